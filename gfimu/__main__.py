@@ -1,0 +1,5 @@
+import sys
+
+from gfimu.cli import main
+
+sys.exit(main())

@@ -1,0 +1,270 @@
+"""Accelerometer arrays: geometry, the linear model and its invertibility.
+
+Pure maths, no I/O (reading and writing ``array.toml`` lives in
+:mod:`gfimu.logio`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import rigid_body
+
+AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+
+
+class ArrayModelError(ValueError):
+    """The array cannot support the requested model (names the cause)."""
+
+
+@dataclass(frozen=True)
+class Accelerometer:
+    """One accelerometer: 1, 2 or 3 axes, at ``position_m`` in B.
+
+    ``rotation_body_sensor`` maps sensor-frame vectors into B:
+    ``v_B = rotation_body_sensor @ v_sensor``.
+    """
+
+    name: str
+    position_m: np.ndarray
+    rotation_body_sensor: np.ndarray = field(default_factory=lambda: np.eye(3))
+    axes: tuple[str, ...] = ("x", "y", "z")
+    noise_std_mps2: float | None = None
+
+    def __post_init__(self) -> None:
+        pos = np.asarray(self.position_m, dtype=float).reshape(-1)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise ArrayModelError(f"accelerometer {self.name!r}: position_m must be 3 finite numbers, got {self.position_m!r}")
+        rot = np.asarray(self.rotation_body_sensor, dtype=float)
+        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+            raise ArrayModelError(f"accelerometer {self.name!r}: rotation_body_sensor must be a 3x3 matrix")
+        if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+            raise ArrayModelError(
+                f"accelerometer {self.name!r}: rotation_body_sensor is not a rotation (orthonormal, det +1): {rot.tolist()}"
+            )
+        axes = tuple(self.axes)
+        if not axes or len(set(axes)) != len(axes) or any(a not in AXIS_INDEX for a in axes):
+            raise ArrayModelError(f"accelerometer {self.name!r}: axes must be distinct among x, y, z; got {list(axes)}")
+        if self.noise_std_mps2 is not None and not (np.isfinite(self.noise_std_mps2) and self.noise_std_mps2 >= 0):
+            raise ArrayModelError(f"accelerometer {self.name!r}: noise_std_mps2 must be >= 0")
+        pos.setflags(write=False)
+        rot = rot.copy()
+        rot.setflags(write=False)
+        object.__setattr__(self, "position_m", pos)
+        object.__setattr__(self, "rotation_body_sensor", rot)
+        object.__setattr__(self, "axes", axes)
+
+    @property
+    def directions_b(self) -> np.ndarray:
+        """Unit sensing directions of the listed axes in B, (n_axes, 3)."""
+        return np.array([self.rotation_body_sensor[:, AXIS_INDEX[a]] for a in self.axes])
+
+    @property
+    def column_names(self) -> list[str]:
+        return [f"{self.name}_{a}" for a in self.axes]
+
+
+@dataclass(frozen=True)
+class Gyroscope:
+    """A triaxial gyroscope measuring ω in B (columns ``w_x, w_y, w_z``)."""
+
+    noise_std_radps: float | None = None
+
+
+@dataclass(frozen=True)
+class Inclinometer:
+    """A two-axis inclinometer giving tilt_x, tilt_y (log format, paper 001)."""
+
+    noise_std_rad: float | None = None
+
+
+@dataclass(frozen=True)
+class Body:
+    """Principal moments of inertia about the axes of B (paper 004)."""
+
+    principal_inertia_kgm2: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        i = np.asarray(self.principal_inertia_kgm2, dtype=float).reshape(-1)
+        if i.shape != (3,) or not np.all(np.isfinite(i)) or np.any(i <= 0):
+            raise ArrayModelError(f"body: principal_inertia_kgm2 must be 3 positive numbers, got {self.principal_inertia_kgm2!r}")
+        a, b, c = np.sort(i)
+        if a + b < c * (1 - 1e-9):
+            raise ArrayModelError(f"body: principal_inertia_kgm2 {i.tolist()} violates the triangle inequality")
+        object.__setattr__(self, "principal_inertia_kgm2", tuple(float(v) for v in i))
+
+
+@dataclass(frozen=True)
+class SensorArray:
+    """A rigid array of accelerometers, with optional gyro, inclinometer and body."""
+
+    accelerometers: tuple[Accelerometer, ...]
+    name: str = "array"
+    gyroscope: Gyroscope | None = None
+    inclinometer: Inclinometer | None = None
+    body: Body | None = None
+
+    def __post_init__(self) -> None:
+        accs = tuple(self.accelerometers)
+        if not accs:
+            raise ArrayModelError("array has no accelerometers")
+        names = [a.name for a in accs]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ArrayModelError(f"accelerometer names must be unique; repeated: {dup}")
+        object.__setattr__(self, "accelerometers", accs)
+
+    # --- geometry -----------------------------------------------------------
+    @property
+    def n_axes(self) -> int:
+        return sum(len(a.axes) for a in self.accelerometers)
+
+    @property
+    def accel_columns(self) -> list[str]:
+        """imu.csv column names of all accelerometer axes, in model-row order."""
+        return [c for a in self.accelerometers for c in a.column_names]
+
+    @property
+    def axis_directions_b(self) -> np.ndarray:
+        """(n_axes, 3) unit sensing directions in B, in model-row order."""
+        return np.vstack([a.directions_b for a in self.accelerometers])
+
+    @property
+    def axis_positions_m(self) -> np.ndarray:
+        """(n_axes, 3) lever arm of each axis, in model-row order."""
+        return np.vstack([np.tile(a.position_m, (len(a.axes), 1)) for a in self.accelerometers])
+
+    @property
+    def axis_owner(self) -> np.ndarray:
+        """(n_axes,) index of the accelerometer each model row belongs to."""
+        return np.concatenate([np.full(len(a.axes), i) for i, a in enumerate(self.accelerometers)])
+
+    @property
+    def noise_std_per_axis_mps2(self) -> np.ndarray:
+        """(n_axes,) noise std per axis; NaN where array.toml gives none."""
+        return np.concatenate(
+            [np.full(len(a.axes), np.nan if a.noise_std_mps2 is None else a.noise_std_mps2) for a in self.accelerometers]
+        )
+
+    # --- linear model (paper 000, eqs. 6-7) -------------------------------
+    def structure_matrix(self) -> np.ndarray:
+        """(n_axes, 12) structure matrix S: readings = S @ [f, ω̇, q(ω)]."""
+        return rigid_body.structure_matrix(self.axis_directions_b, self.axis_positions_m)
+
+    def rank(self, tol: float = 1e-9) -> int:
+        s = np.linalg.svd(self.structure_matrix(), compute_uv=False)
+        return int(np.sum(s > tol * s[0]))
+
+    def condition_number(self) -> float:
+        """2-norm condition number of S; ``inf`` when S has rank below 12."""
+        s = np.linalg.svd(self.structure_matrix(), compute_uv=False)
+        if s.size < rigid_body.N_UNKNOWNS or s[-1] <= 1e-12 * s[0]:
+            return float("inf")
+        return float(s[0] / s[-1])
+
+    def check_invertible(self, max_condition: float = 1e8) -> None:
+        """Raise :class:`ArrayModelError` naming why S cannot be inverted."""
+        n = self.n_axes
+        if n < rigid_body.N_UNKNOWNS:
+            raise ArrayModelError(
+                f"array {self.name!r} has {n} accelerometer axes; the 12-unknown inversion "
+                f"[f, ω̇, q(ω)] needs at least 12 (use method 'ml' or add a gyroscope)"
+            )
+        S = self.structure_matrix()
+        sv = np.linalg.svd(S, compute_uv=False)
+        positions = np.array([a.position_m for a in self.accelerometers])
+        if len(positions) >= 3:
+            centred = positions - positions.mean(axis=0)
+            spread = np.linalg.svd(centred, compute_uv=False)
+            if spread.size < 3 or spread[-1] <= 1e-9 * max(spread[0], 1e-300):
+                raise ArrayModelError(
+                    f"array {self.name!r}: the accelerometer positions are coplanar, so S (rank "
+                    f"{int(np.sum(sv > 1e-9 * sv[0]))} of 12) cannot be inverted; use method 'ml' or 'gyro-aided'"
+                )
+        if sv[-1] <= 1e-12 * sv[0]:
+            raise ArrayModelError(
+                f"array {self.name!r}: structure matrix has rank {int(np.sum(sv > 1e-9 * sv[0]))} of 12 "
+                "(sensing directions do not span the model); use method 'ml'"
+            )
+        cond = sv[0] / sv[-1]
+        if cond > max_condition:
+            raise ArrayModelError(
+                f"array {self.name!r}: structure matrix condition number {cond:.3g} exceeds {max_condition:.3g} "
+                "(nearly degenerate layout)"
+            )
+
+    def predict_readings(self, specific_force_b, omega_dot_b, omega_b) -> np.ndarray:
+        """Noise-free readings (..., n_axes) in each sensor's own frame and axes."""
+        f = np.asarray(specific_force_b, dtype=float)
+        dw = np.asarray(omega_dot_b, dtype=float)
+        w = np.asarray(omega_b, dtype=float)
+        x = np.concatenate([f, dw, rigid_body.quadratic_terms(w)], axis=-1)
+        return x @ self.structure_matrix().T
+
+    def with_accelerometers(self, accelerometers) -> "SensorArray":
+        return SensorArray(tuple(accelerometers), self.name, self.gyroscope, self.inclinometer, self.body)
+
+
+# --- built-in layouts --------------------------------------------------------
+
+def cube_array(half_edge_m: float = 0.05, noise_std_mps2: float | None = 0.07, name: str | None = None) -> SensorArray:
+    """Four triads on alternate corners of a cube (paper 000, Fig. 2)."""
+    corners = half_edge_m * np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
+    accs = tuple(Accelerometer(f"a{i + 1}", p, noise_std_mps2=noise_std_mps2) for i, p in enumerate(corners))
+    return SensorArray(accs, name or f"cube-12 (half edge {half_edge_m:g} m)")
+
+
+def single_triad(position_m=(0.0, 0.0, 0.0), noise_std_mps2: float | None = 0.07, body: Body | None = None) -> SensorArray:
+    """One triaxial accelerometer (paper 004's free-flight sensor)."""
+    return SensorArray((Accelerometer("a1", np.asarray(position_m, float), noise_std_mps2=noise_std_mps2),), "single-triad", body=body)
+
+
+def paper001_array(m_m: float = 0.5, n_m: float = 0.25, noise_std_mps2: float | None = 0.07) -> SensorArray:
+    """Nine-axis layout of paper 001: three 2-axis accelerometers, gyro, inclinometer.
+
+    Paper 001 places the three dual-axis sensors on the body axes at distance
+    ``m`` and measures perpendicular to their lever arms. The printed layout
+    leaves the exact sensing axes partly implicit; see
+    :func:`gfimu.estimators.gyro_aided.paper001_gain_matrix` for the derivation
+    used here.
+    """
+    accs = (
+        Accelerometer("a1", [m_m, 0.0, 0.0], axes=("y", "z"), noise_std_mps2=noise_std_mps2),
+        Accelerometer("a2", [0.0, m_m, 0.0], axes=("x", "z"), noise_std_mps2=noise_std_mps2),
+        Accelerometer("a3", [0.0, 0.0, n_m], axes=("x", "y"), noise_std_mps2=noise_std_mps2),
+    )
+    return SensorArray(accs, "paper001-9axis", gyroscope=Gyroscope(0.01), inclinometer=Inclinometer(0.002))
+
+
+MIMU4444_POSITIONS_M = np.array(
+    [
+        [-0.00945, 0.00945, 0.001],
+        [-0.00945, 0.00945, -0.001],
+        [-0.00945, -0.00945, 0.001],
+        [-0.00945, -0.00945, -0.001],
+        [0.00945, 0.00945, 0.001],
+        [0.00945, 0.00945, -0.001],
+        [0.00945, -0.00945, 0.001],
+        [0.00945, -0.00945, -0.001],
+    ]
+)
+
+
+def mimu4444_array(noise_std_mps2: float | None = 0.05, with_gyroscope: bool = False) -> SensorArray:
+    """The eight corner IMUs of the MIMU4444 board (nominal positions, board frame).
+
+    The readings are expressed in the board frame after conversion, so every
+    sensor has identity rotation here.
+    """
+    accs = tuple(Accelerometer(f"imu{i + 1}", p, noise_std_mps2=noise_std_mps2) for i, p in enumerate(MIMU4444_POSITIONS_M))
+    return SensorArray(accs, "mimu4444", gyroscope=Gyroscope(0.01) if with_gyroscope else None)
+
+
+LAYOUTS = {
+    "cube": cube_array,
+    "paper001": paper001_array,
+    "single-triad": single_triad,
+    "mimu4444": mimu4444_array,
+}

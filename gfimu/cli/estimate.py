@@ -1,0 +1,76 @@
+"""``gfimu estimate LOG --method NAME --out FILE.csv``."""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import time
+
+from . import CLIError
+
+
+def parse_options(pairs: list[str]) -> dict:
+    """``key=value`` pairs; values parsed as Python literals when they look like one."""
+    out = {}
+    for pair in pairs or []:
+        if "=" not in pair:
+            raise CLIError(f"--option expects KEY=VALUE, got {pair!r}")
+        key, value = pair.split("=", 1)
+        key = key.strip().replace("-", "_")
+        try:
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            out[key] = value
+    return out
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from ..estimators import METHODS
+
+    p = sub.add_parser("estimate", help="estimate ω, ω̇ and acceleration from a log",
+                       description="Run one estimation method on a log directory and write an estimate CSV.")
+    p.add_argument("log", help="log directory (array.toml + imu.csv)")
+    p.add_argument("--method", default="smoother", choices=list(METHODS), help="estimation method (default: smoother)")
+    p.add_argument("--out", required=True, help="estimate CSV to write (atomically)")
+    p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
+                   help="method option, repeatable (see the method's documentation)")
+    p.add_argument("--lag-s", type=float, default=None, help="fixed-lag smoother lag in seconds")
+    p.add_argument("--sigma", action="store_true", help="also write one-sigma uncertainties where the method gives them")
+    p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
+    p.add_argument("--orientation", choices=["none", "inclinometer", "gyro", "estimate"], default="none",
+                   help="add gravity-free acceleration and orientation: from the inclinometer (paper 001) or "
+                        "by propagating the gyro or the estimated ω (paper 003)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from .. import logio
+    from ..estimators import make_estimator
+
+    log = logio.read_log(args.log)
+    if args.calibration:
+        from ..calibration import apply_calibration, read_calibration
+
+        log = apply_calibration(log, read_calibration(args.calibration))
+    options = parse_options(args.option)
+    if args.lag_s is not None:
+        if args.method != "fixed-lag":
+            raise CLIError("--lag-s applies to --method fixed-lag only")
+        options["lag_s"] = args.lag_s
+    if args.sigma:
+        options["compute_sigma"] = True
+    est = make_estimator(args.method, **options)
+    reason = est.applicable(log.array)
+    if reason:
+        raise CLIError(f"method {args.method!r} cannot run on {args.log}: {reason}")
+    t0 = time.perf_counter()
+    motion = est.estimate(log, progress=not args.no_progress)
+    elapsed = time.perf_counter() - t0
+    if args.orientation != "none":
+        from ..estimators.gravity import add_orientation
+
+        motion = add_orientation(log, motion, source=args.orientation)
+    logio.write_motion_csv(motion, args.out)
+    print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {args.out}")
+    return 0
