@@ -1,0 +1,79 @@
+"""Kinematics between consecutive samples.
+
+- angular velocity (trapezoid, as paper 000's sign recovery and paper 003's
+  improved Euler step): ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})``;
+- attitude (paper 003, eq. 10 on SO(3)): ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``.
+
+With ω̇ a random walk of density q (white angular jerk), the trapezoid
+residual has variance ``q² h³ / 12`` and is independent of the ω̇ increment,
+so the two factors together are the exact discrete form of that prior
+(see :func:`trapezoid_sigma`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _so3, custom_factor, rotation_at, vector_at
+
+
+def trapezoid_sigma(omega_dot_density: float, dt_s) -> np.ndarray:
+    """Std of the trapezoid residual under white angular jerk: ``q sqrt(h³/12)``."""
+    return omega_dot_density * np.sqrt(np.asarray(dt_s, dtype=float) ** 3 / 12.0)
+
+
+def angular_velocity_residual(omega0, omega1, omega_dot0, omega_dot1, dt_s):
+    """``ω1 - ω0 - h/2 (ω̇0 + ω̇1)`` (N, 3) with Jacobians on w0, w1, d0, d1 (N, 3, 3)."""
+    w0, w1, d0, d1 = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (omega0, omega1, omega_dot0, omega_dot1))
+    h = np.atleast_1d(np.asarray(dt_s, dtype=float))
+    n = max(w0.shape[0], h.shape[0])
+    r = w1 - w0 - 0.5 * h[:, None] * (d0 + d1)
+    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+    half = -0.5 * h[:, None, None] * np.eye(3)
+    half = np.broadcast_to(half, (n, 3, 3))
+    return r, {"w0": -eye, "w1": eye, "d0": half, "d1": half}
+
+
+def attitude_residual(rot0, rot1, omega0, omega1, dt_s):
+    """``Log(Exp(φ)ᵀ R0ᵀ R1)`` with ``φ = h (ω0 + ω1) / 2``, (N, 3), and Jacobians.
+
+    Jacobians on r0, r1 (right perturbations) and w0, w1, each (N, 3, 3).
+    """
+    R0 = np.asarray(rot0, dtype=float).reshape(-1, 3, 3)
+    R1 = np.asarray(rot1, dtype=float).reshape(-1, 3, 3)
+    w0 = np.atleast_2d(np.asarray(omega0, dtype=float))
+    w1 = np.atleast_2d(np.asarray(omega1, dtype=float))
+    h = np.atleast_1d(np.asarray(dt_s, dtype=float))
+    phi = 0.5 * h[:, None] * (w0 + w1)
+    E = _so3.exp(phi)
+    delta = np.swapaxes(E, -1, -2) @ np.swapaxes(R0, -1, -2) @ R1
+    e = _so3.log(delta)
+    jl_inv = _so3.left_jacobian_inverse(e)
+    j_r0 = -jl_inv @ np.swapaxes(E, -1, -2)
+    j_r1 = _so3.right_jacobian_inverse(e)
+    j_w = -0.5 * h[:, None, None] * (jl_inv @ _so3.right_jacobian(phi))
+    return e, {"r0": j_r0, "r1": j_r1, "w0": j_w, "w1": j_w}
+
+
+def make_angular_velocity_factor(key_w0, key_w1, key_d0, key_d1, dt_s: float, noise_model):
+    """CustomFactor for the trapezoid step between samples k and k+1."""
+
+    def error(values):
+        r, j = angular_velocity_residual(
+            vector_at(values, key_w0), vector_at(values, key_w1), vector_at(values, key_d0), vector_at(values, key_d1), dt_s
+        )
+        return r[0], [j["w0"][0], j["w1"][0], j["d0"][0], j["d1"][0]]
+
+    return custom_factor(noise_model, [key_w0, key_w1, key_d0, key_d1], error)
+
+
+def make_attitude_factor(key_r0, key_r1, key_w0, key_w1, dt_s: float, noise_model):
+    """CustomFactor for ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)`` on Rot3 keys."""
+
+    def error(values):
+        r, j = attitude_residual(
+            rotation_at(values, key_r0), rotation_at(values, key_r1), vector_at(values, key_w0), vector_at(values, key_w1), dt_s
+        )
+        return r[0], [j["r0"][0], j["r1"][0], j["w0"][0], j["w1"][0]]
+
+    return custom_factor(noise_model, [key_r0, key_r1, key_w0, key_w1], error)

@@ -1,0 +1,54 @@
+"""Quadratic ω terms against their per-sample inversion (paper 000, eq. 2; paper 002).
+
+The papers invert the structure matrix per sample, ``x̂ = S⁺ y``, and read
+ω from the six quadratic terms ``q(ω) = [ωx²+ωy², ωx²+ωz², ωy²+ωz², ωxωy,
+ωxωz, ωyωz]``. As a factor: residual ``q(ω_k) - q̂_k`` with the 6×6 block of
+the inversion's covariance ``σ² (SᵀWS)⁻¹``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import rigid_body
+from ..array import SensorArray
+from . import custom_factor, vector_at
+
+
+def inversion(array: SensorArray, accel_mps2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample weighted least squares ``x = [f, ω̇, q]`` (N, 12) and its covariance (12, 12).
+
+    Uses :func:`gfimu.estimators.inversion.invert` when available, otherwise
+    the same weighted least squares on ``array.structure_matrix()``.
+    """
+    try:
+        from ..estimators.inversion import invert
+    except ImportError:
+        invert = None
+    if invert is not None:
+        return invert(array, accel_mps2)
+    array.check_invertible()
+    S = array.structure_matrix()
+    sigma = array.noise_std_per_axis_mps2
+    sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
+    A = S / sigma[:, None]
+    cov = np.linalg.inv(A.T @ A)
+    x = (np.asarray(accel_mps2, dtype=float) / sigma) @ (A @ cov)
+    return x, cov
+
+
+def quadratic_residual(omega_b_radps: np.ndarray, q_measured: np.ndarray):
+    """``q(ω) - q̂`` (N, 6) and ``{'w': dq/dω (N, 6, 3)}``."""
+    w = np.atleast_2d(np.asarray(omega_b_radps, dtype=float))
+    return rigid_body.quadratic_terms(w) - np.atleast_2d(q_measured), {"w": rigid_body.quadratic_terms_jacobian(w)}
+
+
+def make_quadratic_factor(key_omega: int, q_measured, noise_model):
+    """CustomFactor on ω_k against measured quadratic terms (6,)."""
+    qm = np.asarray(q_measured, dtype=float).reshape(1, 6)
+
+    def error(values):
+        r, j = quadratic_residual(vector_at(values, key_omega), qm)
+        return r[0], [j["w"][0]]
+
+    return custom_factor(noise_model, [key_omega], error)
