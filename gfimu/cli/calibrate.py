@@ -1,10 +1,51 @@
-"""``gfimu calibrate``."""
+"""``gfimu calibrate LOG --out calibration.toml``: static calibration from still periods."""
+
+from __future__ import annotations
+
+import argparse
 
 
-def register(sub) -> None:
-    p = sub.add_parser("calibrate", help="(calibrate: not available yet)")
+def register(sub: argparse._SubParsersAction) -> None:
+    from ..calibration import StillDetector
+
+    d = StillDetector()
+    p = sub.add_parser(
+        "calibrate",
+        help="fit accelerometer biases and gains from still periods",
+        description="Find the still periods of a log (the array held still in several orientations) and fit, "
+        "per accelerometer, a bias and a 3x3 gain-and-misalignment matrix against gravity; also the gyro bias "
+        "when the log has a gyroscope or an angular-velocity reference. Prints the inter-sensor spread of the "
+        "still means before and after.",
+    )
+    p.add_argument("log", help="log directory")
+    p.add_argument("--out", required=True, help="calibration.toml to write (atomically)")
+    p.add_argument("--window-s", type=float, default=d.window_s, help=f"detector window (default {d.window_s} s)")
+    p.add_argument("--accel-std", type=float, default=d.accel_std_mps2,
+                   help=f"max accelerometer std in the window, m/s^2 (default {d.accel_std_mps2})")
+    p.add_argument("--gyro-std", type=float, default=d.gyro_std_radps,
+                   help=f"max gyro std in the window, rad/s (default {d.gyro_std_radps})")
+    p.add_argument("--min-duration-s", type=float, default=d.min_duration_s,
+                   help=f"shortest still period (default {d.min_duration_s} s)")
+    p.add_argument("--until-s", type=float, default=None, help="use only the first UNTIL_S seconds of the log")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    raise NotImplementedError("gfimu calibrate is not available yet")
+    from .. import logio
+    from ..calibration import StillDetector, fit, write_calibration
+
+    log = logio.read_log(args.log)
+    if args.until_s is not None:
+        log = log.select(slice(0, int(((log.times_s <= args.until_s)).sum())))
+    det = StillDetector(window_s=args.window_s, accel_std_mps2=args.accel_std, gyro_std_radps=args.gyro_std,
+                        min_duration_s=args.min_duration_s)
+    cal = fit(log, det)
+    i = cal.info
+    write_calibration(cal, args.out)
+    print(f"{i['still_periods']} still periods ({i['still_samples']} samples); fit residual {i['residual_rms_mps2']:.4f} m/s^2 RMS")
+    print(f"inter-sensor spread of the still means: {i['spread_before_mps2']:.4f} -> {i['spread_after_mps2']:.4f} m/s^2 (norm); "
+          f"{i['spread_per_axis_before_mps2']:.4f} -> {i['spread_per_axis_after_mps2']:.4f} m/s^2 (per axis)")
+    if cal.gyro_bias_b_radps is not None:
+        print("gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s")
+    print(f"calibration written: {args.out}")
+    return 0
