@@ -221,19 +221,33 @@ def single_triad(position_m=(0.0, 0.0, 0.0), noise_std_mps2: float | None = 0.07
     return SensorArray((Accelerometer("a1", np.asarray(position_m, float), noise_std_mps2=noise_std_mps2),), "single-triad", body=body)
 
 
-def paper001_array(m_m: float = 0.5, n_m: float = 0.25, noise_std_mps2: float | None = 0.07) -> SensorArray:
-    """Nine-axis layout of paper 001: three 2-axis accelerometers, gyro, inclinometer.
+def paper001_array(
+    m_m: float = 0.5, n_m: float = 0.25, noise_std_mps2: float | None = 0.07, lever_arm_m: float | None = None
+) -> SensorArray:
+    """Best layout of paper 001: three 2-axis accelerometers, gyro, inclinometer.
 
-    Paper 001 places the three dual-axis sensors on the body axes at distance
-    ``m`` and measures perpendicular to their lever arms. The printed layout
-    leaves the exact sensing axes partly implicit; see
-    :func:`gfimu.estimators.gyro_aided.paper001_gain_matrix` for the derivation
-    used here.
+    ``m_m`` and ``n_m`` are the entries m and n of the paper's gain matrix
+    (eq. 9). Inverting that matrix gives the layout (derivation in
+    :func:`gfimu.estimators.gyro_aided.paper001_gain_matrix`): chips on three
+    alternate corners of a cube of half edge L, ``acc1`` at L(-1, -1, -1)
+    sensing x, y (the paper's a1, a2), ``acc2`` at L(-1, 1, 1) sensing z, x
+    (a3, a4) and ``acc3`` at L(1, -1, 1) sensing y, z (a5, a6). m must be 0.5;
+    ``L = 1 / (4 n)`` metres (the paper's unit-free L = 1 for n = 0.25) unless
+    ``lever_arm_m`` is given.
     """
+    if not np.isclose(m_m, 0.5):
+        raise ArrayModelError(f"paper001 layout: m is the average of two opposite sensors and must be 0.5, got {m_m!r}")
+    if lever_arm_m is None:
+        if not (np.isfinite(n_m) and n_m > 0):
+            raise ArrayModelError(f"paper001 layout: n must be positive, got {n_m!r}")
+        lever_arm_m = 1.0 / (4.0 * n_m)
+    if not (np.isfinite(lever_arm_m) and lever_arm_m > 0):
+        raise ArrayModelError(f"paper001 layout: lever_arm_m must be positive, got {lever_arm_m!r}")
+    L = float(lever_arm_m)
     accs = (
-        Accelerometer("a1", [m_m, 0.0, 0.0], axes=("y", "z"), noise_std_mps2=noise_std_mps2),
-        Accelerometer("a2", [0.0, m_m, 0.0], axes=("x", "z"), noise_std_mps2=noise_std_mps2),
-        Accelerometer("a3", [0.0, 0.0, n_m], axes=("x", "y"), noise_std_mps2=noise_std_mps2),
+        Accelerometer("acc1", [-L, -L, -L], axes=("x", "y"), noise_std_mps2=noise_std_mps2),
+        Accelerometer("acc2", [-L, L, L], axes=("z", "x"), noise_std_mps2=noise_std_mps2),
+        Accelerometer("acc3", [L, -L, L], axes=("y", "z"), noise_std_mps2=noise_std_mps2),
     )
     return SensorArray(accs, "paper001-9axis", gyroscope=Gyroscope(0.01), inclinometer=Inclinometer(0.002))
 
