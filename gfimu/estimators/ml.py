@@ -142,10 +142,9 @@ class MLEstimator:
             return None
         model = _ProjectedModel.build(array, np.ones(array.n_axes))
         w = np.array([0.37, -0.81, 0.52])
-        Dq = rigid_body.quadratic_terms_jacobian(w)
-        info = Dq.T @ model.M @ Dq
-        ev = np.linalg.eigvalsh(info)
-        if ev[0] <= 1e-10 * max(ev[-1], 1e-300):
+        sens = model.A @ rigid_body.quadratic_terms_jacobian(w)  # (n, 3) projected ∂y/∂ω
+        scale = np.linalg.norm(array.structure_matrix()[:, 6:] @ rigid_body.quadratic_terms_jacobian(w))
+        if np.linalg.svd(sens, compute_uv=False)[-1] <= 1e-9 * max(scale, 1e-300):
             return (
                 f"array {array.name!r}: ω is not observable from the accelerometers once f and ω̇ are "
                 "eliminated (too few axes or degenerate layout); add a gyroscope and use use_gyro=True"

@@ -1,0 +1,137 @@
+"""Per-sample maximum-likelihood estimator (Skog et al. 2016)."""
+
+import numpy as np
+import pytest
+
+from gfimu.array import Accelerometer, SensorArray, cube_array, mimu4444_array, paper001_array, single_triad
+from gfimu.crb import crb_per_sample
+from gfimu.estimators import make_estimator
+from gfimu.estimators.ml import MLEstimator
+from gfimu.log import Log
+from gfimu.motion import Motion
+from gfimu.rotations import matrix_from_rotation_vector
+
+
+def random_array(seed=0, n=5, noise=0.05):
+    rng = np.random.default_rng(seed)
+    accs = [
+        Accelerometer(f"s{i}", rng.uniform(-0.05, 0.05, 3), matrix_from_rotation_vector(rng.normal(size=3)), noise_std_mps2=noise)
+        for i in range(n)
+    ]
+    return SensorArray(tuple(accs), "random-5")
+
+
+def smooth_motion(n, rate_hz=500.0, seed=0, offset=(3.0, -1.5, 2.1)):
+    """Smooth ω(t), its exact derivative, and a varying specific force."""
+    t = np.arange(n) / rate_hz
+    rng = np.random.default_rng(seed)
+    amp, freq, phase = rng.uniform(2, 6, 3), rng.uniform(0.2, 1.0, 3), rng.uniform(0, 6, 3)
+    arg = 2 * np.pi * freq * t[:, None] + phase
+    w = amp * np.sin(arg) + np.asarray(offset)
+    dw = amp * 2 * np.pi * freq * np.cos(arg)
+    f = np.array([0.5, -1.0, 9.81]) + np.sin(3 * t)[:, None] * [1.0, 2.0, -0.5]
+    return t, w, dw, f
+
+
+def make_log(array, t, w, dw, f, noise_std=0.0, seed=1, gyro_noise=None):
+    y = array.predict_readings(f, dw, w)
+    rng = np.random.default_rng(seed)
+    y = y + rng.normal(size=y.shape) * noise_std
+    gyro = None
+    if array.gyroscope is not None:
+        gyro = w + (0 if gyro_noise is None else rng.normal(size=w.shape) * gyro_noise)
+    ts = np.round(t * 1e9).astype(np.int64)
+    truth = Motion(ts, omega_b_radps=w, omega_dot_b_radps2=dw, specific_force_b_mps2=f)
+    return Log(array, ts, y, gyro_b_radps=gyro, truth=truth)
+
+
+@pytest.mark.parametrize("array", [cube_array(), random_array(), mimu4444_array()], ids=["cube", "random-5", "mimu4444"])
+def test_noise_free_recovery(array):
+    t, w, dw, f = smooth_motion(3000)
+    assert np.linalg.norm(w, axis=1).min() > 1.0
+    m = MLEstimator().estimate(make_log(array, t, w, dw, f))
+    np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-8)
+    np.testing.assert_allclose(m.omega_dot_b_radps2, dw, atol=1e-8)
+    np.testing.assert_allclose(m.specific_force_b_mps2, f, atol=1e-8)
+    assert m.accel_b_mps2 is None and m.quaternion_wb is None
+
+
+def test_sign_follows_omega_through_zero():
+    """ω = d·4 sin(πt) changes sign twice; the integral of ω̇ keeps the branch."""
+    t = np.arange(2000) / 500.0 + 0.0013
+    d = np.array([0.48, -0.6, 0.64])
+    w = 4 * np.sin(np.pi * t)[:, None] * d
+    dw = 4 * np.pi * np.cos(np.pi * t)[:, None] * d
+    f = np.tile([0.0, 0.0, 9.81], (len(t), 1))
+    m = MLEstimator().estimate(make_log(cube_array(), t, w, dw, f))
+    np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-7)
+
+
+@pytest.mark.parametrize("array, omega", [(cube_array(), [3.0, -2.0, 4.0]), (mimu4444_array(), [12.0, -8.0, 10.0])],
+                         ids=["cube", "mimu4444"])
+def test_monte_carlo_covariance_reaches_the_bound(array, omega):
+    """At high SNR the ML estimate is efficient: its covariance equals the CRB (Skog et al. 2016)."""
+    n = 1500
+    w0, f0, dw0 = np.asarray(omega), np.array([1.0, 2.0, 9.0]), np.array([5.0, -3.0, 2.0])
+    t = np.arange(n) / 500.0
+    log = make_log(array, t, np.tile(w0, (n, 1)), np.tile(dw0, (n, 1)), np.tile(f0, (n, 1)),
+                   noise_std=array.noise_std_per_axis_mps2, seed=7)
+    m = MLEstimator(compute_sigma=True).estimate(log)
+    # constant ω carries no sign information (ω̇ = 0): compare modulo the sign
+    w = m.omega_b_radps * np.sign(m.omega_b_radps @ w0)[:, None]
+    err = np.hstack([m.specific_force_b_mps2 - f0, m.omega_dot_b_radps2 - dw0, w - w0])
+    emp = err.T @ err / n
+    bound = crb_per_sample(array, w0[None]).covariance[0]
+    np.testing.assert_allclose(np.diag(emp) / np.diag(bound), 1.0, atol=0.15)
+    # the mean error is within 4 standard errors of zero (no visible bias)
+    assert np.all(np.abs(err.mean(axis=0)) < 4 * np.sqrt(np.diag(bound) / n))
+    # sigma reported by the estimator is the bound at the estimate
+    s = m.sigma["omega_b_radps"]
+    np.testing.assert_allclose(np.median(s, axis=0), np.sqrt(np.diag(bound)[6:]), rtol=0.05)
+
+
+def test_gyro_makes_a_nine_axis_array_usable():
+    arr = paper001_array()
+    assert "gyroscope" in MLEstimator().applicable(arr)
+    est = MLEstimator(use_gyro=True)
+    assert est.applicable(arr) is None
+    t, w, dw, f = smooth_motion(1000)
+    m = est.estimate(make_log(arr, t, w, dw, f))
+    np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-9)
+    np.testing.assert_allclose(m.omega_dot_b_radps2, dw, atol=1e-8)
+    np.testing.assert_allclose(m.specific_force_b_mps2, f, atol=1e-8)
+
+
+def test_gyro_improves_the_cube_with_noise():
+    arr = SensorArray(cube_array().accelerometers, "cube+gyro", gyroscope=paper001_array().gyroscope)
+    t, w, dw, f = smooth_motion(2000)
+    log = make_log(arr, t, w, dw, f, noise_std=0.07, gyro_noise=0.01)
+    e_acc = MLEstimator().estimate(log).omega_b_radps - w
+    e_gyro = MLEstimator(use_gyro=True).estimate(log).omega_b_radps - w
+    rms_gyro = np.sqrt(np.mean(e_gyro**2))
+    assert rms_gyro < 0.01 and rms_gyro < 0.2 * np.sqrt(np.mean(e_acc**2))
+
+
+def test_applicability_and_bad_input():
+    assert "free-flight" in MLEstimator().applicable(single_triad())
+    assert "no gyroscope" in MLEstimator(use_gyro=True).applicable(cube_array())
+    assert isinstance(make_estimator("ml", compute_sigma=True), MLEstimator)
+    t, w, dw, f = smooth_motion(10)
+    log = make_log(cube_array(), t, w, dw, f)
+    y = log.accel_mps2.copy()
+    y[4, 7] = np.nan
+    with pytest.raises(ValueError, match="sample 4, column a3_y"):
+        MLEstimator().estimate(log.replace(accel_mps2=y))
+    with pytest.raises(ValueError, match="no gyro"):
+        MLEstimator(use_gyro=True).estimate(make_log(paper001_array(), t, w, dw, f).replace(gyro_b_radps=None))
+
+
+def test_unknown_noise_still_estimates_but_sigma_needs_it():
+    arr = cube_array(noise_std_mps2=None)
+    t, w, dw, f = smooth_motion(200)
+    log = make_log(arr, t, w, dw, f)
+    np.testing.assert_allclose(MLEstimator().estimate(log).omega_b_radps, w, atol=1e-8)
+    with pytest.raises(ValueError, match="noise_std_mps2"):
+        MLEstimator(compute_sigma=True).estimate(log)
+    m = MLEstimator(compute_sigma=True, noise_std_mps2=0.07).estimate(log)
+    np.testing.assert_allclose(m.sigma["specific_force_b_mps2"], 0.035, rtol=1e-9)
