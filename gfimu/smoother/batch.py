@@ -1,0 +1,292 @@
+"""Batch smoother (method "smoother"): the whole log at once, linear in its length.
+
+The factors of :class:`gfimu.smoother.graph.SmootherProblem` are evaluated
+vectorised over all samples; their Gauss-Newton normal equations are
+block-tridiagonal in the per-sample states (plus a dense border for the
+calibration variables), solved by a banded Cholesky factorisation and a
+Schur complement on the border, inside Levenberg-Marquardt iterations. The
+marginal covariances come from the same factor by a backward block recursion
+(selected inversion), also linear in the length. Long logs are solved in
+overlapping windows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from scipy.linalg import cho_solve_banded, cholesky_banded
+
+from ..array import SensorArray
+from ..log import Log
+from ..motion import Motion
+from .graph import STATE_SIZE, SmootherOptions, SmootherProblem, options_reason
+
+M = STATE_SIZE
+
+
+@dataclass
+class NormalEquations:
+    """Gauss-Newton system ``H δ = -g`` with H = [[A, C], [Cᵀ, B]], A block-tridiagonal.
+
+    ``diag`` (N, 9, 9) and ``lower`` (N-1, 9, 9) are A's blocks (``lower[k]``
+    = A[k+1, k]); ``coupling`` (N, 9, G) = C; ``border`` (G, G) = B.
+    """
+
+    diag: np.ndarray
+    lower: np.ndarray
+    grad: np.ndarray
+    coupling: np.ndarray
+    border: np.ndarray
+    grad_global: np.ndarray
+    cost: float
+
+
+def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray) -> NormalEquations:
+    """Accumulate JᵀJ and Jᵀr of all factors, vectorised."""
+    n, G = problem.n, problem.n_global
+    diag = np.zeros((n, M, M))
+    lower = np.zeros((n - 1, M, M))
+    grad = np.zeros((n, M))
+    coupling = np.zeros((n, M, G))
+    border = np.zeros((G, G))
+    grad_g = np.zeros(G)
+    cost = 0.0
+    for t in problem.terms(states, params):
+        r = t.residual
+        cost += 0.5 * float(np.sum(r * r))
+        if t.kind == "unary":
+            J = t.jac["x"]
+            k0, k1 = t.first, t.first + r.shape[0]
+            JT = np.swapaxes(J, 1, 2)
+            diag[k0:k1] += JT @ J
+            grad[k0:k1] += np.einsum("nij,nj->ni", JT, r)
+            if t.jac_global is not None:
+                Jg = t.jac_global
+                coupling[k0:k1] += JT @ Jg
+                border += np.einsum("nri,nrj->ij", Jg, Jg)
+                grad_g += np.einsum("nri,nr->i", Jg, r)
+        elif t.kind == "binary":
+            J0, J1 = t.jac["x0"], t.jac["x1"]
+            J0T, J1T = np.swapaxes(J0, 1, 2), np.swapaxes(J1, 1, 2)
+            diag[:-1] += J0T @ J0
+            diag[1:] += J1T @ J1
+            lower += J1T @ J0
+            grad[:-1] += np.einsum("nij,nj->ni", J0T, r)
+            grad[1:] += np.einsum("nij,nj->ni", J1T, r)
+        else:
+            Jg = t.jac_global
+            border += np.einsum("nri,nrj->ij", Jg, Jg)
+            grad_g += np.einsum("nri,nr->i", Jg, r)
+    return NormalEquations(diag, lower, grad, coupling, border, grad_g, cost)
+
+
+def to_lower_banded(diag: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """LAPACK lower band storage (2m, N m) of a block-tridiagonal symmetric matrix."""
+    n, m, _ = diag.shape
+    ab = np.zeros((2 * m, n * m))
+    for c in range(m):
+        for d in range(2 * m):
+            row = c + d
+            if row < m:
+                ab[d, c::m] = diag[:, row, c]
+            elif row < 2 * m:
+                ab[d, c::m][: n - 1] = lower[:, row - m, c]
+    return ab
+
+
+def factor_blocks(cb: np.ndarray, n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Blocks L[k, k] (N, m, m) and L[k+1, k] (N-1, m, m) of a lower band Cholesky factor."""
+    Lkk = np.zeros((n, m, m))
+    Lnext = np.zeros((n - 1, m, m))
+    for c in range(m):
+        for d in range(2 * m):
+            row = c + d
+            if row < m:
+                Lkk[:, row, c] = cb[d, c::m]
+            elif row < 2 * m:
+                Lnext[:, row - m, c] = cb[d, c::m][: n - 1]
+    return Lkk, Lnext
+
+
+@dataclass
+class Factorisation:
+    cb: np.ndarray
+    Y: np.ndarray | None  # A⁻¹ C, (N m, G)
+    schur: np.ndarray | None  # B - Cᵀ A⁻¹ C
+
+
+def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
+    n = ne.diag.shape[0]
+    diag = ne.diag
+    if damping:
+        diag = diag + damping * (np.einsum("nii->ni", ne.diag)[:, :, None] * np.eye(M) + 1e-9 * np.eye(M))
+    cb = cholesky_banded(to_lower_banded(diag, ne.lower), lower=True, check_finite=False)
+    if ne.border.size:
+        C = ne.coupling.reshape(n * M, -1)
+        Y = cho_solve_banded((cb, True), C, check_finite=False)
+        border = ne.border + (damping * (np.diag(np.diag(ne.border)) + 1e-9 * np.eye(len(ne.border))) if damping else 0.0)
+        return Factorisation(cb, Y, border - C.T @ Y)
+    return Factorisation(cb, None, None)
+
+
+def solve_step(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray]:
+    """Newton step (δx (N, 9), δp (G,)) of the (damped) normal equations."""
+    n = ne.diag.shape[0]
+    gx = ne.grad.reshape(-1)
+    ax = cho_solve_banded((fac.cb, True), gx, check_finite=False)
+    if fac.Y is None:
+        return -ax.reshape(n, M), np.zeros(0)
+    C = ne.coupling.reshape(n * M, -1)
+    dp = np.linalg.solve(fac.schur, -ne.grad_global + C.T @ ax)
+    dx = -ax - fac.Y @ dp
+    return dx.reshape(n, M), dp
+
+
+def marginal_covariances(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray | None]:
+    """Diagonal blocks of H⁻¹ for the states (N, 9, 9) and the border (G, G).
+
+    Backward recursion on the block-bidiagonal Cholesky factor L of A
+    (A⁻¹ = L⁻ᵀ L⁻¹): ``Σ_k = P_k + M_kᵀ Σ_{k+1} M_k`` with
+    ``P_k = L_kk⁻ᵀ L_kk⁻¹`` and ``M_k = L_{k+1,k} L_kk⁻¹``; then the Schur
+    correction ``Y_k S⁻¹ Y_kᵀ`` of the calibration variables.
+    """
+    n = ne.diag.shape[0]
+    Lkk, Lnext = factor_blocks(fac.cb, n, M)
+    Linv = np.linalg.inv(Lkk)
+    P = np.swapaxes(Linv, 1, 2) @ Linv
+    Mk = Lnext @ Linv[:-1]
+    MkT = np.swapaxes(Mk, 1, 2)
+    sigma = np.empty((n, M, M))
+    sigma[-1] = P[-1]
+    for k in range(n - 2, -1, -1):
+        sigma[k] = P[k] + MkT[k] @ sigma[k + 1] @ Mk[k]
+    if fac.Y is None:
+        return sigma, None
+    s_inv = np.linalg.inv(fac.schur)
+    Yk = fac.Y.reshape(n, M, -1)
+    sigma += Yk @ s_inv @ np.swapaxes(Yk, 1, 2)
+    return sigma, s_inv
+
+
+@dataclass
+class SolveResult:
+    states: np.ndarray
+    params: np.ndarray
+    cost: float
+    iterations: int
+    converged: bool
+    covariance: np.ndarray | None = None
+    param_covariance: np.ndarray | None = None
+
+
+def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
+          compute_sigma: bool = False, method: str = "lm") -> SolveResult:
+    """Levenberg-Marquardt (or plain Gauss-Newton) on the banded normal equations."""
+    opt = problem.options
+    X = np.array(states, dtype=float)
+    P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
+    ne = normal_equations(problem, X, P)
+    lam = 1e-6 if method == "lm" else 0.0
+    converged = False
+    it = 0
+    for it in range(1, int(opt.max_iterations) + 1):
+        while True:
+            fac = factorise(ne, lam)
+            dx, dp = solve_step(ne, fac)
+            Xn, Pn = X + dx, P + dp
+            new_cost = problem.cost(Xn, Pn)
+            if method != "lm" or new_cost <= ne.cost or lam > 1e10:
+                break
+            lam *= 10.0
+        decrease = ne.cost - new_cost
+        if method == "lm" and new_cost > ne.cost:
+            converged = True
+            break
+        X, P = Xn, Pn
+        if method == "lm":
+            lam = max(lam / 10.0, 1e-9)
+        ne = normal_equations(problem, X, P)
+        if decrease <= opt.relative_tolerance * max(ne.cost, 1e-300) or np.max(np.abs(dx)) < 1e-12:
+            converged = True
+            break
+    result = SolveResult(X, P, ne.cost, it, converged)
+    if compute_sigma:
+        cov, pcov = marginal_covariances(ne, factorise(ne, 0.0))
+        result.covariance, result.param_covariance = cov, pcov
+    return result
+
+
+def window_slices(n: int, rate_hz: float, window_s: float | None, overlap_s: float) -> list[tuple[slice, slice, slice]]:
+    """(solve slice, keep slice in the log, keep slice within the window) of overlapping windows."""
+    if window_s is None:
+        return [(slice(0, n), slice(0, n), slice(0, n))]
+    w = max(int(round(window_s * rate_hz)), 4)
+    o = max(int(round(overlap_s * rate_hz)), 2)
+    if n <= w:
+        return [(slice(0, n), slice(0, n), slice(0, n))]
+    out = []
+    start = 0
+    keep_from = 0
+    while True:
+        stop = min(start + w, n)
+        if stop == n:
+            out.append((slice(start, n), slice(keep_from, n), slice(keep_from - start, n - start)))
+            break
+        keep_to = stop - o // 2
+        out.append((slice(start, stop), slice(keep_from, keep_to), slice(keep_from - start, keep_to - start)))
+        keep_from = keep_to
+        start = stop - o
+    return out
+
+
+@dataclass(frozen=True)
+class BatchSmootherEstimator(SmootherOptions):
+    """Factor-graph smoother over the whole log (method "smoother").
+
+    Options: see :class:`gfimu.smoother.graph.SmootherOptions`. Returns ω, ω̇
+    and the specific force at the body origin for every sample, with
+    one-sigma marginal uncertainties when ``compute_sigma``. Calibration
+    estimates of the last solve are kept in :attr:`last_calibration`.
+    """
+
+    def options(self) -> SmootherOptions:
+        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
+
+    def applicable(self, array: SensorArray) -> str | None:
+        return options_reason(array, self.options())
+
+    def estimate(self, log: Log, progress: bool = False) -> Motion:
+        from ..progress import progress as progress_bar
+        from .initialise import initial_states
+
+        opt = self.options()
+        reason = options_reason(log.array, opt)
+        if reason:
+            raise ValueError(f"{log.source}: {reason}")
+        n = len(log)
+        states = np.zeros((n, M))
+        cov = np.zeros((n, M, M)) if opt.compute_sigma else None
+        windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
+        calibration = []
+        for solve_sl, keep_log, keep_win in progress_bar(windows, total=len(windows), desc="smoother", enable=progress and len(windows) > 1):
+            part = log.select(solve_sl)
+            problem = SmootherProblem(part, opt)
+            x0 = initial_states(part, opt)
+            res = solve(problem, x0, None, compute_sigma=opt.compute_sigma)
+            states[keep_log] = res.states[keep_win]
+            if cov is not None:
+                cov[keep_log] = res.covariance[keep_win]
+            calibration.append({name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()})
+        object.__setattr__(self, "_last_calibration", calibration)
+        sigma = {}
+        if cov is not None:
+            sd = np.sqrt(np.einsum("nii->ni", cov))
+            sigma = {"omega_b_radps": sd[:, 0:3], "omega_dot_b_radps2": sd[:, 3:6], "specific_force_b_mps2": sd[:, 6:9]}
+        return Motion(log.timestamps_ns, omega_b_radps=states[:, 0:3], omega_dot_b_radps2=states[:, 3:6],
+                      specific_force_b_mps2=states[:, 6:9], sigma=sigma)
+
+    @property
+    def last_calibration(self) -> list[dict]:
+        """Per window: calibration variable name -> estimate, from the last :meth:`estimate`."""
+        return getattr(self, "_last_calibration", [])

@@ -1,0 +1,359 @@
+"""Smoother options and the smoothing problem built from a log.
+
+State of sample k: ``x_k = [ω_k, ω̇_k, f_k]`` (9 numbers, body frame B), plus
+global calibration variables when self-calibration is on (per-axis
+accelerometer bias and scale-factor error, gyroscope bias). Factors
+(:mod:`gfimu.factors`):
+
+- accelerometer equation of every sensor at every sample (paper 000, eq. 6);
+- trapezoid kinematics ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})`` and random
+  walk of ω̇ (together: white angular jerk of density
+  ``omega_dot_random_walk_radps2_per_sqrt_s``);
+- random walk of the specific force;
+- gyroscope on ω when the array has one and ``use_gyro``;
+- Euler's torque-free equation and zero specific force in free flight
+  (paper 004, eq. 1);
+- weak priors on the first state and priors on calibration variables so
+  that nothing in the graph is unobserved.
+
+:class:`SmootherProblem` evaluates all factors vectorised over the samples
+(the fast path) and also builds the same problem as a GTSAM
+``NonlinearFactorGraph`` of CustomFactors (the graph path).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from ..array import SensorArray
+from ..factors import (
+    accelerometer,
+    bias_key,
+    diagonal_noise,
+    euler,
+    free_fall,
+    gyro_bias_key,
+    gyroscope,
+    kinematics,
+    omega_dot_key,
+    omega_key,
+    process,
+    scale_key,
+    specific_force_key,
+)
+from ..log import Log
+
+STATE_SIZE = 9
+W, D, F = slice(0, 3), slice(3, 6), slice(6, 9)
+
+
+@dataclass(frozen=True)
+class SmootherOptions:
+    """Options of the smoothers (batch and fixed-lag); defaults suit 100 Hz-1 kHz logs.
+
+    Noise densities are continuous-time: a random walk of density q has
+    step std ``q sqrt(h)``.
+    """
+
+    omega_dot_random_walk_radps2_per_sqrt_s: float = 100.0
+    """White angular jerk density: how fast ω̇ may change. Larger follows faster motion, smooths less."""
+    specific_force_random_walk_mps2_per_sqrt_s: float = 30.0
+    """How fast the specific force may change."""
+    default_accel_noise_std_mps2: float = 0.07
+    """Accelerometer white-noise std used for axes whose array.toml gives none."""
+    use_gyro: bool = True
+    """Use the gyroscope when the array has one."""
+    use_inclinometer: bool = False
+    """Tilt factors need the attitude state, which the batch smoother does not carry yet; keep False."""
+    self_calibrate_bias: bool = False
+    """Estimate a constant bias per accelerometer axis (and the gyro bias)."""
+    bias_prior_std_mps2: float = 0.1
+    """Prior std of each accelerometer bias (around 0)."""
+    gyro_bias_prior_std_radps: float = 0.05
+    self_calibrate_scale: bool = False
+    """Estimate a constant scale-factor error per accelerometer axis."""
+    scale_prior_std: float = 0.01
+    free_flight: bool = False
+    """Treat the whole log as torque-free free flight (paper 004): needs ``array.body``."""
+    torque_noise_std_nm: float = 1e-4
+    """Std of the unmodelled torque in the Euler factor [N m]."""
+    free_fall_std_mps2: float = 0.05
+    """Std of the specific force at the centre of mass in free flight [m/s²]."""
+    initial_omega_std_radps: float = 100.0
+    initial_omega_dot_std_radps2: float = 1000.0
+    initial_specific_force_std_mps2: float = 1000.0
+    """Weak priors on the first state (zero mean) keeping the normal equations definite."""
+    window_s: float | None = 30.0
+    """Solve logs longer than this in overlapping windows of this length (None: whole log)."""
+    overlap_s: float = 2.0
+    """Overlap of consecutive windows; each half of it is taken from the nearer window."""
+    max_iterations: int = 30
+    relative_tolerance: float = 1e-10
+    """Stop when the cost decreases by less than this fraction."""
+    compute_sigma: bool = False
+    """Fill ``Motion.sigma`` with marginal one-sigma uncertainties."""
+    init_window_s: float = 0.4
+    """Window of the sign-resolving initialisation (see :mod:`gfimu.smoother.initialise`)."""
+
+    def __post_init__(self) -> None:
+        for name in (
+            "omega_dot_random_walk_radps2_per_sqrt_s",
+            "specific_force_random_walk_mps2_per_sqrt_s",
+            "default_accel_noise_std_mps2",
+            "bias_prior_std_mps2",
+            "gyro_bias_prior_std_radps",
+            "scale_prior_std",
+            "torque_noise_std_nm",
+            "free_fall_std_mps2",
+            "initial_omega_std_radps",
+            "initial_omega_dot_std_radps2",
+            "initial_specific_force_std_mps2",
+            "init_window_s",
+        ):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ValueError(f"smoother option {name} must be a positive number, got {v!r}")
+        if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
+            raise ValueError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
+        if int(self.max_iterations) < 1:
+            raise ValueError("smoother option max_iterations must be >= 1")
+
+
+def options_reason(array: SensorArray, options: SmootherOptions) -> str | None:
+    """Why the smoother cannot run on ``array`` with ``options`` (None if it can)."""
+    if options.use_inclinometer:
+        return "use_inclinometer needs the attitude state, not carried by the batch smoother; set use_inclinometer=False"
+    if options.free_flight:
+        if array.body is None:
+            return f"free_flight needs the body's principal inertia ([body] in array.toml); array {array.name!r} has none"
+        return None
+    if array.n_axes < 6 and not (array.gyroscope is not None and options.use_gyro):
+        return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without free flight or a gyroscope "
+                "ω cannot be observed (use free_flight=True with the body's inertia)")
+    return None
+
+
+@dataclass
+class Term:
+    """Whitened residuals and Jacobians of one group of factors, vectorised.
+
+    ``kind`` 'unary' (one state, rows per sample), 'binary' (samples k, k+1)
+    or 'global' (calibration variables only). ``jac`` maps 'x' (unary) or
+    'x0'/'x1' (binary) to (N, r, 9); ``jac_global`` is (N, r, G) or None.
+    """
+
+    kind: str
+    residual: np.ndarray
+    jac: dict
+    jac_global: np.ndarray | None = None
+    first: int = 0
+
+
+@dataclass
+class SmootherProblem:
+    """The smoothing problem of one contiguous log (fast path and graph path)."""
+
+    log: Log
+    options: SmootherOptions = field(default_factory=SmootherOptions)
+
+    def __post_init__(self) -> None:
+        reason = options_reason(self.log.array, self.options)
+        if reason:
+            raise ValueError(reason)
+        arr = self.log.array
+        opt = self.options
+        self.n = len(self.log)
+        if self.n < 2:
+            raise ValueError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
+        self.dt_s = self.log.dt_s
+        sigma = arr.noise_std_per_axis_mps2
+        self.accel_sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, opt.default_accel_noise_std_mps2)
+        self.sensors = []  # (directions, positions, column slice)
+        col = 0
+        for acc in arr.accelerometers:
+            d, p = accelerometer.sensor_geometry(acc)
+            self.sensors.append((d, p, slice(col, col + d.shape[0])))
+            col += d.shape[0]
+        # global variables: biases, scales, gyro bias
+        self.global_blocks = {}  # name -> (slice, gtsam key)
+        g = 0
+        if opt.self_calibrate_bias:
+            for i, (_, _, cols) in enumerate(self.sensors):
+                size = cols.stop - cols.start
+                self.global_blocks[f"bias{i}"] = (slice(g, g + size), bias_key(i))
+                g += size
+        if opt.self_calibrate_scale:
+            for i, (_, _, cols) in enumerate(self.sensors):
+                size = cols.stop - cols.start
+                self.global_blocks[f"scale{i}"] = (slice(g, g + size), scale_key(i))
+                g += size
+        self.use_gyro = arr.gyroscope is not None and opt.use_gyro and self.log.gyro_b_radps is not None
+        if self.use_gyro and opt.self_calibrate_bias:
+            self.global_blocks["gyro_bias"] = (slice(g, g + 3), gyro_bias_key())
+            g += 3
+        self.n_global = g
+        if self.use_gyro:
+            gs = arr.gyroscope.noise_std_radps
+            self.gyro_sigma = float(gs) if gs else 0.01
+        q = opt.omega_dot_random_walk_radps2_per_sqrt_s
+        self.trapezoid_sigma = kinematics.trapezoid_sigma(q, self.dt_s)
+        self.omega_dot_step_sigma = process.random_walk_sigma(q, self.dt_s)
+        self.force_step_sigma = process.random_walk_sigma(opt.specific_force_random_walk_mps2_per_sqrt_s, self.dt_s)
+        self.first_sigma = np.repeat(
+            [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
+        )
+
+    # --- calibration variables -------------------------------------------
+    def global_part(self, params: np.ndarray, name: str) -> np.ndarray | None:
+        block = self.global_blocks.get(name)
+        return None if block is None else params[block[0]]
+
+    def global_prior_sigma(self) -> np.ndarray:
+        s = np.zeros(self.n_global)
+        for name, (sl, _) in self.global_blocks.items():
+            if name.startswith("bias"):
+                s[sl] = self.options.bias_prior_std_mps2
+            elif name.startswith("scale"):
+                s[sl] = self.options.scale_prior_std
+            else:
+                s[sl] = self.options.gyro_bias_prior_std_radps
+        return s
+
+    # --- vectorised factors (fast path) -----------------------------------
+    def terms(self, states: np.ndarray, params: np.ndarray) -> list[Term]:
+        """All factors, whitened, at ``states`` (N, 9) and ``params`` (G,)."""
+        X = states
+        n = self.n
+        out = []
+        # accelerometers: one term with all axes
+        rows = []
+        jx = []
+        jg = np.zeros((n, self.log.array.n_axes, self.n_global)) if self.n_global else None
+        for i, (d, p, cols) in enumerate(self.sensors):
+            bias = self.global_part(params, f"bias{i}")
+            scale = self.global_part(params, f"scale{i}")
+            r, j = accelerometer.accelerometer_residual(X[:, W], X[:, D], X[:, F], self.log.accel_mps2[:, cols], d, p, bias, scale)
+            rows.append(r)
+            jx.append(np.concatenate([j["w"], j["d"], j["f"]], axis=2))
+            if bias is not None:
+                jg[:, cols, self.global_blocks[f"bias{i}"][0]] = j["b"]
+            if scale is not None:
+                jg[:, cols, self.global_blocks[f"scale{i}"][0]] = j["s"]
+        w = 1.0 / self.accel_sigma
+        r = np.concatenate(rows, axis=1) * w
+        J = np.concatenate(jx, axis=1) * w[None, :, None]
+        if jg is not None:
+            jg *= w[None, :, None]
+        out.append(Term("unary", r, {"x": J}, jg))
+        # first-state weak prior
+        r0, _ = process.prior_residual(X[:1], np.zeros(STATE_SIZE))
+        out.append(Term("unary", r0 / self.first_sigma, {"x": np.diag(1.0 / self.first_sigma)[None]}, None, first=0))
+        # trapezoid kinematics + ω̇ and f random walks, stacked as one binary term (9 rows)
+        rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
+        rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
+        rf, _ = process.random_walk_residual(X[:-1, F], X[1:, F])
+        m = n - 1
+        J0 = np.zeros((m, 9, 9))
+        J1 = np.zeros((m, 9, 9))
+        J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
+        J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
+        J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
+        J0[:, 6:9, F], J1[:, 6:9, F] = -np.eye(3), np.eye(3)
+        wb = 1.0 / np.concatenate(
+            [np.repeat(self.trapezoid_sigma[:, None], 3, 1), np.repeat(self.omega_dot_step_sigma[:, None], 3, 1),
+             np.repeat(self.force_step_sigma[:, None], 3, 1)], axis=1)
+        out.append(Term("binary", np.concatenate([rk, rd, rf], axis=1) * wb, {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]}))
+        # gyroscope
+        if self.use_gyro:
+            gb = self.global_part(params, "gyro_bias")
+            r, j = gyroscope.gyroscope_residual(X[:, W], self.log.gyro_b_radps, gb)
+            Jg = np.zeros((n, 3, 9))
+            Jg[:, :, W] = j["w"]
+            jgg = None
+            if gb is not None:
+                jgg = np.zeros((n, 3, self.n_global))
+                jgg[:, :, self.global_blocks["gyro_bias"][0]] = j["g"] / self.gyro_sigma
+            out.append(Term("unary", r / self.gyro_sigma, {"x": Jg / self.gyro_sigma}, jgg))
+        # free flight
+        if self.options.free_flight:
+            inertia = self.log.array.body.principal_inertia_kgm2
+            r, j = euler.euler_residual(X[:, W], X[:, D], inertia)
+            Je = np.zeros((n, 3, 9))
+            Je[:, :, W], Je[:, :, D] = j["w"], j["d"]
+            s = self.options.torque_noise_std_nm
+            out.append(Term("unary", r / s, {"x": Je / s}))
+            r, j = free_fall.free_fall_residual(X[:, F])
+            Jf = np.zeros((n, 3, 9))
+            Jf[:, :, F] = j["f"]
+            s = self.options.free_fall_std_mps2
+            out.append(Term("unary", r / s, {"x": Jf / s}))
+        # calibration priors
+        if self.n_global:
+            s = self.global_prior_sigma()
+            out.append(Term("global", (params / s)[None], {}, np.diag(1.0 / s)[None]))
+        return out
+
+    def cost(self, states: np.ndarray, params: np.ndarray) -> float:
+        """Half the sum of squared whitened residuals (GTSAM's graph error)."""
+        return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
+
+    # --- the same problem as a GTSAM graph (graph path) -----------------------
+    def gtsam_graph(self) -> gtsam.NonlinearFactorGraph:
+        """NonlinearFactorGraph of CustomFactors equal to :meth:`terms`."""
+        graph = gtsam.NonlinearFactorGraph()
+        opt = self.options
+        y = self.log.accel_mps2
+        for k in range(self.n):
+            for i, (d, p, cols) in enumerate(self.sensors):
+                kb = self.global_blocks[f"bias{i}"][1] if f"bias{i}" in self.global_blocks else None
+                ks = self.global_blocks[f"scale{i}"][1] if f"scale{i}" in self.global_blocks else None
+                graph.add(accelerometer.make_accelerometer_factor(
+                    omega_key(k), omega_dot_key(k), specific_force_key(k), y[k, cols], d, p,
+                    diagonal_noise(self.accel_sigma[cols]), kb, ks))
+            if self.use_gyro:
+                kg = self.global_blocks["gyro_bias"][1] if "gyro_bias" in self.global_blocks else None
+                graph.add(gyroscope.make_gyroscope_factor(omega_key(k), self.log.gyro_b_radps[k],
+                                                          diagonal_noise(np.full(3, self.gyro_sigma)), kg))
+            if opt.free_flight:
+                graph.add(euler.make_euler_factor(omega_key(k), omega_dot_key(k), self.log.array.body.principal_inertia_kgm2,
+                                                  diagonal_noise(np.full(3, opt.torque_noise_std_nm))))
+                graph.add(free_fall.make_free_fall_factor(specific_force_key(k), diagonal_noise(np.full(3, opt.free_fall_std_mps2))))
+        for key, sl in ((omega_key(0), W), (omega_dot_key(0), D), (specific_force_key(0), F)):
+            graph.add(process.make_prior_factor(key, np.zeros(3), diagonal_noise(self.first_sigma[sl])))
+        for k in range(self.n - 1):
+            graph.add(kinematics.make_angular_velocity_factor(
+                omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), float(self.dt_s[k]),
+                diagonal_noise(np.full(3, self.trapezoid_sigma[k]))))
+            graph.add(process.make_random_walk_factor(omega_dot_key(k), omega_dot_key(k + 1),
+                                                      diagonal_noise(np.full(3, self.omega_dot_step_sigma[k]))))
+            graph.add(process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
+                                                      diagonal_noise(np.full(3, self.force_step_sigma[k]))))
+        if self.n_global:
+            s = self.global_prior_sigma()
+            for name, (sl, key) in self.global_blocks.items():
+                graph.add(process.make_prior_factor(key, np.zeros(sl.stop - sl.start), diagonal_noise(s[sl])))
+        return graph
+
+    def gtsam_values(self, states: np.ndarray, params: np.ndarray) -> gtsam.Values:
+        values = gtsam.Values()
+        for k in range(self.n):
+            values.insert(omega_key(k), np.array(states[k, W]))
+            values.insert(omega_dot_key(k), np.array(states[k, D]))
+            values.insert(specific_force_key(k), np.array(states[k, F]))
+        for name, (sl, key) in self.global_blocks.items():
+            values.insert(key, np.array(params[sl]))
+        return values
+
+    def from_gtsam_values(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
+        states = np.zeros((self.n, STATE_SIZE))
+        for k in range(self.n):
+            states[k, W] = values.atVector(omega_key(k))
+            states[k, D] = values.atVector(omega_dot_key(k))
+            states[k, F] = values.atVector(specific_force_key(k))
+        params = np.zeros(self.n_global)
+        for name, (sl, key) in self.global_blocks.items():
+            params[sl] = values.atVector(key)
+        return states, params

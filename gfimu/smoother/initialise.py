@@ -1,0 +1,213 @@
+"""Initial states for the smoothers, in the right basin even when ω crosses zero.
+
+1. Linear smoothing of the lifted per-sample unknowns ``z = [f, ω̇, q(ω)]``
+   (paper 000's linear model ``y = S z``) with random-walk priors: the
+   per-sample inversion when S is well conditioned, a regularised version of
+   it for near-planar arrays (e.g. MIMU4444) where S alone fails. One banded
+   solve, linear in length.
+2. Sign of ω, window by window: over a short window ``ω(t) = ω₀ + W(t)``
+   with ``W`` the trapezoid integral of ω̇ from the window start, and
+   ``q(ω₀ + W) = q(ω₀) + J_q(W) ω₀ + q(W)`` is linear in ω₀ and in the
+   constant ``c = q(ω₀)``; a linear least-squares solve plus a Gauss-Newton
+   polish over the eight sign candidates of ``|ω₀|`` picks ω₀ with its sign
+   wherever ω̇ varies within the window (a constant ω has an unobservable
+   sign from accelerometers alone: ``q(ω) = q(-ω)``; then continuity with
+   the previous window decides).
+3. With a gyroscope ω comes from it; in free flight (paper 004) ω is tracked
+   sample by sample through the accelerometer model with Euler's equations,
+   and the global sign (unobservable per sample) is chosen so that the
+   integral of ω̇ agrees with ω.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import cho_solve_banded, cholesky_banded
+
+from .. import rigid_body
+from ..log import Log
+from .graph import STATE_SIZE, SmootherOptions
+
+LIFTED = 12
+
+
+def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: float = 300.0,
+                     prior_std: float = 1e4) -> np.ndarray:
+    """Linear smoother of ``z = [f, ω̇, q]`` (N, 12) from the accelerometers alone.
+
+    Measurement ``S z_k = y_k`` (per-axis noise), random walks of densities
+    (specific force, ω̇, ``quadratic_density`` [rad²/s²/√s]) and a weak zero
+    prior of std ``prior_std`` on every unknown.
+    """
+    arr = log.array
+    S = arr.structure_matrix()
+    sigma = arr.noise_std_per_axis_mps2
+    sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, options.default_accel_noise_std_mps2)
+    A = S / sigma[:, None]
+    n = len(log)
+    y = log.accel_mps2 / sigma
+    info = A.T @ A + np.eye(LIFTED) / prior_std**2
+    dens = np.repeat([options.specific_force_random_walk_mps2_per_sqrt_s, options.omega_dot_random_walk_radps2_per_sqrt_s,
+                      quadratic_density], [3, 3, 6])
+    dt = log.dt_s
+    w = 1.0 / (dens[None, :] ** 2 * dt[:, None])  # (N-1, 12) random-walk information
+    diag = np.broadcast_to(info, (n, LIFTED, LIFTED)).copy()
+    idx = np.arange(LIFTED)
+    diag[:-1, idx, idx] += w
+    diag[1:, idx, idx] += w
+    lower = np.zeros((n - 1, LIFTED, LIFTED))
+    lower[:, idx, idx] = -w
+    from .batch import to_lower_banded
+
+    cb = cholesky_banded(to_lower_banded(diag, lower), lower=True, check_finite=False)
+    rhs = (y @ A).reshape(-1)
+    return cho_solve_banded((cb, True), rhs, check_finite=False).reshape(n, LIFTED)
+
+
+def trapezoid_integral(omega_dot: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
+    """``W_t = ∫ω̇`` from the first sample (W_0 = 0), trapezoid rule; (L, 3)."""
+    inc = 0.5 * (omega_dot[1:] + omega_dot[:-1]) * dt_s[:, None]
+    return np.concatenate([np.zeros((1, 3)), np.cumsum(inc, axis=0)])
+
+
+_SIGNS = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], dtype=float)
+
+
+def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.ndarray | None = None,
+                         continuity_std_radps: float = 0.5, iterations: int = 8) -> tuple[np.ndarray, float]:
+    """ω₀ of one window from measured quadratic terms (L, 6) and ∫ω̇ (L, 3).
+
+    Returns ω₀ and the best cost. ``previous`` (ω expected at the window
+    start from the window before) adds a weak continuity term.
+    """
+    L = q_meas.shape[0]
+    Jw = rigid_body.quadratic_terms_jacobian(integral)  # (L, 6, 3): cross term J_q(W) ω₀
+    rhs = (q_meas - rigid_body.quadratic_terms(integral)).reshape(-1)
+    design = np.concatenate([Jw, np.broadcast_to(np.eye(6), (L, 6, 6))], axis=2).reshape(-1, 9)
+    theta = np.linalg.lstsq(design, rhs, rcond=1e-10)[0]
+    mags = rigid_body.omega_from_quadratic_terms(theta[3:])
+    cands = np.vstack([theta[:3][None], _SIGNS * mags, _SIGNS * rigid_body.omega_from_quadratic_terms(q_meas[0])])
+    w_c = 1.0 / continuity_std_radps
+
+    def residuals(w0):  # (C, 3) -> (C, L*6 [+3]), (C, L*6 [+3], 3)
+        om = w0[:, None, :] + integral[None]
+        r = (rigid_body.quadratic_terms(om) - q_meas[None]).reshape(len(w0), -1)
+        J = rigid_body.quadratic_terms_jacobian(om).reshape(len(w0), -1, 3)
+        if previous is not None:
+            r = np.concatenate([r, w_c * (w0 - previous)], axis=1)
+            J = np.concatenate([J, np.broadcast_to(w_c * np.eye(3), (len(w0), 3, 3))], axis=1)
+        return r, J
+
+    w0 = cands
+    for _ in range(iterations):
+        r, J = residuals(w0)
+        JT = np.swapaxes(J, 1, 2)
+        H = JT @ J + 1e-9 * np.eye(3)
+        w0 = w0 - np.linalg.solve(H, np.einsum("cij,cj->ci", JT, r)[..., None])[..., 0]
+    r, _ = residuals(w0)
+    cost = np.sum(r * r, axis=1)
+    best = int(np.argmin(cost))
+    return w0[best], float(cost[best])
+
+
+def sign_resolved_omega(q_meas: np.ndarray, omega_dot: np.ndarray, dt_s: np.ndarray, window: int) -> np.ndarray:
+    """ω (N, 3) window by window from quadratic terms and ω̇ of one contiguous segment."""
+    n = q_meas.shape[0]
+    out = np.zeros((n, 3))
+    previous = None
+    start = 0
+    while start < n:
+        stop = min(start + window, n)
+        if n - stop < window // 2:
+            stop = n
+        integral = trapezoid_integral(omega_dot[start:stop], dt_s[start:stop - 1])
+        w0, _ = window_initial_omega(q_meas[start:stop], integral, previous)
+        out[start:stop] = w0 + integral
+        if stop < n:
+            previous = out[stop - 1] + 0.5 * (omega_dot[stop - 1] + omega_dot[stop]) * dt_s[stop - 1]
+        start = stop
+    return out
+
+
+def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
+    """Track ω through the single-sensor free-flight model (paper 004, eqs. 1, 13).
+
+    Per sample, Gauss-Newton on ``y = S_axes [0, Ψ(ω), q(ω)]`` with
+    ``Ψ(ω) = -I⁻¹ (ω × I ω)``, started from the previous sample (the first
+    from a spread of candidates); the overall sign, which the readings do
+    not show, is picked so that the trapezoid integral of Ψ(ω) agrees with ω.
+    """
+    arr = log.array
+    inertia = np.asarray(arr.body.principal_inertia_kgm2)
+    S = arr.structure_matrix()
+    Sd, Sq = S[:, 3:6], S[:, 6:12]
+    y = log.accel_mps2
+    n = len(log)
+
+    def model(w):  # (C, 3) -> readings (C, n_axes), Jacobian (C, n_axes, 3)
+        iw = w * inertia
+        psi = -np.cross(w, iw) / inertia
+        from ..rotations import skew
+
+        dpsi = -(skew(w) * inertia - skew(iw)) / inertia[:, None]
+        pred = psi @ Sd.T + rigid_body.quadratic_terms(w) @ Sq.T
+        J = Sd @ dpsi + np.einsum("aj,cjk->cak", Sq, rigid_body.quadratic_terms_jacobian(w))
+        return pred, J
+
+    def polish(w, yk, iters):
+        for _ in range(iters):
+            pred, J = model(w)
+            r = pred - yk
+            JT = np.swapaxes(J, 1, 2)
+            w = w - np.linalg.solve(JT @ J + 1e-6 * np.eye(3), np.einsum("cij,cj->ci", JT, r)[..., None])[..., 0]
+        pred, _ = model(w)
+        return w, np.sum((pred - yk) ** 2, axis=1)
+
+    rng = np.random.default_rng(0)
+    cands = rng.normal(size=(200, 3)) * 10.0
+    w_all, cost = polish(cands, y[0], 30)
+    out = np.zeros((n, 3))
+    out[0] = w_all[np.argmin(cost)]
+    for k in range(1, n):
+        w, _ = polish(out[k - 1][None], y[k], 4)
+        out[k] = w[0]
+    psi = -np.cross(out, out * inertia) / inertia
+    dw = np.diff(out, axis=0)
+    integ = 0.5 * (psi[1:] + psi[:-1]) * log.dt_s[:, None]
+    return out if np.sum(dw * integ) >= 0 else -out
+
+
+def initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
+    """Initial ``[ω, ω̇, f]`` (N, 9) for :class:`gfimu.smoother.graph.SmootherProblem`."""
+    n = len(log)
+    x0 = np.zeros((n, STATE_SIZE))
+    arr = log.array
+    if options.free_flight:
+        w = free_flight_omega(log, options)
+        inertia = np.asarray(arr.body.principal_inertia_kgm2)
+        x0[:, 0:3] = w
+        x0[:, 3:6] = -np.cross(w, w * inertia) / inertia
+        return x0
+    gyro = arr.gyroscope is not None and options.use_gyro and log.gyro_b_radps is not None
+    if gyro and arr.n_axes < 12:
+        # f and ω̇ from the accelerometers given ω (paper 001's gyro-aided model), smoothed lightly
+        S = arr.structure_matrix()
+        y = log.accel_mps2 - rigid_body.quadratic_terms(log.gyro_b_radps) @ S[:, 6:12].T
+        lin = np.linalg.lstsq(S[:, :6], y.T, rcond=1e-8)[0].T
+        x0[:, 0:3] = log.gyro_b_radps
+        x0[:, 3:6] = lin[:, 3:6]
+        x0[:, 6:9] = lin[:, 0:3]
+        return x0
+    z = lifted_smoothing(log, options)
+    x0[:, 6:9] = z[:, 0:3]
+    x0[:, 3:6] = z[:, 3:6]
+    if gyro:
+        x0[:, 0:3] = log.gyro_b_radps
+        return x0
+    window = max(int(round(options.init_window_s * log.rate_hz)), 8)
+    for seg in log.segments():
+        idx = np.arange(seg.start, seg.stop)
+        if idx.size < 2:
+            continue
+        x0[seg, 0:3] = sign_resolved_omega(z[seg, 6:12], z[seg, 3:6], log.dt_s[seg.start:seg.stop - 1], window)
+    return x0
