@@ -75,7 +75,9 @@ def simulate(
     ``rate_hz`` and ``duration_s`` default to the scenario's (500 Hz and 10 s
     for random3d and reversal; see :data:`SCENARIOS`). ``noise=None`` applies
     the default :class:`SensorErrors` (white noise from the array's
-    ``noise_std_mps2``), ``SensorErrors.none()`` gives exact readings. The
+    ``noise_std_mps2``), ``SensorErrors.none()`` gives exact readings; an
+    explicit positive noise level in ``noise`` is also written into the log's
+    array (so array.toml states the noise actually applied). The
     motion and the sensor errors use independent streams derived from
     ``seed``, so changing the noise leaves the motion unchanged.
     ``scenario_options`` are the keyword options of the scenario's function
@@ -104,16 +106,34 @@ def simulate(
     kin, array = spec.build(times_s, np.random.default_rng(motion_seq), array, **scenario_options)
     truth = motion_from_truth(timestamps_ns, kin)
 
+    array = _array_with_noise_levels(array, noise)
+
     rng = np.random.default_rng(noise_seq)
+    show = progress and len(timestamps_ns) > _CHUNK
     readings = noise.accel_readings(array, truth.specific_force_b_mps2, truth.omega_dot_b_radps2,
                                     truth.omega_b_radps, rng, chunk=_CHUNK,
                                     progress=lambda it, total: _progress(it, total=total, desc=f"simulate {scenario}",
-                                                                         enable=progress))
+                                                                         enable=show))
     gyro = noise.gyro_readings(array, truth.omega_b_radps, rng) if array.gyroscope is not None else None
     tilt = (noise.tilt_readings(array, tilt_angles_rad(truth.quaternion_wb), rng)
             if array.inclinometer is not None else None)
     return Log(array, timestamps_ns, readings, gyro_b_radps=gyro, tilt_rad=tilt, truth=truth,
                source=f"simulate:{scenario}")
+
+
+def _array_with_noise_levels(array: SensorArray, noise: SensorErrors) -> SensorArray:
+    """The array as written to the log: explicit positive noise levels replace array.toml's."""
+    from dataclasses import replace
+
+    if noise.accel_noise_std_mps2:
+        array = array.with_accelerometers(replace(a, noise_std_mps2=float(noise.accel_noise_std_mps2))
+                                          for a in array.accelerometers)
+    if noise.gyro_noise_std_radps and array.gyroscope is not None:
+        array = replace(array, gyroscope=replace(array.gyroscope, noise_std_radps=float(noise.gyro_noise_std_radps)))
+    if noise.inclinometer_noise_std_rad and array.inclinometer is not None:
+        array = replace(array, inclinometer=replace(array.inclinometer,
+                                                    noise_std_rad=float(noise.inclinometer_noise_std_rad)))
+    return array
 
 
 def _recording_duration(scenario: str) -> float:
