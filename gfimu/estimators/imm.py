@@ -22,8 +22,8 @@ printed equations are lost, they are rebuilt here from the text):
    formula, e.g. ``ωz² = (b + c - a)/2``).
 4. a, b, c < T1: ω = 0.
 
-The other 19 combinations, and any sample with a negative sum, fall back
-to ω = ω_int.
+The other 19 combinations, and any sample with a negative sum (beyond
+floating-point rounding), fall back to ω = ω_int.
 
 Soft switching (eqs. 16-17, Fig. 6): each sum has a membership in the three
 models, linear across a band of half-width ``h1 Δ`` around T1 and ``h2 Δ``
@@ -124,10 +124,16 @@ def imm_weights(q: np.ndarray, t1: float, t2: float, h1: float, h2: float) -> tu
     w = p[:, 0, combos[:, 0]] * p[:, 1, combos[:, 1]] * p[:, 2, combos[:, 2]]  # (N, 27)
     alpha = w @ (_RULES == INTEGRATION).astype(float)
     beta = w @ (_RULES == QUADRATIC).astype(float)
-    negative = np.any(q[:, :3] < 0.0, axis=1)
+    negative = negative_sums(q)
     alpha[negative] = 1.0
     beta[negative] = 0.0
     return alpha, beta
+
+
+def negative_sums(q: np.ndarray) -> np.ndarray:
+    """Samples (N,) with a quadratic sum below zero beyond rounding (``-1e-9 (1 + max|q|)``)."""
+    q = np.asarray(q, dtype=float).reshape(-1, 6)
+    return np.any(q[:, :3] < -1e-9 * (1.0 + np.abs(q).max(axis=1, keepdims=True)), axis=1)
 
 
 def imm_case(q: np.ndarray, t1: float, t2: float) -> np.ndarray:
@@ -137,7 +143,7 @@ def imm_case(q: np.ndarray, t1: float, t2: float) -> np.ndarray:
     labels = np.where(s < t1, ZERO, np.where(s < t2, INTEGRATION, QUADRATIC))
     lookup = {c: case_rule(c)[1] for c in _COMBOS}
     cases = np.array([lookup[tuple(row)] for row in labels.tolist()], dtype=int)
-    cases[np.any(s < 0.0, axis=1)] = 0
+    cases[negative_sums(q)] = 0
     return cases
 
 
