@@ -179,6 +179,11 @@ def _atomic_write(path: str | os.PathLike, chunks: Iterable[str]) -> None:
         pass
 
 
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (never a half-written file)."""
+    _atomic_write(path, [text])
+
+
 def _format_block(timestamps: list[int], values: list[list[float]], fmt, flags: list[int] | None = None) -> str:
     """CSV text of one block of rows: timestamp, values, then optional integer flags."""
     if flags is None:

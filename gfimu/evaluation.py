@@ -1,0 +1,378 @@
+"""Accuracy of an estimate against truth or a reference (pure computation, no I/O).
+
+For every quantity both motions have, :func:`evaluate` reports, over the rows
+kept (matching timestamps, valid, finite):
+
+- ``rmse`` per axis: sqrt(mean_i e_ij²) with e = estimate − truth;
+- ``rmse_norm``: RMS of the error vector's norm, sqrt(mean_i ‖e_i‖²);
+- ``median_norm``: median of ‖e_i‖;
+- ``relative_rms`` per axis, paper 004 eq. (7):
+  ε_j = sqrt(mean_i e_ij²) / sqrt(mean_i ‖t_i‖²), the component's RMS error
+  normalised by the RMS magnitude of the true vector t (the paper's
+  "theoretical root mean square angular velocity magnitude"); applied to
+  every vector quantity, not to attitude;
+- for ω only: ``wrong_sign_share``, ``wrong_sign_share_axis`` and
+  ``large_error_share`` (defined in :class:`QuantityMetrics`).
+
+Attitude (quaternions): the error is the rotation vector of
+R_trueᵀ R_est, in B, in rad (its norm is the attitude error angle); a
+``tilt`` row also gives the angle between the true and estimated vertical
+seen from B (yaw-free, for orientation from gravity alone).
+
+Rows left out: those where ``valid`` is False (pass
+``~log.invalid_reference``), counted as ``n_invalid``; per quantity, rows
+whose estimate or truth is not finite, counted as ``n_nonfinite``.
+"""
+
+from __future__ import annotations
+
+import csv as _csv
+import io
+import json
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .motion import QUANTITIES, Motion
+from .rotations import quaternion_from_rotation_vector, quaternion_multiply
+
+SHORT_NAMES = {
+    "omega_b_radps": "omega",
+    "omega_dot_b_radps2": "omega_dot",
+    "accel_b_mps2": "accel",
+    "specific_force_b_mps2": "specific_force",
+    "quaternion_wb": "attitude",
+}
+UNITS = {"omega": "rad s^-1", "omega_dot": "rad s^-2", "accel": "m s^-2", "specific_force": "m s^-2",
+         "attitude": "rad", "tilt": "rad"}
+AXES = ("x", "y", "z")
+ROW_KEYS = ("quantity", "unit", "n", "n_nonfinite", "rmse_x", "rmse_y", "rmse_z", "rmse_norm", "median_norm",
+            "rel_rms_x", "rel_rms_y", "rel_rms_z", "wrong_sign", "wrong_sign_x", "wrong_sign_y", "wrong_sign_z",
+            "large_error")
+
+
+class EvaluationAlignmentWarning(UserWarning):
+    """The truth was interpolated at the estimate's timestamps."""
+
+
+@dataclass(frozen=True)
+class QuantityMetrics:
+    """Errors of one quantity.
+
+    ``wrong_sign_share_axis[j]``: among samples with |ω_true_j| above the sign
+    threshold, the share where the estimate's component j has the other sign
+    or is zero (ω_est_j · ω_true_j ≤ 0). ``wrong_sign_share``: among samples
+    with at least one such component, the share with at least one wrong sign.
+    ``large_error_share``: share of samples with ‖ω_est − ω_true‖ above the
+    large-error limit (5 rad/s by default). NaN when no sample qualifies.
+    """
+
+    quantity: str
+    unit: str
+    n: int
+    n_nonfinite: int
+    rmse: tuple[float, ...] | None
+    rmse_norm: float
+    median_norm: float
+    relative_rms: tuple[float, ...] | None = None
+    wrong_sign_share: float | None = None
+    wrong_sign_share_axis: tuple[float, ...] | None = None
+    large_error_share: float | None = None
+
+    def row(self) -> dict:
+        r = dict.fromkeys(ROW_KEYS)
+        r.update(quantity=self.quantity, unit=self.unit, n=self.n, n_nonfinite=self.n_nonfinite,
+                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, wrong_sign=self.wrong_sign_share,
+                 large_error=self.large_error_share)
+        for name, values in (("rmse", self.rmse), ("rel_rms", self.relative_rms), ("wrong_sign", self.wrong_sign_share_axis)):
+            if values is not None:
+                for a, v in zip(AXES, values):
+                    r[f"{name}_{a}"] = v
+        return r
+
+
+def _clean(v):
+    if v is None:
+        return None
+    if isinstance(v, (float, np.floating)):
+        return None if not math.isfinite(v) else float(v)
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def _csv_cell(v) -> str:
+    v = _clean(v)
+    if v is None:
+        return ""
+    return repr(v) if isinstance(v, float) else str(v)
+
+
+def _fmt(v, digits: int = 4) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, str):
+        return v
+    if not math.isfinite(v):
+        return "nan"
+    return f"{v:.{digits}g}"
+
+
+def _pct(v) -> str:
+    return "-" if v is None else ("nan" if not math.isfinite(v) else f"{100 * v:.3g} %")
+
+
+@dataclass(frozen=True)
+class EvaluationResult:
+    """Metrics of every quantity both motions have (see the module docstring)."""
+
+    metrics: tuple[QuantityMetrics, ...]
+    n_rows: int
+    n_compared: int
+    n_invalid: int
+    n_outside: int
+    alignment: str
+    sign_threshold_radps: float
+    large_error_radps: float
+
+    def __getitem__(self, name: str) -> QuantityMetrics:
+        short = SHORT_NAMES.get(name, name)
+        for m in self.metrics:
+            if m.quantity == short:
+                return m
+        raise KeyError(f"no metrics for {name!r}; have {[m.quantity for m in self.metrics]}")
+
+    def __contains__(self, name: str) -> bool:
+        return any(m.quantity == SHORT_NAMES.get(name, name) for m in self.metrics)
+
+    @property
+    def quantities(self) -> list[str]:
+        return [m.quantity for m in self.metrics]
+
+    @property
+    def rows(self) -> list[dict]:
+        """One dict per quantity with the keys of :data:`ROW_KEYS` (None where not applicable)."""
+        return [m.row() for m in self.metrics]
+
+    def summary(self) -> str:
+        parts = [f"{self.n_compared} of {self.n_rows} rows compared"]
+        if self.n_invalid:
+            parts.append(f"{self.n_invalid} left out as invalid reference")
+        if self.n_outside:
+            parts.append(f"{self.n_outside} outside the truth's time span")
+        if self.alignment != "exact":
+            parts.append("truth interpolated at the estimate's timestamps")
+        nonfinite = [f"{m.quantity}: {m.n_nonfinite}" for m in self.metrics if m.n_nonfinite]
+        if nonfinite:
+            parts.append("rows with non-finite estimates left out (" + ", ".join(nonfinite) + ")")
+        return "; ".join(parts)
+
+    def to_markdown(self, title: str | None = None) -> str:
+        head = ["quantity", "unit", "n", "RMSE x", "RMSE y", "RMSE z", "RMSE norm", "median norm",
+                "rel. RMS x", "rel. RMS y", "rel. RMS z", "wrong sign",
+                f"> {self.large_error_radps:g} rad/s"]
+        lines = []
+        if title:
+            lines += [f"### {title}", ""]
+        lines += ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * 2 + ["---:"] * (len(head) - 2)) + "|"]
+        for m in self.metrics:
+            rmse = m.rmse or (None,) * 3
+            rel = m.relative_rms or (None,) * 3
+            cells = [m.quantity, m.unit, str(m.n), *map(_fmt, rmse), _fmt(m.rmse_norm), _fmt(m.median_norm),
+                     *map(_pct, rel), _pct(m.wrong_sign_share), _pct(m.large_error_share)]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines += ["", f"{self.summary()}. Relative RMS: paper 004 eq. (7). Wrong sign: samples with a component of "
+                      f"|ω| > {self.sign_threshold_radps:g} rad/s estimated with the other sign."]
+        return "\n".join(lines) + "\n"
+
+    def to_csv(self) -> str:
+        buf = io.StringIO()
+        w = _csv.writer(buf, lineterminator="\n")
+        w.writerow(ROW_KEYS)
+        for r in self.rows:
+            w.writerow([_csv_cell(r[k]) for k in ROW_KEYS])
+        return buf.getvalue()
+
+    def to_json(self) -> str:
+        doc = {
+            "n_rows": self.n_rows, "n_compared": self.n_compared, "n_invalid": self.n_invalid,
+            "n_outside": self.n_outside, "alignment": self.alignment,
+            "sign_threshold_radps": self.sign_threshold_radps, "large_error_radps": self.large_error_radps,
+            "quantities": [{k: _clean(v) for k, v in r.items()} for r in self.rows],
+        }
+        return json.dumps(doc, indent=2, allow_nan=False) + "\n"
+
+
+# --- maths ---------------------------------------------------------------------
+
+def _conjugate(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def _rotation_vector_from_quaternion(q: np.ndarray) -> np.ndarray:
+    """Rotation vector (..., 3) of unit quaternions (..., 4); angle in [0, π]."""
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    q = np.where(q[..., :1] < 0, -q, q)
+    s = np.linalg.norm(q[..., 1:], axis=-1)
+    angle = 2.0 * np.arctan2(s, q[..., 0])
+    small = s < 1e-12
+    scale = np.where(small, 2.0, angle / np.where(small, 1.0, s))
+    return q[..., 1:] * scale[..., None]
+
+
+def attitude_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
+    """Rotation vector (N, 3) of R_trueᵀ R_est, in B; its norm is the attitude error in rad."""
+    return _rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q_true_wb), q_est_wb))
+
+
+def tilt_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
+    """Angle (N,) in rad between the true and estimated world vertical expressed in B."""
+    def up_in_body(q):
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        w, x, y, z = np.moveaxis(q, -1, 0)
+        return np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)
+
+    u, v = up_in_body(q_true_wb), up_in_body(q_est_wb)
+    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.sum(u * v, axis=-1))
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray) -> np.ndarray:
+    delta = _rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q0), q1))
+    return quaternion_multiply(q0, quaternion_from_rotation_vector(delta * s[:, None]))
+
+
+def _interpolate_truth(truth: Motion, t_ns: np.ndarray, valid: np.ndarray | None):
+    """Truth at times ``t_ns`` inside its span: (Motion, kept mask over t_ns, valid at kept times)."""
+    t_truth = truth.timestamps_ns
+    inside = (t_ns >= t_truth[0]) & (t_ns <= t_truth[-1])
+    tq = t_ns[inside]
+    hi = np.clip(np.searchsorted(t_truth, tq, side="left"), 1, t_truth.size - 1)
+    lo = hi - 1
+    span = (t_truth[hi] - t_truth[lo]).astype(float)
+    s = np.where(span > 0, (tq - t_truth[lo]) / np.where(span > 0, span, 1.0), 0.0)
+    kw = {}
+    for name in truth.available():
+        v = getattr(truth, name)
+        if name == "quaternion_wb":
+            kw[name] = _slerp(v[lo], v[hi], s)
+        else:
+            kw[name] = v[lo] + s[:, None] * (v[hi] - v[lo])
+    valid_at = None
+    if valid is not None:
+        valid_at = (valid[lo] | (s == 1.0)) & (valid[hi] | (s == 0.0))
+    return Motion(tq, **kw), inside, valid_at
+
+
+def _vector_metrics(name: str, err: np.ndarray, truth: np.ndarray, n_nonfinite: int, relative: bool = True,
+                    **extra) -> QuantityMetrics:
+    n = err.shape[0]
+    if n == 0:
+        nan3 = (math.nan,) * err.shape[1]
+        return QuantityMetrics(name, UNITS[name], 0, n_nonfinite, nan3, math.nan, math.nan,
+                               nan3 if relative else None, **extra)
+    norm = np.linalg.norm(err, axis=1)
+    rmse = np.sqrt(np.mean(err**2, axis=0))
+    rel = None
+    if relative:
+        denom = math.sqrt(float(np.mean(np.sum(truth**2, axis=1))))
+        rel = tuple(float(v) for v in (rmse / denom if denom > 0 else np.full(rmse.shape, math.nan)))
+    return QuantityMetrics(name, UNITS[name], n, n_nonfinite, tuple(float(v) for v in rmse),
+                           float(np.sqrt(np.mean(norm**2))), float(np.median(norm)), rel, **extra)
+
+
+def _sign_metrics(est: np.ndarray, true: np.ndarray, threshold: float, large: float) -> dict:
+    eligible = np.abs(true) > threshold
+    wrong = eligible & (est * true <= 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        per_axis = wrong.sum(axis=0) / eligible.sum(axis=0)
+        any_eligible = eligible.any(axis=1)
+        share = wrong.any(axis=1).sum() / any_eligible.sum() if any_eligible.any() else math.nan
+    norm = np.linalg.norm(est - true, axis=1)
+    return {
+        "wrong_sign_share": float(share),
+        "wrong_sign_share_axis": tuple(float(v) for v in per_axis),
+        "large_error_share": float(np.mean(norm > large)) if norm.size else math.nan,
+    }
+
+
+def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, sign_threshold_radps: float = 0.1,
+             large_error_radps: float = 5.0, align: str = "exact") -> EvaluationResult:
+    """Errors of ``estimate`` against ``truth`` (or a reference) for every quantity both have.
+
+    ``valid`` (len(truth),) bool marks truth rows to use (e.g.
+    ``~log.invalid_reference``). Timestamps must match exactly unless
+    ``align="interpolate"``: then the truth is interpolated (linearly; slerp
+    for attitude) at the estimate's timestamps, with a warning, and estimate
+    rows outside the truth's time span are left out (``n_outside``).
+    """
+    if align not in ("exact", "interpolate"):
+        raise ValueError(f"align must be 'exact' or 'interpolate', got {align!r}")
+    if not (sign_threshold_radps >= 0 and large_error_radps > 0):
+        raise ValueError("sign_threshold_radps must be >= 0 and large_error_radps > 0")
+    if valid is not None:
+        valid = np.asarray(valid)
+        if valid.shape != (len(truth),) or valid.dtype != bool:
+            raise ValueError(f"valid must be a boolean array of shape ({len(truth)},) (one per truth row), "
+                             f"got {valid.dtype} {valid.shape}")
+    common = [n for n in QUANTITIES if getattr(estimate, n) is not None and getattr(truth, n) is not None]
+    if not common:
+        raise ValueError(f"no quantity in common: the estimate has {[SHORT_NAMES[n] for n in estimate.available()]}, "
+                         f"the truth has {[SHORT_NAMES[n] for n in truth.available()]}")
+    n_rows = len(estimate)
+    n_outside = 0
+    same = len(estimate) == len(truth) and np.array_equal(estimate.timestamps_ns, truth.timestamps_ns)
+    if same:
+        alignment = "exact"
+    elif align == "exact":
+        if len(estimate) != len(truth):
+            detail = f"the estimate has {len(estimate)} rows, the truth {len(truth)}"
+        else:
+            k = int(np.flatnonzero(estimate.timestamps_ns != truth.timestamps_ns)[0])
+            detail = (f"row {k} differs: estimate {estimate.timestamps_ns[k]} ns, truth {truth.timestamps_ns[k]} ns")
+        raise ValueError(f"estimate and truth timestamps do not match ({detail}); they must be equal, or pass "
+                         "align='interpolate' (--interpolate) to interpolate the truth at the estimate's timestamps")
+    else:
+        if len(truth) < 2:
+            raise ValueError("cannot interpolate a truth with fewer than 2 rows")
+        warnings.warn(f"interpolating the truth ({len(truth)} rows) at the estimate's {len(estimate)} timestamps",
+                      EvaluationAlignmentWarning, stacklevel=2)
+        truth, inside, valid = _interpolate_truth(truth, estimate.timestamps_ns, valid)
+        n_outside = int(np.sum(~inside))
+        estimate = estimate.select(inside)
+        alignment = "interpolated"
+    keep = np.ones(len(truth), bool) if valid is None else valid
+    n_invalid = int(np.sum(~keep))
+
+    metrics = []
+    for name in common:
+        est = getattr(estimate, name)
+        tru = getattr(truth, name)
+        finite = keep & np.all(np.isfinite(est), axis=1) & np.all(np.isfinite(tru), axis=1)
+        n_nonfinite = int(np.sum(keep & ~finite))
+        est, tru = est[finite], tru[finite]
+        short = SHORT_NAMES[name]
+        if name == "quaternion_wb":
+            err = attitude_error(est, tru)
+            metrics.append(_vector_metrics(short, err, tru, n_nonfinite, relative=False))
+            tilt = tilt_error(est, tru)[:, None]
+            m = _vector_metrics("tilt", tilt, tru, n_nonfinite, relative=False)
+            metrics.append(QuantityMetrics("tilt", UNITS["tilt"], m.n, n_nonfinite, None, m.rmse_norm, m.median_norm))
+            continue
+        extra = _sign_metrics(est, tru, sign_threshold_radps, large_error_radps) if name == "omega_b_radps" else {}
+        metrics.append(_vector_metrics(short, est - tru, tru, n_nonfinite, **extra))
+    return EvaluationResult(tuple(metrics), n_rows, int(np.sum(keep)), n_invalid, n_outside, alignment,
+                            float(sign_threshold_radps), float(large_error_radps))
+
+
+def evaluate_log(estimate: Motion, log, **options) -> EvaluationResult:
+    """Evaluate against a log's truth, else its reference (leaving out ``log.invalid_reference`` rows)."""
+    if log.truth is not None:
+        return evaluate(estimate, log.truth, **options)
+    if log.reference is None:
+        raise ValueError(f"{log.source}: the log has neither truth nor reference to evaluate against")
+    valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
+    return evaluate(estimate, log.reference, valid=valid, **options)
