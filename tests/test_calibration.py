@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gfimu import calibration as cal
-from gfimu.array import Accelerometer, SensorArray, mimu4444_array, paper001_array
+from gfimu.array import Accelerometer, SensorArray, mimu4444_array
 from gfimu.log import Log
 from gfimu.rotations import matrix_from_rotation_vector
 
@@ -120,12 +120,14 @@ def test_too_few_orientations_is_refused():
 
 
 def test_identity_calibration_leaves_partial_axis_sensors_unchanged():
-    array = paper001_array()
+    array = SensorArray((Accelerometer("p1", [0.1, 0, 0], axes=("y", "z")), Accelerometer("p2", [0, 0.1, 0], axes=("x",)),
+                         Accelerometer("p3", [0, 0, 0.1], matrix_from_rotation_vector(np.array([0.2, 0.5, -0.1])))))
     sensors = tuple(cal.SensorCalibration(a.name, a.axes, a.directions_b, np.zeros(len(a.axes))) for a in array.accelerometers)
     y = np.random.default_rng(3).standard_normal((5, array.n_axes))
     assert np.allclose(cal.correct_readings(array, cal.Calibration(sensors), y), y)
     # a bias on one axis is removed from that axis only
-    sensors = (cal.SensorCalibration("a1", ("y", "z"), array.accelerometers[0].directions_b, np.array([0.5, 0.0])),) + sensors[1:]
+    first = array.accelerometers[0]
+    sensors = (cal.SensorCalibration(first.name, first.axes, first.directions_b, np.array([0.5, 0.0])),) + sensors[1:]
     out = cal.correct_readings(array, cal.Calibration(sensors), y)
     assert np.allclose(out[:, 0], y[:, 0] - 0.5) and np.allclose(out[:, 1:], y[:, 1:])
 
@@ -188,3 +190,33 @@ def test_real_recordings_spread(mimu4444_dir):
     before = cal.inter_sensor_spread(other.array, means)
     after = cal.inter_sensor_spread(other.array, cal.correct_readings(other.array, c, means))
     assert before > 0.45 and after < 0.05
+
+
+def test_calibrate_and_apply_cli(tmp_path, capsys):
+    from gfimu import logio
+    from gfimu.cli import main
+
+    array = mimu4444_array()
+    gains, biases = true_errors(array, seed=11)
+    f = orientations(8, seed=12)
+    rng = np.random.default_rng(13)
+    parts = []
+    for k in range(len(f)):
+        parts.append(readings(gains, biases, np.tile(f[k], (260, 1))) + 0.02 * rng.standard_normal((260, 24)))
+        parts.append(readings(gains, biases, np.tile(f[k], (40, 1))) + 4.0 * rng.standard_normal((40, 24)))
+    y = np.vstack(parts)
+    log = Log(array, (np.arange(len(y)) * 16_000_000).astype(np.int64), y)
+    logio.write_log(log, tmp_path / "log")
+    assert main(["calibrate", str(tmp_path / "log"), "--out", str(tmp_path / "cal.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "8 still periods" in out
+    c = cal.read_calibration(tmp_path / "cal.toml")
+    ref, _ = gauge_fixed(array, gains)
+    err = max(np.max(np.abs(s.gain - g)) for s, g in zip(c.sensors, ref))
+    nominal_err = max(np.max(np.abs(a.directions_b - g)) for a, g in zip(array.accelerometers, ref))
+    assert err < 6e-3 < 0.02 < nominal_err, (err, nominal_err)  # 8 orientations, 0.02 m/s² noise
+    assert c.info["spread_after_mps2"] < 0.01 < 0.3 < c.info["spread_before_mps2"]
+    # too few orientations: a clear error and exit status 2
+    logio.write_log(log.select(slice(0, 900)), tmp_path / "short")
+    assert main(["calibrate", str(tmp_path / "short"), "--out", str(tmp_path / "bad.toml")]) == 2
+    assert "at least 4 orientations" in capsys.readouterr().err

@@ -137,3 +137,37 @@ def test_exp1_decodes(mimu4444_dir):
     assert np.allclose(np.linalg.norm(f, axis=1), 9.81, atol=0.4)
     assert np.max(np.linalg.norm(f - f.mean(axis=0), axis=1)) < 1.0
     assert np.linalg.norm(log.reference.omega_b_radps[:60].mean(axis=0)) < 0.05
+
+
+def test_convert_cli_round_trip(tmp_path, capsys):
+    from gfimu import logio
+    from gfimu.cli import main
+
+    raw = [raw_for(k) for k in range(8)]
+    raw[5][3, 4] = 32767  # one gyro axis clipped at sample 4 (packet 5, after the dropped packet 3)
+    pk = [make_packet(k, 7 + k * 1_024_000, raw[k]) for k in range(8) if k != 3]
+    src = tmp_path / "data.bin"
+    src.write_bytes(b"\x00\x01" + b"".join(pk))
+    out = tmp_path / "log"
+    assert main(["convert", "mimu4444", str(src), "--out", str(out), "--with-gyro"]) == 0
+    text = capsys.readouterr().out
+    assert "packets: 7 decoded" in text and "dropped: 1 packet(s) in 1 counter gap(s); 1 time gap(s)" in text
+    assert "reference marked invalid on 1 sample(s)" in text
+    log = logio.read_log(out)
+    assert len(log) == 7 and log.gyro_b_radps is not None
+    assert log.invalid_reference.tolist() == [False, False, False, False, True, False, False]
+    assert np.allclose(log.accel_mps2[:, 0], np.array([0, 1, 2, 4, 5, 6, 7]) * m.ACCEL_MPS2_PER_COUNT)
+    assert [g.index for g in log.gaps()] == [3]
+    # without --with-gyro there are no gyro channels, the reference is still there
+    assert main(["convert", "mimu4444", str(src), "--out", str(tmp_path / "log2")]) == 0
+    log2 = logio.read_log(tmp_path / "log2")
+    assert log2.gyro_b_radps is None and np.allclose(log2.reference.omega_b_radps, log.reference.omega_b_radps)
+
+
+def test_convert_cli_bad_input(tmp_path, capsys):
+    from gfimu.cli import main
+
+    src = tmp_path / "data.bin"
+    src.write_bytes(bytes(500))
+    assert main(["convert", "mimu4444", str(src), "--out", str(tmp_path / "log")]) == 2
+    assert "no MIMU4444 packet" in capsys.readouterr().err
