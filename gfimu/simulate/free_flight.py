@@ -26,10 +26,10 @@ In both cases ``p² = z1 − z2`` or ``z3 − z2`` with paper 004's eq. 4. Putti
 the solution into Euler's equations (``sn' = cn dn``, ``cn' = −sn dn``,
 ``dn' = −k² sn cn``) fixes the signs: ``σ_a σ_b σ_c = −1`` when (a, b, c) is
 a cyclic order of the body axes (x, y, z), +1 otherwise. The sign of the
-axis whose component never crosses zero (``dn``) is that of its initial value;
-of the two others we fix one to +1 and the other follows. The phase ``τ0``
-is the incomplete elliptic integral ``F(φ0 | k²)`` of the Jacobi amplitude
-``φ0 = atan2(sn τ0, cn τ0)`` given by the initial condition. ``H² = 2T I_b``
+axes following ``dn`` and ``cn`` are those of their initial values (so
+``cn τ0 ≥ 0``) and the third follows. The phase ``τ0`` is the incomplete
+elliptic integral ``F(φ0 | k²)`` of the Jacobi amplitude
+``φ0 = atan2(sn τ0, cn τ0) ∈ [−π/2, π/2]`` given by the initial condition. ``H² = 2T I_b``
 (the separatrix) is the limit ``k → 1`` (``sn = tanh``, ``cn = dn = sech``).
 
 The paper's footnote 2 prints the small-oscillation frequencies with lost
@@ -111,6 +111,7 @@ class TorqueFreeMotion:
     tau0: float
     two_t: float
     h2: float
+    steady_radps: np.ndarray | None = None  # ω when it is a principal direction (no motion)
 
     @classmethod
     def from_initial(cls, inertia_kgm2, omega0_b_radps) -> "TorqueFreeMotion":
@@ -133,8 +134,10 @@ class TorqueFreeMotion:
         wa, wb, wc = w0[order]
         two_t = ia * wa**2 + ib * wb**2 + ic * wc**2
         h2 = ia**2 * wa**2 + ib**2 * wb**2 + ic**2 * wc**2
-        if two_t <= 0:
-            return cls(inertia, order, "major", np.zeros(3), np.ones(3), 0.0, 0.0, 0.0, 0.0, 0.0)
+        if np.linalg.norm(np.cross(w0, inertia * w0)) <= 1e-14 * max(h2, 1e-300):
+            # spin about a principal axis (or rest): a relative equilibrium, including the
+            # unstable one about the intermediate axis, where Table 1's phase is infinite
+            return cls(inertia, order, "major", np.zeros(3), np.ones(3), 0.0, 0.0, 0.0, float(two_t), float(h2), w0.copy())
         # Differences written as sums of non-negative terms (no cancellation).
         h2_minus_c = ia * (ia - ic) * wa**2 + ib * (ib - ic) * wb**2  # H² − 2T I_c ≥ 0
         a_minus_h2 = ib * (ia - ib) * wb**2 + ic * (ia - ic) * wc**2  # 2T I_a − H² ≥ 0
@@ -145,7 +148,8 @@ class TorqueFreeMotion:
             p = np.sqrt((ia - ib) * h2_minus_c / (ia * ib * ic))
             m = (ib - ic) * a_minus_h2 / ((ia - ib) * h2_minus_c)
             s_dn = 1.0 if wa >= 0 else -1.0
-            sign = np.array([s_dn, -parity * s_dn, 1.0])
+            s_cn = 1.0 if wc >= 0 else -1.0
+            sign = np.array([s_dn, -parity * s_dn * s_cn, s_cn])
             sn0 = sign[1] * wb / amp[1] if amp[1] > 0 else 0.0
             cn0 = sign[2] * wc / amp[2] if amp[2] > 0 else 1.0
         else:
@@ -154,12 +158,13 @@ class TorqueFreeMotion:
             p = np.sqrt((ib - ic) * a_minus_h2 / (ia * ib * ic))
             m = (ia - ib) * h2_minus_c / ((ib - ic) * a_minus_h2)
             s_dn = 1.0 if wc >= 0 else -1.0
-            sign = np.array([1.0, -parity * s_dn, s_dn])
+            s_cn = 1.0 if wa >= 0 else -1.0
+            sign = np.array([s_cn, -parity * s_dn * s_cn, s_dn])
             sn0 = sign[1] * wb / amp[1] if amp[1] > 0 else 0.0
             cn0 = sign[0] * wa / amp[0] if amp[0] > 0 else 1.0
         m = float(min(max(m, 0.0), 1.0))
         phi0 = float(np.arctan2(np.clip(sn0, -1, 1), np.clip(cn0, -1, 1)))
-        tau0 = float(special.ellipkinc(phi0, m)) if m < 1.0 or abs(phi0) < np.pi / 2 else np.sign(phi0) * 50.0
+        tau0 = float(special.ellipkinc(phi0, m))
         return cls(inertia, order, case, amp, sign, float(p), m, tau0, float(two_t), float(h2))
 
     def _elliptic(self, times_s):
@@ -169,6 +174,8 @@ class TorqueFreeMotion:
 
     def omega(self, times_s) -> np.ndarray:
         """ω in B at the given times, (N, 3)."""
+        if self.steady_radps is not None:
+            return np.broadcast_to(self.steady_radps, np.shape(times_s) + (3,)).copy()
         sn, cn, dn = self._elliptic(times_s)
         cols = (dn, sn, cn) if self.case == "major" else (cn, sn, dn)
         out = np.empty(np.shape(sn) + (3,))
@@ -178,6 +185,8 @@ class TorqueFreeMotion:
 
     def omega_dot(self, times_s) -> np.ndarray:
         """ω̇ in B, the exact time derivative of :meth:`omega`, (N, 3)."""
+        if self.steady_radps is not None:
+            return np.zeros(np.shape(times_s) + (3,))
         sn, cn, dn = self._elliptic(times_s)
         d_sn, d_cn, d_dn = cn * dn, -sn * dn, -self.m * sn * cn
         cols = (d_dn, d_sn, d_cn) if self.case == "major" else (d_cn, d_sn, d_dn)

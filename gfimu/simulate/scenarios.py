@@ -31,6 +31,7 @@ from scipy import interpolate
 from ..array import Body, SensorArray, cube_array, single_triad
 from .free_flight import TorqueFreeMotion, box_principal_inertia
 from .trajectory import (
+    GRAVITY_W_MPS2,
     BodyKinematics,
     gravity_in_body,
     integrate_attitude,
@@ -83,7 +84,8 @@ def _turntable(times_s, theta, theta_dot, theta_ddot, array, tilt_deg, axis_offs
     accel = np.cross(omega_dot, d) + np.cross(omega, np.cross(omega, d))
     q_tilt = quaternion_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(np.deg2rad(tilt_deg)))
     q = rotations.quaternion_multiply(q_tilt, quaternion_axis_angle(ez, theta))
-    return BodyKinematics(times_s, omega, omega_dot, accel, q), array
+    position = np.einsum("nij,j->ni", rotations.matrix_from_quaternion(q), d)  # axis through the W origin
+    return BodyKinematics(times_s, omega, omega_dot, accel, q, position), array
 
 
 def turntable(times_s, rng, array, *, tilt_deg: float = 12.0, amplitude_deg: float = 23.5,
@@ -114,7 +116,8 @@ def _sines_motion(times_s, omega_sines, position_sines, array):
     accel_w = sum_of_sines(times_s, *position_sines, order=2)
     r = rotations.matrix_from_quaternion(q)
     accel_b = np.einsum("nji,nj->ni", r, accel_w)
-    return BodyKinematics(times_s, omega, omega_dot, accel_b, q), array
+    position = sum_of_sines(times_s, *position_sines)
+    return BodyKinematics(times_s, omega, omega_dot, accel_b, q, position), array
 
 
 def _random_sines(rng, n_components, max_frequency_hz, rms, min_frequency_hz=0.1):
@@ -189,7 +192,8 @@ def _free_flight(times_s, array, which, spin_radps, off_axis_fraction):
     omega = motion.omega(times_s)
     q = integrate_attitude(motion.omega, times_s, np.array([1.0, 0, 0, 0]), omega_samples=omega)
     # free fall: the centre of mass accelerates at g, the specific force there is zero
-    kin = BodyKinematics(times_s, omega, motion.omega_dot(times_s), gravity_in_body(q), q)
+    position = 0.5 * np.outer(times_s**2, GRAVITY_W_MPS2)  # released at rest at the W origin
+    kin = BodyKinematics(times_s, omega, motion.omega_dot(times_s), gravity_in_body(q), q, position)
     return kin, (array if array.body is not None else replace(array, body=body))
 
 

@@ -29,6 +29,7 @@ class BodyKinematics:
     omega_dot_b_radps2: np.ndarray
     accel_b_mps2: np.ndarray
     quaternion_wb: np.ndarray
+    position_w_m: np.ndarray | None = None  # origin in W, when the scenario defines it
 
     @property
     def gravity_b_mps2(self) -> np.ndarray:
