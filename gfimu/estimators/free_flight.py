@@ -1,0 +1,302 @@
+"""Angular velocity in free flight from one triaxial accelerometer (paper 004).
+
+A torque-free body in free fall (paper 004, eqs. 8-11): the centre of mass
+falls with g, so the specific force at the origin of B (the centre of mass,
+axes along the principal axes) is zero and an accelerometer at r reads
+
+    a_s = ω̇ × r + ω × (ω × r),   ω̇ = -I⁻¹ (ω × I ω)       (eqs. 11-12)
+
+a function of ω alone (eq. 13; written here with the array's structure
+matrix, y = S_ω̇ ω̇(ω) + S_q q(ω), so any sensor rotation and any number of
+sensors on the body are handled). Two constants hold along the motion:
+2T = Σ I_i ω_i² and H² = Σ I_i² ω_i² (eqs. 2-3).
+
+1. Start (paper 004: the five unknowns [ω(0), 2T, H²] from the first
+   readings). Eq. 13 alone at the first sample has several roots besides
+   ±ω; they are found by multi-start least squares, and the root whose
+   per-sample track over the first ``init_samples`` readings best obeys
+   Euler's equations (ω_k+1 - ω_k ≈ Δt ω̇ by the trapezoid rule) is kept.
+   2T and H² are then fitted jointly with ω at those ``init_samples``
+   samples (scipy ``least_squares``, trust-region reflective).
+2. Every sample: the least-squares solution of eq. 13 with eqs. 2-3, with
+   paper 004's eq. 14 weighting (acceleration residual over the mean |a_s|,
+   constants relative), by ``scipy.optimize.least_squares(method="trf")``
+   from the previous sample's ω.
+
+All equations are even in ω, so ω is found up to its sign; ``omega_sign``
+picks the branch: "positive" / "negative" make the component on the spin
+axis (the major axis when H²/2T > I_intermediate, else the minor axis; its
+component never changes sign in torque-free motion) positive / negative;
+"auto" keeps the sign for which the whole track best obeys Euler's
+equations forward in time (-ω(t) solves them only backwards in time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .. import rigid_body
+from ..array import SensorArray
+from ..log import Log
+from ..motion import Motion
+from ..progress import progress as progress_bar
+
+OMEGA_SIGNS = ("positive", "negative", "auto")
+
+
+def euler_omega_dot(inertia_kgm2: np.ndarray, omega_b_radps: np.ndarray) -> np.ndarray:
+    """Torque-free Euler equations (paper 004, eq. 1): ``ω̇ = -I⁻¹ (ω × I ω)``, (..., 3)."""
+    i = np.asarray(inertia_kgm2, dtype=float)
+    w = np.asarray(omega_b_radps, dtype=float)
+    return -np.cross(w, i * w) / i
+
+
+def euler_omega_dot_jacobian(inertia_kgm2: np.ndarray, omega_b_radps: np.ndarray) -> np.ndarray:
+    """∂ω̇/∂ω of :func:`euler_omega_dot`, (3, 3) for one ω."""
+    i = np.asarray(inertia_kgm2, dtype=float)
+    w = np.asarray(omega_b_radps, dtype=float)
+    # d(ω × Iω) = dω × Iω + ω × I dω = -[Iω]× dω + [ω]× I dω
+    d_cross = -_skew(i * w) + _skew(w) * i[None, :]
+    return -d_cross / i[:, None]
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+class _FreeFlightModel:
+    """Readings of the array as a function of ω alone (paper 004, eq. 13)."""
+
+    def __init__(self, array: SensorArray):
+        S = array.structure_matrix()
+        self.S_dw = S[:, 3:6]
+        self.S_q = S[:, 6:]
+        self.inertia = np.asarray(array.body.principal_inertia_kgm2, dtype=float)
+        self.lever_m = float(np.max(np.linalg.norm(array.axis_positions_m, axis=1)))
+
+    def readings(self, w: np.ndarray) -> np.ndarray:
+        """(..., n_axes) readings for ω (..., 3)."""
+        return euler_omega_dot(self.inertia, w) @ self.S_dw.T + rigid_body.quadratic_terms(w) @ self.S_q.T
+
+    def readings_one(self, w: np.ndarray) -> np.ndarray:
+        """:meth:`readings` for a single ω (3,), without the broadcasting overhead."""
+        x, y, z = w
+        i1, i2, i3 = self.inertia
+        dw = np.array([(i2 - i3) * y * z / i1, (i3 - i1) * z * x / i2, (i1 - i2) * x * y / i3])
+        q = np.array([x * x + y * y, x * x + z * z, y * y + z * z, x * y, x * z, y * z])
+        return self.S_dw @ dw + self.S_q @ q
+
+    def jacobian(self, w: np.ndarray) -> np.ndarray:
+        """(n_axes, 3) ∂y/∂ω at one ω."""
+        x, y, z = w
+        i1, i2, i3 = self.inertia
+        a, b, c = (i2 - i3) / i1, (i3 - i1) / i2, (i1 - i2) / i3
+        d_dw = np.array([[0.0, a * z, a * y], [b * z, 0.0, b * x], [c * y, c * x, 0.0]])
+        d_q = np.array([[2 * x, 2 * y, 0.0], [2 * x, 0.0, 2 * z], [0.0, 2 * y, 2 * z], [y, x, 0.0], [z, 0.0, x], [0.0, z, y]])
+        return self.S_dw @ d_dw + self.S_q @ d_q
+
+    def constants(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """2T and H² (paper 004, eqs. 2-3), per row of ω."""
+        i = self.inertia
+        return np.sum(i * w * w, axis=-1), np.sum(i * i * w * w, axis=-1)
+
+    def spin_axis(self, two_t: float, h2: float) -> int:
+        """Axis whose ω component never changes sign: major if H²/2T > I_intermediate, else minor."""
+        order = np.argsort(self.inertia)
+        return int(order[2]) if h2 / two_t > self.inertia[order[1]] else int(order[0])
+
+
+@dataclass
+class FreeFlightEstimator:
+    """ω of a torque-free body in free fall from its accelerometer(s) (paper 004, eqs. 11-14).
+
+    Options (defaults):
+
+    - ``omega_sign="positive"``: branch of the ±ω ambiguity, "positive" /
+      "negative" on the spin axis, or "auto" (see module docstring);
+    - ``init_samples=20``: readings used to find ω(0), 2T and H²;
+    - ``starts=24``: multi-start points for the roots of eq. 13 at sample 0;
+    - ``compute_sigma=False``: one-sigma of ω from the Fisher information of
+      eq. 13 alone (accelerometer noise from the array), ignoring the
+      information added by the constants; ω̇'s follows to first order.
+
+    The whole log is taken as one free-flight phase (cut the throw and the
+    catch first). Returns ω and ω̇ (from Euler's equations); the specific
+    force at the centre of mass is zero by assumption and is not reported.
+    """
+
+    omega_sign: str = "positive"
+    init_samples: int = 20
+    starts: int = 24
+    compute_sigma: bool = False
+
+    def __post_init__(self) -> None:
+        if self.omega_sign not in OMEGA_SIGNS:
+            raise ValueError(f"omega_sign must be one of {OMEGA_SIGNS}, got {self.omega_sign!r}")
+        if int(self.init_samples) < 1:
+            raise ValueError(f"init_samples must be >= 1, got {self.init_samples}")
+        if int(self.starts) < 1:
+            raise ValueError(f"starts must be >= 1, got {self.starts}")
+
+    def applicable(self, array: SensorArray) -> str | None:
+        if array.body is None:
+            return f"array {array.name!r} has no [body] principal_inertia_kgm2 (needed by free-flight)"
+        if not any(len(a.axes) == 3 for a in array.accelerometers):
+            return f"array {array.name!r} has no triaxial accelerometer (free-flight needs one)"
+        if np.max(np.linalg.norm(array.axis_positions_m, axis=1)) <= 0:
+            return f"array {array.name!r}: an accelerometer at the centre of mass senses no rotation"
+        i = np.sort(array.body.principal_inertia_kgm2)
+        if i[1] - i[0] <= 1e-9 * i[2] or i[2] - i[1] <= 1e-9 * i[2]:
+            return f"array {array.name!r}: principal moments {list(i)} are not distinct (axisymmetric body)"
+        return None
+
+    # ------------------------------------------------------------------
+    def estimate(self, log: Log, progress: bool = False) -> Motion:
+        array = log.array
+        reason = self.applicable(array)
+        if reason:
+            raise ValueError(f"{log.source}: method 'free-flight' cannot run: {reason}")
+        y = log.accel_mps2
+        if not np.all(np.isfinite(y)):
+            bad = np.argwhere(~np.isfinite(y))[0]
+            raise ValueError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column {array.accel_columns[bad[1]]}")
+        n = len(log)
+        if n < 2:
+            raise ValueError(f"{log.source}: free-flight needs at least 2 samples, got {n}")
+        model = _FreeFlightModel(array)
+        t = log.times_s
+        k = min(int(self.init_samples), n)
+        w_init, two_t, h2 = self._initial(model, y[:k], t[:k])
+        if self.omega_sign != "auto":
+            axis = model.spin_axis(two_t, h2)
+            want = 1.0 if self.omega_sign == "positive" else -1.0
+            if np.sign(w_init[axis]) != want:
+                w_init = -w_init
+
+        accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))  # eq. 14: mean |a_s| over the N samples
+        omega = np.empty((n, 3))
+        w = w_init
+        for i in progress_bar(range(n), total=n, desc="free-flight", enable=progress):
+            w = self._solve_sample(model, y[i], w, two_t, h2, accel_scale)
+            omega[i] = w
+        if self.omega_sign == "auto":
+            dw = euler_omega_dot(model.inertia, omega)
+            inc = 0.5 * np.diff(t)[:, None] * (dw[1:] + dw[:-1])
+            if np.sum(np.diff(omega, axis=0) * inc) < 0:
+                omega = -omega
+        omega_dot = euler_omega_dot(model.inertia, omega)
+        sigma = {}
+        if self.compute_sigma:
+            sigma = self._sigma(array, model, omega)
+        return Motion(log.timestamps_ns, omega_b_radps=omega, omega_dot_b_radps2=omega_dot, sigma=sigma)
+
+    # ------------------------------------------------------------------
+    def _roots(self, model: _FreeFlightModel, y0: np.ndarray) -> list[np.ndarray]:
+        """Distinct (up to sign) least-squares solutions of eq. 13 at one sample."""
+        scale = np.sqrt(max(np.linalg.norm(y0), 1e-12) / model.lever_m)
+        m = max(int(self.starts) // 2, 1)
+        kk = np.arange(m) + 0.5
+        z = kk / m
+        phi = np.pi * (1 + 5**0.5) * kk
+        dirs = np.column_stack([np.sqrt(1 - z**2) * np.cos(phi), np.sqrt(1 - z**2) * np.sin(phi), z])
+        starts = np.vstack([0.8 * scale * dirs, 2.0 * scale * dirs])
+        found: list[tuple[float, np.ndarray]] = []
+        for st in starts:
+            r = least_squares(lambda w: model.readings_one(w) - y0, st, jac=model.jacobian, method="trf",
+                              xtol=1e-12, ftol=1e-12, gtol=1e-12)
+            w = r.x * (1.0 if r.x[np.argmax(np.abs(r.x))] >= 0 else -1.0)
+            if not any(np.linalg.norm(w - v) <= 1e-6 * (1 + np.linalg.norm(v)) for _, v in found):
+                found.append((float(np.sum(r.fun**2)), w))
+        best = min(c for c, _ in found)
+        tol = max(10 * best, 1e-20 * np.sum(y0**2))
+        roots = [w for c, w in sorted(found, key=lambda cw: cw[0]) if c <= tol]
+        # with noise the true root is not exact, so keep near-minimal ones too (up to a few)
+        return roots if roots else [found[0][1]]
+
+    def _initial(self, model: _FreeFlightModel, y: np.ndarray, t: np.ndarray):
+        """ω(0), 2T and H² from the first readings (see module docstring)."""
+        k = len(y)
+        accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))
+        best = None
+        for root in self._roots(model, y[0]):
+            two_t, h2 = model.constants(root)
+            track = [root]
+            for i in range(1, k):
+                track.append(self._solve_sample(model, y[i], track[-1], two_t, h2, accel_scale))
+            track = np.array(track)
+            if k > 1:
+                dw = euler_omega_dot(model.inertia, track)
+                inc = 0.5 * np.diff(t)[:, None] * (dw[1:] + dw[:-1])
+                step = np.diff(track, axis=0)
+                score = min(np.sum((step - inc) ** 2), np.sum((step + inc) ** 2))
+            else:
+                score = 0.0
+            if best is None or score < best[0]:
+                best = (score, track, two_t, h2)
+        _, track, two_t, h2 = best
+        if k == 1:
+            return track[0], float(two_t), float(h2)
+        # joint fit of ω at the k samples and the two constants (eqs. 13, 2, 3)
+        ref_t, ref_h = float(two_t), float(h2)
+
+        def residuals(z):
+            w = z[:-2].reshape(k, 3)
+            tt, hh = z[-2] * ref_t, z[-1] * ref_h
+            ct, ch = model.constants(w)
+            return np.concatenate([((model.readings(w) - y) / accel_scale).ravel(), (tt - ct) / ref_t, (hh - ch) / ref_h])
+
+        def jac(z):
+            w = z[:-2].reshape(k, 3)
+            na = y.shape[1]
+            J = np.zeros((k * na + 2 * k, 3 * k + 2))
+            i_ = model.inertia
+            for j in range(k):
+                J[j * na:(j + 1) * na, 3 * j:3 * j + 3] = model.jacobian(w[j]) / accel_scale
+                J[k * na + j, 3 * j:3 * j + 3] = -2 * i_ * w[j] / ref_t
+                J[k * na + k + j, 3 * j:3 * j + 3] = -2 * i_ * i_ * w[j] / ref_h
+            J[k * na:k * na + k, -2] = 1.0
+            J[k * na + k:, -1] = 1.0
+            return J
+
+        z0 = np.concatenate([track.ravel(), [1.0, 1.0]])
+        r = least_squares(residuals, z0, jac=jac, method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14)
+        w = r.x[:-2].reshape(k, 3)
+        return w[0], float(r.x[-2] * ref_t), float(r.x[-1] * ref_h)
+
+    @staticmethod
+    def _solve_sample(model, y_i, w_start, two_t, h2, accel_scale):
+        """Paper 004, eq. 14 at one sample, from ``w_start``."""
+        i_ = model.inertia
+
+        def residuals(w):
+            ww = w * w
+            ct, ch = i_ @ ww, (i_ * i_) @ ww
+            return np.concatenate([(y_i - model.readings_one(w)) / accel_scale, [(two_t - ct) / two_t, (h2 - ch) / h2]])
+
+        def jac(w):
+            return np.vstack([-model.jacobian(w) / accel_scale, -2 * i_ * w / two_t, -2 * i_ * i_ * w / h2])
+
+        r = least_squares(residuals, w_start, jac=jac, method="trf", xtol=1e-13, ftol=1e-13, gtol=1e-13)
+        return r.x
+
+    @staticmethod
+    def _sigma(array, model, omega):
+        sig = array.noise_std_per_axis_mps2
+        if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
+            raise ValueError(f"array {array.name!r}: compute_sigma needs noise_std_mps2 for every accelerometer axis")
+        s_w = np.empty_like(omega)
+        s_dw = np.empty_like(omega)
+        for i, w in enumerate(omega):
+            Jw = model.jacobian(w) / sig[:, None]
+            try:
+                cov = np.linalg.inv(Jw.T @ Jw)
+            except np.linalg.LinAlgError:
+                s_w[i] = s_dw[i] = np.inf
+                continue
+            D = euler_omega_dot_jacobian(model.inertia, w)
+            s_w[i] = np.sqrt(np.clip(np.diag(cov), 0, None))
+            s_dw[i] = np.sqrt(np.clip(np.diag(D @ cov @ D.T), 0, None))
+        return {"omega_b_radps": s_w, "omega_dot_b_radps2": s_dw}
