@@ -1,0 +1,342 @@
+#!/usr/bin/env python3
+"""Accelerometer-only angular velocity on the real MIMU4444 recordings.
+
+For each recording (exp_1..3): decode, calibrate (fitted on the same
+recording's still periods — "within" — and/or on another recording's —
+"cross"), run every applicable accelerometer-only method, and compare ω with
+the gyro reference (mean of the board's eight gyros) on the moving,
+unsaturated samples (|ω_ref| > 2 rad/s, reference valid) with
+:func:`gfimu.evaluation.evaluate`.
+
+``--residual`` adds the investigation of the rigid-body model residual: with
+ω from the gyro reference, how far do the calibrated accelerometer readings
+stand from the rigid-body model, and how much of it do a lag between the
+accelerometer and gyro channels, per-sensor time offsets, fitted sensor
+positions, per-sensor dynamic gains or the full 12-unknown linear model take
+away (fitted on one recording, checked on another).
+
+Examples::
+
+    python3 tools/mimu4444_study.py                       # all methods, within calibration, exp_1..3
+    python3 tools/mimu4444_study.py --methods ml smoother --calibration within cross --fit-on 1
+    python3 tools/mimu4444_study.py --residual --methods  # residual study only
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from gfimu import calibration as calib  # noqa: E402
+from gfimu.datasets.mimu4444 import read_mimu4444  # noqa: E402
+from gfimu.estimators import METHODS, make_estimator  # noqa: E402
+from gfimu.evaluation import evaluate  # noqa: E402
+from gfimu.rotations import skew  # noqa: E402
+
+DEFAULT_DATA = REPO.parent / "shared" / "data" / "mimu4444"
+MOVING_RADPS = 2.0
+NEEDS_GYRO = {"gyro-aided"}  # the gyro is the reference here: methods that read it are not compared
+
+
+# --- data ----------------------------------------------------------------------
+
+def load(data_dir: Path, exp: int, with_gyro: bool):
+    path = data_dir / f"exp_{exp}" / "data.bin"
+    if not path.is_file():
+        raise SystemExit(f"{path} not found (pass --data)")
+    return read_mimu4444(path, with_gyro=with_gyro)
+
+
+def moving_mask(log, threshold_radps: float = MOVING_RADPS) -> np.ndarray:
+    w = np.linalg.norm(log.reference.omega_b_radps, axis=1)
+    return (w > threshold_radps) & ~log.invalid_reference
+
+
+# --- method comparison ------------------------------------------------------------
+
+def run_method(name: str, log, options: dict, progress: bool):
+    est = make_estimator(name, **options)
+    reason = est.applicable(log.array)
+    if reason:
+        return None, reason, 0.0
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        motion = est.estimate(log, progress=progress)
+    return motion, None, time.perf_counter() - t0
+
+
+def metrics_row(motion, log, mask) -> dict:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = evaluate(motion.replace(omega_dot_b_radps2=None, accel_b_mps2=None, specific_force_b_mps2=None,
+                                      quaternion_wb=None, sigma={}),
+                       log.reference, valid=mask)
+    row = next(r for r in res.rows if r["quantity"] == "omega")
+    return row
+
+
+def compare(args) -> list[dict]:
+    rows = []
+    cals = {}
+    for exp in set(args.experiments) | ({args.fit_on} if "cross" in args.calibration else set()):
+        glog, _ = load(args.data, exp, with_gyro=True)
+        if args.calibration_until_s is not None:
+            glog = glog.select(slice(0, int(np.sum(glog.times_s <= args.calibration_until_s))))
+        cals[exp] = calib.fit(glog)
+        i = cals[exp].info
+        print(f"exp_{exp}: calibration from {i['still_periods']} still periods, spread {i['spread_before_mps2']:.3f} -> "
+              f"{i['spread_after_mps2']:.4f} m/s² (norm), {i['spread_per_axis_before_mps2']:.3f} -> "
+              f"{i['spread_per_axis_after_mps2']:.4f} m/s² (per axis)", flush=True)
+    for exp in args.experiments:
+        raw, report = load(args.data, exp, with_gyro=False)
+        mask = moving_mask(raw)
+        print(f"exp_{exp}: {report.n_packets} samples, {int(mask.sum())} moving and valid "
+              f"(|ω_ref| > {MOVING_RADPS} rad/s), {report.invalid_reference_samples} with a saturated gyro", flush=True)
+        for cal_mode in args.calibration:
+            if cal_mode == "none":
+                log = raw
+            else:
+                c = cals[exp] if cal_mode == "within" else cals[args.fit_on]
+                log = calib.apply_calibration(raw, c)
+            if args.seconds is not None:
+                log = log.select(slice(0, int(np.sum(log.times_s <= args.seconds))))
+                m = mask[: len(log)]
+            else:
+                m = mask
+            for name in args.methods:
+                opts = dict(args.options.get(name, {}))
+                motion, reason, elapsed = run_method(name, log, opts, args.progress)
+                label = f"{cal_mode}" + (f" (exp_{args.fit_on})" if cal_mode == "cross" else "")
+                if motion is None:
+                    print(f"  {name}: not applicable: {reason}", flush=True)
+                    rows.append({"exp": exp, "calibration": label, "method": name, "skipped": reason})
+                    continue
+                if motion.omega_b_radps is None:
+                    print(f"  {name}: gives no angular velocity", flush=True)
+                    continue
+                row = metrics_row(motion, log, m)
+                row.update(exp=exp, calibration=label, method=name, seconds=elapsed, options=opts)
+                rows.append(row)
+                print(f"  {label:>14} {name:>16}: ω RMSE norm {row['rmse_norm']:.3f} rad/s, median {row['median_norm']:.3f}, "
+                      f"> 5 rad/s {100 * row['large_error']:.1f} %, wrong sign {100 * row['wrong_sign']:.2f} % "
+                      f"({elapsed:.1f} s)", flush=True)
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    head = ("| exp | calibration | method | n | RMSE x | RMSE y | RMSE z | RMSE norm | median | > 5 rad/s | wrong sign | time |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|")
+    lines = [head]
+    for r in rows:
+        if "skipped" in r:
+            lines.append(f"| {r['exp']} | {r['calibration']} | {r['method']} | not applicable: {r['skipped']} |||||||||")
+            continue
+        lines.append(
+            f"| {r['exp']} | {r['calibration']} | {r['method']} | {r['n']} | {r['rmse_x']:.3f} | {r['rmse_y']:.3f} | "
+            f"{r['rmse_z']:.3f} | {r['rmse_norm']:.3f} | {r['median_norm']:.3f} | {100 * r['large_error']:.1f} % | "
+            f"{100 * r['wrong_sign']:.2f} % | {r['seconds']:.1f} s |"
+        )
+    return "\n".join(lines)
+
+
+# --- rigid-body residual investigation ------------------------------------------------
+
+def _skews(v: np.ndarray) -> np.ndarray:
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
+                     np.stack([-v[:, 1], v[:, 0], z], -1)], 1)
+
+
+def _rms(x) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def rigid_residual(y: np.ndarray, omega: np.ndarray, positions: np.ndarray, omega_dot: np.ndarray | None = None):
+    """Residual (N, k, 3) of triad readings y (N, k, 3) in B against the rigid-body model.
+
+    ω is given; f (and ω̇ unless given) are fitted per sample by least
+    squares. Returns ``(residual, f, omega_dot)``.
+    """
+    w2 = _skews(omega) @ _skews(omega)
+    k = positions.shape[0]
+    if omega_dot is not None:
+        pred = np.einsum("nij,kj->nki", _skews(omega_dot) + w2, positions)
+        f = (y - pred).mean(axis=1)
+        return y - pred - f[:, None], f, omega_dot
+    z = y - np.einsum("nij,kj->nki", w2, positions)
+    h = np.concatenate([np.tile(np.eye(3), (k, 1, 1)), -np.stack([skew(p) for p in positions])], 2).reshape(3 * k, 6)
+    sol = np.linalg.lstsq(h, z.reshape(len(z), 3 * k).T, rcond=None)[0].T
+    res = (z.reshape(len(z), 3 * k) - sol @ h.T).reshape(len(z), k, 3)
+    return res, sol[:, :3], sol[:, 3:]
+
+
+def fit_positions(y, omega, positions0, iterations: int = 30):
+    """Sensor positions by alternating least squares (f, ω̇ per sample; centroid held at the nominal one)."""
+    r = positions0.copy()
+    w2 = _skews(omega) @ _skews(omega)
+    for _ in range(iterations):
+        _, f, dw = rigid_residual(y, omega, r)
+        a = (_skews(dw) + w2).reshape(-1, 3)
+        for i in range(r.shape[0]):
+            r[i] = np.linalg.lstsq(a, (y[:, i] - f).reshape(-1), rcond=None)[0]
+        r += positions0.mean(axis=0) - r.mean(axis=0)
+    return r
+
+
+def residual_study(args) -> dict:
+    """Residual of the rigid-body model with the gyro's ω, and what the candidate causes explain."""
+    from scipy.interpolate import CubicSpline
+
+    fit_exp = args.fit_on
+    test_exp = next((e for e in args.experiments if e != fit_exp), fit_exp)
+    data = {}
+    for exp in sorted({fit_exp, test_exp}):
+        glog, _ = load(args.data, exp, with_gyro=True)
+        glog = calib.apply_calibration(glog, calib.fit(glog))
+        n = len(glog)
+        t = glog.times_s
+        w = glog.reference.omega_b_radps
+        valid = ~glog.invalid_reference
+        ok = valid.copy()
+        ok[1:] &= valid[:-1]
+        ok[:-1] &= valid[1:]
+        idx = np.nonzero((np.linalg.norm(w, axis=1) > MOVING_RADPS) & ok)[0]
+        data[exp] = dict(t=t, w=w, idx=idx, y=glog.accel_mps2.reshape(n, 8, 3), spline=CubicSpline(t, w))
+    pos0 = np.array([a.position_m for a in glog.array.accelerometers])
+    out = {"fit_on": fit_exp, "checked_on": test_exp}
+    d = data[fit_exp]
+    idx, y, w = d["idx"], d["y"][d["idx"]], d["w"][d["idx"]]
+    out["moving_samples"] = int(idx.size)
+    dw_gyro = np.gradient(d["w"], d["t"], axis=0)[idx]
+    out["residual_gyro_omega_dot"] = _rms(rigid_residual(y, w, pos0, dw_gyro)[0])
+    res, _, _ = rigid_residual(y, w, pos0)
+    out["residual_free_omega_dot"] = _rms(res)
+    wn = np.linalg.norm(w, axis=1)
+    edges = [2, 5, 10, 15, 20, 25, 30, 35, 60]
+    out["residual_by_omega"] = {f"{lo}-{hi}": _rms(res[(wn >= lo) & (wn < hi)]) for lo, hi in zip(edges[:-1], edges[1:])}
+    # lag between accelerometer and gyro channels: ω taken at t + lag
+    lags_ms = np.arange(-5.0, 5.01, 0.5)
+    by_lag = [_rms(rigid_residual(y, d["spline"](d["t"][idx] + 1e-3 * lag), pos0)[0]) for lag in lags_ms]
+    best = int(np.argmin(by_lag))
+    out["lag_scan_ms"] = {f"{lag:+.1f}": v for lag, v in zip(lags_ms, by_lag)}
+    out["best_lag_ms"] = float(lags_ms[best])
+    out["residual_best_lag"] = by_lag[best]
+    # per-sensor time offsets: residual regressed on each sensor's reading rate
+    dy = np.gradient(d["y"], d["t"], axis=0)[idx]
+    taus = np.array([np.sum(res[:, i] * dy[:, i]) / np.sum(dy[:, i] ** 2) for i in range(8)])
+    out["sensor_time_offsets_ms"] = (1e3 * taus).tolist()
+    out["residual_sensor_time_offsets"] = _rms(res - taus[None, :, None] * dy)
+    # share of the residual along each sensor's reading rate (1/3 if unrelated to timing)
+    u = dy / np.maximum(np.linalg.norm(dy, axis=2, keepdims=True), 1e-12)
+    out["residual_share_along_rate"] = float(np.sum(np.sum(res * u, 2) ** 2) / np.sum(res**2))
+    # sensor positions
+    pos = fit_positions(y, w, pos0)
+    out["fitted_positions_mm"] = (1e3 * pos).round(3).tolist()
+    out["residual_fitted_positions"] = _rms(rigid_residual(y, w, pos)[0])
+    # per-sensor dynamic gain (3x3 + bias) against the rigid-body prediction
+    _, f, dw = rigid_residual(y, w, pos0)
+    pred = f[:, None, :] + np.einsum("nij,kj->nki", _skews(dw) + _skews(w) @ _skews(w), pos0)
+    rg = np.empty_like(res)
+    for i in range(8):
+        x = np.column_stack([pred[:, i], np.ones(len(pred))])
+        rg[:, i] = y[:, i] - x @ np.linalg.lstsq(x, y[:, i], rcond=None)[0]
+    out["residual_dynamic_gains"] = _rms(rg)
+    # full 12-unknown linear model (absorbs any rigid-body error in ω, ω̇, f)
+    from gfimu.array import mimu4444_array
+
+    s = mimu4444_array().structure_matrix()
+    yy = y.reshape(len(y), 24)
+    out["residual_full_linear_model"] = _rms(yy - (s @ np.linalg.lstsq(s, yy.T, rcond=None)[0]).T)
+    # time correlation and cross-sensor correlation of the residual
+    rf = res.reshape(len(res), 24)
+    nxt = np.nonzero(np.diff(idx) == 1)[0]
+    out["residual_lag1_autocorrelation"] = float(np.sum(rf[nxt] * rf[nxt + 1]) / np.sqrt(np.sum(rf[nxt] ** 2) * np.sum(rf[nxt + 1] ** 2)))
+    # held-out check on another recording: fitted lag and positions
+    if test_exp != fit_exp:
+        e = data[test_exp]
+        iy, yt, wt = e["idx"], e["y"][e["idx"]], e["w"][e["idx"]]
+        out["checked_residual_free_omega_dot"] = _rms(rigid_residual(yt, wt, pos0)[0])
+        out["checked_residual_fitted_positions"] = _rms(rigid_residual(yt, wt, pos)[0])
+        out["checked_residual_best_lag"] = _rms(rigid_residual(yt, e["spline"](e["t"][iy] + 1e-3 * out["best_lag_ms"]), pos0)[0])
+        out["checked_residual_lag_and_positions"] = _rms(
+            rigid_residual(yt, e["spline"](e["t"][iy] + 1e-3 * out["best_lag_ms"]), pos)[0])
+    return out
+
+
+def print_residual(r: dict) -> None:
+    print(f"\nRigid-body residual with ω from the gyro reference (exp_{r['fit_on']}, {r['moving_samples']} moving samples, "
+          "calibrated, RMS per axis, m/s²):")
+    print(f"  ω̇ from gyro differences:           {r['residual_gyro_omega_dot']:.3f}")
+    print(f"  ω̇ (and f) fitted per sample:        {r['residual_free_omega_dot']:.3f}")
+    print(f"  + accel/gyro lag {r['best_lag_ms']:+.1f} ms (best):    {r['residual_best_lag']:.3f}")
+    print(f"  + per-sensor time offsets:          {r['residual_sensor_time_offsets']:.3f}  "
+          f"(offsets {np.round(r['sensor_time_offsets_ms'], 2).tolist()} ms)")
+    print(f"  + fitted sensor positions:          {r['residual_fitted_positions']:.3f}")
+    print(f"  + per-sensor dynamic 3x3 gains:     {r['residual_dynamic_gains']:.3f}")
+    print(f"  full 12-unknown linear model:       {r['residual_full_linear_model']:.3f}  (floor for any rigid-body fix)")
+    print(f"  lag-1 autocorrelation {r['residual_lag1_autocorrelation']:.3f}; share along the reading rate "
+          f"{r['residual_share_along_rate']:.3f} (1/3 if unrelated)")
+    print("  by |ω| (rad/s): " + ", ".join(f"{k}: {v:.2f}" for k, v in r["residual_by_omega"].items()))
+    print("  fitted positions (mm): " + "; ".join(", ".join(f"{c:+.2f}" for c in p) for p in r["fitted_positions_mm"]))
+    if "checked_residual_free_omega_dot" in r:
+        print(f"  held out (exp_{r['checked_on']}): nominal {r['checked_residual_free_omega_dot']:.3f}, fitted positions "
+              f"{r['checked_residual_fitted_positions']:.3f}, lag {r['checked_residual_best_lag']:.3f}, both "
+              f"{r['checked_residual_lag_and_positions']:.3f}")
+
+
+def parse_method_options(items: list[str]) -> dict:
+    from gfimu.cli.estimate import parse_options
+
+    out: dict = {}
+    for item in items:
+        if ":" not in item:
+            raise SystemExit(f"--option expects METHOD:KEY=VALUE, got {item!r}")
+        method, pair = item.split(":", 1)
+        out.setdefault(method, {}).update(parse_options([pair]))
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder holding exp_1..3/data.bin")
+    p.add_argument("--experiments", type=int, nargs="+", default=[1, 2, 3])
+    p.add_argument("--methods", nargs="*", default=[m for m in METHODS if m not in NEEDS_GYRO],
+                   help="methods to compare (default: every accelerometer-only method)")
+    p.add_argument("--calibration", nargs="+", choices=["none", "within", "cross"], default=["within"])
+    p.add_argument("--fit-on", type=int, default=1, help="recording whose still periods give the 'cross' calibration")
+    p.add_argument("--calibration-until-s", type=float, default=None,
+                   help="fit calibrations on the first seconds only (the static phase)")
+    p.add_argument("--seconds", type=float, default=None, help="estimate only the first SECONDS of each recording")
+    p.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE", help="method option, repeatable")
+    p.add_argument("--residual", action="store_true", help="also run the rigid-body residual investigation")
+    p.add_argument("--json", type=Path, default=None, help="write all numbers to this JSON file")
+    p.add_argument("--progress", action="store_true")
+    args = p.parse_args(argv)
+    args.options = parse_method_options(args.option)
+    result: dict = {}
+    if args.methods:
+        rows = compare(args)
+        print()
+        print(table(rows))
+        result["methods"] = rows
+    if args.residual:
+        r = residual_study(args)
+        print_residual(r)
+        result["residual"] = r
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
