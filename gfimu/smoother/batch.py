@@ -290,3 +290,24 @@ class BatchSmootherEstimator(SmootherOptions):
     def last_calibration(self) -> list[dict]:
         """Per window: calibration variable name -> estimate, from the last :meth:`estimate`."""
         return getattr(self, "_last_calibration", [])
+
+
+def solve_with_gtsam(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
+                     iterations: int = 10, tolerance: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
+    """The graph path: the same problem as a GTSAM graph of CustomFactors, Gauss-Newton
+    driven here (linearize -> GaussianFactorGraph.optimize -> retract) on a
+    Python-owned Values. Quadratic in length through GTSAM's Python callbacks;
+    meant for verification on small logs.
+    """
+    graph = problem.gtsam_graph()
+    P = np.zeros(problem.n_global) if params is None else params
+    values = problem.gtsam_values(states, P)
+    error = graph.error(values)
+    for _ in range(iterations):
+        delta = graph.linearize(values).optimize()
+        values = values.retract(delta)
+        new_error = graph.error(values)
+        if error - new_error <= tolerance * max(new_error, 1e-300):
+            break
+        error = new_error
+    return problem.from_gtsam_values(values)

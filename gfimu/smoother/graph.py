@@ -58,7 +58,7 @@ class SmootherOptions:
     step std ``q sqrt(h)``.
     """
 
-    omega_dot_random_walk_radps2_per_sqrt_s: float = 100.0
+    omega_dot_random_walk_radps2_per_sqrt_s: float = 30.0
     """White angular jerk density: how fast ω̇ may change. Larger follows faster motion, smooths less."""
     specific_force_random_walk_mps2_per_sqrt_s: float = 30.0
     """How fast the specific force may change."""
