@@ -137,7 +137,8 @@ class TorqueFreeMotion:
         if np.linalg.norm(np.cross(w0, inertia * w0)) <= 1e-14 * max(h2, 1e-300):
             # spin about a principal axis (or rest): a relative equilibrium, including the
             # unstable one about the intermediate axis, where Table 1's phase is infinite
-            return cls(inertia, order, "major", np.zeros(3), np.ones(3), 0.0, 0.0, 0.0, float(two_t), float(h2), w0.copy())
+            return cls(inertia, order, "major", np.zeros(3), np.ones(3), 0.0, 0.0, 0.0, float(two_t), float(h2),
+                       w0.copy())
         # Differences written as sums of non-negative terms (no cancellation).
         h2_minus_c = ia * (ia - ic) * wa**2 + ib * (ib - ic) * wb**2  # H² − 2T I_c ≥ 0
         a_minus_h2 = ib * (ia - ib) * wb**2 + ic * (ia - ic) * wc**2  # 2T I_a − H² ≥ 0
