@@ -345,8 +345,10 @@ class _Csv:
             if not finite.all():
                 rows, cols = np.nonzero(~finite)
                 r, c = int(rows[0]), int(cols[0])
+                token = self.lines[r].split(",")[indices[c]].strip()
+                shown = repr(token) + ("" if token == repr(float(out[r, c])) else f" = {float(out[r, c])!r}")
                 raise LogFormatError(
-                    f"column {self.names[indices[c]]!r} is {out[r, c]!r}; values must be finite "
+                    f"column {self.names[indices[c]]!r} is {shown}; values must be finite "
                     f"({rows.size} non-finite value(s) in the file)", self.path, self.line_of_row(r))
         return out
 
@@ -641,9 +643,9 @@ def _missing_imu_columns(csv: _Csv, array: SensorArray, array_path: str) -> None
 def read_imu_csv(path: str | os.PathLike, array: SensorArray, array_path: str = "array.toml"):
     """Read ``imu.csv`` for ``array``: (timestamps_ns, accel_mps2, gyro_b_radps | None, tilt_rad | None)."""
     csv = _Csv(Path(path))
-    _missing_imu_columns(csv, array, array_path)
     wanted = imu_columns(array)
     indices = [csv.find(name) for name, _ in wanted]
+    _missing_imu_columns(csv, array, array_path)
     factors = np.array([csv.factor(i, kind) for i, (_, kind) in zip(indices, wanted)])
     t = csv.timestamps_ns()
     values = csv.values(indices)
@@ -777,7 +779,7 @@ def read_motion_table(path: str | os.PathLike, allow_nan: bool = False) -> tuple
         bad = np.flatnonzero((raw != 0) & (raw != 1))
         if bad.size:
             r = int(bad[0])
-            raise LogFormatError(f"column 'valid' is {raw[r]!r}; expected 1 (valid) or 0 (invalid)", path,
+            raise LogFormatError(f"column 'valid' is {float(raw[r])!r}; expected 1 (valid) or 0 (invalid)", path,
                                  csv.line_of_row(r))
         valid = raw == 1
     return Motion(t, sigma=sigma, **kw), valid
