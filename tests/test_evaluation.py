@@ -1,0 +1,221 @@
+"""Evaluation metrics against hand-computed values, and the evaluate command."""
+
+import csv
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gfimu import logio
+from gfimu.array import cube_array
+from gfimu.cli import main
+from gfimu.evaluation import EvaluationAlignmentWarning, attitude_error, evaluate, evaluate_log, tilt_error
+from gfimu.log import Log
+from gfimu.motion import Motion
+from gfimu.rotations import matrix_from_quaternion, quaternion_from_rotation_vector, quaternion_multiply
+
+T = np.array([0, 10, 20, 30], dtype=np.int64)
+W_TRUE = np.array([[1.0, 0, 0], [0, 2, 0], [0, 0, -3], [0.05, 1, 1]])
+W_EST = np.array([[-1.0, 0, 0], [0, 2.5, 0], [0, 0, -3], [-0.05, 1, 7]])
+# errors: [-2, 0, 0], [0, 0.5, 0], 0, [-0.1, 0, 6]
+
+
+def hand_motions():
+    return Motion(T, omega_b_radps=W_EST), Motion(T, omega_b_radps=W_TRUE)
+
+
+def test_omega_metrics_by_hand():
+    r = evaluate(*hand_motions())
+    m = r["omega"]
+    assert m.n == 4 and m.n_nonfinite == 0 and m.unit == "rad s^-1"
+    assert m.rmse == pytest.approx((math.sqrt(4.01 / 4), math.sqrt(0.25 / 4), 3.0), rel=1e-15)
+    assert m.rmse_norm == pytest.approx(math.sqrt((4 + 0.25 + 0 + 36.01) / 4), rel=1e-15)
+    assert m.median_norm == pytest.approx(1.25, rel=1e-15)
+    truth_rms = math.sqrt((1 + 4 + 9 + 2.0025) / 4)  # paper 004 eq. (7) denominator
+    assert m.relative_rms == pytest.approx(tuple(v / truth_rms for v in m.rmse), rel=1e-15)
+    # eligible (|true| > 0.1): x of row 0; y of rows 1, 3; z of rows 2, 3. Only row 0's x is wrong.
+    assert m.wrong_sign_share_axis == (1.0, 0.0, 0.0)
+    assert m.wrong_sign_share == 0.25
+    assert m.large_error_share == 0.25  # row 3: |e| = 6.0008 > 5
+    assert r.n_rows == r.n_compared == 4 and r.n_invalid == 0 and r.alignment == "exact"
+
+
+def test_sign_threshold_and_zero_estimates():
+    est, truth = hand_motions()
+    m = evaluate(est, truth, sign_threshold_radps=0.01)["omega"]
+    assert m.wrong_sign_share_axis == (1.0, 0.0, 0.0)  # x of rows 0 and 3 now eligible, both wrong
+    assert m.wrong_sign_share == 0.5
+    zero = Motion(T, omega_b_radps=np.zeros((4, 3)))
+    m = evaluate(zero, truth)["omega"]
+    assert m.wrong_sign_share_axis == (1.0, 1.0, 1.0) and m.wrong_sign_share == 1.0
+    small = Motion(T, omega_b_radps=np.full((4, 3), 0.05))
+    m = evaluate(small, small)["omega"]
+    assert all(math.isnan(v) for v in m.wrong_sign_share_axis) and math.isnan(m.wrong_sign_share)
+
+
+def test_valid_mask_and_nonfinite_rows_are_left_out_and_counted():
+    est, truth = hand_motions()
+    r = evaluate(est, truth, valid=np.array([True, True, True, False]))
+    m = r["omega"]
+    assert r.n_invalid == 1 and r.n_compared == 3 and m.n == 3
+    assert m.rmse == pytest.approx((math.sqrt(4 / 3), math.sqrt(0.25 / 3), 0.0), rel=1e-15)
+    assert m.large_error_share == 0.0
+    w = W_EST.copy()
+    w[1, 2] = np.nan
+    m = evaluate(Motion(T, omega_b_radps=w), truth)["omega"]
+    assert m.n == 3 and m.n_nonfinite == 1
+    assert m.rmse == pytest.approx((math.sqrt(4.01 / 3), 0.0, math.sqrt(12.0)), rel=1e-15)
+    assert "rows with non-finite estimates left out (omega: 1)" in evaluate(Motion(T, omega_b_radps=w), truth).summary()
+    with pytest.raises(ValueError, match=r"valid must be a boolean array of shape \(4,\)"):
+        evaluate(est, truth, valid=np.array([1, 1, 1, 0]))
+
+
+def test_every_common_vector_quantity_is_evaluated():
+    rng = np.random.default_rng(3)
+    n = 200
+    truth = Motion(np.arange(n), rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.normal(size=(n, 3)),
+                   rng.normal(size=(n, 3)))
+    offset = np.array([0.3, -0.4, 1.2])
+    est = Motion(np.arange(n), omega_dot_b_radps2=truth.omega_dot_b_radps2 + offset,
+                 specific_force_b_mps2=truth.specific_force_b_mps2 - offset, accel_b_mps2=None)
+    r = evaluate(est, truth)
+    assert r.quantities == ["omega_dot", "specific_force"]
+    for name in ("omega_dot", "specific_force"):
+        m = r[name]
+        assert m.rmse == pytest.approx(tuple(abs(offset)), rel=1e-12)
+        assert m.rmse_norm == pytest.approx(1.3, rel=1e-12) and m.median_norm == pytest.approx(1.3, rel=1e-12)
+        tv = getattr(truth, {"omega_dot": "omega_dot_b_radps2", "specific_force": "specific_force_b_mps2"}[name])
+        assert m.relative_rms == pytest.approx(tuple(abs(offset) / np.sqrt(np.mean(np.sum(tv**2, axis=1)))), rel=1e-12)
+        assert m.wrong_sign_share is None and m.large_error_share is None
+    assert r["specific_force_b_mps2"] is r["specific_force"]
+    with pytest.raises(KeyError, match="no metrics for 'omega'"):
+        r["omega"]
+    with pytest.raises(ValueError, match=r"no quantity in common: the estimate has \['omega'\], the truth has "
+                                         r"\['omega_dot', 'accel', 'specific_force'\]"):
+        evaluate(Motion(np.arange(n), omega_b_radps=truth.omega_b_radps), truth.replace(omega_b_radps=None))
+
+
+def test_attitude_and_tilt_errors():
+    rng = np.random.default_rng(4)
+    n = 50
+    q_true = quaternion_from_rotation_vector(rng.normal(size=(n, 3)))
+    yaw = quaternion_from_rotation_vector(np.array([0.0, 0.0, 0.1]))
+    q_yawed = quaternion_multiply(yaw, q_true)  # rotated about the world vertical: tilt unchanged
+    np.testing.assert_allclose(np.linalg.norm(attitude_error(q_yawed, q_true), axis=1), 0.1, rtol=1e-12)
+    np.testing.assert_allclose(tilt_error(q_yawed, q_true), 0.0, atol=1e-12)
+    body_x = quaternion_from_rotation_vector(np.array([0.2, 0.0, 0.0]))
+    q_tilted = quaternion_multiply(q_true, body_x)  # rotated about body x
+    np.testing.assert_allclose(attitude_error(q_tilted, q_true), np.tile([0.2, 0.0, 0.0], (n, 1)), atol=1e-12)
+    up_b = matrix_from_quaternion(q_true)[:, 2, :]  # world z in B
+    expected_tilt = np.arccos(np.clip(np.cos(0.2) + (1 - np.cos(0.2)) * up_b[:, 0] ** 2, -1, 1))
+    np.testing.assert_allclose(tilt_error(q_tilted, q_true), expected_tilt, atol=1e-7)
+    r = evaluate(Motion(np.arange(n), quaternion_wb=-q_tilted), Motion(np.arange(n), quaternion_wb=q_true))
+    assert r.quantities == ["attitude", "tilt"]
+    assert r["attitude"].rmse == pytest.approx((0.2, 0.0, 0.0), abs=1e-12)
+    assert r["attitude"].rmse_norm == pytest.approx(0.2, rel=1e-12) and r["attitude"].relative_rms is None
+    assert r["tilt"].rmse is None
+    assert r["tilt"].rmse_norm == pytest.approx(math.sqrt(np.mean(expected_tilt**2)), abs=1e-7)
+
+
+def test_timestamps_must_match_or_be_interpolated_explicitly():
+    t_truth = np.arange(0, 101) * 1_000_000  # 1 kHz, 0..100 ms
+    s = t_truth * 1e-9
+    rate = np.array([0.5, -2.0, 3.0])
+    truth = Motion(t_truth, omega_b_radps=np.column_stack([s, 2 * s, -s]) * 100,
+                   quaternion_wb=quaternion_from_rotation_vector(np.outer(s, rate)))
+    with pytest.raises(ValueError, match=r"the estimate has 3 rows, the truth 101\); they must be equal, or pass "
+                                         r"align='interpolate'"):
+        evaluate(Motion(t_truth[:3], omega_b_radps=np.zeros((3, 3))), truth)
+    shifted = t_truth + 1
+    with pytest.raises(ValueError, match=r"row 0 differs: estimate 1 ns, truth 0 ns"):
+        evaluate(Motion(shifted, omega_b_radps=np.zeros((101, 3))), truth)
+    t_est = np.arange(-2, 105) * 1_000_000 + 250_000  # 2 samples before and 5 after the truth's span
+    se = t_est * 1e-9
+    est = Motion(t_est, omega_b_radps=np.column_stack([se, 2 * se, -se]) * 100,
+                 quaternion_wb=quaternion_from_rotation_vector(np.outer(se, rate)))
+    valid = np.ones(101, bool)
+    valid[50] = False
+    with pytest.warns(EvaluationAlignmentWarning, match="interpolating the truth"):
+        r = evaluate(est, truth, valid=valid, align="interpolate")
+    assert r.alignment == "interpolated" and r.n_rows == 107 and r.n_outside == 7
+    assert r.n_invalid == 2  # the estimate samples at 49.25 ms and 50.25 ms straddle the invalid truth sample
+    assert r.n_compared == 98 and r["omega"].n == 98
+    assert r["omega"].rmse_norm < 1e-12
+    assert r["attitude"].rmse_norm < 1e-12  # constant-rate rotation: slerp is exact
+
+
+def test_output_formats_carry_the_numbers():
+    r = evaluate(*hand_motions())
+    rows = list(csv.DictReader(io.StringIO(r.to_csv())))
+    assert len(rows) == 1 and rows[0]["quantity"] == "omega" and rows[0]["n"] == "4"
+    assert float(rows[0]["rmse_z"]) == 3.0 and float(rows[0]["rmse_x"]) == r["omega"].rmse[0]
+    assert float(rows[0]["wrong_sign"]) == 0.25 and float(rows[0]["large_error"]) == 0.25
+    doc = json.loads(r.to_json())
+    assert doc["n_compared"] == 4 and doc["quantities"][0]["median_norm"] == 1.25
+    assert doc["quantities"][0]["rel_rms_z"] == pytest.approx(3.0 / math.sqrt(16.0025 / 4), rel=1e-15)
+    md = r.to_markdown(title="hand")
+    assert md.startswith("### hand\n")
+    assert "| omega | rad s^-1 | 4 | 1.001 | 0.25 | 3 | 3.173 | 1.25 | 50.1 % | 12.5 % | 150 % | 25 % | 25 % |" in md
+    small = Motion(T, omega_b_radps=np.full((4, 3), 0.05))
+    assert json.loads(evaluate(small, small).to_json())["quantities"][0]["wrong_sign"] is None
+
+
+def test_evaluate_log_uses_truth_else_reference_without_invalid_rows():
+    array = cube_array()
+    est, truth = hand_motions()
+    log = Log(array, T, np.zeros((4, 12)), reference=truth, invalid_reference=np.array([False, False, False, True]))
+    r = evaluate_log(est, log)
+    assert r.n_invalid == 1 and r["omega"].rmse[2] == 0.0
+    r = evaluate_log(est, log.replace(truth=truth))
+    assert r.n_invalid == 0 and r["omega"].rmse[2] == 3.0
+
+
+# --- command line -------------------------------------------------------------------
+
+@pytest.fixture
+def files(tmp_path):
+    est, truth = hand_motions()
+    log = Log(cube_array(), T, np.zeros((4, 12)), reference=truth, invalid_reference=np.array([False] * 3 + [True]))
+    logio.write_log(log, tmp_path / "log")
+    logio.write_motion_csv(est, tmp_path / "est.csv")
+    logio.write_motion_csv(truth, tmp_path / "truth.csv")
+    return tmp_path
+
+
+def test_cli_markdown_against_a_truth_file(files, capsys):
+    assert main(["evaluate", str(files / "est.csv"), str(files / "truth.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "| omega | rad s^-1 | 4 | 1.001 | 0.25 | 3 | 3.173 | 1.25 |" in out
+    assert "4 of 4 rows compared" in out
+
+
+def test_cli_log_folder_uses_the_reference_valid_column(files, capsys):
+    assert main(["evaluate", str(files / "est.csv"), str(files / "log"), "--format", "json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["n_invalid"] == 1 and doc["n_compared"] == 3
+    assert doc["quantities"][0]["rmse_z"] == 0.0 and doc["quantities"][0]["large_error"] == 0.0
+
+
+def test_cli_writes_csv_to_a_file(files, capsys):
+    out = files / "eval.csv"
+    assert main(["evaluate", str(files / "est.csv"), str(files / "truth.csv"), "--format", "csv", "--out", str(out)]) == 0
+    assert str(out) in capsys.readouterr().out
+    rows = list(csv.DictReader(out.open()))
+    assert float(rows[0]["rmse_norm"]) == pytest.approx(math.sqrt(10.065), rel=1e-15)
+
+
+def test_cli_errors_are_one_line_with_exit_status_2(files, capsys):
+    logio.write_motion_csv(Motion(T + 5, omega_b_radps=W_EST), files / "late.csv")
+    assert main(["evaluate", str(files / "late.csv"), str(files / "truth.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gfimu evaluate: error: estimate and truth timestamps do not match (row 0 differs")
+    assert "(--interpolate)" in err and err.count("\n") == 1
+    assert main(["evaluate", str(files / "late.csv"), str(files / "truth.csv"), "--interpolate"]) == 0
+    assert "truth interpolated at the estimate's timestamps" in capsys.readouterr().out
+    assert main(["evaluate", str(files / "est.csv"), str(files / "nothing")]) == 2
+    assert "nothing: not found" in capsys.readouterr().err
+    (files / "empty").mkdir()
+    assert main(["evaluate", str(files / "est.csv"), str(files / "empty")]) == 2
+    assert "log folder has no truth.csv or reference.csv" in capsys.readouterr().err
