@@ -187,3 +187,16 @@ def test_add_orientation_errors():
         add_orientation(log, est, "compass")
     with pytest.raises(ValueError, match="no specific force"):
         add_orientation(log, Motion(log.timestamps_ns, omega_b_radps=est.omega_b_radps), "estimate")
+
+
+def test_moving_start_takes_the_vertical_from_the_inclinometer():
+    """A log starting mid-tumble: the inclinometer's first sample fixes the initial tilt."""
+    full = tumbling_log()
+    R = matrix_from_quaternion(full.truth.quaternion_wb)
+    log = full.replace(tilt_rad=np.arccos(R[:, 2, :2])).select(slice(300, None))
+    assert np.abs(log.gyro_b_radps[0]).max() > 1.0
+    out = add_orientation(log, make_estimator("inversion").estimate(log), "gyro")
+    np.testing.assert_allclose(out.accel_b_mps2, 0.0, atol=5e-4)
+    # heading is not observable: the attitude differs from the truth by a rotation about the vertical only
+    up_est = matrix_from_quaternion(out.quaternion_wb)[:, 2, :]
+    np.testing.assert_allclose(up_est, R[300:, 2, :], atol=5e-5)

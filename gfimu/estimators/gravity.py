@@ -128,10 +128,18 @@ def propagate_quaternion(q0_wb: np.ndarray, omega_b_radps: np.ndarray, timestamp
     return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
-def _initial_up_b(log: Log, motion: Motion, seg: slice, window_s: float) -> np.ndarray:
-    """Upward vertical in B at a segment's start: mean over its first ``window_s`` seconds."""
+def _initial_up_b(log: Log, motion: Motion, seg: slice, window_s: float | None) -> np.ndarray:
+    """Upward vertical in B at a segment's start: mean over its first ``window_s`` seconds.
+
+    ``None``: the first sample alone from an inclinometer (valid in motion), the
+    first 0.05 s of specific force otherwise (the body must be still).
+    """
+    if window_s is None:
+        window_s = 0.0 if log.tilt_rad is not None else 0.05
+    if not (np.isfinite(window_s) and window_s >= 0):
+        raise ValueError(f"add_orientation: initial_window_s must be >= 0, got {window_s!r}")
     t = log.timestamps_ns[seg]
-    k = max(1, int(np.searchsorted(t, t[0] + int(window_s * 1e9), side="right")))
+    k = max(1, int(np.searchsorted(t, t[0] + int(round(window_s * 1e9)), side="right")))
     if log.tilt_rad is not None:
         up = up_b_from_tilt(log.tilt_rad[seg][:k]).mean(axis=0)
     else:
@@ -141,7 +149,8 @@ def _initial_up_b(log: Log, motion: Motion, seg: slice, window_s: float) -> np.n
     return up / np.linalg.norm(up)
 
 
-def add_orientation(log: Log, motion: Motion, source: str = "inclinometer", initial_window_s: float = 0.05) -> Motion:
+def add_orientation(log: Log, motion: Motion, source: str = "inclinometer",
+                    initial_window_s: float | None = None) -> Motion:
     """Add gravity-free acceleration ``accel_b_mps2`` and attitude ``quaternion_wb`` to an estimate.
 
     ``source``:
@@ -155,6 +164,8 @@ def add_orientation(log: Log, motion: Motion, source: str = "inclinometer", init
       attitude with zero yaw whose vertical is the mean over the segment's
       first ``initial_window_s`` seconds of the inclinometer (if the log has
       one) or of the estimated specific force (the body must then be still).
+      Default: the inclinometer's first sample alone (it is valid in
+      motion), or 0.05 s of specific force (averaging its noise).
 
     In all cases ``a = f + g_B`` with f the estimate's specific force.
     """
