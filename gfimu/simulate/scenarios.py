@@ -220,6 +220,8 @@ def freeflight_minor(times_s, rng, array, *, spin_radps: float = FREE_FLIGHT_SPI
 def smooth_recording(times_s, values, bandwidth_hz: float, degree: int = 5) -> interpolate.BSpline:
     """Least-squares B-spline through recorded samples, knots every ``1 / (2 bandwidth)`` s.
 
+    The knots are multiples of that spacing in the recording's time.
+
     A degree-5 spline keeps ω̇ (its derivative) smooth; the knot spacing
     sets the low-pass cut-off.
     """
@@ -227,8 +229,9 @@ def smooth_recording(times_s, values, bandwidth_hz: float, degree: int = 5) -> i
     if not (bandwidth_hz > 0):
         raise ValueError(f"bandwidth_hz must be positive, got {bandwidth_hz}")
     spacing = 0.5 / bandwidth_hz
-    n_int = max(int(np.floor((t[-1] - t[0]) / spacing)) - 1, 0)
-    interior = np.linspace(t[0], t[-1], n_int + 2)[1:-1]
+    # knots on a grid fixed in recording time, so any window of a recording gets the same fit
+    grid = np.arange(np.ceil(t[0] / spacing), np.floor(t[-1] / spacing) + 1) * spacing
+    interior = grid[(grid > t[0] + 0.5 * spacing) & (grid < t[-1] - 0.5 * spacing)]
     knots = np.concatenate([np.full(degree + 1, t[0]), interior, np.full(degree + 1, t[-1])])
     return interpolate.make_lsq_spline(t, np.asarray(values, dtype=float), knots, k=degree)
 
