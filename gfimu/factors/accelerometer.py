@@ -51,10 +51,13 @@ def accelerometer_residual(
     n = rows.shape[0]
     if y.shape[-1] != n:
         raise ValueError(f"accelerometer factor: readings have {y.shape[-1]} axes, geometry has {n}")
-    q = rigid_body.quadratic_terms(w)
-    pred = f @ rows[:, 0:3].T + dw @ rows[:, 3:6].T + q @ rows[:, 6:12].T
+    s = np.asarray(directions_b, dtype=float).reshape(-1, 3)
+    p = np.asarray(positions_m, dtype=float).reshape(-1, 3)
+    # sᵀ (ω × (ω × r)) = (sᵀω)(rᵀω) - (sᵀr)|ω|², its gradient (rᵀω) s + (sᵀω) r - 2 (sᵀr) ω
+    ws, wr, sr = w @ s.T, w @ p.T, np.einsum("ai,ai->a", s, p)
+    pred = f @ rows[:, 0:3].T + dw @ rows[:, 3:6].T + ws * wr - sr * np.sum(w * w, axis=1, keepdims=True)
     n_samples = pred.shape[0]
-    jw = np.einsum("aj,njk->nak", rows[:, 6:12], rigid_body.quadratic_terms_jacobian(w))
+    jw = wr[:, :, None] * s + ws[:, :, None] * p - 2.0 * sr[:, None] * w[:, None, :]
     jd = np.broadcast_to(rows[:, 3:6], (n_samples, n, 3))
     jf = np.broadcast_to(rows[:, 0:3], (n_samples, n, 3))
     jac = {}

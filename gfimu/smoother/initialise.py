@@ -31,6 +31,19 @@ from .graph import STATE_SIZE, SmootherOptions
 LIFTED = 12
 
 
+def _quadratic_jacobian(w: np.ndarray) -> np.ndarray:
+    """d q / d ω (..., 6, 3), as :func:`gfimu.rigid_body.quadratic_terms_jacobian`, preallocated."""
+    out = np.zeros(w.shape[:-1] + (6, 3))
+    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    out[..., 0, 0] = out[..., 1, 0] = 2 * x
+    out[..., 0, 1] = out[..., 2, 1] = 2 * y
+    out[..., 1, 2] = out[..., 2, 2] = 2 * z
+    out[..., 3, 0], out[..., 3, 1] = y, x
+    out[..., 4, 0], out[..., 4, 2] = z, x
+    out[..., 5, 1], out[..., 5, 2] = z, y
+    return out
+
+
 def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: float = 300.0,
                      prior_std: float = 1e4) -> np.ndarray:
     """Linear smoother of ``z = [f, ω̇, q]`` (N, 12) from the accelerometers alone.
@@ -81,10 +94,11 @@ def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.
     start from the window before) adds a weak continuity term.
     """
     L = q_meas.shape[0]
-    Jw = rigid_body.quadratic_terms_jacobian(integral)  # (L, 6, 3): cross term J_q(W) ω₀
+    Jw = _quadratic_jacobian(integral)  # (L, 6, 3): cross term J_q(W) ω₀
     rhs = (q_meas - rigid_body.quadratic_terms(integral)).reshape(-1)
     design = np.concatenate([Jw, np.broadcast_to(np.eye(6), (L, 6, 6))], axis=2).reshape(-1, 9)
-    theta = np.linalg.lstsq(design, rhs, rcond=1e-10)[0]
+    normal = design.T @ design
+    theta = np.linalg.solve(normal + 1e-9 * np.trace(normal) * np.eye(9), design.T @ rhs)
     mags = rigid_body.omega_from_quadratic_terms(theta[3:])
     cands = np.vstack([theta[:3][None], _SIGNS * mags, _SIGNS * rigid_body.omega_from_quadratic_terms(q_meas[0])])
     w_c = 1.0 / continuity_std_radps
@@ -92,7 +106,7 @@ def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.
     def residuals(w0):  # (C, 3) -> (C, L*6 [+3]), (C, L*6 [+3], 3)
         om = w0[:, None, :] + integral[None]
         r = (rigid_body.quadratic_terms(om) - q_meas[None]).reshape(len(w0), -1)
-        J = rigid_body.quadratic_terms_jacobian(om).reshape(len(w0), -1, 3)
+        J = _quadratic_jacobian(om).reshape(len(w0), -1, 3)
         if previous is not None:
             r = np.concatenate([r, w_c * (w0 - previous)], axis=1)
             J = np.concatenate([J, np.broadcast_to(w_c * np.eye(3), (len(w0), 3, 3))], axis=1)
