@@ -32,7 +32,7 @@ Validity mask. ``reference.csv`` may carry a column ``valid []`` holding 1
 where the reference is valid and 0 where it is not (for example a saturated
 reference gyro). :func:`read_log` turns it into ``Log.invalid_reference``
 (True where ``valid`` is 0) and :func:`write_log` writes it back; evaluation
-leaves those rows out.
+leaves those rows out. Values in rows with ``valid`` = 0 may be ``nan``.
 
 Writing is atomic: each file is written to a temporary file in the same
 folder, flushed to disk, then renamed over the target, so a failure never
@@ -244,12 +244,14 @@ class _Csv:
             body = body[:end]
         self.columns: list[tuple[str, str | None]] = []
         for field in header.split(","):
+            field = field.strip().strip('"').strip()
             m = _HEADER_RE.match(field)
             self.columns.append((m.group(1).strip(), m.group(2).strip()) if m else (field.strip(), None))
         first_name, first_unit = self.columns[0]
         if first_name.lstrip("#").strip().lower() != "timestamp":
-            raise LogFormatError(f"the first column must be {TIMESTAMP_HEADER!r}, found {header.split(',')[0]!r}",
-                                 path, 1)
+            hint = " (columns must be separated by commas)" if (";" in header or "\t" in header) else ""
+            raise LogFormatError(f"the first column must be {TIMESTAMP_HEADER!r}, found {header.split(',')[0]!r}"
+                                 f"{hint}", path, 1)
         unit = canonical_unit(first_unit) if first_unit is not None else None
         if unit not in TIME_UNITS_NS:
             raise LogFormatError(
@@ -331,8 +333,11 @@ class _Csv:
                                  self.line_of_row(row))
         return ns
 
-    def values(self, indices: list[int], allow_nan: bool = False) -> np.ndarray:
-        """Float values of the given columns (N, len(indices)), not yet unit-converted."""
+    def values(self, indices: list[int], allow_nan: bool = False, rows: np.ndarray | None = None) -> np.ndarray:
+        """Float values of the given columns (N, len(indices)), not yet unit-converted.
+
+        Unless ``allow_nan``, every value (or every value in the ``rows`` mask) must be finite.
+        """
         if not indices:
             return np.zeros((len(self.lines), 0))
         try:
@@ -341,15 +346,18 @@ class _Csv:
             self._raise_first_bad_value(indices)
             raise
         if not allow_nan:
-            finite = np.isfinite(out)
-            if not finite.all():
-                rows, cols = np.nonzero(~finite)
-                r, c = int(rows[0]), int(cols[0])
+            bad = ~np.isfinite(out)
+            if rows is not None:
+                bad &= rows[:, None]
+            if bad.any():
+                rows_bad, cols = np.nonzero(bad)
+                r, c = int(rows_bad[0]), int(cols[0])
                 token = self.lines[r].split(",")[indices[c]].strip()
                 shown = repr(token) + ("" if token == repr(float(out[r, c])) else f" = {float(out[r, c])!r}")
+                where = "" if rows is None else " where valid is 1"
                 raise LogFormatError(
-                    f"column {self.names[indices[c]]!r} is {shown}; values must be finite "
-                    f"({rows.size} non-finite value(s) in the file)", self.path, self.line_of_row(r))
+                    f"column {self.names[indices[c]]!r} is {shown}; values must be finite{where} "
+                    f"({rows_bad.size} non-finite value(s) in the file)", self.path, self.line_of_row(r))
         return out
 
     def _raise_first_bad_value(self, indices: list[int]) -> None:
@@ -728,7 +736,8 @@ def read_motion_table(path: str | os.PathLike, allow_nan: bool = False) -> tuple
 
     A quantity must have all its components (``w_x, w_y, w_z``) or none.
     ``allow_nan`` accepts non-finite values (estimates that failed on some
-    samples); truth and reference must be finite.
+    samples); truth and reference must be finite, except in reference rows
+    marked ``valid`` = 0.
     """
     path = Path(path)
     csv = _Csv(path)
@@ -754,7 +763,20 @@ def read_motion_table(path: str | os.PathLike, allow_nan: bool = False) -> tuple
     indices = [i for _, _, idx in groups for i in idx]
     factors = np.array([csv.factor(i, kinds[i]) for i in indices])
     t = csv.timestamps_ns()
-    values = csv.values(indices, allow_nan=allow_nan) * factors if indices else np.zeros((len(t), 0))
+    valid = None
+    if valid_index is not None:
+        unit = csv.columns[valid_index][1]
+        if unit is not None and canonical_unit(unit) != "":
+            raise LogFormatError(f"column 'valid' has unit [{unit}]; expected 'valid []' with 1 (valid) or 0 "
+                                 "(invalid)", path, 1)
+        raw = csv.values([valid_index])[:, 0]
+        bad = np.flatnonzero((raw != 0) & (raw != 1))
+        if bad.size:
+            r = int(bad[0])
+            raise LogFormatError(f"column 'valid' is {float(raw[r])!r}; expected 1 (valid) or 0 (invalid)", path,
+                                 csv.line_of_row(r))
+        valid = raw == 1
+    values = csv.values(indices, allow_nan=allow_nan, rows=valid) * factors if indices else np.zeros((len(t), 0))
     kw: dict = {}
     sigma: dict = {}
     k = 0
@@ -764,24 +786,14 @@ def read_motion_table(path: str | os.PathLike, allow_nan: bool = False) -> tuple
         (sigma if is_sigma else kw)[field] = block
     q = kw.get("quaternion_wb")
     if q is not None:
-        norm = np.linalg.norm(q, axis=1)
-        bad = np.flatnonzero(np.abs(norm - 1.0) > 1e-6)
+        off = np.abs(np.linalg.norm(q, axis=1) - 1.0) > 1e-6
+        if valid is not None:
+            off &= valid
+        bad = np.flatnonzero(off)
         if bad.size:
             r = int(bad[0])
-            raise LogFormatError(f"quaternion q_w..q_z has norm {norm[r]:.9g}; expected a unit quaternion "
-                                 f"({bad.size} row(s) off by more than 1e-6)", path, csv.line_of_row(r))
-    valid = None
-    if valid_index is not None:
-        if csv.columns[valid_index][1] not in ("", None):
-            raise LogFormatError(f"column 'valid' has unit [{csv.columns[valid_index][1]}]; expected 'valid []' "
-                                 "with 1 (valid) or 0 (invalid)", path, 1)
-        raw = csv.values([valid_index])[:, 0]
-        bad = np.flatnonzero((raw != 0) & (raw != 1))
-        if bad.size:
-            r = int(bad[0])
-            raise LogFormatError(f"column 'valid' is {float(raw[r])!r}; expected 1 (valid) or 0 (invalid)", path,
-                                 csv.line_of_row(r))
-        valid = raw == 1
+            raise LogFormatError(f"quaternion q_w..q_z has norm {np.linalg.norm(q[r]):.9g}; expected a unit "
+                                 f"quaternion ({bad.size} row(s) off by more than 1e-6)", path, csv.line_of_row(r))
     return Motion(t, sigma=sigma, **kw), valid
 
 

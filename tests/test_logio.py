@@ -217,11 +217,17 @@ def test_timestamp_units_convert_exactly(tmp_path, unit, times, expected):
 def test_reference_valid_column(tmp_path):
     d = one_axis_log(tmp_path, "m s^-2", ["1", "2", "3"])
     write(d / "reference.csv", "#timestamp [ns],w_x [deg s^-1],w_y [rad/s],w_z [rad s^-1],valid []\n"
-                               "10,180,0,0,1\n20,0,1,0,0\n30,0,0,1,1\n")
+                               "10,180,0,0,1\n20,nan,1,0,0\n30,0,0,1,1\n")
     log = logio.read_log(d)
     assert log.truth is None
     assert log.invalid_reference.tolist() == [False, True, False]
     np.testing.assert_allclose(log.reference.omega_b_radps[0], [math.pi, 0, 0], rtol=1e-15)
+    assert np.isnan(log.reference.omega_b_radps[1, 0])  # allowed where valid is 0
+    write(d / "reference.csv", "#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],valid\n"
+                               "10,1,0,0,1\n20,1,1,0,0\n30,0,inf,1,1\n")
+    with pytest.raises(logio.LogFormatError, match=r"reference\.csv:4: column 'w_y' is 'inf'; values must be finite "
+                                                   r"where valid is 1"):
+        logio.read_log(d)
 
 
 # --- errors ------------------------------------------------------------------------
@@ -307,6 +313,9 @@ def test_random_timestamps_must_strictly_increase(tmp_path_factory, stamps):
     (lambda h: h.replace("#timestamp [ns]", "#timestamp [s]").replace("a1_x", "time [s],a1_x"), None),
     (lambda h: h.replace("[ns]", "[min]"), r"imu\.csv:1: timestamp unit \[min\] not understood; expected \[ns\]"),
     (lambda h: h.replace("#timestamp [ns]", "time [ns]"), r"imu\.csv:1: the first column must be '#timestamp \[ns\]'"),
+    (lambda h: h.replace(",", ";"), r"imu\.csv:1: the first column .* \(columns must be separated by commas\)"),
+    (lambda h: ",".join(f'"{f}"' for f in h.split(",")).replace("a2_y", "a2_x"),
+     r"imu\.csv:1: column 'a2_x' appears 2 times"),
 ])
 def test_bad_headers(tmp_path, header_edit, message):
     d, _ = cube_log_dir(tmp_path)
