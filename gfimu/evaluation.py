@@ -38,19 +38,26 @@ import numpy as np
 from .motion import QUANTITIES, Motion
 from .rotations import quaternion_from_rotation_vector, quaternion_multiply
 
-SHORT_NAMES = {
-    "omega_b_radps": "omega",
-    "omega_dot_b_radps2": "omega_dot",
-    "accel_b_mps2": "accel",
-    "specific_force_b_mps2": "specific_force",
-    "quaternion_wb": "attitude",
+# quantity identifier (Motion field name; attitude and tilt errors in rad) -> (short label, unit, CSV prefix)
+QUANTITY_INFO = {
+    "omega_b_radps": ("omega", "rad s^-1", "w"),
+    "omega_dot_b_radps2": ("omega_dot", "rad s^-2", "dw"),
+    "accel_b_mps2": ("accel", "m s^-2", "a"),
+    "specific_force_b_mps2": ("specific_force", "m s^-2", "f"),
+    "attitude_rad": ("attitude", "rad", "q"),
+    "tilt_rad": ("tilt", "rad", None),
 }
-UNITS = {"omega": "rad s^-1", "omega_dot": "rad s^-2", "accel": "m s^-2", "specific_force": "m s^-2",
-         "attitude": "rad", "tilt": "rad"}
+_ALIASES = {alias: ident for ident, (label, _, prefix) in QUANTITY_INFO.items() for alias in (ident, label, prefix)
+            if alias is not None}
+_ALIASES["quaternion_wb"] = "attitude_rad"
 AXES = ("x", "y", "z")
-ROW_KEYS = ("quantity", "unit", "n", "n_nonfinite", "rmse_x", "rmse_y", "rmse_z", "rmse_norm", "median_norm",
-            "rel_rms_x", "rel_rms_y", "rel_rms_z", "wrong_sign", "wrong_sign_x", "wrong_sign_y", "wrong_sign_z",
-            "large_error")
+
+
+def row_keys(large_error_radps: float = 5.0) -> tuple[str, ...]:
+    """Keys of :attr:`EvaluationResult.rows`, in table order."""
+    return ("quantity", "unit", "n_samples", "n_nonfinite", "rmse_x", "rmse_y", "rmse_z", "rmse_norm", "median_norm",
+            "relative_rms_x", "relative_rms_y", "relative_rms_z", "wrong_sign_share", "wrong_sign_share_x",
+            "wrong_sign_share_y", "wrong_sign_share_z", f"share_off_{large_error_radps:g}radps")
 
 
 class EvaluationAlignmentWarning(UserWarning):
@@ -61,6 +68,8 @@ class EvaluationAlignmentWarning(UserWarning):
 class QuantityMetrics:
     """Errors of one quantity.
 
+    ``quantity`` is the Motion field name (``omega_b_radps`` ...) or
+    ``attitude_rad`` / ``tilt_rad``; ``label`` is its short name (``omega``).
     ``wrong_sign_share_axis[j]``: among samples with |ω_true_j| above the sign
     threshold, the share where the estimate's component j has the other sign
     or is zero (ω_est_j · ω_true_j ≤ 0). ``wrong_sign_share``: among samples
@@ -70,6 +79,7 @@ class QuantityMetrics:
     """
 
     quantity: str
+    label: str
     unit: str
     n: int
     n_nonfinite: int
@@ -81,12 +91,14 @@ class QuantityMetrics:
     wrong_sign_share_axis: tuple[float, ...] | None = None
     large_error_share: float | None = None
 
-    def row(self) -> dict:
-        r = dict.fromkeys(ROW_KEYS)
-        r.update(quantity=self.quantity, unit=self.unit, n=self.n, n_nonfinite=self.n_nonfinite,
-                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, wrong_sign=self.wrong_sign_share,
-                 large_error=self.large_error_share)
-        for name, values in (("rmse", self.rmse), ("rel_rms", self.relative_rms), ("wrong_sign", self.wrong_sign_share_axis)):
+    def row(self, large_error_radps: float = 5.0) -> dict:
+        keys = row_keys(large_error_radps)
+        r = dict.fromkeys(keys)
+        r.update(quantity=self.quantity, unit=self.unit, n_samples=self.n, n_nonfinite=self.n_nonfinite,
+                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, wrong_sign_share=self.wrong_sign_share)
+        r[keys[-1]] = self.large_error_share
+        for name, values in (("rmse", self.rmse), ("relative_rms", self.relative_rms),
+                             ("wrong_sign_share", self.wrong_sign_share_axis)):
             if values is not None:
                 for a, v in zip(AXES, values):
                     r[f"{name}_{a}"] = v
@@ -140,23 +152,29 @@ class EvaluationResult:
     large_error_radps: float
 
     def __getitem__(self, name: str) -> QuantityMetrics:
-        short = SHORT_NAMES.get(name, name)
+        """Metrics by Motion field name, short label (``omega``) or CSV prefix (``w``)."""
+        ident = _ALIASES.get(name, name)
         for m in self.metrics:
-            if m.quantity == short:
+            if m.quantity == ident:
                 return m
-        raise KeyError(f"no metrics for {name!r}; have {[m.quantity for m in self.metrics]}")
+        raise KeyError(f"no metrics for {name!r}; have {self.quantities}")
 
     def __contains__(self, name: str) -> bool:
-        return any(m.quantity == SHORT_NAMES.get(name, name) for m in self.metrics)
+        return any(m.quantity == _ALIASES.get(name, name) for m in self.metrics)
 
     @property
     def quantities(self) -> list[str]:
-        return [m.quantity for m in self.metrics]
+        """Short labels of the quantities evaluated, in table order."""
+        return [m.label for m in self.metrics]
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return row_keys(self.large_error_radps)
 
     @property
     def rows(self) -> list[dict]:
-        """One dict per quantity with the keys of :data:`ROW_KEYS` (None where not applicable)."""
-        return [m.row() for m in self.metrics]
+        """One dict per quantity with the keys of :func:`row_keys` (None where not applicable)."""
+        return [m.row(self.large_error_radps) for m in self.metrics]
 
     def summary(self) -> str:
         parts = [f"{self.n_compared} of {self.n_rows} rows compared"]
@@ -166,7 +184,7 @@ class EvaluationResult:
             parts.append(f"{self.n_outside} outside the truth's time span")
         if self.alignment != "exact":
             parts.append("truth interpolated at the estimate's timestamps")
-        nonfinite = [f"{m.quantity}: {m.n_nonfinite}" for m in self.metrics if m.n_nonfinite]
+        nonfinite = [f"{m.label}: {m.n_nonfinite}" for m in self.metrics if m.n_nonfinite]
         if nonfinite:
             parts.append("rows with non-finite estimates left out (" + ", ".join(nonfinite) + ")")
         return "; ".join(parts)
@@ -182,7 +200,7 @@ class EvaluationResult:
         for m in self.metrics:
             rmse = m.rmse or (None,) * 3
             rel = m.relative_rms or (None,) * 3
-            cells = [m.quantity, m.unit, str(m.n), *map(_fmt, rmse), _fmt(m.rmse_norm), _fmt(m.median_norm),
+            cells = [m.label, m.unit, str(m.n), *map(_fmt, rmse), _fmt(m.rmse_norm), _fmt(m.median_norm),
                      *map(_pct, rel), _pct(m.wrong_sign_share), _pct(m.large_error_share)]
             lines.append("| " + " | ".join(cells) + " |")
         lines += ["", f"{self.summary()}. Relative RMS: paper 004 eq. (7). Wrong sign: samples with a component of "
@@ -192,9 +210,9 @@ class EvaluationResult:
     def to_csv(self) -> str:
         buf = io.StringIO()
         w = _csv.writer(buf, lineterminator="\n")
-        w.writerow(ROW_KEYS)
+        w.writerow(self.keys)
         for r in self.rows:
-            w.writerow([_csv_cell(r[k]) for k in ROW_KEYS])
+            w.writerow([_csv_cell(r[k]) for k in self.keys])
         return buf.getvalue()
 
     def to_json(self) -> str:
@@ -267,12 +285,13 @@ def _interpolate_truth(truth: Motion, t_ns: np.ndarray, valid: np.ndarray | None
     return Motion(tq, **kw), inside, valid_at
 
 
-def _vector_metrics(name: str, err: np.ndarray, truth: np.ndarray, n_nonfinite: int, relative: bool = True,
+def _vector_metrics(ident: str, err: np.ndarray, truth: np.ndarray, n_nonfinite: int, relative: bool = True,
                     **extra) -> QuantityMetrics:
+    label, unit, _ = QUANTITY_INFO[ident]
     n = err.shape[0]
     if n == 0:
         nan3 = (math.nan,) * err.shape[1]
-        return QuantityMetrics(name, UNITS[name], 0, n_nonfinite, nan3, math.nan, math.nan,
+        return QuantityMetrics(ident, label, unit, 0, n_nonfinite, nan3, math.nan, math.nan,
                                nan3 if relative else None, **extra)
     norm = np.linalg.norm(err, axis=1)
     rmse = np.sqrt(np.mean(err**2, axis=0))
@@ -280,7 +299,7 @@ def _vector_metrics(name: str, err: np.ndarray, truth: np.ndarray, n_nonfinite: 
     if relative:
         denom = math.sqrt(float(np.mean(np.sum(truth**2, axis=1))))
         rel = tuple(float(v) for v in (rmse / denom if denom > 0 else np.full(rmse.shape, math.nan)))
-    return QuantityMetrics(name, UNITS[name], n, n_nonfinite, tuple(float(v) for v in rmse),
+    return QuantityMetrics(ident, label, unit, n, n_nonfinite, tuple(float(v) for v in rmse),
                            float(np.sqrt(np.mean(norm**2))), float(np.median(norm)), rel, **extra)
 
 
@@ -320,8 +339,8 @@ def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, s
                              f"got {valid.dtype} {valid.shape}")
     common = [n for n in QUANTITIES if getattr(estimate, n) is not None and getattr(truth, n) is not None]
     if not common:
-        raise ValueError(f"no quantity in common: the estimate has {[SHORT_NAMES[n] for n in estimate.available()]}, "
-                         f"the truth has {[SHORT_NAMES[n] for n in truth.available()]}")
+        raise ValueError(f"no quantity in common: the estimate has {estimate.available()}, "
+                         f"the truth has {truth.available()}")
     n_rows = len(estimate)
     n_outside = 0
     same = len(estimate) == len(truth) and np.array_equal(estimate.timestamps_ns, truth.timestamps_ns)
@@ -354,16 +373,14 @@ def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, s
         finite = keep & np.all(np.isfinite(est), axis=1) & np.all(np.isfinite(tru), axis=1)
         n_nonfinite = int(np.sum(keep & ~finite))
         est, tru = est[finite], tru[finite]
-        short = SHORT_NAMES[name]
         if name == "quaternion_wb":
-            err = attitude_error(est, tru)
-            metrics.append(_vector_metrics(short, err, tru, n_nonfinite, relative=False))
-            tilt = tilt_error(est, tru)[:, None]
-            m = _vector_metrics("tilt", tilt, tru, n_nonfinite, relative=False)
-            metrics.append(QuantityMetrics("tilt", UNITS["tilt"], m.n, n_nonfinite, None, m.rmse_norm, m.median_norm))
+            metrics.append(_vector_metrics("attitude_rad", attitude_error(est, tru), tru, n_nonfinite, relative=False))
+            m = _vector_metrics("tilt_rad", tilt_error(est, tru)[:, None], tru, n_nonfinite, relative=False)
+            metrics.append(QuantityMetrics(m.quantity, m.label, m.unit, m.n, n_nonfinite, None, m.rmse_norm,
+                                           m.median_norm))
             continue
         extra = _sign_metrics(est, tru, sign_threshold_radps, large_error_radps) if name == "omega_b_radps" else {}
-        metrics.append(_vector_metrics(short, est - tru, tru, n_nonfinite, **extra))
+        metrics.append(_vector_metrics(name, est - tru, tru, n_nonfinite, **extra))
     return EvaluationResult(tuple(metrics), n_rows, int(np.sum(keep)), n_invalid, n_outside, alignment,
                             float(sign_threshold_radps), float(large_error_radps))
 

@@ -29,7 +29,7 @@ def hand_motions():
 def test_omega_metrics_by_hand():
     r = evaluate(*hand_motions())
     m = r["omega"]
-    assert m.n == 4 and m.n_nonfinite == 0 and m.unit == "rad s^-1"
+    assert m.n == 4 and m.n_nonfinite == 0 and m.unit == "rad s^-1" and m.quantity == "omega_b_radps"
     assert m.rmse == pytest.approx((math.sqrt(4.01 / 4), math.sqrt(0.25 / 4), 3.0), rel=1e-15)
     assert m.rmse_norm == pytest.approx(math.sqrt((4 + 0.25 + 0 + 36.01) / 4), rel=1e-15)
     assert m.median_norm == pytest.approx(1.25, rel=1e-15)
@@ -89,11 +89,12 @@ def test_every_common_vector_quantity_is_evaluated():
         tv = getattr(truth, {"omega_dot": "omega_dot_b_radps2", "specific_force": "specific_force_b_mps2"}[name])
         assert m.relative_rms == pytest.approx(tuple(abs(offset) / np.sqrt(np.mean(np.sum(tv**2, axis=1)))), rel=1e-12)
         assert m.wrong_sign_share is None and m.large_error_share is None
-    assert r["specific_force_b_mps2"] is r["specific_force"]
+    assert r["specific_force_b_mps2"] is r["specific_force"] is r["f"]
+    assert "dw" in r and "omega" not in r
     with pytest.raises(KeyError, match="no metrics for 'omega'"):
         r["omega"]
-    with pytest.raises(ValueError, match=r"no quantity in common: the estimate has \['omega'\], the truth has "
-                                         r"\['omega_dot', 'accel', 'specific_force'\]"):
+    with pytest.raises(ValueError, match=r"no quantity in common: the estimate has \['omega_b_radps'\], the truth has "
+                                         r"\['omega_dot_b_radps2', 'accel_b_mps2', 'specific_force_b_mps2'\]"):
         evaluate(Motion(np.arange(n), omega_b_radps=truth.omega_b_radps), truth.replace(omega_b_radps=None))
 
 
@@ -149,17 +150,19 @@ def test_timestamps_must_match_or_be_interpolated_explicitly():
 def test_output_formats_carry_the_numbers():
     r = evaluate(*hand_motions())
     rows = list(csv.DictReader(io.StringIO(r.to_csv())))
-    assert len(rows) == 1 and rows[0]["quantity"] == "omega" and rows[0]["n"] == "4"
+    assert len(rows) == 1 and rows[0]["quantity"] == "omega_b_radps" and rows[0]["n_samples"] == "4"
     assert float(rows[0]["rmse_z"]) == 3.0 and float(rows[0]["rmse_x"]) == r["omega"].rmse[0]
-    assert float(rows[0]["wrong_sign"]) == 0.25 and float(rows[0]["large_error"]) == 0.25
+    assert float(rows[0]["wrong_sign_share"]) == 0.25 and float(rows[0]["share_off_5radps"]) == 0.25
+    assert float(rows[0]["wrong_sign_share_x"]) == 1.0 and rows[0]["wrong_sign_share_y"] == "0.0"
     doc = json.loads(r.to_json())
     assert doc["n_compared"] == 4 and doc["quantities"][0]["median_norm"] == 1.25
-    assert doc["quantities"][0]["rel_rms_z"] == pytest.approx(3.0 / math.sqrt(16.0025 / 4), rel=1e-15)
+    assert doc["quantities"][0]["relative_rms_z"] == pytest.approx(3.0 / math.sqrt(16.0025 / 4), rel=1e-15)
+    assert "share_off_2radps" in evaluate(*hand_motions(), large_error_radps=2.0).rows[0]
     md = r.to_markdown(title="hand")
     assert md.startswith("### hand\n")
     assert "| omega | rad s^-1 | 4 | 1.001 | 0.25 | 3 | 3.173 | 1.25 | 50.1 % | 12.5 % | 150 % | 25 % | 25 % |" in md
     small = Motion(T, omega_b_radps=np.full((4, 3), 0.05))
-    assert json.loads(evaluate(small, small).to_json())["quantities"][0]["wrong_sign"] is None
+    assert json.loads(evaluate(small, small).to_json())["quantities"][0]["wrong_sign_share"] is None
 
 
 def test_evaluate_log_uses_truth_else_reference_without_invalid_rows():
@@ -195,7 +198,7 @@ def test_cli_log_folder_uses_the_reference_valid_column(files, capsys):
     assert main(["evaluate", str(files / "est.csv"), str(files / "log"), "--format", "json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["n_invalid"] == 1 and doc["n_compared"] == 3
-    assert doc["quantities"][0]["rmse_z"] == 0.0 and doc["quantities"][0]["large_error"] == 0.0
+    assert doc["quantities"][0]["rmse_z"] == 0.0 and doc["quantities"][0]["share_off_5radps"] == 0.0
 
 
 def test_cli_writes_csv_to_a_file(files, capsys):
