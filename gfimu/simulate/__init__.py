@@ -81,7 +81,9 @@ def simulate(
     motion and the sensor errors use independent streams derived from
     ``seed``, so changing the noise leaves the motion unchanged.
     ``scenario_options`` are the keyword options of the scenario's function
-    (``Scenario.options()``).
+    (``Scenario.options()``). A gyroscope reads the true ω, an inclinometer
+    the true tilt of the attitude (an ideal attitude sensor, undisturbed by
+    acceleration), each plus its noise. ``progress`` shows a bar for long logs.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r}; choose from {', '.join(SCENARIOS)}")
