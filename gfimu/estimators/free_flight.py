@@ -13,9 +13,9 @@ sensors on the body are handled). Two constants hold along the motion:
 
 1. Start (paper 004: the five unknowns [ω(0), 2T, H²] from the first
    readings). Eq. 13 alone at the first sample has several roots besides
-   ±ω; they are found by multi-start least squares, and the root whose
-   per-sample track over the first ``init_samples`` readings best obeys
-   Euler's equations (ω_k+1 - ω_k ≈ Δt ω̇ by the trapezoid rule) is kept.
+   ±ω; they are found by multi-start least squares, and the root from which
+   Euler's equations (integrated by RK4) best predict the first
+   ``init_samples`` readings is kept.
    2T and H² are then fitted jointly with ω at those ``init_samples``
    samples (scipy ``least_squares``, trust-region reflective).
 2. Every sample: the least-squares solution of eq. 13 with eqs. 2-3, with
@@ -24,9 +24,11 @@ sensors on the body are handled). Two constants hold along the motion:
    from the previous sample's ω.
 
 All equations are even in ω, so ω is found up to its sign; ``omega_sign``
-picks the branch: "positive" / "negative" make the component on the spin
-axis (the major axis when H²/2T > I_intermediate, else the minor axis; its
-component never changes sign in torque-free motion) positive / negative;
+picks the branch: "positive" / "negative" make the mean component on the
+spin axis positive / negative. The spin axis is the major or the minor axis,
+the one whose component never changes sign in torque-free motion (the major
+axis when H²/2T > I_intermediate): of the two, the one whose estimated
+component keeps its sign best along the track;
 "auto" keeps the sign for which the whole track best obeys Euler's
 equations forward in time (-ω(t) solves them only backwards in time).
 """
@@ -36,6 +38,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 from scipy.optimize import least_squares
 
 from .. import rigid_body
@@ -61,6 +64,26 @@ def euler_omega_dot_jacobian(inertia_kgm2: np.ndarray, omega_b_radps: np.ndarray
     # d(ω × Iω) = dω × Iω + ω × I dω = -[Iω]× dω + [ω]× I dω
     d_cross = -_skew(i * w) + _skew(w) * i[None, :]
     return -d_cross / i[:, None]
+
+
+def _propagate(inertia_kgm2: np.ndarray, omega0_b_radps: np.ndarray, times_s: np.ndarray) -> np.ndarray:
+    """ω at ``times_s`` (from 0, increasing) by RK4 on Euler's equations, steps ≤ 0.2 ms."""
+    out = np.empty((len(times_s), 3))
+    w = np.asarray(omega0_b_radps, dtype=float)
+    t_now = 0.0
+    for j, t_next in enumerate(times_s):
+        span = t_next - t_now
+        m = max(int(np.ceil(span / 2e-4)), 1) if span > 0 else 0
+        for _ in range(m):
+            h = span / m
+            k1 = euler_omega_dot(inertia_kgm2, w)
+            k2 = euler_omega_dot(inertia_kgm2, w + 0.5 * h * k1)
+            k3 = euler_omega_dot(inertia_kgm2, w + 0.5 * h * k2)
+            k4 = euler_omega_dot(inertia_kgm2, w + h * k3)
+            w = w + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        t_now = t_next
+        out[j] = w
+    return out
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -108,6 +131,24 @@ class _FreeFlightModel:
         order = np.argsort(self.inertia)
         return int(order[2]) if h2 / two_t > self.inertia[order[1]] else int(order[0])
 
+    def spin_axis_of_track(self, omega: np.ndarray, two_t: float, h2: float) -> int:
+        """Of the major and minor axes, the one whose component keeps its sign best along ``omega``.
+
+        Near the separatrix (spin about the intermediate axis) noisy constants
+        can put H²/2T on the wrong side of I_intermediate, so the track itself
+        decides: the ratio |mean ω_i| / mean |ω_i| is 1 for a component that
+        never changes sign. The constants decide when the two ratios tie.
+        """
+        order = np.argsort(self.inertia)
+        ratios = {}
+        for axis in (int(order[2]), int(order[0])):
+            mag = np.mean(np.abs(omega[:, axis]))
+            ratios[axis] = abs(np.mean(omega[:, axis])) / mag if mag > 0 else 0.0
+        a, b = ratios
+        if abs(ratios[a] - ratios[b]) <= 1e-3:
+            return self.spin_axis(two_t, h2)
+        return a if ratios[a] > ratios[b] else b
+
 
 @dataclass
 class FreeFlightEstimator:
@@ -117,7 +158,7 @@ class FreeFlightEstimator:
 
     - ``omega_sign="positive"``: branch of the ±ω ambiguity, "positive" /
       "negative" on the spin axis, or "auto" (see module docstring);
-    - ``init_samples=20``: readings used to find ω(0), 2T and H²;
+    - ``init_samples=50``: readings used to find ω(0), 2T and H²;
     - ``starts=24``: multi-start points for the roots of eq. 13 at sample 0;
     - ``compute_sigma=False``: one-sigma of ω from the Fisher information of
       eq. 13 alone (accelerometer noise from the array), ignoring the
@@ -129,7 +170,7 @@ class FreeFlightEstimator:
     """
 
     omega_sign: str = "positive"
-    init_samples: int = 20
+    init_samples: int = 50
     starts: int = 24
     compute_sigma: bool = False
 
@@ -170,11 +211,6 @@ class FreeFlightEstimator:
         t = log.times_s
         k = min(int(self.init_samples), n)
         w_init, two_t, h2 = self._initial(model, y[:k], t[:k])
-        if self.omega_sign != "auto":
-            axis = model.spin_axis(two_t, h2)
-            want = 1.0 if self.omega_sign == "positive" else -1.0
-            if np.sign(w_init[axis]) != want:
-                w_init = -w_init
 
         accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))  # eq. 14: mean |a_s| over the N samples
         omega = np.empty((n, 3))
@@ -182,11 +218,17 @@ class FreeFlightEstimator:
         for i in progress_bar(range(n), total=n, desc="free-flight", enable=progress):
             w = self._solve_sample(model, y[i], w, two_t, h2, accel_scale)
             omega[i] = w
+        # the track is continuous, so one global sign remains to choose
         if self.omega_sign == "auto":
             dw = euler_omega_dot(model.inertia, omega)
             inc = 0.5 * np.diff(t)[:, None] * (dw[1:] + dw[:-1])
-            if np.sum(np.diff(omega, axis=0) * inc) < 0:
-                omega = -omega
+            flip = np.sum(np.diff(omega, axis=0) * inc) < 0
+        else:
+            axis = model.spin_axis_of_track(omega, two_t, h2)
+            want = 1.0 if self.omega_sign == "positive" else -1.0
+            flip = np.sign(np.sum(omega[:, axis])) != want
+        if flip:
+            omega = -omega
         omega_dot = euler_omega_dot(model.inertia, omega)
         sigma = {}
         if self.compute_sigma:
@@ -222,21 +264,17 @@ class FreeFlightEstimator:
         accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))
         best = None
         for root in self._roots(model, y[0]):
-            two_t, h2 = model.constants(root)
-            track = [root]
-            for i in range(1, k):
-                track.append(self._solve_sample(model, y[i], track[-1], two_t, h2, accel_scale))
-            track = np.array(track)
-            if k > 1:
-                dw = euler_omega_dot(model.inertia, track)
-                inc = 0.5 * np.diff(t)[:, None] * (dw[1:] + dw[:-1])
-                step = np.diff(track, axis=0)
-                score = min(np.sum((step - inc) ** 2), np.sum((step + inc) ** 2))
-            else:
-                score = 0.0
+            # rank the roots by how well Euler's equations from them predict the next readings
+            # (either sign: -ω(t) solves Euler's equations only backwards in time)
+            score = min(np.sum((model.readings(_propagate(model.inertia, s * root, t - t[0])) - y) ** 2) for s in (1.0, -1.0))
             if best is None or score < best[0]:
-                best = (score, track, two_t, h2)
-        _, track, two_t, h2 = best
+                best = (score, root)
+        root = best[1]
+        two_t, h2 = model.constants(root)
+        track = [root]
+        for i in range(1, k):
+            track.append(self._solve_sample(model, y[i], track[-1], two_t, h2, accel_scale))
+        track = np.array(track)
         if k == 1:
             return track[0], float(two_t), float(h2)
         # joint fit of ω at the k samples and the two constants (eqs. 13, 2, 3)
@@ -259,10 +297,10 @@ class FreeFlightEstimator:
                 J[k * na + k + j, 3 * j:3 * j + 3] = -2 * i_ * i_ * w[j] / ref_h
             J[k * na:k * na + k, -2] = 1.0
             J[k * na + k:, -1] = 1.0
-            return J
+            return sparse.csr_matrix(J)
 
         z0 = np.concatenate([track.ravel(), [1.0, 1.0]])
-        r = least_squares(residuals, z0, jac=jac, method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14)
+        r = least_squares(residuals, z0, jac=jac, method="trf", tr_solver="lsmr", xtol=1e-14, ftol=1e-14, gtol=1e-14)
         w = r.x[:-2].reshape(k, 3)
         return w[0], float(r.x[-2] * ref_t), float(r.x[-1] * ref_h)
 
