@@ -168,7 +168,8 @@ class EvaluationResult:
         return [m.label for m in self.metrics]
 
     @property
-    def keys(self) -> tuple[str, ...]:
+    def columns(self) -> tuple[str, ...]:
+        """Row keys in table order (the CSV header)."""
         return row_keys(self.large_error_radps)
 
     @property
@@ -210,9 +211,9 @@ class EvaluationResult:
     def to_csv(self) -> str:
         buf = io.StringIO()
         w = _csv.writer(buf, lineterminator="\n")
-        w.writerow(self.keys)
+        w.writerow(self.columns)
         for r in self.rows:
-            w.writerow([_csv_cell(r[k]) for k in self.keys])
+            w.writerow([_csv_cell(r[k]) for k in self.columns])
         return buf.getvalue()
 
     def to_json(self) -> str:
