@@ -509,3 +509,26 @@ def test_units_table_is_consistent_with_motion_quantities():
         kind = logio._KIND_OF_UNIT[unit]
         assert logio.UNITS[kind][0] == unit
         assert logio.unit_factor(unit, kind) == 1.0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64), min_size=5, max_size=5),
+                min_size=1, max_size=20),
+       st.integers(-(2**62), 2**62))
+def test_any_finite_readings_and_timestamps_round_trip(tmp_path_factory, rows, t0):
+    array = SensorArray((Accelerometer("a", [0, 0, 0], axes=("x", "y")), Accelerometer("b", [0, 0, 1.0], axes=("z",))),
+                        gyroscope=Gyroscope())
+    values = np.array(rows)
+    t = t0 + np.arange(len(rows), dtype=np.int64) * 7
+    log = Log(array, t, values[:, :3], values[:, 2:])
+    d = tmp_path_factory.mktemp("rt")
+    logio.write_log(log, d)
+    back = logio.read_log(d)
+    assert np.array_equal(back.timestamps_ns, t)
+    assert np.array_equal(back.accel_mps2, log.accel_mps2) and np.array_equal(back.gyro_b_radps, log.gyro_b_radps)
+    assert np.array_equal(np.signbit(back.accel_mps2), np.signbit(log.accel_mps2))
+
+
+def test_read_log_accepts_the_path_of_a_file_in_the_folder(tmp_path):
+    d, log = cube_log_dir(tmp_path)
+    assert np.array_equal(logio.read_log(d / "imu.csv").accel_mps2, log.accel_mps2)
