@@ -233,15 +233,14 @@ class _Csv:
         except UnicodeDecodeError as exc:
             line = raw[: exc.start].count(b"\n") + 1
             raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, line) from None
-        text = text.lstrip("\ufeff")
         if "\r" in text:
             text = text.replace("\r\n", "\n").replace("\r", "\n")
-        header, _, body = text.partition("\n")
-        end = len(body)
-        while end and body[end - 1] == "\n":
+        lines = text.split("\n")
+        del text
+        header = lines[0].lstrip("\ufeff")
+        end = len(lines)
+        while end > 1 and not lines[end - 1]:
             end -= 1
-        if end < len(body):
-            body = body[:end]
         self.columns: list[tuple[str, str | None]] = []
         for field in header.split(","):
             field = field.strip().strip('"').strip()
@@ -261,9 +260,10 @@ class _Csv:
         self.time_unit = unit
         if len(self.columns) < 2:
             raise LogFormatError("has only a timestamp column", path, 1)
-        if not body:
+        if end == 1:
             raise LogFormatError("has a header but no data rows", path, 2)
-        self.lines = body.split("\n")
+        self.lines = lines[1:end]
+        del lines
         n_fields = len(self.columns)
         counts = np.fromiter((ln.count(",") for ln in self.lines), dtype=np.int64, count=len(self.lines))
         bad = np.flatnonzero(counts != n_fields - 1)
