@@ -116,7 +116,7 @@ _WORDS = {"degree": "deg", "degrees": "deg", "°": "deg", "radian": "rad", "radi
 def canonical_unit(text: str) -> str:
     """Spelling-independent form of a unit: ``m/s²``, ``m s-2``, ``m*s^-2`` -> ``m s^-2``."""
     u = text.strip()
-    for a, b in (("⁻¹", "^-1"), ("⁻²", "^-2"), ("²", "^2"), ("¹", "^1"), ("·", " "), ("*", " "),
+    for a, b in (("⁻¹", "^-1"), ("⁻²", "^-2"), ("²", "^2"), ("¹", "^1"), ("·", " "), ("*", " "), (".", " "),
                  ("°/", "deg/"), ("° ", "deg ")):
         u = u.replace(a, b)
     u = re.sub(r"\s+", " ", u).strip()

@@ -532,3 +532,22 @@ def test_any_finite_readings_and_timestamps_round_trip(tmp_path_factory, rows, t
 def test_read_log_accepts_the_path_of_a_file_in_the_folder(tmp_path):
     d, log = cube_log_dir(tmp_path)
     assert np.array_equal(logio.read_log(d / "imu.csv").accel_mps2, log.accel_mps2)
+
+
+@pytest.mark.parametrize("unit, kind, factor", [
+    ("m s^-2", "acceleration", 1.0), ("m.s-2", "acceleration", 1.0), ("m/s/s", "acceleration", 1.0),
+    ("m s⁻²", "acceleration", 1.0), ("mg", "acceleration", 9.80665e-3),
+    ("rad/s", "angular_rate", 1.0), ("rad·s⁻¹", "angular_rate", 1.0), ("°/s", "angular_rate", math.pi / 180),
+    ("degrees/s", "angular_rate", math.pi / 180), ("rpm", "angular_rate", math.pi / 30),
+    ("deg/s^2", "angular_acceleration", math.pi / 180), ("°", "angle", math.pi / 180), ("1", "dimensionless", 1.0),
+])
+def test_accepted_unit_spellings(unit, kind, factor):
+    assert logio.unit_factor(unit, kind) == factor
+
+
+@pytest.mark.parametrize("unit, kind", [("m/s", "acceleration"), ("G", "acceleration"), ("ft/s^2", "acceleration"),
+                                        ("rad/s^2", "angular_rate"), ("Hz", "angular_rate"), ("rad", "angular_rate"),
+                                        ("m s^-2", "angle"), ("%", "dimensionless")])
+def test_refused_units(unit, kind):
+    with pytest.raises(KeyError):
+        logio.unit_factor(unit, kind)
