@@ -25,6 +25,8 @@ import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from .. import rigid_body
+from ..rigid_body import quadratic_terms
+from ..rotations import skew
 from ..log import Log
 from .graph import STATE_SIZE, SmootherOptions
 
@@ -161,11 +163,10 @@ def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
     def model(w):  # (C, 3) -> readings (C, n_axes), Jacobian (C, n_axes, 3)
         iw = w * inertia
         psi = -np.cross(w, iw) / inertia
-        from ..rotations import skew
-
+        # d(ω × Iω)/dω = [ω]× I - [Iω]×
         dpsi = -(skew(w) * inertia - skew(iw)) / inertia[:, None]
-        pred = psi @ Sd.T + rigid_body.quadratic_terms(w) @ Sq.T
-        J = Sd @ dpsi + np.einsum("aj,cjk->cak", Sq, rigid_body.quadratic_terms_jacobian(w))
+        pred = psi @ Sd.T + quadratic_terms(w) @ Sq.T
+        J = Sd @ dpsi + np.einsum("aj,cjk->cak", Sq, _quadratic_jacobian(w))
         return pred, J
 
     def polish(w, yk, iters):
@@ -179,12 +180,38 @@ def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
 
     rng = np.random.default_rng(0)
     cands = rng.normal(size=(200, 3)) * 10.0
-    w_all, cost = polish(cands, y[0], 30)
-    out = np.zeros((n, 3))
-    out[0] = w_all[np.argmin(cost)]
-    for k in range(1, n):
-        w, _ = polish(out[k - 1][None], y[k], 4)
-        out[k] = w[0]
+    w_all, cost = polish(cands, y[0][None], 30)
+    def euler_step(w, h):  # Heun step of the torque-free Euler equations
+        h = np.reshape(h, (-1, 1))
+        k1 = -np.cross(w, w * inertia) / inertia
+        w1 = w + h * k1
+        return w + 0.5 * h * (k1 - np.cross(w1, w1 * inertia) / inertia)
+
+    # track every ~10 ms: propagate by Euler's equations, polish on the readings;
+    # then start every sample from the tracked state propagated to it
+    stride = max(1, int(round(0.01 * log.rate_hz)))
+    tracked_idx = np.arange(0, n, stride)
+    dt = np.append(log.dt_s, log.nominal_dt_s)
+    tracked = np.zeros((tracked_idx.size, 3))
+    tracked[0] = w_all[np.argmin(cost)]
+    for j in range(1, tracked_idx.size):
+        w = tracked[j - 1][None]
+        for k in range(tracked_idx[j - 1], tracked_idx[j]):
+            w = euler_step(w, dt[k])
+        w, _ = polish(w, y[tracked_idx[j]][None], 4)
+        tracked[j] = w[0]
+    start = np.zeros((n, 3))
+    w = tracked.copy()
+    for offset in range(stride):
+        idx = tracked_idx + offset
+        ok = idx < n
+        start[idx[ok]] = w[ok]
+        w[ok] = euler_step(w[ok], dt[idx[ok]])
+    out, _ = polish(start, y, 4)
+    # the readings are even in ω: align each solution's sign with its predecessor
+    flips = np.sign(np.einsum("ni,ni->n", out[1:], out[:-1]))
+    flips[flips == 0] = 1.0
+    out[1:] *= np.cumprod(flips)[:, None]
     psi = -np.cross(out, out * inertia) / inertia
     dw = np.diff(out, axis=0)
     integ = 0.5 * (psi[1:] + psi[:-1]) * log.dt_s[:, None]
