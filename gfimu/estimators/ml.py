@@ -14,7 +14,8 @@ form by ``[f, ω̇] = H_w⁺ (y_w - S_q,w q(ω))`` (subscript w: whitened by
 
 (variable projection). With ``A = P⊥ S_q,w`` constant for the array, the
 cost is ``|b|² - 2 cᵀ q(ω) + q(ω)ᵀ M q(ω)`` with ``c = Aᵀ b`` (6 numbers per
-sample) and ``M = AᵀA``, so the Gauss–Newton (Levenberg–Marquardt) steps of
+sample) and ``M = AᵀA``, so the Newton steps (exact Hessian where it is
+positive definite, else Gauss–Newton, with Levenberg–Marquardt damping) of
 every sample run at once on 6-vectors. An optional gyro adds the residual
 ``(y_g - ω) / σ_g``.
 
@@ -215,13 +216,19 @@ class MLEstimator:
         cost = _cost(model, b, w, gyro, gyro_var)
         for _ in range(self.neighbour_passes):
             first = w[:1] if previous is None else np.asarray(previous)[None, :]
-            cand = self._iterate(model, b, c, np.vstack([first, w[:-1]]), gyro, gyro_var)
-            cand_cost = _cost(model, b, cand, gyro, gyro_var)
-            better = cand_cost < cost * (1 - 1e-9)
+            prev = np.vstack([first, w[:-1]])
+            # a start within 10 % of the current estimate (either sign) lies in its basin: skip it
+            gap = np.minimum(np.linalg.norm(prev - w, axis=1), np.linalg.norm(prev + w, axis=1))
+            idx = np.nonzero(gap > 0.1 * np.linalg.norm(w, axis=1) + 1e-6)[0]
+            if idx.size == 0:
+                break
+            cand = self._iterate(model, b[idx], c[idx], prev[idx], None if gyro is None else gyro[idx], gyro_var)
+            cand_cost = _cost(model, b[idx], cand, None if gyro is None else gyro[idx], gyro_var)
+            better = cand_cost < cost[idx] * (1 - 1e-9)
             if not np.any(better):
                 break
-            w = np.where(better[:, None], cand, w)
-            cost = np.where(better, cand_cost, cost)
+            w[idx[better]] = cand[better]
+            cost[idx[better]] = cand_cost[better]
         return w
 
     def _start(self, array, model, y, c, gyro):
@@ -261,8 +268,14 @@ class MLEstimator:
             wi = w[idx]
             q = rigid_body.quadratic_terms(wi)
             DqT = np.swapaxes(rigid_body.quadratic_terms_jacobian(wi), 1, 2)
-            grad = (DqT @ (c[idx] - q @ model.M)[:, :, None])[:, :, 0]  # Jᵀ r with r = b - A q
+            g6 = c[idx] - q @ model.M  # Aᵀ r with r = b - A q
+            grad = (DqT @ g6[:, :, None])[:, :, 0]  # -½ ∂cost/∂ω
             JtJ = DqT @ (model.M @ np.swapaxes(DqT, 1, 2))
+            # exact Hessian: q is quadratic, so the residual curvature term is -Σ_j (Aᵀr)_j ∂²q_j/∂ω²;
+            # with noise (non-zero residual) it turns Gauss–Newton's linear convergence into Newton's
+            hess = JtJ - np.einsum("nj,jab->nab", g6, _Q_HESSIAN)
+            pos_def = np.linalg.eigvalsh(hess)[:, 0] > 1e-12 * np.maximum(np.trace(JtJ, axis1=1, axis2=2), 1e-300)
+            JtJ = np.where(pos_def[:, None, None], hess, JtJ)
             if gyro is not None:
                 grad = grad + (gyro[idx] - wi) / gyro_var
                 JtJ = JtJ + eye / gyro_var
@@ -272,12 +285,28 @@ class MLEstimator:
             trial = wi + step
             tcost = _cost(model, b[idx], trial, None if gyro is None else gyro[idx], gyro_var)
             ok = tcost <= cost[idx]
+            gain = cost[idx] - tcost
             w[idx[ok]] = trial[ok]
             cost[idx[ok]] = tcost[ok]
             lam[idx] = np.where(ok, np.maximum(lam[idx] / 10, 1e-12), lam[idx] * 10)
             small = np.linalg.norm(step, axis=1) <= self.tolerance_radps * (1 + np.linalg.norm(wi, axis=1))
-            active[idx[(ok & small) | (lam[idx] > 1e12)]] = False
+            flat = gain <= 1e-15 * (tcost + 1e-300)  # cost settled to rounding (noisy data)
+            active[idx[(ok & (small | flat)) | (lam[idx] > 1e12)]] = False
         return w
+
+
+_Q_HESSIAN = np.array(
+    [
+        [[2, 0, 0], [0, 2, 0], [0, 0, 0]],
+        [[2, 0, 0], [0, 0, 0], [0, 0, 2]],
+        [[0, 0, 0], [0, 2, 0], [0, 0, 2]],
+        [[0, 1, 0], [1, 0, 0], [0, 0, 0]],
+        [[0, 0, 1], [0, 0, 0], [1, 0, 0]],
+        [[0, 0, 0], [0, 0, 1], [0, 1, 0]],
+    ],
+    dtype=float,
+)
+"""∂²q_j/∂ω² for the six quadratic terms (constant)."""
 
 
 def _cost(model: _ProjectedModel, b: np.ndarray, w: np.ndarray, gyro, gyro_var) -> np.ndarray:
