@@ -274,7 +274,10 @@ class MLEstimator:
             # exact Hessian: q is quadratic, so the residual curvature term is -Σ_j (Aᵀr)_j ∂²q_j/∂ω²;
             # with noise (non-zero residual) it turns Gauss–Newton's linear convergence into Newton's
             hess = JtJ - np.einsum("nj,jab->nab", g6, _Q_HESSIAN)
-            pos_def = np.linalg.eigvalsh(hess)[:, 0] > 1e-12 * np.maximum(np.trace(JtJ, axis1=1, axis2=2), 1e-300)
+            tr = np.maximum(np.trace(JtJ, axis1=1, axis2=2), 1e-300)
+            m1 = hess[:, 0, 0]
+            m2 = hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] * hess[:, 1, 0]
+            pos_def = (m1 > 1e-12 * tr) & (m2 > 1e-12 * tr**2) & (np.linalg.det(hess) > 1e-12 * tr**3)  # Sylvester
             JtJ = np.where(pos_def[:, None, None], hess, JtJ)
             if gyro is not None:
                 grad = grad + (gyro[idx] - wi) / gyro_var
