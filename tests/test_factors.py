@@ -81,6 +81,12 @@ def test_quadratic_jacobian():
     check(lambda w: quadratic.quadratic_residual(w, qm), (w,), {0: "w"})
 
 
+def test_inversion_factor_jacobians():
+    w, dw, f = RNG.normal(size=(3, N, 3)) * 3
+    xm = RNG.normal(size=(N, 12))
+    check(lambda a, b, c: quadratic.inversion_residual(a, b, c, xm), (w, dw, f), {0: "w", 1: "d", 2: "f"})
+
+
 def test_quadratic_inversion_recovers_noise_free_terms():
     arr = cube_array(0.05)
     f, dw, w = RNG.normal(size=(3, N, 3)) * [[[9]], [[20]], [[4]]]
@@ -221,6 +227,7 @@ def test_custom_factors_match_numpy_and_numerical_derivatives():
         (accelerometer.make_accelerometer_factor(w(0), d(0), f(0), RNG.normal(size=3), dirs, pos, UNIT.Create(3), F.bias_key(1), F.scale_key(1)),
          [w(0), d(0), f(0), F.bias_key(1), F.scale_key(1)]),
         (quadratic.make_quadratic_factor(w(0), RNG.normal(size=6), UNIT.Create(6)), [w(0)]),
+        (quadratic.make_inversion_factor(w(0), d(0), f(0), RNG.normal(size=12), UNIT.Create(12)), [w(0), d(0), f(0)]),
         (kinematics.make_angular_velocity_factor(w(0), w(1), d(0), d(1), 0.002, UNIT.Create(3)), [w(0), w(1), d(0), d(1)]),
         (kinematics.make_attitude_factor(r(0), r(1), w(0), w(1), 0.05, UNIT.Create(3)), [r(0), r(1), w(0), w(1)]),
         (process.make_random_walk_factor(d(0), d(1), UNIT.Create(3)), [d(0), d(1)]),

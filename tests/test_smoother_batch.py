@@ -79,6 +79,7 @@ def test_marginal_covariances_equal_dense_inverse(small_log):
 @pytest.mark.parametrize("options", [
     SmootherOptions(relative_tolerance=1e-16, max_iterations=50),
     SmootherOptions(self_calibrate_bias=True, self_calibrate_scale=True, relative_tolerance=1e-16, max_iterations=50),
+    SmootherOptions(measurement="quadratic", relative_tolerance=1e-16, max_iterations=50),
 ])
 def test_graph_path_equals_fast_path(small_log, options):
     """GTSAM graph of CustomFactors (linearize/optimize/retract) = banded vectorised engine."""
@@ -92,6 +93,16 @@ def test_graph_path_equals_fast_path(small_log, options):
     np.testing.assert_allclose(params, fast.params, atol=5e-8)
     graph = problem.gtsam_graph()
     assert graph.error(problem.gtsam_values(states, params)) == pytest.approx(problem.cost(fast.states, fast.params), rel=1e-9)
+
+
+def test_quadratic_formulation_equals_accelerometer_factors_for_square_array(small_log):
+    """With 12 axes, the per-sample inversion with its covariance carries the same information."""
+    log = small_log
+    a = BatchSmootherEstimator(relative_tolerance=1e-14).estimate(log)
+    q = BatchSmootherEstimator(measurement="quadratic", relative_tolerance=1e-14).estimate(log)
+    np.testing.assert_allclose(q.omega_b_radps, a.omega_b_radps, atol=1e-7)
+    np.testing.assert_allclose(q.specific_force_b_mps2, a.specific_force_b_mps2, atol=1e-7)
+    assert "needs at least 12" in BatchSmootherEstimator(measurement="quadratic").applicable(single_triad())
 
 
 def test_window_initialisation_recovers_sign_through_zero():

@@ -34,6 +34,7 @@ from ..factors import (
     bias_key,
     diagonal_noise,
     euler,
+    gaussian_noise,
     free_fall,
     gyro_bias_key,
     gyroscope,
@@ -41,6 +42,7 @@ from ..factors import (
     omega_dot_key,
     omega_key,
     process,
+    quadratic,
     scale_key,
     specific_force_key,
 )
@@ -62,6 +64,10 @@ class SmootherOptions:
     """White angular jerk density: how fast ω̇ may change. Larger follows faster motion, smooths less."""
     specific_force_random_walk_mps2_per_sqrt_s: float = 30.0
     """How fast the specific force may change."""
+    measurement: str = "accelerometer"
+    """'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible);
+    'quadratic': the papers' formulation, the per-sample inversion [f, ω̇, q(ω)] with its covariance
+    (needs an invertible array, no self-calibration)."""
     default_accel_noise_std_mps2: float = 0.07
     """Accelerometer white-noise std used for axes whose array.toml gives none."""
     use_gyro: bool = True
@@ -118,6 +124,8 @@ class SmootherOptions:
                 raise ValueError(f"smoother option {name} must be a positive number, got {v!r}")
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
             raise ValueError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
+        if self.measurement not in ("accelerometer", "quadratic"):
+            raise ValueError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
         if int(self.max_iterations) < 1:
             raise ValueError("smoother option max_iterations must be >= 1")
 
@@ -126,6 +134,13 @@ def options_reason(array: SensorArray, options: SmootherOptions) -> str | None:
     """Why the smoother cannot run on ``array`` with ``options`` (None if it can)."""
     if options.use_inclinometer:
         return "use_inclinometer needs the attitude state, not carried by the batch smoother; set use_inclinometer=False"
+    if options.measurement == "quadratic":
+        if options.self_calibrate_bias or options.self_calibrate_scale or options.free_flight:
+            return "measurement='quadratic' works on the per-sample inversion: no self-calibration or free flight"
+        try:
+            array.check_invertible()
+        except ValueError as exc:
+            return f"measurement='quadratic' needs the per-sample inversion: {exc}"
     if options.free_flight:
         if array.body is None:
             return f"free_flight needs the body's principal inertia ([body] in array.toml); array {array.name!r} has none"
@@ -195,6 +210,10 @@ class SmootherProblem:
             self.global_blocks["gyro_bias"] = (slice(g, g + 3), gyro_bias_key())
             g += 3
         self.n_global = g
+        if opt.measurement == "quadratic":
+            self.x_hat, cov = quadratic.inversion(arr, self.log.accel_mps2)
+            self.x_cov = cov
+            self.x_whiten = np.linalg.inv(np.linalg.cholesky(cov))  # L⁻¹ with cov = L Lᵀ
         if self.use_gyro:
             gs = arr.gyroscope.noise_std_radps
             self.gyro_sigma = float(gs) if gs else 0.01
@@ -226,9 +245,17 @@ class SmootherProblem:
     def terms(self, states: np.ndarray, params: np.ndarray) -> list[Term]:
         """All factors, whitened, at ``states`` (N, 9) and ``params`` (G,)."""
         X = states
-        n = self.n
         out = []
-        # accelerometers: one term with all axes
+        if self.options.measurement == "quadratic":
+            r, j = quadratic.inversion_residual(X[:, W], X[:, D], X[:, F], self.x_hat)
+            J = np.concatenate([j["w"], j["d"], j["f"]], axis=2)
+            out.append(Term("unary", r @ self.x_whiten.T, {"x": self.x_whiten @ J}))
+        else:
+            out.append(self._accelerometer_term(X, params))
+        return out + self._other_terms(X, params)
+
+    def _accelerometer_term(self, X: np.ndarray, params: np.ndarray) -> Term:
+        n = self.n
         rows = []
         jx = []
         jg = np.zeros((n, self.log.array.n_axes, self.n_global)) if self.n_global else None
@@ -247,7 +274,11 @@ class SmootherProblem:
         J = np.concatenate(jx, axis=1) * w[None, :, None]
         if jg is not None:
             jg *= w[None, :, None]
-        out.append(Term("unary", r, {"x": J}, jg))
+        return Term("unary", r, {"x": J}, jg)
+
+    def _other_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:
+        n = self.n
+        out = []
         # first-state weak prior
         r0, _ = process.prior_residual(X[:1], np.zeros(STATE_SIZE))
         out.append(Term("unary", r0 / self.first_sigma, {"x": np.diag(1.0 / self.first_sigma)[None]}, None, first=0))
@@ -307,7 +338,10 @@ class SmootherProblem:
         opt = self.options
         y = self.log.accel_mps2
         for k in range(self.n):
-            for i, (d, p, cols) in enumerate(self.sensors):
+            if opt.measurement == "quadratic":
+                graph.add(quadratic.make_inversion_factor(omega_key(k), omega_dot_key(k), specific_force_key(k),
+                                                          self.x_hat[k], gaussian_noise(self.x_cov)))
+            for i, (d, p, cols) in enumerate(self.sensors if opt.measurement == "accelerometer" else []):
                 kb = self.global_blocks[f"bias{i}"][1] if f"bias{i}" in self.global_blocks else None
                 ks = self.global_blocks[f"scale{i}"][1] if f"scale{i}" in self.global_blocks else None
                 graph.add(accelerometer.make_accelerometer_factor(
