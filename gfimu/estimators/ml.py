@@ -32,7 +32,9 @@ up to its sign. Starting points and signs:
    ML, carried forward in parallel;
 3. the signs along each gap-free segment are chosen by a two-state Viterbi
    pass that makes ω most consistent with the trapezoidal integral of the
-   estimated ω̇ (paper 000 resolves the sign by integrating ω̇ the same way).
+   estimated ω̇ (paper 000 resolves the sign by integrating ω̇ the same way),
+   over the samples whose |ω| exceeds three times its bound, the integral
+   bridging the stretches of small |ω| in between (``_resolve_signs``).
    ω̇ does not depend on the sign of ω, so this fixes the sign wherever ω
    changes over the segment; a segment with constant ω keeps the sign that
    makes its largest mean component positive.
@@ -193,7 +195,7 @@ class MLEstimator:
         lin = y @ model.lin_y.T - q @ model.lin_q.T
         f, dw = lin[:, :3], lin[:, 3:]
         if gyro is None:
-            omega = _resolve_signs(omega, dw, log)
+            omega = _resolve_signs(omega, dw, log, _omega_sigma(model, omega))
         sig = {}
         if self.compute_sigma:
             bound = crb_module.crb_per_sample(
@@ -333,8 +335,30 @@ def _omega_from_q(q: np.ndarray) -> np.ndarray:
     return vecs[:, :, -1] * np.sqrt(np.clip(vals[:, -1], 0.0, None))[:, None]
 
 
-def _resolve_signs(omega: np.ndarray, omega_dot: np.ndarray, log: Log) -> np.ndarray:
-    """Signs of ω along each gap-free segment (two-state Viterbi, see module docstring)."""
+def _omega_sigma(model: _ProjectedModel, omega: np.ndarray) -> np.ndarray:
+    """sqrt(trace Cov ω) of the accelerometer-only bound at each ω (inf near ω = 0), (N,)."""
+    Dq = rigid_body.quadratic_terms_jacobian(omega)
+    info = np.swapaxes(Dq, 1, 2) @ (model.M @ Dq)
+    tr = np.trace(info, axis1=1, axis2=2)
+    det = np.linalg.det(info)
+    ok = det > 1e-12 * np.maximum(tr, 1e-300) ** 3
+    out = np.full(len(omega), np.inf)
+    if np.any(ok):
+        out[ok] = np.sqrt(np.trace(np.linalg.inv(info[ok]), axis1=1, axis2=2))
+    return out
+
+
+def _resolve_signs(omega: np.ndarray, omega_dot: np.ndarray, log: Log, sigma_omega: np.ndarray) -> np.ndarray:
+    """Signs of ω along each gap-free segment (see module docstring).
+
+    Samples with |ω| > 3 σ (σ from the bound at the estimate) are "confident":
+    their signs come from a two-state Viterbi pass whose transition cost
+    between consecutive confident samples j < k is
+    ``|s_k u_k - s_j u_j - ∫_j^k ω̇|² / (σ_j² + σ_k²)``, so that stretches of
+    small |ω| are bridged by the integral of ω̇ alone. Every other sample
+    takes the sign closest to the nearest confident sample's ω carried over
+    by the integral of ω̇.
+    """
     out = omega.copy()
     t = log.times_s
     for seg in log.segments():
@@ -346,43 +370,60 @@ def _resolve_signs(omega: np.ndarray, omega_dot: np.ndarray, log: Log) -> np.nda
             out[seg] = _canonical(u)
             continue
         dt = np.diff(t[seg])
-        inc = 0.5 * dt[:, None] * (omega_dot[seg][1:] + omega_dot[seg][:-1])  # (m-1, 3)
-        # transition cost | s_k u_k - s_{k-1} u_{k-1} - inc_k |² for (s_{k-1}, s_k) in {+,-}²
-        cur, prev = u[1:], u[:-1]
-        costs = np.empty((m - 1, 2, 2))
-        for a, sa in enumerate((1.0, -1.0)):
-            for b, sb in enumerate((1.0, -1.0)):
-                costs[:, a, b] = np.sum((sb * cur - sa * prev - inc) ** 2, axis=1)
-        acc = np.zeros(2)
-        back = np.empty((m - 1, 2), dtype=np.int8)
-        cl = costs.tolist()
-        a0, a1 = 0.0, 0.0
-        for k in range(m - 1):
-            c = cl[k]
-            n0a, n0b = a0 + c[0][0], a1 + c[1][0]
-            n1a, n1b = a0 + c[0][1], a1 + c[1][1]
-            back[k, 0] = 0 if n0a <= n0b else 1
-            back[k, 1] = 0 if n1a <= n1b else 1
-            a0, a1 = min(n0a, n0b), min(n1a, n1b)
-        acc[:] = (a0, a1)
-        state = np.empty(m, dtype=np.int8)
-        if abs(a0 - a1) <= 1e-12 * max(a0, a1, 1e-300):
-            # the segment carries no sign information: largest mean component positive
-            state[-1] = 0
-            for k in range(m - 2, -1, -1):
-                state[k] = back[k, state[k + 1]]
-            signs = np.where(state == 0, 1.0, -1.0)
-            path = u * signs[:, None]
-            mean = path.mean(axis=0)
-            if mean[np.argmax(np.abs(mean))] < 0:
-                path = -path
-            out[seg] = path
-            continue
-        state[-1] = int(np.argmin(acc))
-        for k in range(m - 2, -1, -1):
-            state[k] = back[k, state[k + 1]]
-        out[seg] = u * np.where(state == 0, 1.0, -1.0)[:, None]
+        dw = omega_dot[seg]
+        integral = np.vstack([np.zeros((1, 3)), np.cumsum(0.5 * dt[:, None] * (dw[1:] + dw[:-1]), axis=0)])
+        sig = sigma_omega[seg]
+        conf = np.linalg.norm(u, axis=1) > 3 * sig
+        idx = np.nonzero(conf)[0]
+        if idx.size == 0:
+            idx = np.arange(m)
+            sig = np.ones(m)
+        signs = np.ones(m)
+        signs[idx] = _viterbi_signs(u[idx], integral[idx], sig[idx])
+        rest = np.setdiff1d(np.arange(m), idx)
+        if rest.size:
+            pos = np.searchsorted(idx, rest)  # first confident index after each rest sample
+            before = pos > 0
+            anchor = np.where(before, idx[np.maximum(pos - 1, 0)], idx[np.minimum(pos, idx.size - 1)])
+            pred = signs[anchor][:, None] * u[anchor] + integral[rest] - integral[anchor]
+            d = np.sum(u[rest] * pred, axis=1)
+            signs[rest] = np.where(d < 0, -1.0, 1.0)
+        out[seg] = u * signs[:, None]
     return out
+
+
+def _viterbi_signs(u: np.ndarray, integral: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """±1 per row of ``u`` minimising the weighted transition costs (see :func:`_resolve_signs`)."""
+    m = len(u)
+    if m == 1:
+        return _canonical(u)[0] @ u[0] / max(u[0] @ u[0], 1e-300) * np.ones(1)
+    inc = np.diff(integral, axis=0)
+    weight = 1.0 / (sigma[1:] ** 2 + sigma[:-1] ** 2)
+    cur, prev = u[1:], u[:-1]
+    costs = np.empty((m - 1, 2, 2))
+    for a, sa in enumerate((1.0, -1.0)):
+        for b, sb in enumerate((1.0, -1.0)):
+            costs[:, a, b] = weight * np.sum((sb * cur - sa * prev - inc) ** 2, axis=1)
+    back = np.empty((m - 1, 2), dtype=np.int8)
+    a0, a1 = 0.0, 0.0
+    for k, c in enumerate(costs.tolist()):
+        n0a, n0b = a0 + c[0][0], a1 + c[1][0]
+        n1a, n1b = a0 + c[0][1], a1 + c[1][1]
+        back[k, 0] = 0 if n0a <= n0b else 1
+        back[k, 1] = 0 if n1a <= n1b else 1
+        a0, a1 = min(n0a, n0b), min(n1a, n1b)
+    state = np.empty(m, dtype=np.int8)
+    tie = abs(a0 - a1) <= 1e-12 * max(a0, a1, 1e-300)
+    state[-1] = 0 if tie else int(a1 < a0)
+    for k in range(m - 2, -1, -1):
+        state[k] = back[k, state[k + 1]]
+    signs = np.where(state == 0, 1.0, -1.0)
+    if tie:
+        # no sign information (ω̇ = 0 throughout): largest mean component positive
+        mean = (u * signs[:, None]).mean(axis=0)
+        if mean[np.argmax(np.abs(mean))] < 0:
+            signs = -signs
+    return signs
 
 
 def _canonical(u: np.ndarray) -> np.ndarray:
