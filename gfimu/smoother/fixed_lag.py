@@ -1,0 +1,389 @@
+"""Fixed-lag smoothing of ω, ω̇ and f from an accelerometer array, streaming.
+
+The states of each sample k are ω_k, ω̇_k and f_k (all in B). They are tied
+together by
+
+- the array measurement (paper 000, eq. 6): ``y_k = S [f_k, ω̇_k, q(ω_k)] + v``;
+- a white-jerk process model: ``ω_{k+1} = ω_k + h (ω̇_k + ω̇_{k+1}) / 2``
+  (trapezoidal integration) and random walks on ω̇ and f;
+- priors on the first state of every segment, and an optional gyroscope.
+
+:class:`FixedLagSmoother` runs these factors through gtsam's
+``IncrementalFixedLagSmoother`` (iSAM2 underneath): each :meth:`push` adds
+one sample, returns the newest (filtered) state and every state that has just
+reached the lag (smoothed with ``lag_s`` seconds of future data), after which
+gtsam marginalises it. Memory stays bounded: gtsam keeps only the window and
+this module keeps only deques of window length.
+
+Time gaps (a step longer than ``gap_factor`` times the nominal step) are not
+integrated across: the window is flushed (its states are emitted smoothed with
+the data they have) and a new segment starts with a fresh initialisation.
+
+:class:`FixedLagEstimator` (method ``"fixed-lag"``) streams a whole log
+through the smoother and returns one row per sample.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections import deque
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from ..array import ArrayModelError, SensorArray
+from ..log import Log
+from ..motion import Motion
+from ..progress import progress as progress_bar
+from . import _fixed_lag_model as model
+
+
+class FixedLagSmootherError(RuntimeError):
+    """The smoother could not solve an update (names the time and the cause)."""
+
+
+@dataclass(frozen=True)
+class StateEstimate:
+    """ω, ω̇ and f of one sample (body frame), with optional one-sigma values."""
+
+    timestamp_ns: int
+    omega_b_radps: np.ndarray
+    omega_dot_b_radps2: np.ndarray
+    specific_force_b_mps2: np.ndarray
+    sigma_omega_b_radps: np.ndarray | None = None
+    sigma_omega_dot_b_radps2: np.ndarray | None = None
+    sigma_specific_force_b_mps2: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class FixedLagUpdate:
+    """What one :meth:`FixedLagSmoother.push` gives back.
+
+    ``smoothed``: states that reached the lag (final values, oldest first;
+    usually one, several after a warm-up or a gap, none at the start).
+    ``filtered``: the newest state given data up to now (``None`` while the
+    first samples of a segment are being gathered for the initialisation).
+    """
+
+    smoothed: tuple[StateEstimate, ...]
+    filtered: StateEstimate | None
+
+
+@dataclass(frozen=True)
+class FixedLagOptions:
+    """Noise model and solver settings of the fixed-lag smoother.
+
+    Defaults: accelerometer noise from ``array.toml`` (``accel_noise_std_mps2``
+    where it gives none); angular jerk and jerk of f modelled as white noise of
+    the given power spectral densities; iSAM2 relinearisation threshold and
+    skip as in gtsam's defaults, tuned for speed.
+    """
+
+    accel_noise_std_mps2: float = 0.07
+    angular_jerk_psd: float = 2.0e4  # (rad/s^3)^2 / Hz: random walk of ω̇
+    jerk_psd: float = 1.0e3  # (m/s^3)^2 / Hz: random walk of f
+    integration_floor_radps: float = 1e-6  # minimum σ of the ω integration step
+    prior_omega_std_radps: float = 1.0
+    prior_omega_dot_std_radps2: float = 100.0
+    prior_specific_force_std_mps2: float = 100.0
+    gyro_noise_std_radps: float = 0.01
+    relinearize_threshold: float = 0.1
+    relinearize_skip: int = 10
+    warmup_s: float = 0.1
+    gap_factor: float = 1.5
+    marginalise_every_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("accel_noise_std_mps2", "angular_jerk_psd", "jerk_psd", "prior_omega_std_radps",
+                     "prior_omega_dot_std_radps2", "prior_specific_force_std_mps2", "gyro_noise_std_radps",
+                     "relinearize_threshold", "gap_factor", "marginalise_every_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"FixedLagOptions.{name} must be a positive number, got {v!r}")
+        if self.gap_factor <= 1.0:
+            raise ValueError(f"FixedLagOptions.gap_factor must exceed 1, got {self.gap_factor!r}")
+        if int(self.relinearize_skip) < 1:
+            raise ValueError(f"FixedLagOptions.relinearize_skip must be >= 1, got {self.relinearize_skip!r}")
+        if not (math.isfinite(self.warmup_s) and self.warmup_s >= 0):
+            raise ValueError(f"FixedLagOptions.warmup_s must be >= 0, got {self.warmup_s!r}")
+
+
+def _check_array(array: SensorArray) -> str | None:
+    try:
+        array.check_invertible()
+    except ArrayModelError as err:
+        return str(err)
+    return None
+
+
+class FixedLagSmoother:
+    """Streaming fixed-lag smoother.
+
+    ``push(timestamp_ns, accel_row, gyro_row=None, tilt_row=None)`` for each
+    sample as it comes (``accel_row`` ordered as ``array.accel_columns``, each
+    axis in its sensor's own frame); ``flush()`` at the end. ``rate_hz`` is the
+    nominal sample rate, used to detect gaps. Tilt rows are accepted for
+    interface symmetry but not used (the state has no orientation).
+    """
+
+    def __init__(self, array: SensorArray, options: FixedLagOptions | None = None, lag_s: float = 0.2,
+                 rate_hz: float = 500.0, compute_sigma: bool = False) -> None:
+        reason = _check_array(array)
+        if reason:
+            raise ArrayModelError(reason)
+        if not (math.isfinite(lag_s) and lag_s > 0):
+            raise ValueError(f"lag_s must be a positive number of seconds, got {lag_s!r}")
+        if not (math.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
+        self.array = array
+        self.options = options or FixedLagOptions()
+        self.lag_s = float(lag_s)
+        self.rate_hz = float(rate_hz)
+        self.compute_sigma = bool(compute_sigma)
+        self.model = model.ArrayModel(array, self.options)
+        self._nominal_dt_ns = 1e9 / self.rate_hz
+        self._warmup_n = max(2, int(round(self.options.warmup_s * self.rate_hz)))
+        self._block_s = max(self.options.marginalise_every_s, 2.0 / self.rate_hz)
+        self._last_t_ns: int | None = None
+        self._origin_ns: int | None = None
+        self._start_segment()
+
+    # --- public API ---------------------------------------------------------
+    @property
+    def n_keys(self) -> int:
+        """Number of variables currently held by gtsam's smoother."""
+        return 0 if self._smoother is None else len(self._smoother.timestamps())
+
+    @property
+    def window_length(self) -> int:
+        """Number of samples in the current window (Python side)."""
+        return len(self._window) + len(self._warmup)
+
+    def push(self, timestamp_ns: int, accel_row, gyro_row=None, tilt_row=None) -> FixedLagUpdate:
+        """Add one sample; return the states that reached the lag and the newest one."""
+        t_ns = int(timestamp_ns)
+        y = np.asarray(accel_row, dtype=float).reshape(-1)
+        if y.shape != (self.array.n_axes,):
+            raise ValueError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
+        if not np.all(np.isfinite(y)):
+            bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
+            raise ValueError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
+        gyro = None
+        if gyro_row is not None and self.array.gyroscope is not None:
+            gyro = np.asarray(gyro_row, dtype=float).reshape(-1)
+            if gyro.shape != (3,):
+                raise ValueError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
+            if not np.all(np.isfinite(gyro)):
+                gyro = None  # a missing gyro sample: the accelerometers alone carry on
+        smoothed: list[StateEstimate] = []
+        if self._last_t_ns is not None:
+            dt_ns = t_ns - self._last_t_ns
+            if dt_ns <= 0:
+                raise ValueError(f"timestamps must increase: {t_ns} ns after {self._last_t_ns} ns")
+            if dt_ns > self.options.gap_factor * self._nominal_dt_ns:
+                smoothed.extend(self.flush())
+        else:
+            self._origin_ns = t_ns
+        self._last_t_ns = t_ns
+        sample = (t_ns, y, gyro)
+        if self._smoother is None:
+            self._warmup.append(sample)
+            if len(self._warmup) < self._warmup_n:
+                return FixedLagUpdate(tuple(smoothed), None)
+            self._initialise()
+        else:
+            self._add_sample(sample)
+        smoothed.extend(self._emit_due())
+        return FixedLagUpdate(tuple(smoothed), self._read(self._window[-1]))
+
+    def flush(self) -> tuple[StateEstimate, ...]:
+        """Emit every state still in the window (smoothed with the data so far) and reset.
+
+        The next :meth:`push` starts a new segment with a fresh initialisation.
+        """
+        if self._smoother is None and self._warmup:
+            self._initialise()
+        out = tuple(self._read(entry, with_sigma=self.compute_sigma) for entry in self._window)
+        self._start_segment()
+        return out
+
+    # --- internals ------------------------------------------------------------
+    def _start_segment(self) -> None:
+        self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
+        self._window: deque = deque()  # (index, timestamp_ns) of states not yet emitted
+        self._warmup: list = []
+        self._k = -1
+        self._prev = None  # (t_ns, omega, omega_dot, f) of the newest state (filtered)
+
+    def _new_smoother(self) -> gtsam.IncrementalFixedLagSmoother:
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(self.options.relinearize_threshold)
+        params.relinearizeSkip = int(self.options.relinearize_skip)
+        params.findUnusedFactorSlots = True  # reuse the slots of marginalised factors: bounded memory
+        # Keys carry block-quantised timestamps, so gtsam marginalises one block of
+        # states at a time (one re-elimination of the window per block rather than
+        # per sample, which would also relinearise the window's factors). Every
+        # state must be read at t + lag before its block goes: gtsam's lag is the
+        # requested lag plus one block plus a step.
+        return gtsam.IncrementalFixedLagSmoother(self.lag_s + self._block_s + 1.5 / self.rate_hz, params)
+
+    def _time_s(self, t_ns: int) -> float:
+        return (t_ns - self._origin_ns) * 1e-9
+
+    def _stamp(self, t_ns: int) -> float:
+        """Timestamp given to gtsam: the start of the sample's marginalisation block."""
+        return math.floor(self._time_s(t_ns) / self._block_s) * self._block_s
+
+    def _initialise(self) -> None:
+        """First states of a segment: per-sample solution with the sign of ω tracked."""
+        times_ns = np.array([s[0] for s in self._warmup], dtype=np.int64)
+        accel = np.vstack([s[1] for s in self._warmup])
+        omega, omega_dot, f = model.initial_states(self.array, times_ns, accel, self.model)
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        stamps = {}
+        self._smoother = self._new_smoother()
+        for j, (t_ns, y, gyro) in enumerate(self._warmup):
+            self._k += 1
+            k = self._k
+            if j == 0:
+                self.model.add_priors(graph, k, omega[0], omega_dot[0], f[0])
+            else:
+                h = (t_ns - self._warmup[j - 1][0]) * 1e-9
+                self.model.add_process(graph, k - 1, k, h)
+            self.model.add_measurement(graph, k, y, gyro)
+            model.insert_state(values, k, omega[j], omega_dot[j], f[j])
+            t = self._stamp(t_ns)
+            for key in model.keys(k):
+                stamps[key] = t
+            self._window.append((k, t_ns))
+        self._update(graph, values, stamps, self._warmup[-1][0])
+        self._warmup = []
+        self._remember_newest()
+
+    def _add_sample(self, sample) -> None:
+        t_ns, y, gyro = sample
+        k_prev = self._k
+        self._k += 1
+        k = self._k
+        h = (t_ns - self._prev[0]) * 1e-9
+        omega0, omega_dot0, f0 = self.model.predict(self._prev[1], self._prev[2], self._prev[3], h, y)
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        self.model.add_process(graph, k_prev, k, h)
+        self.model.add_measurement(graph, k, y, gyro)
+        model.insert_state(values, k, omega0, omega_dot0, f0)
+        t = self._stamp(t_ns)
+        self._update(graph, values, {key: t for key in model.keys(k)}, t_ns)
+        self._window.append((k, t_ns))
+        self._remember_newest()
+
+    def _update(self, graph, values, stamps, t_ns) -> None:
+        try:
+            self._smoother.update(graph, values, stamps)
+        except RuntimeError as err:
+            raise FixedLagSmootherError(
+                f"fixed-lag smoother failed at t = {self._time_s(t_ns):.6f} s after the stream start "
+                f"({t_ns} ns): {err}".strip()
+            ) from err
+
+    def _remember_newest(self) -> None:
+        k, t_ns = self._window[-1]
+        w, dw, f = self._values_of(k)
+        self._prev = (t_ns, w, dw, f)
+
+    def _values_of(self, k: int):
+        calc = self._smoother.calculateEstimateVector
+        kw, kd, kf = model.keys(k)
+        return calc(kw).reshape(3), calc(kd).reshape(3), calc(kf).reshape(3)
+
+    def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
+        k, t_ns = entry
+        if self._prev is not None and k == self._k:
+            w, dw, f = self._prev[1], self._prev[2], self._prev[3]
+        else:
+            w, dw, f = self._values_of(k)
+        sig = (None, None, None)
+        if with_sigma:
+            sig = tuple(np.sqrt(np.clip(np.diag(self._smoother.marginalCovariance(key)), 0, None))
+                        for key in model.keys(k))
+        return StateEstimate(t_ns, w, dw, f, *sig)
+
+    def _emit_due(self) -> list[StateEstimate]:
+        """States at or before newest - lag: final now, marginalised at the next update."""
+        newest_ns = self._window[-1][1]
+        cutoff_ns = newest_ns - int(round(self.lag_s * 1e9)) + 1000  # 1 µs tolerance
+        out = []
+        while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
+            out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
+        return out
+
+
+@dataclass
+class FixedLagEstimator:
+    """Fixed-lag smoother over a log (method ``"fixed-lag"``).
+
+    Each sample's estimate is its smoothed value ``lag_s`` seconds later (and,
+    at the end of the log or before a gap, the last window's smoothed values),
+    exactly what a live stream would give with that delay.
+    """
+
+    lag_s: float = 0.2
+    compute_sigma: bool = False
+    accel_noise_std_mps2: float = 0.07
+    angular_jerk_psd: float = FixedLagOptions.angular_jerk_psd
+    jerk_psd: float = FixedLagOptions.jerk_psd
+    relinearize_threshold: float = FixedLagOptions.relinearize_threshold
+    relinearize_skip: int = FixedLagOptions.relinearize_skip
+    warmup_s: float = FixedLagOptions.warmup_s
+    use_gyro: bool = True
+
+    def options(self) -> FixedLagOptions:
+        return FixedLagOptions(
+            accel_noise_std_mps2=self.accel_noise_std_mps2,
+            angular_jerk_psd=self.angular_jerk_psd,
+            jerk_psd=self.jerk_psd,
+            relinearize_threshold=self.relinearize_threshold,
+            relinearize_skip=self.relinearize_skip,
+            warmup_s=self.warmup_s,
+        )
+
+    def applicable(self, array: SensorArray) -> str | None:
+        return _check_array(array)
+
+    def estimate(self, log: Log, progress: bool = False) -> Motion:
+        n = len(log)
+        if n == 0:
+            raise ValueError(f"{log.source}: the log has no samples")
+        rate_hz = log.rate_hz if n > 1 else 500.0
+        smoother = FixedLagSmoother(log.array, self.options(), lag_s=self.lag_s, rate_hz=rate_hz,
+                                    compute_sigma=self.compute_sigma)
+        out = np.full((n, 9), np.nan)
+        sig = np.full((n, 9), np.nan) if self.compute_sigma else None
+        gyro = log.gyro_b_radps if (self.use_gyro and log.array.gyroscope is not None) else None
+        cursor = 0  # smoothed states come out in time order, one per sample
+
+        def store(states) -> None:
+            nonlocal cursor
+            for s in states:
+                if log.timestamps_ns[cursor] != s.timestamp_ns:
+                    raise FixedLagSmootherError(f"{log.source}: internal ordering error at sample {cursor}")
+                out[cursor] = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+                if sig is not None and s.sigma_omega_b_radps is not None:
+                    sig[cursor] = np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
+                                                  s.sigma_specific_force_b_mps2])
+                cursor += 1
+
+        for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):
+            upd = smoother.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i])
+            store(upd.smoothed)
+        store(smoother.flush())
+        if cursor != n:
+            raise FixedLagSmootherError(f"{log.source}: {n - cursor} samples were not estimated")
+        sigma = {}
+        if sig is not None:
+            sigma = {"omega_b_radps": sig[:, :3], "omega_dot_b_radps2": sig[:, 3:6], "specific_force_b_mps2": sig[:, 6:]}
+        return Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
+                      specific_force_b_mps2=out[:, 6:], sigma=sigma)
