@@ -134,3 +134,12 @@ def test_applicability_and_bad_options():
     y[3, 1] = np.inf
     with pytest.raises(ValueError, match="sample 3"):
         est.estimate(log.replace(accel_mps2=y))
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_auto_sign_with_noise(case):
+    """Paper 004's noise: the time asymmetry of Euler's equations picks the sign of either spin."""
+    for spin_radps in (27.4, -27.4):
+        log = simulate(case, duration_s=0.5, seed=4, spin_radps=spin_radps)
+        m = FreeFlightEstimator(omega_sign="auto").estimate(log)
+        assert np.all(np.sum(m.omega_b_radps * log.truth.omega_b_radps, axis=1) > 0)
