@@ -29,7 +29,10 @@ up to its sign. Starting points and signs:
 2. after the iterations, ``neighbour_passes`` vectorised passes restart every
    sample from its predecessor's estimate and keep the result if its cost is
    lower, which is the "start from the previous sample" rule of sequential
-   ML, carried forward in parallel;
+   ML, carried forward in parallel (a sample whose estimate is already
+   within 10 % of its predecessor's, either sign, is in the same basin and
+   is skipped). The result is each sample's global minimum whenever one of
+   these starts reaches it;
 3. the signs along each gap-free segment are chosen by a two-state Viterbi
    pass that makes ω most consistent with the trapezoidal integral of the
    estimated ω̇ (paper 000 resolves the sign by integrating ω̇ the same way),
