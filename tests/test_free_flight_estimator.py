@@ -143,3 +143,9 @@ def test_auto_sign_with_noise(case):
         log = simulate(case, duration_s=0.5, seed=4, spin_radps=spin_radps)
         m = FreeFlightEstimator(omega_sign="auto").estimate(log)
         assert np.all(np.sum(m.omega_b_radps * log.truth.omega_b_radps, axis=1) > 0)
+
+
+def test_no_rotation_is_reported():
+    log = simulate("freeflight-major", duration_s=0.05, noise=SensorErrors.none())
+    with pytest.raises(ValueError, match="spinning body"):
+        FreeFlightEstimator().estimate(log.replace(accel_mps2=np.zeros_like(log.accel_mps2)))

@@ -210,7 +210,12 @@ class FreeFlightEstimator:
         model = _FreeFlightModel(array)
         t = log.times_s
         k = min(int(self.init_samples), n)
+        if not np.any(y[:k]):
+            raise ValueError(f"{log.source}: the first {k} readings are all zero; free-flight needs a spinning body")
         w_init, two_t, h2 = self._initial(model, y[:k], t[:k])
+        if not (np.isfinite(two_t) and np.isfinite(h2) and two_t > 0 and h2 > 0):
+            raise ValueError(f"{log.source}: the first {k} readings show no rotation (2T = {two_t:.3g}); "
+                             "free-flight needs a spinning body")
 
         accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))  # eq. 14: mean |a_s| over the N samples
         omega = np.empty((n, 3))
@@ -271,6 +276,8 @@ class FreeFlightEstimator:
                 best = (score, root)
         root = best[1]
         two_t, h2 = model.constants(root)
+        if not (two_t > 0 and h2 > 0):
+            return root, float(two_t), float(h2)  # no rotation: the caller reports it
         track = [root]
         for i in range(1, k):
             track.append(self._solve_sample(model, y[i], track[-1], two_t, h2, accel_scale))
