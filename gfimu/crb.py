@@ -30,6 +30,7 @@ import numpy as np
 
 from . import rigid_body
 from .array import ArrayModelError, SensorArray
+from .motion import Motion
 
 PARAMETERS = ("f_x", "f_y", "f_z", "dw_x", "dw_y", "dw_z", "w_x", "w_y", "w_z")
 """Order of θ in the 9 × 9 covariance: specific force, ω̇, ω."""
@@ -185,3 +186,10 @@ def crb_per_sample(
     J = fisher_information(array.structure_matrix(), sigma, w, gyro_noise_std_radps)
     cov, singular = invert_information(J)
     return CRBResult(cov, singular)
+
+
+def crb_for_motion(array: SensorArray, motion: Motion, **options) -> CRBResult:
+    """:func:`crb_per_sample` along a motion's ω (the bound does not depend on f or ω̇)."""
+    if motion.omega_b_radps is None:
+        raise ValueError("the motion has no omega_b_radps to evaluate the bound at")
+    return crb_per_sample(array, motion.omega_b_radps, **options)

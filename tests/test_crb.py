@@ -97,3 +97,17 @@ def test_missing_noise_is_an_error():
         crb_per_sample(cube_array(), [[1.0, 0.0, 0.0]], gyro=True)
     with pytest.raises(ValueError, match="shape"):
         crb_per_sample(cube_array(), np.zeros((2, 2)))
+
+
+def test_bound_along_a_motion():
+    from gfimu.crb import crb_for_motion
+    from gfimu.motion import Motion
+
+    w = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0], [4.0, -1.0, 0.5]])
+    res = crb_for_motion(cube_array(), Motion(np.arange(3), omega_b_radps=w))
+    np.testing.assert_array_equal(res.singular, [True, False, False])
+    np.testing.assert_allclose(res.covariance[1:], crb_per_sample(cube_array(), w[1:]).covariance)
+    # the trajectory average includes the unobservable sample at rest
+    assert res.rmse_bound_omega() == np.inf and np.isfinite(res.rmse_bound_omega_dot())
+    with pytest.raises(ValueError, match="omega"):
+        crb_for_motion(cube_array(), Motion(np.arange(3)))
