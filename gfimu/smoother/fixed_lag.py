@@ -6,7 +6,14 @@ together by
 - the array measurement (paper 000, eq. 6): ``y_k = S [f_k, ω̇_k, q(ω_k)] + v``;
 - a white-jerk process model: ``ω_{k+1} = ω_k + h (ω̇_k + ω̇_{k+1}) / 2``
   (trapezoidal integration) and random walks on ω̇ and f;
-- priors on the first state of every segment, and an optional gyroscope.
+- weak priors on the first state of every segment, and an optional gyroscope;
+
+the same factors and options (:class:`~gfimu.smoother.graph.SmootherOptions`)
+as the batch smoother (method ``"smoother"``). The first states of a segment
+(``warmup_s`` of data) are initialised by the batch smoother's sign-resolving
+initialiser (:mod:`gfimu.smoother.initialise`); every later state starts from
+the previous filtered one (``ω + h ω̇``, then ``[f, ω̇]`` from the readings
+given that ω), so the sign of ω is carried through zero crossings.
 
 :class:`FixedLagSmoother` runs these factors through gtsam's
 ``IncrementalFixedLagSmoother`` (iSAM2 underneath): each :meth:`push` adds
@@ -15,9 +22,14 @@ reached the lag (smoothed with ``lag_s`` seconds of future data), after which
 gtsam marginalises it. Memory stays bounded: gtsam keeps only the window and
 this module keeps only deques of window length.
 
-Time gaps (a step longer than ``gap_factor`` times the nominal step) are not
-integrated across: the window is flushed (its states are emitted smoothed with
-the data they have) and a new segment starts with a fresh initialisation.
+Time gaps (a step longer than ``gap_factor`` times the nominal step, as
+:meth:`gfimu.log.Log.gaps`) are not integrated across: the window is flushed
+(its states are emitted, smoothed with the data they have) and a new segment
+starts with a fresh initialisation.
+
+gtsam marginalises in blocks of ``marginalise_every_s`` (keys carry the start
+time of their block): marginalising one sample at a time makes gtsam
+re-eliminate and relinearise the whole window at every update.
 
 :class:`FixedLagEstimator` (method ``"fixed-lag"``) streams a whole log
 through the smoother and returns one row per sample.
@@ -26,18 +38,18 @@ through the smoother and returns one row per sample.
 from __future__ import annotations
 
 import math
-import warnings
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 
 import gtsam
 import numpy as np
 
-from ..array import ArrayModelError, SensorArray
+from ..array import SensorArray
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from . import _fixed_lag_model as model
+from .graph import SmootherOptions, options_reason
 
 
 class FixedLagSmootherError(RuntimeError):
@@ -71,51 +83,19 @@ class FixedLagUpdate:
     filtered: StateEstimate | None
 
 
-@dataclass(frozen=True)
-class FixedLagOptions:
-    """Noise model and solver settings of the fixed-lag smoother.
-
-    Defaults: accelerometer noise from ``array.toml`` (``accel_noise_std_mps2``
-    where it gives none); angular jerk and jerk of f modelled as white noise of
-    the given power spectral densities; iSAM2 relinearisation threshold and
-    skip as in gtsam's defaults, tuned for speed.
-    """
-
-    accel_noise_std_mps2: float = 0.07
-    angular_jerk_psd: float = 2.0e4  # (rad/s^3)^2 / Hz: random walk of ω̇
-    jerk_psd: float = 1.0e3  # (m/s^3)^2 / Hz: random walk of f
-    integration_floor_radps: float = 1e-6  # minimum σ of the ω integration step
-    prior_omega_std_radps: float = 1.0
-    prior_omega_dot_std_radps2: float = 100.0
-    prior_specific_force_std_mps2: float = 100.0
-    gyro_noise_std_radps: float = 0.01
-    relinearize_threshold: float = 0.1
-    relinearize_skip: int = 10
-    warmup_s: float = 0.1
-    gap_factor: float = 1.5
-    marginalise_every_s: float = 0.5
-
-    def __post_init__(self) -> None:
-        for name in ("accel_noise_std_mps2", "angular_jerk_psd", "jerk_psd", "prior_omega_std_radps",
-                     "prior_omega_dot_std_radps2", "prior_specific_force_std_mps2", "gyro_noise_std_radps",
-                     "relinearize_threshold", "gap_factor", "marginalise_every_s"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"FixedLagOptions.{name} must be a positive number, got {v!r}")
-        if self.gap_factor <= 1.0:
-            raise ValueError(f"FixedLagOptions.gap_factor must exceed 1, got {self.gap_factor!r}")
-        if int(self.relinearize_skip) < 1:
-            raise ValueError(f"FixedLagOptions.relinearize_skip must be >= 1, got {self.relinearize_skip!r}")
-        if not (math.isfinite(self.warmup_s) and self.warmup_s >= 0):
-            raise ValueError(f"FixedLagOptions.warmup_s must be >= 0, got {self.warmup_s!r}")
-
-
-def _check_array(array: SensorArray) -> str | None:
-    try:
-        array.check_invertible()
-    except ArrayModelError as err:
-        return str(err)
-    return None
+def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None:
+    """Why the fixed-lag smoother cannot run on ``array`` with ``options`` (None if it can)."""
+    unsupported = [name for name in ("self_calibrate_bias", "self_calibrate_scale", "free_flight", "use_inclinometer")
+                   if getattr(options, name)]
+    if unsupported:
+        return f"the fixed-lag smoother does not support {', '.join(unsupported)} (use method 'smoother')"
+    if options.measurement != "accelerometer":
+        return "the fixed-lag smoother uses measurement='accelerometer' only"
+    has_gyro = array.gyroscope is not None and options.use_gyro
+    if array.n_axes < 6 and not has_gyro:
+        return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without a gyroscope ω cannot be "
+                "observed (free flight needs method 'smoother' with free_flight=True)")
+    return options_reason(array, options)
 
 
 class FixedLagSmoother:
@@ -128,24 +108,36 @@ class FixedLagSmoother:
     interface symmetry but not used (the state has no orientation).
     """
 
-    def __init__(self, array: SensorArray, options: FixedLagOptions | None = None, lag_s: float = 0.2,
-                 rate_hz: float = 500.0, compute_sigma: bool = False) -> None:
-        reason = _check_array(array)
+    def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
+                 rate_hz: float = 500.0, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10,
+                 marginalise_every_s: float = 0.5, warmup_s: float = 0.2, gap_factor: float = 1.5,
+                 fast_measurement: bool = True) -> None:
+        options = options or SmootherOptions()
+        reason = fixed_lag_reason(array, options)
         if reason:
-            raise ArrayModelError(reason)
-        if not (math.isfinite(lag_s) and lag_s > 0):
-            raise ValueError(f"lag_s must be a positive number of seconds, got {lag_s!r}")
-        if not (math.isfinite(rate_hz) and rate_hz > 0):
-            raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
+            raise ValueError(reason)
+        for name, v in (("lag_s", lag_s), ("rate_hz", rate_hz), ("relinearize_threshold", relinearize_threshold),
+                        ("marginalise_every_s", marginalise_every_s)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
+        if not (isinstance(warmup_s, (int, float)) and math.isfinite(warmup_s) and warmup_s >= 0):
+            raise ValueError(f"fixed-lag smoother: warmup_s must be >= 0, got {warmup_s!r}")
+        if not gap_factor > 1.0:
+            raise ValueError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
+        if int(relinearize_skip) < 1:
+            raise ValueError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
         self.array = array
-        self.options = options or FixedLagOptions()
+        self.options = options
         self.lag_s = float(lag_s)
         self.rate_hz = float(rate_hz)
-        self.compute_sigma = bool(compute_sigma)
-        self.model = model.ArrayModel(array, self.options)
+        self.compute_sigma = bool(options.compute_sigma)
+        self.relinearize_threshold = float(relinearize_threshold)
+        self.relinearize_skip = int(relinearize_skip)
+        self.gap_factor = float(gap_factor)
+        self.model = model.ArrayModel(array, options, fast_measurement)
         self._nominal_dt_ns = 1e9 / self.rate_hz
-        self._warmup_n = max(2, int(round(self.options.warmup_s * self.rate_hz)))
-        self._block_s = max(self.options.marginalise_every_s, 2.0 / self.rate_hz)
+        self._warmup_n = max(2, int(round(warmup_s * self.rate_hz)))
+        self._block_s = max(float(marginalise_every_s), 2.0 / self.rate_hz)
         self._last_t_ns: int | None = None
         self._origin_ns: int | None = None
         self._start_segment()
@@ -171,7 +163,7 @@ class FixedLagSmoother:
             bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
             raise ValueError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
         gyro = None
-        if gyro_row is not None and self.array.gyroscope is not None:
+        if gyro_row is not None and self.array.gyroscope is not None and self.options.use_gyro:
             gyro = np.asarray(gyro_row, dtype=float).reshape(-1)
             if gyro.shape != (3,):
                 raise ValueError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
@@ -182,7 +174,7 @@ class FixedLagSmoother:
             dt_ns = t_ns - self._last_t_ns
             if dt_ns <= 0:
                 raise ValueError(f"timestamps must increase: {t_ns} ns after {self._last_t_ns} ns")
-            if dt_ns > self.options.gap_factor * self._nominal_dt_ns:
+            if dt_ns > self.gap_factor * self._nominal_dt_ns:
                 smoothed.extend(self.flush())
         else:
             self._origin_ns = t_ns
@@ -219,8 +211,8 @@ class FixedLagSmoother:
 
     def _new_smoother(self) -> gtsam.IncrementalFixedLagSmoother:
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(self.options.relinearize_threshold)
-        params.relinearizeSkip = int(self.options.relinearize_skip)
+        params.setRelinearizeThreshold(self.relinearize_threshold)
+        params.relinearizeSkip = self.relinearize_skip
         params.findUnusedFactorSlots = True  # reuse the slots of marginalised factors: bounded memory
         # Keys carry block-quantised timestamps, so gtsam marginalises one block of
         # states at a time (one re-elimination of the window per block rather than
@@ -237,24 +229,34 @@ class FixedLagSmoother:
         return math.floor(self._time_s(t_ns) / self._block_s) * self._block_s
 
     def _initialise(self) -> None:
-        """First states of a segment: per-sample solution with the sign of ω tracked."""
+        """First states of a segment, from the batch smoother's sign-resolving initialiser."""
+        from .initialise import initial_states
+
         times_ns = np.array([s[0] for s in self._warmup], dtype=np.int64)
         accel = np.vstack([s[1] for s in self._warmup])
-        omega, omega_dot, f = model.initial_states(self.array, times_ns, accel, self.model)
+        gyro = None
+        if self.array.gyroscope is not None and self.options.use_gyro and all(s[2] is not None for s in self._warmup):
+            gyro = np.vstack([s[2] for s in self._warmup])
+        if len(times_ns) >= 2:
+            part = Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag warm-up")
+            x0 = initial_states(part, self.options)
+        else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
+            w = gyro[0] if gyro is not None else np.zeros(3)
+            x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps = {}
         self._smoother = self._new_smoother()
-        for j, (t_ns, y, gyro) in enumerate(self._warmup):
+        for j, (t_ns, y, g) in enumerate(self._warmup):
             self._k += 1
             k = self._k
             if j == 0:
-                self.model.add_priors(graph, k, omega[0], omega_dot[0], f[0])
+                self.model.add_priors(graph, k)
             else:
                 h = (t_ns - self._warmup[j - 1][0]) * 1e-9
                 self.model.add_process(graph, k - 1, k, h)
-            self.model.add_measurement(graph, k, y, gyro)
-            model.insert_state(values, k, omega[j], omega_dot[j], f[j])
+            self.model.add_measurement(graph, k, y, g)
+            model.insert_state(values, k, x0[j, 0:3], x0[j, 3:6], x0[j, 6:9])
             t = self._stamp(t_ns)
             for key in model.keys(k):
                 stamps[key] = t
@@ -321,45 +323,55 @@ class FixedLagSmoother:
         return out
 
 
-@dataclass
-class FixedLagEstimator:
+@dataclass(frozen=True)
+class FixedLagEstimator(SmootherOptions):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
-    Each sample's estimate is its smoothed value ``lag_s`` seconds later (and,
-    at the end of the log or before a gap, the last window's smoothed values),
-    exactly what a live stream would give with that delay.
+    Model options: those of :class:`~gfimu.smoother.graph.SmootherOptions`
+    (shared with method ``"smoother"``). Each sample's estimate is its
+    smoothed value ``lag_s`` seconds later (and, at the end of the log or
+    before a gap, the last window's smoothed values), exactly what a live
+    stream would give with that delay.
     """
 
     lag_s: float = 0.2
-    compute_sigma: bool = False
-    accel_noise_std_mps2: float = 0.07
-    angular_jerk_psd: float = FixedLagOptions.angular_jerk_psd
-    jerk_psd: float = FixedLagOptions.jerk_psd
-    relinearize_threshold: float = FixedLagOptions.relinearize_threshold
-    relinearize_skip: int = FixedLagOptions.relinearize_skip
-    warmup_s: float = FixedLagOptions.warmup_s
-    use_gyro: bool = True
+    """Seconds of future data behind each estimate (the output delay of a live stream)."""
+    relinearize_threshold: float = 0.1
+    """iSAM2 relinearises a variable when its update exceeds this (in its own units)."""
+    relinearize_skip: int = 10
+    """iSAM2 checks for relinearisation every this many updates."""
+    marginalise_every_s: float = 0.5
+    """gtsam marginalises old states in blocks of this length (the window holds lag_s to lag_s + this)."""
+    warmup_s: float = 0.2
+    """Data gathered at the start of each segment for the sign-resolving initialisation."""
+    gap_factor: float = 1.5
+    """A step longer than this times the nominal step is a gap: the smoother restarts after it."""
+    fast_measurement: bool = True
+    """One factor for all accelerometer axes (same residual as the per-sensor factors, fewer Python calls)."""
 
-    def options(self) -> FixedLagOptions:
-        return FixedLagOptions(
-            accel_noise_std_mps2=self.accel_noise_std_mps2,
-            angular_jerk_psd=self.angular_jerk_psd,
-            jerk_psd=self.jerk_psd,
-            relinearize_threshold=self.relinearize_threshold,
-            relinearize_skip=self.relinearize_skip,
-            warmup_s=self.warmup_s,
-        )
+    def options(self) -> SmootherOptions:
+        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
+
+    def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
+        """A streaming smoother with these options."""
+        return FixedLagSmoother(array, self.options(), lag_s=self.lag_s, rate_hz=rate_hz,
+                                relinearize_threshold=self.relinearize_threshold,
+                                relinearize_skip=self.relinearize_skip, marginalise_every_s=self.marginalise_every_s,
+                                warmup_s=self.warmup_s, gap_factor=self.gap_factor,
+                                fast_measurement=self.fast_measurement)
 
     def applicable(self, array: SensorArray) -> str | None:
-        return _check_array(array)
+        return fixed_lag_reason(array, self.options())
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         n = len(log)
         if n == 0:
             raise ValueError(f"{log.source}: the log has no samples")
+        reason = self.applicable(log.array)
+        if reason:
+            raise ValueError(f"{log.source}: {reason}")
         rate_hz = log.rate_hz if n > 1 else 500.0
-        smoother = FixedLagSmoother(log.array, self.options(), lag_s=self.lag_s, rate_hz=rate_hz,
-                                    compute_sigma=self.compute_sigma)
+        smoother = self.smoother(log.array, rate_hz)
         out = np.full((n, 9), np.nan)
         sig = np.full((n, 9), np.nan) if self.compute_sigma else None
         gyro = log.gyro_b_radps if (self.use_gyro and log.array.gyroscope is not None) else None
