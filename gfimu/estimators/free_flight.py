@@ -242,7 +242,7 @@ class FreeFlightEstimator:
 
     # ------------------------------------------------------------------
     def _roots(self, model: _FreeFlightModel, y0: np.ndarray) -> list[np.ndarray]:
-        """Distinct (up to sign) least-squares solutions of eq. 13 at one sample."""
+        """Distinct (up to sign) local least-squares solutions of eq. 13 at one sample, best first."""
         scale = np.sqrt(max(np.linalg.norm(y0), 1e-12) / model.lever_m)
         m = max(int(self.starts) // 2, 1)
         kk = np.arange(m) + 0.5
@@ -257,11 +257,9 @@ class FreeFlightEstimator:
             w = r.x * (1.0 if r.x[np.argmax(np.abs(r.x))] >= 0 else -1.0)
             if not any(np.linalg.norm(w - v) <= 1e-6 * (1 + np.linalg.norm(v)) for _, v in found):
                 found.append((float(np.sum(r.fun**2)), w))
-        best = min(c for c, _ in found)
-        tol = max(10 * best, 1e-20 * np.sum(y0**2))
-        roots = [w for c, w in sorted(found, key=lambda cw: cw[0]) if c <= tol]
-        # with noise the true root is not exact, so keep near-minimal ones too (up to a few)
-        return roots if roots else [found[0][1]]
+        # every local solution is kept (with noise none is exact when there are more than
+        # three axes); the Euler-equation prediction of the next readings ranks them
+        return [w for _, w in sorted(found, key=lambda cw: cw[0])]
 
     def _initial(self, model: _FreeFlightModel, y: np.ndarray, t: np.ndarray):
         """ω(0), 2T and H² from the first readings (see module docstring)."""
