@@ -202,6 +202,15 @@ def test_bias_self_calibration():
     assert omega_rmse(m, log.truth) < 0.03
 
 
+def test_bad_input_is_named(small_log):
+    acc = small_log.accel_mps2.copy()
+    acc[37, 4] = np.nan
+    with pytest.raises(ValueError, match=r"a2_y is not finite at sample 37"):
+        BatchSmootherEstimator().estimate(small_log.replace(accel_mps2=acc))
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        BatchSmootherEstimator().estimate(small_log.select(slice(0, 1)))
+
+
 def test_not_applicable_reasons():
     est = BatchSmootherEstimator()
     assert "free_flight" in est.applicable(single_triad())

@@ -265,6 +265,8 @@ class BatchSmootherEstimator(SmootherOptions):
         if reason:
             raise ValueError(f"{log.source}: {reason}")
         n = len(log)
+        if n < 2:
+            raise ValueError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
         states = np.zeros((n, M))
         cov = np.zeros((n, M, M)) if opt.compute_sigma else None
         windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)

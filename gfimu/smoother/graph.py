@@ -184,6 +184,11 @@ class SmootherProblem:
         if self.n < 2:
             raise ValueError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
         self.dt_s = self.log.dt_s
+        bad = ~np.isfinite(self.log.accel_mps2)
+        if np.any(bad):
+            row, col = np.argwhere(bad)[0]
+            raise ValueError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
+                             f"({int(bad.sum())} such values); the smoother needs finite readings")
         sigma = arr.noise_std_per_axis_mps2
         self.accel_sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, opt.default_accel_noise_std_mps2)
         self.sensors = []  # (directions, positions, column slice)
@@ -215,6 +220,9 @@ class SmootherProblem:
             self.x_cov = cov
             self.x_whiten = np.linalg.inv(np.linalg.cholesky(cov))  # L⁻¹ with cov = L Lᵀ
         if self.use_gyro:
+            if not np.all(np.isfinite(self.log.gyro_b_radps)):
+                row = int(np.argwhere(~np.isfinite(self.log.gyro_b_radps))[0, 0])
+                raise ValueError(f"{self.log.source}: gyroscope reading is not finite at sample {row}")
             gs = arr.gyroscope.noise_std_radps
             self.gyro_sigma = float(gs) if gs else 0.01
         q = opt.omega_dot_random_walk_radps2_per_sqrt_s
