@@ -9,7 +9,8 @@ k hold ω [rad/s], ω̇ [rad/s²] and f [m/s²] in B.
   ``fast_measurement``, one factor for all axes computing the same residual
   and Jacobian with the structure matrix (``S [f, ω̇, q(ω)] - y``);
 - trapezoid ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})``:
-  :func:`gfimu.factors.kinematics.make_angular_velocity_factor`;
+  :func:`gfimu.factors.kinematics.make_angular_velocity_factor` (or the same
+  residual with preallocated Jacobians with ``fast_measurement``);
 - random walks of ω̇ and f (``x_{k+1} - x_k``, the residual of
   :mod:`gfimu.factors.process`) and priors as gtsam's own
   ``BetweenFactorVector`` / ``PriorFactorVector``, evaluated without Python;
@@ -68,6 +69,7 @@ class ArrayModel:
         self.pinv_lin_w = np.linalg.pinv(wL, rcond=1e-10) / sigma[None, :]  # [f, ω̇] given q(ω)
         self.linear_part_observable = np.linalg.matrix_rank(wL) == 6
         self._zero3 = np.zeros(3)
+        self._eye3 = np.eye(3)
         self._noise_cache: dict = {}
         gs = array.gyroscope.noise_std_radps if array.gyroscope is not None else None
         self.gyro_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(gs) if gs else 0.01)  # as the batch smoother
@@ -103,6 +105,22 @@ class ArrayModel:
 
         return gtsam.CustomFactor(self.accel_noise, [kw, kd, kf], error)
 
+    def _fast_trapezoid_factor(self, w0: int, w1: int, d0: int, d1: int, h: float, noise) -> gtsam.CustomFactor:
+        """``ω1 - ω0 - h/2 (ω̇0 + ω̇1)`` with its constant Jacobians, without per-call allocation."""
+        half_h = 0.5 * h
+        eye, neg, jd = self._eye3, -self._eye3, -half_h * self._eye3
+
+        def error(this, values, jacobians):
+            r = values.atVector(w1) - values.atVector(w0) - half_h * (values.atVector(d0) + values.atVector(d1))
+            if jacobians is not None:
+                jacobians[0] = neg
+                jacobians[1] = eye
+                jacobians[2] = jd
+                jacobians[3] = jd
+            return r
+
+        return gtsam.CustomFactor(noise, [w0, w1, d0, d1], error)
+
     def _process_noises(self, h: float):
         key = round(h * 1e9)
         cached = self._noise_cache.get(key)
@@ -124,7 +142,10 @@ class ArrayModel:
         w0, d0, f0 = keys(k0)
         w1, d1, f1 = keys(k1)
         int_noise, dw_noise, f_noise = self._process_noises(h)
-        graph.add(kinematics.make_angular_velocity_factor(w0, w1, d0, d1, h, int_noise))
+        if self.fast_measurement:
+            graph.add(self._fast_trapezoid_factor(w0, w1, d0, d1, h, int_noise))
+        else:
+            graph.add(kinematics.make_angular_velocity_factor(w0, w1, d0, d1, h, int_noise))
         graph.add(gtsam.BetweenFactorVector(d0, d1, self._zero3, dw_noise))
         graph.add(gtsam.BetweenFactorVector(f0, f1, self._zero3, f_noise))
 
