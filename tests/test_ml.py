@@ -191,3 +191,18 @@ def test_signs_with_noise_on_the_cube(scenario):
     rms_f = np.sqrt(np.mean(np.sum((m.specific_force_b_mps2 - truth.specific_force_b_mps2) ** 2, axis=1)))
     assert rms_dw == pytest.approx(bound.rmse_bound_omega_dot(), rel=0.1)
     assert rms_f == pytest.approx(bound.rmse_bound_specific_force(), rel=0.1)
+
+
+def test_three_triads_are_refused_and_one_more_axis_suffices():
+    """9 axes leave 3 equations for ω after eliminating f and ω̇: several exact roots per sample.
+    One more axis (off the span) makes ω unique again, found by the cone multi-start."""
+    three = random_array(seed=7, n=3)
+    assert "several exact solutions" in MLEstimator().applicable(three)
+    assert MLEstimator(use_gyro=True).applicable(SensorArray(three.accelerometers, gyroscope=paper001_array().gyroscope)) is None
+    extra = Accelerometer("e", [0.04, -0.03, 0.02], matrix_from_rotation_vector([0.4, 1.1, -0.7]), axes=("x",), noise_std_mps2=0.05)
+    ten = SensorArray(three.accelerometers + (extra,), "ten-axis")
+    assert MLEstimator().applicable(ten) is None
+    t, w, dw, f = smooth_motion(1000)
+    m = MLEstimator().estimate(make_log(ten, t, w, dw, f))
+    np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-8)
+    np.testing.assert_allclose(m.specific_force_b_mps2, f, atol=1e-8)

@@ -25,7 +25,9 @@ up to its sign. Starting points and signs:
 1. every sample starts from the better (lower cost) of a coarse grid over ω
    (directions on a half sphere × log-spaced magnitudes up to
    ``max_omega_radps``) and, when S has full rank 12, the weighted least-squares
-   inversion (ω from the dominant eigenvector of the estimated ω ωᵀ);
+   inversion (ω from the dominant eigenvector of the estimated ω ωᵀ); a
+   sample whose converged cost is implausible for the noise model restarts
+   from the best grid point of each of eight direction cones;
 2. after the iterations, ``neighbour_passes`` vectorised passes restart every
    sample from its predecessor's estimate and keep the result if its cost is
    lower, which is the "start from the previous sample" rule of sequential
@@ -79,6 +81,7 @@ class _ProjectedModel:
     M: np.ndarray  # (6, 6) AᵀA
     lin_y: np.ndarray  # (6, n): [f, ω̇] = lin_y @ y - lin_q @ q(ω)
     lin_q: np.ndarray  # (6, 6)
+    rank: int  # rank of A: independent equations left for ω
 
     @classmethod
     def build(cls, array: SensorArray, sigma: np.ndarray) -> "_ProjectedModel":
@@ -96,6 +99,7 @@ class _ProjectedModel:
             M=A.T @ A,
             lin_y=Hpinv * wgt[None, :],
             lin_q=Hpinv @ Sqw,
+            rank=int(np.sum(np.linalg.svd(A, compute_uv=False) > 1e-9 * max(np.linalg.norm(Sqw), 1e-300))),
         )
 
 
@@ -147,6 +151,12 @@ class MLEstimator:
                 return f"array {array.name!r}: gyroscope has no noise_std_radps (needed by use_gyro=True)"
             return None
         model = _ProjectedModel.build(array, np.ones(array.n_axes))
+        if model.rank == 3:
+            return (
+                f"array {array.name!r}: once f and ω̇ are eliminated only 3 independent equations remain for "
+                "the 3 components of ω, so each sample has several exact solutions; add an axis off the "
+                "current layout, a gyroscope (use_gyro=True) or use method 'smoother'"
+            )
         w = np.array([0.37, -0.81, 0.52])
         sens = model.A @ rigid_body.quadratic_terms_jacobian(w)  # (n, 3) projected ∂y/∂ω
         scale = np.linalg.norm(array.structure_matrix()[:, 6:] @ rigid_body.quadratic_terms_jacobian(w))
@@ -234,18 +244,63 @@ class MLEstimator:
                 break
             w[idx[better]] = cand[better]
             cost[idx[better]] = cand_cost[better]
+        if gyro is None:
+            w = self._multi_start(model, b, c, w, cost)
         return w
+
+    def _multi_start(self, model, b, c, w, cost):
+        """Restart samples whose cost is implausibly high from the best grid point of every cone.
+
+        With the noise model right, the minimum cost is about χ² with
+        n_axes - 9 degrees of freedom; a sample above its mean + 6 standard
+        deviations (+ 3) sits in a local minimum unless the noise is larger
+        than modelled (then the restart costs time, never accuracy). When
+        the projected model has rank below 6 (fewer than 12 useful axes) the
+        cost surface has plausible local minima, and every sample restarts.
+        """
+        dof = max(model.A.shape[0] - 9, 1)
+        if model.rank < 6:
+            idx = np.arange(len(w))  # few redundant equations: local minima are common, restart all
+        else:
+            idx = np.nonzero(cost > dof + 6 * np.sqrt(2 * dof) + 3)[0]
+        if idx.size == 0:
+            return w
+        grid, cone = self._grid()
+        grid_cost = self._grid_cost(model, c[idx], grid)
+        starts = np.empty((idx.size, _CONES, 3))
+        for k in range(_CONES):
+            cols = np.nonzero(cone == k)[0]
+            starts[:, k] = grid[cols[np.argmin(grid_cost[:, cols], axis=1)]]
+        rep = np.repeat(idx, _CONES)
+        cand = self._iterate(model, b[rep], c[rep], starts.reshape(-1, 3), None, None)
+        cand_cost = _cost(model, b[rep], cand, None, None).reshape(idx.size, _CONES)
+        pick = np.argmin(cand_cost, axis=1)
+        best = cand.reshape(idx.size, _CONES, 3)[np.arange(idx.size), pick]
+        better = cand_cost[np.arange(idx.size), pick] < cost[idx] * (1 - 1e-9)
+        w = w.copy()
+        w[idx[better]] = best[better]
+        return w
+
+    def _grid(self):
+        """Starting grid: (G, 3) points and the index (G,) of the direction cone of each."""
+        dirs = _fibonacci_hemisphere(self.grid_directions)
+        centres = _fibonacci_hemisphere(_CONES)
+        cone = np.argmax(np.abs(dirs @ centres.T), axis=1)  # ω and -ω are equivalent
+        mags = np.geomspace(1e-2, self.max_omega_radps, self.grid_magnitudes)
+        grid = (mags[:, None, None] * dirs[None, :, :]).reshape(-1, 3)
+        return grid, np.tile(cone, len(mags))
+
+    def _grid_cost(self, model, c, grid):
+        Qg = rigid_body.quadratic_terms(grid)
+        quad = np.sum(Qg * (Qg @ model.M), axis=1)
+        return quad[None, :] - 2 * c @ Qg.T  # cost up to the per-sample constant |b|²
 
     def _start(self, array, model, y, c, gyro):
         """Starting ω per sample: gyro, else the best of grid and inversion."""
         if gyro is not None:
             return gyro.copy()
-        dirs = _fibonacci_hemisphere(self.grid_directions)
-        mags = np.geomspace(1e-2, self.max_omega_radps, self.grid_magnitudes)
-        grid = (mags[:, None, None] * dirs[None, :, :]).reshape(-1, 3)
-        Qg = rigid_body.quadratic_terms(grid)
-        quad = np.sum(Qg * (Qg @ model.M), axis=1)
-        grid_cost = quad[None, :] - 2 * c @ Qg.T  # cost up to the per-sample constant |b|²
+        grid, _ = self._grid()
+        grid_cost = self._grid_cost(model, c, grid)
         best = np.argmin(grid_cost, axis=1)
         start = grid[best]
         S = array.structure_matrix()
@@ -302,6 +357,9 @@ class MLEstimator:
             active[idx[(ok & (small | flat)) | (lam[idx] > 1e12)]] = False
         return w
 
+
+_CONES = 8
+"""Direction cones of the multi-start (see ``MLEstimator._multi_start``)."""
 
 _Q_HESSIAN = np.array(
     [
