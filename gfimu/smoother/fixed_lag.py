@@ -149,6 +149,11 @@ class FixedLagSmoother:
         return 0 if self._smoother is None else len(self._smoother.timestamps())
 
     @property
+    def n_factor_slots(self) -> int:
+        """Number of factor slots in gtsam's graph (freed slots are reused)."""
+        return 0 if self._smoother is None else int(self._smoother.getFactors().size())
+
+    @property
     def window_length(self) -> int:
         """Number of samples in the current window (Python side)."""
         return len(self._window) + len(self._warmup)

@@ -1,0 +1,264 @@
+"""Fixed-lag smoother (method "fixed-lag") and its streaming API."""
+
+from dataclasses import replace
+
+import gtsam
+import numpy as np
+import pytest
+
+from gfimu.array import Gyroscope, cube_array, paper001_array, single_triad
+from gfimu.estimators import make_estimator
+from gfimu.factors import accelerometer, kinematics
+from gfimu.log import Log
+from gfimu.simulate import SensorErrors, simulate
+from gfimu.smoother import _fixed_lag_model as model
+from gfimu.smoother.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError
+from gfimu.smoother.graph import SmootherOptions
+
+RATE_HZ = 500.0
+
+
+def omega_rmse(motion, truth):
+    e = motion.omega_b_radps - truth.omega_b_radps
+    return float(np.sqrt(np.mean(np.sum(e * e, axis=1))))
+
+
+def wrong_sign_share(motion, truth, min_norm_radps=0.5):
+    """Share of samples with |ω| > min_norm whose estimate points to the other half-space."""
+    w = truth.omega_b_radps
+    big = np.linalg.norm(w, axis=1) > min_norm_radps
+    return float(np.mean(np.sum(motion.omega_b_radps * w, axis=1)[big] < 0))
+
+
+def values_of(keys_and_vectors):
+    values = gtsam.Values()
+    for key, v in keys_and_vectors:
+        values.insert(key, np.asarray(v, dtype=float))
+    return values
+
+
+# --- factors: the fast path equals gfimu.factors ------------------------------------------
+
+def test_fast_accelerometer_factor_equals_per_sensor_factors_and_numerical_jacobian():
+    rng = np.random.default_rng(4)
+    arr = cube_array(0.05, 0.07)
+    m = model.ArrayModel(arr, SmootherOptions(), fast_measurement=True)
+    w, dw, f = rng.normal(size=(3, 3)) * [[4.0], [30.0], [9.0]]
+    y = arr.predict_readings(f, dw, w) + rng.normal(0, 0.3, arr.n_axes)
+    kw, kd, kf = model.keys(7)
+    assert (kw, kd, kf) == (gtsam.symbol("w", 7), gtsam.symbol("d", 7), gtsam.symbol("f", 7))
+    graph = gtsam.NonlinearFactorGraph()
+    m.add_measurement(graph, 7, y)
+    fast = graph.at(0)
+    values = values_of([(kw, w), (kd, dw), (kf, f)])
+    r_fast = fast.unwhitenedError(values)
+    r_ref = np.concatenate([
+        accelerometer.accelerometer_residual(w, dw, f, y[cols], d, p)[0][0] for d, p, cols, _ in m.sensors])
+    np.testing.assert_allclose(r_fast, r_ref, atol=1e-12)
+    # Jacobian of the whitened error against central differences
+    lin = fast.linearize(values)
+    A, b = lin.jacobian()
+    eps = 1e-6
+    num = []
+    for key, x in ((kw, w), (kd, dw), (kf, f)):
+        for i in range(3):
+            e = np.zeros(3)
+            e[i] = eps
+            others = [(k, v) for k, v in ((kw, w), (kd, dw), (kf, f)) if k != key]
+            plus = fast.whitenedError(values_of(others + [(key, x + e)]))
+            minus = fast.whitenedError(values_of(others + [(key, x - e)]))
+            num.append((plus - minus) / (2 * eps))
+    num = np.column_stack(num)
+    order = [list(lin.keys()).index(k) for k in (kw, kd, kf)]
+    A_ordered = np.hstack([A[:, 3 * j:3 * j + 3] for j in order])
+    np.testing.assert_allclose(A_ordered, num, rtol=1e-6, atol=1e-5)
+
+
+def test_fast_trapezoid_factor_equals_kinematics_factor():
+    rng = np.random.default_rng(5)
+    m = model.ArrayModel(cube_array(), SmootherOptions(), fast_measurement=True)
+    graph = gtsam.NonlinearFactorGraph()
+    m.add_process(graph, 3, 4, 0.002)
+    trapezoid = graph.at(0)
+    w0, w1, d0, d1 = rng.normal(size=(4, 3))
+    keys0, keys1 = model.keys(3), model.keys(4)
+    values = values_of([(keys0[0], w0), (keys1[0], w1), (keys0[1], d0), (keys1[1], d1),
+                        (keys0[2], np.zeros(3)), (keys1[2], np.zeros(3))])
+    r_ref, _ = kinematics.angular_velocity_residual(w0, w1, d0, d1, 0.002)
+    np.testing.assert_allclose(trapezoid.unwhitenedError(values), r_ref[0], atol=1e-14)
+    # noise: the batch smoother's trapezoid sigma q sqrt(h³/12)
+    sigma = kinematics.trapezoid_sigma(SmootherOptions().omega_dot_random_walk_radps2_per_sqrt_s, 0.002)
+    np.testing.assert_allclose(trapezoid.whitenedError(values), r_ref[0] / sigma, rtol=1e-12)
+
+
+# --- accuracy -----------------------------------------------------------------------------
+
+def test_noise_free_random_motion_is_recovered():
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=2.0, noise=SensorErrors.none(), seed=3)
+    est = FixedLagEstimator().estimate(log)
+    assert omega_rmse(est, log.truth) < 2e-3
+    e_dw = est.omega_dot_b_radps2 - log.truth.omega_dot_b_radps2
+    e_f = est.specific_force_b_mps2 - log.truth.specific_force_b_mps2
+    assert np.sqrt(np.mean(np.sum(e_dw**2, axis=1))) < 0.05
+    assert np.sqrt(np.mean(np.sum(e_f**2, axis=1))) < 2e-3
+
+
+@pytest.mark.parametrize("scenario", ["random3d", "turntable", "reversal"])
+def test_within_one_and_a_half_times_the_batch_smoother(scenario):
+    """Cube array, 0.07 m/s² per axis, 500 Hz, 0.2 s lag: ω RMSE ≤ 1.5 × batch, no sign errors."""
+    log = simulate(scenario, cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=3.0, seed=1)
+    batch = make_estimator("smoother").estimate(log)
+    fixed = make_estimator("fixed-lag", lag_s=0.2).estimate(log)
+    assert len(fixed) == len(log)
+    np.testing.assert_array_equal(fixed.timestamps_ns, log.timestamps_ns)
+    rmse_fixed, rmse_batch = omega_rmse(fixed, log.truth), omega_rmse(batch, log.truth)
+    assert rmse_fixed <= 1.5 * rmse_batch, (rmse_fixed, rmse_batch)
+    assert wrong_sign_share(fixed, log.truth) == 0.0
+
+
+def test_sign_carried_through_zero_crossings_when_starting_spinning():
+    """ω(t) = ω₀ cos(2π 0.5 t) about a tilted axis: starts at full rate, crosses zero twice."""
+    arr = cube_array(0.05, 0.07)
+    t = np.arange(int(4.0 * RATE_HZ)) / RATE_HZ
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    w = -6.0 * np.cos(np.pi * t)[:, None] * axis
+    dw = 6.0 * np.pi * np.sin(np.pi * t)[:, None] * axis
+    f = np.column_stack([np.sin(t), np.cos(t), np.full_like(t, 9.8)])
+    y = arr.predict_readings(f, dw, w) + np.random.default_rng(0).normal(0, 0.07, (t.size, arr.n_axes))
+    log = Log(arr, np.round(t * 1e9).astype(np.int64), y)
+    est = FixedLagEstimator().estimate(log)
+    from gfimu.motion import Motion
+    truth = Motion(log.timestamps_ns, omega_b_radps=w)
+    assert wrong_sign_share(est, truth) == 0.0
+    assert omega_rmse(est, truth) < 0.05
+
+
+def test_gyroscope_is_used():
+    """paper 001's 9-axis array with a gyro: ω follows the gyro (noise 0.01 rad/s) closely."""
+    arr = paper001_array()
+    log = simulate("random3d", arr, rate_hz=RATE_HZ, duration_s=1.5, seed=2)
+    assert log.gyro_b_radps is not None
+    est = FixedLagEstimator().estimate(log)
+    assert omega_rmse(est, log.truth) < 0.01
+
+
+# --- streaming API ------------------------------------------------------------------------
+
+def test_push_returns_lagged_smoothed_states_and_newest_filtered():
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.2, seed=4)
+    lag_s = 0.1
+    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=lag_s, rate_hz=RATE_HZ, warmup_s=0.05)
+    lag_ns = round(lag_s * 1e9)
+    emitted = []
+    warmup_n = int(round(0.05 * RATE_HZ))
+    for i in range(len(log)):
+        upd = sm.push(log.timestamps_ns[i], log.accel_mps2[i])
+        if i < warmup_n - 1:
+            assert upd.filtered is None and upd.smoothed == ()
+            continue
+        assert upd.filtered.timestamp_ns == log.timestamps_ns[i]
+        for s in upd.smoothed:
+            assert log.timestamps_ns[i] - s.timestamp_ns >= lag_ns - 1000
+        if i > warmup_n + lag_s * RATE_HZ:  # steady state: exactly the sample at t - lag
+            assert [s.timestamp_ns for s in upd.smoothed] == [log.timestamps_ns[i] - lag_ns]
+        emitted.extend(upd.smoothed)
+    rest = sm.flush()
+    emitted.extend(rest)
+    assert len(rest) == int(lag_s * RATE_HZ)
+    np.testing.assert_array_equal([s.timestamp_ns for s in emitted], log.timestamps_ns)
+    # the newest filtered estimate is worse than the smoothed one, both are sane
+    filtered_err = np.linalg.norm(upd.filtered.omega_b_radps - log.truth.omega_b_radps[-1])
+    assert filtered_err < 0.2
+
+
+def test_memory_stays_bounded_over_a_long_stream():
+    """60 s at 100 Hz (6000 samples): gtsam's keys and factors and the Python window stay bounded."""
+    rate_hz, lag_s, block_s = 100.0, 0.2, 0.3
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=rate_hz, duration_s=60.0, seed=5)
+    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=lag_s, rate_hz=rate_hz, marginalise_every_s=block_s)
+    max_states = int(np.ceil((lag_s + 2 * block_s) * rate_hz)) + 3
+    keys, factors, window = [], [], []
+    smoothed = 0
+    for i in range(len(log)):
+        smoothed += len(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
+        if i % 97 == 0:
+            keys.append(sm.n_keys)
+            factors.append(sm.n_factor_slots)
+            window.append(sm.window_length)
+    assert max(keys) <= 3 * max_states
+    assert max(window) <= lag_s * rate_hz + 2
+    # factor slots are reused: the last quarter holds no more than the second quarter
+    q = len(factors) // 4
+    assert max(factors[-q:]) <= max(factors[q:2 * q]) + 10
+    assert smoothed + len(sm.flush()) == len(log)
+
+
+def test_gap_restarts_without_integrating_across():
+    """A 0.5 s hole in the data: both sides accurate, and the push after the hole flushes the window."""
+    full = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=3.0, seed=6)
+    keep = np.ones(len(full), bool)
+    keep[600:850] = False
+    log = Log(full.array, full.timestamps_ns[keep], full.accel_mps2[keep], truth=full.truth.select(keep))
+    assert len(log.gaps()) == 1
+    est = FixedLagEstimator().estimate(log)
+    assert np.all(np.isfinite(est.omega_b_radps))
+    assert omega_rmse(est, log.truth) < 0.05
+    assert wrong_sign_share(est, log.truth) == 0.0
+    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ)
+    out = []
+    for i in range(600):
+        out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
+    assert len(out) == 600 - 100  # the window after sample 599 holds 0.2 s
+    # sample 600 comes after the gap: the old window is flushed, the new segment is warming up
+    upd = sm.push(log.timestamps_ns[600], log.accel_mps2[600])
+    assert len(upd.smoothed) == 100 and upd.filtered is None
+    np.testing.assert_array_equal([s.timestamp_ns for s in out + list(upd.smoothed)], log.timestamps_ns[:600])
+    assert sm.window_length == 1
+
+
+def test_sigma_matches_the_actual_error():
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.5, seed=7)
+    est = FixedLagEstimator(compute_sigma=True).estimate(log)
+    sig = est.sigma["omega_b_radps"]
+    assert np.all(np.isfinite(sig)) and np.all(sig > 0)
+    err = est.omega_b_radps - log.truth.omega_b_radps
+    ratio = np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(sig**2))
+    assert 0.5 < ratio < 2.0
+
+
+# --- errors -------------------------------------------------------------------------------
+
+def test_bad_input_is_refused_with_the_cause():
+    arr = cube_array()
+    sm = FixedLagSmoother(arr, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ)
+    with pytest.raises(ValueError, match="12 axes"):
+        sm.push(0, np.zeros(5))
+    bad = np.zeros(12)
+    bad[4] = np.nan
+    with pytest.raises(ValueError, match="a2_y"):
+        sm.push(0, bad)
+    sm.push(1000, np.zeros(12))
+    with pytest.raises(ValueError, match="increase"):
+        sm.push(1000, np.zeros(12))
+    with pytest.raises(ValueError, match="lag_s"):
+        FixedLagSmoother(arr, SmootherOptions(), lag_s=0.0)
+    assert "gyroscope" in FixedLagEstimator().applicable(single_triad())
+    assert FixedLagEstimator().applicable(replace(single_triad(), gyroscope=Gyroscope(0.01))) is None
+    assert "self_calibrate_bias" in FixedLagEstimator(self_calibrate_bias=True).applicable(arr)
+    with pytest.raises(ValueError, match="no option"):
+        make_estimator("fixed-lag", lag=0.2)
+
+
+def test_solver_failure_is_reported_with_time(monkeypatch):
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=0.5, seed=8)
+    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
+    for i in range(50):
+        sm.push(log.timestamps_ns[i], log.accel_mps2[i])
+
+    class Failing:
+        def update(self, *args):
+            raise RuntimeError("Indeterminant linear system detected while working near variable 8574853690513424434")
+
+    monkeypatch.setattr(sm, "_smoother", Failing())
+    with pytest.raises(FixedLagSmootherError, match=r"t = 0\.100000 s.*Indeterminant"):
+        sm.push(log.timestamps_ns[50], log.accel_mps2[50])
