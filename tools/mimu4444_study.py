@@ -265,6 +265,18 @@ def residual_study(args) -> dict:
         x = np.column_stack([pred[:, i], np.ones(len(pred))])
         rg[:, i] = y[:, i] - x @ np.linalg.lstsq(x, y[:, i], rcond=None)[0]
     out["residual_dynamic_gains"] = _rms(rg)
+    # dependence on the readings' content near the Nyquist rate (second difference of the array mean), at equal |ω|
+    ym = d["y"].mean(axis=1)
+    d2 = np.zeros_like(ym)
+    d2[1:-1] = ym[2:] - 2 * ym[1:-1] + ym[:-2]
+    hf = np.linalg.norm(d2, axis=1)[idx]
+    per_sample = np.sqrt(np.mean(np.sum(res**2, axis=2), axis=1) / 3)
+    split = {}
+    for lo, hi in ((2, 10), (10, 20), (20, 30), (30, 60)):
+        sel = (wn >= lo) & (wn < hi)
+        med = np.median(hf[sel])
+        split[f"{lo}-{hi}"] = (_rms(per_sample[sel & (hf < med)]), _rms(per_sample[sel & (hf >= med)]))
+    out["residual_low_high_nyquist_content"] = split
     # full 12-unknown linear model (absorbs any rigid-body error in ω, ω̇, f)
     s = mimu4444_array().structure_matrix()
     yy = y.reshape(len(y), 24)
@@ -299,6 +311,8 @@ def print_residual(r: dict) -> None:
     print(f"  lag-1 autocorrelation {r['residual_lag1_autocorrelation']:.3f}; share along the reading rate "
           f"{r['residual_share_along_rate']:.3f} (1/3 if unrelated)")
     print("  by |ω| (rad/s): " + ", ".join(f"{k}: {v:.2f}" for k, v in r["residual_by_omega"].items()))
+    print("  at equal |ω|, samples with less / more content near Nyquist (2nd difference of the array mean): "
+          + ", ".join(f"{k}: {a:.2f} / {b:.2f}" for k, (a, b) in r["residual_low_high_nyquist_content"].items()))
     print("  fitted positions (mm): " + "; ".join(", ".join(f"{c:+.2f}" for c in p) for p in r["fitted_positions_mm"]))
     if "checked_residual_free_omega_dot" in r:
         print(f"  held out (exp_{r['checked_on']}): nominal {r['checked_residual_free_omega_dot']:.3f}, fitted positions "
