@@ -173,3 +173,43 @@ def test_convert_cli_bad_input(tmp_path, capsys):
     src.write_bytes(bytes(500))
     assert main(["convert", "mimu4444", str(src), "--out", str(tmp_path / "log")]) == 2
     assert "no MIMU4444 packet" in capsys.readouterr().err
+
+
+def test_shift_reference_resamples_and_widens_invalid():
+    from gfimu.array import mimu4444_array
+    from gfimu.log import Log
+    from gfimu.motion import Motion
+
+    n = 200
+    t = np.arange(n) * 16_000_000
+    ts = t * 1e-9
+    w = np.column_stack([np.sin(3 * ts), np.cos(2 * ts), ts**2])
+    invalid = np.zeros(n, bool)
+    invalid[100] = True
+    log = Log(mimu4444_array(), t, np.zeros((n, 24)), reference=Motion(t, omega_b_radps=w), invalid_reference=invalid)
+    out = m.shift_reference(log, -1.5)
+    expected = np.column_stack([np.sin(3 * (ts - 1.5e-3)), np.cos(2 * (ts - 1.5e-3)), (ts - 1.5e-3) ** 2])
+    ok = ~out.invalid_reference
+    assert np.max(np.abs(out.reference.omega_b_radps[ok] - expected[ok])) < 1e-5
+    assert np.nonzero(out.invalid_reference)[0].tolist() == [0, 98, 99, 100, 101, 102]
+    assert m.shift_reference(log, 0.0) is log
+
+
+def test_convert_cli_reference_shift(tmp_path, capsys):
+    from gfimu import logio
+    from gfimu.cli import main
+
+    pk = []
+    for k in range(12):
+        raw = raw_for(k)
+        raw[:, 3:6] = [16 * k * k, 0, 0]  # ω_x grows quadratically
+        pk.append(make_packet(k, k * 1_024_000, raw))
+    src = tmp_path / "data.bin"
+    src.write_bytes(b"".join(pk))
+    assert main(["convert", "mimu4444", str(src), "--out", str(tmp_path / "log"), "--reference-shift-ms", "-1.5"]) == 0
+    assert "reference re-sampled at t -1.5 ms; invalid on 1 sample(s)" in capsys.readouterr().out
+    log = logio.read_log(tmp_path / "log")
+    k = np.arange(12)
+    wx = np.deg2rad(16 * (k - 1.5 / 16) ** 2 / 16.4) / 2  # mean of upright (x) and flipped (−y) sensors
+    assert np.allclose(log.reference.omega_b_radps[1:, 0], wx[1:], atol=1e-9)
+    assert log.invalid_reference.tolist() == [True] + [False] * 11

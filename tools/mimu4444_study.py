@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from gfimu import calibration as calib  # noqa: E402
-from gfimu.datasets.mimu4444 import read_mimu4444  # noqa: E402
+from gfimu.datasets.mimu4444 import read_mimu4444, shift_reference  # noqa: E402
 from gfimu.estimators import METHODS, make_estimator  # noqa: E402
 from gfimu.evaluation import evaluate  # noqa: E402
 from gfimu.array import mimu4444_array  # noqa: E402
@@ -110,6 +110,8 @@ def compare(args) -> list[dict]:
               f"{i['spread_per_axis_after_mps2']:.4f} m/s² (per axis)", flush=True)
     for exp in args.experiments:
         raw, report = load(args.data, exp, with_gyro=False)
+        if args.reference_shift_ms:
+            raw = shift_reference(raw, args.reference_shift_ms)
         mask = moving_mask(raw)
         print(f"exp_{exp}: {report.n_packets} samples, {int(mask.sum())} moving and valid "
               f"(|ω_ref| > {MOVING_RADPS} rad/s), {report.invalid_reference_samples} with a saturated gyro", flush=True)
@@ -343,6 +345,8 @@ def main(argv=None) -> int:
     p.add_argument("--calibration-until-s", type=float, default=None,
                    help="fit calibrations on the first seconds only (the static phase)")
     p.add_argument("--seconds", type=float, default=None, help="estimate only the first SECONDS of each recording")
+    p.add_argument("--reference-shift-ms", type=float, default=0.0,
+                   help="evaluate against the gyro reference re-sampled at t + SHIFT (-1.5 aligns it with the accelerometers)")
     p.add_argument("--noise-std", type=float, default=None,
                    help="accelerometer noise std (m/s²) written into the array model (default: the layout's 0.05)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE", help="method option, repeatable")

@@ -310,6 +310,47 @@ def to_log(rec: Recording, with_gyro: bool = False, source: str = "<memory>"):
     )
 
 
+REFERENCE_SHIFT_MS = -1.5
+"""Measured shift between the channels: the accelerometers agree best with the
+gyro mean taken 1.5 ms earlier (rigid-body residual minimal at -1.5 ms on
+each of exp_1..3, 0.1 ms grid; tools/mimu4444_study.py --residual)."""
+
+
+def shift_reference(log, shift_ms: float):
+    """The log with its reference ω re-sampled at ``t + shift_ms`` (cubic spline per gap-free segment).
+
+    Use ``REFERENCE_SHIFT_MS`` to align the gyro reference with the
+    accelerometers. Samples whose spline support (two samples either side)
+    touches an invalid one are also marked invalid; the first and last
+    samples of each segment are marked when the shifted time leaves it.
+    """
+    from scipy.interpolate import CubicSpline
+
+    if log.reference is None or log.reference.omega_b_radps is None:
+        raise ValueError(f"{log.source}: no reference angular velocity to shift")
+    if shift_ms == 0:
+        return log
+    w = log.reference.omega_b_radps
+    invalid = np.zeros(len(log), bool) if log.invalid_reference is None else log.invalid_reference.copy()
+    t = log.timestamps_ns
+    out = np.empty_like(w)
+    bad = invalid.copy()
+    for k in range(1, 3):
+        bad[k:] |= invalid[:-k]
+        bad[:-k] |= invalid[k:]
+    shift_ns = shift_ms * 1e6
+    for seg in log.segments():
+        ts = (t[seg] - t[seg][0]) * 1e-9
+        if ts.size < 4:
+            out[seg] = w[seg]
+            bad[seg] = True
+            continue
+        target = ts + shift_ns * 1e-9
+        out[seg] = CubicSpline(ts, w[seg])(np.clip(target, ts[0], ts[-1]))
+        bad[seg] |= (target < ts[0]) | (target > ts[-1])
+    return log.replace(reference=log.reference.replace(omega_b_radps=out), invalid_reference=bad)
+
+
 def read_mimu4444(path: str | Path, with_gyro: bool = False):
     """Read ``data.bin`` and return ``(log, report)``."""
     path = Path(path)
