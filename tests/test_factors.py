@@ -119,6 +119,29 @@ def test_trapezoid_sigma_matches_white_jerk_monte_carlo():
     assert abs(np.corrcoef(e, d[:, -1])[0, 1]) < 0.05
 
 
+def test_white_snap_step_jacobians_covariance_and_exactness():
+    args = tuple(RNG.normal(size=(6, N, 3)))
+    h = RNG.uniform(1e-3, 1e-2, N)
+    fun = lambda *a: kinematics.angular_motion_residual(*a, h)
+    check(fun, args, {0: "w0", 1: "w1", 2: "d0", 3: "d1", 4: "j0", 5: "j1"})
+    # exact for constant ω̈
+    w0, d0, j = RNG.normal(size=(3, 3))
+    t = 0.02
+    r, _ = kinematics.angular_motion_residual(w0, w0 + d0 * t + j * t * t / 2, d0, d0 + j * t, j, j, t)
+    np.testing.assert_allclose(r, 0, atol=1e-15)
+    # covariance against a Monte Carlo of white snap
+    rng = np.random.default_rng(11)
+    q, steps, n = 5.0, 100, 4000
+    dt = t / steps
+    snap = rng.normal(size=(n, steps)) * q / np.sqrt(dt)
+    jerk = np.concatenate([np.zeros((n, 1)), np.cumsum(snap * dt, axis=1)], axis=1)
+    acc = np.concatenate([np.zeros((n, 1)), np.cumsum(0.5 * (jerk[:, 1:] + jerk[:, :-1]) * dt, axis=1)], axis=1)
+    vel = np.sum(0.5 * (acc[:, 1:] + acc[:, :-1]) * dt, axis=1)
+    sample = np.stack([vel, acc[:, -1], jerk[:, -1]], axis=1)
+    expected = kinematics.snap_process_covariance(q, t)[0]
+    np.testing.assert_allclose(np.cov(sample.T), expected, rtol=0.1, atol=0.02 * np.sqrt(np.outer(np.diag(expected), np.diag(expected))).max())
+
+
 def test_attitude_kinematics_jacobians_and_zero_for_consistent_step():
     R0, R1 = random_rotations(N), random_rotations(N)
     w0, w1 = RNG.normal(size=(2, N, 3))
@@ -218,6 +241,7 @@ def test_custom_factors_match_numpy_and_numerical_derivatives():
         v.insert(F.omega_dot_key(k), RNG.normal(size=3) * 10)
         v.insert(F.specific_force_key(k), RNG.normal(size=3) * 9)
         v.insert(F.accel_key(k), RNG.normal(size=3))
+        v.insert(F.omega_ddot_key(k), RNG.normal(size=3) * 30)
         v.insert(F.attitude_key(k), gtsam.Rot3(random_rotations(1)[0]))
     v.insert(F.bias_key(1), RNG.normal(size=3) * 0.1)
     v.insert(F.scale_key(1), RNG.normal(size=3) * 0.01)
@@ -231,6 +255,8 @@ def test_custom_factors_match_numpy_and_numerical_derivatives():
         (kinematics.make_angular_velocity_factor(w(0), w(1), d(0), d(1), 0.002, UNIT.Create(3)), [w(0), w(1), d(0), d(1)]),
         (kinematics.make_attitude_factor(r(0), r(1), w(0), w(1), 0.05, UNIT.Create(3)), [r(0), r(1), w(0), w(1)]),
         (process.make_random_walk_factor(d(0), d(1), UNIT.Create(3)), [d(0), d(1)]),
+        (kinematics.make_angular_motion_factor(w(0), w(1), d(0), d(1), F.omega_ddot_key(0), F.omega_ddot_key(1), 0.01, UNIT.Create(9)),
+         [w(0), w(1), d(0), d(1), F.omega_ddot_key(0), F.omega_ddot_key(1)]),
         (process.make_prior_factor(F.bias_key(1), np.ones(3), UNIT.Create(3)), [F.bias_key(1)]),
         (euler.make_euler_factor(w(1), d(1), [0.0116, 0.0185, 0.0225], UNIT.Create(3)), [w(1), d(1)]),
         (free_fall.make_free_fall_factor(f(1), UNIT.Create(3)), [f(1)]),

@@ -23,6 +23,7 @@ char      variable                                           type
 ``'w'``   ω_k, angular velocity of sample k in B [rad/s]       vector 3
 ``'d'``   ω̇_k, angular acceleration of sample k in B [rad/s²]  vector 3
 ``'f'``   f_k, specific force at the body origin in B [m/s²]  vector 3
+``'j'``   ω̈_k, angular jerk of sample k in B [rad/s³]        vector 3
 ``'a'``   a_k, gravity-free acceleration of the origin in B    vector 3
 ``'r'``   R_k, attitude W←B of sample k                       ``Rot3``
 ``'b'``   bias of accelerometer i (one per listed axis) [m/s²]  vector n_i
@@ -52,6 +53,10 @@ def omega_dot_key(k: int) -> int:
 
 def specific_force_key(k: int) -> int:
     return gtsam.symbol("f", int(k))
+
+
+def omega_ddot_key(k: int) -> int:
+    return gtsam.symbol("j", int(k))
 
 
 def accel_key(k: int) -> int:

@@ -77,3 +77,60 @@ def make_attitude_factor(key_r0, key_r1, key_w0, key_w1, dt_s: float, noise_mode
         return r[0], [j["r0"][0], j["r1"][0], j["w0"][0], j["w1"][0]]
 
     return custom_factor(noise_model, [key_r0, key_r1, key_w0, key_w1], error)
+
+
+# --- white angular snap: ω, ω̇, ω̈ with ω̈ a random walk -------------------------
+
+def snap_process_covariance(snap_density: float, dt_s) -> np.ndarray:
+    """Covariance (N, 3, 3) of one step of ``[ω, ω̇, ω̈]`` (one axis) under white snap of density q.
+
+    ``q² [[h⁵/20, h⁴/8, h³/6], [h⁴/8, h³/3, h²/2], [h³/6, h²/2, h]]``.
+    """
+    h = np.atleast_1d(np.asarray(dt_s, dtype=float))[:, None, None]
+    c = np.array([[1 / 20, 1 / 8, 1 / 6], [1 / 8, 1 / 3, 1 / 2], [1 / 6, 1 / 2, 1.0]])
+    powers = np.array([[5, 4, 3], [4, 3, 2], [3, 2, 1]])
+    return snap_density**2 * c * h**powers
+
+
+def angular_motion_residual(omega0, omega1, omega_dot0, omega_dot1, omega_ddot0, omega_ddot1, dt_s):
+    """Exact step of the triple integrator ``[ω, ω̇, ω̈]``, (N, 9) rows ordered (ω, ω̇, ω̈) × (x, y, z).
+
+    ``[ω1 - ω0 - h ω̇0 - h²/2 ω̈0, ω̇1 - ω̇0 - h ω̈0, ω̈1 - ω̈0]``; Jacobians on
+    w0, w1, d0, d1, j0, j1, each (N, 9, 3).
+    """
+    w0, w1, d0, d1, j0, j1 = (np.atleast_2d(np.asarray(v, dtype=float)) for v in
+                              (omega0, omega1, omega_dot0, omega_dot1, omega_ddot0, omega_ddot1))
+    h = np.atleast_1d(np.asarray(dt_s, dtype=float))[:, None]
+    n = max(w0.shape[0], h.shape[0])
+    r = np.concatenate([w1 - w0 - h * d0 - 0.5 * h * h * j0, d1 - d0 - h * j0, j1 - j0], axis=1)
+    eye = np.eye(3)
+    z = np.zeros((n, 9, 3))
+    jac = {k: z.copy() for k in ("w0", "w1", "d0", "d1", "j0", "j1")}
+    hh = h[:, :, None]
+    jac["w0"][:, 0:3] = -eye
+    jac["w1"][:, 0:3] = eye
+    jac["d0"][:, 0:3] = -hh * eye
+    jac["d0"][:, 3:6] = -eye
+    jac["d1"][:, 3:6] = eye
+    jac["j0"][:, 0:3] = -0.5 * hh * hh * eye
+    jac["j0"][:, 3:6] = -hh * eye
+    jac["j0"][:, 6:9] = -eye
+    jac["j1"][:, 6:9] = eye
+    return r, jac
+
+
+def angular_motion_covariance(snap_density: float, dt_s) -> np.ndarray:
+    """(N, 9, 9) covariance of :func:`angular_motion_residual`'s rows (axes independent)."""
+    per_axis = snap_process_covariance(snap_density, dt_s)  # (N, 3, 3) over (ω, ω̇, ω̈)
+    return np.einsum("nab,ij->naibj", per_axis, np.eye(3)).reshape(-1, 9, 9)
+
+
+def make_angular_motion_factor(key_w0, key_w1, key_d0, key_d1, key_j0, key_j1, dt_s: float, noise_model):
+    """CustomFactor for one white-snap step; noise model from :func:`angular_motion_covariance`."""
+    keys = [key_w0, key_w1, key_d0, key_d1, key_j0, key_j1]
+
+    def error(values):
+        r, j = angular_motion_residual(*(vector_at(values, k) for k in keys), dt_s)
+        return r[0], [j[n][0] for n in ("w0", "w1", "d0", "d1", "j0", "j1")]
+
+    return custom_factor(noise_model, keys, error)
