@@ -80,6 +80,7 @@ def test_marginal_covariances_equal_dense_inverse(small_log):
     SmootherOptions(relative_tolerance=1e-16, max_iterations=50),
     SmootherOptions(self_calibrate_bias=True, self_calibrate_scale=True, relative_tolerance=1e-16, max_iterations=50),
     SmootherOptions(measurement="quadratic", relative_tolerance=1e-16, max_iterations=50),
+    SmootherOptions(motion_model="snap", relative_tolerance=1e-16, max_iterations=50),
 ])
 def test_graph_path_equals_fast_path(small_log, options):
     """GTSAM graph of CustomFactors (linearize/optimize/retract) = banded vectorised engine."""
@@ -126,6 +127,19 @@ def test_smoother_accuracy(scenario):
     assert rmse < 0.02, (rmse, per_method)
     # random3d: ≥ 20x; turntable: the per-sample IMM does well on this simple motion (see report)
     assert best / rmse > (20.0 if scenario == "random3d" else 5.0), (rmse, per_method)
+
+
+def test_snap_model_sharpens_omega_dot():
+    """White angular snap (ω̈ random walk): same ω accuracy, ω̇ several times better on smooth motion."""
+    log = simulate("turntable", CUBE, rate_hz=500.0, duration_s=5.0, seed=1)
+    jerk = BatchSmootherEstimator().estimate(log)
+    snap_est = BatchSmootherEstimator(motion_model="snap")
+    snap = snap_est.estimate(log)
+    assert omega_rmse(snap, log.truth) < 0.02
+    dw = lambda m: float(np.sqrt(np.mean(np.sum((m.omega_dot_b_radps2 - log.truth.omega_dot_b_radps2) ** 2, axis=1))))
+    assert dw(snap) < 0.4 * dw(jerk), (dw(snap), dw(jerk))
+    eff = efficiency(snap, log.truth, smoother_bound(log, snap_est.options()))
+    assert 0.8 < eff.ratio["omega_b_radps"] < 1.2, eff.to_markdown()
 
 
 def test_reversal_has_no_sign_errors():

@@ -22,8 +22,6 @@ from ..log import Log
 from ..motion import Motion
 from .graph import STATE_SIZE, SmootherOptions, SmootherProblem, options_reason
 
-M = STATE_SIZE
-
 
 @dataclass
 class NormalEquations:
@@ -44,7 +42,7 @@ class NormalEquations:
 
 def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray) -> NormalEquations:
     """Accumulate JᵀJ and Jᵀr of all factors, vectorised."""
-    n, G = problem.n, problem.n_global
+    n, G, M = problem.n, problem.n_global, problem.state_size
     diag = np.zeros((n, M, M))
     lower = np.zeros((n - 1, M, M))
     grad = np.zeros((n, M))
@@ -117,7 +115,7 @@ class Factorisation:
 
 
 def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
-    n = ne.diag.shape[0]
+    n, M = ne.diag.shape[:2]
     diag = ne.diag
     if damping:
         diag = diag + damping * (np.einsum("nii->ni", ne.diag)[:, :, None] * np.eye(M) + 1e-9 * np.eye(M))
@@ -131,8 +129,8 @@ def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
 
 
 def solve_step(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray]:
-    """Newton step (δx (N, 9), δp (G,)) of the (damped) normal equations."""
-    n = ne.diag.shape[0]
+    """Newton step (δx (N, m), δp (G,)) of the (damped) normal equations."""
+    n, M = ne.diag.shape[:2]
     gx = ne.grad.reshape(-1)
     ax = cho_solve_banded((fac.cb, True), gx, check_finite=False)
     if fac.Y is None:
@@ -151,7 +149,7 @@ def marginal_covariances(ne: NormalEquations, fac: Factorisation) -> tuple[np.nd
     ``P_k = L_kk⁻ᵀ L_kk⁻¹`` and ``M_k = L_{k+1,k} L_kk⁻¹``; then the Schur
     correction ``Y_k S⁻¹ Y_kᵀ`` of the calibration variables.
     """
-    n = ne.diag.shape[0]
+    n, M = ne.diag.shape[:2]
     Lkk, Lnext = factor_blocks(fac.cb, n, M)
     Linv = np.linalg.inv(Lkk)
     P = np.swapaxes(Linv, 1, 2) @ Linv
@@ -267,6 +265,7 @@ class BatchSmootherEstimator(SmootherOptions):
         n = len(log)
         if n < 2:
             raise ValueError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
+        M = 12 if opt.motion_model == "snap" else STATE_SIZE
         states = np.zeros((n, M))
         cov = np.zeros((n, M, M)) if opt.compute_sigma else None
         windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)

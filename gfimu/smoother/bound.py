@@ -40,8 +40,10 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
     if truth is None:
         raise ValueError(f"{log.source}: the bound needs the truth (log.truth or truth=)")
     states = truth_states(truth)
+    if opt.motion_model == "snap":  # ω̈ of the truth by central differences
+        states = np.hstack([states, np.gradient(states[:, 3:6], log.times_s, axis=0)])
     n = len(log)
-    sd = np.zeros((n, 9))
+    sd = np.zeros((n, states.shape[1]))
     for solve_sl, keep_log, keep_win in window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s):
         problem = SmootherProblem(log.select(solve_sl), opt)
         params = np.zeros(problem.n_global) if true_params is None else true_params

@@ -1,6 +1,7 @@
 """Smoother options and the smoothing problem built from a log.
 
-State of sample k: ``x_k = [ω_k, ω̇_k, f_k]`` (9 numbers, body frame B), plus
+State of sample k: ``x_k = [ω_k, ω̇_k, f_k]`` (9 numbers, body frame B; the
+'snap' motion model appends ω̈_k), plus
 global calibration variables when self-calibration is on (per-axis
 accelerometer bias and scale-factor error, gyroscope bias). Factors
 (:mod:`gfimu.factors`):
@@ -9,6 +10,7 @@ accelerometer bias and scale-factor error, gyroscope bias). Factors
 - trapezoid kinematics ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})`` and random
   walk of ω̇ (together: white angular jerk of density
   ``omega_dot_random_walk_radps2_per_sqrt_s``);
+- or, with ``motion_model='snap'``, the exact white-snap step of [ω, ω̇, ω̈];
 - random walk of the specific force;
 - gyroscope on ω when the array has one and ``use_gyro``;
 - Euler's torque-free equation and zero specific force in free flight
@@ -39,6 +41,7 @@ from ..factors import (
     gyro_bias_key,
     gyroscope,
     kinematics,
+    omega_ddot_key,
     omega_dot_key,
     omega_key,
     process,
@@ -49,7 +52,8 @@ from ..factors import (
 from ..log import Log
 
 STATE_SIZE = 9
-W, D, F = slice(0, 3), slice(3, 6), slice(6, 9)
+"""State size of the default white-jerk model; white snap appends ω̈ (12)."""
+W, D, F, A = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 
 
 @dataclass(frozen=True)
@@ -60,8 +64,13 @@ class SmootherOptions:
     step std ``q sqrt(h)``.
     """
 
+    motion_model: str = "jerk"
+    """'jerk': ω̇ is a random walk (white angular jerk, state [ω, ω̇, f]); 'snap': ω̈ is a random walk
+    (white angular snap, state [ω, ω̇, f, ω̈]), smoother for slow, smooth motion."""
     omega_dot_random_walk_radps2_per_sqrt_s: float = 30.0
-    """White angular jerk density: how fast ω̇ may change. Larger follows faster motion, smooths less."""
+    """White angular jerk density ('jerk' model): how fast ω̇ may change. Larger follows faster motion, smooths less."""
+    omega_ddot_random_walk_radps3_per_sqrt_s: float = 300.0
+    """White angular snap density ('snap' model): how fast ω̈ may change."""
     specific_force_random_walk_mps2_per_sqrt_s: float = 30.0
     """How fast the specific force may change."""
     measurement: str = "accelerometer"
@@ -107,6 +116,7 @@ class SmootherOptions:
     def __post_init__(self) -> None:
         for name in (
             "omega_dot_random_walk_radps2_per_sqrt_s",
+            "omega_ddot_random_walk_radps3_per_sqrt_s",
             "specific_force_random_walk_mps2_per_sqrt_s",
             "default_accel_noise_std_mps2",
             "bias_prior_std_mps2",
@@ -124,6 +134,8 @@ class SmootherOptions:
                 raise ValueError(f"smoother option {name} must be a positive number, got {v!r}")
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
             raise ValueError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
+        if self.motion_model not in ("jerk", "snap"):
+            raise ValueError(f"smoother option motion_model must be 'jerk' or 'snap', got {self.motion_model!r}")
         if self.measurement not in ("accelerometer", "quadratic"):
             raise ValueError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
         if int(self.max_iterations) < 1:
@@ -157,7 +169,7 @@ class Term:
 
     ``kind`` 'unary' (one state, rows per sample), 'binary' (samples k, k+1)
     or 'global' (calibration variables only). ``jac`` maps 'x' (unary) or
-    'x0'/'x1' (binary) to (N, r, 9); ``jac_global`` is (N, r, G) or None.
+    'x0'/'x1' (binary) to (N, r, state size); ``jac_global`` is (N, r, G) or None.
     """
 
     kind: str
@@ -225,6 +237,11 @@ class SmootherProblem:
                 raise ValueError(f"{self.log.source}: gyroscope reading is not finite at sample {row}")
             gs = arr.gyroscope.noise_std_radps
             self.gyro_sigma = float(gs) if gs else 0.01
+        self.state_size = 12 if opt.motion_model == "snap" else STATE_SIZE
+        if opt.motion_model == "snap":
+            cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, self.dt_s)
+            self.snap_cov = cov
+            self.snap_whiten = np.linalg.inv(np.linalg.cholesky(cov))
         q = opt.omega_dot_random_walk_radps2_per_sqrt_s
         self.trapezoid_sigma = kinematics.trapezoid_sigma(q, self.dt_s)
         self.omega_dot_step_sigma = process.random_walk_sigma(q, self.dt_s)
@@ -232,6 +249,8 @@ class SmootherProblem:
         self.first_sigma = np.repeat(
             [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
         )
+        if self.state_size == 12:
+            self.first_sigma = np.concatenate([self.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
 
     # --- calibration variables -------------------------------------------
     def global_part(self, params: np.ndarray, name: str) -> np.ndarray | None:
@@ -251,12 +270,12 @@ class SmootherProblem:
 
     # --- vectorised factors (fast path) -----------------------------------
     def terms(self, states: np.ndarray, params: np.ndarray) -> list[Term]:
-        """All factors, whitened, at ``states`` (N, 9) and ``params`` (G,)."""
+        """All factors, whitened, at ``states`` (N, state size) and ``params`` (G,)."""
         X = states
         out = []
         if self.options.measurement == "quadratic":
             r, j = quadratic.inversion_residual(X[:, W], X[:, D], X[:, F], self.x_hat)
-            J = np.concatenate([j["w"], j["d"], j["f"]], axis=2)
+            J = np.concatenate([j["w"], j["d"], j["f"]] + ([np.zeros_like(j["f"])] if self.state_size == 12 else []), axis=2)
             out.append(Term("unary", r @ self.x_whiten.T, {"x": self.x_whiten @ J}))
         else:
             out.append(self._accelerometer_term(X, params))
@@ -266,13 +285,14 @@ class SmootherProblem:
         n = self.n
         rows = []
         jx = []
+        m = self.state_size
         jg = np.zeros((n, self.log.array.n_axes, self.n_global)) if self.n_global else None
         for i, (d, p, cols) in enumerate(self.sensors):
             bias = self.global_part(params, f"bias{i}")
             scale = self.global_part(params, f"scale{i}")
             r, j = accelerometer.accelerometer_residual(X[:, W], X[:, D], X[:, F], self.log.accel_mps2[:, cols], d, p, bias, scale)
             rows.append(r)
-            jx.append(np.concatenate([j["w"], j["d"], j["f"]], axis=2))
+            jx.append(np.concatenate([j["w"], j["d"], j["f"]] + ([np.zeros_like(j["f"])] if m == 12 else []), axis=2))
             if bias is not None:
                 jg[:, cols, self.global_blocks[f"bias{i}"][0]] = j["b"]
             if scale is not None:
@@ -287,29 +307,47 @@ class SmootherProblem:
     def _other_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:
         n = self.n
         out = []
+        m = self.state_size
         # first-state weak prior
-        r0, _ = process.prior_residual(X[:1], np.zeros(STATE_SIZE))
+        r0, _ = process.prior_residual(X[:1], np.zeros(m))
         out.append(Term("unary", r0 / self.first_sigma, {"x": np.diag(1.0 / self.first_sigma)[None]}, None, first=0))
-        # trapezoid kinematics + ω̇ and f random walks, stacked as one binary term (9 rows)
-        rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
-        rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
+        steps = n - 1
         rf, _ = process.random_walk_residual(X[:-1, F], X[1:, F])
-        m = n - 1
-        J0 = np.zeros((m, 9, 9))
-        J1 = np.zeros((m, 9, 9))
-        J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
-        J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
-        J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
-        J0[:, 6:9, F], J1[:, 6:9, F] = -np.eye(3), np.eye(3)
-        wb = 1.0 / np.concatenate(
-            [np.repeat(self.trapezoid_sigma[:, None], 3, 1), np.repeat(self.omega_dot_step_sigma[:, None], 3, 1),
-             np.repeat(self.force_step_sigma[:, None], 3, 1)], axis=1)
-        out.append(Term("binary", np.concatenate([rk, rd, rf], axis=1) * wb, {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]}))
+        wf = 1.0 / self.force_step_sigma[:, None]
+        if m == STATE_SIZE:
+            # trapezoid kinematics + ω̇ and f random walks, stacked as one binary term (9 rows)
+            rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
+            rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
+            J0 = np.zeros((steps, 9, m))
+            J1 = np.zeros((steps, 9, m))
+            J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
+            J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
+            J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
+            J0[:, 6:9, F], J1[:, 6:9, F] = -np.eye(3), np.eye(3)
+            wb = 1.0 / np.concatenate(
+                [np.repeat(self.trapezoid_sigma[:, None], 3, 1), np.repeat(self.omega_dot_step_sigma[:, None], 3, 1),
+                 np.repeat(self.force_step_sigma[:, None], 3, 1)], axis=1)
+            out.append(Term("binary", np.concatenate([rk, rd, rf], axis=1) * wb,
+                            {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]}))
+        else:
+            # white snap: exact triple-integrator step of [ω, ω̇, ω̈] (9 rows, full covariance) + f random walk
+            ra, ja = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A], self.dt_s)
+            J0 = np.zeros((steps, 9, m))
+            J1 = np.zeros((steps, 9, m))
+            J0[:, :, W], J1[:, :, W] = ja["w0"], ja["w1"]
+            J0[:, :, D], J1[:, :, D] = ja["d0"], ja["d1"]
+            J0[:, :, A], J1[:, :, A] = ja["j0"], ja["j1"]
+            Wn = self.snap_whiten
+            out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1}))
+            Jf0 = np.zeros((steps, 3, m))
+            Jf1 = np.zeros((steps, 3, m))
+            Jf0[:, :, F], Jf1[:, :, F] = -np.eye(3), np.eye(3)
+            out.append(Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]}))
         # gyroscope
         if self.use_gyro:
             gb = self.global_part(params, "gyro_bias")
             r, j = gyroscope.gyroscope_residual(X[:, W], self.log.gyro_b_radps, gb)
-            Jg = np.zeros((n, 3, 9))
+            Jg = np.zeros((n, 3, m))
             Jg[:, :, W] = j["w"]
             jgg = None
             if gb is not None:
@@ -320,12 +358,12 @@ class SmootherProblem:
         if self.options.free_flight:
             inertia = self.log.array.body.principal_inertia_kgm2
             r, j = euler.euler_residual(X[:, W], X[:, D], inertia)
-            Je = np.zeros((n, 3, 9))
+            Je = np.zeros((n, 3, m))
             Je[:, :, W], Je[:, :, D] = j["w"], j["d"]
             s = self.options.torque_noise_std_nm
             out.append(Term("unary", r / s, {"x": Je / s}))
             r, j = free_fall.free_fall_residual(X[:, F])
-            Jf = np.zeros((n, 3, 9))
+            Jf = np.zeros((n, 3, m))
             Jf[:, :, F] = j["f"]
             s = self.options.free_fall_std_mps2
             out.append(Term("unary", r / s, {"x": Jf / s}))
@@ -365,14 +403,21 @@ class SmootherProblem:
                 graph.add(free_fall.make_free_fall_factor(specific_force_key(k), diagonal_noise(np.full(3, opt.free_fall_std_mps2))))
         for key, sl in ((omega_key(0), W), (omega_dot_key(0), D), (specific_force_key(0), F)):
             graph.add(process.make_prior_factor(key, np.zeros(3), diagonal_noise(self.first_sigma[sl])))
+        if self.state_size == 12:
+            graph.add(process.make_prior_factor(omega_ddot_key(0), np.zeros(3), diagonal_noise(self.first_sigma[A])))
         for k in range(self.n - 1):
+            graph.add(process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
+                                                      diagonal_noise(np.full(3, self.force_step_sigma[k]))))
+            if self.state_size == 12:
+                graph.add(kinematics.make_angular_motion_factor(
+                    omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), omega_ddot_key(k),
+                    omega_ddot_key(k + 1), float(self.dt_s[k]), gaussian_noise(self.snap_cov[k])))
+                continue
             graph.add(kinematics.make_angular_velocity_factor(
                 omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), float(self.dt_s[k]),
                 diagonal_noise(np.full(3, self.trapezoid_sigma[k]))))
             graph.add(process.make_random_walk_factor(omega_dot_key(k), omega_dot_key(k + 1),
                                                       diagonal_noise(np.full(3, self.omega_dot_step_sigma[k]))))
-            graph.add(process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
-                                                      diagonal_noise(np.full(3, self.force_step_sigma[k]))))
         if self.n_global:
             s = self.global_prior_sigma()
             for name, (sl, key) in self.global_blocks.items():
@@ -385,16 +430,20 @@ class SmootherProblem:
             values.insert(omega_key(k), np.array(states[k, W]))
             values.insert(omega_dot_key(k), np.array(states[k, D]))
             values.insert(specific_force_key(k), np.array(states[k, F]))
+            if self.state_size == 12:
+                values.insert(omega_ddot_key(k), np.array(states[k, A]))
         for name, (sl, key) in self.global_blocks.items():
             values.insert(key, np.array(params[sl]))
         return values
 
     def from_gtsam_values(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
-        states = np.zeros((self.n, STATE_SIZE))
+        states = np.zeros((self.n, self.state_size))
         for k in range(self.n):
             states[k, W] = values.atVector(omega_key(k))
             states[k, D] = values.atVector(omega_dot_key(k))
             states[k, F] = values.atVector(specific_force_key(k))
+            if self.state_size == 12:
+                states[k, A] = values.atVector(omega_ddot_key(k))
         params = np.zeros(self.n_global)
         for name, (sl, key) in self.global_blocks.items():
             params[sl] = values.atVector(key)

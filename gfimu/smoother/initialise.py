@@ -219,7 +219,15 @@ def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
 
 
 def initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
-    """Initial ``[ω, ω̇, f]`` (N, 9) for :class:`gfimu.smoother.graph.SmootherProblem`."""
+    """Initial states for :class:`gfimu.smoother.graph.SmootherProblem`: ``[ω, ω̇, f]`` (N, 9),
+    with ω̈ = 0 appended (N, 12) for the 'snap' motion model."""
+    x0 = _initial_states(log, options)
+    if options.motion_model == "snap":
+        x0 = np.hstack([x0, np.zeros((len(log), 3))])
+    return x0
+
+
+def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
     n = len(log)
     x0 = np.zeros((n, STATE_SIZE))
     arr = log.array
