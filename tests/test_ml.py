@@ -166,10 +166,14 @@ def test_real_mimu4444_recording_against_the_gyros(mimu4444_dir):
     ref = log.reference.omega_b_radps
     moving = ~log.invalid_reference & (np.linalg.norm(ref, axis=1) > 15.0)
     assert moving.sum() > 1000
-    e_ml = np.linalg.norm(MLEstimator().estimate(log).omega_b_radps[moving] - ref[moving], axis=1)
+    w_ml = MLEstimator().estimate(log).omega_b_radps[moving]
+    e_ml = np.linalg.norm(w_ml - ref[moving], axis=1)
     e_inv = np.linalg.norm(InversionEstimator().estimate(log).omega_b_radps[moving] - ref[moving], axis=1)
     assert np.median(e_ml) < 3.5
     assert np.median(e_ml) < 0.2 * np.median(e_inv)
+    assert np.sqrt(np.mean(e_ml**2)) < 10.0
+    # the integral of ω̇ keeps the sign at 62.5 Hz as well
+    assert np.mean(np.sum(w_ml * ref[moving], axis=1) < 0) < 0.02
 
 
 @pytest.mark.parametrize("scenario", ["reversal", "random3d"])
