@@ -249,18 +249,38 @@ def test_bad_input_is_refused_with_the_cause():
         make_estimator("fixed-lag", lag=0.2)
 
 
-def test_solver_failure_is_reported_with_time(monkeypatch):
-    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=0.5, seed=8)
+class _FailingSmoother:
+    def update(self, *args):
+        raise RuntimeError("Indeterminant linear system detected while working near variable 8574853690513424434")
+
+
+def test_solver_failure_rebuilds_the_window_once_then_reports_the_time(monkeypatch):
+    log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.0, seed=8)
+    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
+    out = []
+    for i in range(300):
+        out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
+    # one failed update: a warning, the window is rebuilt from its raw samples, nothing is lost
+    monkeypatch.setattr(sm, "_smoother", _FailingSmoother())
+    with pytest.warns(RuntimeWarning, match=r"t = 0\.600000 s.*Indeterminant.*re-initialising"):
+        upd = sm.push(log.timestamps_ns[300], log.accel_mps2[300])
+    out.extend(upd.smoothed)
+    for i in range(301, len(log)):
+        out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
+    out.extend(sm.flush())
+    np.testing.assert_array_equal([s.timestamp_ns for s in out], log.timestamps_ns)
+    w = np.array([s.omega_b_radps for s in out])
+    from gfimu.motion import Motion
+    est = Motion(log.timestamps_ns, omega_b_radps=w)
+    assert wrong_sign_share(est, log.truth) == 0.0
+    assert omega_rmse(est, log.truth) < 0.05
+    # a failure that persists: a clear error naming the time
     sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
     for i in range(50):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
-
-    class Failing:
-        def update(self, *args):
-            raise RuntimeError("Indeterminant linear system detected while working near variable 8574853690513424434")
-
-    monkeypatch.setattr(sm, "_smoother", Failing())
-    with pytest.raises(FixedLagSmootherError, match=r"t = 0\.100000 s.*Indeterminant"):
+    monkeypatch.setattr(sm, "_smoother", _FailingSmoother())
+    monkeypatch.setattr(sm, "_new_smoother", lambda: _FailingSmoother())
+    with pytest.warns(RuntimeWarning), pytest.raises(FixedLagSmootherError, match=r"t = 0\.100000 s.*Indeterminant"):
         sm.push(log.timestamps_ns[50], log.accel_mps2[50])
 
 

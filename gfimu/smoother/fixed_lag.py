@@ -27,6 +27,10 @@ Time gaps (a step longer than ``gap_factor`` times the nominal step, as
 (its states are emitted, smoothed with the data they have) and a new segment
 starts with a fresh initialisation.
 
+If gtsam fails on an update (e.g. ``IndeterminantLinearSystem``), the window
+is rebuilt once from its raw samples with a ``RuntimeWarning`` naming the
+time; a second failure raises :class:`FixedLagSmootherError`.
+
 gtsam marginalises in blocks of ``marginalise_every_s`` (keys carry the start
 time of their block): marginalising one sample at a time makes gtsam
 re-eliminate and relinearise the whole window at every update.
@@ -38,6 +42,7 @@ through the smoother and returns one row per sample.
 from __future__ import annotations
 
 import math
+import warnings
 from collections import deque
 from dataclasses import dataclass, fields
 
@@ -210,6 +215,7 @@ class FixedLagSmoother:
     def _start_segment(self) -> None:
         self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
         self._window: deque = deque()  # (index, timestamp_ns) of states not yet emitted
+        self._raw: deque = deque()  # (timestamp_ns, accel, gyro) of the same samples, for recovery
         self._warmup: list = []
         self._k = -1
         self._prev = None  # (t_ns, omega, omega_dot, f) of the newest state (filtered)
@@ -239,8 +245,12 @@ class FixedLagSmoother:
         """Timestamp given to gtsam: the start of the sample's marginalisation block."""
         return math.floor(self._time_s(t_ns) / self._block_s) * self._block_s
 
-    def _initialise(self) -> None:
-        """First states of a segment, from the batch smoother's sign-resolving initialiser."""
+    def _initialise(self, omega_hint=None) -> None:
+        """First states of a segment, from the batch smoother's sign-resolving initialiser.
+
+        ``omega_hint`` (ω expected at the second-to-last warm-up sample) picks the
+        sign of ω when re-initialising after a solver failure.
+        """
         from .initialise import initial_states
 
         times_ns = np.array([s[0] for s in self._warmup], dtype=np.int64)
@@ -254,6 +264,9 @@ class FixedLagSmoother:
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
+        if omega_hint is not None and len(x0) >= 2:
+            if np.sum((x0[-2, 0:3] + omega_hint) ** 2) < np.sum((x0[-2, 0:3] - omega_hint) ** 2):
+                x0[:, 0:3] *= -1.0
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps = {}
@@ -272,6 +285,7 @@ class FixedLagSmoother:
             for key in model.keys(k):
                 stamps[key] = t
             self._window.append((k, t_ns))
+            self._raw.append((t_ns, y, g))
         self._update(graph, values, stamps, self._warmup[-1][0])
         self._warmup = []
         self._remember_newest()
@@ -289,9 +303,28 @@ class FixedLagSmoother:
         self.model.add_measurement(graph, k, y, gyro)
         model.insert_state(values, k, omega0, omega_dot0, f0)
         t = self._stamp(t_ns)
-        self._update(graph, values, {key: t for key in model.keys(k)}, t_ns)
+        try:
+            self._update(graph, values, {key: t for key in model.keys(k)}, t_ns)
+        except FixedLagSmootherError as err:
+            self._recover(sample, err)
+            return
         self._window.append((k, t_ns))
+        self._raw.append(sample)
         self._remember_newest()
+
+    def _recover(self, sample, err: FixedLagSmootherError) -> None:
+        """After a failed update: rebuild the window from its raw samples, once.
+
+        gtsam's state is unknown after an exception, so a new smoother is
+        initialised on the samples not yet emitted plus the new one (sign of ω
+        kept from the last filtered state). If that fails too the error is raised.
+        """
+        warnings.warn(f"{err}; re-initialising the fixed-lag window", RuntimeWarning, stacklevel=3)
+        samples = list(self._raw) + [sample]
+        hint = self._prev[1]
+        self._start_segment()
+        self._warmup = samples
+        self._initialise(omega_hint=hint)
 
     def _update(self, graph, values, stamps, t_ns) -> None:
         try:
@@ -331,6 +364,7 @@ class FixedLagSmoother:
         out = []
         while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
             out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
+            self._raw.popleft()
         return out
 
 
