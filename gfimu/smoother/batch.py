@@ -109,30 +109,48 @@ def factor_blocks(cb: np.ndarray, n: int, m: int) -> tuple[np.ndarray, np.ndarra
 
 @dataclass
 class Factorisation:
+    """Banded Cholesky factor of the Jacobi-scaled ``S A S`` (``scale`` = diag of S), plus the border."""
+
     cb: np.ndarray
+    scale: np.ndarray  # (N m,)
     Y: np.ndarray | None  # A⁻¹ C, (N m, G)
     schur: np.ndarray | None  # B - Cᵀ A⁻¹ C
 
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """A⁻¹ b for b (N m,) or (N m, k)."""
+        s = self.scale if b.ndim == 1 else self.scale[:, None]
+        return s * cho_solve_banded((self.cb, True), s * b, check_finite=False)
+
 
 def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
+    """Factor A (+ Marquardt damping) after symmetric Jacobi scaling, which keeps the
+    factorisation accurate when the states have very different scales (e.g. ω̈)."""
     n, M = ne.diag.shape[:2]
     diag = ne.diag
     if damping:
         diag = diag + damping * (np.einsum("nii->ni", ne.diag)[:, :, None] * np.eye(M) + 1e-9 * np.eye(M))
-    cb = cholesky_banded(to_lower_banded(diag, ne.lower), lower=True, check_finite=False)
+    d = np.einsum("nii->ni", diag)
+    if np.any(~(d > 0)):
+        k, i = np.argwhere(~(d > 0))[0]
+        raise np.linalg.LinAlgError(f"normal equations not positive definite: state {i} of sample {k} is unobserved")
+    sc = 1.0 / np.sqrt(d)
+    diag_s = diag * sc[:, :, None] * sc[:, None, :]
+    lower_s = ne.lower * sc[1:, :, None] * sc[:-1, None, :]
+    cb = cholesky_banded(to_lower_banded(diag_s, lower_s), lower=True, check_finite=False)
+    fac = Factorisation(cb, sc.reshape(-1), None, None)
     if ne.border.size:
         C = ne.coupling.reshape(n * M, -1)
-        Y = cho_solve_banded((cb, True), C, check_finite=False)
+        Y = fac.solve(C)
         border = ne.border + (damping * (np.diag(np.diag(ne.border)) + 1e-9 * np.eye(len(ne.border))) if damping else 0.0)
-        return Factorisation(cb, Y, border - C.T @ Y)
-    return Factorisation(cb, None, None)
+        fac.Y, fac.schur = Y, border - C.T @ Y
+    return fac
 
 
 def solve_step(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray]:
     """Newton step (δx (N, m), δp (G,)) of the (damped) normal equations."""
     n, M = ne.diag.shape[:2]
     gx = ne.grad.reshape(-1)
-    ax = cho_solve_banded((fac.cb, True), gx, check_finite=False)
+    ax = fac.solve(gx)
     if fac.Y is None:
         return -ax.reshape(n, M), np.zeros(0)
     C = ne.coupling.reshape(n * M, -1)
@@ -142,12 +160,12 @@ def solve_step(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.
 
 
 def marginal_covariances(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray | None]:
-    """Diagonal blocks of H⁻¹ for the states (N, 9, 9) and the border (G, G).
+    """Diagonal blocks of H⁻¹ for the states (N, m, m) and the border (G, G).
 
-    Backward recursion on the block-bidiagonal Cholesky factor L of A
-    (A⁻¹ = L⁻ᵀ L⁻¹): ``Σ_k = P_k + M_kᵀ Σ_{k+1} M_k`` with
-    ``P_k = L_kk⁻ᵀ L_kk⁻¹`` and ``M_k = L_{k+1,k} L_kk⁻¹``; then the Schur
-    correction ``Y_k S⁻¹ Y_kᵀ`` of the calibration variables.
+    Backward recursion on the block-bidiagonal Cholesky factor L of the
+    scaled A (A_s⁻¹ = L⁻ᵀ L⁻¹): ``Σ_k = P_k + M_kᵀ Σ_{k+1} M_k`` with
+    ``P_k = L_kk⁻ᵀ L_kk⁻¹`` and ``M_k = L_{k+1,k} L_kk⁻¹``; unscaled by S; then
+    the Schur correction ``Y_k S⁻¹ Y_kᵀ`` of the calibration variables.
     """
     n, M = ne.diag.shape[:2]
     Lkk, Lnext = factor_blocks(fac.cb, n, M)
@@ -159,6 +177,8 @@ def marginal_covariances(ne: NormalEquations, fac: Factorisation) -> tuple[np.nd
     sigma[-1] = P[-1]
     for k in range(n - 2, -1, -1):
         sigma[k] = P[k] + MkT[k] @ sigma[k + 1] @ Mk[k]
+    sc = fac.scale.reshape(n, M)
+    sigma *= sc[:, :, None] * sc[:, None, :]
     if fac.Y is None:
         return sigma, None
     s_inv = np.linalg.inv(fac.schur)
@@ -180,12 +200,18 @@ class SolveResult:
 
 def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
           compute_sigma: bool = False, method: str = "lm") -> SolveResult:
-    """Levenberg-Marquardt (or plain Gauss-Newton) on the banded normal equations."""
+    """Levenberg-Marquardt (or plain Gauss-Newton) on the banded normal equations.
+
+    Each iteration first tries the undamped Gauss-Newton step (the problem is
+    close to linear near a good initial point); Marquardt damping
+    ``λ diag(H)`` is switched on, and raised tenfold, only while a step fails
+    to lower the cost, and lowered again after each success.
+    """
     opt = problem.options
     X = np.array(states, dtype=float)
     P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
     ne = normal_equations(problem, X, P)
-    lam = 1e-6 if method == "lm" else 0.0
+    lam = 0.0
     converged = False
     it = 0
     for it in range(1, int(opt.max_iterations) + 1):
@@ -196,14 +222,13 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
             new_cost = problem.cost(Xn, Pn)
             if method != "lm" or new_cost <= ne.cost or lam > 1e10:
                 break
-            lam *= 10.0
+            lam = 1e-6 if lam == 0.0 else lam * 10.0
         decrease = ne.cost - new_cost
         if method == "lm" and new_cost > ne.cost:
             converged = True
             break
         X, P = Xn, Pn
-        if method == "lm":
-            lam = max(lam / 10.0, 1e-9)
+        lam = 0.0 if lam < 1e-8 else lam / 10.0
         ne = normal_equations(problem, X, P)
         if decrease <= opt.relative_tolerance * max(ne.cost, 1e-300) or np.max(np.abs(dx)) < 1e-12:
             converged = True
