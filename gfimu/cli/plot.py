@@ -1,10 +1,98 @@
-"""``gfimu plot``."""
+"""``gfimu plot LOG ESTIMATE.csv ... --out fig.png``: figures of estimates against truth or reference."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from . import CLIError
+
+PREFIXES = {"a": "accel_b_mps2", "f": "specific_force_b_mps2", "dw": "omega_dot_b_radps2", "w": "omega_b_radps"}
 
 
-def register(sub) -> None:
-    p = sub.add_parser("plot", help="(plot: not available yet)")
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plot",
+        help="plot estimates against the log's truth or reference (needs the 'plot' extra)",
+        description="Figures (PNG, SVG or PDF by the --out suffix). 'time': ω, ω̇ and linear acceleration of each "
+        "estimate against truth/reference over time with error panels (papers 000-002). 'polhode': the "
+        "estimated ω path on the kinetic-energy and momentum ellipsoids (paper 004; the array needs [body]). "
+        "'condition': condition number of the log's array scaled over layout sizes (paper 000, §III).",
+    )
+    p.add_argument("log", help="log directory (array.toml + imu.csv, truth.csv or reference.csv)")
+    p.add_argument("estimates", nargs="*", help="estimate CSV files (gfimu estimate --out ...)")
+    p.add_argument("--out", required=True, help="figure file to write")
+    p.add_argument("--kind", choices=["time", "polhode", "condition"], default="time", help="figure (default: time)")
+    p.add_argument("--quantities", default=None, help="comma-separated among w, dw, a, f (default: all available)")
+    p.add_argument("--start-s", type=float, default=None, help="first second to show (from the log start)")
+    p.add_argument("--end-s", type=float, default=None, help="last second to show")
+    p.add_argument("--no-errors", action="store_true", help="time plot without the error panels")
     p.set_defaults(func=run)
 
 
+def _window(log, start_s, end_s) -> slice:
+    t = log.times_s
+    i0 = 0 if start_s is None else int(np.searchsorted(t, start_s, side="left"))
+    i1 = len(t) if end_s is None else int(np.searchsorted(t, end_s, side="right"))
+    if i1 - i0 < 2:
+        raise CLIError(f"the window [{start_s}, {end_s}] s holds fewer than 2 samples of the log ({t[-1]:.3f} s long)")
+    return slice(i0, i1)
+
+
 def run(args) -> int:
-    raise NotImplementedError("gfimu plot is not available yet")
+    from .. import logio, plots
+    from ..compare import condition_vs_scale
+
+    log = logio.read_log(args.log)
+    if args.kind == "condition":
+        positions = np.array([a.position_m for a in log.array.accelerometers])
+        size = float(np.max(np.abs(positions)))
+        sizes = np.logspace(np.log10(size) - 2, np.log10(size) + 2, 41)
+        fig = plots.plot_condition_number(sizes, {log.array.name: condition_vs_scale(log.array, sizes)},
+                                          marks=[(size, log.array.condition_number(), "this array")])
+        plots.save_figure(fig, args.out)
+        print(f"plot: condition number over {sizes[0]:.3g}-{sizes[-1]:.3g} m -> {args.out}")
+        return 0
+    if not args.estimates:
+        raise CLIError(f"--kind {args.kind} needs at least one estimate CSV")
+    window = _window(log, args.start_s, args.end_s)
+    estimates = {}
+    for path in args.estimates:
+        motion = logio.read_motion_csv(path)
+        if len(motion) != len(log):
+            raise CLIError(f"{path}: {len(motion)} rows, but the log {args.log} has {len(log)} samples")
+        estimates[Path(path).stem] = motion.select(window)
+    if args.kind == "polhode":
+        if log.array.body is None:
+            raise CLIError(f"{args.log}: array.toml has no [body] principal_inertia_kgm2, needed for the polhode")
+        paths = {}
+        reference = log.truth if log.truth is not None else log.reference
+        if reference is not None and reference.omega_b_radps is not None:
+            paths["truth" if log.truth is not None else "reference"] = reference.select(window).omega_b_radps
+        for name, m in estimates.items():
+            if m.omega_b_radps is None:
+                raise CLIError(f"estimate {name!r} has no angular velocity")
+            paths[name] = m.omega_b_radps
+        fig = plots.plot_polhode(paths, log.array.body.principal_inertia_kgm2)
+    else:
+        if log.truth is not None:
+            reference, label, valid = log.truth, "truth", None
+        elif log.reference is not None:
+            reference, label = log.reference, "reference"
+            valid = None if log.invalid_reference is None else ~log.invalid_reference[window]
+        else:
+            raise CLIError(f"{args.log}: no truth.csv or reference.csv to plot against")
+        quantities = None
+        if args.quantities:
+            try:
+                quantities = [PREFIXES[q.strip()] for q in args.quantities.split(",") if q.strip()]
+            except KeyError as exc:
+                raise CLIError(f"--quantities: unknown {exc.args[0]!r}; choose among {', '.join(PREFIXES)}") from None
+        fig = plots.plot_time_series(reference.select(window), estimates, quantities=quantities,
+                                     reference_label=label, errors=not args.no_errors, valid=valid,
+                                     title=f"{Path(args.log).name}: estimates against {label}")
+    plots.save_figure(fig, args.out)
+    print(f"plot: {len(estimates)} estimate(s), {window.stop - window.start} samples -> {args.out}")
+    return 0
