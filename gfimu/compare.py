@@ -289,6 +289,8 @@ def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, pr
         return "unavailable", f"not installed in this version ({exc})", None, math.nan
     except (TypeError, ValueError) as exc:
         return "failed", f"bad options: {exc}", None, math.nan
+    except Exception as exc:  # noqa: BLE001 - a broken registry entry must not stop the table
+        return "unavailable", f"cannot load: {type(exc).__name__}: {exc}", None, math.nan
     try:
         reason = est.applicable(log.array)
     except Exception as exc:  # noqa: BLE001
