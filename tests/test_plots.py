@@ -1,0 +1,121 @@
+"""Figures: structure of the Figure objects, written PNG files, the plot command."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from gfimu import plots  # noqa: E402
+from gfimu.array import cube_array  # noqa: E402
+from gfimu.compare import condition_vs_scale  # noqa: E402
+from gfimu.motion import Motion  # noqa: E402
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _motions(n: int = 300):
+    t = np.arange(n) * 2_000_000
+    ts = t * 1e-9
+    w = np.column_stack([np.sin(2 * np.pi * ts), np.cos(3 * ts), 0.5 + 0 * ts])
+    dw = np.column_stack([2 * np.pi * np.cos(2 * np.pi * ts), -3 * np.sin(3 * ts), 0 * ts])
+    f = np.column_stack([np.sin(ts), 0 * ts, 9.8 + 0 * ts])
+    truth = Motion(t, omega_b_radps=w, omega_dot_b_radps2=dw, specific_force_b_mps2=f)
+    est = Motion(t, omega_b_radps=w + 0.1, omega_dot_b_radps2=dw - 0.2, specific_force_b_mps2=f)
+    only_w = Motion(t, omega_b_radps=w * 1.1)
+    return truth, est, only_w
+
+
+def _check_png(path):
+    data = path.read_bytes()
+    assert data[:8] == PNG_SIGNATURE and len(data) > 10_000
+
+
+def test_time_series_layout_lines_and_errors(tmp_path):
+    truth, est, only_w = _motions()
+    fig = plots.plot_time_series(truth, {"a": est, "b": only_w})
+    # f, ω̇, ω: a row of values and a row of errors each, three axes per row
+    assert len(fig.axes) == 3 * 2 * 3
+    value_ax_w, error_ax_w = fig.axes[4 * 3], fig.axes[5 * 3]  # ω_x values and errors
+    assert len(value_ax_w.lines) == 3  # truth + two estimates
+    err_a = error_ax_w.lines[0].get_ydata()
+    np.testing.assert_allclose(err_a, 0.1, atol=1e-12)  # estimate − truth
+    assert value_ax_w.get_ylabel() == "w_x [rad/s]" and fig.axes[-1].get_xlabel() == "time [s]"
+    assert len(fig.axes[2 * 3].lines) == 2  # ω̇_x: truth and "a" only
+    _check_png(plots.save_figure(fig, tmp_path / "ts.png"))
+    fig = plots.plot_time_series(truth, {"b": only_w}, errors=False)
+    assert len(fig.axes) == 3  # only ω is shared
+    assert fig.axes[0].get_legend() is not None
+
+
+def test_time_series_masks_invalid_samples_and_checks_input():
+    truth, est, _ = _motions()
+    valid = np.ones(len(truth), bool)
+    valid[10:20] = False
+    fig = plots.plot_time_series(truth, {"a": est}, quantities=["omega_b_radps"], valid=valid)
+    err = fig.axes[3].lines[0].get_ydata()
+    assert np.all(np.isnan(err[10:20])) and np.all(np.isfinite(err[20:]))
+    with pytest.raises(ValueError, match="at least one estimate"):
+        plots.plot_time_series(truth, {})
+    with pytest.raises(ValueError, match="no linear acceleration"):
+        plots.plot_time_series(truth, {"a": est}, quantities=["accel_b_mps2"])
+
+
+def test_condition_number_figure(tmp_path):
+    sizes = np.logspace(-2, 2, 21)
+    cond = condition_vs_scale(cube_array(), sizes)
+    fig = plots.plot_condition_number(sizes, {"cube": cond}, marks=[(1.0, math.sqrt(2), "√2")])
+    (ax,) = fig.axes
+    np.testing.assert_allclose(ax.lines[0].get_ydata(), cond)
+    assert ax.get_xscale() == "log" and "half edge" in ax.get_xlabel()
+    _check_png(plots.save_figure(fig, tmp_path / "cond.png"))
+
+
+def test_polhode_constants_and_figure(tmp_path):
+    inertia = np.array([1.0, 2.0, 3.0])
+    w = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]])
+    two_t, h2 = plots.polhode_constants(w, inertia)
+    assert two_t == 1 + 8 + 27 and h2 == 1 + 16 + 81
+    fig = plots.plot_polhode({"truth": w, "estimate": w * 1.01}, inertia)
+    assert len(fig.axes) == 4  # 3-D view and three plane projections
+    assert fig.axes[0].name == "3d" and len(fig.axes[1].lines) == 2
+    _check_png(plots.save_figure(fig, tmp_path / "polhode.png"))
+
+
+def test_t2_and_step_size_figures(tmp_path):
+    t2 = np.linspace(0.5, 12, 12)
+    fig = plots.plot_t2_rmse(t2, {"trial 1": (t2 - 5) ** 2 + 1, "trial 2": (t2 - 7) ** 2 + 2})
+    (ax,) = fig.axes
+    # each trial: its curve and its best point
+    stars = [line for line in ax.lines if line.get_marker() == "*"]
+    assert [float(s.get_xdata()[0]) for s in stars] == [t2[np.argmin((t2 - 5) ** 2)], t2[np.argmin((t2 - 7) ** 2)]]
+    _check_png(plots.save_figure(fig, tmp_path / "t2.png"))
+    fig = plots.plot_t2_trend(np.array([1.0, 2.0, 3.0]), np.array([3.0, 4.0, 5.0]), np.array([[2, 4], [3, 6], [4, 7]]))
+    assert "trend: T2 = 1(a+b+c) + 2" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    fig = plots.plot_step_size(np.array([0.001, 0.002]), {"gyro": [1e-3, 2e-3], "no gyro": [1e-2, 5e-2]}, "error [rad]")
+    assert len(fig.axes[0].lines) == 2 and fig.axes[0].get_xlabel() == "step size [ms]"
+    _check_png(plots.save_figure(fig, tmp_path / "step.png"))
+
+
+def test_cli_plot(tmp_path):
+    from gfimu.cli import main
+    from gfimu.logio import write_log, write_motion_csv
+    from gfimu.simulate import simulate
+
+    log = simulate("random3d", duration_s=0.6, seed=2)
+    write_log(log, tmp_path / "log")
+    truth = log.truth
+    write_motion_csv(truth.replace(omega_b_radps=truth.omega_b_radps + 0.05, accel_b_mps2=None, quaternion_wb=None),
+                     tmp_path / "est.csv")
+    out = tmp_path / "fig.png"
+    assert main(["plot", str(tmp_path / "log"), str(tmp_path / "est.csv"), "--out", str(out), "--start-s", "0.1"]) == 0
+    _check_png(out)
+    assert main(["plot", str(tmp_path / "log"), "--kind", "condition", "--out", str(tmp_path / "c.png")]) == 0
+    _check_png(tmp_path / "c.png")
+    # no [body] in a cube's array.toml: the polhode is refused with the reason
+    assert main(["plot", str(tmp_path / "log"), str(tmp_path / "est.csv"), "--kind", "polhode",
+                 "--out", str(tmp_path / "p.png")]) == 2
+    assert main(["plot", str(tmp_path / "log"), "--out", str(tmp_path / "x.png")]) == 2
