@@ -191,7 +191,8 @@ def test_shift_reference_resamples_and_widens_invalid():
     expected = np.column_stack([np.sin(3 * (ts - 1.5e-3)), np.cos(2 * (ts - 1.5e-3)), (ts - 1.5e-3) ** 2])
     ok = ~out.invalid_reference
     assert np.max(np.abs(out.reference.omega_b_radps[ok] - expected[ok])) < 1e-5
-    assert np.nonzero(out.invalid_reference)[0].tolist() == [0, 98, 99, 100, 101, 102]
+    assert np.nonzero(out.invalid_reference)[0].tolist() == [0, 100, 101]
+    assert np.nonzero(m.shift_reference(log, 1.0).invalid_reference)[0].tolist() == [99, 100, 199]
     assert m.shift_reference(log, 0.0) is log
 
 

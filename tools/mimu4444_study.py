@@ -110,9 +110,12 @@ def compare(args) -> list[dict]:
               f"{i['spread_per_axis_after_mps2']:.4f} m/s² (per axis)", flush=True)
     for exp in args.experiments:
         raw, report = load(args.data, exp, with_gyro=False)
-        if args.reference_shift_ms:
-            raw = shift_reference(raw, args.reference_shift_ms)
+        references = {"recorded": raw.reference}
         mask = moving_mask(raw)
+        if args.reference_shift_ms:
+            shifted = shift_reference(raw, args.reference_shift_ms)
+            references[f"shifted {args.reference_shift_ms:+g} ms"] = shifted.reference
+            mask &= moving_mask(shifted)  # the same samples for both references
         print(f"exp_{exp}: {report.n_packets} samples, {int(mask.sum())} moving and valid "
               f"(|ω_ref| > {MOVING_RADPS} rad/s), {report.invalid_reference_samples} with a saturated gyro", flush=True)
         for cal_mode in args.calibration:
@@ -139,26 +142,27 @@ def compare(args) -> list[dict]:
                 if motion.omega_b_radps is None:
                     print(f"  {name}: gives no angular velocity", flush=True)
                     continue
-                row = metrics_row(motion, log, m)
-                row.update(exp=exp, calibration=label, method=name, seconds=elapsed, options=opts)
-                rows.append(row)
-                print(f"  {label:>14} {name:>16}: ω RMSE norm {row['rmse_norm']:.3f} rad/s, median {row['median_norm']:.3f}, "
-                      f"> 5 rad/s {100 * row['large_error']:.1f} %, some axis wrong sign {100 * row['wrong_sign']:.2f} %, "
-                      f"ω·ω_ref < 0 {100 * row['opposite']:.2f} % "
-                      f"({elapsed:.1f} s)", flush=True)
+                for ref_name, reference in references.items():
+                    row = metrics_row(motion, log.replace(reference=reference), m)
+                    row.update(exp=exp, calibration=label, method=name, seconds=elapsed, options=opts, reference=ref_name)
+                    rows.append(row)
+                    print(f"  {label:>14} {name:>16} (ref {ref_name}): ω RMSE norm {row['rmse_norm']:.3f} rad/s, median {row['median_norm']:.3f}, "
+                          f"> 5 rad/s {100 * row['large_error']:.1f} %, some axis wrong sign {100 * row['wrong_sign']:.2f} %, "
+                          f"ω·ω_ref < 0 {100 * row['opposite']:.2f} % "
+                          f"({elapsed:.1f} s)", flush=True)
     return rows
 
 
 def table(rows: list[dict]) -> str:
-    head = ("| exp | calibration | method | n | RMSE x | RMSE y | RMSE z | RMSE norm | median | > 5 rad/s | wrong sign (any axis) "
-            "| ω·ω_ref < 0 | time |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    head = ("| exp | calibration | reference | method | n | RMSE x | RMSE y | RMSE z | RMSE norm | median | > 5 rad/s | wrong sign (any axis) "
+            "| ω·ω_ref < 0 | time |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     lines = [head]
     for r in rows:
         if "skipped" in r:
-            lines.append(f"| {r['exp']} | {r['calibration']} | {r['method']} | not applicable: {r['skipped']} ||||||||||")
+            lines.append(f"| {r['exp']} | {r['calibration']} | | {r['method']} | not applicable: {r['skipped']} ||||||||||")
             continue
         lines.append(
-            f"| {r['exp']} | {r['calibration']} | {r['method']} | {r['n']} | {r['rmse_x']:.3f} | {r['rmse_y']:.3f} | "
+            f"| {r['exp']} | {r['calibration']} | {r['reference']} | {r['method']} | {r['n']} | {r['rmse_x']:.3f} | {r['rmse_y']:.3f} | "
             f"{r['rmse_z']:.3f} | {r['rmse_norm']:.3f} | {r['median_norm']:.3f} | {100 * r['large_error']:.1f} % | "
             f"{100 * r['wrong_sign']:.2f} % | {100 * r['opposite']:.2f} % | {r['seconds']:.1f} s |"
         )

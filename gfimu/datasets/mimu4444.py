@@ -320,9 +320,9 @@ def shift_reference(log, shift_ms: float):
     """The log with its reference ω re-sampled at ``t + shift_ms`` (cubic spline per gap-free segment).
 
     Use ``REFERENCE_SHIFT_MS`` to align the gyro reference with the
-    accelerometers. Samples whose spline support (two samples either side)
-    touches an invalid one are also marked invalid; the first and last
-    samples of each segment are marked when the shifted time leaves it.
+    accelerometers. A sample whose shifted time falls in an interval with an
+    invalid end is also marked invalid, and so are samples whose shifted time
+    leaves their gap-free segment.
     """
     from scipy.interpolate import CubicSpline
 
@@ -335,9 +335,10 @@ def shift_reference(log, shift_ms: float):
     t = log.timestamps_ns
     out = np.empty_like(w)
     bad = invalid.copy()
-    for k in range(1, 3):
-        bad[k:] |= invalid[:-k]
-        bad[:-k] |= invalid[k:]
+    if shift_ms < 0:  # sample k is read between samples k-1 and k
+        bad[1:] |= invalid[:-1]
+    else:
+        bad[:-1] |= invalid[1:]
     shift_ns = shift_ms * 1e6
     for seg in log.segments():
         ts = (t[seg] - t[seg][0]) * 1e-9
