@@ -115,7 +115,7 @@ class FixedLagSmoother:
 
     def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
                  rate_hz: float = 500.0, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10,
-                 marginalise_every_s: float = 0.5, warmup_s: float = 0.2, gap_factor: float = 1.5,
+                 marginalise_every_s: float = 0.25, warmup_s: float = 0.2, gap_factor: float = 1.5,
                  fast_measurement: bool = True) -> None:
         options = options or SmootherOptions()
         reason = fixed_lag_reason(array, options)
@@ -385,7 +385,7 @@ class FixedLagEstimator(SmootherOptions):
     """iSAM2 relinearises ω when its update exceeds this [rad/s] (ω̇ and f enter linearly)."""
     relinearize_skip: int = 10
     """iSAM2 checks for relinearisation every this many updates."""
-    marginalise_every_s: float = 0.5
+    marginalise_every_s: float = 0.25
     """gtsam marginalises old states in blocks of this length (the window holds lag_s to lag_s + this)."""
     warmup_s: float = 0.2
     """Data gathered at the start of each segment for the sign-resolving initialisation."""
