@@ -51,8 +51,8 @@ def arbitrary_array(seed: int = 7) -> SensorArray:
                                            noise_std_mps2=0.07) for i in range(5)), "random-5 (±3 cm)")
 
 
-def cases(duration_s: float):
-    cube = cube_array(0.05, 0.07)
+def cases(duration_s: float, half_edge_m: float = 0.05):
+    cube = cube_array(half_edge_m, 0.07)
     for sc in ("random3d", "turntable", "reversal"):
         yield sc, simulate(sc, cube, rate_hz=500.0, duration_s=duration_s, seed=1), {}
     yield "random3d, arbitrary array", simulate("random3d", arbitrary_array(), rate_hz=500.0, duration_s=duration_s, seed=1), {}
@@ -64,12 +64,16 @@ def cases(duration_s: float):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration-s", type=float, default=10.0)
+    ap.add_argument("--half-edge-m", type=float, default=0.05, help="cube half edge (0.025 for a 5 cm edge)")
+    ap.add_argument("--only-cube", action="store_true", help="only the three cube scenarios")
     ap.add_argument("--json", default="smoother_accuracy.json")
     args = ap.parse_args(argv)
     rows = []
     print("| case | best per-sample (ω RMSE rad/s) | smoother ω RMSE rad/s | gain | sign errors | rel. RMS (eq. 7) per-sample → smoother | RMSE / bound | initialisation ω RMSE, sign errors | time s |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for name, log, opts in cases(args.duration_s):
+    for i, (name, log, opts) in enumerate(cases(args.duration_s, args.half_edge_m)):
+        if args.only_cube and i >= 3:
+            break
         per = {}
         for meth in PER_SAMPLE:
             est = make_estimator(meth)
