@@ -168,9 +168,13 @@ def _bound_variances(name: str, log: Log, truth: Motion, gyro_noise_std_radps: f
             "omega_dot_b_radps2": diag[:, 3:6],
             "omega_b_radps": diag[:, 6:9],
         }
+    from .estimators import make_estimator
     from .smoother.bound import smoother_bound
     from .smoother.graph import SmootherOptions
 
+    reason = make_estimator("smoother", **dict(smoother_options or {})).applicable(log.array)
+    if reason:
+        return f"the smoother cannot run on this array: {reason}"
     opt = SmootherOptions(**dict(smoother_options or {}))
     sigma = smoother_bound(log, options=opt, truth=truth).sigma
     variances = {k: v**2 for k, v in sigma.items()}

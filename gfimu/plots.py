@@ -244,10 +244,11 @@ def plot_polhode(
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax3.plot_wireframe(*_ellipsoid(np.sqrt(two_t / inertia)), color="0.35", lw=0.3, alpha=0.5)
     ax3.plot_wireframe(*_ellipsoid(np.sqrt(h2) / inertia), color="C1", lw=0.3, alpha=0.35)
-    styles = ["k-", "C0-", "C2-", "C3-"]
+    # the first path (usually the truth) thick and solid underneath, the others thin and dashed on top
+    styles = [dict(color="k", lw=3.0, alpha=0.45)] + [dict(color=f"C{k}", lw=1.1, ls="--") for k in range(9)]
     for i, (label, w) in enumerate(omega_b_radps.items()):
         w = np.asarray(w, dtype=float)
-        ax3.plot(w[:, 0], w[:, 1], w[:, 2], styles[i % 4], lw=1.6, label=label)
+        ax3.plot(w[:, 0], w[:, 1], w[:, 2], label=label, **styles[i % 10])
     lim = max(np.max(np.sqrt(two_t / inertia)), np.max(np.sqrt(h2) / inertia))
     for setter in (ax3.set_xlim, ax3.set_ylim, ax3.set_zlim):
         setter(-lim, lim)
@@ -263,7 +264,7 @@ def plot_polhode(
         ax = fig.add_subplot(sub[row, 0])
         for k, (label, w) in enumerate(omega_b_radps.items()):
             w = np.asarray(w, dtype=float)
-            ax.plot(w[:, i], w[:, j], styles[k % 4], lw=1.0, label=label)
+            ax.plot(w[:, i], w[:, j], label=label, **styles[k % 10])
         ax.set_xlabel(f"ω{i + 1} [rad/s]", fontsize=8)
         ax.set_ylabel(f"ω{j + 1} [rad/s]", fontsize=8)
         ax.set_aspect("equal", adjustable="datalim")
