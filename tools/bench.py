@@ -9,7 +9,7 @@ batch smoother's numbers come from ``tools/bench_smoother.py`` and the
 fixed-lag update latency (median, 99th percentile) from
 ``tools/bench_fixed_lag.py``. Prints a table and writes JSON.
 
-    python3 tools/bench.py [--quick] [--durations 10 60 300] [--repeats 3] [--json bench.json]
+    python3 tools/bench.py [--quick] [--durations 10 30 100] [--repeats 3] [--json bench.json]
 
 Arrays: the 5 cm cube of four triads (0.07 m/s²) at 500 Hz for the
 accelerometer-only methods, paper 001's nine-axis array with a gyro for
@@ -96,7 +96,7 @@ def fixed_lag_latency(duration_s: float, lag_s: float = 0.2) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--durations", type=float, nargs="+", default=[10.0, 60.0, 300.0], help="log lengths [s]")
+    ap.add_argument("--durations", type=float, nargs="+", default=[10.0, 30.0, 100.0], help="log lengths [s]")
     ap.add_argument("--repeats", type=int, default=3, help="timed runs per point (median reported)")
     ap.add_argument("--methods", default=",".join(PER_SAMPLE + ["smoother", "fixed-lag"]),
                     help="comma-separated methods")
