@@ -207,3 +207,20 @@ def test_cli_compare_json(tmp_path, noisy_log):
     assert doc["rows"][1]["w_rmse_norm"] == pytest.approx(direct["w_rmse_norm"], rel=1e-9)
     assert main(["compare", str(tmp_path / "log"), "--methods", "nope"]) == 2
     assert main(["compare", str(tmp_path / "log"), "--methods", "inversion", "-O", "imm.t2=4"]) == 2
+
+
+def test_motion_level_and_t2_sweep():
+    from gfimu.compare import motion_level, omega_rmse_sum, t2_sweep
+    from gfimu.estimators import make_estimator
+
+    log = simulate("random3d", array=cube_array(0.05), duration_s=1.0, noise=SensorErrors.none(), seed=4)
+    # a + b + c = (ωx²+ωy²) + (ωx²+ωz²) + (ωy²+ωz²) = 2|ω|², recovered exactly without noise
+    assert motion_level(log) == pytest.approx(np.mean(2 * np.sum(log.truth.omega_b_radps**2, axis=1)), rel=1e-9)
+    noisy = simulate("random3d", array=cube_array(0.05, 0.07), duration_s=1.0, seed=4)
+    t2 = [1.0, 6.0]
+    curve = t2_sweep(noisy, t2)
+    for value, t in zip(curve, t2):
+        direct = make_estimator("imm", t2=t).estimate(noisy)
+        err = direct.omega_b_radps - noisy.truth.omega_b_radps
+        assert value == pytest.approx(np.sum(np.sqrt(np.mean(err**2, axis=0))), rel=1e-12)
+        assert value == pytest.approx(omega_rmse_sum(direct, noisy.truth), rel=1e-12)
