@@ -421,6 +421,9 @@ def format_markdown(result: ComparisonResult) -> str:
         lines.append("No method produced an estimate.")
     else:
         lines.append("RMSE per axis and of the error norm (layout of paper 002, Table 1); bounds are √(mean variance) along the truth.")
+        if any(r["kind"] == "bound" and r["method"].startswith("CRB") for r in ok):
+            lines.append("The per-sample CRB uses one sample's readings only; without a gyro its bound on ω grows "
+                         "without limit as ω → 0 (∂q/∂ω = 0), so slow stretches dominate its mean.")
         lines.append("")
         head = ["method"] + [f"{SYMBOLS[key]}{a} [{unit}]" if a != "‖·‖" else f"‖{SYMBOLS[key]}‖ [{unit}]"
                              for key, _, unit in quantities for a in (*AXES, "‖·‖")] + ["time [s]"]
