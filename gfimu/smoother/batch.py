@@ -292,7 +292,7 @@ class BatchSmootherEstimator(SmootherOptions):
             raise ValueError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
         M = 12 if opt.motion_model == "snap" else STATE_SIZE
         states = np.zeros((n, M))
-        cov = np.zeros((n, M, M)) if opt.compute_sigma else None
+        sd = np.zeros((n, M)) if opt.compute_sigma else None
         windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
         calibration = []
         for solve_sl, keep_log, keep_win in progress_bar(windows, total=len(windows), desc="smoother", enable=progress and len(windows) > 1):
@@ -301,13 +301,12 @@ class BatchSmootherEstimator(SmootherOptions):
             x0 = initial_states(part, opt)
             res = solve(problem, x0, None, compute_sigma=opt.compute_sigma)
             states[keep_log] = res.states[keep_win]
-            if cov is not None:
-                cov[keep_log] = res.covariance[keep_win]
+            if sd is not None:
+                sd[keep_log] = np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
             calibration.append({name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()})
         object.__setattr__(self, "_last_calibration", calibration)
         sigma = {}
-        if cov is not None:
-            sd = np.sqrt(np.einsum("nii->ni", cov))
+        if sd is not None:
             sigma = {"omega_b_radps": sd[:, 0:3], "omega_dot_b_radps2": sd[:, 3:6], "specific_force_b_mps2": sd[:, 6:9]}
         return Motion(log.timestamps_ns, omega_b_radps=states[:, 0:3], omega_dot_b_radps2=states[:, 3:6],
                       specific_force_b_mps2=states[:, 6:9], sigma=sigma)
