@@ -262,3 +262,16 @@ def test_gyro_array_smoother_beats_raw_gyro():
     m = BatchSmootherEstimator().estimate(log)
     raw = float(np.sqrt(np.mean(np.sum((log.gyro_b_radps - log.truth.omega_b_radps) ** 2, axis=1))))
     assert omega_rmse(m, log.truth) < 0.3 * raw
+
+
+def test_log_with_gap():
+    """A 0.4 s hole in the recording: the initialiser restarts, the process factors span the gap."""
+    log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=6.0, seed=12)
+    keep = np.ones(len(log), bool)
+    keep[1500:1700] = False
+    idx = np.nonzero(keep)[0]
+    gapped = log.replace(timestamps_ns=log.timestamps_ns[idx], accel_mps2=log.accel_mps2[idx], truth=log.truth.select(idx))
+    assert len(gapped.gaps()) == 1
+    m = BatchSmootherEstimator().estimate(gapped)
+    assert sign_error_share(m, gapped.truth) == 0.0
+    assert omega_rmse(m, gapped.truth) < 0.03
