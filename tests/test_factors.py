@@ -186,6 +186,17 @@ def test_gravity_jacobians_and_still_body():
     np.testing.assert_allclose(r, 0, atol=1e-12)
 
 
+def test_accel_random_walk_and_attitude_prior_jacobians():
+    R0, R1, P = random_rotations(N), random_rotations(N), random_rotations(N)
+    f0, f1 = RNG.normal(size=(2, N, 3)) * 9
+    check(gravity.accel_random_walk_residual, (f0, f1, R0, R1), {0: "f0", 1: "f1", 2: "r0", 3: "r1"}, rotation_args=(2, 3))
+    check(lambda r: process.attitude_prior_residual(r, P), (R0,), {0: "r"}, rotation_args=(0,))
+    # a still body: f = -Rᵀ g in every attitude, so the acceleration does not change
+    r, _ = gravity.accel_random_walk_residual(np.einsum("nji,j->ni", R0, [0, 0, 9.80665]),
+                                              np.einsum("nji,j->ni", R1, [0, 0, 9.80665]), R0, R1)
+    np.testing.assert_allclose(r, 0, atol=1e-12)
+
+
 def test_inclinometer_jacobian_and_log_format_convention():
     R = random_rotations(N)
     tilt = RNG.uniform(0.5, 2.5, (N, 2))
@@ -262,6 +273,8 @@ def test_custom_factors_match_numpy_and_numerical_derivatives():
         (free_fall.make_free_fall_factor(f(1), UNIT.Create(3)), [f(1)]),
         (gravity.make_gravity_factor(f(1), a(1), r(1), UNIT.Create(3)), [f(1), a(1), r(1)]),
         (inclinometer.make_inclinometer_factor(r(0), [1.2, 1.9], UNIT.Create(2)), [r(0)]),
+        (gravity.make_accel_random_walk_factor(f(0), f(1), r(0), r(1), UNIT.Create(3)), [f(0), f(1), r(0), r(1)]),
+        (process.make_attitude_prior_factor(r(1), random_rotations(1)[0], UNIT.Create(3)), [r(1)]),
         (gyroscope.make_gyroscope_factor(w(0), RNG.normal(size=3), UNIT.Create(3), F.gyro_bias_key()), [w(0), F.gyro_bias_key()]),
     ]
     for factor, keys in cases:

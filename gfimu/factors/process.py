@@ -52,3 +52,27 @@ def make_prior_factor(key: int, mean, noise_model):
         return r[0], [j["x"][0]]
 
     return custom_factor(noise_model, [key], error)
+
+
+def attitude_prior_residual(rotation_wb, prior_wb):
+    """``Log(R R̂ᵀ)`` (N, 3), the attitude error in world axes (x, y: tilt; z: yaw),
+    and ``{'r': Jl⁻¹(e) R}`` for the right perturbation of R."""
+    from . import _so3
+
+    R = np.asarray(rotation_wb, dtype=float).reshape(-1, 3, 3)
+    P = np.asarray(prior_wb, dtype=float).reshape(-1, 3, 3)
+    e = _so3.log(R @ np.swapaxes(P, -1, -2))
+    return e, {"r": _so3.left_jacobian_inverse(e) @ R}
+
+
+def make_attitude_prior_factor(key_attitude: int, prior_wb, noise_model):
+    """CustomFactor on a Rot3 variable: world-axis attitude error against ``prior_wb`` (3×3)."""
+    from . import rotation_at
+
+    prior = np.asarray(prior_wb, dtype=float).reshape(3, 3)
+
+    def error(values):
+        r, j = attitude_prior_residual(rotation_at(values, key_attitude), prior)
+        return r[0], [j["r"][0]]
+
+    return custom_factor(noise_model, [key_attitude], error)
