@@ -114,7 +114,20 @@ class FixedLagSmoother:
     sample as it comes (``accel_row`` ordered as ``array.accel_columns``, each
     axis in its sensor's own frame); ``flush()`` at the end. ``rate_hz`` is the
     nominal sample rate, used to detect gaps. Tilt rows are accepted for
-    interface symmetry but not used (the state has no orientation).
+    interface symmetry but not used (the state has no orientation). Usage::
+
+        smoother = FixedLagSmoother(array, SmootherOptions(), lag_s=0.2, rate_hz=500.0)
+        for timestamp_ns, accel_row in stream:
+            update = smoother.push(timestamp_ns, accel_row)
+            for state in update.smoothed:      # final, lag_s behind
+                use(state.omega_b_radps)
+            newest = update.filtered           # now, from the data so far
+        remaining = smoother.flush()
+
+    Solver settings: ``relinearize_threshold`` [rad/s] and ``relinearize_skip``
+    (iSAM2), ``marginalise_every_s`` (size of the marginalisation blocks),
+    ``warmup_s`` (data gathered to initialise a segment), ``gap_factor``,
+    ``fast_measurement`` (see :class:`FixedLagEstimator`).
     """
 
     def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
