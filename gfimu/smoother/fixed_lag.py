@@ -252,8 +252,9 @@ class FixedLagSmoother:
         # states at a time (one re-elimination of the window per block rather than
         # per sample, which would also relinearise the window's factors). Every
         # state must be read at t + lag before its block goes: gtsam's lag is the
-        # requested lag plus one block plus a step.
-        return gtsam.IncrementalFixedLagSmoother(self.lag_s + self._block_s + 1.5 / self.rate_hz, params)
+        # requested lag plus one block plus the longest step that is not a gap.
+        margin_s = (self.gap_factor + 0.5) / self.rate_hz
+        return gtsam.IncrementalFixedLagSmoother(self.lag_s + self._block_s + margin_s, params)
 
     def _time_s(self, t_ns: int) -> float:
         return (t_ns - self._origin_ns) * 1e-9
