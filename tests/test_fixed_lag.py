@@ -91,6 +91,14 @@ def test_fast_trapezoid_factor_equals_kinematics_factor():
     np.testing.assert_allclose(trapezoid.whitenedError(values), r_ref[0] / sigma, rtol=1e-12)
 
 
+def test_fast_and_shared_factor_paths_give_the_same_estimate():
+    log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=0.8, seed=10)
+    fast = FixedLagEstimator(fast_measurement=True).estimate(log)
+    shared = FixedLagEstimator(fast_measurement=False).estimate(log)
+    np.testing.assert_allclose(fast.omega_b_radps, shared.omega_b_radps, atol=1e-6)
+    np.testing.assert_allclose(fast.specific_force_b_mps2, shared.specific_force_b_mps2, atol=1e-6)
+
+
 # --- accuracy -----------------------------------------------------------------------------
 
 def test_noise_free_random_motion_is_recovered():
