@@ -272,6 +272,7 @@ def test_bad_input_is_refused_with_the_cause():
     assert "gyroscope" in FixedLagEstimator().applicable(single_triad())
     assert FixedLagEstimator().applicable(replace(single_triad(), gyroscope=Gyroscope(0.01))) is None
     assert "self_calibrate_bias" in FixedLagEstimator(self_calibrate_bias=True).applicable(arr)
+    assert "motion_model" in FixedLagEstimator(motion_model="snap").applicable(arr)
     with pytest.raises(ValueError, match="no option"):
         make_estimator("fixed-lag", lag=0.2)
 

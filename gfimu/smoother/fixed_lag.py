@@ -94,10 +94,12 @@ class FixedLagUpdate:
 
 def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None:
     """Why the fixed-lag smoother cannot run on ``array`` with ``options`` (None if it can)."""
-    unsupported = [name for name in ("self_calibrate_bias", "self_calibrate_scale", "free_flight", "use_inclinometer")
-                   if getattr(options, name)]
+    unsupported = [name for name in ("self_calibrate_bias", "self_calibrate_scale", "free_flight", "use_inclinometer",
+                                     "estimate_attitude") if getattr(options, name, False)]
     if unsupported:
         return f"the fixed-lag smoother does not support {', '.join(unsupported)} (use method 'smoother')"
+    if getattr(options, "motion_model", "jerk") != "jerk":
+        return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.motion_model!r} (use method 'smoother')"
     if options.measurement != "accelerometer":
         return "the fixed-lag smoother uses measurement='accelerometer' only"
     has_gyro = array.gyroscope is not None and options.use_gyro
