@@ -218,7 +218,7 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
         while True:
             fac = factorise(ne, lam)
             dx, dp = solve_step(ne, fac)
-            Xn, Pn = X + dx, P + dp
+            Xn, Pn = problem.retract(X, dx), P + dp
             new_cost = problem.cost(Xn, Pn)
             if method != "lm" or new_cost <= ne.cost or lam > 1e10:
                 break
@@ -277,29 +277,34 @@ class BatchSmootherEstimator(SmootherOptions):
         return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
 
     def applicable(self, array: SensorArray) -> str | None:
-        return options_reason(array, self.options())
+        return options_reason(array, self.options(), attitude_supported=True)
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         from ..progress import progress as progress_bar
         from .initialise import initial_states
 
         opt = self.options()
-        reason = options_reason(log.array, opt)
+        reason = options_reason(log.array, opt, attitude_supported=True)
         if reason:
             raise ValueError(f"{log.source}: {reason}")
         n = len(log)
         if n < 2:
             raise ValueError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
-        M = 12 if opt.motion_model == "snap" else STATE_SIZE
+        attitude = opt.estimate_attitude or opt.use_inclinometer
+        M = (12 if opt.motion_model == "snap" else STATE_SIZE) + (3 if attitude else 0)
         states = np.zeros((n, M))
         sd = np.zeros((n, M)) if opt.compute_sigma else None
         windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
         calibration = []
+        previous = None  # (solve slice, attitudes) of the window before
         for solve_sl, keep_log, keep_win in progress_bar(windows, total=len(windows), desc="smoother", enable=progress and len(windows) > 1):
             part = log.select(solve_sl)
-            problem = SmootherProblem(part, opt)
-            x0 = initial_states(part, opt)
-            res = solve(problem, x0, None, compute_sigma=opt.compute_sigma)
+            if attitude:
+                res, problem = self._solve_with_attitude(part, opt, previous, solve_sl)
+                previous = (solve_sl, problem.rotations(res.states))
+            else:
+                problem = SmootherProblem(part, opt)
+                res = solve(problem, initial_states(part, opt), None, compute_sigma=opt.compute_sigma)
             states[keep_log] = res.states[keep_win]
             if sd is not None:
                 sd[keep_log] = np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
@@ -308,8 +313,37 @@ class BatchSmootherEstimator(SmootherOptions):
         sigma = {}
         if sd is not None:
             sigma = {"omega_b_radps": sd[:, 0:3], "omega_dot_b_radps2": sd[:, 3:6], "specific_force_b_mps2": sd[:, 6:9]}
+        extra = {}
+        if attitude:
+            from ..factors import GRAVITY_W_MPS2, _so3
+            from ..rotations import quaternion_from_matrix
+
+            R = _so3.exp(states[:, M - 3:])
+            extra["quaternion_wb"] = quaternion_from_matrix(R)
+            extra["accel_b_mps2"] = states[:, 6:9] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
         return Motion(log.timestamps_ns, omega_b_radps=states[:, 0:3], omega_dot_b_radps2=states[:, 3:6],
-                      specific_force_b_mps2=states[:, 6:9], sigma=sigma)
+                      specific_force_b_mps2=states[:, 6:9], sigma=sigma, **extra)
+
+    @staticmethod
+    def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: slice):
+        """Two stages: the smoother without attitude, then the attitude propagated from its ω
+        (starting from the previous window's attitude, which also anchors the yaw) and the full solve."""
+        from dataclasses import replace
+
+        from ..factors import _so3
+        from .initialise import initial_attitude, initial_states
+
+        base = replace(opt, estimate_attitude=False, use_inclinometer=False, compute_sigma=False)
+        first = solve(SmootherProblem(part, base), initial_states(part, base))
+        start = None
+        if previous is not None:
+            prev_sl, prev_R = previous
+            start = prev_R[solve_sl.start - prev_sl.start]
+        R = initial_attitude(part, first.states[:, 0:3], first.states[:, 6:9], start, opt.use_inclinometer)
+        problem = SmootherProblem(part, opt)
+        problem.attitude_prior_wb = R[0]
+        x0 = np.hstack([first.states, _so3.log(R)])
+        return solve(problem, x0, first.params if first.params.size else None, compute_sigma=opt.compute_sigma), problem
 
     @property
     def last_calibration(self) -> list[dict]:

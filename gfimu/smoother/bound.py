@@ -42,10 +42,21 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
     states = truth_states(truth)
     if opt.motion_model == "snap":  # ω̈ of the truth by central differences
         states = np.hstack([states, np.gradient(states[:, 3:6], log.times_s, axis=0)])
+    if opt.estimate_attitude or opt.use_inclinometer:
+        if truth.quaternion_wb is None:
+            raise ValueError("the bound with attitude needs the true quaternion_wb")
+        from ..factors import _so3
+        from ..rotations import matrix_from_quaternion
+
+        states = np.hstack([states, _so3.log(matrix_from_quaternion(truth.quaternion_wb))])
     n = len(log)
     sd = np.zeros((n, states.shape[1]))
     for solve_sl, keep_log, keep_win in window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s):
         problem = SmootherProblem(log.select(solve_sl), opt)
+        if problem.attitude:
+            from ..factors import _so3
+
+            problem.attitude_prior_wb = _so3.exp(states[solve_sl.start, -3:])
         params = np.zeros(problem.n_global) if true_params is None else true_params
         ne = normal_equations(problem, states[solve_sl], params)
         cov, _ = marginal_covariances(ne, factorise(ne, 0.0))

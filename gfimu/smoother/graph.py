@@ -32,14 +32,18 @@ import numpy as np
 
 from ..array import SensorArray
 from ..factors import (
+    _so3,
     accelerometer,
+    attitude_key,
     bias_key,
     diagonal_noise,
     euler,
-    gaussian_noise,
     free_fall,
+    gaussian_noise,
+    gravity,
     gyro_bias_key,
     gyroscope,
+    inclinometer,
     kinematics,
     omega_ddot_key,
     omega_dot_key,
@@ -82,7 +86,17 @@ class SmootherOptions:
     use_gyro: bool = True
     """Use the gyroscope when the array has one."""
     use_inclinometer: bool = False
-    """Tilt factors need the attitude state, which the batch smoother does not carry yet; keep False."""
+    """Use the inclinometer's tilt angles (paper 001); implies ``estimate_attitude``."""
+    estimate_attitude: bool = False
+    """Carry the attitude R_k (W←B) in the state and output orientation and gravity-free acceleration.
+    Tilt is observed through the inclinometer or, without one, through the random walk of the
+    gravity-free acceleration; yaw only through a weak prior (``initial_yaw_std_rad``)."""
+    accel_random_walk_mps2_per_sqrt_s: float = 30.0
+    """With the attitude: random walk of the gravity-free acceleration (replaces the specific-force one)."""
+    attitude_random_walk_rad_per_sqrt_s: float = 1e-3
+    """With the attitude: process noise of ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``."""
+    initial_yaw_std_rad: float = 1.0
+    """With the attitude: prior std of the first sample's yaw (tilt prior std is 10 rad: free)."""
     self_calibrate_bias: bool = False
     """Estimate a constant bias per accelerometer axis (and the gyro bias)."""
     bias_prior_std_mps2: float = 0.1
@@ -128,6 +142,9 @@ class SmootherOptions:
             "initial_omega_dot_std_radps2",
             "initial_specific_force_std_mps2",
             "init_window_s",
+            "accel_random_walk_mps2_per_sqrt_s",
+            "attitude_random_walk_rad_per_sqrt_s",
+            "initial_yaw_std_rad",
         ):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
@@ -142,10 +159,19 @@ class SmootherOptions:
             raise ValueError("smoother option max_iterations must be >= 1")
 
 
-def options_reason(array: SensorArray, options: SmootherOptions) -> str | None:
-    """Why the smoother cannot run on ``array`` with ``options`` (None if it can)."""
-    if options.use_inclinometer:
-        return "use_inclinometer needs the attitude state, not carried by the batch smoother; set use_inclinometer=False"
+def options_reason(array: SensorArray, options: SmootherOptions, attitude_supported: bool = False) -> str | None:
+    """Why the smoother cannot run on ``array`` with ``options`` (None if it can).
+
+    ``attitude_supported``: the caller carries the attitude state (the batch
+    smoother does); otherwise ``use_inclinometer`` and ``estimate_attitude``
+    are refused.
+    """
+    if (options.use_inclinometer or options.estimate_attitude) and not attitude_supported:
+        return "use_inclinometer / estimate_attitude need the attitude state, which this smoother does not carry"
+    if options.use_inclinometer and array.inclinometer is None:
+        return f"use_inclinometer: array {array.name!r} has no inclinometer"
+    if (options.use_inclinometer or options.estimate_attitude) and options.free_flight:
+        return "estimate_attitude is not available in free flight (the specific force carries no gravity)"
     if options.measurement == "quadratic":
         if options.self_calibrate_bias or options.self_calibrate_scale or options.free_flight:
             return "measurement='quadratic' works on the per-sample inversion: no self-calibration or free flight"
@@ -187,7 +213,7 @@ class SmootherProblem:
     options: SmootherOptions = field(default_factory=SmootherOptions)
 
     def __post_init__(self) -> None:
-        reason = options_reason(self.log.array, self.options)
+        reason = options_reason(self.log.array, self.options, attitude_supported=True)
         if reason:
             raise ValueError(reason)
         arr = self.log.array
@@ -237,7 +263,25 @@ class SmootherProblem:
                 raise ValueError(f"{self.log.source}: gyroscope reading is not finite at sample {row}")
             gs = arr.gyroscope.noise_std_radps
             self.gyro_sigma = float(gs) if gs else 0.01
-        self.state_size = 12 if opt.motion_model == "snap" else STATE_SIZE
+        self.snap = opt.motion_model == "snap"
+        self.state_size = 12 if self.snap else STATE_SIZE
+        self.attitude = bool(opt.estimate_attitude or opt.use_inclinometer)
+        self.use_inclinometer = bool(opt.use_inclinometer and self.log.tilt_rad is not None)
+        if opt.use_inclinometer and self.log.tilt_rad is None:
+            raise ValueError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
+        if self.attitude:
+            self.AT = slice(self.state_size, self.state_size + 3)
+            self.state_size += 3
+            self.attitude_prior_wb = np.eye(3)
+            self.attitude_prior_sigma = np.array([10.0, 10.0, opt.initial_yaw_std_rad])
+            self.attitude_step_sigma = process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, self.dt_s)
+            self.accel_step_sigma = process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, self.dt_s)
+            if self.use_inclinometer:
+                if not np.all(np.isfinite(self.log.tilt_rad)):
+                    row = int(np.argwhere(~np.isfinite(self.log.tilt_rad))[0, 0])
+                    raise ValueError(f"{self.log.source}: inclinometer reading is not finite at sample {row}")
+                ns = arr.inclinometer.noise_std_rad
+                self.tilt_sigma = float(ns) if ns else 0.002
         if opt.motion_model == "snap":
             cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, self.dt_s)
             self.snap_cov = cov
@@ -249,7 +293,7 @@ class SmootherProblem:
         self.first_sigma = np.repeat(
             [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
         )
-        if self.state_size == 12:
+        if self.snap:
             self.first_sigma = np.concatenate([self.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
 
     # --- calibration variables -------------------------------------------
@@ -275,7 +319,7 @@ class SmootherProblem:
         out = []
         if self.options.measurement == "quadratic":
             r, j = quadratic.inversion_residual(X[:, W], X[:, D], X[:, F], self.x_hat)
-            J = np.concatenate([j["w"], j["d"], j["f"]] + ([np.zeros_like(j["f"])] if self.state_size == 12 else []), axis=2)
+            J = np.concatenate([j["w"], j["d"], j["f"]] + [np.zeros_like(j["f"])] * ((self.state_size - 9) // 3), axis=2)
             out.append(Term("unary", r @ self.x_whiten.T, {"x": self.x_whiten @ J}))
         else:
             out.append(self._accelerometer_term(X, params))
@@ -292,7 +336,7 @@ class SmootherProblem:
             scale = self.global_part(params, f"scale{i}")
             r, j = accelerometer.accelerometer_residual(X[:, W], X[:, D], X[:, F], self.log.accel_mps2[:, cols], d, p, bias, scale)
             rows.append(r)
-            jx.append(np.concatenate([j["w"], j["d"], j["f"]] + ([np.zeros_like(j["f"])] if m == 12 else []), axis=2))
+            jx.append(np.concatenate([j["w"], j["d"], j["f"]] + [np.zeros_like(j["f"])] * ((m - 9) // 3), axis=2))
             if bias is not None:
                 jg[:, cols, self.global_blocks[f"bias{i}"][0]] = j["b"]
             if scale is not None:
@@ -308,26 +352,34 @@ class SmootherProblem:
         n = self.n
         out = []
         m = self.state_size
+        mk = m - 3 if self.attitude else m  # size of the kinematic part [ω, ω̇, f(, ω̈)]
         # first-state weak prior
-        r0, _ = process.prior_residual(X[:1], np.zeros(m))
-        out.append(Term("unary", r0 / self.first_sigma, {"x": np.diag(1.0 / self.first_sigma)[None]}, None, first=0))
+        r0, _ = process.prior_residual(X[:1, :mk], np.zeros(mk))
+        J0p = np.zeros((1, mk, m))
+        J0p[0, :, :mk] = np.diag(1.0 / self.first_sigma)
+        out.append(Term("unary", r0 / self.first_sigma, {"x": J0p}, None, first=0))
         steps = n - 1
-        rf, _ = process.random_walk_residual(X[:-1, F], X[1:, F])
-        wf = 1.0 / self.force_step_sigma[:, None]
-        if m == STATE_SIZE:
-            # trapezoid kinematics + ω̇ and f random walks, stacked as one binary term (9 rows)
+        if self.attitude:
+            out.extend(self._attitude_terms(X))
+        else:
+            rf, _ = process.random_walk_residual(X[:-1, F], X[1:, F])
+            wf = 1.0 / self.force_step_sigma[:, None]
+            Jf0 = np.zeros((steps, 3, m))
+            Jf1 = np.zeros((steps, 3, m))
+            Jf0[:, :, F], Jf1[:, :, F] = -np.eye(3), np.eye(3)
+            out.append(Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]}))
+        if mk == STATE_SIZE:
+            # trapezoid kinematics + ω̇ random walk, stacked as one binary term (6 rows)
             rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
             rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
-            J0 = np.zeros((steps, 9, m))
-            J1 = np.zeros((steps, 9, m))
+            J0 = np.zeros((steps, 6, m))
+            J1 = np.zeros((steps, 6, m))
             J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
             J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
             J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
-            J0[:, 6:9, F], J1[:, 6:9, F] = -np.eye(3), np.eye(3)
             wb = 1.0 / np.concatenate(
-                [np.repeat(self.trapezoid_sigma[:, None], 3, 1), np.repeat(self.omega_dot_step_sigma[:, None], 3, 1),
-                 np.repeat(self.force_step_sigma[:, None], 3, 1)], axis=1)
-            out.append(Term("binary", np.concatenate([rk, rd, rf], axis=1) * wb,
+                [np.repeat(self.trapezoid_sigma[:, None], 3, 1), np.repeat(self.omega_dot_step_sigma[:, None], 3, 1)], axis=1)
+            out.append(Term("binary", np.concatenate([rk, rd], axis=1) * wb,
                             {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]}))
         else:
             # white snap: exact triple-integrator step of [ω, ω̇, ω̈] (9 rows, full covariance) + f random walk
@@ -339,10 +391,6 @@ class SmootherProblem:
             J0[:, :, A], J1[:, :, A] = ja["j0"], ja["j1"]
             Wn = self.snap_whiten
             out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1}))
-            Jf0 = np.zeros((steps, 3, m))
-            Jf1 = np.zeros((steps, 3, m))
-            Jf0[:, :, F], Jf1[:, :, F] = -np.eye(3), np.eye(3)
-            out.append(Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]}))
         # gyroscope
         if self.use_gyro:
             gb = self.global_part(params, "gyro_bias")
@@ -371,6 +419,51 @@ class SmootherProblem:
         if self.n_global:
             s = self.global_prior_sigma()
             out.append(Term("global", (params / s)[None], {}, np.diag(1.0 / s)[None]))
+        return out
+
+    def rotations(self, states: np.ndarray) -> np.ndarray:
+        """Attitudes R_k (N, 3, 3) from the rotation-vector columns of the state."""
+        return _so3.exp(states[:, self.AT])
+
+    def retract(self, states: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """``x ⊕ δ``: vector parts added, attitude ``R ← R Exp(δ)`` (right perturbation)."""
+        out = states + delta
+        if self.attitude:
+            out[:, self.AT] = _so3.log(self.rotations(states) @ _so3.exp(delta[:, self.AT]))
+        return out
+
+    def _attitude_terms(self, X: np.ndarray) -> list[Term]:
+        n, m, AT = self.n, self.state_size, self.AT
+        steps = n - 1
+        R = self.rotations(X)
+        out = []
+        # attitude kinematics R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)
+        r, j = kinematics.attitude_residual(R[:-1], R[1:], X[:-1, W], X[1:, W], self.dt_s)
+        w = 1.0 / self.attitude_step_sigma[:, None]
+        J0 = np.zeros((steps, 3, m))
+        J1 = np.zeros((steps, 3, m))
+        J0[:, :, AT], J1[:, :, AT] = j["r0"], j["r1"]
+        J0[:, :, W], J1[:, :, W] = j["w0"], j["w1"]
+        out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
+        # gravity-free acceleration a = f + Rᵀ g as a random walk
+        r, j = gravity.accel_random_walk_residual(X[:-1, F], X[1:, F], R[:-1], R[1:])
+        w = 1.0 / self.accel_step_sigma[:, None]
+        J0 = np.zeros((steps, 3, m))
+        J1 = np.zeros((steps, 3, m))
+        J0[:, :, F], J1[:, :, F] = j["f0"], j["f1"]
+        J0[:, :, AT], J1[:, :, AT] = j["r0"], j["r1"]
+        out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
+        # weak prior on the first attitude (fixes yaw)
+        r, j = process.attitude_prior_residual(R[:1], self.attitude_prior_wb)
+        w = 1.0 / self.attitude_prior_sigma
+        Jp = np.zeros((1, 3, m))
+        Jp[:, :, AT] = j["r"] * w[:, None]
+        out.append(Term("unary", r * w, {"x": Jp}, None, first=0))
+        if self.use_inclinometer:
+            r, j = inclinometer.inclinometer_residual(R, self.log.tilt_rad)
+            Ji = np.zeros((n, 2, m))
+            Ji[:, :, AT] = j["r"] / self.tilt_sigma
+            out.append(Term("unary", r / self.tilt_sigma, {"x": Ji}))
         return out
 
     def cost(self, states: np.ndarray, params: np.ndarray) -> float:
@@ -403,12 +496,25 @@ class SmootherProblem:
                 graph.add(free_fall.make_free_fall_factor(specific_force_key(k), diagonal_noise(np.full(3, opt.free_fall_std_mps2))))
         for key, sl in ((omega_key(0), W), (omega_dot_key(0), D), (specific_force_key(0), F)):
             graph.add(process.make_prior_factor(key, np.zeros(3), diagonal_noise(self.first_sigma[sl])))
-        if self.state_size == 12:
+        if self.snap:
             graph.add(process.make_prior_factor(omega_ddot_key(0), np.zeros(3), diagonal_noise(self.first_sigma[A])))
+        if self.attitude:
+            graph.add(process.make_attitude_prior_factor(attitude_key(0), self.attitude_prior_wb,
+                                                         diagonal_noise(self.attitude_prior_sigma)))
+            for k in range(self.n):
+                if self.use_inclinometer:
+                    graph.add(inclinometer.make_inclinometer_factor(attitude_key(k), self.log.tilt_rad[k],
+                                                                    diagonal_noise(np.full(2, self.tilt_sigma))))
         for k in range(self.n - 1):
-            graph.add(process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
-                                                      diagonal_noise(np.full(3, self.force_step_sigma[k]))))
-            if self.state_size == 12:
+            if self.attitude:
+                graph.add(kinematics.make_attitude_factor(attitude_key(k), attitude_key(k + 1), omega_key(k), omega_key(k + 1),
+                                                          float(self.dt_s[k]), diagonal_noise(np.full(3, self.attitude_step_sigma[k]))))
+                graph.add(gravity.make_accel_random_walk_factor(specific_force_key(k), specific_force_key(k + 1), attitude_key(k),
+                                                                attitude_key(k + 1), diagonal_noise(np.full(3, self.accel_step_sigma[k]))))
+            else:
+                graph.add(process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
+                                                          diagonal_noise(np.full(3, self.force_step_sigma[k]))))
+            if self.snap:
                 graph.add(kinematics.make_angular_motion_factor(
                     omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), omega_ddot_key(k),
                     omega_ddot_key(k + 1), float(self.dt_s[k]), gaussian_noise(self.snap_cov[k])))
@@ -430,8 +536,10 @@ class SmootherProblem:
             values.insert(omega_key(k), np.array(states[k, W]))
             values.insert(omega_dot_key(k), np.array(states[k, D]))
             values.insert(specific_force_key(k), np.array(states[k, F]))
-            if self.state_size == 12:
+            if self.snap:
                 values.insert(omega_ddot_key(k), np.array(states[k, A]))
+            if self.attitude:
+                values.insert(attitude_key(k), gtsam.Rot3(_so3.exp(states[k, self.AT])))
         for name, (sl, key) in self.global_blocks.items():
             values.insert(key, np.array(params[sl]))
         return values
@@ -442,8 +550,10 @@ class SmootherProblem:
             states[k, W] = values.atVector(omega_key(k))
             states[k, D] = values.atVector(omega_dot_key(k))
             states[k, F] = values.atVector(specific_force_key(k))
-            if self.state_size == 12:
+            if self.snap:
                 states[k, A] = values.atVector(omega_ddot_key(k))
+            if self.attitude:
+                states[k, self.AT] = _so3.log(values.atRot3(attitude_key(k)).matrix())
         params = np.zeros(self.n_global)
         for name, (sl, key) in self.global_blocks.items():
             params[sl] = values.atVector(key)

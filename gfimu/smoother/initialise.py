@@ -260,3 +260,39 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
             continue
         x0[seg, 0:3] = sign_resolved_omega(z[seg, 6:12], z[seg, 3:6], log.dt_s[seg.start:seg.stop - 1], window)
     return x0
+
+
+def level_attitude(up_b: np.ndarray) -> np.ndarray:
+    """R (W←B) with ``Rᵀ e_z = up_b`` and zero yaw (body x projected on the horizontal maps to world x)."""
+    u = np.asarray(up_b, dtype=float)
+    u = u / np.linalg.norm(u)
+    ref = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = ref - (ref @ u) * u
+    x /= np.linalg.norm(x)
+    return np.vstack([x, np.cross(u, x), u])
+
+
+def initial_attitude(log: Log, omega_b_radps: np.ndarray, specific_force_b_mps2: np.ndarray,
+                     start_wb: np.ndarray | None = None, use_inclinometer: bool = False) -> np.ndarray:
+    """Attitudes (N, 3, 3): the first from ``start_wb``, else levelled from the inclinometer or the
+    mean specific force of the first 0.2 s (zero yaw); then propagated with
+    ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)`` (paper 003, eq. 10)."""
+    from ..factors import _so3
+
+    n = len(log)
+    if start_wb is not None:
+        R0 = np.asarray(start_wb, dtype=float)
+    else:
+        m = max(1, min(n, int(round(0.2 * log.rate_hz))))
+        up = specific_force_b_mps2[:m].mean(axis=0)
+        if use_inclinometer and log.tilt_rad is not None:
+            c = np.cos(log.tilt_rad[:m].mean(axis=0))
+            z = np.sqrt(max(0.0, 1.0 - c @ c))
+            up = np.array([c[0], c[1], z if up[2] >= 0 else -z])
+        R0 = level_attitude(up)
+    steps = _so3.exp(0.5 * log.dt_s[:, None] * (omega_b_radps[1:] + omega_b_radps[:-1]))
+    R = np.empty((n, 3, 3))
+    R[0] = R0
+    for k in range(n - 1):
+        R[k + 1] = R[k] @ steps[k]
+    return R
