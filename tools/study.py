@@ -43,7 +43,7 @@ LAYOUTS = {
     "cube-5cm": lambda: cube_array(0.05, noise_std_mps2=0.07),
     "cube-5cm+gyro": lambda: _with_gyro(cube_array(0.05, noise_std_mps2=0.07)),
     "mimu4444": lambda: mimu4444_array(),
-    "paper001": lambda: paper001_array(0.05, 0.025),
+    "paper001": lambda: paper001_array(lever_arm_m=0.05),
 }
 FREE_FLIGHT = ("freeflight-major", "freeflight-intermediate", "freeflight-minor")
 QUICK_SCENARIOS = ("random3d", "reversal", "turntable", "freeflight-major")
@@ -73,9 +73,14 @@ def comparison_tables(out: Path, scenarios, layouts, duration_s: float | None, m
             if sc_duration is not None and SCENARIOS[scenario].duration_s is not None:
                 sc_duration = min(sc_duration, SCENARIOS[scenario].duration_s)
             t0 = time.perf_counter()
-            log = simulate(scenario, array, duration_s=sc_duration, seed=seed)
-            result = compare(log, methods=methods, gyro_noise_std_radps=0.01)
             stem = f"{scenario}__{layout.split(' ')[0]}"
+            try:
+                log = simulate(scenario, array, duration_s=sc_duration, seed=seed)
+                result = compare(log, methods=methods, gyro_noise_std_radps=0.01)
+            except Exception as exc:  # noqa: BLE001 - one case failing must not lose the rest of the study
+                _say(f"  {stem}: FAILED {type(exc).__name__}: {exc}")
+                (out / "tables" / f"{stem}.md").write_text(f"# {stem}\n\nfailed: {type(exc).__name__}: {exc}\n")
+                continue
             (out / "tables" / f"{stem}.md").write_text(
                 f"# {scenario} on {log.array.name}\n\n{SCENARIOS[scenario].summary}; "
                 f"{len(log)} samples at {log.rate_hz:.0f} Hz, seed {seed}.\n\n" + result.to_markdown(), encoding="utf-8")
