@@ -38,10 +38,12 @@ class NormalEquations:
     border: np.ndarray
     grad_global: np.ndarray
     cost: float
+    rows: int | None = None
+    """Number of whitened residual rows."""
 
 
-def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray) -> NormalEquations:
-    """Accumulate JᵀJ and Jᵀr of all factors, vectorised."""
+def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray, terms=None) -> NormalEquations:
+    """Accumulate JᵀJ and Jᵀr of all factors (or of ``terms``), vectorised."""
     n, G, M = problem.n, problem.n_global, problem.state_size
     diag = np.zeros((n, M, M))
     lower = np.zeros((n - 1, M, M))
@@ -50,9 +52,11 @@ def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.nd
     border = np.zeros((G, G))
     grad_g = np.zeros(G)
     cost = 0.0
-    for t in problem.terms(states, params):
+    rows = 0
+    for t in (problem.terms(states, params) if terms is None else terms):
         r = t.residual
         cost += 0.5 * float(np.sum(r * r))
+        rows += r.size
         if t.kind == "unary":
             J = t.jac["x"]
             k0, k1 = t.first, t.first + r.shape[0]
@@ -76,7 +80,13 @@ def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.nd
             Jg = t.jac_global
             border += np.einsum("nri,nrj->ij", Jg, Jg)
             grad_g += np.einsum("nri,nr->i", Jg, r)
-    return NormalEquations(diag, lower, grad, coupling, border, grad_g, cost)
+    return NormalEquations(diag, lower, grad, coupling, border, grad_g, cost, rows)
+
+
+def add_normal_equations(a: NormalEquations, b: NormalEquations) -> NormalEquations:
+    """Normal equations of the union of two sets of factors on the same states."""
+    return NormalEquations(a.diag + b.diag, a.lower + b.lower, a.grad + b.grad, a.coupling + b.coupling, a.border + b.border,
+                           a.grad_global + b.grad_global, a.cost + b.cost, (a.rows or 0) + (b.rows or 0))
 
 
 def to_lower_banded(diag: np.ndarray, lower: np.ndarray) -> np.ndarray:
@@ -271,7 +281,15 @@ class BatchSmootherEstimator(SmootherOptions):
     and the specific force at the body origin for every sample, with
     one-sigma marginal uncertainties when ``compute_sigma``. Calibration
     estimates of the last solve are kept in :attr:`last_calibration`.
+
+    Unlike :class:`SmootherOptions`, ``tune_process_noise`` is on by default: the
+    jerk density per body axis and the specific-force density are chosen per solve
+    window by the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`;
+    the choice is kept in :attr:`last_tuning`); ``tune_process_noise=False`` uses
+    the fixed densities.
     """
+
+    tune_process_noise: bool = True
 
     def options(self) -> SmootherOptions:
         return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
@@ -296,20 +314,23 @@ class BatchSmootherEstimator(SmootherOptions):
         sd = np.zeros((n, M)) if opt.compute_sigma else None
         windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
         calibration = []
+        tunings = []
         previous = None  # (solve slice, attitudes) of the window before
         for solve_sl, keep_log, keep_win in progress_bar(windows, total=len(windows), desc="smoother", enable=progress and len(windows) > 1):
             part = log.select(solve_sl)
             if attitude:
-                res, problem = self._solve_with_attitude(part, opt, previous, solve_sl)
+                res, problem = self._solve_with_attitude(part, opt, previous, solve_sl, tunings)
                 previous = (solve_sl, problem.rotations(res.states))
             else:
-                problem = SmootherProblem(part, opt)
-                res = solve(problem, initial_states(part, opt), None, compute_sigma=opt.compute_sigma)
-            states[keep_log] = res.states[keep_win]
+                problem, x0 = self._tuned_problem(part, opt, tunings)
+                res = solve(problem, x0, None, compute_sigma=opt.compute_sigma)
+            m = min(M, res.states.shape[1])
+            states[keep_log, :m] = res.states[keep_win, :m]
             if sd is not None:
-                sd[keep_log] = np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
+                sd[keep_log, :m] = np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win, :m]
             calibration.append({name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()})
         object.__setattr__(self, "_last_calibration", calibration)
+        object.__setattr__(self, "_last_tuning", tunings)
         sigma = {}
         if sd is not None:
             sigma = {"omega_b_radps": sd[:, 0:3], "omega_dot_b_radps2": sd[:, 3:6], "specific_force_b_mps2": sd[:, 6:9]}
@@ -325,7 +346,24 @@ class BatchSmootherEstimator(SmootherOptions):
                       specific_force_b_mps2=states[:, 6:9], sigma=sigma, **extra)
 
     @staticmethod
-    def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: slice):
+    def _tuned_problem(part: Log, opt: SmootherOptions, tunings: list):
+        """Problem and initial states of one window, with the process noise chosen from the data
+        (:func:`gfimu.smoother.tuning.tune`) when ``tune_process_noise``; the choice is appended to ``tunings``."""
+        from .initialise import initial_states
+        from .tuning import make_problem, tune
+
+        x0 = initial_states(part, opt)
+        if not opt.tune_process_noise:
+            return SmootherProblem(part, opt), x0
+        models = ("jerk", "snap") if opt.tune_motion_model else None
+        tuning, tuned = tune(part, opt, x0, models=models, accel_noise=opt.tune_accel_noise)
+        tunings.append(tuning)
+        if tuned.motion_model != opt.motion_model:
+            x0 = initial_states(part, tuned)
+        return make_problem(part, tuned, tuning.accel_noise_scale), x0
+
+    @staticmethod
+    def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: slice, tunings: list | None = None):
         """Two stages: the smoother without attitude, then the attitude propagated from its ω
         (starting from the previous window's attitude, which also anchors the yaw) and the full solve."""
         from dataclasses import replace
@@ -334,16 +372,36 @@ class BatchSmootherEstimator(SmootherOptions):
         from .initialise import initial_attitude, initial_states
 
         base = replace(opt, estimate_attitude=False, use_inclinometer=False, compute_sigma=False)
-        first = solve(SmootherProblem(part, base), initial_states(part, base))
+        if opt.tune_process_noise:  # the process noise of ω, ω̇ chosen without the attitude, kept with it
+            problem0, x0 = BatchSmootherEstimator._tuned_problem(part, replace(base, tune_motion_model=False),
+                                                                 [] if tunings is None else tunings)
+            first = solve(problem0, x0)
+            t = tunings[-1] if tunings else None
+            opt = replace(opt, omega_dot_random_walk_radps2_per_sqrt_s=problem0.options.omega_dot_random_walk_radps2_per_sqrt_s,
+                          process_axis_factors=problem0.options.process_axis_factors)
+        else:
+            t = None
+            first = solve(SmootherProblem(part, base), initial_states(part, base))
         start = None
         if previous is not None:
             prev_sl, prev_R = previous
             start = prev_R[solve_sl.start - prev_sl.start]
         R = initial_attitude(part, first.states[:, 0:3], first.states[:, 6:9], start, opt.use_inclinometer)
-        problem = SmootherProblem(part, opt)
+        if t is not None:
+            from .tuning import make_problem
+
+            problem = make_problem(part, opt, t.accel_noise_scale)
+        else:
+            problem = SmootherProblem(part, opt)
         problem.attitude_prior_wb = R[0]
         x0 = np.hstack([first.states, _so3.log(R)])
         return solve(problem, x0, first.params if first.params.size else None, compute_sigma=opt.compute_sigma), problem
+
+    @property
+    def last_tuning(self) -> list:
+        """Per solve window: the process noise chosen from the data (:class:`gfimu.smoother.tuning.Tuning`),
+        from the last :meth:`estimate` with ``tune_process_noise``."""
+        return getattr(self, "_last_tuning", [])
 
     @property
     def last_calibration(self) -> list[dict]:

@@ -126,6 +126,18 @@ class SmootherOptions:
     """Fill ``Motion.sigma`` with marginal one-sigma uncertainties."""
     init_window_s: float = 0.4
     """Window of the sign-resolving initialisation (see :mod:`gfimu.smoother.initialise`)."""
+    process_axis_factors: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """Factor on the jerk (or snap) density per body axis x, y, z (batch smoother): motion
+    about one body axis (turntable, pendulum) is far smoother about the others."""
+    tune_process_noise: bool = False
+    """Batch smoother: choose the jerk/snap density per body axis and the specific-force density
+    by maximising the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`), per solve window.
+    The fixed-lag smoother ignores it."""
+    tune_motion_model: bool = False
+    """With ``tune_process_noise``: also choose 'jerk' or 'snap' by the same criterion."""
+    tune_accel_noise: bool = False
+    """With ``tune_process_noise``: also scale the accelerometer noise of every axis by the same
+    criterion (for real sensors whose rigid-body residual exceeds their white noise)."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -155,6 +167,9 @@ class SmootherOptions:
             raise ValueError(f"smoother option motion_model must be 'jerk' or 'snap', got {self.motion_model!r}")
         if self.measurement not in ("accelerometer", "quadratic"):
             raise ValueError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
+        f = np.asarray(self.process_axis_factors, dtype=float)
+        if f.shape != (3,) or not np.all(np.isfinite(f) & (f > 0)):
+            raise ValueError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")
         if int(self.max_iterations) < 1:
             raise ValueError("smoother option max_iterations must be >= 1")
 
@@ -284,11 +299,13 @@ class SmootherProblem:
                 self.tilt_sigma = float(ns) if ns else 0.002
         if opt.motion_model == "snap":
             cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, self.dt_s)
-            self.snap_cov = cov
-            self.snap_whiten = np.linalg.inv(np.linalg.cholesky(cov))
+            axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)
+            self.snap_cov = cov * axis[:, None] * axis[None, :]
+            self.snap_whiten = np.linalg.inv(np.linalg.cholesky(cov)) / axis
         q = opt.omega_dot_random_walk_radps2_per_sqrt_s
         self.trapezoid_sigma = kinematics.trapezoid_sigma(q, self.dt_s)
         self.omega_dot_step_sigma = process.random_walk_sigma(q, self.dt_s)
+        self.axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
         self.force_step_sigma = process.random_walk_sigma(opt.specific_force_random_walk_mps2_per_sqrt_s, self.dt_s)
         self.first_sigma = np.repeat(
             [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
@@ -378,7 +395,7 @@ class SmootherProblem:
             J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
             J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
             wb = 1.0 / np.concatenate(
-                [np.repeat(self.trapezoid_sigma[:, None], 3, 1), np.repeat(self.omega_dot_step_sigma[:, None], 3, 1)], axis=1)
+                [self.trapezoid_sigma[:, None] * self.axis_factors, self.omega_dot_step_sigma[:, None] * self.axis_factors], axis=1)
             out.append(Term("binary", np.concatenate([rk, rd], axis=1) * wb,
                             {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]}))
         else:
@@ -521,9 +538,9 @@ class SmootherProblem:
                 continue
             graph.add(kinematics.make_angular_velocity_factor(
                 omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), float(self.dt_s[k]),
-                diagonal_noise(np.full(3, self.trapezoid_sigma[k]))))
+                diagonal_noise(self.trapezoid_sigma[k] * self.axis_factors)))
             graph.add(process.make_random_walk_factor(omega_dot_key(k), omega_dot_key(k + 1),
-                                                      diagonal_noise(np.full(3, self.omega_dot_step_sigma[k]))))
+                                                      diagonal_noise(self.omega_dot_step_sigma[k] * self.axis_factors)))
         if self.n_global:
             s = self.global_prior_sigma()
             for name, (sl, key) in self.global_blocks.items():

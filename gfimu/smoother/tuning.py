@@ -1,0 +1,264 @@
+"""Automatic choice of the smoother's process noise by the marginal likelihood of the data.
+
+The smoother's model is Gaussian: a Gauss-Markov prior on the states
+(white angular jerk of density q, or white snap) and Gaussian measurement
+noise. With the measurement model linearised at an estimate ``x̄``, the
+evidence of the data given the noise parameters θ is exact for the
+linearised model (Laplace approximation of the nonlinear one):
+
+    log p(y | θ) = -c*(θ) - ½ log det H(θ) - Σ_rows log σ_row(θ) - ½ (R - D) log 2π
+
+where ``c*`` is the minimum of the quadratic model of the cost (half the
+sum of squared whitened residuals; ``c* = c(x̄) - ½ gᵀ H⁻¹ g`` after one
+Gauss-Newton step), ``H = JᵀJ`` the information matrix (its log-determinant
+comes for free from the banded Cholesky factor), ``σ_row`` the standard
+deviations of all factor rows (the normalising constants of the Gaussian
+factors; the map from the states to the process residuals has unit
+Jacobian determinant for the random-walk, trapezoid and white-snap steps),
+R the number of rows and D the number of unknowns. One evaluation costs
+one Gauss-Newton iteration, linear in the length.
+
+:func:`tune` maximises it over the jerk (or snap) density on a log-spaced
+grid refined by parabolic interpolation in ``log q``, re-linearising at the
+smoother's solution with the selected density once (two rounds); optionally
+also over a common scale of the accelerometer noise and over the motion
+model ('jerk' against 'snap', compared by their maxima). Nothing here uses
+the truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..log import Log
+from .batch import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
+from .graph import SmootherOptions, SmootherProblem
+
+DENSITY_FIELD = {"jerk": "omega_dot_random_walk_radps2_per_sqrt_s", "snap": "omega_ddot_random_walk_radps3_per_sqrt_s"}
+DENSITY_LIMITS = (1e-3, 1e8)
+"""Search limits of the density [rad/s²/√s or rad/s³/√s]."""
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """Outcome of :func:`tune` for one solve window."""
+
+    motion_model: str
+    density: float
+    """Selected jerk density [rad/s²/√s] ('jerk') or snap density [rad/s³/√s] ('snap')."""
+    accel_noise_scale: float
+    """Selected factor on the accelerometer noise std of every axis (1 when not tuned)."""
+    log_evidence: float
+    """Linearised log marginal likelihood at the selection [nats]."""
+    evaluations: int
+    axis_factors: tuple = (1.0, 1.0, 1.0)
+    """Selected factor on the density per body axis."""
+    specific_force_density: float = float("nan")
+    """Selected specific-force random-walk density [m/s²/√s]."""
+
+    def apply(self, options: SmootherOptions) -> SmootherOptions:
+        """``options`` with this selection (except the accelerometer noise scale, see :func:`make_problem`)."""
+        changes = {DENSITY_FIELD[self.motion_model]: self.density, "process_axis_factors": tuple(self.axis_factors),
+                   "motion_model": self.motion_model}
+        if np.isfinite(self.specific_force_density):
+            changes["specific_force_random_walk_mps2_per_sqrt_s"] = self.specific_force_density
+        return replace(options, **changes)
+
+    def as_dict(self) -> dict:
+        return {"motion_model": self.motion_model, "density": self.density, "axis_factors": list(self.axis_factors),
+                "specific_force_density": self.specific_force_density, "accel_noise_scale": self.accel_noise_scale,
+                "log_evidence": self.log_evidence, "evaluations": self.evaluations}
+
+
+def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 1.0) -> SmootherProblem:
+    """:class:`SmootherProblem` with every accelerometer noise std multiplied by ``accel_noise_scale``."""
+    problem = SmootherProblem(log, options)
+    if accel_noise_scale != 1.0:
+        problem.accel_sigma = problem.accel_sigma * accel_noise_scale
+        if options.measurement == "quadratic":
+            problem.x_cov = problem.x_cov * accel_noise_scale**2
+            problem.x_whiten = problem.x_whiten / accel_noise_scale
+    return problem
+
+
+def log_normaliser(problem: SmootherProblem) -> float:
+    """``Σ log σ`` over all factor rows (½ log det of the covariance of the stacked factors)."""
+    n = problem.n
+    total = float(np.sum(np.log(problem.first_sigma)))
+    if problem.options.measurement == "quadratic":
+        total -= n * float(np.sum(np.log(np.diag(problem.x_whiten))))
+    else:
+        total += n * float(np.sum(np.log(problem.accel_sigma)))
+    if problem.attitude:
+        total += 3 * float(np.sum(np.log(problem.attitude_step_sigma)) + np.sum(np.log(problem.accel_step_sigma)))
+        total += float(np.sum(np.log(problem.attitude_prior_sigma)))
+        if problem.use_inclinometer:
+            total += 2 * n * np.log(problem.tilt_sigma)
+    else:
+        total += 3 * float(np.sum(np.log(problem.force_step_sigma)))
+    if problem.snap:
+        total += 0.5 * float(np.sum(np.linalg.slogdet(problem.snap_cov)[1]))
+    else:
+        total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
+        total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
+    if problem.use_gyro:
+        total += 3 * n * np.log(problem.gyro_sigma)
+    if problem.options.free_flight:
+        total += 3 * n * (np.log(problem.options.torque_noise_std_nm) + np.log(problem.options.free_fall_std_mps2))
+    if problem.n_global:
+        total += float(np.sum(np.log(problem.global_prior_sigma())))
+    return total
+
+
+def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
+                            measurement: NormalEquations | None = None) -> float:
+    """Log marginal likelihood of the data under ``problem`` linearised at ``states`` [nats] (module docstring).
+
+    ``measurement``: the normal equations of the measurement factors at ``states`` (see
+    :func:`measurement_normal_equations`), reused while only the process noise changes."""
+    P = np.zeros(problem.n_global) if params is None else params
+    if measurement is None:
+        ne = normal_equations(problem, states, P)
+    else:
+        ne = add_normal_equations(measurement, normal_equations(problem, states, P, problem._other_terms(states, P)))
+    fac = factorise(ne, 0.0)
+    dx, dp = solve_step(ne, fac)
+    c_min = ne.cost + 0.5 * (float(ne.grad.reshape(-1) @ dx.reshape(-1)) + float(ne.grad_global @ dp))
+    logdet = 2.0 * float(np.sum(np.log(fac.cb[0]))) - 2.0 * float(np.sum(np.log(fac.scale)))
+    if fac.schur is not None:
+        logdet += float(np.linalg.slogdet(fac.schur)[1])
+    unknowns = states.size + problem.n_global
+    return -c_min - 0.5 * logdet - log_normaliser(problem) - 0.5 * (ne.rows - unknowns) * np.log(2 * np.pi)
+
+
+def measurement_normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None) -> NormalEquations:
+    """Normal equations of the measurement factors alone (accelerometers or the inversion)."""
+    P = np.zeros(problem.n_global) if params is None else params
+    terms = problem.terms(states, P)
+    return normal_equations(problem, states, P, terms[:1])
+
+
+def _states_for(states: np.ndarray, model: str, problem_state_size: int) -> np.ndarray:
+    """Adapt a state array to the model's size (append ω̈ = 0 for 'snap', drop it for 'jerk')."""
+    m = states.shape[1]
+    if m == problem_state_size:
+        return states
+    if problem_state_size > m:
+        return np.hstack([states, np.zeros((states.shape[0], problem_state_size - m))])
+    return states[:, :problem_state_size]
+
+
+def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 1) -> tuple[float, float, int]:
+    """Maximise ``f`` over ``x`` (a log density) from a grid ``x0 + step·k``, |k| ≤ points,
+    extended while the best point is at an edge, then one parabolic refinement."""
+    cache = {}
+
+    def F(x):
+        x = float(np.clip(x, lo, hi))
+        key = round(x, 9)
+        if key not in cache:
+            cache[key] = f(x)
+        return cache[key], x
+
+    xs = [x0 + step * k for k in range(-points, points + 1)]
+    vals = [F(x)[0] for x in xs]
+    while True:
+        i = int(np.argmax(vals))
+        if i == 0 and xs[0] - step >= lo:
+            xs.insert(0, xs[0] - step)
+            vals.insert(0, F(xs[0])[0])
+        elif i == len(xs) - 1 and xs[-1] + step <= hi:
+            xs.append(xs[-1] + step)
+            vals.append(F(xs[-1])[0])
+        else:
+            break
+    i = int(np.argmax(vals))
+    best_x, best_v = xs[i], vals[i]
+    if 0 < i < len(xs) - 1:
+        a, b, c = vals[i - 1], vals[i], vals[i + 1]
+        denom = a - 2 * b + c
+        if denom < 0 and np.isfinite(denom):
+            xp = xs[i] + 0.5 * step * (a - c) / denom
+            vp, xp = F(xp)
+            if vp > best_v:
+                best_x, best_v = xp, vp
+    return best_x, best_v, len(cache)
+
+
+def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndarray | None = None,
+         models: tuple[str, ...] | None = None, accel_noise: bool = False) -> tuple[Tuning, SmootherOptions]:
+    """Select the process noise maximising :func:`linearised_log_evidence` from a starting estimate
+    ``states`` (e.g. the initialisation); returns the selection and the options carrying it.
+
+    Per motion model: (1) the common jerk/snap density on a grid of factor 4, linearised at
+    ``states``; the smoother is solved with it; (2) linearised at that solution, coordinate
+    ascent over the factor of each body axis (``process_axis_factors``), the specific-force
+    density and, with ``accel_noise``, the accelerometer noise scale; each 1-D search is a
+    grid (factor 4 for the density, 10 for the others) extended while the best point is at an edge, refined by a parabola.
+    The model with the larger evidence wins."""
+    models = models or (options.motion_model,)
+    best = None
+    for model in models:
+        field = DENSITY_FIELD[model]
+        size = (12 if model == "snap" else 9) + (3 if (options.estimate_attitude or options.use_inclinometer) else 0)
+        p0 = params
+        X = _states_for(states, model, size)
+        current = {"density": np.log(getattr(options, field)), "axis": np.log(np.asarray(options.process_axis_factors, float)),
+                   "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0}
+
+        def settings_options(c):
+            return replace(options, motion_model=model, **{field: float(np.exp(c["density"]))},
+                           process_axis_factors=tuple(float(v) for v in np.exp(c["axis"])),
+                           specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
+
+        cache = {}
+
+        def evidence(c, X):
+            try:
+                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])))
+                key = (version, float(c["scale"]))
+                if key not in cache:
+                    cache.clear()
+                    cache[key] = measurement_normal_equations(problem, X, p0)
+                return linearised_log_evidence(problem, X, p0, cache[key])
+            except np.linalg.LinAlgError:
+                return -np.inf
+
+        evaluations = 0
+        version = 0
+
+        def search(name, lo, hi, axis=None, step=np.log(10.0)):
+            nonlocal evaluations
+
+            def f(v):
+                c = {k: (np.array(val, copy=True) if k == "axis" else val) for k, val in current.items()}
+                if axis is None:
+                    c[name] = v
+                else:
+                    c[name][axis] = v
+                return evidence(c, X)
+
+            start = current[name] if axis is None else current[name][axis]
+            v, value, k = _maximise_1d(f, float(start), step, np.log(lo), np.log(hi))
+            evaluations += k
+            if axis is None:
+                current[name] = v
+            else:
+                current[name][axis] = v
+            return value
+
+        value = search("density", *DENSITY_LIMITS, step=np.log(4.0))
+        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"]))), X, p0)
+        X, version = res.states, 1
+        for a in range(3):
+            value = search("axis", 1e-5, 1e2, axis=a)
+        value = search("force", 1e-3, 1e4)
+        if accel_noise:
+            value = search("scale", 1e-2, 1e3)
+        tuning = Tuning(model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value), evaluations,
+                        tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])))
+        if best is None or tuning.log_evidence > best[0].log_evidence:
+            best = (tuning, settings_options(current))
+    return best
