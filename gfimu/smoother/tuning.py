@@ -194,8 +194,9 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
 
     Per motion model: (1) the common jerk/snap density on a grid of factor 4, linearised at
     ``states``; the smoother is solved with it; (2) linearised at that solution, coordinate
-    ascent over the factor of each body axis (``process_axis_factors``), the specific-force
-    density and, with ``accel_noise``, the accelerometer noise scale; each 1-D search is a
+    ascent over the factor of each body axis (``process_axis_factors``) and the specific-force
+    density; with ``accel_noise`` the accelerometer noise scale is searched first in (1) and
+    before and after the others in (2). Each 1-D search is a
     grid (factor 4 for the density, 10 for the others) extended while the best point is at an edge, refined by a parabola.
     The model with the larger evidence wins."""
     models = models or (options.motion_model,)
@@ -249,14 +250,18 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                 current[name][axis] = v
             return value
 
+        if accel_noise:
+            search("scale", 1e-2, 1e3)
         value = search("density", *DENSITY_LIMITS, step=np.log(4.0))
         res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"]))), X, p0)
         X, version = res.states, 1
+        if accel_noise:
+            search("scale", 1e-2, 1e3, step=np.log(2.0))
         for a in range(3):
             value = search("axis", 1e-5, 1e2, axis=a)
         value = search("force", 1e-3, 1e4)
         if accel_noise:
-            value = search("scale", 1e-2, 1e3)
+            value = search("scale", 1e-2, 1e3, step=np.log(1.5))
         tuning = Tuning(model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value), evaluations,
                         tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])))
         if best is None or tuning.log_evidence > best[0].log_evidence:
