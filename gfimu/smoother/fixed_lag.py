@@ -134,12 +134,14 @@ class FixedLagSmoother:
 
     def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
                  rate_hz: float = 500.0, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10,
-                 marginalise_every_s: float = 0.25, warmup_s: float = 0.2, gap_factor: float = 1.5,
+                 marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
                  fast_measurement: bool = True) -> None:
         options = options or SmootherOptions()
         reason = fixed_lag_reason(array, options)
         if reason:
             raise ValueError(reason)
+        if marginalise_every_s is None:  # about 125 updates per block, at most 0.25 s
+            marginalise_every_s = min(0.25, 125.0 / rate_hz) if rate_hz > 0 else 0.25
         for name, v in (("lag_s", lag_s), ("rate_hz", rate_hz), ("relinearize_threshold", relinearize_threshold),
                         ("marginalise_every_s", marginalise_every_s)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -405,8 +407,9 @@ class FixedLagEstimator(SmootherOptions):
     """iSAM2 relinearises ω when its update exceeds this [rad/s] (ω̇ and f enter linearly)."""
     relinearize_skip: int = 10
     """iSAM2 checks for relinearisation every this many updates."""
-    marginalise_every_s: float = 0.25
-    """gtsam marginalises old states in blocks of this length (the window holds lag_s to lag_s + this)."""
+    marginalise_every_s: float | None = None
+    """gtsam marginalises old states in blocks of this length [s] (the window holds lag_s to
+    lag_s + twice this); None: 125 samples, at most 0.25 s (0.25 s at 500 Hz, 0.125 s at 1 kHz)."""
     warmup_s: float = 0.2
     """Data gathered at the start of each segment for the sign-resolving initialisation."""
     gap_factor: float = 1.5
