@@ -4,7 +4,8 @@
 For each method and log length (simulated, fixed seed): median wall time over
 the repeats, throughput in samples per second, and peak traced memory
 (tracemalloc, one extra run, so tracing does not slow the timed runs),
-after one untimed warm-up run on the first 200 samples. The
+after one untimed warm-up run on the first 200 samples. Runs shorter than
+0.3 s are repeated (up to 50 times) so that their median is stable. The
 batch smoother's numbers come from ``tools/bench_smoother.py`` and the
 fixed-lag update latency (median, 99th percentile) from
 ``tools/bench_fixed_lag.py``. Prints a table and writes JSON.
@@ -22,6 +23,7 @@ import argparse
 import contextlib
 import io
 import json
+import math
 import os
 import platform
 import statistics
@@ -38,6 +40,7 @@ from gfimu.array import cube_array, paper001_array  # noqa: E402
 from gfimu.estimators import METHODS, make_estimator  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
 
+MAX_REPEATS = 50
 PER_SAMPLE = ["inversion", "integration", "pure-integration", "imm", "ml", "gyro-aided", "free-flight"]
 
 
@@ -57,10 +60,13 @@ def time_method(method: str, log, repeats: int) -> dict:
         return {"method": method, "samples": len(log), "status": f"not applicable: {reason}"}
     est.estimate(log.select(slice(0, min(len(log), 200))))  # warm-up: imports and caches, not timed
     times = []
-    for _ in range(max(repeats, 1)):
+    n_runs = max(repeats, 1)
+    while len(times) < n_runs:
         t0 = time.perf_counter()
         est.estimate(log)
         times.append(time.perf_counter() - t0)
+        if len(times) == 1:  # fast methods: repeat until about 0.3 s in all, so the median is stable
+            n_runs = max(n_runs, min(MAX_REPEATS, math.ceil(0.3 / max(times[0], 1e-6))))
     tracemalloc.start()
     est.estimate(log)
     _, peak = tracemalloc.get_traced_memory()
