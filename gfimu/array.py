@@ -195,6 +195,14 @@ class SensorArray:
                 "(nearly degenerate layout)"
             )
 
+    def inversion_reason(self) -> str | None:
+        """``None`` when the 12-unknown inversion works, else why it cannot."""
+        try:
+            self.check_invertible()
+        except ArrayModelError as exc:
+            return str(exc)
+        return None
+
     def predict_readings(self, specific_force_b, omega_dot_b, omega_b) -> np.ndarray:
         """Noise-free readings (..., n_axes) in each sensor's own frame and axes."""
         f = np.asarray(specific_force_b, dtype=float)

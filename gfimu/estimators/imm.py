@@ -195,11 +195,7 @@ class IMMEstimator:
         validate_initial_omega(self.initial_omega)
 
     def applicable(self, array: SensorArray) -> str | None:
-        try:
-            array.check_invertible()
-        except ValueError as exc:
-            return str(exc)
-        return None
+        return array.inversion_reason()
 
     def thresholds(self, q: np.ndarray) -> tuple[float, float]:
         """(T1, T2) used for a log whose inverted quadratic terms are q."""

@@ -99,11 +99,7 @@ class PureIntegrationEstimator:
         validate_initial_omega(self.initial_omega)
 
     def applicable(self, array: SensorArray) -> str | None:
-        try:
-            array.check_invertible()
-        except ValueError as exc:
-            return str(exc)
-        return None
+        return array.inversion_reason()
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
@@ -142,11 +138,7 @@ class IntegrationEstimator:
         validate_initial_omega(self.initial_omega)
 
     def applicable(self, array: SensorArray) -> str | None:
-        try:
-            array.check_invertible()
-        except ValueError as exc:
-            return str(exc)
-        return None
+        return array.inversion_reason()
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)

@@ -113,11 +113,7 @@ class InversionEstimator:
     compute_sigma: bool = False
 
     def applicable(self, array: SensorArray) -> str | None:
-        try:
-            array.check_invertible()
-        except ValueError as exc:
-            return str(exc)
-        return None
+        return array.inversion_reason()
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
