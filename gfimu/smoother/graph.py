@@ -313,6 +313,16 @@ class SmootherProblem:
         if self.snap:
             self.first_sigma = np.concatenate([self.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
 
+    accel_sigma_per_sample: np.ndarray | None = None
+    """(N, n_axes) accelerometer noise std per sample and axis replacing ``accel_sigma`` when set."""
+
+    def set_motion_dependent_noise(self, omega_b_radps: np.ndarray, slope_mps2_per_radps: float) -> None:
+        """Noise std per sample ``sqrt(σ² + (slope |ω_k|)²)`` from an estimate of ω: the rigid-body
+        residual of real arrays grows with the rotation rate (sensor positions, alignment and
+        dynamic errors). Re-evaluated from each new estimate (iteratively re-weighted least squares)."""
+        wn = np.linalg.norm(np.asarray(omega_b_radps, dtype=float), axis=1)
+        self.accel_sigma_per_sample = np.sqrt(self.accel_sigma[None, :] ** 2 + (slope_mps2_per_radps * wn[:, None]) ** 2)
+
     # --- calibration variables -------------------------------------------
     def global_part(self, params: np.ndarray, name: str) -> np.ndarray | None:
         block = self.global_blocks.get(name)
@@ -358,11 +368,18 @@ class SmootherProblem:
                 jg[:, cols, self.global_blocks[f"bias{i}"][0]] = j["b"]
             if scale is not None:
                 jg[:, cols, self.global_blocks[f"scale{i}"][0]] = j["s"]
-        w = 1.0 / self.accel_sigma
-        r = np.concatenate(rows, axis=1) * w
-        J = np.concatenate(jx, axis=1) * w[None, :, None]
-        if jg is not None:
-            jg *= w[None, :, None]
+        if self.accel_sigma_per_sample is None:
+            w = 1.0 / self.accel_sigma
+            r = np.concatenate(rows, axis=1) * w
+            J = np.concatenate(jx, axis=1) * w[None, :, None]
+            if jg is not None:
+                jg *= w[None, :, None]
+        else:  # motion-dependent noise (iteratively re-weighted, see set_motion_dependent_noise)
+            w = 1.0 / self.accel_sigma_per_sample
+            r = np.concatenate(rows, axis=1) * w
+            J = np.concatenate(jx, axis=1) * w[:, :, None]
+            if jg is not None:
+                jg *= w[:, :, None]
         return Term("unary", r, {"x": J}, jg)
 
     def _other_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:

@@ -90,7 +90,10 @@ def log_normaliser(problem: SmootherProblem) -> float:
     if problem.options.measurement == "quadratic":
         total -= n * float(np.sum(np.log(np.diag(problem.x_whiten))))
     else:
-        total += n * float(np.sum(np.log(problem.accel_sigma)))
+        if problem.accel_sigma_per_sample is None:
+            total += n * float(np.sum(np.log(problem.accel_sigma)))
+        else:
+            total += float(np.sum(np.log(problem.accel_sigma_per_sample)))
     if problem.attitude:
         total += 3 * float(np.sum(np.log(problem.attitude_step_sigma)) + np.sum(np.log(problem.accel_step_sigma)))
         total += float(np.sum(np.log(problem.attitude_prior_sigma)))
