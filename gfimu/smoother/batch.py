@@ -324,6 +324,10 @@ class BatchSmootherEstimator(SmootherOptions):
             else:
                 problem, x0 = self._tuned_problem(part, opt, tunings)
                 res = solve(problem, x0, None, compute_sigma=opt.compute_sigma)
+                if opt.accel_noise_slope_mps2_per_radps > 0 and opt.measurement == "accelerometer":
+                    for _ in range(int(opt.reweight_iterations) - 1):  # re-weight from the new estimate
+                        problem.set_motion_dependent_noise(res.states[:, 0:3], opt.accel_noise_slope_mps2_per_radps)
+                        res = solve(problem, res.states, None, compute_sigma=opt.compute_sigma)
             m = min(M, res.states.shape[1])
             states[keep_log, :m] = res.states[keep_win, :m]
             if sd is not None:
@@ -349,18 +353,32 @@ class BatchSmootherEstimator(SmootherOptions):
     def _tuned_problem(part: Log, opt: SmootherOptions, tunings: list):
         """Problem and initial states of one window, with the process noise chosen from the data
         (:func:`gfimu.smoother.tuning.tune`) when ``tune_process_noise``; the choice is appended to ``tunings``."""
-        from .initialise import initial_states
         from .tuning import make_problem, tune
 
-        x0 = initial_states(part, opt)
+        x0 = BatchSmootherEstimator._initial_states(part, opt)
         if not opt.tune_process_noise:
-            return SmootherProblem(part, opt), x0
+            return make_problem(part, opt, 1.0, x0[:, 0:3]), x0
         models = ("jerk", "snap") if opt.tune_motion_model else None
         tuning, tuned = tune(part, opt, x0, models=models, accel_noise=opt.tune_accel_noise)
         tunings.append(tuning)
         if tuned.motion_model != opt.motion_model:
-            x0 = initial_states(part, tuned)
-        return make_problem(part, tuned, tuning.accel_noise_scale), x0
+            x0 = BatchSmootherEstimator._initial_states(part, tuned)
+        return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, 0:3]), x0
+
+    @staticmethod
+    def _initial_states(part: Log, opt: SmootherOptions) -> np.ndarray:
+        """Initial states: the sign-resolving initialisation or the per-sample ML estimate."""
+        from .initialise import initial_states
+
+        if opt.initialisation != "ml" or opt.free_flight:
+            return initial_states(part, opt)
+        from ..estimators.ml import MLEstimator
+
+        m = MLEstimator().estimate(part)
+        x = np.hstack([m.omega_b_radps, m.omega_dot_b_radps2, m.specific_force_b_mps2])
+        if opt.motion_model == "snap":
+            x = np.hstack([x, np.gradient(m.omega_dot_b_radps2, part.times_s, axis=0)])
+        return x
 
     @staticmethod
     def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: slice, tunings: list | None = None):

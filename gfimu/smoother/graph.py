@@ -126,6 +126,17 @@ class SmootherOptions:
     """Fill ``Motion.sigma`` with marginal one-sigma uncertainties."""
     init_window_s: float = 0.4
     """Window of the sign-resolving initialisation (see :mod:`gfimu.smoother.initialise`)."""
+    accel_noise_slope_mps2_per_radps: float = 0.0
+    """Batch smoother: accelerometer noise std growing with the rotation rate,
+    ``sqrt(σ² + (slope |ω|)²)`` per sample, re-weighted from the current estimate of ω
+    (``reweight_iterations`` solves). Real arrays' rigid-body residual grows so (MIMU4444: about
+    0.2 + 0.047 |ω| m/s²); 0 keeps the constant noise of array.toml."""
+    reweight_iterations: int = 3
+    """Solves with the noise re-weighted from the previous solution when the slope above is set."""
+    initialisation: str = "sign-resolving"
+    """Batch smoother: 'sign-resolving' (:mod:`gfimu.smoother.initialise`) or 'ml' (the per-sample
+    maximum-likelihood estimate with its sign choice, :mod:`gfimu.estimators.ml`; slower, more robust
+    on real recordings with large model residuals and fast motion at low rates)."""
     process_axis_factors: tuple[float, float, float] = (1.0, 1.0, 1.0)
     """Factor on the jerk (or snap) density per body axis x, y, z (batch smoother): motion
     about one body axis (turntable, pendulum) is far smoother about the others."""
@@ -167,6 +178,12 @@ class SmootherOptions:
             raise ValueError(f"smoother option motion_model must be 'jerk' or 'snap', got {self.motion_model!r}")
         if self.measurement not in ("accelerometer", "quadratic"):
             raise ValueError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
+        if not (np.isfinite(self.accel_noise_slope_mps2_per_radps) and self.accel_noise_slope_mps2_per_radps >= 0):
+            raise ValueError(f"smoother option accel_noise_slope_mps2_per_radps must be >= 0, got {self.accel_noise_slope_mps2_per_radps!r}")
+        if self.initialisation not in ("sign-resolving", "ml"):
+            raise ValueError(f"smoother option initialisation must be 'sign-resolving' or 'ml', got {self.initialisation!r}")
+        if int(self.reweight_iterations) < 1:
+            raise ValueError("smoother option reweight_iterations must be >= 1")
         f = np.asarray(self.process_axis_factors, dtype=float)
         if f.shape != (3,) or not np.all(np.isfinite(f) & (f > 0)):
             raise ValueError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")

@@ -72,14 +72,18 @@ class Tuning:
                 "log_evidence": self.log_evidence, "evaluations": self.evaluations}
 
 
-def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 1.0) -> SmootherProblem:
-    """:class:`SmootherProblem` with every accelerometer noise std multiplied by ``accel_noise_scale``."""
+def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 1.0,
+                 omega_b_radps: np.ndarray | None = None) -> SmootherProblem:
+    """:class:`SmootherProblem` with every accelerometer noise std multiplied by ``accel_noise_scale``
+    and, when ``options.accel_noise_slope_mps2_per_radps`` is set, growing with |ω| of ``omega_b_radps``."""
     problem = SmootherProblem(log, options)
     if accel_noise_scale != 1.0:
         problem.accel_sigma = problem.accel_sigma * accel_noise_scale
         if options.measurement == "quadratic":
             problem.x_cov = problem.x_cov * accel_noise_scale**2
             problem.x_whiten = problem.x_whiten / accel_noise_scale
+    if options.accel_noise_slope_mps2_per_radps > 0 and omega_b_radps is not None and options.measurement == "accelerometer":
+        problem.set_motion_dependent_noise(omega_b_radps, options.accel_noise_slope_mps2_per_radps)
     return problem
 
 
@@ -221,7 +225,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
 
         def evidence(c, X):
             try:
-                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])))
+                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])), X[:, 0:3])
                 key = (version, float(c["scale"]))
                 if key not in cache:
                     cache.clear()
@@ -256,7 +260,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
         if accel_noise:
             search("scale", 1e-2, 1e3)
         value = search("density", *DENSITY_LIMITS, step=np.log(4.0))
-        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"]))), X, p0)
+        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"])), X[:, 0:3]), X, p0)
         X, version = res.states, 1
         if accel_noise:
             search("scale", 1e-2, 1e3, step=np.log(2.0))
