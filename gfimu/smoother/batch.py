@@ -8,6 +8,13 @@ Schur complement on the border, inside Levenberg-Marquardt iterations. The
 marginal covariances come from the same factor by a backward block recursion
 (selected inversion), also linear in the length. Long logs are solved in
 overlapping windows.
+
+Per window, the process noise (jerk density per body axis, specific-force
+density; optionally the accelerometer noise scale and the motion model) is
+chosen by maximising the marginal likelihood of the readings
+(:mod:`gfimu.smoother.tuning`, on by default here); with
+``accel_noise_slope_mps2_per_radps`` the accelerometer noise grows with |ω|
+and is re-weighted from each solution (iteratively re-weighted least squares).
 """
 
 from __future__ import annotations
