@@ -233,7 +233,13 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     it = 0
     for it in range(1, int(opt.max_iterations) + 1):
         while True:
-            fac = factorise(ne, lam)
+            try:
+                fac = factorise(ne, lam)
+            except np.linalg.LinAlgError:  # numerically indefinite (very stiff process noise): damp more
+                if lam > 1e10:
+                    raise
+                lam = 1e-6 if lam == 0.0 else lam * 10.0
+                continue
             dx, dp = solve_step(ne, fac)
             Xn, Pn = problem.retract(X, dx), P + dp
             new_cost = problem.cost(Xn, Pn)
