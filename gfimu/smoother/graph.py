@@ -145,7 +145,9 @@ class SmootherOptions:
     by maximising the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`), per solve window.
     The fixed-lag smoother ignores it."""
     tune_motion_model: bool = False
-    """With ``tune_process_noise``: also choose 'jerk' or 'snap' by the same criterion."""
+    """With ``tune_process_noise``: also choose 'jerk' or 'snap' by the same criterion. Off by default:
+    the white-snap normal equations become numerically stiff with small per-axis densities, and on the
+    5 cm turntable the snap model it selects gives a worse ω than the tuned jerk model."""
     tune_accel_noise: bool = False
     """With ``tune_process_noise``: also scale the accelerometer noise of every axis by the same
     criterion (for real sensors whose rigid-body residual exceeds their white noise)."""
