@@ -57,7 +57,7 @@ def row_keys(large_error_radps: float = 5.0) -> tuple[str, ...]:
     """Keys of :attr:`EvaluationResult.rows`, in table order."""
     return ("quantity", "unit", "n_samples", "n_nonfinite", "rmse_x", "rmse_y", "rmse_z", "rmse_norm", "median_norm",
             "relative_rms_x", "relative_rms_y", "relative_rms_z", "wrong_sign_share", "wrong_sign_share_x",
-            "wrong_sign_share_y", "wrong_sign_share_z", f"share_off_{large_error_radps:g}radps")
+            "wrong_sign_share_y", "wrong_sign_share_z", "flipped_share", f"share_off_{large_error_radps:g}radps")
 
 
 class EvaluationAlignmentWarning(UserWarning):
@@ -74,6 +74,9 @@ class QuantityMetrics:
     threshold, the share where the estimate's component j has the other sign
     or is zero (ω_est_j · ω_true_j ≤ 0). ``wrong_sign_share``: among samples
     with at least one such component, the share with at least one wrong sign.
+    ``flipped_share``: among samples with ‖ω_true‖ above the sign threshold,
+    the share whose estimate points into the opposite half-space
+    (ω_est · ω_true < 0): the whole vector has the wrong sign.
     ``large_error_share``: share of samples with ‖ω_est − ω_true‖ above the
     large-error limit (5 rad/s by default). NaN when no sample qualifies.
     """
@@ -90,12 +93,13 @@ class QuantityMetrics:
     wrong_sign_share: float | None = None
     wrong_sign_share_axis: tuple[float, ...] | None = None
     large_error_share: float | None = None
+    flipped_share: float | None = None
 
     def row(self, large_error_radps: float = 5.0) -> dict:
         keys = row_keys(large_error_radps)
         r = dict.fromkeys(keys)
         r.update(quantity=self.quantity, unit=self.unit, n_samples=self.n, n_nonfinite=self.n_nonfinite,
-                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, wrong_sign_share=self.wrong_sign_share)
+                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, wrong_sign_share=self.wrong_sign_share, flipped_share=self.flipped_share)
         r[keys[-1]] = self.large_error_share
         for name, values in (("rmse", self.rmse), ("relative_rms", self.relative_rms),
                              ("wrong_sign_share", self.wrong_sign_share_axis)):
@@ -192,7 +196,7 @@ class EvaluationResult:
 
     def to_markdown(self, title: str | None = None) -> str:
         head = ["quantity", "unit", "n", "RMSE x", "RMSE y", "RMSE z", "RMSE norm", "median norm",
-                "rel. RMS x", "rel. RMS y", "rel. RMS z", "wrong sign",
+                "rel. RMS x", "rel. RMS y", "rel. RMS z", "wrong sign", "flipped",
                 f"> {self.large_error_radps:g} rad/s"]
         lines = []
         if title:
@@ -202,10 +206,11 @@ class EvaluationResult:
             rmse = m.rmse or (None,) * 3
             rel = m.relative_rms or (None,) * 3
             cells = [m.label, m.unit, str(m.n), *map(_fmt, rmse), _fmt(m.rmse_norm), _fmt(m.median_norm),
-                     *map(_pct, rel), _pct(m.wrong_sign_share), _pct(m.large_error_share)]
+                     *map(_pct, rel), _pct(m.wrong_sign_share), _pct(m.flipped_share), _pct(m.large_error_share)]
             lines.append("| " + " | ".join(cells) + " |")
         lines += ["", f"{self.summary()}. Relative RMS: paper 004 eq. (7). Wrong sign: samples with a component of "
-                      f"|ω| > {self.sign_threshold_radps:g} rad/s estimated with the other sign."]
+                      f"|ω| > {self.sign_threshold_radps:g} rad/s estimated with the other sign; flipped: ω_est · ω_true < 0 "
+                      f"where ‖ω_true‖ > {self.sign_threshold_radps:g} rad/s."]
         return "\n".join(lines) + "\n"
 
     def to_csv(self) -> str:
@@ -312,10 +317,13 @@ def _sign_metrics(est: np.ndarray, true: np.ndarray, threshold: float, large: fl
         any_eligible = eligible.any(axis=1)
         share = wrong.any(axis=1).sum() / any_eligible.sum() if any_eligible.any() else math.nan
     norm = np.linalg.norm(est - true, axis=1)
+    big = np.linalg.norm(true, axis=1) > threshold
+    flipped = np.sum(est * true, axis=1) < 0
     return {
         "wrong_sign_share": float(share),
         "wrong_sign_share_axis": tuple(float(v) for v in per_axis),
         "large_error_share": float(np.mean(norm > large)) if norm.size else math.nan,
+        "flipped_share": float(np.mean(flipped[big])) if np.any(big) else math.nan,
     }
 
 

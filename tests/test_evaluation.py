@@ -55,6 +55,20 @@ def test_sign_threshold_and_zero_estimates():
     assert all(math.isnan(v) for v in m.wrong_sign_share_axis) and math.isnan(m.wrong_sign_share)
 
 
+def test_flipped_share_counts_whole_vector_sign_errors():
+    # dot products est·true: -1, 5, 9, -0.0025 + 1 + 7 > 0 -> only row 0 flipped
+    m = evaluate(*hand_motions())["omega"]
+    assert m.flipped_share == 0.25
+    est, truth = hand_motions()
+    m = evaluate(Motion(T, omega_b_radps=-W_TRUE), truth)["omega"]
+    assert m.flipped_share == 1.0 and m.wrong_sign_share == 1.0
+    # a small component with the wrong sign is not a flip
+    m = evaluate(Motion(T, omega_b_radps=W_TRUE * [[-1, 1, 1]]), truth)["omega"]
+    assert m.flipped_share == 0.25  # row 0 is pure x; row 3's x is small, its vector keeps its sign
+    rows = evaluate(*hand_motions()).rows
+    assert rows[0]["flipped_share"] == 0.25
+
+
 def test_valid_mask_and_nonfinite_rows_are_left_out_and_counted():
     est, truth = hand_motions()
     r = evaluate(est, truth, valid=np.array([True, True, True, False]))
