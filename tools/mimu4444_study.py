@@ -20,6 +20,16 @@ Examples::
     python3 tools/mimu4444_study.py                       # all methods, within calibration, exp_1..3
     python3 tools/mimu4444_study.py --methods ml smoother --calibration within cross --fit-on 1
     python3 tools/mimu4444_study.py --residual --methods  # residual study only
+
+The smoother set up for these recordings (settings chosen on exp_1; per-sample
+ML initialisation, jerk density 3000 rad/s²/√s for hand motion at 62.5 Hz,
+accelerometer noise growing by 0.03 m/s² per rad/s, re-weighted)::
+
+    python3 tools/mimu4444_study.py --experiments 1 2 3 --methods smoother --calibration within cross \
+        --fit-on 1 --reference-shift-ms -1.5 --option smoother:initialisation=ml \
+        --option smoother:tune_process_noise=False --option smoother:omega_dot_random_walk_radps2_per_sqrt_s=3000 \
+        --option smoother:specific_force_random_walk_mps2_per_sqrt_s=300 \
+        --option smoother:accel_noise_slope_mps2_per_radps=0.03
 """
 
 from __future__ import annotations
