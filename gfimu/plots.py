@@ -114,7 +114,8 @@ def plot_time_series(
             for mi, (label, motion) in enumerate(estimates.items()):
                 if getattr(motion, name) is None:
                     continue
-                ax.plot(t, _interp_to(reference, motion, name)[:, k], color=colours[mi % 10], lw=0.9, label=label)
+                ax.plot(t, _interp_to(reference, motion, name)[:, k], color=colours[mi % 10], lw=0.9, label=label,
+                        zorder=3 + len(estimates) - mi)  # the first estimate named stays on top
             ax.set_title(f"{symbol} — {axis}", fontsize=9)
             ax.set_ylabel(f"{QUANTITIES[name][0]}_{axis} [{unit}]")
             ax.grid(alpha=0.3)
@@ -126,7 +127,7 @@ def plot_time_series(
                     err = _interp_to(reference, motion, name)[:, k] - ref[:, k]
                     if valid_mask is not None:
                         err = np.where(valid_mask, err, np.nan)
-                    eax.plot(t, err, color=colours[mi % 10], lw=0.8, label=label)
+                    eax.plot(t, err, color=colours[mi % 10], lw=0.8, label=label, zorder=3 + len(estimates) - mi)
                 eax.axhline(0.0, color="k", lw=0.6)
                 eax.set_ylabel(f"error [{unit}]")
                 eax.grid(alpha=0.3)
