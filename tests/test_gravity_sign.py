@@ -40,3 +40,15 @@ def test_reversal_is_not_steady():
 def test_no_usable_sample():
     s, n = gravity_sign_score(np.zeros((10, 3)), np.tile([0, 0, 9.81], (10, 1)), np.full(9, 0.01))
     assert n == 0 and np.isnan(s)
+
+
+@pytest.mark.parametrize("seed", [0, 2, 3])
+def test_smoothers_get_the_sign_of_a_constant_rotation(seed):
+    """Seeds whose lever-arm-only initialisation picked the wrong sign (ω off by 2 × 180°/s)."""
+    from gfimu.estimators import make_estimator
+
+    log = simulate("turntable-constant", cube_array(0.025, 0.07), rate_hz=500.0, duration_s=3.0, seed=seed)
+    for method in ("smoother", "fixed-lag"):
+        est = make_estimator(method).estimate(log)
+        err = est.omega_b_radps - log.truth.omega_b_radps
+        assert np.sqrt(np.mean(np.sum(err**2, axis=1))) < 0.05, method

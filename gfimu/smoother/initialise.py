@@ -29,6 +29,7 @@ from ..rigid_body import quadratic_terms
 from ..rotations import skew
 from ..log import Log
 from .graph import STATE_SIZE, SmootherOptions
+from .gravity_sign import gravity_sign_score, steady_rotation
 
 LIFTED = 12
 
@@ -258,8 +259,29 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
         idx = np.arange(seg.start, seg.stop)
         if idx.size < 2:
             continue
-        x0[seg, 0:3] = sign_resolved_omega(z[seg, 6:12], z[seg, 3:6], log.dt_s[seg.start:seg.stop - 1], window)
+        dt = log.dt_s[seg.start:seg.stop - 1]
+        w = sign_resolved_omega(z[seg, 6:12], z[seg, 3:6], dt, window)
+        x0[seg, 0:3] = w * steady_rotation_sign(w, z[seg, 0:3], dt, window)
     return x0
+
+
+STEADY_OMEGA_CHANGE_SIGMA_RADPS = 0.03
+"""Noise of ω̇ integrated over an initialisation window, below which (times five) a window's
+change of ω does not decide the sign of ω (see :func:`gfimu.smoother.gravity_sign.steady_rotation`)."""
+
+
+def steady_rotation_sign(omega_b_radps: np.ndarray, specific_force_b_mps2: np.ndarray, dt_s: np.ndarray,
+                         window: int, min_samples: int = 50, min_score: float = 0.5) -> float:
+    """-1 to flip ω of a whole segment whose rotation is steady and whose gravity turns the other way.
+
+    A steady rotation's sign is unobservable from the lever-arm terms (``q(ω) = q(-ω)``) and ω̇
+    carries none; gravity seen from the body turns as ``ḟ ≈ -ω × f``, which decides it
+    (:mod:`gfimu.smoother.gravity_sign`). Returns +1 unless that evidence is clear.
+    """
+    if not steady_rotation(omega_b_radps, STEADY_OMEGA_CHANGE_SIGMA_RADPS, window):
+        return 1.0
+    score, used = gravity_sign_score(omega_b_radps, specific_force_b_mps2, dt_s)
+    return -1.0 if used >= min_samples and score > min_score else 1.0
 
 
 def level_attitude(up_b: np.ndarray) -> np.ndarray:
