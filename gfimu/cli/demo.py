@@ -23,6 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods")
     p.add_argument("--duration-s", type=float, default=10.0, help="length of each log (default 10 s)")
     p.add_argument("--rate-hz", type=float, default=500.0, help="sample rate (default 500 Hz)")
+    p.add_argument("--half-edge-m", type=float, default=0.025,
+                   help="half edge of the cube array (default 0.025 m: a 5 cm cube)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--format", choices=["markdown", "csv", "json"], default="markdown")
     p.set_defaults(func=run)
@@ -34,7 +36,7 @@ def run(args) -> int:
     from ..simulate import simulate
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    array = cube_array(0.05, noise_std_mps2=0.07)
+    array = cube_array(args.half_edge_m, noise_std_mps2=0.07)
     cases = [
         ("random3d: simulated motion", "random3d"),
         ("euroc: real EuRoC V1_01_easy motion, synthetic array readings", "euroc"),
