@@ -9,6 +9,7 @@ each and the comparison table is printed.
 from __future__ import annotations
 
 import argparse
+import sys
 
 DEFAULT_METHODS = ("inversion", "integration", "imm", "ml", "smoother", "fixed-lag")
 
@@ -43,7 +44,7 @@ def run(args) -> int:
     ]
     for title, scenario in cases:
         log = simulate(scenario, array=array, rate_hz=args.rate_hz, duration_s=args.duration_s, seed=args.seed)
-        result = compare(log, methods=methods)
+        result = compare(log, methods=methods, progress=sys.stderr.isatty())
         text = {"markdown": result.to_markdown, "csv": result.to_csv, "json": result.to_json}[args.format]()
         print(f"## {title} ({array.name}, {args.rate_hz:g} Hz, {args.duration_s:g} s, 0.07 m/s² noise)\n")
         print(text)
