@@ -124,13 +124,17 @@ def bound_rms(variance: Mapping[str, np.ndarray], valid: np.ndarray | None = Non
 
 def compute_bounds(log: Log, truth: Motion, valid: np.ndarray | None, which: Iterable[str] = tuple(BOUND_NAMES),
                    gyro_noise_std_radps: float | None = None,
-                   smoother_options: Mapping[str, Any] | None = None) -> list[dict]:
-    """Rows of the available bounds, each with a reason when it cannot be computed."""
+                   smoother_options: Mapping[str, Any] | None = None,
+                   smoother_tunings: Sequence[Any] = ()) -> list[dict]:
+    """Rows of the available bounds, each with a reason when it cannot be computed.
+
+    ``smoother_tunings``: the process noise the smoother chose per solve window
+    (``BatchSmootherEstimator.last_tuning``); the smoother's bound then uses the same graph."""
     rows = []
     for name in which:
         label = BOUND_NAMES[name]
         try:
-            variance = _bound_variances(name, log, truth, gyro_noise_std_radps, smoother_options)
+            variance = _bound_variances(name, log, truth, gyro_noise_std_radps, smoother_options, smoother_tunings)
         except (ImportError, AttributeError) as exc:
             rows.append(_row(label, "bound", "unavailable", f"{type(exc).__name__}: {exc}"))
             continue
@@ -147,7 +151,7 @@ def compute_bounds(log: Log, truth: Motion, valid: np.ndarray | None, which: Ite
 
 
 def _bound_variances(name: str, log: Log, truth: Motion, gyro_noise_std_radps: float | None = None,
-                     smoother_options: Mapping[str, Any] | None = None):
+                     smoother_options: Mapping[str, Any] | None = None, smoother_tunings: Sequence[Any] = ()):
     """Per-field variances (N, 3) of one bound along the truth, or the reason it does not apply."""
     if truth.omega_b_radps is None:
         return "the truth has no angular velocity to evaluate the bound at"
@@ -177,7 +181,8 @@ def _bound_variances(name: str, log: Log, truth: Motion, gyro_noise_std_radps: f
     if reason:
         return f"the smoother cannot run on this array: {reason}"
     opt = SmootherOptions(**dict(smoother_options or {}))
-    sigma = smoother_bound(log, options=opt, truth=truth).sigma
+    window_options = [t.apply(opt) for t in smoother_tunings] or None
+    sigma = smoother_bound(log, options=opt, truth=truth, window_options=window_options).sigma
     variances = {k: v**2 for k, v in sigma.items()}
     if "specific_force_b_mps2" in variances:
         variances["accel_b_mps2"] = variances["specific_force_b_mps2"]
@@ -282,8 +287,11 @@ def default_methods() -> list[str]:
     return list(METHODS)
 
 
-def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, progress: bool = False):
-    """Run one method: ``(status, reason, motion | None, seconds)``; never raises for the method's own failures."""
+def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, progress: bool = False,
+               made: dict | None = None):
+    """Run one method: ``(status, reason, motion | None, seconds)``; never raises for the method's own failures.
+
+    ``made``: if given, receives the estimator object under ``name`` (e.g. for the smoother's tuning)."""
     from .estimators import UnknownMethodError, make_estimator
 
     try:
@@ -302,6 +310,8 @@ def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, pr
         return "failed", f"applicable() raised {type(exc).__name__}: {exc}", None, math.nan
     if reason:
         return "not applicable", str(reason), None, math.nan
+    if made is not None:
+        made[name] = est
     t0 = time.perf_counter()
     try:
         motion = est.estimate(log, progress=progress)
@@ -344,8 +354,9 @@ def compare(
         raise ValueError(f"options given for methods not compared: {unknown_opts}")
     rows: list[dict] = []
     estimates: dict[str, Motion] = {}
+    made: dict[str, Any] = {}
     for name in methods:
-        status, reason, motion, seconds = run_method(name, log, options.get(name), progress=progress)
+        status, reason, motion, seconds = run_method(name, log, options.get(name), progress=progress, made=made)
         row = _row(name, "method", status, reason)
         row["time_s"] = seconds
         if motion is not None:
@@ -364,7 +375,8 @@ def compare(
                 rows.append(_row(BOUND_NAMES[name], "bound", "not applicable", "bounds are evaluated along a simulated truth"))
         else:
             smoother_options = {k: v for k, v in dict(options.get("smoother", {})).items() if k != "compute_sigma"}
-            bound_rows = compute_bounds(log, reference, valid, which, gyro_noise_std_radps, smoother_options)
+            tunings = list(getattr(made.get("smoother"), "last_tuning", []) or []) if "smoother" in estimates else []
+            bound_rows = compute_bounds(log, reference, valid, which, gyro_noise_std_radps, smoother_options, tunings)
             rows.extend(bound_rows)
             _add_ratios(rows, bound_rows, which)
     if estimates_dir is not None:

@@ -224,3 +224,22 @@ def test_motion_level_and_t2_sweep():
         err = direct.omega_b_radps - noisy.truth.omega_b_radps
         assert value == pytest.approx(np.sum(np.sqrt(np.mean(err**2, axis=0))), rel=1e-12)
         assert value == pytest.approx(omega_rmse_sum(direct, noisy.truth), rel=1e-12)
+
+
+def test_smoother_bound_uses_the_process_noise_the_smoother_chose():
+    from gfimu.smoother.batch import BatchSmootherEstimator
+    from gfimu.smoother.bound import smoother_bound
+    from gfimu.smoother.graph import SmootherOptions
+
+    log = simulate("turntable", array=cube_array(0.025, noise_std_mps2=0.07), rate_hz=500.0, duration_s=3.0, seed=2)
+    result = compare(log, methods=["smoother"], bounds=["smoother_bound"])
+    row, bound = result.row("smoother"), result.row("smoother bound")
+    est = BatchSmootherEstimator()
+    est.estimate(log)
+    tuned = smoother_bound(log, est.options(), log.truth,
+                           window_options=[t.apply(est.options()) for t in est.last_tuning]).sigma["omega_b_radps"]
+    assert bound["w_rmse_norm"] == pytest.approx(np.sqrt(np.mean(np.sum(tuned**2, axis=1))), rel=1e-9)
+    # on the smooth turntable the chosen noise is far below the default, and so is the bound
+    default = smoother_bound(log, SmootherOptions(), log.truth).sigma["omega_b_radps"]
+    assert np.sqrt(np.mean(np.sum(default**2, axis=1))) > 1.3 * bound["w_rmse_norm"]
+    assert row["w_rmse_norm_over_smoother_bound"] == pytest.approx(row["w_rmse_norm"] / bound["w_rmse_norm"])

@@ -33,8 +33,13 @@ def truth_states(truth: Motion) -> np.ndarray:
 
 
 def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Motion | None = None,
-                   true_params: np.ndarray | None = None) -> Motion:
-    """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state."""
+                   true_params: np.ndarray | None = None,
+                   window_options: "list[SmootherOptions] | None" = None) -> Motion:
+    """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state.
+
+    ``window_options``: the options of each solve window, e.g. with the process noise that the
+    batch smoother chose from the data (``[t.apply(options) for t in estimator.last_tuning]``).
+    """
     opt = options or SmootherOptions()
     truth = truth or log.truth
     if truth is None:
@@ -51,8 +56,11 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
         states = np.hstack([states, _so3.log(matrix_from_quaternion(truth.quaternion_wb))])
     n = len(log)
     sd = np.zeros((n, states.shape[1]))
-    for solve_sl, keep_log, keep_win in window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s):
-        problem = SmootherProblem(log.select(solve_sl), opt)
+    windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
+    if window_options is not None and len(window_options) != len(windows):
+        raise ValueError(f"window_options has {len(window_options)} entries for {len(windows)} solve windows")
+    for i, (solve_sl, keep_log, keep_win) in enumerate(windows):
+        problem = SmootherProblem(log.select(solve_sl), opt if window_options is None else window_options[i])
         if problem.attitude:
             from ..factors import _so3
 
