@@ -15,6 +15,12 @@ k hold ω [rad/s], ω̇ [rad/s²] and f [m/s²] in B.
   :mod:`gfimu.factors.process`) and priors as gtsam's own
   ``BetweenFactorVector`` / ``PriorFactorVector``, evaluated without Python;
 - gyroscope on ω (residual ``ω - ω_meas``) as a ``PriorFactorVector``.
+
+The process noise follows the options exactly as the batch smoother's
+:class:`~gfimu.smoother.graph.SmootherProblem` does: the trapezoid and ω̇
+random-walk stds are scaled per body axis by ``process_axis_factors``; the
+accelerometer noise std of every axis can be scaled by ``accel_noise_scale``
+(the factor chosen by :func:`gfimu.smoother.tuning.tune` with ``tune_accel_noise``).
 """
 
 from __future__ import annotations
@@ -45,10 +51,14 @@ def insert_state(values: gtsam.Values, k: int, omega, omega_dot, f) -> None:
 class ArrayModel:
     """Precomputed geometry and noise models of one array under ``SmootherOptions``."""
 
-    def __init__(self, array: SensorArray, options: SmootherOptions, fast_measurement: bool = True) -> None:
+    def __init__(self, array: SensorArray, options: SmootherOptions, fast_measurement: bool = True,
+                 accel_noise_scale: float = 1.0) -> None:
+        if not (np.isfinite(accel_noise_scale) and accel_noise_scale > 0):
+            raise ValueError(f"accel_noise_scale must be a positive number, got {accel_noise_scale!r}")
         self.array = array
         self.options = options
         self.fast_measurement = bool(fast_measurement)
+        self.accel_noise_scale = float(accel_noise_scale)
         S = array.structure_matrix()
         self.S_lin = np.ascontiguousarray(S[:, :6])  # [f, ω̇] columns
         self.S_q = np.ascontiguousarray(S[:, 6:])
@@ -56,6 +66,7 @@ class ArrayModel:
         self.S_dw = np.ascontiguousarray(S[:, 3:6])
         sigma = array.noise_std_per_axis_mps2
         sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, options.default_accel_noise_std_mps2)
+        sigma = sigma * self.accel_noise_scale
         self.accel_sigma_mps2 = sigma
         self.accel_noise = gtsam.noiseModel.Diagonal.Sigmas(sigma)
         self.sensors = []  # (directions, positions, column slice, noise model)
@@ -71,6 +82,7 @@ class ArrayModel:
         self._zero3 = np.zeros(3)
         self._eye3 = np.eye(3)
         self._noise_cache: dict = {}
+        self.axis_factors = np.asarray(options.process_axis_factors, dtype=float)
         gs = array.gyroscope.noise_std_radps if array.gyroscope is not None else None
         self.gyro_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(gs) if gs else 0.01)  # as the batch smoother
 
@@ -127,9 +139,10 @@ class ArrayModel:
         if cached is None:
             o = self.options
             q_dw = o.omega_dot_random_walk_radps2_per_sqrt_s
+            axis = self.axis_factors  # per body axis, as SmootherProblem
             cached = (
-                gtsam.noiseModel.Isotropic.Sigma(3, float(kinematics.trapezoid_sigma(q_dw, h))),
-                gtsam.noiseModel.Isotropic.Sigma(3, float(process.random_walk_sigma(q_dw, h))),
+                gtsam.noiseModel.Diagonal.Sigmas(float(kinematics.trapezoid_sigma(q_dw, h)) * axis),
+                gtsam.noiseModel.Diagonal.Sigmas(float(process.random_walk_sigma(q_dw, h)) * axis),
                 gtsam.noiseModel.Isotropic.Sigma(
                     3, float(process.random_walk_sigma(o.specific_force_random_walk_mps2_per_sqrt_s, h))),
             )

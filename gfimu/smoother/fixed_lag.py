@@ -27,6 +27,22 @@ Time gaps (a step longer than ``gap_factor`` times the nominal step, as
 (its states are emitted, smoothed with the data they have) and a new segment
 starts with a fresh initialisation.
 
+Process noise chosen from the data (``tune_process_noise``, on by default
+in :class:`FixedLagEstimator`): a stream cannot see its future, so the first
+``tune_window_s`` of data (a contiguous stretch) are buffered and the batch
+smoother's tuner (:func:`gfimu.smoother.batch.BatchSmootherEstimator._tuned_problem`,
+i.e. :func:`gfimu.smoother.tuning.tune`: jerk density per body axis,
+specific-force density, optionally the accelerometer noise scale) is run on
+them, exactly as the batch smoother would on that stretch alone. The buffered
+samples are then smoothed with the selected densities and the stream goes on
+with them: outputs start ``tune_window_s`` late, once, and that one
+:meth:`FixedLagSmoother.push` pays for the tuning (linear in the stretch:
+about 0.2 s for 3 s at 500 Hz) and for the catch-up of the buffered samples.
+Densities given explicitly (any of ``omega_dot_random_walk_radps2_per_sqrt_s``,
+``specific_force_random_walk_mps2_per_sqrt_s``, ``process_axis_factors`` not at
+its default) are used as given and disable the tuning, as does
+``tune_process_noise=False``.
+
 If gtsam fails on an update (e.g. ``IndeterminantLinearSystem``), the window
 is rebuilt once from its raw samples with a ``RuntimeWarning`` naming the
 time; a second failure raises :class:`FixedLagSmootherError`.
@@ -48,7 +64,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections import deque
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import gtsam
 import numpy as np
@@ -92,8 +108,28 @@ class FixedLagUpdate:
     filtered: StateEstimate | None
 
 
+PROCESS_NOISE_OPTIONS = ("omega_dot_random_walk_radps2_per_sqrt_s", "specific_force_random_walk_mps2_per_sqrt_s",
+                         "process_axis_factors")
+"""Options that, set away from their defaults, give the process noise explicitly (no tuning)."""
+_DEFAULTS = SmootherOptions()
+
+
+def explicit_process_noise(options: SmootherOptions) -> list[str]:
+    """Names of the process-noise options of ``options`` that differ from their defaults."""
+    return [name for name in PROCESS_NOISE_OPTIONS
+            if tuple(np.atleast_1d(getattr(options, name))) != tuple(np.atleast_1d(getattr(_DEFAULTS, name)))]
+
+
+def tunes_process_noise(options: SmootherOptions) -> bool:
+    """Whether the fixed-lag smoother chooses the process noise from the data with ``options``."""
+    return bool(options.tune_process_noise) and not explicit_process_noise(options)
+
+
 def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None:
-    """Why the fixed-lag smoother cannot run on ``array`` with ``options`` (None if it can)."""
+    """Why the fixed-lag smoother cannot run on ``array`` with ``options`` (None if it can).
+
+    Batch-only options away from their defaults are refused with the reason,
+    never silently ignored."""
     unsupported = [name for name in ("self_calibrate_bias", "self_calibrate_scale", "free_flight", "use_inclinometer",
                                      "estimate_attitude") if getattr(options, name, False)]
     if unsupported:
@@ -102,6 +138,15 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
         return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.motion_model!r} (use method 'smoother')"
     if options.measurement != "accelerometer":
         return "the fixed-lag smoother uses measurement='accelerometer' only"
+    if options.tune_motion_model:
+        return "tune_motion_model: the fixed-lag smoother has the 'jerk' motion model only (use method 'smoother')"
+    if options.accel_noise_slope_mps2_per_radps > 0:
+        return ("accel_noise_slope_mps2_per_radps: the motion-dependent accelerometer noise is re-weighted from a whole "
+                "solution, which a stream does not have (use method 'smoother')")
+    for name in ("window_s", "overlap_s", "reweight_iterations"):
+        if getattr(options, name) != getattr(_DEFAULTS, name):
+            return (f"{name} is an option of the batch smoother's solve windows; the fixed-lag smoother's window is "
+                    "lag_s (use method 'smoother', or leave it at its default)")
     has_gyro = array.gyroscope is not None and options.use_gyro
     if array.n_axes < 6 and not has_gyro:
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without a gyroscope ω cannot be "
@@ -129,13 +174,20 @@ class FixedLagSmoother:
     Solver settings: ``relinearize_threshold`` [rad/s] and ``relinearize_skip``
     (iSAM2), ``marginalise_every_s`` (size of the marginalisation blocks),
     ``warmup_s`` (data gathered to initialise a segment), ``gap_factor``,
-    ``fast_measurement`` (see :class:`FixedLagEstimator`).
+    ``fast_measurement``, ``tune_window_s`` (see :class:`FixedLagEstimator`).
+
+    With ``options.tune_process_noise`` and no explicit density (module
+    docstring) the first ``tune_window_s`` of data are buffered (``push``
+    returns nothing meanwhile), the process noise is chosen on them by the
+    batch smoother's tuner, and the push that fills the buffer returns all
+    buffered states that have reached the lag. :attr:`tuning` then holds the
+    selection and :attr:`options` the options in use.
     """
 
     def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
                  rate_hz: float = 500.0, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10,
                  marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
-                 fast_measurement: bool = True) -> None:
+                 fast_measurement: bool = True, tune_window_s: float = 3.0) -> None:
         options = options or SmootherOptions()
         reason = fixed_lag_reason(array, options)
         if reason:
@@ -152,6 +204,8 @@ class FixedLagSmoother:
             raise ValueError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
         if int(relinearize_skip) < 1:
             raise ValueError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
+        if not (isinstance(tune_window_s, (int, float)) and math.isfinite(tune_window_s) and tune_window_s > 0):
+            raise ValueError(f"fixed-lag smoother: tune_window_s must be a positive number, got {tune_window_s!r}")
         self.array = array
         self.options = options
         self.lag_s = float(lag_s)
@@ -160,7 +214,16 @@ class FixedLagSmoother:
         self.relinearize_threshold = float(relinearize_threshold)
         self.relinearize_skip = int(relinearize_skip)
         self.gap_factor = float(gap_factor)
+        self.fast_measurement = bool(fast_measurement)
+        self.factorization = "QR"
+        self.wildfire_threshold = None
         self.model = model.ArrayModel(array, options, fast_measurement)
+        self.tuning = None  # gfimu.smoother.tuning.Tuning once chosen from the data
+        self._tune_pending = tunes_process_noise(options)
+        self._tune_n = max(2, int(round(tune_window_s * self.rate_hz)))
+        # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
+        self._tune_min_n = min(self._tune_n, max(2, int(round(1.0 * self.rate_hz))))
+        self._tune_buffer: list = []
         self._nominal_dt_ns = 1e9 / self.rate_hz
         self._warmup_n = max(2, int(round(warmup_s * self.rate_hz)))
         self._block_s = max(float(marginalise_every_s), 2.0 / self.rate_hz)
@@ -185,7 +248,11 @@ class FixedLagSmoother:
         return len(self._window) + len(self._warmup)
 
     def push(self, timestamp_ns: int, accel_row, gyro_row=None, tilt_row=None) -> FixedLagUpdate:
-        """Add one sample; return the states that reached the lag and the newest one."""
+        """Add one sample; return the states that reached the lag and the newest one.
+
+        While the tuning stretch is being gathered nothing comes out (``filtered``
+        is None); the push that completes it returns every buffered state that has
+        reached the lag."""
         t_ns = int(timestamp_ns)
         y = np.asarray(accel_row, dtype=float).reshape(-1)
         if y.shape != (self.array.n_axes,):
@@ -211,24 +278,97 @@ class FixedLagSmoother:
             self._origin_ns = t_ns
         self._last_t_ns = t_ns
         sample = (t_ns, y, gyro)
+        if self._tune_pending:
+            self._tune_buffer.append(sample)
+            if len(self._tune_buffer) < self._tune_n:
+                return FixedLagUpdate(tuple(smoothed), None)
+            smoothed.extend(self._tune_and_replay())
+            return FixedLagUpdate(tuple(smoothed), self._read(self._window[-1]))
+        smoothed.extend(self._process(sample))
+        return FixedLagUpdate(tuple(smoothed), None if self._smoother is None else self._read(self._window[-1]))
+
+    def _process(self, sample) -> list[StateEstimate]:
+        """One sample into the current segment (no tuning, no gap check); the states due."""
         if self._smoother is None:
             self._warmup.append(sample)
             if len(self._warmup) < self._warmup_n:
-                return FixedLagUpdate(tuple(smoothed), None)
+                return []
             self._initialise()
         else:
             self._add_sample(sample)
-        smoothed.extend(self._emit_due())
-        return FixedLagUpdate(tuple(smoothed), self._read(self._window[-1]))
+        return self._emit_due()
+
+    def _tune_and_replay(self, final: bool = False) -> list[StateEstimate]:
+        """Choose the process noise on the buffered stretch, then smooth the buffer with it.
+
+        The states of the stretch that come out now are the batch smoother's
+        solution on the whole stretch (they are emitted at its end, so all of it
+        is past data for them); the buffer is also streamed through the
+        fixed-lag smoother, which carries that information on.
+
+        ``final``: the stretch ends early (a gap or the end of the stream); it is
+        tuned on only if it holds at least ``min(tune_window_s, 1 s)`` of samples,
+        otherwise it is smoothed with the given densities and the tuning waits
+        for the next segment."""
+        samples, self._tune_buffer = self._tune_buffer, []
+        batch = None
+        if not final or len(samples) >= self._tune_min_n:
+            self.tuning, tuned, batch = self._tune_and_solve(samples)
+            self.options = tuned
+            self.model = model.ArrayModel(self.array, tuned, self.fast_measurement, self.tuning.accel_noise_scale)
+            self._tune_pending = False
+        if batch is not None and final:  # the segment ends here: the batch solution is all there is to say
+            return batch
+        out = []
+        for sample in samples:
+            out.extend(self._process(sample))
+        if batch is not None:
+            out = batch[:len(out)]
+        return out
+
+    def _stretch_log(self, samples) -> Log:
+        times_ns = np.array([s[0] for s in samples], dtype=np.int64)
+        accel = np.vstack([s[1] for s in samples])
+        gyro = None
+        if self.array.gyroscope is not None and self.options.use_gyro and all(s[2] is not None for s in samples):
+            gyro = np.vstack([s[2] for s in samples])
+        return Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag tuning stretch")
+
+    def tune(self, samples) -> tuple:
+        """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
+        (:class:`gfimu.smoother.tuning.Tuning`, options carrying it)."""
+        from .batch import BatchSmootherEstimator
+
+        tunings: list = []
+        problem, _ = BatchSmootherEstimator._tuned_problem(self._stretch_log(samples),
+                                                          replace(self.options, tune_process_noise=True), tunings)
+        return tunings[-1], replace(problem.options, tune_process_noise=False)
+
+    def _tune_and_solve(self, samples):
+        """:meth:`tune`, plus the batch smoother's states of the stretch with the selection."""
+        from .batch import BatchSmootherEstimator, solve
+
+        part = self._stretch_log(samples)
+        tunings: list = []
+        problem, x0 = BatchSmootherEstimator._tuned_problem(part, replace(self.options, tune_process_noise=True), tunings)
+        res = solve(problem, x0, None, compute_sigma=self.compute_sigma)
+        X = res.states
+        sd = np.sqrt(np.einsum("nii->ni", res.covariance)) if self.compute_sigma else None
+        states = [StateEstimate(int(t), X[j, 0:3].copy(), X[j, 3:6].copy(), X[j, 6:9].copy(),
+                                *((None,) * 3 if sd is None else (sd[j, 0:3], sd[j, 3:6], sd[j, 6:9])))
+                  for j, t in enumerate(part.timestamps_ns)]
+        return tunings[-1], replace(problem.options, tune_process_noise=False), states
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
 
         The next :meth:`push` starts a new segment with a fresh initialisation.
+        A tuning stretch still being gathered is tuned on (if long enough) and smoothed first.
         """
+        replayed = self._tune_and_replay(final=True) if self._tune_buffer else []
         if self._smoother is None and self._warmup:
             self._initialise()
-        out = tuple(self._read(entry, with_sigma=self.compute_sigma) for entry in self._window)
+        out = tuple(replayed) + tuple(self._read(entry, with_sigma=self.compute_sigma) for entry in self._window)
         self._start_segment()
         return out
 
@@ -251,6 +391,11 @@ class FixedLagSmoother:
         thresholds.insert(("f", np.full(3, 1e300)))
         params.setRelinearizeThreshold(thresholds)
         params.relinearizeSkip = self.relinearize_skip
+        params.setFactorization(self.factorization)
+        if self.wildfire_threshold is not None:
+            gn = gtsam.ISAM2GaussNewtonParams()
+            gn.setWildfireThreshold(self.wildfire_threshold)
+            params.setOptimizationParams(gn)
         params.findUnusedFactorSlots = True  # reuse the slots of marginalised factors: bounded memory
         # Keys carry block-quantised timestamps, so gtsam marginalises one block of
         # states at a time (one re-elimination of the window per block rather than
@@ -273,7 +418,7 @@ class FixedLagSmoother:
         ``omega_hint`` (ω expected at the second-to-last warm-up sample) picks the
         sign of ω when re-initialising after a solver failure.
         """
-        from .initialise import initial_states
+        from .batch import BatchSmootherEstimator
 
         times_ns = np.array([s[0] for s in self._warmup], dtype=np.int64)
         accel = np.vstack([s[1] for s in self._warmup])
@@ -282,7 +427,7 @@ class FixedLagSmoother:
             gyro = np.vstack([s[2] for s in self._warmup])
         if len(times_ns) >= 2:
             part = Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag warm-up")
-            x0 = initial_states(part, self.options)
+            x0 = BatchSmootherEstimator._initial_states(part, self.options)  # 'sign-resolving' or 'ml'
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
@@ -399,7 +544,30 @@ class FixedLagEstimator(SmootherOptions):
     smoothed value ``lag_s`` seconds later (and, at the end of the log or
     before a gap, the last window's smoothed values), exactly what a live
     stream would give with that delay.
+
+    Process noise: as in the batch smoother, ``tune_process_noise`` is on by
+    default, but chosen once, from the first ``tune_window_s`` of data (the
+    batch smoother's tuner on that stretch: jerk density per body axis,
+    specific-force density, and with ``tune_accel_noise`` the accelerometer
+    noise scale); the stream then runs with it (its first outputs come
+    ``tune_window_s`` late). The choice is kept in :attr:`last_tuning`. Giving
+    any of ``omega_dot_random_walk_radps2_per_sqrt_s``,
+    ``specific_force_random_walk_mps2_per_sqrt_s`` or ``process_axis_factors``
+    (a value other than the default) uses the given densities and skips the
+    tuning, as does ``tune_process_noise=False``.
+
+    Batch-only options are refused by :meth:`applicable` with the reason when
+    set away from their defaults: ``motion_model='snap'``, ``tune_motion_model``,
+    ``accel_noise_slope_mps2_per_radps``, ``window_s``, ``overlap_s``,
+    ``reweight_iterations``, self-calibration, free flight, the attitude and
+    the inclinometer, ``measurement='quadratic'``. ``initialisation='ml'`` is
+    honoured (initial states of each segment and of the tuning).
     """
+
+    tune_process_noise: bool = True
+    """Choose the process noise from the first ``tune_window_s`` of data (see above)."""
+    tune_window_s: float = 3.0
+    """Length of the stretch of data the process noise is chosen on [s] (the stream's one-time start-up delay)."""
 
     lag_s: float = 0.2
     """Seconds of future data behind each estimate (the output delay of a live stream)."""
@@ -427,7 +595,7 @@ class FixedLagEstimator(SmootherOptions):
                                 relinearize_threshold=self.relinearize_threshold,
                                 relinearize_skip=self.relinearize_skip, marginalise_every_s=self.marginalise_every_s,
                                 warmup_s=self.warmup_s, gap_factor=self.gap_factor,
-                                fast_measurement=self.fast_measurement)
+                                fast_measurement=self.fast_measurement, tune_window_s=self.tune_window_s)
 
     def applicable(self, array: SensorArray) -> str | None:
         return fixed_lag_reason(array, self.options())
@@ -461,6 +629,7 @@ class FixedLagEstimator(SmootherOptions):
             upd = smoother.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i])
             store(upd.smoothed)
         store(smoother.flush())
+        object.__setattr__(self, "_last_tuning", [] if smoother.tuning is None else [smoother.tuning])
         if cursor != n:
             raise FixedLagSmootherError(f"{log.source}: {n - cursor} samples were not estimated")
         sigma = {}
@@ -468,3 +637,9 @@ class FixedLagEstimator(SmootherOptions):
             sigma = {"omega_b_radps": sig[:, :3], "omega_dot_b_radps2": sig[:, 3:6], "specific_force_b_mps2": sig[:, 6:]}
         return Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
                       specific_force_b_mps2=out[:, 6:], sigma=sigma)
+
+    @property
+    def last_tuning(self) -> list:
+        """The process noise chosen from the data in the last :meth:`estimate`
+        (one :class:`gfimu.smoother.tuning.Tuning`, or empty when not tuned)."""
+        return getattr(self, "_last_tuning", [])
