@@ -156,6 +156,8 @@ def test_batch_only_options_are_refused_with_the_reason():
         "reweight_iterations": {"reweight_iterations": 2},
         "motion_model": {"motion_model": "snap"},
     }
+    if hasattr(SmootherOptions(), "accel_robust_threshold"):  # the batch smoother's robust re-weighting
+        cases["accel_robust_threshold"] = {"accel_robust_threshold": 2.0}
     for word, changes in cases.items():
         reason = FixedLagEstimator(**changes).applicable(arr)
         assert reason and word in reason, (changes, reason)

@@ -145,8 +145,12 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
                 "solution, which a stream does not have (use method 'smoother')")
     for name in ("window_s", "overlap_s", "reweight_iterations"):
         if getattr(options, name) != getattr(_DEFAULTS, name):
-            return (f"{name} is an option of the batch smoother's solve windows; the fixed-lag smoother's window is "
+            return (f"{name} is an option of the batch smoother's solves; the fixed-lag smoother's window is "
                     "lag_s (use method 'smoother', or leave it at its default)")
+    for name in ("accel_robust_threshold", "process_robust_threshold", "robust_loss"):
+        if hasattr(_DEFAULTS, name) and getattr(options, name) != getattr(_DEFAULTS, name):
+            return (f"{name}: the robust re-weighting is iterated over whole solutions, which a stream does not "
+                    "have (use method 'smoother')")
     has_gyro = array.gyroscope is not None and options.use_gyro
     if array.n_axes < 6 and not has_gyro:
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without a gyroscope ω cannot be "
@@ -216,7 +220,6 @@ class FixedLagSmoother:
         self.gap_factor = float(gap_factor)
         self.fast_measurement = bool(fast_measurement)
         self.factorization = "QR"
-        self.wildfire_threshold = None
         self.model = model.ArrayModel(array, options, fast_measurement)
         self.tuning = None  # gfimu.smoother.tuning.Tuning once chosen from the data
         self._tune_pending = tunes_process_noise(options)
@@ -391,11 +394,10 @@ class FixedLagSmoother:
         thresholds.insert(("f", np.full(3, 1e300)))
         params.setRelinearizeThreshold(thresholds)
         params.relinearizeSkip = self.relinearize_skip
+        # QR rather than Cholesky: the densities chosen from the data can be tiny about some axes
+        # (1e-4 of the others on a turntable), and gtsam's Cholesky then reports an indeterminate
+        # system; QR works on the square-root information and costs the same here.
         params.setFactorization(self.factorization)
-        if self.wildfire_threshold is not None:
-            gn = gtsam.ISAM2GaussNewtonParams()
-            gn.setWildfireThreshold(self.wildfire_threshold)
-            params.setOptimizationParams(gn)
         params.findUnusedFactorSlots = True  # reuse the slots of marginalised factors: bounded memory
         # Keys carry block-quantised timestamps, so gtsam marginalises one block of
         # states at a time (one re-elimination of the window per block rather than
@@ -559,9 +561,11 @@ class FixedLagEstimator(SmootherOptions):
     Batch-only options are refused by :meth:`applicable` with the reason when
     set away from their defaults: ``motion_model='snap'``, ``tune_motion_model``,
     ``accel_noise_slope_mps2_per_radps``, ``window_s``, ``overlap_s``,
-    ``reweight_iterations``, self-calibration, free flight, the attitude and
-    the inclinometer, ``measurement='quadratic'``. ``initialisation='ml'`` is
-    honoured (initial states of each segment and of the tuning).
+    ``reweight_iterations``, the robust re-weighting options, self-calibration,
+    free flight, the attitude and the inclinometer, ``measurement='quadratic'``.
+    ``initialisation='ml'`` is honoured (initial states of each segment and of
+    the tuning), and so are ``max_iterations`` and ``relative_tolerance`` (the
+    batch solves of the tuning stretch).
     """
 
     tune_process_noise: bool = True
