@@ -178,3 +178,15 @@ def test_accelerometer_noise_scale_is_tuned_and_used(turntable_log):
     batch.estimate(log.select(slice(0, 500)))
     assert sm.tuning.accel_noise_scale == batch.last_tuning[0].accel_noise_scale
     np.testing.assert_allclose(sm.model.accel_sigma_mps2, 0.07 * sm.tuning.accel_noise_scale, rtol=1e-12)
+
+
+def test_sigma_of_the_stretch_and_of_the_stream_match_the_actual_error():
+    """compute_sigma: the batch marginals for the stretch's states, gtsam's for the streamed ones."""
+    log = simulate("random3d", CUBE_5CM, rate_hz=RATE_HZ, duration_s=2.0, seed=7)
+    est = FixedLagEstimator(compute_sigma=True, tune_window_s=1.0).estimate(log)
+    sig = est.sigma["omega_b_radps"]
+    assert np.all(np.isfinite(sig)) and np.all(sig > 0)
+    err = est.omega_b_radps - log.truth.omega_b_radps
+    for part in (slice(0, 400), slice(500, None)):  # measured 1.37 and 1.06
+        ratio = np.sqrt(np.mean(err[part] ** 2)) / np.sqrt(np.mean(sig[part] ** 2))
+        assert 0.5 < ratio < 2.0, (part, ratio)
