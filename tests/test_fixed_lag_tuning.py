@@ -190,3 +190,21 @@ def test_sigma_of_the_stretch_and_of_the_stream_match_the_actual_error():
     for part in (slice(0, 400), slice(500, None)):  # measured 1.37 and 1.06
         ratio = np.sqrt(np.mean(err[part] ** 2)) / np.sqrt(np.mean(sig[part] ** 2))
         assert 0.5 < ratio < 2.0, (part, ratio)
+
+
+def test_a_stretch_shorter_than_the_initialisation_warm_up(turntable_log):
+    """tune_window_s 0.1 s < warmup_s 0.2 s: the tuning push returns nothing yet, every sample comes out once."""
+    log = turntable_log.select(slice(0, 400))
+    sm = FixedLagEstimator(tune_window_s=0.1, warmup_s=0.2).smoother(CUBE_5CM, RATE_HZ)
+    out = []
+    for i in range(len(log)):
+        upd = sm.push(log.timestamps_ns[i], log.accel_mps2[i])
+        assert (upd.filtered is None) == (i < 99)
+        out.extend(upd.smoothed)
+    out.extend(sm.flush())
+    assert sm.tuning is not None
+    np.testing.assert_array_equal([s.timestamp_ns for s in out], log.timestamps_ns)
+    w = np.array([s.omega_b_radps for s in out])
+    assert omega_rmse(w, log.truth.omega_b_radps) < 0.1  # measured 0.076 (densities from 0.1 s of data), |ω| up to 2.6 rad/s
+    big = np.linalg.norm(log.truth.omega_b_radps, axis=1) > 0.1
+    assert not np.any(np.sum(w * log.truth.omega_b_radps, axis=1)[big] < 0)

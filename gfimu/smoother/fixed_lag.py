@@ -286,8 +286,8 @@ class FixedLagSmoother:
             if len(self._tune_buffer) < self._tune_n:
                 return FixedLagUpdate(tuple(smoothed), None)
             smoothed.extend(self._tune_and_replay())
-            return FixedLagUpdate(tuple(smoothed), self._read(self._window[-1]))
-        smoothed.extend(self._process(sample))
+        else:
+            smoothed.extend(self._process(sample))
         return FixedLagUpdate(tuple(smoothed), None if self._smoother is None else self._read(self._window[-1]))
 
     def _process(self, sample) -> list[StateEstimate]:
