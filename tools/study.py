@@ -40,8 +40,9 @@ from gfimu.evaluation import evaluate  # noqa: E402
 from gfimu.simulate import SCENARIOS, SensorErrors, simulate  # noqa: E402
 
 LAYOUTS = {
-    "cube-5cm": lambda: cube_array(0.05, noise_std_mps2=0.07),
-    "cube-5cm+gyro": lambda: _with_gyro(cube_array(0.05, noise_std_mps2=0.07)),
+    "cube-5cm": lambda: cube_array(0.025, noise_std_mps2=0.07),  # 5 cm edge
+    "cube-5cm+gyro": lambda: _with_gyro(cube_array(0.025, noise_std_mps2=0.07)),
+    "cube-10cm": lambda: cube_array(0.05, noise_std_mps2=0.07),
     "mimu4444": lambda: mimu4444_array(),
     "paper001": lambda: paper001_array(lever_arm_m=0.05),
 }
