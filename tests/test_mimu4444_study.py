@@ -47,3 +47,35 @@ def test_fit_positions_recovers_displaced_sensors():
     assert before > 0.05
     assert np.max(np.abs(fitted - true)) < 1e-7
     assert study._rms(study.rigid_residual(y, w, fitted)[0]) < 1e-5
+
+
+def test_error_breakdown_shares():
+    """Known errors: 2 rad/s on the 3 samples either side of a saturated sample, 1 rad/s elsewhere,
+    and one estimate pointing to the other hemisphere."""
+    from gfimu.array import mimu4444_array
+    from gfimu.log import Log
+    from gfimu.motion import Motion
+
+    n = 200
+    t = np.arange(n, dtype=np.int64) * 16_000_000
+    ref = np.tile([12.0, 0.0, 0.0], (n, 1))
+    invalid = np.zeros(n, dtype=bool)
+    invalid[100] = True
+    est = ref + np.array([0.0, 1.0, 0.0])
+    near = np.abs(np.arange(n) - 100) <= 3
+    est[near] = ref[near] + np.array([0.0, 2.0, 0.0])
+    est[10] = -ref[10]  # error 24 rad/s, opposite
+    arr = mimu4444_array()
+    log = Log(arr, t, np.zeros((n, arr.n_axes)), reference=Motion(t, omega_b_radps=ref), invalid_reference=invalid)
+    mask = ~invalid
+    b = study.error_breakdown(Motion(t, omega_b_radps=est), log, mask)
+    err2 = np.where(near, 4.0, 1.0)
+    err2[10] = 24.0**2
+    total = err2[mask].sum()
+    c = b["by_distance_to_saturation"]["1-4"]
+    assert c["n"] == 6 and np.isclose(c["rmse_norm"], 2.0) and np.isclose(c["share_sse"], 24.0 / total)
+    far = b["by_distance_to_saturation"]["30-1000000000"]
+    assert np.isclose(far["opposite"], 1.0 / far["n"])
+    assert np.isclose(b["by_omega_radps"]["10-20"]["share_sse"], 1.0)
+    assert np.isclose(b["top_1pc_share_sse"], 24.0**2 / total)  # 199 samples: the single largest
+    assert np.isclose(b["top_5pc_share_sse"], (24.0**2 + 6 * 4.0 + 2 * 1.0) / total)  # the 9 largest

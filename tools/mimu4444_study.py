@@ -155,12 +155,57 @@ def compare(args) -> list[dict]:
                 for ref_name, reference in references.items():
                     row = metrics_row(motion, log.replace(reference=reference), m)
                     row.update(exp=exp, calibration=label, method=name, seconds=elapsed, options=opts, reference=ref_name)
+                    if args.breakdown and (ref_name != "recorded" or len(references) == 1):
+                        row["breakdown"] = error_breakdown(motion, log.replace(reference=reference), m)
                     rows.append(row)
                     print(f"  {label:>14} {name:>16} (ref {ref_name}): ω RMSE norm {row['rmse_norm']:.3f} rad/s, median {row['median_norm']:.3f}, "
                           f"> 5 rad/s {100 * row['large_error']:.1f} %, some axis wrong sign {100 * row['wrong_sign']:.2f} %, "
                           f"ω·ω_ref < 0 {100 * row['opposite']:.2f} % "
                           f"({elapsed:.1f} s)", flush=True)
+                    if "breakdown" in row:
+                        print_breakdown(row["breakdown"])
     return rows
+
+
+def error_breakdown(motion, log, mask) -> dict:
+    """Where the ω error sits: share of the squared error (and RMSE of the norm) by distance to the
+    nearest saturated-gyro sample, by |ω_ref|, by |ω̇_ref| quantile; opposite-sign share by |ω_ref|."""
+    ref = log.reference.omega_b_radps
+    err2 = np.sum((motion.omega_b_radps - ref) ** 2, axis=1)
+    wn = np.linalg.norm(ref, axis=1)
+    k = np.arange(len(log))
+    sat = np.nonzero(log.invalid_reference)[0]
+    if sat.size:
+        j = np.clip(np.searchsorted(sat, k), 1, sat.size) - 1
+        dist = np.minimum(np.abs(k - sat[j]), np.abs(sat[np.clip(j + 1, 0, sat.size - 1)] - k))
+    else:
+        dist = np.full(len(log), 10**9)
+    wd = np.linalg.norm(np.gradient(ref, log.times_s, axis=0), axis=1)
+    total = float(np.sum(err2[mask]))
+    opposite = np.sum(motion.omega_b_radps * ref, axis=1) < 0
+
+    def cell(sel):
+        sel = sel & mask
+        n = int(sel.sum())
+        return {"n": n, "rmse_norm": float(np.sqrt(np.mean(err2[sel]))) if n else float("nan"),
+                "share_sse": float(np.sum(err2[sel]) / total), "opposite": float(np.mean(opposite[sel])) if n else float("nan")}
+
+    out = {"by_distance_to_saturation": {f"{a}-{b}": cell((dist >= a) & (dist < b)) for a, b in ((1, 4), (4, 10), (10, 30), (30, 10**9))},
+           "by_omega_radps": {f"{a}-{b}": cell((wn >= a) & (wn < b)) for a, b in ((2, 5), (5, 10), (10, 20), (20, 30), (30, 40))}}
+    q = np.quantile(wd[mask], [0.0, 0.5, 0.9, 0.99, 1.0])
+    out["by_omega_dot_quantile"] = {f"{lo:.0f}-{hi:.0f}": cell((wd >= lo) & (wd <= hi)) for lo, hi in zip(q[:-1], q[1:])}
+    e = np.sort(err2[mask])[::-1]
+    out["top_1pc_share_sse"] = float(e[: max(len(e) // 100, 1)].sum() / total)
+    out["top_5pc_share_sse"] = float(e[: max(len(e) // 20, 1)].sum() / total)
+    return out
+
+
+def print_breakdown(b: dict, indent: str = "    ") -> None:
+    for key in ("by_distance_to_saturation", "by_omega_radps", "by_omega_dot_quantile"):
+        print(f"{indent}{key}: " + "; ".join(f"{k}: n {c['n']}, RMSE {c['rmse_norm']:.2f}, SSE {100 * c['share_sse']:.0f} %, "
+                                            f"opp {100 * c['opposite']:.1f} %" for k, c in b[key].items()))
+    print(f"{indent}largest 1 % / 5 % of errors carry {100 * b['top_1pc_share_sse']:.0f} % / {100 * b['top_5pc_share_sse']:.0f} % "
+          "of the squared error", flush=True)
 
 
 def table(rows: list[dict]) -> str:
@@ -365,6 +410,8 @@ def main(argv=None) -> int:
                    help="accelerometer noise std (m/s²) written into the array model (default: the layout's 0.05)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE", help="method option, repeatable")
     p.add_argument("--residual", action="store_true", help="also run the rigid-body residual investigation")
+    p.add_argument("--breakdown", action="store_true",
+                   help="print where the ω error sits (distance to gyro saturation, |ω|, |ω̇|) for each method")
     p.add_argument("--json", type=Path, default=None, help="write all numbers to this JSON file")
     p.add_argument("--progress", action="store_true")
     args = p.parse_args(argv)

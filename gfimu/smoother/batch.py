@@ -337,9 +337,13 @@ class BatchSmootherEstimator(SmootherOptions):
             else:
                 problem, x0 = self._tuned_problem(part, opt, tunings)
                 res = solve(problem, x0, None, compute_sigma=opt.compute_sigma)
-                if opt.accel_noise_slope_mps2_per_radps > 0 and opt.measurement == "accelerometer":
+                slope = opt.accel_noise_slope_mps2_per_radps > 0 and opt.measurement == "accelerometer"
+                if slope or opt.robust:
                     for _ in range(int(opt.reweight_iterations) - 1):  # re-weight from the new estimate
-                        problem.set_motion_dependent_noise(res.states[:, 0:3], opt.accel_noise_slope_mps2_per_radps)
+                        if slope:
+                            problem.set_motion_dependent_noise(res.states[:, 0:3], opt.accel_noise_slope_mps2_per_radps)
+                        if opt.robust:
+                            problem.set_robust_weights(res.states, res.params)
                         res = solve(problem, res.states, None, compute_sigma=opt.compute_sigma)
             m = min(M, res.states.shape[1])
             states[keep_log, :m] = res.states[keep_win, :m]

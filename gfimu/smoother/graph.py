@@ -151,6 +151,17 @@ class SmootherOptions:
     tune_accel_noise: bool = False
     """With ``tune_process_noise``: also scale the accelerometer noise of every axis by the same
     criterion (for real sensors whose rigid-body residual exceeds their white noise)."""
+    robust_loss: str = "huber"
+    """Batch smoother: loss of the robust re-weighting below, 'huber' or 'cauchy' (iteratively
+    re-weighted least squares, one re-weighting per extra solve of ``reweight_iterations``)."""
+    accel_robust_threshold: float = 0.0
+    """Batch smoother: robust loss on each accelerometer axis, threshold in standard deviations of
+    its (whitened) residual; 0 (default) keeps the Gaussian loss. For real arrays whose rigid-body
+    residual has heavy tails."""
+    process_robust_threshold: float = 0.0
+    """Batch smoother: robust loss on the motion-model factors of each step (kinematics + ω̇ random walk,
+    or the white-snap step), threshold on the step's whitened residual norm / sqrt(rows); 0 (default)
+    keeps the Gaussian loss. Lets sudden hand jerks through without smoothing them away."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -191,6 +202,17 @@ class SmootherOptions:
             raise ValueError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")
         if int(self.max_iterations) < 1:
             raise ValueError("smoother option max_iterations must be >= 1")
+        if self.robust_loss not in ("huber", "cauchy"):
+            raise ValueError(f"smoother option robust_loss must be 'huber' or 'cauchy', got {self.robust_loss!r}")
+        for name in ("accel_robust_threshold", "process_robust_threshold"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
+                raise ValueError(f"smoother option {name} must be >= 0 (0: off), got {v!r}")
+
+    @property
+    def robust(self) -> bool:
+        """Whether any robust re-weighting is on."""
+        return self.accel_robust_threshold > 0 or self.process_robust_threshold > 0
 
 
 def options_reason(array: SensorArray, options: SmootherOptions, attitude_supported: bool = False) -> str | None:
@@ -341,6 +363,56 @@ class SmootherProblem:
         dynamic errors). Re-evaluated from each new estimate (iteratively re-weighted least squares)."""
         wn = np.linalg.norm(np.asarray(omega_b_radps, dtype=float), axis=1)
         self.accel_sigma_per_sample = np.sqrt(self.accel_sigma[None, :] ** 2 + (slope_mps2_per_radps * wn[:, None]) ** 2)
+        self._accel_sigma_unweighted = self.accel_sigma_per_sample
+
+    def set_robust_weights(self, states: np.ndarray, params: np.ndarray | None = None) -> None:
+        """Robust (Huber or Cauchy) re-weighting at ``states`` (iteratively re-weighted least squares).
+
+        Each accelerometer axis (``accel_robust_threshold``) and each motion-model step
+        (``process_robust_threshold``) gets the IRLS weight ``w(e)`` of its whitened residual e
+        (for a step: its norm / sqrt(rows)); the weight divides the factor's variance. Weights are
+        computed against the un-reweighted noise (the motion-dependent one when set), so repeated
+        calls do not compound.
+        """
+        opt = self.options
+        P = np.zeros(self.n_global) if params is None else params
+
+        def weight(e, c):
+            e = np.abs(e)
+            if opt.robust_loss == "cauchy":
+                return 1.0 / (1.0 + (e / c) ** 2)
+            return np.where(e <= c, 1.0, c / np.maximum(e, 1e-300))
+
+        if opt.accel_robust_threshold > 0 and opt.measurement == "accelerometer":
+            base = getattr(self, "_accel_sigma_unweighted", None)
+            if base is None:
+                base = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
+            self.accel_sigma_per_sample = np.array(base)  # whiten with the base noise
+            r = self._accelerometer_term(states, P).residual
+            self.accel_sigma_per_sample = base / np.sqrt(weight(r, opt.accel_robust_threshold))
+        if opt.process_robust_threshold > 0:
+            if not hasattr(self, "_process_base"):
+                self._process_base = (self.trapezoid_sigma.copy(), self.omega_dot_step_sigma.copy(),
+                                      self.snap_whiten.copy() if self.snap else None)
+            self.trapezoid_sigma, self.omega_dot_step_sigma = self._process_base[0].copy(), self._process_base[1].copy()
+            if self.snap:
+                self.snap_whiten, self.snap_cov = self._process_base[2].copy(), None
+            mk = self.state_size - 3 if self.attitude else self.state_size
+            X = states
+            if mk == STATE_SIZE:
+                rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
+                rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
+                r = np.concatenate([rk / (self.trapezoid_sigma[:, None] * self.axis_factors),
+                                    rd / (self.omega_dot_step_sigma[:, None] * self.axis_factors)], axis=1)
+            else:
+                ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A], self.dt_s)
+                r = np.einsum("nij,nj->ni", self.snap_whiten, ra)
+            w = weight(np.sqrt(np.mean(r**2, axis=1)), opt.process_robust_threshold)
+            self.trapezoid_sigma = self.trapezoid_sigma / np.sqrt(w)
+            self.omega_dot_step_sigma = self.omega_dot_step_sigma / np.sqrt(w)
+            if self.snap:
+                self.snap_whiten = self.snap_whiten * np.sqrt(w)[:, None, None]
+                self.snap_cov = np.linalg.inv(np.swapaxes(self.snap_whiten, 1, 2) @ self.snap_whiten)
 
     # --- calibration variables -------------------------------------------
     def global_part(self, params: np.ndarray, name: str) -> np.ndarray | None:
