@@ -36,8 +36,15 @@ specific-force density, optionally the accelerometer noise scale) is run on
 them, exactly as the batch smoother would on that stretch alone. The buffered
 samples are then smoothed with the selected densities and the stream goes on
 with them: outputs start ``tune_window_s`` late, once, and that one
-:meth:`FixedLagSmoother.push` pays for the tuning (linear in the stretch:
-about 0.2 s for 3 s at 500 Hz) and for the catch-up of the buffered samples.
+:meth:`FixedLagSmoother.push` pays for the tuning and the batch solve of the
+stretch (linear in its length: about 0.3-0.6 s for 3 s at 500 Hz) and for
+the catch-up of the buffered samples (a median update each: 1-2 s in all).
+The states of the stretch that come out then are the batch solution of the
+stretch (every one of them has at least ``lag_s`` of data after it); the
+stream continues from the fixed-lag smoother run over the stretch, so after
+it every output is exactly the fixed-lag smoother with the chosen densities.
+Periodic re-tuning is not done: once the densities are chosen, the stream
+costs what it costs with given densities.
 Densities given explicitly (any of ``omega_dot_random_walk_radps2_per_sqrt_s``,
 ``specific_force_random_walk_mps2_per_sqrt_s``, ``process_axis_factors`` not at
 its default) are used as given and disable the tuning, as does
