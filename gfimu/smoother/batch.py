@@ -392,7 +392,12 @@ class BatchSmootherEstimator(SmootherOptions):
         from ..estimators.ml import MLEstimator
 
         m = MLEstimator().estimate(part)
-        x = np.hstack([m.omega_b_radps, m.omega_dot_b_radps2, m.specific_force_b_mps2])
+        omega = m.omega_b_radps
+        if opt.ml_sign_chain:
+            from .initialise import sign_chain
+
+            omega = omega * sign_chain(omega, m.omega_dot_b_radps2, part.dt_s)[:, None]
+        x = np.hstack([omega, m.omega_dot_b_radps2, m.specific_force_b_mps2])
         if opt.motion_model == "snap":
             x = np.hstack([x, np.gradient(m.omega_dot_b_radps2, part.times_s, axis=0)])
         return x

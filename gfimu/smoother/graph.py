@@ -137,6 +137,11 @@ class SmootherOptions:
     """Batch smoother: 'sign-resolving' (:mod:`gfimu.smoother.initialise`) or 'ml' (the per-sample
     maximum-likelihood estimate with its sign choice, :mod:`gfimu.estimators.ml`; slower, more robust
     on real recordings with large model residuals and fast motion at low rates)."""
+    ml_sign_chain: bool = False
+    """Batch smoother with ``initialisation='ml'``: re-choose the sign of each sample's ML ω so that
+    consecutive samples follow the trapezoid of ML's (sign-free) ω̇, exactly by dynamic programming
+    (:func:`gfimu.smoother.initialise.sign_chain`). Fixes the per-sample sign choice where a fast
+    rotation slows through zero and reverses (the smoother alone stays in that local minimum)."""
     process_axis_factors: tuple[float, float, float] = (1.0, 1.0, 1.0)
     """Factor on the jerk (or snap) density per body axis x, y, z (batch smoother): motion
     about one body axis (turntable, pendulum) is far smoother about the others."""

@@ -146,6 +146,41 @@ def sign_resolved_omega(q_meas: np.ndarray, omega_dot: np.ndarray, dt_s: np.ndar
     return out
 
 
+def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
+    """Signs s_k = ±1 (N,) minimising ``Σ_k ||s_{k+1} ω_{k+1} - s_k ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||²``.
+
+    The accelerometers fix ω only up to its sign per sample (the quadratic terms, paper 000, eq. 6)
+    while ω̇ is sign-free: the sign sequence that best follows the trapezoid of ω̇ is found exactly
+    by dynamic programming (Viterbi, two states per sample, linear in N). It keeps a rotation that
+    slows through zero and reverses (ω̇ keeps its sign) apart from one that bounces back.
+    """
+    w = np.asarray(omega_b_radps, dtype=float)
+    d = np.asarray(omega_dot_b_radps2, dtype=float)
+    n = len(w)
+    if n < 2:
+        return np.ones(n)
+    h = np.broadcast_to(np.asarray(dt_s, dtype=float), (n - 1,))
+    inc = 0.5 * h[:, None] * (d[:-1] + d[1:])  # (N-1, 3)
+    signs = np.array([1.0, -1.0])
+    # step cost[k, a, b]: from sign a at k to sign b at k+1
+    diff = signs[None, None, :, None] * w[1:, None, None, :] - signs[None, :, None, None] * w[:-1, None, None, :] \
+        - inc[:, None, None, :]
+    step = np.sum(diff**2, axis=3)
+    cost = np.zeros(2)
+    back = np.zeros((n - 1, 2), dtype=np.int8)
+    for k in range(n - 1):  # two states: a short loop of 2x2 minima
+        total = cost[:, None] + step[k]
+        back[k] = np.argmin(total, axis=0)
+        cost = total[back[k], [0, 1]]
+    out = np.empty(n)
+    state = int(np.argmin(cost))
+    out[-1] = signs[state]
+    for k in range(n - 2, -1, -1):
+        state = int(back[k, state])
+        out[k] = signs[state]
+    return out
+
+
 def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
     """Track ω through the single-sensor free-flight model (paper 004, eqs. 1, 13).
 
