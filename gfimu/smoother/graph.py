@@ -148,7 +148,8 @@ class SmootherOptions:
     tune_process_noise: bool = False
     """Batch smoother: choose the jerk/snap density per body axis and the specific-force density
     by maximising the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`), per solve window.
-    The fixed-lag smoother ignores it."""
+    The method 'smoother' and the fixed-lag smoother switch it on by default; the fixed-lag smoother
+    tunes once, on the first ``tune_window_s`` of each stream (:mod:`gfimu.smoother.fixed_lag`)."""
     tune_motion_model: bool = False
     """With ``tune_process_noise``: also choose 'jerk' or 'snap' by the same criterion. Off by default:
     the white-snap normal equations become numerically stiff with small per-axis densities, and on the
