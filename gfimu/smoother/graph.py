@@ -143,10 +143,10 @@ class SmootherOptions:
     (:func:`gfimu.smoother.initialise.sign_chain`). Fixes the per-sample sign choice where a fast
     rotation slows through zero and reverses (the smoother alone stays in that local minimum)."""
     process_axis_factors: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    """Factor on the jerk (or snap) density per body axis x, y, z (batch smoother): motion
+    """Factor on the jerk (or snap) density per body axis x, y, z (both smoothers): motion
     about one body axis (turntable, pendulum) is far smoother about the others."""
     tune_process_noise: bool = False
-    """Batch smoother: choose the jerk/snap density per body axis and the specific-force density
+    """Choose the jerk/snap density per body axis and the specific-force density
     by maximising the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`), per solve window.
     The method 'smoother' and the fixed-lag smoother switch it on by default; the fixed-lag smoother
     tunes once, on the first ``tune_window_s`` of each stream (:mod:`gfimu.smoother.fixed_lag`)."""
