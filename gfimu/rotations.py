@@ -77,15 +77,30 @@ def matrix_from_rotation_vector(phi: np.ndarray) -> np.ndarray:
 
 
 def rotation_vector_from_matrix(m: np.ndarray) -> np.ndarray:
-    """SO(3) logarithm, (..., 3, 3) -> (..., 3); angle in [0, pi]."""
+    """SO(3) logarithm, (..., 3, 3) -> (..., 3), vectorised, angle in [0, π]."""
     m = np.asarray(m, dtype=float)
-    q = quaternion_from_matrix(m)
-    w = np.clip(q[..., 0], -1.0, 1.0)
-    v = q[..., 1:]
-    s = np.linalg.norm(v, axis=-1)
-    angle = 2.0 * np.arctan2(s, w)
-    scale = np.where(s < 1e-12, 2.0, angle / np.where(s < 1e-12, 1.0, s))
-    return v * scale[..., None]
+    tr = np.clip((np.trace(m, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(tr)
+    v = np.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], axis=-1)
+    s = np.sin(angle)
+    small = angle < 1e-6
+    scale = np.where(small, 0.5 + angle**2 / 12.0, angle / (2.0 * np.where(small, 1.0, s)))
+    out = v * scale[..., None]
+    near_pi = angle > np.pi - 1e-4
+    if np.any(near_pi):
+        # Around π the antisymmetric part vanishes: take the axis from R + I.
+        idx = np.nonzero(near_pi)
+        for k in zip(*idx) if m.ndim > 2 else [()]:
+            r = m[k]
+            b = (r + np.eye(3)) / 2.0
+            col = int(np.argmax(np.diag(b)))
+            axis = b[:, col] / np.sqrt(max(b[col, col], 1e-300))
+            axis /= np.linalg.norm(axis)
+            vk = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+            if axis @ vk < 0:
+                axis = -axis
+            out[k] = axis * angle[k]
+    return out
 
 
 def quaternion_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:

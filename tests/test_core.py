@@ -76,3 +76,17 @@ def test_bad_accelerometer_definitions():
         Accelerometer("a", [0, 0, 0], axes=("x", "x"))
     with pytest.raises(ArrayModelError, match="unique"):
         SensorArray((Accelerometer("a", [0, 0, 0]), Accelerometer("a", [1, 0, 0])))
+
+
+def test_rotation_vector_round_trip_including_near_pi():
+    from gfimu.rotations import matrix_from_rotation_vector, rotation_vector_from_matrix
+
+    rng = np.random.default_rng(5)
+    axes = rng.normal(size=(50, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([rng.uniform(0, np.pi - 1e-3, 40), np.pi - np.logspace(-9, -5, 10)])
+    phi = axes * angles[:, None]
+    back = rotation_vector_from_matrix(matrix_from_rotation_vector(phi))
+    np.testing.assert_allclose(matrix_from_rotation_vector(back), matrix_from_rotation_vector(phi), atol=1e-9)
+    np.testing.assert_allclose(back[:40], phi[:40], atol=1e-9)
+    np.testing.assert_allclose(rotation_vector_from_matrix(np.eye(3)), np.zeros(3), atol=0)
