@@ -88,18 +88,12 @@ def rotation_vector_from_matrix(m: np.ndarray) -> np.ndarray:
     out = v * scale[..., None]
     near_pi = angle > np.pi - 1e-4
     if np.any(near_pi):
-        # Around π the antisymmetric part vanishes: take the axis from R + I.
-        idx = np.nonzero(near_pi)
-        for k in zip(*idx) if m.ndim > 2 else [()]:
-            r = m[k]
-            b = (r + np.eye(3)) / 2.0
-            col = int(np.argmax(np.diag(b)))
-            axis = b[:, col] / np.sqrt(max(b[col, col], 1e-300))
-            axis /= np.linalg.norm(axis)
-            vk = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-            if axis @ vk < 0:
-                axis = -axis
-            out[k] = axis * angle[k]
+        # Around π the antisymmetric part vanishes and arccos loses precision: use the
+        # quaternion (Shepperd's method), angle = 2 atan2(|q_v|, q_w).
+        q = quaternion_from_matrix(m[near_pi])
+        qv = q[..., 1:]
+        norm_v = np.linalg.norm(qv, axis=-1, keepdims=True)
+        out[near_pi] = qv / norm_v * (2.0 * np.arctan2(norm_v, q[..., :1]))
     return out
 
 

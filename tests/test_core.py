@@ -90,7 +90,7 @@ def test_rotation_vector_round_trip_including_near_pi():
     R, R_back = matrix_from_rotation_vector(phi), matrix_from_rotation_vector(back)
     np.testing.assert_allclose(R_back[:40], R[:40], atol=1e-9)
     np.testing.assert_allclose(back[:40], phi[:40], atol=1e-9)
-    # within 1e-4 rad of π the axis comes from (R + I) / 2: accurate to about 1e-7
-    np.testing.assert_allclose(R_back[40:], R[40:], atol=2e-7)
-    np.testing.assert_allclose(np.linalg.norm(back[40:], axis=1), angles[40:], atol=1e-7)
+    # within 1e-4 rad of π (the quaternion route)
+    np.testing.assert_allclose(R_back[40:], R[40:], atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(back[40:], axis=1), angles[40:], atol=1e-9)
     np.testing.assert_allclose(rotation_vector_from_matrix(np.eye(3)), np.zeros(3), atol=0)
