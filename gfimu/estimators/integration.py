@@ -80,7 +80,21 @@ def sign_tracking_loop(mag: list[float], inc: list[float], w0: float, alpha=None
 
 
 @dataclass
-class PureIntegrationEstimator:
+class _IntegratingEstimator:
+    """Options shared by the two integrating methods (documented on each)."""
+
+    initial_omega: InitialOmega = "zero"
+    compute_sigma: bool = False
+
+    def __post_init__(self) -> None:
+        validate_initial_omega(self.initial_omega)
+
+    def applicable(self, array: SensorArray) -> str | None:
+        return array.inversion_reason()
+
+
+@dataclass
+class PureIntegrationEstimator(_IntegratingEstimator):
     """Trapezoid integration of the inverted ω̇ (paper 002 eq. 8); f and ω̇ by inversion.
 
     Options:
@@ -92,14 +106,6 @@ class PureIntegrationEstimator:
         compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
     """
 
-    initial_omega: InitialOmega = "zero"
-    compute_sigma: bool = False
-
-    def __post_init__(self) -> None:
-        validate_initial_omega(self.initial_omega)
-
-    def applicable(self, array: SensorArray) -> str | None:
-        return array.inversion_reason()
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
@@ -116,7 +122,7 @@ class PureIntegrationEstimator:
 
 
 @dataclass
-class IntegrationEstimator:
+class IntegrationEstimator(_IntegratingEstimator):
     """Quadratic-term magnitudes with the sign of the integrated prediction (papers 000, 002).
 
     f and ω̇ come from the inversion; |ω| per axis from the quadratic sums
@@ -131,14 +137,6 @@ class IntegrationEstimator:
         compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
     """
 
-    initial_omega: InitialOmega = "zero"
-    compute_sigma: bool = False
-
-    def __post_init__(self) -> None:
-        validate_initial_omega(self.initial_omega)
-
-    def applicable(self, array: SensorArray) -> str | None:
-        return array.inversion_reason()
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
