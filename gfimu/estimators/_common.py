@@ -21,6 +21,25 @@ def check_finite(values: np.ndarray, what: str, columns: Sequence[str] | None = 
         raise ValueError(f"{what}: non-finite value at sample {int(row)}{where}")
 
 
+def weighted_least_squares(S: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Estimator matrix ``A`` (x = A y) of the least squares ``y = S x`` and the covariance of x.
+
+    Weighted by ``1/std²`` when every axis has a positive noise std (covariance
+    ``(SᵀΣ⁻¹S)⁻¹``); unweighted otherwise, with the covariance propagated from
+    ``std`` where it is finite and NaN where any std is unknown.
+    """
+    n = S.shape[1]
+    weighted = bool(np.all(np.isfinite(std)) and np.all(std > 0))
+    w = 1.0 / std**2 if weighted else np.ones(S.shape[0])
+    normal = S.T @ (w[:, None] * S)
+    A = np.linalg.solve(normal, S.T * w[None, :])
+    if weighted:
+        cov = np.linalg.inv(normal)
+    else:
+        cov = (A * std[None, :] ** 2) @ A.T if np.all(np.isfinite(std)) else np.full((n, n), np.nan)
+    return A, 0.5 * (cov + cov.T)
+
+
 def omega_from_quadratic_terms_signed(q: np.ndarray) -> np.ndarray:
     """ω from q up to one global sign, (N, 6) -> (N, 3).
 

@@ -18,7 +18,7 @@ from ..array import ArrayModelError, SensorArray
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import quadratic_terms, quadratic_terms_jacobian, structure_matrix
-from ._common import check_finite
+from ._common import check_finite, weighted_least_squares
 from .inversion import check_log_for_inversion
 
 
@@ -117,16 +117,8 @@ def gyro_aided_matrices(array: SensorArray) -> tuple[np.ndarray, np.ndarray, np.
             f"array {array.name!r}: the [f, ω̇] columns of the structure matrix have rank "
             f"{int(np.sum(sv > 1e-9 * sv[0]))} of 6 (sensing directions and lever arms do not span f and ω̇)"
         )
-    std = array.noise_std_per_axis_mps2
-    weighted = bool(np.all(np.isfinite(std)) and np.all(std > 0))
-    w = 1.0 / std**2 if weighted else np.ones(S.shape[0])
-    normal = S6.T @ (w[:, None] * S6)
-    A = np.linalg.solve(normal, S6.T * w[None, :])
-    if weighted:
-        cov = np.linalg.inv(normal)
-    else:
-        cov = (A * std[None, :] ** 2) @ A.T if np.all(np.isfinite(std)) else np.full((6, 6), np.nan)
-    return A, W, 0.5 * (cov + cov.T)
+    A, cov = weighted_least_squares(S6, array.noise_std_per_axis_mps2)
+    return A, W, cov
 
 
 def gyro_aided_solve(array: SensorArray, accel_mps2: np.ndarray, gyro_b_radps: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ from ..array import SensorArray
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import omega_from_quadratic_terms
-from ._common import check_finite, continuity_signs, omega_from_quadratic_terms_signed
+from ._common import check_finite, continuity_signs, omega_from_quadratic_terms_signed, weighted_least_squares
 
 
 def inversion_matrix(array: SensorArray) -> tuple[np.ndarray, np.ndarray]:
@@ -31,17 +31,7 @@ def inversion_matrix(array: SensorArray) -> tuple[np.ndarray, np.ndarray]:
     ``array.check_invertible``) when S cannot be inverted.
     """
     array.check_invertible()
-    S = array.structure_matrix()
-    std = array.noise_std_per_axis_mps2
-    weighted = bool(np.all(np.isfinite(std)) and np.all(std > 0))
-    w = 1.0 / std**2 if weighted else np.ones(S.shape[0])
-    normal = S.T @ (w[:, None] * S)
-    A = np.linalg.solve(normal, S.T * w[None, :])
-    if weighted:
-        cov = np.linalg.inv(normal)
-    else:
-        cov = (A * std[None, :] ** 2) @ A.T if np.all(np.isfinite(std)) else np.full((12, 12), np.nan)
-    return A, 0.5 * (cov + cov.T)
+    return weighted_least_squares(array.structure_matrix(), array.noise_std_per_axis_mps2)
 
 
 def invert(array: SensorArray, accel_mps2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
