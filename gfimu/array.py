@@ -260,6 +260,21 @@ def paper001_array(
     return SensorArray(accs, "paper001-9axis", gyroscope=Gyroscope(0.01), inclinometer=Inclinometer(0.002))
 
 
+def random_array(n_triads: int = 5, half_extent_m: float = 0.03, noise_std_mps2: float | None = 0.07, seed: int = 7,
+                 name: str | None = None) -> SensorArray:
+    """``n_triads`` triads at uniform random positions within ±``half_extent_m`` per axis, each
+    rotated at random (rotation vector drawn from a standard normal); reproducible by ``seed``."""
+    from .rotations import matrix_from_rotation_vector
+
+    rng = np.random.default_rng(seed)
+    accs = tuple(
+        Accelerometer(f"s{i}", rng.uniform(-half_extent_m, half_extent_m, 3), matrix_from_rotation_vector(rng.normal(size=3)),
+                      noise_std_mps2=noise_std_mps2)
+        for i in range(n_triads)
+    )
+    return SensorArray(accs, name or f"random-{n_triads} (±{half_extent_m * 100:g} cm)")
+
+
 MIMU4444_POSITIONS_M = np.array(
     [
         [-0.00945, 0.00945, 0.001],

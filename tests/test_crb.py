@@ -3,18 +3,13 @@
 import numpy as np
 import pytest
 
-from gfimu.array import Accelerometer, ArrayModelError, SensorArray, cube_array, mimu4444_array, single_triad
+from gfimu import array as layouts
+from gfimu.array import ArrayModelError, cube_array, mimu4444_array, single_triad
 from gfimu.crb import PARAMETERS, crb_per_sample, fisher_information
-from gfimu.rotations import matrix_from_rotation_vector
 
 
 def random_array(seed=0, n=5, noise=0.05):
-    rng = np.random.default_rng(seed)
-    accs = [
-        Accelerometer(f"s{i}", rng.uniform(-0.05, 0.05, 3), matrix_from_rotation_vector(rng.normal(size=3)), noise_std_mps2=noise)
-        for i in range(n)
-    ]
-    return SensorArray(tuple(accs), "random")
+    return layouts.random_array(n, half_extent_m=0.05, noise_std_mps2=noise, seed=seed, name="random")
 
 
 def test_parameter_order():

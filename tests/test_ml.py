@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from gfimu import array as layouts
 from gfimu.array import Accelerometer, SensorArray, cube_array, mimu4444_array, paper001_array, single_triad
 from gfimu.crb import crb_per_sample
 from gfimu.estimators import make_estimator
@@ -13,12 +14,7 @@ from gfimu.rotations import matrix_from_rotation_vector
 
 
 def random_array(seed=0, n=5, noise=0.05):
-    rng = np.random.default_rng(seed)
-    accs = [
-        Accelerometer(f"s{i}", rng.uniform(-0.05, 0.05, 3), matrix_from_rotation_vector(rng.normal(size=3)), noise_std_mps2=noise)
-        for i in range(n)
-    ]
-    return SensorArray(tuple(accs), "random-5")
+    return layouts.random_array(n, half_extent_m=0.05, noise_std_mps2=noise, seed=seed, name="random-5")
 
 
 def smooth_motion(n, rate_hz=500.0, seed=0, offset=(3.0, -1.5, 2.1)):

@@ -3,9 +3,8 @@
 import numpy as np
 import pytest
 
-from gfimu.array import Accelerometer, SensorArray, cube_array, mimu4444_array, single_triad
+from gfimu.array import cube_array, mimu4444_array, random_array, single_triad
 from gfimu.estimators import make_estimator
-from gfimu.rotations import matrix_from_rotation_vector
 from gfimu.simulate import simulate
 from gfimu.smoother import batch
 from gfimu.smoother.batch import BatchSmootherEstimator
@@ -190,10 +189,7 @@ def test_reversal_has_no_sign_errors():
 
 
 def test_arbitrary_array():
-    rng = np.random.default_rng(7)
-    accs = tuple(Accelerometer(f"s{i}", rng.uniform(-0.03, 0.03, 3), matrix_from_rotation_vector(rng.normal(size=3)),
-                               noise_std_mps2=0.07) for i in range(5))
-    arr = SensorArray(accs, "random-5")
+    arr = random_array(5, half_extent_m=0.03, noise_std_mps2=0.07, seed=7)
     log = simulate("random3d", arr, rate_hz=500.0, duration_s=5.0, seed=3)
     m = BatchSmootherEstimator().estimate(log)
     rmse = omega_rmse(m, log.truth)
@@ -234,7 +230,6 @@ def test_windows_match_whole_log_solve():
 
 
 def test_bias_self_calibration():
-    from gfimu.log import Log
 
     log = simulate("random3d", CUBE, rate_hz=500.0, duration_s=5.0, seed=9)
     bias = np.random.default_rng(9).normal(size=CUBE.n_axes) * 0.1

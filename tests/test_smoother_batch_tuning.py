@@ -156,12 +156,9 @@ def test_motion_dependent_noise_and_ml_initialisation():
 
 
 def _arbitrary_array(seed=7):
-    from gfimu.array import Accelerometer, SensorArray
-    from gfimu.rotations import matrix_from_rotation_vector
+    from gfimu.array import random_array
 
-    rng = np.random.default_rng(seed)
-    return SensorArray(tuple(Accelerometer(f"s{i}", rng.uniform(-0.03, 0.03, 3), matrix_from_rotation_vector(rng.normal(size=3)),
-                                           noise_std_mps2=0.07) for i in range(5)), "random-5")
+    return random_array(5, half_extent_m=0.03, noise_std_mps2=0.07, seed=seed)
 
 
 @pytest.mark.parametrize("scenario, array_name, max_rmse", [

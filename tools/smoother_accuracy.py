@@ -25,9 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gfimu.array import Accelerometer, SensorArray, cube_array, mimu4444_array  # noqa: E402
+from gfimu.array import SensorArray, cube_array, mimu4444_array, random_array  # noqa: E402
 from gfimu.estimators import make_estimator  # noqa: E402
-from gfimu.rotations import matrix_from_rotation_vector  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
 from gfimu.smoother.batch import BatchSmootherEstimator  # noqa: E402
 from gfimu.smoother.bound import efficiency, smoother_bound  # noqa: E402
@@ -48,9 +47,7 @@ def omega_errors(motion, truth):
 
 
 def arbitrary_array(seed: int = 7) -> SensorArray:
-    rng = np.random.default_rng(seed)
-    return SensorArray(tuple(Accelerometer(f"s{i}", rng.uniform(-0.03, 0.03, 3), matrix_from_rotation_vector(rng.normal(size=3)),
-                                           noise_std_mps2=0.07) for i in range(5)), "random-5 (±3 cm)")
+    return random_array(5, half_extent_m=0.03, noise_std_mps2=0.07, seed=seed)
 
 
 def cases(duration_s: float, half_edge_m: float = 0.025):
