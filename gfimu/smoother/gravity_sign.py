@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rigid_body import quadratic_terms_jacobian
-
 STANDARD_GRAVITY_MPS2 = 9.80665
 
 
@@ -62,10 +60,10 @@ def steady_rotation(omega_b_radps: np.ndarray, omega_dot_sigma_radps: float, win
         if len(seg) < 2:
             break
         change = float(np.max(np.linalg.norm(seg - seg[0], axis=1)))
-        # the information on the sign scales with ‖J_q(W) ω₀‖ ~ 2 ‖W‖ ‖ω₀‖ (quadratic_terms_jacobian)
+        # the information on the sign scales with ‖J_q(W) ω₀‖ ~ 2 ‖W‖ ‖ω₀‖
         if change > 5.0 * omega_dot_sigma_radps and np.linalg.norm(seg[0]) > 0.5:
             return False
     return True
 
 
-__all__ = ["gravity_sign_score", "steady_rotation", "quadratic_terms_jacobian"]
+__all__ = ["gravity_sign_score", "steady_rotation"]
