@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import custom_factor, vector_at
+from . import custom_factor
 
 
 def gyroscope_residual(omega_b_radps, gyro_b_radps, bias_radps=None):

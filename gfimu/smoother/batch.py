@@ -312,7 +312,6 @@ class BatchSmootherEstimator(SmootherOptions):
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         from ..progress import progress as progress_bar
-        from .initialise import initial_states
 
         opt = self.options()
         reason = options_reason(log.array, opt, attitude_supported=True)
