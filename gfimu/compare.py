@@ -349,6 +349,10 @@ def compare(
     if not methods:
         raise ValueError("no method to compare")
     options = dict(options or {})
+    if "preset" in options.get("smoother", {}):  # the preset's settings, for the smoother and its bound
+        from .smoother.presets import expand_preset
+
+        options["smoother"] = expand_preset("smoother", options["smoother"])
     unknown_opts = sorted(set(options) - set(methods))
     if unknown_opts:
         raise ValueError(f"options given for methods not compared: {unknown_opts}")

@@ -25,6 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--estimates-dir", default=None, help="also write each method's estimate as DIR/<method>.csv")
     p.add_argument("--option", "-O", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="option of one method, repeatable, e.g. -O imm.t2=4.0")
+    p.add_argument("--preset", default=None, metavar="NAME",
+                   help="named settings of the smoother (-O smoother.KEY=VALUE wins over it), e.g. hand-held-low-rate "
+                        "(gfimu.smoother.presets)")
     p.add_argument("--no-bounds", action="store_true", help="leave out the Cramér–Rao and smoother bounds")
     p.add_argument("--gyro-noise", type=float, default=None, metavar="RAD_PER_S",
                    help="gyro noise std for the 'CRB (with gyro)' row when the array has no gyroscope")
@@ -61,6 +64,13 @@ def run(args) -> int:
         if unknown:
             raise CLIError(f"unknown method(s) {unknown}; choose among: {', '.join(METHODS)}")
     options = parse_method_options(args.option, methods)
+    if getattr(args, "preset", None) is not None:
+        if methods is not None and "smoother" not in methods:
+            raise CLIError(f"--preset sets the smoother's options, but smoother is not among --methods {','.join(methods)}")
+        from ..smoother.presets import apply_preset
+
+        apply_preset(args.preset)  # an unknown name stops here, before the log is read
+        options.setdefault("smoother", {})["preset"] = args.preset
     log = logio.read_log(args.log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration

@@ -34,6 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="estimate CSV to write (atomically)")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="method option, repeatable (see the method's documentation)")
+    p.add_argument("--preset", default=None, metavar="NAME",
+                   help="named smoother settings (method smoother; -O options win over it), e.g. hand-held-low-rate: "
+                        "fast hand-held motion at 50–100 Hz on real sensors (gfimu.smoother.presets)")
     p.add_argument("--lag-s", type=float, default=None, help="fixed-lag smoother lag in seconds")
     p.add_argument("--sigma", action="store_true", help="also write one-sigma uncertainties where the method gives them")
     p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
@@ -48,6 +51,12 @@ def run(args) -> int:
     from .. import logio
     from ..estimators import make_estimator
 
+    if getattr(args, "preset", None) is not None:  # checked before the log is read
+        if args.method != "smoother":
+            raise CLIError(f"--preset applies to --method smoother only, not {args.method!r}")
+        from ..smoother.presets import apply_preset
+
+        apply_preset(args.preset)
     log = logio.read_log(args.log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
@@ -60,6 +69,8 @@ def run(args) -> int:
         options["lag_s"] = args.lag_s
     if args.sigma:
         options["compute_sigma"] = True
+    if getattr(args, "preset", None) is not None:
+        options["preset"] = args.preset
     est = make_estimator(args.method, **options)
     reason = est.applicable(log.array)
     if reason:

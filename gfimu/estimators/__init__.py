@@ -43,8 +43,16 @@ def estimator_class(name: str):
 
 
 def make_estimator(name: str, **options: Any):
-    """Instantiate the estimator ``name`` with keyword options (checked by name)."""
+    """Instantiate the estimator ``name`` with keyword options (checked by name).
+
+    ``preset=NAME`` (method "smoother"): start from the named settings of
+    :data:`gfimu.smoother.presets.PRESETS`; the other options given win over it.
+    """
     cls = estimator_class(name)
+    if "preset" in options:
+        from ..smoother.presets import expand_preset
+
+        options = expand_preset(name, options)
     if dataclasses.is_dataclass(cls):
         known = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(set(options) - set(known))
