@@ -59,6 +59,7 @@ import json
 import sys
 import time
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -94,16 +95,86 @@ def moving_mask(log, threshold_radps: float = MOVING_RADPS) -> np.ndarray:
 
 # --- method comparison ------------------------------------------------------------
 
-def run_method(name: str, log, options: dict, progress: bool):
+def run_method(name: str, log, options: dict, progress: bool, start_at_reference: bool = False):
     est = make_estimator(name, **options)
     reason = est.applicable(log.array)
     if reason:
         return None, reason, 0.0
     t0 = time.perf_counter()
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), smoother_started_at_reference(start_at_reference and name == "smoother"):
         warnings.simplefilter("ignore")
         motion = est.estimate(log, progress=progress)
     return motion, None, time.perf_counter() - t0
+
+
+@contextmanager
+def smoother_started_at_reference(active: bool = True):
+    """Within the block, the batch smoother starts each window from ω of the log's reference
+    (where the reference is valid; at saturated-gyro samples from the ML initialisation's ω, turned
+    to the reference's side), its other states from its own initialisation: how far the
+    accelerometer-only solution stands from the gyro's when started on the right sign branch."""
+    if not active:
+        yield
+        return
+    from gfimu.smoother.batch import BatchSmootherEstimator
+
+    own = BatchSmootherEstimator.__dict__["_initial_states"]
+
+    def at_reference(part, opt):
+        x = own.__func__(part, opt)
+        ref = part.reference.omega_b_radps
+        ok = ~part.invalid_reference if part.invalid_reference is not None else np.ones(len(part), bool)
+        w = x[:, 0:3].copy()
+        w[ok] = ref[ok]
+        w[~ok & (np.sum(w * ref, axis=1) < 0)] *= -1.0
+        x[:, 0:3] = w
+        return x
+
+    BatchSmootherEstimator._initial_states = staticmethod(at_reference)
+    try:
+        yield
+    finally:
+        BatchSmootherEstimator._initial_states = own
+
+
+def reference_bound(log, options: dict, mask) -> dict:
+    """The smoother's own bound (:mod:`gfimu.smoother.bound`: its graph linearised, here at the
+    reference trajectory) with the accelerometer noise the options model, including the noise
+    growing with |ω| of the reference (``accel_noise_slope_mps2_per_radps``); the robust weights,
+    which depend on the residuals of a solution, are left out. RMS of the norm of the one-sigma ω
+    bound over ``mask``, and by |ω_ref| band."""
+    from dataclasses import fields
+
+    from gfimu.rigid_body import quadratic_terms
+    from gfimu.smoother.batch import factorise, marginal_covariances, normal_equations, window_slices
+    from gfimu.smoother.graph import SmootherOptions
+    from gfimu.smoother.tuning import make_problem
+
+    opt = SmootherOptions(**{k: v for k, v in options.items() if k in {f.name for f in fields(SmootherOptions)}})
+    if opt.tune_process_noise or opt.motion_model != "jerk" or opt.measurement != "accelerometer":
+        raise SystemExit("--bound needs fixed process noise, the jerk model and the accelerometer factors "
+                         "(e.g. --preset hand-held-low-rate)")
+    omega = log.reference.omega_b_radps
+    omega_dot = np.gradient(omega, log.times_s, axis=0)
+    # specific force at the origin by least squares given the reference ω, ω̇ (the bound's Jacobians
+    # do not depend on it: the model is linear in f)
+    s = log.array.structure_matrix()
+    rest = np.hstack([omega_dot, quadratic_terms(omega)]) @ s[:, 3:].T
+    f = np.linalg.lstsq(s[:, :3], (log.accel_mps2 - rest).T, rcond=None)[0].T
+    states = np.hstack([omega, omega_dot, f])
+    sd = np.zeros((len(log), 3))
+    for solve_sl, keep_log, keep_win in window_slices(len(log), log.rate_hz, opt.window_s, opt.overlap_s):
+        part = log.select(solve_sl)
+        problem = make_problem(part, opt, 1.0, omega[solve_sl])
+        ne = normal_equations(problem, states[solve_sl], np.zeros(problem.n_global))
+        cov, _ = marginal_covariances(ne, factorise(ne, 0.0))
+        sd[keep_log] = np.sqrt(np.einsum("nii->ni", cov[:, 0:3, 0:3]))[keep_win]
+    b2 = np.sum(sd**2, axis=1)
+    wn = np.linalg.norm(omega, axis=1)
+    out = {"rms_bound_norm": float(np.sqrt(np.mean(b2[mask]))), "median_bound_norm": float(np.median(np.sqrt(b2[mask])))}
+    out["by_omega_radps"] = {f"{a}-{b}": float(np.sqrt(np.mean(b2[mask & (wn >= a) & (wn < b)])))
+                             for a, b in ((2, 10), (10, 20), (20, 30), (30, 40)) if np.any(mask & (wn >= a) & (wn < b))}
+    return out
 
 
 def metrics_row(motion, log, mask) -> dict:
@@ -161,9 +232,18 @@ def compare(args) -> list[dict]:
                 m = mask[: len(log)]
             else:
                 m = mask
+            if args.start_at_reference or args.bound:  # the aligned reference, for the start and the bound
+                aligned = references[list(references)[-1]]
+                log = log.replace(reference=aligned if len(aligned) == len(log) else aligned.select(slice(0, len(log))))
+            if args.bound:
+                b = reference_bound(log, args.options.get("smoother", {}), m)
+                rows.append({"exp": exp, "calibration": cal_mode, "method": "smoother bound at the reference", **b})
+                print(f"  {cal_mode:>14} smoother bound at the reference: RMS of the ω bound norm {b['rms_bound_norm']:.3f} rad/s, "
+                      f"median {b['median_bound_norm']:.3f}; by |ω| " +
+                      ", ".join(f"{k}: {v:.2f}" for k, v in b["by_omega_radps"].items()), flush=True)
             for name in args.methods:
                 opts = dict(args.options.get(name, {}))
-                motion, reason, elapsed = run_method(name, log, opts, args.progress)
+                motion, reason, elapsed = run_method(name, log, opts, args.progress, args.start_at_reference)
                 label = f"{cal_mode}" + (f" (exp_{args.fit_on})" if cal_mode == "cross" else "")
                 if motion is None:
                     print(f"  {name}: not applicable: {reason}", flush=True)
@@ -173,6 +253,8 @@ def compare(args) -> list[dict]:
                     print(f"  {name}: gives no angular velocity", flush=True)
                     continue
                 for ref_name, reference in references.items():
+                    if len(reference) != len(log):  # --seconds
+                        reference = reference.select(slice(0, len(log)))
                     row = metrics_row(motion, log.replace(reference=reference), m)
                     row.update(exp=exp, calibration=label, method=name, seconds=elapsed, options=opts, reference=ref_name)
                     if args.breakdown and (ref_name != "recorded" or len(references) == 1):
@@ -233,6 +315,10 @@ def table(rows: list[dict]) -> str:
             "| ω·ω_ref < 0 | time |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     lines = [head]
     for r in rows:
+        if "rms_bound_norm" in r:
+            lines.append(f"| {r['exp']} | {r['calibration']} | | {r['method']} | | | | | {r['rms_bound_norm']:.3f} (RMS) | "
+                         f"{r['median_bound_norm']:.3f} | | | | |")
+            continue
         if "skipped" in r:
             lines.append(f"| {r['exp']} | {r['calibration']} | | {r['method']} | not applicable: {r['skipped']} ||||||||||")
             continue
@@ -429,6 +515,12 @@ def main(argv=None) -> int:
     p.add_argument("--noise-std", type=float, default=None,
                    help="accelerometer noise std (m/s²) written into the array model (default: the layout's 0.05)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE", help="method option, repeatable")
+    p.add_argument("--preset", default=None, metavar="NAME",
+                   help="named smoother settings (gfimu.smoother.presets); --option smoother:KEY=VALUE wins over it")
+    p.add_argument("--start-at-reference", action="store_true",
+                   help="start the smoother's ω at the gyro reference (other states from its initialisation)")
+    p.add_argument("--bound", action="store_true",
+                   help="also print the smoother's own bound at the reference trajectory (with the noise slope)")
     p.add_argument("--residual", action="store_true", help="also run the rigid-body residual investigation")
     p.add_argument("--breakdown", action="store_true",
                    help="print where the ω error sits (distance to gyro saturation, |ω|, |ω̇|) for each method")
@@ -436,6 +528,13 @@ def main(argv=None) -> int:
     p.add_argument("--progress", action="store_true")
     args = p.parse_args(argv)
     args.options = parse_method_options(args.option)
+    if args.preset is not None:
+        from gfimu.smoother.presets import apply_preset
+
+        try:
+            args.options["smoother"] = apply_preset(args.preset, args.options.get("smoother", {}))
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
     result: dict = {}
     if args.methods:
         rows = compare(args)
