@@ -29,11 +29,13 @@ def turntable_log():
 @pytest.mark.parametrize("scenario", ["random3d", "turntable", "reversal"])
 def test_within_one_and_a_half_times_the_batch_smoother(scenario):
     """5 cm cube, 0.07 m/s² per axis, 500 Hz, 4 s, lag 0.2 s, densities chosen on the first 2 s:
-    ω RMSE ≤ 1.5 × the batch smoother's (tuned on the whole log), over the whole log and over the
-    streamed part after the tuning stretch alone (measured 1.18/1.23, 1.08/1.25, 1.10/1.19), no
-    sign errors."""
+    ω RMSE ≤ 1.5 × the batch smoother's white-jerk model (tuned on the whole log), over the whole
+    log and over the streamed part after the tuning stretch alone (measured 1.18/1.23, 1.08/1.25,
+    1.10/1.19), no sign errors. The batch smoother's oscillator model, which needs two periods of
+    data to be chosen, does better on the turntable and the reversal (see tests/test_oscillator.py);
+    a 2 s tuning stretch does not hold two periods of these motions."""
     log = simulate(scenario, CUBE_5CM, rate_hz=RATE_HZ, duration_s=4.0, seed=1)
-    batch = BatchSmootherEstimator().estimate(log)
+    batch = BatchSmootherEstimator(tune_axis_frequencies=False).estimate(log)
     fixed = FixedLagEstimator(lag_s=0.2, tune_window_s=2.0).estimate(log)
     np.testing.assert_array_equal(fixed.timestamps_ns, log.timestamps_ns)
     truth = log.truth.omega_b_radps
@@ -89,7 +91,7 @@ def test_per_axis_factors_and_noise_scale_enter_the_factors():
                           specific_force_random_walk_mps2_per_sqrt_s=0.4)
     m = model.ArrayModel(CUBE_5CM, opt, accel_noise_scale=2.5)
     h = 0.002
-    int_noise, dw_noise, f_noise = m._process_noises(h)
+    int_noise, dw_noise, f_noise, _ = m._process_noises(h)
     axis = np.array([1e-3, 0.2, 1.0])
     np.testing.assert_allclose(int_noise.sigmas(), kinematics.trapezoid_sigma(7.5, h) * axis, rtol=1e-12)
     np.testing.assert_allclose(dw_noise.sigmas(), process.random_walk_sigma(7.5, h) * axis, rtol=1e-12)

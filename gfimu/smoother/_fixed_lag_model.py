@@ -14,7 +14,10 @@ k hold ω [rad/s], ω̇ [rad/s²] and f [m/s²] in B.
 - random walks of ω̇ and f (``x_{k+1} - x_k``, the residual of
   :mod:`gfimu.factors.process`) and priors as gtsam's own
   ``BetweenFactorVector`` / ``PriorFactorVector``, evaluated without Python;
-- gyroscope on ω (residual ``ω - ω_meas``) as a ``PriorFactorVector``.
+- gyroscope on ω (residual ``ω - ω_meas``) as a ``PriorFactorVector``;
+- with ``process_axis_frequencies_hz`` set, the exact oscillator step of
+  (ω, ω̇) (:func:`gfimu.factors.process.oscillator_residual`) in place of the
+  trapezoid and the ω̇ random walk.
 
 The process noise follows the options exactly as the batch smoother's
 :class:`~gfimu.smoother.graph.SmootherProblem` does: the trapezoid and ω̇
@@ -83,6 +86,8 @@ class ArrayModel:
         self._eye3 = np.eye(3)
         self._noise_cache: dict = {}
         self.axis_factors = np.asarray(options.process_axis_factors, dtype=float)
+        self.natural_frequency_radps = 2.0 * np.pi * np.asarray(options.process_axis_frequencies_hz, dtype=float)
+        self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
         gs = array.gyroscope.noise_std_radps if array.gyroscope is not None else None
         self.gyro_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(gs) if gs else 0.01)  # as the batch smoother
 
@@ -133,6 +138,28 @@ class ArrayModel:
 
         return gtsam.CustomFactor(noise, [w0, w1, d0, d1], error)
 
+    def _fast_oscillator_factor(self, w0: int, w1: int, d0: int, d1: int, h: float, noise) -> gtsam.CustomFactor:
+        """Exact oscillator step ``[ω1; ω̇1] - Φ [ω0; ω̇0]`` (:func:`gfimu.factors.process.oscillator_residual`)
+        with its constant Jacobians."""
+        phi = process.oscillator_transition(h, self.natural_frequency_radps)[0]
+        a, b, c, d = phi[:, 0, 0], phi[:, 0, 1], phi[:, 1, 0], phi[:, 1, 1]
+        top = np.vstack([self._eye3, np.zeros((3, 3))])
+        bottom = np.vstack([np.zeros((3, 3)), self._eye3])
+        jw0 = -np.vstack([np.diag(a), np.diag(c)])
+        jd0 = -np.vstack([np.diag(b), np.diag(d)])
+
+        def error(this, values, jacobians):
+            x0, y0 = values.atVector(w0), values.atVector(d0)
+            r = np.concatenate([values.atVector(w1) - a * x0 - b * y0, values.atVector(d1) - c * x0 - d * y0])
+            if jacobians is not None:
+                jacobians[0] = jw0
+                jacobians[1] = top
+                jacobians[2] = jd0
+                jacobians[3] = bottom
+            return r
+
+        return gtsam.CustomFactor(noise, [w0, w1, d0, d1], error)
+
     def _process_noises(self, h: float):
         key = round(h * 1e9)
         cached = self._noise_cache.get(key)
@@ -145,6 +172,9 @@ class ArrayModel:
                 gtsam.noiseModel.Diagonal.Sigmas(float(process.random_walk_sigma(q_dw, h)) * axis),
                 gtsam.noiseModel.Isotropic.Sigma(
                     3, float(process.random_walk_sigma(o.specific_force_random_walk_mps2_per_sqrt_s, h))),
+                gtsam.noiseModel.Gaussian.Covariance(
+                    process.oscillator_step_covariance(q_dw, h, self.natural_frequency_radps, axis)[0])
+                if self.oscillator else None,
             )
             if len(self._noise_cache) > 64:  # irregular timestamps: keep the cache bounded
                 self._noise_cache.clear()
@@ -154,7 +184,14 @@ class ArrayModel:
     def add_process(self, graph: gtsam.NonlinearFactorGraph, k0: int, k1: int, h: float) -> None:
         w0, d0, f0 = keys(k0)
         w1, d1, f1 = keys(k1)
-        int_noise, dw_noise, f_noise = self._process_noises(h)
+        int_noise, dw_noise, f_noise, osc_noise = self._process_noises(h)
+        if self.oscillator:
+            if self.fast_measurement:
+                graph.add(self._fast_oscillator_factor(w0, w1, d0, d1, h, osc_noise))
+            else:
+                graph.add(process.make_oscillator_factor(w0, w1, d0, d1, h, self.natural_frequency_radps, osc_noise))
+            graph.add(gtsam.BetweenFactorVector(f0, f1, self._zero3, f_noise))
+            return
         if self.fast_measurement:
             graph.add(self._fast_trapezoid_factor(w0, w1, d0, d1, h, int_noise))
         else:

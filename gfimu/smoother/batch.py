@@ -375,10 +375,13 @@ class BatchSmootherEstimator(SmootherOptions):
         if not opt.tune_process_noise:
             return make_problem(part, opt, 1.0, x0[:, 0:3]), x0
         models = ("jerk", "snap") if opt.tune_motion_model else None
-        tuning, tuned = tune(part, opt, x0, models=models, accel_noise=opt.tune_accel_noise)
+        solved: list = []
+        tuning, tuned = tune(part, opt, x0, models=models, accel_noise=opt.tune_accel_noise, states_out=solved)
         tunings.append(tuning)
         if tuned.motion_model != opt.motion_model:
             x0 = BatchSmootherEstimator._initial_states(part, tuned)
+        elif any(f > 0 for f in tuning.axis_frequencies_hz):
+            x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
         return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, 0:3]), x0
 
     @staticmethod
@@ -417,7 +420,8 @@ class BatchSmootherEstimator(SmootherOptions):
             first = solve(problem0, x0)
             t = tunings[-1] if tunings else None
             opt = replace(opt, omega_dot_random_walk_radps2_per_sqrt_s=problem0.options.omega_dot_random_walk_radps2_per_sqrt_s,
-                          process_axis_factors=problem0.options.process_axis_factors)
+                          process_axis_factors=problem0.options.process_axis_factors,
+                          process_axis_frequencies_hz=problem0.options.process_axis_frequencies_hz)
         else:
             t = None
             first = solve(SmootherProblem(part, base), initial_states(part, base))

@@ -116,7 +116,7 @@ class FixedLagUpdate:
 
 
 PROCESS_NOISE_OPTIONS = ("omega_dot_random_walk_radps2_per_sqrt_s", "specific_force_random_walk_mps2_per_sqrt_s",
-                         "process_axis_factors")
+                         "process_axis_factors", "process_axis_frequencies_hz")
 """Options that, set away from their defaults, give the process noise explicitly (no tuning)."""
 _DEFAULTS = SmootherOptions()
 
@@ -352,7 +352,7 @@ class FixedLagSmoother:
         tunings: list = []
         problem, _ = BatchSmootherEstimator._tuned_problem(self._stretch_log(samples),
                                                           replace(self.options, tune_process_noise=True), tunings)
-        return tunings[-1], replace(problem.options, tune_process_noise=False)
+        return tunings[-1], tunings[-1].for_stream(replace(problem.options, tune_process_noise=False))
 
     def _tune_and_solve(self, samples):
         """:meth:`tune`, plus the batch smoother's states of the stretch with the selection."""
@@ -367,7 +367,7 @@ class FixedLagSmoother:
         states = [StateEstimate(int(t), X[j, 0:3].copy(), X[j, 3:6].copy(), X[j, 6:9].copy(),
                                 *((None,) * 3 if sd is None else (sd[j, 0:3], sd[j, 3:6], sd[j, 6:9])))
                   for j, t in enumerate(part.timestamps_ns)]
-        return tunings[-1], replace(problem.options, tune_process_noise=False), states
+        return tunings[-1], tunings[-1].for_stream(replace(problem.options, tune_process_noise=False)), states
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.

@@ -9,7 +9,8 @@ accelerometer bias and scale-factor error, gyroscope bias). Factors
 - accelerometer equation of every sensor at every sample (paper 000, eq. 6);
 - trapezoid kinematics ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})`` and random
   walk of ω̇ (together: white angular jerk of density
-  ``omega_dot_random_walk_radps2_per_sqrt_s``);
+  ``omega_dot_random_walk_radps2_per_sqrt_s``), or per body axis the driven
+  oscillator ``ω̈ = -Ω² ω + white jerk`` (``process_axis_frequencies_hz``);
 - or, with ``motion_model='snap'``, the exact white-snap step of [ω, ω̇, ω̈];
 - random walk of the specific force;
 - gyroscope on ω when the array has one and ``use_gyro``;
@@ -145,6 +146,13 @@ class SmootherOptions:
     process_axis_factors: tuple[float, float, float] = (1.0, 1.0, 1.0)
     """Factor on the jerk (or snap) density per body axis x, y, z (both smoothers): motion
     about one body axis (turntable, pendulum) is far smoother about the others."""
+    process_axis_frequencies_hz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """'jerk' model: natural frequency per body axis x, y, z [Hz]; with f > 0 the motion about that axis
+    is a driven oscillator ``ω̈ = -(2π f)² ω + white jerk`` (sinusoidal turntables and shakers, pendulums,
+    gait; :func:`gfimu.factors.process.oscillator_residual`), 0 the plain white jerk."""
+    tune_axis_frequencies: bool = True
+    """With ``tune_process_noise`` ('jerk' model): per body axis, try the oscillator at the dominant
+    frequency of the estimated ω and keep it where it raises the marginal likelihood."""
     tune_process_noise: bool = False
     """Choose the jerk/snap density per body axis and the specific-force density
     by maximising the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`), per solve window.
@@ -206,6 +214,12 @@ class SmootherOptions:
         f = np.asarray(self.process_axis_factors, dtype=float)
         if f.shape != (3,) or not np.all(np.isfinite(f) & (f > 0)):
             raise ValueError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")
+        fr = np.asarray(self.process_axis_frequencies_hz, dtype=float)
+        if fr.shape != (3,) or not np.all(np.isfinite(fr) & (fr >= 0)):
+            raise ValueError("smoother option process_axis_frequencies_hz must be 3 numbers >= 0, "
+                             f"got {self.process_axis_frequencies_hz!r}")
+        if np.any(fr > 0) and self.motion_model != "jerk":
+            raise ValueError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
         if int(self.max_iterations) < 1:
             raise ValueError("smoother option max_iterations must be >= 1")
         if self.robust_loss not in ("huber", "cauchy"):
@@ -353,6 +367,13 @@ class SmootherProblem:
         self.trapezoid_sigma = kinematics.trapezoid_sigma(q, self.dt_s)
         self.omega_dot_step_sigma = process.random_walk_sigma(q, self.dt_s)
         self.axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
+        self.natural_frequency_radps = 2.0 * np.pi * np.asarray(opt.process_axis_frequencies_hz, dtype=float)
+        self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
+        if self.oscillator:
+            cov = process.oscillator_step_covariance(q, self.dt_s, self.natural_frequency_radps, self.axis_factors)
+            self._oscillator_cov = cov
+            self._oscillator_whiten = np.linalg.inv(np.linalg.cholesky(cov))
+            self._oscillator_unit_sigma = self.omega_dot_step_sigma.copy()
         self.force_step_sigma = process.random_walk_sigma(opt.specific_force_random_walk_mps2_per_sqrt_s, self.dt_s)
         self.first_sigma = np.repeat(
             [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
@@ -362,6 +383,19 @@ class SmootherProblem:
 
     accel_sigma_per_sample: np.ndarray | None = None
     """(N, n_axes) accelerometer noise std per sample and axis replacing ``accel_sigma`` when set."""
+
+    def oscillator_weight(self) -> np.ndarray:
+        """(N-1,) factor on the oscillator step's std: 1, or the robust re-weighting's (it scales
+        ``omega_dot_step_sigma``)."""
+        return self.omega_dot_step_sigma / self._oscillator_unit_sigma
+
+    def oscillator_whiten(self) -> np.ndarray:
+        """(N-1, 6, 6) whitening of the oscillator steps (inverse Cholesky factor of their covariance)."""
+        return self._oscillator_whiten / self.oscillator_weight()[:, None, None]
+
+    def oscillator_covariance(self) -> np.ndarray:
+        """(N-1, 6, 6) covariance of the oscillator steps."""
+        return self._oscillator_cov * (self.oscillator_weight() ** 2)[:, None, None]
 
     def set_motion_dependent_noise(self, omega_b_radps: np.ndarray, slope_mps2_per_radps: float) -> None:
         """Noise std per sample ``sqrt(σ² + (slope |ω_k|)²)`` from an estimate of ω: the rigid-body
@@ -410,6 +444,10 @@ class SmootherProblem:
                 rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
                 r = np.concatenate([rk / (self.trapezoid_sigma[:, None] * self.axis_factors),
                                     rd / (self.omega_dot_step_sigma[:, None] * self.axis_factors)], axis=1)
+                if self.oscillator:
+                    ro, _ = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s,
+                                                        self.natural_frequency_radps)
+                    r = np.einsum("nij,nj->ni", self.oscillator_whiten(), ro)
             else:
                 ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A], self.dt_s)
                 r = np.einsum("nij,nj->ni", self.snap_whiten, ra)
@@ -499,7 +537,16 @@ class SmootherProblem:
             Jf1 = np.zeros((steps, 3, m))
             Jf0[:, :, F], Jf1[:, :, F] = -np.eye(3), np.eye(3)
             out.append(Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]}))
-        if mk == STATE_SIZE:
+        if mk == STATE_SIZE and self.oscillator:
+            # exact step of the driven oscillator per axis (6 rows, 2×2 blocks of covariance)
+            ro, jo = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s,
+                                                 self.natural_frequency_radps)
+            J0 = np.zeros((steps, 6, m))
+            J1 = np.zeros((steps, 6, m))
+            J0[:, :, W], J1[:, :, W], J0[:, :, D], J1[:, :, D] = jo["w0"], jo["w1"], jo["d0"], jo["d1"]
+            Wn = self.oscillator_whiten()
+            out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ro), {"x0": Wn @ J0, "x1": Wn @ J1}))
+        elif mk == STATE_SIZE:
             # trapezoid kinematics + ω̇ random walk, stacked as one binary term (6 rows)
             rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
             rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
@@ -649,6 +696,11 @@ class SmootherProblem:
                 graph.add(kinematics.make_angular_motion_factor(
                     omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), omega_ddot_key(k),
                     omega_ddot_key(k + 1), float(self.dt_s[k]), gaussian_noise(self.snap_cov[k])))
+                continue
+            if self.oscillator:
+                graph.add(process.make_oscillator_factor(omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1),
+                                                         float(self.dt_s[k]), self.natural_frequency_radps,
+                                                         gaussian_noise(self.oscillator_covariance()[k])))
                 continue
             graph.add(kinematics.make_angular_velocity_factor(
                 omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), float(self.dt_s[k]),

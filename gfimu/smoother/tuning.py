@@ -57,11 +57,34 @@ class Tuning:
     """Selected factor on the density per body axis."""
     specific_force_density: float = float("nan")
     """Selected specific-force random-walk density [m/s²/√s]."""
+    axis_frequencies_hz: tuple = (0.0, 0.0, 0.0)
+    """Selected natural frequency of the oscillator model per body axis [Hz] (0: white jerk)."""
+    axis_frequency_std_hz: tuple = (0.0, 0.0, 0.0)
+    """Std of that frequency from the curvature of the evidence [Hz]."""
+    axis_amplitude_radps: tuple = (0.0, 0.0, 0.0)
+    """Amplitude of the oscillation, √2 × RMS of the estimated ω about the axis [rad/s]."""
+
+    def for_stream(self, options: SmootherOptions, memory_s: float = 1.0) -> SmootherOptions:
+        """``options`` (carrying this selection) for a stream that goes on past the tuning data:
+        on each oscillator axis the jerk density is raised, if needed, to ``√(2 τ) A Ω δΩ`` (τ =
+        ``memory_s``, A the amplitude, δΩ the frequency's std), the density whose phase diffusion
+        over τ covers the phase drift ``δΩ τ`` that the frequency's error causes. Without it the
+        model, tuned stiff on a short stretch, drifts away from a long oscillation."""
+        factors = np.array(options.process_axis_factors, dtype=float)
+        q = options.omega_dot_random_walk_radps2_per_sqrt_s
+        for a in range(3):
+            f, sf, amp = self.axis_frequencies_hz[a], self.axis_frequency_std_hz[a], self.axis_amplitude_radps[a]
+            if f > 0:
+                floor = np.sqrt(2.0 * memory_s) * amp * (2 * np.pi * f) * (2 * np.pi * sf)
+                factors[a] = max(factors[a], floor / q)
+        return replace(options, process_axis_factors=tuple(float(v) for v in factors))
 
     def apply(self, options: SmootherOptions) -> SmootherOptions:
         """``options`` with this selection (except the accelerometer noise scale, see :func:`make_problem`)."""
         changes = {DENSITY_FIELD[self.motion_model]: self.density, "process_axis_factors": tuple(self.axis_factors),
                    "motion_model": self.motion_model}
+        if self.motion_model == "jerk":
+            changes["process_axis_frequencies_hz"] = tuple(float(v) for v in self.axis_frequencies_hz)
         if np.isfinite(self.specific_force_density):
             changes["specific_force_random_walk_mps2_per_sqrt_s"] = self.specific_force_density
         return replace(options, **changes)
@@ -69,7 +92,9 @@ class Tuning:
     def as_dict(self) -> dict:
         return {"motion_model": self.motion_model, "density": self.density, "axis_factors": list(self.axis_factors),
                 "specific_force_density": self.specific_force_density, "accel_noise_scale": self.accel_noise_scale,
-                "log_evidence": self.log_evidence, "evaluations": self.evaluations}
+                "axis_frequencies_hz": list(self.axis_frequencies_hz), "axis_frequency_std_hz": list(self.axis_frequency_std_hz),
+                "axis_amplitude_radps": list(self.axis_amplitude_radps), "log_evidence": self.log_evidence,
+                "evaluations": self.evaluations}
 
 
 def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 1.0,
@@ -108,8 +133,11 @@ def log_normaliser(problem: SmootherProblem) -> float:
     if problem.snap:
         total += 0.5 * float(np.sum(np.linalg.slogdet(problem.snap_cov)[1]))
     else:
-        total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
-        total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
+        if problem.oscillator:
+            total += 0.5 * float(np.sum(np.linalg.slogdet(problem.oscillator_covariance())[1]))
+        else:
+            total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
+            total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
     if problem.use_gyro:
         total += 3 * n * np.log(problem.gyro_sigma)
     if problem.options.free_flight:
@@ -194,8 +222,37 @@ def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 
     return best_x, best_v, len(cache)
 
 
+def dominant_frequency_hz(signal: np.ndarray, rate_hz: float, min_hz: float, max_hz: float,
+                          min_share: float = 0.0) -> float | None:
+    """Frequency of the largest peak of the periodogram of ``signal`` (Hann window, zero-padded
+    16 times, mean removed) within [min_hz, max_hz], refined by a parabola; None if there is none
+    or if the peak (within ±max(5 %, 3/T)) holds less than ``min_share`` of the signal's power."""
+    x = np.asarray(signal, dtype=float)
+    n = x.size
+    if n < 8 or not (max_hz > min_hz > 0):
+        return None
+    nfft = 16 * (1 << int(np.ceil(np.log2(n))))
+    p = np.abs(np.fft.rfft((x - x.mean()) * np.hanning(n), nfft)) ** 2
+    f = np.fft.rfftfreq(nfft, 1.0 / rate_hz)
+    band = np.flatnonzero((f >= min_hz) & (f <= max_hz))
+    if band.size < 3 or not np.any(p[band] > 0):
+        return None
+    i = int(band[np.argmax(p[band])])
+    if i in (band[0], band[-1]):
+        return None  # no peak inside the band, only its edge
+    if min_share > 0:
+        half_width = max(0.05 * f[i], 3.0 * rate_hz / n)
+        if np.sum(p[np.abs(f - f[i]) <= half_width]) < min_share * np.sum(p[1:]):
+            return None
+    a, b, c = np.log(p[i - 1: i + 2] + 1e-300)
+    denom = a - 2 * b + c
+    shift = 0.5 * (a - c) / denom if denom < 0 else 0.0
+    return float(f[i] + shift * (f[1] - f[0]))
+
+
 def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndarray | None = None,
-         models: tuple[str, ...] | None = None, accel_noise: bool = False) -> tuple[Tuning, SmootherOptions]:
+         models: tuple[str, ...] | None = None, accel_noise: bool = False,
+         states_out: list | None = None) -> tuple[Tuning, SmootherOptions]:
     """Select the process noise maximising :func:`linearised_log_evidence` from a starting estimate
     ``states`` (e.g. the initialisation); returns the selection and the options carrying it.
 
@@ -205,7 +262,8 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     density; with ``accel_noise`` the accelerometer noise scale is searched first in (1) and
     before and after the others in (2). Each 1-D search is a
     grid (factor 4 for the density, 10 for the others) extended while the best point is at an edge, refined by a parabola.
-    The model with the larger evidence wins."""
+    The model with the larger evidence wins. ``states_out``, if given, receives the smoother's
+    solution that the winner was linearised at (a better start than ``states`` for a stiff model)."""
     models = models or (options.motion_model,)
     best = None
     for model in models:
@@ -214,11 +272,14 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
         p0 = params
         X = _states_for(states, model, size)
         current = {"density": np.log(getattr(options, field)), "axis": np.log(np.asarray(options.process_axis_factors, float)),
-                   "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0}
+                   "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0,
+                   "freq": np.array(options.process_axis_frequencies_hz if model == "jerk" else (0.0, 0.0, 0.0), dtype=float),
+                   "freq_std": np.zeros(3), "amp": np.zeros(3)}
 
         def settings_options(c):
             return replace(options, motion_model=model, **{field: float(np.exp(c["density"]))},
                            process_axis_factors=tuple(float(v) for v in np.exp(c["axis"])),
+                           process_axis_frequencies_hz=tuple(float(v) for v in c["freq"]),
                            specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
 
         cache = {}
@@ -241,7 +302,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
             nonlocal evaluations
 
             def f(v):
-                c = {k: (np.array(val, copy=True) if k == "axis" else val) for k, val in current.items()}
+                c = {k: (np.array(val, copy=True) if k in ("axis", "freq", "freq_std", "amp") else val) for k, val in current.items()}
                 if axis is None:
                     c[name] = v
                 else:
@@ -257,6 +318,51 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                 current[name][axis] = v
             return value
 
+        def search_frequencies(value):
+            """Per body axis whose solved ω has one dominant spectral line (80 % of its power): the
+            oscillator at that frequency, refined with the axis density by coordinate ascent; kept where
+            the evidence rises by more than 10 nats."""
+            nonlocal evaluations
+            rate = float(log.rate_hz)
+            t = log.times_s
+            span_s = float(t[-1] - t[0])
+            uniform_t = t[0] + np.arange(int(span_s * rate) + 1) / rate  # the periodogram over gaps too
+            for a in range(3):
+                if current["freq"][a] > 0:
+                    continue
+                f0 = dominant_frequency_hz(np.interp(uniform_t, t, X[:, a]), rate, 2.0 / max(span_s, 1e-9), min(0.05 * rate, 50.0), min_share=0.8)
+                if f0 is None:
+                    continue
+                saved = {k: (np.array(v, copy=True) if k in ("axis", "freq", "freq_std", "amp") else v) for k, v in current.items()}
+                current["freq"][a] = f0
+                trial = value
+                for step in (np.log(1.02), np.log(1.002)):
+                    start = np.log(current["freq"][a])
+
+                    def g(v):
+                        c = {k: (np.array(val, copy=True) if k in ("axis", "freq", "freq_std", "amp") else val) for k, val in current.items()}
+                        c["freq"][a] = float(np.exp(v))
+                        return evidence(c, X)
+
+                    v, trial, k = _maximise_1d(g, start, step, start - np.log(1.5), start + np.log(1.5))
+                    evaluations += k
+                    current["freq"][a] = float(np.exp(v))
+                    trial = search("axis", 1e-6, 1e2, axis=a)
+                if trial > value + 10.0:
+                    value = trial
+                    # frequency std from the evidence's curvature in log f; amplitude of the oscillation
+                    step = np.log(1.002)
+                    v = np.log(current["freq"][a])
+                    up, down = g(v + step), g(v - step)
+                    evaluations += 2
+                    curv = (up - 2.0 * trial + down) / step**2
+                    current["freq_std"][a] = current["freq"][a] / np.sqrt(-curv) if curv < 0 else current["freq"][a] * 0.01
+                    current["amp"][a] = np.sqrt(2.0) * float(np.std(X[:, a]))
+                else:
+                    current.clear()
+                    current.update(saved)
+            return value
+
         if accel_noise:
             search("scale", 1e-2, 1e3)
         value = search("density", *DENSITY_LIMITS, step=np.log(4.0))
@@ -267,10 +373,16 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
         for a in range(3):
             value = search("axis", 1e-5, 1e2, axis=a)
         value = search("force", 1e-3, 1e4)
+        if model == "jerk" and options.tune_axis_frequencies:
+            value = search_frequencies(value)
         if accel_noise:
             value = search("scale", 1e-2, 1e3, step=np.log(1.5))
         tuning = Tuning(model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value), evaluations,
-                        tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])))
+                        tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])),
+                        tuple(float(v) for v in current["freq"]), tuple(float(v) for v in current["freq_std"]),
+                        tuple(float(v) for v in current["amp"]))
         if best is None or tuning.log_evidence > best[0].log_evidence:
-            best = (tuning, settings_options(current))
-    return best
+            best = (tuning, settings_options(current), X)
+    if states_out is not None:
+        states_out.append(best[2])
+    return best[:2]
