@@ -140,3 +140,52 @@ def test_preset_reproduces_the_explicit_settings_on_the_real_recording(mimu4444_
     print(f"exp_1 busiest 40 s: {mask.sum()} moving samples, ω RMSE {rmse:.3f} rad/s, {opposite:.2%} opposite")
     assert mask.sum() > 1500
     assert rmse < 3.3 and opposite < 0.01  # measured 3.10 rad/s, 0.20 %
+
+
+def _study():
+    import importlib
+    import sys
+    from pathlib import Path
+
+    tools = str(Path(__file__).resolve().parents[1] / "tools")
+    if tools not in sys.path:
+        sys.path.insert(0, tools)
+    return importlib.import_module("mimu4444_study")
+
+
+def test_study_bound_at_the_reference_is_the_smoother_bound_plus_the_noise_slope():
+    """tools/mimu4444_study.py --bound: with no slope it is gfimu.smoother.bound at the same trajectory;
+    the preset's noise slope raises it."""
+    from gfimu.smoother.bound import smoother_bound
+    from gfimu.smoother.graph import SmootherOptions
+
+    study = _study()
+    log = simulate("reversal", array=mimu4444_array(), rate_hz=62.5, duration_s=4.0, seed=2)
+    log = log.replace(reference=log.truth, invalid_reference=np.zeros(len(log), bool))
+    mask = np.ones(len(log), bool)
+    flat = {**HAND_HELD, "accel_noise_slope_mps2_per_radps": 0.0}
+    got = study.reference_bound(log, flat, mask)
+    keys = {f.name for f in dataclasses.fields(SmootherOptions)}
+    sd = smoother_bound(log, SmootherOptions(**{k: v for k, v in flat.items() if k in keys})).sigma["omega_b_radps"]
+    assert got["rms_bound_norm"] == pytest.approx(float(np.sqrt(np.mean(np.sum(sd**2, axis=1)))), rel=1e-9)
+    sloped = study.reference_bound(log, HAND_HELD, mask)
+    assert sloped["rms_bound_norm"] > 1.05 * got["rms_bound_norm"]
+
+
+def test_study_start_at_reference_changes_only_the_initial_omega():
+    """--start-at-reference: the smoother's initial ω is the reference's (at valid samples), ω̇ and f
+    those of its own initialisation; the class is restored afterwards."""
+    study = _study()
+    log = simulate("reversal", array=mimu4444_array(), rate_hz=62.5, duration_s=2.0, seed=4)
+    invalid = np.zeros(len(log), bool)
+    invalid[40:45] = True
+    log = log.replace(reference=log.truth, invalid_reference=invalid)
+    opt = make_estimator("smoother", preset="hand-held-low-rate").options()
+    own = BatchSmootherEstimator._initial_states(log, opt)
+    with study.smoother_started_at_reference():
+        x = BatchSmootherEstimator._initial_states(log, opt)
+    np.testing.assert_array_equal(x[~invalid, 0:3], log.truth.omega_b_radps[~invalid])
+    np.testing.assert_array_equal(np.abs(x[invalid, 0:3]), np.abs(own[invalid, 0:3]))
+    assert np.all(np.sum(x[invalid, 0:3] * log.truth.omega_b_radps[invalid], axis=1) >= 0)
+    np.testing.assert_array_equal(x[:, 3:], own[:, 3:])
+    np.testing.assert_array_equal(BatchSmootherEstimator._initial_states(log, opt), own)
