@@ -336,7 +336,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                 saved = {k: (np.array(v, copy=True) if k in ("axis", "freq", "freq_std", "amp") else v) for k, v in current.items()}
                 current["freq"][a] = f0
                 trial = value
-                for step in (np.log(1.02), np.log(1.002)):
+                for step, reach in ((np.log(1.02), np.log(1.3)), (np.log(1.002), np.log(1.03))):
                     start = np.log(current["freq"][a])
 
                     def g(v):
@@ -344,7 +344,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                         c["freq"][a] = float(np.exp(v))
                         return evidence(c, X)
 
-                    v, trial, k = _maximise_1d(g, start, step, start - np.log(1.5), start + np.log(1.5))
+                    v, trial, k = _maximise_1d(g, start, step, start - reach, start + reach)
                     evaluations += k
                     current["freq"][a] = float(np.exp(v))
                     trial = search("axis", 1e-6, 1e2, axis=a)
