@@ -330,7 +330,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
             for a in range(3):
                 if current["freq"][a] > 0:
                     continue
-                f0 = dominant_frequency_hz(np.interp(uniform_t, t, X[:, a]), rate, 2.0 / max(span_s, 1e-9), min(0.05 * rate, 50.0), min_share=0.8)
+                f0 = dominant_frequency_hz(np.interp(uniform_t, t, X[:, a]), rate, 1.5 / max(span_s, 1e-9), min(0.05 * rate, 50.0), min_share=0.8)
                 if f0 is None:
                     continue
                 saved = {k: (np.array(v, copy=True) if k in ("axis", "freq", "freq_std", "amp") else v) for k, v in current.items()}
