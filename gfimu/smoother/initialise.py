@@ -146,14 +146,29 @@ def sign_resolved_omega(q_meas: np.ndarray, omega_dot: np.ndarray, dt_s: np.ndar
     return out
 
 
-def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
-    """Signs s_k = ±1 (N,) minimising ``Σ_k ||s_{k+1} ω_{k+1} - s_k ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||²``.
+SIGN_CHAIN_SCALE_RADPS = 5.0
+"""Cauchy scale of the sign chain's step residual (chosen on the first MIMU4444 recording)."""
+
+
+def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray,
+               robust_scale_radps: float | None = SIGN_CHAIN_SCALE_RADPS) -> np.ndarray:
+    """Signs s_k = ±1 (N,) minimising ``Σ_k ρ(||s_{k+1} ω_{k+1} - s_k ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||)``.
 
     The accelerometers fix ω only up to its sign per sample (the quadratic terms, paper 000, eq. 6)
     while ω̇ is sign-free: the sign sequence that best follows the trapezoid of ω̇ is found exactly
     by dynamic programming (Viterbi, two states per sample, linear in N). It keeps a rotation that
     slows through zero and reverses (ω̇ keeps its sign) apart from one that bounces back.
+
+    ρ is the Cauchy loss ``c² log(1 + e²/c²)`` with ``c = robust_scale_radps`` (None: the plain
+    square ``e²``): one sample whose per-sample ω̇ (or ω) is off by hundreds of rad/s², e.g. from a
+    reading spike, costs at most a few c² whichever its sign, instead of flipping the run that
+    follows it onto the wrong sign branch. On the MIMU4444 recordings (62.5 Hz hand motion, scale
+    chosen on exp_1) the robust chain lowered the smoother's ω RMSE on the unseen exp_2 / exp_3
+    from 4.58 / 5.54 to 3.61 / 4.03 rad/s and its opposite-sign share from 0.73 / 1.68 % to
+    0.31 / 1.25 % (``tools/mimu4444_study.py``).
     """
+    if robust_scale_radps is not None and not (np.isfinite(robust_scale_radps) and robust_scale_radps > 0):
+        raise ValueError(f"sign_chain: robust_scale_radps must be a positive number or None, got {robust_scale_radps!r}")
     w = np.asarray(omega_b_radps, dtype=float)
     d = np.asarray(omega_dot_b_radps2, dtype=float)
     n = len(w)
@@ -166,6 +181,8 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
     diff = signs[None, None, :, None] * w[1:, None, None, :] - signs[None, :, None, None] * w[:-1, None, None, :] \
         - inc[:, None, None, :]
     step = np.sum(diff**2, axis=3)
+    if robust_scale_radps is not None:
+        step = robust_scale_radps**2 * np.log1p(step / robust_scale_radps**2)
     cost = np.zeros(2)
     back = np.zeros((n - 1, 2), dtype=np.int8)
     for k in range(n - 1):  # two states: a short loop of 2x2 minima
