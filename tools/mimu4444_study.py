@@ -39,11 +39,14 @@ noise slope, without the robust weights)::
         --preset hand-held-low-rate --start-at-reference --bound
 
 Measured (shifted reference, within calibration, moving valid samples; RMSE of the ω error norm /
-median / share with ω·ω_ref < 0), with the preset: exp_1 3.15 / 1.91 / 2.01 %, exp_2 4.58 / 2.01 /
-0.73 %, exp_3 5.54 / 2.13 / 1.68 % (before the sign chain and the robust loss: 3.58 / 2.23 / 1.88 %,
-4.94 / 2.43 / 1.59 %, 5.84 / 2.42 / 1.77 %). The largest 1 % of the errors carry 53 % (exp_2) and
-64 % (exp_3) of the squared error: short runs on the wrong sign branch in the fastest reversals
-next to the gyro saturation. Started at the reference: 3.04 / 1.86 / 0.28 %, 3.33 / 1.98 / 0.15 %,
+median / share with ω·ω_ref < 0), with the preset: exp_1 3.13 / 1.90 / 1.57 %, exp_2 3.61 / 1.99 /
+0.31 %, exp_3 4.03 / 2.11 / 1.25 %. With the sign chain's plain squared steps (before its Cauchy
+loss, :func:`gfimu.smoother.initialise.sign_chain`): 3.15 / 1.91 / 2.01 %, 4.58 / 2.01 / 0.73 %,
+5.54 / 2.13 / 1.68 %, the largest 1 % of the errors carrying 53 % (exp_2) and 64 % (exp_3) of the
+squared error: runs of 4-5 samples on the wrong sign branch after a single sample with a reading
+spike (per-sample ω̇ off by thousands of rad/s²) at the fastest rotations; now 29 % and 38 %.
+Before the sign chain and the robust loss: 3.58 / 2.23 / 1.88 %, 4.94 / 2.43 / 1.59 %,
+5.84 / 2.42 / 1.77 %. Started at the reference: 3.04 / 1.86 / 0.28 %, 3.33 / 1.98 / 0.15 %,
 3.30 / 2.04 / 0.13 %. The smoother's own bound at the reference (RMS of the ω bound's norm):
 1.55, 1.54, 1.54 rad/s: even on the right sign branch the error is twice what the model's
 noise allows, the rigid-body residual of the board (``--residual``) not being white noise.
