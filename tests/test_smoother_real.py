@@ -40,7 +40,7 @@ def scores(motion, part, mask):
     return float(np.sqrt(np.mean(np.sum((w - ref) ** 2, axis=1)))), float(np.mean(np.sum(w * ref, axis=1) < 0))
 
 
-@pytest.mark.parametrize("exp, max_rmse", [(2, 4.9), (3, 5.2)])  # measured 4.66, 4.99
+@pytest.mark.parametrize("exp, max_rmse", [(2, 3.4), (3, 4.3)])  # measured 3.14, 4.06 (sign chain with Cauchy steps)
 def test_robust_settings_on_unseen_recordings(mimu4444_dir, exp, max_rmse):
     """Busiest 40 s (own calibration, shifted reference): the robust settings lower the ω RMSE and
     the opposite-sign share below those of the Gaussian real-data settings, to the measured level."""
@@ -51,5 +51,5 @@ def test_robust_settings_on_unseen_recordings(mimu4444_dir, exp, max_rmse):
           f"robust {robust[0]:.3f} rad/s, {robust[1]:.2%} opposite")
     assert mask.sum() > 1500
     assert robust[0] < max_rmse, robust
-    assert robust[0] < 0.985 * plain[0], (robust, plain)  # measured 0.93 (exp_2), 0.96 (exp_3)
+    assert robust[0] < 0.9 * plain[0], (robust, plain)  # measured 0.63 (exp_2), 0.78 (exp_3)
     assert robust[1] < 0.01 and robust[1] < plain[1], (robust, plain)  # opposite-sign share
