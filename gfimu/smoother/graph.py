@@ -440,14 +440,15 @@ class SmootherProblem:
             mk = self.state_size - 3 if self.attitude else self.state_size
             X = states
             if mk == STATE_SIZE:
-                rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
-                rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
-                r = np.concatenate([rk / (self.trapezoid_sigma[:, None] * self.axis_factors),
-                                    rd / (self.omega_dot_step_sigma[:, None] * self.axis_factors)], axis=1)
                 if self.oscillator:
                     ro, _ = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s,
                                                         self.natural_frequency_radps)
                     r = np.einsum("nij,nj->ni", self.oscillator_whiten(), ro)
+                else:
+                    rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
+                    rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
+                    r = np.concatenate([rk / (self.trapezoid_sigma[:, None] * self.axis_factors),
+                                        rd / (self.omega_dot_step_sigma[:, None] * self.axis_factors)], axis=1)
             else:
                 ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A], self.dt_s)
                 r = np.einsum("nij,nj->ni", self.snap_whiten, ra)
@@ -683,6 +684,7 @@ class SmootherProblem:
                 if self.use_inclinometer:
                     graph.add(inclinometer.make_inclinometer_factor(attitude_key(k), self.log.tilt_rad[k],
                                                                     diagonal_noise(np.full(2, self.tilt_sigma))))
+        oscillator_cov = self.oscillator_covariance() if self.oscillator else None
         for k in range(self.n - 1):
             if self.attitude:
                 graph.add(kinematics.make_attitude_factor(attitude_key(k), attitude_key(k + 1), omega_key(k), omega_key(k + 1),
@@ -700,7 +702,7 @@ class SmootherProblem:
             if self.oscillator:
                 graph.add(process.make_oscillator_factor(omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1),
                                                          float(self.dt_s[k]), self.natural_frequency_radps,
-                                                         gaussian_noise(self.oscillator_covariance()[k])))
+                                                         gaussian_noise(oscillator_cov[k])))
                 continue
             graph.add(kinematics.make_angular_velocity_factor(
                 omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), float(self.dt_s[k]),

@@ -282,6 +282,9 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                            process_axis_frequencies_hz=tuple(float(v) for v in c["freq"]),
                            specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
 
+        def copy_settings(c):
+            return {k: (np.array(v, copy=True) if isinstance(v, np.ndarray) else v) for k, v in c.items()}
+
         cache = {}
 
         def evidence(c, X):
@@ -302,7 +305,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
             nonlocal evaluations
 
             def f(v):
-                c = {k: (np.array(val, copy=True) if k in ("axis", "freq", "freq_std", "amp") else val) for k, val in current.items()}
+                c = copy_settings(current)
                 if axis is None:
                     c[name] = v
                 else:
@@ -333,14 +336,14 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                 f0 = dominant_frequency_hz(np.interp(uniform_t, t, X[:, a]), rate, 1.5 / max(span_s, 1e-9), min(0.05 * rate, 50.0), min_share=0.8)
                 if f0 is None:
                     continue
-                saved = {k: (np.array(v, copy=True) if k in ("axis", "freq", "freq_std", "amp") else v) for k, v in current.items()}
+                saved = copy_settings(current)
                 current["freq"][a] = f0
                 trial = value
                 for step, reach in ((np.log(1.02), np.log(1.3)), (np.log(1.002), np.log(1.03))):
                     start = np.log(current["freq"][a])
 
                     def g(v):
-                        c = {k: (np.array(val, copy=True) if k in ("axis", "freq", "freq_std", "amp") else val) for k, val in current.items()}
+                        c = copy_settings(current)
                         c["freq"][a] = float(np.exp(v))
                         return evidence(c, X)
 
