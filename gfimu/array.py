@@ -1,7 +1,7 @@
 """Accelerometer arrays: geometry, the linear model and its invertibility.
 
 Pure maths, no I/O (reading and writing ``array.toml`` lives in
-:mod:`gfimu.logio`).
+:mod:`gfimu.io`).
 """
 
 from __future__ import annotations

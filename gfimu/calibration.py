@@ -54,8 +54,6 @@ takes the RMS over single axes instead (norm value / √3 for triads).
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -367,59 +365,33 @@ def fit(log, detector: StillDetector | None = None, periods: list[slice] | None 
 
 # --- TOML I/O ----------------------------------------------------------------------
 
-def _fmt(v) -> str:
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        return repr(float(v))
-    arr = np.asarray(v)
-    if arr.ndim == 1:
-        return "[" + ", ".join(_fmt(x.item() if hasattr(x, "item") else x) for x in v) + "]"
-    return "[" + ", ".join(_fmt(row) for row in arr) + "]"
+def calibration_to_dict(cal: Calibration) -> dict:
+    """The ``calibration.toml`` document of a calibration."""
+    doc: dict = {"format": FORMAT, "gravity_mps2": float(cal.gravity_mps2)}
+    if cal.info:
+        doc["fit"] = dict(cal.info)
+    if cal.gyro_bias_b_radps is not None:
+        doc["gyroscope"] = {"bias_b_radps": np.asarray(cal.gyro_bias_b_radps, dtype=float)}
+    doc["accelerometers"] = [{"name": s.name, "axes": list(s.axes), "bias_mps2": np.asarray(s.bias_mps2, dtype=float),
+                              "gain": np.asarray(s.gain, dtype=float)} for s in cal.sensors]
+    return doc
+
+
+_TOML_COMMENT = "model per accelerometer: reading = gain · f_B + bias_mps2 (rows of gain: sensing vectors in B)"
 
 
 def calibration_to_toml(cal: Calibration) -> str:
-    lines = [
-        f'format = "{FORMAT}"',
-        "# model per accelerometer: reading = gain · f_B + bias_mps2 (rows of gain: sensing vectors in B)",
-        f"gravity_mps2 = {_fmt(cal.gravity_mps2)}",
-    ]
-    if cal.info:
-        lines.append("")
-        lines.append("[fit]")
-        for k, v in cal.info.items():
-            lines.append(f"{k} = {_fmt(v)}")
-    if cal.gyro_bias_b_radps is not None:
-        lines += ["", "[gyroscope]", f"bias_b_radps = {_fmt(cal.gyro_bias_b_radps)}"]
-    for s in cal.sensors:
-        lines += [
-            "",
-            "[[accelerometers]]",
-            f"name = {_fmt(s.name)}",
-            f"axes = {_fmt(list(s.axes))}",
-            f"bias_mps2 = {_fmt(s.bias_mps2)}",
-            f"gain = {_fmt(s.gain)}",
-        ]
-    return "\n".join(lines) + "\n"
+    """Text of ``calibration.toml``."""
+    from .io.array_toml import format_toml
+
+    return format_toml(calibration_to_dict(cal), comment=_TOML_COMMENT, finite=False)
 
 
 def write_calibration(cal: Calibration, path: str | Path) -> None:
-    """Write ``calibration.toml`` atomically (temporary file, then rename)."""
-    path = Path(path)
-    text = calibration_to_toml(cal)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent if str(path.parent) else ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write ``calibration.toml`` atomically (temporary file, fsync, rename)."""
+    from .io.atomic import atomic_write_text
+
+    atomic_write_text(path, calibration_to_toml(cal))
 
 
 def read_calibration(path: str | Path) -> Calibration:

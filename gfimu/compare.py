@@ -10,7 +10,7 @@ velocity in the layout of paper 002, Table 1; paper 004's relative RMS error
 time. A method that is missing, not applicable or fails is a row with its
 reason, never an exception.
 
-No file I/O here except through :mod:`gfimu.logio` when asked to keep the
+No file I/O here except through :mod:`gfimu.io` when asked to keep the
 estimates (``estimates_dir``).
 """
 
@@ -386,7 +386,7 @@ def compare(
     if estimates_dir is not None:
         from pathlib import Path
 
-        from .logio import write_motion_csv
+        from .io import write_motion_csv
 
         out = Path(estimates_dir)
         out.mkdir(parents=True, exist_ok=True)

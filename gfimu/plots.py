@@ -35,13 +35,16 @@ def _figure(width_in: float, height_in: float):
 
 
 def save_figure(fig, path, dpi: int = 110) -> Path:
-    """Write ``fig`` to ``path`` (format from the suffix) with the Agg canvas."""
+    """Write ``fig`` to ``path`` (format from the suffix) with the Agg canvas, atomically."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
+    from .io.atomic import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    fmt = path.suffix.lstrip(".").lower() or "png"
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=dpi)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format=fmt)
     return path
 
 

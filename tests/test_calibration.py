@@ -176,7 +176,7 @@ def test_missing_sensor_in_calibration(tmp_path):
 
 
 def test_real_recordings_spread(mimu4444_dir):
-    from gfimu.datasets.mimu4444 import read_mimu4444
+    from gfimu.io.readers.mimu4444 import read_mimu4444
 
     log, _ = read_mimu4444(mimu4444_dir / "exp_1" / "data.bin", with_gyro=True)
     c = cal.fit(log)
@@ -193,7 +193,7 @@ def test_real_recordings_spread(mimu4444_dir):
 
 
 def test_calibrate_and_apply_cli(tmp_path, capsys):
-    from gfimu import logio
+    from gfimu import io as gio
     from gfimu.cli import main
 
     array = mimu4444_array()
@@ -206,7 +206,7 @@ def test_calibrate_and_apply_cli(tmp_path, capsys):
         parts.append(readings(gains, biases, np.tile(f[k], (40, 1))) + 4.0 * rng.standard_normal((40, 24)))
     y = np.vstack(parts)
     log = Log(array, (np.arange(len(y)) * 16_000_000).astype(np.int64), y)
-    logio.write_log(log, tmp_path / "log")
+    gio.write_log(log, tmp_path / "log")
     assert main(["calibrate", str(tmp_path / "log"), "--out", str(tmp_path / "cal.toml")]) == 0
     out = capsys.readouterr().out
     assert "8 still periods" in out
@@ -217,6 +217,6 @@ def test_calibrate_and_apply_cli(tmp_path, capsys):
     assert err < 6e-3 < 0.02 < nominal_err, (err, nominal_err)  # 8 orientations, 0.02 m/s² noise
     assert c.info["spread_after_mps2"] < 0.01 < 0.3 < c.info["spread_before_mps2"]
     # too few orientations: a clear error and exit status 2
-    logio.write_log(log.select(slice(0, 900)), tmp_path / "short")
+    gio.write_log(log.select(slice(0, 900)), tmp_path / "short")
     assert main(["calibrate", str(tmp_path / "short"), "--out", str(tmp_path / "bad.toml")]) == 2
     assert "at least 4 orientations" in capsys.readouterr().err

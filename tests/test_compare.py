@@ -193,7 +193,7 @@ def test_t2_band():
 
 def test_cli_compare_json(tmp_path, noisy_log):
     from gfimu.cli import main
-    from gfimu.logio import write_log
+    from gfimu.io import write_log
 
     write_log(noisy_log, tmp_path / "log")
     out = tmp_path / "table.json"

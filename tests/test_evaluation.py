@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from gfimu import logio
+from gfimu import io as gio
 from gfimu.array import cube_array
 from gfimu.cli import main
 from gfimu.evaluation import EvaluationAlignmentWarning, attitude_error, evaluate, evaluate_log, tilt_error
@@ -195,9 +195,9 @@ def test_evaluate_log_uses_truth_else_reference_without_invalid_rows():
 def files(tmp_path):
     est, truth = hand_motions()
     log = Log(cube_array(), T, np.zeros((4, 12)), reference=truth, invalid_reference=np.array([False] * 3 + [True]))
-    logio.write_log(log, tmp_path / "log")
-    logio.write_motion_csv(est, tmp_path / "est.csv")
-    logio.write_motion_csv(truth, tmp_path / "truth.csv")
+    gio.write_log(log, tmp_path / "log")
+    gio.write_motion_csv(est, tmp_path / "est.csv")
+    gio.write_motion_csv(truth, tmp_path / "truth.csv")
     return tmp_path
 
 
@@ -224,7 +224,7 @@ def test_cli_writes_csv_to_a_file(files, capsys):
 
 
 def test_cli_errors_are_one_line_with_exit_status_2(files, capsys):
-    logio.write_motion_csv(Motion(T + 5, omega_b_radps=W_EST), files / "late.csv")
+    gio.write_motion_csv(Motion(T + 5, omega_b_radps=W_EST), files / "late.csv")
     assert main(["evaluate", str(files / "late.csv"), str(files / "truth.csv")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("gfimu evaluate: error: estimate and truth timestamps do not match (row 0 differs")

@@ -302,16 +302,16 @@ def test_solver_failure_rebuilds_the_window_once_then_reports_the_time(monkeypat
 # --- command line -------------------------------------------------------------------------
 
 def test_cli_estimate_fixed_lag_on_a_log_folder(tmp_path, capsys):
-    from gfimu import logio
+    from gfimu import io as gio
     from gfimu.cli import main
 
     log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.5, seed=9)
-    logio.write_log(log, tmp_path / "log")
+    gio.write_log(log, tmp_path / "log")
     out = tmp_path / "fl.csv"
     assert main(["estimate", str(tmp_path / "log"), "--method", "fixed-lag", "--lag-s", "0.1", "--out", str(out),
                  "--no-progress"]) == 0
-    est = logio.read_motion_csv(out)
+    est = gio.read_motion_csv(out)
     np.testing.assert_array_equal(est.timestamps_ns, log.timestamps_ns)
     assert omega_rmse(est, log.truth) < 0.05
-    direct = FixedLagEstimator(lag_s=0.1).estimate(logio.read_log(tmp_path / "log"))
+    direct = FixedLagEstimator(lag_s=0.1).estimate(gio.read_log(tmp_path / "log"))
     np.testing.assert_allclose(est.omega_b_radps, direct.omega_b_radps, atol=1e-5)

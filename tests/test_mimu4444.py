@@ -5,7 +5,7 @@ import struct
 import numpy as np
 import pytest
 
-from gfimu.datasets import mimu4444 as m
+from gfimu.io.readers import mimu4444 as m
 
 
 def make_packet(counter: int, ticks: int, raw: np.ndarray, corrupt_checksum: bool = False) -> bytes:
@@ -140,7 +140,7 @@ def test_exp1_decodes(mimu4444_dir):
 
 
 def test_convert_cli_round_trip(tmp_path, capsys):
-    from gfimu import logio
+    from gfimu import io as gio
     from gfimu.cli import main
 
     raw = [raw_for(k) for k in range(8)]
@@ -154,7 +154,7 @@ def test_convert_cli_round_trip(tmp_path, capsys):
     assert "packets: 7 decoded" in text and "dropped: 1 packet(s) in 1 counter gap(s); 1 time gap(s)" in text
     assert "reference marked invalid on 1 sample(s)" in text
     with pytest.warns(UserWarning, match="1 gap"):
-        log = logio.read_log(out)
+        log = gio.read_log(out)
     assert len(log) == 7 and log.gyro_b_radps is not None
     assert log.invalid_reference.tolist() == [False, False, False, False, True, False, False]
     assert np.allclose(log.accel_mps2[:, 0], np.array([0, 1, 2, 4, 5, 6, 7]) * m.ACCEL_MPS2_PER_COUNT)
@@ -162,7 +162,7 @@ def test_convert_cli_round_trip(tmp_path, capsys):
     # without --with-gyro there are no gyro channels, the reference is still there
     assert main(["convert", "mimu4444", str(src), "--out", str(tmp_path / "log2")]) == 0
     with pytest.warns(UserWarning, match="1 gap"):
-        log2 = logio.read_log(tmp_path / "log2")
+        log2 = gio.read_log(tmp_path / "log2")
     assert log2.gyro_b_radps is None and np.allclose(log2.reference.omega_b_radps, log.reference.omega_b_radps)
 
 
@@ -197,7 +197,7 @@ def test_shift_reference_resamples_and_widens_invalid():
 
 
 def test_convert_cli_reference_shift(tmp_path, capsys):
-    from gfimu import logio
+    from gfimu import io as gio
     from gfimu.cli import main
 
     pk = []
@@ -209,7 +209,7 @@ def test_convert_cli_reference_shift(tmp_path, capsys):
     src.write_bytes(b"".join(pk))
     assert main(["convert", "mimu4444", str(src), "--out", str(tmp_path / "log"), "--reference-shift-ms", "-1.5"]) == 0
     assert "reference re-sampled at t -1.5 ms; invalid on 1 sample(s)" in capsys.readouterr().out
-    log = logio.read_log(tmp_path / "log")
+    log = gio.read_log(tmp_path / "log")
     k = np.arange(12)
     wx = np.deg2rad(16 * (k - 1.5 / 16) ** 2 / 16.4) / 2  # mean of upright (x) and flipped (−y) sensors
     assert np.allclose(log.reference.omega_b_radps[1:, 0], wx[1:], atol=1e-9)

@@ -154,7 +154,7 @@ def test_real_mimu4444_recording_against_the_gyros(mimu4444_dir):
     while the per-sample ML follows the gyros; the remaining error comes from
     the uncalibrated sensors, well above the CRB of white noise.
     """
-    from gfimu.datasets.mimu4444 import read_mimu4444
+    from gfimu.io.readers.mimu4444 import read_mimu4444
     from gfimu.estimators.inversion import InversionEstimator
 
     log, _ = read_mimu4444(mimu4444_dir / "exp_1")

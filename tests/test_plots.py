@@ -102,7 +102,7 @@ def test_t2_and_step_size_figures(tmp_path):
 
 def test_cli_plot(tmp_path):
     from gfimu.cli import main
-    from gfimu.logio import write_log, write_motion_csv
+    from gfimu.io import write_log, write_motion_csv
     from gfimu.simulate import simulate
 
     log = simulate("random3d", duration_s=0.6, seed=2)

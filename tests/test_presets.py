@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from gfimu import logio
+from gfimu import io as gio
 from gfimu.array import mimu4444_array
 from gfimu.cli import main
 from gfimu.estimators import make_estimator
@@ -68,7 +68,7 @@ def hand_log_dir(tmp_path_factory):
     """4 s of a fast reversal seen by the MIMU4444 layout at 62.5 Hz, written as a log."""
     log = simulate("reversal", array=mimu4444_array(), rate_hz=62.5, duration_s=4.0, seed=2)
     out = tmp_path_factory.mktemp("hand") / "log"
-    logio.write_log(log, out)
+    gio.write_log(log, out)
     return out
 
 
@@ -78,7 +78,7 @@ def test_cli_estimate_preset_equals_explicit_options(hand_log_dir, tmp_path, cap
     assert main(base + ["--preset", "hand-held-low-rate", "--out", str(a)]) == 0
     assert main(base + EXPLICIT_CLI + ["--out", str(b)]) == 0
     assert main(base + ["--out", str(c)]) == 0
-    pa, pb, pc = (logio.read_motion_csv(p) for p in (a, b, c))
+    pa, pb, pc = (gio.read_motion_csv(p) for p in (a, b, c))
     np.testing.assert_array_equal(pa.omega_b_radps, pb.omega_b_radps)
     np.testing.assert_array_equal(pa.specific_force_b_mps2, pb.specific_force_b_mps2)
     assert np.max(np.abs(pa.omega_b_radps - pc.omega_b_radps)) > 1e-3  # the preset is not the default
@@ -87,16 +87,16 @@ def test_cli_estimate_preset_equals_explicit_options(hand_log_dir, tmp_path, cap
     assert main(base + ["--preset", "hand-held-low-rate", "-O", "reweight_iterations=1", "--out", str(d)]) == 0
     e = tmp_path / "override_explicit.csv"
     assert main(base + EXPLICIT_CLI + ["-O", "reweight_iterations=1", "--out", str(e)]) == 0
-    np.testing.assert_array_equal(logio.read_motion_csv(d).omega_b_radps, logio.read_motion_csv(e).omega_b_radps)
-    assert np.max(np.abs(logio.read_motion_csv(d).omega_b_radps - pa.omega_b_radps)) > 0
+    np.testing.assert_array_equal(gio.read_motion_csv(d).omega_b_radps, gio.read_motion_csv(e).omega_b_radps)
+    assert np.max(np.abs(gio.read_motion_csv(d).omega_b_radps - pa.omega_b_radps)) > 0
 
 
 def test_cli_compare_applies_the_preset_to_the_smoother(hand_log_dir, tmp_path):
     out = tmp_path / "table.json"
     assert main(["compare", str(hand_log_dir), "--methods", "smoother,ml", "--preset", "hand-held-low-rate",
                  "--no-bounds", "--format", "json", "--out", str(out), "--estimates-dir", str(tmp_path / "est")]) == 0
-    est = logio.read_motion_csv(tmp_path / "est" / "smoother.csv")
-    log = logio.read_log(hand_log_dir)
+    est = gio.read_motion_csv(tmp_path / "est" / "smoother.csv")
+    log = gio.read_log(hand_log_dir)
     direct = make_estimator("smoother", **HAND_HELD).estimate(log)
     np.testing.assert_allclose(est.omega_b_radps, direct.omega_b_radps, rtol=0, atol=1e-9)
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from gfimu import logio
+from gfimu import io as gio
 from gfimu.array import paper001_array
 from gfimu.cli import main
 from gfimu.simulate import SensorErrors, simulate
@@ -14,20 +14,20 @@ def test_cli_writes_a_log_equal_to_the_library_result(tmp_path, capsys):
     assert main(["simulate", "reversal", "--out", str(out), "--duration-s", "1", "--rate-hz", "200",
                  "--no-noise", "--no-progress"]) == 0
     assert "200 samples" in capsys.readouterr().out
-    log = logio.read_log(out)
+    log = gio.read_log(out)
     ref = simulate("reversal", duration_s=1.0, rate_hz=200.0, noise=SensorErrors.none())
     np.testing.assert_array_equal(log.timestamps_ns, ref.timestamps_ns)
     np.testing.assert_allclose(log.accel_mps2, ref.accel_mps2, rtol=1e-15)
     for name in ref.truth.available():
         np.testing.assert_allclose(getattr(log.truth, name), getattr(ref.truth, name), rtol=1e-15, atol=1e-300)
-    assert logio.format_array_toml(log.array) == logio.format_array_toml(ref.array)
+    assert gio.format_array_toml(log.array) == gio.format_array_toml(ref.array)
 
 
 def test_cli_array_choices_options_and_noise(tmp_path):
     out = tmp_path / "tt"
     assert main(["simulate", "turntable", "--out", str(out), "--array", "paper001", "--duration-s", "2",
                  "--noise-std-mps2", "0.1", "--seed", "4", "-O", "amplitude_deg=10", "--no-progress"]) == 0
-    log = logio.read_log(out)
+    log = gio.read_log(out)
     assert log.array.n_axes == 6 and log.gyro_b_radps is not None and log.tilt_rad is not None
     np.testing.assert_array_equal(log.array.noise_std_per_axis_mps2, 0.1)
     exact = paper001_array().predict_readings(log.truth.specific_force_b_mps2, log.truth.omega_dot_b_radps2,
@@ -38,11 +38,11 @@ def test_cli_array_choices_options_and_noise(tmp_path):
     out2 = tmp_path / "again"
     assert main(["simulate", "random3d", "--out", str(out2), "--array", str(out / "array.toml"),
                  "--duration-s", "0.5", "--no-progress"]) == 0
-    assert logio.format_array_toml(logio.read_log(out2).array) == logio.format_array_toml(log.array)
+    assert gio.format_array_toml(gio.read_log(out2).array) == gio.format_array_toml(log.array)
     out3 = tmp_path / "cube"
     assert main(["simulate", "random3d", "--out", str(out3), "--half-edge-m", "0.1", "--duration-s", "0.5",
                  "--no-progress"]) == 0
-    np.testing.assert_allclose(np.abs(logio.read_log(out3).array.axis_positions_m), 0.1)
+    np.testing.assert_allclose(np.abs(gio.read_log(out3).array.axis_positions_m), 0.1)
 
 
 @pytest.mark.parametrize("argv,message", [

@@ -166,7 +166,7 @@ def test_real_recording_settings_beat_the_per_sample_ml(mimu4444_dir):
     with the real-data settings has a lower ω RMSE and fewer opposite-sign samples than the
     per-sample ML estimate."""
     from gfimu import calibration as calib
-    from gfimu.datasets.mimu4444 import read_mimu4444, shift_reference
+    from gfimu.io.readers.mimu4444 import read_mimu4444, shift_reference
     from gfimu.estimators import make_estimator
 
     path = mimu4444_dir / "exp_2" / "data.bin"

@@ -18,7 +18,7 @@ def busiest_part(mimu4444_dir, exp: int, samples: int = 2500):
     """Own static-phase calibration, reference shifted by the 1.5 ms accelerometer-gyro lag, the
     ``samples`` with the most moving valid-reference samples; returns (log part, mask of moving samples)."""
     from gfimu import calibration as calib
-    from gfimu.datasets.mimu4444 import read_mimu4444, shift_reference
+    from gfimu.io.readers.mimu4444 import read_mimu4444, shift_reference
 
     path = mimu4444_dir / f"exp_{exp}" / "data.bin"
     full, _ = read_mimu4444(path, with_gyro=True)

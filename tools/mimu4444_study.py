@@ -68,7 +68,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from gfimu import calibration as calib  # noqa: E402
-from gfimu.datasets.mimu4444 import read_mimu4444, shift_reference  # noqa: E402
+from gfimu.io.readers.mimu4444 import read_mimu4444, shift_reference  # noqa: E402
 from gfimu.estimators import METHODS, make_estimator  # noqa: E402
 from gfimu.evaluation import evaluate  # noqa: E402
 from gfimu.array import mimu4444_array  # noqa: E402

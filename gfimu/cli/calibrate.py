@@ -31,10 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from .. import logio
+    from .. import io as gio
     from ..calibration import StillDetector, fit, write_calibration
 
-    log = logio.read_log(args.log)
+    log = gio.read_log(args.log)
     if args.until_s is not None:
         log = log.select(slice(0, int(((log.times_s <= args.until_s)).sum())))
     det = StillDetector(window_s=args.window_s, accel_std_mps2=args.accel_std, gyro_std_radps=args.gyro_std,

@@ -53,7 +53,7 @@ def parse_method_options(pairs: list[str], methods: list[str] | None) -> dict[st
 
 
 def run(args) -> int:
-    from .. import logio
+    from .. import io as gio
     from ..compare import compare
     from ..estimators import METHODS
 
@@ -71,7 +71,7 @@ def run(args) -> int:
 
         apply_preset(args.preset)  # an unknown name stops here, before the log is read
         options.setdefault("smoother", {})["preset"] = args.preset
-    log = logio.read_log(args.log)
+    log = gio.read_log(args.log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
 
@@ -82,10 +82,7 @@ def run(args) -> int:
     text = {"markdown": result.to_markdown, "csv": result.to_csv, "json": result.to_json}[args.format]()
     if args.out:
         out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(out)
+        gio.atomic_write_text(out, text)
         n_ok = sum(1 for r in result.rows if r["kind"] == "method" and r["status"] == "ok")
         print(f"compare: {n_ok} of {len(result.methods)} methods ran on {len(log)} samples -> {out}")
     else:

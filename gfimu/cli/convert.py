@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from .. import logio
+    from .. import io as gio
     from ..io.readers import read_recording
 
     options = {dest: getattr(args, dest) for dest in args.reader_options}
@@ -44,6 +44,6 @@ def run(args) -> int:
 
         log = apply_calibration(log, read_calibration(args.calibration))
         print(f"calibration applied: {args.calibration}")
-    logio.write_log(log, args.out)
+    gio.write_log(log, args.out)
     print(f"log written: {args.out} ({len(log)} samples, {log.rate_hz:.2f} Hz)")
     return 0

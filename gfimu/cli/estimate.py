@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from .. import logio
+    from .. import io as gio
     from ..estimators import make_estimator
 
     if getattr(args, "preset", None) is not None:  # checked before the log is read
@@ -57,7 +57,7 @@ def run(args) -> int:
         from ..smoother.presets import apply_preset
 
         apply_preset(args.preset)
-    log = logio.read_log(args.log)
+    log = gio.read_log(args.log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
 
@@ -82,6 +82,6 @@ def run(args) -> int:
         from ..estimators.gravity import add_orientation
 
         motion = add_orientation(log, motion, source=args.orientation)
-    logio.write_motion_csv(motion, args.out)
+    gio.write_motion_csv(motion, args.out)
     print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {args.out}")
     return 0

@@ -2,7 +2,7 @@
 
 The second argument is a truth or reference CSV, or a log folder: its
 ``truth.csv`` is used, else its ``reference.csv``. Rows whose reference has
-``valid`` = 0 are left out (see :mod:`gfimu.logio`).
+``valid`` = 0 are left out (see :mod:`gfimu.io`).
 """
 
 from __future__ import annotations
@@ -52,12 +52,12 @@ def _truth_path(arg: str, against: str) -> Path:
 
 
 def run(args) -> int:
-    from .. import logio
+    from .. import io as gio
     from ..evaluation import EvaluationAlignmentWarning, evaluate
 
     truth_path = _truth_path(args.truth, args.against)
-    estimate = logio.read_motion_csv(args.estimate, allow_nan=True)
-    truth, valid = logio.read_motion_table(truth_path)
+    estimate = gio.read_motion_csv(args.estimate, allow_nan=True)
+    truth, valid = gio.read_motion_table(truth_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", EvaluationAlignmentWarning)
         result = evaluate(estimate, truth, valid=valid, sign_threshold_radps=args.sign_threshold,
@@ -69,7 +69,7 @@ def run(args) -> int:
     else:
         text = result.to_json()
     if args.out:
-        logio.atomic_write_text(args.out, text)
+        gio.atomic_write_text(args.out, text)
         print(f"evaluation of {args.estimate} -> {args.out} ({result.summary()})")
     else:
         print(text, end="")

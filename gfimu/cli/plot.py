@@ -42,10 +42,10 @@ def _window(log, start_s, end_s) -> slice:
 
 
 def run(args) -> int:
-    from .. import logio, plots
+    from .. import io as gio, plots
     from ..compare import condition_vs_scale
 
-    log = logio.read_log(args.log)
+    log = gio.read_log(args.log)
     if args.kind == "condition":
         positions = np.array([a.position_m for a in log.array.accelerometers])
         size = float(np.max(np.abs(positions)))
@@ -60,7 +60,7 @@ def run(args) -> int:
     window = _window(log, args.start_s, args.end_s)
     estimates = {}
     for path in args.estimates:
-        motion = logio.read_motion_csv(path)
+        motion = gio.read_motion_csv(path)
         if len(motion) != len(log):
             raise CLIError(f"{path}: {len(motion)} rows, but the log {args.log} has {len(log)} samples")
         estimates[Path(path).stem] = motion.select(window)

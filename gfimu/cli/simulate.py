@@ -77,18 +77,18 @@ def _array(args):
         return LAYOUTS[args.array]()
     from pathlib import Path
 
-    from .. import logio
+    from .. import io as gio
 
     path = Path(args.array)
     if path.is_dir():
         path = path / "array.toml"
     if not path.is_file():
         raise CLIError(f"--array {args.array!r}: not one of {', '.join(ARRAY_CHOICES)} and no such file")
-    return logio.read_array_toml(path)
+    return gio.read_array_toml(path)
 
 
 def run(args) -> int:
-    from .. import logio
+    from .. import io as gio
     from ..simulate import SensorErrors, simulate
     from .estimate import parse_options
 
@@ -104,7 +104,7 @@ def run(args) -> int:
         noise = None
     log = simulate(args.scenario, array=_array(args), rate_hz=args.rate_hz, duration_s=args.duration_s,
                    noise=noise, seed=args.seed, progress=not args.no_progress, **parse_options(args.option))
-    logio.write_log(log, args.out)
+    gio.write_log(log, args.out)
     print(f"{args.scenario}: {len(log)} samples at {log.rate_hz:g} Hz ({log.array.name}, "
           f"{log.array.n_axes} accelerometer axes) -> {args.out}")
     return 0

@@ -1,5 +1,49 @@
 """Input and output: log files, estimates, and the readers of recorded formats.
 
-Readers of recorded formats live in :mod:`gfimu.io.readers`, one module per
-format, found by :func:`gfimu.io.readers.reader_names`.
+- :mod:`gfimu.io.errors`: :class:`LogFormatError` and the warnings of reading;
+- :mod:`gfimu.io.units`: units of columns and timestamps;
+- :mod:`gfimu.io.atomic`: the one atomic writer (temporary file, fsync, rename);
+- :mod:`gfimu.io.tables`: ``imu.csv`` and motion tables (truth, reference, estimates);
+- :mod:`gfimu.io.array_toml`: ``array.toml`` and the TOML writer;
+- :mod:`gfimu.io.log_dir`: whole log folders;
+- :mod:`gfimu.io.readers`: one module per recorded format, found by
+  :func:`gfimu.io.readers.reader_names`.
+
+Use ``from gfimu import io as gio`` or ``from gfimu.io import read_log``.
 """
+
+from .array_toml import (
+    ARRAY_FORMAT,
+    format_array_toml,
+    format_toml,
+    parse_array_toml,
+    read_array_toml,
+    write_array_toml,
+    write_toml,
+)
+from .atomic import atomic_path, atomic_write, atomic_write_bytes, atomic_write_text
+from .errors import LogFormatError, LogFormatWarning, LogGapWarning, LogPlausibilityWarning, OutputError
+from .log_dir import LOG_FILES, read_log, write_log
+from .tables import (
+    GYRO_COLUMNS,
+    TILT_COLUMNS,
+    TIMESTAMP_HEADER,
+    VALID_COLUMN,
+    imu_columns,
+    motion_columns,
+    read_imu_csv,
+    read_motion_csv,
+    read_motion_table,
+    write_imu_csv,
+    write_motion_csv,
+)
+from .units import STANDARD_GRAVITY_MPS2, TIME_UNITS_NS, UNITS, canonical_unit, unit_factor
+
+__all__ = [
+    "ARRAY_FORMAT", "GYRO_COLUMNS", "LOG_FILES", "STANDARD_GRAVITY_MPS2", "TILT_COLUMNS", "TIMESTAMP_HEADER",
+    "TIME_UNITS_NS", "UNITS", "VALID_COLUMN", "LogFormatError", "LogFormatWarning", "LogGapWarning",
+    "LogPlausibilityWarning", "OutputError", "atomic_path", "atomic_write", "atomic_write_bytes",
+    "atomic_write_text", "canonical_unit", "format_array_toml", "format_toml", "imu_columns", "motion_columns",
+    "parse_array_toml", "read_array_toml", "read_imu_csv", "read_log", "read_motion_csv", "read_motion_table",
+    "unit_factor", "write_array_toml", "write_imu_csv", "write_log", "write_motion_csv", "write_toml",
+]

@@ -1,11 +1,374 @@
-"""The MIMU4444 board's raw ``data.bin`` (decoding in :mod:`gfimu.datasets.mimu4444`)."""
+"""The MIMU4444 board's raw ``data.bin``: decoding the packet stream, and the reader of ``gfimu convert mimu4444``.
+
+The board (8 corner IMUs, each a triaxial accelerometer and gyroscope,
+62.5 Hz) streams 106-byte big-endian packets::
+
+    0       header 0xAA
+    1-2     uint16 packet counter (wraps at 65536)
+    3       uint8 payload length = 100
+    4-7     uint32 timestamp, 64 MHz ticks (wraps about every 67 s)
+    8-103   8 IMUs x int16 [ax ay az gx gy gz]
+    104-105 uint16 checksum = sum of bytes 0-103 modulo 65536
+
+The decoder works on bytes only (no file access except in
+:func:`read_mimu4444`): candidate packets are found by header, length byte and
+checksum, all vectorised; overlapping candidates are resolved in favour of
+those chained to a neighbour exactly one packet away. Everything else is
+counted as skipped bytes.
+
+Gyro saturation: the gyros clip at int16 full scale (2000 deg/s = 34.9
+rad/s): on exp_1..3 about 3 % of the samples hold some gyro axis at exactly
++32767 or -32768, while values between 32000 and 32766 occur only a few
+times. A sample is marked when any gyro axis has ``|count| >= 32767``; the
+reference (mean of the eight gyros) is not valid there. No neighbourhood is
+marked by default (``SATURATION_MARGIN = 0``): on exp_1 the RMS disagreement
+between the eight gyros on the samples next to a clipped one is 0.46 rad/s,
+the same as on unclipped samples with |ω| > 25 rad/s (0.44 rad/s), so the
+clipping does not leak into neighbouring samples. Accelerometer clipping
+(±16 g) is counted in the report but not masked.
+"""
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
 
 from . import Conversion, Reader
 
+PACKET_BYTES = 106
+HEADER = 0xAA
+PAYLOAD_BYTES = 100
+N_IMUS = 8
+TICK_HZ = 64_000_000
+NOMINAL_TICKS_PER_PACKET = 1_024_000  # 16 ms at 62.5 Hz
+COUNTER_MODULUS = 1 << 16
+TICK_MODULUS = 1 << 32
+GRAVITY_MPS2 = 9.80665
+ACCEL_MPS2_PER_COUNT = GRAVITY_MPS2 / 2048.0
+GYRO_RADPS_PER_COUNT = np.deg2rad(1.0 / 16.4)
+SATURATION_COUNT = 32767  # |count| at or above this is clipped (int16 full scale)
+SATURATION_MARGIN = 0  # samples also marked either side of a clipped one (see module docstring)
+UPSIDE_DOWN_IMUS = (1, 3, 5, 7)  # 0-based: IMUs 2, 4, 6, 8
+ROTATION_BOARD_UPSIDE_DOWN = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+class MIMU4444FormatError(ValueError):
+    """The byte stream holds no decodable MIMU4444 packet."""
+
+
+@dataclass(frozen=True)
+class DecodeReport:
+    """What the decoder found and what it left out."""
+
+    n_bytes: int
+    n_packets: int
+    skipped_bytes: int
+    skipped_regions: int
+    bad_checksums: int
+    duplicates_removed: int
+    dropped_packets: int
+    counter_gaps: int
+    time_gaps: int
+    saturated_samples: int
+    invalid_reference_samples: int
+    accel_clipped_samples: int
+    duration_s: float
+    gap_indices: tuple[int, ...] = field(default=())
+
+    def summary(self) -> str:
+        lines = [
+            f"packets: {self.n_packets} decoded from {self.n_bytes} bytes ({self.duration_s:.1f} s)",
+            f"skipped: {self.skipped_bytes} bytes in {self.skipped_regions} region(s); "
+            f"{self.bad_checksums} candidate packet(s) with a bad checksum; {self.duplicates_removed} duplicate(s) removed",
+            f"dropped: {self.dropped_packets} packet(s) in {self.counter_gaps} counter gap(s); {self.time_gaps} time gap(s)",
+            f"gyro saturated: {self.saturated_samples} sample(s); reference marked invalid on "
+            f"{self.invalid_reference_samples} sample(s) ({100 * self.invalid_reference_samples / max(self.n_packets, 1):.1f} %); "
+            "these are left out of evaluation",
+            f"accelerometer clipped (16 g): {self.accel_clipped_samples} sample(s)",
+        ]
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class DecodedPackets:
+    """Decoded raw fields, one row per kept packet."""
+
+    starts: np.ndarray  # byte offset of each packet
+    counter: np.ndarray  # uint16 as read
+    ticks: np.ndarray  # uint32 as read
+    raw: np.ndarray  # (N, 8, 6) int16 counts [ax ay az gx gy gz]
+
+
+def _be_u16(b: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    return (b[idx].astype(np.int64) << 8) | b[idx + 1].astype(np.int64)
+
+
+def find_packets(data: bytes | np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Start offsets of valid packets in ``data``.
+
+    Returns ``(starts, bad_checksums, skipped_regions)``: sorted
+    non-overlapping offsets of candidates with header, length byte and
+    checksum all right; the number of header+length candidates outside the
+    kept packets whose checksum failed; the number of byte runs left out.
+    """
+    b = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data.astype(np.uint8, copy=False)
+    n = b.size
+    if n < PACKET_BYTES:
+        return np.zeros(0, dtype=np.int64), 0, int(n > 0)
+    last = n - PACKET_BYTES
+    cand = np.nonzero(b[: last + 1] == HEADER)[0]
+    cand = cand[b[cand + 3] == PAYLOAD_BYTES]
+    csum = np.concatenate([[0], np.cumsum(b, dtype=np.int64)])
+    body_sum = (csum[cand + PACKET_BYTES - 2] - csum[cand]) % COUNTER_MODULUS
+    ok = body_sum == _be_u16(b, cand + PACKET_BYTES - 2)
+    good = cand[ok]
+    # resolve overlaps: chained candidates (another one exactly one packet
+    # before or after) first, then isolated ones that do not overlap them
+    chained = np.isin(good + PACKET_BYTES, good) | np.isin(good - PACKET_BYTES, good)
+    kept = _greedy_non_overlapping(good[chained])
+    for s in good[~chained]:
+        k = np.searchsorted(kept, s)
+        if (k == 0 or kept[k - 1] + PACKET_BYTES <= s) and (k == kept.size or s + PACKET_BYTES <= kept[k]):
+            kept = np.insert(kept, k, s)
+    # candidates with a bad checksum that are not inside a kept packet
+    bad = cand[~ok]
+    k = np.searchsorted(kept, bad, side="right") - 1
+    inside = (k >= 0) & (bad < kept[np.maximum(k, 0)] + PACKET_BYTES) if kept.size else np.zeros(bad.size, bool)
+    n_bad = int(np.count_nonzero(~inside))
+    # runs of bytes not covered by kept packets
+    if kept.size:
+        holes = int(kept[0] > 0) + int(np.count_nonzero(np.diff(kept) > PACKET_BYTES)) + int(kept[-1] + PACKET_BYTES < n)
+    else:
+        holes = int(n > 0)
+    return kept.astype(np.int64), n_bad, holes
+
+
+def _greedy_non_overlapping(starts: np.ndarray) -> np.ndarray:
+    """Earliest-first selection of non-overlapping packets (fast path when none overlap)."""
+    if starts.size < 2 or np.all(np.diff(starts) >= PACKET_BYTES):
+        return starts.copy()
+    out = [int(starts[0])]
+    for s in starts[1:]:
+        if s >= out[-1] + PACKET_BYTES:
+            out.append(int(s))
+    return np.asarray(out, dtype=np.int64)
+
+
+def decode_packets(data: bytes | np.ndarray, starts: np.ndarray) -> DecodedPackets:
+    """Counter, timestamp ticks and the (N, 8, 6) int16 counts at ``starts``."""
+    b = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data.astype(np.uint8, copy=False)
+    starts = np.asarray(starts, dtype=np.int64)
+    rows = b[starts[:, None] + np.arange(PACKET_BYTES)]
+    counter = rows[:, 1:3].copy().view(">u2").reshape(-1).astype(np.uint16)
+    ticks = rows[:, 4:8].copy().view(">u4").reshape(-1).astype(np.uint32)
+    raw = rows[:, 8:104].copy().view(">i2").reshape(-1, N_IMUS, 6).astype(np.int16)
+    return DecodedPackets(starts, counter, ticks, raw)
+
+
+def unwrap_counter(counter: np.ndarray) -> np.ndarray:
+    """Unwrapped int64 packet counter (16-bit wrap), starting at its first value."""
+    c = np.asarray(counter, dtype=np.int64)
+    if c.size == 0:
+        return c
+    step = np.diff(c) % COUNTER_MODULUS
+    return np.concatenate([[c[0]], c[0] + np.cumsum(step)])
+
+
+def unwrap_ticks(ticks: np.ndarray, counter_steps: np.ndarray | None = None) -> np.ndarray:
+    """Unwrapped int64 64 MHz ticks (32-bit wrap).
+
+    Each step is taken modulo 2**32; when ``counter_steps`` (unwrapped
+    counter differences) is given, whole wraps are added so that a step is
+    closest to ``counter_step x 1,024,000`` ticks — this keeps time right
+    across a gap of dropped packets longer than one wrap (67 s).
+    """
+    t = np.asarray(ticks, dtype=np.int64)
+    if t.size == 0:
+        return t
+    step = np.diff(t) % TICK_MODULUS
+    if counter_steps is not None:
+        expected = np.asarray(counter_steps, dtype=np.int64) * NOMINAL_TICKS_PER_PACKET
+        step = step + np.round((expected - step) / TICK_MODULUS).astype(np.int64) * TICK_MODULUS
+    return np.concatenate([[t[0]], t[0] + np.cumsum(step)])
+
+
+def ticks_to_ns(ticks: np.ndarray) -> np.ndarray:
+    """64 MHz ticks to integer nanoseconds (exact: 1 tick = 15.625 ns, rounded down)."""
+    return (np.asarray(ticks, dtype=np.int64) * 125) // 8
+
+
+def saturation_mask(raw: np.ndarray, threshold: int = SATURATION_COUNT, margin: int = SATURATION_MARGIN) -> tuple[np.ndarray, np.ndarray]:
+    """(clipped, invalid): rows where any gyro count reaches ``threshold``, and those dilated by ``margin``."""
+    clipped = np.any(np.abs(raw[:, :, 3:6].astype(np.int32)) >= threshold, axis=(1, 2))
+    invalid = clipped.copy()
+    for k in range(1, margin + 1):
+        invalid[k:] |= clipped[:-k]
+        invalid[:-k] |= clipped[k:]
+    return clipped, invalid
+
+
+def board_frame(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Counts (N, 8, 6) to board-frame accelerations (N, 8, 3) m/s² and rates (N, 8, 3) rad/s."""
+    acc = raw[:, :, 0:3].astype(float) * ACCEL_MPS2_PER_COUNT
+    gyr = raw[:, :, 3:6].astype(float) * GYRO_RADPS_PER_COUNT
+    rot = np.tile(np.eye(3), (N_IMUS, 1, 1))
+    rot[list(UPSIDE_DOWN_IMUS)] = ROTATION_BOARD_UPSIDE_DOWN
+    acc = np.einsum("kij,nkj->nki", rot, acc)
+    gyr = np.einsum("kij,nkj->nki", rot, gyr)
+    return acc, gyr
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A decoded recording in the board frame."""
+
+    timestamps_ns: np.ndarray  # (N,)
+    accel_b_mps2: np.ndarray  # (N, 8, 3)
+    gyro_b_radps: np.ndarray  # (N, 8, 3)
+    saturated: np.ndarray  # (N,) any gyro clipped
+    invalid_reference: np.ndarray  # (N,) saturated +/- margin
+    report: DecodeReport
+
+
+def decode(data: bytes | np.ndarray, gap_factor: float = 1.5) -> Recording:
+    """Decode a whole MIMU4444 byte stream (pure: bytes in, arrays out)."""
+    b = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data.astype(np.uint8, copy=False)
+    starts, n_bad, holes = find_packets(b)
+    if starts.size == 0:
+        raise MIMU4444FormatError(
+            f"no MIMU4444 packet (header 0xAA, length 100, valid checksum) in {b.size} bytes"
+        )
+    pk = decode_packets(b, starts)
+    # drop repeated or out-of-order packets (counter step 0 or >= half the range)
+    keep = np.ones(starts.size, dtype=bool)
+    cstep = np.diff(pk.counter.astype(np.int64)) % COUNTER_MODULUS
+    if np.any((cstep == 0) | (cstep >= COUNTER_MODULUS // 2)):
+        last = int(pk.counter[0])
+        for i in range(1, starts.size):
+            s = (int(pk.counter[i]) - last) % COUNTER_MODULUS
+            if s == 0 or s >= COUNTER_MODULUS // 2:
+                keep[i] = False
+            else:
+                last = int(pk.counter[i])
+    n_dup = int(np.count_nonzero(~keep))
+    pk = DecodedPackets(pk.starts[keep], pk.counter[keep], pk.ticks[keep], pk.raw[keep])
+    counter = unwrap_counter(pk.counter)
+    dc = np.diff(counter)
+    ticks = unwrap_ticks(pk.ticks, dc)
+    t_ns = ticks_to_ns(ticks)
+    dt = np.diff(t_ns)
+    if np.any(dt <= 0):
+        k = int(np.argmax(dt <= 0)) + 1
+        raise MIMU4444FormatError(f"timestamps not increasing at packet {k} (byte offset {int(pk.starts[k])})")
+    nominal = float(np.median(dt)) if dt.size else 0.0
+    gap_idx = tuple(int(i) + 1 for i in np.nonzero(dt > gap_factor * nominal)[0]) if dt.size else ()
+    acc, gyr = board_frame(pk.raw)
+    clipped, invalid = saturation_mask(pk.raw)
+    report = DecodeReport(
+        n_bytes=int(b.size),
+        n_packets=int(starts.size) - n_dup,
+        skipped_bytes=int(b.size - PACKET_BYTES * starts.size),
+        skipped_regions=holes,
+        bad_checksums=n_bad,
+        duplicates_removed=n_dup,
+        dropped_packets=int(np.sum(dc - 1)) if dc.size else 0,
+        counter_gaps=int(np.count_nonzero(dc > 1)),
+        time_gaps=len(gap_idx),
+        saturated_samples=int(np.count_nonzero(clipped)),
+        invalid_reference_samples=int(np.count_nonzero(invalid)),
+        accel_clipped_samples=int(np.count_nonzero(np.any(np.abs(pk.raw[:, :, 0:3].astype(np.int32)) >= SATURATION_COUNT, axis=(1, 2)))),
+        duration_s=float((t_ns[-1] - t_ns[0]) * 1e-9),
+        gap_indices=gap_idx,
+    )
+    return Recording(t_ns, acc, gyr, clipped, invalid, report)
+
+
+def to_log(rec: Recording, with_gyro: bool = False, source: str = "<memory>"):
+    """A :class:`gfimu.log.Log` of the 8 accelerometers (board frame, nominal positions).
+
+    ``reference`` holds the mean of the eight gyros (board frame) as angular
+    velocity; ``invalid_reference`` marks the saturated samples. With
+    ``with_gyro`` the same mean is also given as the log's gyroscope channel.
+    """
+    from ...array import mimu4444_array
+    from ...log import Log
+    from ...motion import Motion
+
+    array = mimu4444_array(with_gyroscope=with_gyro)
+    n = rec.timestamps_ns.size
+    accel = rec.accel_b_mps2.reshape(n, 3 * N_IMUS)
+    omega = rec.gyro_b_radps.mean(axis=1)
+    reference = Motion(rec.timestamps_ns, omega_b_radps=omega)
+    return Log(
+        array,
+        rec.timestamps_ns,
+        accel,
+        gyro_b_radps=omega.copy() if with_gyro else None,
+        reference=reference,
+        invalid_reference=rec.invalid_reference.copy(),
+        source=source,
+    )
+
+
+REFERENCE_SHIFT_MS = -1.5
+"""Measured shift between the channels: the accelerometers agree best with the
+gyro mean taken 1.5 ms earlier (rigid-body residual minimal at -1.5 ms on
+each of exp_1..3, 0.1 ms grid; tools/mimu4444_study.py --residual)."""
+
+
+def shift_reference(log, shift_ms: float):
+    """The log with its reference ω re-sampled at ``t + shift_ms`` (cubic spline per gap-free segment).
+
+    Use ``REFERENCE_SHIFT_MS`` to align the gyro reference with the
+    accelerometers. A sample whose shifted time falls in an interval with an
+    invalid end is also marked invalid, and so are samples whose shifted time
+    leaves their gap-free segment.
+    """
+    from scipy.interpolate import CubicSpline
+
+    if log.reference is None or log.reference.omega_b_radps is None:
+        raise ValueError(f"{log.source}: no reference angular velocity to shift")
+    if shift_ms == 0:
+        return log
+    w = log.reference.omega_b_radps
+    invalid = np.zeros(len(log), bool) if log.invalid_reference is None else log.invalid_reference.copy()
+    t = log.timestamps_ns
+    out = np.empty_like(w)
+    bad = invalid.copy()
+    if shift_ms < 0:  # sample k is read between samples k-1 and k
+        bad[1:] |= invalid[:-1]
+    else:
+        bad[:-1] |= invalid[1:]
+    shift_ns = shift_ms * 1e6
+    for seg in log.segments():
+        ts = (t[seg] - t[seg][0]) * 1e-9
+        if ts.size < 4:
+            out[seg] = w[seg]
+            bad[seg] = True
+            continue
+        target = ts + shift_ns * 1e-9
+        out[seg] = CubicSpline(ts, w[seg])(np.clip(target, ts[0], ts[-1]))
+        bad[seg] |= (target < ts[0]) | (target > ts[-1])
+    return log.replace(reference=log.reference.replace(omega_b_radps=out), invalid_reference=bad)
+
+
+def read_mimu4444(path: str | Path, with_gyro: bool = False):
+    """Read ``data.bin`` and return ``(log, report)``."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "data.bin"
+    data = path.read_bytes()
+    try:
+        rec = decode(data)
+    except MIMU4444FormatError as exc:
+        raise MIMU4444FormatError(f"{path}: {exc}") from None
+    return to_log(rec, with_gyro=with_gyro, source=str(path)), rec.report
+
+
+# --- reader of `gfimu convert mimu4444` ---------------------------------------------
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--with-gyro", action="store_true",
@@ -17,8 +380,6 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def read(path, with_gyro: bool = False, reference_shift_ms: float = 0.0) -> Conversion:
     """The board's 8 accelerometers in the board frame; the mean gyro is the reference."""
-    from ...datasets.mimu4444 import read_mimu4444, shift_reference
-
     log, report = read_mimu4444(path, with_gyro=with_gyro)
     lines = [f"{path}:", report.summary()]
     if reference_shift_ms:

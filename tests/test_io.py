@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gfimu import logio
+from gfimu import io as gio
+from gfimu.io import tables, units
 from gfimu.array import Accelerometer, Body, Gyroscope, Inclinometer, SensorArray, cube_array, paper001_array
 from gfimu.log import Log
 from gfimu.motion import QUANTITIES, Motion
@@ -65,13 +66,13 @@ def write(path, text: str):
 
 def test_array_toml_round_trip_exact(tmp_path):
     for array in (mixed_array(), cube_array(0.0371), paper001_array()):
-        logio.write_array_toml(array, tmp_path / "array.toml")
-        assert_same_array(logio.read_array_toml(tmp_path / "array.toml"), array)
+        gio.write_array_toml(array, tmp_path / "array.toml")
+        assert_same_array(gio.read_array_toml(tmp_path / "array.toml"), array)
 
 
 def test_array_toml_text_is_deterministic_and_uses_the_specified_keys(tmp_path):
-    text = logio.format_array_toml(mixed_array())
-    assert text == logio.format_array_toml(mixed_array())
+    text = gio.format_array_toml(mixed_array())
+    assert text == gio.format_array_toml(mixed_array())
     assert text.startswith('format = "gfimu-array/1"\nname = "bench \\"B\\" \\\\ ünïcode"\n')
     assert 'axes = ["y", "z"]' in text and "noise_std_mps2 = 0.0123456789" in text
     assert "[gyroscope]\nnoise_std_radps = 0.01" in text and "[inclinometer]" in text
@@ -85,8 +86,8 @@ def test_array_toml_text_is_deterministic_and_uses_the_specified_keys(tmp_path):
        st.floats(min_value=0, max_value=1e300, allow_nan=False))
 def test_array_toml_round_trips_any_float(tmp_path_factory, position, noise):
     array = SensorArray((Accelerometer("a", position, noise_std_mps2=noise),))
-    text = logio.format_array_toml(array)
-    back = logio.parse_array_toml(text)
+    text = gio.format_array_toml(array)
+    back = gio.parse_array_toml(text)
     assert np.array_equal(back.accelerometers[0].position_m, np.asarray(position))
     assert back.accelerometers[0].noise_std_mps2 == noise
 
@@ -95,8 +96,8 @@ def test_log_round_trip_exact(tmp_path):
     log = random_log(mixed_array(), n=64)
     log = log.replace(reference=log.truth.replace(quaternion_wb=None, sigma={}),
                       invalid_reference=np.arange(64) % 7 == 3)
-    logio.write_log(log, tmp_path / "log")
-    back = logio.read_log(tmp_path / "log")
+    gio.write_log(log, tmp_path / "log")
+    back = gio.read_log(tmp_path / "log")
     assert_same_array(back.array, log.array)
     assert back.timestamps_ns.dtype == np.int64 and np.array_equal(back.timestamps_ns, log.timestamps_ns)
     for name in ("accel_mps2", "gyro_b_radps", "tilt_rad", "invalid_reference"):
@@ -123,16 +124,16 @@ def test_estimate_csv_layout_and_digits(tmp_path):
     t = T0_NS + np.arange(20) * 1_000_000
     w = rng.normal(size=(20, 3))
     est = Motion(t, omega_b_radps=w, specific_force_b_mps2=w * 3, sigma={"omega_b_radps": np.abs(w) / 10})
-    logio.write_motion_csv(est, tmp_path / "exact.csv")
-    logio.write_motion_csv(est, tmp_path / "short.csv", digits=9)
+    gio.write_motion_csv(est, tmp_path / "exact.csv")
+    gio.write_motion_csv(est, tmp_path / "short.csv", digits=9)
     lines = (tmp_path / "exact.csv").read_text().splitlines()
     assert lines[0] == ("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],f_x [m s^-2],f_y [m s^-2],"
                         "f_z [m s^-2],sigma_w_x [rad s^-1],sigma_w_y [rad s^-1],sigma_w_z [rad s^-1]")
     assert len(lines) == 21 and lines[1].startswith(f"{T0_NS},")
-    exact = logio.read_motion_csv(tmp_path / "exact.csv")
+    exact = gio.read_motion_csv(tmp_path / "exact.csv")
     assert exact.available() == ["omega_b_radps", "specific_force_b_mps2"]
     assert np.array_equal(exact.omega_b_radps, w) and np.array_equal(exact.sigma["omega_b_radps"], np.abs(w) / 10)
-    short = logio.read_motion_csv(tmp_path / "short.csv")
+    short = gio.read_motion_csv(tmp_path / "short.csv")
     assert np.array_equal(short.timestamps_ns, t)
     np.testing.assert_allclose(short.omega_b_radps, w, rtol=6e-9, atol=0)
     assert not np.array_equal(short.omega_b_radps, w)
@@ -141,11 +142,11 @@ def test_estimate_csv_layout_and_digits(tmp_path):
 def test_estimate_with_nan_reads_back_only_when_allowed(tmp_path):
     t = np.arange(4) * 10
     w = np.array([[1.0, 2, 3], [np.nan, 0, 0], [4, 5, 6], [7, 8, 9]])
-    logio.write_motion_csv(Motion(t, omega_b_radps=w), tmp_path / "e.csv")
-    back = logio.read_motion_csv(tmp_path / "e.csv", allow_nan=True)
+    gio.write_motion_csv(Motion(t, omega_b_radps=w), tmp_path / "e.csv")
+    back = gio.read_motion_csv(tmp_path / "e.csv", allow_nan=True)
     assert np.array_equal(back.omega_b_radps, w, equal_nan=True)
-    with pytest.raises(logio.LogFormatError, match=r"e\.csv:3: column 'w_x' is 'nan'; values must be finite"):
-        logio.read_motion_csv(tmp_path / "e.csv")
+    with pytest.raises(gio.LogFormatError, match=r"e\.csv:3: column 'w_x' is 'nan'; values must be finite"):
+        gio.read_motion_csv(tmp_path / "e.csv")
 
 
 def test_crlf_bom_extra_columns_and_keys_are_accepted(tmp_path):
@@ -156,7 +157,7 @@ def test_crlf_bom_extra_columns_and_keys_are_accepted(tmp_path):
                             'name = "t"\nposition_m = [0.0, 0.0, -0.01]\naxes = ["z"]\n[extra]\nx = 1\n')
     (d / "imu.csv").write_bytes("\ufeff#timestamp [ns],note,s_z [m s^-2],temp [degC],t_z [m/s²]\r\n"
                                 "10,start,1.5,21.0,2.5\r\n20,,-1e-3,21.5,3\r\n\r\n".encode())
-    log = logio.read_log(d)
+    log = gio.read_log(d)
     assert log.array.name == "array" and [a.axes for a in log.array.accelerometers] == [("z",), ("z",)]
     assert np.array_equal(log.timestamps_ns, [10, 20])
     assert np.array_equal(log.accel_mps2, [[1.5, 2.5], [-1e-3, 3.0]])
@@ -178,24 +179,24 @@ def one_axis_log(tmp_path, header_unit: str, values: list[str], time_unit: str =
 @pytest.mark.parametrize("unit, factor", [("m s^-2", 1.0), ("m/s^2", 1.0), ("m/s²", 1.0), ("m·s⁻²", 1.0),
                                           ("g", 9.80665), ("mg", 9.80665e-3)])
 def test_acceleration_units(tmp_path, unit, factor):
-    log = logio.read_log(one_axis_log(tmp_path, unit, ["1", "-0.5", "2"]))
+    log = gio.read_log(one_axis_log(tmp_path, unit, ["1", "-0.5", "2"]))
     assert np.array_equal(log.accel_mps2[:, 0], np.array([1.0, -0.5, 2.0]) * factor)
 
 
 def test_g_converts_to_standard_gravity_exactly(tmp_path):
-    log = logio.read_log(one_axis_log(tmp_path, "g", ["1", "0.5", "-2"]))
+    log = gio.read_log(one_axis_log(tmp_path, "g", ["1", "0.5", "-2"]))
     assert log.accel_mps2[:, 0].tolist() == [9.80665, 4.903325, -19.6133]
 
 
 def test_gyro_and_tilt_units(tmp_path):
     d = tmp_path / "log"
-    logio.write_array_toml(paper001_array(), tmp_path / "array.toml")
+    gio.write_array_toml(paper001_array(), tmp_path / "array.toml")
     d.mkdir()
     os.replace(tmp_path / "array.toml", d / "array.toml")
     acc = ",".join(f"{c} [m s^-2]" for c in paper001_array().accel_columns)
     write(d / "imu.csv", f"#timestamp [ms],{acc},w_x [deg s^-1],w_y [deg/s],w_z [dps],tilt_x [deg],tilt_y [mrad]\n"
                          "1.5,1,2,3,4,5,6,180,-90,45,12,250\n2.5,1,2,3,4,5,6,0,360,1,0,-1\n")
-    log = logio.read_log(d)
+    log = gio.read_log(d)
     assert np.array_equal(log.timestamps_ns, [1_500_000, 2_500_000])
     np.testing.assert_allclose(log.gyro_b_radps, [[math.pi, -math.pi / 2, math.pi / 4], [0, 2 * math.pi, math.pi / 180]],
                                rtol=1e-15)
@@ -210,7 +211,7 @@ def test_gyro_and_tilt_units(tmp_path):
     ("ns", ["-5", "1700000000123456789"], [-5, 1_700_000_000_123_456_789]),
 ])
 def test_timestamp_units_convert_exactly(tmp_path, unit, times, expected):
-    log = logio.read_log(one_axis_log(tmp_path, "m s^-2", ["1", "2"], unit, times))
+    log = gio.read_log(one_axis_log(tmp_path, "m s^-2", ["1", "2"], unit, times))
     assert log.timestamps_ns.tolist() == expected
 
 
@@ -218,23 +219,23 @@ def test_reference_valid_column(tmp_path):
     d = one_axis_log(tmp_path, "m s^-2", ["1", "2", "3"])
     write(d / "reference.csv", "#timestamp [ns],w_x [deg s^-1],w_y [rad/s],w_z [rad s^-1],valid []\n"
                                "10,180,0,0,1\n20,nan,1,0,0\n30,0,0,1,1\n")
-    log = logio.read_log(d)
+    log = gio.read_log(d)
     assert log.truth is None
     assert log.invalid_reference.tolist() == [False, True, False]
     np.testing.assert_allclose(log.reference.omega_b_radps[0], [math.pi, 0, 0], rtol=1e-15)
     assert np.isnan(log.reference.omega_b_radps[1, 0])  # allowed where valid is 0
     write(d / "reference.csv", "#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],valid\n"
                                "10,1,0,0,1\n20,1,1,0,0\n30,0,inf,1,1\n")
-    with pytest.raises(logio.LogFormatError, match=r"reference\.csv:4: column 'w_y' is 'inf'; values must be finite "
+    with pytest.raises(gio.LogFormatError, match=r"reference\.csv:4: column 'w_y' is 'inf'; values must be finite "
                                                    r"where valid is 1"):
-        logio.read_log(d)
+        gio.read_log(d)
 
 
 # --- errors ------------------------------------------------------------------------
 
 def cube_log_dir(tmp_path, n: int = 5) -> tuple:
     log = random_log(cube_array(), n=n, truth=True)
-    logio.write_log(log, tmp_path / "log")
+    gio.write_log(log, tmp_path / "log")
     return tmp_path / "log", log
 
 
@@ -262,8 +263,8 @@ def set_field(path, line: int, field: int, value: str) -> None:
 def test_bad_values_name_line_and_column(tmp_path, value, message):
     d, _ = cube_log_dir(tmp_path)
     set_field(d / "imu.csv", 4, 5, value)
-    with pytest.raises(logio.LogFormatError, match=message):
-        logio.read_log(d)
+    with pytest.raises(gio.LogFormatError, match=message):
+        gio.read_log(d)
 
 
 @settings(max_examples=25, deadline=None)
@@ -278,8 +279,8 @@ def test_random_nan_positions_are_reported_at_the_first(tmp_path_factory, data):
         lines[row + 1] = ",".join(parts)
     (d / "imu.csv").write_text("\n".join(lines))
     row, col = min(cells)
-    with pytest.raises(logio.LogFormatError) as info:
-        logio.read_log(d)
+    with pytest.raises(gio.LogFormatError) as info:
+        gio.read_log(d)
     assert info.value.line == row + 2
     assert f"imu.csv:{row + 2}: column '{log.array.accel_columns[col]}'" in str(info.value)
     assert f"({len(cells)} non-finite value(s) in the file)" in str(info.value)
@@ -291,10 +292,10 @@ def test_random_timestamps_must_strictly_increase(tmp_path_factory, stamps):
     d = one_axis_log(tmp_path_factory.mktemp("t"), "m s^-2", ["1"] * len(stamps), times=[str(s) for s in stamps])
     bad = [k for k in range(1, len(stamps)) if stamps[k] <= stamps[k - 1]]
     if not bad:
-        assert logio.read_log(d).timestamps_ns.tolist() == stamps
+        assert gio.read_log(d).timestamps_ns.tolist() == stamps
         return
-    with pytest.raises(logio.LogFormatError, match="strictly increasing") as info:
-        logio.read_log(d)
+    with pytest.raises(gio.LogFormatError, match="strictly increasing") as info:
+        gio.read_log(d)
     assert info.value.line == bad[0] + 2
     assert f"imu.csv:{bad[0] + 2}: timestamp {stamps[bad[0]]} is not after the previous one ({stamps[bad[0] - 1]} " \
            f"on line {bad[0] + 1})" in str(info.value)
@@ -322,15 +323,15 @@ def test_bad_headers(tmp_path, header_edit, message):
     edit_line(d / "imu.csv", 1, header_edit)
     if message is None:  # the header grew a column: rows are now ragged
         message = r"imu\.csv:2: row has 13 fields, the header has 14 \(ragged rows: 5\)"
-    with pytest.raises(logio.LogFormatError, match=message):
-        logio.read_log(d)
+    with pytest.raises(gio.LogFormatError, match=message):
+        gio.read_log(d)
 
 
 def test_gyroscope_declared_but_absent(tmp_path):
     d = one_axis_log(tmp_path, "m s^-2", ["1", "2"], extra="[gyroscope]\nnoise_std_radps = 0.01\n")
-    with pytest.raises(logio.LogFormatError, match=r"imu\.csv:1: array\.toml has a \[gyroscope\] but column "
+    with pytest.raises(gio.LogFormatError, match=r"imu\.csv:1: array\.toml has a \[gyroscope\] but column "
                                                    r"'w_x \[rad s\^-1\]' is missing"):
-        logio.read_log(d)
+        gio.read_log(d)
 
 
 @pytest.mark.parametrize("body, message, line", [
@@ -346,8 +347,8 @@ def test_gyroscope_declared_but_absent(tmp_path):
 def test_bad_imu_files(tmp_path, body, message, line):
     d = one_axis_log(tmp_path, "m s^-2", ["1"])
     write(d / "imu.csv", body)
-    with pytest.raises(logio.LogFormatError, match=message) as info:
-        logio.read_log(d)
+    with pytest.raises(gio.LogFormatError, match=message) as info:
+        gio.read_log(d)
     assert info.value.line == line and info.value.path.endswith("imu.csv")
 
 
@@ -396,45 +397,45 @@ TOML_OK = ('format = "gfimu-array/1"\nname = "x"\n\n[[accelerometers]]\nname = "
 def test_bad_array_toml_names_key_and_line(tmp_path, old, new, message):
     assert old in TOML_OK
     path = write(tmp_path / "array.toml", TOML_OK.replace(old, new, 1))
-    with pytest.raises(logio.LogFormatError, match=message):
-        logio.read_array_toml(path)
+    with pytest.raises(gio.LogFormatError, match=message):
+        gio.read_array_toml(path)
 
 
 def test_missing_accelerometers_and_empty_array_toml(tmp_path):
-    with pytest.raises(logio.LogFormatError, match=r"array\.toml: file is empty"):
-        logio.read_array_toml(write(tmp_path / "array.toml", "\n"))
-    with pytest.raises(logio.LogFormatError, match=r"array\.toml: accelerometers: no \[\[accelerometers\]\] table"):
-        logio.read_array_toml(write(tmp_path / "array.toml", 'format = "gfimu-array/1"\n'))
+    with pytest.raises(gio.LogFormatError, match=r"array\.toml: file is empty"):
+        gio.read_array_toml(write(tmp_path / "array.toml", "\n"))
+    with pytest.raises(gio.LogFormatError, match=r"array\.toml: accelerometers: no \[\[accelerometers\]\] table"):
+        gio.read_array_toml(write(tmp_path / "array.toml", 'format = "gfimu-array/1"\n'))
 
 
 def test_nearly_orthonormal_rotation_is_projected_with_a_warning(tmp_path):
     text = TOML_OK.replace("[[1,0,0],[0,1,0],[0,0,1]]", "[[0.7071, -0.7071, 0], [0.7071, 0.7071, 0], [0, 0, 1]]")
-    with pytest.warns(logio.LogFormatWarning, match=r"array\.toml:11: accelerometers\[1\]\.rotation_body_sensor: "
+    with pytest.warns(gio.LogFormatWarning, match=r"array\.toml:11: accelerometers\[1\]\.rotation_body_sensor: "
                                                     r"orthonormal only to 1\.9e-05"):
-        array = logio.parse_array_toml(text, tmp_path / "array.toml")
+        array = gio.parse_array_toml(text, tmp_path / "array.toml")
     c = math.sqrt(0.5)
     np.testing.assert_allclose(array.accelerometers[1].rotation_body_sensor, [[c, -c, 0], [c, c, 0], [0, 0, 1]],
                                atol=1e-15)
 
 
 def test_missing_log_files(tmp_path):
-    with pytest.raises(logio.LogFormatError, match="log folder not found"):
-        logio.read_log(tmp_path / "nope")
+    with pytest.raises(gio.LogFormatError, match="log folder not found"):
+        gio.read_log(tmp_path / "nope")
     (tmp_path / "log").mkdir()
-    with pytest.raises(logio.LogFormatError, match=r"log: log folder has no array\.toml"):
-        logio.read_log(tmp_path / "log")
+    with pytest.raises(gio.LogFormatError, match=r"log: log folder has no array\.toml"):
+        gio.read_log(tmp_path / "log")
 
 
 def test_truth_must_share_the_imu_timestamps(tmp_path):
     d, _ = cube_log_dir(tmp_path)
     stamp = int((d / "truth.csv").read_text().split("\n")[3].split(",")[0])
     set_field(d / "truth.csv", 4, 0, str(stamp + 1))
-    with pytest.raises(logio.LogFormatError, match=r"truth\.csv:4: timestamp .* differs from imu\.csv line 4"):
-        logio.read_log(d)
+    with pytest.raises(gio.LogFormatError, match=r"truth\.csv:4: timestamp .* differs from imu\.csv line 4"):
+        gio.read_log(d)
     edit_line(d / "truth.csv", 4, lambda s: "")
     (d / "truth.csv").write_text((d / "truth.csv").read_text().replace("\n\n", "\n"))
-    with pytest.raises(logio.LogFormatError, match=r"truth\.csv: has 4 rows but imu\.csv has 5"):
-        logio.read_log(d)
+    with pytest.raises(gio.LogFormatError, match=r"truth\.csv: has 4 rows but imu\.csv has 5"):
+        gio.read_log(d)
 
 
 @pytest.mark.parametrize("header, row, message", [
@@ -448,16 +449,16 @@ def test_truth_must_share_the_imu_timestamps(tmp_path):
 ])
 def test_bad_motion_csv(tmp_path, header, row, message):
     path = write(tmp_path / "m.csv", f"#timestamp [ns],{header}\n0,{row}\n")
-    with pytest.raises(logio.LogFormatError, match=message):
-        logio.read_motion_table(path)
+    with pytest.raises(gio.LogFormatError, match=message):
+        gio.read_motion_table(path)
 
 
 def test_gaps_are_reported_as_warnings(tmp_path):
     times = [str(v) for v in (0, 10, 20, 30, 75, 85, 95, 200, 210)]
     d = one_axis_log(tmp_path, "m s^-2", ["1"] * len(times), times=times)
-    with pytest.warns(logio.LogGapWarning, match=r"imu\.csv: 2 gap\(s\) in time .*the largest, 1\.05e-07 s, is before "
+    with pytest.warns(gio.LogGapWarning, match=r"imu\.csv: 2 gap\(s\) in time .*the largest, 1\.05e-07 s, is before "
                                                  r"line 9; estimators restart at each gap"):
-        log = logio.read_log(d)
+        log = gio.read_log(d)
     assert [s.start for s in log.segments()] == [0, 4, 7]
 
 
@@ -465,8 +466,8 @@ def test_error_is_a_value_error_with_location_attributes(tmp_path):
     d, _ = cube_log_dir(tmp_path)
     set_field(d / "imu.csv", 3, 2, "nan")
     with pytest.raises(ValueError) as info:
-        logio.read_log(d)
-    assert isinstance(info.value, logio.LogFormatError)
+        gio.read_log(d)
+    assert isinstance(info.value, gio.LogFormatError)
     assert info.value.path == str(d / "imu.csv") and info.value.line == 3
 
 
@@ -476,10 +477,10 @@ def test_failed_write_leaves_the_old_file_intact(tmp_path, monkeypatch):
     path = tmp_path / "est.csv"
     t = np.arange(10) * 1000
     old = Motion(t, omega_b_radps=np.ones((10, 3)))
-    logio.write_motion_csv(old, path)
+    gio.write_motion_csv(old, path)
     before = path.read_bytes()
     calls = []
-    real = logio._format_block
+    real = tables._format_block
 
     def failing(*args, **kwargs):
         calls.append(1)
@@ -487,10 +488,10 @@ def test_failed_write_leaves_the_old_file_intact(tmp_path, monkeypatch):
             raise RuntimeError("disk on fire")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(logio, "_ROWS_PER_BLOCK", 2)
-    monkeypatch.setattr(logio, "_format_block", failing)
+    monkeypatch.setattr(tables, "_ROWS_PER_BLOCK", 2)
+    monkeypatch.setattr(tables, "_format_block", failing)
     with pytest.raises(RuntimeError, match="disk on fire"):
-        logio.write_motion_csv(Motion(t, omega_b_radps=np.zeros((10, 3))), path)
+        gio.write_motion_csv(Motion(t, omega_b_radps=np.zeros((10, 3))), path)
     assert len(calls) == 3  # two blocks were written to the temporary file before the failure
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["est.csv"]
@@ -498,7 +499,7 @@ def test_failed_write_leaves_the_old_file_intact(tmp_path, monkeypatch):
 
 def test_written_file_gets_ordinary_permissions(tmp_path):
     path = tmp_path / "array.toml"
-    logio.write_array_toml(cube_array(), path)
+    gio.write_array_toml(cube_array(), path)
     umask = os.umask(0)
     os.umask(umask)
     assert (path.stat().st_mode & 0o777) == (0o666 & ~umask)
@@ -506,9 +507,9 @@ def test_written_file_gets_ordinary_permissions(tmp_path):
 
 def test_units_table_is_consistent_with_motion_quantities():
     for _, (prefix, unit, _) in QUANTITIES.items():
-        kind = logio._KIND_OF_UNIT[unit]
-        assert logio.UNITS[kind][0] == unit
-        assert logio.unit_factor(unit, kind) == 1.0
+        kind = units.KIND_OF_UNIT[unit]
+        assert gio.UNITS[kind][0] == unit
+        assert gio.unit_factor(unit, kind) == 1.0
 
 
 @settings(max_examples=30, deadline=None)
@@ -522,8 +523,8 @@ def test_any_finite_readings_and_timestamps_round_trip(tmp_path_factory, rows, t
     t = t0 + np.arange(len(rows), dtype=np.int64) * 7
     log = Log(array, t, values[:, :3], values[:, 2:])
     d = tmp_path_factory.mktemp("rt")
-    logio.write_log(log, d)
-    back = logio.read_log(d)
+    gio.write_log(log, d)
+    back = gio.read_log(d)
     assert np.array_equal(back.timestamps_ns, t)
     assert np.array_equal(back.accel_mps2, log.accel_mps2) and np.array_equal(back.gyro_b_radps, log.gyro_b_radps)
     assert np.array_equal(np.signbit(back.accel_mps2), np.signbit(log.accel_mps2))
@@ -531,7 +532,7 @@ def test_any_finite_readings_and_timestamps_round_trip(tmp_path_factory, rows, t
 
 def test_read_log_accepts_the_path_of_a_file_in_the_folder(tmp_path):
     d, log = cube_log_dir(tmp_path)
-    assert np.array_equal(logio.read_log(d / "imu.csv").accel_mps2, log.accel_mps2)
+    assert np.array_equal(gio.read_log(d / "imu.csv").accel_mps2, log.accel_mps2)
 
 
 @pytest.mark.parametrize("unit, kind, factor", [
@@ -542,7 +543,7 @@ def test_read_log_accepts_the_path_of_a_file_in_the_folder(tmp_path):
     ("deg/s^2", "angular_acceleration", math.pi / 180), ("°", "angle", math.pi / 180), ("1", "dimensionless", 1.0),
 ])
 def test_accepted_unit_spellings(unit, kind, factor):
-    assert logio.unit_factor(unit, kind) == factor
+    assert gio.unit_factor(unit, kind) == factor
 
 
 @pytest.mark.parametrize("unit, kind", [("m/s", "acceleration"), ("G", "acceleration"), ("ft/s^2", "acceleration"),
@@ -550,4 +551,4 @@ def test_accepted_unit_spellings(unit, kind, factor):
                                         ("m s^-2", "angle"), ("%", "dimensionless")])
 def test_refused_units(unit, kind):
     with pytest.raises(KeyError):
-        logio.unit_factor(unit, kind)
+        gio.unit_factor(unit, kind)

@@ -1,0 +1,305 @@
+"""``array.toml``: the sensor array of a log (format ``gfimu-array/1``), and the TOML writer.
+
+Reading uses :mod:`tomllib`; every problem raises
+:class:`~gfimu.io.errors.LogFormatError` naming the key and its line. Unknown
+keys are ignored (for example ``topic``, the message topic an accelerometer
+was recorded on, which the CSV reader does not need).
+
+Writing uses :func:`format_toml`, the only TOML writer of gfimu (also used
+for ``calibration.toml``): :mod:`tomli_w` with short arrays of numbers or
+strings kept on one line. Floats are written in their shortest round-trip
+form, so reading a written file gives back exactly the same numbers.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tomllib
+import warnings
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from ..array import Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
+from .atomic import atomic_write_text
+from .errors import LogFormatError, LogFormatWarning
+
+ARRAY_FORMAT = "gfimu-array/1"
+ROTATION_TOLERANCE = 1e-6  # accepted as written
+ROTATION_REPAIR_TOLERANCE = 1e-3  # projected onto the nearest rotation, with a warning
+
+
+def _key_lines(text: str) -> dict[tuple, int]:
+    """Line numbers of keys: (table, index, key) -> line, for error messages.
+
+    ``table`` is ``""`` for top-level keys; ``index`` counts ``[[accelerometers]]``
+    entries (0 for plain tables). Table header lines are stored under key ``None``.
+    """
+    out: dict[tuple, int] = {}
+    table, index = "", 0
+    counts: dict[str, int] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        m = re.match(r"^\[\[\s*([A-Za-z0-9_\-]+)\s*\]\]", s)
+        if m:
+            table = m.group(1)
+            index = counts.get(table, 0)
+            counts[table] = index + 1
+            out.setdefault((table, index, None), lineno)
+            continue
+        m = re.match(r"^\[\s*([A-Za-z0-9_\-]+)\s*\]", s)
+        if m:
+            table, index = m.group(1), 0
+            out.setdefault((table, index, None), lineno)
+            continue
+        m = re.match(r"^([A-Za-z0-9_\-]+)\s*=", s)
+        if m:
+            out.setdefault((table, index, m.group(1)), lineno)
+    return out
+
+
+class _TomlContext:
+    def __init__(self, path: Path, text: str):
+        self.path = path
+        self.lines = _key_lines(text)
+
+    def error(self, message: str, table: str = "", index: int = 0, key: str | None = None) -> LogFormatError:
+        line = self.lines.get((table, index, key)) or self.lines.get((table, index, None))
+        where = key if not table else (f"{table}[{index}]" if table == "accelerometers" else table)
+        if table and key:
+            where += f".{key}"
+        return LogFormatError(f"{where}: {message}" if where else message, self.path, line, where)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _vector(ctx: _TomlContext, value, n: int, table: str, index: int, key: str) -> np.ndarray:
+    if not isinstance(value, list) or len(value) != n or not all(_is_number(v) for v in value):
+        raise ctx.error(f"expected a list of {n} numbers, got {value!r}", table, index, key)
+    out = np.array(value, dtype=float)
+    if not np.all(np.isfinite(out)):
+        raise ctx.error(f"values must be finite, got {value!r}", table, index, key)
+    return out
+
+
+def _optional_std(ctx: _TomlContext, table_value: dict, table: str, index: int, key: str) -> float | None:
+    if key not in table_value:
+        return None
+    v = table_value[key]
+    if not _is_number(v) or not math.isfinite(v) or v < 0:
+        raise ctx.error(f"expected a finite number >= 0, got {v!r}", table, index, key)
+    return float(v)
+
+
+def _rotation(ctx: _TomlContext, value, index: int, name: str) -> np.ndarray:
+    key = "rotation_body_sensor"
+    if (not isinstance(value, list) or len(value) != 3
+            or not all(isinstance(r, list) and len(r) == 3 and all(_is_number(v) for v in r) for r in value)):
+        raise ctx.error(f"expected a 3x3 matrix written as three rows of three numbers, got {value!r}",
+                        "accelerometers", index, key)
+    rot = np.array(value, dtype=float)
+    if not np.all(np.isfinite(rot)):
+        raise ctx.error("values must be finite", "accelerometers", index, key)
+    det = np.linalg.det(rot)
+    if det < 0:
+        raise ctx.error(f"{rot.tolist()} has determinant {det:.6g}: a reflection, not a rotation",
+                        "accelerometers", index, key)
+    deviation = float(np.max(np.abs(rot @ rot.T - np.eye(3))))
+    if deviation <= ROTATION_TOLERANCE:
+        return rot
+    if deviation <= ROTATION_REPAIR_TOLERANCE:
+        u, _, vt = np.linalg.svd(rot)
+        fixed = u @ vt
+        err = ctx.error(f"orthonormal only to {deviation:.2g}; using the nearest rotation matrix (write more digits "
+                        "to silence this)", "accelerometers", index, key)
+        warnings.warn(str(err), LogFormatWarning, stacklevel=4)
+        return fixed
+    raise ctx.error(f"{rot.tolist()} is not a rotation matrix (R Rᵀ differs from the identity by {deviation:.3g}; "
+                    f"expected orthonormal rows, determinant +1)", "accelerometers", index, key)
+
+
+def parse_array_toml(text: str, path: str | os.PathLike = "array.toml") -> SensorArray:
+    """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line."""
+    path = Path(path)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise LogFormatError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None) from None
+    ctx = _TomlContext(path, text)
+    fmt = doc.get("format")
+    if fmt is None:
+        raise ctx.error(f"key is missing; the first line should be format = \"{ARRAY_FORMAT}\"", key="format")
+    if fmt != ARRAY_FORMAT:
+        raise ctx.error(f"unknown format {fmt!r}; this version of gfimu reads {ARRAY_FORMAT!r}", key="format")
+    name = doc.get("name", "array")
+    if not isinstance(name, str):
+        raise ctx.error(f"expected a string, got {name!r}", key="name")
+    accs_doc = doc.get("accelerometers")
+    if accs_doc is None:
+        raise ctx.error("no [[accelerometers]] table; an array needs at least one accelerometer", key="accelerometers")
+    if not isinstance(accs_doc, list) or not accs_doc or not all(isinstance(a, dict) for a in accs_doc):
+        raise ctx.error("expected one or more [[accelerometers]] tables", key="accelerometers")
+    accs = []
+    seen: dict[str, int] = {}
+    for i, a in enumerate(accs_doc):
+        t = "accelerometers"
+        acc_name = a.get("name")
+        if not isinstance(acc_name, str) or not acc_name.strip():
+            raise ctx.error(f"expected a non-empty string (the CSV column prefix), got {acc_name!r}", t, i, "name")
+        if acc_name != acc_name.strip() or re.search(r"[,\[\]\"\n\r]", acc_name):
+            raise ctx.error(f"{acc_name!r} cannot be a CSV column prefix (no commas, brackets, quotes, line breaks "
+                            "or surrounding spaces)", t, i, "name")
+        if acc_name in ("w", "tilt", "sigma"):
+            raise ctx.error(f"{acc_name!r} is reserved (its columns would clash with the gyroscope, inclinometer or "
+                            "uncertainty columns)", t, i, "name")
+        if acc_name in seen:
+            raise ctx.error(f"{acc_name!r} is also the name of accelerometers[{seen[acc_name]}]; names must be unique",
+                            t, i, "name")
+        seen[acc_name] = i
+        if "position_m" not in a:
+            raise ctx.error(f"accelerometer {acc_name!r} has no position_m (3 numbers, in metres, in the body frame)",
+                            t, i)
+        position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
+        rot = _rotation(ctx, a["rotation_body_sensor"], i, acc_name) if "rotation_body_sensor" in a else np.eye(3)
+        axes = a.get("axes", ["x", "y", "z"])
+        if (not isinstance(axes, list) or not axes or not all(isinstance(x, str) for x in axes)
+                or len(set(axes)) != len(axes) or any(x not in ("x", "y", "z") for x in axes)):
+            raise ctx.error(f"expected a list of distinct axes among \"x\", \"y\", \"z\", got {axes!r}", t, i, "axes")
+        noise = _optional_std(ctx, a, t, i, "noise_std_mps2")
+        try:
+            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise))
+        except ArrayModelError as exc:
+            raise ctx.error(str(exc), t, i) from None
+    gyro = inclinometer = body = None
+    for table, cls, key in (("gyroscope", Gyroscope, "noise_std_radps"), ("inclinometer", Inclinometer, "noise_std_rad")):
+        if table in doc:
+            if not isinstance(doc[table], dict):
+                raise ctx.error(f"expected a table [{table}]", key=table)
+            obj = cls(_optional_std(ctx, doc[table], table, 0, key))
+            if table == "gyroscope":
+                gyro = obj
+            else:
+                inclinometer = obj
+    if "body" in doc:
+        b = doc["body"]
+        if not isinstance(b, dict) or "principal_inertia_kgm2" not in b:
+            raise ctx.error("[body] needs principal_inertia_kgm2 = [I1, I2, I3]", "body", 0)
+        inertia = _vector(ctx, b["principal_inertia_kgm2"], 3, "body", 0, "principal_inertia_kgm2")
+        try:
+            body = Body(tuple(inertia))
+        except ArrayModelError as exc:
+            raise ctx.error(str(exc), "body", 0, "principal_inertia_kgm2") from None
+    return SensorArray(tuple(accs), name, gyro, inclinometer, body)
+
+
+def read_array_toml(path: str | os.PathLike) -> SensorArray:
+    """Read ``array.toml`` (format ``gfimu-array/1``) into a :class:`SensorArray`."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise LogFormatError("file not found", path) from None
+    try:
+        text = raw.decode("utf-8").lstrip("\ufeff")
+    except UnicodeDecodeError as exc:
+        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path) from None
+    if not text.strip():
+        raise LogFormatError(f"file is empty; expected format = \"{ARRAY_FORMAT}\" and [[accelerometers]] tables", path)
+    return parse_array_toml(text, path)
+
+
+# --- writing -------------------------------------------------------------------------
+
+def _plain(value, where: str, finite: bool = True):
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists (non-finite refused if ``finite``)."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v, f"{where}.{k}" if where else str(k), finite) for k, v in value.items()
+                if v is not None}
+    if isinstance(value, (str, bool)):
+        return value
+    if isinstance(value, (np.bool_,)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        x = float(value)
+        if finite and not math.isfinite(x):
+            raise ValueError(f"{where}: cannot write the non-finite number {x!r} to TOML")
+        return x
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v, f"{where}[{i}]", finite) for i, v in enumerate(value)]
+    raise TypeError(f"{where}: cannot write a {type(value).__name__} to TOML")
+
+
+_SCALAR = r'(?:[-+0-9][-+0-9.eE_]*|true|false|"[^"\\\n\[\]]*")'
+_FLAT_ARRAY = re.compile(r"\[\n(?:[ ]+" + _SCALAR + r",\n)+[ ]*\]")
+_NESTED_ARRAY = re.compile(r"\[\n(?:[ ]+\[[^\[\]\n]*\],\n)+[ ]*\]")
+
+
+def _one_line(match: re.Match) -> str:
+    items = [ln.strip().rstrip(",") for ln in match.group(0).split("\n")[1:-1]]
+    return "[" + ", ".join(items) + "]"
+
+
+def format_toml(doc: Mapping, comment: str = "", finite: bool = True) -> str:
+    """TOML text of a mapping; arrays of numbers or short strings stay on one line.
+
+    numpy scalars and arrays are accepted; keys whose value is ``None`` are
+    left out; ``comment`` lines are written first, each after ``#``. With
+    ``finite`` (the default) a NaN or infinite number is refused with a
+    ValueError naming its key, otherwise it is written as ``nan``/``inf``.
+    """
+    text = tomli_w.dumps(_plain(doc, "", finite))
+    text = _FLAT_ARRAY.sub(_one_line, text)
+    text = _NESTED_ARRAY.sub(_one_line, text)
+    head = "".join(f"# {line}\n" for line in comment.splitlines())
+    return head + text
+
+
+def write_toml(doc: Mapping, path: str | os.PathLike, comment: str = "", finite: bool = True) -> None:
+    """Write a mapping as TOML (see :func:`format_toml`), atomically."""
+    atomic_write_text(path, format_toml(doc, comment, finite))
+
+
+def array_to_dict(array: SensorArray) -> dict:
+    """The ``array.toml`` document of an array."""
+    doc: dict = {"format": ARRAY_FORMAT, "name": array.name}
+    accs = []
+    for a in array.accelerometers:
+        entry: dict = {"name": a.name, "position_m": np.asarray(a.position_m, dtype=float)}
+        if not np.array_equal(a.rotation_body_sensor, np.eye(3)):
+            entry["rotation_body_sensor"] = np.asarray(a.rotation_body_sensor, dtype=float)
+        entry["axes"] = list(a.axes)
+        if a.noise_std_mps2 is not None:
+            entry["noise_std_mps2"] = float(a.noise_std_mps2)
+        accs.append(entry)
+    doc["accelerometers"] = accs
+    if array.gyroscope is not None:
+        doc["gyroscope"] = ({} if array.gyroscope.noise_std_radps is None
+                            else {"noise_std_radps": float(array.gyroscope.noise_std_radps)})
+    if array.inclinometer is not None:
+        doc["inclinometer"] = ({} if array.inclinometer.noise_std_rad is None
+                               else {"noise_std_rad": float(array.inclinometer.noise_std_rad)})
+    if array.body is not None:
+        doc["body"] = {"principal_inertia_kgm2": np.asarray(array.body.principal_inertia_kgm2, dtype=float)}
+    return doc
+
+
+def format_array_toml(array: SensorArray) -> str:
+    """Deterministic ``array.toml`` text of an array (floats round-trip exactly)."""
+    try:
+        return format_toml(array_to_dict(array))
+    except ValueError as exc:
+        raise ValueError(f"array.toml: {exc}") from None
+
+
+def write_array_toml(array: SensorArray, path: str | os.PathLike) -> None:
+    """Write ``array.toml`` atomically."""
+    atomic_write_text(path, format_array_toml(array))

@@ -1,0 +1,101 @@
+"""Whole logs: a folder with ``array.toml`` and ``imu.csv``, optionally ``truth.csv`` and ``reference.csv``.
+
+The format is specified in ``docs/log-format.md``. :func:`read_log` reads
+and checks a folder; gaps in time are reported with a
+:class:`~gfimu.io.errors.LogGapWarning` (estimators restart at each gap, see
+:meth:`gfimu.log.Log.segments`). :func:`write_log` writes each file
+atomically.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..log import Log
+from ..motion import Motion
+from .array_toml import read_array_toml, write_array_toml
+from .errors import LogFormatError, LogGapWarning
+from .tables import read_imu_csv, read_motion_csv, read_motion_table, write_imu_csv, write_motion_csv
+
+LOG_FILES = ("array.toml", "imu.csv", "truth.csv", "reference.csv")
+"""The files of a log folder, in the order they are written."""
+
+
+def _log_folder(path: str | os.PathLike) -> Path:
+    p = Path(path)
+    if p.is_file() and p.name in ("imu.csv", "array.toml"):
+        p = p.parent
+    if not p.exists():
+        raise LogFormatError("log folder not found", p)
+    if not p.is_dir():
+        raise LogFormatError("not a log folder (expected a folder holding array.toml and imu.csv)", p)
+    for name in ("array.toml", "imu.csv"):
+        if not (p / name).is_file():
+            raise LogFormatError(f"log folder has no {name} (a log holds array.toml and imu.csv)", p)
+    return p
+
+
+def _check_same_timestamps(motion: Motion, t_imu: np.ndarray, path: Path, imu_path: Path) -> None:
+    if len(motion) != t_imu.size:
+        raise LogFormatError(f"has {len(motion)} rows but {imu_path.name} has {t_imu.size}; it needs one row per "
+                             f"{imu_path.name} row, with the same timestamps", path)
+    diff = np.flatnonzero(motion.timestamps_ns != t_imu)
+    if diff.size:
+        r = int(diff[0])
+        raise LogFormatError(f"timestamp {motion.timestamps_ns[r]} differs from {imu_path.name} line {r + 2} "
+                             f"({t_imu[r]}); it needs the same timestamps as {imu_path.name}", path, r + 2)
+
+
+def read_log(path: str | os.PathLike) -> Log:
+    """Read a log folder (array.toml, imu.csv, and truth.csv / reference.csv when present).
+
+    Gaps in time are reported with a :class:`LogGapWarning`.
+    """
+    folder = _log_folder(path)
+    array_path = folder / "array.toml"
+    imu_path = folder / "imu.csv"
+    array = read_array_toml(array_path)
+    t, accel, gyro, tilt = read_imu_csv(imu_path, array, array_path.name)
+    truth = reference = invalid = None
+    if (folder / "truth.csv").is_file():
+        truth = read_motion_csv(folder / "truth.csv")
+        _check_same_timestamps(truth, t, folder / "truth.csv", imu_path)
+    if (folder / "reference.csv").is_file():
+        reference, valid = read_motion_table(folder / "reference.csv")
+        _check_same_timestamps(reference, t, folder / "reference.csv", imu_path)
+        if valid is not None:
+            invalid = ~valid
+        if not reference.available():
+            reference = None
+    log = Log(array, t, accel, gyro, tilt, truth, reference, invalid, source=str(folder))
+    gaps = log.gaps()
+    if gaps:
+        worst = max(gaps, key=lambda g: g.dt_s)
+        warnings.warn(
+            f"{imu_path}: {len(gaps)} gap(s) in time (steps over 1.5 x the median {worst.nominal_dt_s:.6g} s); the "
+            f"largest, {worst.dt_s:.6g} s, is before line {worst.index + 2}; estimators restart at each gap",
+            LogGapWarning, stacklevel=2)
+    return log
+
+
+def write_log(log: Log, path: str | os.PathLike) -> None:
+    """Write a log folder: array.toml, imu.csv, and truth.csv / reference.csv when present.
+
+    Each file is written atomically; the folder is created when needed.
+    """
+    folder = Path(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_array_toml(log.array, folder / "array.toml")
+    write_imu_csv(log, folder / "imu.csv")
+    if log.truth is not None:
+        _check_same_timestamps(log.truth, log.timestamps_ns, folder / "truth.csv", folder / "imu.csv")
+        write_motion_csv(log.truth, folder / "truth.csv")
+    if log.reference is not None or log.invalid_reference is not None:
+        reference = log.reference if log.reference is not None else Motion(log.timestamps_ns)
+        _check_same_timestamps(reference, log.timestamps_ns, folder / "reference.csv", folder / "imu.csv")
+        valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
+        write_motion_csv(reference, folder / "reference.csv", valid=valid)

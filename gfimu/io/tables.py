@@ -1,0 +1,418 @@
+"""CSV tables of a log: ``imu.csv`` (readings) and motion tables (truth, reference, estimates).
+
+Layout (see ``docs/log-format.md``): the first column is ``#timestamp [ns]``,
+every other column carries its unit in brackets. Every problem raises
+:class:`~gfimu.io.errors.LogFormatError` naming file, line and column:
+missing, duplicated or unknown-unit columns, timestamps that are not strictly
+increasing, empty files, ragged rows, text where a number belongs. Extra
+columns are ignored.
+
+Finite values. Readings, truth and reference must be finite, except in
+reference rows marked ``valid`` = 0; estimates may hold non-finite values
+(``allow_nan=True``).
+
+Validity mask. ``reference.csv`` may carry a column ``valid []`` holding 1
+where the reference is valid and 0 where it is not (for example a saturated
+reference gyro).
+
+Writing goes through :func:`gfimu.io.atomic.atomic_write`. Floats are
+written with Python's shortest round-trip representation, so reading a
+written file gives back exactly the same numbers; timestamps are integer
+nanoseconds.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterator
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+
+import numpy as np
+
+from ..array import SensorArray
+from ..log import Log
+from ..motion import QUANTITIES, Motion
+from .atomic import atomic_write
+from .errors import LogFormatError
+from .units import KIND_OF_UNIT, TIME_UNITS_NS, UNITS, canonical_unit, unit_factor, unit_help
+
+TIMESTAMP_HEADER = "#timestamp [ns]"
+GYRO_COLUMNS = ("w_x", "w_y", "w_z")
+TILT_COLUMNS = ("tilt_x", "tilt_y")
+VALID_COLUMN = "valid"
+
+_ROWS_PER_BLOCK = 16384  # rows formatted at a time when writing CSV
+
+
+def _format_block(timestamps: list[int], values: list[list[float]], fmt, flags: list[int] | None = None) -> str:
+    """CSV text of one block of rows: timestamp, values, then optional integer flags."""
+    if flags is None:
+        return "".join(f"{t},{','.join(map(fmt, row))}\n" for t, row in zip(timestamps, values))
+    return "".join(f"{t},{','.join(map(fmt, row))}{',' if row else ''}{flag}\n"
+                   for t, row, flag in zip(timestamps, values, flags))
+
+
+def _csv_chunks(header: list[str], timestamps_ns: np.ndarray, values: np.ndarray, fmt,
+                flags: np.ndarray | None = None) -> Iterator[str]:
+    yield ",".join(header) + "\n"
+    for start in range(0, timestamps_ns.size, _ROWS_PER_BLOCK):
+        stop = start + _ROWS_PER_BLOCK
+        yield _format_block(timestamps_ns[start:stop].tolist(), values[start:stop].tolist(), fmt,
+                            None if flags is None else flags[start:stop].tolist())
+
+
+def _float_formatter(digits: int | None):
+    if digits is None:
+        return float.__repr__
+    if not 1 <= int(digits) <= 17:
+        raise ValueError(f"digits must be between 1 and 17, got {digits}")
+    spec = f"%.{int(digits)}g"
+    return spec.__mod__
+
+
+# --- CSV reading ---------------------------------------------------------------
+
+_HEADER_RE = re.compile(r"^(.*?)\s*\[([^\[\]]*)\]\s*$")
+
+
+class _Csv:
+    """A parsed CSV header and its raw body; values are converted column by column on demand."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        try:
+            raw = path.read_bytes()
+        except FileNotFoundError:
+            raise LogFormatError("file not found", path) from None
+        except IsADirectoryError:
+            raise LogFormatError("is a folder, expected a CSV file", path) from None
+        if re.match(rb"\s*\S", raw[:65536]) is None and not raw.strip():
+            raise LogFormatError("file is empty (expected a header line and one row per sample)", path)
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            line = raw[: exc.start].count(b"\n") + 1
+            raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, line) from None
+        if "\r" in text:
+            text = text.replace("\r\n", "\n").replace("\r", "\n")
+        lines = text.split("\n")
+        del text
+        header = lines[0].lstrip("\ufeff")
+        end = len(lines)
+        while end > 1 and not lines[end - 1]:
+            end -= 1
+        self.columns: list[tuple[str, str | None]] = []
+        for field in header.split(","):
+            field = field.strip().strip('"').strip()
+            m = _HEADER_RE.match(field)
+            self.columns.append((m.group(1).strip(), m.group(2).strip()) if m else (field.strip(), None))
+        first_name, first_unit = self.columns[0]
+        if first_name.lstrip("#").strip().lower() != "timestamp":
+            hint = " (columns must be separated by commas)" if (";" in header or "\t" in header) else ""
+            raise LogFormatError(f"the first column must be {TIMESTAMP_HEADER!r}, found {header.split(',')[0]!r}"
+                                 f"{hint}", path, 1)
+        unit = canonical_unit(first_unit) if first_unit is not None else None
+        if unit not in TIME_UNITS_NS:
+            raise LogFormatError(
+                f"timestamp unit [{first_unit}] not understood; expected [ns] (or, converted: [us], [ms], [s])"
+                if first_unit is not None else f"timestamp column has no unit; expected {TIMESTAMP_HEADER!r}",
+                path, 1)
+        self.time_unit = unit
+        if len(self.columns) < 2:
+            raise LogFormatError("has only a timestamp column", path, 1)
+        if end == 1:
+            raise LogFormatError("has a header but no data rows", path, 2)
+        self.lines = lines[1:end]
+        del lines
+        n_fields = len(self.columns)
+        counts = np.fromiter((ln.count(",") for ln in self.lines), dtype=np.int64, count=len(self.lines))
+        bad = np.flatnonzero(counts != n_fields - 1)
+        if bad.size:
+            k = int(bad[0])
+            what = "is empty" if not self.lines[k].strip() else f"has {counts[k] + 1} fields"
+            raise LogFormatError(f"row {what}, the header has {n_fields} (ragged rows: {bad.size})", path, k + 2)
+        self.names = [n for n, _ in self.columns]
+
+    def line_of_row(self, row: int) -> int:
+        return row + 2
+
+    def find(self, name: str) -> int | None:
+        """Index of column ``name``; error when it appears more than once."""
+        idx = [i for i, n in enumerate(self.names) if n == name]
+        if len(idx) > 1:
+            raise LogFormatError(f"column {name!r} appears {len(idx)} times (fields {', '.join(str(i + 1) for i in idx)})",
+                                 self.path, 1)
+        return idx[0] if idx else None
+
+    def factor(self, index: int, kind: str) -> float:
+        name, unit = self.columns[index]
+        if unit is None:
+            raise LogFormatError(f"column {name!r} has no unit; expected '{name} {unit_help(kind)}'", self.path, 1)
+        try:
+            return unit_factor(unit, kind)
+        except KeyError:
+            raise LogFormatError(f"column {name!r} has unit [{unit}], which is not understood here; expected "
+                                 f"{unit_help(kind)}", self.path, 1) from None
+
+    def timestamps_ns(self) -> np.ndarray:
+        tokens = [ln[: ln.find(",")] for ln in self.lines]
+        scale = TIME_UNITS_NS[self.time_unit]
+        t = None
+        if scale == 1:
+            try:
+                t = np.array(tokens).astype(np.int64)
+            except (ValueError, OverflowError):
+                t = None
+        if t is None:
+            t = np.empty(len(tokens), dtype=np.int64)
+            for k, tok in enumerate(tokens):
+                t[k] = self._parse_time(tok, scale, k)
+        d = np.diff(t)
+        bad = np.flatnonzero(d <= 0)
+        if bad.size:
+            k = int(bad[0]) + 1
+            raise LogFormatError(
+                f"timestamp {tokens[k].strip()} is not after the previous one ({tokens[k - 1].strip()} on line "
+                f"{k + 1}); timestamps must be strictly increasing", self.path, self.line_of_row(k))
+        return t
+
+    def _parse_time(self, token: str, scale: int, row: int) -> int:
+        tok = token.strip()
+        try:
+            value = Decimal(tok) * scale
+        except InvalidOperation:
+            value = None
+        if value is None or not value.is_finite():
+            raise LogFormatError(f"timestamp {tok!r} is not a number", self.path, self.line_of_row(row))
+        ns = int(value.to_integral_value())
+        if scale == 1 and ns != value:
+            raise LogFormatError(f"timestamp {tok!r} is not an integer number of nanoseconds", self.path,
+                                 self.line_of_row(row))
+        if not -(2**63) <= ns < 2**63:
+            raise LogFormatError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds", self.path,
+                                 self.line_of_row(row))
+        return ns
+
+    def values(self, indices: list[int], allow_nan: bool = False, rows: np.ndarray | None = None) -> np.ndarray:
+        """Float values of the given columns (N, len(indices)), not yet unit-converted.
+
+        Unless ``allow_nan``, every value (or every value in the ``rows`` mask) must be finite.
+        """
+        if not indices:
+            return np.zeros((len(self.lines), 0))
+        try:
+            out = np.loadtxt(self.lines, delimiter=",", usecols=indices, dtype=float, ndmin=2, comments=None)
+        except ValueError:
+            self._raise_first_bad_value(indices)
+            raise
+        if not allow_nan:
+            bad = ~np.isfinite(out)
+            if rows is not None:
+                bad &= rows[:, None]
+            if bad.any():
+                rows_bad, cols = np.nonzero(bad)
+                r, c = int(rows_bad[0]), int(cols[0])
+                token = self.lines[r].split(",")[indices[c]].strip()
+                shown = repr(token) + ("" if token == repr(float(out[r, c])) else f" = {float(out[r, c])!r}")
+                where = "" if rows is None else " where valid is 1"
+                raise LogFormatError(
+                    f"column {self.names[indices[c]]!r} is {shown}; values must be finite{where} "
+                    f"({rows_bad.size} non-finite value(s) in the file)", self.path, self.line_of_row(r))
+        return out
+
+    def _raise_first_bad_value(self, indices: list[int]) -> None:
+        for k, ln in enumerate(self.lines):
+            fields = ln.split(",")
+            for i in indices:
+                tok = fields[i].strip()
+                try:
+                    float(tok)
+                except ValueError:
+                    what = "is empty" if not tok else f"value {tok!r} is not a number"
+                    raise LogFormatError(f"column {self.names[i]!r} (field {i + 1}) {what}", self.path,
+                                         self.line_of_row(k)) from None
+
+
+def imu_columns(array: SensorArray) -> list[tuple[str, str]]:
+    """(name, kind) of the imu.csv columns an array needs, in file order."""
+    cols = [(c, "acceleration") for c in array.accel_columns]
+    if array.gyroscope is not None:
+        cols += [(c, "angular_rate") for c in GYRO_COLUMNS]
+    if array.inclinometer is not None:
+        cols += [(c, "angle") for c in TILT_COLUMNS]
+    return cols
+
+
+def _missing_imu_columns(csv: _Csv, array: SensorArray, array_path: str) -> None:
+    present = set(csv.names)
+    for acc in array.accelerometers:
+        missing = [c for c in acc.column_names if c not in present]
+        if len(missing) == len(acc.column_names):
+            expected = ", ".join(f"'{c} [m s^-2]'" for c in acc.column_names)
+            raise LogFormatError(f"accelerometer {acc.name!r} of {array_path} has no columns here; expected {expected}",
+                                 csv.path, 1)
+        if missing:
+            raise LogFormatError(f"column '{missing[0]} [m s^-2]' is missing (accelerometer {acc.name!r} lists axes "
+                                 f"{', '.join(acc.axes)} in {array_path})", csv.path, 1)
+    for sensor, cols, unit in (("gyroscope", GYRO_COLUMNS, "rad s^-1"), ("inclinometer", TILT_COLUMNS, "rad")):
+        if getattr(array, sensor) is None:
+            continue
+        missing = [c for c in cols if c not in present]
+        if missing:
+            raise LogFormatError(f"{array_path} has a [{sensor}] but column '{missing[0]} [{unit}]' is missing",
+                                 csv.path, 1)
+
+
+def read_imu_csv(path: str | os.PathLike, array: SensorArray, array_path: str = "array.toml"):
+    """Read ``imu.csv`` for ``array``: (timestamps_ns, accel_mps2, gyro_b_radps | None, tilt_rad | None)."""
+    csv = _Csv(Path(path))
+    wanted = imu_columns(array)
+    indices = [csv.find(name) for name, _ in wanted]
+    _missing_imu_columns(csv, array, array_path)
+    factors = np.array([csv.factor(i, kind) for i, (_, kind) in zip(indices, wanted)])
+    t = csv.timestamps_ns()
+    values = csv.values(indices)
+    values = values * factors if np.any(factors != 1.0) else values
+    n_acc = array.n_axes
+    accel = values[:, :n_acc]
+    k = n_acc
+    gyro = tilt = None
+    if array.gyroscope is not None:
+        gyro, k = values[:, k:k + 3], k + 3
+    if array.inclinometer is not None:
+        tilt = values[:, k:k + 2]
+    return t, accel, gyro, tilt
+
+
+def write_imu_csv(log: Log, path: str | os.PathLike) -> None:
+    """Write the readings of ``log`` as ``imu.csv`` (atomic, exact floats)."""
+    array = log.array
+    header = [TIMESTAMP_HEADER] + [f"{c} [{UNITS[k][0]}]" for c, k in imu_columns(array)]
+    parts = [log.accel_mps2]
+    if array.gyroscope is not None:
+        if log.gyro_b_radps is None:
+            raise ValueError(f"{log.source}: the array has a gyroscope but the log has no gyro readings")
+        parts.append(log.gyro_b_radps)
+    if array.inclinometer is not None:
+        if log.tilt_rad is None:
+            raise ValueError(f"{log.source}: the array has an inclinometer but the log has no tilt readings")
+        parts.append(log.tilt_rad)
+    values = np.hstack(parts)
+    atomic_write(path, _csv_chunks(header, log.timestamps_ns, values, float.__repr__))
+
+
+
+def motion_columns(motion: Motion) -> list[tuple[str, str, np.ndarray]]:
+    """(column name, unit, values) of every column a Motion writes, in file order."""
+    cols = []
+    for field, (prefix, unit, comps) in QUANTITIES.items():
+        v = getattr(motion, field)
+        if v is not None:
+            cols += [(f"{prefix}_{c}", unit, v[:, j]) for j, c in enumerate(comps)]
+    for field, (prefix, unit, comps) in QUANTITIES.items():
+        s = motion.sigma.get(field)
+        if s is not None:
+            s = np.asarray(s, dtype=float)
+            cols += [(f"sigma_{prefix}_{c}", unit, s[:, j]) for j, c in enumerate(comps)]
+    return cols
+
+
+def write_motion_csv(motion: Motion, path: str | os.PathLike, digits: int | None = None,
+                     valid: np.ndarray | None = None) -> None:
+    """Write a Motion (truth, reference or estimate) as CSV, atomically.
+
+    Quantities that are ``None`` are left out; ``sigma`` entries become
+    ``sigma_`` columns. ``digits=None`` writes floats exactly (shortest
+    round-trip form); an integer writes that many significant digits
+    (``%.9g`` is ample for estimates). ``valid`` (N,) bool adds the ``valid []``
+    column of reference files. Non-finite estimate values are written as
+    ``nan``/``inf`` and can be read back with ``allow_nan=True``.
+    """
+    cols = motion_columns(motion)
+    header = [TIMESTAMP_HEADER] + [f"{name} [{unit}]" for name, unit, _ in cols]
+    n = len(motion)
+    values = np.column_stack([v for _, _, v in cols]) if cols else np.zeros((n, 0))
+    fmt = _float_formatter(digits)
+    flags = None
+    if valid is not None:
+        valid = np.asarray(valid)
+        if valid.shape != (n,):
+            raise ValueError(f"valid has shape {valid.shape}, expected ({n},)")
+        header.append(f"{VALID_COLUMN} []")
+        flags = valid.astype(bool).astype(np.int8)
+    if not cols and valid is None:
+        raise ValueError(f"{path}: the motion has no quantities to write")
+    atomic_write(path, _csv_chunks(header, motion.timestamps_ns, values, fmt, flags))
+
+
+def read_motion_table(path: str | os.PathLike, allow_nan: bool = False) -> tuple[Motion, np.ndarray | None]:
+    """Read truth/reference/estimate CSV: (Motion, valid mask or None).
+
+    A quantity must have all its components (``w_x, w_y, w_z``) or none.
+    ``allow_nan`` accepts non-finite values (estimates that failed on some
+    samples); truth and reference must be finite, except in reference rows
+    marked ``valid`` = 0.
+    """
+    path = Path(path)
+    csv = _Csv(path)
+    kinds = {}
+    groups: list[tuple[str, bool, list[int]]] = []
+    for field, (prefix, unit, comps) in QUANTITIES.items():
+        for is_sigma in (False, True):
+            names = [f"{'sigma_' if is_sigma else ''}{prefix}_{c}" for c in comps]
+            idx = [csv.find(n) for n in names]
+            present = [i is not None for i in idx]
+            if any(present) and not all(present):
+                missing = [n for n, p in zip(names, present) if not p]
+                raise LogFormatError(f"column '{missing[0]} [{unit}]' is missing (a quantity needs all of "
+                                     f"{', '.join(names)})", path, 1)
+            if all(present):
+                groups.append((field, is_sigma, idx))
+                for i in idx:
+                    kinds[i] = KIND_OF_UNIT[unit]
+    valid_index = csv.find(VALID_COLUMN)
+    if not groups and valid_index is None:
+        known = ", ".join(f"{p}_{c[0]}" for p, _, c in QUANTITIES.values())
+        raise LogFormatError(f"no motion columns (expected some of {known} ... with units)", path, 1)
+    indices = [i for _, _, idx in groups for i in idx]
+    factors = np.array([csv.factor(i, kinds[i]) for i in indices])
+    t = csv.timestamps_ns()
+    valid = None
+    if valid_index is not None:
+        unit = csv.columns[valid_index][1]
+        if unit is not None and canonical_unit(unit) != "":
+            raise LogFormatError(f"column 'valid' has unit [{unit}]; expected 'valid []' with 1 (valid) or 0 "
+                                 "(invalid)", path, 1)
+        raw = csv.values([valid_index])[:, 0]
+        bad = np.flatnonzero((raw != 0) & (raw != 1))
+        if bad.size:
+            r = int(bad[0])
+            raise LogFormatError(f"column 'valid' is {float(raw[r])!r}; expected 1 (valid) or 0 (invalid)", path,
+                                 csv.line_of_row(r))
+        valid = raw == 1
+    values = csv.values(indices, allow_nan=allow_nan, rows=valid) * factors if indices else np.zeros((len(t), 0))
+    kw: dict = {}
+    sigma: dict = {}
+    k = 0
+    for field, is_sigma, idx in groups:
+        block = values[:, k:k + len(idx)]
+        k += len(idx)
+        (sigma if is_sigma else kw)[field] = block
+    q = kw.get("quaternion_wb")
+    if q is not None:
+        off = np.abs(np.linalg.norm(q, axis=1) - 1.0) > 1e-6
+        if valid is not None:
+            off &= valid
+        bad = np.flatnonzero(off)
+        if bad.size:
+            r = int(bad[0])
+            raise LogFormatError(f"quaternion q_w..q_z has norm {np.linalg.norm(q[r]):.9g}; expected a unit "
+                                 f"quaternion ({bad.size} row(s) off by more than 1e-6)", path, csv.line_of_row(r))
+    return Motion(t, sigma=sigma, **kw), valid
+
+
+def read_motion_csv(path: str | os.PathLike, allow_nan: bool = False) -> Motion:
+    """Read a truth, reference or estimate CSV into a :class:`Motion`."""
+    return read_motion_table(path, allow_nan=allow_nan)[0]
