@@ -49,7 +49,7 @@ def test_cli_array_choices_options_and_noise(tmp_path):
     (["random3d", "--array", "nonexistent.toml"], "no such file"),
     (["random3d", "--no-noise", "--noise-std-mps2", "0.1"], "exclude"),
     (["random3d", "-O", "spin=3"], "no option"),
-    (["random3d", "--duration-s", "-1"], "duration_s"),
+    (["random3d", "--duration-s", "-1"], "--duration-s"),
     (["random3d", "--array", "paper001", "--half-edge-m", "0.1"], "cube only"),
 ])
 def test_cli_user_errors_exit_2_with_one_line(tmp_path, capsys, argv, message):

@@ -3,46 +3,156 @@
 Each sub-command lives in its own module with ``register(subparsers)``,
 which adds its parser and sets ``func`` to a function of the parsed args
 returning an exit code.
+
+Errors. A user mistake or a failure of the machine (a missing or unreadable
+file, a full disk, a log the method cannot solve) ends in one line
+``gfimu COMMAND: error: ...`` naming the file, option or step, and a non-zero
+exit status: 2 for a mistake in the command or its inputs, 1 for a failure
+of the system or of a computation, 130/143 when interrupted by SIGINT/SIGTERM
+(temporary files are removed first). ``--debug`` shows the traceback instead.
+Outputs follow :mod:`gfimu.io.outputs`: never over an input, never over
+anything but a regular file.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
 import sys
 
 COMMANDS = ("demo", "simulate", "estimate", "evaluate", "compare", "convert", "calibrate", "plot")
+
+EXIT_USAGE = 2
+EXIT_FAILURE = 1
 
 
 class CLIError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``gfimu simulate: error: argument --rate-hz: ...`` (exit 2)."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="gfimu",
         description="Angular velocity, angular acceleration and linear acceleration from accelerometer arrays.",
     )
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error instead of a one-line message")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"gfimu.cli.{name}").register(sub)
+    _add_debug_everywhere(parser)
     return parser
 
 
+def _add_debug_everywhere(parser: argparse.ArgumentParser) -> None:
+    """Accept ``--debug`` after the command too (default suppressed so the top-level value stands)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in set(action.choices.values()):
+                if "--debug" not in child._option_string_actions:
+                    child.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                                       help="show the full traceback of an error")
+                _add_debug_everywhere(child)
+
+
+_OS_HINTS = {
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+    errno.ENOENT: "no such file or folder",
+    errno.EISDIR: "is a folder, a file was expected",
+    errno.ENOTDIR: "a part of this path is a file, not a folder",
+    errno.EEXIST: "already exists",
+    errno.EBUSY: "device or resource busy",
+    errno.ENOSPC: "no space left on the device",
+    errno.EROFS: "read-only file system",
+    errno.EXDEV: "cannot rename across file systems",
+    errno.ENAMETOOLONG: "file name too long",
+    errno.ELOOP: "too many levels of symbolic links",
+    errno.EMFILE: "too many open files",
+    errno.EIO: "input/output error",
+    errno.EDQUOT: "disk quota exceeded",
+}
+
+
+def os_error_message(exc: OSError) -> str:
+    """One line for an OSError: the path(s), then what went wrong in plain words."""
+    from ..io.errors import OutputError
+
+    if isinstance(exc, OutputError):
+        return str(exc)
+    what = _OS_HINTS.get(exc.errno) or exc.strerror or str(exc) or type(exc).__name__
+    paths = [str(p) for p in (exc.filename, exc.filename2) if p is not None]
+    if paths:
+        return f"{' -> '.join(paths)}: {what}"
+    return f"{what} ({exc})" if exc.strerror and str(exc) != exc.strerror else what
+
+
+def _first_line(exc: BaseException) -> str:
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return " ".join(lines[:2]) if lines else type(exc).__name__
+
+
+def error_message(exc: BaseException) -> tuple[str, int]:
+    """(message, exit status) for an exception that ends a command."""
+    from ..io.errors import LogFormatError, OutputError
+
+    if isinstance(exc, (CLIError, LogFormatError, OutputError)):
+        return str(exc), EXIT_USAGE
+    if isinstance(exc, OSError):
+        return os_error_message(exc), EXIT_FAILURE
+    if isinstance(exc, KeyError):
+        return str(exc.args[0]) if exc.args else "missing key", EXIT_USAGE
+    if isinstance(exc, (ValueError, TypeError)):
+        return str(exc) or type(exc).__name__, EXIT_USAGE
+    if isinstance(exc, MemoryError):
+        return "out of memory (try a shorter log, or fewer methods)", EXIT_FAILURE
+    text = str(exc)
+    if isinstance(exc, RuntimeError) and ("Indeterminant" in text or "Indeterminate" in text):
+        return ("the estimation problem is under-determined (GTSAM: " + _first_line(exc) + "); likely causes: "
+                "co-located or too few accelerometers, a stretch of constant or missing readings, or options "
+                "that leave a state free"), EXIT_FAILURE
+    if isinstance(exc, RuntimeError):
+        return _first_line(exc), EXIT_FAILURE
+    return f"{type(exc).__name__}: {_first_line(exc)} (run with --debug for the traceback)", EXIT_FAILURE
+
+
 def main(argv: list[str] | None = None) -> int:
+    from ..io.atomic import install_signal_cleanup, remove_temporaries, restore_signal_handlers
+
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, or a malformed command line (argparse printed why)
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     if not getattr(args, "func", None):
         parser.print_help()
-        return 2
+        return EXIT_USAGE
+    previous = install_signal_cleanup()
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
-        import os
-
+        remove_temporaries()
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except (CLIError, ValueError, FileNotFoundError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"gfimu {args.command}: error: {msg}", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt:
+        remove_temporaries()
+        print(f"gfimu {args.command}: interrupted; no output was left half-written", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - every error becomes one line unless --debug
+        remove_temporaries()
+        if args.debug:
+            raise
+        message, status = error_message(exc)
+        print(f"gfimu {args.command}: error: {message}", file=sys.stderr)
+        return status
+    finally:
+        restore_signal_handlers(previous)

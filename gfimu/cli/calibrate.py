@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
+
+from . import CLIError
+from .options import non_negative, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,34 +22,43 @@ def register(sub: argparse._SubParsersAction) -> None:
         "still means before and after.",
     )
     p.add_argument("log", help="log directory")
-    p.add_argument("--out", required=True, help="calibration.toml to write (atomically)")
-    p.add_argument("--window-s", type=float, default=d.window_s, help=f"detector window (default {d.window_s} s)")
-    p.add_argument("--accel-std", type=float, default=d.accel_std_mps2,
-                   help=f"max accelerometer std in the window, m/s^2 (default {d.accel_std_mps2})")
-    p.add_argument("--gyro-std", type=float, default=d.gyro_std_radps,
-                   help=f"max gyro std in the window, rad/s (default {d.gyro_std_radps})")
-    p.add_argument("--min-duration-s", type=float, default=d.min_duration_s,
-                   help=f"shortest still period (default {d.min_duration_s} s)")
-    p.add_argument("--until-s", type=float, default=None, help="use only the first UNTIL_S seconds of the log")
+    p.add_argument("--out", required=True,
+                   help="calibration.toml to write (atomically; never over an input), or - for standard output")
+    p.add_argument("--window-s", type=positive("s"), default=d.window_s,
+                   help=f"detector window [s] (default {d.window_s})")
+    p.add_argument("--accel-std", type=positive("m/s^2"), default=d.accel_std_mps2,
+                   help=f"max accelerometer std in the window [m/s^2] (default {d.accel_std_mps2})")
+    p.add_argument("--gyro-std", type=positive("rad/s"), default=d.gyro_std_radps,
+                   help=f"max gyro std in the window [rad/s] (default {d.gyro_std_radps})")
+    p.add_argument("--min-duration-s", type=non_negative("s"), default=d.min_duration_s,
+                   help=f"shortest still period [s] (default {d.min_duration_s})")
+    p.add_argument("--until-s", type=positive("s"), default=None,
+                   help="use only the first UNTIL_S seconds of the log [s] (default: all)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from .. import io as gio
-    from ..calibration import StillDetector, fit, write_calibration
+    from ..calibration import StillDetector, calibration_to_toml, fit
+    from ..io.outputs import check_output, write_output
 
+    out = check_output(args.out, [args.log], "--out", stdout=True)
     log = gio.read_log(args.log)
     if args.until_s is not None:
-        log = log.select(slice(0, int(((log.times_s <= args.until_s)).sum())))
+        n = int((log.times_s <= args.until_s).sum())
+        if n < 2:
+            raise CLIError(f"--until-s {args.until_s:g}: keeps {n} sample(s) of {args.log}; at least 2 are needed")
+        log = log.select(slice(0, n))
     det = StillDetector(window_s=args.window_s, accel_std_mps2=args.accel_std, gyro_std_radps=args.gyro_std,
                         min_duration_s=args.min_duration_s)
     cal = fit(log, det)
     i = cal.info
-    write_calibration(cal, args.out)
-    print(f"{i['still_periods']} still periods ({i['still_samples']} samples); fit residual {i['residual_rms_mps2']:.4f} m/s^2 RMS")
-    print(f"inter-sensor spread of the still means: {i['spread_before_mps2']:.4f} -> {i['spread_after_mps2']:.4f} m/s^2 (norm); "
+    write_output(out, [calibration_to_toml(cal)])
+    say = print if out is not None else (lambda *a: print(*a, file=sys.stderr))
+    say(f"{i['still_periods']} still periods ({i['still_samples']} samples); fit residual {i['residual_rms_mps2']:.4f} m/s^2 RMS")
+    say(f"inter-sensor spread of the still means: {i['spread_before_mps2']:.4f} -> {i['spread_after_mps2']:.4f} m/s^2 (norm); "
           f"{i['spread_per_axis_before_mps2']:.4f} -> {i['spread_per_axis_after_mps2']:.4f} m/s^2 (per axis)")
     if cal.gyro_bias_b_radps is not None:
-        print("gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s")
-    print(f"calibration written: {args.out}")
+        say("gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s")
+    say(f"calibration written: {args.out}")
     return 0

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from . import CLIError
+from .options import check_method_options, non_negative, parse_method_options
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,35 +22,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", help="log directory (array.toml + imu.csv + truth.csv or reference.csv)")
     p.add_argument("--methods", default=None, help="comma-separated methods (default: all registered)")
     p.add_argument("--format", choices=["markdown", "csv", "json"], default="markdown", help="table format (default: markdown)")
-    p.add_argument("--out", default=None, help="file to write the table to (default: standard output)")
-    p.add_argument("--estimates-dir", default=None, help="also write each method's estimate as DIR/<method>.csv")
+    p.add_argument("--out", default=None,
+                   help="file to write the table to (atomically; never over an input; default: standard output, -)")
+    p.add_argument("--estimates-dir", default=None,
+                   help="also write each method's estimate as DIR/<method>.csv (DIR is created when missing)")
     p.add_argument("--option", "-O", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="option of one method, repeatable, e.g. -O imm.t2=4.0")
     p.add_argument("--preset", default=None, metavar="NAME",
                    help="named settings of the smoother (-O smoother.KEY=VALUE wins over it), e.g. hand-held-low-rate "
                         "(gfimu.smoother.presets)")
     p.add_argument("--no-bounds", action="store_true", help="leave out the Cramér–Rao and smoother bounds")
-    p.add_argument("--gyro-noise", type=float, default=None, metavar="RAD_PER_S",
+    p.add_argument("--gyro-noise", type=non_negative("rad/s"), default=None, metavar="RAD_PER_S",
                    help="gyro noise std for the 'CRB (with gyro)' row when the array has no gyroscope")
     p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
     p.add_argument("--progress", action="store_true", help="show progress bars of the methods")
     p.set_defaults(func=run)
-
-
-def parse_method_options(pairs: list[str], methods: list[str] | None) -> dict[str, dict]:
-    """``METHOD.KEY=VALUE`` pairs -> {method: {key: value}}."""
-    from .estimate import parse_options
-
-    out: dict[str, dict] = {}
-    for pair in pairs:
-        head, sep, value = pair.partition("=")
-        method, dot, key = head.partition(".")
-        if not sep or not dot or not method or not key:
-            raise CLIError(f"--option expects METHOD.KEY=VALUE, got {pair!r}")
-        if methods is not None and method not in methods:
-            raise CLIError(f"--option {pair!r}: method {method!r} is not among --methods {','.join(methods)}")
-        out.setdefault(method, {}).update(parse_options([f"{key}={value}"]))
-    return out
 
 
 def run(args) -> int:
@@ -63,7 +50,15 @@ def run(args) -> int:
         unknown = [m for m in methods if m not in METHODS]
         if unknown:
             raise CLIError(f"unknown method(s) {unknown}; choose among: {', '.join(METHODS)}")
+    from ..io.outputs import check_output, write_output
+
+    inputs = [args.log, args.calibration]
+    out = check_output(args.out, inputs, "--out", stdout=True)
     options = parse_method_options(args.option, methods)
+    for method, opts in options.items():
+        if method not in METHODS:
+            raise CLIError(f"-O {method}.…: unknown method {method!r}; choose among: {', '.join(METHODS)}")
+        check_method_options(method, opts, flag=f"-O {method}.")
     if getattr(args, "preset", None) is not None:
         if methods is not None and "smoother" not in methods:
             raise CLIError(f"--preset sets the smoother's options, but smoother is not among --methods {','.join(methods)}")
@@ -71,6 +66,12 @@ def run(args) -> int:
 
         apply_preset(args.preset)  # an unknown name stops here, before the log is read
         options.setdefault("smoother", {})["preset"] = args.preset
+    if args.estimates_dir is not None:
+        folder = Path(args.estimates_dir)
+        if folder.exists() and not folder.is_dir():
+            raise CLIError(f"--estimates-dir {folder}: exists and is not a folder")
+        for name in (methods or list(METHODS)):
+            check_output(folder / f"{name}.csv", inputs, "--estimates-dir") if folder.is_dir() else None
     log = gio.read_log(args.log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
@@ -80,11 +81,19 @@ def run(args) -> int:
                      estimates_dir=args.estimates_dir, progress=args.progress,
                      gyro_noise_std_radps=args.gyro_noise)
     text = {"markdown": result.to_markdown, "csv": result.to_csv, "json": result.to_json}[args.format]()
-    if args.out:
-        out = Path(args.out)
-        gio.atomic_write_text(out, text)
-        n_ok = sum(1 for r in result.rows if r["kind"] == "method" and r["status"] == "ok")
+    write_output(out, [text])
+    method_rows = [r for r in result.rows if r["kind"] == "method"]
+    n_ok = sum(1 for r in method_rows if r["status"] == "ok")
+    if out is not None:
         print(f"compare: {n_ok} of {len(result.methods)} methods ran on {len(log)} samples -> {out}")
-    else:
-        sys.stdout.write(text)
+    # a method that failed is an error; so is one asked for by name (--methods) that did not run
+    failed = [r for r in method_rows if r["status"] == "failed" or (methods is not None and r["status"] != "ok")]
+    if failed:
+        for r in failed:
+            print(f"gfimu compare: error: method {r['method']!r} {r['status']}: {r.get('reason', '')}",
+                  file=sys.stderr)
+        return 1
+    if n_ok == 0:
+        print("gfimu compare: error: no method could run on this log", file=sys.stderr)
+        return 1
     return 0

@@ -6,6 +6,9 @@ The formats are those of :mod:`gfimu.io.readers`, each with its own options.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from . import CLIError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,7 +26,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         reader = get_reader(name)
         fp = formats.add_parser(name, help=reader.summary, description=reader.summary)
         fp.add_argument("input", help=reader.input_help)
-        fp.add_argument("--out", required=True, help="log directory to write")
+        fp.add_argument("--out", required=True,
+                        help="log folder to write (created when missing; an existing non-empty folder needs --force)")
+        fp.add_argument("--force", action="store_true",
+                        help="write into a non-empty --out folder: its array.toml, imu.csv, truth.csv and "
+                             "reference.csv are replaced or removed, other files are kept")
         fp.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings before writing")
         before = {a.dest for a in fp._actions}
         reader.add_arguments(fp)
@@ -32,9 +39,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args) -> int:
     from .. import io as gio
+    from ..io.outputs import prepare_log_folder
     from ..io.readers import read_recording
 
     options = {dest: getattr(args, dest) for dest in args.reader_options}
+    if not Path(args.input).exists():
+        raise CLIError(f"{args.input}: no such file or folder")
+    prepare_log_folder(args.out, [args.input, args.calibration], force=args.force)
     conversion = read_recording(args.format, args.input, **options)
     log = conversion.log
     for line in conversion.report:

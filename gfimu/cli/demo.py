@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .options import integer, positive
+
 DEFAULT_METHODS = ("inversion", "integration", "imm", "ml", "smoother", "fixed-lag")
 
 
@@ -22,11 +24,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "GTSAM) through a four-triad cube array, run the estimation methods and print their accuracy.",
     )
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods")
-    p.add_argument("--duration-s", type=float, default=10.0, help="length of each log (default 10 s)")
-    p.add_argument("--rate-hz", type=float, default=500.0, help="sample rate (default 500 Hz)")
-    p.add_argument("--half-edge-m", type=float, default=0.025,
-                   help="half edge of the cube array (default 0.025 m: a 5 cm cube)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--duration-s", type=positive("s"), default=10.0, help="length of each log [s] (default 10)")
+    p.add_argument("--rate-hz", type=positive("Hz"), default=500.0, help="sample rate [Hz] (default 500)")
+    p.add_argument("--half-edge-m", type=positive("m"), default=0.025,
+                   help="half edge of the cube array [m] (default 0.025: a 5 cm cube)")
+    p.add_argument("--seed", type=integer(0), default=0, help="seed of the motion and noise (default 0)")
     p.add_argument("--format", choices=["markdown", "csv", "json"], default="markdown")
     p.set_defaults(func=run)
 

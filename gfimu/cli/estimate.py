@@ -3,25 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import ast
+import sys
 import time
 
 from . import CLIError
-
-
-def parse_options(pairs: list[str]) -> dict:
-    """``key=value`` pairs; values parsed as Python literals when they look like one."""
-    out = {}
-    for pair in pairs or []:
-        if "=" not in pair:
-            raise CLIError(f"--option expects KEY=VALUE, got {pair!r}")
-        key, value = pair.split("=", 1)
-        key = key.strip().replace("-", "_")
-        try:
-            out[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            out[key] = value
-    return out
+from .options import check_method_options, parse_options, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,13 +17,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Run one estimation method on a log directory and write an estimate CSV.")
     p.add_argument("log", help="log directory (array.toml + imu.csv)")
     p.add_argument("--method", default="smoother", choices=list(METHODS), help="estimation method (default: smoother)")
-    p.add_argument("--out", required=True, help="estimate CSV to write (atomically)")
+    p.add_argument("--out", required=True,
+                   help="estimate CSV to write (atomically; never over an input), or - for standard output")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="method option, repeatable (see the method's documentation)")
     p.add_argument("--preset", default=None, metavar="NAME",
                    help="named smoother settings (method smoother; -O options win over it), e.g. hand-held-low-rate: "
                         "fast hand-held motion at 50–100 Hz on real sensors (gfimu.smoother.presets)")
-    p.add_argument("--lag-s", type=float, default=None, help="fixed-lag smoother lag in seconds")
+    p.add_argument("--lag-s", type=positive("s"), default=None,
+                   help="fixed-lag smoother lag [s] (default: the method's, see -O lag_s)")
     p.add_argument("--sigma", action="store_true", help="also write one-sigma uncertainties where the method gives them")
     p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
     p.add_argument("--orientation", choices=["none", "inclinometer", "gyro", "estimate"], default="none",
@@ -50,28 +38,30 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from .. import io as gio
     from ..estimators import make_estimator
+    from ..io.outputs import check_output, write_output
 
+    out = check_output(args.out, [args.log, args.calibration], "--out", stdout=True)
+    options = parse_options(args.option)
     if getattr(args, "preset", None) is not None:  # checked before the log is read
         if args.method != "smoother":
             raise CLIError(f"--preset applies to --method smoother only, not {args.method!r}")
         from ..smoother.presets import apply_preset
 
         apply_preset(args.preset)
-    log = gio.read_log(args.log)
-    if args.calibration:
-        from ..calibration import apply_calibration, read_calibration
-
-        log = apply_calibration(log, read_calibration(args.calibration))
-    options = parse_options(args.option)
+        options["preset"] = args.preset
     if args.lag_s is not None:
         if args.method != "fixed-lag":
             raise CLIError("--lag-s applies to --method fixed-lag only")
         options["lag_s"] = args.lag_s
     if args.sigma:
         options["compute_sigma"] = True
-    if getattr(args, "preset", None) is not None:
-        options["preset"] = args.preset
+    check_method_options(args.method, options)
     est = make_estimator(args.method, **options)
+    log = gio.read_log(args.log)
+    if args.calibration:
+        from ..calibration import apply_calibration, read_calibration
+
+        log = apply_calibration(log, read_calibration(args.calibration))
     reason = est.applicable(log.array)
     if reason:
         raise CLIError(f"method {args.method!r} cannot run on {args.log}: {reason}")
@@ -82,6 +72,7 @@ def run(args) -> int:
         from ..estimators.gravity import add_orientation
 
         motion = add_orientation(log, motion, source=args.orientation)
-    gio.write_motion_csv(motion, args.out)
-    print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {args.out}")
+    write_output(out, gio.motion_csv_chunks(motion))
+    print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {args.out}",
+          file=sys.stderr if out is None else sys.stdout)
     return 0

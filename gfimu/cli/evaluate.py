@@ -2,7 +2,7 @@
 
 The second argument is a truth or reference CSV, or a log folder: its
 ``truth.csv`` is used, else its ``reference.csv``. Rows whose reference has
-``valid`` = 0 are left out (see :mod:`gfimu.io`).
+``valid`` = 0 are left out (see :mod:`gfimu.io.tables`).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 from . import CLIError
+from .options import non_negative
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,12 +27,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("estimate", help="estimate CSV (as written by gfimu estimate)")
     p.add_argument("truth", help="truth or reference CSV, or a log folder")
     p.add_argument("--format", choices=["markdown", "csv", "json"], default="markdown", help="output format")
-    p.add_argument("--out", default=None, help="write the table to this file (atomically) instead of stdout")
+    p.add_argument("--out", default=None,
+                   help="write the table to this file (atomically; never over an input) instead of standard output (-)")
     p.add_argument("--against", choices=["auto", "truth", "reference"], default="auto",
                    help="with a log folder: compare with truth.csv or reference.csv (default: truth if present)")
     p.add_argument("--interpolate", action="store_true",
                    help="if the timestamps differ, interpolate the truth at the estimate's timestamps")
-    p.add_argument("--sign-threshold", type=float, default=0.1, metavar="RADPS",
+    p.add_argument("--sign-threshold", type=non_negative("rad/s"), default=0.1, metavar="RADPS",
                    help="count wrong signs only for ω components above this magnitude (default 0.1 rad/s)")
     p.set_defaults(func=run)
 
@@ -55,6 +57,9 @@ def run(args) -> int:
     from .. import io as gio
     from ..evaluation import EvaluationAlignmentWarning, evaluate
 
+    from ..io.outputs import check_output, write_output
+
+    out = check_output(args.out, [args.estimate, args.truth], "--out", stdout=True)
     truth_path = _truth_path(args.truth, args.against)
     estimate = gio.read_motion_csv(args.estimate, allow_nan=True)
     truth, valid = gio.read_motion_table(truth_path)
@@ -68,9 +73,7 @@ def run(args) -> int:
         text = result.to_csv()
     else:
         text = result.to_json()
-    if args.out:
-        gio.atomic_write_text(args.out, text)
+    write_output(out, [text])
+    if out is not None:
         print(f"evaluation of {args.estimate} -> {args.out} ({result.summary()})")
-    else:
-        print(text, end="")
     return 0

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from . import CLIError
+from .options import non_negative
 
 PREFIXES = {"a": "accel_b_mps2", "f": "specific_force_b_mps2", "dw": "omega_dot_b_radps2", "w": "omega_b_radps"}
 
@@ -23,11 +24,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", help="log directory (array.toml + imu.csv, truth.csv or reference.csv)")
     p.add_argument("estimates", nargs="*", help="estimate CSV files (gfimu estimate --out ...)")
-    p.add_argument("--out", required=True, help="figure file to write")
+    p.add_argument("--out", required=True,
+                   help="figure file to write (atomically; never over an input); .png, .svg or .pdf")
     p.add_argument("--kind", choices=["time", "polhode", "condition"], default="time", help="figure (default: time)")
     p.add_argument("--quantities", default=None, help="comma-separated among w, dw, a, f (default: all available)")
-    p.add_argument("--start-s", type=float, default=None, help="first second to show (from the log start)")
-    p.add_argument("--end-s", type=float, default=None, help="last second to show")
+    p.add_argument("--start-s", type=non_negative("s"), default=None,
+                   help="first second to show, from the log start [s] (default: the start)")
+    p.add_argument("--end-s", type=non_negative("s"), default=None, help="last second to show [s] (default: the end)")
     p.add_argument("--no-errors", action="store_true", help="time plot without the error panels")
     p.set_defaults(func=run)
 
@@ -45,6 +48,17 @@ def run(args) -> int:
     from .. import io as gio, plots
     from ..compare import condition_vs_scale
 
+    from ..io.outputs import check_output
+
+    out = check_output(args.out, [args.log, *args.estimates], "--out")
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if out.suffix.lower().lstrip(".") not in formats:
+        raise CLIError(f"--out {args.out}: the figure format comes from the suffix; use one of "
+                       f"{', '.join('.' + f for f in sorted(formats))}")
+    if args.start_s is not None and args.end_s is not None and args.end_s <= args.start_s:
+        raise CLIError(f"--end-s {args.end_s:g} must be after --start-s {args.start_s:g}")
     log = gio.read_log(args.log)
     if args.kind == "condition":
         positions = np.array([a.position_m for a in log.array.accelerometers])

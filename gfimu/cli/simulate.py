@@ -6,6 +6,7 @@ import argparse
 import textwrap
 
 from . import CLIError
+from .options import integer, non_negative, parse_options, positive
 
 ARRAY_CHOICES = ("cube", "paper001", "single-triad", "mimu4444")
 
@@ -44,18 +45,23 @@ def register(sub: argparse._SubParsersAction) -> None:
         ) + _scenario_help(),
     )
     p.add_argument("scenario", choices=list(SCENARIOS), metavar="SCENARIO", help="motion to simulate (see above)")
-    p.add_argument("--out", required=True, help="log folder to write")
+    p.add_argument("--out", required=True,
+                   help="log folder to write (created when missing; an existing non-empty folder needs --force)")
+    p.add_argument("--force", action="store_true",
+                   help="write into a non-empty --out folder: its array.toml, imu.csv, truth.csv and reference.csv "
+                        "are replaced or removed, other files are kept")
     p.add_argument("--array", default=None,
                    help="cube | paper001 | single-triad | mimu4444 | PATH/array.toml (default: cube, "
                         "or the block's single triad for the freeflight scenarios)")
-    p.add_argument("--half-edge-m", type=float, default=None, help="half edge of the cube array (default 0.05 m)")
-    p.add_argument("--rate-hz", type=float, default=None, help="sample rate (default: the scenario's)")
-    p.add_argument("--duration-s", type=float, default=None, help="length (default: the scenario's)")
-    p.add_argument("--noise-std-mps2", type=float, default=None,
-                   help="white accelerometer noise per axis (default: array.toml's noise_std_mps2, "
+    p.add_argument("--half-edge-m", type=positive("m"), default=None,
+                   help="half edge of the cube array [m] (default 0.05)")
+    p.add_argument("--rate-hz", type=positive("Hz"), default=None, help="sample rate [Hz] (default: the scenario's)")
+    p.add_argument("--duration-s", type=positive("s"), default=None, help="length [s] (default: the scenario's)")
+    p.add_argument("--noise-std-mps2", type=non_negative("m/s^2"), default=None,
+                   help="white accelerometer noise per axis [m/s^2] (default: array.toml's noise_std_mps2, "
                         "else the ADXL330 figures of paper 000)")
     p.add_argument("--no-noise", action="store_true", help="exact readings (no sensor errors at all)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random motion and noise (default 0)")
+    p.add_argument("--seed", type=integer(0), default=0, help="seed of the random motion and noise (default 0)")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="scenario option, repeatable (e.g. -O spin_radps=20, -O start_s=5)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -89,13 +95,16 @@ def _array(args):
 
 def run(args) -> int:
     from .. import io as gio
+    from ..io.outputs import prepare_log_folder
     from ..simulate import SensorErrors, simulate
-    from .estimate import parse_options
 
+    array_input = None
+    if args.array is not None and args.array not in ARRAY_CHOICES:
+        array_input = args.array
+    options = parse_options(args.option)
     if args.no_noise and args.noise_std_mps2 is not None:
         raise CLIError("--no-noise and --noise-std-mps2 exclude each other")
-    if args.noise_std_mps2 is not None and not args.noise_std_mps2 >= 0:
-        raise CLIError(f"--noise-std-mps2 must be >= 0, got {args.noise_std_mps2}")
+    prepare_log_folder(args.out, [array_input], force=args.force)
     if args.no_noise:
         noise = SensorErrors.none()
     elif args.noise_std_mps2 is not None:
@@ -103,7 +112,7 @@ def run(args) -> int:
     else:
         noise = None
     log = simulate(args.scenario, array=_array(args), rate_hz=args.rate_hz, duration_s=args.duration_s,
-                   noise=noise, seed=args.seed, progress=not args.no_progress, **parse_options(args.option))
+                   noise=noise, seed=args.seed, progress=not args.no_progress, **options)
     gio.write_log(log, args.out)
     print(f"{args.scenario}: {len(log)} samples at {log.rate_hz:g} Hz ({log.array.name}, "
           f"{log.array.n_axes} accelerometer axes) -> {args.out}")

@@ -173,14 +173,15 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     atomic_write(path, [data], binary=True)
 
 
-def install_signal_cleanup() -> None:
+def install_signal_cleanup() -> dict:
     """On SIGINT or SIGTERM: remove the temporary files being written, then exit 130 or 143.
 
     Only from the main thread (signal handlers can be set nowhere else);
-    elsewhere this does nothing.
+    elsewhere this does nothing. Returns the previous handlers, for
+    :func:`restore_signal_handlers`.
     """
     if threading.current_thread() is not threading.main_thread():
-        return
+        return {}
 
     def handler(signum, frame):  # noqa: ARG001
         remove_temporaries()
@@ -192,5 +193,14 @@ def install_signal_cleanup() -> None:
             pass
         raise SystemExit(128 + signum)
 
+    previous = {}
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, handler)
+        previous[sig] = signal.signal(sig, handler)
+    return previous
+
+
+def restore_signal_handlers(previous: dict) -> None:
+    """Put back the handlers :func:`install_signal_cleanup` replaced."""
+    for sig, old in previous.items():
+        if old is not None:
+            signal.signal(sig, old)

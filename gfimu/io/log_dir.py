@@ -18,6 +18,7 @@ import numpy as np
 from ..log import Log
 from ..motion import Motion
 from .array_toml import read_array_toml, write_array_toml
+from .atomic import destination
 from .errors import LogFormatError, LogGapWarning
 from .tables import read_imu_csv, read_motion_csv, read_motion_table, write_imu_csv, write_motion_csv
 
@@ -85,17 +86,32 @@ def read_log(path: str | os.PathLike) -> Log:
 def write_log(log: Log, path: str | os.PathLike) -> None:
     """Write a log folder: array.toml, imu.csv, and truth.csv / reference.csv when present.
 
-    Each file is written atomically; the folder is created when needed.
+    Each file is written atomically; the folder is created when needed. A
+    log file of an earlier log in the folder that this log does not have
+    (for example a ``truth.csv``) is removed, so the folder holds exactly this
+    log; other files are kept. Every destination is checked before anything
+    is written (see :func:`gfimu.io.atomic.destination`).
     """
     folder = Path(path)
     folder.mkdir(parents=True, exist_ok=True)
-    write_array_toml(log.array, folder / "array.toml")
-    write_imu_csv(log, folder / "imu.csv")
-    if log.truth is not None:
-        _check_same_timestamps(log.truth, log.timestamps_ns, folder / "truth.csv", folder / "imu.csv")
-        write_motion_csv(log.truth, folder / "truth.csv")
+    truth = log.truth
+    reference = valid = None
+    if truth is not None:
+        _check_same_timestamps(truth, log.timestamps_ns, folder / "truth.csv", folder / "imu.csv")
     if log.reference is not None or log.invalid_reference is not None:
         reference = log.reference if log.reference is not None else Motion(log.timestamps_ns)
         _check_same_timestamps(reference, log.timestamps_ns, folder / "reference.csv", folder / "imu.csv")
         valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
+    names = ["array.toml", "imu.csv"] + (["truth.csv"] if truth is not None else []) + (
+        ["reference.csv"] if reference is not None else [])
+    for name in LOG_FILES:
+        destination(folder / name)
+    write_array_toml(log.array, folder / "array.toml")
+    write_imu_csv(log, folder / "imu.csv")
+    if truth is not None:
+        write_motion_csv(truth, folder / "truth.csv")
+    if reference is not None:
         write_motion_csv(reference, folder / "reference.csv", valid=valid)
+    for name in LOG_FILES:
+        if name not in names and (folder / name).is_file():
+            (folder / name).unlink()

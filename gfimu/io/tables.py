@@ -319,17 +319,9 @@ def motion_columns(motion: Motion) -> list[tuple[str, str, np.ndarray]]:
     return cols
 
 
-def write_motion_csv(motion: Motion, path: str | os.PathLike, digits: int | None = None,
-                     valid: np.ndarray | None = None) -> None:
-    """Write a Motion (truth, reference or estimate) as CSV, atomically.
-
-    Quantities that are ``None`` are left out; ``sigma`` entries become
-    ``sigma_`` columns. ``digits=None`` writes floats exactly (shortest
-    round-trip form); an integer writes that many significant digits
-    (``%.9g`` is ample for estimates). ``valid`` (N,) bool adds the ``valid []``
-    column of reference files. Non-finite estimate values are written as
-    ``nan``/``inf`` and can be read back with ``allow_nan=True``.
-    """
+def motion_csv_chunks(motion: Motion, digits: int | None = None, valid: np.ndarray | None = None,
+                      path: str | os.PathLike = "<estimate>") -> Iterator[str]:
+    """Text chunks of a motion CSV (see :func:`write_motion_csv`); checks run before the first chunk."""
     cols = motion_columns(motion)
     header = [TIMESTAMP_HEADER] + [f"{name} [{unit}]" for name, unit, _ in cols]
     n = len(motion)
@@ -344,7 +336,21 @@ def write_motion_csv(motion: Motion, path: str | os.PathLike, digits: int | None
         flags = valid.astype(bool).astype(np.int8)
     if not cols and valid is None:
         raise ValueError(f"{path}: the motion has no quantities to write")
-    atomic_write(path, _csv_chunks(header, motion.timestamps_ns, values, fmt, flags))
+    return _csv_chunks(header, motion.timestamps_ns, values, fmt, flags)
+
+
+def write_motion_csv(motion: Motion, path: str | os.PathLike, digits: int | None = None,
+                     valid: np.ndarray | None = None) -> None:
+    """Write a Motion (truth, reference or estimate) as CSV, atomically.
+
+    Quantities that are ``None`` are left out; ``sigma`` entries become
+    ``sigma_`` columns. ``digits=None`` writes floats exactly (shortest
+    round-trip form); an integer writes that many significant digits
+    (``%.9g`` is ample for estimates). ``valid`` (N,) bool adds the ``valid []``
+    column of reference files. Non-finite estimate values are written as
+    ``nan``/``inf`` and can be read back with ``allow_nan=True``.
+    """
+    atomic_write(path, motion_csv_chunks(motion, digits, valid, path))
 
 
 def read_motion_table(path: str | os.PathLike, allow_nan: bool = False) -> tuple[Motion, np.ndarray | None]:

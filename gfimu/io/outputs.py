@@ -1,0 +1,146 @@
+"""The output policy of every gfimu command.
+
+One rule for every file a command writes:
+
+- it is written through :func:`gfimu.io.atomic.atomic_path` (temporary file
+  in the destination folder, fsync, rename; the temporary file is removed on
+  any error and on SIGINT/SIGTERM);
+- it never replaces one of the command's inputs, nor any file of an input
+  log folder: paths are compared after resolving links, and by device and
+  inode (hard links);
+- it never replaces anything that is not a regular file (a folder, a device
+  such as ``/dev/null``, a FIFO, a socket);
+- ``-`` means standard output where the command allows it (tables, estimates).
+
+Log folders (``convert``, ``simulate``) are written by
+:func:`prepare_log_folder` + :func:`gfimu.io.write_log`: an existing
+non-empty folder is refused unless ``force``, and then only the files a log
+owns (:data:`gfimu.io.log_dir.LOG_FILES`) are replaced or removed, so no
+stale truth or reference of an earlier run stays next to the new log.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+
+from .atomic import atomic_write, destination, file_kind
+from .errors import OutputError
+from .log_dir import LOG_FILES
+
+STDOUT = "-"
+
+
+def input_files(paths: Iterable[str | os.PathLike | None]) -> list[Path]:
+    """The files that stand behind a command's inputs.
+
+    A folder stands for every file in it (a log folder: its ``array.toml``,
+    ``imu.csv``, ``truth.csv``, ``reference.csv`` and whatever else it
+    holds); a file of a log folder also stands for the other files of that
+    log. ``None`` and ``-`` are skipped; paths that do not exist are kept
+    (compared by name).
+    """
+    out: list[Path] = []
+    for p in paths:
+        if p is None or str(p) == STDOUT:
+            continue
+        p = Path(p)
+        out.append(p)
+        if p.is_dir():
+            out.extend(c for c in p.iterdir() if c.is_file())
+        elif p.name in LOG_FILES and p.parent.is_dir():
+            out.extend(p.parent / name for name in LOG_FILES if (p.parent / name).exists())
+    return out
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """True when ``a`` and ``b`` are the same file: same resolved path, or same device and inode."""
+    try:
+        if os.path.samefile(a, b):
+            return True
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def _refuse_inputs(path: Path, shown: str, inputs: list[Path], what: str) -> None:
+    for inp in inputs:
+        if same_file(path, inp):
+            same = "" if os.path.realpath(inp) == os.path.realpath(path) else f" ({inp}, the same file)"
+            raise OutputError(f"{what} {shown}: is an input of this command{same}; refusing to overwrite it "
+                              "(write the output elsewhere)")
+
+
+def check_output(path: str | os.PathLike | None, inputs: Iterable[str | os.PathLike | None] = (),
+                 what: str = "--out", stdout: bool = False) -> Path | None:
+    """Check one output file before any work is done; ``None`` means standard output.
+
+    Refused with :class:`OutputError` naming ``what`` (the option): ``-``
+    where ``stdout`` is not allowed; one of the ``inputs`` or a file of an
+    input log folder; an existing destination that is not a regular file; a
+    missing output folder.
+    """
+    if path is None:
+        return None
+    if str(path) == STDOUT:
+        if not stdout:
+            raise OutputError(f"{what} -: this output cannot go to standard output; give a file name")
+        return None
+    shown = str(path)
+    try:
+        target = destination(path)
+    except OutputError as exc:
+        raise OutputError(f"{what} {exc}") from None
+    _refuse_inputs(target, shown, input_files(inputs), what)
+    return target
+
+
+def write_output(target: Path | None, chunks: Iterable[str]) -> None:
+    """Write text chunks to ``target`` atomically, or to standard output when ``target`` is ``None``."""
+    if target is None:
+        for chunk in chunks:
+            sys.stdout.write(chunk)
+        sys.stdout.flush()
+        return
+    atomic_write(target, chunks)
+
+
+def prepare_log_folder(folder: str | os.PathLike, inputs: Iterable[str | os.PathLike | None] = (),
+                       force: bool = False, what: str = "--out") -> Path:
+    """Check the folder a command writes a log into, before any work is done.
+
+    Refused with :class:`OutputError`: ``-``; a path that exists and is not
+    a folder; a folder holding one of the command's inputs under a name the
+    log writes; a non-empty folder unless ``force``; with ``force``, a log
+    file name that is not a regular file. A missing folder is fine
+    (:func:`gfimu.io.write_log` creates it).
+    """
+    if str(folder) == STDOUT:
+        raise OutputError(f"{what} -: a log is a folder; give its path")
+    p = Path(folder)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        st = None
+    except NotADirectoryError:
+        raise OutputError(f"{what} {p}: a part of this path is a file, not a folder") from None
+    if st is not None and not os.path.isdir(p):
+        raise OutputError(f"{what} {p}: exists and is {file_kind(st.st_mode)}; a log is written into a folder")
+    ins = input_files(inputs)
+    for name in LOG_FILES:
+        _refuse_inputs(p / name, str(p / name), ins, what)
+    if st is None:  # created by write_log, once there is a log to write
+        return p
+    entries = sorted(c.name for c in p.iterdir())
+    if entries and not force:
+        shown = ", ".join(entries[:6]) + (", ..." if len(entries) > 6 else "")
+        raise OutputError(f"{what} {p}: the folder is not empty ({shown}); use --force to replace the log in it "
+                          f"({', '.join(LOG_FILES)} are replaced or removed, other files are kept)")
+    for name in LOG_FILES:
+        try:
+            destination(p / name)
+        except OutputError as exc:
+            raise OutputError(f"{what} {exc}") from None
+    return p
