@@ -10,6 +10,9 @@ from hypothesis import strategies as st
 
 from gfimu import io as gio
 from gfimu.io import tables, units
+
+# the toy logs here have arbitrary timestamps and readings; plausibility is tested in test_bad_inputs.py
+pytestmark = pytest.mark.filterwarnings("ignore::gfimu.io.errors.LogPlausibilityWarning")
 from gfimu.array import Accelerometer, Body, Gyroscope, Inclinometer, SensorArray, cube_array, paper001_array
 from gfimu.log import Log
 from gfimu.motion import QUANTITIES, Motion
@@ -254,15 +257,42 @@ def set_field(path, line: int, field: int, value: str) -> None:
 
 
 @pytest.mark.parametrize("value, message", [
-    ("nan", r"imu\.csv:4: column 'a2_y' is 'nan'; values must be finite"),
-    ("-inf", r"imu\.csv:4: column 'a2_y' is '-inf'; values"),
-    ("1e999", r"imu\.csv:4: column 'a2_y' is '1e999' = inf; values must be finite"),
     ("abc", r"imu\.csv:4: column 'a2_y' \(field 6\) value 'abc' is not a number"),
     ("", r"imu\.csv:4: column 'a2_y' \(field 6\) is empty"),
+    ("0x12", r"imu\.csv:4: column 'a2_y' \(field 6\) value '0x12' is not a number"),
 ])
-def test_bad_values_name_line_and_column(tmp_path, value, message):
+def test_text_where_a_reading_belongs_names_line_and_column(tmp_path, value, message):
     d, _ = cube_log_dir(tmp_path)
     set_field(d / "imu.csv", 4, 5, value)
+    with pytest.raises(gio.LogFormatError, match=message):
+        gio.read_log(d)
+
+
+@pytest.mark.parametrize("value, expected", [("nan", math.nan), ("-inf", -math.inf), ("1e999", math.inf),
+                                             ("1e300", 1e300)])
+def test_non_finite_and_huge_readings_are_let_through(tmp_path, value, expected):
+    d, log = cube_log_dir(tmp_path)
+    set_field(d / "imu.csv", 4, 5, value)
+    if math.isfinite(expected):
+        back = gio.read_log(d)
+    else:
+        with pytest.warns(gio.LogPlausibilityWarning, match=r"imu\.csv:4: 1 accelerometer reading\(s\) are NaN or "
+                          r"infinite \(first in column 'a2_y'\)"):
+            back = gio.read_log(d)
+    got = back.accel_mps2[2, 4]
+    assert (math.isnan(got) and math.isnan(expected)) or got == expected
+    mask = np.ones_like(log.accel_mps2, dtype=bool)
+    mask[2, 4] = False
+    assert np.array_equal(back.accel_mps2[mask], log.accel_mps2[mask])
+
+
+@pytest.mark.parametrize("value, message", [
+    ("nan", r"truth\.csv:4: column 'w_y' is 'nan'; values must be finite"),
+    ("1e999", r"truth\.csv:4: column 'w_y' is '1e999' = inf; values must be finite"),
+])
+def test_truth_must_be_finite(tmp_path, value, message):
+    d, _ = cube_log_dir(tmp_path)
+    set_field(d / "truth.csv", 4, 2, value)
     with pytest.raises(gio.LogFormatError, match=message):
         gio.read_log(d)
 
@@ -279,11 +309,13 @@ def test_random_nan_positions_are_reported_at_the_first(tmp_path_factory, data):
         lines[row + 1] = ",".join(parts)
     (d / "imu.csv").write_text("\n".join(lines))
     row, col = min(cells)
-    with pytest.raises(gio.LogFormatError) as info:
-        gio.read_log(d)
-    assert info.value.line == row + 2
-    assert f"imu.csv:{row + 2}: column '{log.array.accel_columns[col]}'" in str(info.value)
-    assert f"({len(cells)} non-finite value(s) in the file)" in str(info.value)
+    with pytest.warns(gio.LogPlausibilityWarning) as record:
+        back = gio.read_log(d)
+    text = " ".join(str(w.message) for w in record)
+    assert f"imu.csv:{row + 2}: {len(cells)} accelerometer reading(s) are NaN or infinite (first in column " \
+           f"'{log.array.accel_columns[col]}')" in text
+    bad = ~np.isfinite(back.accel_mps2)
+    assert sorted(zip(*np.nonzero(bad))) == sorted(cells)
 
 
 @settings(max_examples=25, deadline=None)
@@ -464,7 +496,7 @@ def test_gaps_are_reported_as_warnings(tmp_path):
 
 def test_error_is_a_value_error_with_location_attributes(tmp_path):
     d, _ = cube_log_dir(tmp_path)
-    set_field(d / "imu.csv", 3, 2, "nan")
+    set_field(d / "imu.csv", 3, 2, "abc")
     with pytest.raises(ValueError) as info:
         gio.read_log(d)
     assert isinstance(info.value, gio.LogFormatError)

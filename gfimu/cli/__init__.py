@@ -21,6 +21,7 @@ import errno
 import importlib
 import os
 import sys
+import warnings
 
 COMMANDS = ("demo", "simulate", "estimate", "evaluate", "compare", "convert", "calibrate", "plot")
 
@@ -125,6 +126,18 @@ def error_message(exc: BaseException) -> tuple[str, int]:
     return f"{type(exc).__name__}: {_first_line(exc)} (run with --debug for the traceback)", EXIT_FAILURE
 
 
+def _warning_printer(command: str):
+    """Warnings as one line each: ``gfimu COMMAND: warning: ...`` (the full form with --debug)."""
+
+    def show(message, category, filename, lineno, file=None, line=None):  # noqa: ARG001
+        try:
+            print(f"gfimu {command}: warning: {message}", file=sys.stderr if file is None else file)
+        except (OSError, ValueError):
+            pass
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     from ..io.atomic import install_signal_cleanup, remove_temporaries, restore_signal_handlers
 
@@ -138,7 +151,10 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     previous = install_signal_cleanup()
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            if not args.debug:
+                warnings.showwarning = _warning_printer(args.command)
+            return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
         remove_temporaries()
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

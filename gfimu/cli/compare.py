@@ -58,7 +58,7 @@ def run(args) -> int:
     for method, opts in options.items():
         if method not in METHODS:
             raise CLIError(f"-O {method}.…: unknown method {method!r}; choose among: {', '.join(METHODS)}")
-        check_method_options(method, opts, flag=f"-O {method}.")
+        check_method_options(method, opts, prefix=f"{method}.")
     if getattr(args, "preset", None) is not None:
         if methods is not None and "smoother" not in methods:
             raise CLIError(f"--preset sets the smoother's options, but smoother is not among --methods {','.join(methods)}")

@@ -77,10 +77,15 @@ def integer(low: int | None = None, high: int | None = None) -> Callable[[str], 
 # --- -O KEY=VALUE --------------------------------------------------------------------
 
 def parse_value(text: str):
-    """A value as a Python literal when it reads as one (``4``, ``0.5``, ``True``, ``(1, 2)``), else the text."""
+    """A value as a Python literal when it reads as one (``4``, ``0.5``, ``True``, ``(1, 2)``), ``nan`` and
+    ``inf`` as floats, else the text."""
     try:
         return ast.literal_eval(text.strip())
     except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
+        pass
+    try:
+        return float(text)  # nan, inf
+    except ValueError:
         return text
 
 
@@ -130,7 +135,7 @@ def _kind_of(annotation, default) -> str | None:
     return None
 
 
-def check_method_options(method: str, options: dict, flag: str = "-O") -> dict:
+def check_method_options(method: str, options: dict, flag: str = "-O", prefix: str = "") -> dict:
     """Check the type of each option of ``method`` against its documented default; returns the options.
 
     A number where a number is expected (an integer is a valid float), True or
@@ -150,7 +155,7 @@ def check_method_options(method: str, options: dict, flag: str = "-O") -> dict:
         f = fields.get(key)
         if f is None:
             known = ", ".join(sorted(fields))
-            raise OptionError(f"{flag} {key}=...: method {method!r} has no option {key!r}; its options are: {known}")
+            raise OptionError(f"{flag} {prefix}{key}=...: method {method!r} has no option {key!r}; its options are: {known}")
         default = f.default if f.default is not dataclasses.MISSING else None
         kind = _kind_of(f.type, default)
         if kind is None or (value is None and default is None):
@@ -160,9 +165,9 @@ def check_method_options(method: str, options: dict, flag: str = "-O") -> dict:
               "float": isinstance(value, (int, float)) and not isinstance(value, bool),
               "str": isinstance(value, str)}[kind]
         if ok and kind == "float" and not math.isfinite(float(value)):
-            raise OptionError(f"{flag} {key}={value!r}: expected a finite number (option of method {method!r})")
+            raise OptionError(f"{flag} {prefix}{key}={value!r}: expected a finite number (option of method {method!r})")
         if not ok:
             expected = {"bool": "True or False", "int": "an integer", "float": "a number", "str": "text"}[kind]
-            raise OptionError(f"{flag} {key}={value!r}: expected {expected} (option of method {method!r}, "
+            raise OptionError(f"{flag} {prefix}{key}={value!r}: expected {expected} (option of method {method!r}, "
                               f"default {default!r})")
     return options

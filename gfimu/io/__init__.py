@@ -16,6 +16,7 @@ from .array_toml import (
     ARRAY_FORMAT,
     format_array_toml,
     format_toml,
+    load_array_toml,
     parse_array_toml,
     read_array_toml,
     write_array_toml,
@@ -44,7 +45,7 @@ __all__ = [
     "ARRAY_FORMAT", "GYRO_COLUMNS", "LOG_FILES", "STANDARD_GRAVITY_MPS2", "TILT_COLUMNS", "TIMESTAMP_HEADER",
     "TIME_UNITS_NS", "UNITS", "VALID_COLUMN", "LogFormatError", "LogFormatWarning", "LogGapWarning",
     "LogPlausibilityWarning", "OutputError", "atomic_path", "atomic_write", "atomic_write_bytes",
-    "atomic_write_text", "canonical_unit", "format_array_toml", "format_toml", "imu_columns", "motion_columns", "motion_csv_chunks",
+    "atomic_write_text", "canonical_unit", "format_array_toml", "format_toml", "imu_columns", "load_array_toml", "motion_columns", "motion_csv_chunks",
     "parse_array_toml", "read_array_toml", "read_imu_csv", "read_log", "read_motion_csv", "read_motion_table",
     "unit_factor", "write_array_toml", "write_imu_csv", "write_log", "write_motion_csv", "write_toml",
 ]

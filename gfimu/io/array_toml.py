@@ -126,6 +126,11 @@ def _rotation(ctx: _TomlContext, value, index: int, name: str) -> np.ndarray:
 
 def parse_array_toml(text: str, path: str | os.PathLike = "array.toml") -> SensorArray:
     """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line."""
+    return _parse(text, path)[0]
+
+
+def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | None]:
+    """(array, declared rate_hz or None) from the text of an ``array.toml``."""
     path = Path(path)
     try:
         doc = tomllib.loads(text)
@@ -141,6 +146,9 @@ def parse_array_toml(text: str, path: str | os.PathLike = "array.toml") -> Senso
     name = doc.get("name", "array")
     if not isinstance(name, str):
         raise ctx.error(f"expected a string, got {name!r}", key="name")
+    rate_hz = doc.get("rate_hz")
+    if rate_hz is not None and (not _is_number(rate_hz) or not math.isfinite(rate_hz) or rate_hz <= 0):
+        raise ctx.error(f"expected the nominal sample rate in Hz, a number > 0, got {rate_hz!r}", key="rate_hz")
     accs_doc = doc.get("accelerometers")
     if accs_doc is None:
         raise ctx.error("no [[accelerometers]] table; an array needs at least one accelerometer", key="accelerometers")
@@ -196,11 +204,16 @@ def parse_array_toml(text: str, path: str | os.PathLike = "array.toml") -> Senso
             body = Body(tuple(inertia))
         except ArrayModelError as exc:
             raise ctx.error(str(exc), "body", 0, "principal_inertia_kgm2") from None
-    return SensorArray(tuple(accs), name, gyro, inclinometer, body)
+    return SensorArray(tuple(accs), name, gyro, inclinometer, body), (None if rate_hz is None else float(rate_hz))
 
 
 def read_array_toml(path: str | os.PathLike) -> SensorArray:
     """Read ``array.toml`` (format ``gfimu-array/1``) into a :class:`SensorArray`."""
+    return load_array_toml(path)[0]
+
+
+def load_array_toml(path: str | os.PathLike) -> tuple[SensorArray, float | None]:
+    """Read ``array.toml``: (array, its optional ``rate_hz``, the nominal sample rate in Hz)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -212,7 +225,7 @@ def read_array_toml(path: str | os.PathLike) -> SensorArray:
         raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path) from None
     if not text.strip():
         raise LogFormatError(f"file is empty; expected format = \"{ARRAY_FORMAT}\" and [[accelerometers]] tables", path)
-    return parse_array_toml(text, path)
+    return _parse(text, path)
 
 
 # --- writing -------------------------------------------------------------------------

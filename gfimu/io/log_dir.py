@@ -17,10 +17,11 @@ import numpy as np
 
 from ..log import Log
 from ..motion import Motion
-from .array_toml import read_array_toml, write_array_toml
+from . import plausibility
+from .array_toml import load_array_toml, write_array_toml
 from .atomic import destination
-from .errors import LogFormatError, LogGapWarning
-from .tables import read_imu_csv, read_motion_csv, read_motion_table, write_imu_csv, write_motion_csv
+from .errors import LogFormatError, LogGapWarning, LogPlausibilityWarning
+from .tables import read_imu_table, read_motion_csv, read_motion_table, write_imu_csv, write_motion_csv
 
 LOG_FILES = ("array.toml", "imu.csv", "truth.csv", "reference.csv")
 """The files of a log folder, in the order they are written."""
@@ -51,16 +52,21 @@ def _check_same_timestamps(motion: Motion, t_imu: np.ndarray, path: Path, imu_pa
                              f"({t_imu[r]}); it needs the same timestamps as {imu_path.name}", path, r + 2)
 
 
-def read_log(path: str | os.PathLike) -> Log:
+def read_log(path: str | os.PathLike, check: bool = True) -> Log:
     """Read a log folder (array.toml, imu.csv, and truth.csv / reference.csv when present).
 
-    Gaps in time are reported with a :class:`LogGapWarning`.
+    Gaps in time are reported with a :class:`LogGapWarning`; with ``check``,
+    implausible values (a sample rate that disagrees with ``rate_hz``,
+    timestamps in another unit than their header says, positions in mm,
+    readings in g or mg, NaN readings) with a
+    :class:`~gfimu.io.errors.LogPlausibilityWarning` each (see
+    :mod:`gfimu.io.plausibility`).
     """
     folder = _log_folder(path)
     array_path = folder / "array.toml"
     imu_path = folder / "imu.csv"
-    array = read_array_toml(array_path)
-    t, accel, gyro, tilt = read_imu_csv(imu_path, array, array_path.name)
+    array, declared_rate_hz = load_array_toml(array_path)
+    t, accel, gyro, tilt, time_unit, accel_unit = read_imu_table(imu_path, array, array_path.name)
     truth = reference = invalid = None
     if (folder / "truth.csv").is_file():
         truth = read_motion_csv(folder / "truth.csv")
@@ -80,6 +86,13 @@ def read_log(path: str | os.PathLike) -> Log:
             f"{imu_path}: {len(gaps)} gap(s) in time (steps over 1.5 x the median {worst.nominal_dt_s:.6g} s); the "
             f"largest, {worst.dt_s:.6g} s, is before line {worst.index + 2}; estimators restart at each gap",
             LogGapWarning, stacklevel=2)
+    if check:
+        found = (plausibility.check_rate(t, declared_rate_hz, time_unit, str(imu_path), str(array_path))
+                 + plausibility.check_geometry(array, str(array_path))
+                 + plausibility.check_finite(log, str(imu_path))
+                 + plausibility.check_gravity(log, str(imu_path), accel_unit or "m s^-2"))
+        for message in found:
+            warnings.warn(message, LogPlausibilityWarning, stacklevel=2)
     return log
 
 

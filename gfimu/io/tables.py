@@ -7,9 +7,11 @@ missing, duplicated or unknown-unit columns, timestamps that are not strictly
 increasing, empty files, ragged rows, text where a number belongs. Extra
 columns are ignored.
 
-Finite values. Readings, truth and reference must be finite, except in
-reference rows marked ``valid`` = 0; estimates may hold non-finite values
-(``allow_nan=True``).
+Finite values. ``imu.csv`` readings may be ``nan``, ``inf`` or huge numbers
+(a sensor's glitch): they are read as written and masked later, with a
+warning; text that is not a number is an error. Truth and reference must be
+finite, except in reference rows marked ``valid`` = 0; estimates may hold
+non-finite values (``allow_nan=True``).
 
 Validity mask. ``reference.csv`` may carry a column ``valid []`` holding 1
 where the reference is valid and 0 where it is not (for example a saturated
@@ -266,14 +268,23 @@ def _missing_imu_columns(csv: _Csv, array: SensorArray, array_path: str) -> None
 
 
 def read_imu_csv(path: str | os.PathLike, array: SensorArray, array_path: str = "array.toml"):
-    """Read ``imu.csv`` for ``array``: (timestamps_ns, accel_mps2, gyro_b_radps | None, tilt_rad | None)."""
+    """Read ``imu.csv`` for ``array``: (timestamps_ns, accel_mps2, gyro_b_radps | None, tilt_rad | None).
+
+    Readings may be NaN, infinite or huge (a sensor's glitch): they are read
+    as written and masked later; text that is not a number is an error.
+    """
+    return read_imu_table(path, array, array_path)[:4]
+
+
+def read_imu_table(path: str | os.PathLike, array: SensorArray, array_path: str = "array.toml"):
+    """As :func:`read_imu_csv`, plus the header's timestamp unit and the unit of the first accelerometer column."""
     csv = _Csv(Path(path))
     wanted = imu_columns(array)
     indices = [csv.find(name) for name, _ in wanted]
     _missing_imu_columns(csv, array, array_path)
     factors = np.array([csv.factor(i, kind) for i, (_, kind) in zip(indices, wanted)])
     t = csv.timestamps_ns()
-    values = csv.values(indices)
+    values = csv.values(indices, allow_nan=True)
     values = values * factors if np.any(factors != 1.0) else values
     n_acc = array.n_axes
     accel = values[:, :n_acc]
@@ -283,7 +294,8 @@ def read_imu_csv(path: str | os.PathLike, array: SensorArray, array_path: str = 
         gyro, k = values[:, k:k + 3], k + 3
     if array.inclinometer is not None:
         tilt = values[:, k:k + 2]
-    return t, accel, gyro, tilt
+    accel_unit = csv.columns[indices[0]][1] if indices else "m s^-2"
+    return t, accel, gyro, tilt, csv.time_unit, accel_unit
 
 
 def write_imu_csv(log: Log, path: str | os.PathLike) -> None:

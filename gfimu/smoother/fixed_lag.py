@@ -513,24 +513,34 @@ class FixedLagSmoother:
 
     def _remember_newest(self) -> None:
         k, t_ns = self._window[-1]
-        w, dw, f = self._values_of(k)
+        w, dw, f = self._values_of(k, t_ns)
         self._prev = (t_ns, w, dw, f)
 
-    def _values_of(self, k: int):
+    def _values_of(self, k: int, t_ns: int):
         calc = self._smoother.calculateEstimateVector
         kw, kd, kf = model.keys(k)
-        return calc(kw).reshape(3), calc(kd).reshape(3), calc(kf).reshape(3)
+        try:
+            return calc(kw).reshape(3), calc(kd).reshape(3), calc(kf).reshape(3)
+        except RuntimeError as err:  # gtsam's IndeterminantLinearSystem and the like
+            raise FixedLagSmootherError(
+                f"fixed-lag smoother could not solve the state at t = {self._time_s(t_ns):.6f} s after the stream "
+                f"start ({t_ns} ns): {err}".strip()) from err
 
     def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
         k, t_ns = entry
         if self._prev is not None and k == self._k:
             w, dw, f = self._prev[1], self._prev[2], self._prev[3]
         else:
-            w, dw, f = self._values_of(k)
+            w, dw, f = self._values_of(k, t_ns)
         sig = (None, None, None)
         if with_sigma:
-            sig = tuple(np.sqrt(np.clip(np.diag(self._smoother.marginalCovariance(key)), 0, None))
-                        for key in model.keys(k))
+            try:
+                sig = tuple(np.sqrt(np.clip(np.diag(self._smoother.marginalCovariance(key)), 0, None))
+                            for key in model.keys(k))
+            except RuntimeError as err:
+                raise FixedLagSmootherError(
+                    f"fixed-lag smoother could not compute the uncertainty at t = {self._time_s(t_ns):.6f} s after "
+                    f"the stream start ({t_ns} ns): {err}".strip()) from err
         return StateEstimate(t_ns, w, dw, f, *sig)
 
     def _emit_due(self) -> list[StateEstimate]:
@@ -613,12 +623,13 @@ class FixedLagEstimator(SmootherOptions):
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         n = len(log)
-        if n == 0:
-            raise ValueError(f"{log.source}: the log has no samples")
+        if n < 2:
+            raise ValueError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
+                             "(a single reading does not tell the angular velocity)")
         reason = self.applicable(log.array)
         if reason:
             raise ValueError(f"{log.source}: {reason}")
-        rate_hz = log.rate_hz if n > 1 else 500.0
+        rate_hz = log.rate_hz
         smoother = self.smoother(log.array, rate_hz)
         out = np.full((n, 9), np.nan)
         sig = np.full((n, 9), np.nan) if self.compute_sigma else None

@@ -259,7 +259,11 @@ def options_reason(array: SensorArray, options: SmootherOptions, attitude_suppor
         if array.body is None:
             return f"free_flight needs the body's principal inertia ([body] in array.toml); array {array.name!r} has none"
         return None
-    if array.n_axes < 6 and not (array.gyroscope is not None and options.use_gyro):
+    gyro_used = array.gyroscope is not None and options.use_gyro
+    if not gyro_used and len(array.accelerometers) > 1 and float(np.ptp(array.axis_positions_m, axis=0).max()) < 1e-6:
+        return (f"the accelerometers of array {array.name!r} all sit at one point (position_m spans less than "
+                "1 µm): the rotation is not sensed; check position_m in array.toml (metres, in the body frame)")
+    if array.n_axes < 6 and not gyro_used:
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without free flight or a gyroscope "
                 "ω cannot be observed (use free_flight=True with the body's inertia)")
     return None

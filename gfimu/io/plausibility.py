@@ -1,0 +1,164 @@
+"""Plausibility of a log that reads: values that are valid but probably not what the writer meant.
+
+Each check returns plain sentences that name the file, what was found and
+the likely mistake; :func:`gfimu.io.read_log` issues them as
+:class:`~gfimu.io.errors.LogPlausibilityWarning`. Nothing here changes the
+log. The checks:
+
+- the sample rate from the timestamps against ``rate_hz`` in ``array.toml``
+  (when given);
+- the timestamp unit: steps that imply more than 100 kHz or less than 0.1 Hz
+  under the header's unit, with the units that would give a plausible rate;
+- the array size: an accelerometer more than 1 m from the body origin, or
+  all of them within 1 mm of each other (``position_m`` is in metres);
+- gravity: the specific force of a still array, in m/s², far from
+  9.81 (readings in g or mg under a ``[m s^-2]`` header);
+- readings that are NaN or infinite (masked later; counted here).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..array import SensorArray
+from ..log import Log
+from .units import STANDARD_GRAVITY_MPS2, TIME_UNITS_NS
+
+MAX_RATE_HZ = 100e3
+MIN_RATE_HZ = 0.1
+RATE_TOLERANCE = 0.05  # relative difference between rate_hz and the timestamps' rate
+MAX_POSITION_M = 1.0
+MIN_EXTENT_M = 1e-3
+STILL_WINDOW_S = 0.25
+STILL_SENSOR_SPREAD = 0.1  # sensors agree within 10 % of |f| (uncalibrated biases) ...
+STILL_TIME_SPREAD = 0.03  # ... and |f| varies by less than 3 % (std) over the window
+
+
+def _median_step_ns(t_ns: np.ndarray) -> float | None:
+    if t_ns.size < 2:
+        return None
+    return float(np.median(np.diff(t_ns)))
+
+
+def check_rate(t_ns: np.ndarray, declared_rate_hz: float | None, time_unit: str, imu_name: str,
+               array_name: str) -> list[str]:
+    """The timestamps' rate against the declared one, and the timestamp unit."""
+    out: list[str] = []
+    step = _median_step_ns(t_ns)
+    if step is None or step <= 0:
+        return out
+    rate = 1e9 / step
+    scale = TIME_UNITS_NS.get(time_unit, 1)
+    raw_step = step / scale
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        likely = []
+        for unit, ns in TIME_UNITS_NS.items():
+            r = 1e9 / (raw_step * ns)
+            if unit != time_unit and MIN_RATE_HZ <= r <= MAX_RATE_HZ:
+                likely.append((abs(np.log10(r) - 2.5), unit, r))  # closest to a few hundred Hz first
+        hint = ""
+        if likely:
+            _, unit, r = min(likely)
+            hint = (f"; likely the timestamps are in [{unit}] ({r:.4g} Hz): write the header as "
+                    f"'#timestamp [{unit}]'")
+        out.append(f"{imu_name}: the timestamps under '#timestamp [{time_unit}]' step by a median {raw_step:.6g} "
+                   f"{time_unit}, a sample rate of {rate:.4g} Hz, implausible for an IMU (expected between "
+                   f"{MIN_RATE_HZ:g} Hz and {MAX_RATE_HZ / 1e3:g} kHz){hint}")
+    if declared_rate_hz is not None and abs(rate / declared_rate_hz - 1.0) > RATE_TOLERANCE:
+        out.append(f"{array_name}: rate_hz = {declared_rate_hz:g}, but the timestamps of {imu_name} step by a "
+                   f"median {step / 1e6:.6g} ms ({rate:.4g} Hz); either rate_hz is wrong or the timestamps are "
+                   f"not in [{time_unit}]")
+    return out
+
+
+def check_geometry(array: SensorArray, array_name: str) -> list[str]:
+    """Positions that look like millimetres (or metres divided once too often)."""
+    out: list[str] = []
+    pos = np.array([a.position_m for a in array.accelerometers], dtype=float)
+    dist = np.linalg.norm(pos, axis=1)
+    far = int(np.argmax(dist))
+    if dist[far] > MAX_POSITION_M:
+        out.append(f"{array_name}: accelerometer {array.accelerometers[far].name!r} sits {dist[far]:.4g} m from "
+                   "the body origin; position_m is in metres: likely the positions were written in mm or cm")
+    if len(pos) > 1:
+        extent = float(np.max(np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=2)))
+        if extent == 0.0:
+            out.append(f"{array_name}: all {len(pos)} accelerometers have the same position_m; the rotation "
+                       "cannot be sensed from their differences: check position_m (metres, body frame)")
+        elif extent < MIN_EXTENT_M:
+            out.append(f"{array_name}: the accelerometers lie within {extent * 1e3:.3g} mm of each other; "
+                       "position_m is in metres: likely the positions were divided by 1000 once too often")
+    return out
+
+
+def _still_specific_force(log: Log) -> float | None:
+    """Median |f| [m/s²] over still stretches (every triad reads the same f in B, steadily); None if none."""
+    with np.errstate(all="ignore"):  # NaN or huge readings are simply not still
+        return _still_specific_force_of(log)
+
+
+def _still_specific_force_of(log: Log) -> float | None:
+    arr = log.array
+    triads, col = [], 0
+    for a in arr.accelerometers:
+        if tuple(a.axes) == ("x", "y", "z"):
+            triads.append((col, a.rotation_body_sensor))
+        col += len(a.axes)
+    if len(triads) < 2 or len(log) < 5:
+        return None
+    f_b = np.stack([log.accel_mps2[:, c:c + 3] @ np.asarray(rot).T for c, rot in triads], axis=1)  # (N, K, 3)
+    mean = np.mean(f_b, axis=1)
+    norm = np.linalg.norm(mean, axis=1)
+    spread = np.max(np.linalg.norm(f_b - mean[:, None, :], axis=2), axis=1)
+    finite = np.isfinite(norm) & np.isfinite(spread)
+    agree = finite & (spread <= STILL_SENSOR_SPREAD * norm) & (norm > 0)
+    step = _median_step_ns(log.timestamps_ns)
+    w = max(5, int(round(STILL_WINDOW_S * 1e9 / step))) if step and step > 0 else 5
+    if len(log) < w:
+        return None
+    still = []
+    for start in range(0, len(log) - w + 1, w):
+        sl = slice(start, start + w)
+        n = norm[sl]
+        if agree[sl].all() and np.std(n) <= STILL_TIME_SPREAD * np.mean(n):
+            still.append(float(np.median(n)))
+    return float(np.median(still)) if still else None
+
+
+def check_gravity(log: Log, imu_name: str, accel_units: str = "m s^-2") -> list[str]:
+    """|f| of a still array far from 9.81 m/s² (likely g or mg)."""
+    g0 = _still_specific_force(log)
+    if g0 is None or g0 < 0.3:  # no still stretch, or free fall
+        return []
+    ratio = g0 / STANDARD_GRAVITY_MPS2
+    if 0.5 <= ratio <= 2.0:
+        return []
+    where = (f"{imu_name}: at rest the accelerometers read |f| = {g0:.4g} m/s² (read under [{accel_units}]), "
+             f"not {STANDARD_GRAVITY_MPS2:g}")
+    if 0.07 <= ratio <= 0.14:
+        return [f"{where}: likely the readings are in g; write the column units as [g] to convert them"]
+    if 70 <= ratio <= 140:
+        return [f"{where}: likely the readings are in mg; write the column units as [mg] to convert them"]
+    if 8 <= ratio <= 12:
+        return [f"{where}: likely readings in m/s² under a [g] header; write the column units as [m s^-2]"]
+    return [f"{where}: check the unit and scale of the accelerometer readings"]
+
+
+def check_finite(log: Log, imu_name: str) -> list[str]:
+    """NaN or infinite readings (let through to be masked by the estimators)."""
+    out = []
+    bad = ~np.isfinite(log.accel_mps2)
+    if bad.any():
+        rows, cols = np.nonzero(bad)
+        out.append(f"{imu_name}:{int(rows[0]) + 2}: {int(bad.sum())} accelerometer reading(s) are NaN or infinite "
+                   f"(first in column {log.array.accel_columns[int(cols[0])]!r}); they are masked out of the estimates")
+    for name, values, columns in (("gyroscope", log.gyro_b_radps, ("w_x", "w_y", "w_z")),
+                                  ("inclinometer", log.tilt_rad, ("tilt_x", "tilt_y"))):
+        if values is None:
+            continue
+        bad = ~np.isfinite(values)
+        if bad.any():
+            rows, cols = np.nonzero(bad)
+            out.append(f"{imu_name}:{int(rows[0]) + 2}: {int(bad.sum())} {name} reading(s) are NaN or infinite "
+                       f"(first in column {columns[int(cols[0])]!r})")
+    return out
