@@ -243,7 +243,8 @@ def test_force_never_replaces_an_input(work, capsys):
     (["calibrate", "{log}", "--out", "{w}/c.toml", "--window-s", "-1"], "argument --window-s: must be a number > 0"),
     (["calibrate", "{log}", "--out", "{w}/c.toml", "--window-s", "abc"], "argument --window-s: expected a number"),
     (["calibrate", "{log}", "--out", "{w}/c.toml", "--until-s", "nan"], "argument --until-s: expected a finite"),
-    (["simulate", "random3d", "--out", "{w}/s", "--rate-hz", "0"], "argument --rate-hz: must be a number > 0 [Hz]"),
+    (["simulate", "random3d", "--out", "{w}/s", "--rate-hz", "0"], "argument --rate-hz: must be a number > 0 and"),
+    (["simulate", "random3d", "--out", "{w}/s", "--rate-hz", "1e9"], "<= 100000 [Hz], got '1e9'"),
     (["simulate", "random3d", "--out", "{w}/s", "--duration-s", "inf"], "argument --duration-s: expected a finite"),
     (["simulate", "random3d", "--out", "{w}/s", "--seed", "-3"], "argument --seed: must be an integer >= 0"),
     (["estimate", "{log}", "--method", "fixed-lag", "--out", "{w}/e.csv", "--lag-s", "0"], "argument --lag-s"),
@@ -269,6 +270,7 @@ def test_out_of_range_options_name_the_option(work, capsys, argv, message):
     (["compare", "{log}", "--methods", "imm", "-O", "imm.t2=abc"], "-O imm.t2='abc': expected a number"),
     (["compare", "{log}", "--methods", "imm", "-O", "imm=3"], "expected METHOD.KEY=VALUE"),
     (["compare", "{log}", "--methods", "imm", "-O", "ml.x=3"], "method 'ml' is not among --methods imm"),
+    (["compare", "{log}", "--methods", ""], "--methods: no method named"),
 ])
 def test_bad_method_options_are_one_clear_message(work, capsys, argv, message):
     argv = [a.format(log=work / "log") for a in argv]
@@ -320,7 +322,8 @@ def test_a_nan_reading_is_let_through_with_a_warning(work, capsys):
     set_cell(work / "log" / "imu.csv", 7, 3, "nan")
     main(["estimate", str(work / "log"), "--method", "inversion", "--out", str(work / "e.csv"), "--no-progress"])
     err = capsys.readouterr().err
-    assert "warning:" in err and "imu.csv:7: 1 accelerometer reading(s) are NaN or infinite (first in column 'a1_z')" in err
+    assert "warning:" in err
+    assert "imu.csv:7: 1 accelerometer reading(s) are NaN or infinite (first in column 'a1_z')" in err
 
 
 def rewrite_times(path: Path, fn) -> None:
@@ -478,6 +481,23 @@ def test_os_error_inside_a_command_is_one_line(work, capsys, monkeypatch):
     monkeypatch.setattr(atomic.os, "replace", busy)
     refused(["estimate", str(work / "log"), "--method", "inversion", "--out", str(work / "e.csv"), "--no-progress"],
             work, capsys, f"{work / 'e.csv'}: device or resource busy", status=1)
+
+
+@pytest.mark.parametrize("where, exc, what", [
+    ("mkstemp", PermissionError(errno.EACCES, "Permission denied", "/somewhere/.e.csv.x1y2.tmp"), "permission denied"),
+    ("fsync", OSError(errno.ENOSPC, "No space left on device"), "no space left on the device"),
+])
+def test_write_errors_name_the_destination_not_the_temporary_file(work, capsys, monkeypatch, where, exc, what):
+    from gfimu.io import atomic
+
+    def fail(*args, **kwargs):
+        raise exc
+
+    monkeypatch.setattr(atomic.tempfile if where == "mkstemp" else atomic.os, where, fail)
+    err = refused(["estimate", str(work / "log"), "--method", "inversion", "--out", str(work / "e.csv"),
+                   "--no-progress"], work, capsys, f"{work / 'e.csv'}: {what}",
+                  status=1)
+    assert ".tmp" not in err
 
 
 def test_debug_keeps_the_traceback(work):

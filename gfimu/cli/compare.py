@@ -45,8 +45,10 @@ def run(args) -> int:
     from ..estimators import METHODS
 
     methods = None
-    if args.methods:
+    if args.methods is not None:
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+        if not methods:
+            raise CLIError("--methods: no method named; give a comma-separated list, or leave --methods out for all")
         unknown = [m for m in methods if m not in METHODS]
         if unknown:
             raise CLIError(f"unknown method(s) {unknown}; choose among: {', '.join(METHODS)}")
@@ -70,8 +72,9 @@ def run(args) -> int:
         folder = Path(args.estimates_dir)
         if folder.exists() and not folder.is_dir():
             raise CLIError(f"--estimates-dir {folder}: exists and is not a folder")
-        for name in (methods or list(METHODS)):
-            check_output(folder / f"{name}.csv", inputs, "--estimates-dir") if folder.is_dir() else None
+        if folder.is_dir():
+            for name in methods or list(METHODS):
+                check_output(folder / f"{name}.csv", inputs, "--estimates-dir")
     log = gio.read_log(args.log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .options import integer, positive
+from .options import integer, number, positive
 
 DEFAULT_METHODS = ("inversion", "integration", "imm", "ml", "smoother", "fixed-lag")
 
@@ -25,7 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), help="comma-separated methods")
     p.add_argument("--duration-s", type=positive("s"), default=10.0, help="length of each log [s] (default 10)")
-    p.add_argument("--rate-hz", type=positive("Hz"), default=500.0, help="sample rate [Hz] (default 500)")
+    p.add_argument("--rate-hz", type=number(0.0, 100e3, "Hz", low_open=True), default=500.0,
+                   help="sample rate [Hz], at most 100 kHz (default 500)")
     p.add_argument("--half-edge-m", type=positive("m"), default=0.025,
                    help="half edge of the cube array [m] (default 0.025: a 5 cm cube)")
     p.add_argument("--seed", type=integer(0), default=0, help="seed of the motion and noise (default 0)")

@@ -66,7 +66,8 @@ def integer(low: int | None = None, high: int | None = None) -> Callable[[str], 
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if (low is not None and value < low) or (high is not None and value > high):
-            rng = " and ".join(x for x in ("" if low is None else f">= {low}", "" if high is None else f"<= {high}") if x)
+            bounds = ("" if low is None else f">= {low}", "" if high is None else f"<= {high}")
+            rng = " and ".join(x for x in bounds if x)
             raise argparse.ArgumentTypeError(f"must be an integer {rng}, got {text!r}")
         return value
 
@@ -155,7 +156,8 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
         f = fields.get(key)
         if f is None:
             known = ", ".join(sorted(fields))
-            raise OptionError(f"{flag} {prefix}{key}=...: method {method!r} has no option {key!r}; its options are: {known}")
+            raise OptionError(f"{flag} {prefix}{key}=...: method {method!r} has no option {key!r}; "
+                              f"its options are: {known}")
         default = f.default if f.default is not dataclasses.MISSING else None
         kind = _kind_of(f.type, default)
         if kind is None or (value is None and default is None):

@@ -6,7 +6,7 @@ import argparse
 import textwrap
 
 from . import CLIError
-from .options import integer, non_negative, parse_options, positive
+from .options import integer, non_negative, number, parse_options, positive
 
 ARRAY_CHOICES = ("cube", "paper001", "single-triad", "mimu4444")
 
@@ -55,7 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "or the block's single triad for the freeflight scenarios)")
     p.add_argument("--half-edge-m", type=positive("m"), default=None,
                    help="half edge of the cube array [m] (default 0.05)")
-    p.add_argument("--rate-hz", type=positive("Hz"), default=None, help="sample rate [Hz] (default: the scenario's)")
+    p.add_argument("--rate-hz", type=number(0.0, 100e3, "Hz", low_open=True), default=None,
+                   help="sample rate [Hz], at most 100 kHz (default: the scenario's)")
     p.add_argument("--duration-s", type=positive("s"), default=None, help="length [s] (default: the scenario's)")
     p.add_argument("--noise-std-mps2", type=non_negative("m/s^2"), default=None,
                    help="white accelerometer noise per axis [m/s^2] (default: array.toml's noise_std_mps2, "

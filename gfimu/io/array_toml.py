@@ -231,7 +231,7 @@ def load_array_toml(path: str | os.PathLike) -> tuple[SensorArray, float | None]
 # --- writing -------------------------------------------------------------------------
 
 def _plain(value, where: str, finite: bool = True):
-    """``value`` with numpy scalars and arrays turned into Python numbers and lists (non-finite refused if ``finite``)."""
+    """``value`` with numpy scalars and arrays as Python numbers and lists (non-finite refused if ``finite``)."""
     if isinstance(value, Mapping):
         return {str(k): _plain(v, f"{where}.{k}" if where else str(k), finite) for k, v in value.items()
                 if v is not None}

@@ -99,6 +99,22 @@ def remove_temporaries() -> int:
     return n
 
 
+def _naming(exc: OSError, target: Path) -> OSError:
+    """The same error, naming the destination instead of the temporary file."""
+    if isinstance(exc, OutputError):
+        return exc
+    if exc.errno is None:
+        return exc
+    return type(exc)(exc.errno, exc.strerror or str(exc), str(target))
+
+
+def _remove(tmp: str) -> None:
+    try:
+        os.unlink(tmp)
+    except FileNotFoundError:
+        pass
+
+
 def _fsync_folder(folder: Path) -> None:
     try:  # make the rename itself durable
         dfd = os.open(folder, os.O_RDONLY)
@@ -120,7 +136,10 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
     """
     target = destination(path)
     folder = target.parent
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
+    except OSError as exc:  # name the destination, not the temporary file
+        raise _naming(exc, target) from None
     os.close(fd)
     _register(tmp)
     try:
@@ -135,11 +154,13 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
         os.chmod(tmp, 0o666 & ~umask)
         destination(path)  # still a regular file (or absent) right before the rename
         os.replace(tmp, target)
+    except OSError as exc:
+        _remove(tmp)
+        if exc.filename in (None, tmp) or exc.filename2 == tmp:
+            raise _naming(exc, target) from None
+        raise
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+        _remove(tmp)
         raise
     finally:
         _unregister(tmp)

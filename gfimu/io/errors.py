@@ -40,4 +40,7 @@ class LogFormatWarning(UserWarning):
 
 
 class LogPlausibilityWarning(UserWarning):
-    """A log reads, but a value is implausible (likely a wrong unit, rate or size); the message names the likely mistake."""
+    """A log reads, but a value is implausible (likely a wrong unit, rate or size).
+
+    The message names the file and the likely mistake.
+    """
