@@ -32,6 +32,7 @@ MIN_EXTENT_M = 1e-3
 STILL_WINDOW_S = 0.25
 STILL_SENSOR_SPREAD = 0.1  # sensors agree within 10 % of |f| (uncalibrated biases) ...
 STILL_TIME_SPREAD = 0.03  # ... and |f| varies by less than 3 % (std) over the window
+_BLOCK_ROWS = 65536
 
 
 def _median_step_ns(t_ns: np.ndarray) -> float | None:
@@ -106,23 +107,25 @@ def _still_specific_force_of(log: Log) -> float | None:
         col += len(a.axes)
     if len(triads) < 2 or len(log) < 5:
         return None
-    f_b = np.stack([log.accel_mps2[:, c:c + 3] @ np.asarray(rot).T for c, rot in triads], axis=1)  # (N, K, 3)
-    mean = np.mean(f_b, axis=1)
-    norm = np.linalg.norm(mean, axis=1)
-    spread = np.max(np.linalg.norm(f_b - mean[:, None, :], axis=2), axis=1)
+    n = len(log)
+    norm = np.empty(n)
+    spread = np.empty(n)
+    for start in range(0, n, _BLOCK_ROWS):  # in blocks: (rows, sensors, 3) stays small on long logs
+        rows = slice(start, min(start + _BLOCK_ROWS, n))
+        f_b = np.stack([log.accel_mps2[rows, c:c + 3] @ np.asarray(rot).T for c, rot in triads], axis=1)
+        mean = np.mean(f_b, axis=1)
+        norm[rows] = np.linalg.norm(mean, axis=1)
+        spread[rows] = np.max(np.linalg.norm(f_b - mean[:, None, :], axis=2), axis=1)
     finite = np.isfinite(norm) & np.isfinite(spread)
     agree = finite & (spread <= STILL_SENSOR_SPREAD * norm) & (norm > 0)
     step = _median_step_ns(log.timestamps_ns)
     w = max(5, int(round(STILL_WINDOW_S * 1e9 / step))) if step and step > 0 else 5
     if len(log) < w:
         return None
-    still = []
-    for start in range(0, len(log) - w + 1, w):
-        sl = slice(start, start + w)
-        n = norm[sl]
-        if agree[sl].all() and np.std(n) <= STILL_TIME_SPREAD * np.mean(n):
-            still.append(float(np.median(n)))
-    return float(np.median(still)) if still else None
+    m = len(log) // w
+    nw = norm[: m * w].reshape(m, w)
+    still = agree[: m * w].reshape(m, w).all(axis=1) & (np.std(nw, axis=1) <= STILL_TIME_SPREAD * np.mean(nw, axis=1))
+    return float(np.median(np.median(nw[still], axis=1))) if still.any() else None
 
 
 def check_gravity(log: Log, imu_name: str, accel_units: str = "m s^-2") -> list[str]:
