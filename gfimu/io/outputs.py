@@ -92,7 +92,8 @@ def check_output(path: str | os.PathLike | None, inputs: Iterable[str | os.PathL
     try:
         target = destination(path)
     except OutputError as exc:
-        raise OutputError(f"{what} {exc}") from None
+        hint = "; use - for standard output" if stdout and "refusing to replace it" in str(exc) else ""
+        raise OutputError(f"{what} {exc}{hint}") from None
     _refuse_inputs(target, shown, input_files(inputs), what)
     return target
 
