@@ -54,11 +54,13 @@ def run(args) -> int:
     cal = fit(log, det)
     i = cal.info
     write_output(out, [calibration_to_toml(cal)])
-    say = print if out is not None else (lambda *a: print(*a, file=sys.stderr))
-    say(f"{i['still_periods']} still periods ({i['still_samples']} samples); fit residual {i['residual_rms_mps2']:.4f} m/s^2 RMS")
-    say(f"inter-sensor spread of the still means: {i['spread_before_mps2']:.4f} -> {i['spread_after_mps2']:.4f} m/s^2 (norm); "
-          f"{i['spread_per_axis_before_mps2']:.4f} -> {i['spread_per_axis_after_mps2']:.4f} m/s^2 (per axis)")
+    report = sys.stdout if out is not None else sys.stderr  # standard output may hold the calibration itself
+    print(f"{i['still_periods']} still periods ({i['still_samples']} samples); fit residual "
+          f"{i['residual_rms_mps2']:.4f} m/s^2 RMS", file=report)
+    print(f"inter-sensor spread of the still means: {i['spread_before_mps2']:.4f} -> {i['spread_after_mps2']:.4f} "
+          f"m/s^2 (norm); {i['spread_per_axis_before_mps2']:.4f} -> {i['spread_per_axis_after_mps2']:.4f} m/s^2 "
+          "(per axis)", file=report)
     if cal.gyro_bias_b_radps is not None:
-        say("gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s")
-    say(f"calibration written: {args.out}")
+        print("gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s", file=report)
+    print(f"calibration written: {args.out}", file=report)
     return 0

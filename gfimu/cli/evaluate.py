@@ -56,7 +56,6 @@ def _truth_path(arg: str, against: str) -> Path:
 def run(args) -> int:
     from .. import io as gio
     from ..evaluation import EvaluationAlignmentWarning, evaluate
-
     from ..io.outputs import check_output, write_output
 
     out = check_output(args.out, [args.estimate, args.truth], "--out", stdout=True)
