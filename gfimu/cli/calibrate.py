@@ -62,5 +62,5 @@ def run(args) -> int:
           "(per axis)", file=report)
     if cal.gyro_bias_b_radps is not None:
         print("gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s", file=report)
-    print(f"calibration written: {args.out}", file=report)
+    print(f"calibration written: {out if out is not None else 'standard output'}", file=report)
     return 0

@@ -73,6 +73,6 @@ def run(args) -> int:
 
         motion = add_orientation(log, motion, source=args.orientation)
     write_output(out, gio.motion_csv_chunks(motion))
-    print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {args.out}",
+    print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {out if out is not None else 'standard output'}",
           file=sys.stderr if out is None else sys.stdout)
     return 0
