@@ -18,11 +18,29 @@ class CLIError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
+def _version() -> str:
+    """The installed distribution's version, or the source tree's from pyproject.toml."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("gfimu")
+    except metadata.PackageNotFoundError:
+        import tomllib
+        from pathlib import Path
+
+        pyproject = Path(__file__).resolve().parents[2] / "pyproject.toml"
+        try:
+            return tomllib.loads(pyproject.read_text())["project"]["version"]
+        except (OSError, KeyError, tomllib.TOMLDecodeError):
+            return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gfimu",
         description="Angular velocity, angular acceleration and linear acceleration from accelerometer arrays.",
     )
+    parser.add_argument("--version", action="version", version=f"gfimu {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"gfimu.cli.{name}").register(sub)
