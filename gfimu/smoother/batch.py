@@ -216,22 +216,32 @@ class SolveResult:
 
 
 def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
-          compute_sigma: bool = False, method: str = "lm") -> SolveResult:
+          compute_sigma: bool = False, method: str = "lm", reweight=None,
+          max_iterations: int | None = None) -> SolveResult:
     """Levenberg-Marquardt (or plain Gauss-Newton) on the banded normal equations.
 
     Each iteration first tries the undamped Gauss-Newton step (the problem is
     close to linear near a good initial point); Marquardt damping
     ``λ diag(H)`` is switched on, and raised tenfold, only while a step fails
     to lower the cost, and lowered again after each success.
+
+    ``reweight(states, params)``, when given, re-weights the factors (motion-dependent noise,
+    robust losses) at the current estimate before every iteration: iteratively re-weighted
+    least squares with the Levenberg-Marquardt safeguard, each step accepted when it lowers the
+    cost under the weights it was computed with. It stops when an iteration lowers that cost by
+    less than ``relative_tolerance`` (or after ``max_iterations``, default the options').
     """
     opt = problem.options
     X = np.array(states, dtype=float)
     P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
+    if reweight is not None:
+        reweight(X, P)
     ne = normal_equations(problem, X, P)
     lam = 0.0
     converged = False
     it = 0
-    for it in range(1, int(opt.max_iterations) + 1):
+    limit = int(opt.max_iterations if max_iterations is None else max_iterations)
+    for it in range(1, limit + 1):
         while True:
             try:
                 fac = factorise(ne, lam)
@@ -252,8 +262,10 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
             break
         X, P = Xn, Pn
         lam = 0.0 if lam < 1e-8 else lam / 10.0
+        if reweight is not None:
+            reweight(X, P)
         ne = normal_equations(problem, X, P)
-        if decrease <= opt.relative_tolerance * max(ne.cost, 1e-300) or np.max(np.abs(dx)) < 1e-12:
+        if decrease <= opt.relative_tolerance * max(new_cost, 1e-300) or np.max(np.abs(dx)) < 1e-12:
             converged = True
             break
     result = SolveResult(X, P, ne.cost, it, converged)
@@ -261,6 +273,36 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
         cov, pcov = marginal_covariances(ne, factorise(ne, 0.0))
         result.covariance, result.param_covariance = cov, pcov
     return result
+
+
+def reweighting(problem: SmootherProblem, options: SmootherOptions):
+    """The re-weighting callback of :func:`solve` for the motion-dependent accelerometer noise and
+    the robust losses of ``options``, or None when neither is on."""
+    slope = options.accel_noise_slope_mps2_per_radps > 0 and options.measurement == "accelerometer"
+    if not (slope or options.robust):
+        return None
+
+    def reweight(states: np.ndarray, params: np.ndarray) -> None:
+        if slope:
+            problem.set_motion_dependent_noise(states[:, 0:3], options.accel_noise_slope_mps2_per_radps)
+        if options.robust:
+            problem.set_robust_weights(states, params)
+
+    return reweight
+
+
+def solve_reweighted(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions,
+                     params: np.ndarray | None = None, compute_sigma: bool | None = None) -> SolveResult:
+    """Solve with the motion-dependent noise and robust losses of ``options``: first
+    ``reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
+    iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`)."""
+    sigma = options.compute_sigma if compute_sigma is None else compute_sigma
+    reweight = reweighting(problem, options)
+    if reweight is None:
+        return solve(problem, states, params, compute_sigma=sigma)
+    first = solve(problem, states, params, max_iterations=max(1, int(options.reweight_iterations) - 1))
+    return solve(problem, first.states, first.params if first.params.size else None,
+                 compute_sigma=sigma, reweight=reweight)
 
 
 def window_slices(n: int, rate_hz: float, window_s: float | None, overlap_s: float) -> list[tuple[slice, slice, slice]]:
@@ -303,6 +345,12 @@ class BatchSmootherEstimator(SmootherOptions):
     """
 
     tune_process_noise: bool = True
+    auto_model: bool = True
+    """Choose the model from the log (:mod:`gfimu.smoother.auto`): logs whose readings follow the
+    rigid-body equation up to the stated white noise keep the options as they are; logs whose
+    residual is larger, heavy-tailed or grows with |ω| (real arrays) get the ML initialisation with
+    its sign chain, the measured noise floor and slope, Cauchy losses and moment-estimated process
+    noise. Options set to other than their defaults are kept either way; False: the options as given."""
 
     def options(self) -> SmootherOptions:
         return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
@@ -327,6 +375,8 @@ class BatchSmootherEstimator(SmootherOptions):
         windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
         calibration = []
         tunings = []
+        opt, auto = self._auto_model(log, opt, attitude)
+        object.__setattr__(self, "_last_model_check", auto[0] if auto else None)
         previous = None  # (solve slice, attitudes) of the window before
         for solve_sl, keep_log, keep_win in progress_bar(windows, total=len(windows), desc="smoother", enable=progress and len(windows) > 1):
             part = log.select(solve_sl)
@@ -334,16 +384,11 @@ class BatchSmootherEstimator(SmootherOptions):
                 res, problem = self._solve_with_attitude(part, opt, previous, solve_sl, tunings)
                 previous = (solve_sl, problem.rotations(res.states))
             else:
-                problem, x0 = self._tuned_problem(part, opt, tunings)
-                res = solve(problem, x0, None, compute_sigma=opt.compute_sigma)
-                slope = opt.accel_noise_slope_mps2_per_radps > 0 and opt.measurement == "accelerometer"
-                if slope or opt.robust:
-                    for _ in range(int(opt.reweight_iterations) - 1):  # re-weight from the new estimate
-                        if slope:
-                            problem.set_motion_dependent_noise(res.states[:, 0:3], opt.accel_noise_slope_mps2_per_radps)
-                        if opt.robust:
-                            problem.set_robust_weights(res.states, res.params)
-                        res = solve(problem, res.states, None, compute_sigma=opt.compute_sigma)
+                if auto is not None and not auto[0].consistent:
+                    problem, x0 = self._moment_problem(part, opt, auto, solve_sl, tunings)
+                else:
+                    problem, x0 = self._tuned_problem(part, opt, tunings)
+                res = solve_reweighted(problem, x0, opt)
             m = min(M, res.states.shape[1])
             states[keep_log, :m] = res.states[keep_win, :m]
             if sd is not None:
@@ -364,6 +409,60 @@ class BatchSmootherEstimator(SmootherOptions):
             extra["accel_b_mps2"] = states[:, 6:9] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
         return Motion(log.timestamps_ns, omega_b_radps=states[:, 0:3], omega_dot_b_radps2=states[:, 3:6],
                       specific_force_b_mps2=states[:, 6:9], sigma=sigma, **extra)
+
+    def _auto_model(self, log: Log, opt: SmootherOptions, attitude: bool):
+        """(options, (ModelCheck, ML motion, noise densities) or None) of :mod:`gfimu.smoother.auto`."""
+        from dataclasses import replace
+
+        from ..estimators.ml import MLEstimator
+        from .auto import check_model, misfit_options, noise_densities
+
+        if (not self.auto_model or attitude or opt.free_flight or opt.measurement != "accelerometer"
+                or opt.self_calibrate_bias or opt.self_calibrate_scale):
+            return opt, None
+        ml = MLEstimator()
+        if ml.applicable(log.array) is not None:
+            return opt, None
+        motion = ml.estimate(log)
+        check = check_model(log, motion)
+        if check.consistent:
+            return opt, (check, motion, None)
+        chosen = misfit_options(opt, check)
+        defaults = {f.name: f.default for f in fields(SmootherOptions)}
+        keep = {name: getattr(opt, name) for name in defaults
+                if name != "tune_process_noise" and getattr(opt, name) != defaults[name]
+                and getattr(chosen, name) != getattr(opt, name)}
+        chosen = replace(chosen, **keep)
+        x = np.hstack([motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2])
+        return chosen, (check, motion, noise_densities(x, log.dt_s) if self.tune_process_noise else None)
+
+    def _moment_problem(self, part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
+        """Problem and initial states of one window of an inconsistent log: ML initialisation with its
+        sign chain, the measured noise floor and process densities by the method of moments
+        (fixed densities when ``tune_process_noise`` is off)."""
+        from .auto import with_moment_densities
+        from .initialise import sign_chain
+        from .tuning import Tuning, make_problem
+
+        check, motion, noise = auto
+        omega = motion.omega_b_radps[solve_sl]
+        omega_dot = motion.omega_dot_b_radps2[solve_sl]
+        if opt.ml_sign_chain:
+            omega = omega * sign_chain(omega, omega_dot, part.dt_s)[:, None]
+        x0 = np.hstack([omega, omega_dot, motion.specific_force_b_mps2[solve_sl]])
+        if noise is not None:
+            opt = with_moment_densities(opt, x0, part.dt_s, noise)
+        scale = 1.0
+        if np.isfinite(check.stated_noise_mps2) and check.stated_noise_mps2 > 0:
+            scale = check.noise_floor_mps2 / check.stated_noise_mps2
+        tunings.append(Tuning("jerk", opt.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
+                              tuple(opt.process_axis_factors), opt.specific_force_random_walk_mps2_per_sqrt_s))
+        return make_problem(part, opt, scale, x0[:, 0:3]), x0
+
+    @property
+    def last_model_check(self):
+        """The :class:`gfimu.smoother.auto.ModelCheck` of the last :meth:`estimate` (None when not run)."""
+        return getattr(self, "_last_model_check", None)
 
     @staticmethod
     def _tuned_problem(part: Log, opt: SmootherOptions, tunings: list):

@@ -315,6 +315,9 @@ class SmootherProblem:
             d, p = accelerometer.sensor_geometry(acc)
             self.sensors.append((d, p, slice(col, col + d.shape[0])))
             col += d.shape[0]
+        # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
+        self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
+        self.all_positions_m = np.concatenate([p for _, p, _ in self.sensors])
         # global variables: biases, scales, gyro bias
         self.global_blocks = {}  # name -> (slice, gtsam key)
         g = 0
@@ -498,7 +501,10 @@ class SmootherProblem:
         jx = []
         m = self.state_size
         jg = np.zeros((n, self.log.array.n_axes, self.n_global)) if self.n_global else None
-        for i, (d, p, cols) in enumerate(self.sensors):
+        groups = self.sensors
+        if not any(name.startswith(("bias", "scale")) for name in self.global_blocks):
+            groups = [(self.all_directions_b, self.all_positions_m, slice(0, self.all_directions_b.shape[0]))]
+        for i, (d, p, cols) in enumerate(groups):
             bias = self.global_part(params, f"bias{i}")
             scale = self.global_part(params, f"scale{i}")
             r, j = accelerometer.accelerometer_residual(X[:, W], X[:, D], X[:, F], self.log.accel_mps2[:, cols], d, p, bias, scale)
