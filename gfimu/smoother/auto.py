@@ -182,41 +182,58 @@ def misfit_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptio
     )
 
 
-def moment_densities(states: np.ndarray, dt_s: np.ndarray, noise_jerk: np.ndarray | None = None,
-                     noise_force: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per-axis white-jerk density [rad/s²/√s] and specific-force density [m/s²/√s] by the method of
-    moments: a random walk of density q has steps of variance ``q² h``, so
-    ``q² = (mean(Δx²) - noise²) / h`` from the steps of the initial estimate ``states`` [ω, ω̇, f, ...]
-    (``noise_*``: the density the estimate's own noise alone would give, subtracted)."""
-    h = np.asarray(dt_s, dtype=float)
-    out = []
-    for sl, noise in ((slice(3, 6), noise_jerk), (slice(6, 9), noise_force)):
-        steps = np.diff(states[:, sl], axis=0)
-        q2 = np.mean(steps**2 / h[:, None], axis=0)
-        if noise is not None:
-            q2 = np.maximum(q2 - np.asarray(noise) ** 2, np.asarray(noise) ** 2)
-        out.append(np.sqrt(np.maximum(q2, 1e-12)))
-    return out[0], out[1]
+
+def estimate_noise_variances(array, check: ModelCheck, omega_b_radps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) variances of the per-sample ω̇ and f estimates by the linear rigid-body model with all
+    12 unknowns (paper 000, eq. 6), ``diag((SᵀS)⁻¹) σ_k²`` with the measured noise
+    ``σ_k² = σ₀² + (s |ω_k|)²``: what the per-sample estimate's own noise puts into its steps."""
+    S = array.structure_matrix()
+    c = np.diag(np.linalg.pinv(S.T @ S))
+    wn = np.linalg.norm(omega_b_radps, axis=1)
+    var = check.noise_floor_mps2**2 + (check.noise_slope_mps2_per_radps * wn) ** 2
+    return var[:, None] * c[None, 3:6], var[:, None] * c[None, 0:3]
 
 
-def noise_densities(states: np.ndarray, dt_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The densities the initial estimate's own noise gives: the robust (median absolute) scale of its
-    steps, which on a log that rests part of the time measures the estimate's noise, not the motion."""
+MOTION_STEP_SIGMAS = 3.0
+"""A stretch of the per-sample estimate is motion when the RMS of its steps (over the axes and
+:data:`MOTION_PERIOD_S`) exceeds this many times what the estimate's own noise gives."""
+MOTION_PERIOD_S = 0.5
+"""Length of the stretches [s] over which motion is told from rest."""
+
+
+def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.ndarray,
+                     noise_var_force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis jerk density [rad/s²/√s] and specific-force density [m/s²/√s] of the motion, from the
+    steps of the per-sample estimate ``states`` [ω, ω̇, f]: a random walk of density q has steps of
+    std ``q √h``; the estimate's own noise (variances ``noise_var_*``, independent per sample) gives
+    steps of std ``√(v_k + v_{k+1})``. Steps beyond :data:`MOTION_STEP_SIGMAS` of that are motion;
+    q is the robust scale (1.4826 × median absolute value) of the motion's steps / √h, the scale
+    of the Cauchy core that the robust motion-model loss expects (its heavy tail, the sudden jerks,
+    goes through the loss). A log that rests part of the time keeps the density of its motion;
+    a log without motion gets the density of the noise."""
     h = np.asarray(dt_s, dtype=float)
     out = []
-    for sl in (slice(3, 6), slice(6, 9)):
+    for sl, v in ((slice(3, 6), noise_var_jerk), (slice(6, 9), noise_var_force)):
         steps = np.diff(states[:, sl], axis=0) / np.sqrt(h)[:, None]
-        out.append(1.4826 * np.median(np.abs(steps - np.median(steps, axis=0)), axis=0))
+        rest = np.sqrt((v[:-1] + v[1:]) / h[:, None])
+        z2 = np.mean((steps / np.maximum(rest, 1e-300)) ** 2, axis=1)
+        width = max(int(round(MOTION_PERIOD_S / max(float(np.median(h)), 1e-12))), 1)
+        local = np.convolve(z2, np.ones(width) / width, mode="same")
+        moving = local > MOTION_STEP_SIGMAS**2
+        floor = np.median(rest, axis=0)
+        if np.count_nonzero(moving) >= max(10, 0.01 * len(z2)):
+            q = 1.4826 * np.median(np.abs(steps[moving]), axis=0)
+        else:
+            q = floor
+        out.append(np.maximum(q, floor))
     return out[0], out[1]
 
 
-def with_moment_densities(options: SmootherOptions, states: np.ndarray, dt_s: np.ndarray,
-                          noise: tuple[np.ndarray, np.ndarray] | None = None) -> SmootherOptions:
-    """``options`` with the jerk density (RMS over the axes, per-axis factors) and the specific-force
-    density of :func:`moment_densities` on ``states``."""
-    qj, qf = moment_densities(states, dt_s, *(noise if noise is not None else (None, None)))
-    q = float(np.sqrt(np.mean(qj**2)))
+def with_densities(options: SmootherOptions, jerk: np.ndarray, force: np.ndarray) -> SmootherOptions:
+    """``options`` with per-axis jerk densities (their RMS and per-axis factors) and the RMS of the
+    per-axis specific-force densities."""
+    jerk = np.asarray(jerk, dtype=float)
+    q = float(np.sqrt(np.mean(jerk**2)))
     return replace(options, omega_dot_random_walk_radps2_per_sqrt_s=q,
-                   process_axis_factors=tuple(float(v) for v in qj / q),
-                   specific_force_random_walk_mps2_per_sqrt_s=float(np.sqrt(np.mean(qf**2))))
-
+                   process_axis_factors=tuple(float(v) for v in jerk / q),
+                   specific_force_random_walk_mps2_per_sqrt_s=float(np.sqrt(np.mean(np.asarray(force) ** 2))))

@@ -292,7 +292,8 @@ def reweighting(problem: SmootherProblem, options: SmootherOptions):
 
 
 def solve_reweighted(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions,
-                     params: np.ndarray | None = None, compute_sigma: bool | None = None) -> SolveResult:
+                     params: np.ndarray | None = None, compute_sigma: bool | None = None,
+                     warm: bool = False) -> SolveResult:
     """Solve with the motion-dependent noise and robust losses of ``options``: first
     ``reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
     iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`)."""
@@ -300,6 +301,8 @@ def solve_reweighted(problem: SmootherProblem, states: np.ndarray, options: Smoo
     reweight = reweighting(problem, options)
     if reweight is None:
         return solve(problem, states, params, compute_sigma=sigma)
+    if warm:  # ``states`` is already a re-weighted solution
+        return solve(problem, states, params, compute_sigma=sigma, reweight=reweight)
     first = solve(problem, states, params, max_iterations=max(1, int(options.reweight_iterations) - 1))
     return solve(problem, first.states, first.params if first.params.size else None,
                  compute_sigma=sigma, reweight=reweight)
@@ -386,9 +389,10 @@ class BatchSmootherEstimator(SmootherOptions):
             else:
                 if auto is not None and not auto[0].consistent:
                     problem, x0 = self._moment_problem(part, opt, auto, solve_sl, tunings)
+                    res = solve_reweighted(problem, x0, problem.options)
                 else:
                     problem, x0 = self._tuned_problem(part, opt, tunings)
-                res = solve_reweighted(problem, x0, opt)
+                    res = solve_reweighted(problem, x0, opt)
             m = min(M, res.states.shape[1])
             states[keep_log, :m] = res.states[keep_win, :m]
             if sd is not None:
@@ -415,7 +419,7 @@ class BatchSmootherEstimator(SmootherOptions):
         from dataclasses import replace
 
         from ..estimators.ml import MLEstimator
-        from .auto import check_model, misfit_options, noise_densities
+        from .auto import check_model, estimate_noise_variances, misfit_options, motion_densities, with_densities
 
         if (not self.auto_model or attitude or opt.free_flight or opt.measurement != "accelerometer"
                 or opt.self_calibrate_bias or opt.self_calibrate_scale):
@@ -432,26 +436,25 @@ class BatchSmootherEstimator(SmootherOptions):
         keep = {name: getattr(opt, name) for name in defaults
                 if name != "tune_process_noise" and getattr(opt, name) != defaults[name]
                 and getattr(chosen, name) != getattr(opt, name)}
+        if self.tune_process_noise:  # the process noise of the log's motion (else the fixed densities)
+            x = np.hstack([motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2])
+            chosen = with_densities(chosen, *motion_densities(x, log.dt_s, *estimate_noise_variances(
+                log.array, check, motion.omega_b_radps)))
         chosen = replace(chosen, **keep)
-        x = np.hstack([motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2])
-        return chosen, (check, motion, noise_densities(x, log.dt_s) if self.tune_process_noise else None)
+        return chosen, (check, motion)
 
     def _moment_problem(self, part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
         """Problem and initial states of one window of an inconsistent log: ML initialisation with its
-        sign chain, the measured noise floor and process densities by the method of moments
-        (fixed densities when ``tune_process_noise`` is off)."""
-        from .auto import with_moment_densities
+        sign chain, the measured noise floor and slope, and the process densities chosen for the log."""
         from .initialise import sign_chain
         from .tuning import Tuning, make_problem
 
-        check, motion, noise = auto
+        check, motion = auto
         omega = motion.omega_b_radps[solve_sl]
         omega_dot = motion.omega_dot_b_radps2[solve_sl]
         if opt.ml_sign_chain:
             omega = omega * sign_chain(omega, omega_dot, part.dt_s)[:, None]
         x0 = np.hstack([omega, omega_dot, motion.specific_force_b_mps2[solve_sl]])
-        if noise is not None:
-            opt = with_moment_densities(opt, x0, part.dt_s, noise)
         scale = 1.0
         if np.isfinite(check.stated_noise_mps2) and check.stated_noise_mps2 > 0:
             scale = check.noise_floor_mps2 / check.stated_noise_mps2
