@@ -204,6 +204,12 @@ def marginal_covariances(ne: NormalEquations, fac: Factorisation) -> tuple[np.nd
     return sigma, s_inv
 
 
+REWEIGHTED_TOLERANCE = 0.01
+"""Re-weighted solves stop when an iteration lowers the cost by less than this fraction of the
+cost's statistical spread at the solution, ``sqrt(R / 2)`` for R whitened rows (the std of half a
+χ² with R degrees of freedom): further iterations move the estimate by far less than its noise."""
+
+
 @dataclass
 class SolveResult:
     states: np.ndarray
@@ -229,7 +235,9 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     robust losses) at the current estimate before every iteration: iteratively re-weighted
     least squares with the Levenberg-Marquardt safeguard, each step accepted when it lowers the
     cost under the weights it was computed with. It stops when an iteration lowers that cost by
-    less than ``relative_tolerance`` (or after ``max_iterations``, default the options').
+    less than ``relative_tolerance`` of it, or, re-weighting, by less than
+    :data:`REWEIGHTED_TOLERANCE` of its statistical spread (or after ``max_iterations``, default
+    the options').
     """
     opt = problem.options
     X = np.array(states, dtype=float)
@@ -265,7 +273,10 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
         if reweight is not None:
             reweight(X, P)
         ne = normal_equations(problem, X, P)
-        if decrease <= opt.relative_tolerance * max(new_cost, 1e-300) or np.max(np.abs(dx)) < 1e-12:
+        enough = opt.relative_tolerance * max(new_cost, 1e-300)
+        if reweight is not None:  # the weights move with every step: stop within the cost's own spread
+            enough = max(enough, REWEIGHTED_TOLERANCE * np.sqrt(0.5 * (ne.rows or 1)))
+        if decrease <= enough or np.max(np.abs(dx)) < 1e-12:
             converged = True
             break
     result = SolveResult(X, P, ne.cost, it, converged)
@@ -425,7 +436,7 @@ class BatchSmootherEstimator(SmootherOptions):
                 or opt.self_calibrate_bias or opt.self_calibrate_scale):
             return opt, None
         ml = MLEstimator()
-        if ml.applicable(log.array) is not None:
+        if ml.applicable(log.array) is not None or not np.all(np.isfinite(log.accel_mps2)):
             return opt, None
         motion = ml.estimate(log)
         check = check_model(log, motion)

@@ -657,7 +657,16 @@ class SmootherProblem:
 
     def cost(self, states: np.ndarray, params: np.ndarray) -> float:
         """Half the sum of squared whitened residuals (GTSAM's graph error)."""
-        return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
+        if self.options.measurement == "quadratic" or self.n_global:
+            return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
+        X = states
+        rows = getattr(self, "_all_rows", None)
+        if rows is None:
+            rows = self._all_rows = accelerometer.axis_rows(self.all_directions_b, self.all_positions_m)
+        r = accelerometer.accelerometer_prediction(X[:, W], X[:, D], X[:, F], rows) - self.log.accel_mps2
+        sigma = self.accel_sigma if self.accel_sigma_per_sample is None else self.accel_sigma_per_sample
+        r = r / sigma
+        return 0.5 * (float(np.sum(r * r)) + sum(float(np.sum(t.residual**2)) for t in self._other_terms(X, params)))
 
     # --- the same problem as a GTSAM graph (graph path) -----------------------
     def gtsam_graph(self) -> gtsam.NonlinearFactorGraph:
