@@ -342,6 +342,11 @@ def window_slices(n: int, rate_hz: float, window_s: float | None, overlap_s: flo
     return out
 
 
+CHECK_SAMPLES = 5000
+"""The model check (:func:`gfimu.smoother.auto.check_model`) reads at most about this many samples,
+evenly spread over the log (120,000 residuals of an 8-triad array)."""
+
+
 @dataclass(frozen=True)
 class BatchSmootherEstimator(SmootherOptions):
     """Factor-graph smoother over the whole log (method "smoother").
@@ -359,6 +364,10 @@ class BatchSmootherEstimator(SmootherOptions):
     """
 
     tune_process_noise: bool = True
+    tune_span_s: float | None = 10.0
+    """With ``tune_process_noise``: choose the process noise on at most this much of each solve
+    window, its middle [s] (the evidence of 10 s of readings fixes a handful of noise levels well;
+    the cost of the choice then stops growing with the window); None: on the whole window."""
     auto_model: bool = True
     """Choose the model from the log (:mod:`gfimu.smoother.auto`): logs whose readings follow the
     rigid-body equation up to the stated white noise keep the options as they are; logs whose
@@ -402,7 +411,7 @@ class BatchSmootherEstimator(SmootherOptions):
                     problem, x0 = self._moment_problem(part, opt, auto, solve_sl, tunings)
                     res = solve_reweighted(problem, x0, problem.options)
                 else:
-                    problem, x0 = self._tuned_problem(part, opt, tunings)
+                    problem, x0 = self._tuned_problem(part, opt, tunings, self.tune_span_s)
                     res = solve_reweighted(problem, x0, opt)
             m = min(M, res.states.shape[1])
             states[keep_log, :m] = res.states[keep_win, :m]
@@ -438,10 +447,14 @@ class BatchSmootherEstimator(SmootherOptions):
         ml = MLEstimator()
         if ml.applicable(log.array) is not None or not np.all(np.isfinite(log.accel_mps2)):
             return opt, None
-        motion = ml.estimate(log)
-        check = check_model(log, motion)
+        step = max(1, len(log) // CHECK_SAMPLES)
+        sample = log if step == 1 else log.select(slice(0, None, step))
+        motion = ml.estimate(sample)
+        check = check_model(sample, motion)
         if check.consistent:
-            return opt, (check, motion, None)
+            return opt, (check, None)
+        if step > 1:
+            motion = ml.estimate(log)
         chosen = misfit_options(opt, check)
         defaults = {f.name: f.default for f in fields(SmootherOptions)}
         keep = {name: getattr(opt, name) for name in defaults
@@ -479,9 +492,11 @@ class BatchSmootherEstimator(SmootherOptions):
         return getattr(self, "_last_model_check", None)
 
     @staticmethod
-    def _tuned_problem(part: Log, opt: SmootherOptions, tunings: list):
+    def _tuned_problem(part: Log, opt: SmootherOptions, tunings: list, span_s: float | None = None):
         """Problem and initial states of one window, with the process noise chosen from the data
         (:func:`gfimu.smoother.tuning.tune`) when ``tune_process_noise``; the choice is appended to ``tunings``."""
+        from dataclasses import replace
+
         from .tuning import make_problem, tune
 
         x0 = BatchSmootherEstimator._initial_states(part, opt)
@@ -489,12 +504,22 @@ class BatchSmootherEstimator(SmootherOptions):
             return make_problem(part, opt, 1.0, x0[:, 0:3]), x0
         models = ("jerk", "snap") if opt.tune_motion_model else None
         solved: list = []
-        tuning, tuned = tune(part, opt, x0, models=models, accel_noise=opt.tune_accel_noise, states_out=solved)
+        span = slice(0, len(part))
+        if span_s is not None and part.times_s[-1] - part.times_s[0] > span_s:
+            width = max(int(round(span_s * part.rate_hz)), 4)
+            start = (len(part) - width) // 2
+            span = slice(start, start + width)
+        tuning, tuned = tune(part.select(span), opt, x0[span], models=models, accel_noise=opt.tune_accel_noise,
+                             states_out=solved)
         tunings.append(tuning)
         if tuned.motion_model != opt.motion_model:
             x0 = BatchSmootherEstimator._initial_states(part, tuned)
         elif any(f > 0 for f in tuning.axis_frequencies_hz):
-            x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
+            if span == slice(0, len(part)):
+                x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
+            else:  # ... or from the white-jerk solution of the whole window with the chosen densities
+                plain = replace(tuned, process_axis_frequencies_hz=(0.0, 0.0, 0.0))
+                x0 = solve(make_problem(part, plain, tuning.accel_noise_scale, x0[:, 0:3]), x0).states
         return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, 0:3]), x0
 
     @staticmethod
