@@ -76,3 +76,19 @@ def test_misfit_options_and_describe():
     assert opt.initialisation == "ml" and opt.ml_sign_chain and opt.robust
     assert opt.accel_noise_slope_mps2_per_radps == 0.03 and opt.default_accel_noise_std_mps2 == 0.2
     assert "disagree" in check.describe() and "0.03" in check.describe()
+
+
+def test_local_density_factors_rest_and_motion():
+    """ω̇ resting, then a random walk of the motion density: factor 1 in the motion, the noise's
+    level (about σ√2 / (q √h) per axis) at rest, a ramp of one period between."""
+    rng = np.random.default_rng(2)
+    n, h, q = 4000, 0.002, 400.0
+    moving = np.arange(n) >= 2000
+    omega_dot = np.cumsum(rng.normal(size=(n, 3)) * q * np.sqrt(h) * moving[:, None], axis=0)
+    sigma = 0.5
+    states = np.hstack([np.zeros((n, 3)), omega_dot + rng.normal(size=(n, 3)) * sigma, np.zeros((n, 3))])
+    f = auto.local_density_factors(states, np.full(n - 1, h), np.full((n, 3), sigma**2), q, period_s=0.5)
+    rest_level = sigma * np.sqrt(2.0) / (q * np.sqrt(h))
+    assert np.all(f <= 1.0)
+    np.testing.assert_allclose(np.median(f[:1500]), rest_level, rtol=0.1)
+    assert np.median(f[2500:]) > 0.85

@@ -242,3 +242,22 @@ def with_densities(options: SmootherOptions, jerk: np.ndarray, force: np.ndarray
     return replace(options, omega_dot_random_walk_radps2_per_sqrt_s=q,
                    process_axis_factors=tuple(float(v) for v in jerk / q),
                    specific_force_random_walk_mps2_per_sqrt_s=float(np.sqrt(np.mean(np.asarray(force) ** 2))))
+
+
+def local_density_factors(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.ndarray,
+                          density: float, period_s: float = MOTION_PERIOD_S) -> np.ndarray:
+    """(N-1,) factors on the jerk density per step: the local density of the motion over the
+    motion density ``density`` [rad/s²/√s], at most 1. The local density is the step power of the
+    per-sample ω̇ in ``states`` above what its own noise gives (variances ``noise_var_jerk``),
+    averaged over ``period_s``; where the body rests it falls to the level that noise can resolve,
+    so that short, slow turns from rest keep the sign the integral of ω̇ gives them instead of
+    following the per-sample estimate, which cannot tell the sign of a slow ω (its centripetal
+    signal is below the noise)."""
+    h = np.asarray(dt_s, dtype=float)
+    width = max(int(round(period_s / max(float(np.median(h)), 1e-12))), 1)
+    kernel = np.ones(width) / width
+    steps = np.sum(np.diff(states[:, 3:6], axis=0) ** 2, axis=1) / h
+    noise = np.sum(noise_var_jerk[:-1] + noise_var_jerk[1:], axis=1) / h
+    local_noise = np.convolve(noise, kernel, mode="same")
+    excess = np.maximum(np.convolve(steps, kernel, mode="same") - local_noise, local_noise)
+    return np.clip(np.sqrt(excess / (3.0 * density**2)), 0.0, 1.0)

@@ -469,7 +469,9 @@ class BatchSmootherEstimator(SmootherOptions):
 
     def _moment_problem(self, part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
         """Problem and initial states of one window of an inconsistent log: ML initialisation with its
-        sign chain, the measured noise floor and slope, and the process densities chosen for the log."""
+        sign chain, the measured noise floor and slope, the process densities chosen for the log, and
+        the jerk density lowered where the body rests (:func:`gfimu.smoother.auto.local_density_factors`)."""
+        from .auto import estimate_noise_variances, local_density_factors
         from .initialise import sign_chain
         from .tuning import Tuning, make_problem
 
@@ -484,7 +486,12 @@ class BatchSmootherEstimator(SmootherOptions):
             scale = check.noise_floor_mps2 / check.stated_noise_mps2
         tunings.append(Tuning("jerk", opt.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
                               tuple(opt.process_axis_factors), opt.specific_force_random_walk_mps2_per_sqrt_s))
-        return make_problem(part, opt, scale, x0[:, 0:3]), x0
+        problem = make_problem(part, opt, scale, x0[:, 0:3])
+        factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
+                                        opt.omega_dot_random_walk_radps2_per_sqrt_s)
+        problem.trapezoid_sigma = problem.trapezoid_sigma * factors
+        problem.omega_dot_step_sigma = problem.omega_dot_step_sigma * factors
+        return problem, x0
 
     @property
     def last_model_check(self):
