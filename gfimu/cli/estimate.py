@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from . import CLIError
+from . import CLIError, screened
 from .options import check_method_options, parse_options, positive
 
 
@@ -58,6 +58,7 @@ def run(args) -> int:
     check_method_options(args.method, options)
     est = make_estimator(args.method, **options)
     log = gio.read_log(args.log)
+    log = screened(log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
 
