@@ -15,9 +15,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("estimate", help="estimate ω, ω̇ and acceleration from a log",
                        description="Run one estimation method on a log directory and write an estimate CSV.")
-    p.add_argument("log", help="log directory (array.toml + imu.csv)")
+    p.add_argument("log", nargs="?", default=None, help="log directory (array.toml + imu.csv)")
     p.add_argument("--method", default="smoother", choices=list(METHODS), help="estimation method (default: smoother)")
-    p.add_argument("--out", required=True,
+    p.add_argument("--list-options", action="store_true",
+                   help="print every -O option of --method with its unit, default and meaning, and exit")
+    p.add_argument("--out", required=False, default=None,
                    help="estimate CSV to write (atomically; never over an input), or - for standard output")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="method option, repeatable (see the method's documentation)")
@@ -36,6 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
+    if args.list_options:
+        from .options import describe_options
+
+        sys.stdout.write(describe_options(args.method))
+        return 0
+    if args.log is None or args.out is None:
+        raise CLIError("a LOG folder and --out (a file, or - for standard output) are needed "
+                       "(--list-options alone lists the method's options)")
     from .. import io as gio
     from ..estimators import make_estimator
     from ..io.outputs import check_output, write_output
