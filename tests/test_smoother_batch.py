@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import cube_array, mimu4444_array, random_array, single_triad
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.simulate import simulate
 from gfimu.smoother import batch
 from gfimu.smoother.batch import BatchSmootherEstimator

@@ -144,7 +144,7 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
     ``None``; an unknown name lists the known ones. Ranges are checked by the
     method itself (its errors name the option too).
     """
-    from ..estimators import estimator_class
+    from ..methods import estimator_class
 
     cls = estimator_class(method)
     if not dataclasses.is_dataclass(cls):

@@ -490,7 +490,7 @@ class SmootherProblem:
             out.append(Term("unary", r @ self.x_whiten.T, {"x": self.x_whiten @ J}))
         else:
             out.append(self._accelerometer_term(X, params))
-        return out + self._other_terms(X, params)
+        return out + self.process_terms(X, params)
 
     def _accelerometer_term(self, X: np.ndarray, params: np.ndarray) -> Term:
         n = self.n
@@ -522,7 +522,8 @@ class SmootherProblem:
                 jg *= w[:, :, None]
         return Term("unary", r, {"x": J}, jg)
 
-    def _other_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:
+    def process_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:
+        """Every factor but the measurement's (process, priors, gyroscope, free flight, attitude), whitened."""
         n = self.n
         out = []
         m = self.state_size
@@ -659,6 +660,8 @@ class SmootherProblem:
         graph = gtsam.NonlinearFactorGraph()
         opt = self.options
         y = self.log.accel_mps2
+        accel_sigma = (np.broadcast_to(self.accel_sigma, y.shape) if self.accel_sigma_per_sample is None
+                       else self.accel_sigma_per_sample)  # motion-dependent or robust re-weighting when set
         for k in range(self.n):
             if opt.measurement == "quadratic":
                 graph.add(quadratic.make_inversion_factor(omega_key(k), omega_dot_key(k), specific_force_key(k),
@@ -668,7 +671,7 @@ class SmootherProblem:
                 ks = self.global_blocks[f"scale{i}"][1] if f"scale{i}" in self.global_blocks else None
                 graph.add(accelerometer.make_accelerometer_factor(
                     omega_key(k), omega_dot_key(k), specific_force_key(k), y[k, cols], d, p,
-                    diagonal_noise(self.accel_sigma[cols]), kb, ks))
+                    diagonal_noise(accel_sigma[k, cols]), kb, ks))
             if self.use_gyro:
                 kg = self.global_blocks["gyro_bias"][1] if "gyro_bias" in self.global_blocks else None
                 graph.add(gyroscope.make_gyroscope_factor(omega_key(k), self.log.gyro_b_radps[k],
@@ -732,6 +735,35 @@ class SmootherProblem:
         for name, (sl, key) in self.global_blocks.items():
             values.insert(key, np.array(params[sl]))
         return values
+
+    def gtsam_ordering(self) -> gtsam.Ordering:
+        """Elimination order of :meth:`gtsam_graph`: the states sample by sample, then the calibration
+        variables (a chain with a border: fill-in stays within neighbouring samples and the border)."""
+        ordering = gtsam.Ordering()
+        for k in range(self.n):
+            for key in (omega_key(k), omega_dot_key(k), specific_force_key(k)):
+                ordering.push_back(key)
+            if self.snap:
+                ordering.push_back(omega_ddot_key(k))
+            if self.attitude:
+                ordering.push_back(attitude_key(k))
+        for name, (sl, key) in self.global_blocks.items():
+            ordering.push_back(key)
+        return ordering
+
+    def gtsam_key_dims(self) -> dict[int, int]:
+        """Tangent dimension of every variable of :meth:`gtsam_graph`, by key."""
+        dims = {}
+        for k in range(self.n):
+            for key in (omega_key(k), omega_dot_key(k), specific_force_key(k)):
+                dims[key] = 3
+            if self.snap:
+                dims[omega_ddot_key(k)] = 3
+            if self.attitude:
+                dims[attitude_key(k)] = 3
+        for name, (sl, key) in self.global_blocks.items():
+            dims[key] = sl.stop - sl.start
+        return dims
 
     def from_gtsam_values(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
         states = np.zeros((self.n, self.state_size))

@@ -29,12 +29,17 @@ the truth.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
 from ..log import Log
-from .batch import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
+from .banded import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
 from .graph import SmootherOptions, SmootherProblem
+from .initialise import initial_estimate
+
+InitialStates = Callable[[Log, SmootherOptions], np.ndarray]
+"""``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.initialise.initial_estimate`."""
 
 DENSITY_FIELD = {"jerk": "omega_dot_random_walk_radps2_per_sqrt_s", "snap": "omega_ddot_random_walk_radps3_per_sqrt_s"}
 DENSITY_LIMITS = (1e-3, 1e8)
@@ -157,7 +162,7 @@ def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params
     if measurement is None:
         ne = normal_equations(problem, states, P)
     else:
-        ne = add_normal_equations(measurement, normal_equations(problem, states, P, problem._other_terms(states, P)))
+        ne = add_normal_equations(measurement, normal_equations(problem, states, P, problem.process_terms(states, P)))
     fac = factorise(ne, 0.0)
     dx, dp = solve_step(ne, fac)
     c_min = ne.cost + 0.5 * (float(ne.grad.reshape(-1) @ dx.reshape(-1)) + float(ne.grad_global @ dp))
@@ -389,3 +394,25 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     if states_out is not None:
         states_out.append(best[2])
     return best[:2]
+
+
+def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = None,
+                  initial: InitialStates | None = None) -> tuple[SmootherProblem, np.ndarray]:
+    """Problem and initial states of one solve window, with the process noise chosen from the data
+    (:func:`tune`) when ``options.tune_process_noise``; the choice is appended to ``tunings``.
+
+    ``initial``: how the initial states are made (default :func:`gfimu.smoother.initialise.initial_estimate`)."""
+    initial = initial or initial_estimate
+    x0 = initial(part, options)
+    if not options.tune_process_noise:
+        return make_problem(part, options, 1.0, x0[:, 0:3]), x0
+    models = ("jerk", "snap") if options.tune_motion_model else None
+    solved: list = []
+    tuning, tuned = tune(part, options, x0, models=models, accel_noise=options.tune_accel_noise, states_out=solved)
+    if tunings is not None:
+        tunings.append(tuning)
+    if tuned.motion_model != options.motion_model:
+        x0 = initial(part, tuned)
+    elif any(f > 0 for f in tuning.axis_frequencies_hz):
+        x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
+    return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, 0:3]), x0
