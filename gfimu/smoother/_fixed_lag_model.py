@@ -113,9 +113,7 @@ class ArrayModel:
             q = np.array([x * x + yy * yy, x * x + z * z, yy * yy + z * z, x * yy, x * z, yy * z])
             r = S_f @ values.atVector(kf) + S_dw @ values.atVector(kd) + S_q @ q - y
             if jacobians is not None:
-                dq = np.array([[2 * x, 2 * yy, 0.0], [2 * x, 0.0, 2 * z], [0.0, 2 * yy, 2 * z],
-                               [yy, x, 0.0], [z, 0.0, x], [0.0, z, yy]])
-                jacobians[0] = S_q @ dq
+                jacobians[0] = S_q @ rigid_body.quadratic_terms_jacobian(w)
                 jacobians[1] = S_dw
                 jacobians[2] = S_f
             return r
