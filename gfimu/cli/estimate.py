@@ -81,6 +81,9 @@ def run(args) -> int:
 
         motion = add_orientation(log, motion, source=args.orientation)
     write_output(out, gio.motion_csv_chunks(motion))
+    check = getattr(est, "last_model_check", None)
+    if check is not None:  # what the smoother learnt about the readings and the model it chose
+        print(f"{args.method}: {check.describe()}", file=sys.stderr)
     print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {out if out is not None else 'standard output'}",
           file=sys.stderr if out is None else sys.stdout)
     return 0

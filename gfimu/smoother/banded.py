@@ -8,7 +8,8 @@ Schur complement on the border. The marginal covariances come from the same
 factor by a backward block recursion (selected inversion), also linear in
 the length.
 
-This module holds the linear algebra only; the batch estimator
+Also the re-weighting schedule of the motion-dependent accelerometer noise and the robust
+losses (:func:`solve_reweighted`). This module holds the solver only; the batch estimator
 (:mod:`gfimu.smoother.batch`), the noise tuner (:mod:`gfimu.smoother.tuning`)
 and the initialisation (:mod:`gfimu.smoother.initialise`) build on it.
 """
@@ -20,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from .graph import SmootherProblem
+from .graph import SmootherOptions, SmootherProblem
 
 
 @dataclass
@@ -197,6 +198,12 @@ def marginal_covariances(ne: NormalEquations, fac: Factorisation) -> tuple[np.nd
     return sigma, s_inv
 
 
+REWEIGHTED_TOLERANCE = 0.01
+"""Re-weighted solves stop when an iteration lowers the cost by less than this fraction of the
+cost's statistical spread at the solution, ``sqrt(R / 2)`` for R whitened rows (the std of half a
+χ² with R degrees of freedom): further iterations move the estimate by far less than its noise."""
+
+
 @dataclass
 class SolveResult:
     states: np.ndarray
@@ -209,22 +216,34 @@ class SolveResult:
 
 
 def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
-          compute_sigma: bool = False, method: str = "lm") -> SolveResult:
+          compute_sigma: bool = False, method: str = "lm", reweight=None,
+          max_iterations: int | None = None) -> SolveResult:
     """Levenberg-Marquardt (or plain Gauss-Newton) on the banded normal equations.
 
     Each iteration first tries the undamped Gauss-Newton step (the problem is
     close to linear near a good initial point); Marquardt damping
     ``λ diag(H)`` is switched on, and raised tenfold, only while a step fails
     to lower the cost, and lowered again after each success.
+
+    ``reweight(states, params)``, when given, re-weights the factors (motion-dependent noise,
+    robust losses) at the current estimate before every iteration: iteratively re-weighted
+    least squares with the Levenberg-Marquardt safeguard, each step accepted when it lowers the
+    cost under the weights it was computed with. It stops when an iteration lowers that cost by
+    less than ``relative_tolerance`` of it, or, re-weighting, by less than
+    :data:`REWEIGHTED_TOLERANCE` of its statistical spread (or after ``max_iterations``, default
+    the options').
     """
     opt = problem.options
     X = np.array(states, dtype=float)
     P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
+    if reweight is not None:
+        reweight(X, P)
     ne = normal_equations(problem, X, P)
     lam = 0.0
     converged = False
     it = 0
-    for it in range(1, int(opt.max_iterations) + 1):
+    limit = int(opt.max_iterations if max_iterations is None else max_iterations)
+    for it in range(1, limit + 1):
         while True:
             try:
                 fac = factorise(ne, lam)
@@ -245,8 +264,13 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
             break
         X, P = Xn, Pn
         lam = 0.0 if lam < 1e-8 else lam / 10.0
+        if reweight is not None:
+            reweight(X, P)
         ne = normal_equations(problem, X, P)
-        if decrease <= opt.relative_tolerance * max(ne.cost, 1e-300) or np.max(np.abs(dx)) < 1e-12:
+        enough = opt.relative_tolerance * max(new_cost, 1e-300)
+        if reweight is not None:  # the weights move with every step: stop within the cost's own spread
+            enough = max(enough, REWEIGHTED_TOLERANCE * np.sqrt(0.5 * (ne.rows or 1)))
+        if decrease <= enough or np.max(np.abs(dx)) < 1e-12:
             converged = True
             break
     result = SolveResult(X, P, ne.cost, it, converged)
@@ -254,3 +278,36 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
         cov, pcov = marginal_covariances(ne, factorise(ne, 0.0))
         result.covariance, result.param_covariance = cov, pcov
     return result
+
+
+def reweighting(problem: SmootherProblem, options: SmootherOptions):
+    """The re-weighting callback of :func:`solve` for the motion-dependent accelerometer noise and
+    the robust losses of ``options``, or None when neither is on."""
+    slope = options.accel_noise_slope_mps2_per_radps > 0 and options.measurement == "accelerometer"
+    if not (slope or options.robust):
+        return None
+
+    def reweight(states: np.ndarray, params: np.ndarray) -> None:
+        if slope:
+            problem.set_motion_dependent_noise(states[:, 0:3], options.accel_noise_slope_mps2_per_radps)
+        if options.robust:
+            problem.set_robust_weights(states, params)
+
+    return reweight
+
+
+def solve_reweighted(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions,
+                     params: np.ndarray | None = None, compute_sigma: bool | None = None,
+                     warm: bool = False) -> SolveResult:
+    """Solve with the motion-dependent noise and robust losses of ``options``: first
+    ``reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
+    iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`)."""
+    sigma = options.compute_sigma if compute_sigma is None else compute_sigma
+    reweight = reweighting(problem, options)
+    if reweight is None:
+        return solve(problem, states, params, compute_sigma=sigma)
+    if warm:  # ``states`` is already a re-weighted solution
+        return solve(problem, states, params, compute_sigma=sigma, reweight=reweight)
+    first = solve(problem, states, params, max_iterations=max(1, int(options.reweight_iterations) - 1))
+    return solve(problem, first.states, first.params if first.params.size else None,
+                 compute_sigma=sigma, reweight=reweight)

@@ -25,12 +25,22 @@ import gtsam
 import numpy as np
 
 from ..array import SensorArray
+from ..estimators.ml import MLEstimator
 from ..factors import GRAVITY_W_MPS2, _so3
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rotations import quaternion_from_matrix
+from .auto import (
+    check_model,
+    estimate_noise_variances,
+    local_density_factors,
+    misfit_options,
+    motion_densities,
+    with_densities,
+)
 from .banded import (  # noqa: F401  (the banded core, also importable from here)
+    REWEIGHTED_TOLERANCE,
     Factorisation,
     NormalEquations,
     SolveResult,
@@ -39,12 +49,14 @@ from .banded import (  # noqa: F401  (the banded core, also importable from here
     factorise,
     marginal_covariances,
     normal_equations,
+    reweighting,
     solve,
+    solve_reweighted,
     solve_step,
     to_lower_banded,
 )
 from .graph import STATE_SIZE, SmootherOptions, SmootherProblem, options_reason
-from .initialise import initial_attitude, initial_estimate, initial_states
+from .initialise import initial_attitude, initial_estimate, initial_states, sign_chain
 from .result import SmootherResult
 from .tuning import InitialStates, Tuning, make_problem, tuned_problem
 
@@ -77,15 +89,22 @@ def window_slices(n: int, rate_hz: float, window_s: float | None, overlap_s: flo
     return out
 
 
+CHECK_SAMPLES = 5000
+"""The model check (:func:`gfimu.smoother.auto.check_model`) reads at most about this many samples,
+evenly spread over the log (120,000 residuals of an 8-triad array)."""
+
+
 def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
-                  compute_sigma: bool = False, solver: str = "numpy") -> SolveResult:
-    """Solve ``problem`` from ``states`` with the banded numpy solver or GTSAM (:data:`SOLVERS`)."""
+                  compute_sigma: bool = False, solver: str = "numpy", reweight=None,
+                  max_iterations: int | None = None) -> SolveResult:
+    """:func:`gfimu.smoother.banded.solve` with the banded numpy solver or the GTSAM graph (:data:`SOLVERS`)."""
     if solver == "numpy":
-        return solve(problem, states, params, compute_sigma=compute_sigma)
+        return solve(problem, states, params, compute_sigma=compute_sigma, reweight=reweight, max_iterations=max_iterations)
     if solver != "gtsam":
         raise ValueError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
-    X, P, iterations, converged = gtsam_levenberg_marquardt(problem, states, params, int(problem.options.max_iterations),
-                                                     problem.options.relative_tolerance)
+    limit = int(problem.options.max_iterations if max_iterations is None else max_iterations)
+    X, P, iterations, converged = gtsam_levenberg_marquardt(problem, states, params, limit,
+                                                            problem.options.relative_tolerance, reweight)
     ne = normal_equations(problem, X, P)
     result = SolveResult(X, P, ne.cost, iterations, converged)
     if compute_sigma:
@@ -93,13 +112,28 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
     return result
 
 
+def solve_window(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions, params: np.ndarray | None = None,
+                 compute_sigma: bool | None = None, solver: str = "numpy") -> SolveResult:
+    """:func:`gfimu.smoother.banded.solve_reweighted` (motion-dependent noise and robust losses of
+    ``options``) with either solver."""
+    if solver == "numpy":
+        return solve_reweighted(problem, states, options, params, compute_sigma)
+    sigma = options.compute_sigma if compute_sigma is None else compute_sigma
+    reweight = reweighting(problem, options)
+    if reweight is None:
+        return solve_problem(problem, states, params, sigma, solver)
+    first = solve_problem(problem, states, params, False, solver, max_iterations=max(1, int(options.reweight_iterations) - 1))
+    return solve_problem(problem, first.states, first.params if first.params.size else None, sigma, solver, reweight)
+
+
 def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: InitialStates | None = None,
-           solver: str = "numpy") -> SmootherResult:
+           solver: str = "numpy", auto_model: bool = True, tune_span_s: float | None = 10.0) -> SmootherResult:
     """The batch smoother on a whole log: overlapping solve windows, each with its process noise chosen
     from the data when ``options.tune_process_noise``.
 
     ``initial``: how each window's initial states are made (default
-    :func:`gfimu.smoother.initialise.initial_estimate`); ``solver``: one of :data:`SOLVERS`."""
+    :func:`gfimu.smoother.initialise.initial_estimate`); ``solver``: one of :data:`SOLVERS`;
+    ``auto_model``, ``tune_span_s``: see :class:`BatchSmootherEstimator`."""
     opt = options
     reason = options_reason(log.array, opt, attitude_supported=True)
     if reason:
@@ -118,6 +152,7 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     tunings: list[Tuning] = []
     notes = []
     iterations, cost = 0, 0.0
+    opt, auto = _auto_model(log, opt, attitude) if auto_model else (opt, None)
     previous = None  # (solve slice, attitudes) of the window before
     for w, (solve_sl, keep_log, keep_win) in enumerate(progress_bar(windows, total=len(windows), desc="smoother",
                                                                     enable=progress and len(windows) > 1)):
@@ -125,20 +160,13 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         if attitude:
             res, problem = _solve_with_attitude(part, opt, previous, solve_sl, tunings, initial, solver)
             previous = (solve_sl, problem.rotations(res.states))
-            iterations += res.iterations
+        elif auto is not None and not auto[0].consistent:
+            problem, x0 = _moment_problem(part, opt, auto, solve_sl, tunings)
+            res = solve_window(problem, x0, problem.options, solver=solver)
         else:
-            problem, x0 = tuned_problem(part, opt, tunings, initial)
-            res = solve_problem(problem, x0, None, opt.compute_sigma, solver)
-            iterations += res.iterations
-            slope = opt.accel_noise_slope_mps2_per_radps > 0 and opt.measurement == "accelerometer"
-            if slope or opt.robust:
-                for _ in range(int(opt.reweight_iterations) - 1):  # re-weight from the new estimate
-                    if slope:
-                        problem.set_motion_dependent_noise(res.states[:, 0:3], opt.accel_noise_slope_mps2_per_radps)
-                    if opt.robust:
-                        problem.set_robust_weights(res.states, res.params)
-                    res = solve_problem(problem, res.states, None, opt.compute_sigma, solver)
-                    iterations += res.iterations
+            problem, x0 = tuned_problem(part, opt, tunings, initial, tune_span_s)
+            res = solve_window(problem, x0, opt, solver=solver)
+        iterations += res.iterations
         if not res.converged:
             notes.append(f"solve window {w + 1} of {len(windows)} (samples {solve_sl.start}..{solve_sl.stop - 1}) "
                          f"stopped after {res.iterations} iterations without converging")
@@ -158,7 +186,60 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         extra["accel_b_mps2"] = states[:, 6:9] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
     motion = Motion(log.timestamps_ns, omega_b_radps=states[:, 0:3], omega_dot_b_radps2=states[:, 3:6],
                     specific_force_b_mps2=states[:, 6:9], sigma=sigma, **extra)
-    return SmootherResult(motion, tuple(tunings), tuple(calibration), iterations, cost, len(windows), tuple(notes))
+    return SmootherResult(motion, tuple(tunings), tuple(calibration), iterations, cost, len(windows), tuple(notes),
+                          auto[0] if auto else None)
+
+
+def _auto_model(log: Log, opt: SmootherOptions, attitude: bool):
+    """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.auto`."""
+    if (attitude or opt.free_flight or opt.measurement != "accelerometer"
+            or opt.self_calibrate_bias or opt.self_calibrate_scale):
+        return opt, None
+    ml = MLEstimator()
+    if ml.applicable(log.array) is not None or not np.all(np.isfinite(log.accel_mps2)):
+        return opt, None
+    step = max(1, len(log) // CHECK_SAMPLES)
+    sample = log if step == 1 else log.select(slice(0, None, step))
+    motion = ml.estimate(sample)
+    check = check_model(sample, motion)
+    if check.consistent:
+        return opt, (check, None)
+    if step > 1:
+        motion = ml.estimate(log)
+    chosen = misfit_options(opt, check)
+    defaults = {f.name: f.default for f in fields(SmootherOptions)}
+    keep = {name: getattr(opt, name) for name in defaults
+            if name != "tune_process_noise" and getattr(opt, name) != defaults[name]
+            and getattr(chosen, name) != getattr(opt, name)}
+    if opt.tune_process_noise:  # the process noise of the log's motion (else the fixed densities)
+        x = np.hstack([motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2])
+        chosen = with_densities(chosen, *motion_densities(x, log.dt_s, *estimate_noise_variances(
+            log.array, check, motion.omega_b_radps)))
+    chosen = replace(chosen, **keep)
+    return chosen, (check, motion)
+
+
+def _moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
+    """Problem and initial states of one window of an inconsistent log: ML initialisation with its
+    sign chain, the measured noise floor and slope, the process densities chosen for the log, and
+    the jerk density lowered where the body rests (:func:`gfimu.smoother.auto.local_density_factors`)."""
+    check, motion = auto
+    omega = motion.omega_b_radps[solve_sl]
+    omega_dot = motion.omega_dot_b_radps2[solve_sl]
+    if opt.ml_sign_chain:
+        omega = omega * sign_chain(omega, omega_dot, part.dt_s)[:, None]
+    x0 = np.hstack([omega, omega_dot, motion.specific_force_b_mps2[solve_sl]])
+    scale = 1.0
+    if np.isfinite(check.stated_noise_mps2) and check.stated_noise_mps2 > 0:
+        scale = check.noise_floor_mps2 / check.stated_noise_mps2
+    tunings.append(Tuning("jerk", opt.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
+                          tuple(opt.process_axis_factors), opt.specific_force_random_walk_mps2_per_sqrt_s))
+    problem = make_problem(part, opt, scale, x0[:, 0:3])
+    factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
+                                    opt.omega_dot_random_walk_radps2_per_sqrt_s)
+    problem.trapezoid_sigma = problem.trapezoid_sigma * factors
+    problem.omega_dot_step_sigma = problem.omega_dot_step_sigma * factors
+    return problem, x0
 
 
 def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: slice, tunings: list,
@@ -204,10 +285,22 @@ class BatchSmootherEstimator(SmootherOptions):
     """
 
     tune_process_noise: bool = True
+    tune_span_s: float | None = 10.0
+    """With ``tune_process_noise``: choose the process noise on at most this much of each solve
+    window, its middle [s] (the evidence of 10 s of readings fixes a handful of noise levels well;
+    the cost of the choice then stops growing with the window); None: on the whole window."""
+    auto_model: bool = True
+    """Choose the model from the log (:mod:`gfimu.smoother.auto`): logs whose readings follow the
+    rigid-body equation up to the stated white noise keep the options as they are; logs whose
+    residual is larger, heavy-tailed or grows with |ω| (real arrays) get the ML initialisation with
+    its sign chain, the measured noise floor and slope, Cauchy losses and moment-estimated process
+    noise. Options set to other than their defaults are kept either way; False: the options as given."""
     solver: str = field(default="numpy", metadata={"unit": "", "help": "batch solver: 'numpy' (vectorised banded "
                                                    "Levenberg-Marquardt, default) or 'gtsam' (the same problem as a GTSAM graph)"})
+    """'numpy': the vectorised banded Levenberg-Marquardt (default, linear in the length, fast);
+    'gtsam': the same problem as a GTSAM graph, same schedule, eliminated in time order (a cross-check)."""
     _runs: list = field(default_factory=list, init=False, repr=False, compare=False)
-    """The results of :meth:`estimate` (only the newest is kept), behind :attr:`last_tuning`."""
+    """The result of the newest :meth:`estimate`, behind :attr:`last_tuning` and its kin."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -222,7 +315,8 @@ class BatchSmootherEstimator(SmootherOptions):
 
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> SmootherResult:
         """The smoother on ``log`` (:func:`smooth`), with everything it produced."""
-        return smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver)
+        return smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver,
+                      auto_model=self.auto_model, tune_span_s=self.tune_span_s)
 
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         res = self.result(log, progress)
@@ -238,6 +332,11 @@ class BatchSmootherEstimator(SmootherOptions):
     def last_calibration(self) -> list[dict]:
         """The calibration estimates of the newest :meth:`estimate` (see :attr:`SmootherResult.calibration`)."""
         return list(self._runs[-1].calibration) if self._runs else []
+
+    @property
+    def last_model_check(self):
+        """The :class:`gfimu.smoother.auto.ModelCheck` of the newest :meth:`estimate` (None when not run)."""
+        return self._runs[-1].model_check if self._runs else None
 
 
 def _hessian_diagonal(linear: gtsam.GaussianFactorGraph, dims: dict[int, int]) -> dict[int, np.ndarray]:
@@ -256,19 +355,25 @@ def _hessian_diagonal(linear: gtsam.GaussianFactorGraph, dims: dict[int, int]) -
 
 
 def gtsam_levenberg_marquardt(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
-                              iterations: int = 10, tolerance: float = 1e-12) -> tuple[np.ndarray, np.ndarray, int, bool]:
-    """The graph path: :meth:`SmootherProblem.gtsam_graph`, solved by the same Levenberg-Marquardt
-    schedule as :func:`gfimu.smoother.banded.solve`, driven here on a Python-owned Values: linearise,
-    eliminate with the states in time order (then the calibration variables), retract. The time
-    ordering keeps the elimination a chain, linear in the length. Each iteration first tries the
-    undamped Gauss-Newton step; Marquardt damping ``λ (diag(JᵀJ) + 10⁻⁹)`` is switched on and raised
-    tenfold only while a step fails to lower the cost. Returns the states, the calibration variables,
-    the iterations and whether it converged (relative decrease below ``tolerance``)."""
-    graph = problem.gtsam_graph()
+                              iterations: int = 10, tolerance: float = 1e-12,
+                              reweight=None) -> tuple[np.ndarray, np.ndarray, int, bool]:
+    """The graph path: :meth:`SmootherProblem.gtsam_graph`, solved by the Levenberg-Marquardt schedule
+    of :func:`gfimu.smoother.banded.solve`, driven here on a Python-owned Values: linearise, eliminate
+    with the states in time order (then the calibration variables), retract. The time ordering keeps
+    the elimination a chain, linear in the length. Each iteration first tries the undamped
+    Gauss-Newton step; Marquardt damping ``λ (diag(JᵀJ) + 10⁻⁹)`` is switched on and raised tenfold
+    only while a step fails to lower the cost. ``reweight(states, params)`` re-weights the problem
+    before every iteration (the graph is rebuilt with the new noise). Returns the states, the
+    calibration variables, the iterations and whether it converged."""
     P = np.zeros(problem.n_global) if params is None else np.asarray(params, dtype=float)
-    values = problem.gtsam_values(states, P)
+    X = np.array(states, dtype=float)
+    if reweight is not None:
+        reweight(X, P)
+    graph = problem.gtsam_graph()
+    values = problem.gtsam_values(X, P)
     ordering = problem.gtsam_ordering()
     dims = problem.gtsam_key_dims()
+    rows = sum(graph.at(i).dim() for i in range(graph.size()))
     cost = graph.error(values)
     lam, it, converged = 0.0, 0, False
     for it in range(1, iterations + 1):
@@ -300,8 +405,15 @@ def gtsam_levenberg_marquardt(problem: SmootherProblem, states: np.ndarray, para
         decrease = cost - new_cost
         values, cost = trial, new_cost
         lam = 0.0 if lam < 1e-8 else lam / 10.0
+        enough = tolerance * max(new_cost, 1e-300)
+        if reweight is not None:  # new weights at the new estimate: rebuild the graph with them
+            X, P = problem.from_gtsam_values(values)
+            reweight(X, P)
+            graph = problem.gtsam_graph()
+            cost = graph.error(values)
+            enough = max(enough, REWEIGHTED_TOLERANCE * np.sqrt(0.5 * rows))
         step = max((float(np.max(np.abs(delta.at(key)))) for key in dims), default=0.0)
-        if decrease <= tolerance * max(cost, 1e-300) or step < 1e-12:
+        if decrease <= enough or step < 1e-12:
             converged = True
             break
     X, P = problem.from_gtsam_values(values)
@@ -314,6 +426,6 @@ gtsam_gauss_newton = gtsam_levenberg_marquardt
 
 def solve_with_gtsam(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
                      iterations: int = 10, tolerance: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
-    """States and calibration variables from :func:`gtsam_gauss_newton`."""
+    """States and calibration variables from :func:`gtsam_levenberg_marquardt`."""
     X, P, _, _ = gtsam_levenberg_marquardt(problem, states, params, iterations, tolerance)
     return X, P

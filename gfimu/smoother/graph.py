@@ -315,6 +315,9 @@ class SmootherProblem:
             d, p = accelerometer.sensor_geometry(acc)
             self.sensors.append((d, p, slice(col, col + d.shape[0])))
             col += d.shape[0]
+        # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
+        self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
+        self.all_positions_m = np.concatenate([p for _, p, _ in self.sensors])
         # global variables: biases, scales, gyro bias
         self.global_blocks = {}  # name -> (slice, gtsam key)
         g = 0
@@ -498,7 +501,10 @@ class SmootherProblem:
         jx = []
         m = self.state_size
         jg = np.zeros((n, self.log.array.n_axes, self.n_global)) if self.n_global else None
-        for i, (d, p, cols) in enumerate(self.sensors):
+        groups = self.sensors
+        if not any(name.startswith(("bias", "scale")) for name in self.global_blocks):
+            groups = [(self.all_directions_b, self.all_positions_m, slice(0, self.all_directions_b.shape[0]))]
+        for i, (d, p, cols) in enumerate(groups):
             bias = self.global_part(params, f"bias{i}")
             scale = self.global_part(params, f"scale{i}")
             r, j = accelerometer.accelerometer_residual(X[:, W], X[:, D], X[:, F], self.log.accel_mps2[:, cols], d, p, bias, scale)
@@ -652,7 +658,16 @@ class SmootherProblem:
 
     def cost(self, states: np.ndarray, params: np.ndarray) -> float:
         """Half the sum of squared whitened residuals (GTSAM's graph error)."""
-        return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
+        if self.options.measurement == "quadratic" or self.n_global:
+            return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
+        X = states
+        rows = getattr(self, "_all_rows", None)
+        if rows is None:
+            rows = self._all_rows = accelerometer.axis_rows(self.all_directions_b, self.all_positions_m)
+        r = accelerometer.accelerometer_prediction(X[:, W], X[:, D], X[:, F], rows) - self.log.accel_mps2
+        sigma = self.accel_sigma if self.accel_sigma_per_sample is None else self.accel_sigma_per_sample
+        r = r / sigma
+        return 0.5 * (float(np.sum(r * r)) + sum(float(np.sum(t.residual**2)) for t in self.process_terms(X, params)))
 
     # --- the same problem as a GTSAM graph (graph path) -----------------------
     def gtsam_graph(self) -> gtsam.NonlinearFactorGraph:

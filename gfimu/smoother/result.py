@@ -24,8 +24,12 @@ class SmootherResult:
     cost: float = float("nan")
     """Final cost (half the sum of squared whitened residuals), summed over the windows."""
     windows: int = 1
+    """Solve windows of a batch run (0: a stream)."""
     warnings: tuple = ()
     """Plain-text notes on anything that went less well than planned (e.g. a window that did not converge)."""
+    model_check: object | None = None
+    """The batch smoother's check of the readings against a rigid body (:class:`gfimu.smoother.auto.ModelCheck`),
+    None when it did not run."""
 
     @property
     def sigma(self) -> dict:

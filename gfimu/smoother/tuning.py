@@ -397,22 +397,33 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
 
 
 def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = None,
-                  initial: InitialStates | None = None) -> tuple[SmootherProblem, np.ndarray]:
+                  initial: InitialStates | None = None, span_s: float | None = None) -> tuple[SmootherProblem, np.ndarray]:
     """Problem and initial states of one solve window, with the process noise chosen from the data
     (:func:`tune`) when ``options.tune_process_noise``; the choice is appended to ``tunings``.
 
-    ``initial``: how the initial states are made (default :func:`gfimu.smoother.initialise.initial_estimate`)."""
+    ``initial``: how the initial states are made (default :func:`gfimu.smoother.initialise.initial_estimate`);
+    ``span_s``: choose on at most this much of the window, its middle [s] (None: the whole window)."""
     initial = initial or initial_estimate
     x0 = initial(part, options)
     if not options.tune_process_noise:
         return make_problem(part, options, 1.0, x0[:, 0:3]), x0
     models = ("jerk", "snap") if options.tune_motion_model else None
     solved: list = []
-    tuning, tuned = tune(part, options, x0, models=models, accel_noise=options.tune_accel_noise, states_out=solved)
+    span = slice(0, len(part))
+    if span_s is not None and part.times_s[-1] - part.times_s[0] > span_s:
+        width = max(int(round(span_s * part.rate_hz)), 4)
+        start = (len(part) - width) // 2
+        span = slice(start, start + width)
+    tuning, tuned = tune(part.select(span), options, x0[span], models=models, accel_noise=options.tune_accel_noise,
+                         states_out=solved)
     if tunings is not None:
         tunings.append(tuning)
     if tuned.motion_model != options.motion_model:
         x0 = initial(part, tuned)
     elif any(f > 0 for f in tuning.axis_frequencies_hz):
-        x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
+        if span == slice(0, len(part)):
+            x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
+        else:  # ... or from the white-jerk solution of the whole window with the chosen densities
+            plain = replace(tuned, process_axis_frequencies_hz=(0.0, 0.0, 0.0))
+            x0 = solve(make_problem(part, plain, tuning.accel_noise_scale, x0[:, 0:3]), x0).states
     return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, 0:3]), x0
