@@ -55,8 +55,9 @@ from .banded import (  # noqa: F401  (the banded core, also importable from here
     solve_step,
     to_lower_banded,
 )
-from .graph import STATE_SIZE, SmootherOptions, SmootherProblem, options_reason
+from .graph import SmootherOptions, SmootherProblem, options_reason
 from .initialise import initial_attitude, initial_estimate, initial_states, sign_chain
+from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from .result import SmootherResult
 from .tuning import InitialStates, Tuning, make_problem, tuned_problem
 
@@ -143,8 +144,9 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     n = len(log)
     if n < 2:
         raise ValueError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
-    attitude = opt.estimate_attitude or opt.use_inclinometer
-    M = (12 if opt.motion_model == "snap" else STATE_SIZE) + (3 if attitude else 0)
+    layout = StateLayout.from_options(opt)
+    attitude = layout.attitude
+    M = layout.size
     states = np.zeros((n, M))
     sd = np.zeros((n, M)) if opt.compute_sigma else None
     windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
@@ -176,16 +178,13 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         if sd is not None:
             sd[keep_log, :m] = np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win, :m]
         calibration.append({name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()})
-    sigma = {}
-    if sd is not None:
-        sigma = {"omega_b_radps": sd[:, 0:3], "omega_dot_b_radps2": sd[:, 3:6], "specific_force_b_mps2": sd[:, 6:9]}
+    sigma = {} if sd is None else layout.quantities(sd)
     extra = {}
     if attitude:
-        R = _so3.exp(states[:, M - 3:])
+        R = _so3.exp(states[:, layout.rotation])
         extra["quaternion_wb"] = quaternion_from_matrix(R)
-        extra["accel_b_mps2"] = states[:, 6:9] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
-    motion = Motion(log.timestamps_ns, omega_b_radps=states[:, 0:3], omega_dot_b_radps2=states[:, 3:6],
-                    specific_force_b_mps2=states[:, 6:9], sigma=sigma, **extra)
+        extra["accel_b_mps2"] = states[:, layout.specific_force] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
+    motion = Motion(log.timestamps_ns, sigma=sigma, **layout.quantities(states), **extra)
     return SmootherResult(motion, tuple(tunings), tuple(calibration), iterations, cost, len(windows), tuple(notes),
                           auto[0] if auto else None)
 
@@ -234,7 +233,7 @@ def _moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tuni
         scale = check.noise_floor_mps2 / check.stated_noise_mps2
     tunings.append(Tuning("jerk", opt.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
                           tuple(opt.process_axis_factors), opt.specific_force_random_walk_mps2_per_sqrt_s))
-    problem = make_problem(part, opt, scale, x0[:, 0:3])
+    problem = make_problem(part, opt, scale, x0[:, OMEGA])
     factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
                                     opt.omega_dot_random_walk_radps2_per_sqrt_s)
     problem.trapezoid_sigma = problem.trapezoid_sigma * factors
@@ -262,7 +261,7 @@ def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: sl
     if previous is not None:
         prev_sl, prev_R = previous
         start = prev_R[solve_sl.start - prev_sl.start]
-    R = initial_attitude(part, first.states[:, 0:3], first.states[:, 6:9], start, opt.use_inclinometer)
+    R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start, opt.use_inclinometer)
     problem = make_problem(part, opt, t.accel_noise_scale) if t is not None else SmootherProblem(part, opt)
     problem.attitude_prior_wb = R[0]
     x0 = np.hstack([first.states, _so3.log(R)])

@@ -23,8 +23,9 @@ from ..rotations import matrix_from_quaternion
 from .banded import factorise, marginal_covariances, normal_equations
 from .batch import window_slices
 from .graph import SmootherOptions, SmootherProblem
+from .layout import OMEGA_DOT, QUANTITIES
 
-QUANTITY_SLICES = {"omega_b_radps": slice(0, 3), "omega_dot_b_radps2": slice(3, 6), "specific_force_b_mps2": slice(6, 9)}
+QUANTITY_SLICES = QUANTITIES
 
 
 def truth_states(truth: Motion) -> np.ndarray:
@@ -49,7 +50,7 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
         raise ValueError(f"{log.source}: the bound needs the truth (log.truth or truth=)")
     states = truth_states(truth)
     if opt.motion_model == "snap":  # ω̈ of the truth by central differences
-        states = np.hstack([states, np.gradient(states[:, 3:6], log.times_s, axis=0)])
+        states = np.hstack([states, np.gradient(states[:, OMEGA_DOT], log.times_s, axis=0)])
     if opt.estimate_attitude or opt.use_inclinometer:
         if truth.quaternion_wb is None:
             raise ValueError("the bound with attitude needs the true quaternion_wb")

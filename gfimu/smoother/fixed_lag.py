@@ -84,6 +84,7 @@ from . import _fixed_lag_model as model
 from .banded import solve
 from .graph import SmootherOptions, options_reason
 from .initialise import initial_estimate
+from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .result import SmootherResult
 from .tuning import tuned_problem
 
@@ -363,8 +364,8 @@ class FixedLagSmoother:
         res = solve(problem, x0, None, compute_sigma=self.compute_sigma)
         X = res.states
         sd = np.sqrt(np.einsum("nii->ni", res.covariance)) if self.compute_sigma else None
-        states = [StateEstimate(int(t), X[j, 0:3].copy(), X[j, 3:6].copy(), X[j, 6:9].copy(),
-                                *((None,) * 3 if sd is None else (sd[j, 0:3], sd[j, 3:6], sd[j, 6:9])))
+        states = [StateEstimate(int(t), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
+                                *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
                   for j, t in enumerate(part.timestamps_ns)]
         return tunings[-1], tunings[-1].for_stream(replace(problem.options, tune_process_noise=False)), states
 
@@ -438,8 +439,8 @@ class FixedLagSmoother:
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
         if omega_hint is not None and len(x0) >= 2:
-            if np.sum((x0[-2, 0:3] + omega_hint) ** 2) < np.sum((x0[-2, 0:3] - omega_hint) ** 2):
-                x0[:, 0:3] *= -1.0
+            if np.sum((x0[-2, OMEGA] + omega_hint) ** 2) < np.sum((x0[-2, OMEGA] - omega_hint) ** 2):
+                x0[:, OMEGA] *= -1.0
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps = {}
@@ -453,7 +454,7 @@ class FixedLagSmoother:
                 h = (t_ns - self._warmup[j - 1][0]) * 1e-9
                 self.model.add_process(graph, k - 1, k, h)
             self.model.add_measurement(graph, k, y, g)
-            model.insert_state(values, k, x0[j, 0:3], x0[j, 3:6], x0[j, 6:9])
+            model.insert_state(values, k, x0[j, OMEGA], x0[j, OMEGA_DOT], x0[j, SPECIFIC_FORCE])
             t = self._stamp(t_ns)
             for key in model.keys(k):
                 stamps[key] = t

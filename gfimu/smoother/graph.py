@@ -55,10 +55,11 @@ from ..factors import (
     specific_force_key,
 )
 from ..log import Log
+from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
-STATE_SIZE = 9
-"""State size of the default white-jerk model; white snap appends ω̈ (12)."""
-W, D, F, A = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
+STATE_SIZE = KINEMATIC_SIZE
+"""State size of the default white-jerk model; white snap appends ω̈ (12); see :mod:`gfimu.smoother.layout`."""
+W, D, F, A = OMEGA, OMEGA_DOT, SPECIFIC_FORCE, OMEGA_DDOT
 
 
 @dataclass(frozen=True)
@@ -346,15 +347,15 @@ class SmootherProblem:
                 raise ValueError(f"{self.log.source}: gyroscope reading is not finite at sample {row}")
             gs = arr.gyroscope.noise_std_radps
             self.gyro_sigma = float(gs) if gs else 0.01
-        self.snap = opt.motion_model == "snap"
-        self.state_size = 12 if self.snap else STATE_SIZE
-        self.attitude = bool(opt.estimate_attitude or opt.use_inclinometer)
+        self.layout = StateLayout.from_options(opt)
+        self.snap = self.layout.snap
+        self.state_size = self.layout.size
+        self.attitude = self.layout.attitude
         self.use_inclinometer = bool(opt.use_inclinometer and self.log.tilt_rad is not None)
         if opt.use_inclinometer and self.log.tilt_rad is None:
             raise ValueError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
         if self.attitude:
-            self.AT = slice(self.state_size, self.state_size + 3)
-            self.state_size += 3
+            self.AT = self.layout.rotation
             self.attitude_prior_wb = np.eye(3)
             self.attitude_prior_sigma = np.array([10.0, 10.0, opt.initial_yaw_std_rad])
             self.attitude_step_sigma = process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, self.dt_s)
@@ -444,7 +445,7 @@ class SmootherProblem:
             self.trapezoid_sigma, self.omega_dot_step_sigma = self._process_base[0].copy(), self._process_base[1].copy()
             if self.snap:
                 self.snap_whiten, self.snap_cov = self._process_base[2].copy(), None
-            mk = self.state_size - 3 if self.attitude else self.state_size
+            mk = self.layout.motion_size
             X = states
             if mk == STATE_SIZE:
                 if self.oscillator:
@@ -533,7 +534,7 @@ class SmootherProblem:
         n = self.n
         out = []
         m = self.state_size
-        mk = m - 3 if self.attitude else m  # size of the kinematic part [ω, ω̇, f(, ω̈)]
+        mk = self.layout.motion_size  # size of the motion part [ω, ω̇, f(, ω̈)]
         # first-state weak prior
         r0, _ = process.prior_residual(X[:1, :mk], np.zeros(mk))
         J0p = np.zeros((1, mk, m))

@@ -32,6 +32,7 @@ from ..rigid_body import quadratic_terms
 from ..rotations import skew
 from .banded import to_lower_banded
 from .graph import STATE_SIZE, SmootherOptions
+from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
 
 LIFTED = 12
@@ -291,8 +292,8 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
     if options.free_flight:
         w = free_flight_omega(log, options)
         inertia = np.asarray(arr.body.principal_inertia_kgm2)
-        x0[:, 0:3] = w
-        x0[:, 3:6] = -np.cross(w, w * inertia) / inertia
+        x0[:, OMEGA] = w
+        x0[:, OMEGA_DOT] = -np.cross(w, w * inertia) / inertia
         return x0
     gyro = arr.gyroscope is not None and options.use_gyro and log.gyro_b_radps is not None
     if gyro and arr.n_axes < 12:
@@ -300,15 +301,15 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
         S = arr.structure_matrix()
         y = log.accel_mps2 - rigid_body.quadratic_terms(log.gyro_b_radps) @ S[:, 6:12].T
         lin = np.linalg.lstsq(S[:, :6], y.T, rcond=1e-8)[0].T
-        x0[:, 0:3] = log.gyro_b_radps
-        x0[:, 3:6] = lin[:, 3:6]
-        x0[:, 6:9] = lin[:, 0:3]
+        x0[:, OMEGA] = log.gyro_b_radps
+        x0[:, OMEGA_DOT] = lin[:, 3:6]
+        x0[:, SPECIFIC_FORCE] = lin[:, 0:3]
         return x0
     z = lifted_smoothing(log, options)
-    x0[:, 6:9] = z[:, 0:3]
-    x0[:, 3:6] = z[:, 3:6]
+    x0[:, SPECIFIC_FORCE] = z[:, 0:3]
+    x0[:, OMEGA_DOT] = z[:, 3:6]
     if gyro:
-        x0[:, 0:3] = log.gyro_b_radps
+        x0[:, OMEGA] = log.gyro_b_radps
         return x0
     window = max(int(round(options.init_window_s * log.rate_hz)), 8)
     for seg in log.segments():
@@ -317,7 +318,7 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
             continue
         dt = log.dt_s[seg.start:seg.stop - 1]
         w = sign_resolved_omega(z[seg, 6:12], z[seg, 3:6], dt, window)
-        x0[seg, 0:3] = w * steady_rotation_sign(w, z[seg, 0:3], dt, window)
+        x0[seg, OMEGA] = w * steady_rotation_sign(w, z[seg, 0:3], dt, window)
     return x0
 
 

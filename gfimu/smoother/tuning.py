@@ -37,6 +37,7 @@ from ..log import Log
 from .banded import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
 from .graph import SmootherOptions, SmootherProblem
 from .initialise import initial_estimate
+from .layout import OMEGA, StateLayout
 
 InitialStates = Callable[[Log, SmootherOptions], np.ndarray]
 """``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.initialise.initial_estimate`."""
@@ -180,16 +181,6 @@ def measurement_normal_equations(problem: SmootherProblem, states: np.ndarray, p
     return normal_equations(problem, states, P, terms[:1])
 
 
-def _states_for(states: np.ndarray, model: str, problem_state_size: int) -> np.ndarray:
-    """Adapt a state array to the model's size (append ω̈ = 0 for 'snap', drop it for 'jerk')."""
-    m = states.shape[1]
-    if m == problem_state_size:
-        return states
-    if problem_state_size > m:
-        return np.hstack([states, np.zeros((states.shape[0], problem_state_size - m))])
-    return states[:, :problem_state_size]
-
-
 def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 1) -> tuple[float, float, int]:
     """Maximise ``f`` over ``x`` (a log density) from a grid ``x0 + step·k``, |k| ≤ points,
     extended while the best point is at an edge, then one parabolic refinement."""
@@ -273,9 +264,8 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     best = None
     for model in models:
         field = DENSITY_FIELD[model]
-        size = (12 if model == "snap" else 9) + (3 if (options.estimate_attitude or options.use_inclinometer) else 0)
         p0 = params
-        X = _states_for(states, model, size)
+        X = StateLayout.from_options(replace(options, motion_model=model)).resize(states)
         current = {"density": np.log(getattr(options, field)), "axis": np.log(np.asarray(options.process_axis_factors, float)),
                    "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0,
                    "freq": np.array(options.process_axis_frequencies_hz if model == "jerk" else (0.0, 0.0, 0.0), dtype=float),
@@ -294,7 +284,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
 
         def evidence(c, X):
             try:
-                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])), X[:, 0:3])
+                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])), X[:, OMEGA])
                 key = (version, float(c["scale"]))
                 if key not in cache:
                     cache.clear()
@@ -374,7 +364,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
         if accel_noise:
             search("scale", 1e-2, 1e3)
         value = search("density", *DENSITY_LIMITS, step=np.log(4.0))
-        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"])), X[:, 0:3]), X, p0)
+        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"])), X[:, OMEGA]), X, p0)
         X, version = res.states, 1
         if accel_noise:
             search("scale", 1e-2, 1e3, step=np.log(2.0))
@@ -406,7 +396,7 @@ def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = No
     initial = initial or initial_estimate
     x0 = initial(part, options)
     if not options.tune_process_noise:
-        return make_problem(part, options, 1.0, x0[:, 0:3]), x0
+        return make_problem(part, options, 1.0, x0[:, OMEGA]), x0
     models = ("jerk", "snap") if options.tune_motion_model else None
     solved: list = []
     span = slice(0, len(part))
@@ -425,5 +415,5 @@ def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = No
             x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
         else:  # ... or from the white-jerk solution of the whole window with the chosen densities
             plain = replace(tuned, process_axis_frequencies_hz=(0.0, 0.0, 0.0))
-            x0 = solve(make_problem(part, plain, tuning.accel_noise_scale, x0[:, 0:3]), x0).states
-    return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, 0:3]), x0
+            x0 = solve(make_problem(part, plain, tuning.accel_noise_scale, x0[:, OMEGA]), x0).states
+    return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, OMEGA]), x0
