@@ -49,6 +49,16 @@ def test_estimate_keeps_the_newest_result_behind_last_tuning():
     assert est.last_tuning == list(res.tunings) and len(res.tunings) == 1
 
 
+def test_a_log_shorter_than_the_motion_period_runs():
+    """A 0.5 s log the model check finds inconsistent with a rigid body (the constant turntable's
+    noise-free rotation against the stated noise): the local density factors fit its length."""
+    log = simulate("turntable-constant", duration_s=0.5, seed=2)
+    res = make_estimator("smoother", tune_process_noise=False).result(log)
+    assert np.all(np.isfinite(res.motion.omega_b_radps))
+    err = np.linalg.norm(res.motion.omega_b_radps - log.truth.omega_b_radps, axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.5
+
+
 def test_unknown_solver_is_refused_by_name():
     with pytest.raises(ValueError, match="solver"):
         make_estimator("smoother", solver="cholmod")

@@ -146,6 +146,8 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
                                      "estimate_attitude") if getattr(options, name, False)]
     if unsupported:
         return f"the fixed-lag smoother does not support {', '.join(unsupported)} (use method 'smoother')"
+    if getattr(options, "factor_groups", ()):
+        return "factor_groups: the fixed-lag smoother builds its own stream of factors (use method 'smoother')"
     if getattr(options, "motion_model", "jerk") != "jerk":
         return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.motion_model!r} (use method 'smoother')"
     if options.measurement != "accelerometer":

@@ -38,12 +38,9 @@ from ..factors import (
     attitude_key,
     bias_key,
     diagonal_noise,
-    euler,
-    free_fall,
     gaussian_noise,
     gravity,
     gyro_bias_key,
-    gyroscope,
     inclinometer,
     kinematics,
     omega_ddot_key,
@@ -55,6 +52,7 @@ from ..factors import (
     specific_force_key,
 )
 from ..log import Log
+from .groups import BUILT_IN, FactorGroup, Term  # noqa: F401  (Term: also importable from here)
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -178,6 +176,10 @@ class SmootherOptions:
     or the white-snap step), threshold on the step's whitened residual norm / sqrt(rows); 0 (default)
     keeps the Gaussian loss. Lets sudden hand jerks through without smoothing them away."""
 
+    factor_groups: tuple = ()
+    """Further factor groups (:class:`gfimu.smoother.groups.FactorGroup`) added to the model of every
+    solve window: the batch solver, the tuner, the bound and the GTSAM graph all use them."""
+
     def __post_init__(self) -> None:
         for name in (
             "omega_dot_random_walk_radps2_per_sqrt_s",
@@ -268,22 +270,6 @@ def options_reason(array: SensorArray, options: SmootherOptions, attitude_suppor
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without free flight or a gyroscope "
                 "ω cannot be observed (use free_flight=True with the body's inertia)")
     return None
-
-
-@dataclass
-class Term:
-    """Whitened residuals and Jacobians of one group of factors, vectorised.
-
-    ``kind`` 'unary' (one state, rows per sample), 'binary' (samples k, k+1)
-    or 'global' (calibration variables only). ``jac`` maps 'x' (unary) or
-    'x0'/'x1' (binary) to (N, r, state size); ``jac_global`` is (N, r, G) or None.
-    """
-
-    kind: str
-    residual: np.ndarray
-    jac: dict
-    jac_global: np.ndarray | None = None
-    first: int = 0
 
 
 @dataclass
@@ -388,6 +374,7 @@ class SmootherProblem:
         )
         if self.snap:
             self.first_sigma = np.concatenate([self.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
+        self.groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
 
     accel_sigma_per_sample: np.ndarray | None = None
     """(N, n_axes) accelerometer noise std per sample and axis replacing ``accel_sigma`` when set."""
@@ -582,30 +569,9 @@ class SmootherProblem:
             J0[:, :, A], J1[:, :, A] = ja["j0"], ja["j1"]
             Wn = self.snap_whiten
             out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1}))
-        # gyroscope
-        if self.use_gyro:
-            gb = self.global_part(params, "gyro_bias")
-            r, j = gyroscope.gyroscope_residual(X[:, W], self.log.gyro_b_radps, gb)
-            Jg = np.zeros((n, 3, m))
-            Jg[:, :, W] = j["w"]
-            jgg = None
-            if gb is not None:
-                jgg = np.zeros((n, 3, self.n_global))
-                jgg[:, :, self.global_blocks["gyro_bias"][0]] = j["g"] / self.gyro_sigma
-            out.append(Term("unary", r / self.gyro_sigma, {"x": Jg / self.gyro_sigma}, jgg))
-        # free flight
-        if self.options.free_flight:
-            inertia = self.log.array.body.principal_inertia_kgm2
-            r, j = euler.euler_residual(X[:, W], X[:, D], inertia)
-            Je = np.zeros((n, 3, m))
-            Je[:, :, W], Je[:, :, D] = j["w"], j["d"]
-            s = self.options.torque_noise_std_nm
-            out.append(Term("unary", r / s, {"x": Je / s}))
-            r, j = free_fall.free_fall_residual(X[:, F])
-            Jf = np.zeros((n, 3, m))
-            Jf[:, :, F] = j["f"]
-            s = self.options.free_fall_std_mps2
-            out.append(Term("unary", r / s, {"x": Jf / s}))
+        # the factor groups (gyroscope, free flight, and any given with the options)
+        for group in self.groups:
+            out.extend(group.terms(self, X, params))
         # calibration priors
         if self.n_global:
             s = self.global_prior_sigma()
@@ -688,14 +654,6 @@ class SmootherProblem:
                 graph.add(accelerometer.make_accelerometer_factor(
                     omega_key(k), omega_dot_key(k), specific_force_key(k), y[k, cols], d, p,
                     diagonal_noise(accel_sigma[k, cols]), kb, ks))
-            if self.use_gyro:
-                kg = self.global_blocks["gyro_bias"][1] if "gyro_bias" in self.global_blocks else None
-                graph.add(gyroscope.make_gyroscope_factor(omega_key(k), self.log.gyro_b_radps[k],
-                                                          diagonal_noise(np.full(3, self.gyro_sigma)), kg))
-            if opt.free_flight:
-                graph.add(euler.make_euler_factor(omega_key(k), omega_dot_key(k), self.log.array.body.principal_inertia_kgm2,
-                                                  diagonal_noise(np.full(3, opt.torque_noise_std_nm))))
-                graph.add(free_fall.make_free_fall_factor(specific_force_key(k), diagonal_noise(np.full(3, opt.free_fall_std_mps2))))
         for key, sl in ((omega_key(0), W), (omega_dot_key(0), D), (specific_force_key(0), F)):
             graph.add(process.make_prior_factor(key, np.zeros(3), diagonal_noise(self.first_sigma[sl])))
         if self.snap:
@@ -732,6 +690,9 @@ class SmootherProblem:
                 diagonal_noise(self.trapezoid_sigma[k] * self.axis_factors)))
             graph.add(process.make_random_walk_factor(omega_dot_key(k), omega_dot_key(k + 1),
                                                       diagonal_noise(self.omega_dot_step_sigma[k] * self.axis_factors)))
+        for group in self.groups:
+            for factor in group.gtsam_factors(self):
+                graph.add(factor)
         if self.n_global:
             s = self.global_prior_sigma()
             for name, (sl, key) in self.global_blocks.items():

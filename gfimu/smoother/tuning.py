@@ -144,10 +144,7 @@ def log_normaliser(problem: SmootherProblem) -> float:
         else:
             total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
             total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
-    if problem.use_gyro:
-        total += 3 * n * np.log(problem.gyro_sigma)
-    if problem.options.free_flight:
-        total += 3 * n * (np.log(problem.options.torque_noise_std_nm) + np.log(problem.options.free_fall_std_mps2))
+    total += sum(group.log_normaliser(problem) for group in problem.groups)
     if problem.n_global:
         total += float(np.sum(np.log(problem.global_prior_sigma())))
     return total
