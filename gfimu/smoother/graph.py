@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from .. import noise
 from ..array import SensorArray
 from ..factors import (
     _so3,
@@ -81,8 +82,9 @@ class SmootherOptions:
     """'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible);
     'quadratic': the papers' formulation, the per-sample inversion [f, ω̇, q(ω)] with its covariance
     (needs an invertible array, no self-calibration)."""
-    default_accel_noise_std_mps2: float = 0.07
-    """Accelerometer white-noise std used for axes whose array.toml gives none."""
+    default_accel_noise_std_mps2: float = noise.DEFAULT_ACCEL_NOISE_STD_MPS2
+    """Accelerometer white-noise std [m/s²] when no axis of array.toml gives one (:mod:`gfimu.noise`:
+    an axis without one among axes with one takes their mean)."""
     use_gyro: bool = True
     """Use the gyroscope when the array has one."""
     use_inclinometer: bool = False
@@ -294,8 +296,7 @@ class SmootherProblem:
             row, col = np.argwhere(bad)[0]
             raise ValueError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
                              f"({int(bad.sum())} such values); the smoother needs finite readings")
-        sigma = arr.noise_std_per_axis_mps2
-        self.accel_sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, opt.default_accel_noise_std_mps2)
+        self.accel_sigma = noise.accel_noise_std(arr, opt.default_accel_noise_std_mps2)
         self.sensors = []  # (directions, positions, column slice)
         col = 0
         for acc in arr.accelerometers:
@@ -331,8 +332,7 @@ class SmootherProblem:
             if not np.all(np.isfinite(self.log.gyro_b_radps)):
                 row = int(np.argwhere(~np.isfinite(self.log.gyro_b_radps))[0, 0])
                 raise ValueError(f"{self.log.source}: gyroscope reading is not finite at sample {row}")
-            gs = arr.gyroscope.noise_std_radps
-            self.gyro_sigma = float(gs) if gs else 0.01
+            self.gyro_sigma = noise.gyro_noise_std(arr)
         self.layout = StateLayout.from_options(opt)
         self.snap = self.layout.snap
         self.state_size = self.layout.size
@@ -350,8 +350,7 @@ class SmootherProblem:
                 if not np.all(np.isfinite(self.log.tilt_rad)):
                     row = int(np.argwhere(~np.isfinite(self.log.tilt_rad))[0, 0])
                     raise ValueError(f"{self.log.source}: inclinometer reading is not finite at sample {row}")
-                ns = arr.inclinometer.noise_std_rad
-                self.tilt_sigma = float(ns) if ns else 0.002
+                self.tilt_sigma = noise.tilt_noise_std(arr)
         if opt.motion_model == "snap":
             cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, self.dt_s)
             axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from .. import rigid_body
+from .. import noise, rigid_body
 from ..estimators.ml import MLEstimator
 from ..factors import _so3
 from ..log import Log
@@ -48,8 +48,7 @@ def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: floa
     """
     arr = log.array
     S = arr.structure_matrix()
-    sigma = arr.noise_std_per_axis_mps2
-    sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, options.default_accel_noise_std_mps2)
+    sigma = noise.accel_noise_std(arr, options.default_accel_noise_std_mps2)
     A = S / sigma[:, None]
     n = len(log)
     y = log.accel_mps2 / sigma
