@@ -15,10 +15,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("estimate", help="estimate ω, ω̇ and acceleration from a log",
                        description="Run one estimation method on a log directory and write an estimate CSV.")
-    p.add_argument("log", help="log directory (array.toml + imu.csv)")
+    p.add_argument("log", nargs="?", default=None, help="log directory (array.toml + imu.csv)")
     p.add_argument("--method", default="smoother", choices=list(METHODS), help="estimation method (default: smoother)")
-    p.add_argument("--out", required=True,
-                   help="estimate CSV to write (atomically; never over an input), or - for standard output")
+    p.add_argument("--list-options", action="store_true",
+                   help="list the options of --method (grouped, with unit, default and meaning) and exit")
+    p.add_argument("--out", default=None,
+                   help="estimate CSV to write (atomically; never over an input), or - for standard output (required)")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="method option, repeatable (see the method's documentation)")
     p.add_argument("--preset", default=None, metavar="NAME",
@@ -40,6 +42,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
+    if args.list_options:
+        from ..methods import describe_options
+        from ..optiondoc import format_options
+
+        sys.stdout.write(f"options of method {args.method!r} (-O NAME=VALUE):\n" + format_options(describe_options(args.method)))
+        return 0
+    if args.log is None:
+        raise CLIError("the log directory is required (gfimu estimate LOG --out FILE.csv)")
+    if args.out is None:
+        raise CLIError("--out is required (an estimate CSV, or - for standard output)")
     from .. import io as gio
     from ..methods import make_estimator
     from ..io.outputs import check_output, write_output
