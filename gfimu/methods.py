@@ -19,8 +19,6 @@ import dataclasses
 import importlib
 from typing import Any
 
-from . import optiondoc
-from .smoother.option_groups import GROUP_OF
 from .smoother.presets import expand_preset
 
 METHODS: dict[str, str] = {
@@ -84,11 +82,3 @@ def option_fields(name: str) -> dict[str, Any]:
         out[f.name] = (f.type, default)
     return out
 
-
-def describe_options(name: str) -> list[optiondoc.OptionInfo]:
-    """Every option of method ``name`` with its group, type, default, unit and help (smoother options
-    grouped as :data:`gfimu.smoother.option_groups.GROUPS`)."""
-    cls = estimator_class(name)
-    if not dataclasses.is_dataclass(cls):
-        return []
-    return optiondoc.describe(cls, GROUP_OF, default_group="method")

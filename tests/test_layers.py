@@ -26,7 +26,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "gfimu"
 
 LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
     ("core", 0, ("gfimu", "gfimu.rigid_body", "gfimu.rotations", "gfimu.motion", "gfimu.array", "gfimu.log",
-                 "gfimu.noise", "gfimu.optiondoc", "gfimu.progress", "gfimu.datasets*")),
+                 "gfimu.noise", "gfimu.progress", "gfimu.readings", "gfimu.datasets*")),
     ("io", 1, ("gfimu.io*",)),
     ("simulate", 1, ("gfimu.simulate*",)),
     ("estimators", 2, ("gfimu.estimators*", "gfimu.crb", "gfimu.calibration")),

@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from . import CLIError
+from . import CLIError, screened
 from .options import check_method_options, parse_options, positive
 
 
@@ -18,9 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", nargs="?", default=None, help="log directory (array.toml + imu.csv)")
     p.add_argument("--method", default="smoother", choices=list(METHODS), help="estimation method (default: smoother)")
     p.add_argument("--list-options", action="store_true",
-                   help="list the options of --method (grouped, with unit, default and meaning) and exit")
-    p.add_argument("--out", default=None,
-                   help="estimate CSV to write (atomically; never over an input), or - for standard output (required)")
+                   help="print every -O option of --method with its unit, default and meaning, and exit")
+    p.add_argument("--out", required=False, default=None,
+                   help="estimate CSV to write (atomically; never over an input), or - for standard output")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="method option, repeatable (see the method's documentation)")
     p.add_argument("--preset", default=None, metavar="NAME",
@@ -43,15 +43,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args) -> int:
     if args.list_options:
-        from ..methods import describe_options
-        from ..optiondoc import format_options
+        from .options import describe_options
 
-        sys.stdout.write(f"options of method {args.method!r} (-O NAME=VALUE):\n" + format_options(describe_options(args.method)))
+        sys.stdout.write(describe_options(args.method))
         return 0
-    if args.log is None:
-        raise CLIError("the log directory is required (gfimu estimate LOG --out FILE.csv)")
-    if args.out is None:
-        raise CLIError("--out is required (an estimate CSV, or - for standard output)")
+    if args.log is None or args.out is None:
+        raise CLIError("a LOG folder and --out (a file, or - for standard output) are needed "
+                       "(--list-options alone lists the method's options)")
     from .. import io as gio
     from ..methods import make_estimator
     from ..io.outputs import check_output, write_output
@@ -78,6 +76,7 @@ def run(args) -> int:
     check_method_options(args.method, options)
     est = make_estimator(args.method, **options)
     log = gio.read_log(args.log)
+    log = screened(log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
 

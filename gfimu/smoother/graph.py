@@ -104,11 +104,11 @@ class SmootherOptions:
     bias_prior_std_mps2: float = 0.1
     """Prior std of each accelerometer bias (around 0)."""
     gyro_bias_prior_std_radps: float = 0.05
-    """Prior std of the gyroscope bias when self-calibrating."""
+    """Prior std of the gyro bias (around 0) with ``self_calibrate_bias``."""
     self_calibrate_scale: bool = False
     """Estimate a constant scale-factor error per accelerometer axis."""
     scale_prior_std: float = 0.01
-    """Prior std of each axis's scale-factor error (dimensionless) when self-calibrating."""
+    """Prior std of each accelerometer scale-factor error (around 0) with ``self_calibrate_scale``."""
     free_flight: bool = False
     """Treat the whole log as torque-free free flight (paper 004): needs ``array.body``."""
     torque_noise_std_nm: float = 1e-4
@@ -116,9 +116,9 @@ class SmootherOptions:
     free_fall_std_mps2: float = 0.05
     """Std of the specific force at the centre of mass in free flight [m/s²]."""
     initial_omega_std_radps: float = 100.0
-    """Weak zero-mean prior on the first ω, keeping the normal equations definite."""
+    """Weak prior std of the first sample's ω (zero mean)."""
     initial_omega_dot_std_radps2: float = 1000.0
-    """Weak zero-mean prior on the first ω̇."""
+    """Weak prior std of the first sample's ω̇ (zero mean)."""
     initial_specific_force_std_mps2: float = 1000.0
     """Weak priors on the first state (zero mean) keeping the normal equations definite."""
     window_s: float | None = 30.0
@@ -126,7 +126,7 @@ class SmootherOptions:
     overlap_s: float = 2.0
     """Overlap of consecutive windows; each half of it is taken from the nearer window."""
     max_iterations: int = 30
-    """Most Levenberg-Marquardt iterations per solve."""
+    """Largest number of Levenberg-Marquardt iterations per solve."""
     relative_tolerance: float = 1e-10
     """Stop when the cost decreases by less than this fraction."""
     compute_sigma: bool = False
