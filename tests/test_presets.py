@@ -126,6 +126,7 @@ def test_cli_preset_for_another_method_exits_2(argv, message, hand_log_dir, tmp_
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_preset_reproduces_the_explicit_settings_on_the_real_recording(mimu4444_dir):
     """Busiest 40 s of exp_1 (own calibration, reference shifted by -1.5 ms): the preset gives the
     estimate of the explicit settings bit for bit, at the measured accuracy of those settings."""

@@ -115,6 +115,7 @@ def test_normal_equations_of_a_subset_of_terms_add_up():
     assert parts.cost == pytest.approx(whole.cost)
 
 
+@pytest.mark.slow
 def test_motion_dependent_noise_and_ml_initialisation():
     """Readings whose noise grows with |ω| (std sqrt(0.07² + (0.2 |ω|)²)): the re-weighted smoother
     with that slope beats the constant-noise one; started from the per-sample ML estimate it is as good."""
