@@ -42,7 +42,6 @@ from ..factors import (
     gaussian_noise,
     gravity,
     gyro_bias_key,
-    inclinometer,
     kinematics,
     omega_ddot_key,
     omega_dot_key,
@@ -573,13 +572,9 @@ class SmootherProblem:
             J0[:, :, A], J1[:, :, A] = ja["j0"], ja["j1"]
             Wn = self.snap_whiten
             out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1}))
-        # the factor groups (gyroscope, free flight, and any given with the options)
+        # the factor groups (gyroscope, free flight, inclinometer, calibration priors, any given with the options)
         for group in self.groups:
             out.extend(group.terms(self, X, params))
-        # calibration priors
-        if self.n_global:
-            s = self.global_prior_sigma()
-            out.append(Term("global", (params / s)[None], {}, np.diag(1.0 / s)[None]))
         return out
 
     def rotations(self, states: np.ndarray) -> np.ndarray:
@@ -620,11 +615,6 @@ class SmootherProblem:
         Jp = np.zeros((1, 3, m))
         Jp[:, :, AT] = j["r"] * w[:, None]
         out.append(Term("unary", r * w, {"x": Jp}, None, first=0))
-        if self.use_inclinometer:
-            r, j = inclinometer.inclinometer_residual(R, self.log.tilt_rad)
-            Ji = np.zeros((n, 2, m))
-            Ji[:, :, AT] = j["r"] / self.tilt_sigma
-            out.append(Term("unary", r / self.tilt_sigma, {"x": Ji}))
         return out
 
     def cost(self, states: np.ndarray, params: np.ndarray) -> float:
@@ -665,10 +655,6 @@ class SmootherProblem:
         if self.attitude:
             graph.add(process.make_attitude_prior_factor(attitude_key(0), self.attitude_prior_wb,
                                                          diagonal_noise(self.attitude_prior_sigma)))
-            for k in range(self.n):
-                if self.use_inclinometer:
-                    graph.add(inclinometer.make_inclinometer_factor(attitude_key(k), self.log.tilt_rad[k],
-                                                                    diagonal_noise(np.full(2, self.tilt_sigma))))
         oscillator_cov = self.oscillator_covariance() if self.oscillator else None
         for k in range(self.n - 1):
             if self.attitude:
@@ -697,10 +683,6 @@ class SmootherProblem:
         for group in self.groups:
             for factor in group.gtsam_factors(self):
                 graph.add(factor)
-        if self.n_global:
-            s = self.global_prior_sigma()
-            for name, (sl, key) in self.global_blocks.items():
-                graph.add(process.make_prior_factor(key, np.zeros(sl.stop - sl.start), diagonal_noise(s[sl])))
         return graph
 
     def gtsam_values(self, states: np.ndarray, params: np.ndarray) -> gtsam.Values:

@@ -8,8 +8,10 @@ A group gives, for a :class:`gfimu.smoother.graph.SmootherProblem`,
 - :meth:`FactorGroup.log_normaliser`: ``Σ log σ`` over its rows (the tuner's evidence),
 
 so the batch solver, the noise tuner, the bound and the GTSAM graph read one definition. The
-model's built-in groups that live here are the gyroscope (paper 001) and free flight (paper 004,
-eq. 1: Euler's torque-free equation and zero specific force). Further groups are given with
+model's built-in groups that live here are the gyroscope (paper 001), free flight (paper 004,
+eq. 1: Euler's torque-free equation and zero specific force), the inclinometer (paper 001) and the
+calibration priors; the accelerometer measurement and the motion model are still written in
+:class:`gfimu.smoother.graph.SmootherProblem`. Further groups are given with
 ``SmootherOptions.factor_groups`` and reach every consumer without changing any of them.
 """
 
@@ -19,7 +21,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..factors import diagonal_noise, euler, free_fall, gyroscope, omega_dot_key, omega_key, specific_force_key
+from ..factors import (
+    attitude_key,
+    diagonal_noise,
+    euler,
+    free_fall,
+    gyroscope,
+    inclinometer,
+    omega_dot_key,
+    omega_key,
+    process,
+    specific_force_key,
+)
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 
 
@@ -128,5 +141,50 @@ class FreeFlightGroup(FactorGroup):
         return 3 * problem.n * float(np.log(opt.torque_noise_std_nm) + np.log(opt.free_fall_std_mps2))
 
 
-BUILT_IN = (GyroscopeGroup(), FreeFlightGroup())
+class InclinometerGroup(FactorGroup):
+    """The inclinometer's two tilt angles against the attitude's direction cosines of gravity
+    (paper 001, eqs. 12-13), when the attitude is estimated with ``use_inclinometer``."""
+
+    name = "inclinometer"
+
+    def applies(self, problem) -> bool:
+        return bool(problem.attitude and problem.use_inclinometer)
+
+    def terms(self, problem, states, params):
+        s = problem.tilt_sigma
+        r, j = inclinometer.inclinometer_residual(problem.rotations(states), problem.log.tilt_rad)
+        J = unary_jacobian(problem, [(problem.layout.rotation, j["r"])], 2, problem.n) / s
+        return [Term("unary", r / s, {"x": J})]
+
+    def gtsam_factors(self, problem):
+        noise = diagonal_noise(np.full(2, problem.tilt_sigma))
+        return [inclinometer.make_inclinometer_factor(attitude_key(k), problem.log.tilt_rad[k], noise) for k in range(problem.n)]
+
+    def log_normaliser(self, problem):
+        return 2 * problem.n * float(np.log(problem.tilt_sigma))
+
+
+class CalibrationPriorGroup(FactorGroup):
+    """Zero-mean priors on the calibration variables (biases, scale-factor errors, gyroscope bias),
+    so that nothing in the problem is unobserved."""
+
+    name = "calibration priors"
+
+    def applies(self, problem) -> bool:
+        return problem.n_global > 0
+
+    def terms(self, problem, states, params):
+        s = problem.global_prior_sigma()
+        return [Term("global", (params / s)[None], {}, np.diag(1.0 / s)[None])]
+
+    def gtsam_factors(self, problem):
+        s = problem.global_prior_sigma()
+        return [process.make_prior_factor(key, np.zeros(sl.stop - sl.start), diagonal_noise(s[sl]))
+                for sl, key in problem.global_blocks.values()]
+
+    def log_normaliser(self, problem):
+        return float(np.sum(np.log(problem.global_prior_sigma())))
+
+
+BUILT_IN = (GyroscopeGroup(), FreeFlightGroup(), InclinometerGroup(), CalibrationPriorGroup())
 """The built-in groups defined here, in the order the problem adds them."""

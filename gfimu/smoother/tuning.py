@@ -132,8 +132,6 @@ def log_normaliser(problem: SmootherProblem) -> float:
     if problem.attitude:
         total += 3 * float(np.sum(np.log(problem.attitude_step_sigma)) + np.sum(np.log(problem.accel_step_sigma)))
         total += float(np.sum(np.log(problem.attitude_prior_sigma)))
-        if problem.use_inclinometer:
-            total += 2 * n * np.log(problem.tilt_sigma)
     else:
         total += 3 * float(np.sum(np.log(problem.force_step_sigma)))
     if problem.snap:
@@ -145,8 +143,6 @@ def log_normaliser(problem: SmootherProblem) -> float:
             total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
             total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
     total += sum(group.log_normaliser(problem) for group in problem.groups)
-    if problem.n_global:
-        total += float(np.sum(np.log(problem.global_prior_sigma())))
     return total
 
 
