@@ -60,9 +60,21 @@ def matrix_from_rotation_vector(phi: np.ndarray) -> np.ndarray:
 def rotation_vector_from_matrix(m: np.ndarray) -> np.ndarray:
     """SO(3) logarithm, (..., 3, 3) -> (..., 3), angle in [0, π].
 
-    Through the quaternion (``angle = 2 atan2(|q_v|, q_w)``), which keeps full precision
-    near 0 and near π, where ``arccos`` of the trace does not."""
-    return _rowwise(lambda r: Rotation.from_matrix(r).as_rotvec(), m, 2, (3,))
+    ``θ = atan2(|v|/2, (tr R - 1)/2)`` with ``v`` the axial vector of ``R - Rᵀ`` (no ``arccos``, so
+    no loss near 0); where ``cos θ < -0.9`` the axial vector vanishes and the axis comes from the
+    quaternion of the symmetric part (scipy's ``Rotation``), which stays exact at and near π."""
+    m = np.asarray(m, dtype=float)
+    v = np.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], axis=-1)
+    c = 0.5 * (np.trace(m, axis1=-2, axis2=-1) - 1.0)
+    s = 0.5 * np.linalg.norm(v, axis=-1)
+    angle = np.arctan2(s, c)
+    small = s < 1e-8
+    scale = np.where(small, 0.5 + angle**2 / 12.0, angle / (2.0 * np.where(small, 1.0, s)))
+    out = v * scale[..., None]
+    near_pi = c < -0.9
+    if np.any(near_pi):
+        out[near_pi] = _rowwise(lambda r: Rotation.from_matrix(r).as_rotvec(), m[near_pi], 2, (3,))
+    return out
 
 
 def rotation_vector_from_quaternion(q: np.ndarray) -> np.ndarray:
