@@ -8,6 +8,7 @@ core (rigid body, array, log, motion, rotations, noise policy, progress, bundled
 ← smoother (factors, model, solvers, tuning, fixed lag)
 ← methods (the registry of every method by name)
 ← evaluation (metrics, comparison study, plots)
+← pipeline (one log or many, read to written: gfimu.pipeline, gfimu.batch)
 ← cli.
 
 Every ``import`` statement counts, at module level or inside a function, so an import
@@ -33,7 +34,8 @@ LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
     ("smoother", 3, ("gfimu.factors*", "gfimu.smoother*")),
     ("methods", 4, ("gfimu.methods",)),
     ("evaluation", 5, ("gfimu.evaluation", "gfimu.compare", "gfimu.plots")),
-    ("cli", 6, ("gfimu.cli*", "gfimu.__main__")),
+    ("pipeline", 6, ("gfimu.pipeline", "gfimu.batch")),
+    ("cli", 7, ("gfimu.cli*", "gfimu.__main__")),
 ]
 
 LAZY_ALIASES = {("gfimu.estimators", "gfimu.methods")}

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
-from . import CLIError, screened
+from . import CLIError
 from .options import check_method_options, parse_options, positive
 
 
@@ -51,10 +50,26 @@ def run(args) -> int:
         raise CLIError("a LOG folder and --out (a file, or - for standard output) are needed "
                        "(--list-options alone lists the method's options)")
     from .. import io as gio
-    from ..methods import make_estimator
     from ..io.outputs import check_output, write_output
+    from ..pipeline import MethodNotApplicable, estimate_log
 
     out = check_output(args.out, [args.log, args.calibration], "--out", stdout=True)
+    options = method_options(args)
+    try:
+        run_ = estimate_log(args.log, args.method, options, args.calibration, progress=not args.no_progress,
+                            orientation=args.orientation)
+    except MethodNotApplicable as exc:
+        raise CLIError(str(exc)) from None
+    write_output(out, gio.motion_csv_chunks(run_.motion))
+    if run_.model_check is not None:  # what the smoother learnt about the readings and the model it chose
+        print(f"{args.method}: {run_.model_check.describe()}", file=sys.stderr)
+    print(f"{args.method}: {run_.samples} samples in {run_.seconds:.2f} s -> "
+          f"{out if out is not None else 'standard output'}", file=sys.stderr if out is None else sys.stdout)
+    return 0
+
+
+def method_options(args) -> dict:
+    """The method's options from ``-O``, ``--preset``, ``--lag-s`` and ``--sigma``, checked."""
     options = parse_options(args.option)
     if getattr(args, "preset", None) is not None:  # checked before the log is read
         if args.method != "smoother":
@@ -63,38 +78,18 @@ def run(args) -> int:
 
         apply_preset(args.preset)
         options["preset"] = args.preset
-    if args.solver is not None:
+    if getattr(args, "solver", None) is not None:
         if args.method != "smoother":
             raise CLIError(f"--solver applies to --method smoother only, not {args.method!r}")
         options["solver"] = args.solver
-    if args.lag_s is not None:
+    if getattr(args, "lag_s", None) is not None:
         if args.method != "fixed-lag":
             raise CLIError("--lag-s applies to --method fixed-lag only")
         options["lag_s"] = args.lag_s
-    if args.sigma:
+    if getattr(args, "sigma", False):
         options["compute_sigma"] = True
     check_method_options(args.method, options)
-    est = make_estimator(args.method, **options)
-    log = gio.read_log(args.log)
-    log = screened(log)
-    if args.calibration:
-        from ..calibration import apply_calibration, read_calibration
+    from ..methods import make_estimator
 
-        log = apply_calibration(log, read_calibration(args.calibration))
-    reason = est.applicable(log.array)
-    if reason:
-        raise CLIError(f"method {args.method!r} cannot run on {args.log}: {reason}")
-    t0 = time.perf_counter()
-    motion = est.estimate(log, progress=not args.no_progress)
-    elapsed = time.perf_counter() - t0
-    if args.orientation != "none":
-        from ..estimators.gravity import add_orientation
-
-        motion = add_orientation(log, motion, source=args.orientation)
-    write_output(out, gio.motion_csv_chunks(motion))
-    check = getattr(est, "last_model_check", None)
-    if check is not None:  # what the smoother learnt about the readings and the model it chose
-        print(f"{args.method}: {check.describe()}", file=sys.stderr)
-    print(f"{args.method}: {len(motion)} samples in {elapsed:.2f} s -> {out if out is not None else 'standard output'}",
-          file=sys.stderr if out is None else sys.stdout)
-    return 0
+    make_estimator(args.method, **options)  # option values checked before any log is read
+    return options
