@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .motion import QUANTITIES, Motion
-from .rotations import quaternion_from_rotation_vector, quaternion_multiply
+from .rotations import quaternion_from_rotation_vector, quaternion_multiply, rotation_vector_from_quaternion
 
 # quantity identifier (Motion field name; attitude and tilt errors in rad) -> (short label, unit, CSV prefix)
 QUANTITY_INFO = {
@@ -237,20 +237,9 @@ def _conjugate(q: np.ndarray) -> np.ndarray:
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
-def _rotation_vector_from_quaternion(q: np.ndarray) -> np.ndarray:
-    """Rotation vector (..., 3) of unit quaternions (..., 4); angle in [0, π]."""
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    q = np.where(q[..., :1] < 0, -q, q)
-    s = np.linalg.norm(q[..., 1:], axis=-1)
-    angle = 2.0 * np.arctan2(s, q[..., 0])
-    small = s < 1e-12
-    scale = np.where(small, 2.0, angle / np.where(small, 1.0, s))
-    return q[..., 1:] * scale[..., None]
-
-
 def attitude_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
     """Rotation vector (N, 3) of R_trueᵀ R_est, in B; its norm is the attitude error in rad."""
-    return _rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q_true_wb), q_est_wb))
+    return rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q_true_wb), q_est_wb))
 
 
 def tilt_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
@@ -265,7 +254,7 @@ def tilt_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray) -> np.ndarray:
-    delta = _rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q0), q1))
+    delta = rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q0), q1))
     return quaternion_multiply(q0, quaternion_from_rotation_vector(delta * s[:, None]))
 
 

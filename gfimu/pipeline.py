@@ -48,7 +48,7 @@ def estimate_log(log_dir: str | Path, method: str = "smoother", options: dict | 
     """Read ``log_dir``, screen and calibrate its readings, run ``method`` with ``options``; warnings
     (plausibility, replaced readings) go through :mod:`warnings`."""
     from . import io as gio
-    from .estimators import make_estimator
+    from .methods import make_estimator
     from .readings import screen_log
 
     est = make_estimator(method, **dict(options or {}))

@@ -6,7 +6,7 @@ import pytest
 
 from gfimu.cli import main
 from gfimu.cli.options import attribute_docs, describe_options, unit_of
-from gfimu.estimators import METHODS, estimator_class
+from gfimu.methods import METHODS, estimator_class
 
 
 @pytest.mark.parametrize("method", list(METHODS))

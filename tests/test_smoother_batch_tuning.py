@@ -115,6 +115,7 @@ def test_normal_equations_of_a_subset_of_terms_add_up():
     assert parts.cost == pytest.approx(whole.cost)
 
 
+@pytest.mark.slow
 def test_motion_dependent_noise_and_ml_initialisation():
     """Readings whose noise grows with |ω| (std sqrt(0.07² + (0.2 |ω|)²)): the re-weighted smoother
     with that slope beats the constant-noise one; started from the per-sample ML estimate it is as good."""
@@ -154,7 +155,7 @@ def _arbitrary_array(seed=7):
 def test_default_smoother_gain_over_per_sample_ml(scenario, array_name, max_rmse):
     """5 cm cube (and five triads at random within ±3 cm), 0.07 m/s², 500 Hz, 6 s: the default
     (tuned) smoother is ≥ 20x better than the per-sample ML estimate, with no sign error."""
-    from gfimu.estimators import make_estimator
+    from gfimu.methods import make_estimator
 
     array = CUBE_5CM if array_name == "cube5" else _arbitrary_array()
     log = simulate(scenario, array, rate_hz=500.0, duration_s=6.0, seed=1)
@@ -175,7 +176,7 @@ def test_real_recording_settings_beat_the_per_sample_ml(mimu4444_dir):
     per-sample ML estimate."""
     from gfimu import calibration as calib
     from gfimu.io.readers.mimu4444 import read_mimu4444, shift_reference
-    from gfimu.estimators import make_estimator
+    from gfimu.methods import make_estimator
 
     path = mimu4444_dir / "exp_2" / "data.bin"
     full, _ = read_mimu4444(path, with_gyro=True)

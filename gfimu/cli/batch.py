@@ -11,7 +11,7 @@ from .options import integer
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..estimators import METHODS
+    from ..methods import METHODS
 
     p = sub.add_parser(
         "batch", help="run one method on many logs, in parallel on Dask (this machine or a cluster)",

@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from .. import io as gio
     from ..compare import compare
-    from ..estimators import METHODS
+    from ..methods import METHODS
 
     methods = None
     if args.methods is not None:

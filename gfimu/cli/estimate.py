@@ -10,7 +10,7 @@ from .options import check_method_options, parse_options, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..estimators import METHODS
+    from ..methods import METHODS
 
     p = sub.add_parser("estimate", help="estimate ω, ω̇ and acceleration from a log",
                        description="Run one estimation method on a log directory and write an estimate CSV.")
@@ -25,6 +25,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", default=None, metavar="NAME",
                    help="named smoother settings (method smoother; -O options win over it), e.g. hand-held-low-rate: "
                         "fast hand-held motion at 50–100 Hz on real sensors (gfimu.smoother.presets)")
+    p.add_argument("--solver", choices=["numpy", "gtsam"], default=None,
+                   help="batch smoother solver (method smoother; default: numpy, the vectorised banded "
+                        "Levenberg-Marquardt, linear in the length; gtsam: the same problem as a GTSAM graph, "
+                        "eliminated in time order, about ten times slower, a cross-check)")
     p.add_argument("--lag-s", type=positive("s"), default=None,
                    help="fixed-lag smoother lag [s] (default: the method's, see -O lag_s)")
     p.add_argument("--sigma", action="store_true", help="also write one-sigma uncertainties where the method gives them")
@@ -74,6 +78,10 @@ def method_options(args) -> dict:
 
         apply_preset(args.preset)
         options["preset"] = args.preset
+    if getattr(args, "solver", None) is not None:
+        if args.method != "smoother":
+            raise CLIError(f"--solver applies to --method smoother only, not {args.method!r}")
+        options["solver"] = args.solver
     if getattr(args, "lag_s", None) is not None:
         if args.method != "fixed-lag":
             raise CLIError("--lag-s applies to --method fixed-lag only")
@@ -81,7 +89,7 @@ def method_options(args) -> dict:
     if getattr(args, "sigma", False):
         options["compute_sigma"] = True
     check_method_options(args.method, options)
-    from ..estimators import make_estimator
+    from ..methods import make_estimator
 
     make_estimator(args.method, **options)  # option values checked before any log is read
     return options

@@ -145,7 +145,7 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
     ``None``; an unknown name lists the known ones. Ranges are checked by the
     method itself (its errors name the option too).
     """
-    from ..estimators import estimator_class
+    from ..methods import estimator_class
 
     cls = estimator_class(method)
     if not dataclasses.is_dataclass(cls):
@@ -253,22 +253,33 @@ COMMON_OPTION_DOCS = {
 
 
 def describe_options(method: str) -> str:
-    """Every ``-O`` option of ``method``: name, unit, default and meaning, one block each."""
-    from ..estimators import estimator_class
+    """Every ``-O`` option of ``method``: name, unit, default and meaning, one block each; the smoothers'
+    options under their group (model, batch, fixed-lag, tuning: :mod:`gfimu.smoother.option_groups`).
+    A field's metadata (``unit``, ``help``) wins over what its name and docstring say."""
+    from ..methods import estimator_class
+    from ..smoother.option_groups import GROUP_OF, GROUPS
 
     cls = estimator_class(method)
     if not dataclasses.is_dataclass(cls):
         return f"method {method!r} has no options"
     docs = attribute_docs(cls)
     lines = [f"options of method {method!r} (-O NAME=VALUE; values are JSON or plain text):", ""]
-    for f in dataclasses.fields(cls):
-        if not f.init or f.name.startswith("_"):
+    fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
+    grouped = any(f.name in GROUP_OF for f in fields)
+    for group in (list(GROUPS) + [""]) if grouped else [""]:
+        members = [f for f in fields if (GROUP_OF.get(f.name, "") if grouped else "") == group]
+        if not members:
             continue
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
-        unit = unit_of(f.name)
-        head = f"{f.name} = {default!r}" + (f" [{unit}]" if unit else "")
-        lines.append(head)
-        doc = docs.get(f.name, "") or COMMON_OPTION_DOCS.get(f.name, "")
-        lines.append(f"    {doc}" if doc else "    (no description)")
-    return "\n".join(lines) + "\n"
+        if grouped:
+            lines.append(f"[{group or 'other'}]")
+        for f in members:
+            default = f.default if f.default is not dataclasses.MISSING else (
+                f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+            unit = f.metadata.get("unit") or unit_of(f.name)
+            head = f"{f.name} = {default!r}" + (f" [{unit}]" if unit else "")
+            lines.append(head)
+            doc = f.metadata.get("help") or docs.get(f.name, "") or COMMON_OPTION_DOCS.get(f.name, "")
+            lines.append(f"    {doc}" if doc else "    (no description)")
+        if grouped:
+            lines.append("")
+    return "\n".join(lines).rstrip("\n") + "\n"

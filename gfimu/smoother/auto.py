@@ -254,7 +254,7 @@ def local_density_factors(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: 
     following the per-sample estimate, which cannot tell the sign of a slow ω (its centripetal
     signal is below the noise)."""
     h = np.asarray(dt_s, dtype=float)
-    width = max(int(round(period_s / max(float(np.median(h)), 1e-12))), 1)
+    width = min(max(int(round(period_s / max(float(np.median(h)), 1e-12))), 1), max(h.size, 1))  # a log shorter than the period: its length
     kernel = np.ones(width) / width
     steps = np.sum(np.diff(states[:, 3:6], axis=0) ** 2, axis=1) / h
     noise = np.sum(noise_var_jerk[:-1] + noise_var_jerk[1:], axis=1) / h

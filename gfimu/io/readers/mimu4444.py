@@ -37,6 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from . import Conversion, Reader
+from ...array import mimu4444_array
+from ...log import Log
+from ...motion import Motion
 
 PACKET_BYTES = 106
 HEADER = 0xAA
@@ -293,9 +296,6 @@ def to_log(rec: Recording, with_gyro: bool = False, source: str = "<memory>"):
     velocity; ``invalid_reference`` marks the saturated samples. With
     ``with_gyro`` the same mean is also given as the log's gyroscope channel.
     """
-    from ...array import mimu4444_array
-    from ...log import Log
-    from ...motion import Motion
 
     array = mimu4444_array(with_gyroscope=with_gyro)
     n = rec.timestamps_ns.size
