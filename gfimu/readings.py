@@ -10,9 +10,11 @@ value there and the rest of the log is untouched:
 - readings outside the sensor's range when the array states one;
 - isolated spikes (a Hampel identifier with a local scale): the reading's
   distance from the median of the 5 samples centred on it exceeds
-  :data:`SPIKE_SCALES` times the mean distance of the other samples within
-  ±:data:`SCALE_HALF_WIDTH` samples. Real motion, however fast, moves
-  neighbouring samples together; a spike stands alone.
+  :data:`SPIKE_SCALES` times the local noise scale, read from the second
+  differences within ±:data:`SCALE_HALF_WIDTH` samples (leaving out those the
+  sample itself touches), and no other accelerometer jumps at the same sample.
+  Real motion, however fast, moves neighbouring samples together and is felt by
+  every sensor; a spike stands alone.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 SPIKE_SCALES = 50.0
-"""A reading this many local scales from its neighbours' median is a gross error."""
+"""A reading this many local noise stds from its neighbours' median is a gross error (white noise
+reaches 6 stds once in a billion readings)."""
 SCALE_HALF_WIDTH = 25
 """Half width [samples] of the window of the local scale."""
 MEDIAN_HALF_WIDTH = 2
@@ -94,12 +97,21 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
     if n >= 2 * SCALE_HALF_WIDTH + 1:
         med = _rolling_median(work, MEDIAN_HALF_WIDTH)
         dev = np.abs(work - med)
-        dev0 = np.where(np.isfinite(dev), dev, 0.0)
-        counts = np.isfinite(dev).astype(float)
-        kernel = np.ones(2 * SCALE_HALF_WIDTH + 1)
-        total = np.apply_along_axis(lambda c: np.convolve(c, kernel, mode="same"), 0, dev0)
-        number = np.apply_along_axis(lambda c: np.convolve(c, kernel, mode="same"), 0, counts)
-        local = (total - dev0) / np.maximum(number - counts, 1.0)  # the others' mean distance
+        # local noise scale from the second differences around the sample, leaving out the three a
+        # spike at k touches (k-1, k, k+1): mean |y[j+1] - 2 y[j] + y[j-1]| = σ √6 √(2/π) for white noise
+        d2 = np.zeros_like(work)
+        d2[1:-1] = np.abs(work[2:] - 2.0 * work[1:-1] + work[:-2])
+        ok = np.isfinite(d2)
+        d2 = np.where(ok, d2, 0.0)
+        wide = np.ones(2 * SCALE_HALF_WIDTH + 1)
+        near = np.ones(3)
+
+        def window_sum(x, kernel):
+            return np.apply_along_axis(lambda c: np.convolve(c, kernel, mode="same"), 0, x)
+
+        total = window_sum(d2, wide) - window_sum(d2, near)
+        number = window_sum(ok.astype(float), wide) - window_sum(ok.astype(float), near)
+        local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
         # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
         floor = 1e-6 * max(float(np.nanmedian(np.abs(work))) if np.any(np.isfinite(work)) else 1.0, 1.0)
         spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
