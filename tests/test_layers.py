@@ -8,7 +8,7 @@ core (rigid body, array, log, motion, rotations, noise policy, progress, bundled
 ← smoother (factors, model, solvers, tuning, fixed lag)
 ← methods (the registry of every method by name)
 ← evaluation (metrics, comparison study, plots)
-← pipeline (one log or many, read to written: gfimu.pipeline, gfimu.batch)
+← pipeline (one log, many logs or a live stream, read to written: gfimu.pipeline, gfimu.batch, gfimu.live)
 ← cli.
 
 Every ``import`` statement counts, at module level or inside a function, so an import

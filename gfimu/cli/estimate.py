@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--solver", choices=["numpy", "gtsam"], default=None,
                    help="batch smoother solver (method smoother; default: numpy, the vectorised banded "
                         "Levenberg-Marquardt, linear in the length; gtsam: the same problem as a GTSAM graph, "
-                        "eliminated in time order, about ten times slower, a cross-check)")
+                        "eliminated in time order: the same answer 10-100 times slower (Python factor callbacks), a cross-check)")
     p.add_argument("--lag-s", type=positive("s"), default=None,
                    help="fixed-lag smoother lag [s] (default: the method's, see -O lag_s)")
     p.add_argument("--sigma", action="store_true", help="also write one-sigma uncertainties where the method gives them")

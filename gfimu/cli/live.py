@@ -131,7 +131,7 @@ def _mimu_rows(source: str, array, stop: threading.Event):
 
 def run(args) -> int:
     from .. import io as gio
-    from ..estimators import make_estimator
+    from ..methods import make_estimator
     from ..io.outputs import check_output
     from ..live import ESTIMATE_HEADER, LiveInputError, LiveSession, default_header, imu_row_parser
     from .options import check_method_options, parse_options

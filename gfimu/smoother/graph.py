@@ -525,11 +525,9 @@ class SmootherProblem:
         out = []
         m = self.state_size
         mk = self.layout.motion_size  # size of the motion part [ω, ω̇, f(, ω̈)]
-        # first-state weak prior
-        r0, _ = process.prior_residual(X[:1, :mk], np.zeros(mk))
-        J0p = np.zeros((1, mk, m))
-        J0p[0, :, :mk] = np.diag(1.0 / self.first_sigma)
-        out.append(Term("unary", r0 / self.first_sigma, {"x": J0p}, None, first=0))
+        for group in self.groups:  # the groups placed first (the first-state prior)
+            if group.first:
+                out.extend(group.terms(self, X, params))
         steps = n - 1
         if self.attitude:
             out.extend(self._attitude_terms(X))
@@ -574,7 +572,8 @@ class SmootherProblem:
             out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1}))
         # the factor groups (gyroscope, free flight, inclinometer, calibration priors, any given with the options)
         for group in self.groups:
-            out.extend(group.terms(self, X, params))
+            if not group.first:
+                out.extend(group.terms(self, X, params))
         return out
 
     def rotations(self, states: np.ndarray) -> np.ndarray:
@@ -648,10 +647,6 @@ class SmootherProblem:
                 graph.add(accelerometer.make_accelerometer_factor(
                     omega_key(k), omega_dot_key(k), specific_force_key(k), y[k, cols], d, p,
                     diagonal_noise(accel_sigma[k, cols]), kb, ks))
-        for key, sl in ((omega_key(0), W), (omega_dot_key(0), D), (specific_force_key(0), F)):
-            graph.add(process.make_prior_factor(key, np.zeros(3), diagonal_noise(self.first_sigma[sl])))
-        if self.snap:
-            graph.add(process.make_prior_factor(omega_ddot_key(0), np.zeros(3), diagonal_noise(self.first_sigma[A])))
         if self.attitude:
             graph.add(process.make_attitude_prior_factor(attitude_key(0), self.attitude_prior_wb,
                                                          diagonal_noise(self.attitude_prior_sigma)))

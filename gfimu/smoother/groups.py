@@ -8,7 +8,7 @@ A group gives, for a :class:`gfimu.smoother.graph.SmootherProblem`,
 - :meth:`FactorGroup.log_normaliser`: ``Σ log σ`` over its rows (the tuner's evidence),
 
 so the batch solver, the noise tuner, the bound and the GTSAM graph read one definition. The
-model's built-in groups that live here are the gyroscope (paper 001), free flight (paper 004,
+model's built-in groups that live here are the first-state prior, the gyroscope (paper 001), free flight (paper 004,
 eq. 1: Euler's torque-free equation and zero specific force), the inclinometer (paper 001) and the
 calibration priors; the accelerometer measurement and the motion model are still written in
 :class:`gfimu.smoother.graph.SmootherProblem`. Further groups are given with
@@ -28,12 +28,13 @@ from ..factors import (
     free_fall,
     gyroscope,
     inclinometer,
+    omega_ddot_key,
     omega_dot_key,
     omega_key,
     process,
     specific_force_key,
 )
-from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
+from .layout import OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
 
 
 @dataclass
@@ -57,6 +58,8 @@ class FactorGroup:
     :meth:`applies` and the three views; each is given the problem it belongs to."""
 
     name = "group"
+    first = False
+    """Whether its terms come before the motion model's in the problem (only the order of summation)."""
 
     def applies(self, problem) -> bool:
         return True
@@ -77,6 +80,30 @@ def unary_jacobian(problem, blocks: list[tuple[slice, np.ndarray]], rows: int, n
     for sl, block in blocks:
         J[:, :, sl] = block
     return J
+
+
+class FirstStatePriorGroup(FactorGroup):
+    """Weak zero-mean priors on the first sample's motion states ``[ω, ω̇, f(, ω̈)]`` (stds
+    ``problem.first_sigma``), keeping the normal equations definite."""
+
+    name = "first-state prior"
+    first = True
+
+    def terms(self, problem, states, params):
+        mk = problem.layout.motion_size
+        r, _ = process.prior_residual(states[:1, :mk], np.zeros(mk))
+        J = np.zeros((1, mk, problem.state_size))
+        J[0, :, :mk] = np.diag(1.0 / problem.first_sigma)
+        return [Term("unary", r / problem.first_sigma, {"x": J}, None, first=0)]
+
+    def gtsam_factors(self, problem):
+        pairs = [(omega_key(0), OMEGA), (omega_dot_key(0), OMEGA_DOT), (specific_force_key(0), SPECIFIC_FORCE)]
+        if problem.snap:
+            pairs.append((omega_ddot_key(0), OMEGA_DDOT))
+        return [process.make_prior_factor(key, np.zeros(3), diagonal_noise(problem.first_sigma[sl])) for key, sl in pairs]
+
+    def log_normaliser(self, problem):
+        return float(np.sum(np.log(problem.first_sigma)))
 
 
 class GyroscopeGroup(FactorGroup):
@@ -186,5 +213,5 @@ class CalibrationPriorGroup(FactorGroup):
         return float(np.sum(np.log(problem.global_prior_sigma())))
 
 
-BUILT_IN = (GyroscopeGroup(), FreeFlightGroup(), InclinometerGroup(), CalibrationPriorGroup())
+BUILT_IN = (FirstStatePriorGroup(), GyroscopeGroup(), FreeFlightGroup(), InclinometerGroup(), CalibrationPriorGroup())
 """The built-in groups defined here, in the order the problem adds them."""

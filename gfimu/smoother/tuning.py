@@ -121,7 +121,7 @@ def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 
 def log_normaliser(problem: SmootherProblem) -> float:
     """``Σ log σ`` over all factor rows (½ log det of the covariance of the stacked factors)."""
     n = problem.n
-    total = float(np.sum(np.log(problem.first_sigma)))
+    total = float(sum(group.log_normaliser(problem) for group in problem.groups if group.first))
     if problem.options.measurement == "quadratic":
         total -= n * float(np.sum(np.log(np.diag(problem.x_whiten))))
     else:
@@ -142,7 +142,7 @@ def log_normaliser(problem: SmootherProblem) -> float:
         else:
             total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
             total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
-    total += sum(group.log_normaliser(problem) for group in problem.groups)
+    total += sum(group.log_normaliser(problem) for group in problem.groups if not group.first)
     return total
 
 
