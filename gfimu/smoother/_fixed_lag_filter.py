@@ -233,7 +233,9 @@ class WindowFilter:
             raise FilterFailure("non-finite values in the update")
         n = hi - lo
         cross = self._cross[lo:hi].reshape(9 * n, 9)  # the stack as one matrix: one BLAS call per product
-        self._mean[lo:hi] += (cross @ g).reshape(n, 9)
+        # (einsum, not BLAS gemv: OpenBLAS threads a gemv this size, and on a busy machine waiting for its
+        # second thread costs milliseconds)
+        self._mean[lo:hi] += np.einsum("lij,j->li", cross.reshape(n, 9, 9), g)
         CA = np.matmul(cross, A, out=self._tmp[lo:hi].reshape(9 * n, 9))
         self._var[lo:hi] -= np.einsum("lij,lij->li", CA.reshape(n, 9, 9), cross.reshape(n, 9, 9))
         # C_i (I - A P) = C_i - (C_i A) P
