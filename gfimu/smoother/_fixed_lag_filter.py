@@ -56,7 +56,7 @@ class WindowFilter:
         self._prior_var = np.repeat(np.array([o.initial_omega_std_radps, o.initial_omega_dot_std_radps2,
                                               o.initial_specific_force_std_mps2], dtype=float) ** 2, 3)
         self._R = model.accel_sigma_mps2 ** 2
-        self._gyro_var = float(model.gyro_noise.sigmas()[0]) ** 2
+        self._gyro_var = model.gyro_sigma_radps ** 2
         self._cap = max(int(capacity), 8)
         self._mean = np.zeros((self._cap, 9))
         self._var = np.zeros((self._cap, 9))

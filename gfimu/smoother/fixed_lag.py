@@ -79,7 +79,6 @@ import warnings
 from collections import deque
 from dataclasses import dataclass, fields, replace
 
-import gtsam
 import numpy as np
 
 from ..array import SensorArray
@@ -87,6 +86,7 @@ from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from . import _fixed_lag_model as model
+from ._fixed_lag_model import gtsam  # imported on first use (engine 'gtsam')
 from ._fixed_lag_filter import FilterFailure, WindowFilter
 from .graph import SmootherOptions, options_reason
 
