@@ -95,6 +95,14 @@ class FixedLagSmootherError(RuntimeError):
     """The smoother could not solve an update (names the time and the cause)."""
 
 
+class FixedLagSmootherClosed(RuntimeError):
+    """:meth:`FixedLagSmoother.push` or :meth:`FixedLagSmoother.flush` after :meth:`FixedLagSmoother.close`."""
+
+
+class ClockResetWarning(RuntimeWarning):
+    """The stream's time went back by more than ``clock_reset_s``: the window was restarted."""
+
+
 @dataclass(frozen=True)
 class StateEstimate:
     """ω, ω̇ and f of one sample (body frame), with optional one-sigma values."""
@@ -113,13 +121,18 @@ class FixedLagUpdate:
     """What one :meth:`FixedLagSmoother.push` gives back.
 
     ``smoothed``: states that reached the lag (final values, oldest first;
-    usually one, several after a warm-up or a gap, none at the start).
+    usually one, several after a warm-up, a gap or a clock reset, none at the start).
     ``filtered``: the newest state given data up to now (``None`` while the
-    first samples of a segment are being gathered for the initialisation).
+    first samples of a segment are being gathered for the initialisation, and
+    when the sample was dropped).
+    ``dropped``: why this sample was not used: ``None`` (it was used),
+    ``"duplicate"`` (same timestamp as the previous sample) or ``"out-of-order"``
+    (earlier than the previous sample by at most ``clock_reset_s``).
     """
 
     smoothed: tuple[StateEstimate, ...]
     filtered: StateEstimate | None
+    dropped: str | None = None
 
 
 ENGINES = ("numpy", "gtsam")
@@ -209,7 +222,8 @@ class FixedLagSmoother:
     def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
                  rate_hz: float = 500.0, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10,
                  marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
-                 fast_measurement: bool = True, tune_window_s: float = 3.0, engine: str = "numpy") -> None:
+                 fast_measurement: bool = True, tune_window_s: float = 3.0, engine: str = "numpy",
+                 clock_reset_s: float = 1.0) -> None:
         options = options or SmootherOptions()
         if engine not in ENGINES:
             raise ValueError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
@@ -228,6 +242,8 @@ class FixedLagSmoother:
             raise ValueError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
         if int(relinearize_skip) < 1:
             raise ValueError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
+        if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
+            raise ValueError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
         if not (isinstance(tune_window_s, (int, float)) and math.isfinite(tune_window_s) and tune_window_s > 0):
             raise ValueError(f"fixed-lag smoother: tune_window_s must be a positive number, got {tune_window_s!r}")
         self.array = array
@@ -253,6 +269,14 @@ class FixedLagSmoother:
         self._block_s = max(float(marginalise_every_s), 2.0 / self.rate_hz)
         self._last_t_ns: int | None = None
         self._origin_ns: int | None = None
+        self.clock_reset_s = float(clock_reset_s)
+        self.n_duplicates = 0
+        """Samples dropped because their timestamp equals the previous one."""
+        self.n_out_of_order = 0
+        """Samples dropped because they are earlier than the previous one (by at most ``clock_reset_s``)."""
+        self.n_clock_resets = 0
+        """Times the clock went back by more than ``clock_reset_s`` (each restarted the window)."""
+        self.closed = False
         self._start_segment()
 
     # --- public API ---------------------------------------------------------
@@ -280,12 +304,30 @@ class FixedLagSmoother:
         """Number of samples in the current window (Python side)."""
         return len(self._window) + len(self._warmup)
 
+    @property
+    def counts(self) -> dict:
+        """Dropped samples and clock resets so far: ``{"duplicates", "out_of_order", "clock_resets"}``."""
+        return {"duplicates": self.n_duplicates, "out_of_order": self.n_out_of_order,
+                "clock_resets": self.n_clock_resets}
+
     def push(self, timestamp_ns: int, accel_row, gyro_row=None, tilt_row=None) -> FixedLagUpdate:
         """Add one sample; return the states that reached the lag and the newest one.
 
         While the tuning stretch is being gathered nothing comes out (``filtered``
         is None); the push that completes it returns every buffered state that has
-        reached the lag."""
+        reached the lag.
+
+        Time going backwards (defined, never an error): a sample with the previous
+        sample's timestamp is dropped (``dropped="duplicate"``, counted in
+        :attr:`n_duplicates`); one earlier than the previous sample by at most
+        ``clock_reset_s`` is dropped (``"out-of-order"``, :attr:`n_out_of_order`);
+        one earlier by more is a clock reset: a :class:`ClockResetWarning`, the
+        window is flushed (its states come out in ``smoothed``) and a new segment
+        starts with this sample (:attr:`n_clock_resets`). After :meth:`close`,
+        :class:`FixedLagSmootherClosed`."""
+        if self.closed:
+            raise FixedLagSmootherClosed("fixed-lag smoother: push after close(); create a new smoother to start "
+                                         "another stream")
         t_ns = int(timestamp_ns)
         y = np.asarray(accel_row, dtype=float).reshape(-1)
         if y.shape != (self.array.n_axes,):
@@ -303,10 +345,21 @@ class FixedLagSmoother:
         smoothed: list[StateEstimate] = []
         if self._last_t_ns is not None:
             dt_ns = t_ns - self._last_t_ns
-            if dt_ns <= 0:
-                raise ValueError(f"timestamps must increase: {t_ns} ns after {self._last_t_ns} ns")
-            if dt_ns > self.gap_factor * self._nominal_dt_ns:
-                smoothed.extend(self.flush())
+            if dt_ns == 0:
+                self.n_duplicates += 1
+                return FixedLagUpdate((), None, "duplicate")
+            if 0 > dt_ns >= -self.clock_reset_s * 1e9:
+                self.n_out_of_order += 1
+                return FixedLagUpdate((), None, "out-of-order")
+            if dt_ns < 0:
+                self.n_clock_resets += 1
+                warnings.warn(f"fixed-lag smoother: the clock went back by {-dt_ns * 1e-9:.6f} s (from {self._last_t_ns} "
+                              f"to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
+                              "flushed and a new segment starts", ClockResetWarning, stacklevel=2)
+                smoothed.extend(self._end_segment())
+                self._origin_ns = t_ns
+            elif dt_ns > self.gap_factor * self._nominal_dt_ns:
+                smoothed.extend(self._end_segment())
         else:
             self._origin_ns = t_ns
         self._last_t_ns = t_ns
@@ -395,9 +448,35 @@ class FixedLagSmoother:
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
 
-        The next :meth:`push` starts a new segment with a fresh initialisation.
-        A tuning stretch still being gathered is tuned on (if long enough) and smoothed first.
+        The next :meth:`push` starts a new segment with a fresh initialisation, at any
+        timestamp (the stream's clock starts again). A tuning stretch still being
+        gathered is tuned on (if long enough) and smoothed first.
         """
+        if self.closed:
+            raise FixedLagSmootherClosed("fixed-lag smoother: flush after close()")
+        out = self._end_segment()
+        self._last_t_ns = None
+        return out
+
+    def close(self) -> tuple[StateEstimate, ...]:
+        """:meth:`flush`, then refuse any further push (closing twice returns nothing)."""
+        if self.closed:
+            return ()
+        out = self.flush()
+        self.closed = True
+        self._tune_buffer = []
+        return out
+
+    def __enter__(self) -> FixedLagSmoother:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if not self.closed:
+            self.closed = True
+            self._start_segment()
+
+    def _end_segment(self) -> tuple[StateEstimate, ...]:
+        """Every state of the current segment (and of a pending tuning stretch), and a fresh segment."""
         replayed = self._tune_and_replay(final=True) if self._tune_buffer else []
         if self._smoother is None and self._warmup:
             self._initialise()
