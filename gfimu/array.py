@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import rigid_body
+from .rotations import matrix_from_rotation_vector
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 
@@ -264,7 +265,6 @@ def random_array(n_triads: int = 5, half_extent_m: float = 0.03, noise_std_mps2:
                  name: str | None = None) -> SensorArray:
     """``n_triads`` triads at uniform random positions within ±``half_extent_m`` per axis, each
     rotated at random (rotation vector drawn from a standard normal); reproducible by ``seed``."""
-    from .rotations import matrix_from_rotation_vector
 
     rng = np.random.default_rng(seed)
     accs = tuple(

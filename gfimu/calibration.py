@@ -61,6 +61,8 @@ from pathlib import Path
 import numpy as np
 
 from .array import AXIS_INDEX, SensorArray
+from .io.array_toml import format_toml
+from .io.atomic import atomic_write_text
 
 GRAVITY_MPS2 = 9.80665
 FORMAT = "gfimu-calibration/1"
@@ -382,14 +384,12 @@ _TOML_COMMENT = "model per accelerometer: reading = gain · f_B + bias_mps2 (row
 
 def calibration_to_toml(cal: Calibration) -> str:
     """Text of ``calibration.toml``."""
-    from .io.array_toml import format_toml
 
     return format_toml(calibration_to_dict(cal), comment=_TOML_COMMENT, finite=False)
 
 
 def write_calibration(cal: Calibration, path: str | Path) -> None:
     """Write ``calibration.toml`` atomically (temporary file, fsync, rename)."""
-    from .io.atomic import atomic_write_text
 
     atomic_write_text(path, calibration_to_toml(cal))
 

@@ -27,8 +27,16 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .crb import crb_per_sample
+from .estimators.inversion import invert
+from .evaluation import evaluate
+from .io import write_motion_csv
 from .log import Log
+from .methods import METHODS, UnknownMethodError, make_estimator
 from .motion import Motion
+from .smoother.bound import smoother_bound
+from .smoother.graph import SmootherOptions
+from .smoother.presets import expand_preset
 
 # Quantities in table order: field -> (short key, label for headers, unit)
 TABLE_QUANTITIES: dict[str, tuple[str, str, str]] = {
@@ -66,7 +74,6 @@ COLUMNS = ["method", "kind", "status", "reason"] + metric_columns()
 
 def _evaluation_metrics(estimate: Motion, reference: Motion, valid: np.ndarray | None) -> dict[str, float]:
     """Table columns from :func:`gfimu.evaluation.evaluate`."""
-    from .evaluation import evaluate
 
     result = evaluate(estimate, reference, valid=valid, large_error_radps=5.0)
     return metrics_from_evaluation(result)
@@ -156,7 +163,6 @@ def _bound_variances(name: str, log: Log, truth: Motion, gyro_noise_std_radps: f
     if truth.omega_b_radps is None:
         return "the truth has no angular velocity to evaluate the bound at"
     if name in ("crb", "crb_gyro"):
-        from .crb import crb_per_sample
 
         if name == "crb_gyro":
             if gyro_noise_std_radps is None:
@@ -173,9 +179,6 @@ def _bound_variances(name: str, log: Log, truth: Motion, gyro_noise_std_radps: f
             "omega_dot_b_radps2": diag[:, 3:6],
             "omega_b_radps": diag[:, 6:9],
         }
-    from .estimators import make_estimator
-    from .smoother.bound import smoother_bound
-    from .smoother.graph import SmootherOptions
 
     reason = make_estimator("smoother", **dict(smoother_options or {})).applicable(log.array)
     if reason:
@@ -282,7 +285,6 @@ def reference_of(log: Log) -> tuple[Motion, str, np.ndarray | None]:
 
 
 def default_methods() -> list[str]:
-    from .estimators import METHODS
 
     return list(METHODS)
 
@@ -292,7 +294,6 @@ def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, pr
     """Run one method: ``(status, reason, motion | None, seconds)``; never raises for the method's own failures.
 
     ``made``: if given, receives the estimator object under ``name`` (e.g. for the smoother's tuning)."""
-    from .estimators import UnknownMethodError, make_estimator
 
     try:
         est = make_estimator(name, **dict(options or {}))
@@ -350,7 +351,6 @@ def compare(
         raise ValueError("no method to compare")
     options = dict(options or {})
     if "preset" in options.get("smoother", {}):  # the preset's settings, for the smoother and its bound
-        from .smoother.presets import expand_preset
 
         options["smoother"] = expand_preset("smoother", options["smoother"])
     unknown_opts = sorted(set(options) - set(methods))
@@ -386,7 +386,6 @@ def compare(
     if estimates_dir is not None:
         from pathlib import Path
 
-        from .io import write_motion_csv
 
         out = Path(estimates_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -512,7 +511,6 @@ def omega_rmse_sum(estimate: Motion, reference: Motion, valid: np.ndarray | None
 
 def t2_sweep(log: Log, t2_values: Sequence[float], imm_options: Mapping[str, Any] | None = None) -> np.ndarray:
     """Summed RMSE of ω of the ``imm`` method at each T2 (paper 002, §4.1, Fig. 7)."""
-    from .estimators import make_estimator
 
     reference, _, valid = reference_of(log)
     out = []
@@ -542,7 +540,6 @@ def motion_level(log: Log) -> float:
     As in the paper this uses only the accelerometers (S⁻¹ times the readings,
     eq. 7), so it needs an invertible array.
     """
-    from .estimators.inversion import invert
 
     x, _ = invert(log.array, log.accel_mps2)
     return float(np.mean(np.sum(x[:, 6:9], axis=1)))

@@ -31,12 +31,12 @@ import io
 import json
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .motion import QUANTITIES, Motion
-from .rotations import quaternion_from_rotation_vector, quaternion_multiply
+from .rotations import quaternion_from_rotation_vector, quaternion_multiply, rotation_vector_from_quaternion
 
 # quantity identifier (Motion field name; attitude and tilt errors in rad) -> (short label, unit, CSV prefix)
 QUANTITY_INFO = {
@@ -237,20 +237,9 @@ def _conjugate(q: np.ndarray) -> np.ndarray:
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
-def _rotation_vector_from_quaternion(q: np.ndarray) -> np.ndarray:
-    """Rotation vector (..., 3) of unit quaternions (..., 4); angle in [0, π]."""
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    q = np.where(q[..., :1] < 0, -q, q)
-    s = np.linalg.norm(q[..., 1:], axis=-1)
-    angle = 2.0 * np.arctan2(s, q[..., 0])
-    small = s < 1e-12
-    scale = np.where(small, 2.0, angle / np.where(small, 1.0, s))
-    return q[..., 1:] * scale[..., None]
-
-
 def attitude_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
     """Rotation vector (N, 3) of R_trueᵀ R_est, in B; its norm is the attitude error in rad."""
-    return _rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q_true_wb), q_est_wb))
+    return rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q_true_wb), q_est_wb))
 
 
 def tilt_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
@@ -265,7 +254,7 @@ def tilt_error(q_est_wb: np.ndarray, q_true_wb: np.ndarray) -> np.ndarray:
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray) -> np.ndarray:
-    delta = _rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q0), q1))
+    delta = rotation_vector_from_quaternion(quaternion_multiply(_conjugate(q0), q1))
     return quaternion_multiply(q0, quaternion_from_rotation_vector(delta * s[:, None]))
 
 
@@ -402,3 +391,54 @@ def evaluate_log(estimate: Motion, log, **options) -> EvaluationResult:
         raise ValueError(f"{log.source}: the log has neither truth nor reference to evaluate against")
     valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
     return evaluate(estimate, log.reference, valid=valid, **options)
+
+
+def estimate_time_offset_s(estimate: Motion, reference: Motion, valid: np.ndarray | None = None,
+                           max_offset_s: float = 0.5) -> float:
+    """Offset [s] to add to the estimate's timestamps that best lines it up with the reference: the
+    lag minimising the mean squared difference of |ω| (sign-free, so a sign error does not pull it)
+    over the rows both cover, on the reference's time grid within ±``max_offset_s``, refined to a
+    fraction of a sample by a parabola through the minimum."""
+    if estimate.omega_b_radps is None or reference.omega_b_radps is None:
+        raise ValueError("a time offset is estimated from ω: both need omega columns")
+    t_ref = reference.timestamps_ns * 1e-9
+    t_est = estimate.timestamps_ns * 1e-9
+    if len(t_ref) < 4 or len(t_est) < 4:
+        raise ValueError("too few rows to estimate a time offset")
+    dt = float(np.median(np.diff(t_ref)))
+    ref = np.linalg.norm(reference.omega_b_radps, axis=1)
+    est_t = t_est
+    est_v = np.linalg.norm(estimate.omega_b_radps, axis=1)
+    ok = np.ones(len(ref), bool) if valid is None else np.asarray(valid, bool)
+    ok &= np.isfinite(ref)
+    finite = np.isfinite(est_v)
+    lags = np.arange(-int(round(max_offset_s / dt)), int(round(max_offset_s / dt)) + 1)
+    score = np.full(len(lags), np.inf)
+    for j, k in enumerate(lags):
+        # the estimate shifted by k dt, sampled at the reference's times
+        shifted_est = np.interp(t_ref, est_t[finite] + k * dt, est_v[finite], left=np.nan, right=np.nan)
+        both = ok & np.isfinite(shifted_est)
+        if np.count_nonzero(both) > 3:
+            score[j] = float(np.mean((shifted_est[both] - ref[both]) ** 2))
+    i = int(np.argmin(score))
+    frac = 0.0
+    if 0 < i < len(lags) - 1 and np.all(np.isfinite(score[i - 1:i + 2])):
+        y0, y1, y2 = score[i - 1], score[i], score[i + 1]
+        denom = y0 - 2 * y1 + y2
+        frac = 0.5 * (y0 - y2) / denom if denom > 0 else 0.0
+    return float((lags[i] + frac) * dt)
+
+
+def shifted(motion: Motion, offset_s: float) -> Motion:
+    """``motion`` with ``offset_s`` added to its timestamps."""
+    return replace(motion, timestamps_ns=motion.timestamps_ns + int(round(offset_s * 1e9)))
+
+
+def error_table(estimate: Motion, reference: Motion, used: np.ndarray) -> np.ndarray:
+    """(N, 6) per-sample ω errors on the reference's rows: timestamp [ns], error x, y, z, norm
+    [rad/s], 1 where the row is used by the metrics (else 0); NaN where the estimate has no value."""
+    t = reference.timestamps_ns
+    est = np.column_stack([np.interp(t, estimate.timestamps_ns, estimate.omega_b_radps[:, i],
+                                     left=np.nan, right=np.nan) for i in range(3)])
+    err = est - reference.omega_b_radps
+    return np.column_stack([t.astype(float), err, np.linalg.norm(err, axis=1), used.astype(float)])

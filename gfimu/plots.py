@@ -15,6 +15,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .motion import QUANTITIES, Motion
+from .io.atomic import atomic_path
 
 # field -> (symbol for titles, unit for axis labels)
 LABELS: dict[str, tuple[str, str]] = {
@@ -38,7 +39,6 @@ def save_figure(fig, path, dpi: int = 110) -> Path:
     """Write ``fig`` to ``path`` (format from the suffix) with the Agg canvas, atomically."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from .io.atomic import atomic_path
 
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"

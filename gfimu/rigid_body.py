@@ -24,19 +24,17 @@ def quadratic_terms(omega_b: np.ndarray) -> np.ndarray:
 
 
 def quadratic_terms_jacobian(omega_b: np.ndarray) -> np.ndarray:
-    """d q / d ω, (..., 3) -> (..., 6, 3)."""
+    """d q / d ω, (..., 3) -> (..., 6, 3) (the one Jacobian of :func:`quadratic_terms`)."""
     w = np.asarray(omega_b, dtype=float)
+    out = np.zeros(w.shape[:-1] + (6, 3))
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
-    zero = np.zeros_like(x)
-    rows = [
-        [2 * x, 2 * y, zero],
-        [2 * x, zero, 2 * z],
-        [zero, 2 * y, 2 * z],
-        [y, x, zero],
-        [z, zero, x],
-        [zero, z, y],
-    ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    out[..., 0, 0] = out[..., 1, 0] = 2 * x
+    out[..., 0, 1] = out[..., 2, 1] = 2 * y
+    out[..., 1, 2] = out[..., 2, 2] = 2 * z
+    out[..., 3, 0], out[..., 3, 1] = y, x
+    out[..., 4, 0], out[..., 4, 2] = z, x
+    out[..., 5, 1], out[..., 5, 2] = z, y
+    return out
 
 
 def centripetal_matrix(position_m: np.ndarray) -> np.ndarray:

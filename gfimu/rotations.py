@@ -1,4 +1,4 @@
-"""Rotation helpers (pure maths, vectorised where useful).
+"""Rotation helpers (pure maths, vectorised): one SO(3) exponential and logarithm, on scipy's ``Rotation``.
 
 Quaternions are scalar first, ``[w, x, y, z]``; ``quaternion_wb`` rotates a
 body vector into the world frame, as in the log format.
@@ -7,6 +7,7 @@ body vector into the world frame, as in the log format.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -22,79 +23,63 @@ def skew(v: np.ndarray) -> np.ndarray:
     return out
 
 
+def _rowwise(fn, x: np.ndarray, inner: int, out_shape: tuple[int, ...]) -> np.ndarray:
+    """``fn`` on the rows of ``x`` (..., *inner dims) that are finite and not all zero; NaN elsewhere."""
+    x = np.asarray(x, dtype=float)
+    lead = x.shape[: x.ndim - inner]
+    flat = x.reshape((-1,) + x.shape[x.ndim - inner:])
+    axes = tuple(range(1, flat.ndim))
+    ok = np.all(np.isfinite(flat), axis=axes) & np.any(flat != 0, axis=axes)
+    out = np.full((flat.shape[0],) + out_shape, np.nan)
+    if np.any(ok):
+        out[ok] = fn(flat[ok])
+    return out.reshape(lead + out_shape)
+
+
 def matrix_from_quaternion(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix (..., 3, 3) from unit quaternion(s) (..., 4), scalar first."""
-    q = np.asarray(q, dtype=float)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - w * z)
-    out[..., 0, 2] = 2 * (x * z + w * y)
-    out[..., 1, 0] = 2 * (x * y + w * z)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - w * x)
-    out[..., 2, 0] = 2 * (x * z - w * y)
-    out[..., 2, 1] = 2 * (y * z + w * x)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
+    """Rotation matrix (..., 3, 3) from quaternion(s) (..., 4), scalar first, normalised first."""
+    return _rowwise(lambda v: Rotation.from_quat(v, scalar_first=True).as_matrix(), q, 1, (3, 3))
 
 
 def quaternion_from_matrix(m: np.ndarray) -> np.ndarray:
-    """Unit quaternion(s) (..., 4), scalar first and w >= 0, from rotation matrices."""
-    m = np.asarray(m, dtype=float)
-    flat = m.reshape(-1, 3, 3)
-    out = np.empty((flat.shape[0], 4))
-    for i, r in enumerate(flat):
-        tr = np.trace(r)
-        if tr > 0:
-            s = 2.0 * np.sqrt(tr + 1.0)
-            q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-        elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-            s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-            q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
-        elif r[1, 1] > r[2, 2]:
-            s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-            q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
-        else:
-            s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-            q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-        q = np.asarray(q)
-        out[i] = q * (1.0 if q[0] >= 0 else -1.0) / np.linalg.norm(q)
-    return out.reshape(m.shape[:-2] + (4,))
+    """Unit quaternion(s) (..., 4), scalar first and w >= 0, from rotation matrices (..., 3, 3)."""
+    return _rowwise(lambda r: Rotation.from_matrix(r).as_quat(canonical=True, scalar_first=True), m, 2, (4,))
 
 
 def matrix_from_rotation_vector(phi: np.ndarray) -> np.ndarray:
-    """SO(3) exponential map (Rodrigues), (..., 3) -> (..., 3, 3)."""
+    """SO(3) exponential map, (..., 3) -> (..., 3, 3); accurate to rounding at every angle."""
     phi = np.asarray(phi, dtype=float)
-    angle = np.linalg.norm(phi, axis=-1)[..., None, None]
-    k = skew(phi)
-    small = angle < 1e-8
-    safe = np.where(small, 1.0, angle)
-    a = np.where(small, 1.0 - angle**2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - angle**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
-    return np.eye(3) + a * k + b * (k @ k)
+    flat = phi.reshape(-1, 3)
+    ok = np.all(np.isfinite(flat), axis=1)
+    out = np.full((flat.shape[0], 3, 3), np.nan)
+    if np.any(ok):
+        out[ok] = Rotation.from_rotvec(flat[ok]).as_matrix()
+    return out.reshape(phi.shape[:-1] + (3, 3))
 
 
 def rotation_vector_from_matrix(m: np.ndarray) -> np.ndarray:
-    """SO(3) logarithm, (..., 3, 3) -> (..., 3), vectorised, angle in [0, π]."""
+    """SO(3) logarithm, (..., 3, 3) -> (..., 3), angle in [0, π].
+
+    ``θ = atan2(|v|/2, (tr R - 1)/2)`` with ``v`` the axial vector of ``R - Rᵀ`` (no ``arccos``, so
+    no loss near 0); where ``cos θ < -0.9`` the axial vector vanishes and the axis comes from the
+    quaternion of the symmetric part (scipy's ``Rotation``), which stays exact at and near π."""
     m = np.asarray(m, dtype=float)
-    tr = np.clip((np.trace(m, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(tr)
     v = np.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], axis=-1)
-    s = np.sin(angle)
-    small = angle < 1e-6
+    c = 0.5 * (np.trace(m, axis1=-2, axis2=-1) - 1.0)
+    s = 0.5 * np.linalg.norm(v, axis=-1)
+    angle = np.arctan2(s, c)
+    small = s < 1e-8
     scale = np.where(small, 0.5 + angle**2 / 12.0, angle / (2.0 * np.where(small, 1.0, s)))
     out = v * scale[..., None]
-    near_pi = angle > np.pi - 1e-4
+    near_pi = c < -0.9
     if np.any(near_pi):
-        # Around π the antisymmetric part vanishes and arccos loses precision: use the
-        # quaternion (Shepperd's method), angle = 2 atan2(|q_v|, q_w).
-        q = quaternion_from_matrix(m[near_pi])
-        qv = q[..., 1:]
-        norm_v = np.linalg.norm(qv, axis=-1, keepdims=True)
-        out[near_pi] = qv / norm_v * (2.0 * np.arctan2(norm_v, q[..., :1]))
+        out[near_pi] = _rowwise(lambda r: Rotation.from_matrix(r).as_rotvec(), m[near_pi], 2, (3,))
     return out
+
+
+def rotation_vector_from_quaternion(q: np.ndarray) -> np.ndarray:
+    """Rotation vector (..., 3) of quaternions (..., 4), scalar first; angle in [0, π]."""
+    return _rowwise(lambda v: Rotation.from_quat(v, scalar_first=True).as_rotvec(), q, 1, (3,))
 
 
 def quaternion_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -115,10 +100,11 @@ def quaternion_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def quaternion_from_rotation_vector(phi: np.ndarray) -> np.ndarray:
-    """Unit quaternion (..., 4) of the rotation vector phi (..., 3)."""
+    """Unit quaternion (..., 4), scalar first, of the rotation vector phi (..., 3)."""
     phi = np.asarray(phi, dtype=float)
-    angle = np.linalg.norm(phi, axis=-1, keepdims=True)
-    half = 0.5 * angle
-    small = angle < 1e-8
-    sinc = np.where(small, 0.5 - angle**2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
-    return np.concatenate([np.cos(half), sinc * phi], axis=-1)
+    flat = phi.reshape(-1, 3)
+    ok = np.all(np.isfinite(flat), axis=1)
+    out = np.full((flat.shape[0], 4), np.nan)
+    if np.any(ok):
+        out[ok] = Rotation.from_rotvec(flat[ok]).as_quat(scalar_first=True)
+    return out.reshape(phi.shape[:-1] + (4,))

@@ -96,7 +96,7 @@ def test_noise_free_inversion_is_exact_and_crb_without_gyro_is_not_applicable():
 
 
 def test_failing_and_unknown_methods_do_not_stop_the_table(monkeypatch, noisy_log):
-    from gfimu.estimators import METHODS
+    from gfimu.methods import METHODS
 
     module = types.ModuleType("gfimu_broken_method")
 
@@ -211,7 +211,7 @@ def test_cli_compare_json(tmp_path, noisy_log):
 
 def test_motion_level_and_t2_sweep():
     from gfimu.compare import motion_level, omega_rmse_sum, t2_sweep
-    from gfimu.estimators import make_estimator
+    from gfimu.methods import make_estimator
 
     log = simulate("random3d", array=cube_array(0.05), duration_s=1.0, noise=SensorErrors.none(), seed=4)
     # a + b + c = (ωx²+ωy²) + (ωx²+ωz²) + (ωy²+ωz²) = 2|ω|², recovered exactly without noise

@@ -94,3 +94,25 @@ def test_rotation_vector_round_trip_including_near_pi():
     np.testing.assert_allclose(R_back[40:], R[40:], atol=1e-9)
     np.testing.assert_allclose(np.linalg.norm(back[40:], axis=1), angles[40:], atol=1e-9)
     np.testing.assert_allclose(rotation_vector_from_matrix(np.eye(3)), np.zeros(3), atol=0)
+
+
+def test_noise_policy_resolves_a_missing_std_one_way():
+    """gfimu.noise: a missing accelerometer std takes the stated axes' mean, else the default."""
+    import dataclasses
+
+    from gfimu import noise
+    from gfimu.array import cube_array
+
+    arr = cube_array(noise_std_mps2=0.04)
+    np.testing.assert_array_equal(noise.accel_noise_std(arr), np.full(arr.n_axes, 0.04))
+    accs = list(arr.accelerometers)
+    accs[1] = dataclasses.replace(accs[1], noise_std_mps2=None)
+    accs[2] = dataclasses.replace(accs[2], noise_std_mps2=0.1)
+    part = dataclasses.replace(arr, accelerometers=tuple(accs))
+    sigma = noise.accel_noise_std(part)
+    mean = (0.04 * 6 + 0.1 * 3) / 9
+    np.testing.assert_allclose(sigma[3:6], mean)
+    assert noise.missing_accel_axes(part) == list(part.accel_columns[3:6])
+    none = cube_array(noise_std_mps2=None)
+    np.testing.assert_array_equal(noise.accel_noise_std(none, 0.3), np.full(none.n_axes, 0.3))
+    assert noise.gyro_noise_std(none) == noise.DEFAULT_GYRO_NOISE_STD_RADPS

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import cube_array
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.estimators.imm import IMMEstimator, case_rule, context_memberships, imm_case, imm_weights
 from gfimu.estimators.integration import SIGN_CANDIDATES, select_candidate
 from gfimu.log import Log

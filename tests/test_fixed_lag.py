@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import Gyroscope, cube_array, paper001_array, single_triad
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.factors import accelerometer, kinematics
 from gfimu.log import Log
 from gfimu.simulate import SensorErrors, simulate

@@ -182,6 +182,7 @@ def test_accelerometer_noise_scale_is_tuned_and_used(turntable_log):
     np.testing.assert_allclose(sm.model.accel_sigma_mps2, 0.07 * sm.tuning.accel_noise_scale, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_sigma_of_the_stretch_and_of_the_stream_match_the_actual_error():
     """compute_sigma: the batch marginals for the stretch's states, gtsam's for the streamed ones."""
     log = simulate("random3d", CUBE_5CM, rate_hz=RATE_HZ, duration_s=2.0, seed=7)

@@ -5,7 +5,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from gfimu.array import Accelerometer, Body, SensorArray, cube_array, single_triad
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.estimators.free_flight import FreeFlightEstimator, euler_omega_dot, euler_omega_dot_jacobian
 from gfimu.log import Log
 from gfimu.motion import Motion

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import Gyroscope, Inclinometer, SensorArray, cube_array
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.estimators.gravity import (
     STANDARD_GRAVITY_MPS2,
     add_orientation,

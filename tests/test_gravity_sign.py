@@ -45,7 +45,7 @@ def test_no_usable_sample():
 @pytest.mark.parametrize("seed", [0, 2, 3])
 def test_smoothers_get_the_sign_of_a_constant_rotation(seed):
     """Seeds whose lever-arm-only initialisation picked the wrong sign (ω off by 2 × 180°/s)."""
-    from gfimu.estimators import make_estimator
+    from gfimu.methods import make_estimator
 
     log = simulate("turntable-constant", cube_array(0.025, 0.07), rate_hz=500.0, duration_s=3.0, seed=seed)
     for method in ("smoother", "fixed-lag"):

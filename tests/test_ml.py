@@ -6,7 +6,7 @@ import pytest
 from gfimu import array as layouts
 from gfimu.array import Accelerometer, SensorArray, cube_array, mimu4444_array, paper001_array, single_triad
 from gfimu.crb import crb_per_sample
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.estimators.ml import MLEstimator
 from gfimu.log import Log
 from gfimu.motion import Motion

@@ -88,6 +88,7 @@ def turntable_log():
     return simulate("turntable", CUBE_5CM, rate_hz=500.0, duration_s=6.0, seed=1)
 
 
+@pytest.mark.slow
 def test_graph_path_equals_fast_path_with_the_oscillator(turntable_log):
     log = turntable_log.select(slice(0, 150))
     opt = SmootherOptions(process_axis_frequencies_hz=(0.0, 0.8, 1.0), process_axis_factors=(1.0, 0.1, 0.01),
@@ -149,6 +150,7 @@ def test_reversal_frequencies_and_accuracy():
     assert np.all(np.sign(m.omega_b_radps[big]) == np.sign(log.truth.omega_b_radps[big]))
 
 
+@pytest.mark.slow
 def test_random_motion_keeps_the_white_jerk():
     """Band-limited random motion has no dominant line: no oscillator, same result as without."""
     log = simulate("random3d", CUBE_5CM, rate_hz=500.0, duration_s=10.0, seed=1)

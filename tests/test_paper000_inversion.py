@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import Accelerometer, ArrayModelError, SensorArray, cube_array, mimu4444_array
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.estimators._common import continuity_signs, omega_from_quadratic_terms_signed
 from gfimu.estimators.inversion import invert, inversion_matrix
 from gfimu.rigid_body import quadratic_terms

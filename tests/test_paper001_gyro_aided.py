@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import ArrayModelError, Gyroscope, SensorArray, cube_array, paper001_array, single_triad
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.estimators.gyro_aided import gyro_aided_matrices, gyro_aided_solve, paper001_gain_matrix
 
 from test_estimators_classic import analytic_log, sines

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import cube_array, mimu4444_array, random_array, single_triad
-from gfimu.estimators import make_estimator
+from gfimu.methods import make_estimator
 from gfimu.simulate import simulate
 from gfimu.smoother import batch
 from gfimu.smoother.batch import BatchSmootherEstimator
@@ -230,6 +230,7 @@ def test_windows_match_whole_log_solve():
     assert np.max(diff) < 0.1
 
 
+@pytest.mark.slow
 def test_windows_with_the_oscillator_stay_within_the_accuracy():
     """With the oscillator model (chosen per window) the memory of the model outlasts the overlap:
     the windowed solve differs from the whole-log one by about its own sigma (not far below it),
@@ -244,6 +245,7 @@ def test_windows_with_the_oscillator_stay_within_the_accuracy():
     assert rmse(whole) < 0.008 and rmse(windowed) < 0.008
 
 
+@pytest.mark.slow
 def test_bias_self_calibration():
 
     log = simulate("random3d", CUBE, rate_hz=500.0, duration_s=5.0, seed=9)
@@ -310,6 +312,7 @@ def test_gyro_array_smoother_beats_raw_gyro():
     assert omega_rmse(m, log.truth) < 0.3 * raw
 
 
+@pytest.mark.slow
 def test_log_with_gap():
     """A 0.4 s hole in the recording: the initialiser restarts, the process factors span the gap."""
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=6.0, seed=12)

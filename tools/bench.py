@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from gfimu.array import cube_array, paper001_array  # noqa: E402
-from gfimu.estimators import METHODS, make_estimator  # noqa: E402
+from gfimu.methods import METHODS, make_estimator  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
 
 MAX_REPEATS = 50

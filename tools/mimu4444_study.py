@@ -59,7 +59,6 @@ import json
 import sys
 import time
 import warnings
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -69,7 +68,8 @@ sys.path.insert(0, str(REPO))
 
 from gfimu import calibration as calib  # noqa: E402
 from gfimu.io.readers.mimu4444 import read_mimu4444, shift_reference  # noqa: E402
-from gfimu.estimators import METHODS, make_estimator  # noqa: E402
+from gfimu.methods import METHODS, make_estimator  # noqa: E402
+from gfimu.smoother.initialise import initial_estimate  # noqa: E402
 from gfimu.evaluation import evaluate  # noqa: E402
 from gfimu.array import mimu4444_array  # noqa: E402
 from gfimu.rotations import skew  # noqa: E402
@@ -101,40 +101,28 @@ def run_method(name: str, log, options: dict, progress: bool, start_at_reference
     if reason:
         return None, reason, 0.0
     t0 = time.perf_counter()
-    with warnings.catch_warnings(), smoother_started_at_reference(start_at_reference and name == "smoother"):
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        motion = est.estimate(log, progress=progress)
+        if start_at_reference and name == "smoother":
+            motion = est.result(log, progress=progress, initial=started_at_reference).motion
+        else:
+            motion = est.estimate(log, progress=progress)
     return motion, None, time.perf_counter() - t0
 
 
-@contextmanager
-def smoother_started_at_reference(active: bool = True):
-    """Within the block, the batch smoother starts each window from ω of the log's reference
-    (where the reference is valid; at saturated-gyro samples from the ML initialisation's ω, turned
-    to the reference's side), its other states from its own initialisation: how far the
-    accelerometer-only solution stands from the gyro's when started on the right sign branch."""
-    if not active:
-        yield
-        return
-    from gfimu.smoother.batch import BatchSmootherEstimator
-
-    own = BatchSmootherEstimator.__dict__["_initial_states"]
-
-    def at_reference(part, opt):
-        x = own.__func__(part, opt)
-        ref = part.reference.omega_b_radps
-        ok = ~part.invalid_reference if part.invalid_reference is not None else np.ones(len(part), bool)
-        w = x[:, 0:3].copy()
-        w[ok] = ref[ok]
-        w[~ok & (np.sum(w * ref, axis=1) < 0)] *= -1.0
-        x[:, 0:3] = w
-        return x
-
-    BatchSmootherEstimator._initial_states = staticmethod(at_reference)
-    try:
-        yield
-    finally:
-        BatchSmootherEstimator._initial_states = own
+def started_at_reference(part, opt):
+    """Initial states of a batch-smoother window from ω of the log's reference (where the reference
+    is valid; at saturated-gyro samples from the own initialisation's ω, turned to the reference's
+    side), its other states from its own initialisation: how far the accelerometer-only solution
+    stands from the gyro's when started on the right sign branch."""
+    x = initial_estimate(part, opt)
+    ref = part.reference.omega_b_radps
+    ok = ~part.invalid_reference if part.invalid_reference is not None else np.ones(len(part), bool)
+    w = x[:, 0:3].copy()
+    w[ok] = ref[ok]
+    w[~ok & (np.sum(w * ref, axis=1) < 0)] *= -1.0
+    x[:, 0:3] = w
+    return x
 
 
 def reference_bound(log, options: dict, mask) -> dict:
@@ -146,7 +134,8 @@ def reference_bound(log, options: dict, mask) -> dict:
     from dataclasses import fields
 
     from gfimu.rigid_body import quadratic_terms
-    from gfimu.smoother.batch import factorise, marginal_covariances, normal_equations, window_slices
+    from gfimu.smoother.banded import factorise, marginal_covariances, normal_equations
+    from gfimu.smoother.batch import window_slices
     from gfimu.smoother.graph import SmootherOptions
     from gfimu.smoother.tuning import make_problem
 
@@ -332,12 +321,6 @@ def table(rows: list[dict]) -> str:
 
 # --- rigid-body residual investigation ------------------------------------------------
 
-def _skews(v: np.ndarray) -> np.ndarray:
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
-                     np.stack([-v[:, 1], v[:, 0], z], -1)], 1)
-
-
 def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
@@ -348,10 +331,10 @@ def rigid_residual(y: np.ndarray, omega: np.ndarray, positions: np.ndarray, omeg
     ω is given; f (and ω̇ unless given) are fitted per sample by least
     squares. Returns ``(residual, f, omega_dot)``.
     """
-    w2 = _skews(omega) @ _skews(omega)
+    w2 = skew(omega) @ skew(omega)
     k = positions.shape[0]
     if omega_dot is not None:
-        pred = np.einsum("nij,kj->nki", _skews(omega_dot) + w2, positions)
+        pred = np.einsum("nij,kj->nki", skew(omega_dot) + w2, positions)
         f = (y - pred).mean(axis=1)
         return y - pred - f[:, None], f, omega_dot
     z = y - np.einsum("nij,kj->nki", w2, positions)
@@ -364,10 +347,10 @@ def rigid_residual(y: np.ndarray, omega: np.ndarray, positions: np.ndarray, omeg
 def fit_positions(y, omega, positions0, iterations: int = 30):
     """Sensor positions by alternating least squares (f, ω̇ per sample; centroid held at the nominal one)."""
     r = positions0.copy()
-    w2 = _skews(omega) @ _skews(omega)
+    w2 = skew(omega) @ skew(omega)
     for _ in range(iterations):
         _, f, dw = rigid_residual(y, omega, r)
-        a = (_skews(dw) + w2).reshape(-1, 3)
+        a = (skew(dw) + w2).reshape(-1, 3)
         for i in range(r.shape[0]):
             r[i] = np.linalg.lstsq(a, (y[:, i] - f).reshape(-1), rcond=None)[0]
         r += positions0.mean(axis=0) - r.mean(axis=0)
@@ -426,7 +409,7 @@ def residual_study(args) -> dict:
     out["residual_fitted_positions"] = _rms(rigid_residual(y, w, pos)[0])
     # per-sensor dynamic gain (3x3 + bias) against the rigid-body prediction
     _, f, dw = rigid_residual(y, w, pos0)
-    pred = f[:, None, :] + np.einsum("nij,kj->nki", _skews(dw) + _skews(w) @ _skews(w), pos0)
+    pred = f[:, None, :] + np.einsum("nij,kj->nki", skew(dw) + skew(w) @ skew(w), pos0)
     rg = np.empty_like(res)
     for i in range(8):
         x = np.column_stack([pred[:, i], np.ones(len(pred))])

@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gfimu.array import SensorArray, cube_array, mimu4444_array, random_array  # noqa: E402
-from gfimu.estimators import make_estimator  # noqa: E402
+from gfimu.methods import make_estimator  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
 from gfimu.smoother.batch import BatchSmootherEstimator  # noqa: E402
 from gfimu.smoother.bound import efficiency, smoother_bound  # noqa: E402

@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from gfimu import plots  # noqa: E402
 from gfimu.array import Gyroscope, Inclinometer, SensorArray, cube_array, mimu4444_array, paper001_array  # noqa: E402
 from gfimu.compare import compare, condition_vs_scale, motion_level, t2_band, t2_sweep  # noqa: E402
-from gfimu.estimators import make_estimator  # noqa: E402
+from gfimu.methods import make_estimator  # noqa: E402
 from gfimu.evaluation import evaluate  # noqa: E402
 from gfimu.simulate import SCENARIOS, SensorErrors, simulate  # noqa: E402
 

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from . import CLIError
+from . import CLIError, screened
 from .options import check_method_options, non_negative, parse_method_options
 
 
@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from .. import io as gio
     from ..compare import compare
-    from ..estimators import METHODS
+    from ..methods import METHODS
 
     methods = None
     if args.methods is not None:
@@ -76,6 +76,7 @@ def run(args) -> int:
             for name in methods or list(METHODS):
                 check_output(folder / f"{name}.csv", inputs, "--estimates-dir")
     log = gio.read_log(args.log)
+    log = screened(log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
 

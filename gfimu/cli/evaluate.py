@@ -1,13 +1,17 @@
-"""``gfimu evaluate ESTIMATE.csv TRUTH.csv|LOG [--format markdown|csv|json] [--out FILE]``.
+"""``gfimu evaluate REFERENCE ESTIMATE.csv [--format markdown|csv|json] [--out FILE]``.
 
-The second argument is a truth or reference CSV, or a log folder: its
-``truth.csv`` is used, else its ``reference.csv``. Rows whose reference has
-``valid`` = 0 are left out (see :mod:`gfimu.io.tables`).
+The reference comes first, as in evo: a truth or reference CSV, or a log folder
+(its ``truth.csv`` is used, else its ``reference.csv``). The older order
+``ESTIMATE.csv LOG`` (a log folder, truth.csv or reference.csv second) keeps working. Rows whose reference
+has ``valid`` = 0 are left out (see :mod:`gfimu.io.tables`); options select the
+moving samples, a time window, and shift the estimate in time (given or
+estimated); ``--errors-out`` writes the per-sample ω errors.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import warnings
 from pathlib import Path
 
@@ -24,8 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "(paper 004 eq. 7) for every quantity both files have; for ω also the share of wrong signs "
                     "and of errors over 5 rad/s. Rows marked invalid in the reference (valid = 0) are left out.",
     )
+    p.add_argument("reference", help="truth or reference CSV, or a log folder (its truth.csv, else reference.csv)")
     p.add_argument("estimate", help="estimate CSV (as written by gfimu estimate)")
-    p.add_argument("truth", help="truth or reference CSV, or a log folder")
     p.add_argument("--format", choices=["markdown", "csv", "json"], default="markdown", help="output format")
     p.add_argument("--out", default=None,
                    help="write the table to this file (atomically; never over an input) instead of standard output (-)")
@@ -35,6 +39,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="if the timestamps differ, interpolate the truth at the estimate's timestamps")
     p.add_argument("--sign-threshold", type=non_negative("rad/s"), default=0.1, metavar="RADPS",
                    help="count wrong signs only for ω components above this magnitude (default 0.1 rad/s)")
+    p.add_argument("--moving-threshold-radps", type=non_negative("rad/s"), default=0.0, metavar="RADPS",
+                   help="use only rows where the reference turns faster than this, |ω_ref| > RADPS "
+                        "(default 0: every valid row)")
+    p.add_argument("--t-start-s", type=float, default=None, metavar="S",
+                   help="use only rows from this time on, in s from the reference's first row (default: the start)")
+    p.add_argument("--t-end-s", type=float, default=None, metavar="S",
+                   help="use only rows up to this time, in s from the reference's first row (default: the end)")
+    offset = p.add_mutually_exclusive_group()
+    offset.add_argument("--time-offset-s", type=float, default=0.0, metavar="S",
+                        help="add this to the estimate's timestamps before comparing (default 0 s; "
+                             "implies --interpolate when not 0)")
+    offset.add_argument("--estimate-time-offset", action="store_true",
+                        help="estimate that offset (cross-correlation of |ω| within ±0.5 s), report it and apply it")
+    p.add_argument("--errors-out", default=None, metavar="FILE",
+                   help="also write the per-sample ω errors (timestamp, error x, y, z, norm [rad/s], used 0/1) "
+                        "as CSV (atomically; never over an input)")
     p.set_defaults(func=run)
 
 
@@ -53,26 +73,74 @@ def _truth_path(arg: str, against: str) -> Path:
     raise CLIError(f"{path}: log folder has no {' or '.join(names)} to evaluate against")
 
 
+def _order(args) -> tuple[str, str]:
+    """(reference, estimate) from the two positional arguments: reference first, as evo takes them;
+    the older order ``ESTIMATE.csv LOG`` (a log folder, truth.csv or reference.csv second) keeps working."""
+    def looks_like_reference(path: Path) -> bool:
+        return path.is_dir() or path.name in ("truth.csv", "reference.csv")
+
+    first, second = Path(args.reference), Path(args.estimate)
+    if looks_like_reference(second) and not looks_like_reference(first):
+        return args.estimate, args.reference
+    return args.reference, args.estimate
+
+
 def run(args) -> int:
+    import numpy as np
+
     from .. import io as gio
-    from ..evaluation import EvaluationAlignmentWarning, evaluate
+    from ..evaluation import EvaluationAlignmentWarning, error_table, estimate_time_offset_s, evaluate, shifted
     from ..io.outputs import check_output, write_output
 
-    out = check_output(args.out, [args.estimate, args.truth], "--out", stdout=True)
-    truth_path = _truth_path(args.truth, args.against)
-    estimate = gio.read_motion_csv(args.estimate, allow_nan=True)
+    reference_arg, estimate_arg = _order(args)
+    out = check_output(args.out, [reference_arg, estimate_arg], "--out", stdout=True)
+    errors_out = None
+    if args.errors_out is not None:
+        errors_out = check_output(args.errors_out, [reference_arg, estimate_arg], "--errors-out")
+    truth_path = _truth_path(reference_arg, args.against)
+    estimate = gio.read_motion_csv(estimate_arg, allow_nan=True)
     truth, valid = gio.read_motion_table(truth_path)
+    interpolate = args.interpolate
+    offset_s = float(args.time_offset_s)
+    if args.estimate_time_offset:
+        offset_s = estimate_time_offset_s(estimate, truth, valid)
+    if offset_s:
+        estimate = shifted(estimate, offset_s)
+        interpolate = True
+    t = (truth.timestamps_ns - truth.timestamps_ns[0]) * 1e-9
+    use = np.ones(len(truth), bool) if valid is None else np.array(valid, bool)
+    if args.t_start_s is not None:
+        use &= t >= args.t_start_s
+    if args.t_end_s is not None:
+        use &= t <= args.t_end_s
+    if args.moving_threshold_radps > 0:
+        if truth.omega_b_radps is None:
+            raise CLIError(f"{truth_path}: --moving-threshold-radps needs ω (w_x, w_y, w_z) in the reference")
+        use &= np.linalg.norm(truth.omega_b_radps, axis=1) > args.moving_threshold_radps
+    if not np.any(use):
+        raise CLIError("no reference row left to evaluate (check --t-start-s, --t-end-s, --moving-threshold-radps)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", EvaluationAlignmentWarning)
-        result = evaluate(estimate, truth, valid=valid, sign_threshold_radps=args.sign_threshold,
-                          align="interpolate" if args.interpolate else "exact")
+        result = evaluate(estimate, truth, valid=use, sign_threshold_radps=args.sign_threshold,
+                          align="interpolate" if interpolate else "exact")
     if args.format == "markdown":
-        text = result.to_markdown(title=f"{args.estimate} vs {truth_path}")
+        text = result.to_markdown(title=f"{estimate_arg} vs {truth_path}")
     elif args.format == "csv":
         text = result.to_csv()
     else:
         text = result.to_json()
     write_output(out, [text])
+    report = sys.stderr if out is None else sys.stdout
+    if offset_s:
+        print(f"evaluate: estimate shifted by {offset_s * 1e3:+.3f} ms"
+              f"{' (estimated from |omega|)' if args.estimate_time_offset else ''}", file=report)
+    if errors_out is not None:
+        if estimate.omega_b_radps is None or truth.omega_b_radps is None:
+            raise CLIError("--errors-out needs ω in both the estimate and the reference")
+        table = error_table(estimate, truth, use)
+        lines = ["#timestamp [ns],err_w_x [rad s^-1],err_w_y [rad s^-1],err_w_z [rad s^-1],err_w_norm [rad s^-1],used []\n"]
+        lines += [f"{int(r[0])},{r[1]:.9g},{r[2]:.9g},{r[3]:.9g},{r[4]:.9g},{int(r[5])}\n" for r in table]
+        write_output(errors_out, ["".join(lines)])
     if out is not None:
-        print(f"evaluation of {args.estimate} -> {args.out} ({result.summary()})")
+        print(f"evaluation of {estimate_arg} -> {args.out} ({result.summary()})")
     return 0

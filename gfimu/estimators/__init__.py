@@ -1,74 +1,19 @@
-"""Estimators by name: the papers' per-sample methods and the smoothers.
+"""Per-sample estimators of the papers: a shared base (:mod:`._common`) and one module per method.
 
-Every estimator is a small object configured at construction (a dataclass
-of options with documented defaults) that offers
-
-- ``applicable(array) -> str | None``: ``None`` when it can run on the array,
-  else the reason it cannot;
-- ``estimate(log, progress=False) -> Motion``: one row per sample of the log.
-
-Classes are imported lazily so that ``gfimu --help`` stays fast.
+The registry of every method by name, smoothers included, is :mod:`gfimu.methods` (above this
+layer). ``METHODS``, ``make_estimator``, ``estimator_class``, ``option_fields`` and
+``UnknownMethodError`` are still reachable from here, resolved from :mod:`gfimu.methods` on
+first use (no import of the layers above at import time).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import importlib
-from typing import Any
 
-METHODS: dict[str, str] = {
-    "inversion": "gfimu.estimators.inversion:InversionEstimator",
-    "integration": "gfimu.estimators.integration:IntegrationEstimator",
-    "pure-integration": "gfimu.estimators.integration:PureIntegrationEstimator",
-    "imm": "gfimu.estimators.imm:IMMEstimator",
-    "ml": "gfimu.estimators.ml:MLEstimator",
-    "gyro-aided": "gfimu.estimators.gyro_aided:GyroAidedEstimator",
-    "free-flight": "gfimu.estimators.free_flight:FreeFlightEstimator",
-    "smoother": "gfimu.smoother.batch:BatchSmootherEstimator",
-    "fixed-lag": "gfimu.smoother.fixed_lag:FixedLagEstimator",
-}
+_REGISTRY_NAMES = ("METHODS", "UnknownMethodError", "estimator_class", "make_estimator", "option_fields")
 
 
-class UnknownMethodError(KeyError):
-    pass
-
-
-def estimator_class(name: str):
-    try:
-        target = METHODS[name]
-    except KeyError:
-        raise UnknownMethodError(f"unknown method {name!r}; choose one of: {', '.join(METHODS)}") from None
-    module, cls = target.split(":")
-    return getattr(importlib.import_module(module), cls)
-
-
-def make_estimator(name: str, **options: Any):
-    """Instantiate the estimator ``name`` with keyword options (checked by name).
-
-    ``preset=NAME`` (method "smoother"): start from the named settings of
-    :data:`gfimu.smoother.presets.PRESETS`; the other options given win over it.
-    """
-    cls = estimator_class(name)
-    if "preset" in options:
-        from ..smoother.presets import expand_preset
-
-        options = expand_preset(name, options)
-    if dataclasses.is_dataclass(cls):
-        known = {f.name: f for f in dataclasses.fields(cls)}
-        unknown = sorted(set(options) - set(known))
-        if unknown:
-            raise ValueError(f"method {name!r} has no option(s) {unknown}; options are: {sorted(known)}")
-    return cls(**options)
-
-
-def option_fields(name: str) -> dict[str, Any]:
-    """Option name -> (type, default) of a method, for the CLI's help."""
-    cls = estimator_class(name)
-    if not dataclasses.is_dataclass(cls):
-        return {}
-    out = {}
-    for f in dataclasses.fields(cls):
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
-        out[f.name] = (f.type, default)
-    return out
+def __getattr__(name: str):
+    if name in _REGISTRY_NAMES:
+        return getattr(importlib.import_module("gfimu.methods"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -46,6 +46,7 @@ from ..array import SensorArray
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
+from ..rotations import skew
 
 OMEGA_SIGNS = ("positive", "negative", "auto")
 
@@ -62,7 +63,7 @@ def euler_omega_dot_jacobian(inertia_kgm2: np.ndarray, omega_b_radps: np.ndarray
     i = np.asarray(inertia_kgm2, dtype=float)
     w = np.asarray(omega_b_radps, dtype=float)
     # d(ω × Iω) = dω × Iω + ω × I dω = -[Iω]× dω + [ω]× I dω
-    d_cross = -_skew(i * w) + _skew(w) * i[None, :]
+    d_cross = -skew(i * w) + skew(w) * i[None, :]
     return -d_cross / i[:, None]
 
 
@@ -84,10 +85,6 @@ def _propagate(inertia_kgm2: np.ndarray, omega0_b_radps: np.ndarray, times_s: np
         t_now = t_next
         out[j] = w
     return out
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 class _FreeFlightModel:
@@ -118,8 +115,7 @@ class _FreeFlightModel:
         i1, i2, i3 = self.inertia
         a, b, c = (i2 - i3) / i1, (i3 - i1) / i2, (i1 - i2) / i3
         d_dw = np.array([[0.0, a * z, a * y], [b * z, 0.0, b * x], [c * y, c * x, 0.0]])
-        d_q = np.array([[2 * x, 2 * y, 0.0], [2 * x, 0.0, 2 * z], [0.0, 2 * y, 2 * z], [y, x, 0.0], [z, 0.0, x], [0.0, z, y]])
-        return self.S_dw @ d_dw + self.S_q @ d_q
+        return self.S_dw @ d_dw + self.S_q @ rigid_body.quadratic_terms_jacobian(w)
 
     def constants(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """2T and H² (paper 004, eqs. 2-3), per row of ω."""

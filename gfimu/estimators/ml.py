@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import crb as crb_module
-from .. import rigid_body
+from .. import noise, rigid_body
 from ..array import SensorArray
 from ..log import Log
 from ..motion import Motion
@@ -170,10 +170,7 @@ class MLEstimator:
     def _axis_sigma(self, array: SensorArray) -> np.ndarray:
         if self.noise_std_mps2 is not None:
             return crb_module.axis_noise_std(array, self.noise_std_mps2)
-        sigma = array.noise_std_per_axis_mps2
-        known = np.isfinite(sigma) & (sigma > 0)
-        fill = float(np.mean(sigma[known])) if np.any(known) else 1.0
-        return np.where(known, sigma, fill)
+        return noise.accel_noise_std(array)
 
     # ------------------------------------------------------------------
     def estimate(self, log: Log, progress: bool = False) -> Motion:

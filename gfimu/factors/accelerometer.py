@@ -74,6 +74,14 @@ def accelerometer_residual(
     return residual, jac
 
 
+def accelerometer_prediction(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, specific_force_b_mps2: np.ndarray,
+                             rows: np.ndarray) -> np.ndarray:
+    """(N, n) rigid-body readings ``S [f, ω̇, q(ω)]`` of axes with structure-matrix rows ``rows`` (n, 12)
+    (paper 000, eq. 6): the residual of :func:`accelerometer_residual` without its Jacobians."""
+    return (specific_force_b_mps2 @ rows[:, 0:3].T + omega_dot_b_radps2 @ rows[:, 3:6].T
+            + rigid_body.quadratic_terms(omega_b_radps) @ rows[:, 6:12].T)
+
+
 def make_accelerometer_factor(
     key_omega: int,
     key_omega_dot: int,

@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import custom_factor, vector_at
+from . import _so3
+from . import rotation_at
 
 
 def random_walk_sigma(density_per_sqrt_s: float, dt_s) -> np.ndarray:
@@ -137,7 +139,6 @@ def make_prior_factor(key: int, mean, noise_model):
 def attitude_prior_residual(rotation_wb, prior_wb):
     """``Log(R R̂ᵀ)`` (N, 3), the attitude error in world axes (x, y: tilt; z: yaw),
     and ``{'r': Jl⁻¹(e) R}`` for the right perturbation of R."""
-    from . import _so3
 
     R = np.asarray(rotation_wb, dtype=float).reshape(-1, 3, 3)
     P = np.asarray(prior_wb, dtype=float).reshape(-1, 3, 3)
@@ -147,7 +148,6 @@ def attitude_prior_residual(rotation_wb, prior_wb):
 
 def make_attitude_prior_factor(key_attitude: int, prior_wb, noise_model):
     """CustomFactor on a Rot3 variable: world-axis attitude error against ``prior_wb`` (3×3)."""
-    from . import rotation_at
 
     prior = np.asarray(prior_wb, dtype=float).reshape(3, 3)
 

@@ -12,29 +12,14 @@ import numpy as np
 
 from .. import rigid_body
 from ..array import SensorArray
+from ..estimators.inversion import invert
 from . import custom_factor, vector_at
 
 
 def inversion(array: SensorArray, accel_mps2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-sample weighted least squares ``x = [f, ω̇, q]`` (N, 12) and its covariance (12, 12).
-
-    Uses :func:`gfimu.estimators.inversion.invert` when available, otherwise
-    the same weighted least squares on ``array.structure_matrix()``.
-    """
-    try:
-        from ..estimators.inversion import invert
-    except ImportError:
-        invert = None
-    if invert is not None:
-        return invert(array, accel_mps2)
-    array.check_invertible()
-    S = array.structure_matrix()
-    sigma = array.noise_std_per_axis_mps2
-    sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
-    A = S / sigma[:, None]
-    cov = np.linalg.inv(A.T @ A)
-    x = (np.asarray(accel_mps2, dtype=float) / sigma) @ (A @ cov)
-    return x, cov
+    """Per-sample weighted least squares ``x = [f, ω̇, q]`` (N, 12) and its covariance (12, 12)
+    (:func:`gfimu.estimators.inversion.invert`)."""
+    return invert(array, accel_mps2)
 
 
 def quadratic_residual(omega_b_radps: np.ndarray, q_measured: np.ndarray):

@@ -23,6 +23,7 @@ from ..progress import progress as _progress
 from .scenarios import SCENARIOS, Scenario
 from .sensor_errors import SensorErrors
 from .trajectory import BodyKinematics, tilt_angles_rad
+from ..datasets.gtsam_recordings import RECORDINGS
 
 __all__ = ["simulate", "SCENARIOS", "Scenario", "SensorErrors", "BodyKinematics", "motion_from_truth",
            "sample_timestamps_ns"]
@@ -139,6 +140,5 @@ def _array_with_noise_levels(array: SensorArray, noise: SensorErrors) -> SensorA
 
 
 def _recording_duration(scenario: str) -> float:
-    from ..datasets.gtsam_recordings import RECORDINGS
 
     return RECORDINGS[scenario]().longest_segment().duration_s

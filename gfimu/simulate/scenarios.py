@@ -40,6 +40,7 @@ from .trajectory import (
     sum_of_sines,
 )
 from .. import rotations
+from ..datasets.gtsam_recordings import RECORDINGS
 
 # paper 004: the accelerometer sits at a corner of the block's +z face,
 # about 15 mm in from both edges and 7 mm above the face (IMU in its casing).
@@ -237,7 +238,6 @@ def smooth_recording(times_s, values, bandwidth_hz: float, degree: int = 5) -> i
 
 
 def _recorded(times_s, recording, start_s, bandwidth_hz, still_s, array):
-    from ..datasets.gtsam_recordings import RECORDINGS
 
     rec = RECORDINGS[recording]().longest_segment()
     if still_s > 0:

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import rigid_body
+from .. import noise, rigid_body
 from ..array import SensorArray
 from ..factors import accelerometer, kinematics, process
 from .graph import SmootherOptions
@@ -77,8 +77,7 @@ class ArrayModel:
         self.S_q = np.ascontiguousarray(S[:, 6:])
         self.S_f = np.ascontiguousarray(S[:, :3])
         self.S_dw = np.ascontiguousarray(S[:, 3:6])
-        sigma = array.noise_std_per_axis_mps2
-        sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, options.default_accel_noise_std_mps2)
+        sigma = noise.accel_noise_std(array, options.default_accel_noise_std_mps2)
         sigma = sigma * self.accel_noise_scale
         self.accel_sigma_mps2 = sigma
         self._geometry = []  # (directions, positions, column slice)
@@ -97,8 +96,7 @@ class ArrayModel:
         self.axis_factors = np.asarray(options.process_axis_factors, dtype=float)
         self.natural_frequency_radps = 2.0 * np.pi * np.asarray(options.process_axis_frequencies_hz, dtype=float)
         self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
-        gs = array.gyroscope.noise_std_radps if array.gyroscope is not None else None
-        self.gyro_sigma_radps = float(gs) if gs else 0.01  # as the batch smoother
+        self.gyro_sigma_radps = float(noise.gyro_noise_std(array))  # as the batch smoother
 
     # --- gtsam noise models (built on first use) --------------------------------------
     @property
@@ -143,9 +141,7 @@ class ArrayModel:
             q = np.array([x * x + yy * yy, x * x + z * z, yy * yy + z * z, x * yy, x * z, yy * z])
             r = S_f @ values.atVector(kf) + S_dw @ values.atVector(kd) + S_q @ q - y
             if jacobians is not None:
-                dq = np.array([[2 * x, 2 * yy, 0.0], [2 * x, 0.0, 2 * z], [0.0, 2 * yy, 2 * z],
-                               [yy, x, 0.0], [z, 0.0, x], [0.0, z, yy]])
-                jacobians[0] = S_q @ dq
+                jacobians[0] = S_q @ rigid_body.quadratic_terms_jacobian(w)
                 jacobians[1] = S_dw
                 jacobians[2] = S_f
             return r

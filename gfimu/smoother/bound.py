@@ -16,12 +16,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..factors import _so3
 from ..log import Log
 from ..motion import Motion
-from .batch import factorise, marginal_covariances, normal_equations, window_slices
+from ..rotations import matrix_from_quaternion
+from .banded import factorise, marginal_covariances, normal_equations
+from .batch import window_slices
 from .graph import SmootherOptions, SmootherProblem
+from .layout import OMEGA_DOT, QUANTITIES
 
-QUANTITY_SLICES = {"omega_b_radps": slice(0, 3), "omega_dot_b_radps2": slice(3, 6), "specific_force_b_mps2": slice(6, 9)}
+QUANTITY_SLICES = QUANTITIES
 
 
 def truth_states(truth: Motion) -> np.ndarray:
@@ -46,13 +50,10 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
         raise ValueError(f"{log.source}: the bound needs the truth (log.truth or truth=)")
     states = truth_states(truth)
     if opt.motion_model == "snap":  # ω̈ of the truth by central differences
-        states = np.hstack([states, np.gradient(states[:, 3:6], log.times_s, axis=0)])
+        states = np.hstack([states, np.gradient(states[:, OMEGA_DOT], log.times_s, axis=0)])
     if opt.estimate_attitude or opt.use_inclinometer:
         if truth.quaternion_wb is None:
             raise ValueError("the bound with attitude needs the true quaternion_wb")
-        from ..factors import _so3
-        from ..rotations import matrix_from_quaternion
-
         states = np.hstack([states, _so3.log(matrix_from_quaternion(truth.quaternion_wb))])
     n = len(log)
     sd = np.zeros((n, states.shape[1]))
@@ -62,8 +63,6 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
     for i, (solve_sl, keep_log, keep_win) in enumerate(windows):
         problem = SmootherProblem(log.select(solve_sl), opt if window_options is None else window_options[i])
         if problem.attitude:
-            from ..factors import _so3
-
             problem.attitude_prior_wb = _so3.exp(states[solve_sl.start, -3:])
         params = np.zeros(problem.n_global) if true_params is None else true_params
         ne = normal_equations(problem, states[solve_sl], params)

@@ -36,7 +36,7 @@ starts with a fresh initialisation.
 Process noise chosen from the data (``tune_process_noise``, on by default
 in :class:`FixedLagEstimator`): a stream cannot see its future, so the first
 ``tune_window_s`` of data (a contiguous stretch) are buffered and the batch
-smoother's tuner (:func:`gfimu.smoother.batch.BatchSmootherEstimator._tuned_problem`,
+smoother's tuner (:func:`gfimu.smoother.tuning.tuned_problem`,
 i.e. :func:`gfimu.smoother.tuning.tune`: jerk density per body axis,
 specific-force density, optionally the accelerometer noise scale) is run on
 them, exactly as the batch smoother would on that stretch alone. The buffered
@@ -77,7 +77,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -86,9 +86,14 @@ from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from . import _fixed_lag_model as model
-from ._fixed_lag_model import gtsam  # imported on first use (engine 'gtsam')
 from ._fixed_lag_filter import FilterFailure, WindowFilter
+from ._fixed_lag_model import gtsam  # imported on first use (engine 'gtsam')
+from .banded import solve
 from .graph import SmootherOptions, options_reason
+from .initialise import initial_estimate
+from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
+from .result import SmootherResult
+from .tuning import tuned_problem
 
 
 class FixedLagSmootherError(RuntimeError):
@@ -165,6 +170,8 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
                                      "estimate_attitude") if getattr(options, name, False)]
     if unsupported:
         return f"the fixed-lag smoother does not support {', '.join(unsupported)} (use method 'smoother')"
+    if getattr(options, "factor_groups", ()):
+        return "factor_groups: the fixed-lag smoother builds its own stream of factors (use method 'smoother')"
     if getattr(options, "motion_model", "jerk") != "jerk":
         return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.motion_model!r} (use method 'smoother')"
     if options.measurement != "accelerometer":
@@ -423,25 +430,20 @@ class FixedLagSmoother:
     def tune(self, samples) -> tuple:
         """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
         (:class:`gfimu.smoother.tuning.Tuning`, options carrying it)."""
-        from .batch import BatchSmootherEstimator
-
         tunings: list = []
-        problem, _ = BatchSmootherEstimator._tuned_problem(self._stretch_log(samples),
-                                                          replace(self.options, tune_process_noise=True), tunings)
+        problem, _ = tuned_problem(self._stretch_log(samples), replace(self.options, tune_process_noise=True), tunings)
         return tunings[-1], tunings[-1].for_stream(replace(problem.options, tune_process_noise=False))
 
     def _tune_and_solve(self, samples):
         """:meth:`tune`, plus the batch smoother's states of the stretch with the selection."""
-        from .batch import BatchSmootherEstimator, solve
-
         part = self._stretch_log(samples)
         tunings: list = []
-        problem, x0 = BatchSmootherEstimator._tuned_problem(part, replace(self.options, tune_process_noise=True), tunings)
+        problem, x0 = tuned_problem(part, replace(self.options, tune_process_noise=True), tunings)
         res = solve(problem, x0, None, compute_sigma=self.compute_sigma)
         X = res.states
         sd = np.sqrt(np.einsum("nii->ni", res.covariance)) if self.compute_sigma else None
-        states = [StateEstimate(int(t), X[j, 0:3].copy(), X[j, 3:6].copy(), X[j, 6:9].copy(),
-                                *((None,) * 3 if sd is None else (sd[j, 0:3], sd[j, 3:6], sd[j, 6:9])))
+        states = [StateEstimate(int(t), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
+                                *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
                   for j, t in enumerate(part.timestamps_ns)]
         return tunings[-1], tunings[-1].for_stream(replace(problem.options, tune_process_noise=False)), states
 
@@ -532,8 +534,6 @@ class FixedLagSmoother:
         ``omega_hint`` (ω expected at the second-to-last warm-up sample) picks the
         sign of ω when re-initialising after a solver failure.
         """
-        from .batch import BatchSmootherEstimator
-
         times_ns = np.array([s[0] for s in self._warmup], dtype=np.int64)
         accel = np.vstack([s[1] for s in self._warmup])
         gyro = None
@@ -541,13 +541,13 @@ class FixedLagSmoother:
             gyro = np.vstack([s[2] for s in self._warmup])
         if len(times_ns) >= 2:
             part = Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag warm-up")
-            x0 = BatchSmootherEstimator._initial_states(part, self.options)  # 'sign-resolving' or 'ml'
+            x0 = initial_estimate(part, self.options)  # 'sign-resolving' or 'ml'
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
         if omega_hint is not None and len(x0) >= 2:
-            if np.sum((x0[-2, 0:3] + omega_hint) ** 2) < np.sum((x0[-2, 0:3] - omega_hint) ** 2):
-                x0[:, 0:3] *= -1.0
+            if np.sum((x0[-2, OMEGA] + omega_hint) ** 2) < np.sum((x0[-2, OMEGA] - omega_hint) ** 2):
+                x0[:, OMEGA] *= -1.0
         self._smoother = self._new_smoother()
         if isinstance(self._smoother, WindowFilter):
             self._initialise_filter(x0)
@@ -564,7 +564,7 @@ class FixedLagSmoother:
                 h = (t_ns - self._warmup[j - 1][0]) * 1e-9
                 self.model.add_process(graph, k - 1, k, h)
             self.model.add_measurement(graph, k, y, g)
-            model.insert_state(values, k, x0[j, 0:3], x0[j, 3:6], x0[j, 6:9])
+            model.insert_state(values, k, x0[j, OMEGA], x0[j, OMEGA_DOT], x0[j, SPECIFIC_FORCE])
             t = self._stamp(t_ns)
             for key in model.keys(k):
                 stamps[key] = t
@@ -763,6 +763,9 @@ class FixedLagEstimator(SmootherOptions):
     """Window solver: 'numpy' (a Kalman filter carrying the window's cross-covariances, about 0.2 ms per
     sample at 500 Hz with a 0.2 s lag) or 'gtsam' (iSAM2's IncrementalFixedLagSmoother, the reference)."""
 
+    _runs: list = field(default_factory=list, init=False, repr=False, compare=False)
+    """The result of the newest :meth:`estimate`, behind :attr:`last_tuning`."""
+
     def options(self) -> SmootherOptions:
         return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
 
@@ -778,7 +781,8 @@ class FixedLagEstimator(SmootherOptions):
     def applicable(self, array: SensorArray) -> str | None:
         return fixed_lag_reason(array, self.options())
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def result(self, log: Log, progress: bool = False) -> SmootherResult:
+        """The fixed-lag smoother over ``log`` sample by sample, with what it chose (:class:`SmootherResult`)."""
         n = len(log)
         if n < 2:
             raise ValueError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
@@ -808,17 +812,22 @@ class FixedLagEstimator(SmootherOptions):
             upd = smoother.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i])
             store(upd.smoothed)
         store(smoother.flush())
-        object.__setattr__(self, "_last_tuning", [] if smoother.tuning is None else [smoother.tuning])
         if cursor != n:
             raise FixedLagSmootherError(f"{log.source}: {n - cursor} samples were not estimated")
         sigma = {}
         if sig is not None:
             sigma = {"omega_b_radps": sig[:, :3], "omega_dot_b_radps2": sig[:, 3:6], "specific_force_b_mps2": sig[:, 6:]}
-        return Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
-                      specific_force_b_mps2=out[:, 6:], sigma=sigma)
+        motion = Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
+                        specific_force_b_mps2=out[:, 6:], sigma=sigma)
+        return SmootherResult(motion, () if smoother.tuning is None else (smoother.tuning,), windows=0)
+
+    def estimate(self, log: Log, progress: bool = False) -> Motion:
+        res = self.result(log, progress)
+        self._runs[:] = [res]
+        return res.motion
 
     @property
     def last_tuning(self) -> list:
-        """The process noise chosen from the data in the last :meth:`estimate`
-        (one :class:`gfimu.smoother.tuning.Tuning`, or empty when not tuned)."""
-        return getattr(self, "_last_tuning", [])
+        """The process noise chosen from the data in the newest :meth:`estimate`
+        (one :class:`gfimu.smoother.tuning.Tuning`, or empty when not tuned); :meth:`result` returns it."""
+        return list(self._runs[-1].tunings) if self._runs else []

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import noise
 from ..array import SensorArray
 from ..factors import (
     _so3,
@@ -37,13 +38,9 @@ from ..factors import (
     attitude_key,
     bias_key,
     diagonal_noise,
-    euler,
-    free_fall,
     gaussian_noise,
     gravity,
     gyro_bias_key,
-    gyroscope,
-    inclinometer,
     kinematics,
     omega_ddot_key,
     omega_dot_key,
@@ -54,10 +51,12 @@ from ..factors import (
     specific_force_key,
 )
 from ..log import Log
+from .groups import BUILT_IN, FactorGroup, Term  # noqa: F401  (Term: also importable from here)
+from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
-STATE_SIZE = 9
-"""State size of the default white-jerk model; white snap appends ω̈ (12)."""
-W, D, F, A = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
+STATE_SIZE = KINEMATIC_SIZE
+"""State size of the default white-jerk model; white snap appends ω̈ (12); see :mod:`gfimu.smoother.layout`."""
+W, D, F, A = OMEGA, OMEGA_DOT, SPECIFIC_FORCE, OMEGA_DDOT
 
 
 @dataclass(frozen=True)
@@ -81,8 +80,9 @@ class SmootherOptions:
     """'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible);
     'quadratic': the papers' formulation, the per-sample inversion [f, ω̇, q(ω)] with its covariance
     (needs an invertible array, no self-calibration)."""
-    default_accel_noise_std_mps2: float = 0.07
-    """Accelerometer white-noise std used for axes whose array.toml gives none."""
+    default_accel_noise_std_mps2: float = noise.DEFAULT_ACCEL_NOISE_STD_MPS2
+    """Accelerometer white-noise std [m/s²] when no axis of array.toml gives one (:mod:`gfimu.noise`:
+    an axis without one among axes with one takes their mean)."""
     use_gyro: bool = True
     """Use the gyroscope when the array has one."""
     use_inclinometer: bool = False
@@ -102,9 +102,11 @@ class SmootherOptions:
     bias_prior_std_mps2: float = 0.1
     """Prior std of each accelerometer bias (around 0)."""
     gyro_bias_prior_std_radps: float = 0.05
+    """Prior std of the gyro bias (around 0) with ``self_calibrate_bias``."""
     self_calibrate_scale: bool = False
     """Estimate a constant scale-factor error per accelerometer axis."""
     scale_prior_std: float = 0.01
+    """Prior std of each accelerometer scale-factor error (around 0) with ``self_calibrate_scale``."""
     free_flight: bool = False
     """Treat the whole log as torque-free free flight (paper 004): needs ``array.body``."""
     torque_noise_std_nm: float = 1e-4
@@ -112,7 +114,9 @@ class SmootherOptions:
     free_fall_std_mps2: float = 0.05
     """Std of the specific force at the centre of mass in free flight [m/s²]."""
     initial_omega_std_radps: float = 100.0
+    """Weak prior std of the first sample's ω (zero mean)."""
     initial_omega_dot_std_radps2: float = 1000.0
+    """Weak prior std of the first sample's ω̇ (zero mean)."""
     initial_specific_force_std_mps2: float = 1000.0
     """Weak priors on the first state (zero mean) keeping the normal equations definite."""
     window_s: float | None = 30.0
@@ -120,6 +124,7 @@ class SmootherOptions:
     overlap_s: float = 2.0
     """Overlap of consecutive windows; each half of it is taken from the nearer window."""
     max_iterations: int = 30
+    """Largest number of Levenberg-Marquardt iterations per solve."""
     relative_tolerance: float = 1e-10
     """Stop when the cost decreases by less than this fraction."""
     compute_sigma: bool = False
@@ -175,6 +180,10 @@ class SmootherOptions:
     """Batch smoother: robust loss on the motion-model factors of each step (kinematics + ω̇ random walk,
     or the white-snap step), threshold on the step's whitened residual norm / sqrt(rows); 0 (default)
     keeps the Gaussian loss. Lets sudden hand jerks through without smoothing them away."""
+
+    factor_groups: tuple = ()
+    """Further factor groups (:class:`gfimu.smoother.groups.FactorGroup`) added to the model of every
+    solve window: the batch solver, the tuner, the bound and the GTSAM graph all use them."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -269,22 +278,6 @@ def options_reason(array: SensorArray, options: SmootherOptions, attitude_suppor
 
 
 @dataclass
-class Term:
-    """Whitened residuals and Jacobians of one group of factors, vectorised.
-
-    ``kind`` 'unary' (one state, rows per sample), 'binary' (samples k, k+1)
-    or 'global' (calibration variables only). ``jac`` maps 'x' (unary) or
-    'x0'/'x1' (binary) to (N, r, state size); ``jac_global`` is (N, r, G) or None.
-    """
-
-    kind: str
-    residual: np.ndarray
-    jac: dict
-    jac_global: np.ndarray | None = None
-    first: int = 0
-
-
-@dataclass
 class SmootherProblem:
     """The smoothing problem of one contiguous log (fast path and graph path)."""
 
@@ -306,14 +299,16 @@ class SmootherProblem:
             row, col = np.argwhere(bad)[0]
             raise ValueError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
                              f"({int(bad.sum())} such values); the smoother needs finite readings")
-        sigma = arr.noise_std_per_axis_mps2
-        self.accel_sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, opt.default_accel_noise_std_mps2)
+        self.accel_sigma = noise.accel_noise_std(arr, opt.default_accel_noise_std_mps2)
         self.sensors = []  # (directions, positions, column slice)
         col = 0
         for acc in arr.accelerometers:
             d, p = accelerometer.sensor_geometry(acc)
             self.sensors.append((d, p, slice(col, col + d.shape[0])))
             col += d.shape[0]
+        # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
+        self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
+        self.all_positions_m = np.concatenate([p for _, p, _ in self.sensors])
         # global variables: biases, scales, gyro bias
         self.global_blocks = {}  # name -> (slice, gtsam key)
         g = 0
@@ -340,17 +335,16 @@ class SmootherProblem:
             if not np.all(np.isfinite(self.log.gyro_b_radps)):
                 row = int(np.argwhere(~np.isfinite(self.log.gyro_b_radps))[0, 0])
                 raise ValueError(f"{self.log.source}: gyroscope reading is not finite at sample {row}")
-            gs = arr.gyroscope.noise_std_radps
-            self.gyro_sigma = float(gs) if gs else 0.01
-        self.snap = opt.motion_model == "snap"
-        self.state_size = 12 if self.snap else STATE_SIZE
-        self.attitude = bool(opt.estimate_attitude or opt.use_inclinometer)
+            self.gyro_sigma = noise.gyro_noise_std(arr)
+        self.layout = StateLayout.from_options(opt)
+        self.snap = self.layout.snap
+        self.state_size = self.layout.size
+        self.attitude = self.layout.attitude
         self.use_inclinometer = bool(opt.use_inclinometer and self.log.tilt_rad is not None)
         if opt.use_inclinometer and self.log.tilt_rad is None:
             raise ValueError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
         if self.attitude:
-            self.AT = slice(self.state_size, self.state_size + 3)
-            self.state_size += 3
+            self.AT = self.layout.rotation
             self.attitude_prior_wb = np.eye(3)
             self.attitude_prior_sigma = np.array([10.0, 10.0, opt.initial_yaw_std_rad])
             self.attitude_step_sigma = process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, self.dt_s)
@@ -359,8 +353,7 @@ class SmootherProblem:
                 if not np.all(np.isfinite(self.log.tilt_rad)):
                     row = int(np.argwhere(~np.isfinite(self.log.tilt_rad))[0, 0])
                     raise ValueError(f"{self.log.source}: inclinometer reading is not finite at sample {row}")
-                ns = arr.inclinometer.noise_std_rad
-                self.tilt_sigma = float(ns) if ns else 0.002
+                self.tilt_sigma = noise.tilt_noise_std(arr)
         if opt.motion_model == "snap":
             cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, self.dt_s)
             axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)
@@ -383,6 +376,7 @@ class SmootherProblem:
         )
         if self.snap:
             self.first_sigma = np.concatenate([self.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
+        self.groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
 
     accel_sigma_per_sample: np.ndarray | None = None
     """(N, n_axes) accelerometer noise std per sample and axis replacing ``accel_sigma`` when set."""
@@ -440,7 +434,7 @@ class SmootherProblem:
             self.trapezoid_sigma, self.omega_dot_step_sigma = self._process_base[0].copy(), self._process_base[1].copy()
             if self.snap:
                 self.snap_whiten, self.snap_cov = self._process_base[2].copy(), None
-            mk = self.state_size - 3 if self.attitude else self.state_size
+            mk = self.layout.motion_size
             X = states
             if mk == STATE_SIZE:
                 if self.oscillator:
@@ -489,7 +483,7 @@ class SmootherProblem:
             out.append(Term("unary", r @ self.x_whiten.T, {"x": self.x_whiten @ J}))
         else:
             out.append(self._accelerometer_term(X, params))
-        return out + self._other_terms(X, params)
+        return out + self.process_terms(X, params)
 
     def _accelerometer_term(self, X: np.ndarray, params: np.ndarray) -> Term:
         n = self.n
@@ -497,7 +491,10 @@ class SmootherProblem:
         jx = []
         m = self.state_size
         jg = np.zeros((n, self.log.array.n_axes, self.n_global)) if self.n_global else None
-        for i, (d, p, cols) in enumerate(self.sensors):
+        groups = self.sensors
+        if not any(name.startswith(("bias", "scale")) for name in self.global_blocks):
+            groups = [(self.all_directions_b, self.all_positions_m, slice(0, self.all_directions_b.shape[0]))]
+        for i, (d, p, cols) in enumerate(groups):
             bias = self.global_part(params, f"bias{i}")
             scale = self.global_part(params, f"scale{i}")
             r, j = accelerometer.accelerometer_residual(X[:, W], X[:, D], X[:, F], self.log.accel_mps2[:, cols], d, p, bias, scale)
@@ -521,11 +518,12 @@ class SmootherProblem:
                 jg *= w[:, :, None]
         return Term("unary", r, {"x": J}, jg)
 
-    def _other_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:
+    def process_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:
+        """Every factor but the measurement's (process, priors, gyroscope, free flight, attitude), whitened."""
         n = self.n
         out = []
         m = self.state_size
-        mk = m - 3 if self.attitude else m  # size of the kinematic part [ω, ω̇, f(, ω̈)]
+        mk = self.layout.motion_size  # size of the motion part [ω, ω̇, f(, ω̈)]
         # first-state weak prior
         r0, _ = process.prior_residual(X[:1, :mk], np.zeros(mk))
         J0p = np.zeros((1, mk, m))
@@ -573,34 +571,9 @@ class SmootherProblem:
             J0[:, :, A], J1[:, :, A] = ja["j0"], ja["j1"]
             Wn = self.snap_whiten
             out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1}))
-        # gyroscope
-        if self.use_gyro:
-            gb = self.global_part(params, "gyro_bias")
-            r, j = gyroscope.gyroscope_residual(X[:, W], self.log.gyro_b_radps, gb)
-            Jg = np.zeros((n, 3, m))
-            Jg[:, :, W] = j["w"]
-            jgg = None
-            if gb is not None:
-                jgg = np.zeros((n, 3, self.n_global))
-                jgg[:, :, self.global_blocks["gyro_bias"][0]] = j["g"] / self.gyro_sigma
-            out.append(Term("unary", r / self.gyro_sigma, {"x": Jg / self.gyro_sigma}, jgg))
-        # free flight
-        if self.options.free_flight:
-            inertia = self.log.array.body.principal_inertia_kgm2
-            r, j = euler.euler_residual(X[:, W], X[:, D], inertia)
-            Je = np.zeros((n, 3, m))
-            Je[:, :, W], Je[:, :, D] = j["w"], j["d"]
-            s = self.options.torque_noise_std_nm
-            out.append(Term("unary", r / s, {"x": Je / s}))
-            r, j = free_fall.free_fall_residual(X[:, F])
-            Jf = np.zeros((n, 3, m))
-            Jf[:, :, F] = j["f"]
-            s = self.options.free_fall_std_mps2
-            out.append(Term("unary", r / s, {"x": Jf / s}))
-        # calibration priors
-        if self.n_global:
-            s = self.global_prior_sigma()
-            out.append(Term("global", (params / s)[None], {}, np.diag(1.0 / s)[None]))
+        # the factor groups (gyroscope, free flight, inclinometer, calibration priors, any given with the options)
+        for group in self.groups:
+            out.extend(group.terms(self, X, params))
         return out
 
     def rotations(self, states: np.ndarray) -> np.ndarray:
@@ -641,16 +614,20 @@ class SmootherProblem:
         Jp = np.zeros((1, 3, m))
         Jp[:, :, AT] = j["r"] * w[:, None]
         out.append(Term("unary", r * w, {"x": Jp}, None, first=0))
-        if self.use_inclinometer:
-            r, j = inclinometer.inclinometer_residual(R, self.log.tilt_rad)
-            Ji = np.zeros((n, 2, m))
-            Ji[:, :, AT] = j["r"] / self.tilt_sigma
-            out.append(Term("unary", r / self.tilt_sigma, {"x": Ji}))
         return out
 
     def cost(self, states: np.ndarray, params: np.ndarray) -> float:
         """Half the sum of squared whitened residuals (GTSAM's graph error)."""
-        return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
+        if self.options.measurement == "quadratic" or self.n_global:
+            return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
+        X = states
+        rows = getattr(self, "_all_rows", None)
+        if rows is None:
+            rows = self._all_rows = accelerometer.axis_rows(self.all_directions_b, self.all_positions_m)
+        r = accelerometer.accelerometer_prediction(X[:, W], X[:, D], X[:, F], rows) - self.log.accel_mps2
+        sigma = self.accel_sigma if self.accel_sigma_per_sample is None else self.accel_sigma_per_sample
+        r = r / sigma
+        return 0.5 * (float(np.sum(r * r)) + sum(float(np.sum(t.residual**2)) for t in self.process_terms(X, params)))
 
     # --- the same problem as a GTSAM graph (graph path) -----------------------
     def gtsam_graph(self) -> gtsam.NonlinearFactorGraph:
@@ -660,6 +637,8 @@ class SmootherProblem:
         graph = gtsam.NonlinearFactorGraph()
         opt = self.options
         y = self.log.accel_mps2
+        accel_sigma = (np.broadcast_to(self.accel_sigma, y.shape) if self.accel_sigma_per_sample is None
+                       else self.accel_sigma_per_sample)  # motion-dependent or robust re-weighting when set
         for k in range(self.n):
             if opt.measurement == "quadratic":
                 graph.add(quadratic.make_inversion_factor(omega_key(k), omega_dot_key(k), specific_force_key(k),
@@ -669,15 +648,7 @@ class SmootherProblem:
                 ks = self.global_blocks[f"scale{i}"][1] if f"scale{i}" in self.global_blocks else None
                 graph.add(accelerometer.make_accelerometer_factor(
                     omega_key(k), omega_dot_key(k), specific_force_key(k), y[k, cols], d, p,
-                    diagonal_noise(self.accel_sigma[cols]), kb, ks))
-            if self.use_gyro:
-                kg = self.global_blocks["gyro_bias"][1] if "gyro_bias" in self.global_blocks else None
-                graph.add(gyroscope.make_gyroscope_factor(omega_key(k), self.log.gyro_b_radps[k],
-                                                          diagonal_noise(np.full(3, self.gyro_sigma)), kg))
-            if opt.free_flight:
-                graph.add(euler.make_euler_factor(omega_key(k), omega_dot_key(k), self.log.array.body.principal_inertia_kgm2,
-                                                  diagonal_noise(np.full(3, opt.torque_noise_std_nm))))
-                graph.add(free_fall.make_free_fall_factor(specific_force_key(k), diagonal_noise(np.full(3, opt.free_fall_std_mps2))))
+                    diagonal_noise(accel_sigma[k, cols]), kb, ks))
         for key, sl in ((omega_key(0), W), (omega_dot_key(0), D), (specific_force_key(0), F)):
             graph.add(process.make_prior_factor(key, np.zeros(3), diagonal_noise(self.first_sigma[sl])))
         if self.snap:
@@ -685,10 +656,6 @@ class SmootherProblem:
         if self.attitude:
             graph.add(process.make_attitude_prior_factor(attitude_key(0), self.attitude_prior_wb,
                                                          diagonal_noise(self.attitude_prior_sigma)))
-            for k in range(self.n):
-                if self.use_inclinometer:
-                    graph.add(inclinometer.make_inclinometer_factor(attitude_key(k), self.log.tilt_rad[k],
-                                                                    diagonal_noise(np.full(2, self.tilt_sigma))))
         oscillator_cov = self.oscillator_covariance() if self.oscillator else None
         for k in range(self.n - 1):
             if self.attitude:
@@ -714,10 +681,9 @@ class SmootherProblem:
                 diagonal_noise(self.trapezoid_sigma[k] * self.axis_factors)))
             graph.add(process.make_random_walk_factor(omega_dot_key(k), omega_dot_key(k + 1),
                                                       diagonal_noise(self.omega_dot_step_sigma[k] * self.axis_factors)))
-        if self.n_global:
-            s = self.global_prior_sigma()
-            for name, (sl, key) in self.global_blocks.items():
-                graph.add(process.make_prior_factor(key, np.zeros(sl.stop - sl.start), diagonal_noise(s[sl])))
+        for group in self.groups:
+            for factor in group.gtsam_factors(self):
+                graph.add(factor)
         return graph
 
     def gtsam_values(self, states: np.ndarray, params: np.ndarray) -> gtsam.Values:
@@ -735,6 +701,35 @@ class SmootherProblem:
         for name, (sl, key) in self.global_blocks.items():
             values.insert(key, np.array(params[sl]))
         return values
+
+    def gtsam_ordering(self) -> gtsam.Ordering:
+        """Elimination order of :meth:`gtsam_graph`: the states sample by sample, then the calibration
+        variables (a chain with a border: fill-in stays within neighbouring samples and the border)."""
+        ordering = gtsam.Ordering()
+        for k in range(self.n):
+            for key in (omega_key(k), omega_dot_key(k), specific_force_key(k)):
+                ordering.push_back(key)
+            if self.snap:
+                ordering.push_back(omega_ddot_key(k))
+            if self.attitude:
+                ordering.push_back(attitude_key(k))
+        for name, (sl, key) in self.global_blocks.items():
+            ordering.push_back(key)
+        return ordering
+
+    def gtsam_key_dims(self) -> dict[int, int]:
+        """Tangent dimension of every variable of :meth:`gtsam_graph`, by key."""
+        dims = {}
+        for k in range(self.n):
+            for key in (omega_key(k), omega_dot_key(k), specific_force_key(k)):
+                dims[key] = 3
+            if self.snap:
+                dims[omega_ddot_key(k)] = 3
+            if self.attitude:
+                dims[attitude_key(k)] = 3
+        for name, (sl, key) in self.global_blocks.items():
+            dims[key] = sl.stop - sl.start
+        return dims
 
     def from_gtsam_values(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
         states = np.zeros((self.n, self.state_size))

@@ -24,27 +24,18 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from .. import rigid_body
+from .. import noise, rigid_body
+from ..estimators.ml import MLEstimator
+from ..factors import _so3
+from ..log import Log
 from ..rigid_body import quadratic_terms
 from ..rotations import skew
-from ..log import Log
+from .banded import to_lower_banded
 from .graph import STATE_SIZE, SmootherOptions
+from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
 
 LIFTED = 12
-
-
-def _quadratic_jacobian(w: np.ndarray) -> np.ndarray:
-    """d q / d ω (..., 6, 3), as :func:`gfimu.rigid_body.quadratic_terms_jacobian`, preallocated."""
-    out = np.zeros(w.shape[:-1] + (6, 3))
-    x, y, z = w[..., 0], w[..., 1], w[..., 2]
-    out[..., 0, 0] = out[..., 1, 0] = 2 * x
-    out[..., 0, 1] = out[..., 2, 1] = 2 * y
-    out[..., 1, 2] = out[..., 2, 2] = 2 * z
-    out[..., 3, 0], out[..., 3, 1] = y, x
-    out[..., 4, 0], out[..., 4, 2] = z, x
-    out[..., 5, 1], out[..., 5, 2] = z, y
-    return out
 
 
 def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: float = 300.0,
@@ -57,8 +48,7 @@ def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: floa
     """
     arr = log.array
     S = arr.structure_matrix()
-    sigma = arr.noise_std_per_axis_mps2
-    sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, options.default_accel_noise_std_mps2)
+    sigma = noise.accel_noise_std(arr, options.default_accel_noise_std_mps2)
     A = S / sigma[:, None]
     n = len(log)
     y = log.accel_mps2 / sigma
@@ -73,8 +63,6 @@ def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: floa
     diag[1:, idx, idx] += w
     lower = np.zeros((n - 1, LIFTED, LIFTED))
     lower[:, idx, idx] = -w
-    from .batch import to_lower_banded
-
     cb = cholesky_banded(to_lower_banded(diag, lower), lower=True, check_finite=False)
     rhs = (y @ A).reshape(-1)
     return cho_solve_banded((cb, True), rhs, check_finite=False).reshape(n, LIFTED)
@@ -97,7 +85,7 @@ def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.
     start from the window before) adds a weak continuity term.
     """
     L = q_meas.shape[0]
-    Jw = _quadratic_jacobian(integral)  # (L, 6, 3): cross term J_q(W) ω₀
+    Jw = rigid_body.quadratic_terms_jacobian(integral)  # (L, 6, 3): cross term J_q(W) ω₀
     rhs = (q_meas - rigid_body.quadratic_terms(integral)).reshape(-1)
     design = np.concatenate([Jw, np.broadcast_to(np.eye(6), (L, 6, 6))], axis=2).reshape(-1, 9)
     normal = design.T @ design
@@ -109,7 +97,7 @@ def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.
     def residuals(w0):  # (C, 3) -> (C, L*6 [+3]), (C, L*6 [+3], 3)
         om = w0[:, None, :] + integral[None]
         r = (rigid_body.quadratic_terms(om) - q_meas[None]).reshape(len(w0), -1)
-        J = _quadratic_jacobian(om).reshape(len(w0), -1, 3)
+        J = rigid_body.quadratic_terms_jacobian(om).reshape(len(w0), -1, 3)
         if previous is not None:
             r = np.concatenate([r, w_c * (w0 - previous)], axis=1)
             J = np.concatenate([J, np.broadcast_to(w_c * np.eye(3), (len(w0), 3, 3))], axis=1)
@@ -219,7 +207,7 @@ def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
         # d(ω × Iω)/dω = [ω]× I - [Iω]×
         dpsi = -(skew(w) * inertia - skew(iw)) / inertia[:, None]
         pred = psi @ Sd.T + quadratic_terms(w) @ Sq.T
-        J = Sd @ dpsi + np.einsum("aj,cjk->cak", Sq, _quadratic_jacobian(w))
+        J = Sd @ dpsi + np.einsum("aj,cjk->cak", Sq, rigid_body.quadratic_terms_jacobian(w))
         return pred, J
 
     def polish(w, yk, iters):
@@ -280,6 +268,22 @@ def initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
     return x0
 
 
+def initial_estimate(log: Log, options: SmootherOptions) -> np.ndarray:
+    """Initial states of one solve window as ``options.initialisation`` asks: the sign-resolving
+    initialisation (:func:`initial_states`) or the per-sample ML estimate (``'ml'``, its ω signs
+    chained over time when ``ml_sign_chain``); free flight always uses its own initialisation."""
+    if options.initialisation != "ml" or options.free_flight:
+        return initial_states(log, options)
+    m = MLEstimator().estimate(log)
+    omega = m.omega_b_radps
+    if options.ml_sign_chain:
+        omega = omega * sign_chain(omega, m.omega_dot_b_radps2, log.dt_s)[:, None]
+    x = np.hstack([omega, m.omega_dot_b_radps2, m.specific_force_b_mps2])
+    if options.motion_model == "snap":
+        x = np.hstack([x, np.gradient(m.omega_dot_b_radps2, log.times_s, axis=0)])
+    return x
+
+
 def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
     n = len(log)
     x0 = np.zeros((n, STATE_SIZE))
@@ -287,8 +291,8 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
     if options.free_flight:
         w = free_flight_omega(log, options)
         inertia = np.asarray(arr.body.principal_inertia_kgm2)
-        x0[:, 0:3] = w
-        x0[:, 3:6] = -np.cross(w, w * inertia) / inertia
+        x0[:, OMEGA] = w
+        x0[:, OMEGA_DOT] = -np.cross(w, w * inertia) / inertia
         return x0
     gyro = arr.gyroscope is not None and options.use_gyro and log.gyro_b_radps is not None
     if gyro and arr.n_axes < 12:
@@ -296,15 +300,15 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
         S = arr.structure_matrix()
         y = log.accel_mps2 - rigid_body.quadratic_terms(log.gyro_b_radps) @ S[:, 6:12].T
         lin = np.linalg.lstsq(S[:, :6], y.T, rcond=1e-8)[0].T
-        x0[:, 0:3] = log.gyro_b_radps
-        x0[:, 3:6] = lin[:, 3:6]
-        x0[:, 6:9] = lin[:, 0:3]
+        x0[:, OMEGA] = log.gyro_b_radps
+        x0[:, OMEGA_DOT] = lin[:, 3:6]
+        x0[:, SPECIFIC_FORCE] = lin[:, 0:3]
         return x0
     z = lifted_smoothing(log, options)
-    x0[:, 6:9] = z[:, 0:3]
-    x0[:, 3:6] = z[:, 3:6]
+    x0[:, SPECIFIC_FORCE] = z[:, 0:3]
+    x0[:, OMEGA_DOT] = z[:, 3:6]
     if gyro:
-        x0[:, 0:3] = log.gyro_b_radps
+        x0[:, OMEGA] = log.gyro_b_radps
         return x0
     window = max(int(round(options.init_window_s * log.rate_hz)), 8)
     for seg in log.segments():
@@ -313,7 +317,7 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
             continue
         dt = log.dt_s[seg.start:seg.stop - 1]
         w = sign_resolved_omega(z[seg, 6:12], z[seg, 3:6], dt, window)
-        x0[seg, 0:3] = w * steady_rotation_sign(w, z[seg, 0:3], dt, window)
+        x0[seg, OMEGA] = w * steady_rotation_sign(w, z[seg, 0:3], dt, window)
     return x0
 
 
@@ -351,8 +355,6 @@ def initial_attitude(log: Log, omega_b_radps: np.ndarray, specific_force_b_mps2:
     """Attitudes (N, 3, 3): the first from ``start_wb``, else levelled from the inclinometer or the
     mean specific force of the first 0.2 s (zero yaw); then propagated with
     ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)`` (paper 003, eq. 10)."""
-    from ..factors import _so3
-
     n = len(log)
     if start_wb is not None:
         R0 = np.asarray(start_wb, dtype=float)

@@ -8,6 +8,10 @@ overrides. Options given explicitly win over the preset::
     make_estimator("smoother", preset="hand-held-low-rate", reweight_iterations=3)
     gfimu estimate LOG --method smoother --preset hand-held-low-rate --out est.csv
 
+Presets are named starting points, never required: the default smoother checks each
+log's rigid-body residual and chooses a robust model for real sensors by itself
+(:mod:`gfimu.smoother.auto`), which matches this preset on the MIMU4444 recordings.
+
 ``hand-held-low-rate`` holds the settings chosen on the first real MIMU4444
 recording (``tools/mimu4444_study.py``): the per-sample maximum-likelihood
 initialisation with its sign chain, fixed process noise for hand motion at

@@ -29,12 +29,18 @@ the truth.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
 from ..log import Log
-from .batch import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
+from .banded import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
 from .graph import SmootherOptions, SmootherProblem
+from .initialise import initial_estimate
+from .layout import OMEGA, StateLayout
+
+InitialStates = Callable[[Log, SmootherOptions], np.ndarray]
+"""``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.initialise.initial_estimate`."""
 
 DENSITY_FIELD = {"jerk": "omega_dot_random_walk_radps2_per_sqrt_s", "snap": "omega_ddot_random_walk_radps3_per_sqrt_s"}
 DENSITY_LIMITS = (1e-3, 1e8)
@@ -126,8 +132,6 @@ def log_normaliser(problem: SmootherProblem) -> float:
     if problem.attitude:
         total += 3 * float(np.sum(np.log(problem.attitude_step_sigma)) + np.sum(np.log(problem.accel_step_sigma)))
         total += float(np.sum(np.log(problem.attitude_prior_sigma)))
-        if problem.use_inclinometer:
-            total += 2 * n * np.log(problem.tilt_sigma)
     else:
         total += 3 * float(np.sum(np.log(problem.force_step_sigma)))
     if problem.snap:
@@ -138,12 +142,7 @@ def log_normaliser(problem: SmootherProblem) -> float:
         else:
             total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
             total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
-    if problem.use_gyro:
-        total += 3 * n * np.log(problem.gyro_sigma)
-    if problem.options.free_flight:
-        total += 3 * n * (np.log(problem.options.torque_noise_std_nm) + np.log(problem.options.free_fall_std_mps2))
-    if problem.n_global:
-        total += float(np.sum(np.log(problem.global_prior_sigma())))
+    total += sum(group.log_normaliser(problem) for group in problem.groups)
     return total
 
 
@@ -157,7 +156,7 @@ def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params
     if measurement is None:
         ne = normal_equations(problem, states, P)
     else:
-        ne = add_normal_equations(measurement, normal_equations(problem, states, P, problem._other_terms(states, P)))
+        ne = add_normal_equations(measurement, normal_equations(problem, states, P, problem.process_terms(states, P)))
     fac = factorise(ne, 0.0)
     dx, dp = solve_step(ne, fac)
     c_min = ne.cost + 0.5 * (float(ne.grad.reshape(-1) @ dx.reshape(-1)) + float(ne.grad_global @ dp))
@@ -173,16 +172,6 @@ def measurement_normal_equations(problem: SmootherProblem, states: np.ndarray, p
     P = np.zeros(problem.n_global) if params is None else params
     terms = problem.terms(states, P)
     return normal_equations(problem, states, P, terms[:1])
-
-
-def _states_for(states: np.ndarray, model: str, problem_state_size: int) -> np.ndarray:
-    """Adapt a state array to the model's size (append ω̈ = 0 for 'snap', drop it for 'jerk')."""
-    m = states.shape[1]
-    if m == problem_state_size:
-        return states
-    if problem_state_size > m:
-        return np.hstack([states, np.zeros((states.shape[0], problem_state_size - m))])
-    return states[:, :problem_state_size]
 
 
 def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 1) -> tuple[float, float, int]:
@@ -268,9 +257,8 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     best = None
     for model in models:
         field = DENSITY_FIELD[model]
-        size = (12 if model == "snap" else 9) + (3 if (options.estimate_attitude or options.use_inclinometer) else 0)
         p0 = params
-        X = _states_for(states, model, size)
+        X = StateLayout.from_options(replace(options, motion_model=model)).resize(states)
         current = {"density": np.log(getattr(options, field)), "axis": np.log(np.asarray(options.process_axis_factors, float)),
                    "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0,
                    "freq": np.array(options.process_axis_frequencies_hz if model == "jerk" else (0.0, 0.0, 0.0), dtype=float),
@@ -289,7 +277,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
 
         def evidence(c, X):
             try:
-                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])), X[:, 0:3])
+                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])), X[:, OMEGA])
                 key = (version, float(c["scale"]))
                 if key not in cache:
                     cache.clear()
@@ -369,7 +357,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
         if accel_noise:
             search("scale", 1e-2, 1e3)
         value = search("density", *DENSITY_LIMITS, step=np.log(4.0))
-        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"])), X[:, 0:3]), X, p0)
+        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"])), X[:, OMEGA]), X, p0)
         X, version = res.states, 1
         if accel_noise:
             search("scale", 1e-2, 1e3, step=np.log(2.0))
@@ -389,3 +377,36 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     if states_out is not None:
         states_out.append(best[2])
     return best[:2]
+
+
+def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = None,
+                  initial: InitialStates | None = None, span_s: float | None = None) -> tuple[SmootherProblem, np.ndarray]:
+    """Problem and initial states of one solve window, with the process noise chosen from the data
+    (:func:`tune`) when ``options.tune_process_noise``; the choice is appended to ``tunings``.
+
+    ``initial``: how the initial states are made (default :func:`gfimu.smoother.initialise.initial_estimate`);
+    ``span_s``: choose on at most this much of the window, its middle [s] (None: the whole window)."""
+    initial = initial or initial_estimate
+    x0 = initial(part, options)
+    if not options.tune_process_noise:
+        return make_problem(part, options, 1.0, x0[:, OMEGA]), x0
+    models = ("jerk", "snap") if options.tune_motion_model else None
+    solved: list = []
+    span = slice(0, len(part))
+    if span_s is not None and part.times_s[-1] - part.times_s[0] > span_s:
+        width = max(int(round(span_s * part.rate_hz)), 4)
+        start = (len(part) - width) // 2
+        span = slice(start, start + width)
+    tuning, tuned = tune(part.select(span), options, x0[span], models=models, accel_noise=options.tune_accel_noise,
+                         states_out=solved)
+    if tunings is not None:
+        tunings.append(tuning)
+    if tuned.motion_model != options.motion_model:
+        x0 = initial(part, tuned)
+    elif any(f > 0 for f in tuning.axis_frequencies_hz):
+        if span == slice(0, len(part)):
+            x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
+        else:  # ... or from the white-jerk solution of the whole window with the chosen densities
+            plain = replace(tuned, process_axis_frequencies_hz=(0.0, 0.0, 0.0))
+            x0 = solve(make_problem(part, plain, tuning.accel_noise_scale, x0[:, OMEGA]), x0).states
+    return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, OMEGA]), x0

@@ -37,6 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from . import Conversion, Reader
+from ...array import mimu4444_array
+from ...log import Log
+from ...motion import Motion
 
 PACKET_BYTES = 106
 HEADER = 0xAA
@@ -293,9 +296,6 @@ def to_log(rec: Recording, with_gyro: bool = False, source: str = "<memory>"):
     velocity; ``invalid_reference`` marks the saturated samples. With
     ``with_gyro`` the same mean is also given as the log's gyroscope channel.
     """
-    from ...array import mimu4444_array
-    from ...log import Log
-    from ...motion import Motion
 
     array = mimu4444_array(with_gyroscope=with_gyro)
     n = rec.timestamps_ns.size
@@ -311,6 +311,54 @@ def to_log(rec: Recording, with_gyro: bool = False, source: str = "<memory>"):
         invalid_reference=rec.invalid_reference.copy(),
         source=source,
     )
+
+
+class StreamDecoder:
+    """Incremental decoding of a MIMU4444 byte stream (serial port, TCP): bytes in, board-frame
+    samples out, with the packet search, counter and tick unwrapping of :func:`decode` (a packet
+    split between two chunks is kept for the next; a repeated or out-of-order packet is dropped
+    and counted in ``duplicates``). ``feed(chunk)`` returns ``[(timestamp_ns, accel_row (24,))]``,
+    accelerometer axes ordered as the 8-IMU array's columns (m/s², board frame)."""
+
+    def __init__(self) -> None:
+        self._buffer = b""
+        self._counter: int | None = None  # last unwrapped counter
+        self._raw_counter = 0
+        self._ticks: int | None = None  # last unwrapped ticks
+        self._raw_ticks = 0
+        self.duplicates = 0
+        self.skipped_bytes = 0
+
+    def feed(self, chunk: bytes) -> list[tuple[int, np.ndarray]]:
+        data = self._buffer + bytes(chunk)
+        starts, _, _ = find_packets(data)
+        out = []
+        consumed = 0
+        if starts.size:
+            pk = decode_packets(data, starts)
+            acc, _ = board_frame(pk.raw)
+            for i in range(starts.size):
+                c, t = int(pk.counter[i]), int(pk.ticks[i])
+                if self._counter is None:
+                    self._counter, self._ticks = c, t
+                else:
+                    step = (c - self._raw_counter) % COUNTER_MODULUS
+                    if step == 0 or step >= COUNTER_MODULUS // 2:
+                        self.duplicates += 1
+                        continue
+                    dt = (t - self._raw_ticks) % TICK_MODULUS
+                    dt += int(round((step * NOMINAL_TICKS_PER_PACKET - dt) / TICK_MODULUS)) * TICK_MODULUS
+                    self._counter += step
+                    self._ticks += dt
+                self._raw_counter, self._raw_ticks = c, t
+                out.append((int(ticks_to_ns(np.array([self._ticks]))[0]), acc[i].reshape(-1)))
+            consumed = int(starts[-1]) + PACKET_BYTES
+            self.skipped_bytes += int(starts[0])
+        else:
+            consumed = max(len(data) - (PACKET_BYTES - 1), 0)  # keep what could start a packet
+            self.skipped_bytes += consumed
+        self._buffer = data[consumed:]
+        return out
 
 
 REFERENCE_SHIFT_MS = -1.5

@@ -1,0 +1,130 @@
+"""Many logs, one method, on Dask distributed (the library side of ``gfimu batch``).
+
+:func:`run_one` is the task a worker runs for one log: :func:`gfimu.pipeline.estimate_log`,
+then the estimate written atomically to its own folder, returning one summary row
+(never raising: a broken log is a row with status ``failed`` and its message).
+:func:`run_batch` sends the logs to a Dask scheduler (an existing one, or a
+``LocalCluster`` started here) and gathers the rows as they finish. Workers need
+the logs and the output folder on a shared file system.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+import warnings
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+SUMMARY_COLUMNS = ("log", "output", "status", "samples", "seconds", "omega_rmse_radps", "warnings", "message")
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """Outcome of :func:`run_batch`: one row per log, in the order given."""
+
+    rows: tuple[dict, ...]
+    scheduler: str
+
+    @property
+    def failed(self) -> list[dict]:
+        return [r for r in self.rows if r["status"] != "ok"]
+
+    def summary_csv(self) -> str:
+        """The rows as CSV (``summary.csv``)."""
+        import csv
+        import io
+
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
+        writer.writeheader()
+        for r in self.rows:
+            writer.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in SUMMARY_COLUMNS})
+        return buf.getvalue()
+
+
+def output_folders(logs: Iterable[str | Path], out_dir: str | Path) -> list[Path]:
+    """``out_dir/<log folder name>`` per log; repeated names get ``-2``, ``-3``... in the order given."""
+    seen: dict[str, int] = {}
+    out = []
+    for log in logs:
+        name = Path(log).resolve().name or "log"
+        seen[name] = seen.get(name, 0) + 1
+        out.append(Path(out_dir) / (name if seen[name] == 1 else f"{name}-{seen[name]}"))
+    return out
+
+
+def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibration: str | None) -> dict:
+    """Estimate one log and write its estimate; the summary row (status ok or failed)."""
+    from . import io as gio
+    from .io.outputs import check_output, write_output
+    from .pipeline import estimate_log, score
+
+    row = {"log": str(log_dir), "output": str(output_csv), "status": "failed", "samples": None, "seconds": None,
+           "omega_rmse_radps": None, "warnings": "", "message": ""}
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            inputs = [log_dir] + ([calibration] if calibration else [])
+            Path(output_csv).parent.mkdir(parents=True, exist_ok=True)
+            out = check_output(output_csv, inputs, "--out")
+            run = estimate_log(log_dir, method, options, calibration)
+            write_output(out, gio.motion_csv_chunks(run.motion))
+        rmse = score(run)
+        row.update(status="ok", samples=run.samples, omega_rmse_radps=None if rmse is None else f"{rmse:.6g}",
+                   warnings=" | ".join(str(w.message) for w in caught))
+    except Exception as exc:  # noqa: BLE001 - a broken log is reported, the others go on
+        message = str(exc) or type(exc).__name__
+        if not isinstance(exc, (OSError, ValueError)):
+            message = f"{type(exc).__name__}: {message} ({traceback.format_exc(limit=1).splitlines()[-1]})"
+        row["message"] = " ".join(message.split())
+        folder = Path(output_csv).parent
+        if folder.is_dir() and not any(folder.iterdir()):  # leave no empty folder behind a failed log
+            folder.rmdir()
+    row["seconds"] = f"{time.perf_counter() - t0:.3f}"
+    return row
+
+
+def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smoother", options: dict | None = None,
+              calibration: str | Path | None = None, scheduler: str | None = None, workers: int = 2,
+              on_done: Callable[[dict], None] | None = None) -> BatchResult:
+    """Run ``method`` on every log on Dask: on the scheduler at ``scheduler`` (``tcp://host:port``), or
+    on a ``LocalCluster`` of ``workers`` single-threaded processes started here and closed after.
+    ``on_done(row)`` is called as each log finishes (progress)."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    folders = output_folders(logs, out_dir)
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler, timeout="20s")
+    try:
+        futures, index = [], {}
+        for i, (log, folder) in enumerate(zip(logs, folders)):
+            fut = client.submit(run_one, str(log), str(folder / "estimate.csv"), method, dict(options or {}),
+                                None if calibration is None else str(calibration), pure=False)
+            futures.append(fut)
+            index[fut.key] = i
+        rows: list[dict | None] = [None] * len(futures)
+        for fut in as_completed(futures):
+            i = index[fut.key]
+            try:
+                row = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a lost worker: the log is reported, the others go on
+                row = {"log": str(logs[i]), "output": str(folders[i] / "estimate.csv"), "status": "failed",
+                       "message": f"worker failed: {type(exc).__name__}: {exc}"}
+            rows[i] = row
+            if on_done is not None:
+                on_done(row)
+        address = client.scheduler.address if client.scheduler is not None else str(scheduler)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return BatchResult(tuple(r for r in rows if r is not None), address)
+

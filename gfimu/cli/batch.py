@@ -1,0 +1,102 @@
+"""``gfimu batch LOG... --method M --out DIR [--scheduler ADDRESS]``: many logs on Dask distributed."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import CLIError
+from .options import integer
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from ..methods import METHODS
+
+    p = sub.add_parser(
+        "batch", help="run one method on many logs, in parallel on Dask (this machine or a cluster)",
+        description="Estimate every LOG with one method on Dask distributed and write DIR/<log folder name>/"
+                    "estimate.csv (as gfimu estimate would) and DIR/summary.csv (log, status, samples, seconds, "
+                    "ω RMSE where the log has a truth or reference, warnings, error message). A log that fails is "
+                    "reported in the summary and the exit status is 1; the others go on. Needs the distributed "
+                    "extra (pip install 'gfimu[distributed]').")
+    p.add_argument("logs", nargs="+", metavar="LOG", help="log folders (array.toml + imu.csv)")
+    p.add_argument("--method", default="smoother", choices=list(METHODS), help="estimation method (default: smoother)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created; estimates are never written "
+                                                                "over an input)")
+    p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
+                   help="method option, repeatable (gfimu estimate --method M --list-options lists them)")
+    p.add_argument("--preset", default=None, metavar="NAME", help="named smoother settings (method smoother)")
+    p.add_argument("--calibration", default=None, metavar="FILE", help="calibration.toml applied to every log")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler to use, e.g. tcp://10.0.0.5:8786 (default: a local cluster on this machine)")
+    p.add_argument("--workers", type=integer(1, 256), default=2, metavar="N",
+                   help="worker processes of the local cluster (default 2; ignored with --scheduler)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        raise CLIError("gfimu batch needs dask.distributed: pip install 'gfimu[distributed]'") from None
+    from ..batch import output_folders, run_batch
+    from ..io.outputs import check_output, write_output
+    from .estimate import method_options
+
+    for log in args.logs:
+        if not Path(log).is_dir():
+            raise CLIError(f"{log}: not a log folder")
+    args.lag_s, args.sigma = None, False
+    options = method_options(args)
+    out_dir = Path(args.out)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise CLIError(f"--out {out_dir}: exists and is not a folder")
+    inputs = list(args.logs) + ([args.calibration] if args.calibration else [])
+    for folder in output_folders(args.logs, out_dir):  # each estimate is checked again where it is written
+        target = folder / "estimate.csv"
+        if target.exists() and not target.is_file():
+            raise CLIError(f"--out: {target} exists and is not a regular file")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = check_output(out_dir / "summary.csv", inputs, "--out")
+    bar = _Bar(len(args.logs), enable=not args.quiet)
+    failed = []
+
+    def done(row):
+        bar.update(1)
+        if row["status"] != "ok":
+            failed.append(row)
+
+    try:
+        result = run_batch(args.logs, out_dir, args.method, options, args.calibration, args.scheduler, args.workers,
+                           on_done=done)
+    except OSError as exc:
+        raise CLIError(f"Dask scheduler {args.scheduler or '(local cluster)'}: {exc}") from None
+    finally:
+        bar.close()
+    write_output(summary, [result.summary_csv()])
+    for row in result.failed:
+        print(f"gfimu batch: {row['log']}: failed: {row['message']}", file=sys.stderr)
+    ok = len(result.rows) - len(result.failed)
+    print(f"batch: {ok} of {len(result.rows)} logs estimated with {args.method} on {result.scheduler} -> {out_dir}")
+    return 1 if result.failed else 0
+
+
+class _Bar:
+    """A tqdm bar across the logs (nothing when disabled)."""
+
+    def __init__(self, total: int, enable: bool):
+        self._bar = None
+        if enable:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, desc="batch", unit="log", leave=False)
+
+    def update(self, n: int) -> None:
+        if self._bar is not None:
+            self._bar.update(n)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()

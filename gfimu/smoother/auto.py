@@ -1,0 +1,263 @@
+"""The smoother's model chosen from the log itself (the batch smoother's default).
+
+The smoother's Gaussian model is right for arrays whose readings follow the
+rigid-body equation up to white noise of the stated level (simulations, well
+built rigs). Real arrays often do not: their rigid-body residual exceeds the
+datasheet noise several times, grows with the rotation rate and has heavy
+tails (sample-time skew, filter differences, alignment and position errors;
+see docs/rigid-body-residual.md). The marginal-likelihood tuner
+(:mod:`gfimu.smoother.tuning`) then trusts a wrong noise model, chooses a far
+too smooth motion model, and the smoother settles on the wrong sign branch of
+ω at fast rotations.
+
+:func:`check_model` asks the data which case holds, before any smoothing, from
+the per-sample maximum-likelihood fit (:class:`gfimu.estimators.ml.MLEstimator`),
+whose residual ``r_k = y_k - S x̂_k`` (paper 000, eq. 6) sees the readings'
+disagreement with a rigid body, sample by sample:
+
+- **noise ratio**: the robust scale (1.4826 × median absolute value) of ``r``,
+  corrected for the 9 unknowns fitted per sample (``sqrt(n / (n - 9))`` for n
+  axes), over the stated noise std;
+- **tail share**: the share of residuals beyond 4 robust scales (a Gaussian puts
+  6e-5 there);
+- **noise slope**: the residual's growth with |ω|: ``E[r²] = σ₀² + (s |ω|)²``
+  fitted to the median residual power in |ω| bins.
+
+The log is *consistent* when the noise ratio is below
+:data:`NOISE_RATIO_LIMIT`, the tail share below :data:`TAIL_SHARE_LIMIT` and the
+slope adds less than the floor's variance at the 90th percentile of |ω|
+(:data:`SLOPE_VARIANCE_LIMIT`). These limits are statements about Gaussianity
+(a factor two on the noise, a hundred times the Gaussian tail), not values fitted
+to any recording.
+
+Consistent logs keep the model that is optimal for them: the sign-resolving
+initialisation and the process noise by marginal likelihood. Inconsistent logs
+get the model the residual asks for (:func:`misfit_options`): the per-sample ML
+initialisation with its sign chain, the accelerometer noise floor σ₀ and slope
+s measured above, a Cauchy loss at 2 σ on every accelerometer axis and every
+motion-model step (heavy tails, sudden jerks), and process densities by the
+method of moments on the initial estimate (:func:`moment_densities`), per solve
+window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..log import Log
+from ..rigid_body import quadratic_terms
+from .graph import SmootherOptions
+
+NOISE_RATIO_LIMIT = 2.0
+"""Largest robust residual scale over the stated noise std of a consistent log."""
+TAIL_SHARE_LIMIT = 0.006
+"""Largest share of residuals beyond 4 robust scales of a consistent log (100 × Gaussian)."""
+SLOPE_VARIANCE_LIMIT = 1.0
+"""Largest ``(s |ω|₉₀)² / σ₀²`` of a consistent log: the motion-dependent part of the residual
+variance at the 90th percentile of |ω| against the floor."""
+ROBUST_THRESHOLD = 2.0
+"""Cauchy loss threshold [robust σ] of the accelerometer axes and motion-model steps on an
+inconsistent log (95 % efficiency region of the Cauchy loss is about 2.4 σ; 2 σ favours robustness)."""
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """Rigid-body consistency of a log, and the model it leads to (:func:`check_model`)."""
+
+    consistent: bool
+    """Whether the readings follow the rigid-body model up to white noise of the stated level."""
+    samples: int
+    noise_ratio: float
+    """Robust residual scale / stated noise std."""
+    tail_share: float
+    """Share of residuals beyond 4 robust scales."""
+    noise_floor_mps2: float
+    """σ₀ of the fit ``E[r²] = σ₀² + (s |ω|)²`` [m/s²]."""
+    noise_slope_mps2_per_radps: float
+    """s of that fit [m/s² per rad/s] (0 when the residual does not grow with |ω|)."""
+    omega_p90_radps: float
+    """90th percentile of the per-sample |ω| [rad/s]."""
+    stated_noise_mps2: float
+    """Mean stated noise std of the axes [m/s²]."""
+    reasons: tuple[str, ...] = ()
+    """Why the log is inconsistent (empty when consistent)."""
+
+    def describe(self) -> str:
+        head = ("readings consistent with a rigid body (Gaussian model, noise by marginal likelihood)" if self.consistent
+                else "readings disagree with a rigid body beyond white noise (robust model): " + "; ".join(self.reasons))
+        return (f"{head}. Residual {self.noise_ratio:.1f} x the stated {self.stated_noise_mps2:.3g} m/s^2, "
+                f"{100 * self.tail_share:.2f} % beyond 4 sigma, floor {self.noise_floor_mps2:.3g} m/s^2 "
+                f"+ {self.noise_slope_mps2_per_radps:.3g} m/s^2 per rad/s")
+
+    def as_dict(self) -> dict:
+        return {"consistent": self.consistent, "samples": self.samples, "noise_ratio": self.noise_ratio,
+                "tail_share": self.tail_share, "noise_floor_mps2": self.noise_floor_mps2,
+                "noise_slope_mps2_per_radps": self.noise_slope_mps2_per_radps, "omega_p90_radps": self.omega_p90_radps,
+                "stated_noise_mps2": self.stated_noise_mps2, "reasons": list(self.reasons)}
+
+
+def rigid_body_residual(log: Log, omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray,
+                        specific_force_b_mps2: np.ndarray) -> np.ndarray:
+    """(N, n_axes) readings minus the rigid-body prediction ``S [f, ω̇, q(ω)]`` (paper 000, eq. 6) [m/s²]."""
+    S = log.array.structure_matrix()
+    x = np.hstack([specific_force_b_mps2, omega_dot_b_radps2, quadratic_terms(omega_b_radps)])
+    return log.accel_mps2 - x @ S.T
+
+
+def noise_vs_rate(residual_mps2: np.ndarray, omega_b_radps: np.ndarray, dof_factor: float,
+                  bins: int = 20) -> tuple[float, float]:
+    """(σ₀, s) of ``E[r²] = σ₀² + (s |ω|)²``, fitted to the per-sample mean residual power in |ω|
+    quantile bins: σ₀ through the slowest bin, s by least squares on the power above it; each bin's power is its median, scaled to a
+    mean by the median of a χ²_ν/ν law, ν = n_axes - 9 (robust against the heavy tails). The
+    per-sample estimate's own |ω| error flattens the fit when the noise is large against the motion
+    (0.14 measured for 0.2 m/s² per rad/s on a 5 cm cube turning at 2 rad/s)."""
+    n_axes = residual_mps2.shape[1]
+    power = np.mean(residual_mps2**2, axis=1) * dof_factor
+    wn = np.linalg.norm(omega_b_radps, axis=1)
+    edges = np.unique(np.quantile(wn, np.linspace(0.0, 1.0, bins + 1)))
+    if edges.size < 3:
+        return float(np.sqrt(np.mean(power))), 0.0
+    idx = np.clip(np.searchsorted(edges, wn, side="right") - 1, 0, edges.size - 2)
+    # the residual of a 9-unknown fit has ν = n_axes - 9 degrees of freedom; median of χ²_ν / ν:
+    # (1 - 2/(9ν))³ (Wilson-Hilferty)
+    nu = max(n_axes - 9, 1)
+    median_to_mean = 1.0 / max(1.0 - 2.0 / (9.0 * nu), 0.1) ** 3
+    w2, p = [], []
+    for b in range(edges.size - 1):
+        sel = idx == b
+        if np.count_nonzero(sel) >= 10:
+            w2.append(np.mean(wn[sel] ** 2))
+            p.append(np.median(power[sel]) * median_to_mean)
+    w2, p = np.asarray(w2), np.asarray(p)
+    if w2.size < 2:
+        return float(np.sqrt(np.mean(power))), 0.0
+    # the floor from the slowest bin, the slope by least squares on the excess power above it
+    # (unweighted: the fast bins, where the noise matters to ω, lead the fit)
+    a = float(p[0])
+    excess = p - a
+    b = float(np.sum(excess * (w2 - w2[0])) / max(float(np.sum((w2 - w2[0]) ** 2)), 1e-300))
+    a = max(a - b * w2[0], 0.0)
+    if b <= 0:
+        return float(np.sqrt(max(np.median(p), 0.0))), 0.0
+    return float(np.sqrt(a)), float(np.sqrt(b))
+
+
+def check_model(log: Log, ml_motion) -> ModelCheck:
+    """:class:`ModelCheck` of ``log`` from its per-sample ML estimate ``ml_motion`` (a Motion)."""
+    r = rigid_body_residual(log, ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2)
+    ok = np.all(np.isfinite(r), axis=1)
+    r, omega = r[ok], ml_motion.omega_b_radps[ok]
+    n_axes = r.shape[1]
+    dof_factor = n_axes / max(n_axes - 9, 1)
+    stated = log.array.noise_std_per_axis_mps2
+    stated = np.where(np.isfinite(stated) & (stated > 0), stated, np.nan)
+    stated_mean = float(np.nanmean(stated)) if np.any(np.isfinite(stated)) else float("nan")
+    scale = 1.4826 * np.median(np.abs(r), axis=0) * np.sqrt(dof_factor)  # per axis
+    ratio = float(np.median(scale / stated)) if np.isfinite(stated_mean) else float("inf")
+    tail = float(np.mean(np.abs(r) > 4.0 * scale[None, :] / np.sqrt(dof_factor))) if r.size else 0.0
+    floor, slope = noise_vs_rate(r, omega, dof_factor)
+    w90 = float(np.quantile(np.linalg.norm(omega, axis=1), 0.9)) if len(omega) else 0.0
+    reasons = []
+    if not ratio < NOISE_RATIO_LIMIT:
+        reasons.append(f"residual {ratio:.1f} x the stated noise" if np.isfinite(ratio) else "no noise std stated")
+    if tail > TAIL_SHARE_LIMIT:
+        reasons.append(f"{100 * tail:.2f} % of residuals beyond 4 sigma")
+    if floor > 0 and (slope * w90 / floor) ** 2 > SLOPE_VARIANCE_LIMIT:
+        reasons.append(f"residual grows with |omega| ({slope:.3g} m/s^2 per rad/s)")
+    return ModelCheck(not reasons, int(len(r)), ratio, tail, floor, slope, w90, stated_mean, tuple(reasons))
+
+
+def misfit_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptions:
+    """The smoother's options for a log that disagrees with the rigid-body model (see module docstring)."""
+    floor = check.noise_floor_mps2 if check.noise_floor_mps2 > 0 else options.default_accel_noise_std_mps2
+    return replace(
+        options,
+        initialisation="ml",
+        ml_sign_chain=True,
+        tune_process_noise=False,
+        tune_motion_model=False,
+        motion_model="jerk",
+        accel_noise_slope_mps2_per_radps=check.noise_slope_mps2_per_radps,
+        robust_loss="cauchy",
+        accel_robust_threshold=ROBUST_THRESHOLD,
+        process_robust_threshold=ROBUST_THRESHOLD,
+        default_accel_noise_std_mps2=floor,
+    )
+
+
+
+def estimate_noise_variances(array, check: ModelCheck, omega_b_radps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) variances of the per-sample ω̇ and f estimates by the linear rigid-body model with all
+    12 unknowns (paper 000, eq. 6), ``diag((SᵀS)⁻¹) σ_k²`` with the measured noise
+    ``σ_k² = σ₀² + (s |ω_k|)²``: what the per-sample estimate's own noise puts into its steps."""
+    S = array.structure_matrix()
+    c = np.diag(np.linalg.pinv(S.T @ S))
+    wn = np.linalg.norm(omega_b_radps, axis=1)
+    var = check.noise_floor_mps2**2 + (check.noise_slope_mps2_per_radps * wn) ** 2
+    return var[:, None] * c[None, 3:6], var[:, None] * c[None, 0:3]
+
+
+MOTION_STEP_SIGMAS = 3.0
+"""A stretch of the per-sample estimate is motion when the RMS of its steps (over the axes and
+:data:`MOTION_PERIOD_S`) exceeds this many times what the estimate's own noise gives."""
+MOTION_PERIOD_S = 0.5
+"""Length of the stretches [s] over which motion is told from rest."""
+
+
+def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.ndarray,
+                     noise_var_force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis jerk density [rad/s²/√s] and specific-force density [m/s²/√s] of the motion, from the
+    steps of the per-sample estimate ``states`` [ω, ω̇, f]: a random walk of density q has steps of
+    std ``q √h``; the estimate's own noise (variances ``noise_var_*``, independent per sample) gives
+    steps of std ``√(v_k + v_{k+1})``. Steps beyond :data:`MOTION_STEP_SIGMAS` of that are motion;
+    q is the robust scale (1.4826 × median absolute value) of the motion's steps / √h, the scale
+    of the Cauchy core that the robust motion-model loss expects (its heavy tail, the sudden jerks,
+    goes through the loss). A log that rests part of the time keeps the density of its motion;
+    a log without motion gets the density of the noise."""
+    h = np.asarray(dt_s, dtype=float)
+    out = []
+    for sl, v in ((slice(3, 6), noise_var_jerk), (slice(6, 9), noise_var_force)):
+        steps = np.diff(states[:, sl], axis=0) / np.sqrt(h)[:, None]
+        rest = np.sqrt((v[:-1] + v[1:]) / h[:, None])
+        z2 = np.mean((steps / np.maximum(rest, 1e-300)) ** 2, axis=1)
+        width = max(int(round(MOTION_PERIOD_S / max(float(np.median(h)), 1e-12))), 1)
+        local = np.convolve(z2, np.ones(width) / width, mode="same")
+        moving = local > MOTION_STEP_SIGMAS**2
+        floor = np.median(rest, axis=0)
+        if np.count_nonzero(moving) >= max(10, 0.01 * len(z2)):
+            q = 1.4826 * np.median(np.abs(steps[moving]), axis=0)
+        else:
+            q = floor
+        out.append(np.maximum(q, floor))
+    return out[0], out[1]
+
+
+def with_densities(options: SmootherOptions, jerk: np.ndarray, force: np.ndarray) -> SmootherOptions:
+    """``options`` with per-axis jerk densities (their RMS and per-axis factors) and the RMS of the
+    per-axis specific-force densities."""
+    jerk = np.asarray(jerk, dtype=float)
+    q = float(np.sqrt(np.mean(jerk**2)))
+    return replace(options, omega_dot_random_walk_radps2_per_sqrt_s=q,
+                   process_axis_factors=tuple(float(v) for v in jerk / q),
+                   specific_force_random_walk_mps2_per_sqrt_s=float(np.sqrt(np.mean(np.asarray(force) ** 2))))
+
+
+def local_density_factors(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.ndarray,
+                          density: float, period_s: float = MOTION_PERIOD_S) -> np.ndarray:
+    """(N-1,) factors on the jerk density per step: the local density of the motion over the
+    motion density ``density`` [rad/s²/√s], at most 1. The local density is the step power of the
+    per-sample ω̇ in ``states`` above what its own noise gives (variances ``noise_var_jerk``),
+    averaged over ``period_s``; where the body rests it falls to the level that noise can resolve,
+    so that short, slow turns from rest keep the sign the integral of ω̇ gives them instead of
+    following the per-sample estimate, which cannot tell the sign of a slow ω (its centripetal
+    signal is below the noise)."""
+    h = np.asarray(dt_s, dtype=float)
+    width = min(max(int(round(period_s / max(float(np.median(h)), 1e-12))), 1), max(h.size, 1))  # a log shorter than the period: its length
+    kernel = np.ones(width) / width
+    steps = np.sum(np.diff(states[:, 3:6], axis=0) ** 2, axis=1) / h
+    noise = np.sum(noise_var_jerk[:-1] + noise_var_jerk[1:], axis=1) / h
+    local_noise = np.convolve(noise, kernel, mode="same")
+    excess = np.maximum(np.convolve(steps, kernel, mode="same") - local_noise, local_noise)
+    return np.clip(np.sqrt(excess / (3.0 * density**2)), 0.0, 1.0)

@@ -1,0 +1,313 @@
+"""Banded Gauss-Newton / Levenberg-Marquardt core of the batch smoother, linear in the length.
+
+The factors of a :class:`gfimu.smoother.graph.SmootherProblem` are evaluated
+vectorised over all samples; their Gauss-Newton normal equations are
+block-tridiagonal in the per-sample states (plus a dense border for the
+calibration variables), solved by a banded Cholesky factorisation and a
+Schur complement on the border. The marginal covariances come from the same
+factor by a backward block recursion (selected inversion), also linear in
+the length.
+
+Also the re-weighting schedule of the motion-dependent accelerometer noise and the robust
+losses (:func:`solve_reweighted`). This module holds the solver only; the batch estimator
+(:mod:`gfimu.smoother.batch`), the noise tuner (:mod:`gfimu.smoother.tuning`)
+and the initialisation (:mod:`gfimu.smoother.initialise`) build on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import cho_solve_banded, cholesky_banded
+
+from .graph import SmootherOptions, SmootherProblem
+
+
+@dataclass
+class NormalEquations:
+    """Gauss-Newton system ``H δ = -g`` with H = [[A, C], [Cᵀ, B]], A block-tridiagonal.
+
+    ``diag`` (N, 9, 9) and ``lower`` (N-1, 9, 9) are A's blocks (``lower[k]``
+    = A[k+1, k]); ``coupling`` (N, 9, G) = C; ``border`` (G, G) = B.
+    """
+
+    diag: np.ndarray
+    lower: np.ndarray
+    grad: np.ndarray
+    coupling: np.ndarray
+    border: np.ndarray
+    grad_global: np.ndarray
+    cost: float
+    rows: int | None = None
+    """Number of whitened residual rows."""
+
+
+def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray, terms=None) -> NormalEquations:
+    """Accumulate JᵀJ and Jᵀr of all factors (or of ``terms``), vectorised."""
+    n, G, M = problem.n, problem.n_global, problem.state_size
+    diag = np.zeros((n, M, M))
+    lower = np.zeros((n - 1, M, M))
+    grad = np.zeros((n, M))
+    coupling = np.zeros((n, M, G))
+    border = np.zeros((G, G))
+    grad_g = np.zeros(G)
+    cost = 0.0
+    rows = 0
+    for t in (problem.terms(states, params) if terms is None else terms):
+        r = t.residual
+        cost += 0.5 * float(np.sum(r * r))
+        rows += r.size
+        if t.kind == "unary":
+            J = t.jac["x"]
+            k0, k1 = t.first, t.first + r.shape[0]
+            JT = np.swapaxes(J, 1, 2)
+            diag[k0:k1] += JT @ J
+            grad[k0:k1] += np.einsum("nij,nj->ni", JT, r)
+            if t.jac_global is not None:
+                Jg = t.jac_global
+                coupling[k0:k1] += JT @ Jg
+                border += np.einsum("nri,nrj->ij", Jg, Jg)
+                grad_g += np.einsum("nri,nr->i", Jg, r)
+        elif t.kind == "binary":
+            J0, J1 = t.jac["x0"], t.jac["x1"]
+            J0T, J1T = np.swapaxes(J0, 1, 2), np.swapaxes(J1, 1, 2)
+            diag[:-1] += J0T @ J0
+            diag[1:] += J1T @ J1
+            lower += J1T @ J0
+            grad[:-1] += np.einsum("nij,nj->ni", J0T, r)
+            grad[1:] += np.einsum("nij,nj->ni", J1T, r)
+        else:
+            Jg = t.jac_global
+            border += np.einsum("nri,nrj->ij", Jg, Jg)
+            grad_g += np.einsum("nri,nr->i", Jg, r)
+    return NormalEquations(diag, lower, grad, coupling, border, grad_g, cost, rows)
+
+
+def add_normal_equations(a: NormalEquations, b: NormalEquations) -> NormalEquations:
+    """Normal equations of the union of two sets of factors on the same states."""
+    return NormalEquations(a.diag + b.diag, a.lower + b.lower, a.grad + b.grad, a.coupling + b.coupling, a.border + b.border,
+                           a.grad_global + b.grad_global, a.cost + b.cost, (a.rows or 0) + (b.rows or 0))
+
+
+def to_lower_banded(diag: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """LAPACK lower band storage (2m, N m) of a block-tridiagonal symmetric matrix."""
+    n, m, _ = diag.shape
+    ab = np.zeros((2 * m, n * m))
+    for c in range(m):
+        for d in range(2 * m):
+            row = c + d
+            if row < m:
+                ab[d, c::m] = diag[:, row, c]
+            elif row < 2 * m:
+                ab[d, c::m][: n - 1] = lower[:, row - m, c]
+    return ab
+
+
+def factor_blocks(cb: np.ndarray, n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Blocks L[k, k] (N, m, m) and L[k+1, k] (N-1, m, m) of a lower band Cholesky factor."""
+    Lkk = np.zeros((n, m, m))
+    Lnext = np.zeros((n - 1, m, m))
+    for c in range(m):
+        for d in range(2 * m):
+            row = c + d
+            if row < m:
+                Lkk[:, row, c] = cb[d, c::m]
+            elif row < 2 * m:
+                Lnext[:, row - m, c] = cb[d, c::m][: n - 1]
+    return Lkk, Lnext
+
+
+@dataclass
+class Factorisation:
+    """Banded Cholesky factor of the Jacobi-scaled ``S A S`` (``scale`` = diag of S), plus the border."""
+
+    cb: np.ndarray
+    scale: np.ndarray  # (N m,)
+    Y: np.ndarray | None  # A⁻¹ C, (N m, G)
+    schur: np.ndarray | None  # B - Cᵀ A⁻¹ C
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """A⁻¹ b for b (N m,) or (N m, k)."""
+        s = self.scale if b.ndim == 1 else self.scale[:, None]
+        return s * cho_solve_banded((self.cb, True), s * b, check_finite=False)
+
+
+def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
+    """Factor A (+ Marquardt damping) after symmetric Jacobi scaling, which keeps the
+    factorisation accurate when the states have very different scales (e.g. ω̈)."""
+    n, M = ne.diag.shape[:2]
+    diag = ne.diag
+    if damping:
+        diag = diag + damping * (np.einsum("nii->ni", ne.diag)[:, :, None] * np.eye(M) + 1e-9 * np.eye(M))
+    d = np.einsum("nii->ni", diag)
+    if np.any(~(d > 0)):
+        k, i = np.argwhere(~(d > 0))[0]
+        raise np.linalg.LinAlgError(f"normal equations not positive definite: state {i} of sample {k} is unobserved")
+    sc = 1.0 / np.sqrt(d)
+    diag_s = diag * sc[:, :, None] * sc[:, None, :]
+    lower_s = ne.lower * sc[1:, :, None] * sc[:-1, None, :]
+    cb = cholesky_banded(to_lower_banded(diag_s, lower_s), lower=True, check_finite=False)
+    fac = Factorisation(cb, sc.reshape(-1), None, None)
+    if ne.border.size:
+        C = ne.coupling.reshape(n * M, -1)
+        Y = fac.solve(C)
+        border = ne.border + (damping * (np.diag(np.diag(ne.border)) + 1e-9 * np.eye(len(ne.border))) if damping else 0.0)
+        fac.Y, fac.schur = Y, border - C.T @ Y
+    return fac
+
+
+def solve_step(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray]:
+    """Newton step (δx (N, m), δp (G,)) of the (damped) normal equations."""
+    n, M = ne.diag.shape[:2]
+    gx = ne.grad.reshape(-1)
+    ax = fac.solve(gx)
+    if fac.Y is None:
+        return -ax.reshape(n, M), np.zeros(0)
+    C = ne.coupling.reshape(n * M, -1)
+    dp = np.linalg.solve(fac.schur, -ne.grad_global + C.T @ ax)
+    dx = -ax - fac.Y @ dp
+    return dx.reshape(n, M), dp
+
+
+def marginal_covariances(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray | None]:
+    """Diagonal blocks of H⁻¹ for the states (N, m, m) and the border (G, G).
+
+    Backward recursion on the block-bidiagonal Cholesky factor L of the
+    scaled A (A_s⁻¹ = L⁻ᵀ L⁻¹): ``Σ_k = P_k + M_kᵀ Σ_{k+1} M_k`` with
+    ``P_k = L_kk⁻ᵀ L_kk⁻¹`` and ``M_k = L_{k+1,k} L_kk⁻¹``; unscaled by S; then
+    the Schur correction ``Y_k S⁻¹ Y_kᵀ`` of the calibration variables.
+    """
+    n, M = ne.diag.shape[:2]
+    Lkk, Lnext = factor_blocks(fac.cb, n, M)
+    Linv = np.linalg.inv(Lkk)
+    P = np.swapaxes(Linv, 1, 2) @ Linv
+    Mk = Lnext @ Linv[:-1]
+    MkT = np.swapaxes(Mk, 1, 2)
+    sigma = np.empty((n, M, M))
+    sigma[-1] = P[-1]
+    for k in range(n - 2, -1, -1):
+        sigma[k] = P[k] + MkT[k] @ sigma[k + 1] @ Mk[k]
+    sc = fac.scale.reshape(n, M)
+    sigma *= sc[:, :, None] * sc[:, None, :]
+    if fac.Y is None:
+        return sigma, None
+    s_inv = np.linalg.inv(fac.schur)
+    Yk = fac.Y.reshape(n, M, -1)
+    sigma += Yk @ s_inv @ np.swapaxes(Yk, 1, 2)
+    return sigma, s_inv
+
+
+REWEIGHTED_TOLERANCE = 0.01
+"""Re-weighted solves stop when an iteration lowers the cost by less than this fraction of the
+cost's statistical spread at the solution, ``sqrt(R / 2)`` for R whitened rows (the std of half a
+χ² with R degrees of freedom): further iterations move the estimate by far less than its noise."""
+
+
+@dataclass
+class SolveResult:
+    states: np.ndarray
+    params: np.ndarray
+    cost: float
+    iterations: int
+    converged: bool
+    covariance: np.ndarray | None = None
+    param_covariance: np.ndarray | None = None
+
+
+def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
+          compute_sigma: bool = False, method: str = "lm", reweight=None,
+          max_iterations: int | None = None) -> SolveResult:
+    """Levenberg-Marquardt (or plain Gauss-Newton) on the banded normal equations.
+
+    Each iteration first tries the undamped Gauss-Newton step (the problem is
+    close to linear near a good initial point); Marquardt damping
+    ``λ diag(H)`` is switched on, and raised tenfold, only while a step fails
+    to lower the cost, and lowered again after each success.
+
+    ``reweight(states, params)``, when given, re-weights the factors (motion-dependent noise,
+    robust losses) at the current estimate before every iteration: iteratively re-weighted
+    least squares with the Levenberg-Marquardt safeguard, each step accepted when it lowers the
+    cost under the weights it was computed with. It stops when an iteration lowers that cost by
+    less than ``relative_tolerance`` of it, or, re-weighting, by less than
+    :data:`REWEIGHTED_TOLERANCE` of its statistical spread (or after ``max_iterations``, default
+    the options').
+    """
+    opt = problem.options
+    X = np.array(states, dtype=float)
+    P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
+    if reweight is not None:
+        reweight(X, P)
+    ne = normal_equations(problem, X, P)
+    lam = 0.0
+    converged = False
+    it = 0
+    limit = int(opt.max_iterations if max_iterations is None else max_iterations)
+    for it in range(1, limit + 1):
+        while True:
+            try:
+                fac = factorise(ne, lam)
+            except np.linalg.LinAlgError:  # numerically indefinite (very stiff process noise): damp more
+                if lam > 1e10:
+                    raise
+                lam = 1e-6 if lam == 0.0 else lam * 10.0
+                continue
+            dx, dp = solve_step(ne, fac)
+            Xn, Pn = problem.retract(X, dx), P + dp
+            new_cost = problem.cost(Xn, Pn)
+            if method != "lm" or new_cost <= ne.cost or lam > 1e10:
+                break
+            lam = 1e-6 if lam == 0.0 else lam * 10.0
+        decrease = ne.cost - new_cost
+        if method == "lm" and new_cost > ne.cost:
+            converged = True
+            break
+        X, P = Xn, Pn
+        lam = 0.0 if lam < 1e-8 else lam / 10.0
+        if reweight is not None:
+            reweight(X, P)
+        ne = normal_equations(problem, X, P)
+        enough = opt.relative_tolerance * max(new_cost, 1e-300)
+        if reweight is not None:  # the weights move with every step: stop within the cost's own spread
+            enough = max(enough, REWEIGHTED_TOLERANCE * np.sqrt(0.5 * (ne.rows or 1)))
+        if decrease <= enough or np.max(np.abs(dx)) < 1e-12:
+            converged = True
+            break
+    result = SolveResult(X, P, ne.cost, it, converged)
+    if compute_sigma:
+        cov, pcov = marginal_covariances(ne, factorise(ne, 0.0))
+        result.covariance, result.param_covariance = cov, pcov
+    return result
+
+
+def reweighting(problem: SmootherProblem, options: SmootherOptions):
+    """The re-weighting callback of :func:`solve` for the motion-dependent accelerometer noise and
+    the robust losses of ``options``, or None when neither is on."""
+    slope = options.accel_noise_slope_mps2_per_radps > 0 and options.measurement == "accelerometer"
+    if not (slope or options.robust):
+        return None
+
+    def reweight(states: np.ndarray, params: np.ndarray) -> None:
+        if slope:
+            problem.set_motion_dependent_noise(states[:, 0:3], options.accel_noise_slope_mps2_per_radps)
+        if options.robust:
+            problem.set_robust_weights(states, params)
+
+    return reweight
+
+
+def solve_reweighted(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions,
+                     params: np.ndarray | None = None, compute_sigma: bool | None = None,
+                     warm: bool = False) -> SolveResult:
+    """Solve with the motion-dependent noise and robust losses of ``options``: first
+    ``reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
+    iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`)."""
+    sigma = options.compute_sigma if compute_sigma is None else compute_sigma
+    reweight = reweighting(problem, options)
+    if reweight is None:
+        return solve(problem, states, params, compute_sigma=sigma)
+    if warm:  # ``states`` is already a re-weighted solution
+        return solve(problem, states, params, compute_sigma=sigma, reweight=reweight)
+    first = solve(problem, states, params, max_iterations=max(1, int(options.reweight_iterations) - 1))
+    return solve(problem, first.states, first.params if first.params.size else None,
+                 compute_sigma=sigma, reweight=reweight)

@@ -1,0 +1,108 @@
+"""gfimu batch on Dask distributed: a scheduler and two workers started on localhost."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("dask.distributed")
+
+from gfimu import io as gio  # noqa: E402
+from gfimu.batch import output_folders  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _env():
+    return {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+
+@pytest.fixture(scope="module")
+def scheduler(tmp_path_factory):
+    """``tcp://host:port`` of a scheduler with two single-threaded workers, torn down after the module."""
+    folder = tmp_path_factory.mktemp("dask")
+    info = folder / "scheduler.json"
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--scheduler-file", str(info),
+                               "--port", "0", "--no-dashboard", "--host", "127.0.0.1"], env=_env(),
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.time() + 60
+        while not info.exists() and time.time() < deadline:
+            time.sleep(0.2)
+        assert info.exists(), "the scheduler did not start"
+        address = json.loads(info.read_text())["address"]
+        for _ in range(2):
+            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+                                           "--nworkers", "1", "--no-dashboard", "--host", "127.0.0.1"], env=_env(),
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        from dask.distributed import Client
+
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address
+    finally:
+        for p in procs[::-1]:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def test_output_folders_are_unique():
+    folders = output_folders(["a/log", "b/log", "c/other", "d/log"], "out")
+    assert [f.name for f in folders] == ["log", "log-2", "other", "log-3"]
+
+
+def test_batch_on_a_scheduler_with_two_workers(scheduler, tmp_path):
+    """Three simulated logs and a broken one: each estimate equals gfimu estimate's on the same log,
+    the summary has one row per log (the broken one failed, with its message) and the exit status is 1."""
+    logs = []
+    for seed, scenario in ((1, "reversal"), (2, "random3d"), (3, "turntable")):
+        folder = tmp_path / f"{scenario}{seed}"
+        from gfimu.simulate import simulate
+
+        gio.write_log(simulate(scenario, duration_s=2.0, seed=seed), folder)
+        logs.append(folder)
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "array.toml").write_text("this is not toml\n")
+    (broken / "imu.csv").write_text("")
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "gfimu", "batch", *map(str, logs), str(broken), "--out", str(out),
+                           "--scheduler", scheduler, "--quiet"], env=_env(), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    assert "broken: failed" in proc.stderr and "3 of 4 logs" in proc.stdout
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [Path(r["log"]).name for r in rows] == [p.name for p in logs] + ["broken"]
+    assert [r["status"] for r in rows] == ["ok", "ok", "ok", "failed"]
+    assert "not valid TOML" in rows[3]["message"] and not (out / "broken").exists()
+    for log, row in zip(logs, rows):
+        single = tmp_path / f"{log.name}.csv"
+        assert subprocess.run([sys.executable, "-m", "gfimu", "estimate", str(log), "--out", str(single), "--no-progress"],
+                              env=_env(), capture_output=True).returncode == 0
+        a = gio.read_motion_csv(out / log.name / "estimate.csv")
+        b = gio.read_motion_csv(single)
+        np.testing.assert_allclose(a.omega_b_radps, b.omega_b_radps, rtol=0, atol=1e-9)
+        truth = gio.read_log(log).truth.omega_b_radps
+        rmse = float(np.sqrt(np.mean(np.sum((a.omega_b_radps - truth) ** 2, axis=1))))
+        assert float(row["omega_rmse_radps"]) == pytest.approx(rmse, rel=1e-5)
+        assert int(row["samples"]) == 1000
+
+
+def test_batch_refuses_an_unreachable_scheduler(tmp_path):
+    from gfimu.simulate import simulate
+
+    gio.write_log(simulate("reversal", duration_s=1.0, seed=1), tmp_path / "log")
+    proc = subprocess.run([sys.executable, "-m", "gfimu", "batch", str(tmp_path / "log"), "--out", str(tmp_path / "out"),
+                           "--scheduler", "tcp://127.0.0.1:9", "--quiet"], env=_env(), capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert "scheduler" in proc.stderr.lower()

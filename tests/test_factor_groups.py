@@ -1,0 +1,89 @@
+"""A factor group added from outside reaches every consumer of the model: the batch solver, the
+GTSAM graph, the noise tuner's evidence and the bound (this file is the only one it touches)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from gfimu.factors import diagonal_noise, omega_key, process
+from gfimu.methods import make_estimator
+from gfimu.simulate import simulate
+from gfimu.smoother.bound import smoother_bound
+from gfimu.smoother.graph import SmootherOptions, SmootherProblem
+from gfimu.smoother.groups import FactorGroup, Term
+from gfimu.smoother.layout import OMEGA
+from gfimu.smoother.tuning import log_normaliser
+
+
+class ZeroRatePrior(FactorGroup):
+    """ω = 0 with std ``sigma_radps`` at the samples with timestamps in [start_ns, stop_ns)."""
+
+    name = "zero rate"
+
+    def __init__(self, start_ns: int, stop_ns: int, sigma_radps: float):
+        self.start_ns, self.stop_ns, self.sigma = start_ns, stop_ns, sigma_radps
+
+    def _span(self, problem) -> tuple[int, int]:
+        t = problem.log.timestamps_ns
+        return int(np.searchsorted(t, self.start_ns)), int(np.searchsorted(t, self.stop_ns))
+
+    def applies(self, problem) -> bool:
+        k0, k1 = self._span(problem)
+        return k1 > k0
+
+    def terms(self, problem, states, params):
+        k0, k1 = self._span(problem)
+        J = np.zeros((k1 - k0, 3, problem.state_size))
+        J[:, :, OMEGA] = np.eye(3) / self.sigma
+        return [Term("unary", states[k0:k1, OMEGA] / self.sigma, {"x": J}, None, first=k0)]
+
+    def gtsam_factors(self, problem):
+        k0, k1 = self._span(problem)
+        noise = diagonal_noise(np.full(3, self.sigma))
+        return [process.make_prior_factor(omega_key(k), np.zeros(3), noise) for k in range(k0, k1)]
+
+    def log_normaliser(self, problem):
+        k0, k1 = self._span(problem)
+        return 3 * (k1 - k0) * float(np.log(self.sigma))
+
+
+@pytest.fixture(scope="module")
+def spinning():
+    log = simulate("turntable-constant", duration_s=0.25, seed=2)
+    t = log.timestamps_ns
+    group = ZeroRatePrior(int(t[100]), int(t[150]), 1e-4)
+    return log, group
+
+
+def test_batch_and_gtsam_solvers_both_use_the_group(spinning):
+    log, group = spinning
+    inside = slice(100, 150)
+    plain = make_estimator("smoother", tune_process_noise=False).result(log)
+    assert np.min(np.linalg.norm(plain.motion.omega_b_radps[inside], axis=1)) > 1.0  # it spins
+    a = make_estimator("smoother", tune_process_noise=False, factor_groups=(group,)).result(log)
+    b = make_estimator("smoother", tune_process_noise=False, factor_groups=(group,), solver="gtsam").result(log)
+    assert np.max(np.abs(a.motion.omega_b_radps[inside])) < 1e-3  # the prior holds ω at zero there
+    np.testing.assert_allclose(b.motion.omega_b_radps, a.motion.omega_b_radps, atol=1e-6)
+    assert b.cost == pytest.approx(a.cost, rel=1e-8)
+
+
+def test_tuner_and_bound_use_the_group(spinning):
+    log, group = spinning
+    opt = SmootherOptions()
+    with_group = replace(opt, factor_groups=(group,))
+    diff = log_normaliser(SmootherProblem(log, with_group)) - log_normaliser(SmootherProblem(log, opt))
+    assert diff == pytest.approx(3 * 50 * np.log(1e-4))
+    tuned = make_estimator("smoother", factor_groups=(group,), auto_model=False).result(log)  # the likelihood tuner
+    assert len(tuned.tunings) == 1 and np.isfinite(tuned.tunings[0].log_evidence)
+    sd = smoother_bound(log, with_group).sigma["omega_b_radps"]
+    sd0 = smoother_bound(log, opt).sigma["omega_b_radps"]
+    assert np.max(sd[125]) < 1.1e-4 < np.min(sd0[125])
+
+
+def test_fixed_lag_refuses_extra_groups(spinning):
+    log, group = spinning
+    reason = make_estimator("fixed-lag", factor_groups=(group,)).applicable(log.array)
+    assert reason is not None and "factor_groups" in reason
