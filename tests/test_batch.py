@@ -61,6 +61,7 @@ def test_output_folders_are_unique():
     assert [f.name for f in folders] == ["log", "log-2", "other", "log-3"]
 
 
+@pytest.mark.slow
 def test_batch_on_a_scheduler_with_two_workers(scheduler, tmp_path):
     """Three simulated logs and a broken one: each estimate equals gfimu estimate's on the same log,
     the summary has one row per log (the broken one failed, with its message) and the exit status is 1."""
@@ -97,6 +98,7 @@ def test_batch_on_a_scheduler_with_two_workers(scheduler, tmp_path):
         assert int(row["samples"]) == 1000
 
 
+@pytest.mark.slow
 def test_batch_refuses_an_unreachable_scheduler(tmp_path):
     from gfimu.simulate import simulate
 

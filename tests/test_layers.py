@@ -34,7 +34,7 @@ LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
     ("smoother", 3, ("gfimu.factors*", "gfimu.smoother*")),
     ("methods", 4, ("gfimu.methods",)),
     ("evaluation", 5, ("gfimu.evaluation", "gfimu.compare", "gfimu.plots")),
-    ("pipeline", 6, ("gfimu.pipeline", "gfimu.batch")),
+    ("pipeline", 6, ("gfimu.pipeline", "gfimu.batch", "gfimu.live")),
     ("cli", 7, ("gfimu.cli*", "gfimu.__main__")),
 ]
 
