@@ -63,7 +63,34 @@ def _version() -> str:
             return "unknown"
 
 
-def build_parser() -> argparse.ArgumentParser:
+SUMMARIES = {
+    "demo": "run every method on built-in data and print an accuracy table",
+    "simulate": "write a simulated log (exact rigid-body motion, synthetic readings, truth)",
+    "estimate": "estimate ω, ω̇ and acceleration from a log",
+    "evaluate": "errors of an estimate against truth or a reference (RMSE, relative RMS, sign errors)",
+    "compare": "run several methods on a log and tabulate their errors against truth or reference",
+    "convert": "convert a recording into a log directory",
+    "calibrate": "fit accelerometer biases and gains from still periods",
+    "plot": "plot estimates against the log's truth or reference (needs the 'plot' extra)",
+    "batch": "run one method on many logs, in parallel on Dask (this machine or a cluster)",
+    "live": "estimate ω live from readings on standard input, UDP, TCP or a serial port (fixed-lag smoother)",
+}
+"""One line per command for ``gfimu --help`` (each command's own parser carries the same line)."""
+
+
+def command_of(argv: list[str]) -> str | None:
+    """The command named on a command line (the first word that is not an option), or None."""
+    for word in argv:
+        if word == "--":
+            return None
+        if not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
+
+
+def build_parser(command: str | None = "") -> argparse.ArgumentParser:
+    """The parser of ``gfimu``: with every command's full parser (``command=""``), or with only ``command``'s
+    (the others listed by their summary line, so that ``gfimu --help`` imports nothing heavy; ``None``: none)."""
     parser = ArgumentParser(
         prog="gfimu",
         description="Angular velocity, angular acceleration and linear acceleration from accelerometer arrays.",
@@ -73,7 +100,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"gfimu {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        importlib.import_module(f"gfimu.cli.{name}").register(sub)
+        if command == "" or name == command:
+            importlib.import_module(f"gfimu.cli.{name}").register(sub)
+        else:
+            sub.add_parser(name, help=SUMMARIES[name])
     _add_debug_everywhere(parser)
     return parser
 
@@ -163,9 +193,7 @@ def _warning_printer(command: str):
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..io.atomic import install_signal_cleanup, remove_temporaries, restore_signal_handlers
-
-    parser = build_parser()
+    parser = build_parser(command_of(sys.argv[1:] if argv is None else list(argv)))
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, or a malformed command line (argparse printed why)
@@ -173,6 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE
+    from ..io.atomic import install_signal_cleanup, remove_temporaries, restore_signal_handlers  # after --help
+
     previous = install_signal_cleanup()
     try:
         with warnings.catch_warnings():

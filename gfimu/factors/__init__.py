@@ -37,46 +37,50 @@ GTSAM's tangent-space convention.
 
 from __future__ import annotations
 
-import gtsam
 import numpy as np
 
 GRAVITY_W_MPS2 = np.array([0.0, 0.0, -9.80665])
 
 
+def _symbol(char: str, index: int) -> int:
+    """``gtsam.symbol(char, index)`` without importing gtsam: the character in the top byte, the index below."""
+    return (ord(char) << 56) | int(index)
+
+
 def omega_key(k: int) -> int:
-    return gtsam.symbol("w", int(k))
+    return _symbol("w", int(k))
 
 
 def omega_dot_key(k: int) -> int:
-    return gtsam.symbol("d", int(k))
+    return _symbol("d", int(k))
 
 
 def specific_force_key(k: int) -> int:
-    return gtsam.symbol("f", int(k))
+    return _symbol("f", int(k))
 
 
 def omega_ddot_key(k: int) -> int:
-    return gtsam.symbol("j", int(k))
+    return _symbol("j", int(k))
 
 
 def accel_key(k: int) -> int:
-    return gtsam.symbol("a", int(k))
+    return _symbol("a", int(k))
 
 
 def attitude_key(k: int) -> int:
-    return gtsam.symbol("r", int(k))
+    return _symbol("r", int(k))
 
 
 def bias_key(i: int) -> int:
-    return gtsam.symbol("b", int(i))
+    return _symbol("b", int(i))
 
 
 def scale_key(i: int) -> int:
-    return gtsam.symbol("s", int(i))
+    return _symbol("s", int(i))
 
 
 def gyro_bias_key() -> int:
-    return gtsam.symbol("g", 0)
+    return _symbol("g", 0)
 
 
 def vector_at(values: gtsam.Values, key: int) -> np.ndarray:
@@ -97,16 +101,24 @@ def custom_factor(noise_model, keys, error) -> gtsam.CustomFactor:
                 jacobians[i] = np.ascontiguousarray(np.atleast_2d(j), dtype=float)
         return np.asarray(residual, dtype=float).reshape(-1)
 
+    import gtsam
+
     return gtsam.CustomFactor(noise_model, [int(k) for k in keys], error_function)
 
 
 def isotropic_noise(dim: int, sigma: float):
+    import gtsam
+
     return gtsam.noiseModel.Isotropic.Sigma(int(dim), float(sigma))
 
 
 def diagonal_noise(sigmas) -> gtsam.noiseModel.Diagonal:
+    import gtsam
+
     return gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=float))
 
 
 def gaussian_noise(covariance) -> gtsam.noiseModel.Gaussian:
+    import gtsam
+
     return gtsam.noiseModel.Gaussian.Covariance(np.asarray(covariance, dtype=float))

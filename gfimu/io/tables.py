@@ -79,32 +79,83 @@ def _float_formatter(digits: int | None):
 _HEADER_RE = re.compile(r"^(.*?)\s*\[([^\[\]]*)\]\s*$")
 
 
+_BLOCK_BYTES = 1 << 22
+"""Bytes of text read, decoded and parsed at a time: the file is never held whole in memory."""
+
+
 class _Csv:
-    """A parsed CSV header and its raw body; values are converted column by column on demand."""
+    """A CSV header, checked, and its body read in blocks of whole lines; values are converted column by
+    column on demand, block by block, into preallocated arrays (peak memory: the result plus one block)."""
 
     def __init__(self, path: Path):
         self.path = path
         try:
-            raw = path.read_bytes()
+            with open(path, "rb") as fh:
+                head = fh.read(65536)
+                if re.match(rb"\s*\S", head) is None and not any(
+                        re.search(rb"\S", block) for block in iter(lambda: fh.read(1 << 20), b"")):
+                    raise LogFormatError("file is empty (expected a header line and one row per sample)", path)
         except FileNotFoundError:
             raise LogFormatError("file not found", path) from None
         except IsADirectoryError:
             raise LogFormatError("is a folder, expected a CSV file", path) from None
-        if re.match(rb"\s*\S", raw[:65536]) is None and not raw.strip():
+        header = None
+        n_fields = 0
+        last_nonempty = -1
+        first_bad = None  # (row, what) of the first line with the wrong number of fields
+        n_bad_nonempty = 0
+        pending_first, pending_n = None, 0  # empty lines ("") after the last non-empty one so far
+        n_empty_middle = 0  # empty lines followed by data: errors
+        first_empty = None
+        for line0, lines in self._blocks():
+            if header is None:
+                header = lines[0].lstrip("\ufeff")
+                self._parse_header(header)
+                n_fields = len(self.columns)
+                lines = lines[1:]
+                line0 += 1
+            if not lines:
+                continue
+            row0 = line0 - 1
+            counts = np.fromiter((ln.count(",") for ln in lines), dtype=np.int64, count=len(lines))
+            empty = np.fromiter((not ln for ln in lines), dtype=bool, count=len(lines))
+            nonempty = np.flatnonzero(~empty)
+            if nonempty.size:
+                last = int(nonempty[-1])
+                inner = np.flatnonzero(empty[:last])
+                if pending_n and first_empty is None:
+                    first_empty = pending_first
+                if inner.size and first_empty is None:
+                    first_empty = row0 + int(inner[0])
+                n_empty_middle += pending_n + inner.size
+                last_nonempty = row0 + last
+                pending_n = len(lines) - 1 - last
+                pending_first = last_nonempty + 1
+            else:
+                if not pending_n:
+                    pending_first = row0
+                pending_n += len(lines)
+            bad = np.flatnonzero((counts != n_fields - 1) & ~empty)
+            if bad.size:
+                n_bad_nonempty += bad.size
+                k = int(bad[0])
+                if first_bad is None:
+                    what = "is empty" if not lines[k].strip() else f"has {counts[k] + 1} fields"
+                    first_bad = (row0 + k, what)
+        if header is None:
             raise LogFormatError("file is empty (expected a header line and one row per sample)", path)
-        try:
-            text = raw.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            line = raw[: exc.start].count(b"\n") + 1
-            raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, line) from None
-        if "\r" in text:
-            text = text.replace("\r\n", "\n").replace("\r", "\n")
-        lines = text.split("\n")
-        del text
-        header = lines[0].lstrip("\ufeff")
-        end = len(lines)
-        while end > 1 and not lines[end - 1]:
-            end -= 1
+        self.n_rows = last_nonempty + 1
+        if self.n_rows == 0:
+            raise LogFormatError("has a header but no data rows", path, 2)
+        candidates = [b for b in (first_bad, (first_empty, "is empty") if first_empty is not None else None) if b]
+        if candidates:
+            k, what = min(candidates)
+            raise LogFormatError(f"row {what}, the header has {n_fields} (ragged rows: {n_bad_nonempty + n_empty_middle})",
+                                 path, k + 2)
+        self.names = [n for n, _ in self.columns]
+
+    def _parse_header(self, header: str) -> None:
+        path = self.path
         self.columns: list[tuple[str, str | None]] = []
         for field in header.split(","):
             field = field.strip().strip('"').strip()
@@ -124,18 +175,62 @@ class _Csv:
         self.time_unit = unit
         if len(self.columns) < 2:
             raise LogFormatError("has only a timestamp column", path, 1)
-        if end == 1:
-            raise LogFormatError("has a header but no data rows", path, 2)
-        self.lines = lines[1:end]
-        del lines
-        n_fields = len(self.columns)
-        counts = np.fromiter((ln.count(",") for ln in self.lines), dtype=np.int64, count=len(self.lines))
-        bad = np.flatnonzero(counts != n_fields - 1)
-        if bad.size:
-            k = int(bad[0])
-            what = "is empty" if not self.lines[k].strip() else f"has {counts[k] + 1} fields"
-            raise LogFormatError(f"row {what}, the header has {n_fields} (ragged rows: {bad.size})", path, k + 2)
-        self.names = [n for n, _ in self.columns]
+
+    def _blocks(self) -> Iterator[tuple[int, list[str]]]:
+        """(index of the first line, lines) over the whole file, header included, in blocks of whole lines
+        (``\\r\\n`` and lone ``\\r`` read as line ends)."""
+        line0 = 0
+        offset = 0  # byte offset of the start of ``carry``
+        carry = b""
+        with open(self.path, "rb") as fh:
+            while True:
+                data = fh.read(_BLOCK_BYTES)
+                buf = carry + data if carry else data
+                last = not data
+                if last and not buf:
+                    return
+                cut = len(buf) if last else buf.rfind(b"\n") + 1
+                if cut == 0:  # no line end yet: read on
+                    carry = buf
+                    continue
+                block, carry = buf[:cut], buf[cut:]
+                del buf
+                try:
+                    text = block.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    line = line0 + block[: exc.start].count(b"\n") + 1
+                    raise LogFormatError(f"not UTF-8 text (byte {offset + exc.start})", self.path, line) from None
+                offset += cut
+                del block
+                if "\r" in text:
+                    text = text.replace("\r\n", "\n").replace("\r", "\n")
+                lines = text.split("\n")
+                del text
+                if not last:
+                    lines.pop()  # the block ends with a line end
+                if lines:
+                    yield line0, lines
+                line0 += len(lines)
+                if last:
+                    return
+
+    def _row_blocks(self) -> Iterator[tuple[int, list[str]]]:
+        """(index of the first row, rows) of the data rows (trailing empty lines left out)."""
+        for line0, lines in self._blocks():
+            row0 = line0 - 1
+            if row0 < 0:
+                lines, row0 = lines[1:], 0
+            lines = lines[: max(0, self.n_rows - row0)]
+            if lines:
+                yield row0, lines
+            if row0 + len(lines) >= self.n_rows:
+                return
+
+    def _row(self, row: int) -> str:
+        for row0, lines in self._row_blocks():
+            if row < row0 + len(lines):
+                return lines[row - row0]
+        raise IndexError(row)
 
     def line_of_row(self, row: int) -> int:
         return row + 2
@@ -159,25 +254,32 @@ class _Csv:
                                  f"{unit_help(kind)}", self.path, 1) from None
 
     def timestamps_ns(self) -> np.ndarray:
-        tokens = [ln[: ln.find(",")] for ln in self.lines]
         scale = TIME_UNITS_NS[self.time_unit]
-        t = None
-        if scale == 1:
-            try:
-                t = np.array(tokens).astype(np.int64)
-            except (ValueError, OverflowError):
-                t = None
-        if t is None:
-            t = np.empty(len(tokens), dtype=np.int64)
-            for k, tok in enumerate(tokens):
-                t[k] = self._parse_time(tok, scale, k)
-        d = np.diff(t)
-        bad = np.flatnonzero(d <= 0)
-        if bad.size:
-            k = int(bad[0]) + 1
-            raise LogFormatError(
-                f"timestamp {tokens[k].strip()} is not after the previous one ({tokens[k - 1].strip()} on line "
-                f"{k + 1}); timestamps must be strictly increasing", self.path, self.line_of_row(k))
+        t = np.empty(self.n_rows, dtype=np.int64)
+        prev = None  # (value, token) of the last row of the previous block
+        for row0, lines in self._row_blocks():
+            tokens = [ln[: ln.find(",")] for ln in lines]
+            part = None
+            if scale == 1:
+                try:
+                    part = np.array(tokens).astype(np.int64)
+                except (ValueError, OverflowError):
+                    part = None
+            if part is None:
+                part = np.empty(len(tokens), dtype=np.int64)
+                for k, tok in enumerate(tokens):
+                    part[k] = self._parse_time(tok, scale, row0 + k)
+            t[row0:row0 + len(tokens)] = part
+            bad = np.flatnonzero(np.diff(part) <= 0) + 1
+            if prev is not None and part[0] <= prev[0]:
+                bad = np.r_[0, bad]
+            if bad.size:
+                k = int(bad[0])
+                before = tokens[k - 1] if k > 0 else prev[1]
+                raise LogFormatError(
+                    f"timestamp {tokens[k].strip()} is not after the previous one ({before.strip()} on line "
+                    f"{row0 + k + 1}); timestamps must be strictly increasing", self.path, self.line_of_row(row0 + k))
+            prev = (part[-1], tokens[-1])
         return t
 
     def _parse_time(self, token: str, scale: int, row: int) -> int:
@@ -203,12 +305,15 @@ class _Csv:
         Unless ``allow_nan``, every value (or every value in the ``rows`` mask) must be finite.
         """
         if not indices:
-            return np.zeros((len(self.lines), 0))
-        try:
-            out = np.loadtxt(self.lines, delimiter=",", usecols=indices, dtype=float, ndmin=2, comments=None)
-        except ValueError:
-            self._raise_first_bad_value(indices)
-            raise
+            return np.zeros((self.n_rows, 0))
+        out = np.empty((self.n_rows, len(indices)))
+        for row0, lines in self._row_blocks():
+            try:
+                part = np.loadtxt(lines, delimiter=",", usecols=indices, dtype=float, ndmin=2, comments=None)
+            except ValueError:
+                self._raise_first_bad_value(indices, row0, lines)
+                raise
+            out[row0:row0 + len(lines)] = part
         if not allow_nan:
             bad = ~np.isfinite(out)
             if rows is not None:
@@ -216,7 +321,7 @@ class _Csv:
             if bad.any():
                 rows_bad, cols = np.nonzero(bad)
                 r, c = int(rows_bad[0]), int(cols[0])
-                token = self.lines[r].split(",")[indices[c]].strip()
+                token = self._row(r).split(",")[indices[c]].strip()
                 shown = repr(token) + ("" if token == repr(float(out[r, c])) else f" = {float(out[r, c])!r}")
                 where = "" if rows is None else " where valid is 1"
                 raise LogFormatError(
@@ -224,8 +329,8 @@ class _Csv:
                     f"({rows_bad.size} non-finite value(s) in the file)", self.path, self.line_of_row(r))
         return out
 
-    def _raise_first_bad_value(self, indices: list[int]) -> None:
-        for k, ln in enumerate(self.lines):
+    def _raise_first_bad_value(self, indices: list[int], row0: int, lines: list[str]) -> None:
+        for k, ln in enumerate(lines):
             fields = ln.split(",")
             for i in indices:
                 tok = fields[i].strip()
@@ -234,7 +339,7 @@ class _Csv:
                 except ValueError:
                     what = "is empty" if not tok else f"value {tok!r} is not a number"
                     raise LogFormatError(f"column {self.names[i]!r} (field {i + 1}) {what}", self.path,
-                                         self.line_of_row(k)) from None
+                                         self.line_of_row(row0 + k)) from None
 
 
 def imu_columns(array: SensorArray) -> list[tuple[str, str]]:

@@ -28,13 +28,23 @@ accelerometer noise std of every axis can be scaled by ``accel_noise_scale``
 
 from __future__ import annotations
 
-import gtsam
 import numpy as np
 
 from .. import noise, rigid_body
 from ..array import SensorArray
 from ..factors import accelerometer, kinematics, process
 from .graph import SmootherOptions
+
+class _LazyGtsam:
+    """The ``gtsam`` module, imported on first use (the numpy engine and ``gfimu --help`` never need it)."""
+
+    def __getattr__(self, name: str):
+        import gtsam as module
+
+        return getattr(module, name)
+
+
+gtsam = _LazyGtsam()
 
 _W, _D, _F = (ord(c) << 56 for c in "wdf")  # gtsam.Symbol layout: character in the top byte
 
@@ -70,14 +80,13 @@ class ArrayModel:
         sigma = noise.accel_noise_std(array, options.default_accel_noise_std_mps2)
         sigma = sigma * self.accel_noise_scale
         self.accel_sigma_mps2 = sigma
-        self.accel_noise = gtsam.noiseModel.Diagonal.Sigmas(sigma)
-        self.sensors = []  # (directions, positions, column slice, noise model)
+        self._geometry = []  # (directions, positions, column slice)
         col = 0
         for acc in array.accelerometers:
             d, p = accelerometer.sensor_geometry(acc)
-            cols = slice(col, col + d.shape[0])
-            self.sensors.append((d, p, cols, gtsam.noiseModel.Diagonal.Sigmas(sigma[cols])))
+            self._geometry.append((d, p, slice(col, col + d.shape[0])))
             col += d.shape[0]
+        self._gtsam_noise: dict = {}
         wL = self.S_lin / sigma[:, None]
         self.pinv_lin_w = np.linalg.pinv(wL, rcond=1e-10) / sigma[None, :]  # [f, ω̇] given q(ω)
         self.linear_part_observable = np.linalg.matrix_rank(wL) == 6
@@ -87,7 +96,28 @@ class ArrayModel:
         self.axis_factors = np.asarray(options.process_axis_factors, dtype=float)
         self.natural_frequency_radps = 2.0 * np.pi * np.asarray(options.process_axis_frequencies_hz, dtype=float)
         self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
-        self.gyro_noise = gtsam.noiseModel.Isotropic.Sigma(3, noise.gyro_noise_std(array))  # as the batch smoother
+        self.gyro_sigma_radps = float(noise.gyro_noise_std(array))  # as the batch smoother
+
+    # --- gtsam noise models (built on first use) --------------------------------------
+    @property
+    def accel_noise(self):
+        if "accel" not in self._gtsam_noise:
+            self._gtsam_noise["accel"] = gtsam.noiseModel.Diagonal.Sigmas(self.accel_sigma_mps2)
+        return self._gtsam_noise["accel"]
+
+    @property
+    def sensors(self) -> list:
+        """(directions, positions, column slice, gtsam noise model) of every accelerometer."""
+        if "sensors" not in self._gtsam_noise:
+            self._gtsam_noise["sensors"] = [(d, p, cols, gtsam.noiseModel.Diagonal.Sigmas(self.accel_sigma_mps2[cols]))
+                                            for d, p, cols in self._geometry]
+        return self._gtsam_noise["sensors"]
+
+    @property
+    def gyro_noise(self):
+        if "gyro" not in self._gtsam_noise:
+            self._gtsam_noise["gyro"] = gtsam.noiseModel.Isotropic.Sigma(3, self.gyro_sigma_radps)
+        return self._gtsam_noise["gyro"]
 
     # --- factors ----------------------------------------------------------------
     def add_measurement(self, graph: gtsam.NonlinearFactorGraph, k: int, y: np.ndarray, gyro=None) -> None:

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import gtsam
 import numpy as np
 
 from .. import noise
@@ -632,6 +631,8 @@ class SmootherProblem:
     # --- the same problem as a GTSAM graph (graph path) -----------------------
     def gtsam_graph(self) -> gtsam.NonlinearFactorGraph:
         """NonlinearFactorGraph of CustomFactors equal to :meth:`terms`."""
+        import gtsam
+
         graph = gtsam.NonlinearFactorGraph()
         opt = self.options
         y = self.log.accel_mps2
@@ -681,6 +682,8 @@ class SmootherProblem:
         return graph
 
     def gtsam_values(self, states: np.ndarray, params: np.ndarray) -> gtsam.Values:
+        import gtsam
+
         values = gtsam.Values()
         for k in range(self.n):
             values.insert(omega_key(k), np.array(states[k, W]))
