@@ -19,7 +19,6 @@ import dataclasses
 import importlib
 from typing import Any
 
-from .smoother.presets import expand_preset
 
 METHODS: dict[str, str] = {
     "inversion": "gfimu.estimators.inversion:InversionEstimator",
@@ -64,6 +63,8 @@ def make_estimator(name: str, **options: Any):
     """
     cls = estimator_class(name)
     if "preset" in options:
+        from .smoother.presets import expand_preset  # on first use: `gfimu --help` loads no numpy
+
         options = expand_preset(name, options)
     if dataclasses.is_dataclass(cls):
         known = {f.name for f in option_field_list(name)}
