@@ -705,6 +705,8 @@ class SmootherProblem:
     def gtsam_ordering(self) -> gtsam.Ordering:
         """Elimination order of :meth:`gtsam_graph`: the states sample by sample, then the calibration
         variables (a chain with a border: fill-in stays within neighbouring samples and the border)."""
+        import gtsam
+
         ordering = gtsam.Ordering()
         for k in range(self.n):
             for key in (omega_key(k), omega_dot_key(k), specific_force_key(k)):

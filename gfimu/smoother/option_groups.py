@@ -22,7 +22,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     ),
     "fixed-lag": (
         "lag_s", "relinearize_threshold", "relinearize_skip", "marginalise_every_s", "warmup_s", "gap_factor",
-        "fast_measurement", "tune_window_s",
+        "fast_measurement", "tune_window_s", "engine",
     ),
     "tuning": (
         "tune_process_noise", "tune_span_s", "tune_axis_frequencies", "tune_motion_model", "tune_accel_noise",
