@@ -19,7 +19,7 @@ def imported_modules(*args: str, code: str | None = None) -> set[str]:
     return {line.split("|")[-1].strip() for line in done.stderr.splitlines() if line.startswith("import time:")}
 
 
-@pytest.mark.parametrize("args", [["--help"], ["--version"], [], ["estimate", "--help"]])
+@pytest.mark.parametrize("args", [["--help"], ["--version"], []])
 def test_help_and_version_import_no_heavy_library(args):
     if not args:  # bare ``gfimu`` prints the help and exits 2
         env = dict(os.environ, PYTHONPATH=str(ROOT))
