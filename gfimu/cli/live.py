@@ -49,8 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-class _Stop(Exception):
-    pass
+STEADY_AFTER_S = 10.0
+"""Latency is also summarised for samples arriving this long after the first [s]: past the start,
+where the first seconds are held while the process noise is chosen on them."""
 
 
 def _text_rows(source: str, stop: threading.Event):
@@ -191,6 +192,7 @@ def run(args) -> int:
             q.put(None)
 
     def _put(item):
+        item = (item, time.perf_counter())  # with its arrival time, for the latency
         while True:
             try:
                 q.put_nowait(item)
@@ -202,6 +204,8 @@ def run(args) -> int:
                 except queue.Empty:
                     pass
 
+    arrival: dict[int, float] = {}
+    latency: list[float] = []
     try:
         out.write(ESTIMATE_HEADER + "\n")
         out.flush()
@@ -218,10 +222,22 @@ def run(args) -> int:
             if item is None:
                 break
             if item is not False:
-                rows = session.push(*item)
+                sample, arrived = item
+                arrival[int(sample[0])] = arrived
+                rows = session.push(*sample)
                 if rows:
                     out.writelines(rows)
                     out.flush()
+                    now = time.perf_counter()
+                    for row in rows:  # arrival of a sample -> its estimate written
+                        t = arrival.pop(int(row.split(",", 1)[0]), None)
+                        if t is not None:
+                            latency.append((t, now - t))
+                    if len(arrival) > 100_000:  # samples that never left (dropped): forget the oldest
+                        for key in list(arrival)[:50_000]:
+                            del arrival[key]
+                    if len(latency) > 200_000:
+                        del latency[:100_000]
             if not args.quiet and time.monotonic() - last_status >= args.status_s:
                 last_status = time.monotonic()
                 p50, p99, _ = session.stats.percentiles_ms()
@@ -242,5 +258,18 @@ def run(args) -> int:
         if isinstance(exc, LiveInputError):
             raise CLIError(f"--source {args.source}: {exc}")
         raise exc
-    report(session.stats.summary())
+    summary = session.stats.summary()
+    if latency:
+        import numpy as np
+
+        pairs = np.asarray(latency)
+        lat = pairs[:, 1] * 1e3
+        summary += (f"; latency arrival -> estimate written (lag {args.lag_s:g} s + processing) p50 "
+                    f"{np.percentile(lat, 50):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms")
+        # after the start, where the first seconds wait for the one-time choice of the process noise
+        steady = lat[pairs[:, 0] > pairs[0, 0] + STEADY_AFTER_S]
+        if steady.size:
+            summary += (f"; after the first {STEADY_AFTER_S:g} s: p50 {np.percentile(steady, 50):.1f} ms, "
+                        f"p99 {np.percentile(steady, 99):.1f} ms, max {steady.max():.1f} ms")
+    report(summary)
     return 0
