@@ -43,6 +43,8 @@ class LiveStats:
     bad_rows: int = 0
     late_or_repeated: int = 0
     clock_resets: int = 0
+    missing: int = 0
+    """Samples that never arrived: gaps in time of more than 1.5 nominal steps."""
     overrun_dropped: int = 0
     processing_s: list = field(default_factory=list)
 
@@ -56,7 +58,7 @@ class LiveStats:
     def summary(self) -> str:
         p50, p99, mx = self.percentiles_ms()
         return (f"{self.samples_in} samples in, {self.samples_out} estimates out; {self.bad_rows} bad rows, "
-                f"{self.late_or_repeated} late or repeated, {self.overrun_dropped} dropped (input faster than the "
+                f"{self.late_or_repeated} late or repeated, {self.missing} missing (gaps), {self.overrun_dropped} dropped (input faster than the "
                 f"smoother), {self.clock_resets} clock resets; processing per sample p50 {p50:.3f} ms, "
                 f"p99 {p99:.3f} ms, max {mx:.3f} ms")
 
@@ -149,6 +151,10 @@ class LiveSession:
             else:
                 self.stats.late_or_repeated += 1
                 return []
+        if self._last_t is not None:
+            steps = (timestamp_ns - self._last_t) * 1e-9 * self.rate_hz
+            if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
+                self.stats.missing += int(round(steps)) - 1
         self._last_t = timestamp_ns
         t0 = time.perf_counter()
         update = self._smoother.push(int(timestamp_ns), np.asarray(accel_row, dtype=float),

@@ -55,7 +55,8 @@ def test_stdin_rows_give_the_fixed_lag_estimate(log_dir, tmp_path):
 
 def test_udp_datagrams_with_a_bad_a_repeated_and_a_late_one(log_dir, tmp_path):
     """One data row per datagram: a bad row is skipped with a warning naming it, a repeated and a late
-    sample are dropped and counted, the rest estimated; the run ends on an EOF datagram."""
+    sample are dropped and counted, a lost one is counted as missing, the rest estimated; the run
+    ends on an EOF datagram."""
     port = _free_port()
     out = tmp_path / "udp.csv"
     proc = subprocess.Popen([sys.executable, "-m", "gfimu", "live", "--array", str(log_dir / "array.toml"),
@@ -65,6 +66,8 @@ def test_udp_datagrams_with_a_bad_a_repeated_and_a_late_one(log_dir, tmp_path):
     time.sleep(2.0)  # the command binds its socket
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         for i, row in enumerate(rows):
+            if i == 500:
+                continue                                            # lost
             s.sendto(row.encode(), ("127.0.0.1", port))
             if i == 100:
                 s.sendto(b"1,2,three", ("127.0.0.1", port))       # bad
@@ -79,9 +82,9 @@ def test_udp_datagrams_with_a_bad_a_repeated_and_a_late_one(log_dir, tmp_path):
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
     assert "datagram 102 skipped" in err
-    assert "1000 estimates out; 1 bad rows, 2 late or repeated" in err
+    assert "999 estimates out; 1 bad rows, 2 late or repeated, 1 missing (gaps)" in err
     est = gio.read_motion_csv(out)
-    assert len(est) == 1000 and np.all(np.diff(est.timestamps_ns) > 0)
+    assert len(est) == 999 and np.all(np.diff(est.timestamps_ns) > 0)
 
 
 def test_sigterm_flushes_and_summarises(log_dir, tmp_path):
