@@ -2,10 +2,10 @@
 
 :class:`LiveSession` wraps the fixed-lag smoother (:mod:`gfimu.smoother.fixed_lag`)
 for a stream of imu.csv rows (text) or of decoded readings, and counts what
-happens: samples in and out, rows that could not be read, samples dropped for
-going back in time or repeating a timestamp, clock resets (time going back by
-more than :data:`CLOCK_RESET_S`: the window restarts), and the processing time
-of each sample. It formats estimate rows exactly as ``gfimu estimate`` writes
+happens: samples in and out, rows that could not be read, samples the smoother
+dropped for going back in time or repeating a timestamp and its clock resets
+(time going back by more than its ``clock_reset_s``: the window restarts),
+samples that never came, and the processing time of each sample. It formats estimate rows exactly as ``gfimu estimate`` writes
 them, so a log fed row by row gives the file ``gfimu estimate --method
 fixed-lag`` writes. No I/O here: the command (:mod:`gfimu.cli.live`) owns the
 sockets, files and signals.
@@ -18,10 +18,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-
-CLOCK_RESET_S = 1.0
-"""Time going back by more than this [s] is a clock reset (the window restarts); less is a late
-sample (dropped and counted)."""
 
 ESTIMATE_HEADER = ("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],dw_x [rad s^-2],dw_y [rad s^-2],"
                    "dw_z [rad s^-2],f_x [m s^-2],f_y [m s^-2],f_z [m s^-2]")
@@ -140,29 +136,27 @@ class LiveSession:
         self._use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
 
     def push(self, timestamp_ns: int, accel_row, gyro_row=None) -> list[str]:
-        """One sample in; the estimate rows that left the lag window (text, with newlines)."""
+        """One sample in; the estimate rows that left the lag window (text, with newlines). Late,
+        repeated and clock-reset samples are handled and counted by the smoother itself
+        (:meth:`gfimu.smoother.fixed_lag.FixedLagSmoother.push`)."""
         self.stats.samples_in += 1
-        out = []
-        if self._last_t is not None and timestamp_ns <= self._last_t:
-            if self._last_t - timestamp_ns > CLOCK_RESET_S * 1e9:  # the sender's clock restarted
-                out = self._rows(self._smoother.flush())
-                self._smoother = self.estimator.smoother(self.array, self.rate_hz)
-                self.stats.clock_resets += 1
-            else:
-                self.stats.late_or_repeated += 1
-                return []
-        if self._last_t is not None:
+        t0 = time.perf_counter()
+        update = self._smoother.push(int(timestamp_ns), np.asarray(accel_row, dtype=float),
+                                     gyro_row if self._use_gyro else None)
+        counts = self._smoother.counts
+        self.stats.late_or_repeated = counts["duplicates"] + counts["out_of_order"]
+        self.stats.clock_resets = counts["clock_resets"]
+        if update.dropped is not None:
+            return self._rows(update.smoothed)
+        self.stats.processing_s.append(time.perf_counter() - t0)
+        if len(self.stats.processing_s) > 200_000:  # bounded memory on long streams
+            self.stats.processing_s = self.stats.processing_s[-100_000:]
+        if self._last_t is not None and timestamp_ns > self._last_t:
             steps = (timestamp_ns - self._last_t) * 1e-9 * self.rate_hz
             if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
                 self.stats.missing += int(round(steps)) - 1
         self._last_t = timestamp_ns
-        t0 = time.perf_counter()
-        update = self._smoother.push(int(timestamp_ns), np.asarray(accel_row, dtype=float),
-                                     gyro_row if self._use_gyro else None)
-        self.stats.processing_s.append(time.perf_counter() - t0)
-        if len(self.stats.processing_s) > 200_000:  # bounded memory on long streams
-            self.stats.processing_s = self.stats.processing_s[-100_000:]
-        return out + self._rows(update.smoothed)
+        return self._rows(update.smoothed)
 
     def flush(self) -> list[str]:
         """The rows still in the window (end of the stream)."""
