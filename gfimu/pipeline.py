@@ -54,8 +54,7 @@ def estimate_log(log_dir: str | Path, method: str = "smoother", options: dict | 
     est = make_estimator(method, **dict(options or {}))
     log = gio.read_log(log_dir)
     log, screening = screen_log(log)
-    if screening.count:
-        warnings.warn(f"{log.source}: {screening.describe(log.array.accel_columns)}", stacklevel=2)
+    _warn_replaced(log, screening)
     if calibration:
         from .calibration import apply_calibration, read_calibration
 
@@ -72,6 +71,22 @@ def estimate_log(log_dir: str | Path, method: str = "smoother", options: dict | 
         motion = add_orientation(log, motion, source=orientation)
     return EstimateRun(str(log_dir), method, motion, len(motion), seconds, log, screening,
                        getattr(est, "last_model_check", None))
+
+
+def screened(log):
+    """``log`` with gross errors in its accelerometer readings (not finite, out of range, isolated
+    spikes) replaced by the median of their neighbours (:func:`gfimu.readings.screen_log`), the
+    replacements reported as a warning with counts and rows."""
+    from .readings import screen_log
+
+    clean, screening = screen_log(log)
+    _warn_replaced(log, screening)
+    return clean
+
+
+def _warn_replaced(log, screening) -> None:
+    if screening.count:
+        warnings.warn(f"{log.source}: {screening.describe(log.array.accel_columns)}", stacklevel=3)
 
 
 def score(run: EstimateRun) -> float | None:

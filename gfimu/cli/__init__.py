@@ -227,14 +227,3 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         restore_signal_handlers(previous)
 
-
-def screened(log):
-    """``log`` with gross errors in its accelerometer readings (not finite, out of range, isolated
-    spikes) replaced by the median of their neighbours (:func:`gfimu.readings.screen_log`), each
-    replacement reported as a warning with counts and rows."""
-    from ..readings import screen_log
-
-    clean, screening = screen_log(log)
-    if screening.count:
-        warnings.warn(f"{log.source}: {screening.describe(log.array.accel_columns)}", stacklevel=2)
-    return clean

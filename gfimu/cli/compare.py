@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from . import CLIError, screened
+from . import CLIError
 from .options import check_method_options, non_negative, parse_method_options
 
 
@@ -76,6 +76,8 @@ def run(args) -> int:
             for name in methods or list(METHODS):
                 check_output(folder / f"{name}.csv", inputs, "--estimates-dir")
     log = gio.read_log(args.log)
+    from ..pipeline import screened
+
     log = screened(log)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration
