@@ -6,9 +6,10 @@ The formats are those of :mod:`gfimu.io.readers`, each with its own options.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="write into a non-empty --out folder: its array.toml, imu.csv, truth.csv and "
                              "reference.csv are replaced or removed, other files are kept")
         fp.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings before writing")
+        add_no_progress(fp)
         before = {a.dest for a in fp._actions}
         reader.add_arguments(fp)
         fp.set_defaults(func=run, reader_options=[a.dest for a in fp._actions if a.dest not in before])
@@ -46,15 +48,23 @@ def run(args) -> int:
     if not Path(args.input).exists():
         raise CLIError(f"{args.input}: no such file or folder")
     prepare_log_folder(args.out, [args.input, args.calibration], force=args.force)
-    conversion = read_recording(args.format, args.input, **options)
-    log = conversion.log
-    for line in conversion.report:
-        print(line)
-    if args.calibration:
-        from ..calibration import apply_calibration, read_calibration
+    from ..progress import steps
 
-        log = apply_calibration(log, read_calibration(args.calibration))
-        print(f"calibration applied: {args.calibration}")
-    gio.write_log(log, args.out)
-    print(f"log written: {args.out} ({len(log)} samples, {log.rate_hz:.2f} Hz)")
+    names = ["read the recording"] + (["apply the calibration"] if args.calibration else []) + ["write the log"]
+    with steps(f"convert {args.format}", names, show_progress(args)) as bar:
+        bar.step("read the recording")
+        conversion = read_recording(args.format, args.input, **options)
+        log = conversion.log
+        if args.calibration:
+            from ..calibration import apply_calibration, read_calibration
+
+            bar.step("apply the calibration")
+            log = apply_calibration(log, read_calibration(args.calibration))
+        bar.step("write the log")
+        gio.write_log(log, args.out)
+    for line in conversion.report:
+        info(args, line, file=sys.stdout)
+    if args.calibration:
+        info(args, f"calibration applied: {args.calibration}", file=sys.stdout)
+    info(args, f"log written: {args.out} ({len(log)} samples, {log.rate_hz:.2f} Hz)", file=sys.stdout)
     return 0

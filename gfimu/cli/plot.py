@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 from .options import non_negative
 
 PREFIXES = {"a": "accel_b_mps2", "f": "specific_force_b_mps2", "dw": "omega_dot_b_radps2", "w": "omega_b_radps"}
@@ -32,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="first second to show, from the log start [s] (default: the start)")
     p.add_argument("--end-s", type=non_negative("s"), default=None, help="last second to show [s] (default: the end)")
     p.add_argument("--no-errors", action="store_true", help="time plot without the error panels")
+    add_no_progress(p)
     p.set_defaults(func=run)
 
 
@@ -45,6 +47,16 @@ def _window(log, start_s, end_s) -> slice:
 
 
 def run(args) -> int:
+    from ..progress import steps
+
+    with steps("plot", ["read the log and estimates", "draw", "write the figure"], show_progress(args)) as bar:
+        message = _run(args, bar)
+    info(args, message, file=sys.stdout)
+    return 0
+
+
+def _run(args, bar) -> str:
+    """Draw and write the figure; returns the status line."""
     from .. import io as gio, plots
     from ..compare import condition_vs_scale
 
@@ -59,16 +71,18 @@ def run(args) -> int:
                        f"{', '.join('.' + f for f in sorted(formats))}")
     if args.start_s is not None and args.end_s is not None and args.end_s <= args.start_s:
         raise CLIError(f"--end-s {args.end_s:g} must be after --start-s {args.start_s:g}")
+    bar.step("read the log and estimates")
     log = gio.read_log(args.log)
     if args.kind == "condition":
         positions = np.array([a.position_m for a in log.array.accelerometers])
         size = float(np.max(np.abs(positions)))
         sizes = np.logspace(np.log10(size) - 2, np.log10(size) + 2, 41)
+        bar.step("draw")
         fig = plots.plot_condition_number(sizes, {log.array.name: condition_vs_scale(log.array, sizes)},
                                           marks=[(size, log.array.condition_number(), "this array")])
+        bar.step("write the figure")
         plots.save_figure(fig, args.out)
-        print(f"plot: condition number over {sizes[0]:.3g}-{sizes[-1]:.3g} m -> {args.out}")
-        return 0
+        return f"plot: condition number over {sizes[0]:.3g}-{sizes[-1]:.3g} m -> {args.out}"
     if not args.estimates:
         raise CLIError(f"--kind {args.kind} needs at least one estimate CSV")
     window = _window(log, args.start_s, args.end_s)
@@ -78,6 +92,7 @@ def run(args) -> int:
         if len(motion) != len(log):
             raise CLIError(f"{path}: {len(motion)} rows, but the log {args.log} has {len(log)} samples")
         estimates[Path(path).stem] = motion.select(window)
+    bar.step("draw")
     if args.kind == "polhode":
         if log.array.body is None:
             raise CLIError(f"{args.log}: array.toml has no [body] principal_inertia_kgm2, needed for the polhode")
@@ -107,6 +122,6 @@ def run(args) -> int:
         fig = plots.plot_time_series(reference.select(window), estimates, quantities=quantities,
                                      reference_label=label, errors=not args.no_errors, valid=valid,
                                      title=f"{Path(args.log).name}: estimates against {label}")
+    bar.step("write the figure")
     plots.save_figure(fig, args.out)
-    print(f"plot: {len(estimates)} estimate(s), {window.stop - window.start} samples -> {args.out}")
-    return 0
+    return f"plot: {len(estimates)} estimate(s), {window.stop - window.start} samples -> {args.out}"
