@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--queue", type=int, default=5000, metavar="N",
                    help="samples held while the smoother is busy before the oldest are dropped (default 5000)")
     p.add_argument("--status-s", type=positive("s"), default=5.0, help="status line every this many s (default 5)")
-    p.add_argument("--quiet", action="store_true", help="no status lines (the summary at the end stays)")
+    p.add_argument("--quiet", action="store_true", help="no status lines; the summary at the end stays (default: off)")
     p.set_defaults(func=run)
 
 
