@@ -12,6 +12,13 @@ of the system or of a computation, 130/143 when interrupted by SIGINT/SIGTERM
 (temporary files are removed first). ``--debug`` shows the traceback instead.
 Outputs follow :mod:`gfimu.io.outputs`: never over an input, never over
 anything but a regular file.
+
+Progress and messages, the same on every command: a long step shows a tqdm bar
+on standard error when it is a terminal (:mod:`gfimu.progress`,
+:func:`show_progress`); a status line (what was written, what was found) goes
+through :func:`info`. ``--quiet`` (``-q``), added to every command by
+:func:`build_parser`, silences both; ``--no-progress`` (:func:`add_no_progress`)
+the bars alone. Warnings and errors are always shown.
 """
 
 from __future__ import annotations
