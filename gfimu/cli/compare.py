@@ -37,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
     add_no_progress(p)
     p.add_argument("--progress", action="store_true",
-                   help="kept for older command lines: the methods' progress bars are on by default (default: on)")
+                   help="no effect, kept for older command lines: the methods' progress bars now show by default "
+                        "on a terminal (see --no-progress, --quiet; default: off)")
     p.set_defaults(func=run)
 
 
