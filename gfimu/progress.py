@@ -31,7 +31,7 @@ class Steps:
             from tqdm import tqdm
 
             self._bar = tqdm(total=len(names), desc=desc, unit="step", leave=False, mininterval=0,
-                             bar_format="{desc}: {n_fmt}/{total_fmt} {postfix} [{elapsed}]")
+                             bar_format="{desc}: {n_fmt}/{total_fmt}{postfix} [{elapsed}]")
 
     def step(self, name: str) -> None:
         if self._bar is None:
