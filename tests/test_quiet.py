@@ -77,3 +77,16 @@ def test_without_quiet_status_lines_and_on_a_terminal_progress_bars(work, capsys
                  "--no-progress"]) == 0
     captured = capsys.readouterr()
     assert "%|" not in captured.err and "-> " in captured.out
+
+
+def test_step_bars_name_the_current_step_and_are_silent_when_disabled(capsys):
+    from gfimu.progress import steps
+
+    with steps("calibrate", ["read", "fit", "write"], enable=True) as bar:
+        for name in ("read", "fit", "write"):
+            bar.step(name)
+    err = capsys.readouterr().err
+    assert "calibrate: 0/3, read" in err and "calibrate: 1/3, fit" in err and "calibrate: 2/3, write" in err
+    with steps("calibrate", ["read"], enable=False) as bar:
+        bar.step("read")
+    assert capsys.readouterr().err == ""
