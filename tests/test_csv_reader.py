@@ -411,3 +411,26 @@ def test_a_folder_without_the_named_file(tmp_path, capsys):
     (tmp_path / "rec").mkdir()
     refused(capsys, tmp_path, "TotalAcceleration.csv: file not found", str(tmp_path / "rec"), "--map",
             "sensorlogger", "--out", str(tmp_path / "log"))
+
+
+def test_the_documented_example(tmp_path, capsys):
+    """The column map, board.csv and right.csv of docs/convert.md, converted as documented."""
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "convert.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```(toml|text)\n(.*?)```", text, flags=re.DOTALL)
+    assert [b[0] for b in blocks] == ["toml", "text", "text"]
+    write(tmp_path / "board-map.toml", blocks[0][1])
+    write(tmp_path / "rec" / "board.csv", blocks[1][1])
+    write(tmp_path / "rec" / "right.csv", blocks[2][1])
+    out = convert(capsys, str(tmp_path / "rec"), "--map", str(tmp_path / "board-map.toml"), "--out",
+                  str(tmp_path / "log"))
+    assert "right.csv linearly interpolated" in out
+    log = gio.read_log(tmp_path / "log", check=False)
+    assert log.timestamps_ns.tolist() == [10_000_000, 20_000_000]
+    mg = G * 1e-3
+    assert log.accel_mps2[:, :3].tolist() == [[0.02 * G, 0.01 * G, 999 * mg], [0.03 * G, -0.0 * G, 1000 * mg]]
+    np.testing.assert_allclose(log.accel_mps2[:, 3:], [[0.15, 0.25, 9.75], [0.25, 0.35, 9.65]], rtol=0, atol=1e-12)
+    assert log.gyro_b_radps.tolist() == [[1.25 * DEG, -1.5 * DEG, 0.25 * DEG], [1.0 * DEG, -1.0 * DEG, 0.0]]
+    assert log.array.accelerometers[1].rotation_body_sensor.tolist() == [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    assert log.array.name == "board"

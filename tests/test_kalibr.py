@@ -168,3 +168,14 @@ def test_extrinsics_apply_to_every_format(tmp_path, capsys):
     for a, b in zip(target.accelerometers, log.array.accelerometers):
         np.testing.assert_allclose(b.position_m, a.position_m, rtol=0, atol=1e-12)
         np.testing.assert_allclose(b.rotation_body_sensor, a.rotation_body_sensor, rtol=0, atol=1e-12)
+
+
+def test_the_documented_example():
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "convert.md").read_text(encoding="utf-8")
+    block = re.search(r"```yaml\n(.*?)```", text, flags=re.DOTALL).group(1)
+    array, report = apply_kalibr(unplaced(["imu0", "imu1"]), parse_kalibr(yaml.safe_load(block), block, "doc"))
+    np.testing.assert_allclose(array.accelerometers[1].position_m, [-0.02, 0.01, 0.0], rtol=0, atol=1e-15)
+    assert (array.accelerometers[1].rotation_body_sensor @ [1.0, 0.0, 0.0]).tolist() == [0.0, -1.0, 0.0]
+    assert "matched by rostopic" in report[0] and any("time_offset 0.0012 s is not applied" in r for r in report)

@@ -1,7 +1,7 @@
 """Delimited text tables (phone apps, EuRoC, TUM-style whitespace files, a logger's own CSV): ``gfimu convert csv``.
 
 What the columns mean is said by a *column map*, a TOML document of format
-``gfimu-csv-map/1`` (``docs/log-format.md``, section "Reading CSV files"), or
+``gfimu-csv-map/1`` (``docs/convert.md``), or
 by a built-in preset (:data:`PRESETS`: ``euroc``, ``phyphox``,
 ``sensorlogger``). The map names the time column and its unit, how the file
 is split (delimiter, comment prefix, header row, decimal mark) and, for each
