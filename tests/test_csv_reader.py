@@ -434,3 +434,11 @@ def test_the_documented_example(tmp_path, capsys):
     assert log.gyro_b_radps.tolist() == [[1.25 * DEG, -1.5 * DEG, 0.25 * DEG], [1.0 * DEG, -1.0 * DEG, 0.0]]
     assert log.array.accelerometers[1].rotation_body_sensor.tolist() == [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
     assert log.array.name == "board"
+
+
+def test_the_map_unit_stands_where_the_header_holds_no_unit(bad, capsys):
+    write(bad / "f.csv", "t [ms],ax (raw),ay [g],az [g]\n0,1,0,1\n1,2,0,1\n")
+    write(bad / "map.toml", SIMPLE_MAP.format(time_unit="", z="az").replace('x = "ax"', 'x = { column = "ax", unit = "mg" }'))
+    convert(capsys, str(bad / "f.csv"), "--map", str(bad / "map.toml"), "--out", str(bad / "log"))
+    log = gio.read_log(bad / "log", check=False)
+    assert log.accel_mps2[:, 0].tolist() == [G * 1e-3, 2 * (G * 1e-3)]

@@ -473,6 +473,11 @@ class _Reader:
                 raise self.error(f"unit [{u}] of {table.shown(j)} in {table.path} is not understood here; "
                                  f"expected {expected}", column) from None
 
+        if header_unit is not None and column.unit is not None:
+            try:
+                time_unit_ns(header_unit) if kind == "time" else unit_factor(header_unit, kind)
+            except KeyError:  # bracketed text that is no unit ("ax (raw)"): the map says the unit
+                header_unit = None
         if header_unit is None and column.unit is None:
             what = ("the time column" if kind == "time" else f"column {table.shown(j)}")
             expected = "ns, us, ms or s" if kind == "time" else unit_help(kind)
