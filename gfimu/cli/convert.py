@@ -32,6 +32,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="write into a non-empty --out folder: its array.toml, imu.csv, truth.csv and "
                              "reference.csv are replaced or removed, other files are kept")
         fp.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings before writing")
+        fp.add_argument("--extrinsics", default=None, metavar="KALIBR.yaml",
+                        help="Kalibr IMU-chain YAML (imu0, imu1, ... each with T_i_b, a 4x4 body-to-IMU transform): "
+                             "replaces every accelerometer's position [m] and rotation (default: none, the "
+                             "recording's own geometry)")
         before = {a.dest for a in fp._actions}
         reader.add_arguments(fp)
         fp.set_defaults(func=run, reader_options=[a.dest for a in fp._actions if a.dest not in before])
@@ -45,10 +49,21 @@ def run(args) -> int:
     options = {dest: getattr(args, dest) for dest in args.reader_options}
     if not Path(args.input).exists():
         raise CLIError(f"{args.input}: no such file or folder")
-    prepare_log_folder(args.out, [args.input, args.calibration], force=args.force)
+    option_files = [v for v in options.values() if isinstance(v, str) and Path(v).is_file()]
+    prepare_log_folder(args.out, [args.input, args.calibration, args.extrinsics, *option_files], force=args.force)
     conversion = read_recording(args.format, args.input, **options)
     log = conversion.log
-    for line in conversion.report:
+    extrinsics_report: list[str] = []
+    if args.extrinsics:
+        from ..io.kalibr import apply_kalibr, read_kalibr
+
+        array, extrinsics_report = apply_kalibr(log.array, read_kalibr(args.extrinsics), args.extrinsics)
+        log = log.replace(array=array)
+    elif conversion.unplaced:
+        raise CLIError(f"{args.input}: accelerometer(s) {', '.join(conversion.unplaced)} have no position or "
+                       "rotation; give them in the map (position_m, rotation_body_sensor), with --array, or with "
+                       "--extrinsics")
+    for line in [*conversion.report, *extrinsics_report]:
         print(line)
     if args.calibration:
         from ..calibration import apply_calibration, read_calibration

@@ -124,12 +124,18 @@ def _rotation(ctx: _TomlContext, value, index: int, name: str) -> np.ndarray:
                     f"expected orthonormal rows, determinant +1)", "accelerometers", index, key)
 
 
-def parse_array_toml(text: str, path: str | os.PathLike = "array.toml") -> SensorArray:
-    """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line."""
-    return _parse(text, path)[0]
+def parse_array_toml(text: str, path: str | os.PathLike = "array.toml", *, expected_format: str = ARRAY_FORMAT,
+                     positions_required: bool = True) -> SensorArray:
+    """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line.
+
+    Another document holding the same ``[[accelerometers]]`` keys (a CSV column map) is read with its own
+    ``expected_format``; without ``positions_required`` an accelerometer without ``position_m`` sits at the
+    origin (its place is given elsewhere)."""
+    return _parse(text, path, expected_format, positions_required)[0]
 
 
-def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | None]:
+def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORMAT,
+           positions_required: bool = True) -> tuple[SensorArray, float | None]:
     """(array, declared rate_hz or None) from the text of an ``array.toml``."""
     path = Path(path)
     try:
@@ -140,9 +146,9 @@ def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | Non
     ctx = _TomlContext(path, text)
     fmt = doc.get("format")
     if fmt is None:
-        raise ctx.error(f"key is missing; the first line should be format = \"{ARRAY_FORMAT}\"", key="format")
-    if fmt != ARRAY_FORMAT:
-        raise ctx.error(f"unknown format {fmt!r}; this version of gfimu reads {ARRAY_FORMAT!r}", key="format")
+        raise ctx.error(f"key is missing; the first line should be format = \"{expected_format}\"", key="format")
+    if fmt != expected_format:
+        raise ctx.error(f"unknown format {fmt!r}; this version of gfimu reads {expected_format!r}", key="format")
     name = doc.get("name", "array")
     if not isinstance(name, str):
         raise ctx.error(f"expected a string, got {name!r}", key="name")
@@ -171,10 +177,13 @@ def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | Non
             raise ctx.error(f"{acc_name!r} is also the name of accelerometers[{seen[acc_name]}]; names must be unique",
                             t, i, "name")
         seen[acc_name] = i
-        if "position_m" not in a:
+        if "position_m" not in a and not positions_required:
+            position = np.zeros(3)
+        elif "position_m" not in a:
             raise ctx.error(f"accelerometer {acc_name!r} has no position_m (3 numbers, in metres, in the body frame)",
                             t, i)
-        position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
+        else:
+            position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
         rot = _rotation(ctx, a["rotation_body_sensor"], i, acc_name) if "rotation_body_sensor" in a else np.eye(3)
         axes = a.get("axes", ["x", "y", "z"])
         if (not isinstance(axes, list) or not axes or not all(isinstance(x, str) for x in axes)

@@ -25,6 +25,9 @@ class Conversion:
     """The :class:`gfimu.log.Log` read."""
     report: tuple[str, ...] = ()
     """Human-readable lines: packets, gaps, dropped or repaired samples, alignment."""
+    unplaced: tuple[str, ...] = ()
+    """Accelerometers whose position and rotation the recording does not give (placed at the origin,
+    unrotated): ``gfimu convert`` refuses to write them unless ``--extrinsics`` gives their places."""
 
 
 @dataclass(frozen=True)
