@@ -34,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         fp.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings before writing")
         before = {a.dest for a in fp._actions}
         reader.add_arguments(fp)
-        fp.set_defaults(func=run, reader_options=[a.dest for a in fp._actions if a.dest not in before])
+        fp.set_defaults(func=run, reader_options=[a.dest for a in fp._actions if a.dest not in before],
+                        reader_inputs=list(reader.input_options))
 
 
 def run(args) -> int:
@@ -45,7 +46,8 @@ def run(args) -> int:
     options = {dest: getattr(args, dest) for dest in args.reader_options}
     if not Path(args.input).exists():
         raise CLIError(f"{args.input}: no such file or folder")
-    prepare_log_folder(args.out, [args.input, args.calibration], force=args.force)
+    prepare_log_folder(args.out, [args.input, args.calibration] + [getattr(args, d) for d in args.reader_inputs],
+                       force=args.force)
     conversion = read_recording(args.format, args.input, **options)
     log = conversion.log
     for line in conversion.report:

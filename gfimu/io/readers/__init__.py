@@ -34,7 +34,8 @@ class Reader:
     ``add_arguments(parser)`` adds the format's own options (the input path
     and ``--out`` are added by the command line); ``read(path, **options)``
     returns a :class:`Conversion`, with ``options`` named as the arguments'
-    destinations.
+    destinations. ``input_options`` names the destinations of options that
+    are input files, which the output must never replace.
     """
 
     name: str
@@ -42,6 +43,7 @@ class Reader:
     read: Callable[..., Conversion]
     add_arguments: Callable[[argparse.ArgumentParser], None] = field(default=lambda parser: None)
     input_help: str = "the recording to read"
+    input_options: tuple[str, ...] = ()
 
 
 def reader_names() -> list[str]:
