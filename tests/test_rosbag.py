@@ -7,8 +7,8 @@ truth readings at every time of the converted log's grid are known exactly.
 
 from __future__ import annotations
 
-import os
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +17,7 @@ import pytest
 from gfimu import io as gio
 from gfimu.array import Accelerometer, SensorArray, cube_array
 from gfimu.cli import main
-from gfimu.io.errors import LogFormatError
+from gfimu.io.errors import LogFormatError, LogGapWarning
 from gfimu.io.readers import rosbag as rb
 from gfimu.log import Log
 from gfimu.rotations import matrix_from_rotation_vector
@@ -270,14 +270,249 @@ def interpolation_cost(tmp_path, capsys, duration_s: float) -> tuple[float, floa
     return smoother_rmse(converted), smoother_rmse(direct)
 
 
-def test_asynchronous_bag_smoother_accuracy_short(tmp_path, capsys):
-    via_bag, direct = interpolation_cost(tmp_path, capsys, 3.0)
-    print(f"omega RMSE: converted {via_bag:.4f} rad/s, direct {direct:.4f} rad/s, ratio {via_bag / direct:.3f}")
-    assert via_bag < 1.5 * direct
-
-
 @pytest.mark.slow
 def test_asynchronous_bag_smoother_accuracy_10s(tmp_path, capsys):
     via_bag, direct = interpolation_cost(tmp_path, capsys, 10.0)
     print(f"omega RMSE: converted {via_bag:.4f} rad/s, direct {direct:.4f} rad/s, ratio {via_bag / direct:.3f}")
     assert via_bag < 1.5 * direct
+
+
+def test_asynchronous_bag_smoother_accuracy_short(tmp_path, capsys):
+    via_bag, direct = interpolation_cost(tmp_path, capsys, 2.0)
+    print(f"omega RMSE: converted {via_bag:.4f} rad/s, direct {direct:.4f} rad/s, ratio {via_bag / direct:.3f}")
+    assert via_bag < 1.5 * direct
+
+
+# --- matching, gyro, covariances, gaps -------------------------------------------------------------
+
+def rotated_log(duration_s: float = 0.5, gyro: bool = False):
+    """Four triads turned every way, synchronous readings (and the true ω as the gyro)."""
+    from gfimu.array import Gyroscope
+
+    rng = np.random.default_rng(3)
+    accs = tuple(Accelerometer(f"s{i}", rng.uniform(-0.03, 0.03, 3), matrix_from_rotation_vector(rng.normal(size=3)),
+                               noise_std_mps2=NOISE_MPS2) for i in range(4))
+    array = SensorArray(accs, "rotated", Gyroscope(0.01) if gyro else None)
+    return simulate("random3d", array=array, rate_hz=500.0, duration_s=duration_s, seed=2)
+
+
+def sync_streams(log, topic=None, gyro_from=(), accel_cov=None, gyro_cov=None):
+    out = []
+    for i, a in enumerate(log.array.accelerometers):
+        s = {"topic": topic or f"/imu/{a.name}", "frame_id": a.name, "stamps_ns": log.timestamps_ns + T0_NS,
+             "accel": log.accel_mps2[:, 3 * i:3 * i + 3], "accel_cov": accel_cov, "gyro_cov": gyro_cov}
+        if i in gyro_from:  # angular velocity in the sensor frame: R_BS^T ω_B
+            s["gyro"] = log.truth.omega_b_radps @ np.asarray(a.rotation_body_sensor)
+        out.append(s)
+    return out
+
+
+@pytest.mark.parametrize("one_topic", [True, False])
+def test_frame_id_matches_the_accelerometer_name(tmp_path, one_topic, capsys):
+    log = rotated_log()
+    streams = sync_streams(log, topic="/imu" if one_topic else None)[::-1]  # written in another order
+    bag = write_bag(tmp_path / "bag", "ros1", streams)
+    arr = array_file(tmp_path / "array.toml", log.array, topics=False)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    back = gio.read_log(tmp_path / "log")
+    assert np.array_equal(back.accel_mps2, log.accel_mps2)
+    assert back.array.gyroscope is None and back.gyro_b_radps is None
+    assert ("s2: frame_id 's2' on /imu (frame_id 's2')" if one_topic else "s2: frame_id 's2' on /imu/s2") in out
+
+
+def test_with_gyro_mean_in_the_body_frame_and_covariances_as_stds(tmp_path, capsys):
+    log = rotated_log(gyro=True)
+    gyro_cov = np.diag([1e-4, 4e-4, 2.5e-5]).ravel()
+    streams = sync_streams(log, gyro_from=(0, 1, 3), accel_cov=np.diag([0.0025, 0.0049, 0.0121]).ravel(),
+                           gyro_cov=gyro_cov)
+    bag = write_bag(tmp_path / "bag", "sqlite3", streams)
+    arr = array_file(tmp_path / "array.toml", replace(log.array, gyroscope=None), noise=False)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log"), "--with-gyro"], capsys)
+    assert rc == 0, err
+    back = gio.read_log(tmp_path / "log")
+    np.testing.assert_allclose(back.gyro_b_radps, log.truth.omega_b_radps, rtol=0, atol=1e-12)
+    assert "gyro: mean angular velocity in B of 3 stream(s) (s0, s1, s3)" in out
+    assert "not provided (angular_velocity_covariance[0] = -1) by s2" in out
+    std = float(np.sqrt((0.0025 + 0.0049 + 0.0121) / 3))
+    assert [a.noise_std_mps2 for a in back.array.accelerometers] == [pytest.approx(std, rel=1e-12)] * 4
+    # the mean of 3 gyros: variance (mean of the diagonal) / 3
+    assert back.array.gyroscope.noise_std_radps == pytest.approx(float(np.sqrt(np.mean(np.diag(gyro_cov.reshape(3, 3))) / 3)))
+    # without --with-gyro: no gyro channels; a noise_std_mps2 given in array.toml is kept
+    arr = array_file(tmp_path / "array2.toml", log.array, noise=True)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log2")], capsys)
+    assert rc == 0, err
+    back = gio.read_log(tmp_path / "log2")
+    assert back.gyro_b_radps is None and back.array.gyroscope is None
+    assert [a.noise_std_mps2 for a in back.array.accelerometers] == [NOISE_MPS2] * 4
+    assert f"s0: noise_std_mps2 0.07 kept from {arr} (linear_acceleration_covariance says {std:.6g})" in out
+
+
+def test_with_gyro_needs_a_gyro(tmp_path, capsys):
+    log = rotated_log()
+    bag = write_bag(tmp_path / "bag", "mcap", sync_streams(log))
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log"), "--with-gyro"], capsys)
+    assert rc == 2 and not (tmp_path / "log").exists()
+    assert err.count("\n") == 1 and f"error: {bag}: --with-gyro: no Imu stream of the array provides angular_velocity" in err
+
+
+def test_gaps_are_counted_and_long_ones_become_log_gaps(tmp_path, capsys):
+    log = simulate("random3d", array=cube_array(0.025, noise_std_mps2=NOISE_MPS2), rate_hz=500.0, duration_s=1.0,
+                   seed=1)
+    streams = sync_streams(log)
+    streams[1] = {**streams[1], "stamps_ns": np.delete(streams[1]["stamps_ns"], [100]),
+                  "accel": np.delete(streams[1]["accel"], [100], axis=0)}  # one message dropped: bridged
+    cut = np.arange(300, 320)
+    streams[2] = {**streams[2], "stamps_ns": np.delete(streams[2]["stamps_ns"], cut),
+                  "accel": np.delete(streams[2]["accel"], cut, axis=0)}  # 20 dropped: a gap of the log
+    bag = write_bag(tmp_path / "bag", "ros1", streams)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert "a2: topic /imu/a2 (frame_id 'a2'), 499 message(s) at 500.00 Hz; 1 gap(s), 1 message(s) missing (1 at 0.198 s)" in out
+    assert "a3: topic /imu/a3 (frame_id 'a3'), 480 message(s) at 500.00 Hz; 1 gap(s), 20 message(s) missing (20 at 0.598 s)" in out
+    assert "gaps over 3 periods: 1, left out as time gaps of the log: 0.598 s to 0.640 s (20 sample(s))" in out
+    with pytest.warns(LogGapWarning, match="1 gap"):
+        back = gio.read_log(tmp_path / "log")
+    assert len(back) == 480
+    assert np.array_equal(back.timestamps_ns, np.delete(log.timestamps_ns, cut) + T0_NS)
+    keep = np.delete(np.arange(500), cut)
+    # a2's dropped message is interpolated from its neighbours; everything else is read as written
+    expected = log.accel_mps2[keep].copy()
+    expected[100, 3:6] = 0.5 * (log.accel_mps2[99, 3:6] + log.accel_mps2[101, 3:6])
+    np.testing.assert_allclose(back.accel_mps2, expected, rtol=0, atol=1e-12)
+    assert [(s.start, s.stop) for s in back.segments()] == [(0, 300), (300, 480)]
+    # a longer bridge: --max-gap-periods 30 interpolates over the 20 missing messages too
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log2"), "--max-gap-periods", "30"],
+                           capsys)
+    assert rc == 0 and len(gio.read_log(tmp_path / "log2")) == 500 and "gaps over 30 periods: none" in out
+
+
+# --- bad inputs: one line naming the file, exit 2, nothing written ----------------------------------
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory):
+    d = tmp_path_factory.mktemp("good")
+    log = simulate("random3d", array=cube_array(0.025, noise_std_mps2=NOISE_MPS2), rate_hz=500.0, duration_s=0.2,
+                   seed=1)
+    return log, {kind: write_bag(d / kind, kind, sync_streams(log)) for kind in KINDS}
+
+
+def refused(argv: list[str], out_dir: Path, capsys, *parts: str, status: int = 2) -> str:
+    rc, out, err = convert([*argv, "--out", str(out_dir)], capsys)
+    assert rc == status, err
+    assert err.count("\n") == 1 and err.startswith("gfimu convert: error: ") and "Traceback" not in err, err
+    for part in parts:
+        assert part in err, err
+    assert not out_dir.exists()
+    return err
+
+
+def test_bag_without_imu_topics(tmp_path, capsys):
+    bag = tmp_path / "strings.bag"
+    with Writer1(bag) as w:
+        c = w.add_connection("/status", "std_msgs/msg/String", typestore=TS1)
+        w.write(c, 1, TS1.serialize_ros1(TS1.types["std_msgs/msg/String"](data="x"), "std_msgs/msg/String"))
+    arr = array_file(tmp_path / "array.toml", cube_array(0.025))
+    refused([str(bag), "--array", str(arr)], tmp_path / "log", capsys,
+            f"{bag}: no sensor_msgs/msg/Imu topic in this ROS 1 bag (topics: /status [std_msgs/msg/String])")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_topic_missing_from_the_bag(tmp_path, good, kind, capsys):
+    log, bags = good
+    accs = list(log.array.accelerometers)
+    accs[2] = Accelerometer("a3", accs[2].position_m, topic="/imu/a9")
+    arr = tmp_path / "array.toml"
+    gio.write_array_toml(SensorArray(tuple(accs)), arr)
+    refused([str(bags[kind]), "--array", str(arr)], tmp_path / "log", capsys,
+            f"{arr}: accelerometers[2].topic: '/imu/a9' (accelerometer 'a3') is not in {bags[kind]}",
+            "Imu topics: /imu/a1, /imu/a2, /imu/a3, /imu/a4")
+
+
+def test_topic_of_another_type(tmp_path, good, capsys):
+    log, bags = good
+    accs = list(log.array.accelerometers)
+    accs[0] = Accelerometer("a1", accs[0].position_m, topic="/status")
+    arr = tmp_path / "array.toml"
+    gio.write_array_toml(SensorArray(tuple(accs)), arr)
+    refused([str(bags["mcap"]), "--array", str(arr)], tmp_path / "log", capsys,
+            f"{arr}: accelerometers[0].topic: '/status' (accelerometer 'a1') holds std_msgs/msg/String")
+
+
+def test_no_frame_id_matches_an_accelerometer(tmp_path, good, capsys):
+    log, bags = good
+    accs = tuple(Accelerometer(n, a.position_m) for n, a in zip(("a1", "a2", "left", "a4"), log.array.accelerometers))
+    arr = tmp_path / "array.toml"
+    gio.write_array_toml(SensorArray(accs), arr)
+    refused([str(bags["bare-mcap"]), "--array", str(arr)], tmp_path / "log", capsys,
+            f"{bags['bare-mcap']}: no Imu message has header.frame_id 'left', the name of accelerometer 'left' of {arr}",
+            "frame_ids in the bag: 'a1', 'a2', 'a3', 'a4'")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_truncated_bag(tmp_path, good, kind, capsys):
+    log, bags = good
+    bag = bags[kind]
+    if bag.is_file():
+        target = tmp_path / bag.name
+        data = bag.read_bytes()
+        target.write_bytes(data[: len(data) * 3 // 4])
+        storage = target
+    else:
+        target = tmp_path / bag.name
+        shutil.copytree(bag, target)
+        (storage,) = [p for p in target.iterdir() if p.suffix != ".yaml"]
+        data = storage.read_bytes()
+        storage.write_bytes(data[: len(data) * 3 // 4])
+    arr = array_file(tmp_path / "array.toml", log.array)
+    refused([str(target), "--array", str(arr)], tmp_path / "log", capsys, f"{target}: cannot read this",
+            "(corrupt or truncated?)")
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("notes.txt", b"hello", "not a ROS bag (expected a ROS 1 .bag file"),
+    ("empty.bag", b"", "not a ROS bag (expected a ROS 1 .bag file"),
+    ("folder", None, "not a ROS bag: a folder without metadata.yaml"),
+    ("noise.bag", b"#ROSBAG V2.0\n" + bytes(range(256)) * 8, "cannot read this ROS 1 bag (corrupt or truncated?)"),
+    ("bag.mcap.bak", b"\x89MCAP0\r\n" + bytes(64), "an MCAP file whose name does not end in .mcap"),
+])
+def test_a_path_that_is_not_a_bag(tmp_path, good, name, content, message, capsys):
+    log, _ = good
+    path = tmp_path / name
+    if content is None:
+        path.mkdir()
+    else:
+        path.write_bytes(content)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    refused([str(path), "--array", str(arr)], tmp_path / "log", capsys, f"{path}: {message}")
+
+
+def test_missing_bag_and_array(tmp_path, good, capsys):
+    log, bags = good
+    refused([str(tmp_path / "none.bag"), "--array", str(tmp_path / "a.toml")], tmp_path / "log", capsys,
+            f"{tmp_path / 'none.bag'}: no such file or folder")
+    refused([str(bags["ros1"]), "--array", str(tmp_path / "a.toml")], tmp_path / "log", capsys,
+            f"{tmp_path / 'a.toml'}: file not found")
+
+
+def test_the_array_file_is_an_input_never_overwritten(tmp_path, good, capsys):
+    log, bags = good
+    out = tmp_path / "log"
+    out.mkdir()
+    arr = array_file(out / "array.toml", log.array)
+    before = arr.read_bytes()
+    rc, _, err = convert([str(bags["ros1"]), "--array", str(arr), "--out", str(out), "--force"], capsys)
+    assert rc == 2 and "is an input of this command" in err and arr.read_bytes() == before
+    assert sorted(p.name for p in out.iterdir()) == ["array.toml"]
+
+
+def test_without_the_rosbags_package(tmp_path, good, monkeypatch, capsys):
+    log, bags = good
+    arr = array_file(tmp_path / "array.toml", log.array)
+    for name in [m for m in list(__import__("sys").modules) if m == "rosbags" or m.startswith("rosbags.")]:
+        monkeypatch.delitem(__import__("sys").modules, name)
+    monkeypatch.setitem(__import__("sys").modules, "rosbags", None)
+    refused([str(bags["ros1"]), "--array", str(arr)], tmp_path / "log", capsys,
+            "reading ROS bags needs the rosbags package: pip install 'gfimu[rosbag]'", status=1)
