@@ -146,10 +146,12 @@ def write_bag(path: Path, kind: str, streams: list[dict], extra_topic: bool = Tr
                 ts.types["std_msgs/msg/String"](data="ok"), "std_msgs/msg/String")
             w.write(other, int(streams[0]["stamps_ns"][0]), data)
         for s in streams:
+            # received 0.3 ms after the stamp unless given
+            record = s.get("record_ns", np.asarray(s["stamps_ns"]) + 300_000)
             for k, t in enumerate(s["stamps_ns"]):
                 gyro = None if s.get("gyro") is None else s["gyro"][k]
                 msg = imu_message(ts, int(t), s["frame_id"], s["accel"][k], gyro, s.get("accel_cov"), s.get("gyro_cov"))
-                events.append((int(t) + 300_000, conns[s["topic"]], ser(msg)))  # received 0.3 ms after the stamp
+                events.append((int(record[k]), conns[s["topic"]], ser(msg)))
         events.sort(key=lambda e: e[0])
         for record_ns, conn, data in events:
             w.write(conn, record_ns, data)
@@ -387,6 +389,30 @@ def test_gaps_are_counted_and_long_ones_become_log_gaps(tmp_path, capsys):
     rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log2"), "--max-gap-periods", "30"],
                            capsys)
     assert rc == 0 and len(gio.read_log(tmp_path / "log2")) == 500 and "gaps over 30 periods: none" in out
+
+
+def test_out_of_order_repeated_and_zero_stamps(tmp_path, capsys):
+    log = simulate("random3d", array=cube_array(0.025, noise_std_mps2=NOISE_MPS2), rate_hz=500.0, duration_s=0.5,
+                   seed=1)
+    streams = sync_streams(log)
+    s = streams[0]
+    order = np.arange(250)
+    order[[10, 11]] = [11, 10]  # recorded in swapped order
+    order = np.concatenate([order[:41], [40, 40], order[41:]])  # message 40 recorded three times
+    streams[0] = {**s, "stamps_ns": s["stamps_ns"][order], "accel": s["accel"][order],
+                  "record_ns": T0_NS + 1_000 * np.arange(order.size)}
+    for k in (1, 2, 3):  # header stamps never set: the record times are the sample times
+        streams[k] = {**streams[k], "record_ns": streams[k]["stamps_ns"], "stamps_ns": np.zeros(250, np.int64)}
+    bag = write_bag(tmp_path / "bag", "mcap", streams)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert "a1: topic /imu/a1 (frame_id 'a1'), 250 message(s) at 500.00 Hz; 0 gap(s), 0 message(s) missing; " \
+           "2 duplicate stamp(s) dropped; 1 out of order (sorted)" in out
+    assert out.count("header stamps all zero: the bag's record times are used") == 3
+    back = gio.read_log(tmp_path / "log")
+    assert np.array_equal(back.timestamps_ns, log.timestamps_ns + T0_NS)
+    assert np.array_equal(back.accel_mps2, log.accel_mps2)
 
 
 # --- bad inputs: one line naming the file, exit 2, nothing written ----------------------------------

@@ -198,8 +198,28 @@ def _bag_kind(path: Path) -> str:
                          "folder with metadata.yaml, or an .mcap or .db3 file)", path)
 
 
-def _messages(path: Path):
-    """(kind, {topic: msgtype}, {topic: list of (record_ns, msg)} of the Imu topics) read from the bag."""
+@dataclass(frozen=True)
+class TopicMessages:
+    """The fields of one topic's Imu messages that gfimu uses, in the bag's order."""
+
+    record_ns: np.ndarray  # (n,) int64 time the bag recorded each message
+    stamp_ns: np.ndarray  # (n,) int64 header.stamp
+    frame_code: np.ndarray  # (n,) int index into ``frame_ids``
+    frame_ids: tuple[str, ...]
+    fields: np.ndarray  # (n, 24) linear_acceleration, angular_velocity, their 9-element covariances
+
+    def __len__(self) -> int:
+        return int(self.stamp_ns.size)
+
+    def frame(self, name: str) -> np.ndarray:
+        """(n,) True where header.frame_id is ``name``."""
+        return self.frame_code == self.frame_ids.index(name) if name in self.frame_ids else np.zeros(len(self), bool)
+
+
+def _messages(path: Path) -> tuple[str, dict[str, str], dict[str, TopicMessages]]:
+    """(kind, {topic: msgtype}, {Imu topic: its messages}) read from the bag."""
+    from array import array as packed
+
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -210,42 +230,48 @@ def _messages(path: Path):
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             topics = {name: info.msgtype for name, info in reader.topics.items()}
             imu = [c for c in reader.connections if c.msgtype == IMU_TYPE]
-            out: dict[str, list] = {c.topic: [] for c in imu}
+            rows = {c.topic: (packed("q"), packed("q"), packed("l"), {}, packed("d")) for c in imu}
             if imu:
                 for conn, record_ns, raw in reader.messages(connections=imu):
-                    out[conn.topic].append((record_ns, reader.deserialize(raw, conn.msgtype)))
+                    m = reader.deserialize(raw, conn.msgtype)
+                    rec, stamp, code, frames, fields = rows[conn.topic]
+                    rec.append(record_ns)
+                    stamp.append(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
+                    code.append(frames.setdefault(m.header.frame_id, len(frames)))
+                    a, w = m.linear_acceleration, m.angular_velocity
+                    fields.extend((a.x, a.y, a.z, w.x, w.y, w.z))
+                    fields.extend(np.asarray(m.linear_acceleration_covariance, float).reshape(9))
+                    fields.extend(np.asarray(m.angular_velocity_covariance, float).reshape(9))
     except (OSError, MissingExtraError):
         raise
     except Exception as exc:  # noqa: BLE001 - a corrupt bag fails in many ways inside rosbags
         text = " ".join(str(exc).split()) or type(exc).__name__
         raise LogFormatError(f"cannot read this {kind} (corrupt or truncated?): {text}", path) from None
+    out = {t: TopicMessages(np.array(rec, dtype=np.int64), np.array(stamp, dtype=np.int64),
+                            np.array(code, dtype=np.int64), tuple(frames), np.array(fields, dtype=float).reshape(-1, 24))
+           for t, (rec, stamp, code, frames, fields) in rows.items()}
     return kind, topics, out
 
 
-def _stream(source: str, topics: list[str], records: list) -> ImuStream:
-    """An :class:`ImuStream` of (record_ns, Imu message) pairs."""
-    n = len(records)
-    stamps = np.array([m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for _, m in records], dtype=np.int64)
-    from_bag = bool(n) and not np.any(stamps)
+def _stream(source: str, topics: list[str], parts: list[tuple[TopicMessages, np.ndarray]]) -> ImuStream:
+    """An :class:`ImuStream` of the messages ``parts`` select (topic, boolean mask), in record order."""
+    record = np.concatenate([m.record_ns[sel] for m, sel in parts])
+    stamps = np.concatenate([m.stamp_ns[sel] for m, sel in parts])
+    fields = np.concatenate([m.fields[sel] for m, sel in parts])
+    frames = sorted({m.frame_ids[c] for m, sel in parts for c in np.unique(m.frame_code[sel])})
+    by_record = np.argsort(record, kind="stable")
+    stamps, record, fields = stamps[by_record], record[by_record], fields[by_record]
+    from_bag = bool(stamps.size) and not np.any(stamps)
     if from_bag:
-        stamps = np.array([r for r, _ in records], dtype=np.int64)
-    acc = np.array([[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z] for _, m in records],
-                   dtype=float).reshape(n, 3)
-    gyr = np.array([[m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] for _, m in records],
-                   dtype=float).reshape(n, 3)
-    acov = np.array([np.asarray(m.linear_acceleration_covariance, float) for _, m in records]).reshape(n, 9)
-    gcov = np.array([np.asarray(m.angular_velocity_covariance, float) for _, m in records]).reshape(n, 9)
+        stamps = record
     order = np.argsort(stamps, kind="stable")
     out_of_order = int(np.count_nonzero(np.diff(stamps) < 0))
     stamps = stamps[order]
     first = np.concatenate([[True], np.diff(stamps) > 0])
-    idx = order[first]
+    f = fields[order[first]]
     return ImuStream(
-        source,
-        tuple(topics),
-        tuple(sorted({m.header.frame_id for _, m in records})),
-        stamps[first], acc[idx], gyr[idx], gcov[idx, 0] != -1,
-        _diagonal_variance(acov[idx]), _diagonal_variance(gcov[idx]),
+        source, tuple(topics), tuple(frames), stamps[first], f[:, 0:3], f[:, 3:6], f[:, 15] != -1,
+        _diagonal_variance(f[:, 6:15]), _diagonal_variance(f[:, 15:24]),
         duplicates=int(np.count_nonzero(~first)), out_of_order=out_of_order, stamps_from_bag=from_bag,
     )
 
@@ -273,20 +299,22 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                 raise LogFormatError(f"accelerometers[{i}].topic: {acc.topic!r} (accelerometer {acc.name!r}) holds "
                                      f"{topics[acc.topic]} in {path}, not {IMU_TYPE} (its Imu topics: {imu_topics})",
                                      array_path)
-            if not records[acc.topic]:
+            if not len(records[acc.topic]):
                 raise LogFormatError(f"topic {acc.topic!r} (accelerometer {acc.name!r}) holds no message", path)
-            streams.append(_stream(f"topic {acc.topic}", [acc.topic], records[acc.topic]))
+            everything = np.ones(len(records[acc.topic]), bool)
+            streams.append(_stream(f"topic {acc.topic}", [acc.topic], [(records[acc.topic], everything)]))
         else:
-            hits = [(t, r) for t in sorted(records) for r in records[t] if r[1].header.frame_id == acc.name]
+            hits = [(t, records[t].frame(acc.name)) for t in sorted(records)]
+            hits = [(t, sel) for t, sel in hits if sel.any()]
             if not hits:
-                frames = sorted({m.header.frame_id for rs in records.values() for _, m in rs})
+                frames = sorted({f for m in records.values() for f in m.frame_ids})
                 raise LogFormatError(
                     f"no Imu message has header.frame_id {acc.name!r}, the name of accelerometer {acc.name!r} of "
                     f"{array_path}, which gives no topic (frame_ids in the bag: "
                     f"{', '.join(repr(f) for f in frames) or 'none'}; Imu topics: {imu_topics})", path)
-            on = sorted({t for t, _ in hits})
-            hits.sort(key=lambda h: h[1][0])
-            streams.append(_stream(f"frame_id {acc.name!r} on {', '.join(on)}", on, [r for _, r in hits]))
+            on = [t for t, _ in hits]
+            streams.append(_stream(f"frame_id {acc.name!r} on {', '.join(on)}", on,
+                                   [(records[t], sel) for t, sel in hits]))
     for acc, s in zip(array.accelerometers, streams):
         if s.stamps_ns.size < 2:
             raise LogFormatError(f"accelerometer {acc.name!r} ({s.source}): {s.stamps_ns.size} message(s) with "
