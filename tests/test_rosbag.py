@@ -515,6 +515,14 @@ def test_a_path_that_is_not_a_bag(tmp_path, good, name, content, message, capsys
     refused([str(path), "--array", str(arr)], tmp_path / "log", capsys, f"{path}: {message}")
 
 
+@pytest.mark.parametrize("value", ["1", "nan", "-3"])
+def test_max_gap_periods_out_of_range(tmp_path, good, value, capsys):
+    log, bags = good
+    arr = array_file(tmp_path / "array.toml", log.array)
+    refused([str(bags["ros1"]), "--array", str(arr), "--max-gap-periods", value], tmp_path / "log", capsys,
+            "--max-gap-periods: expected a number >= 1.5")
+
+
 def test_missing_bag_and_array(tmp_path, good, capsys):
     log, bags = good
     refused([str(tmp_path / "none.bag"), "--array", str(tmp_path / "a.toml")], tmp_path / "log", capsys,

@@ -14,7 +14,7 @@ extrapolated). The interpolation of stream y at a grid time t between its stamps
 t_{k+1} is y(t) = y_k + (t - t_k) / (t_{k+1} - t_k) (y_{k+1} - y_k). A stream whose stamps are
 the grid itself is copied exactly. Linear rather than cubic: on the simulated random motion at
 500 Hz both cost less than the sensor noise, and linear cannot overshoot a clipped or spiky
-reading (the measured costs are in ``docs/log-format.md``).
+reading (the measured costs are in ``docs/formats.md``).
 
 Gaps: a step of a stream's stamps over 1.5 of its median period is a gap (its missing messages
 are counted in the report, with where they are). A gap up to ``max_gap_periods`` periods is
