@@ -385,7 +385,8 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                      + (f"; noise_std_radps {gstd:.6g} from angular_velocity_covariance" if gstd is not None else ""))
         left = [a.name for k, a in enumerate(array.accelerometers) if k not in gyro_streams]
         if left:
-            lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1) by {', '.join(left)}")
+            lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1) by {', '.join(left)}; a stream "
+                         "is used only when all its messages provide it")
     elif array.gyroscope is not None:
         gyroscope = None
         lines.append(f"gyro: the [gyroscope] of {array_path} is left out of the log (no --with-gyro)")
