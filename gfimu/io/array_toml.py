@@ -2,8 +2,8 @@
 
 Reading uses :mod:`tomllib`; every problem raises
 :class:`~gfimu.io.errors.LogFormatError` naming the key and its line. Unknown
-keys are ignored (for example ``topic``, the message topic an accelerometer
-was recorded on, which the CSV reader does not need).
+keys are ignored. ``topic`` (the message topic an accelerometer was recorded
+on) is read and written back, and used only by the recording readers.
 
 Writing uses :func:`format_toml`, the only TOML writer of gfimu (also used
 for ``calibration.toml``): :mod:`tomli_w` with short arrays of numbers or
@@ -190,8 +190,12 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
                 or len(set(axes)) != len(axes) or any(x not in ("x", "y", "z") for x in axes)):
             raise ctx.error(f"expected a list of distinct axes among \"x\", \"y\", \"z\", got {axes!r}", t, i, "axes")
         noise = _optional_std(ctx, a, t, i, "noise_std_mps2")
+        topic = a.get("topic")
+        if topic is not None and (not isinstance(topic, str) or not topic.strip() or topic != topic.strip()):
+            raise ctx.error(f"expected the message topic as a non-empty string without surrounding spaces, "
+                            f"got {topic!r}", t, i, "topic")
         try:
-            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise))
+            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise, topic))
         except ArrayModelError as exc:
             raise ctx.error(str(exc), t, i) from None
     gyro = inclinometer = body = None
@@ -301,6 +305,8 @@ def array_to_dict(array: SensorArray) -> dict:
         entry["axes"] = list(a.axes)
         if a.noise_std_mps2 is not None:
             entry["noise_std_mps2"] = float(a.noise_std_mps2)
+        if a.topic is not None:
+            entry["topic"] = a.topic
         accs.append(entry)
     doc["accelerometers"] = accs
     if array.gyroscope is not None:

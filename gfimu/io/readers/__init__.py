@@ -37,7 +37,8 @@ class Reader:
     ``add_arguments(parser)`` adds the format's own options (the input path
     and ``--out`` are added by the command line); ``read(path, **options)``
     returns a :class:`Conversion`, with ``options`` named as the arguments'
-    destinations.
+    destinations. Options whose value names an existing file are inputs,
+    which ``gfimu convert`` never lets the output replace.
     """
 
     name: str
