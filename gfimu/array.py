@@ -25,7 +25,9 @@ class Accelerometer:
     """One accelerometer: 1, 2 or 3 axes, at ``position_m`` in B.
 
     ``rotation_body_sensor`` maps sensor-frame vectors into B:
-    ``v_B = rotation_body_sensor @ v_sensor``.
+    ``v_B = rotation_body_sensor @ v_sensor``. ``topic`` names the message
+    topic (or stream) the sensor was recorded on, when known; the estimators
+    do not use it.
     """
 
     name: str
@@ -33,6 +35,7 @@ class Accelerometer:
     rotation_body_sensor: np.ndarray = field(default_factory=lambda: np.eye(3))
     axes: tuple[str, ...] = ("x", "y", "z")
     noise_std_mps2: float | None = None
+    topic: str | None = None
 
     def __post_init__(self) -> None:
         pos = np.asarray(self.position_m, dtype=float).reshape(-1)
@@ -50,6 +53,8 @@ class Accelerometer:
             raise ArrayModelError(f"accelerometer {self.name!r}: axes must be distinct among x, y, z; got {list(axes)}")
         if self.noise_std_mps2 is not None and not (np.isfinite(self.noise_std_mps2) and self.noise_std_mps2 >= 0):
             raise ArrayModelError(f"accelerometer {self.name!r}: noise_std_mps2 must be >= 0")
+        if self.topic is not None and (not isinstance(self.topic, str) or not self.topic.strip()):
+            raise ArrayModelError(f"accelerometer {self.name!r}: topic must be a non-empty string, got {self.topic!r}")
         pos.setflags(write=False)
         rot = rot.copy()
         rot.setflags(write=False)

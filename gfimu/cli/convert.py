@@ -33,6 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="write into a non-empty --out folder: its array.toml, imu.csv, truth.csv and "
                              "reference.csv are replaced or removed, other files are kept")
         fp.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings before writing")
+        fp.add_argument("--extrinsics", default=None, metavar="KALIBR.yaml",
+                        help="Kalibr IMU-chain YAML (imu0, imu1, ... each with T_i_b, a 4x4 body-to-IMU transform): "
+                             "replaces every accelerometer's position [m] and rotation (default: none, the "
+                             "recording's own geometry)")
         add_no_progress(fp)
         before = {a.dest for a in fp._actions}
         reader.add_arguments(fp)
@@ -47,14 +51,27 @@ def run(args) -> int:
     options = {dest: getattr(args, dest) for dest in args.reader_options}
     if not Path(args.input).exists():
         raise CLIError(f"{args.input}: no such file or folder")
-    prepare_log_folder(args.out, [args.input, args.calibration], force=args.force)
+    option_files = [v for v in options.values() if isinstance(v, str) and Path(v).is_file()]
+    prepare_log_folder(args.out, [args.input, args.calibration, args.extrinsics, *option_files], force=args.force)
     from ..progress import steps
 
-    names = ["read the recording"] + (["apply the calibration"] if args.calibration else []) + ["write the log"]
+    names = (["read the recording"] + (["apply the extrinsics"] if args.extrinsics else [])
+             + (["apply the calibration"] if args.calibration else []) + ["write the log"])
     with steps(f"convert {args.format}", names, show_progress(args)) as bar:
         bar.step("read the recording")
         conversion = read_recording(args.format, args.input, **options)
         log = conversion.log
+        extrinsics_report: list[str] = []
+        if args.extrinsics:
+            from ..io.kalibr import apply_kalibr, read_kalibr
+
+            bar.step("apply the extrinsics")
+            array, extrinsics_report = apply_kalibr(log.array, read_kalibr(args.extrinsics), args.extrinsics)
+            log = log.replace(array=array)
+        elif conversion.unplaced:
+            raise CLIError(f"{args.input}: accelerometer(s) {', '.join(conversion.unplaced)} have no position or "
+                           "rotation; give them in the map (position_m, rotation_body_sensor), with --array, or "
+                           "with --extrinsics")
         if args.calibration:
             from ..calibration import apply_calibration, read_calibration
 
@@ -62,7 +79,7 @@ def run(args) -> int:
             log = apply_calibration(log, read_calibration(args.calibration))
         bar.step("write the log")
         gio.write_log(log, args.out)
-    for line in conversion.report:
+    for line in [*conversion.report, *extrinsics_report]:
         info(args, line, file=sys.stdout)
     if args.calibration:
         info(args, f"calibration applied: {args.calibration}", file=sys.stdout)

@@ -2,8 +2,8 @@
 
 Reading uses :mod:`tomllib`; every problem raises
 :class:`~gfimu.io.errors.LogFormatError` naming the key and its line. Unknown
-keys are ignored (for example ``topic``, the message topic an accelerometer
-was recorded on, which the CSV reader does not need).
+keys are ignored. ``topic`` (the message topic an accelerometer was recorded
+on) is read and written back, and used only by the recording readers.
 
 Writing uses :func:`format_toml`, the only TOML writer of gfimu (also used
 for ``calibration.toml``): :mod:`tomli_w` with short arrays of numbers or
@@ -124,12 +124,18 @@ def _rotation(ctx: _TomlContext, value, index: int, name: str) -> np.ndarray:
                     f"expected orthonormal rows, determinant +1)", "accelerometers", index, key)
 
 
-def parse_array_toml(text: str, path: str | os.PathLike = "array.toml") -> SensorArray:
-    """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line."""
-    return _parse(text, path)[0]
+def parse_array_toml(text: str, path: str | os.PathLike = "array.toml", *, expected_format: str = ARRAY_FORMAT,
+                     positions_required: bool = True) -> SensorArray:
+    """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line.
+
+    Another document holding the same ``[[accelerometers]]`` keys (a CSV column map) is read with its own
+    ``expected_format``; without ``positions_required`` an accelerometer without ``position_m`` sits at the
+    origin (its place is given elsewhere)."""
+    return _parse(text, path, expected_format, positions_required)[0]
 
 
-def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | None]:
+def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORMAT,
+           positions_required: bool = True) -> tuple[SensorArray, float | None]:
     """(array, declared rate_hz or None) from the text of an ``array.toml``."""
     path = Path(path)
     try:
@@ -140,9 +146,9 @@ def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | Non
     ctx = _TomlContext(path, text)
     fmt = doc.get("format")
     if fmt is None:
-        raise ctx.error(f"key is missing; the first line should be format = \"{ARRAY_FORMAT}\"", key="format")
-    if fmt != ARRAY_FORMAT:
-        raise ctx.error(f"unknown format {fmt!r}; this version of gfimu reads {ARRAY_FORMAT!r}", key="format")
+        raise ctx.error(f"key is missing; the first line should be format = \"{expected_format}\"", key="format")
+    if fmt != expected_format:
+        raise ctx.error(f"unknown format {fmt!r}; this version of gfimu reads {expected_format!r}", key="format")
     name = doc.get("name", "array")
     if not isinstance(name, str):
         raise ctx.error(f"expected a string, got {name!r}", key="name")
@@ -171,18 +177,25 @@ def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | Non
             raise ctx.error(f"{acc_name!r} is also the name of accelerometers[{seen[acc_name]}]; names must be unique",
                             t, i, "name")
         seen[acc_name] = i
-        if "position_m" not in a:
+        if "position_m" not in a and not positions_required:
+            position = np.zeros(3)
+        elif "position_m" not in a:
             raise ctx.error(f"accelerometer {acc_name!r} has no position_m (3 numbers, in metres, in the body frame)",
                             t, i)
-        position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
+        else:
+            position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
         rot = _rotation(ctx, a["rotation_body_sensor"], i, acc_name) if "rotation_body_sensor" in a else np.eye(3)
         axes = a.get("axes", ["x", "y", "z"])
         if (not isinstance(axes, list) or not axes or not all(isinstance(x, str) for x in axes)
                 or len(set(axes)) != len(axes) or any(x not in ("x", "y", "z") for x in axes)):
             raise ctx.error(f"expected a list of distinct axes among \"x\", \"y\", \"z\", got {axes!r}", t, i, "axes")
         noise = _optional_std(ctx, a, t, i, "noise_std_mps2")
+        topic = a.get("topic")
+        if topic is not None and (not isinstance(topic, str) or not topic.strip() or topic != topic.strip()):
+            raise ctx.error(f"expected the message topic as a non-empty string without surrounding spaces, "
+                            f"got {topic!r}", t, i, "topic")
         try:
-            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise))
+            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise, topic))
         except ArrayModelError as exc:
             raise ctx.error(str(exc), t, i) from None
     gyro = inclinometer = body = None
@@ -292,6 +305,8 @@ def array_to_dict(array: SensorArray) -> dict:
         entry["axes"] = list(a.axes)
         if a.noise_std_mps2 is not None:
             entry["noise_std_mps2"] = float(a.noise_std_mps2)
+        if a.topic is not None:
+            entry["topic"] = a.topic
         accs.append(entry)
     doc["accelerometers"] = accs
     if array.gyroscope is not None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import re
+from decimal import Decimal, InvalidOperation
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 
@@ -66,3 +67,31 @@ def unit_help(kind: str) -> str:
     canonical, accepted = UNITS[kind]
     others = [f"[{u}]" for u in accepted if u != canonical]
     return f"[{canonical}]" + (f" (or, converted: {', '.join(others)})" if others else "")
+
+
+def header_name_and_unit(field: str) -> tuple[str, str | None]:
+    """A column header split into its name and unit: ``a_x [m s^-2]`` and ``Acceleration x (m/s^2)`` give
+    the name and the unit text; a header without a bracketed or parenthesised unit gives ``(name, None)``.
+    A leading ``#`` (EuRoC's ``#timestamp [ns]``) and surrounding quotes are not part of the name."""
+    text = field.strip().strip('"').strip()
+    m = re.match(r"^(.*?)\s*(?:\[([^\[\]]*)\]|\(([^()]*)\))\s*$", text)
+    name, unit = (m.group(1), m.group(2) if m.group(2) is not None else m.group(3)) if m and m.group(1).strip() else (text, None)
+    return name.lstrip("#").strip(), None if unit is None else unit.strip()
+
+
+def time_unit_ns(unit: str) -> int:
+    """Nanoseconds per unit of a timestamp unit (``ns``, ``us``/``µs``, ``ms``, ``s`` in any accepted spelling);
+    KeyError if not one of them."""
+    return TIME_UNITS_NS[canonical_unit(unit)]
+
+
+def timestamp_ns(text: str, ns_per_unit: int) -> int:
+    """Integer nanoseconds of a timestamp written as decimal text in a unit of ``ns_per_unit`` ns, converted
+    exactly and rounded to the nearest nanosecond; ValueError if the text is not a finite number."""
+    try:
+        value = Decimal(text.strip()) * ns_per_unit
+    except InvalidOperation:
+        raise ValueError(f"timestamp {text.strip()!r} is not a number") from None
+    if not value.is_finite():
+        raise ValueError(f"timestamp {text.strip()!r} is not a finite number")
+    return int(value.to_integral_value())

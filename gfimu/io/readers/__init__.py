@@ -25,6 +25,9 @@ class Conversion:
     """The :class:`gfimu.log.Log` read."""
     report: tuple[str, ...] = ()
     """Human-readable lines: packets, gaps, dropped or repaired samples, alignment."""
+    unplaced: tuple[str, ...] = ()
+    """Accelerometers whose position and rotation the recording does not give (placed at the origin,
+    unrotated): ``gfimu convert`` refuses to write them unless ``--extrinsics`` gives their places."""
 
 
 @dataclass(frozen=True)
@@ -34,7 +37,8 @@ class Reader:
     ``add_arguments(parser)`` adds the format's own options (the input path
     and ``--out`` are added by the command line); ``read(path, **options)``
     returns a :class:`Conversion`, with ``options`` named as the arguments'
-    destinations.
+    destinations. Options whose value names an existing file are inputs,
+    which ``gfimu convert`` never lets the output replace.
     """
 
     name: str

@@ -1,0 +1,198 @@
+"""Kalibr extrinsics: the places of the accelerometers from a Kalibr IMU-chain YAML (``--extrinsics``).
+
+Kalibr's multi-IMU calibration writes one entry per IMU, ``imu0``, ``imu1``,
+..., each with ``T_i_b``, a 4×4 homogeneous matrix, and usually the
+``rostopic`` the IMU was recorded on. ``T_i_b`` maps body-frame coordinates
+to IMU i's frame::
+
+    p_i = R_i_b p_b + t_i_b        T_i_b = [[R_i_b, t_i_b], [0 0 0 1]]
+
+Kalibr's body frame is the frame of its reference IMU, ``imu0`` (its
+``T_i_b`` is the identity). So IMU i's origin, where ``p_i = 0``, lies in the
+body frame at ``p_b = -R_i_bᵀ t_i_b``, and a vector measured in IMU i's
+axes is ``v_b = R_i_bᵀ v_i`` in the body frame: ``position_m = -R_i_bᵀ t_i_b``
+and ``rotation_body_sensor = R_i_bᵀ`` in ``array.toml``.
+
+The YAML entries are matched to the array's accelerometers by topic (every
+entry's ``rostopic`` equal to one accelerometer's ``topic`` in array.toml, or
+to its name with or without a leading ``/``), else by name (entry ``imu1``
+for accelerometer ``imu1``), else by order; the report says which. pyyaml is
+imported only here (the ``kalibr`` extra).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..array import SensorArray
+from .array_toml import ROTATION_TOLERANCE
+from .errors import LogFormatError
+
+BOTTOM_ROW_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class KalibrImu:
+    """One entry of the IMU chain."""
+
+    key: str
+    topic: str | None
+    rotation_i_b: np.ndarray  # R_i_b: body -> IMU
+    translation_i_b_m: np.ndarray  # t_i_b
+    time_offset_s: float | None
+
+    @property
+    def position_b_m(self) -> np.ndarray:
+        """The IMU's origin in the body frame, ``-R_i_bᵀ t_i_b``."""
+        return -self.rotation_i_b.T @ self.translation_i_b_m
+
+    @property
+    def rotation_body_sensor(self) -> np.ndarray:
+        """``R_i_bᵀ``: ``v_b = R_i_bᵀ v_i``."""
+        return self.rotation_i_b.T.copy()
+
+
+def _load_yaml(path: Path):
+    try:
+        import yaml
+    except ImportError:
+        raise LogFormatError("reading Kalibr YAML needs pyyaml: pip install 'gfimu[kalibr]' (or pyyaml)",
+                             path) from None
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise LogFormatError("file not found", path) from None
+    except IsADirectoryError:
+        raise LogFormatError("is a folder, expected a Kalibr YAML file", path) from None
+    except UnicodeDecodeError as exc:
+        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path) from None
+    try:
+        return yaml.safe_load(text), text
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise LogFormatError(f"not valid YAML: {problem}", path, None if mark is None else mark.line + 1) from None
+
+
+def _line_of(text: str, key: str, after: int = 0) -> int | None:
+    """1-based line of the first ``key:`` on or after line ``after`` (None if not found)."""
+    for n, line in enumerate(text.splitlines()[max(after - 1, 0):], start=max(after, 1)):
+        if re.match(rf"\s*['\"]?{re.escape(key)}['\"]?\s*:", line):
+            return n
+    return None
+
+
+def _imu_number(key: str) -> int:
+    m = re.fullmatch(r"imu(\d+)", key)
+    return int(m.group(1)) if m else 1 << 30
+
+
+def parse_kalibr(doc, text: str, path: str | os.PathLike) -> list[KalibrImu]:
+    """The IMU entries of a loaded Kalibr YAML, in chain order (imu0, imu1, ...)."""
+    path = Path(path)
+    if not isinstance(doc, dict):
+        raise LogFormatError("expected a Kalibr IMU chain: entries imu0, imu1, ... each with T_i_b", path)
+    entries = [(k, v) for k, v in doc.items() if isinstance(v, dict)]
+    if not entries:
+        raise LogFormatError("no IMU entries (imu0, imu1, ... each with T_i_b, a 4x4 matrix)", path)
+    entries.sort(key=lambda kv: (_imu_number(str(kv[0])), list(doc).index(kv[0])))
+    out = []
+    for key, entry in entries:
+        key = str(key)
+        line = _line_of(text, key)
+        if "T_i_b" not in entry:
+            found = ", ".join(k for k in entry if str(k).startswith("T_")) or "none"
+            raise LogFormatError(f"{key}: has no T_i_b (the 4x4 body-to-IMU transform Kalibr's IMU chain holds; "
+                                 f"transforms found: {found})", path, line, key)
+        line = _line_of(text, "T_i_b", line or 0) or line
+        try:
+            m = np.array(entry["T_i_b"], dtype=float)
+        except (TypeError, ValueError):
+            m = np.zeros(0)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise LogFormatError(f"{key}.T_i_b: expected a 4x4 matrix of finite numbers (four rows of four), got "
+                                 f"{entry['T_i_b']!r}", path, line, f"{key}.T_i_b")
+        if np.max(np.abs(m[3] - [0.0, 0.0, 0.0, 1.0])) > BOTTOM_ROW_TOLERANCE:
+            raise LogFormatError(f"{key}.T_i_b: not a rigid transform: its bottom row is {m[3].tolist()}, expected "
+                                 "[0, 0, 0, 1]", path, line, f"{key}.T_i_b")
+        r = m[:3, :3]
+        deviation = float(np.max(np.abs(r @ r.T - np.eye(3))))
+        det = float(np.linalg.det(r))
+        if deviation > ROTATION_TOLERANCE or det < 0:
+            raise LogFormatError(f"{key}.T_i_b: not a rigid transform: its rotation part is not a rotation "
+                                 f"(R Rᵀ differs from the identity by {deviation:.3g}, determinant {det:.6g})",
+                                 path, line, f"{key}.T_i_b")
+        topic = entry.get("rostopic")
+        offset = entry.get("time_offset")
+        out.append(KalibrImu(key, topic if isinstance(topic, str) else None, r.copy(), m[:3, 3].copy(),
+                             float(offset) if isinstance(offset, (int, float)) else None))
+    return out
+
+
+def read_kalibr(path: str | os.PathLike) -> list[KalibrImu]:
+    """The IMU entries of a Kalibr IMU-chain YAML file."""
+    doc, text = _load_yaml(Path(path))
+    return parse_kalibr(doc, text, path)
+
+
+def _match(array: SensorArray, imus: list[KalibrImu]) -> tuple[list[int], str]:
+    """For each accelerometer, the index of its entry; and how they were matched."""
+    names = [a.name for a in array.accelerometers]
+    topics = [getattr(a, "topic", None) for a in array.accelerometers]
+    if all(imu.topic for imu in imus):
+        keys = []
+        for imu in imus:
+            t = imu.topic
+            hits = [i for i, (n, tp) in enumerate(zip(names, topics)) if tp == t or n in (t, t.lstrip("/"))]
+            keys.append(hits[0] if len(hits) == 1 else None)
+        if None not in keys and len(set(keys)) == len(keys):
+            return [keys.index(i) for i in range(len(names))], "by rostopic"
+    by_key = {imu.key: j for j, imu in enumerate(imus)}
+    if set(by_key) == set(names):
+        return [by_key[n] for n in names], "by name"
+    return list(range(len(names))), "by order"
+
+
+def apply_kalibr(array: SensorArray, imus: list[KalibrImu], path: str | os.PathLike = "kalibr.yaml"
+                 ) -> tuple[SensorArray, list[str]]:
+    """The array with every accelerometer's position and rotation from its Kalibr entry; and report lines."""
+    if len(imus) != len(array.accelerometers):
+        raise LogFormatError(f"has {len(imus)} IMU entr{'y' if len(imus) == 1 else 'ies'} "
+                             f"({', '.join(i.key for i in imus)}) but the array has {len(array.accelerometers)} "
+                             f"accelerometer(s) ({', '.join(a.name for a in array.accelerometers)}); one entry per "
+                             "accelerometer is needed", path)
+    order, how = _match(array, imus)
+    accs = []
+    lines = [f"extrinsics: {path}, Kalibr entries matched {how}; body frame = the frame of "
+             f"{imus[0].key} (Kalibr's reference IMU)"]
+    for acc, j in zip(array.accelerometers, order):
+        imu = imus[j]
+        accs.append(replace(acc, position_m=imu.position_b_m, rotation_body_sensor=imu.rotation_body_sensor))
+        lines.append(f"  {acc.name} <- {imu.key}" + (f" ({imu.topic})" if imu.topic else "")
+                     + f": position {np.round(imu.position_b_m, 6).tolist()} m")
+        if imu.time_offset_s:
+            lines.append(f"  {imu.key}: time_offset {imu.time_offset_s:g} s is not applied")
+    return replace(array, accelerometers=tuple(accs)), lines
+
+
+def kalibr_yaml(array: SensorArray, topics: list[str] | None = None) -> str:
+    """Kalibr IMU-chain YAML text of an array's accelerometer places (T_i_b from position and rotation)."""
+    import yaml
+
+    doc = {}
+    for k, acc in enumerate(array.accelerometers):
+        r_i_b = np.asarray(acc.rotation_body_sensor, dtype=float).T
+        t = np.eye(4)
+        t[:3, :3] = r_i_b
+        t[:3, 3] = -r_i_b @ np.asarray(acc.position_m, dtype=float)
+        entry = {"T_i_b": t.tolist()}
+        if topics is not None:
+            entry["rostopic"] = topics[k]
+        entry["time_offset"] = 0.0
+        doc[f"imu{k}"] = entry
+    return yaml.safe_dump(doc, sort_keys=False)

@@ -1,0 +1,716 @@
+"""Delimited text tables (phone apps, EuRoC, TUM-style whitespace files, a logger's own CSV): ``gfimu convert csv``.
+
+What the columns mean is said by a *column map*, a TOML document of format
+``gfimu-csv-map/1`` (``docs/convert.md``), or
+by a built-in preset (:data:`PRESETS`: ``euroc``, ``phyphox``,
+``sensorlogger``). The map names the time column and its unit, how the file
+is split (delimiter, comment prefix, header row, decimal mark) and, for each
+accelerometer axis and the optional gyroscope, the column (by name or
+0-based index), its unit and sign. The array's geometry comes either from the
+map itself (the keys of ``array.toml``'s ``[[accelerometers]]``) or from an
+``array.toml`` given with ``--array``; neither, for one accelerometer, puts it
+at the body origin, unrotated.
+
+Units come from the map or from the header (``a [m s^-2]``, ``Time (s)``) and
+are converted by :mod:`gfimu.io.units`; a column with no unit in either, or
+with two different ones, is refused. Sensors in different files (one file
+per sensor, as phone apps and EuRoC write) are brought onto the timestamps of
+the first accelerometer's file by linear interpolation
+(:func:`resample_linear`), over the time span all files share.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import Conversion, Reader
+from ...array import Gyroscope, SensorArray
+from ...log import Log
+from ...motion import Motion
+from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
+from ..errors import LogFormatError
+from ..units import header_name_and_unit, time_unit_ns, timestamp_ns, unit_factor, unit_help
+
+MAP_FORMAT = "gfimu-csv-map/1"
+AXES = ("x", "y", "z")
+DELIMITERS = {",": ",", ";": ";", "\t": "\t", "tab": "\t", "|": "|", " ": None, "whitespace": None}
+
+PRESETS: dict[str, str] = {
+    "euroc": f'''format = "{MAP_FORMAT}"
+name = "euroc-imu0"
+# mav0/imu0/data.csv of the EuRoC MAV datasets (and TUM-VI): units in the header
+[time]
+column = "timestamp"
+[[accelerometers]]
+name = "imu0"
+x = "a_RS_S_x"
+y = "a_RS_S_y"
+z = "a_RS_S_z"
+[gyroscope]
+x = "w_RS_S_x"
+y = "w_RS_S_y"
+z = "w_RS_S_z"
+''',
+    "phyphox": f'''format = "{MAP_FORMAT}"
+name = "phyphox"
+# phyphox "Acceleration with g" (or "Linear Acceleration") export, one CSV file; a gyroscope
+# in the same file is read when present
+[time]
+column = "Time"
+[[accelerometers]]
+name = "phone"
+x = ["Acceleration x", "Linear Acceleration x"]
+y = ["Acceleration y", "Linear Acceleration y"]
+z = ["Acceleration z", "Linear Acceleration z"]
+[gyroscope]
+optional = true
+x = "Gyroscope x"
+y = "Gyroscope y"
+z = "Gyroscope z"
+''',
+    "sensorlogger": f'''format = "{MAP_FORMAT}"
+name = "sensorlogger"
+# Sensor Logger's CSV export, the folder of its files: time in epoch nanoseconds
+[time]
+column = "time"
+unit = "ns"
+[[accelerometers]]
+name = "phone"
+file = "TotalAcceleration.csv"
+unit = "m/s^2"
+x = "x"
+y = "y"
+z = "z"
+[gyroscope]
+optional = true
+file = "Gyroscope.csv"
+unit = "rad/s"
+x = "x"
+y = "y"
+z = "z"
+''',
+}
+"""Built-in column maps, used with ``--map NAME``."""
+
+
+def resample_linear(t_src_ns: np.ndarray, values: np.ndarray, t_dst_ns: np.ndarray) -> np.ndarray:
+    """``values`` (N, k) sampled at ``t_src_ns`` linearly interpolated at ``t_dst_ns`` (inside the source span)."""
+    t0 = t_dst_ns[0]
+    src = (np.asarray(t_src_ns, dtype=np.int64) - t0).astype(float)
+    dst = (np.asarray(t_dst_ns, dtype=np.int64) - t0).astype(float)
+    values = np.asarray(values, dtype=float).reshape(len(src), -1)
+    return np.column_stack([np.interp(dst, src, values[:, j]) for j in range(values.shape[1])])
+
+
+# --- the map ------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Column:
+    """One column of the map: a name, a list of alternative names or a 0-based index; its unit and sign."""
+
+    column: str | int | tuple[str, ...]
+    unit: str | None
+    sign: float
+    table: str
+    index: int
+    key: str
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """The columns of one accelerometer (or the gyroscope) and the file they are in."""
+
+    name: str
+    file: str | None
+    time: Column
+    axes: dict[str, Column]
+    table: str
+    index: int
+    optional: bool = False
+
+
+@dataclass(frozen=True)
+class Layout:
+    """How a file is split into rows and fields."""
+
+    delimiter: str | None  # None: runs of whitespace; "auto": guessed from the header line
+    comment: str
+    header_row: int  # 1-based line of the header; 0: no header
+    skip_rows: int
+    decimal: str
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    path: str
+    text: str
+    ctx: _TomlContext
+    layout: Layout
+    file: str | None
+    accelerometers: tuple[Sensor, ...]
+    gyroscope: Sensor | None
+    gyro_rotation: np.ndarray | None
+    has_geometry: bool
+    placed: tuple[bool, ...]
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _column(ctx: _TomlContext, value, table: str, index: int, key: str, default_unit: str | None) -> Column:
+    unit, sign = default_unit, 1.0
+    if isinstance(value, dict):
+        unknown = sorted(set(value) - {"column", "unit", "sign"})
+        if unknown:
+            raise ctx.error(f"unknown key {unknown[0]!r}; a column is {{ column = NAME or INDEX, unit = \"...\", "
+                            "sign = 1 or -1 }", table, index, key)
+        if "column" not in value:
+            raise ctx.error("no column (a header name, a list of alternative names, or a 0-based index)",
+                            table, index, key)
+        unit = value.get("unit", default_unit)
+        sign = value.get("sign", 1)
+        value = value["column"]
+        if sign not in (1, -1) or isinstance(sign, bool):
+            raise ctx.error(f"sign must be 1 or -1, got {sign!r}", table, index, key)
+    if unit is not None and not isinstance(unit, str):
+        raise ctx.error(f"unit must be a string such as \"m/s^2\", got {unit!r}", table, index, key)
+    if isinstance(value, list):
+        if not value or not all(isinstance(v, str) and v.strip() for v in value):
+            raise ctx.error(f"expected a column name, a list of names or a 0-based index, got {value!r}",
+                            table, index, key)
+        value = tuple(v.strip() for v in value)
+    elif isinstance(value, str):
+        if not value.strip():
+            raise ctx.error("empty column name", table, index, key)
+        value = value.strip()
+    elif _is_int(value):
+        if value < 0:
+            raise ctx.error(f"a column index counts from 0, got {value}", table, index, key)
+    else:
+        raise ctx.error(f"expected a column name, a list of names or a 0-based index, got {value!r}",
+                        table, index, key)
+    return Column(value, unit, float(sign), table, index, key)
+
+
+def _sensor(ctx: _TomlContext, doc: dict, table: str, index: int, name: str, default_time: Column | None,
+            kind: str) -> Sensor:
+    file = doc.get("file")
+    if file is not None and (not isinstance(file, str) or not file.strip()):
+        raise ctx.error(f"expected a file name, got {file!r}", table, index, "file")
+    unit = doc.get("unit")
+    if unit is not None and not isinstance(unit, str):
+        raise ctx.error(f"expected a unit such as \"m/s^2\", got {unit!r}", table, index, "unit")
+    time = _column(ctx, doc["time"], table, index, "time", None) if "time" in doc else default_time
+    if time is None:
+        raise ctx.error("no time column: give [time] column = NAME (and unit) for every file, or time = ... here",
+                        table, index)
+    axes = {a: _column(ctx, doc[a], table, index, a, unit) for a in AXES if a in doc}
+    if not axes:
+        raise ctx.error(f"names no column: give x, y and/or z (the {kind} axes' columns)", table, index)
+    optional = doc.get("optional", False)
+    if not isinstance(optional, bool):
+        raise ctx.error(f"expected true or false, got {optional!r}", table, index, "optional")
+    return Sensor(name, None if file is None else file.strip(), time, axes, table, index, optional)
+
+
+def parse_map(text: str, path: str) -> ColumnMap:
+    """A column map from its TOML text; every problem names the map, the key and its line."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise LogFormatError(f"not valid TOML: {exc}", path) from None
+    ctx = _TomlContext(Path(path), text)
+    if doc.get("format") != MAP_FORMAT:
+        raise ctx.error(f"expected format = \"{MAP_FORMAT}\" (a column map), got {doc.get('format')!r}", key="format")
+    csv = doc.get("csv", {})
+    if not isinstance(csv, dict):
+        raise ctx.error("expected a table [csv]", key="csv")
+    unknown = sorted(set(csv) - {"delimiter", "comment", "header_row", "skip_rows", "decimal", "file"})
+    if unknown:
+        raise ctx.error(f"unknown key {unknown[0]!r} (known: delimiter, comment, header_row, skip_rows, decimal, "
+                        "file)", "csv", 0, unknown[0])
+    delimiter = csv.get("delimiter", "auto")
+    if delimiter != "auto" and delimiter not in DELIMITERS:
+        raise ctx.error(f"expected \"auto\", \",\", \";\", \"tab\", \"|\" or \"whitespace\", got {delimiter!r}",
+                        "csv", 0, "delimiter")
+    comment = csv.get("comment", "#")
+    if not isinstance(comment, str):
+        raise ctx.error(f"expected a string (\"\" for none), got {comment!r}", "csv", 0, "comment")
+    header_row = csv.get("header_row", 1)
+    skip_rows = csv.get("skip_rows", 0)
+    for key, v in (("header_row", header_row), ("skip_rows", skip_rows)):
+        if not _is_int(v) or v < 0:
+            raise ctx.error(f"expected a whole number >= 0, got {v!r}", "csv", 0, key)
+    decimal = csv.get("decimal", ".")
+    if decimal not in (".", ","):
+        raise ctx.error(f"expected \".\" or \",\", got {decimal!r}", "csv", 0, "decimal")
+    if decimal == "," and delimiter == ",":
+        raise ctx.error("a decimal comma needs another delimiter", "csv", 0, "decimal")
+    file = csv.get("file")
+    if file is not None and (not isinstance(file, str) or not file.strip()):
+        raise ctx.error(f"expected a file name, got {file!r}", "csv", 0, "file")
+    layout = Layout(delimiter if delimiter == "auto" else DELIMITERS[delimiter], comment, header_row, skip_rows,
+                    decimal)
+    default_time = None
+    if "time" in doc:
+        t = doc["time"]
+        if not isinstance(t, dict):
+            raise ctx.error("expected a table [time] with column = NAME or INDEX and unit", key="time")
+        unknown = sorted(set(t) - {"column", "unit"})
+        if unknown:
+            raise ctx.error(f"unknown key {unknown[0]!r} (known: column, unit)", "time", 0, unknown[0])
+        if "column" not in t:
+            raise ctx.error("no column (the time column's name or 0-based index)", "time", 0)
+        default_time = _column(ctx, t, "time", 0, "column", None)
+    if "inclinometer" in doc:
+        raise ctx.error("the csv reader reads accelerometers and a gyroscope; an inclinometer is not read",
+                        key="inclinometer")
+    accs_doc = doc.get("accelerometers")
+    if not isinstance(accs_doc, list) or not accs_doc or not all(isinstance(a, dict) for a in accs_doc):
+        raise ctx.error("expected one or more [[accelerometers]] tables (name, and x, y, z columns)",
+                        key="accelerometers")
+    accs = []
+    for i, a in enumerate(accs_doc):
+        name = a.get("name")
+        if not isinstance(name, str) or not name.strip():
+            raise ctx.error(f"expected a non-empty string, got {name!r}", "accelerometers", i, "name")
+        accs.append(_sensor(ctx, a, "accelerometers", i, name, default_time, "accelerometer"))
+    gyro = gyro_rotation = None
+    if "gyroscope" in doc:
+        g = doc["gyroscope"]
+        if not isinstance(g, dict):
+            raise ctx.error("expected a table [gyroscope]", key="gyroscope")
+        gyro = _sensor(ctx, g, "gyroscope", 0, "gyroscope", default_time, "gyroscope")
+        if set(gyro.axes) != set(AXES):
+            missing = [a for a in AXES if a not in gyro.axes]
+            raise ctx.error(f"names no column for {missing[0]}; a gyroscope needs x, y and z", "gyroscope", 0)
+        if "rotation_body_sensor" in g:
+            r = g["rotation_body_sensor"]
+            try:
+                rot = np.array(r, dtype=float)
+            except (TypeError, ValueError):
+                rot = np.zeros(0)
+            if (rot.shape != (3, 3) or not np.all(np.isfinite(rot)) or np.max(np.abs(rot @ rot.T - np.eye(3))) > 1e-6
+                    or np.linalg.det(rot) < 0):
+                raise ctx.error(f"expected a rotation matrix (three rows of three numbers, orthonormal, "
+                                f"determinant +1), got {r!r}", "gyroscope", 0, "rotation_body_sensor")
+            gyro_rotation = rot
+    placed = tuple("position_m" in a or "rotation_body_sensor" in a for a in accs_doc)
+    return ColumnMap(path, text, ctx, layout, None if file is None else file.strip(), tuple(accs), gyro,
+                     gyro_rotation, any(placed), placed)
+
+
+def load_map(spec: str) -> ColumnMap:
+    """The column map of a file or of a preset name."""
+    p = Path(spec)
+    if not p.exists() and spec in PRESETS:
+        return parse_map(PRESETS[spec], f"preset {spec}")
+    try:
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise LogFormatError(f"column map not found (a TOML file, or a preset: {', '.join(sorted(PRESETS))})",
+                             spec) from None
+    except IsADirectoryError:
+        raise LogFormatError("is a folder; --map takes a TOML file or a preset name", spec) from None
+    try:
+        text = raw.decode("utf-8").lstrip("\ufeff")
+    except UnicodeDecodeError as exc:
+        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", spec) from None
+    return parse_map(text, spec)
+
+
+# --- tables -------------------------------------------------------------------------------
+
+@dataclass
+class Table:
+    """A delimited file split into fields: header names and units, data rows and their line numbers."""
+
+    path: Path
+    names: list[str]
+    headers: list[str]
+    units: list[str | None]
+    rows: list[list[str]]
+    lines: list[int]
+
+    @property
+    def n_fields(self) -> int:
+        return len(self.rows[0])
+
+    def field(self, j: int) -> list[str]:
+        return [r[j] for r in self.rows]
+
+    def shown(self, j: int) -> str:
+        return repr(self.headers[j]) if self.headers else f"field {j}"
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.split()
+    return [f.strip().strip('"').strip() for f in line.split(delimiter)]
+
+
+def read_table(path: Path, layout: Layout) -> Table:
+    """Split a text file by ``layout``; errors name the file and line."""
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise LogFormatError("file not found", path) from None
+    except IsADirectoryError:
+        raise LogFormatError("is a folder, expected a CSV file", path) from None
+    try:
+        text = raw.decode("utf-8").lstrip("\ufeff")
+    except UnicodeDecodeError as exc:
+        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, raw[: exc.start].count(b"\n") + 1) from None
+    lines = text.splitlines()
+    header = None
+    if layout.header_row:
+        if len(lines) < layout.header_row:
+            raise LogFormatError(f"has {len(lines)} line(s); the map puts the header on line {layout.header_row}",
+                                 path)
+        header = lines[layout.header_row - 1].strip()
+        for prefix in (layout.comment, "#"):
+            if prefix and header.startswith(prefix):
+                header = header[len(prefix):].strip()
+    first = layout.header_row + layout.skip_rows
+    data = [(k + 1, ln) for k, ln in enumerate(lines[first:], start=first)
+            if ln.strip() and not (layout.comment and ln.lstrip().startswith(layout.comment))]
+    if not data:
+        raise LogFormatError("has no data rows", path, first + 1)
+    delimiter = layout.delimiter
+    if delimiter == "auto":
+        probe = header if header is not None else data[0][1]
+        delimiter = next((d for d in (",", "\t", ";") if d in probe), None)
+    names: list[str] = []
+    headers: list[str] = []
+    units: list[str | None] = []
+    if header is not None:
+        headers = _split(header, delimiter)
+        for h in headers:
+            n, u = header_name_and_unit(h)
+            names.append(n)
+            units.append(u)
+    rows = [_split(ln, delimiter) for _, ln in data]
+    n_fields = len(headers) if headers else len(rows[0])
+    for (line, _), r in zip(data, rows):
+        if len(r) != n_fields:
+            what = "the header has" if headers else "the first row has"
+            raise LogFormatError(f"row has {len(r)} fields, {what} {n_fields}", path, line)
+    if layout.decimal == ",":
+        rows = [[f.replace(",", ".") for f in r] for r in rows]
+    return Table(path, names, headers, units if headers else [None] * n_fields, rows, [ln for ln, _ in data])
+
+
+# --- reading ------------------------------------------------------------------------------
+
+class _Reader:
+    def __init__(self, cmap: ColumnMap, input_path: Path):
+        self.map = cmap
+        self.input = input_path
+        self.folder = input_path if input_path.is_dir() else input_path.parent
+        self.tables: dict[Path, Table] = {}
+
+    def error(self, message: str, column: Column) -> LogFormatError:
+        return self.map.ctx.error(message, column.table, column.index, column.key)
+
+    def file_of(self, sensor: Sensor) -> Path:
+        name = sensor.file or self.map.file
+        if name is None:
+            if self.input.is_dir():
+                raise self.map.ctx.error(f"{self.input} is a folder and the map names no file for this sensor "
+                                         "(give file = NAME here or [csv] file)", sensor.table, sensor.index)
+            return self.input
+        return self.folder / name
+
+    def table(self, path: Path) -> Table:
+        if path not in self.tables:
+            self.tables[path] = read_table(path, self.map.layout)
+        return self.tables[path]
+
+    def find(self, table: Table, column: Column, required: bool = True) -> int | None:
+        if _is_int(column.column):
+            if column.column < table.n_fields:
+                return column.column
+            if not required:
+                return None
+            raise self.error(f"column index {column.column} is past the last field of {table.path} "
+                             f"({table.n_fields} fields, counted from 0)", column)
+        wanted = column.column if isinstance(column.column, tuple) else (column.column,)
+        for w in wanted:
+            for pool in (table.names, table.headers):
+                hits = [j for j, n in enumerate(pool) if n == w]
+                if len(hits) == 1:
+                    return hits[0]
+            hits = [j for j, n in enumerate(table.names) if n.casefold() == w.casefold().lstrip("#").strip()]
+            if len(hits) == 1:
+                return hits[0]
+            if len(hits) > 1:
+                raise self.error(f"column {w!r} appears {len(hits)} times in {table.path}", column)
+        if not required:
+            return None
+        if not table.headers:
+            raise self.error(f"{table.path} has no header (header_row = 0): give the column as a 0-based index",
+                             column)
+        shown = " or ".join(repr(w) for w in wanted)
+        raise self.error(f"column {shown} is not in {table.path} (its columns: "
+                         f"{', '.join(repr(h) for h in table.headers)})", column)
+
+    def unit(self, table: Table, j: int, column: Column, kind: str) -> tuple[float, str]:
+        """(factor to the canonical unit, or to ns for time; the unit's text)."""
+        header_unit = table.units[j]
+
+        def factor(u: str) -> float:
+            try:
+                return time_unit_ns(u) if kind == "time" else unit_factor(u, kind)
+            except KeyError:
+                expected = "[ns], [us], [ms] or [s]" if kind == "time" else unit_help(kind)
+                raise self.error(f"unit [{u}] of {table.shown(j)} in {table.path} is not understood here; "
+                                 f"expected {expected}", column) from None
+
+        if header_unit is not None and column.unit is not None:
+            try:
+                time_unit_ns(header_unit) if kind == "time" else unit_factor(header_unit, kind)
+            except KeyError:  # bracketed text that is no unit ("ax (raw)"): the map says the unit
+                header_unit = None
+        if header_unit is None and column.unit is None:
+            what = ("the time column" if kind == "time" else f"column {table.shown(j)}")
+            expected = "ns, us, ms or s" if kind == "time" else unit_help(kind)
+            raise self.error(f"{what} of {table.path} has no unit in its header nor in the map; its unit is "
+                             f"ambiguous: give unit = \"...\" ({expected})", column)
+        if header_unit is not None and column.unit is not None and factor(header_unit) != factor(column.unit):
+            raise self.error(f"conflicting units for {table.shown(j)} of {table.path}: [{header_unit}] in the "
+                             f"header, [{column.unit}] in the map", column)
+        u = column.unit if column.unit is not None else header_unit
+        return factor(u), u
+
+    def timestamps(self, table: Table, column: Column) -> tuple[np.ndarray, str]:
+        j = self.find(table, column)
+        scale, unit = self.unit(table, j, column, "time")
+        tokens = table.field(j)
+        t = None
+        if scale == 1:
+            try:
+                t = np.array(tokens).astype(np.int64)
+            except (ValueError, OverflowError):
+                t = None
+        if t is None:
+            t = np.empty(len(tokens), dtype=np.int64)
+            for k, tok in enumerate(tokens):
+                try:
+                    ns = timestamp_ns(tok, int(scale))
+                except ValueError as exc:
+                    raise LogFormatError(f"{table.shown(j)}: {exc}", table.path, table.lines[k]) from None
+                if not -(2**63) <= ns < 2**63:
+                    raise LogFormatError(f"{table.shown(j)}: timestamp {tok!r} is out of range for 64-bit "
+                                         "nanoseconds", table.path, table.lines[k])
+                t[k] = ns
+        bad = np.flatnonzero(np.diff(t) <= 0)
+        if bad.size:
+            k = int(bad[0]) + 1
+            raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) is not after the previous row's "
+                                 f"{tokens[k - 1]} (line {table.lines[k - 1]}); time must be strictly increasing",
+                                 table.path, table.lines[k])
+        return t, unit
+
+    def values(self, table: Table, sensor: Sensor, kind: str, axes: tuple[str, ...]) -> tuple[np.ndarray, list[str]]:
+        out = np.empty((len(table.rows), len(axes)))
+        shown = []
+        for c, a in enumerate(axes):
+            column = sensor.axes[a]
+            j = self.find(table, column)
+            factor, unit = self.unit(table, j, column, kind)
+            tokens = table.field(j)
+            try:
+                v = np.array(tokens).astype(float)
+            except ValueError:
+                for k, tok in enumerate(tokens):
+                    try:
+                        float(tok)
+                    except ValueError:
+                        what = "is empty" if not tok else f"value {tok!r} is not a number"
+                        raise LogFormatError(f"{table.shown(j)} (field {j + 1}) {what}", table.path,
+                                             table.lines[k]) from None
+                raise
+            out[:, c] = v * (factor * column.sign)
+            shown.append(f"{a} = {'-' if column.sign < 0 else ''}{table.shown(j)} [{unit}]")
+        return out, shown
+
+    def gyro_present(self, sensor: Sensor) -> bool:
+        path = self.file_of(sensor)
+        if not path.is_file():
+            return False
+        table = self.table(path)
+        return all(self.find(table, c, required=False) is not None for c in sensor.axes.values())
+
+
+def _array_and_order(cmap: ColumnMap, array_path: str | None, with_gyro: bool) -> tuple[SensorArray, list[int],
+                                                                                        tuple[str, ...], list[str]]:
+    """(array, index of the map's accelerometer for each array accelerometer, unplaced names, report lines)."""
+    mapped_axes = [tuple(a for a in AXES if a in s.axes) for s in cmap.accelerometers]
+    report = []
+    if array_path is not None:
+        if cmap.has_geometry:
+            k = cmap.placed.index(True)
+            raise cmap.ctx.error(f"gives position_m / rotation_body_sensor, and --array {array_path} gives the "
+                                 "geometry too; give it in one place", "accelerometers", k)
+        array = read_array_toml(array_path)
+        names = [s.name for s in cmap.accelerometers]
+        if len(names) == 1 and len(array.accelerometers) == 1:
+            order = [0]
+            if array.accelerometers[0].name != names[0]:
+                report.append(f"accelerometer {names[0]!r} of the map is {array.accelerometers[0].name!r} of "
+                              f"{array_path}")
+        else:
+            order = []
+            for acc in array.accelerometers:
+                if acc.name not in names:
+                    raise LogFormatError(f"accelerometer {acc.name!r} has no columns in the map {cmap.path} "
+                                         f"(it names {', '.join(map(repr, names))})", array_path)
+                order.append(names.index(acc.name))
+            extra = [i for i in range(len(names)) if i not in order]
+            if extra:
+                raise cmap.ctx.error(f"accelerometer {names[extra[0]]!r} is not in --array {array_path}",
+                                     "accelerometers", extra[0], "name")
+        for acc, i in zip(array.accelerometers, order):
+            if set(acc.axes) != set(mapped_axes[i]):
+                raise cmap.ctx.error(f"names columns for axes {', '.join(mapped_axes[i])} but accelerometer "
+                                     f"{acc.name!r} of {array_path} lists axes {', '.join(acc.axes)}",
+                                     "accelerometers", i)
+        if array.gyroscope is not None and not with_gyro:
+            raise LogFormatError(f"has a [gyroscope] but the map {cmap.path} names no gyroscope columns (or they "
+                                 "are not in the file)", array_path)
+        report.append(f"geometry: {array_path}")
+        unplaced: tuple[str, ...] = ()
+    else:
+        array = parse_array_toml(cmap.text, cmap.path, expected_format=MAP_FORMAT, positions_required=False)
+        accs = []
+        doc = tomllib.loads(cmap.text)["accelerometers"]
+        for i, acc in enumerate(array.accelerometers):
+            if "axes" in doc[i] and tuple(doc[i]["axes"]) != mapped_axes[i] and set(doc[i]["axes"]) != set(
+                    mapped_axes[i]):
+                raise cmap.ctx.error(f"lists axes {doc[i]['axes']!r} but names columns for "
+                                     f"{', '.join(mapped_axes[i])}", "accelerometers", i, "axes")
+            accs.append(dataclasses.replace(acc, axes=mapped_axes[i]))
+        array = dataclasses.replace(array, accelerometers=tuple(accs))
+        order = list(range(len(accs)))
+        if cmap.has_geometry:
+            report.append(f"geometry: {cmap.path}")
+            unplaced = tuple(s.name for s, p in zip(cmap.accelerometers, cmap.placed) if not p)
+        elif len(accs) == 1:
+            report.append(f"geometry: one accelerometer, no place given: at the body origin, its axes the body axes")
+            unplaced = ()
+        else:
+            unplaced = tuple(s.name for s in cmap.accelerometers)
+    if with_gyro and array.gyroscope is None:
+        array = dataclasses.replace(array, gyroscope=Gyroscope())
+    if not with_gyro and array.gyroscope is not None:
+        array = dataclasses.replace(array, gyroscope=None)
+    return array, order, unplaced, report
+
+
+def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
+                       gyro_as_reference: bool = False) -> Conversion:
+    """Read the file(s) of ``input_path`` with a column map (a TOML file or a preset name)."""
+    cmap = load_map(map_spec)
+    reader = _Reader(cmap, Path(input_path))
+    gyro = cmap.gyroscope
+    report: list[str] = []
+    if gyro is not None and gyro.optional and not reader.gyro_present(gyro):
+        report.append(f"gyroscope: not in {reader.file_of(gyro)}; none read")
+        gyro = None
+    array, order, unplaced, geometry_report = _array_and_order(cmap, array_path, gyro is not None)
+    # sensors in file order: the array's accelerometers, then the gyroscope
+    sensors = [(cmap.accelerometers[i], acc.axes, "acceleration") for acc, i in zip(array.accelerometers, order)]
+    if gyro is not None:
+        sensors.append((gyro, AXES, "angular_rate"))
+    groups: dict[tuple, tuple[np.ndarray, str]] = {}
+    blocks = []
+    for sensor, axes, kind in sensors:
+        path = reader.file_of(sensor)
+        table = reader.table(path)
+        key = (path, sensor.time.column, sensor.time.unit)
+        if key not in groups:
+            t, unit = reader.timestamps(table, sensor.time)
+            groups[key] = (t, unit)
+            report.append(f"{path}: {t.size} rows, time from {table.shown(reader.find(table, sensor.time))} "
+                          f"in [{unit}]")
+        values, shown = reader.values(table, sensor, kind, axes)
+        blocks.append((key, values))
+        report.append(f"  {sensor.name}: {', '.join(shown)}")
+    base_key = blocks[0][0]
+    t = groups[base_key][0]
+    lo = max(g[0][0] for g in groups.values())
+    hi = min(g[0][-1] for g in groups.values())
+    keep = (t >= lo) & (t <= hi)
+    if len(groups) > 1:
+        if np.count_nonzero(keep) < 2:
+            raise LogFormatError(f"the files {', '.join(str(k[0]) for k in groups)} share no common time span "
+                                 "(are their times in the same clock and unit?)", base_key[0])
+        others = [str(k[0]) + ("" if k[0] != base_key[0] else f" (time column {k[1]!r})") for k in groups
+                  if k != base_key]
+        report.append(f"aligned: {', '.join(others)} linearly interpolated onto the timestamps of {base_key[0]}; "
+                      f"{int(np.count_nonzero(~keep))} row(s) of {base_key[0]} outside the span all files share "
+                      "left out")
+    t_out = t[keep]
+    columns = []
+    for key, values in blocks:
+        if key == base_key:
+            columns.append(values[keep])
+        else:
+            columns.append(resample_linear(groups[key][0], values, t_out))
+    n_acc = len(array.accelerometers)
+    accel = np.hstack(columns[:n_acc])
+    omega = None
+    if gyro is not None:
+        omega = columns[n_acc]
+        if cmap.gyro_rotation is not None:
+            omega = omega @ cmap.gyro_rotation.T
+    if t_out.size < 2:
+        raise LogFormatError(f"holds {t_out.size} sample(s); a log needs at least two", base_key[0])
+    reference = None
+    if gyro_as_reference:
+        if omega is None:
+            raise LogFormatError("--gyro-as-reference: the map names no gyroscope columns", cmap.path)
+        reference = Motion(t_out, omega_b_radps=omega.copy())
+    log = Log(array, t_out, accel, gyro_b_radps=omega, reference=reference, source=str(input_path))
+    return Conversion(log, tuple(report + geometry_report), unplaced)
+
+
+# --- reader of `gfimu convert csv` ------------------------------------------------------------
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--map", required=True, metavar="MAP",
+                        help="column map: a TOML file (format gfimu-csv-map/1: time column and unit, delimiter, "
+                             "header row, each axis's column, unit [m/s^2, g, mg, rad/s, deg/s ...] and sign) or a "
+                             f"preset: {', '.join(sorted(PRESETS))} (required; no default)")
+    parser.add_argument("--array", default=None, metavar="ARRAY.toml",
+                        help="array.toml giving the accelerometers' positions [m] and rotations, matched to the "
+                             "map's accelerometers by name (default: none: the map's own position_m and "
+                             "rotation_body_sensor, or --extrinsics)")
+    parser.add_argument("--gyro-as-reference", action="store_true",
+                        help="also write the gyroscope [rad/s] as reference.csv, the angular-velocity reference of "
+                             "gfimu evaluate (default: off)")
+
+
+def read(path, map: str, array: str | None = None, gyro_as_reference: bool = False) -> Conversion:  # noqa: A002
+    """Columns of one or more delimited text files, by a column map."""
+    return read_csv_recording(path, map, array, gyro_as_reference)
+
+
+READER = Reader(
+    name="csv",
+    summary="delimited text files (CSV, semicolon, tab or whitespace; phyphox, Sensor Logger, EuRoC, TUM and "
+            "others) read by a column map (--map FILE.toml or a preset)",
+    read=read,
+    add_arguments=_add_arguments,
+    input_help="the CSV file, or the folder holding the files the map names",
+)
+
+__all__ = ["MAP_FORMAT", "PRESETS", "READER", "load_map", "parse_map", "read_csv_recording", "read_table",
+           "resample_linear"]
