@@ -1,4 +1,11 @@
-"""In-memory log: a sensor array and its synchronised readings (no I/O here)."""
+"""In-memory log: a sensor array and its synchronised readings (no I/O here).
+
+pandas bridge (``pip install 'gfimu[pandas]'``): :meth:`Log.to_dataframe` gives the readings as
+``imu.csv`` holds them, one column per axis named as in its header without the unit
+(``a1_x``, ``w_x``, ``tilt_x``), units in ``df.attrs["units"]``, indexed by the integer
+timestamps in nanoseconds (index name ``timestamp_ns``: exact, unlike float seconds);
+:meth:`Log.from_dataframe` reads such a frame back with its array.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +14,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .array import SensorArray
-from .motion import Motion
+from .motion import TIME_INDEX, Motion, _require_pandas
+
+GYRO_COLUMNS = ("w_x", "w_y", "w_z")
+"""Columns of the gyroscope readings (in B) in ``imu.csv`` and in :meth:`Log.to_dataframe`."""
+TILT_COLUMNS = ("tilt_x", "tilt_y")
+"""Columns of the inclinometer readings."""
+READING_UNITS = {"accel": "m s^-2", "gyro": "rad s^-1", "tilt": "rad"}
 
 
 @dataclass(frozen=True)
@@ -108,3 +121,68 @@ class Log:
 
     def replace(self, **changes) -> "Log":
         return replace(self, **changes)
+
+    def reading_columns(self) -> list[tuple[str, str]]:
+        """(name, unit) of every reading column, in ``imu.csv`` order: accelerometer axes, gyro, tilt."""
+        cols = [(c, READING_UNITS["accel"]) for c in self.array.accel_columns]
+        if self.gyro_b_radps is not None:
+            cols += [(c, READING_UNITS["gyro"]) for c in GYRO_COLUMNS]
+        if self.tilt_rad is not None:
+            cols += [(c, READING_UNITS["tilt"]) for c in TILT_COLUMNS]
+        return cols
+
+    def to_dataframe(self):
+        """The readings as a ``pandas.DataFrame``: index ``timestamp_ns`` (int64 nanoseconds), one float
+        column per reading named as in ``imu.csv`` without its unit (``a1_x`` ..., ``w_x`` ..., ``tilt_x``
+        ...), the units in ``df.attrs["units"]``. Truth and reference: ``log.truth.to_dataframe()``."""
+        pd = _require_pandas("Log.to_dataframe")
+        parts = [self.accel_mps2]
+        if self.gyro_b_radps is not None:
+            parts.append(self.gyro_b_radps)
+        if self.tilt_rad is not None:
+            parts.append(self.tilt_rad)
+        cols = self.reading_columns()
+        df = pd.DataFrame(np.hstack(parts), columns=[c for c, _ in cols],
+                          index=pd.Index(self.timestamps_ns.copy(), name=TIME_INDEX))
+        df.attrs["units"] = dict(cols)
+        return df
+
+    @classmethod
+    def from_dataframe(cls, df, array: SensorArray, truth: Motion | None = None, reference: Motion | None = None,
+                       source: str = "<dataframe>") -> "Log":
+        """A log from readings in a ``pandas.DataFrame`` laid out as :meth:`to_dataframe` writes it: integer
+        nanosecond index, the array's accelerometer columns (``<name>_<axis>`` in each sensor's frame, m/s²),
+        ``w_x, w_y, w_z`` [rad/s] when the array has a gyroscope, ``tilt_x, tilt_y`` [rad] with an
+        inclinometer; other columns are ignored. ``ValueError`` names a missing column or a bad index."""
+        pd = _require_pandas("Log.from_dataframe")
+        if not isinstance(df, pd.DataFrame):
+            raise TypeError(f"{source}: expected a pandas.DataFrame, got {type(df).__name__}")
+        t = _timestamps_from_index(df, source)
+        names = list(array.accel_columns)
+        if array.gyroscope is not None:
+            names += list(GYRO_COLUMNS)
+        if array.inclinometer is not None:
+            names += list(TILT_COLUMNS)
+        missing = [n for n in names if n not in df.columns]
+        if missing:
+            raise ValueError(f"{source}: column {missing[0]!r} is missing ({len(missing)} of the {len(names)} "
+                             f"reading columns of array {array.name!r}: {', '.join(names)})")
+        values = df[names].to_numpy(dtype=float)
+        n_acc = array.n_axes
+        gyro = tilt = None
+        k = n_acc
+        if array.gyroscope is not None:
+            gyro, k = values[:, k:k + 3], k + 3
+        if array.inclinometer is not None:
+            tilt = values[:, k:k + 2]
+        return cls(array, t, values[:, :n_acc], gyro_b_radps=gyro, tilt_rad=tilt, truth=truth,
+                   reference=reference, source=source)
+
+
+def _timestamps_from_index(df, source: str) -> np.ndarray:
+    """The integer nanoseconds of a frame's index (``timestamp_ns``)."""
+    index = df.index
+    if not np.issubdtype(index.dtype, np.integer):
+        raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
+                         f"got dtype {index.dtype}")
+    return np.asarray(index, dtype=np.int64)

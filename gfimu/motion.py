@@ -3,6 +3,11 @@
 One class serves the three roles of the log format (truth.csv,
 reference.csv, estimate CSVs). Quantities a source cannot give are ``None``,
 never zeros.
+
+pandas bridge (``pip install 'gfimu[pandas]'``): :meth:`Motion.to_dataframe` gives the columns of
+the CSV format without their units (``w_x`` ..., ``dw_x`` ..., ``a_x`` ..., ``f_x`` ..., ``q_w``
+..., ``sigma_w_x`` ...), the units in ``df.attrs["units"]``, indexed by the integer timestamps in
+nanoseconds (index name ``timestamp_ns``); :meth:`Motion.from_dataframe` reads it back exactly.
 """
 
 from __future__ import annotations
@@ -19,6 +24,28 @@ QUANTITIES: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "specific_force_b_mps2": ("f", "m s^-2", ("x", "y", "z")),
     "quaternion_wb": ("q", "", ("w", "x", "y", "z")),
 }
+
+
+TIME_INDEX = "timestamp_ns"
+"""Name of the index of the pandas frames: integer nanoseconds, as the CSV files' first column."""
+
+
+def _require_pandas(what: str):
+    try:
+        import pandas
+    except ImportError:
+        raise ImportError(f"{what} needs pandas, which is not installed: pip install 'gfimu[pandas]'") from None
+    return pandas
+
+
+def motion_column_names() -> list[tuple[str, str, str, int, bool]]:
+    """(column, unit, quantity, component, is sigma) of every column a Motion can have, in CSV order."""
+    out = []
+    for is_sigma in (False, True):
+        for name, (prefix, unit, comps) in QUANTITIES.items():
+            out += [(f"{'sigma_' if is_sigma else ''}{prefix}_{c}", unit, name, j, is_sigma)
+                    for j, c in enumerate(comps)]
+    return out
 
 
 @dataclass(frozen=True)
@@ -73,3 +100,44 @@ class Motion:
 
     def replace(self, **changes) -> "Motion":
         return replace(self, **changes)
+
+    def to_dataframe(self):
+        """A ``pandas.DataFrame``: index ``timestamp_ns`` (int64 nanoseconds), one float column per component
+        named as in the CSV format without its unit (``w_x``, ``q_w``, ``sigma_w_x`` ...), only for the
+        quantities present; the units in ``df.attrs["units"]``."""
+        pd = _require_pandas("Motion.to_dataframe")
+        data, units = {}, {}
+        for column, unit, name, j, is_sigma in motion_column_names():
+            values = self.sigma.get(name) if is_sigma else getattr(self, name)
+            if values is not None:
+                data[column] = np.asarray(values, dtype=float)[:, j]
+                units[column] = unit
+        df = pd.DataFrame(data, index=pd.Index(self.timestamps_ns.copy(), name=TIME_INDEX))
+        df.attrs["units"] = units
+        return df
+
+    @classmethod
+    def from_dataframe(cls, df, source: str = "<dataframe>") -> "Motion":
+        """A Motion from a frame laid out as :meth:`to_dataframe` writes it (integer nanosecond index); a
+        quantity needs all its components or none (``ValueError`` names the missing one); other columns are
+        ignored."""
+        pd = _require_pandas("Motion.from_dataframe")
+        if not isinstance(df, pd.DataFrame):
+            raise TypeError(f"{source}: expected a pandas.DataFrame, got {type(df).__name__}")
+        index = df.index
+        if not np.issubdtype(index.dtype, np.integer):
+            raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
+                             f"got dtype {index.dtype}")
+        kw: dict = {}
+        sigma: dict = {}
+        for is_sigma in (False, True):
+            for name, (prefix, _, comps) in QUANTITIES.items():
+                cols = [f"{'sigma_' if is_sigma else ''}{prefix}_{c}" for c in comps]
+                present = [c in df.columns for c in cols]
+                if any(present) and not all(present):
+                    missing = cols[present.index(False)]
+                    raise ValueError(f"{source}: column {missing!r} is missing (a quantity needs all of "
+                                     f"{', '.join(cols)})")
+                if all(present):
+                    (sigma if is_sigma else kw)[name] = df[cols].to_numpy(dtype=float)
+        return cls(np.asarray(index, dtype=np.int64), sigma=sigma, **kw)

@@ -76,6 +76,41 @@ def default_quantities(reference: Motion, estimates: Mapping[str, Motion]) -> li
     return out
 
 
+ESTIMATE_STYLES = ("-", "--", "-.", ":")
+"""Line styles of the estimates, in turn with the colours C0..C9, so that lines stay apart in grey too."""
+REFERENCE_STYLE = dict(color="k", lw=2.4, alpha=0.35, solid_capstyle="butt")
+"""The reference: a wide, pale black line underneath the estimates."""
+BAND_ALPHA = 0.22
+"""Opacity of the ±1σ bands."""
+
+
+def estimate_style(index: int) -> dict:
+    """Colour and line style of the ``index``-th estimate (ten colours, four line styles, both in turn)."""
+    return dict(color=f"C{index % 10}", ls=ESTIMATE_STYLES[index % len(ESTIMATE_STYLES)])
+
+
+def _interp_sigma(reference: Motion, estimate: Motion, name: str) -> np.ndarray | None:
+    sigma = estimate.sigma.get(name)
+    if sigma is None:
+        return None
+    return _interp_to(reference, estimate.replace(**{name: np.asarray(sigma, dtype=float)}), name)
+
+
+def _layers(values: Mapping[str, np.ndarray], ref: np.ndarray, k: int, valid: np.ndarray | None) -> dict[str, int]:
+    """zorder of each estimate's line in one panel: larger RMS error against ``ref`` lower; bands at zorder - 1."""
+    rms = {}
+    for label, v in values.items():
+        err = v[:, k] - ref
+        if valid is not None:
+            err = err[valid]
+        err = err[np.isfinite(err)]
+        rms[label] = float(np.sqrt(np.mean(err**2))) if err.size else np.inf
+    names = list(values)
+    # bottom first: the largest error, and among equals the last named
+    ranked = sorted(names, key=lambda n: (-rms[n], -names.index(n)))
+    return {label: 3 + 2 * i for i, label in enumerate(ranked)}
+
+
 def plot_time_series(
     reference: Motion,
     estimates: Mapping[str, Motion],
@@ -84,12 +119,22 @@ def plot_time_series(
     errors: bool = True,
     title: str | None = None,
     valid: np.ndarray | None = None,
+    bands: bool = True,
+    time_origin_ns: int | None = None,
 ):
     """Estimates against the reference over time, one column per axis (papers 000–002, Figs. 4–5, 10–11).
 
-    For each quantity one row of values (reference dashed black, one colour per
-    method) and, with ``errors``, one row of errors (estimate − reference).
-    Samples where ``valid`` is False are greyed out of the error rows.
+    For each quantity one row of values and, with ``errors``, one row of errors
+    (estimate − reference). The reference is a wide pale black line underneath; each
+    estimate has its own colour and line style (:func:`estimate_style`); in each panel the
+    estimates with the larger RMS error are drawn underneath, so that a noisy one does not
+    bury the accurate ones (ties: the first named on top). Where an estimate has a one-sigma uncertainty (``Motion.sigma``, the
+    ``sigma_`` columns of ``gfimu estimate --sigma``) and ``bands``, a translucent band
+    of its colour shows ±1σ around it in the value rows and ±1σ around zero in the
+    error rows (so an error inside its band is within one sigma). One legend for the
+    figure, under the panels, names the reference, each estimate and each band.
+    Samples where ``valid`` is False are greyed out of the error rows. Time is in seconds
+    from ``time_origin_ns`` (default: the reference's first sample).
     """
     if not estimates:
         raise ValueError("plot_time_series needs at least one estimate")
@@ -101,42 +146,71 @@ def plot_time_series(
             raise ValueError(f"cannot plot quantity {name!r}; choose among {list(LABELS)}")
         if getattr(reference, name) is None:
             raise ValueError(f"the {reference_label} has no {LABELS[name][0]}")
+        if all(getattr(m, name) is None for m in estimates.values()):
+            raise ValueError(f"no estimate has {LABELS[name][0]} ({', '.join(estimates)})")
     rows_per = 2 if errors else 1
     n_rows = rows_per * len(quantities)
-    fig = _figure(13.0, 2.1 * n_rows + 0.6)
+    fig = _figure(13.0, 2.1 * n_rows + 1.0)
+    from matplotlib.colors import to_rgba
+
     axes = fig.subplots(n_rows, 3, sharex=True, squeeze=False)
-    t = reference.times_s
+    origin = reference.timestamps_ns[0] if time_origin_ns is None else int(time_origin_ns)
+    t = (reference.timestamps_ns - origin) * 1e-9
     valid_mask = None if valid is None else np.asarray(valid, dtype=bool)
-    colours = [f"C{i}" for i in range(10)]
+    handles: dict[str, object] = {}
     for qi, name in enumerate(quantities):
         symbol, unit = LABELS[name]
         ref = getattr(reference, name)
+        values = {label: _interp_to(reference, m, name) for label, m in estimates.items() if getattr(m, name) is not None}
+        sigmas = {label: _interp_sigma(reference, estimates[label], name) for label in values} if bands else {}
         for k, axis in enumerate(AXES):
+            layer = _layers(values, ref[:, k], k, valid_mask)
             ax = axes[rows_per * qi, k]
-            ax.plot(t, ref[:, k], "k--", lw=1.4, label=reference_label)
+            (line,) = ax.plot(t, ref[:, k], label=reference_label, zorder=2, **REFERENCE_STYLE)
+            handles.setdefault(reference_label, line)
             for mi, (label, motion) in enumerate(estimates.items()):
-                if getattr(motion, name) is None:
+                if label not in values:
                     continue
-                ax.plot(t, _interp_to(reference, motion, name)[:, k], color=colours[mi % 10], lw=0.9, label=label,
-                        zorder=3 + len(estimates) - mi)  # the first estimate named stays on top
+                style = estimate_style(mi)
+                top = layer[label]  # each band just under its line
+                v = values[label][:, k]
+                s = sigmas.get(label)
+                if s is not None:
+                    band = ax.fill_between(t, v - s[:, k], v + s[:, k], color=style["color"], alpha=BAND_ALPHA,
+                                           lw=0, zorder=top - 1, label=f"{label} ±1σ")
+                    handles.setdefault(f"{label} ±1σ", band)
+                (line,) = ax.plot(t, v, lw=1.0, label=label, zorder=top, **style)
+                handles.setdefault(label, line)
             ax.set_title(f"{symbol} — {axis}", fontsize=9)
             ax.set_ylabel(f"{QUANTITIES[name][0]}_{axis} [{unit}]")
             ax.grid(alpha=0.3)
             if errors:
                 eax = axes[rows_per * qi + 1, k]
                 for mi, (label, motion) in enumerate(estimates.items()):
-                    if getattr(motion, name) is None:
+                    if label not in values:
                         continue
-                    err = _interp_to(reference, motion, name)[:, k] - ref[:, k]
+                    style = estimate_style(mi)
+                    top = layer[label]
+                    err = values[label][:, k] - ref[:, k]
+                    s = sigmas.get(label)
                     if valid_mask is not None:
                         err = np.where(valid_mask, err, np.nan)
-                    eax.plot(t, err, color=colours[mi % 10], lw=0.8, label=label, zorder=3 + len(estimates) - mi)
+                    if s is not None:  # over the error lines, so that its edges stay visible on noise
+                        sk = s[:, k] if valid_mask is None else np.where(valid_mask, s[:, k], np.nan)
+                        edge = 0.6 * np.array(to_rgba(style["color"]))  # darker than the line, dashed
+                        edge[3] = 1.0
+                        eax.fill_between(t, -sk, sk, facecolor=to_rgba(style["color"], 0.5 * BAND_ALPHA),
+                                         edgecolor=tuple(edge), lw=1.1, ls=(0, (4, 2)), zorder=50 + top,
+                                         label=f"{label} ±1σ")
+                    eax.plot(t, err, lw=0.9, label=label, zorder=top, **style)
                 eax.axhline(0.0, color="k", lw=0.6)
                 eax.set_ylabel(f"error [{unit}]")
                 eax.grid(alpha=0.3)
     for k in range(3):
         axes[-1, k].set_xlabel("time [s]")
-    axes[0, 0].legend(fontsize=8, loc="best")
+    order = [reference_label] + [x for label in estimates for x in (label, f"{label} ±1σ") if x in handles]
+    fig.legend([handles[x] for x in order], order, loc="outside lower center", fontsize=9,
+               ncol=min(len(order), 7), frameon=False)
     fig.suptitle(title or f"Estimates against {reference_label}")
     return fig
 

@@ -48,7 +48,54 @@ def test_time_series_layout_lines_and_errors(tmp_path):
     _check_png(plots.save_figure(fig, tmp_path / "ts.png"))
     fig = plots.plot_time_series(truth, {"b": only_w}, errors=False)
     assert len(fig.axes) == 3  # only ω is shared
-    assert fig.axes[0].get_legend() is not None
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["truth", "b"]
+
+
+def _bands(ax):
+    from matplotlib.collections import PolyCollection
+
+    return [c for c in ax.collections if isinstance(c, PolyCollection)]
+
+
+def test_sigma_bands_and_several_estimates_stay_apart(tmp_path):
+    truth, est, only_w = _motions()
+    sigma_w = np.full((len(truth), 3), 0.05)
+    sigma_w[:, 1] = np.linspace(0.01, 0.2, len(truth))
+    with_sigma = est.replace(sigma={"omega_b_radps": sigma_w})
+    third = est.replace(omega_b_radps=truth.omega_b_radps - 0.3)
+    estimates = {"smoother": with_sigma, "ml": only_w, "fixed-lag": third}
+    fig = plots.plot_time_series(truth, estimates, quantities=["omega_b_radps"])
+    values_y, errors_y = fig.axes[1], fig.axes[4]  # ω_y: values and errors
+    # one line per estimate plus the reference in the values, one per estimate (and zero) in the errors
+    labels = [line.get_label() for line in values_y.lines]
+    assert labels == ["truth", "smoother", "ml", "fixed-lag"]
+    assert [line.get_label() for line in errors_y.lines][:3] == ["smoother", "ml", "fixed-lag"]
+    # one ±1σ band, only for the estimate with sigma, in each panel; values ± σ and ± σ around zero
+    for ax, centre in ((values_y, with_sigma.omega_b_radps[:, 1]), (errors_y, 0.0)):
+        (band,) = _bands(ax)
+        assert band.get_label() == "smoother ±1σ"
+        x, y = band.get_paths()[0].vertices.T
+        at = [y[np.isclose(x, ti, rtol=0, atol=1e-12)] for ti in truth.times_s]
+        np.testing.assert_allclose([v.max() for v in at], centre + sigma_w[:, 1], atol=1e-12)
+        np.testing.assert_allclose([v.min() for v in at], centre - sigma_w[:, 1], atol=1e-12)
+        assert 0 < band.get_facecolor()[0][3] < 0.5  # translucent
+    # distinct colours and line styles; the reference drawn apart (black, wide, pale, underneath)
+    lines = values_y.lines[1:]
+    assert len({line.get_color() for line in lines}) == 3 and len({line.get_linestyle() for line in lines}) == 3
+    ref = values_y.lines[0]
+    assert ref.get_color() == "k" and ref.get_linewidth() > 2 * max(line.get_linewidth() for line in lines)
+    assert ref.get_alpha() < 1 and ref.get_zorder() < min(line.get_zorder() for line in lines)
+    # the most accurate estimate on top (ml's error is 10 % of ω, the others' 0.1 and 0.3 rad/s)
+    z = {line.get_label(): line.get_zorder() for line in lines}
+    assert z["smoother"] > z["fixed-lag"]
+    # one legend for the figure naming the reference, the estimates and the band
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["truth", "smoother", "smoother ±1σ", "ml",
+                                                                  "fixed-lag"]
+    fig = plots.plot_time_series(truth, estimates, quantities=["omega_b_radps"], bands=False)
+    assert not any(_bands(ax) for ax in fig.axes)
+    with pytest.raises(ValueError, match="no estimate has linear acceleration"):
+        plots.plot_time_series(truth.replace(accel_b_mps2=truth.specific_force_b_mps2), {"ml": only_w},
+                               quantities=["accel_b_mps2"])
 
 
 def test_time_series_masks_invalid_samples_and_checks_input():
@@ -119,3 +166,30 @@ def test_cli_plot(tmp_path):
     assert main(["plot", str(tmp_path / "log"), str(tmp_path / "est.csv"), "--kind", "polhode",
                  "--out", str(tmp_path / "p.png")]) == 2
     assert main(["plot", str(tmp_path / "log"), "--out", str(tmp_path / "x.png")]) == 2
+
+
+def test_estimate_labels_tell_files_apart():
+    from gfimu.cli.plot import estimate_labels
+
+    assert estimate_labels(["x/a/est.csv", "x/b/est.csv", "est.csv"]) == ["a/est", "b/est", "est"]
+    assert estimate_labels(["smoother.csv", "ml.csv", "ml.csv"]) == ["smoother", "ml", "ml (2)"]
+
+
+def test_cli_plot_sigma_columns_and_files_of_the_same_name(tmp_path):
+    from gfimu.cli import main
+    from gfimu.io import write_log, write_motion_csv
+    from gfimu.simulate import simulate
+
+    log = simulate("random3d", duration_s=0.3, seed=2)
+    write_log(log, tmp_path / "log")
+    truth = log.truth
+    write_motion_csv(truth.replace(omega_b_radps=truth.omega_b_radps + 0.05, accel_b_mps2=None, quaternion_wb=None),
+                     tmp_path / "est.csv")
+    sigma = {"omega_b_radps": np.full((len(truth), 3), 0.02)}
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        write_motion_csv(truth.replace(accel_b_mps2=None, quaternion_wb=None, sigma=sigma if folder == "a" else {}),
+                         tmp_path / folder / "est.csv")
+    assert main(["plot", str(tmp_path / "log"), str(tmp_path / "a" / "est.csv"), str(tmp_path / "b" / "est.csv"),
+                 str(tmp_path / "est.csv"), "--out", str(tmp_path / "three.png"), "--quantities", "w", "-q"]) == 0
+    _check_png(tmp_path / "three.png")

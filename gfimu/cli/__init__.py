@@ -12,6 +12,13 @@ of the system or of a computation, 130/143 when interrupted by SIGINT/SIGTERM
 (temporary files are removed first). ``--debug`` shows the traceback instead.
 Outputs follow :mod:`gfimu.io.outputs`: never over an input, never over
 anything but a regular file.
+
+Progress and messages, the same on every command: a long step shows a tqdm bar
+on standard error when it is a terminal (:mod:`gfimu.progress`,
+:func:`show_progress`); a status line (what was written, what was found) goes
+through :func:`info`. ``--quiet`` (``-q``), added to every command by
+:func:`build_parser`, silences both; ``--no-progress`` (:func:`add_no_progress`)
+the bars alone. Warnings and errors are always shown.
 """
 
 from __future__ import annotations
@@ -98,6 +105,7 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback of an error instead of a one-line message")
     parser.add_argument("--version", action="version", version=f"gfimu {_version()}")
+    parser.add_argument("--quiet", "-q", action="store_true", help=QUIET_HELP)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         if command == "" or name == command:
@@ -108,15 +116,53 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     return parser
 
 
+QUIET_HELP = ("no progress bars and no status lines; the outputs, warnings and errors stay "
+              "(default: off)")
+NO_PROGRESS_HELP = ("no progress bars; the status lines stay (--quiet silences both; default: bars on standard "
+                    "error when it is a terminal)")
+
+
 def _add_debug_everywhere(parser: argparse.ArgumentParser) -> None:
-    """Accept ``--debug`` after the command too (default suppressed so the top-level value stands)."""
+    """Accept ``--debug`` and ``--quiet`` after the command too, on every command (defaults suppressed so
+    that a value given before the command stands)."""
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for child in set(action.choices.values()):
                 if "--debug" not in child._option_string_actions:
                     child.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                                        help="show the full traceback of an error")
+                if "--quiet" not in child._option_string_actions:
+                    names = ["--quiet"] + ([] if "-q" in child._option_string_actions else ["-q"])
+                    child.add_argument(*names, action="store_true", default=argparse.SUPPRESS, help=QUIET_HELP)
                 _add_debug_everywhere(child)
+
+
+def add_no_progress(parser: argparse.ArgumentParser) -> None:
+    """``--no-progress`` on a command that shows progress bars."""
+    parser.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
+
+
+def quiet(args) -> bool:
+    """True under ``--quiet``: no progress bars, no status lines."""
+    return bool(getattr(args, "quiet", False))
+
+
+def show_progress(args) -> bool:
+    """Progress bars (tqdm on standard error) when standard error is a terminal, unless ``--quiet`` or
+    ``--no-progress``: a log of the command redirected to a file gets no bars."""
+    if quiet(args) or getattr(args, "no_progress", False):
+        return False
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def info(args, *text, file=None) -> None:
+    """A status line (what was written, what was found), left out under ``--quiet``; standard error by
+    default, or ``file`` (a command whose data goes to a file reports on standard output)."""
+    if not quiet(args):
+        print(*text, file=sys.stderr if file is None else file)
 
 
 _OS_HINTS = {

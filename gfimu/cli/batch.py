@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 from .options import integer
 
 
@@ -32,7 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="Dask scheduler to use, e.g. tcp://10.0.0.5:8786 (default: a local cluster on this machine)")
     p.add_argument("--workers", type=integer(1, 256), default=2, metavar="N",
                    help="worker processes of the local cluster (default 2; ignored with --scheduler)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_no_progress(p)
     p.set_defaults(func=run)
 
 
@@ -60,7 +60,7 @@ def run(args) -> int:
             raise CLIError(f"--out: {target} exists and is not a regular file")
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = check_output(out_dir / "summary.csv", inputs, "--out")
-    bar = _Bar(len(args.logs), enable=not args.quiet)
+    bar = _Bar(len(args.logs), enable=show_progress(args))
     failed = []
 
     def done(row):
@@ -79,7 +79,8 @@ def run(args) -> int:
     for row in result.failed:
         print(f"gfimu batch: {row['log']}: failed: {row['message']}", file=sys.stderr)
     ok = len(result.rows) - len(result.failed)
-    print(f"batch: {ok} of {len(result.rows)} logs estimated with {args.method} on {result.scheduler} -> {out_dir}")
+    info(args, f"batch: {ok} of {len(result.rows)} logs estimated with {args.method} on {result.scheduler} "
+               f"-> {out_dir}", file=sys.stdout)
     return 1 if result.failed else 0
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 from .options import non_negative, positive
 
 
@@ -34,16 +34,40 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"shortest still period [s] (default {d.min_duration_s})")
     p.add_argument("--until-s", type=positive("s"), default=None,
                    help="use only the first UNTIL_S seconds of the log [s] (default: all)")
+    add_no_progress(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from .. import io as gio
-    from ..calibration import StillDetector, calibration_to_toml, fit
+    from ..calibration import calibration_to_toml
     from ..io.outputs import check_output, write_output
+    from ..progress import steps
 
     out = check_output(args.out, [args.log], "--out", stdout=True)
-    log = gio.read_log(args.log)
+    with steps("calibrate", ["read the log", "find still periods and fit", "write"], show_progress(args)) as bar:
+        bar.step("read the log")
+        log = gio.read_log(args.log)
+        bar.step("find still periods and fit")
+        cal = _fit(args, log)
+        bar.step("write")
+        write_output(out, [calibration_to_toml(cal)])
+    i = cal.info
+    report = sys.stdout if out is not None else sys.stderr  # standard output may hold the calibration itself
+    info(args, f"{i['still_periods']} still periods ({i['still_samples']} samples); fit residual "
+               f"{i['residual_rms_mps2']:.4f} m/s^2 RMS", file=report)
+    info(args, f"inter-sensor spread of the still means: {i['spread_before_mps2']:.4f} -> "
+               f"{i['spread_after_mps2']:.4f} m/s^2 (norm); {i['spread_per_axis_before_mps2']:.4f} -> "
+               f"{i['spread_per_axis_after_mps2']:.4f} m/s^2 (per axis)", file=report)
+    if cal.gyro_bias_b_radps is not None:
+        info(args, "gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s", file=report)
+    info(args, f"calibration written: {out if out is not None else 'standard output'}", file=report)
+    return 0
+
+
+def _fit(args, log):
+    from ..calibration import StillDetector, fit
+
     if args.until_s is not None:
         n = int((log.times_s <= args.until_s).sum())
         if n < 2:
@@ -51,16 +75,4 @@ def run(args) -> int:
         log = log.select(slice(0, n))
     det = StillDetector(window_s=args.window_s, accel_std_mps2=args.accel_std, gyro_std_radps=args.gyro_std,
                         min_duration_s=args.min_duration_s)
-    cal = fit(log, det)
-    i = cal.info
-    write_output(out, [calibration_to_toml(cal)])
-    report = sys.stdout if out is not None else sys.stderr  # standard output may hold the calibration itself
-    print(f"{i['still_periods']} still periods ({i['still_samples']} samples); fit residual "
-          f"{i['residual_rms_mps2']:.4f} m/s^2 RMS", file=report)
-    print(f"inter-sensor spread of the still means: {i['spread_before_mps2']:.4f} -> {i['spread_after_mps2']:.4f} "
-          f"m/s^2 (norm); {i['spread_per_axis_before_mps2']:.4f} -> {i['spread_per_axis_after_mps2']:.4f} m/s^2 "
-          "(per axis)", file=report)
-    if cal.gyro_bias_b_radps is not None:
-        print("gyro bias (B): " + ", ".join(f"{v:+.4f}" for v in cal.gyro_bias_b_radps) + " rad/s", file=report)
-    print(f"calibration written: {out if out is not None else 'standard output'}", file=report)
-    return 0
+    return fit(log, det)

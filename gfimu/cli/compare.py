@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 from .options import check_method_options, non_negative, parse_method_options
 
 
@@ -35,7 +35,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gyro-noise", type=non_negative("rad/s"), default=None, metavar="RAD_PER_S",
                    help="gyro noise std for the 'CRB (with gyro)' row when the array has no gyroscope")
     p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
-    p.add_argument("--progress", action="store_true", help="show progress bars of the methods")
+    add_no_progress(p)
+    p.add_argument("--progress", action="store_true",
+                   help="no effect, kept for older command lines: the methods' progress bars now show by default "
+                        "on a terminal (see --no-progress, --quiet; default: off)")
     p.set_defaults(func=run)
 
 
@@ -84,14 +87,15 @@ def run(args) -> int:
 
         log = apply_calibration(log, read_calibration(args.calibration))
     result = compare(log, methods=methods, options=options, bounds=not args.no_bounds,
-                     estimates_dir=args.estimates_dir, progress=args.progress,
+                     estimates_dir=args.estimates_dir, progress=show_progress(args),
                      gyro_noise_std_radps=args.gyro_noise)
     text = {"markdown": result.to_markdown, "csv": result.to_csv, "json": result.to_json}[args.format]()
     write_output(out, [text])
     method_rows = [r for r in result.rows if r["kind"] == "method"]
     n_ok = sum(1 for r in method_rows if r["status"] == "ok")
     if out is not None:
-        print(f"compare: {n_ok} of {len(result.methods)} methods ran on {len(log)} samples -> {out}")
+        info(args, f"compare: {n_ok} of {len(result.methods)} methods ran on {len(log)} samples -> {out}",
+             file=sys.stdout)
     # a method that failed is an error; so is one asked for by name (--methods) that did not run
     failed = [r for r in method_rows if r["status"] == "failed" or (methods is not None and r["status"] != "ok")]
     if failed:

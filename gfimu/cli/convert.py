@@ -6,9 +6,10 @@ The formats are those of :mod:`gfimu.io.readers`, each with its own options.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -36,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="Kalibr IMU-chain YAML (imu0, imu1, ... each with T_i_b, a 4x4 body-to-IMU transform): "
                              "replaces every accelerometer's position [m] and rotation (default: none, the "
                              "recording's own geometry)")
+        add_no_progress(fp)
         before = {a.dest for a in fp._actions}
         reader.add_arguments(fp)
         fp.set_defaults(func=run, reader_options=[a.dest for a in fp._actions if a.dest not in before])
@@ -51,25 +53,35 @@ def run(args) -> int:
         raise CLIError(f"{args.input}: no such file or folder")
     option_files = [v for v in options.values() if isinstance(v, str) and Path(v).is_file()]
     prepare_log_folder(args.out, [args.input, args.calibration, args.extrinsics, *option_files], force=args.force)
-    conversion = read_recording(args.format, args.input, **options)
-    log = conversion.log
-    extrinsics_report: list[str] = []
-    if args.extrinsics:
-        from ..io.kalibr import apply_kalibr, read_kalibr
+    from ..progress import steps
 
-        array, extrinsics_report = apply_kalibr(log.array, read_kalibr(args.extrinsics), args.extrinsics)
-        log = log.replace(array=array)
-    elif conversion.unplaced:
-        raise CLIError(f"{args.input}: accelerometer(s) {', '.join(conversion.unplaced)} have no position or "
-                       "rotation; give them in the map (position_m, rotation_body_sensor), with --array, or with "
-                       "--extrinsics")
+    names = (["read the recording"] + (["apply the extrinsics"] if args.extrinsics else [])
+             + (["apply the calibration"] if args.calibration else []) + ["write the log"])
+    with steps(f"convert {args.format}", names, show_progress(args)) as bar:
+        bar.step("read the recording")
+        conversion = read_recording(args.format, args.input, **options)
+        log = conversion.log
+        extrinsics_report: list[str] = []
+        if args.extrinsics:
+            from ..io.kalibr import apply_kalibr, read_kalibr
+
+            bar.step("apply the extrinsics")
+            array, extrinsics_report = apply_kalibr(log.array, read_kalibr(args.extrinsics), args.extrinsics)
+            log = log.replace(array=array)
+        elif conversion.unplaced:
+            raise CLIError(f"{args.input}: accelerometer(s) {', '.join(conversion.unplaced)} have no position or "
+                           "rotation; give them in the map (position_m, rotation_body_sensor), with --array, or "
+                           "with --extrinsics")
+        if args.calibration:
+            from ..calibration import apply_calibration, read_calibration
+
+            bar.step("apply the calibration")
+            log = apply_calibration(log, read_calibration(args.calibration))
+        bar.step("write the log")
+        gio.write_log(log, args.out)
     for line in [*conversion.report, *extrinsics_report]:
-        print(line)
+        info(args, line, file=sys.stdout)
     if args.calibration:
-        from ..calibration import apply_calibration, read_calibration
-
-        log = apply_calibration(log, read_calibration(args.calibration))
-        print(f"calibration applied: {args.calibration}")
-    gio.write_log(log, args.out)
-    print(f"log written: {args.out} ({len(log)} samples, {log.rate_hz:.2f} Hz)")
+        info(args, f"calibration applied: {args.calibration}", file=sys.stdout)
+    info(args, f"log written: {args.out} ({len(log)} samples, {log.rate_hz:.2f} Hz)", file=sys.stdout)
     return 0

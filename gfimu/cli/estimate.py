@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 from .options import check_method_options, parse_options, positive
 
 
@@ -35,8 +35,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
     p.add_argument("--orientation", choices=["none", "inclinometer", "gyro", "estimate"], default="none",
                    help="add gravity-free acceleration and orientation: from the inclinometer (paper 001) or "
-                        "by propagating the gyro or the estimated ω (paper 003)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+                        "by propagating the gyro or the estimated ω (paper 003); default: none")
+    p.add_argument("--tum", default=None, metavar="FILE",
+                   help="also write the estimated orientation as a TUM trajectory (timestamp [s], tx ty tz [m] "
+                        "= 0, qx qy qz qw of the body→world rotation), as evo reads it (`evo_traj tum FILE`); "
+                        "needs --orientation inclinometer|gyro|estimate (default: none written)")
+    add_no_progress(p)
     p.set_defaults(func=run)
 
 
@@ -49,22 +53,44 @@ def run(args) -> int:
     if args.log is None or args.out is None:
         raise CLIError("a LOG folder and --out (a file, or - for standard output) are needed "
                        "(--list-options alone lists the method's options)")
+    import numpy as np
+
     from .. import io as gio
-    from ..io.outputs import check_output, write_output
+    from ..io.outputs import check_output, same_file, write_output
     from ..pipeline import MethodNotApplicable, estimate_log
 
     out = check_output(args.out, [args.log, args.calibration], "--out", stdout=True)
     options = method_options(args)
+    tum = None
+    if args.tum is not None:
+        tum = check_output(args.tum, [args.log, args.calibration], "--tum")
+        if out is not None and same_file(out, tum):
+            raise CLIError(f"--tum {args.tum}: the same file as --out {args.out}; give the trajectory its own name")
+        if args.orientation == "none" and not (options.get("estimate_attitude") or options.get("use_inclinometer")):
+            raise CLIError("--tum writes the estimated orientation, but none is estimated: add --orientation "
+                           "inclinometer, gyro or estimate")
     try:
-        run_ = estimate_log(args.log, args.method, options, args.calibration, progress=not args.no_progress,
+        run_ = estimate_log(args.log, args.method, options, args.calibration, progress=show_progress(args),
                             orientation=args.orientation)
     except MethodNotApplicable as exc:
         raise CLIError(str(exc)) from None
+    tum_chunks = None
+    if tum is not None:
+        if run_.motion.quaternion_wb is None:
+            raise CLIError(f"--tum {args.tum}: method {args.method!r} gave no orientation to write")
+        from ..io.trajectory import tum_chunks as make_tum_chunks
+
+        tum_chunks = make_tum_chunks(run_.motion)  # checked before anything is written
     write_output(out, gio.motion_csv_chunks(run_.motion))
+    if tum_chunks is not None:
+        write_output(tum, tum_chunks)
     if run_.model_check is not None:  # what the smoother learnt about the readings and the model it chose
-        print(f"{args.method}: {run_.model_check.describe()}", file=sys.stderr)
-    print(f"{args.method}: {run_.samples} samples in {run_.seconds:.2f} s -> "
-          f"{out if out is not None else 'standard output'}", file=sys.stderr if out is None else sys.stdout)
+        info(args, f"{args.method}: {run_.model_check.describe()}")
+    info(args, f"{args.method}: {run_.samples} samples in {run_.seconds:.2f} s -> "
+               f"{out if out is not None else 'standard output'}", file=sys.stderr if out is None else sys.stdout)
+    if tum is not None:
+        info(args, f"orientation: {int(np.sum(np.all(np.isfinite(run_.motion.quaternion_wb), axis=1)))} poses "
+                   f"-> {tum} (TUM: timestamp tx ty tz qx qy qz qw)", file=sys.stderr if out is None else sys.stdout)
     return 0
 
 

@@ -15,7 +15,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from . import CLIError
+from . import CLIError, info
 from .options import non_negative
 
 
@@ -132,8 +132,8 @@ def run(args) -> int:
     write_output(out, [text])
     report = sys.stderr if out is None else sys.stdout
     if offset_s:
-        print(f"evaluate: estimate shifted by {offset_s * 1e3:+.3f} ms"
-              f"{' (estimated from |omega|)' if args.estimate_time_offset else ''}", file=report)
+        info(args, f"evaluate: estimate shifted by {offset_s * 1e3:+.3f} ms"
+                   f"{' (estimated from |omega|)' if args.estimate_time_offset else ''}", file=report)
     if errors_out is not None:
         if estimate.omega_b_radps is None or truth.omega_b_radps is None:
             raise CLIError("--errors-out needs ω in both the estimate and the reference")
@@ -142,5 +142,5 @@ def run(args) -> int:
         lines += [f"{int(r[0])},{r[1]:.9g},{r[2]:.9g},{r[3]:.9g},{r[4]:.9g},{int(r[5])}\n" for r in table]
         write_output(errors_out, ["".join(lines)])
     if out is not None:
-        print(f"evaluation of {estimate_arg} -> {args.out} ({result.summary()})")
+        info(args, f"evaluation of {estimate_arg} -> {args.out} ({result.summary()})", file=sys.stdout)
     return 0

@@ -45,7 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--queue", type=int, default=5000, metavar="N",
                    help="samples held while the smoother is busy before the oldest are dropped (default 5000)")
     p.add_argument("--status-s", type=positive("s"), default=5.0, help="status line every this many s (default 5)")
-    p.add_argument("--quiet", action="store_true", help="no status lines (the summary at the end stays)")
+    p.add_argument("--quiet", "-q", action="store_true", default=argparse.SUPPRESS,
+                   help="no status lines; the summary at the end stays (default: off)")
     p.set_defaults(func=run)
 
 
@@ -238,7 +239,7 @@ def run(args) -> int:
                             del arrival[key]
                     if len(latency) > 200_000:
                         del latency[:100_000]
-            if not args.quiet and time.monotonic() - last_status >= args.status_s:
+            if not getattr(args, "quiet", False) and time.monotonic() - last_status >= args.status_s:
                 last_status = time.monotonic()
                 p50, p99, _ = session.stats.percentiles_ms()
                 report(f"{session.stats.samples_in} in, {session.stats.samples_out} out, lag {args.lag_s:g} s, "

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import textwrap
 
-from . import CLIError
+from . import CLIError, add_no_progress, info, show_progress
 from .options import integer, non_negative, number, parse_options, positive
 
 ARRAY_CHOICES = ("cube", "paper001", "single-triad", "mimu4444")
@@ -22,7 +23,7 @@ def _scenario_help() -> str:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..simulate import SCENARIOS
+    from ..simulate import SCENARIOS, defaults
 
     p = sub.add_parser(
         "simulate",
@@ -54,32 +55,35 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cube | paper001 | single-triad | mimu4444 | PATH/array.toml (default: cube, "
                         "or the block's single triad for the freeflight scenarios)")
     p.add_argument("--half-edge-m", type=positive("m"), default=None,
-                   help="half edge of the cube array [m] (default 0.05)")
+                   help=f"half edge of the cube array [m] (default {defaults.CUBE_HALF_EDGE_M:g})")
     p.add_argument("--rate-hz", type=number(0.0, 100e3, "Hz", low_open=True), default=None,
                    help="sample rate [Hz], at most 100 kHz (default: the scenario's)")
     p.add_argument("--duration-s", type=positive("s"), default=None, help="length [s] (default: the scenario's)")
     p.add_argument("--noise-std-mps2", type=non_negative("m/s^2"), default=None,
-                   help="white accelerometer noise per axis [m/s^2] (default: array.toml's noise_std_mps2, "
-                        "else the ADXL330 figures of paper 000)")
+                   help="white accelerometer noise per axis [m/s^2] (default: the array's noise_std_mps2, "
+                        f"{defaults.ACCEL_NOISE_STD_MPS2:g} for the cube; the ADXL330 figures of paper 000 for an "
+                        "array.toml without one)")
     p.add_argument("--no-noise", action="store_true", help="exact readings (no sensor errors at all)")
-    p.add_argument("--seed", type=integer(0), default=0, help="seed of the random motion and noise (default 0)")
+    p.add_argument("--seed", type=integer(0), default=defaults.SEED,
+                   help=f"seed of the random motion and noise (default {defaults.SEED})")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="scenario option, repeatable (e.g. -O spin_radps=20, -O start_s=5)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_no_progress(p)
     p.set_defaults(func=run)
 
 
 def _array(args):
-    from ..array import LAYOUTS, cube_array
+    from ..array import LAYOUTS
+    from ..simulate.defaults import default_cube
 
     if args.half_edge_m is not None and args.array not in (None, "cube"):
         raise CLIError("--half-edge-m applies to --array cube only")
     if args.half_edge_m is not None and not args.half_edge_m > 0:
         raise CLIError(f"--half-edge-m must be positive, got {args.half_edge_m}")
     if args.array is None:
-        return cube_array(args.half_edge_m) if args.half_edge_m is not None else None
+        return default_cube(args.half_edge_m) if args.half_edge_m is not None else None
     if args.array == "cube":
-        return cube_array(0.05 if args.half_edge_m is None else args.half_edge_m)
+        return default_cube(args.half_edge_m)
     if args.array in LAYOUTS:
         return LAYOUTS[args.array]()
     from pathlib import Path
@@ -113,8 +117,8 @@ def run(args) -> int:
     else:
         noise = None
     log = simulate(args.scenario, array=_array(args), rate_hz=args.rate_hz, duration_s=args.duration_s,
-                   noise=noise, seed=args.seed, progress=not args.no_progress, **options)
+                   noise=noise, seed=args.seed, progress=show_progress(args), **options)
     gio.write_log(log, args.out)
-    print(f"{args.scenario}: {len(log)} samples at {log.rate_hz:g} Hz ({log.array.name}, "
-          f"{log.array.n_axes} accelerometer axes) -> {args.out}")
+    info(args, f"{args.scenario}: {len(log)} samples at {log.rate_hz:g} Hz ({log.array.name}, "
+          f"{log.array.n_axes} accelerometer axes) -> {args.out}", file=sys.stdout)
     return 0

@@ -34,15 +34,13 @@ from pathlib import Path
 import numpy as np
 
 from ..array import SensorArray
-from ..log import Log
+from ..log import GYRO_COLUMNS, TILT_COLUMNS, Log
 from ..motion import QUANTITIES, Motion
 from .atomic import atomic_write
 from .errors import LogFormatError
 from .units import KIND_OF_UNIT, TIME_UNITS_NS, UNITS, canonical_unit, unit_factor, unit_help
 
 TIMESTAMP_HEADER = "#timestamp [ns]"
-GYRO_COLUMNS = ("w_x", "w_y", "w_z")
-TILT_COLUMNS = ("tilt_x", "tilt_y")
 VALID_COLUMN = "valid"
 
 _ROWS_PER_BLOCK = 16384  # rows formatted at a time when writing CSV

@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 from scipy import interpolate
 
-from ..array import Body, SensorArray, cube_array, single_triad
+from ..array import Body, SensorArray, single_triad
 from .free_flight import TorqueFreeMotion, box_principal_inertia
 from .trajectory import (
     GRAVITY_W_MPS2,
@@ -41,6 +41,7 @@ from .trajectory import (
 )
 from .. import rotations
 from ..datasets.gtsam_recordings import RECORDINGS
+from .defaults import DURATION_S, RATE_HZ, default_cube
 
 # paper 004: the accelerometer sits at a corner of the block's +z face,
 # about 15 mm in from both edges and 7 mm above the face (IMU in its casing).
@@ -293,7 +294,7 @@ def kitti(times_s, rng, array, *, start_s: float = 0.0, bandwidth_hz: float = 10
 
 
 def _cube():
-    return cube_array(0.05)
+    return default_cube()
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -303,9 +304,9 @@ SCENARIOS: dict[str, Scenario] = {
                  1000.0, 10.0, turntable, _cube),
         Scenario("turntable-constant", "paper 001 bench turning at a constant 180 °/s", 1000.0, 10.0,
                  turntable_constant, _cube),
-        Scenario("random3d", "band-limited random 3-D rotation and translation (paper 002)", 500.0, 10.0,
+        Scenario("random3d", "band-limited random 3-D rotation and translation (paper 002)", RATE_HZ, DURATION_S,
                  random3d, _cube),
-        Scenario("reversal", "ω_i = A_i sin(2π f_i t + φ_i): zero crossings on every axis", 500.0, 10.0,
+        Scenario("reversal", "ω_i = A_i sin(2π f_i t + φ_i): zero crossings on every axis", RATE_HZ, DURATION_S,
                  reversal, _cube),
         Scenario("freeflight-major", "paper 004 block in free flight, spun near its major axis", 1000.0, 2.0,
                  freeflight_major, free_flight_array),

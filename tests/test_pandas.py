@@ -1,0 +1,84 @@
+"""pandas bridge: Log and Motion to and from DataFrames, exact round trips, columns as in the CSV formats."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pd = pytest.importorskip("pandas")
+
+from gfimu import io as gio  # noqa: E402
+from gfimu.array import paper001_array  # noqa: E402
+from gfimu.log import Log  # noqa: E402
+from gfimu.motion import Motion  # noqa: E402
+from gfimu.simulate import simulate  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def log():
+    # paper 001's array: 2-axis accelerometers, a gyroscope and an inclinometer, so every reading column
+    return simulate("turntable", array=paper001_array(), duration_s=0.2, seed=2)
+
+
+def test_log_round_trip_is_exact_with_the_imu_csv_columns(log, tmp_path):
+    df = log.to_dataframe()
+    assert df.index.name == "timestamp_ns" and df.index.dtype == np.int64
+    np.testing.assert_array_equal(df.index.to_numpy(), log.timestamps_ns)
+    # the columns of imu.csv, in its order, without their units
+    gio.write_imu_csv(log, tmp_path / "imu.csv")
+    header = (tmp_path / "imu.csv").read_text().splitlines()[0].split(",")
+    assert [f"{c} [{df.attrs['units'][c]}]" for c in df.columns] == header[1:]
+    assert list(df.columns[-5:]) == ["w_x", "w_y", "w_z", "tilt_x", "tilt_y"]
+    np.testing.assert_array_equal(df["w_z"].to_numpy(), log.gyro_b_radps[:, 2])
+    back = Log.from_dataframe(df, log.array)
+    np.testing.assert_array_equal(back.timestamps_ns, log.timestamps_ns)
+    np.testing.assert_array_equal(back.accel_mps2, log.accel_mps2)
+    np.testing.assert_array_equal(back.gyro_b_radps, log.gyro_b_radps)
+    np.testing.assert_array_equal(back.tilt_rad, log.tilt_rad)
+    # extra columns are ignored; a missing one is named
+    df2 = df.assign(extra=1.0)
+    np.testing.assert_array_equal(Log.from_dataframe(df2, log.array).accel_mps2, log.accel_mps2)
+    with pytest.raises(ValueError, match="column 'tilt_y' is missing"):
+        Log.from_dataframe(df.drop(columns="tilt_y"), log.array)
+    with pytest.raises(ValueError, match="integer timestamps in nanoseconds"):
+        Log.from_dataframe(df.set_index(df.index * 1e-9), log.array)
+
+
+def test_motion_round_trip_is_exact_with_sigma(log, tmp_path):
+    truth = log.truth
+    rng = np.random.default_rng(0)
+    motion = truth.replace(sigma={"omega_b_radps": rng.random((len(truth), 3))})
+    df = motion.to_dataframe()
+    gio.write_motion_csv(motion, tmp_path / "m.csv")
+    header = (tmp_path / "m.csv").read_text().splitlines()[0].split(",")
+    assert [f"{c} [{df.attrs['units'][c]}]" for c in df.columns] == header[1:]
+    assert df.columns[-3:].tolist() == ["sigma_w_x", "sigma_w_y", "sigma_w_z"]
+    assert "q_w" in df.columns and df.attrs["units"]["w_x"] == "rad s^-1"
+    back = Motion.from_dataframe(df)
+    np.testing.assert_array_equal(back.timestamps_ns, motion.timestamps_ns)
+    for name in motion.available():
+        np.testing.assert_array_equal(getattr(back, name), getattr(motion, name))
+    np.testing.assert_array_equal(back.sigma["omega_b_radps"], motion.sigma["omega_b_radps"])
+    assert back.available() == motion.available() and set(back.sigma) == {"omega_b_radps"}
+    with pytest.raises(ValueError, match="column 'dw_y' is missing"):
+        Motion.from_dataframe(df.drop(columns="dw_y"))
+    # only what is present: an estimate of ω alone gives three columns
+    only = Motion(motion.timestamps_ns, omega_b_radps=motion.omega_b_radps).to_dataframe()
+    assert only.columns.tolist() == ["w_x", "w_y", "w_z"]
+
+
+def test_a_missing_pandas_is_named_with_its_extra(log, monkeypatch):
+    import builtins
+
+    real = builtins.__import__
+
+    def no_pandas(name, *args, **kwargs):
+        if name == "pandas":
+            raise ImportError("no pandas")
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_pandas)
+    with pytest.raises(ImportError, match=r"Log.to_dataframe needs pandas.*gfimu\[pandas\]"):
+        log.to_dataframe()
+    with pytest.raises(ImportError, match=r"Motion.to_dataframe needs pandas"):
+        log.truth.to_dataframe()
