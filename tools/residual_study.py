@@ -31,6 +31,13 @@ second):
 
     python3 tools/residual_study.py                        # exp_1 (study), exp_2, exp_3 (checked)
     python3 tools/residual_study.py --experiments 1 --json out.json
+    python3 tools/residual_study.py --experiments 1 --estimate est1.csv   # + where an estimate's errors are
+
+``--estimate`` (one ω estimate per experiment, e.g. the ``est.csv`` of ``gfimu estimate``) adds
+where its errors sit against the gyro reference on the moving, unsaturated samples: by |ω_ref|,
+by distance to the nearest clipped gyro sample, the share of the squared error in the largest
+1 % and 5 %, the wrong-sign share by |ω_ref|, along / across ω_ref, and the part a constant
+delay of the reference explains (reported only; the scoring never shifts the reference).
 
 The findings are in docs/rigid-body-residual.md.
 """
@@ -291,9 +298,85 @@ def study(d, fs) -> dict:
     out["r12_low_high_rate_at_equal_omega"] = split
     sel = np.argsort(rate)
     q = len(sel) // 4
+    # structure across the axes: principal components of the residual whitened by its |ω| model
+    coef = out["variance_models_r12"]["omega"]["coef"]
+    rw = r12.reshape(n, -1) / np.sqrt(coef[0] + coef[1] * wn**2)[:, None]
+    sv = np.linalg.svd(rw, compute_uv=False) ** 2
+    out["principal_shares"] = (sv[:12] / sv.sum()).tolist()
+    nxt = np.nonzero(np.diff(d["idx"]) == 1)[0]
+    rf = r12.reshape(n, -1)
+    out["lag1_autocorrelation"] = float(np.sum(rf[nxt] * rf[nxt + 1]) / np.sqrt(np.sum(rf[nxt] ** 2) * np.sum(rf[nxt + 1] ** 2)))
     out["r12_by_rate_quartile"] = [float(np.sqrt(np.mean(ps[sel[i * q:(i + 1) * q]] ** 2))) for i in range(4)]
     out["stated_noise"] = d["stated"]
     return out
+
+
+def error_breakdown(d, estimate_csv: Path) -> dict:
+    """Where the errors of an ω estimate sit (see the module docstring)."""
+    from gfimu import io as gio
+
+    log = d["log"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = gio.read_motion_csv(estimate_csv).omega_b_radps
+    ref = log.reference.omega_b_radps
+    inv = log.invalid_reference
+    mov = ~inv & (np.linalg.norm(ref, axis=1) > MOVING_RADPS)
+    E = est - ref
+    err2 = np.sum(E**2, axis=1)
+    total = float(np.sum(err2[mov]))
+    out = {"rmse": float(np.sqrt(np.mean(err2[mov]))), "median": float(np.median(np.sqrt(err2[mov])))}
+    srt = np.sort(err2[mov])[::-1]
+    out["top1_share"] = float(srt[: max(len(srt) // 100, 1)].sum() / total)
+    out["top5_share"] = float(srt[: max(len(srt) // 20, 1)].sum() / total)
+    wn = np.linalg.norm(ref, axis=1)
+    wrong = np.sum(est * ref, axis=1) < 0
+    out["by_omega"] = {}
+    for lo, hi in ((2, 5), (5, 10), (10, 20), (20, 30), (30, 40)):
+        sel = mov & (wn >= lo) & (wn < hi)
+        out["by_omega"][f"{lo}-{hi}"] = dict(n=int(sel.sum()), rmse=float(np.sqrt(np.mean(err2[sel]))),
+                                              share=float(np.sum(err2[sel]) / total), wrong=float(np.mean(wrong[sel])))
+    clipped = np.nonzero(inv)[0]
+    k = np.arange(len(ref))
+    if clipped.size:
+        p = np.searchsorted(clipped, k)
+        dist = np.minimum(np.abs(k - clipped[np.clip(p - 1, 0, clipped.size - 1)]),
+                          np.abs(clipped[np.clip(p, 0, clipped.size - 1)] - k))
+    else:
+        dist = np.full(len(ref), 10**9)
+    out["by_distance_to_clipped"] = {}
+    for lo, hi in ((1, 2), (2, 4), (4, 8), (8, 10**9)):
+        sel = mov & (dist >= lo) & (dist < hi)
+        out["by_distance_to_clipped"][f"{lo}-{hi if hi < 10**9 else 'inf'}"] = dict(
+            n=int(sel.sum()), rmse=float(np.sqrt(np.mean(err2[sel]))) if sel.any() else float("nan"),
+            share=float(np.sum(err2[sel]) / total))
+    u = ref[mov] / wn[mov, None]
+    along = np.sum(E[mov] * u, axis=1)
+    out["rms_along_ref"] = float(np.sqrt(np.mean(along**2)))
+    out["rms_across_ref"] = float(np.sqrt(np.mean(np.sum((E[mov] - along[:, None] * u) ** 2, axis=1))))
+    # a constant delay of the reference: E ≈ τ ω̇_ref (samples with valid neighbours)
+    wd = np.gradient(ref, log.times_s, axis=0)
+    m = mov.copy()
+    m[[0, -1]] = False
+    m[1:] &= ~inv[:-1]
+    m[:-1] &= ~inv[1:]
+    tau = float(np.sum(E[m] * wd[m]) / np.sum(wd[m] ** 2))
+    out["reference_delay_ms"] = 1e3 * tau
+    out["rmse_with_neighbours"] = float(np.sqrt(np.mean(err2[m])))
+    out["rmse_reference_delay_removed"] = float(np.sqrt(np.mean(np.sum((E[m] - tau * wd[m]) ** 2, axis=1))))
+    return out
+
+
+def report_errors(exp, b) -> None:
+    print(f"  estimate: RMSE {b['rmse']:.2f}, median {b['median']:.2f} rad/s; largest 1 % of the errors carry "
+          f"{100 * b['top1_share']:.0f} % of the squared error, largest 5 % {100 * b['top5_share']:.0f} %")
+    print("    by |ω_ref| [rad/s]: " + "; ".join(f"{k}: n {v['n']}, RMSE {v['rmse']:.2f}, share {100 * v['share']:.0f} %, "
+                                                 f"wrong sign {100 * v['wrong']:.1f} %" for k, v in b["by_omega"].items()))
+    print("    by distance to the nearest clipped gyro sample [samples]: " + "; ".join(
+        f"{k}: n {v['n']}, RMSE {v['rmse']:.2f}, share {100 * v['share']:.0f} %" for k, v in b["by_distance_to_clipped"].items()))
+    print(f"    along ω_ref {b['rms_along_ref']:.2f}, across {b['rms_across_ref']:.2f} rad/s; the reference lags by "
+          f"{-b['reference_delay_ms']:.2f} ms: RMSE {b['rmse_with_neighbours']:.2f} -> {b['rmse_reference_delay_removed']:.2f} "
+          "with that delay removed (samples with valid neighbours; reported only)")
 
 
 def report(exp, r) -> None:
@@ -319,6 +402,9 @@ def report(exp, r) -> None:
           f"σ' = scale·√(ν/(ν+1)) = {r['student_t_scale'] * np.sqrt(r['student_t_nu'] / (r['student_t_nu'] + 1)):.2f})")
     print("  correlation of the log residual power with the log of: "
           + ", ".join(f"{k} {v:.2f}" for k, v in r["correlation_log_power"].items()))
+    print(f"  principal components of R12 (12 dims, isotropic 8.3 % each): largest "
+          + ", ".join(f"{100 * v:.1f} %" for v in r["principal_shares"][:3]) + f", smallest {100 * r['principal_shares'][-1]:.1f} %; "
+          f"lag-1 autocorrelation {r['lag1_autocorrelation']:.3f}")
     s = r["spectra"]
     print(f"  spectra: residual power above fs/4 {100 * s['residual_high_share']:.0f} % (white 50 %); "
           f"array-mean reading power above fs/4 {100 * s['readings_high_share']:.1f} %")
@@ -333,6 +419,8 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--experiments", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--estimate", type=Path, nargs="*", default=[],
+                    help="ω estimates (CSV), one per experiment in the order given: adds where their errors are")
     args = ap.parse_args(argv)
     rows = {}
     for exp in args.experiments:
@@ -344,6 +432,10 @@ def main(argv=None) -> int:
         fs = 1.0 / float(np.median(np.diff(d["t"])))
         rows[exp] = study(d, fs)
         report(exp, rows[exp])
+        k = args.experiments.index(exp)
+        if k < len(args.estimate):
+            rows[exp]["errors"] = error_breakdown(d, args.estimate[k])
+            report_errors(exp, rows[exp]["errors"])
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2, default=float))
     return 0
