@@ -308,6 +308,8 @@ def study(d, fs) -> dict:
     out["lag1_autocorrelation"] = float(np.sum(rf[nxt] * rf[nxt + 1]) / np.sqrt(np.sum(rf[nxt] ** 2) * np.sum(rf[nxt + 1] ** 2)))
     out["r12_by_rate_quartile"] = [float(np.sqrt(np.mean(ps[sel[i * q:(i + 1) * q]] ** 2))) for i in range(4)]
     out["stated_noise"] = d["stated"]
+    # per-sample conditioning of the layout: std of each linear unknown per unit axis noise
+    out["unknown_std_per_unit_noise"] = np.sqrt(np.diag(np.linalg.pinv(S.T @ S))).tolist()
     return out
 
 
@@ -402,6 +404,10 @@ def report(exp, r) -> None:
           f"σ' = scale·√(ν/(ν+1)) = {r['student_t_scale'] * np.sqrt(r['student_t_nu'] / (r['student_t_nu'] + 1)):.2f})")
     print("  correlation of the log residual power with the log of: "
           + ", ".join(f"{k} {v:.2f}" for k, v in r["correlation_log_power"].items()))
+    sd = r["unknown_std_per_unit_noise"]
+    print("  per-sample std of the 12 unknowns per 1 m/s² of axis noise: f " + ", ".join(f"{v:.2f}" for v in sd[:3])
+          + "; ω̇ " + ", ".join(f"{v:.0f}" for v in sd[3:6]) + "; q(ω) [xx+yy, xx+zz, yy+zz, xy, xz, yz] "
+          + ", ".join(f"{v:.0f}" for v in sd[6:]))
     print(f"  principal components of R12 (12 dims, isotropic 8.3 % each): largest "
           + ", ".join(f"{100 * v:.1f} %" for v in r["principal_shares"][:3]) + f", smallest {100 * r['principal_shares'][-1]:.1f} %; "
           f"lag-1 autocorrelation {r['lag1_autocorrelation']:.3f}")
