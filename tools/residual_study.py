@@ -29,7 +29,7 @@ second):
 - aliasing: the residual's spectrum (share of its power above half the Nyquist rate;
   white noise puts half there) and the readings' spectrum near Nyquist.
 
-    python3 tools/residual_study.py                        # exp_1 (study), exp_2, exp_3 (checked)
+    python3 tools/residual_study.py --data ../shared/data/mimu4444   # exp_1 (study), exp_2, exp_3 (checked)
     python3 tools/residual_study.py --experiments 1 --json out.json
     python3 tools/residual_study.py --experiments 1 --estimate est1.csv   # + where an estimate's errors are
 
@@ -60,7 +60,7 @@ from gfimu.io.readers.mimu4444 import read_mimu4444  # noqa: E402
 from gfimu.rigid_body import quadratic_terms  # noqa: E402
 from gfimu.rotations import skew  # noqa: E402
 
-DEFAULT_DATA = Path("/work/shared/data/mimu4444")
+DEFAULT_DATA = REPO.parent / "shared" / "data" / "mimu4444"
 MOVING_RADPS = 2.0
 
 
