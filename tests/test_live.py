@@ -35,6 +35,23 @@ def _free_port(kind=socket.SOCK_DGRAM) -> int:
         return s.getsockname()[1]
 
 
+def _wait_until_bound(port: int, proc, timeout_s: float = 120.0) -> None:
+    """Wait until a UDP socket on 127.0.0.1:``port`` is bound (read from /proc/net/udp, so a loaded
+    machine's slow start-up cannot make the test send before the command listens)."""
+    table = Path("/proc/net/udp")
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return
+        if not table.exists():  # not Linux: fall back to a fixed wait
+            time.sleep(2.0)
+            return
+        if any(line.split()[1].endswith(f":{port:04X}") for line in table.read_text().splitlines()[1:]):
+            time.sleep(0.2)
+            return
+        time.sleep(0.05)
+
+
 def test_stdin_rows_give_the_fixed_lag_estimate(log_dir, tmp_path):
     """Fed a log's imu.csv on standard input: the same rows and values as gfimu estimate --method fixed-lag."""
     batch = tmp_path / "batch.csv"
@@ -63,7 +80,7 @@ def test_udp_datagrams_with_a_bad_a_repeated_and_a_late_one(log_dir, tmp_path):
                              "--rate-hz", "500", "--source", f"udp://127.0.0.1:{port}", "--out", str(out), "--quiet"],
                             env=_env(), stderr=subprocess.PIPE, text=True)
     rows = (log_dir / "imu.csv").read_text().splitlines()[1:1001]
-    time.sleep(2.0)  # the command binds its socket
+    _wait_until_bound(port, proc)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         for i, row in enumerate(rows):
             if i == 500:
@@ -95,7 +112,7 @@ def test_sigterm_flushes_and_summarises(log_dir, tmp_path):
                              "--rate-hz", "500", "--source", f"udp://127.0.0.1:{port}", "--out", str(out), "--quiet",
                              "-O", "tune_process_noise=False"], env=_env(), stderr=subprocess.PIPE, text=True)
     rows = (log_dir / "imu.csv").read_text().splitlines()[1:401]
-    time.sleep(2.0)
+    _wait_until_bound(port, proc)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         for row in rows:
             s.sendto(row.encode(), ("127.0.0.1", port))

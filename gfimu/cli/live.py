@@ -66,6 +66,10 @@ def _text_rows(source: str, stop: threading.Event):
         return
     url = urlparse(source)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:  # room for a few seconds of datagrams while the process is descheduled (the kernel may cap it)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    except OSError:
+        pass
     try:
         sock.bind((url.hostname or "0.0.0.0", url.port or 0))
     except OSError as exc:
