@@ -173,7 +173,8 @@ class SmootherOptions:
 
     factor_groups: tuple = ()
     """Further factor groups (:class:`gfimu.smoother.groups.FactorGroup`) added to the model of every
-    solve window: the batch solver, the tuner, the bound and the GTSAM graph all use them."""
+    solve window: the batch solver, the tuner, the bound and the GTSAM graph all use them, and the
+    fixed-lag smoother those that are per sample (``FactorGroup.per_sample``)."""
 
     def __post_init__(self) -> None:
         for name in (
