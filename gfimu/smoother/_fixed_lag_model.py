@@ -107,12 +107,7 @@ class ArrayModel:
         sigma = noise.accel_noise_std(array, options.default_accel_noise_std_mps2)
         sigma = sigma * self.accel_noise_scale
         self.accel_sigma_mps2 = sigma
-        self._geometry = []  # (directions, positions, column slice)
-        col = 0
-        for acc in array.accelerometers:
-            d, p = accelerometer.sensor_geometry(acc)
-            self._geometry.append((d, p, slice(col, col + d.shape[0])))
-            col += d.shape[0]
+        self._geometry = accelerometer.array_geometry(array)  # (directions, positions, column slice)
         self._gtsam_noise: dict = {}
         wL = self.S_lin / sigma[:, None]
         self.pinv_lin_w = np.linalg.pinv(wL, rcond=1e-10) / sigma[None, :]  # [f, ω̇] given q(ω)

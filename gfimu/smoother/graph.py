@@ -290,12 +290,7 @@ class SmootherProblem:
             row, col = np.argwhere(bad)[0]
             raise ValueError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
                              f"({int(bad.sum())} such values); the smoother needs finite readings")
-        self.sensors = []  # (directions, positions, column slice)
-        col = 0
-        for acc in arr.accelerometers:
-            d, p = accelerometer.sensor_geometry(acc)
-            self.sensors.append((d, p, slice(col, col + d.shape[0])))
-            col += d.shape[0]
+        self.sensors = accelerometer.array_geometry(arr)  # (directions, positions, column slice)
         # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
         self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
         self.all_positions_m = np.concatenate([p for _, p, _ in self.sensors])
