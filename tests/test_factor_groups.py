@@ -138,3 +138,22 @@ def test_fixed_lag_refuses_groups_that_are_not_per_sample(spinning):
     assert make_estimator("fixed-lag", factor_groups=(group,)).applicable(log.array) is None
     reason = make_estimator("fixed-lag", factor_groups=(SpanMean(0, 1, 1.0),)).applicable(log.array)
     assert reason is not None and "span mean" in reason and "per_sample" in reason
+
+
+class ZeroRatePriorWithSetup(ZeroRatePrior):
+    """The same prior with its noise set on the problem by :meth:`setup`, as the model's groups do."""
+
+    def setup(self, problem):
+        problem.zero_rate_sigma = self.sigma
+
+    def terms(self, problem, states, params):
+        assert problem.zero_rate_sigma == self.sigma
+        return super().terms(problem, states, params)
+
+
+def test_fixed_lag_sets_the_group_up_on_each_sample(with_gyro):
+    log, group = with_gyro
+    same = ZeroRatePriorWithSetup(group.start_ns, group.stop_ns, group.sigma)
+    a = make_estimator("fixed-lag", tune_process_noise=False, lag_s=0.05, factor_groups=(group,)).result(log)
+    b = make_estimator("fixed-lag", tune_process_noise=False, lag_s=0.05, factor_groups=(same,)).result(log)
+    np.testing.assert_array_equal(b.motion.omega_b_radps, a.motion.omega_b_radps)

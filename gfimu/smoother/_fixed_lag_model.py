@@ -131,6 +131,8 @@ class ArrayModel:
         groups = [g for g in self.groups if g.applies(view)]
         if not groups:
             return None
+        for group in groups:
+            group.setup(view)
         none = np.zeros(0)
 
         def terms(x: np.ndarray):
