@@ -2,7 +2,8 @@
 model written out in SmootherProblem before it: cost, log-normaliser and a Levenberg-Marquardt solve
 on short simulated logs for every motion model, measurement and optional group, to 1e-9. The
 reference values were computed by that earlier code. Each group's Jacobian is also checked against
-numerical derivatives, and its GTSAM factors against its vectorised residuals."""
+numerical derivatives, its GTSAM factors against its vectorised residuals, and the fixed-lag
+smoother's own per-sample factors against the groups."""
 
 from __future__ import annotations
 
@@ -112,3 +113,33 @@ def test_every_group_jacobian_and_gtsam_factors_agree(name):
         half = 0.5 * sum(float(np.sum(t.residual**2)) for t in terms)
         graph_error = sum(f.error(values) for f in group.gtsam_factors(problem))
         assert graph_error == pytest.approx(half, rel=1e-9, abs=1e-12), group.name
+
+
+@pytest.mark.parametrize("fast", [True, False])
+@pytest.mark.parametrize("options", [
+    SmootherOptions(process_axis_factors=(0.5, 1.0, 2.0)),
+    SmootherOptions(process_axis_frequencies_hz=(0.0, 2.0, 1.0)),
+    SmootherOptions(use_gyro=False),
+], ids=["jerk", "oscillator", "no gyroscope"])
+def test_the_fixed_lag_stream_is_the_batch_model(options, fast):
+    """The fixed-lag smoother's own factors (measurement, gyroscope, process step, first-state priors) have
+    the error of the batch model's groups on the same three samples."""
+    import gtsam
+
+    from gfimu.smoother import _fixed_lag_model as model
+
+    log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.1, seed=3).select(slice(10, 13))
+    problem = SmootherProblem(log, options)
+    x = test_states(log, problem)
+    am = model.ArrayModel(log.array, options, fast_measurement=fast)
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    am.add_priors(graph, 0)
+    for k in range(3):
+        gyro = log.gyro_b_radps[k] if problem.use_gyro else None
+        am.add_measurement(graph, k, log.accel_mps2[k], gyro)
+        if k:
+            am.add_process(graph, k - 1, k, float(log.dt_s[k - 1]))
+        model.insert_state(values, k, x[k, 0:3], x[k, 3:6], x[k, 6:9])
+    assert {type(g) for g in problem.groups} == ({groups.AccelerometerGroup, groups.FirstStatePriorGroup, groups.SpecificForceWalkGroup,
+                                                  groups.MotionModelGroup} | ({groups.GyroscopeGroup} if options.use_gyro else set()))
+    assert graph.error(values) == pytest.approx(problem.cost(x, np.zeros(0)), rel=1e-9)
