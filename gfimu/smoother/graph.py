@@ -444,7 +444,9 @@ class SmootherProblem:
 
     def log_normaliser(self) -> float:
         """``Σ log σ`` over every row of the model (the Gaussian normaliser of the evidence)."""
-        ordered = sorted(self.groups, key=lambda g: 0 if g.first else 1)  # (the order of summation of earlier versions)
+        # summed with the groups placed first ahead of the measurement, part by part: the noise tuner's
+        # choices can turn on the last bit of this sum (a stiff oscillator axis of a reversal log does)
+        ordered = sorted(self.groups, key=lambda g: 0 if g.first else 1)
         total = 0.0
         for group in ordered:
             for part in group.log_normaliser_parts(self):

@@ -67,11 +67,13 @@ class Term:
 
 class FactorGroup:
     """One equation over the samples of a problem (see the module docstring). Subclasses set
-    :meth:`applies` and the three views; each is given the problem it belongs to."""
+    :meth:`applies`, :meth:`setup` (their noise) and the three views; each is given the problem it
+    belongs to."""
 
     name = "group"
     first = False
-    """Whether its terms come before the motion model's in the problem (only the order of summation)."""
+    """Whether its terms come right after the measurement's, before the other groups' (only the order of
+    summation)."""
     measurement = False
     """Whether it is the array's measurement (evaluated apart by the tuner's evidence and the cost)."""
     per_sample = True
