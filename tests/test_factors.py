@@ -286,3 +286,16 @@ def test_custom_factors_match_numpy_and_numerical_derivatives():
     fac = accelerometer.make_accelerometer_factor(w(0), d(0), f(0), y, dirs, pos, UNIT.Create(3))
     expected, _ = accelerometer.accelerometer_residual(v.atVector(w(0)), v.atVector(d(0)), v.atVector(f(0)), y[None], dirs, pos)
     np.testing.assert_allclose(fac.unwhitenedError(v), expected[0], atol=1e-12)
+
+
+def test_array_geometry_follows_the_reading_columns():
+    from gfimu.array import mimu4444_array, paper001_array
+
+    for arr in (paper001_array(), mimu4444_array(0.05)):
+        geo = accelerometer.array_geometry(arr)
+        assert len(geo) == len(arr.accelerometers)
+        assert [(g[2].start, g[2].stop) for g in geo] == [(int(s), int(s + g[0].shape[0])) for s, g in
+                                                         zip(np.cumsum([0] + [g[0].shape[0] for g in geo[:-1]]), geo)]
+        assert geo[-1][2].stop == arr.n_axes
+        rows = np.vstack([accelerometer.axis_rows(d, p) for d, p, _ in geo])
+        np.testing.assert_allclose(rows, arr.structure_matrix(), rtol=0, atol=1e-15)

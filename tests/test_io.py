@@ -584,3 +584,17 @@ def test_accepted_unit_spellings(unit, kind, factor):
 def test_refused_units(unit, kind):
     with pytest.raises(KeyError):
         gio.unit_factor(unit, kind)
+
+
+def test_an_output_under_a_file_is_refused_by_name(tmp_path):
+    from gfimu.io.atomic import destination
+    from gfimu.io.errors import OutputError
+    from gfimu.io.outputs import prepare_log_folder
+
+    f = tmp_path / "file"
+    f.write_text("x")
+    with pytest.raises(OutputError, match=r"file/x\.csv: a part of this path is a file, not a folder"):
+        destination(f / "x.csv")
+    with pytest.raises(OutputError, match=r"^--out .*file/log: a part of this path is a file, not a folder"):
+        prepare_log_folder(f / "log")
+    assert prepare_log_folder(tmp_path / "new") == tmp_path / "new"  # missing: fine

@@ -21,6 +21,18 @@ def sensor_geometry(accelerometer: Accelerometer) -> tuple[np.ndarray, np.ndarra
     return d, np.tile(accelerometer.position_m, (d.shape[0], 1))
 
 
+def array_geometry(array) -> list[tuple[np.ndarray, np.ndarray, slice]]:
+    """(directions_b, positions_m, column slice) of every accelerometer of ``array`` (a
+    :class:`gfimu.array.SensorArray`), in the order of its reading columns."""
+    out = []
+    col = 0
+    for acc in array.accelerometers:
+        d, p = sensor_geometry(acc)
+        out.append((d, p, slice(col, col + d.shape[0])))
+        col += d.shape[0]
+    return out
+
+
 def axis_rows(directions_b: np.ndarray, positions_m: np.ndarray) -> np.ndarray:
     """Rows of the structure matrix (n, 12) for the given axes (paper 000, eq. 6)."""
     return rigid_body.structure_matrix(directions_b, positions_m)

@@ -42,6 +42,17 @@ def file_kind(mode: int) -> str:
     return "not a regular file"
 
 
+def stat_or_none(path: str | os.PathLike, name: str) -> os.stat_result | None:
+    """``os.stat(path)``, None when nothing is there; :class:`OutputError` (naming ``name``) when a part
+    of the path is a file."""
+    try:
+        return os.stat(path)
+    except FileNotFoundError:
+        return None
+    except NotADirectoryError:
+        raise OutputError(f"{name}: a part of this path is a file, not a folder") from None
+
+
 def destination(path: str | os.PathLike) -> Path:
     """The file an output to ``path`` replaces, after checks; :class:`OutputError` otherwise.
 
@@ -52,12 +63,7 @@ def destination(path: str | os.PathLike) -> Path:
     if str(p) in ("", "."):
         raise OutputError(f"{str(path)!r}: not a file name")
     target = Path(os.path.realpath(p)) if p.is_symlink() else p
-    try:
-        st = os.stat(target)
-    except FileNotFoundError:
-        st = None
-    except NotADirectoryError:
-        raise OutputError(f"{p}: a part of this path is a file, not a folder") from None
+    st = stat_or_none(target, str(p))
     if st is not None and not stat.S_ISREG(st.st_mode):
         raise OutputError(f"{p}: exists and is {file_kind(st.st_mode)}; refusing to replace it with a file")
     folder = target.parent

@@ -26,7 +26,7 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from .atomic import atomic_write, destination, file_kind
+from .atomic import atomic_write, destination, file_kind, stat_or_none
 from .errors import OutputError
 from .log_dir import LOG_FILES
 
@@ -121,12 +121,7 @@ def prepare_log_folder(folder: str | os.PathLike, inputs: Iterable[str | os.Path
     if str(folder) == STDOUT:
         raise OutputError(f"{what} -: a log is a folder; give its path")
     p = Path(folder)
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
-        st = None
-    except NotADirectoryError:
-        raise OutputError(f"{what} {p}: a part of this path is a file, not a folder") from None
+    st = stat_or_none(p, f"{what} {p}")
     if st is not None and not os.path.isdir(p):
         raise OutputError(f"{what} {p}: exists and is {file_kind(st.st_mode)}; a log is written into a folder")
     ins = input_files(inputs)

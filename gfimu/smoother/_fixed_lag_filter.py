@@ -11,7 +11,9 @@ model of the state ``x = [ω, ω̇, f]`` (9 values, body frame):
   and of this model are the same); f is a random walk; with
   ``process_axis_frequencies_hz`` the exact oscillator step (Φ, its covariance);
 - measurement (paper 000, eq. 6): ``y = S_f f + S_ω̇ ω̇ + S_q q(ω) + v``, and the
-  gyroscope ``ω + v_g``; priors on the first state of a segment.
+  gyroscope ``ω + v_g``; priors on the first state of a segment; the whitened rows
+  of the factor groups given in the options (:meth:`ArrayModel.sample_terms`:
+  "readings" 0 with unit noise).
 
 The measurement is linearised by a Gauss-Newton (iterated extended Kalman) update
 of the newest state, started from the prediction, or from the sign-resolving
@@ -198,8 +200,10 @@ class WindowFilter:
         self._P = P
         self._hi = hi + 1
 
-    def measure(self, y: np.ndarray, gyro=None, start=None) -> None:
-        """Gauss-Newton update of the newest state with its readings, moving every state of the window."""
+    def measure(self, y: np.ndarray, gyro=None, start=None, extra=None) -> None:
+        """Gauss-Newton update of the newest state with its readings, moving every state of the window.
+
+        ``extra``: the factor groups' rows at this sample (:meth:`ArrayModel.sample_terms`), or None."""
         lo, hi = self._lo, self._hi
         xp = self._mean[hi - 1].copy()
         P = self._P
@@ -210,8 +214,18 @@ class WindowFilter:
             R, diag = self._R, self._diag
         x = xp if start is None else np.asarray(start, dtype=float)
         rhs = np.empty((R.size, 10))
+        extended = False
         for _ in range(max(self.iterations, 1)):
             pred, H = self._measure(x, gyro)
+            if extra is not None:  # the groups' whitened rows: readings 0, prediction r(x), unit noise
+                r_e, J_e = extra(x)
+                H = np.vstack([H, J_e])
+                pred = np.concatenate([pred, r_e])
+                if not extended:
+                    y, R = np.concatenate([y, np.zeros(r_e.size)]), np.concatenate([R, np.ones(r_e.size)])
+                    diag = (np.arange(R.size), np.arange(R.size))
+                    rhs = np.empty((R.size, 10))
+                    extended = True
             rhs[:, :9] = H
             rhs[:, 9] = y - pred + H @ (x - xp)  # innovation of the linearisation at x
             PHt = P @ H.T

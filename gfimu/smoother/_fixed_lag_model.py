@@ -17,7 +17,11 @@ k hold ω [rad/s], ω̇ [rad/s²] and f [m/s²] in B.
 - gyroscope on ω (residual ``ω - ω_meas``) as a ``PriorFactorVector``;
 - with ``process_axis_frequencies_hz`` set, the exact oscillator step of
   (ω, ω̇) (:func:`gfimu.factors.process.oscillator_residual`) in place of the
-  trapezoid and the ω̇ random walk.
+  trapezoid and the ω̇ random walk;
+- the factor groups given in ``SmootherOptions.factor_groups``
+  (:mod:`gfimu.smoother.groups`, those ``per_sample``), each evaluated on each
+  sample alone (:class:`SampleProblem`) from the same vectorised residual and
+  Jacobian the batch smoother uses (:meth:`ArrayModel.sample_terms`).
 
 The process noise follows the options exactly as the batch smoother's
 :class:`~gfimu.smoother.graph.SmootherProblem` does: the trapezoid and ω̇
@@ -33,7 +37,9 @@ import numpy as np
 from .. import noise, rigid_body
 from ..array import SensorArray
 from ..factors import accelerometer, kinematics, process
+from ..log import Log
 from .graph import SmootherOptions
+from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 class _LazyGtsam:
     """The ``gtsam`` module, imported on first use (the numpy engine and ``gfimu --help`` never need it)."""
@@ -61,6 +67,27 @@ def insert_state(values: gtsam.Values, k: int, omega, omega_dot, f) -> None:
     values.insert(kf, np.asarray(f, dtype=float))
 
 
+class SampleProblem:
+    """One sample of a stream seen as a problem of one sample, what a factor group is evaluated on
+    (the attributes of :class:`gfimu.smoother.graph.SmootherProblem` a per-sample group reads: its
+    one-sample ``log``, ``options``, ``n``, ``layout``, ``state_size``, no calibration variables)."""
+
+    def __init__(self, array: SensorArray, options: SmootherOptions, t_ns: int, y: np.ndarray, gyro=None) -> None:
+        self.log = Log(array, np.array([t_ns], dtype=np.int64), np.asarray(y, dtype=float)[None],
+                       gyro_b_radps=None if gyro is None else np.asarray(gyro, dtype=float)[None], source="fixed-lag stream")
+        self.options = options
+        self.n = 1
+        self.dt_s = np.zeros(0)
+        self.layout = StateLayout()
+        self.state_size = self.layout.size
+        self.snap = self.attitude = False
+        self.n_global = 0
+        self.global_blocks: dict = {}
+
+    def global_part(self, params: np.ndarray, name: str) -> None:
+        return None
+
+
 class ArrayModel:
     """Precomputed geometry and noise models of one array under ``SmootherOptions``."""
 
@@ -80,12 +107,7 @@ class ArrayModel:
         sigma = noise.accel_noise_std(array, options.default_accel_noise_std_mps2)
         sigma = sigma * self.accel_noise_scale
         self.accel_sigma_mps2 = sigma
-        self._geometry = []  # (directions, positions, column slice)
-        col = 0
-        for acc in array.accelerometers:
-            d, p = accelerometer.sensor_geometry(acc)
-            self._geometry.append((d, p, slice(col, col + d.shape[0])))
-            col += d.shape[0]
+        self._geometry = accelerometer.array_geometry(array)  # (directions, positions, column slice)
         self._gtsam_noise: dict = {}
         wL = self.S_lin / sigma[:, None]
         self.pinv_lin_w = np.linalg.pinv(wL, rcond=1e-10) / sigma[None, :]  # [f, ω̇] given q(ω)
@@ -97,6 +119,37 @@ class ArrayModel:
         self.natural_frequency_radps = 2.0 * np.pi * np.asarray(options.process_axis_frequencies_hz, dtype=float)
         self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
         self.gyro_sigma_radps = float(noise.gyro_noise_std(array))  # as the batch smoother
+        self.groups = tuple(options.factor_groups)
+
+    def sample_terms(self, t_ns: int, y: np.ndarray, gyro=None):
+        """The factor groups of the options at one sample: None when none applies there, else a function
+        ``x -> (r, J)`` of the state ``[ω, ω̇, f]`` giving their whitened residual rows (R,) and Jacobian
+        (R, 9), from each group's :meth:`~gfimu.smoother.groups.FactorGroup.terms` on that sample alone."""
+        if not self.groups:
+            return None
+        view = SampleProblem(self.array, self.options, t_ns, y, gyro)
+        groups = [g for g in self.groups if g.applies(view)]
+        if not groups:
+            return None
+        for group in groups:
+            group.setup(view)
+        none = np.zeros(0)
+
+        def terms(x: np.ndarray):
+            rows, jacs = [], []
+            for group in groups:
+                for t in group.terms(view, np.asarray(x, dtype=float).reshape(1, KINEMATIC_SIZE), none):
+                    if t.kind != "unary" or t.jac_global is not None or t.residual.shape[0] > 1:
+                        raise ValueError(f"factor group {group.name!r}: the fixed-lag smoother streams only terms of one "
+                                         "sample's state (unary, no calibration variables)")
+                    if t.residual.shape[0]:
+                        rows.append(t.residual[0])
+                        jacs.append(t.jac["x"][0])
+            if not rows:
+                return np.zeros(0), np.zeros((0, KINEMATIC_SIZE))
+            return np.concatenate(rows), np.vstack(jacs)
+
+        return terms
 
     # --- gtsam noise models (built on first use) --------------------------------------
     @property
@@ -120,8 +173,13 @@ class ArrayModel:
         return self._gtsam_noise["gyro"]
 
     # --- factors ----------------------------------------------------------------
-    def add_measurement(self, graph: gtsam.NonlinearFactorGraph, k: int, y: np.ndarray, gyro=None) -> None:
+    def add_measurement(self, graph: gtsam.NonlinearFactorGraph, k: int, y: np.ndarray, gyro=None, extra=None) -> None:
+        """The readings of sample k (and ``extra``, :meth:`sample_terms` of the sample, when given)."""
         kw, kd, kf = keys(k)
+        if extra is not None:
+            rows = extra(np.zeros(KINEMATIC_SIZE))[0].size
+            if rows:
+                graph.add(self._group_factor(kw, kd, kf, rows, extra))
         y = np.array(y, dtype=float)
         if self.fast_measurement:
             graph.add(self._fast_accelerometer_factor(kw, kd, kf, y))
@@ -130,6 +188,19 @@ class ArrayModel:
                 graph.add(accelerometer.make_accelerometer_factor(kw, kd, kf, y[cols], d, p, noise))
         if gyro is not None:
             graph.add(gtsam.PriorFactorVector(kw, np.asarray(gyro, dtype=float), self.gyro_noise))
+
+    def _group_factor(self, kw: int, kd: int, kf: int, rows: int, extra) -> gtsam.CustomFactor:
+        """The factor groups' whitened rows at one sample as one factor (unit noise)."""
+
+        def error(this, values, jacobians):
+            r, J = extra(np.concatenate([values.atVector(kw), values.atVector(kd), values.atVector(kf)]))
+            if jacobians is not None:
+                jacobians[0] = J[:, OMEGA]
+                jacobians[1] = J[:, OMEGA_DOT]
+                jacobians[2] = J[:, SPECIFIC_FORCE]
+            return r
+
+        return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(rows), [kw, kd, kf], error)
 
     def _fast_accelerometer_factor(self, kw: int, kd: int, kf: int, y: np.ndarray) -> gtsam.CustomFactor:
         """All axes at once: ``S_f f + S_ω̇ ω̇ + S_q q(ω) - y`` (paper 000, eq. 6)."""

@@ -7,6 +7,10 @@ together by
 - a white-jerk process model: ``ω_{k+1} = ω_k + h (ω̇_k + ω̇_{k+1}) / 2``
   (trapezoidal integration) and random walks on ω̇ and f;
 - weak priors on the first state of every segment, and an optional gyroscope;
+- the factor groups given in ``SmootherOptions.factor_groups`` whose rows each
+  depend on one sample's state (:attr:`gfimu.smoother.groups.FactorGroup.per_sample`),
+  evaluated by their own vectorised residual and Jacobian on each sample as it
+  comes (:meth:`gfimu.smoother._fixed_lag_model.ArrayModel.sample_terms`);
 
 the same factors and options (:class:`~gfimu.smoother.graph.SmootherOptions`)
 as the batch smoother (method ``"smoother"``). The first states of a segment
@@ -170,8 +174,10 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
                                      "estimate_attitude") if getattr(options, name, False)]
     if unsupported:
         return f"the fixed-lag smoother does not support {', '.join(unsupported)} (use method 'smoother')"
-    if getattr(options, "factor_groups", ()):
-        return "factor_groups: the fixed-lag smoother builds its own stream of factors (use method 'smoother')"
+    whole = [getattr(g, "name", repr(g)) for g in getattr(options, "factor_groups", ()) if not getattr(g, "per_sample", False)]
+    if whole:
+        return (f"factor_groups {', '.join(whole)}: the fixed-lag smoother streams only groups whose rows each depend on "
+                "one sample's state (FactorGroup.per_sample; use method 'smoother')")
     if getattr(options, "motion_model", "jerk") != "jerk":
         return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.motion_model!r} (use method 'smoother')"
     if options.measurement != "accelerometer":
@@ -563,7 +569,7 @@ class FixedLagSmoother:
             else:
                 h = (t_ns - self._warmup[j - 1][0]) * 1e-9
                 self.model.add_process(graph, k - 1, k, h)
-            self.model.add_measurement(graph, k, y, g)
+            self.model.add_measurement(graph, k, y, g, self.model.sample_terms(t_ns, y, g))
             model.insert_state(values, k, x0[j, OMEGA], x0[j, OMEGA_DOT], x0[j, SPECIFIC_FORCE])
             t = self._stamp(t_ns)
             for key in model.keys(k):
@@ -585,7 +591,7 @@ class FixedLagSmoother:
                     filt.start(self._k)
                 else:
                     filt.predict(self._k, (t_ns - prev_t) * 1e-9)
-                filt.measure(y, g, start=x0[j])
+                filt.measure(y, g, start=x0[j], extra=self.model.sample_terms(t_ns, y, g))
                 prev_t = t_ns
                 self._window.append((self._k, t_ns))
                 self._raw.append((t_ns, y, g))
@@ -605,7 +611,7 @@ class FixedLagSmoother:
         if isinstance(self._smoother, WindowFilter):
             try:
                 self._smoother.predict(k, h)
-                self._smoother.measure(y, gyro)
+                self._smoother.measure(y, gyro, extra=self.model.sample_terms(t_ns, y, gyro))
             except FilterFailure as err:
                 self._k = k_prev
                 self._recover(sample, FixedLagSmootherError(
@@ -620,7 +626,7 @@ class FixedLagSmoother:
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         self.model.add_process(graph, k_prev, k, h)
-        self.model.add_measurement(graph, k, y, gyro)
+        self.model.add_measurement(graph, k, y, gyro, self.model.sample_terms(t_ns, y, gyro))
         model.insert_state(values, k, omega0, omega_dot0, f0)
         t = self._stamp(t_ns)
         try:
@@ -731,7 +737,8 @@ class FixedLagEstimator(SmootherOptions):
     set away from their defaults: ``motion_model='snap'``, ``tune_motion_model``,
     ``accel_noise_slope_mps2_per_radps``, ``window_s``, ``overlap_s``,
     ``reweight_iterations``, the robust re-weighting options, self-calibration,
-    free flight, the attitude and the inclinometer, ``measurement='quadratic'``.
+    free flight, the attitude and the inclinometer, ``measurement='quadratic'``, factor groups that
+    are not per sample.
     ``initialisation='ml'`` is honoured (initial states of each segment and of
     the tuning), and so are ``max_iterations`` and ``relative_tolerance`` (the
     batch solves of the tuning stretch).

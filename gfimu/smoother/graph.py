@@ -3,25 +3,21 @@
 State of sample k: ``x_k = [ω_k, ω̇_k, f_k]`` (9 numbers, body frame B; the
 'snap' motion model appends ω̈_k), plus
 global calibration variables when self-calibration is on (per-axis
-accelerometer bias and scale-factor error, gyroscope bias). Factors
-(:mod:`gfimu.factors`):
+accelerometer bias and scale-factor error, gyroscope bias).
 
-- accelerometer equation of every sensor at every sample (paper 000, eq. 6);
-- trapezoid kinematics ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})`` and random
-  walk of ω̇ (together: white angular jerk of density
-  ``omega_dot_random_walk_radps2_per_sqrt_s``), or per body axis the driven
-  oscillator ``ω̈ = -Ω² ω + white jerk`` (``process_axis_frequencies_hz``);
-- or, with ``motion_model='snap'``, the exact white-snap step of [ω, ω̇, ω̈];
-- random walk of the specific force;
-- gyroscope on ω when the array has one and ``use_gyro``;
-- Euler's torque-free equation and zero specific force in free flight
-  (paper 004, eq. 1);
-- weak priors on the first state and priors on calibration variables so
-  that nothing in the graph is unobserved.
+The model is the list of factor groups of :mod:`gfimu.smoother.groups` that apply to the options
+(:data:`gfimu.smoother.groups.BUILT_IN`, then ``SmootherOptions.factor_groups``): the accelerometer
+equation of every sensor (paper 000, eq. 6) or the per-sample inversion; the motion model
+(trapezoid kinematics and the ω̇ random walk, i.e. white angular jerk of density
+``omega_dot_random_walk_radps2_per_sqrt_s``, or per body axis the driven oscillator
+``ω̈ = -Ω² ω + white jerk``, or with ``motion_model='snap'`` the exact white-snap step of
+[ω, ω̇, ω̈]); the random walk of the specific force, or with the attitude its kinematics and the
+random walk of the gravity-free acceleration; the gyroscope, free flight (paper 004, eq. 1), the
+inclinometer; weak priors on the first state and priors on the calibration variables so that
+nothing in the graph is unobserved. Each group sets its noise on the problem when it is built.
 
-:class:`SmootherProblem` evaluates all factors vectorised over the samples
-(the fast path) and also builds the same problem as a GTSAM
-``NonlinearFactorGraph`` of CustomFactors (the graph path).
+:class:`SmootherProblem` assembles the groups: their terms vectorised over the samples (the fast
+path), and the same problem as a GTSAM ``NonlinearFactorGraph`` of their factors (the graph path).
 """
 
 from __future__ import annotations
@@ -37,21 +33,15 @@ from ..factors import (
     accelerometer,
     attitude_key,
     bias_key,
-    diagonal_noise,
-    gaussian_noise,
-    gravity,
     gyro_bias_key,
-    kinematics,
     omega_ddot_key,
     omega_dot_key,
     omega_key,
-    process,
-    quadratic,
     scale_key,
     specific_force_key,
 )
 from ..log import Log
-from .groups import BUILT_IN, FactorGroup, Term  # noqa: F401  (Term: also importable from here)
+from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -183,7 +173,8 @@ class SmootherOptions:
 
     factor_groups: tuple = ()
     """Further factor groups (:class:`gfimu.smoother.groups.FactorGroup`) added to the model of every
-    solve window: the batch solver, the tuner, the bound and the GTSAM graph all use them."""
+    solve window: the batch solver, the tuner, the bound and the GTSAM graph all use them, and the
+    fixed-lag smoother those that are per sample (``FactorGroup.per_sample``)."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -299,13 +290,7 @@ class SmootherProblem:
             row, col = np.argwhere(bad)[0]
             raise ValueError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
                              f"({int(bad.sum())} such values); the smoother needs finite readings")
-        self.accel_sigma = noise.accel_noise_std(arr, opt.default_accel_noise_std_mps2)
-        self.sensors = []  # (directions, positions, column slice)
-        col = 0
-        for acc in arr.accelerometers:
-            d, p = accelerometer.sensor_geometry(acc)
-            self.sensors.append((d, p, slice(col, col + d.shape[0])))
-            col += d.shape[0]
+        self.sensors = accelerometer.array_geometry(arr)  # (directions, positions, column slice)
         # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
         self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
         self.all_positions_m = np.concatenate([p for _, p, _ in self.sensors])
@@ -327,15 +312,6 @@ class SmootherProblem:
             self.global_blocks["gyro_bias"] = (slice(g, g + 3), gyro_bias_key())
             g += 3
         self.n_global = g
-        if opt.measurement == "quadratic":
-            self.x_hat, cov = quadratic.inversion(arr, self.log.accel_mps2)
-            self.x_cov = cov
-            self.x_whiten = np.linalg.inv(np.linalg.cholesky(cov))  # L⁻¹ with cov = L Lᵀ
-        if self.use_gyro:
-            if not np.all(np.isfinite(self.log.gyro_b_radps)):
-                row = int(np.argwhere(~np.isfinite(self.log.gyro_b_radps))[0, 0])
-                raise ValueError(f"{self.log.source}: gyroscope reading is not finite at sample {row}")
-            self.gyro_sigma = noise.gyro_noise_std(arr)
         self.layout = StateLayout.from_options(opt)
         self.snap = self.layout.snap
         self.state_size = self.layout.size
@@ -345,38 +321,12 @@ class SmootherProblem:
             raise ValueError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
         if self.attitude:
             self.AT = self.layout.rotation
-            self.attitude_prior_wb = np.eye(3)
-            self.attitude_prior_sigma = np.array([10.0, 10.0, opt.initial_yaw_std_rad])
-            self.attitude_step_sigma = process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, self.dt_s)
-            self.accel_step_sigma = process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, self.dt_s)
-            if self.use_inclinometer:
-                if not np.all(np.isfinite(self.log.tilt_rad)):
-                    row = int(np.argwhere(~np.isfinite(self.log.tilt_rad))[0, 0])
-                    raise ValueError(f"{self.log.source}: inclinometer reading is not finite at sample {row}")
-                self.tilt_sigma = noise.tilt_noise_std(arr)
-        if opt.motion_model == "snap":
-            cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, self.dt_s)
-            axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)
-            self.snap_cov = cov * axis[:, None] * axis[None, :]
-            self.snap_whiten = np.linalg.inv(np.linalg.cholesky(cov)) / axis
-        q = opt.omega_dot_random_walk_radps2_per_sqrt_s
-        self.trapezoid_sigma = kinematics.trapezoid_sigma(q, self.dt_s)
-        self.omega_dot_step_sigma = process.random_walk_sigma(q, self.dt_s)
-        self.axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
-        self.natural_frequency_radps = 2.0 * np.pi * np.asarray(opt.process_axis_frequencies_hz, dtype=float)
-        self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
-        if self.oscillator:
-            cov = process.oscillator_step_covariance(q, self.dt_s, self.natural_frequency_radps, self.axis_factors)
-            self._oscillator_cov = cov
-            self._oscillator_whiten = np.linalg.inv(np.linalg.cholesky(cov))
-            self._oscillator_unit_sigma = self.omega_dot_step_sigma.copy()
-        self.force_step_sigma = process.random_walk_sigma(opt.specific_force_random_walk_mps2_per_sqrt_s, self.dt_s)
-        self.first_sigma = np.repeat(
-            [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
-        )
-        if self.snap:
-            self.first_sigma = np.concatenate([self.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
-        self.groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
+        # the model: every group that applies, the measurement first, then those placed first
+        # (the first-state prior), then the rest in order; each sets its own noise
+        groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
+        self.groups = sorted(groups, key=lambda g: 0 if g.measurement else 1 if g.first else 2)
+        for group in self.groups:
+            group.setup(self)
 
     accel_sigma_per_sample: np.ndarray | None = None
     """(N, n_axes) accelerometer noise std per sample and axis replacing ``accel_sigma`` when set."""
@@ -425,7 +375,7 @@ class SmootherProblem:
             if base is None:
                 base = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
             self.accel_sigma_per_sample = np.array(base)  # whiten with the base noise
-            r = self._accelerometer_term(states, P).residual
+            r = self.group(AccelerometerGroup).term(self, states, P).residual
             self.accel_sigma_per_sample = base / np.sqrt(weight(r, opt.accel_robust_threshold))
         if opt.process_robust_threshold > 0:
             if not hasattr(self, "_process_base"):
@@ -434,21 +384,7 @@ class SmootherProblem:
             self.trapezoid_sigma, self.omega_dot_step_sigma = self._process_base[0].copy(), self._process_base[1].copy()
             if self.snap:
                 self.snap_whiten, self.snap_cov = self._process_base[2].copy(), None
-            mk = self.layout.motion_size
-            X = states
-            if mk == STATE_SIZE:
-                if self.oscillator:
-                    ro, _ = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s,
-                                                        self.natural_frequency_radps)
-                    r = np.einsum("nij,nj->ni", self.oscillator_whiten(), ro)
-                else:
-                    rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
-                    rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
-                    r = np.concatenate([rk / (self.trapezoid_sigma[:, None] * self.axis_factors),
-                                        rd / (self.omega_dot_step_sigma[:, None] * self.axis_factors)], axis=1)
-            else:
-                ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A], self.dt_s)
-                r = np.einsum("nij,nj->ni", self.snap_whiten, ra)
+            r = self.group(MotionModelGroup).step_residual(self, states)
             w = weight(np.sqrt(np.mean(r**2, axis=1)), opt.process_robust_threshold)
             self.trapezoid_sigma = self.trapezoid_sigma / np.sqrt(w)
             self.omega_dot_step_sigma = self.omega_dot_step_sigma / np.sqrt(w)
@@ -472,108 +408,21 @@ class SmootherProblem:
                 s[sl] = self.options.gyro_bias_prior_std_radps
         return s
 
+    def group(self, kind: type) -> FactorGroup:
+        """The model's group of class ``kind`` (KeyError if it does not apply to this problem)."""
+        for g in self.groups:
+            if isinstance(g, kind):
+                return g
+        raise KeyError(f"the problem has no {kind.__name__}")
+
     # --- vectorised factors (fast path) -----------------------------------
     def terms(self, states: np.ndarray, params: np.ndarray) -> list[Term]:
-        """All factors, whitened, at ``states`` (N, state size) and ``params`` (G,)."""
-        X = states
-        out = []
-        if self.options.measurement == "quadratic":
-            r, j = quadratic.inversion_residual(X[:, W], X[:, D], X[:, F], self.x_hat)
-            J = np.concatenate([j["w"], j["d"], j["f"]] + [np.zeros_like(j["f"])] * ((self.state_size - 9) // 3), axis=2)
-            out.append(Term("unary", r @ self.x_whiten.T, {"x": self.x_whiten @ J}))
-        else:
-            out.append(self._accelerometer_term(X, params))
-        return out + self.process_terms(X, params)
-
-    def _accelerometer_term(self, X: np.ndarray, params: np.ndarray) -> Term:
-        n = self.n
-        rows = []
-        jx = []
-        m = self.state_size
-        jg = np.zeros((n, self.log.array.n_axes, self.n_global)) if self.n_global else None
-        groups = self.sensors
-        if not any(name.startswith(("bias", "scale")) for name in self.global_blocks):
-            groups = [(self.all_directions_b, self.all_positions_m, slice(0, self.all_directions_b.shape[0]))]
-        for i, (d, p, cols) in enumerate(groups):
-            bias = self.global_part(params, f"bias{i}")
-            scale = self.global_part(params, f"scale{i}")
-            r, j = accelerometer.accelerometer_residual(X[:, W], X[:, D], X[:, F], self.log.accel_mps2[:, cols], d, p, bias, scale)
-            rows.append(r)
-            jx.append(np.concatenate([j["w"], j["d"], j["f"]] + [np.zeros_like(j["f"])] * ((m - 9) // 3), axis=2))
-            if bias is not None:
-                jg[:, cols, self.global_blocks[f"bias{i}"][0]] = j["b"]
-            if scale is not None:
-                jg[:, cols, self.global_blocks[f"scale{i}"][0]] = j["s"]
-        if self.accel_sigma_per_sample is None:
-            w = 1.0 / self.accel_sigma
-            r = np.concatenate(rows, axis=1) * w
-            J = np.concatenate(jx, axis=1) * w[None, :, None]
-            if jg is not None:
-                jg *= w[None, :, None]
-        else:  # motion-dependent noise (iteratively re-weighted, see set_motion_dependent_noise)
-            w = 1.0 / self.accel_sigma_per_sample
-            r = np.concatenate(rows, axis=1) * w
-            J = np.concatenate(jx, axis=1) * w[:, :, None]
-            if jg is not None:
-                jg *= w[:, :, None]
-        return Term("unary", r, {"x": J}, jg)
+        """All factors, whitened, at ``states`` (N, state size) and ``params`` (G,): the groups' terms in order."""
+        return [t for group in self.groups for t in group.terms(self, states, params)]
 
     def process_terms(self, X: np.ndarray, params: np.ndarray) -> list[Term]:
         """Every factor but the measurement's (process, priors, gyroscope, free flight, attitude), whitened."""
-        n = self.n
-        out = []
-        m = self.state_size
-        mk = self.layout.motion_size  # size of the motion part [ω, ω̇, f(, ω̈)]
-        for group in self.groups:  # the groups placed first (the first-state prior)
-            if group.first:
-                out.extend(group.terms(self, X, params))
-        steps = n - 1
-        if self.attitude:
-            out.extend(self._attitude_terms(X))
-        else:
-            rf, _ = process.random_walk_residual(X[:-1, F], X[1:, F])
-            wf = 1.0 / self.force_step_sigma[:, None]
-            Jf0 = np.zeros((steps, 3, m))
-            Jf1 = np.zeros((steps, 3, m))
-            Jf0[:, :, F], Jf1[:, :, F] = -np.eye(3), np.eye(3)
-            out.append(Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]}))
-        if mk == STATE_SIZE and self.oscillator:
-            # exact step of the driven oscillator per axis (6 rows, 2×2 blocks of covariance)
-            ro, jo = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s,
-                                                 self.natural_frequency_radps)
-            J0 = np.zeros((steps, 6, m))
-            J1 = np.zeros((steps, 6, m))
-            J0[:, :, W], J1[:, :, W], J0[:, :, D], J1[:, :, D] = jo["w0"], jo["w1"], jo["d0"], jo["d1"]
-            Wn = self.oscillator_whiten()
-            out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ro), {"x0": Wn @ J0, "x1": Wn @ J1}))
-        elif mk == STATE_SIZE:
-            # trapezoid kinematics + ω̇ random walk, stacked as one binary term (6 rows)
-            rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], self.dt_s)
-            rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
-            J0 = np.zeros((steps, 6, m))
-            J1 = np.zeros((steps, 6, m))
-            J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
-            J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
-            J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
-            wb = 1.0 / np.concatenate(
-                [self.trapezoid_sigma[:, None] * self.axis_factors, self.omega_dot_step_sigma[:, None] * self.axis_factors], axis=1)
-            out.append(Term("binary", np.concatenate([rk, rd], axis=1) * wb,
-                            {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]}))
-        else:
-            # white snap: exact triple-integrator step of [ω, ω̇, ω̈] (9 rows, full covariance) + f random walk
-            ra, ja = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A], self.dt_s)
-            J0 = np.zeros((steps, 9, m))
-            J1 = np.zeros((steps, 9, m))
-            J0[:, :, W], J1[:, :, W] = ja["w0"], ja["w1"]
-            J0[:, :, D], J1[:, :, D] = ja["d0"], ja["d1"]
-            J0[:, :, A], J1[:, :, A] = ja["j0"], ja["j1"]
-            Wn = self.snap_whiten
-            out.append(Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1}))
-        # the factor groups (gyroscope, free flight, inclinometer, calibration priors, any given with the options)
-        for group in self.groups:
-            if not group.first:
-                out.extend(group.terms(self, X, params))
-        return out
+        return [t for group in self.groups if not group.measurement for t in group.terms(self, X, params)]
 
     def rotations(self, states: np.ndarray) -> np.ndarray:
         """Attitudes R_k (N, 3, 3) from the rotation-vector columns of the state."""
@@ -586,47 +435,23 @@ class SmootherProblem:
             out[:, self.AT] = _so3.log(self.rotations(states) @ _so3.exp(delta[:, self.AT]))
         return out
 
-    def _attitude_terms(self, X: np.ndarray) -> list[Term]:
-        n, m, AT = self.n, self.state_size, self.AT
-        steps = n - 1
-        R = self.rotations(X)
-        out = []
-        # attitude kinematics R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)
-        r, j = kinematics.attitude_residual(R[:-1], R[1:], X[:-1, W], X[1:, W], self.dt_s)
-        w = 1.0 / self.attitude_step_sigma[:, None]
-        J0 = np.zeros((steps, 3, m))
-        J1 = np.zeros((steps, 3, m))
-        J0[:, :, AT], J1[:, :, AT] = j["r0"], j["r1"]
-        J0[:, :, W], J1[:, :, W] = j["w0"], j["w1"]
-        out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
-        # gravity-free acceleration a = f + Rᵀ g as a random walk
-        r, j = gravity.accel_random_walk_residual(X[:-1, F], X[1:, F], R[:-1], R[1:])
-        w = 1.0 / self.accel_step_sigma[:, None]
-        J0 = np.zeros((steps, 3, m))
-        J1 = np.zeros((steps, 3, m))
-        J0[:, :, F], J1[:, :, F] = j["f0"], j["f1"]
-        J0[:, :, AT], J1[:, :, AT] = j["r0"], j["r1"]
-        out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
-        # weak prior on the first attitude (fixes yaw)
-        r, j = process.attitude_prior_residual(R[:1], self.attitude_prior_wb)
-        w = 1.0 / self.attitude_prior_sigma
-        Jp = np.zeros((1, 3, m))
-        Jp[:, :, AT] = j["r"] * w[:, None]
-        out.append(Term("unary", r * w, {"x": Jp}, None, first=0))
-        return out
-
     def cost(self, states: np.ndarray, params: np.ndarray) -> float:
         """Half the sum of squared whitened residuals (GTSAM's graph error)."""
         if self.options.measurement == "quadratic" or self.n_global:
             return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
-        X = states
-        rows = getattr(self, "_all_rows", None)
-        if rows is None:
-            rows = self._all_rows = accelerometer.axis_rows(self.all_directions_b, self.all_positions_m)
-        r = accelerometer.accelerometer_prediction(X[:, W], X[:, D], X[:, F], rows) - self.log.accel_mps2
-        sigma = self.accel_sigma if self.accel_sigma_per_sample is None else self.accel_sigma_per_sample
-        r = r / sigma
-        return 0.5 * (float(np.sum(r * r)) + sum(float(np.sum(t.residual**2)) for t in self.process_terms(X, params)))
+        measured = sum(g.squared_norm(self, states, params) for g in self.groups if g.measurement)
+        return 0.5 * (measured + sum(float(np.sum(t.residual**2)) for t in self.process_terms(states, params)))
+
+    def log_normaliser(self) -> float:
+        """``Σ log σ`` over every row of the model (the Gaussian normaliser of the evidence)."""
+        # summed with the groups placed first ahead of the measurement, part by part: the noise tuner's
+        # choices can turn on the last bit of this sum (a stiff oscillator axis of a reversal log does)
+        ordered = sorted(self.groups, key=lambda g: 0 if g.first else 1)
+        total = 0.0
+        for group in ordered:
+            for part in group.log_normaliser_parts(self):
+                total += part
+        return total
 
     # --- the same problem as a GTSAM graph (graph path) -----------------------
     def gtsam_graph(self) -> gtsam.NonlinearFactorGraph:
@@ -634,48 +459,6 @@ class SmootherProblem:
         import gtsam
 
         graph = gtsam.NonlinearFactorGraph()
-        opt = self.options
-        y = self.log.accel_mps2
-        accel_sigma = (np.broadcast_to(self.accel_sigma, y.shape) if self.accel_sigma_per_sample is None
-                       else self.accel_sigma_per_sample)  # motion-dependent or robust re-weighting when set
-        for k in range(self.n):
-            if opt.measurement == "quadratic":
-                graph.add(quadratic.make_inversion_factor(omega_key(k), omega_dot_key(k), specific_force_key(k),
-                                                          self.x_hat[k], gaussian_noise(self.x_cov)))
-            for i, (d, p, cols) in enumerate(self.sensors if opt.measurement == "accelerometer" else []):
-                kb = self.global_blocks[f"bias{i}"][1] if f"bias{i}" in self.global_blocks else None
-                ks = self.global_blocks[f"scale{i}"][1] if f"scale{i}" in self.global_blocks else None
-                graph.add(accelerometer.make_accelerometer_factor(
-                    omega_key(k), omega_dot_key(k), specific_force_key(k), y[k, cols], d, p,
-                    diagonal_noise(accel_sigma[k, cols]), kb, ks))
-        if self.attitude:
-            graph.add(process.make_attitude_prior_factor(attitude_key(0), self.attitude_prior_wb,
-                                                         diagonal_noise(self.attitude_prior_sigma)))
-        oscillator_cov = self.oscillator_covariance() if self.oscillator else None
-        for k in range(self.n - 1):
-            if self.attitude:
-                graph.add(kinematics.make_attitude_factor(attitude_key(k), attitude_key(k + 1), omega_key(k), omega_key(k + 1),
-                                                          float(self.dt_s[k]), diagonal_noise(np.full(3, self.attitude_step_sigma[k]))))
-                graph.add(gravity.make_accel_random_walk_factor(specific_force_key(k), specific_force_key(k + 1), attitude_key(k),
-                                                                attitude_key(k + 1), diagonal_noise(np.full(3, self.accel_step_sigma[k]))))
-            else:
-                graph.add(process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
-                                                          diagonal_noise(np.full(3, self.force_step_sigma[k]))))
-            if self.snap:
-                graph.add(kinematics.make_angular_motion_factor(
-                    omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), omega_ddot_key(k),
-                    omega_ddot_key(k + 1), float(self.dt_s[k]), gaussian_noise(self.snap_cov[k])))
-                continue
-            if self.oscillator:
-                graph.add(process.make_oscillator_factor(omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1),
-                                                         float(self.dt_s[k]), self.natural_frequency_radps,
-                                                         gaussian_noise(oscillator_cov[k])))
-                continue
-            graph.add(kinematics.make_angular_velocity_factor(
-                omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1), float(self.dt_s[k]),
-                diagonal_noise(self.trapezoid_sigma[k] * self.axis_factors)))
-            graph.add(process.make_random_walk_factor(omega_dot_key(k), omega_dot_key(k + 1),
-                                                      diagonal_noise(self.omega_dot_step_sigma[k] * self.axis_factors)))
         for group in self.groups:
             for factor in group.gtsam_factors(self):
                 graph.add(factor)

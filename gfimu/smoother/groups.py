@@ -1,18 +1,24 @@
-"""Factor groups: one physical equation over a log, written once for every consumer.
+"""Factor groups: the smoother's model as one list of equations, each written once for every consumer.
 
 A group gives, for a :class:`gfimu.smoother.graph.SmootherProblem`,
 
+- :meth:`FactorGroup.setup`: its noise, set on the problem (the attributes the tuner and the
+  solvers scale, e.g. ``problem.trapezoid_sigma``),
 - :meth:`FactorGroup.terms`: its whitened residuals and analytic Jacobians over all samples at
   once (vectorised; the batch solver and the tuner's normal equations),
 - :meth:`FactorGroup.gtsam_factors`: the same residuals as GTSAM factors (the graph path),
 - :meth:`FactorGroup.log_normaliser`: ``Σ log σ`` over its rows (the tuner's evidence),
 
 so the batch solver, the noise tuner, the bound and the GTSAM graph read one definition. The
-model's built-in groups that live here are the first-state prior, the gyroscope (paper 001), free flight (paper 004,
-eq. 1: Euler's torque-free equation and zero specific force), the inclinometer (paper 001) and the
-calibration priors; the accelerometer measurement and the motion model are still written in
-:class:`gfimu.smoother.graph.SmootherProblem`. Further groups are given with
-``SmootherOptions.factor_groups`` and reach every consumer without changing any of them.
+model (:data:`BUILT_IN`, in the order the problem adds them): the accelerometer measurement (paper
+000, eq. 6) or the per-sample inversion ('quadratic'), the first-state prior, the specific-force
+random walk or, with the attitude, the attitude kinematics (paper 003, eqs. 9-10 on SO(3)), the
+random walk of the gravity-free acceleration and the attitude prior; the motion model (white jerk:
+trapezoid kinematics and the ω̇ random walk, the driven oscillator, or white snap), the gyroscope
+(paper 001), free flight (paper 004, eq. 1), the inclinometer (paper 001) and the calibration
+priors. Further groups are given with ``SmootherOptions.factor_groups`` and reach every consumer
+without changing any of them; those whose terms are per sample (``per_sample``) also reach the
+fixed-lag smoother (:mod:`gfimu.smoother.fixed_lag`), which evaluates them on each sample alone.
 """
 
 from __future__ import annotations
@@ -21,20 +27,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import noise
 from ..factors import (
+    accelerometer,
     attitude_key,
     diagonal_noise,
     euler,
     free_fall,
+    gaussian_noise,
+    gravity,
     gyroscope,
     inclinometer,
+    kinematics,
     omega_ddot_key,
     omega_dot_key,
     omega_key,
     process,
+    quadratic,
     specific_force_key,
 )
-from .layout import OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
+from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
 
 
 @dataclass
@@ -55,14 +67,33 @@ class Term:
 
 class FactorGroup:
     """One equation over the samples of a problem (see the module docstring). Subclasses set
-    :meth:`applies` and the three views; each is given the problem it belongs to."""
+    :meth:`applies`, :meth:`setup` (their noise) and the three views; each is given the problem it
+    belongs to."""
 
     name = "group"
     first = False
-    """Whether its terms come before the motion model's in the problem (only the order of summation)."""
+    """Whether its terms come right after the measurement's, before the other groups' (only the order of
+    summation)."""
+    measurement = False
+    """Whether it is the array's measurement (evaluated apart by the tuner's evidence and the cost)."""
+    per_sample = True
+    """Whether each of its rows depends on one sample's state only (unary terms, no calibration
+    variables): the fixed-lag smoother can then stream it, evaluating it on each sample alone."""
 
     def applies(self, problem) -> bool:
         return True
+
+    def setup(self, problem) -> None:
+        """Set its noise on ``problem`` (once, when the problem is built); nothing by default."""
+
+    def log_normaliser_parts(self, problem) -> list[float]:
+        """:meth:`log_normaliser` as the parts it sums (kept apart so that the sum's rounding does not
+        depend on how the groups are cut)."""
+        return [self.log_normaliser(problem)]
+
+    def squared_norm(self, problem, states: np.ndarray, params: np.ndarray) -> float:
+        """Sum of its squared whitened residuals at ``states`` (twice its share of the cost)."""
+        return float(sum(float(np.sum(t.residual**2)) for t in self.terms(problem, states, params)))
 
     def terms(self, problem, states: np.ndarray, params: np.ndarray) -> list:
         raise NotImplementedError
@@ -88,6 +119,15 @@ class FirstStatePriorGroup(FactorGroup):
 
     name = "first-state prior"
     first = True
+    per_sample = False
+
+    def setup(self, problem) -> None:
+        opt = problem.options
+        problem.first_sigma = np.repeat(
+            [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
+        )
+        if problem.snap:
+            problem.first_sigma = np.concatenate([problem.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
 
     def terms(self, problem, states, params):
         mk = problem.layout.motion_size
@@ -106,13 +146,352 @@ class FirstStatePriorGroup(FactorGroup):
         return float(np.sum(np.log(problem.first_sigma)))
 
 
+def _padded(blocks: list[np.ndarray], state_size: int) -> np.ndarray:
+    """Jacobian blocks over ``[ω, ω̇, f]`` with zero columns for the rest of the state."""
+    return np.concatenate(blocks + [np.zeros_like(blocks[-1])] * ((state_size - KINEMATIC_SIZE) // 3), axis=2)
+
+
+def _binary(problem, rows: int, pairs: list[tuple[slice, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """(N-1, rows, state size) Jacobians of a step on samples k and k+1, blocks ``(columns, d/dx_k, d/dx_k+1)``."""
+    J0 = np.zeros((problem.n - 1, rows, problem.state_size))
+    J1 = np.zeros((problem.n - 1, rows, problem.state_size))
+    for sl, j0, j1 in pairs:
+        J0[:, :, sl], J1[:, :, sl] = j0, j1
+    return J0, J1
+
+
+class AccelerometerGroup(FactorGroup):
+    """The accelerometer equation of every sensor at every sample (paper 000, eq. 6), with the
+    per-axis biases and scale-factor errors when self-calibrating. Noise: ``problem.accel_sigma``
+    (array.toml, :mod:`gfimu.noise`), or ``problem.accel_sigma_per_sample`` when set (motion-dependent
+    noise, robust re-weighting)."""
+
+    name = "accelerometer"
+    measurement = True
+    per_sample = False
+
+    def applies(self, problem) -> bool:
+        return problem.options.measurement == "accelerometer"
+
+    def setup(self, problem) -> None:
+        problem.accel_sigma = noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2)
+
+    def terms(self, problem, states, params):
+        return [self.term(problem, states, params)]
+
+    def term(self, problem, X: np.ndarray, params: np.ndarray) -> Term:
+        n = problem.n
+        rows = []
+        jx = []
+        m = problem.state_size
+        jg = np.zeros((n, problem.log.array.n_axes, problem.n_global)) if problem.n_global else None
+        groups = problem.sensors
+        if not any(name.startswith(("bias", "scale")) for name in problem.global_blocks):
+            groups = [(problem.all_directions_b, problem.all_positions_m, slice(0, problem.all_directions_b.shape[0]))]
+        for i, (d, p, cols) in enumerate(groups):
+            bias = problem.global_part(params, f"bias{i}")
+            scale = problem.global_part(params, f"scale{i}")
+            r, j = accelerometer.accelerometer_residual(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
+                                                        problem.log.accel_mps2[:, cols], d, p, bias, scale)
+            rows.append(r)
+            jx.append(_padded([j["w"], j["d"], j["f"]], m))
+            if bias is not None:
+                jg[:, cols, problem.global_blocks[f"bias{i}"][0]] = j["b"]
+            if scale is not None:
+                jg[:, cols, problem.global_blocks[f"scale{i}"][0]] = j["s"]
+        if problem.accel_sigma_per_sample is None:
+            w = 1.0 / problem.accel_sigma
+            r = np.concatenate(rows, axis=1) * w
+            J = np.concatenate(jx, axis=1) * w[None, :, None]
+            if jg is not None:
+                jg *= w[None, :, None]
+        else:  # motion-dependent noise (iteratively re-weighted, see SmootherProblem.set_motion_dependent_noise)
+            w = 1.0 / problem.accel_sigma_per_sample
+            r = np.concatenate(rows, axis=1) * w
+            J = np.concatenate(jx, axis=1) * w[:, :, None]
+            if jg is not None:
+                jg *= w[:, :, None]
+        return Term("unary", r, {"x": J}, jg)
+
+    def squared_norm(self, problem, states, params):
+        if problem.n_global:
+            return super().squared_norm(problem, states, params)
+        rows = getattr(problem, "_all_rows", None)  # every axis at once, without the Jacobians
+        if rows is None:
+            rows = problem._all_rows = accelerometer.axis_rows(problem.all_directions_b, problem.all_positions_m)
+        X = states
+        r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], rows) - problem.log.accel_mps2
+        sigma = problem.accel_sigma if problem.accel_sigma_per_sample is None else problem.accel_sigma_per_sample
+        r = r / sigma
+        return float(np.sum(r * r))
+
+    def gtsam_factors(self, problem):
+        y = problem.log.accel_mps2
+        sigma = (np.broadcast_to(problem.accel_sigma, y.shape) if problem.accel_sigma_per_sample is None
+                 else problem.accel_sigma_per_sample)
+        out = []
+        for k in range(problem.n):
+            for i, (d, p, cols) in enumerate(problem.sensors):
+                kb = problem.global_blocks[f"bias{i}"][1] if f"bias{i}" in problem.global_blocks else None
+                ks = problem.global_blocks[f"scale{i}"][1] if f"scale{i}" in problem.global_blocks else None
+                out.append(accelerometer.make_accelerometer_factor(
+                    omega_key(k), omega_dot_key(k), specific_force_key(k), y[k, cols], d, p,
+                    diagonal_noise(sigma[k, cols]), kb, ks))
+        return out
+
+    def log_normaliser(self, problem):
+        if problem.accel_sigma_per_sample is None:
+            return problem.n * float(np.sum(np.log(problem.accel_sigma)))
+        return float(np.sum(np.log(problem.accel_sigma_per_sample)))
+
+
+class InversionGroup(FactorGroup):
+    """``measurement='quadratic'``: the per-sample inversion ``[f, ω̇, q(ω)]`` (paper 000, eq. 7) with
+    its covariance ``problem.x_cov`` (whitening ``problem.x_whiten``)."""
+
+    name = "per-sample inversion"
+    measurement = True
+    per_sample = False
+
+    def applies(self, problem) -> bool:
+        return problem.options.measurement == "quadratic"
+
+    def setup(self, problem) -> None:
+        problem.accel_sigma = noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2)
+        problem.x_hat, problem.x_cov = quadratic.inversion(problem.log.array, problem.log.accel_mps2)
+        problem.x_whiten = np.linalg.inv(np.linalg.cholesky(problem.x_cov))  # L⁻¹ with cov = L Lᵀ
+
+    def terms(self, problem, states, params):
+        X = states
+        r, j = quadratic.inversion_residual(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], problem.x_hat)
+        J = _padded([j["w"], j["d"], j["f"]], problem.state_size)
+        return [Term("unary", r @ problem.x_whiten.T, {"x": problem.x_whiten @ J})]
+
+    def gtsam_factors(self, problem):
+        return [quadratic.make_inversion_factor(omega_key(k), omega_dot_key(k), specific_force_key(k),
+                                                problem.x_hat[k], gaussian_noise(problem.x_cov)) for k in range(problem.n)]
+
+    def log_normaliser(self, problem):
+        return -problem.n * float(np.sum(np.log(np.diag(problem.x_whiten))))
+
+
+class SpecificForceWalkGroup(FactorGroup):
+    """The specific force as a random walk (``specific_force_random_walk_mps2_per_sqrt_s``;
+    step std ``problem.force_step_sigma``), without the attitude."""
+
+    name = "specific-force random walk"
+    per_sample = False
+
+    def applies(self, problem) -> bool:
+        return not problem.attitude
+
+    def setup(self, problem) -> None:
+        problem.force_step_sigma = process.random_walk_sigma(problem.options.specific_force_random_walk_mps2_per_sqrt_s,
+                                                             problem.dt_s)
+
+    def terms(self, problem, states, params):
+        X = states
+        rf, _ = process.random_walk_residual(X[:-1, SPECIFIC_FORCE], X[1:, SPECIFIC_FORCE])
+        wf = 1.0 / problem.force_step_sigma[:, None]
+        Jf0, Jf1 = _binary(problem, 3, [(SPECIFIC_FORCE, -np.eye(3), np.eye(3))])
+        return [Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]})]
+
+    def gtsam_factors(self, problem):
+        return [process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
+                                                diagonal_noise(np.full(3, problem.force_step_sigma[k])))
+                for k in range(problem.n - 1)]
+
+    def log_normaliser(self, problem):
+        return 3 * float(np.sum(np.log(problem.force_step_sigma)))
+
+
+class AttitudeGroup(FactorGroup):
+    """With the attitude R_k (W←B) in the state: its kinematics ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``
+    (paper 003, eqs. 9-10 on SO(3); ``problem.attitude_step_sigma``), the gravity-free acceleration
+    ``f + Rᵀ g`` as a random walk (``problem.accel_step_sigma``) and a weak prior on the first attitude
+    (``problem.attitude_prior_wb``, stds ``problem.attitude_prior_sigma``: tilt free, yaw
+    ``initial_yaw_std_rad``)."""
+
+    name = "attitude"
+    per_sample = False
+
+    def applies(self, problem) -> bool:
+        return bool(problem.attitude)
+
+    def setup(self, problem) -> None:
+        opt = problem.options
+        problem.attitude_prior_wb = np.eye(3)
+        problem.attitude_prior_sigma = np.array([10.0, 10.0, opt.initial_yaw_std_rad])
+        problem.attitude_step_sigma = process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, problem.dt_s)
+        problem.accel_step_sigma = process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, problem.dt_s)
+
+    def terms(self, problem, states, params):
+        X, AT = states, problem.layout.rotation
+        R = problem.rotations(X)
+        out = []
+        # attitude kinematics R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)
+        r, j = kinematics.attitude_residual(R[:-1], R[1:], X[:-1, OMEGA], X[1:, OMEGA], problem.dt_s)
+        w = 1.0 / problem.attitude_step_sigma[:, None]
+        J0, J1 = _binary(problem, 3, [(AT, j["r0"], j["r1"]), (OMEGA, j["w0"], j["w1"])])
+        out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
+        # gravity-free acceleration a = f + Rᵀ g as a random walk
+        r, j = gravity.accel_random_walk_residual(X[:-1, SPECIFIC_FORCE], X[1:, SPECIFIC_FORCE], R[:-1], R[1:])
+        w = 1.0 / problem.accel_step_sigma[:, None]
+        J0, J1 = _binary(problem, 3, [(SPECIFIC_FORCE, j["f0"], j["f1"]), (AT, j["r0"], j["r1"])])
+        out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
+        # weak prior on the first attitude (fixes yaw)
+        r, j = process.attitude_prior_residual(R[:1], problem.attitude_prior_wb)
+        w = 1.0 / problem.attitude_prior_sigma
+        Jp = np.zeros((1, 3, problem.state_size))
+        Jp[:, :, AT] = j["r"] * w[:, None]
+        out.append(Term("unary", r * w, {"x": Jp}, None, first=0))
+        return out
+
+    def gtsam_factors(self, problem):
+        out = [process.make_attitude_prior_factor(attitude_key(0), problem.attitude_prior_wb,
+                                                  diagonal_noise(problem.attitude_prior_sigma))]
+        for k in range(problem.n - 1):
+            out.append(kinematics.make_attitude_factor(attitude_key(k), attitude_key(k + 1), omega_key(k), omega_key(k + 1),
+                                                       float(problem.dt_s[k]),
+                                                       diagonal_noise(np.full(3, problem.attitude_step_sigma[k]))))
+            out.append(gravity.make_accel_random_walk_factor(specific_force_key(k), specific_force_key(k + 1), attitude_key(k),
+                                                             attitude_key(k + 1),
+                                                             diagonal_noise(np.full(3, problem.accel_step_sigma[k]))))
+        return out
+
+    def log_normaliser(self, problem):
+        return float(sum(self.log_normaliser_parts(problem)))
+
+    def log_normaliser_parts(self, problem):
+        return [3 * float(np.sum(np.log(problem.attitude_step_sigma)) + np.sum(np.log(problem.accel_step_sigma))),
+                float(np.sum(np.log(problem.attitude_prior_sigma)))]
+
+
+class MotionModelGroup(FactorGroup):
+    """The angular motion model, one step per pair of samples:
+
+    - 'jerk': trapezoid kinematics ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})`` and the random walk of ω̇
+      (white angular jerk; stds ``problem.trapezoid_sigma``, ``problem.omega_dot_step_sigma``, per body
+      axis times ``problem.axis_factors``), stacked as one 6-row step;
+    - with ``process_axis_frequencies_hz``: the exact step of the driven oscillator per axis
+      (``problem.oscillator_whiten()``, :func:`gfimu.factors.process.oscillator_residual`);
+    - 'snap': the exact white-snap step of ``[ω, ω̇, ω̈]`` (``problem.snap_whiten``, ``problem.snap_cov``).
+    """
+
+    name = "motion model"
+    per_sample = False
+
+    def setup(self, problem) -> None:
+        opt = problem.options
+        if opt.motion_model == "snap":
+            cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, problem.dt_s)
+            axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)
+            problem.snap_cov = cov * axis[:, None] * axis[None, :]
+            problem.snap_whiten = np.linalg.inv(np.linalg.cholesky(cov)) / axis
+        q = opt.omega_dot_random_walk_radps2_per_sqrt_s
+        problem.trapezoid_sigma = kinematics.trapezoid_sigma(q, problem.dt_s)
+        problem.omega_dot_step_sigma = process.random_walk_sigma(q, problem.dt_s)
+        problem.axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
+        problem.natural_frequency_radps = 2.0 * np.pi * np.asarray(opt.process_axis_frequencies_hz, dtype=float)
+        problem.oscillator = bool(np.any(problem.natural_frequency_radps > 0))
+        if problem.oscillator:
+            cov = process.oscillator_step_covariance(q, problem.dt_s, problem.natural_frequency_radps, problem.axis_factors)
+            problem._oscillator_cov = cov
+            problem._oscillator_whiten = np.linalg.inv(np.linalg.cholesky(cov))
+            problem._oscillator_unit_sigma = problem.omega_dot_step_sigma.copy()
+
+    def step_residual(self, problem, X: np.ndarray) -> np.ndarray:
+        """(N-1, rows) whitened residual of every step (what the robust re-weighting weighs)."""
+        W, D = OMEGA, OMEGA_DOT
+        if problem.snap:
+            ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D],
+                                                       X[:-1, OMEGA_DDOT], X[1:, OMEGA_DDOT], problem.dt_s)
+            return np.einsum("nij,nj->ni", problem.snap_whiten, ra)
+        if problem.oscillator:
+            ro, _ = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s,
+                                                problem.natural_frequency_radps)
+            return np.einsum("nij,nj->ni", problem.oscillator_whiten(), ro)
+        rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
+        rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
+        return np.concatenate([rk / (problem.trapezoid_sigma[:, None] * problem.axis_factors),
+                               rd / (problem.omega_dot_step_sigma[:, None] * problem.axis_factors)], axis=1)
+
+    def terms(self, problem, states, params):
+        X, W, D, A = states, OMEGA, OMEGA_DOT, OMEGA_DDOT
+        if problem.snap:
+            # white snap: exact triple-integrator step of [ω, ω̇, ω̈] (9 rows, full covariance)
+            ra, ja = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A],
+                                                        problem.dt_s)
+            J0, J1 = _binary(problem, 9, [(W, ja["w0"], ja["w1"]), (D, ja["d0"], ja["d1"]), (A, ja["j0"], ja["j1"])])
+            Wn = problem.snap_whiten
+            return [Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1})]
+        if problem.oscillator:
+            # exact step of the driven oscillator per axis (6 rows, 2×2 blocks of covariance)
+            ro, jo = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s,
+                                                 problem.natural_frequency_radps)
+            J0, J1 = _binary(problem, 6, [(W, jo["w0"], jo["w1"]), (D, jo["d0"], jo["d1"])])
+            Wn = problem.oscillator_whiten()
+            return [Term("binary", np.einsum("nij,nj->ni", Wn, ro), {"x0": Wn @ J0, "x1": Wn @ J1})]
+        # trapezoid kinematics + ω̇ random walk, stacked as one binary term (6 rows)
+        rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
+        rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
+        steps, m = problem.n - 1, problem.state_size
+        J0 = np.zeros((steps, 6, m))
+        J1 = np.zeros((steps, 6, m))
+        J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
+        J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
+        J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
+        wb = 1.0 / np.concatenate([problem.trapezoid_sigma[:, None] * problem.axis_factors,
+                                   problem.omega_dot_step_sigma[:, None] * problem.axis_factors], axis=1)
+        return [Term("binary", np.concatenate([rk, rd], axis=1) * wb, {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]})]
+
+    def gtsam_factors(self, problem):
+        out = []
+        oscillator_cov = problem.oscillator_covariance() if problem.oscillator and not problem.snap else None
+        for k in range(problem.n - 1):
+            w0, w1, d0, d1 = omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1)
+            h = float(problem.dt_s[k])
+            if problem.snap:
+                out.append(kinematics.make_angular_motion_factor(w0, w1, d0, d1, omega_ddot_key(k), omega_ddot_key(k + 1), h,
+                                                                 gaussian_noise(problem.snap_cov[k])))
+            elif problem.oscillator:
+                out.append(process.make_oscillator_factor(w0, w1, d0, d1, h, problem.natural_frequency_radps,
+                                                          gaussian_noise(oscillator_cov[k])))
+            else:
+                out.append(kinematics.make_angular_velocity_factor(w0, w1, d0, d1, h, diagonal_noise(
+                    problem.trapezoid_sigma[k] * problem.axis_factors)))
+                out.append(process.make_random_walk_factor(d0, d1, diagonal_noise(
+                    problem.omega_dot_step_sigma[k] * problem.axis_factors)))
+        return out
+
+    def log_normaliser(self, problem):
+        if problem.snap:
+            return 0.5 * float(np.sum(np.linalg.slogdet(problem.snap_cov)[1]))
+        if problem.oscillator:
+            return 0.5 * float(np.sum(np.linalg.slogdet(problem.oscillator_covariance())[1]))
+        return float(sum(self.log_normaliser_parts(problem)))
+
+    def log_normaliser_parts(self, problem):
+        if problem.snap or problem.oscillator:
+            return [self.log_normaliser(problem)]
+        return [3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma))),
+                2 * (problem.n - 1) * float(np.sum(np.log(problem.axis_factors)))]
+
+
 class GyroscopeGroup(FactorGroup):
     """``ω_k + b_g - ω_meas,k`` with the gyroscope's noise (paper 001), bias when self-calibrating."""
 
     name = "gyroscope"
+    per_sample = False
 
     def applies(self, problem) -> bool:
         return bool(problem.use_gyro)
+
+    def setup(self, problem) -> None:
+        if not np.all(np.isfinite(problem.log.gyro_b_radps)):
+            row = int(np.argwhere(~np.isfinite(problem.log.gyro_b_radps))[0, 0])
+            raise ValueError(f"{problem.log.source}: gyroscope reading is not finite at sample {row}")
+        problem.gyro_sigma = noise.gyro_noise_std(problem.log.array)
 
     def terms(self, problem, states, params):
         n, s = problem.n, problem.gyro_sigma
@@ -177,6 +556,12 @@ class InclinometerGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return bool(problem.attitude and problem.use_inclinometer)
 
+    def setup(self, problem) -> None:
+        if not np.all(np.isfinite(problem.log.tilt_rad)):
+            row = int(np.argwhere(~np.isfinite(problem.log.tilt_rad))[0, 0])
+            raise ValueError(f"{problem.log.source}: inclinometer reading is not finite at sample {row}")
+        problem.tilt_sigma = noise.tilt_noise_std(problem.log.array)
+
     def terms(self, problem, states, params):
         s = problem.tilt_sigma
         r, j = inclinometer.inclinometer_residual(problem.rotations(states), problem.log.tilt_rad)
@@ -196,6 +581,7 @@ class CalibrationPriorGroup(FactorGroup):
     so that nothing in the problem is unobserved."""
 
     name = "calibration priors"
+    per_sample = False
 
     def applies(self, problem) -> bool:
         return problem.n_global > 0
@@ -213,5 +599,6 @@ class CalibrationPriorGroup(FactorGroup):
         return float(np.sum(np.log(problem.global_prior_sigma())))
 
 
-BUILT_IN = (FirstStatePriorGroup(), GyroscopeGroup(), FreeFlightGroup(), InclinometerGroup(), CalibrationPriorGroup())
-"""The built-in groups defined here, in the order the problem adds them."""
+BUILT_IN = (AccelerometerGroup(), InversionGroup(), FirstStatePriorGroup(), SpecificForceWalkGroup(), AttitudeGroup(),
+            MotionModelGroup(), GyroscopeGroup(), FreeFlightGroup(), InclinometerGroup(), CalibrationPriorGroup())
+"""The model: the built-in groups, in the order the problem adds them (each where it applies)."""

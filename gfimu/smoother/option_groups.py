@@ -1,8 +1,13 @@
 """The smoothers' options in four groups: the model, the batch solver, the fixed-lag stream and
 the noise tuning (read by ``gfimu estimate --list-options``; every option keeps its flat name for
-``-O name=value``)."""
+``-O name=value`` and the presets). :func:`nested` gives a flat options object as nested frozen
+dataclasses, one per group (``nested(options).model.motion_model``), and :func:`flatten` turns them
+back into the flat options."""
 
 from __future__ import annotations
+
+import dataclasses
+from functools import lru_cache
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "model": (
@@ -32,3 +37,41 @@ GROUPS: dict[str, tuple[str, ...]] = {
 
 GROUP_OF = {name: group for group, names in GROUPS.items() for name in names}
 """Option name -> its group."""
+
+
+ATTRIBUTE = {"model": "model", "batch": "batch", "fixed-lag": "fixed_lag", "tuning": "tuning", "other": "other"}
+"""Group -> attribute of :func:`nested`'s result (``other``: options in no group, e.g. an estimator's own)."""
+
+
+@lru_cache(maxsize=None)
+def _classes(cls: type) -> tuple[type, dict[str, tuple[str, ...]]]:
+    """The nested dataclass of the flat options class ``cls`` and group -> its option names (in the order of
+    :data:`GROUPS`, as ``--list-options`` lists them)."""
+    names = [f.name for f in dataclasses.fields(cls) if f.init]
+    members = {group: tuple(n for n in GROUPS[group] if n in names) for group in GROUPS}
+    members["other"] = tuple(n for n in names if n not in GROUP_OF)
+    parts = []
+    for group, own in members.items():
+        part = dataclasses.make_dataclass(f"{cls.__name__}_{ATTRIBUTE[group]}", [(n, object) for n in own], frozen=True)
+        parts.append((ATTRIBUTE[group], part))
+    return dataclasses.make_dataclass(f"{cls.__name__}_groups", parts, frozen=True), members
+
+
+def nested(options):
+    """``options`` (a flat options dataclass: :class:`gfimu.smoother.graph.SmootherOptions`, an estimator)
+    as nested frozen dataclasses: ``.model``, ``.batch``, ``.fixed_lag``, ``.tuning``, ``.other``, each
+    holding the options of that group the object has."""
+    outer, members = _classes(type(options))
+    parts = {f.name: f.type for f in dataclasses.fields(outer)}
+    return outer(**{ATTRIBUTE[group]: parts[ATTRIBUTE[group]](**{n: getattr(options, n) for n in own})
+                    for group, own in members.items()})
+
+
+def flatten(cls: type, grouped, **changes):
+    """The flat options of class ``cls`` from :func:`nested`'s ``grouped`` (with ``changes`` by flat name)."""
+    _, members = _classes(cls)
+    values = {n: getattr(getattr(grouped, ATTRIBUTE[group]), n) for group, own in members.items() for n in own}
+    unknown = set(changes) - set(values)
+    if unknown:
+        raise TypeError(f"{cls.__name__} has no option {', '.join(sorted(unknown))}")
+    return cls(**{**values, **changes})

@@ -119,31 +119,9 @@ def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 
 
 
 def log_normaliser(problem: SmootherProblem) -> float:
-    """``Σ log σ`` over all factor rows (½ log det of the covariance of the stacked factors)."""
-    n = problem.n
-    total = float(sum(group.log_normaliser(problem) for group in problem.groups if group.first))
-    if problem.options.measurement == "quadratic":
-        total -= n * float(np.sum(np.log(np.diag(problem.x_whiten))))
-    else:
-        if problem.accel_sigma_per_sample is None:
-            total += n * float(np.sum(np.log(problem.accel_sigma)))
-        else:
-            total += float(np.sum(np.log(problem.accel_sigma_per_sample)))
-    if problem.attitude:
-        total += 3 * float(np.sum(np.log(problem.attitude_step_sigma)) + np.sum(np.log(problem.accel_step_sigma)))
-        total += float(np.sum(np.log(problem.attitude_prior_sigma)))
-    else:
-        total += 3 * float(np.sum(np.log(problem.force_step_sigma)))
-    if problem.snap:
-        total += 0.5 * float(np.sum(np.linalg.slogdet(problem.snap_cov)[1]))
-    else:
-        if problem.oscillator:
-            total += 0.5 * float(np.sum(np.linalg.slogdet(problem.oscillator_covariance())[1]))
-        else:
-            total += 3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma)))
-            total += 2 * (n - 1) * float(np.sum(np.log(problem.axis_factors)))
-    total += sum(group.log_normaliser(problem) for group in problem.groups if not group.first)
-    return total
+    """``Σ log σ`` over all factor rows (½ log det of the covariance of the stacked factors), the sum of
+    the model's groups' (:meth:`SmootherProblem.log_normaliser`)."""
+    return problem.log_normaliser()
 
 
 def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
