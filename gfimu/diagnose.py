@@ -596,12 +596,17 @@ def diagnosis_figure(d: Diagnosis):
     t = data["times_s"]
     step = max(1, len(t) // MAX_FIGURE_POINTS)
     ax = axes[0]
-    ax.plot(t[::step], data["omega_norm_radps"][::step], lw=0.6, label="|omega| (ML fit)")
-    ax.plot(t[::step], data["bound_radps"][::step], lw=0.6, label="bound on |omega| error")
-    ax.set_yscale("symlog", linthresh=0.01)
+    w = data["omega_norm_radps"][::step]
+    top = 3.0 * max(float(np.max(w)) if w.size else 1.0, 1e-3)
+    ax.plot(t[::step], np.clip(w, top * 1e-5, None), lw=0.6, label="|omega| (ML fit)")
+    ax.plot(t[::step], np.clip(data["bound_radps"][::step], top * 1e-5, top), lw=0.6,
+            label="bound on |omega| error (clipped to the plot)")
+    ax.set_yscale("log")
+    ax.set_ylim(top * 1e-5, top)
     ax.set_ylabel("rad/s")
     ax.legend(loc="upper right", fontsize=8)
-    ax.set_title(f"{d.source}: {d.verdict[:100]}", fontsize=9)
+    verdict = d.verdict if len(d.verdict) <= 110 else d.verdict[:107] + "..."
+    ax.set_title(f"{d.source}\n{verdict}", fontsize=8)
     ax = axes[1]
     ax.plot(t[::step], data["residual_norm_mps2"][::step], lw=0.5)
     ax.axhline(d.stated_noise_mps2, color="k", ls="--", lw=0.8, label="stated noise")
