@@ -33,6 +33,8 @@ class Accelerometer:
     rotation_body_sensor: np.ndarray = field(default_factory=lambda: np.eye(3))
     axes: tuple[str, ...] = ("x", "y", "z")
     noise_std_mps2: float | None = None
+    range_mps2: float | None = None
+    """Largest magnitude each axis can read [m/s²] (the full scale, e.g. 16 g = 156.9 m/s²); None: not stated."""
 
     def __post_init__(self) -> None:
         pos = np.asarray(self.position_m, dtype=float).reshape(-1)
@@ -50,6 +52,8 @@ class Accelerometer:
             raise ArrayModelError(f"accelerometer {self.name!r}: axes must be distinct among x, y, z; got {list(axes)}")
         if self.noise_std_mps2 is not None and not (np.isfinite(self.noise_std_mps2) and self.noise_std_mps2 >= 0):
             raise ArrayModelError(f"accelerometer {self.name!r}: noise_std_mps2 must be >= 0")
+        if self.range_mps2 is not None and not (np.isfinite(self.range_mps2) and self.range_mps2 > 0):
+            raise ArrayModelError(f"accelerometer {self.name!r}: range_mps2 must be a finite number > 0, got {self.range_mps2!r}")
         pos.setflags(write=False)
         rot = rot.copy()
         rot.setflags(write=False)
@@ -147,6 +151,13 @@ class SensorArray:
         """(n_axes,) noise std per axis; NaN where array.toml gives none."""
         return np.concatenate(
             [np.full(len(a.axes), np.nan if a.noise_std_mps2 is None else a.noise_std_mps2) for a in self.accelerometers]
+        )
+
+    @property
+    def range_per_axis_mps2(self) -> np.ndarray:
+        """(n_axes,) full scale per axis [m/s²]; NaN where array.toml gives none."""
+        return np.concatenate(
+            [np.full(len(a.axes), np.nan if a.range_mps2 is None else a.range_mps2) for a in self.accelerometers]
         )
 
     # --- linear model (paper 000, eqs. 6-7) -------------------------------
@@ -289,13 +300,19 @@ MIMU4444_POSITIONS_M = np.array(
 )
 
 
-def mimu4444_array(noise_std_mps2: float | None = 0.05, with_gyroscope: bool = False) -> SensorArray:
+MIMU4444_RANGE_MPS2 = 16 * 9.80665
+"""Full scale of the board's accelerometers, ±16 g [m/s²]."""
+
+
+def mimu4444_array(noise_std_mps2: float | None = 0.05, with_gyroscope: bool = False,
+                   range_mps2: float | None = MIMU4444_RANGE_MPS2) -> SensorArray:
     """The eight corner IMUs of the MIMU4444 board (nominal positions, board frame).
 
     The readings are expressed in the board frame after conversion, so every
     sensor has identity rotation here.
     """
-    accs = tuple(Accelerometer(f"imu{i + 1}", p, noise_std_mps2=noise_std_mps2) for i, p in enumerate(MIMU4444_POSITIONS_M))
+    accs = tuple(Accelerometer(f"imu{i + 1}", p, noise_std_mps2=noise_std_mps2, range_mps2=range_mps2)
+                 for i, p in enumerate(MIMU4444_POSITIONS_M))
     return SensorArray(accs, "mimu4444", gyroscope=Gyroscope(0.01) if with_gyroscope else None)
 
 

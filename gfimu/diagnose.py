@@ -35,7 +35,7 @@ from .estimators.ml import MLEstimator
 from .io.plausibility import MAX_POSITION_M, MIN_EXTENT_M, RATE_TOLERANCE, still_specific_force
 from .io.units import STANDARD_GRAVITY_MPS2
 from .log import Log
-from .readings import screen_log
+from .readings import clipped_readings, runs_of, screen_log, stuck_runs
 from .rigid_body import quadratic_terms_jacobian
 from .smoother.auto import NOISE_RATIO_LIMIT, check_model, rigid_body_residual
 
@@ -45,11 +45,6 @@ BANDS_RADPS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, np.inf)
 UNIT_TOLERANCE = 1.4
 """A measured scale within this factor of a unit's scale (g: 1/9.81, mg: 1000/9.81, deg/s: 57.3) names that
 unit; the candidates differ by at least 1.8 (57.3 against 31.6, the gyro ratio of positions in mm)."""
-STUCK_MIN_S = 0.2
-"""Shortest run [s] of identical readings reported as stuck (and at least :data:`STUCK_MIN_SAMPLES`)."""
-STUCK_MIN_SAMPLES = 10
-"""A quantised channel with white noise of 1 quantum std repeats a value with probability about 0.3 per step;
-10 repeats in a row: 2e-5; and a run counts only while the other channels move."""
 CLIP_MIN_RUN = 3
 """A channel pinned at its extreme value for this many consecutive samples is clipped (a smooth peak stays within
 one quantum for one or two samples at the rates of IMUs)."""
@@ -273,64 +268,37 @@ def timing_of(timestamps_ns) -> Timing:
 
 # --- channels ----------------------------------------------------------------
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """(start, stop) of the runs of True in a 1-D mask."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist()))
-
-
 def channel_faults(accel_mps2: np.ndarray, columns, rate_hz: float,
                    range_mps2=None) -> tuple[list[ChannelFault], np.ndarray]:
     """(stuck and clipped channels, (N, n_axes) mask of their readings) of readings (N, n_axes).
 
-    *Clipped*: pinned at ±``range_mps2`` (per axis, when stated) or, without a range, held at the channel's
-    largest or smallest value for :data:`CLIP_MIN_RUN` samples in a row beyond :data:`CLIP_MIN_MAGNITUDE_MPS2`.
-    *Stuck*: one value repeated for :data:`STUCK_MIN_S` (at least :data:`STUCK_MIN_SAMPLES`) while most other
-    channels change at most of those steps."""
+    *Clipped*: within :data:`gfimu.readings.CLIP_TOLERANCE` of ±``range_mps2`` (per axis, where stated) or,
+    without a range, held at the channel's largest or smallest value for :data:`CLIP_MIN_RUN` samples in a row
+    beyond :data:`CLIP_MIN_MAGNITUDE_MPS2`. *Stuck*: :func:`gfimu.readings.stuck_runs` (the screening's rule)."""
     y = np.asarray(accel_mps2, dtype=float)
     n, m = y.shape
     out: list[ChannelFault] = []
-    mask = np.zeros((n, m), bool)
     rng = np.full(m, np.nan) if range_mps2 is None else np.broadcast_to(np.asarray(range_mps2, float), (m,))
-    changed = np.zeros((n, m), bool)
-    changed[1:] = y[1:] != y[:-1]
-    min_stuck = max(STUCK_MIN_SAMPLES, int(round(STUCK_MIN_S * rate_hz)) if np.isfinite(rate_hz) else 0)
+    pinned = clipped_readings(y, rng)
     for c in range(m):
         col = y[:, c]
-        finite = np.isfinite(col)
-        if not finite.any():
+        if np.isfinite(rng[c]) or not np.isfinite(col).any():
             continue
-        pinned = np.zeros(n, bool)
-        if np.isfinite(rng[c]) and rng[c] > 0:
-            pinned = finite & (np.abs(col) >= rng[c] * (1 - 1e-9))
-        else:
-            for v in (np.nanmax(col), np.nanmin(col)):
-                if abs(v) < CLIP_MIN_MAGNITUDE_MPS2:
-                    continue
-                at = col == v
-                if any(b - a >= CLIP_MIN_RUN for a, b in _runs(at)):
-                    pinned |= at
-        if pinned.any():
-            mask[:, c] |= pinned
-            rows = np.nonzero(pinned)[0]
-            out.append(ChannelFault(columns[c], "clipped", int(rows.size), int(rows[0]), int(rows[-1]),
-                                    float(col[rows[0]])))
-        same = np.zeros(n, bool)
-        same[1:] = (col[1:] == col[:-1]) & ~pinned[1:]
-        others = np.delete(changed, c, axis=1)
-        stuck_rows = []
-        for a, b in _runs(same):
-            start = a - 1  # the first sample of the repeated value
-            if b - start < min_stuck:
-                continue
-            moving = np.median(np.mean(others[a:b], axis=0)) if others.shape[1] else 0.0
-            if moving >= 0.5:
-                stuck_rows.append((start, b))
-                mask[start:b, c] = True
-        if stuck_rows:
-            count = sum(b - a for a, b in stuck_rows)
-            out.append(ChannelFault(columns[c], "stuck", int(count), int(stuck_rows[0][0]), int(stuck_rows[-1][1] - 1),
-                                    float(col[stuck_rows[0][0]])))
+        for v in (np.nanmax(col), np.nanmin(col)):
+            at = col == v
+            if abs(v) >= CLIP_MIN_MAGNITUDE_MPS2 and any(b - a >= CLIP_MIN_RUN for a, b in runs_of(at)):
+                pinned[:, c] |= at
+    mask = pinned.copy()
+    for c in np.nonzero(pinned.any(axis=0))[0]:
+        rows = np.nonzero(pinned[:, c])[0]
+        out.append(ChannelFault(columns[c], "clipped", int(rows.size), int(rows[0]), int(rows[-1]), float(y[rows[0], c])))
+    stuck: dict[int, list[tuple[int, int]]] = {}
+    for c, a, b in stuck_runs(y, rate_hz, exclude=pinned):
+        stuck.setdefault(c, []).append((a, b))
+        mask[a:b, c] = True
+    for c, spans in sorted(stuck.items()):
+        out.append(ChannelFault(columns[c], "stuck", int(sum(b - a for a, b in spans)), spans[0][0], spans[-1][1] - 1,
+                                float(y[spans[0][0], c])))
     return out, mask
 
 

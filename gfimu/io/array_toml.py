@@ -181,8 +181,15 @@ def _parse(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | Non
                 or len(set(axes)) != len(axes) or any(x not in ("x", "y", "z") for x in axes)):
             raise ctx.error(f"expected a list of distinct axes among \"x\", \"y\", \"z\", got {axes!r}", t, i, "axes")
         noise = _optional_std(ctx, a, t, i, "noise_std_mps2")
+        full_scale = None
+        if "range_mps2" in a:
+            full_scale = a["range_mps2"]
+            if not _is_number(full_scale) or not math.isfinite(full_scale) or full_scale <= 0:
+                raise ctx.error(f"expected the full scale in m/s², a finite number > 0, got {full_scale!r}", t, i,
+                                "range_mps2")
+            full_scale = float(full_scale)
         try:
-            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise))
+            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise, full_scale))
         except ArrayModelError as exc:
             raise ctx.error(str(exc), t, i) from None
     gyro = inclinometer = body = None
@@ -292,6 +299,8 @@ def array_to_dict(array: SensorArray) -> dict:
         entry["axes"] = list(a.axes)
         if a.noise_std_mps2 is not None:
             entry["noise_std_mps2"] = float(a.noise_std_mps2)
+        if a.range_mps2 is not None:
+            entry["range_mps2"] = float(a.range_mps2)
         accs.append(entry)
     doc["accelerometers"] = accs
     if array.gyroscope is not None:
