@@ -266,6 +266,9 @@ class SensorArray:
         centred = positions - positions.mean(axis=0)
         spread = np.linalg.svd(centred, compute_uv=False) if len(positions) > 1 else np.zeros(1)
         size = float(spread[0]) if spread.size else 0.0
+        if len(positions) == 1:
+            return (f"array {self.name!r} has a single accelerometer: one point does not sense the rotation (method "
+                    "'free-flight' estimates it from the body's dynamics)")
         if size <= 1e-9:
             return (f"array {self.name!r}: all accelerometers sit at one point (positions within 1 nm): the rotation "
                     "is not sensed; check position_m (metres, body frame) or add accelerometers elsewhere")
@@ -294,7 +297,7 @@ class SensorArray:
     def inversion_reason(self) -> str | None:
         """``None`` when the 12-unknown inversion works, else why it cannot (the geometry first,
         :meth:`geometry_reason`)."""
-        reason = self.geometry_reason()
+        reason = self.geometry_reason() if self.n_axes >= rigid_body.N_UNKNOWNS else None
         if reason:
             return reason
         try:

@@ -181,3 +181,18 @@ def test_real_recording(mimu4444_dir, tmp_path):
     assert d.gyro_ratio == pytest.approx(1.0, abs=0.2)
     assert d.accel_unit_suspect is None and d.position_scale_suspect is None
     assert not d.model["consistent"]  # the board's residual is several times its datasheet noise
+
+
+def test_positions_in_cm_of_a_small_array_found_by_the_gyroscope():
+    """Sizes that look plausible (35 cm) but are in cm: the accelerometers' ω is √100 times too small."""
+    from gfimu.array import SensorArray, cube_array
+
+    small = cube_array(0.002, noise_std_mps2=0.001)
+    array = SensorArray(small.accelerometers, "small", Gyroscope(0.01))
+    log = simulate("random3d", array=array, seed=2, duration_s=4.0)
+    assert diagnose(log).position_scale_suspect is None
+    cm = array.with_accelerometers([Accelerometer(a.name, a.position_m * 100, noise_std_mps2=a.noise_std_mps2)
+                                    for a in array.accelerometers])
+    d = diagnose(log.replace(array=cm))
+    assert d.gyro_ratio == pytest.approx(10.0, rel=0.05) and d.position_scale_suspect == 0.01
+    assert d.gyro_unit_suspect is None and "multiply the positions by 0.01" in d.verdict
