@@ -214,7 +214,8 @@ class Diagnosis:
             lines.append(f"  gyroscope |omega| / accelerometers' |omega|: {self.gyro_ratio:.3g}"
                          + (f" -> gyroscope likely in {self.gyro_unit_suspect}" if self.gyro_unit_suspect else ""))
         lines += ["", "channels",
-                  f"  {self.screened_readings} reading(s) replaced by the screening (not finite, out of range, spikes)"]
+                  f"  {self.screened_readings} reading(s) replaced by the screening (not finite, out of range, spikes, "
+                  "clipped, stuck)"]
         if not self.faults:
             lines.append("  no stuck or clipped channel")
         for f in self.faults:
