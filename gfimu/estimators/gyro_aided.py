@@ -154,7 +154,7 @@ class GyroAidedEstimator:
     def applicable(self, array: SensorArray) -> str | None:
         if array.gyroscope is None:
             return f"array {array.name!r} has no gyroscope (method 'gyro-aided' needs one)"
-        reason = array.geometry_reason()
+        reason = array.geometry_reason() if array.n_axes >= 6 else None  # fewer axes: the count says why
         if reason:
             return reason
         try:
