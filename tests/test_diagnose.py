@@ -145,7 +145,7 @@ def test_timing_counts_jitter_gaps_repeats_and_backward_steps():
     assert timing_of(jittered).jitter_s == pytest.approx(np.sqrt(2) * 200e-6, rel=0.1)  # steps: difference of two
 
 
-def test_cli_text_json_figure_and_refusals(tmp_path, base):
+def test_cli_text_json_figure_and_refusals(tmp_path, base, capsys):
     env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     folder = tmp_path / "log"
     y = base.accel_mps2.copy()
@@ -162,10 +162,15 @@ def test_cli_text_json_figure_and_refusals(tmp_path, base):
     doc = json.loads(out.read_text())
     assert doc["faults"][0]["column"] == "a2_y" and doc["timing"]["rate_hz"] == pytest.approx(500.0)
     assert fig.read_bytes()[:4] == b"\x89PNG"
-    bad = subprocess.run(cmd + ["--out", str(folder / "imu.csv")], env=env, capture_output=True, text=True)
-    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "input" in bad.stderr
-    missing = subprocess.run(cmd[:4] + [str(tmp_path / "nowhere")], env=env, capture_output=True, text=True)
-    assert missing.returncode == 2 and "error" in missing.stderr and "Traceback" not in missing.stderr
+    from gfimu.cli import main
+
+    before = (folder / "imu.csv").read_bytes()
+    assert main(["diagnose", str(folder), "--quiet", "--out", str(folder / "imu.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is an input" in err and (folder / "imu.csv").read_bytes() == before
+    assert main(["diagnose", str(tmp_path / "nowhere"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "gfimu diagnose: error:" in err and "log folder not found" in err and err.count("\n") == 1
 
 
 @pytest.mark.slow
