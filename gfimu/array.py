@@ -36,6 +36,8 @@ class Accelerometer:
     axes: tuple[str, ...] = ("x", "y", "z")
     noise_std_mps2: float | None = None
     topic: str | None = None
+    range_mps2: float | None = None
+    """Largest magnitude each axis can read [m/s²] (the full scale, e.g. 16 g = 156.9 m/s²); None: not stated."""
 
     def __post_init__(self) -> None:
         pos = np.asarray(self.position_m, dtype=float).reshape(-1)
@@ -55,6 +57,8 @@ class Accelerometer:
             raise ArrayModelError(f"accelerometer {self.name!r}: noise_std_mps2 must be >= 0")
         if self.topic is not None and (not isinstance(self.topic, str) or not self.topic.strip()):
             raise ArrayModelError(f"accelerometer {self.name!r}: topic must be a non-empty string, got {self.topic!r}")
+        if self.range_mps2 is not None and not (np.isfinite(self.range_mps2) and self.range_mps2 > 0):
+            raise ArrayModelError(f"accelerometer {self.name!r}: range_mps2 must be a finite number > 0, got {self.range_mps2!r}")
         pos.setflags(write=False)
         rot = rot.copy()
         rot.setflags(write=False)
@@ -154,6 +158,13 @@ class SensorArray:
             [np.full(len(a.axes), np.nan if a.noise_std_mps2 is None else a.noise_std_mps2) for a in self.accelerometers]
         )
 
+    @property
+    def range_per_axis_mps2(self) -> np.ndarray:
+        """(n_axes,) full scale per axis [m/s²]; NaN where array.toml gives none."""
+        return np.concatenate(
+            [np.full(len(a.axes), np.nan if a.range_mps2 is None else a.range_mps2) for a in self.accelerometers]
+        )
+
     # --- linear model (paper 000, eqs. 6-7) -------------------------------
     def structure_matrix(self) -> np.ndarray:
         """(n_axes, 12) structure matrix S: readings = S @ [f, ω̇, q(ω)]."""
@@ -201,8 +212,99 @@ class SensorArray:
                 "(nearly degenerate layout)"
             )
 
+    def linear_condition_number(self) -> float:
+        """Condition number of the model's linear block [f, ω̇] with the lever arms taken from the positions'
+        centroid and the ω̇ columns divided by the RMS lever arm (unit-free, independent of the body origin);
+        ``inf`` when f and ω̇ are not determined (all accelerometers at one point, on one line, or sensing
+        directions that do not span the motion)."""
+        positions = self.axis_positions_m
+        centred = positions - positions.mean(axis=0)
+        size = float(np.sqrt(np.mean(np.sum(centred**2, axis=1))))
+        if size <= 0:
+            return float("inf")
+        H = rigid_body.structure_matrix(self.axis_directions_b, centred)[:, :6] / np.array([1, 1, 1, size, size, size])
+        sv = np.linalg.svd(H, compute_uv=False)
+        if sv.size < 6 or sv[-1] <= 1e-12 * sv[0]:
+            return float("inf")
+        return float(sv[0] / sv[-1])
+
+    def omega_equations(self) -> int:
+        """Number of independent equations per sample left for ω once f and ω̇ are eliminated: the rank of
+        ``P⊥ S_q`` (P⊥ the projection orthogonal to the linear block). Three or fewer with 12 or more axes
+        (four coplanar triads) leave several exact ω per sample, not only ±ω (docs/geometry.md)."""
+        S = self.structure_matrix()
+        H, Sq = S[:, :6], S[:, 6:]
+        u, sv, _ = np.linalg.svd(H, full_matrices=True)
+        r = int(np.sum(sv > 1e-9 * max(sv[0], 1e-300))) if sv.size else 0
+        A = u[:, r:].T @ Sq
+        if A.size == 0:
+            return 0
+        sa = np.linalg.svd(A, compute_uv=False)
+        return int(np.sum(sa > 1e-9 * max(np.abs(Sq).max(), 1e-300)))
+
+    def omega_condition_number(self) -> float:
+        """Condition number of the equations left for ω per sample once f and ω̇ are eliminated, ``P⊥ S_q``
+        (6 columns, the quadratic terms; independent of the body origin and of the array's size); ``inf`` when
+        fewer than 6 remain independent (coplanar triads: 3)."""
+        S = self.structure_matrix()
+        H, Sq = S[:, :6], S[:, 6:]
+        u, sv, _ = np.linalg.svd(H, full_matrices=True)
+        r = int(np.sum(sv > 1e-9 * max(sv[0], 1e-300))) if sv.size else 0
+        A = u[:, r:].T @ Sq
+        if A.shape[0] < 6:
+            return float("inf")
+        sa = np.linalg.svd(A, compute_uv=False)
+        if sa[-1] <= 1e-12 * max(sa[0], 1e-300):
+            return float("inf")
+        return float(sa[0] / sa[-1])
+
+    def geometry_reason(self, max_condition: float | None = None, several_solutions: bool = False) -> str | None:
+        """``None`` when the accelerometers determine f, ω̇ and ω (see docs/geometry.md), else why not:
+        all at one point, on one line, sensing directions that miss a component, or a layout so close to
+        those that the linear block's condition number (:meth:`linear_condition_number`) exceeds
+        ``max_condition`` (default :data:`MAX_LINEAR_CONDITION`). With ``several_solutions`` (the smoothers) also
+        a layout of 12 or more axes whose equations for ω per sample are degenerate or nearly so
+        (:meth:`omega_condition_number` over :data:`MAX_OMEGA_CONDITION`; coplanar triads: infinite), whose
+        samples then have several exact or nearly exact solutions besides ±ω."""
+        limit = MAX_LINEAR_CONDITION if max_condition is None else max_condition
+        positions = np.array([a.position_m for a in self.accelerometers])
+        centred = positions - positions.mean(axis=0)
+        spread = np.linalg.svd(centred, compute_uv=False) if len(positions) > 1 else np.zeros(1)
+        size = float(spread[0]) if spread.size else 0.0
+        if len(positions) == 1:
+            return (f"array {self.name!r} has a single accelerometer: one point does not sense the rotation (method "
+                    "'free-flight' estimates it from the body's dynamics)")
+        if size <= 1e-9:
+            return (f"array {self.name!r}: all accelerometers sit at one point (positions within 1 nm): the rotation "
+                    "is not sensed; check position_m (metres, body frame) or add accelerometers elsewhere")
+        if spread.size < 2 or spread[1] <= 1e-9 * size:
+            return (f"array {self.name!r}: all accelerometers lie on one line: rotation about that line and its ω̇ are "
+                    "not sensed; add an accelerometer off the line")
+        cond = self.linear_condition_number()
+        if not np.isfinite(cond):
+            return (f"array {self.name!r}: the sensing directions and lever arms do not determine f and ω̇ (the "
+                    "linear block [f, ω̇] of the model is rank deficient); add axes in the missing directions")
+        if cond > limit:
+            return (f"array {self.name!r}: the layout is nearly degenerate (nearly on one line or one point): the "
+                    f"condition number {cond:.3g} of the linear block [f, ω̇] exceeds {limit:.3g} (docs/geometry.md)")
+        if several_solutions and self.n_axes >= 12:
+            cond_w = self.omega_condition_number()
+            if cond_w > MAX_OMEGA_CONDITION:
+                what = (f"only {self.omega_equations()} independent equations remain for ω (coplanar triads)"
+                        if not np.isfinite(cond_w) else
+                        f"the equations left for ω have condition number {cond_w:.3g}, over {MAX_OMEGA_CONDITION:g} "
+                        "(nearly coplanar triads)")
+                return (f"array {self.name!r}: once f and ω̇ are eliminated {what}: each sample has several "
+                        "(nearly) exact solutions besides ±ω and the smoother follows a wrong one (docs/geometry.md); "
+                        "move a triad off the plane or use a gyroscope")
+        return None
+
     def inversion_reason(self) -> str | None:
-        """``None`` when the 12-unknown inversion works, else why it cannot."""
+        """``None`` when the 12-unknown inversion works, else why it cannot (the geometry first,
+        :meth:`geometry_reason`)."""
+        reason = self.geometry_reason() if self.n_axes >= rigid_body.N_UNKNOWNS else None
+        if reason:
+            return reason
         try:
             self.check_invertible()
         except ArrayModelError as exc:
@@ -219,6 +321,16 @@ class SensorArray:
 
     def with_accelerometers(self, accelerometers) -> "SensorArray":
         return SensorArray(tuple(accelerometers), self.name, self.gyroscope, self.inclinometer, self.body)
+
+
+MAX_LINEAR_CONDITION = 40.0
+"""Largest condition number of the unit-free linear block [f, ω̇] of an array the methods accept
+(:meth:`SensorArray.geometry_reason`). From the study of docs/geometry.md: triads closing in on a line keep the
+smoother's accuracy up to 24 and lose it at 71; 40 is about the geometric mean."""
+MAX_OMEGA_CONDITION = 450.0
+"""Largest condition number of the equations left for ω (:meth:`SensorArray.omega_condition_number`) of an array
+the smoothers accept without a gyroscope. From the same study: flattened triads keep the smoother's accuracy up to
+141 and lose it at 1414; 450 is about the geometric mean."""
 
 
 # --- built-in layouts --------------------------------------------------------
@@ -294,13 +406,19 @@ MIMU4444_POSITIONS_M = np.array(
 )
 
 
-def mimu4444_array(noise_std_mps2: float | None = 0.05, with_gyroscope: bool = False) -> SensorArray:
+MIMU4444_RANGE_MPS2 = 16 * 9.80665
+"""Full scale of the board's accelerometers, ±16 g [m/s²]."""
+
+
+def mimu4444_array(noise_std_mps2: float | None = 0.05, with_gyroscope: bool = False,
+                   range_mps2: float | None = MIMU4444_RANGE_MPS2) -> SensorArray:
     """The eight corner IMUs of the MIMU4444 board (nominal positions, board frame).
 
     The readings are expressed in the board frame after conversion, so every
     sensor has identity rotation here.
     """
-    accs = tuple(Accelerometer(f"imu{i + 1}", p, noise_std_mps2=noise_std_mps2) for i, p in enumerate(MIMU4444_POSITIONS_M))
+    accs = tuple(Accelerometer(f"imu{i + 1}", p, noise_std_mps2=noise_std_mps2, range_mps2=range_mps2)
+                 for i, p in enumerate(MIMU4444_POSITIONS_M))
     return SensorArray(accs, "mimu4444", gyroscope=Gyroscope(0.01) if with_gyroscope else None)
 
 

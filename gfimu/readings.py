@@ -14,7 +14,16 @@ value there and the rest of the log is untouched:
   differences within ±:data:`SCALE_HALF_WIDTH` samples (leaving out those the
   sample itself touches), and no other accelerometer jumps at the same sample.
   Real motion, however fast, moves neighbouring samples together and is felt by
-  every sensor; a spike stands alone.
+  every sensor; a spike stands alone;
+- readings *clipped* at the sensor's range (within :data:`CLIP_TOLERANCE` of it);
+- *stuck* channels: one value repeated for at least :data:`STUCK_MIN_S` (and
+  :data:`STUCK_MIN_SAMPLES`) while most other channels change (:func:`stuck_runs`).
+
+Clipped and stuck readings come in runs longer than the median window; they are
+replaced by the rigid-body prediction of the other axes at the same sample (the
+least-squares fit of the 12 unknowns [f, ω̇, q(ω)], paper 000 eq. 6) when the
+remaining axes determine it, else by a straight line between the channel's good
+readings on either side.
 """
 
 from __future__ import annotations
@@ -30,6 +39,14 @@ SCALE_HALF_WIDTH = 25
 """Half width [samples] of the window of the local scale."""
 MEDIAN_HALF_WIDTH = 2
 """Half width [samples] of the median a reading is compared with and replaced by."""
+CLIP_TOLERANCE = 1e-3
+"""A reading within this fraction of the stated range is clipped (one count of a 10-bit converter is 2e-3 of its
+full scale; wider converters are finer); beyond the range by more than it, out of range."""
+STUCK_MIN_S = 0.2
+"""Shortest run [s] of one repeated value reported as a stuck channel (and at least :data:`STUCK_MIN_SAMPLES`)."""
+STUCK_MIN_SAMPLES = 10
+"""A quantised channel with white noise of one quantum std repeats its value with probability about 0.3 per step;
+ten repeats in a row: 2e-5 (and a run counts only while most other channels change)."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +58,10 @@ class Screening:
     non_finite: int
     out_of_range: int
     spikes: int
+    clipped: int = 0
+    stuck: int = 0
+    runs: tuple = ()
+    """(kind, column index, first row, last row) of each run of clipped or stuck readings."""
 
     @property
     def count(self) -> int:
@@ -53,9 +74,17 @@ class Screening:
         more = f" and {len(rows) - limit} more" if len(rows) > limit else ""
         kinds = ", ".join(f"{n} {name}" for n, name in ((self.non_finite, "not finite"),
                                                          (self.out_of_range, "out of range"),
-                                                         (self.spikes, "isolated spikes")) if n)
-        return (f"{self.count} accelerometer reading(s) replaced by the median of their neighbours "
-                f"({kinds}): {where}{more}")
+                                                         (self.spikes, "isolated spikes"),
+                                                         (self.clipped, "clipped at the range"),
+                                                         (self.stuck, "stuck")) if n)
+        if not self.runs:
+            return (f"{self.count} accelerometer reading(s) replaced by the median of their neighbours "
+                    f"({kinds}): {where}{more}")
+        spans = ", ".join(f"{columns[c]} {kind} rows {a}-{b}" for kind, c, a, b in self.runs[:limit])
+        spans += f" and {len(self.runs) - limit} more run(s)" if len(self.runs) > limit else ""
+        return (f"{self.count} accelerometer reading(s) replaced ({kinds}; clipped and stuck ones by the other "
+                f"sensors' rigid-body prediction or a line between good neighbours, the others by the median of "
+                f"their neighbours): {spans}; {where}{more}")
 
 
 def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
@@ -77,22 +106,120 @@ def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
     return out
 
 
+def runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of the runs of True in a 1-D mask."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist()))
+
+
+def clipped_readings(accel_mps2: np.ndarray, range_mps2) -> np.ndarray:
+    """(N, n_axes) readings within :data:`CLIP_TOLERANCE` of the stated range (NaN: none stated) or beyond it."""
+    y = np.asarray(accel_mps2, dtype=float)
+    limit = np.broadcast_to(np.asarray(range_mps2, dtype=float), (y.shape[1],))
+    stated = np.isfinite(limit) & (limit > 0)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(y) & stated[None, :] & (np.abs(y) >= (1 - CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
+
+
+def stuck_runs(accel_mps2: np.ndarray, rate_hz: float | None = None,
+               exclude: np.ndarray | None = None) -> list[tuple[int, int, int]]:
+    """(column, first row, stop row) of the runs in which a channel repeats one value for at least
+    :data:`STUCK_MIN_S` (at ``rate_hz``; :data:`STUCK_MIN_SAMPLES` when not given) while most other channels change
+    at most of those steps; readings in ``exclude`` (N, n_axes) never count as repeats."""
+    y = np.asarray(accel_mps2, dtype=float)
+    n, m = y.shape
+    if n < 2 or m < 2:
+        return []
+    changed = np.zeros((n, m), bool)
+    changed[1:] = y[1:] != y[:-1]
+    min_len = STUCK_MIN_SAMPLES
+    if rate_hz is not None and np.isfinite(rate_hz) and rate_hz > 0:
+        min_len = max(min_len, int(round(STUCK_MIN_S * rate_hz)))
+    out = []
+    for c in range(m):
+        same = np.zeros(n, bool)
+        same[1:] = (y[1:, c] == y[:-1, c]) & np.isfinite(y[1:, c])
+        if exclude is not None:
+            same[1:] &= ~exclude[1:, c] & ~exclude[:-1, c]
+        if np.count_nonzero(same) < min_len - 1:
+            continue
+        others = np.delete(changed, c, axis=1)
+        for a, b in runs_of(same):
+            start = a - 1  # the first sample holding the repeated value
+            if b - start >= min_len and np.median(np.mean(others[a:b], axis=0)) >= 0.5:
+                out.append((c, start, b))
+    return out
+
+
+def _rigid_body_fill(y: np.ndarray, bad: np.ndarray, structure_matrix: np.ndarray | None) -> np.ndarray:
+    """(N, n_axes) bool: the readings of ``bad`` that were replaced in ``y`` (in place) by the rigid-body
+    prediction of the good axes of their sample, where those determine the 12 unknowns."""
+    done = np.zeros_like(bad)
+    if structure_matrix is None:
+        return done
+    S = np.asarray(structure_matrix, dtype=float)
+    rows = np.nonzero(bad.any(axis=1))[0]
+    if rows.size == 0:
+        return done
+    patterns, inverse = np.unique(bad[rows], axis=0, return_inverse=True)
+    for k, pattern in enumerate(patterns):
+        good = ~pattern
+        sg = S[good]
+        if sg.shape[0] < S.shape[1]:
+            continue
+        sv = np.linalg.svd(sg, compute_uv=False)
+        if sv[-1] <= 1e-9 * sv[0]:
+            continue
+        r = rows[inverse.reshape(-1) == k]
+        r = r[np.all(np.isfinite(y[np.ix_(r, np.nonzero(good)[0])]), axis=1)]
+        if r.size == 0:
+            continue
+        x, *_ = np.linalg.lstsq(sg, y[np.ix_(r, np.nonzero(good)[0])].T, rcond=None)
+        y[np.ix_(r, np.nonzero(pattern)[0])] = (S[pattern] @ x).T
+        done[np.ix_(r, np.nonzero(pattern)[0])] = True
+    return done
+
+
+def _line_fill(y: np.ndarray, bad: np.ndarray) -> None:
+    """Readings of ``bad`` replaced in ``y`` (in place) by a straight line between the channel's good readings."""
+    for c in np.nonzero(bad.any(axis=0))[0]:
+        good = np.nonzero(~bad[:, c] & np.isfinite(y[:, c]))[0]
+        idx = np.nonzero(bad[:, c])[0]
+        if good.size:
+            y[idx, c] = np.interp(idx, good, y[good, c])
+
+
 def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
-           sensor_of_axis: np.ndarray | None = None) -> tuple[np.ndarray, Screening]:
+           sensor_of_axis: np.ndarray | None = None, rate_hz: float | None = None,
+           structure_matrix: np.ndarray | None = None) -> tuple[np.ndarray, Screening]:
     """(readings with gross errors replaced, :class:`Screening`) of ``accel_mps2`` (N, n_axes);
     ``range_mps2`` (n_axes,) the largest magnitude each axis can read (NaN or None: not stated);
     ``sensor_of_axis`` (n_axes,) the accelerometer each axis belongs to: a spike seen by two or more
-    accelerometers at the same sample is a real event of the body (a knock), not a gross error."""
+    accelerometers at the same sample is a real event of the body (a knock), not a gross error;
+    ``rate_hz`` the sample rate (for the shortest stuck run); ``structure_matrix`` (n_axes, 12) the array's S,
+    to replace clipped and stuck readings by the other axes' rigid-body prediction."""
     y = np.array(accel_mps2, dtype=float)
     n = y.shape[0]
     bad_value = ~np.isfinite(y)
     out_range = np.zeros_like(bad_value)
+    clipped = np.zeros_like(bad_value)
     if range_mps2 is not None:
         limit = np.asarray(range_mps2, dtype=float)
         stated = np.isfinite(limit) & (limit > 0)
         with np.errstate(invalid="ignore"):
-            out_range = ~bad_value & stated[None, :] & (np.abs(y) > 1.001 * np.where(stated, limit, np.inf)[None, :])
-    work = np.where(bad_value | out_range, np.nan, y)
+            out_range = ~bad_value & stated[None, :] & (
+                np.abs(y) > (1 + CLIP_TOLERANCE) * np.where(stated, limit, np.inf)[None, :])
+        clipped = clipped_readings(y, limit) & ~out_range
+    stuck = np.zeros_like(bad_value)
+    runs = []
+    for c, a, b in stuck_runs(y, rate_hz, exclude=bad_value | out_range | clipped):
+        stuck[a:b, c] = True
+        runs.append(("stuck", c, a, b - 1))
+    for c in np.nonzero(clipped.any(axis=0))[0]:
+        runs += [("clipped", int(c), a, b - 1) for a, b in runs_of(clipped[:, c])]
+    runs.sort(key=lambda r: (r[2], r[1]))
+    long_bad = clipped | stuck
+    work = np.where(bad_value | out_range | long_bad, np.nan, y)
     spikes = np.zeros_like(bad_value)
     if n >= 2 * SCALE_HALF_WIDTH + 1:
         med = _rolling_median(work, MEDIAN_HALF_WIDTH)
@@ -121,8 +248,16 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
             for r in rows:
                 if np.unique(sensors[spikes[r]]).size > 1:
                     spikes[r] = False
-    replaced = bad_value | out_range | spikes
-    if np.any(replaced):
+    spikes &= ~long_bad
+    short = bad_value | out_range | spikes
+    replaced = short | long_bad
+    if np.any(long_bad):
+        raw = y
+        y = np.where(short, np.nan, y)  # the short ones are filled below, from good readings only
+        done = _rigid_body_fill(y, long_bad, structure_matrix)
+        _line_fill(y, long_bad & ~done)
+        y = np.where(short, raw, y)
+    if np.any(short):
         fill = _rolling_median(np.where(replaced, np.nan, y), MEDIAN_HALF_WIDTH)
         still_bad = replaced & ~np.isfinite(fill)
         if np.any(still_bad):  # a run of bad readings longer than the median window: nearest good value
@@ -132,15 +267,17 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
                     idx = np.nonzero(still_bad[:, c])[0]
                     nearest = good[np.clip(np.searchsorted(good, idx), 0, good.size - 1)]
                     fill[idx, c] = y[nearest, c]
-        y = np.where(replaced, fill, y)
-    return y, Screening(replaced, int(bad_value.sum()), int(out_range.sum()), int(spikes.sum()))
+        y = np.where(short, fill, y)
+    return y, Screening(replaced, int(bad_value.sum()), int(out_range.sum()), int(spikes.sum()), int(clipped.sum()),
+                        int(stuck.sum()), tuple(runs))
 
 
 def screen_log(log):
     """(log with gross errors replaced, :class:`Screening`); the log itself when none is found."""
     sensor_of_axis = np.concatenate([np.full(len(a.axes), i) for i, a in enumerate(log.array.accelerometers)])
     rng = getattr(log.array, "range_per_axis_mps2", None)
-    accel, result = screen(log.accel_mps2, rng() if callable(rng) else rng, sensor_of_axis)
+    accel, result = screen(log.accel_mps2, rng() if callable(rng) else rng, sensor_of_axis,
+                           log.rate_hz if len(log) > 1 else None, log.array.structure_matrix())
     if result.count == 0:
         return log, result
     return log.replace(accel_mps2=accel), result

@@ -598,3 +598,25 @@ def test_an_output_under_a_file_is_refused_by_name(tmp_path):
     with pytest.raises(OutputError, match=r"^--out .*file/log: a part of this path is a file, not a folder"):
         prepare_log_folder(f / "log")
     assert prepare_log_folder(tmp_path / "new") == tmp_path / "new"  # missing: fine
+
+
+def test_range_mps2_round_trips_and_a_bad_one_names_its_key(tmp_path):
+    array = SensorArray((Accelerometer("a1", [0.05, 0, 0], noise_std_mps2=0.07, range_mps2=156.9066),
+                         Accelerometer("a2", [0, 0.05, 0])))
+    text = gio.format_array_toml(array)
+    assert "range_mps2 = 156.9066" in text and text.count("range_mps2") == 1
+    back = gio.parse_array_toml(text)
+    assert back.accelerometers[0].range_mps2 == 156.9066 and back.accelerometers[1].range_mps2 is None
+    assert np.array_equal(back.range_per_axis_mps2, [156.9066] * 3 + [np.nan] * 3, equal_nan=True)
+    for bad in ("0", "-5", '"16 g"', "nan"):
+        path = write(tmp_path / "array.toml", text.replace("range_mps2 = 156.9066", f"range_mps2 = {bad}"))
+        with pytest.raises(gio.LogFormatError, match=r"array\.toml:\d+: accelerometers\[0\]\.range_mps2: expected the "
+                                                     r"full scale in m/s², a finite number > 0"):
+            gio.read_array_toml(path)
+
+
+def test_the_mimu4444_array_states_its_16_g_range():
+    from gfimu.array import mimu4444_array
+
+    assert all(a.range_mps2 == pytest.approx(16 * 9.80665) for a in mimu4444_array().accelerometers)
+    assert "range_mps2 = 156.9064" in gio.format_array_toml(mimu4444_array())

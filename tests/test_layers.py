@@ -33,7 +33,7 @@ LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
     ("estimators", 2, ("gfimu.estimators*", "gfimu.crb", "gfimu.calibration")),
     ("smoother", 3, ("gfimu.factors*", "gfimu.smoother*")),
     ("methods", 4, ("gfimu.methods",)),
-    ("evaluation", 5, ("gfimu.evaluation", "gfimu.compare", "gfimu.plots")),
+    ("evaluation", 5, ("gfimu.evaluation", "gfimu.compare", "gfimu.plots", "gfimu.diagnose")),
     ("pipeline", 6, ("gfimu.pipeline", "gfimu.batch", "gfimu.live")),
     ("cli", 7, ("gfimu.cli*", "gfimu.__main__")),
 ]

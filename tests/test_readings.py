@@ -75,3 +75,77 @@ def test_one_corrupt_cell_does_not_spoil_the_estimate(tmp_path, method, value):
         return float(np.sqrt(np.mean(np.sum((w[away] - log.truth.omega_b_radps[away]) ** 2, axis=1))))
 
     assert rmse(out) < 1.5 * rmse(clean), (rmse(out), rmse(clean))
+
+
+def test_stuck_and_clipped_runs_found_and_replaced_by_the_rigid_body_prediction():
+    """Five triads (15 axes): a stuck channel and a channel clipped at its range are replaced by the prediction of
+    the other 14 axes, within a few noise stds of the truth; the rest is untouched."""
+    from gfimu.array import random_array
+
+    array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
+    log = simulate("random3d", array=array, seed=4)
+    exact = log.array.predict_readings(log.truth.specific_force_b_mps2, log.truth.omega_dot_b_radps2,
+                                       log.truth.omega_b_radps)
+    y = log.accel_mps2.copy()
+    y[1000:1400, 2] = y[1000, 2]
+    limit = 0.9 * np.abs(y[:, 7]).max()
+    rng = np.full(15, np.inf)
+    rng[7] = limit
+    y[:, 7] = np.clip(y[:, 7], -limit, limit)
+    out, result = screen(y, rng, array.axis_owner, 500.0, array.structure_matrix())
+    assert result.stuck == 400 and result.clipped == int(np.sum(np.abs(log.accel_mps2[:, 7]) >= 0.999 * limit))
+    assert ("stuck", 2, 1000, 1399) in result.runs
+    assert np.all(result.replaced[1000:1400, 2]) and not result.replaced[1400:, 2].any()
+    err = (out - exact)[result.replaced]
+    assert np.sqrt(np.mean(err**2)) < 0.1, np.sqrt(np.mean(err**2))  # 14 axes at 0.02 m/s² predict the 15th
+    np.testing.assert_array_equal(out[~result.replaced], y[~result.replaced])
+    assert "a" in result.describe(array.accel_columns) and "stuck rows 1000-1399" in result.describe(array.accel_columns)
+
+
+def test_a_quiet_array_at_rest_is_not_stuck():
+    """Every channel repeating (a still, coarsely quantised array) is rest, not a stuck channel."""
+    y = np.round(np.random.default_rng(0).normal(size=(2000, 6)) * 0.3) * 0.05 + 9.81
+    y[500:1500] = y[500]  # all channels still at once
+    _, result = screen(y, sensor_of_axis=np.array([0, 0, 0, 1, 1, 1]), rate_hz=500.0)
+    assert result.stuck == 0
+
+
+@pytest.mark.parametrize("method", ["smoother", "ml"])
+def test_a_stuck_channel_and_a_clipped_stretch_do_not_spoil_the_estimate(tmp_path, method):
+    """10 s at 500 Hz on the 5 cm cube: one channel stuck for 1 s, one clipped at its stated range; the ω RMSE away
+    from them (±0.5 s) stays within 1.5x of the clean log's, exit 0, a warning naming the runs."""
+    from dataclasses import replace as dc_replace
+
+    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    log = simulate("random3d", seed=3)
+    folder = tmp_path / "log"
+    gio.write_log(log, folder)
+    clean = tmp_path / "clean.csv"
+    run = [sys.executable, "-m", "gfimu", "estimate", str(folder), "--method", method, "--no-progress"]
+    assert subprocess.run(run + ["--out", str(clean)], env=env, capture_output=True).returncode == 0
+    y = log.accel_mps2.copy()
+    y[2000:2500, 4] = y[2000, 4]  # a2_y stuck for 1 s
+    limit = 0.85 * np.abs(y[:, 7]).max()  # a3_y clipped at a stated range below its peaks
+    clipped = np.abs(y[:, 7]) >= limit
+    y[:, 7] = np.clip(y[:, 7], -limit, limit)
+    accs = [dc_replace(a, range_mps2=float(limit)) if a.name == "a3" else a for a in log.array.accelerometers]
+    bad = tmp_path / "bad"
+    gio.write_log(log.replace(accel_mps2=y, array=log.array.with_accelerometers(accs)), bad)
+    out = tmp_path / "bad.csv"
+    proc = subprocess.run(run[:4] + [str(bad)] + run[5:] + ["--out", str(out)], env=env, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "a2_y stuck rows 2000-2499" in proc.stderr and "a3_y clipped rows" in proc.stderr
+    assert f"{int(clipped.sum())} clipped at the range" in proc.stderr and "500 stuck" in proc.stderr
+    t = log.times_s
+    faulty = np.zeros(len(log), bool)
+    faulty[2000:2500] = True
+    faulty |= clipped
+    near = np.array([np.any(np.abs(t[faulty] - ti) <= 0.5) for ti in t])
+    away = ~near
+    assert away.sum() > 1000
+
+    def rmse(path):
+        w = gio.read_motion_csv(path).omega_b_radps
+        return float(np.sqrt(np.mean(np.sum((w[away] - log.truth.omega_b_radps[away]) ** 2, axis=1))))
+
+    assert rmse(out) < 1.5 * rmse(clean), (rmse(out), rmse(clean))

@@ -36,7 +36,7 @@ import warnings
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
-COMMANDS = ("demo", "simulate", "estimate", "evaluate", "compare", "convert", "calibrate", "plot", "batch", "live")
+COMMANDS = ("demo", "simulate", "estimate", "evaluate", "compare", "convert", "calibrate", "plot", "batch", "live", "diagnose")
 
 EXIT_USAGE = 2
 EXIT_FAILURE = 1
@@ -80,6 +80,8 @@ SUMMARIES = {
     "calibrate": "fit accelerometer biases and gains from still periods",
     "plot": "plot estimates against the log's truth or reference (needs the 'plot' extra)",
     "batch": "run one method on many logs, in parallel on Dask (this machine or a cluster)",
+    "diagnose": "check a log before trusting it: rigid-body residual, noise, timing, units, positions, "
+                "stuck or clipped channels, expected ω accuracy",
     "live": "estimate ω live from readings on standard input, UDP, TCP or a serial port (fixed-lag smoother)",
 }
 """One line per command for ``gfimu --help`` (each command's own parser carries the same line)."""

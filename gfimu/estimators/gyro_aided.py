@@ -154,6 +154,9 @@ class GyroAidedEstimator:
     def applicable(self, array: SensorArray) -> str | None:
         if array.gyroscope is None:
             return f"array {array.name!r} has no gyroscope (method 'gyro-aided' needs one)"
+        reason = array.geometry_reason() if array.n_axes >= 6 else None  # fewer axes: the count says why
+        if reason:
+            return reason
         try:
             gyro_aided_matrices(array)
         except ArrayModelError as exc:

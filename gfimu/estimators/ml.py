@@ -137,6 +137,9 @@ class MLEstimator:
 
     # ------------------------------------------------------------------
     def applicable(self, array: SensorArray) -> str | None:
+        reason = array.geometry_reason()
+        if reason:
+            return reason
         S = array.structure_matrix()
         lin = S[:, :6]
         if np.linalg.matrix_rank(lin, tol=1e-9 * max(np.abs(lin).max(), 1e-300)) < 6:

@@ -194,8 +194,15 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
         if topic is not None and (not isinstance(topic, str) or not topic.strip() or topic != topic.strip()):
             raise ctx.error(f"expected the message topic as a non-empty string without surrounding spaces, "
                             f"got {topic!r}", t, i, "topic")
+        full_scale = None
+        if "range_mps2" in a:
+            full_scale = a["range_mps2"]
+            if not _is_number(full_scale) or not math.isfinite(full_scale) or full_scale <= 0:
+                raise ctx.error(f"expected the full scale in m/s², a finite number > 0, got {full_scale!r}", t, i,
+                                "range_mps2")
+            full_scale = float(full_scale)
         try:
-            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise, topic))
+            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise, topic=topic, range_mps2=full_scale))
         except ArrayModelError as exc:
             raise ctx.error(str(exc), t, i) from None
     gyro = inclinometer = body = None
@@ -307,6 +314,8 @@ def array_to_dict(array: SensorArray) -> dict:
             entry["noise_std_mps2"] = float(a.noise_std_mps2)
         if a.topic is not None:
             entry["topic"] = a.topic
+        if a.range_mps2 is not None:
+            entry["range_mps2"] = float(a.range_mps2)
         accs.append(entry)
     doc["accelerometers"] = accs
     if array.gyroscope is not None:

@@ -92,6 +92,12 @@ def check_geometry(array: SensorArray, array_name: str) -> list[str]:
     return out
 
 
+def still_specific_force(log: Log) -> float | None:
+    """Median |f| [m/s², as read] over still stretches of the array (every triad reads the same f in B, steadily);
+    None when the log has none."""
+    return _still_specific_force(log)
+
+
 def _still_specific_force(log: Log) -> float | None:
     """Median |f| [m/s²] over still stretches (every triad reads the same f in B, steadily); None if none."""
     with np.errstate(all="ignore"):  # NaN or huge readings are simply not still

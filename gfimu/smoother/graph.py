@@ -265,6 +265,8 @@ def options_reason(array: SensorArray, options: SmootherOptions, attitude_suppor
     if array.n_axes < 6 and not gyro_used:
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without free flight or a gyroscope "
                 "ω cannot be observed (use free_flight=True with the body's inertia)")
+    if not gyro_used:
+        return array.geometry_reason(several_solutions=True)
     return None
 
 
