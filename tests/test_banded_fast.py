@@ -184,3 +184,81 @@ def test_tuner_with_the_process_basis_on_a_turntable_reaches_the_same_evidence()
     assert fast.density == pytest.approx(plain.density, rel=1e-6)
     np.testing.assert_allclose(fast.axis_frequencies_hz, plain.axis_frequencies_hz, rtol=1e-6)
     assert max(fast.axis_factors[:2]) < 0.02 and max(plain.axis_factors[:2]) < 0.02
+
+
+# --- the initialisation's window sign resolution ------------------------------
+
+from gfimu import rigid_body  # noqa: E402
+from gfimu.smoother.initialise import _SIGNS, sign_resolved_omega, trapezoid_integral, window_initial_omega  # noqa: E402
+
+
+def window_initial_omega_by_samples(q_meas, integral, previous=None, continuity_std_radps=0.5, iterations=8):
+    """The per-sample form of :func:`window_initial_omega`: residuals and Jacobians of every sample
+    of every candidate stacked, Gauss-Newton on them."""
+    L = q_meas.shape[0]
+    Jw = rigid_body.quadratic_terms_jacobian(integral)
+    rhs = (q_meas - rigid_body.quadratic_terms(integral)).reshape(-1)
+    design = np.concatenate([Jw, np.broadcast_to(np.eye(6), (L, 6, 6))], axis=2).reshape(-1, 9)
+    normal = design.T @ design
+    theta = np.linalg.solve(normal + 1e-9 * np.trace(normal) * np.eye(9), design.T @ rhs)
+    mags = rigid_body.omega_from_quadratic_terms(theta[3:])
+    cands = np.vstack([theta[:3][None], _SIGNS * mags, _SIGNS * rigid_body.omega_from_quadratic_terms(q_meas[0])])
+    w_c = 1.0 / continuity_std_radps
+
+    def residuals(w0):
+        om = w0[:, None, :] + integral[None]
+        r = (rigid_body.quadratic_terms(om) - q_meas[None]).reshape(len(w0), -1)
+        J = rigid_body.quadratic_terms_jacobian(om).reshape(len(w0), -1, 3)
+        if previous is not None:
+            r = np.concatenate([r, w_c * (w0 - previous)], axis=1)
+            J = np.concatenate([J, np.broadcast_to(w_c * np.eye(3), (len(w0), 3, 3))], axis=1)
+        return r, J
+
+    w0 = cands
+    for _ in range(iterations):
+        r, J = residuals(w0)
+        JT = np.swapaxes(J, 1, 2)
+        w0 = w0 - np.linalg.solve(JT @ J + 1e-9 * np.eye(3), np.einsum("cij,cj->ci", JT, r)[..., None])[..., 0]
+    r, _ = residuals(w0)
+    cost = np.sum(r * r, axis=1)
+    best = int(np.argmin(cost))
+    return w0[best], float(cost[best])
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("with_previous", [False, True])
+def test_window_omega_from_sums_equals_the_per_sample_gauss_newton(seed, with_previous):
+    rng = np.random.default_rng(seed)
+    L = 200
+    h = np.full(L - 1, 0.002)
+    omega_dot = np.cumsum(rng.normal(size=(L, 3)) * 2.0, axis=0) + rng.normal(size=3) * 20
+    integral = trapezoid_integral(omega_dot, h)
+    w_true = rng.normal(size=3) * 3.0
+    q = rigid_body.quadratic_terms(w_true + integral) + rng.normal(size=(L, 6)) * 0.3
+    previous = w_true + rng.normal(size=3) * 0.3 if with_previous else None
+    fast, fast_cost = window_initial_omega(q, integral, previous)
+    plain, plain_cost = window_initial_omega_by_samples(q, integral, previous)
+    np.testing.assert_allclose(fast, plain, rtol=1e-8, atol=1e-9)
+    assert fast_cost == pytest.approx(plain_cost, rel=1e-7, abs=1e-8)
+
+
+def test_sign_resolved_omega_equals_window_by_window_resolution():
+    log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=3.0, seed=1)
+    w, wd = log.truth.omega_b_radps, log.truth.omega_dot_b_radps2
+    q = rigid_body.quadratic_terms(w) + np.random.default_rng(3).normal(size=(len(log), 6)) * 0.2
+    window = 200
+    fast = sign_resolved_omega(q, wd, log.dt_s, window)
+    plain = np.zeros_like(fast)
+    previous, start, n = None, 0, len(log)
+    while start < n:
+        stop = min(start + window, n)
+        if n - stop < window // 2:
+            stop = n
+        integral = trapezoid_integral(wd[start:stop], log.dt_s[start:stop - 1])
+        w0, _ = window_initial_omega_by_samples(q[start:stop], integral, previous)
+        plain[start:stop] = w0 + integral
+        if stop < n:
+            previous = plain[stop - 1] + 0.5 * (wd[stop - 1] + wd[stop]) * log.dt_s[stop - 1]
+        start = stop
+    np.testing.assert_allclose(fast, plain, rtol=1e-7, atol=1e-7)
+    assert np.sqrt(np.mean((fast - w) ** 2)) < 0.2
