@@ -362,17 +362,22 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
             break
         X, P = Xn, Pn
         lam = 0.0 if lam < 1e-8 else lam / 10.0
+        enough = opt.relative_tolerance * max(new_cost, 1e-300)
+        if reweight is None and (decrease <= enough or np.max(np.abs(dx)) < 1e-12):
+            converged, final_cost, ne = True, new_cost, None  # (no normal equations needed at the solution)
+            break
         if reweight is not None:
             reweight(X, P)
         ne = normal_equations(problem, X, P)
-        enough = opt.relative_tolerance * max(new_cost, 1e-300)
         if reweight is not None:  # the weights move with every step: stop within the cost's own spread
             enough = max(enough, REWEIGHTED_TOLERANCE * np.sqrt(0.5 * (ne.rows or 1)))
         if decrease <= enough or np.max(np.abs(dx)) < 1e-12:
             converged = True
             break
-    result = SolveResult(X, P, ne.cost, it, converged)
+    result = SolveResult(X, P, ne.cost if ne is not None else final_cost, it, converged)
     if compute_sigma:
+        if ne is None:
+            ne = normal_equations(problem, X, P)
         cov, pcov = marginal_covariances(ne, factorise(ne, 0.0))
         result.covariance, result.param_covariance = cov, pcov
     return result
