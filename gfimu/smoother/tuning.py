@@ -186,13 +186,52 @@ class _Part:
     cost: float
 
     @classmethod
-    def of(cls, ne: NormalEquations) -> _Part:
-        def compact(a):
-            flat = a.reshape(a.shape[0], -1)
-            idx = np.flatnonzero(np.count_nonzero(flat, axis=0))
-            return idx, np.ascontiguousarray(flat[:, idx])
+    def of_terms(cls, terms: list, n: int, m: int) -> _Part | None:
+        """The normal equations of ``terms`` in this form, each product taken over the columns where its
+        Jacobian is nonzero (a row of the motion model touches two or four columns, not 2m);
+        None for terms on the calibration variables."""
+        stores = {"diag": {}, "lower": {}, "grad": {}}
+        lengths = {"diag": n, "lower": n - 1, "grad": n}
 
-        return cls(compact(ne.diag), compact(ne.lower), compact(ne.grad), float(ne.cost))
+        def put(target, flat, offset, values):  # values (samples, len(flat))
+            store = stores[target]
+            for j, f in enumerate(flat):
+                if f not in store:
+                    store[f] = np.zeros(lengths[target])
+                store[f][offset:offset + len(values)] += values[:, j]
+
+        def columns(J):
+            c = np.flatnonzero(np.count_nonzero(J.reshape(-1, J.shape[-1]), axis=0))
+            return c, J[:, :, c]
+
+        def pairs(a, b):
+            return (a[:, None] * m + b[None, :]).reshape(-1)
+
+        cost = 0.0
+        for t in terms:
+            if t.kind not in ("unary", "binary") or t.jac_global is not None:
+                return None
+            r = t.residual
+            cost += 0.5 * float(np.sum(r * r))
+            blocks = [(t.jac["x"], t.first)] if t.kind == "unary" else [(t.jac["x0"], 0), (t.jac["x1"], 1)]
+            cols = []
+            for J, offset in blocks:
+                c, Jc = columns(J)
+                cols.append((c, Jc))
+                if c.size:
+                    JcT = np.ascontiguousarray(np.swapaxes(Jc, 1, 2))
+                    put("diag", pairs(c, c), offset, (JcT @ Jc).reshape(len(Jc), -1))
+                    put("grad", c, offset, np.einsum("nr,nrj->nj", r, Jc))
+            if t.kind == "binary" and cols[0][0].size and cols[1][0].size:
+                (c0, J0c), (c1, J1c) = cols
+                put("lower", pairs(c1, c0), 0, (np.ascontiguousarray(np.swapaxes(J1c, 1, 2)) @ J0c).reshape(len(J0c), -1))
+
+        def compact(store, length):
+            idx = np.array(sorted(store), dtype=int)
+            values = np.stack([store[f] for f in idx], axis=1) if idx.size else np.zeros((length, 0))
+            return idx, values
+
+        return cls(*(compact(stores[k], lengths[k]) for k in ("diag", "lower", "grad")), cost)
 
 
 @dataclass
@@ -250,11 +289,11 @@ class ProcessBasis:
                 rows = [i for i, k in enumerate(row_label) if k == key]
                 if rows:
                     split[key].append(_term_rows(t, rows))
-        parts = {key: normal_equations(problem, states, params, ts) for key, ts in split.items() if ts}
-        if any(np.any(part.coupling) or np.any(part.border) or np.any(part.grad_global) for part in parts.values()):
+        parts = {key: _Part.of_terms(ts, problem.n, problem.state_size) for key, ts in split.items() if ts}
+        if any(part is None for part in parts.values()):
             return None  # calibration variables in the process factors: not written for here
-        return cls({key: _Part.of(part) for key, part in parts.items()}, sum(int(part.rows or 0) for part in parts.values()),
-                   problem.n_global)
+        rows = sum(t.residual.size for ts in split.values() for t in ts)
+        return cls(parts, rows, problem.n_global)
 
     def normal_equations(self, density: float, axis_factors, force_density: float,
                          measurement: NormalEquations) -> NormalEquations:
