@@ -104,65 +104,49 @@ def window_moments(q_meas: np.ndarray, integral: np.ndarray, starts: np.ndarray)
 
 
 def _omega_from_moments(count, s1, s2, d1, d2, e, q_first, previous, continuity_std_radps, iterations):
-    """:func:`window_initial_omega` of K windows at once from their sums (:func:`window_moments`,
-    each with a leading axis K); ``previous`` (K, 3) with NaN rows where a window has none.
-    Returns ω₀ (K, 3) and the cost (K,).
+    """:func:`window_initial_omega` from the window's sums (:func:`window_moments`).
 
     With ω = ω₀ + W_t, each residual ``q_l(ω₀ + W_t) - q_meas = a_l + b_lt + d_lt`` (``a_l = q_l(ω₀)``,
     ``b_lt = 2 ω₀ᵀ A_l W_t``), so the cost, its gradient and the Gauss-Newton matrix over the
     window are polynomials in ω₀ whose coefficients are the sums above: no pass over the samples."""
     A = _QUADRATIC_FORMS
-    K = len(count)
-    eye3 = np.eye(3)
     # linear start: q(ω₀ + W) = q(W) + J_q(W) ω₀ + c with c = q(ω₀), least squares in (ω₀, c)
-    tr2 = np.trace(s2, axis1=1, axis2=2)
-    diag2 = np.einsum("kii->ki", s2)
-    jtj = tr2[:, None, None] * eye3 + 5.0 * s2 + 2.0 * diag2[:, :, None] * eye3  # Σ J_q(W)ᵀ J_q(W)
-    jsum = rigid_body.quadratic_terms_jacobian(s1)  # Σ J_q(W) (J_q is linear), (K, 6, 3)
-    normal = np.zeros((K, 9, 9))
-    normal[:, :3, :3], normal[:, :3, 3:], normal[:, 3:, :3] = jtj, np.swapaxes(jsum, 1, 2), jsum
-    normal[:, 3:, 3:] = count[:, None, None] * np.eye(6)
-    a_e = np.einsum("lij,klj->ki", A, e)  # Σ_l A_l E_l
-    rhs = np.concatenate([-2.0 * a_e, -d1], axis=1)
-    ridge = 1e-9 * np.trace(normal, axis1=1, axis2=2)[:, None, None] * np.eye(9)
-    theta = np.linalg.solve(normal + ridge, rhs[..., None])[..., 0]
-    mags = rigid_body.omega_from_quadratic_terms(theta[:, 3:])
-    w0 = np.concatenate([theta[:, None, :3], _SIGNS * mags[:, None], _SIGNS * rigid_body.omega_from_quadratic_terms(q_first)[:, None]],
-                        axis=1)  # (K, C, 3)
-    has_previous = np.all(np.isfinite(previous), axis=1)
-    w_c2 = np.where(has_previous, 1.0 / continuity_std_radps**2, 0.0)[:, None]
-    prev = np.where(has_previous[:, None], previous, 0.0)[:, None, :]
-    a_s1 = np.einsum("lij,kj->kli", A, s1)  # A_l S1
-    a_s2_a = np.einsum("lij,kjm,lmn->kin", A, s2, A)  # Σ_l A_l S2 A_l
-    n_ = count[:, None]
+    jtj = np.trace(s2) * np.eye(3) + 5.0 * s2 + 2.0 * np.diag(np.diag(s2))  # Σ J_q(W)ᵀ J_q(W)
+    jsum = rigid_body.quadratic_terms_jacobian(s1)  # Σ J_q(W) (J_q is linear)
+    normal = np.zeros((9, 9))
+    normal[:3, :3], normal[:3, 3:], normal[3:, :3], normal[3:, 3:] = jtj, jsum.T, jsum, count * np.eye(6)
+    rhs = np.concatenate([-2.0 * np.einsum("lij,lj->i", A, e), -d1])
+    theta = np.linalg.solve(normal + 1e-9 * np.trace(normal) * np.eye(9), rhs)
+    mags = rigid_body.omega_from_quadratic_terms(theta[3:])
+    w0 = np.vstack([theta[:3][None], _SIGNS * mags, _SIGNS * rigid_body.omega_from_quadratic_terms(q_first)])
+    w_c2 = 1.0 / continuity_std_radps**2
+    a_s1 = A @ s1  # (6, 3)
+    a_e = np.einsum("lij,lj->i", A, e)  # Σ_l A_l E_l
+    a_s2_a = np.einsum("lij,jk,lkm->im", A, s2, A)  # Σ_l A_l S2 A_l
 
-    def cost_and_step(w):  # (K, C, 3) -> cost (K, C), JᵀJ (K, C, 3, 3), Jᵀr (K, C, 3)
-        aw = np.einsum("lij,kcj->kcli", A, w)  # A_l ω₀
-        a = np.einsum("kcli,kci->kcl", aw, w)
-        was1 = np.einsum("kcli,ki->kcl", aw, s1)
-        quad = np.einsum("kcli,kij,kclj->kcl", aw, s2, aw)
-        lin = np.einsum("kcli,kli->kcl", aw, e)
-        cost = np.sum(n_[:, :, None] * a * a + 4.0 * quad + d2[:, None, :] + 4.0 * a * was1 + 2.0 * a * d1[:, None, :]
-                      + 4.0 * lin, axis=2)
-        g = 2.0 * (np.einsum("kcli,kcl->kci", aw, n_[:, :, None] * a + 2.0 * was1 + d1[:, None, :])
-                   + np.einsum("kcl,kli->kci", a, a_s1) + 2.0 * np.einsum("kci,kij->kcj", w, a_s2_a) + a_e[:, None, :])
-        ws1 = w[..., :, None] * s1[:, None, None, :]
-        m2 = n_[:, :, None, None] * w[..., :, None] * w[..., None, :] + ws1 + np.swapaxes(ws1, 2, 3) + s2[:, None]
-        tr = np.trace(m2, axis1=2, axis2=3)
-        H = tr[..., None, None] * eye3 + 5.0 * m2 + 2.0 * np.einsum("kcii->kci", m2)[..., None] * eye3
-        dp = w - prev
-        cost = cost + w_c2 * np.sum(dp * dp, axis=2)
-        g = g + w_c2[..., None] * dp
-        H = H + w_c2[..., None, None] * eye3
+    def cost_and_step(w):  # (C, 3) -> cost (C,), JᵀJ (C, 3, 3), Jᵀr (C, 3)
+        aw = np.einsum("lij,cj->cli", A, w)  # A_l ω₀
+        a = np.einsum("cli,ci->cl", aw, w)
+        was1 = aw @ s1
+        cost = np.sum(count * a * a + 4.0 * np.einsum("cli,ij,clj->cl", aw, s2, aw) + d2 + 4.0 * a * was1
+                      + 2.0 * a * d1 + 4.0 * np.einsum("cli,li->cl", aw, e), axis=1)
+        g = 2.0 * (np.einsum("cli,cl->ci", aw, count * a + 2.0 * was1 + d1) + a @ a_s1 + 2.0 * w @ a_s2_a + a_e)
+        m2 = count * w[:, :, None] * w[:, None, :] + w[:, :, None] * s1 + s1[:, None] * w[:, None, :] + s2
+        tr = np.trace(m2, axis1=1, axis2=2)
+        H = tr[:, None, None] * np.eye(3) + 5.0 * m2 + 2.0 * np.einsum("cii->ci", m2)[:, :, None] * np.eye(3)
+        if previous is not None:
+            dp = w - previous
+            cost = cost + w_c2 * np.sum(dp * dp, axis=1)
+            g = g + w_c2 * dp
+            H = H + w_c2 * np.eye(3)
         return cost, H, g
 
     for _ in range(iterations):
         _, H, g = cost_and_step(w0)
-        w0 = w0 - np.linalg.solve(H + 1e-9 * eye3, g[..., None])[..., 0]
+        w0 = w0 - np.linalg.solve(H + 1e-9 * np.eye(3), g[..., None])[..., 0]
     cost, _, _ = cost_and_step(w0)
-    best = np.argmin(cost, axis=1)
-    k = np.arange(K)
-    return w0[k, best], cost[k, best]
+    best = int(np.argmin(cost))
+    return w0[best], float(cost[best])
 
 
 def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.ndarray | None = None,
@@ -172,19 +156,13 @@ def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.
     Returns ω₀ and the best cost. ``previous`` (ω expected at the window
     start from the window before) adds a weak continuity term.
     """
-    prev = np.full((1, 3), np.nan) if previous is None else np.reshape(previous, (1, 3))
-    w0, cost = _omega_from_moments(*window_moments(q_meas, integral, np.array([0])), prev, continuity_std_radps, iterations)
-    return w0[0], float(cost[0])
-
-
-SETTLED_RADPS = 1e-7
-"""Initial ω of a window that moves by less than this between two passes of
-:func:`sign_resolved_omega` is taken as settled (a start for the smoother's iterations)."""
+    moments = [m[0] for m in window_moments(q_meas, integral, np.array([0]))]
+    return _omega_from_moments(*moments, previous, continuity_std_radps, iterations)
 
 
 def sign_resolved_omega(q_meas: np.ndarray, omega_dot: np.ndarray, dt_s: np.ndarray, window: int) -> np.ndarray:
-    """ω (N, 3) window by window from quadratic terms and ω̇ of one contiguous segment, each window
-    continuing the one before (the sums of every window at once, :func:`window_moments`)."""
+    """ω (N, 3) window by window from quadratic terms and ω̇ of one contiguous segment (the sums of
+    every window at once, :func:`window_moments`; then the windows in turn, each continuing the last)."""
     n = q_meas.shape[0]
     starts = []
     start = 0
@@ -200,37 +178,13 @@ def sign_resolved_omega(q_meas: np.ndarray, omega_dot: np.ndarray, dt_s: np.ndar
     whole = trapezoid_integral(omega_dot, dt_s)
     integral = whole - np.repeat(whole[starts], stops - starts, axis=0)
     moments = window_moments(q_meas, integral, starts)
-    K = len(starts)
-
-    def solve(ks, previous):  # the windows ks, given the ω expected at their starts
-        return _omega_from_moments(*(m[ks] for m in moments), previous, 0.5, 8)[0]
-
-    def expected_start(w0):  # ω expected at the start of each window from the one before (NaN: none)
-        prev = np.full((K, 3), np.nan)
-        last = stops[:-1] - 1
-        prev[1:] = w0[:-1] + integral[last] + 0.5 * (omega_dot[last] + omega_dot[last + 1]) * dt_s[last][:, None]
-        return prev
-
-    # Each window continues the one before. All windows at once, each from the previous pass's
-    # neighbour, until a pass moves no window by more than SETTLED_RADPS: then every window holds
-    # what the window-by-window sequence gives, to that amount (the first window has no
-    # predecessor, and so on down the chain: the continuity term is weak, a change in one window
-    # reaches the next shrunk by orders of magnitude). Windows still moving after a few passes are
-    # done one by one.
-    every = np.arange(K)
-    w0 = solve(every, np.full((K, 3), np.nan))
-    settled = 1
-    for _ in range(6):
-        new = solve(every, expected_start(w0))
-        moving = np.flatnonzero(np.max(np.abs(new - w0), axis=1) > SETTLED_RADPS)
-        w0 = new
-        if not moving.size:
-            settled = K
-            break
-        settled = max(settled, int(moving[0]))
-    for k in range(settled, K):
-        w0[k] = solve(np.array([k]), expected_start(w0)[k:k + 1])[0]
-    out = integral + np.repeat(w0, stops - starts, axis=0)
+    out = np.zeros((n, 3))
+    previous = None
+    for k, (start, stop) in enumerate(zip(starts, stops)):
+        w0, _ = _omega_from_moments(*(m[k] for m in moments), previous, 0.5, 8)
+        out[start:stop] = w0 + integral[start:stop]
+        if stop < n:
+            previous = out[stop - 1] + 0.5 * (omega_dot[stop - 1] + omega_dot[stop]) * dt_s[stop - 1]
     return out
 
 
