@@ -7,7 +7,14 @@ body vector into the world frame, as in the log format.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+
+def _rotation():
+    """scipy's ``Rotation``, imported on first use (it pulls in much of scipy.spatial: a tenth of a
+    second of start-up that the commands which never turn a rotation need not pay)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -38,12 +45,12 @@ def _rowwise(fn, x: np.ndarray, inner: int, out_shape: tuple[int, ...]) -> np.nd
 
 def matrix_from_quaternion(q: np.ndarray) -> np.ndarray:
     """Rotation matrix (..., 3, 3) from quaternion(s) (..., 4), scalar first, normalised first."""
-    return _rowwise(lambda v: Rotation.from_quat(v, scalar_first=True).as_matrix(), q, 1, (3, 3))
+    return _rowwise(lambda v: _rotation().from_quat(v, scalar_first=True).as_matrix(), q, 1, (3, 3))
 
 
 def quaternion_from_matrix(m: np.ndarray) -> np.ndarray:
     """Unit quaternion(s) (..., 4), scalar first and w >= 0, from rotation matrices (..., 3, 3)."""
-    return _rowwise(lambda r: Rotation.from_matrix(r).as_quat(canonical=True, scalar_first=True), m, 2, (4,))
+    return _rowwise(lambda r: _rotation().from_matrix(r).as_quat(canonical=True, scalar_first=True), m, 2, (4,))
 
 
 def matrix_from_rotation_vector(phi: np.ndarray) -> np.ndarray:
@@ -53,7 +60,7 @@ def matrix_from_rotation_vector(phi: np.ndarray) -> np.ndarray:
     ok = np.all(np.isfinite(flat), axis=1)
     out = np.full((flat.shape[0], 3, 3), np.nan)
     if np.any(ok):
-        out[ok] = Rotation.from_rotvec(flat[ok]).as_matrix()
+        out[ok] = _rotation().from_rotvec(flat[ok]).as_matrix()
     return out.reshape(phi.shape[:-1] + (3, 3))
 
 
@@ -73,13 +80,13 @@ def rotation_vector_from_matrix(m: np.ndarray) -> np.ndarray:
     out = v * scale[..., None]
     near_pi = c < -0.9
     if np.any(near_pi):
-        out[near_pi] = _rowwise(lambda r: Rotation.from_matrix(r).as_rotvec(), m[near_pi], 2, (3,))
+        out[near_pi] = _rowwise(lambda r: _rotation().from_matrix(r).as_rotvec(), m[near_pi], 2, (3,))
     return out
 
 
 def rotation_vector_from_quaternion(q: np.ndarray) -> np.ndarray:
     """Rotation vector (..., 3) of quaternions (..., 4), scalar first; angle in [0, π]."""
-    return _rowwise(lambda v: Rotation.from_quat(v, scalar_first=True).as_rotvec(), q, 1, (3,))
+    return _rowwise(lambda v: _rotation().from_quat(v, scalar_first=True).as_rotvec(), q, 1, (3,))
 
 
 def quaternion_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -106,5 +113,5 @@ def quaternion_from_rotation_vector(phi: np.ndarray) -> np.ndarray:
     ok = np.all(np.isfinite(flat), axis=1)
     out = np.full((flat.shape[0], 4), np.nan)
     if np.any(ok):
-        out[ok] = Rotation.from_rotvec(flat[ok]).as_quat(scalar_first=True)
+        out[ok] = _rotation().from_rotvec(flat[ok]).as_quat(scalar_first=True)
     return out.reshape(phi.shape[:-1] + (4,))

@@ -7,8 +7,8 @@ For each MIMU4444 recording (``data.bin``) given, in a temporary folder::
     gfimu calibrate LOG --out cal.toml
     gfimu estimate LOG --method smoother --calibration cal.toml --out est.csv
 
-each as its own process (start-up included), wall time and peak resident memory
-of each step (``resource.getrusage`` of the children); then the estimate is scored
+each as its own process (start-up included), wall time, CPU time (user + system)
+and peak resident memory of each step (``resource.getrusage`` of the children); then the estimate is scored
 against the board's gyro reference (mean of its gyros) on the moving, unsaturated
 samples (|ω_ref| > 2 rad/s, reference valid): RMSE of the ω error norm, its median
 and the share of samples with ``ω · ω_ref < 0`` (wrong sign). ``--option`` passes
@@ -43,16 +43,18 @@ sys.path.insert(0, str(REPO))
 MOVING_RADPS = 2.0
 
 
-def run_step(args: list[str], env: dict) -> tuple[float, float]:
-    """(wall time [s], peak RSS of the child [MB]) of ``python -m gfimu ARGS``; exits on failure."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+def run_step(args: list[str], env: dict) -> tuple[float, float, float]:
+    """(wall time [s], CPU time [s], peak RSS of the children so far [MB]) of ``python -m gfimu ARGS``;
+    exits on failure."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "gfimu", *args], env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise SystemExit(f"gfimu {' '.join(args)} failed ({proc.returncode}):\n{proc.stderr.strip()}")
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return wall, max(peak, before) / 1024.0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, max(after.ru_maxrss, before.ru_maxrss) / 1024.0
 
 
 def score(log_dir: Path, estimate_csv: Path) -> dict:
@@ -82,22 +84,24 @@ def main(argv=None) -> int:
     env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     rows = []
     print(f"# {time.strftime('%Y-%m-%d')}, {platform.node()}, {os.cpu_count()} cores, {platform.processor() or platform.machine()}")
-    print("| recording | samples | moving | convert s | calibrate s | estimate s | total s | peak MB | RMSE rad/s | median rad/s | wrong sign |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| recording | samples | moving | convert s | calibrate s | estimate s | total s | total CPU s | peak MB | RMSE rad/s "
+          "| median rad/s | wrong sign |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for rec in args.recordings:
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
             log, cal, est = tmp / "log", tmp / "cal.toml", tmp / "est.csv"
-            t_conv, m1 = run_step(["convert", "mimu4444", str(rec), "--out", str(log)], env)
-            t_cal, m2 = run_step(["calibrate", str(log), "--out", str(cal)], env)
+            t_conv, c1, m1 = run_step(["convert", "mimu4444", str(rec), "--out", str(log)], env)
+            t_cal, c2, m2 = run_step(["calibrate", str(log), "--out", str(cal)], env)
             extra = (["--preset", args.preset] if args.preset else []) + [x for o in args.option for x in ("-O", o)]
-            t_est, m3 = run_step(["estimate", str(log), "--method", "smoother", "--calibration", str(cal),
+            t_est, c3, m3 = run_step(["estimate", str(log), "--method", "smoother", "--calibration", str(cal),
                                   "--out", str(est), "--no-progress", *extra], env)
             row = {"recording": str(rec), **score(log, est), "convert_s": t_conv, "calibrate_s": t_cal,
-                   "estimate_s": t_est, "total_s": t_conv + t_cal + t_est, "peak_mb": max(m1, m2, m3)}
+                   "estimate_s": t_est, "total_s": t_conv + t_cal + t_est, "peak_mb": max(m1, m2, m3),
+                   "convert_cpu_s": c1, "calibrate_cpu_s": c2, "estimate_cpu_s": c3, "total_cpu_s": c1 + c2 + c3}
         rows.append(row)
         print(f"| {rec.parent.name or rec.name} | {row['samples']} | {row['moving']} | {t_conv:.1f} | {t_cal:.1f} | {t_est:.1f} | "
-              f"{row['total_s']:.1f} | {row['peak_mb']:.0f} | {row['rmse_radps']:.2f} | {row['median_radps']:.2f} | "
+              f"{row['total_s']:.1f} | {row['total_cpu_s']:.1f} | {row['peak_mb']:.0f} | {row['rmse_radps']:.2f} | {row['median_radps']:.2f} | "
               f"{100 * row['wrong_sign_share']:.2f} % |", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 
-import gtsam
 import numpy as np
 
 from ..array import SensorArray
@@ -364,6 +363,8 @@ def gtsam_levenberg_marquardt(problem: SmootherProblem, states: np.ndarray, para
     only while a step fails to lower the cost. ``reweight(states, params)`` re-weights the problem
     before every iteration (the graph is rebuilt with the new noise). Returns the states, the
     calibration variables, the iterations and whether it converged."""
+    import gtsam  # only this path needs it (imported here: it is slow to import)
+
     P = np.zeros(problem.n_global) if params is None else np.asarray(params, dtype=float)
     X = np.array(states, dtype=float)
     if reweight is not None:

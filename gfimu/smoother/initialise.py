@@ -30,7 +30,7 @@ from ..factors import _so3
 from ..log import Log
 from ..rigid_body import quadratic_terms
 from ..rotations import skew
-from .banded import to_lower_banded
+from .banded import band_structure
 from .graph import STATE_SIZE, SmootherOptions
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
@@ -63,9 +63,12 @@ def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: floa
     diag[1:, idx, idx] += w
     lower = np.zeros((n - 1, LIFTED, LIFTED))
     lower[:, idx, idx] = -w
-    cb = cholesky_banded(to_lower_banded(diag, lower), lower=True, check_finite=False)
-    rhs = (y @ A).reshape(-1)
-    return cho_solve_banded((cb, True), rhs, check_finite=False).reshape(n, LIFTED)
+    # each unknown is tied only to itself across samples: a band of 12 sub-diagonals (not 23)
+    structure = band_structure(lower)
+    ab = structure.band(diag, lower, np.ones((n, LIFTED)), np.einsum("nii->ni", diag))
+    cb = cholesky_banded(ab, lower=True, check_finite=False)
+    rhs = structure.to_band_order((y @ A).reshape(-1), n)
+    return structure.from_band_order(cho_solve_banded((cb, True), rhs, check_finite=False), n).reshape(n, LIFTED)
 
 
 def trapezoid_integral(omega_dot: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
@@ -77,6 +80,75 @@ def trapezoid_integral(omega_dot: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
 _SIGNS = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], dtype=float)
 
 
+_QUADRATIC_FORMS = np.zeros((6, 3, 3))
+"""A_l with ``q_l(ω) = ωᵀ A_l ω`` (:func:`gfimu.rigid_body.quadratic_terms`); its Jacobian is ``2 A_l ω``."""
+for _l, (_i, _j) in enumerate([(0, 1), (0, 2), (1, 2)]):
+    _QUADRATIC_FORMS[_l, _i, _i] = _QUADRATIC_FORMS[_l, _j, _j] = 1.0
+for _l, (_i, _j) in enumerate([(0, 1), (0, 2), (1, 2)], start=3):
+    _QUADRATIC_FORMS[_l, _i, _j] = _QUADRATIC_FORMS[_l, _j, _i] = 0.5
+
+
+def window_moments(q_meas: np.ndarray, integral: np.ndarray, starts: np.ndarray) -> tuple:
+    """Sums over each window (starting at ``starts``) that :func:`window_initial_omega` needs: with
+    ``W`` the integral of ω̇ from the window start and ``d = q(W) - q_meas``, the count, ΣW (3),
+    ΣW Wᵀ (3, 3), Σd (6), Σd² (6), ΣW d_l (6, 3), and the first q_meas of the window."""
+    n = len(q_meas)
+    d = rigid_body.quadratic_terms(integral) - q_meas
+    count = np.diff(np.append(starts, n)).astype(float)
+    s1 = np.add.reduceat(integral, starts, axis=0)
+    s2 = np.add.reduceat(integral[:, :, None] * integral[:, None, :], starts, axis=0)
+    d1 = np.add.reduceat(d, starts, axis=0)
+    d2 = np.add.reduceat(d * d, starts, axis=0)
+    e = np.add.reduceat(d[:, :, None] * integral[:, None, :], starts, axis=0)
+    return count, s1, s2, d1, d2, e, q_meas[starts]
+
+
+def _omega_from_moments(count, s1, s2, d1, d2, e, q_first, previous, continuity_std_radps, iterations):
+    """:func:`window_initial_omega` from the window's sums (:func:`window_moments`).
+
+    With ω = ω₀ + W_t, each residual ``q_l(ω₀ + W_t) - q_meas = a_l + b_lt + d_lt`` (``a_l = q_l(ω₀)``,
+    ``b_lt = 2 ω₀ᵀ A_l W_t``), so the cost, its gradient and the Gauss-Newton matrix over the
+    window are polynomials in ω₀ whose coefficients are the sums above: no pass over the samples."""
+    A = _QUADRATIC_FORMS
+    # linear start: q(ω₀ + W) = q(W) + J_q(W) ω₀ + c with c = q(ω₀), least squares in (ω₀, c)
+    jtj = np.trace(s2) * np.eye(3) + 5.0 * s2 + 2.0 * np.diag(np.diag(s2))  # Σ J_q(W)ᵀ J_q(W)
+    jsum = rigid_body.quadratic_terms_jacobian(s1)  # Σ J_q(W) (J_q is linear)
+    normal = np.zeros((9, 9))
+    normal[:3, :3], normal[:3, 3:], normal[3:, :3], normal[3:, 3:] = jtj, jsum.T, jsum, count * np.eye(6)
+    rhs = np.concatenate([-2.0 * np.einsum("lij,lj->i", A, e), -d1])
+    theta = np.linalg.solve(normal + 1e-9 * np.trace(normal) * np.eye(9), rhs)
+    mags = rigid_body.omega_from_quadratic_terms(theta[3:])
+    w0 = np.vstack([theta[:3][None], _SIGNS * mags, _SIGNS * rigid_body.omega_from_quadratic_terms(q_first)])
+    w_c2 = 1.0 / continuity_std_radps**2
+    a_s1 = A @ s1  # (6, 3)
+    a_e = np.einsum("lij,lj->i", A, e)  # Σ_l A_l E_l
+    a_s2_a = np.einsum("lij,jk,lkm->im", A, s2, A)  # Σ_l A_l S2 A_l
+
+    def cost_and_step(w):  # (C, 3) -> cost (C,), JᵀJ (C, 3, 3), Jᵀr (C, 3)
+        aw = np.einsum("lij,cj->cli", A, w)  # A_l ω₀
+        a = np.einsum("cli,ci->cl", aw, w)
+        was1 = aw @ s1
+        cost = np.sum(count * a * a + 4.0 * np.einsum("cli,ij,clj->cl", aw, s2, aw) + d2 + 4.0 * a * was1
+                      + 2.0 * a * d1 + 4.0 * np.einsum("cli,li->cl", aw, e), axis=1)
+        g = 2.0 * (np.einsum("cli,cl->ci", aw, count * a + 2.0 * was1 + d1) + a @ a_s1 + 2.0 * w @ a_s2_a + a_e)
+        m2 = count * w[:, :, None] * w[:, None, :] + w[:, :, None] * s1 + s1[:, None] * w[:, None, :] + s2
+        tr = np.trace(m2, axis1=1, axis2=2)
+        H = tr[:, None, None] * np.eye(3) + 5.0 * m2 + 2.0 * np.einsum("cii->ci", m2)[:, :, None] * np.eye(3)
+        if previous is not None:
+            dp = w - previous
+            cost = cost + w_c2 * np.sum(dp * dp, axis=1)
+            g = g + w_c2 * dp
+            H = H + w_c2 * np.eye(3)
+        return cost, H, g
+
+    for _ in range(iterations):
+        _, H, g = cost_and_step(w0)
+        w0 = w0 - np.linalg.solve(H + 1e-9 * np.eye(3), g[..., None])[..., 0]
+    cost, _, _ = cost_and_step(w0)
+    best = int(np.argmin(cost))
+    return w0[best], float(cost[best])
+
+
 def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.ndarray | None = None,
                          continuity_std_radps: float = 0.5, iterations: int = 8) -> tuple[np.ndarray, float]:
     """ω₀ of one window from measured quadratic terms (L, 6) and ∫ω̇ (L, 3).
@@ -84,53 +156,35 @@ def window_initial_omega(q_meas: np.ndarray, integral: np.ndarray, previous: np.
     Returns ω₀ and the best cost. ``previous`` (ω expected at the window
     start from the window before) adds a weak continuity term.
     """
-    L = q_meas.shape[0]
-    Jw = rigid_body.quadratic_terms_jacobian(integral)  # (L, 6, 3): cross term J_q(W) ω₀
-    rhs = (q_meas - rigid_body.quadratic_terms(integral)).reshape(-1)
-    design = np.concatenate([Jw, np.broadcast_to(np.eye(6), (L, 6, 6))], axis=2).reshape(-1, 9)
-    normal = design.T @ design
-    theta = np.linalg.solve(normal + 1e-9 * np.trace(normal) * np.eye(9), design.T @ rhs)
-    mags = rigid_body.omega_from_quadratic_terms(theta[3:])
-    cands = np.vstack([theta[:3][None], _SIGNS * mags, _SIGNS * rigid_body.omega_from_quadratic_terms(q_meas[0])])
-    w_c = 1.0 / continuity_std_radps
-
-    def residuals(w0):  # (C, 3) -> (C, L*6 [+3]), (C, L*6 [+3], 3)
-        om = w0[:, None, :] + integral[None]
-        r = (rigid_body.quadratic_terms(om) - q_meas[None]).reshape(len(w0), -1)
-        J = rigid_body.quadratic_terms_jacobian(om).reshape(len(w0), -1, 3)
-        if previous is not None:
-            r = np.concatenate([r, w_c * (w0 - previous)], axis=1)
-            J = np.concatenate([J, np.broadcast_to(w_c * np.eye(3), (len(w0), 3, 3))], axis=1)
-        return r, J
-
-    w0 = cands
-    for _ in range(iterations):
-        r, J = residuals(w0)
-        JT = np.swapaxes(J, 1, 2)
-        H = JT @ J + 1e-9 * np.eye(3)
-        w0 = w0 - np.linalg.solve(H, np.einsum("cij,cj->ci", JT, r)[..., None])[..., 0]
-    r, _ = residuals(w0)
-    cost = np.sum(r * r, axis=1)
-    best = int(np.argmin(cost))
-    return w0[best], float(cost[best])
+    moments = [m[0] for m in window_moments(q_meas, integral, np.array([0]))]
+    return _omega_from_moments(*moments, previous, continuity_std_radps, iterations)
 
 
 def sign_resolved_omega(q_meas: np.ndarray, omega_dot: np.ndarray, dt_s: np.ndarray, window: int) -> np.ndarray:
-    """ω (N, 3) window by window from quadratic terms and ω̇ of one contiguous segment."""
+    """ω (N, 3) window by window from quadratic terms and ω̇ of one contiguous segment (the sums of
+    every window at once, :func:`window_moments`; then the windows in turn, each continuing the last)."""
     n = q_meas.shape[0]
-    out = np.zeros((n, 3))
-    previous = None
+    starts = []
     start = 0
     while start < n:
         stop = min(start + window, n)
         if n - stop < window // 2:
             stop = n
-        integral = trapezoid_integral(omega_dot[start:stop], dt_s[start:stop - 1])
-        w0, _ = window_initial_omega(q_meas[start:stop], integral, previous)
-        out[start:stop] = w0 + integral
+        starts.append(start)
+        start = stop
+    starts = np.array(starts)
+    stops = np.append(starts[1:], n)
+    # ∫ω̇ from each window's start: the trapezoid sum along the segment less its value at the start
+    whole = trapezoid_integral(omega_dot, dt_s)
+    integral = whole - np.repeat(whole[starts], stops - starts, axis=0)
+    moments = window_moments(q_meas, integral, starts)
+    out = np.zeros((n, 3))
+    previous = None
+    for k, (start, stop) in enumerate(zip(starts, stops)):
+        w0, _ = _omega_from_moments(*(m[k] for m in moments), previous, 0.5, 8)
+        out[start:stop] = w0 + integral[start:stop]
         if stop < n:
             previous = out[stop - 1] + 0.5 * (omega_dot[stop - 1] + omega_dot[stop]) * dt_s[stop - 1]
-        start = stop
     return out
 
 

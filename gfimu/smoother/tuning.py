@@ -36,6 +36,7 @@ import numpy as np
 from ..log import Log
 from .banded import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
 from .graph import SmootherOptions, SmootherProblem
+from .groups import Term
 from .initialise import initial_estimate
 from .layout import OMEGA, StateLayout
 
@@ -125,13 +126,16 @@ def log_normaliser(problem: SmootherProblem) -> float:
 
 
 def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
-                            measurement: NormalEquations | None = None) -> float:
+                            measurement: NormalEquations | None = None, total: NormalEquations | None = None) -> float:
     """Log marginal likelihood of the data under ``problem`` linearised at ``states`` [nats] (module docstring).
 
     ``measurement``: the normal equations of the measurement factors at ``states`` (see
-    :func:`measurement_normal_equations`), reused while only the process noise changes."""
+    :func:`measurement_normal_equations`), reused while only the process noise changes; ``total``:
+    those of all factors of ``problem`` at ``states`` when already known (see :class:`ProcessBasis`)."""
     P = np.zeros(problem.n_global) if params is None else params
-    if measurement is None:
+    if total is not None:
+        ne = total
+    elif measurement is None:
         ne = normal_equations(problem, states, P)
     else:
         ne = add_normal_equations(measurement, normal_equations(problem, states, P, problem.process_terms(states, P)))
@@ -143,6 +147,163 @@ def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params
         logdet += float(np.linalg.slogdet(fac.schur)[1])
     unknowns = states.size + problem.n_global
     return -c_min - 0.5 * logdet - log_normaliser(problem) - 0.5 * (ne.rows - unknowns) * np.log(2 * np.pi)
+
+
+PROBE_FACTORS = (2.0, 3.0, 5.0, 7.0)
+"""Factors on the noise std of the motion rows of body axes x, y, z and of the specific-force rows
+with which :meth:`ProcessBasis.of` tells the rows apart."""
+
+
+@dataclass
+class _Part:
+    """The nonzero entries of one part's normal equations (the same in every sample)."""
+
+    diag: tuple  # (flat indices into m², values (N, k))
+    lower: tuple
+    grad: tuple
+    cost: float
+
+    @classmethod
+    def of_terms(cls, terms: list, n: int, m: int) -> _Part | None:
+        """The normal equations of ``terms`` in this form, each product taken over the columns where its
+        Jacobian is nonzero (a row of the motion model touches two or four columns, not 2m);
+        None for terms on the calibration variables."""
+        stores = {"diag": {}, "lower": {}, "grad": {}}
+        lengths = {"diag": n, "lower": n - 1, "grad": n}
+
+        def put(target, flat, offset, values):  # values (samples, len(flat))
+            store = stores[target]
+            for j, f in enumerate(flat):
+                if f not in store:
+                    store[f] = np.zeros(lengths[target])
+                store[f][offset:offset + len(values)] += values[:, j]
+
+        def columns(J):
+            c = np.flatnonzero(np.count_nonzero(J.reshape(-1, J.shape[-1]), axis=0))
+            return c, J[:, :, c]
+
+        def pairs(a, b):
+            return (a[:, None] * m + b[None, :]).reshape(-1)
+
+        cost = 0.0
+        for t in terms:
+            if t.kind not in ("unary", "binary") or t.jac_global is not None:
+                return None
+            r = t.residual
+            cost += 0.5 * float(np.sum(r * r))
+            blocks = [(t.jac["x"], t.first)] if t.kind == "unary" else [(t.jac["x0"], 0), (t.jac["x1"], 1)]
+            cols = []
+            for J, offset in blocks:
+                c, Jc = columns(J)
+                cols.append((c, Jc))
+                if c.size:
+                    JcT = np.ascontiguousarray(np.swapaxes(Jc, 1, 2))
+                    put("diag", pairs(c, c), offset, (JcT @ Jc).reshape(len(Jc), -1))
+                    put("grad", c, offset, np.einsum("nr,nrj->nj", r, Jc))
+            if t.kind == "binary" and cols[0][0].size and cols[1][0].size:
+                (c0, J0c), (c1, J1c) = cols
+                put("lower", pairs(c1, c0), 0, (np.ascontiguousarray(np.swapaxes(J1c, 1, 2)) @ J0c).reshape(len(J0c), -1))
+
+        def compact(store, length):
+            idx = np.array(sorted(store), dtype=int)
+            values = np.stack([store[f] for f in idx], axis=1) if idx.size else np.zeros((length, 0))
+            return idx, values
+
+        return cls(*(compact(stores[k], lengths[k]) for k in ("diag", "lower", "grad")), cost)
+
+
+@dataclass
+class ProcessBasis:
+    """The normal equations of a problem's non-measurement factors at fixed states, as a weighted sum
+    over the noise parameters that the tuner searches: ``Σ_c w_c(θ) N_c`` with ``N_c`` those of the
+    rows whose std scales with parameter c at unit settings, ``w = 1/(q f_a)²`` for the motion rows of
+    body axis a (density q, axis factor f_a), ``1/q_f²`` for the specific force's, 1 for the rest
+    (priors, gyroscope, ...). One evaluation of the evidence then needs no factor evaluation.
+
+    :meth:`of` finds which rows scale with which parameter from the problem itself, at unit settings
+    and at :data:`PROBE_FACTORS`, and gives None when some row scales otherwise (then the factors are
+    evaluated for every setting, as before)."""
+
+    parts: dict
+    """'const', 0, 1, 2 (body axes), 'force' -> the normal equations of those rows at unit settings."""
+    rows: int
+    n_global: int
+
+    @classmethod
+    def of(cls, log: Log, options: SmootherOptions, field: str, states: np.ndarray, params: np.ndarray,
+           omega_b_radps: np.ndarray | None = None) -> ProcessBasis | None:
+        if options.motion_model != "jerk" or any(f > 0 for f in options.process_axis_frequencies_hz):
+            return None  # (the white-snap system is too stiff for sums that agree to many digits)
+        unit = replace(options, **{field: 1.0}, process_axis_factors=(1.0, 1.0, 1.0),
+                       specific_force_random_walk_mps2_per_sqrt_s=1.0)
+        fx, fy, fz, ff = PROBE_FACTORS
+        probe = replace(unit, process_axis_factors=(fx, fy, fz), specific_force_random_walk_mps2_per_sqrt_s=ff)
+        problem = make_problem(log, unit, 1.0, omega_b_radps)
+        terms = problem.process_terms(states, params)
+        probed = make_problem(log, probe, 1.0, omega_b_radps).process_terms(states, params)
+        if len(terms) != len(probed):
+            return None
+        labels = {1.0: "const", fx: 0, fy: 1, fz: 2, ff: "force"}
+        split: dict = {key: [] for key in labels.values()}
+        for t, u in zip(terms, probed):
+            if t.kind != u.kind or t.residual.shape != u.residual.shape:
+                return None
+            a, b = _row_entries(t), _row_entries(u)
+            if a.shape != b.shape:
+                return None
+            row_label = []
+            for i in range(a.shape[1]):
+                nz = a[:, i] != 0
+                if not np.array_equal(nz, b[:, i] != 0):
+                    return None
+                ratio = a[:, i][nz] / b[:, i][nz] if np.any(nz) else np.ones(1)
+                for f, key in labels.items():
+                    if np.allclose(ratio, f, rtol=1e-9, atol=0.0):
+                        row_label.append(key)
+                        break
+                else:
+                    return None
+            for key in labels.values():
+                rows = [i for i, k in enumerate(row_label) if k == key]
+                if rows:
+                    split[key].append(_term_rows(t, rows))
+        parts = {key: _Part.of_terms(ts, problem.n, problem.state_size) for key, ts in split.items() if ts}
+        if any(part is None for part in parts.values()):
+            return None  # calibration variables in the process factors: not written for here
+        rows = sum(t.residual.size for ts in split.values() for t in ts)
+        return cls(parts, rows, problem.n_global)
+
+    def normal_equations(self, density: float, axis_factors, force_density: float,
+                         measurement: NormalEquations) -> NormalEquations:
+        """The normal equations of ``measurement`` plus the process factors at these settings (see
+        the class docstring)."""
+        weights = {"const": 1.0, "force": 1.0 / force_density**2}
+        for a in range(3):
+            weights[a] = 1.0 / (density * axis_factors[a]) ** 2
+        diag, lower, grad = measurement.diag.copy(), measurement.lower.copy(), measurement.grad.copy()
+        cost = measurement.cost
+        for key, part in self.parts.items():
+            w = weights[key]
+            for target, (idx, values) in ((diag, part.diag), (lower, part.lower), (grad, part.grad)):
+                flat = target.reshape(target.shape[0], -1)
+                flat[:, idx] += w * values
+            cost += w * part.cost
+        return NormalEquations(diag, lower, grad, measurement.coupling, measurement.border, measurement.grad_global,
+                               cost, (measurement.rows or 0) + self.rows)
+
+
+def _row_entries(t: Term) -> np.ndarray:
+    """(samples, rows, entries) of a term: residual and Jacobians side by side."""
+    parts = [t.residual[:, :, None]] + [t.jac[k] for k in sorted(t.jac)]
+    if t.jac_global is not None:
+        parts.append(t.jac_global)
+    return np.concatenate(parts, axis=2)
+
+
+def _term_rows(t: Term, rows: list[int]) -> Term:
+    """The term restricted to some of its rows."""
+    return Term(t.kind, t.residual[:, rows], {k: v[:, rows] for k, v in t.jac.items()},
+                None if t.jac_global is None else t.jac_global[:, rows], t.first)
 
 
 def measurement_normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None) -> NormalEquations:
@@ -219,7 +380,7 @@ def dominant_frequency_hz(signal: np.ndarray, rate_hz: float, min_hz: float, max
 
 def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndarray | None = None,
          models: tuple[str, ...] | None = None, accel_noise: bool = False,
-         states_out: list | None = None) -> tuple[Tuning, SmootherOptions]:
+         states_out: list | None = None, basis: bool = True) -> tuple[Tuning, SmootherOptions]:
     """Select the process noise maximising :func:`linearised_log_evidence` from a starting estimate
     ``states`` (e.g. the initialisation); returns the selection and the options carrying it.
 
@@ -230,7 +391,9 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     before and after the others in (2). Each 1-D search is a
     grid (factor 4 for the density, 10 for the others) extended while the best point is at an edge, refined by a parabola.
     The model with the larger evidence wins. ``states_out``, if given, receives the smoother's
-    solution that the winner was linearised at (a better start than ``states`` for a stiff model)."""
+    solution that the winner was linearised at (a better start than ``states`` for a stiff model).
+    ``basis``: evaluate the process factors once per linearisation point and weight them per
+    setting (:class:`ProcessBasis`; False: evaluate them for every setting, the same numbers slower)."""
     models = models or (options.motion_model,)
     best = None
     for model in models:
@@ -252,6 +415,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
             return {k: (np.array(v, copy=True) if isinstance(v, np.ndarray) else v) for k, v in c.items()}
 
         cache = {}
+        bases = {}
 
         def evidence(c, X):
             try:
@@ -260,7 +424,16 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                 if key not in cache:
                     cache.clear()
                     cache[key] = measurement_normal_equations(problem, X, p0)
-                return linearised_log_evidence(problem, X, p0, cache[key])
+                total = None
+                if basis and not np.any(c["freq"] > 0):
+                    if version not in bases:
+                        bases.clear()
+                        bases[version] = ProcessBasis.of(log, settings_options(c), field, X,
+                                                         np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA])
+                    if bases[version] is not None:
+                        total = bases[version].normal_equations(float(np.exp(c["density"])), np.exp(c["axis"]),
+                                                                float(np.exp(c["force"])), cache[key])
+                return linearised_log_evidence(problem, X, p0, cache[key], total)
             except np.linalg.LinAlgError:
                 return -np.inf
 
