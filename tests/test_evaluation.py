@@ -284,3 +284,25 @@ def test_cli_reference_first_moving_window_offset_and_errors(tmp_path, capsys):
     table = np.array(rows[1:], dtype=float)
     np.testing.assert_allclose(table[:, 1:4], err, atol=1e-9)
     np.testing.assert_array_equal(table[:, 5] == 1, moving)
+
+
+def test_cli_rows_left_out_by_the_selection_are_not_called_invalid_reference(tmp_path, capsys):
+    """A log whose reference is invalid on 2 rows, evaluated with --moving-threshold-radps: the summary counts
+    the invalid rows and the rows the threshold leaves out apart."""
+    t = np.arange(10) * 10_000_000
+    w = np.zeros((10, 3))
+    w[:, 2] = [0, 0, 0, 3, 3, 3, 3, 3, 0, 0]
+    ref = tmp_path / "reference.csv"
+    lines = ["#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],valid []"]
+    lines += [f"{ti},0,0,{wz},{0 if k in (4, 5) else 1}" for k, (ti, wz) in enumerate(zip(t, w[:, 2]))]
+    ref.write_text("\n".join(lines) + "\n")
+    gio.write_motion_csv(Motion(t, omega_b_radps=w + 0.1), tmp_path / "est.csv")
+    assert main(["evaluate", str(ref), str(tmp_path / "est.csv"), "--moving-threshold-radps", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "3 of 10 rows compared; 2 left out as invalid reference; 5 left out by the selection." in out
+    assert main(["evaluate", str(ref), str(tmp_path / "est.csv"), "--moving-threshold-radps", "1", "--format",
+                 "json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert (doc["n_compared"], doc["n_invalid"], doc["n_deselected"]) == (3, 2, 5)
+    assert main(["evaluate", str(ref), str(tmp_path / "est.csv")]) == 0
+    assert "8 of 10 rows compared; 2 left out as invalid reference." in capsys.readouterr().out

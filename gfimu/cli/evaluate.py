@@ -11,6 +11,7 @@ estimated); ``--errors-out`` writes the per-sample ω errors.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -123,6 +124,12 @@ def run(args) -> int:
         warnings.simplefilter("ignore", EvaluationAlignmentWarning)
         result = evaluate(estimate, truth, valid=use, sign_threshold_radps=args.sign_threshold,
                           align="interpolate" if interpolate else "exact")
+        if result.n_invalid and (valid is None or np.any(use != np.asarray(valid, bool))):
+            # the rows the selection left out are not invalid reference: count those apart
+            invalid = 0 if valid is None else evaluate(
+                estimate, truth, valid=np.array(valid, bool), sign_threshold_radps=args.sign_threshold,
+                align="interpolate" if interpolate else "exact").n_invalid
+            result = dataclasses.replace(result, n_invalid=invalid, n_deselected=result.n_invalid - invalid)
     if args.format == "markdown":
         text = result.to_markdown(title=f"{estimate_arg} vs {truth_path}")
     elif args.format == "csv":
