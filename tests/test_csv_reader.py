@@ -413,6 +413,15 @@ def test_a_folder_without_the_named_file(tmp_path, capsys):
             "sensorlogger", "--out", str(tmp_path / "log"))
 
 
+def test_a_map_naming_a_missing_file_names_the_map_key(bad, capsys):
+    """A sensor's `file` (or [csv] `file`) that does not exist: the map's line and key, and the path looked for."""
+    sensor_file = SIMPLE_MAP.format(time_unit='unit = "ms"', z="az").replace('name = "a"', 'name = "a"\nfile = "right.csv"')
+    run_bad(capsys, bad, f"map.toml:7: accelerometers[0].file: {bad / 'right.csv'}: file not found",
+            map_text=sensor_file)
+    csv_file = SIMPLE_MAP.format(time_unit="", z="az").replace("[time]", '[csv]\nfile = "board.csv"\n[time]')
+    run_bad(capsys, bad, f"map.toml:3: csv.file: {bad / 'board.csv'}: file not found", map_text=csv_file)
+
+
 def test_the_documented_example(tmp_path, capsys):
     """The column map, board.csv and right.csv of docs/convert.md, converted as documented."""
     import re

@@ -428,6 +428,15 @@ class _Reader:
             return self.input
         return self.folder / name
 
+    def existing_file_of(self, sensor: Sensor) -> Path:
+        """:meth:`file_of`, refused naming the map's ``file`` key when that file is missing."""
+        path = self.file_of(sensor)
+        if path != self.input and not path.exists():
+            if sensor.file is not None:
+                raise self.map.ctx.error(f"{path}: file not found", sensor.table, sensor.index, "file")
+            raise self.map.ctx.error(f"{path}: file not found", "csv", 0, "file")
+        return path
+
     def table(self, path: Path) -> Table:
         if path not in self.tables:
             self.tables[path] = read_table(path, self.map.layout)
@@ -632,7 +641,7 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     groups: dict[tuple, tuple[np.ndarray, str]] = {}
     blocks = []
     for sensor, axes, kind in sensors:
-        path = reader.file_of(sensor)
+        path = reader.existing_file_of(sensor)
         table = reader.table(path)
         key = (path, sensor.time.column, sensor.time.unit)
         if key not in groups:
