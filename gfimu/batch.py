@@ -79,7 +79,7 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
         message = str(exc) or type(exc).__name__
         if not isinstance(exc, (OSError, ValueError)):
             message = f"{type(exc).__name__}: {message} ({traceback.format_exc(limit=1).splitlines()[-1]})"
-        row["message"] = " ".join(message.split())
+        row.update(output="", message=" ".join(message.split()))  # no estimate of this run to point at
         folder = Path(output_csv).parent
         if folder.is_dir() and not any(folder.iterdir()):  # leave no empty folder behind a failed log
             folder.rmdir()
@@ -116,7 +116,7 @@ def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smooth
             try:
                 row = fut.result()
             except Exception as exc:  # noqa: BLE001 - a lost worker: the log is reported, the others go on
-                row = {"log": str(logs[i]), "output": str(folders[i] / "estimate.csv"), "status": "failed",
+                row = {"log": str(logs[i]), "output": "", "status": "failed",
                        "message": f"worker failed: {type(exc).__name__}: {exc}"}
             rows[i] = row
             if on_done is not None:

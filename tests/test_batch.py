@@ -61,6 +61,21 @@ def test_output_folders_are_unique():
     assert [f.name for f in folders] == ["log", "log-2", "other", "log-3"]
 
 
+def test_a_failed_log_points_at_no_output_even_when_an_earlier_estimate_is_there(tmp_path):
+    """A log that worked once and is broken now: its row says failed with an empty output, not the path of the
+    earlier run's estimate still in the folder."""
+    from gfimu.batch import run_one
+    from gfimu.simulate import simulate
+
+    gio.write_log(simulate("reversal", duration_s=0.5, seed=1), tmp_path / "log")
+    target = tmp_path / "out" / "log" / "estimate.csv"
+    ok = run_one(str(tmp_path / "log"), str(target), "inversion", {}, None)
+    assert ok["status"] == "ok" and ok["output"] == str(target) and target.is_file()
+    (tmp_path / "log" / "imu.csv").write_text("#timestamp [ns],a1_x [m s^-2]\n0,abc\n")
+    row = run_one(str(tmp_path / "log"), str(target), "inversion", {}, None)
+    assert row["status"] == "failed" and row["output"] == "" and "imu.csv" in row["message"]
+
+
 @pytest.mark.slow
 def test_batch_on_a_scheduler_with_two_workers(scheduler, tmp_path):
     """Three simulated logs and a broken one: each estimate equals gfimu estimate's on the same log,
