@@ -83,12 +83,28 @@ def test_phyphox_linear_acceleration_with_gyroscope_semicolons_and_decimal_comma
           "Gyroscope x (rad/s);Gyroscope y (rad/s);Gyroscope z (rad/s)\n"
           "0,0;0,5;-0,5;0,25;1,5;-2,5;0,125\n"
           "0,005;0,75;-0,75;0,5;1,75;-2,25;0,25\n")
-    write(tmp_path / "map.toml", PRESETS["phyphox"].replace("[time]", '[csv]\ndecimal = ","\n[time]'))
+    write(tmp_path / "map.toml", PRESETS["phyphox"].replace('decimal = "auto"', 'decimal = ","'))
     convert(capsys, str(tmp_path / "raw.csv"), "--map", str(tmp_path / "map.toml"), "--out", str(tmp_path / "log"))
     log = gio.read_log(tmp_path / "log")
     assert log.timestamps_ns.tolist() == [0, 5_000_000]
     assert log.accel_mps2.tolist() == [[0.5, -0.5, 0.25], [0.75, -0.75, 0.5]]
     assert log.gyro_b_radps.tolist() == [[1.5, -2.5, 0.125], [1.75, -2.25, 0.25]]
+
+
+@pytest.mark.parametrize("delimiter,decimal", [(";", ","), ("\t", ","), (";", "."), ("\t", "."), (",", ".")])
+def test_phyphox_preset_reads_every_csv_export_of_phyphox(tmp_path, capsys, delimiter, decimal):
+    """phyphox exports CSV with a comma, tab or semicolon and a decimal point or comma: the preset reads all."""
+    header = ["Time (s)", "Acceleration x (m/s^2)", "Acceleration y (m/s^2)", "Acceleration z (m/s^2)",
+              "Absolute acceleration (m/s^2)"]
+    rows = [["0.000000000E+00", "1.250000000E-01", "-2.500000000E-01", "9.810000000E+00", "9.8"],
+            ["1.000100000E-02", "1.500000000E-01", "-2.250000000E-01", "9.800000000E+00", "9.8"]]
+    text = delimiter.join(f'"{h}"' for h in header) + "\n"
+    text += "".join(delimiter.join(f.replace(".", decimal) for f in r) + "\n" for r in rows)
+    write(tmp_path / "Raw Data.csv", text)
+    convert(capsys, str(tmp_path / "Raw Data.csv"), "--map", "phyphox", "--out", str(tmp_path / "log"))
+    log = gio.read_log(tmp_path / "log")
+    assert log.timestamps_ns.tolist() == [0, 10_001_000]
+    assert log.accel_mps2.tolist() == [[0.125, -0.25, 9.81], [0.15, -0.225, 9.80]]
 
 
 def test_sensor_logger_folder_interpolates_the_gyroscope_onto_the_accelerometer(tmp_path, capsys):

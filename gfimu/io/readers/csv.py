@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,7 +61,10 @@ z = "w_RS_S_z"
     "phyphox": f'''format = "{MAP_FORMAT}"
 name = "phyphox"
 # phyphox "Acceleration with g" (or "Linear Acceleration") export, one CSV file; a gyroscope
-# in the same file is read when present
+# in the same file is read when present; any of phyphox's CSV exports (comma, tab or semicolon,
+# decimal point or comma)
+[csv]
+decimal = "auto"
 [time]
 column = "Time"
 [[accelerometers]]
@@ -249,8 +253,8 @@ def parse_map(text: str, path: str) -> ColumnMap:
         if not _is_int(v) or v < 0:
             raise ctx.error(f"expected a whole number >= 0, got {v!r}", "csv", 0, key)
     decimal = csv.get("decimal", ".")
-    if decimal not in (".", ","):
-        raise ctx.error(f"expected \".\" or \",\", got {decimal!r}", "csv", 0, "decimal")
+    if decimal not in (".", ",", "auto"):
+        raise ctx.error(f"expected \".\", \",\" or \"auto\", got {decimal!r}", "csv", 0, "decimal")
     if decimal == "," and delimiter == ",":
         raise ctx.error("a decimal comma needs another delimiter", "csv", 0, "decimal")
     file = csv.get("file")
@@ -356,6 +360,10 @@ def _split(line: str, delimiter: str | None) -> list[str]:
     return [f.strip().strip('"').strip() for f in line.split(delimiter)]
 
 
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+"""A number written with a decimal comma (``decimal = "auto"``)."""
+
+
 def read_table(path: Path, layout: Layout) -> Table:
     """Split a text file by ``layout``; errors name the file and line."""
     try:
@@ -402,7 +410,8 @@ def read_table(path: Path, layout: Layout) -> Table:
         if len(r) != n_fields:
             what = "the header has" if headers else "the first row has"
             raise LogFormatError(f"row has {len(r)} fields, {what} {n_fields}", path, line)
-    if layout.decimal == ",":
+    if layout.decimal == "," or (layout.decimal == "auto" and delimiter != ","
+                                 and any(_DECIMAL_COMMA.match(f) for f in rows[0])):
         rows = [[f.replace(",", ".") for f in r] for r in rows]
     return Table(path, names, headers, units if headers else [None] * n_fields, rows, [ln for ln, _ in data])
 
