@@ -227,7 +227,8 @@ def test_cli_errors_are_one_line_with_exit_status_2(files, capsys):
     gio.write_motion_csv(Motion(T + 5, omega_b_radps=W_EST), files / "late.csv")
     assert main(["evaluate", str(files / "late.csv"), str(files / "truth.csv")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("gfimu evaluate: error: estimate and truth timestamps do not match (row 0 differs")
+    assert err.startswith(f"gfimu evaluate: error: {files / 'late.csv'} vs {files / 'truth.csv'}: estimate and truth "
+                          "timestamps do not match (row 0 differs")
     assert "(--interpolate)" in err and err.count("\n") == 1
     assert main(["evaluate", str(files / "late.csv"), str(files / "truth.csv"), "--interpolate"]) == 0
     assert "truth interpolated at the estimate's timestamps" in capsys.readouterr().out

@@ -122,8 +122,11 @@ def run(args) -> int:
         raise CLIError("no reference row left to evaluate (check --t-start-s, --t-end-s, --moving-threshold-radps)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", EvaluationAlignmentWarning)
-        result = evaluate(estimate, truth, valid=use, sign_threshold_radps=args.sign_threshold,
-                          align="interpolate" if interpolate else "exact")
+        try:
+            result = evaluate(estimate, truth, valid=use, sign_threshold_radps=args.sign_threshold,
+                              align="interpolate" if interpolate else "exact")
+        except ValueError as exc:  # the files the mismatch is between
+            raise CLIError(f"{estimate_arg} vs {truth_path}: {exc}") from None
         if result.n_invalid and (valid is None or np.any(use != np.asarray(valid, bool))):
             # the rows the selection left out are not invalid reference: count those apart
             invalid = 0 if valid is None else evaluate(
