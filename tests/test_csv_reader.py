@@ -385,6 +385,17 @@ def test_an_axis_without_a_unit(bad, capsys):
             map_text=SIMPLE_MAP.format(time_unit="", z="az"))
 
 
+def test_seconds_under_a_nanosecond_header_are_not_called_a_step_back(bad, capsys):
+    """EuRoC-style times written in seconds under '[ns]': increasing times that round to one nanosecond are
+    refused as such, pointing at the unit, not as time going back."""
+    run_bad(capsys, bad, "f.csv:3: time 1403715273.267143 ('t [ns]') and the previous row's 1403715273.262143 "
+                         "(line 2) are the same nanosecond in [ns]; is the time unit right?",
+            csv_text="t [ns],ax [g],ay [g],az [g]\n1403715273.262143,0,0,1\n1403715273.267143,0,0,1\n",
+            map_text=SIMPLE_MAP.format(time_unit="", z="az"))
+    run_bad(capsys, bad, "f.csv:3: time 1403715273.2 ('t [ns]') is not after the previous row's 1403715273.3",
+            csv_text="t [ns],ax [g],ay [g],az [g]\n1403715273.3,0,0,1\n1403715273.2,0,0,1\n")
+
+
 def test_text_in_a_value_and_a_ragged_row(bad, capsys):
     run_bad(capsys, bad, "f.csv:3: 'ay [g]' (field 3) value 'n/a' is not a number",
             csv_text="t [ms],ax [g],ay [g],az [g]\n0,0,0,1\n1,0,n/a,1\n", map_text=SIMPLE_MAP.format(time_unit="", z="az"))

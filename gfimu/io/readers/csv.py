@@ -26,6 +26,7 @@ import dataclasses
 import re
 import tomllib
 from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 import numpy as np
@@ -531,6 +532,15 @@ class _Reader:
         bad = np.flatnonzero(np.diff(t) <= 0)
         if bad.size:
             k = int(bad[0]) + 1
+            if t[k] == t[k - 1] and tokens[k].strip() != tokens[k - 1].strip():
+                try:
+                    later = Decimal(tokens[k].strip()) > Decimal(tokens[k - 1].strip())
+                except InvalidOperation:
+                    later = False
+                if later:  # distinct times that round to one nanosecond: a fraction of a ns, not a step back
+                    raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) and the previous row's {tokens[k - 1]} "
+                                         f"(line {table.lines[k - 1]}) are the same nanosecond in [{unit}]; "
+                                         "is the time unit right?", table.path, table.lines[k])
             raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) is not after the previous row's "
                                  f"{tokens[k - 1]} (line {table.lines[k - 1]}); time must be strictly increasing",
                                  table.path, table.lines[k])
