@@ -396,6 +396,23 @@ def test_seconds_under_a_nanosecond_header_are_not_called_a_step_back(bad, capsy
             csv_text="t [ns],ax [g],ay [g],az [g]\n1403715273.3,0,0,1\n1403715273.2,0,0,1\n")
 
 
+def test_times_in_milliseconds_under_a_seconds_header_are_warned_about(tmp_path, capsys):
+    """A 200 Hz recording written in ms under '[s]' reads as 0.2 Hz: the log is written, with one warning naming
+    the file, the column and the likely unit."""
+    write(tmp_path / "f.csv", "t [s],ax [g],ay [g],az [g]\n" + "".join(f"{5 * k},0,0,1\n" for k in range(20)))
+    write(tmp_path / "map.toml", SIMPLE_MAP.format(time_unit="", z="az"))
+    assert main(["convert", "csv", str(tmp_path / "f.csv"), "--map", str(tmp_path / "map.toml"), "--out",
+                 str(tmp_path / "log"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err == (f"gfimu convert: warning: {tmp_path / 'f.csv'}: the times of 't [s]' step by a median 5 s, a "
+                   "sample rate of 0.2 Hz, implausible for an accelerometer array: is the time unit [s] right; in "
+                   "[ms] that is 200 Hz?\n")
+    write(tmp_path / "g.csv", "t [ms],ax [g],ay [g],az [g]\n" + "".join(f"{5 * k},0,0,1\n" for k in range(20)))
+    assert main(["convert", "csv", str(tmp_path / "g.csv"), "--map", str(tmp_path / "map.toml"), "--out",
+                 str(tmp_path / "log2"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+
+
 def test_text_in_a_value_and_a_ragged_row(bad, capsys):
     run_bad(capsys, bad, "f.csv:3: 'ay [g]' (field 3) value 'n/a' is not a number",
             csv_text="t [ms],ax [g],ay [g],az [g]\n0,0,0,1\n1,0,n/a,1\n", map_text=SIMPLE_MAP.format(time_unit="", z="az"))

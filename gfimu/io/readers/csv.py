@@ -25,6 +25,7 @@ import argparse
 import dataclasses
 import re
 import tomllib
+import warnings
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
@@ -36,8 +37,8 @@ from ...array import Gyroscope, SensorArray
 from ...log import Log
 from ...motion import Motion
 from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
-from ..errors import LogFormatError
-from ..units import header_name_and_unit, time_unit_ns, timestamp_ns, unit_factor, unit_help
+from ..errors import LogFormatError, LogPlausibilityWarning
+from ..units import TIME_UNITS_NS, header_name_and_unit, time_unit_ns, timestamp_ns, unit_factor, unit_help
 
 MAP_FORMAT = "gfimu-csv-map/1"
 AXES = ("x", "y", "z")
@@ -419,12 +420,37 @@ def read_table(path: Path, layout: Layout) -> Table:
 
 # --- reading ------------------------------------------------------------------------------
 
+PLAUSIBLE_RATE_HZ = (1.0, 100e3)
+"""Sample rates [Hz] an accelerometer array records at; times stepping outside suggest a wrong time unit."""
+
+
+def _rate_warning(t: np.ndarray, unit: str, table: Table, j: int) -> str | None:
+    """A warning when the median time step gives an implausible sample rate under the time unit read."""
+    if t.size < 2:
+        return None
+    step_ns = float(np.median(np.diff(t)))
+    lo, hi = PLAUSIBLE_RATE_HZ
+    if step_ns <= 0 or lo <= 1e9 / step_ns <= hi:
+        return None
+    try:
+        scale = time_unit_ns(unit)
+    except KeyError:
+        return None
+    raw = step_ns / scale
+    likely = sorted((abs(np.log10(1e9 / (raw * ns)) - 2.5), u) for u, ns in TIME_UNITS_NS.items()
+                    if ns != scale and lo <= 1e9 / (raw * ns) <= hi)
+    hint = f"; in [{likely[0][1]}] that is {1e9 / (raw * TIME_UNITS_NS[likely[0][1]]):.4g} Hz" if likely else ""
+    return (f"{table.path}: the times of {table.shown(j)} step by a median {raw:.6g} {unit}, a sample rate of "
+            f"{1e9 / step_ns:.4g} Hz, implausible for an accelerometer array: is the time unit [{unit}] right{hint}?")
+
+
 class _Reader:
     def __init__(self, cmap: ColumnMap, input_path: Path):
         self.map = cmap
         self.input = input_path
         self.folder = input_path if input_path.is_dir() else input_path.parent
         self.tables: dict[Path, Table] = {}
+        self.rate_warnings: list[str] = []  # issued once the recording has been read
 
     def error(self, message: str, column: Column) -> LogFormatError:
         return self.map.ctx.error(message, column.table, column.index, column.key)
@@ -544,6 +570,9 @@ class _Reader:
             raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) is not after the previous row's "
                                  f"{tokens[k - 1]} (line {table.lines[k - 1]}); time must be strictly increasing",
                                  table.path, table.lines[k])
+        warning = _rate_warning(t, unit, table, j)
+        if warning is not None:
+            self.rate_warnings.append(warning)
         return t, unit
 
     def values(self, table: Table, sensor: Sensor, kind: str, axes: tuple[str, ...]) -> tuple[np.ndarray, list[str]]:
@@ -707,6 +736,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
             raise LogFormatError("--gyro-as-reference: the map names no gyroscope columns", cmap.path)
         reference = Motion(t_out, omega_b_radps=omega.copy())
     log = Log(array, t_out, accel, gyro_b_radps=omega, reference=reference, source=str(input_path))
+    for warning in reader.rate_warnings:
+        warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
     return Conversion(log, tuple(report + geometry_report), unplaced)
 
 
