@@ -466,6 +466,18 @@ def test_a_map_naming_a_missing_file_names_the_map_key(bad, capsys):
     run_bad(capsys, bad, f"map.toml:3: csv.file: {bad / 'board.csv'}: file not found", map_text=csv_file)
 
 
+def test_gyro_as_reference_without_the_optional_gyroscope_says_where_it_looked(tmp_path, capsys):
+    write(tmp_path / "rec" / "TotalAcceleration.csv", "time,seconds_elapsed,z,y,x\n100,0,1,0,0\n200,0,1,0,0\n")
+    refused(capsys, tmp_path, f"{tmp_path / 'rec'}: --gyro-as-reference: no gyroscope to take as the reference: "
+                              f"{tmp_path / 'rec' / 'Gyroscope.csv'} is not there", str(tmp_path / "rec"), "--map",
+            "sensorlogger", "--gyro-as-reference", "--out", str(tmp_path / "log"))
+    write(tmp_path / "Raw Data.csv", '"Time (s)","Acceleration x (m/s^2)","Acceleration y (m/s^2)",'
+                                     '"Acceleration z (m/s^2)"\n0,0,0,9.8\n0.01,0,0,9.8\n')
+    refused(capsys, tmp_path, "no gyroscope to take as the reference: its columns (Gyroscope x, Gyroscope y, "
+                              f"Gyroscope z) are not in {tmp_path / 'Raw Data.csv'}", str(tmp_path / "Raw Data.csv"),
+            "--map", "phyphox", "--gyro-as-reference", "--out", str(tmp_path / "log"))
+
+
 def test_the_documented_example(tmp_path, capsys):
     """The column map, board.csv and right.csv of docs/convert.md, converted as documented."""
     import re

@@ -732,6 +732,12 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         raise LogFormatError(f"holds {t_out.size} sample(s); a log needs at least two", base_key[0])
     reference = None
     if gyro_as_reference:
+        if omega is None and cmap.gyroscope is not None:  # optional, and not in the recording
+            where = reader.file_of(cmap.gyroscope)
+            names = ", ".join(" or ".join(map(str, c.column)) if isinstance(c.column, tuple) else str(c.column)
+                              for c in cmap.gyroscope.axes.values())
+            found = f"its columns ({names}) are not in {where}" if where.is_file() else f"{where} is not there"
+            raise LogFormatError(f"--gyro-as-reference: no gyroscope to take as the reference: {found}", input_path)
         if omega is None:
             raise LogFormatError("--gyro-as-reference: the map names no gyroscope columns", cmap.path)
         reference = Motion(t_out, omega_b_radps=omega.copy())
