@@ -307,3 +307,28 @@ def test_cli_rows_left_out_by_the_selection_are_not_called_invalid_reference(tmp
     assert (doc["n_compared"], doc["n_invalid"], doc["n_deselected"]) == (3, 2, 5)
     assert main(["evaluate", str(ref), str(tmp_path / "est.csv")]) == 0
     assert "8 of 10 rows compared; 2 left out as invalid reference." in capsys.readouterr().out
+
+
+def test_cli_calibration_removes_the_gyro_bias_from_the_reference(tmp_path, capsys):
+    """An estimate made with --calibration has the gyro bias removed; evaluate --calibration removes it from the
+    gyro reference too, so a bias-free estimate of the same motion scores 0 instead of the bias."""
+    from gfimu.calibration import Calibration, SensorCalibration, write_calibration
+
+    t = np.arange(5) * 10_000_000
+    w = np.column_stack([np.linspace(0, 1, 5), np.ones(5), np.zeros(5)])
+    bias = np.array([0.01, -0.02, 0.005])
+    (tmp_path / "log").mkdir()
+    gio.write_motion_csv(Motion(t, omega_b_radps=w + bias), tmp_path / "log" / "reference.csv")
+    gio.write_motion_csv(Motion(t, omega_b_radps=w), tmp_path / "est.csv")
+    sensor = SensorCalibration("a1", ("x", "y", "z"), np.eye(3), np.zeros(3))
+    write_calibration(Calibration((sensor,), gyro_bias_b_radps=bias), tmp_path / "cal.toml")
+    ref, est = str(tmp_path / "log" / "reference.csv"), str(tmp_path / "est.csv")
+    assert main(["evaluate", ref, est, "--format", "json"]) == 0
+    row = json.loads(capsys.readouterr().out)["quantities"][0]
+    assert row["rmse_norm"] == pytest.approx(float(np.linalg.norm(bias)), rel=1e-9)
+    assert main(["evaluate", ref, est, "--format", "json", "--calibration", str(tmp_path / "cal.toml")]) == 0
+    row = json.loads(capsys.readouterr().out)["quantities"][0]
+    assert row["rmse_norm"] < 1e-12
+    assert main(["evaluate", ref, est, "--calibration", str(tmp_path / "cal.toml"), "--out",
+                 str(tmp_path / "cal.toml")]) == 2
+    assert "is an input of this command" in capsys.readouterr().err

@@ -53,6 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "implies --interpolate when not 0)")
     offset.add_argument("--estimate-time-offset", action="store_true",
                         help="estimate that offset (cross-correlation of |ω| within ±0.5 s), report it and apply it")
+    p.add_argument("--calibration", default=None, metavar="FILE",
+                   help="calibration.toml the estimate was made with (gfimu estimate --calibration): its gyro bias "
+                        "is removed from a reference's ω too, as gfimu estimate removes it from the gyro (default: "
+                        "the reference as it is)")
     p.add_argument("--errors-out", default=None, metavar="FILE",
                    help="also write the per-sample ω errors (timestamp, error x, y, z, norm [rad/s], used 0/1) "
                         "as CSV (atomically; never over an input)")
@@ -94,13 +98,20 @@ def run(args) -> int:
     from ..io.outputs import check_output, write_output
 
     reference_arg, estimate_arg = _order(args)
-    out = check_output(args.out, [reference_arg, estimate_arg], "--out", stdout=True)
+    inputs = [reference_arg, estimate_arg, args.calibration]
+    out = check_output(args.out, inputs, "--out", stdout=True)
     errors_out = None
     if args.errors_out is not None:
-        errors_out = check_output(args.errors_out, [reference_arg, estimate_arg], "--errors-out")
+        errors_out = check_output(args.errors_out, inputs, "--errors-out")
     truth_path = _truth_path(reference_arg, args.against)
     estimate = gio.read_motion_csv(estimate_arg, allow_nan=True)
     truth, valid = gio.read_motion_table(truth_path)
+    if args.calibration is not None:
+        from ..calibration import read_calibration
+
+        bias = read_calibration(args.calibration).gyro_bias_b_radps
+        if bias is not None and truth.omega_b_radps is not None and truth_path.name != "truth.csv":
+            truth = truth.replace(omega_b_radps=truth.omega_b_radps - bias)
     interpolate = args.interpolate
     offset_s = float(args.time_offset_s)
     if args.estimate_time_offset:
