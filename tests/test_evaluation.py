@@ -332,3 +332,26 @@ def test_cli_calibration_removes_the_gyro_bias_from_the_reference(tmp_path, caps
     assert main(["evaluate", ref, est, "--calibration", str(tmp_path / "cal.toml"), "--out",
                  str(tmp_path / "cal.toml")]) == 2
     assert "is an input of this command" in capsys.readouterr().err
+
+
+def test_cli_warns_when_the_reference_is_the_logs_own_gyroscope(tmp_path, capsys):
+    """A log whose gyroscope channels are its reference (convert --with-gyro / --gyro-as-reference): evaluate
+    against it says once that it is no independent check; a log without gyro channels gets no warning."""
+    from gfimu.simulate import simulate
+
+    log = simulate("reversal", duration_s=0.2, seed=1)
+    w = log.truth.omega_b_radps
+    import dataclasses
+
+    from gfimu.array import Gyroscope
+
+    with_gyro = dataclasses.replace(log.array, gyroscope=Gyroscope())
+    gio.write_log(log.replace(array=with_gyro, truth=None, gyro_b_radps=w,
+                              reference=Motion(log.timestamps_ns, omega_b_radps=w)), tmp_path / "gyro")
+    gio.write_motion_csv(Motion(log.timestamps_ns, omega_b_radps=w + 0.01), tmp_path / "est.csv")
+    assert main(["evaluate", str(tmp_path / "gyro"), str(tmp_path / "est.csv"), "--format", "json"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the reference is the log's own gyroscope" in err
+    gio.write_log(log.replace(truth=None, reference=Motion(log.timestamps_ns, omega_b_radps=w)), tmp_path / "plain")
+    assert main(["evaluate", str(tmp_path / "plain"), str(tmp_path / "est.csv"), "--format", "json"]) == 0
+    assert capsys.readouterr().err == ""

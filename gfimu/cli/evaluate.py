@@ -78,6 +78,32 @@ def _truth_path(arg: str, against: str) -> Path:
     raise CLIError(f"{path}: log folder has no {' or '.join(names)} to evaluate against")
 
 
+def _warn_gyro_is_reference(truth_path: Path, truth) -> None:
+    """A warning when the reference is the log's own gyroscope (convert mimu4444 --with-gyro): an estimate
+    that reads the gyro then agrees with it by construction."""
+    import numpy as np
+
+    imu = truth_path.parent / "imu.csv"
+    if truth_path.name != "reference.csv" or truth.omega_b_radps is None or not imu.is_file():
+        return
+    with imu.open(encoding="utf-8") as f:
+        header = f.readline()
+    if "w_x" not in header:
+        return
+    from .. import io as gio
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gyro = gio.read_log(truth_path.parent, check=False).gyro_b_radps
+    if gyro is None or gyro.shape != truth.omega_b_radps.shape:
+        return
+    same = np.all(np.isfinite(gyro), axis=1) & np.all(gyro == truth.omega_b_radps, axis=1)
+    if np.mean(same) > 0.9:
+        warnings.warn(f"{truth_path}: the reference is the log's own gyroscope (imu.csv's w_x, w_y, w_z); an "
+                      "estimate made with the gyro agrees with it by construction, so this is no independent check "
+                      "(a log without gyroscope channels, e.g. convert without --with-gyro, evaluates the accelerometers alone)", UserWarning, stacklevel=2)
+
+
 def _order(args) -> tuple[str, str]:
     """(reference, estimate) from the two positional arguments: reference first, as evo takes them;
     the older order ``ESTIMATE.csv LOG`` (a log folder, truth.csv or reference.csv second) keeps working."""
@@ -106,6 +132,7 @@ def run(args) -> int:
     truth_path = _truth_path(reference_arg, args.against)
     estimate = gio.read_motion_csv(estimate_arg, allow_nan=True)
     truth, valid = gio.read_motion_table(truth_path)
+    _warn_gyro_is_reference(truth_path, truth)
     if args.calibration is not None:
         from ..calibration import read_calibration
 
