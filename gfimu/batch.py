@@ -87,19 +87,34 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
     return row
 
 
+def local_cluster(workers: int):
+    """A Dask ``LocalCluster`` of ``workers`` single-threaded worker processes (one BLAS thread each).
+
+    Dask's nannies set ``MALLOC_TRIM_THRESHOLD_=65536`` in their workers, which hands every freed block
+    back to the system: the smoother's many small arrays then cost more in system calls than in arithmetic
+    (a 2000-sample log: 6.4 s instead of 2.1 s). These workers keep glibc's own, adaptive threshold.
+    """
+    import dask
+    from dask.distributed import LocalCluster
+
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+        return LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
+
+
 def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smoother", options: dict | None = None,
               calibration: str | Path | None = None, scheduler: str | None = None, workers: int = 2,
               on_done: Callable[[dict], None] | None = None) -> BatchResult:
     """Run ``method`` on every log on Dask: on the scheduler at ``scheduler`` (``tcp://host:port``), or
     on a ``LocalCluster`` of ``workers`` single-threaded processes started here and closed after.
     ``on_done(row)`` is called as each log finishes (progress)."""
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
 
     folders = output_folders(logs, out_dir)
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        cluster = local_cluster(workers)
         client = Client(cluster)
     else:
         client = Client(scheduler, timeout="20s")

@@ -76,6 +76,26 @@ def test_a_failed_log_points_at_no_output_even_when_an_earlier_estimate_is_there
     assert row["status"] == "failed" and row["output"] == "" and "imu.csv" in row["message"]
 
 
+def _worker_environ():
+    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+
+
+def test_local_workers_run_one_blas_thread_without_dasks_malloc_trim_threshold():
+    """MALLOC_TRIM_THRESHOLD_=65536 (Dask's default for its workers) made the smoother 3x slower there."""
+    from dask.distributed import Client
+
+    from gfimu.batch import local_cluster
+
+    cluster = local_cluster(1)
+    try:
+        with Client(cluster) as client:
+            env = client.submit(_worker_environ, pure=False).result()
+    finally:
+        cluster.close()
+    assert env == {"MALLOC_TRIM_THRESHOLD_": os.environ.get("MALLOC_TRIM_THRESHOLD_"), "OPENBLAS_NUM_THREADS": "1",
+                   "OMP_NUM_THREADS": "1"}
+
+
 @pytest.mark.slow
 def test_batch_on_a_scheduler_with_two_workers(scheduler, tmp_path):
     """Three simulated logs and a broken one: each estimate equals gfimu estimate's on the same log,
