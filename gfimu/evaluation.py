@@ -154,6 +154,9 @@ class EvaluationResult:
     alignment: str
     sign_threshold_radps: float
     large_error_radps: float
+    n_deselected: int = 0
+    """Rows of a valid reference left out by a selection (time window, moving threshold); ``n_invalid``
+    then counts only the rows whose reference is invalid."""
 
     def __getitem__(self, name: str) -> QuantityMetrics:
         """Metrics by Motion field name, short label (``omega``) or CSV prefix (``w``)."""
@@ -185,6 +188,8 @@ class EvaluationResult:
         parts = [f"{self.n_compared} of {self.n_rows} rows compared"]
         if self.n_invalid:
             parts.append(f"{self.n_invalid} left out as invalid reference")
+        if self.n_deselected:
+            parts.append(f"{self.n_deselected} left out by the selection")
         if self.n_outside:
             parts.append(f"{self.n_outside} outside the truth's time span")
         if self.alignment != "exact":
@@ -224,7 +229,7 @@ class EvaluationResult:
     def to_json(self) -> str:
         doc = {
             "n_rows": self.n_rows, "n_compared": self.n_compared, "n_invalid": self.n_invalid,
-            "n_outside": self.n_outside, "alignment": self.alignment,
+            "n_deselected": self.n_deselected, "n_outside": self.n_outside, "alignment": self.alignment,
             "sign_threshold_radps": self.sign_threshold_radps, "large_error_radps": self.large_error_radps,
             "quantities": [{k: _clean(v) for k, v in r.items()} for r in self.rows],
         }

@@ -111,6 +111,21 @@ def test_compare_calibrate_and_plot_never_write_over_the_log(work, capsys, name)
             "is an input of this command")
 
 
+def test_an_estimate_kept_in_its_log_folder_can_be_written_again(work, capsys):
+    """A file next to the log's own files is no input: estimating twice into LOG/est.csv works, and so do
+    calibrate and plot; the log's own files stay refused."""
+    target = work / "log" / "est.csv"
+    for _ in range(2):
+        assert main(["estimate", str(work / "log"), "--method", "inversion", "--out", str(target), "--quiet"]) == 0
+    assert gio.read_motion_csv(target).omega_b_radps is not None
+    assert main(["estimate", str(work / "log"), "--method", "inversion", "--out", str(target), "--quiet"]) == 0
+    capsys.readouterr()
+    refused(["estimate", str(work / "log"), "--method", "inversion", "--out", str(work / "log" / "imu.csv")], work,
+            capsys, "is an input of this command", status=2)
+    refused(["evaluate", str(work / "log"), str(target), "--out", str(target)], work, capsys,
+            "is an input of this command")
+
+
 def test_evaluate_never_writes_over_truth_or_estimate(work, capsys):
     for target in (work / "log" / "truth.csv", work / "est.csv"):
         refused(["evaluate", str(work / "est.csv"), str(work / "log"), "--out", str(target)], work, capsys,

@@ -83,12 +83,28 @@ def test_phyphox_linear_acceleration_with_gyroscope_semicolons_and_decimal_comma
           "Gyroscope x (rad/s);Gyroscope y (rad/s);Gyroscope z (rad/s)\n"
           "0,0;0,5;-0,5;0,25;1,5;-2,5;0,125\n"
           "0,005;0,75;-0,75;0,5;1,75;-2,25;0,25\n")
-    write(tmp_path / "map.toml", PRESETS["phyphox"].replace("[time]", '[csv]\ndecimal = ","\n[time]'))
+    write(tmp_path / "map.toml", PRESETS["phyphox"].replace('decimal = "auto"', 'decimal = ","'))
     convert(capsys, str(tmp_path / "raw.csv"), "--map", str(tmp_path / "map.toml"), "--out", str(tmp_path / "log"))
     log = gio.read_log(tmp_path / "log")
     assert log.timestamps_ns.tolist() == [0, 5_000_000]
     assert log.accel_mps2.tolist() == [[0.5, -0.5, 0.25], [0.75, -0.75, 0.5]]
     assert log.gyro_b_radps.tolist() == [[1.5, -2.5, 0.125], [1.75, -2.25, 0.25]]
+
+
+@pytest.mark.parametrize("delimiter,decimal", [(";", ","), ("\t", ","), (";", "."), ("\t", "."), (",", ".")])
+def test_phyphox_preset_reads_every_csv_export_of_phyphox(tmp_path, capsys, delimiter, decimal):
+    """phyphox exports CSV with a comma, tab or semicolon and a decimal point or comma: the preset reads all."""
+    header = ["Time (s)", "Acceleration x (m/s^2)", "Acceleration y (m/s^2)", "Acceleration z (m/s^2)",
+              "Absolute acceleration (m/s^2)"]
+    rows = [["0.000000000E+00", "1.250000000E-01", "-2.500000000E-01", "9.810000000E+00", "9.8"],
+            ["1.000100000E-02", "1.500000000E-01", "-2.250000000E-01", "9.800000000E+00", "9.8"]]
+    text = delimiter.join(f'"{h}"' for h in header) + "\n"
+    text += "".join(delimiter.join(f.replace(".", decimal) for f in r) + "\n" for r in rows)
+    write(tmp_path / "Raw Data.csv", text)
+    convert(capsys, str(tmp_path / "Raw Data.csv"), "--map", "phyphox", "--out", str(tmp_path / "log"))
+    log = gio.read_log(tmp_path / "log")
+    assert log.timestamps_ns.tolist() == [0, 10_001_000]
+    assert log.accel_mps2.tolist() == [[0.125, -0.25, 9.81], [0.15, -0.225, 9.80]]
 
 
 def test_sensor_logger_folder_interpolates_the_gyroscope_onto_the_accelerometer(tmp_path, capsys):
@@ -369,6 +385,34 @@ def test_an_axis_without_a_unit(bad, capsys):
             map_text=SIMPLE_MAP.format(time_unit="", z="az"))
 
 
+def test_seconds_under_a_nanosecond_header_are_not_called_a_step_back(bad, capsys):
+    """EuRoC-style times written in seconds under '[ns]': increasing times that round to one nanosecond are
+    refused as such, pointing at the unit, not as time going back."""
+    run_bad(capsys, bad, "f.csv:3: time 1403715273.267143 ('t [ns]') and the previous row's 1403715273.262143 "
+                         "(line 2) are the same nanosecond in [ns]; is the time unit right?",
+            csv_text="t [ns],ax [g],ay [g],az [g]\n1403715273.262143,0,0,1\n1403715273.267143,0,0,1\n",
+            map_text=SIMPLE_MAP.format(time_unit="", z="az"))
+    run_bad(capsys, bad, "f.csv:3: time 1403715273.2 ('t [ns]') is not after the previous row's 1403715273.3",
+            csv_text="t [ns],ax [g],ay [g],az [g]\n1403715273.3,0,0,1\n1403715273.2,0,0,1\n")
+
+
+def test_times_in_milliseconds_under_a_seconds_header_are_warned_about(tmp_path, capsys):
+    """A 200 Hz recording written in ms under '[s]' reads as 0.2 Hz: the log is written, with one warning naming
+    the file, the column and the likely unit."""
+    write(tmp_path / "f.csv", "t [s],ax [g],ay [g],az [g]\n" + "".join(f"{5 * k},0,0,1\n" for k in range(20)))
+    write(tmp_path / "map.toml", SIMPLE_MAP.format(time_unit="", z="az"))
+    assert main(["convert", "csv", str(tmp_path / "f.csv"), "--map", str(tmp_path / "map.toml"), "--out",
+                 str(tmp_path / "log"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err == (f"gfimu convert: warning: {tmp_path / 'f.csv'}: the times of 't [s]' step by a median 5 s, a "
+                   "sample rate of 0.2 Hz, implausible for an accelerometer array: is the time unit [s] right; in "
+                   "[ms] that is 200 Hz?\n")
+    write(tmp_path / "g.csv", "t [ms],ax [g],ay [g],az [g]\n" + "".join(f"{5 * k},0,0,1\n" for k in range(20)))
+    assert main(["convert", "csv", str(tmp_path / "g.csv"), "--map", str(tmp_path / "map.toml"), "--out",
+                 str(tmp_path / "log2"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+
+
 def test_text_in_a_value_and_a_ragged_row(bad, capsys):
     run_bad(capsys, bad, "f.csv:3: 'ay [g]' (field 3) value 'n/a' is not a number",
             csv_text="t [ms],ax [g],ay [g],az [g]\n0,0,0,1\n1,0,n/a,1\n", map_text=SIMPLE_MAP.format(time_unit="", z="az"))
@@ -411,6 +455,27 @@ def test_a_folder_without_the_named_file(tmp_path, capsys):
     (tmp_path / "rec").mkdir()
     refused(capsys, tmp_path, "TotalAcceleration.csv: file not found", str(tmp_path / "rec"), "--map",
             "sensorlogger", "--out", str(tmp_path / "log"))
+
+
+def test_a_map_naming_a_missing_file_names_the_map_key(bad, capsys):
+    """A sensor's `file` (or [csv] `file`) that does not exist: the map's line and key, and the path looked for."""
+    sensor_file = SIMPLE_MAP.format(time_unit='unit = "ms"', z="az").replace('name = "a"', 'name = "a"\nfile = "right.csv"')
+    run_bad(capsys, bad, f"map.toml:7: accelerometers[0].file: {bad / 'right.csv'}: file not found",
+            map_text=sensor_file)
+    csv_file = SIMPLE_MAP.format(time_unit="", z="az").replace("[time]", '[csv]\nfile = "board.csv"\n[time]')
+    run_bad(capsys, bad, f"map.toml:3: csv.file: {bad / 'board.csv'}: file not found", map_text=csv_file)
+
+
+def test_gyro_as_reference_without_the_optional_gyroscope_says_where_it_looked(tmp_path, capsys):
+    write(tmp_path / "rec" / "TotalAcceleration.csv", "time,seconds_elapsed,z,y,x\n100,0,1,0,0\n200,0,1,0,0\n")
+    refused(capsys, tmp_path, f"{tmp_path / 'rec'}: --gyro-as-reference: no gyroscope to take as the reference: "
+                              f"{tmp_path / 'rec' / 'Gyroscope.csv'} is not there", str(tmp_path / "rec"), "--map",
+            "sensorlogger", "--gyro-as-reference", "--out", str(tmp_path / "log"))
+    write(tmp_path / "Raw Data.csv", '"Time (s)","Acceleration x (m/s^2)","Acceleration y (m/s^2)",'
+                                     '"Acceleration z (m/s^2)"\n0,0,0,9.8\n0.01,0,0,9.8\n')
+    refused(capsys, tmp_path, "no gyroscope to take as the reference: its columns (Gyroscope x, Gyroscope y, "
+                              f"Gyroscope z) are not in {tmp_path / 'Raw Data.csv'}", str(tmp_path / "Raw Data.csv"),
+            "--map", "phyphox", "--gyro-as-reference", "--out", str(tmp_path / "log"))
 
 
 def test_the_documented_example(tmp_path, capsys):

@@ -227,7 +227,8 @@ def test_cli_errors_are_one_line_with_exit_status_2(files, capsys):
     gio.write_motion_csv(Motion(T + 5, omega_b_radps=W_EST), files / "late.csv")
     assert main(["evaluate", str(files / "late.csv"), str(files / "truth.csv")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("gfimu evaluate: error: estimate and truth timestamps do not match (row 0 differs")
+    assert err.startswith(f"gfimu evaluate: error: {files / 'late.csv'} vs {files / 'truth.csv'}: estimate and truth "
+                          "timestamps do not match (row 0 differs")
     assert "(--interpolate)" in err and err.count("\n") == 1
     assert main(["evaluate", str(files / "late.csv"), str(files / "truth.csv"), "--interpolate"]) == 0
     assert "truth interpolated at the estimate's timestamps" in capsys.readouterr().out
@@ -284,3 +285,73 @@ def test_cli_reference_first_moving_window_offset_and_errors(tmp_path, capsys):
     table = np.array(rows[1:], dtype=float)
     np.testing.assert_allclose(table[:, 1:4], err, atol=1e-9)
     np.testing.assert_array_equal(table[:, 5] == 1, moving)
+
+
+def test_cli_rows_left_out_by_the_selection_are_not_called_invalid_reference(tmp_path, capsys):
+    """A log whose reference is invalid on 2 rows, evaluated with --moving-threshold-radps: the summary counts
+    the invalid rows and the rows the threshold leaves out apart."""
+    t = np.arange(10) * 10_000_000
+    w = np.zeros((10, 3))
+    w[:, 2] = [0, 0, 0, 3, 3, 3, 3, 3, 0, 0]
+    ref = tmp_path / "reference.csv"
+    lines = ["#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],valid []"]
+    lines += [f"{ti},0,0,{wz},{0 if k in (4, 5) else 1}" for k, (ti, wz) in enumerate(zip(t, w[:, 2]))]
+    ref.write_text("\n".join(lines) + "\n")
+    gio.write_motion_csv(Motion(t, omega_b_radps=w + 0.1), tmp_path / "est.csv")
+    assert main(["evaluate", str(ref), str(tmp_path / "est.csv"), "--moving-threshold-radps", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "3 of 10 rows compared; 2 left out as invalid reference; 5 left out by the selection." in out
+    assert main(["evaluate", str(ref), str(tmp_path / "est.csv"), "--moving-threshold-radps", "1", "--format",
+                 "json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert (doc["n_compared"], doc["n_invalid"], doc["n_deselected"]) == (3, 2, 5)
+    assert main(["evaluate", str(ref), str(tmp_path / "est.csv")]) == 0
+    assert "8 of 10 rows compared; 2 left out as invalid reference." in capsys.readouterr().out
+
+
+def test_cli_calibration_removes_the_gyro_bias_from_the_reference(tmp_path, capsys):
+    """An estimate made with --calibration has the gyro bias removed; evaluate --calibration removes it from the
+    gyro reference too, so a bias-free estimate of the same motion scores 0 instead of the bias."""
+    from gfimu.calibration import Calibration, SensorCalibration, write_calibration
+
+    t = np.arange(5) * 10_000_000
+    w = np.column_stack([np.linspace(0, 1, 5), np.ones(5), np.zeros(5)])
+    bias = np.array([0.01, -0.02, 0.005])
+    (tmp_path / "log").mkdir()
+    gio.write_motion_csv(Motion(t, omega_b_radps=w + bias), tmp_path / "log" / "reference.csv")
+    gio.write_motion_csv(Motion(t, omega_b_radps=w), tmp_path / "est.csv")
+    sensor = SensorCalibration("a1", ("x", "y", "z"), np.eye(3), np.zeros(3))
+    write_calibration(Calibration((sensor,), gyro_bias_b_radps=bias), tmp_path / "cal.toml")
+    ref, est = str(tmp_path / "log" / "reference.csv"), str(tmp_path / "est.csv")
+    assert main(["evaluate", ref, est, "--format", "json"]) == 0
+    row = json.loads(capsys.readouterr().out)["quantities"][0]
+    assert row["rmse_norm"] == pytest.approx(float(np.linalg.norm(bias)), rel=1e-9)
+    assert main(["evaluate", ref, est, "--format", "json", "--calibration", str(tmp_path / "cal.toml")]) == 0
+    row = json.loads(capsys.readouterr().out)["quantities"][0]
+    assert row["rmse_norm"] < 1e-12
+    assert main(["evaluate", ref, est, "--calibration", str(tmp_path / "cal.toml"), "--out",
+                 str(tmp_path / "cal.toml")]) == 2
+    assert "is an input of this command" in capsys.readouterr().err
+
+
+def test_cli_warns_when_the_reference_is_the_logs_own_gyroscope(tmp_path, capsys):
+    """A log whose gyroscope channels are its reference (convert --with-gyro / --gyro-as-reference): evaluate
+    against it says once that it is no independent check; a log without gyro channels gets no warning."""
+    from gfimu.simulate import simulate
+
+    log = simulate("reversal", duration_s=0.2, seed=1)
+    w = log.truth.omega_b_radps
+    import dataclasses
+
+    from gfimu.array import Gyroscope
+
+    with_gyro = dataclasses.replace(log.array, gyroscope=Gyroscope())
+    gio.write_log(log.replace(array=with_gyro, truth=None, gyro_b_radps=w,
+                              reference=Motion(log.timestamps_ns, omega_b_radps=w)), tmp_path / "gyro")
+    gio.write_motion_csv(Motion(log.timestamps_ns, omega_b_radps=w + 0.01), tmp_path / "est.csv")
+    assert main(["evaluate", str(tmp_path / "gyro"), str(tmp_path / "est.csv"), "--format", "json"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the reference is the log's own gyroscope" in err
+    gio.write_log(log.replace(truth=None, reference=Motion(log.timestamps_ns, omega_b_radps=w)), tmp_path / "plain")
+    assert main(["evaluate", str(tmp_path / "plain"), str(tmp_path / "est.csv"), "--format", "json"]) == 0
+    assert capsys.readouterr().err == ""

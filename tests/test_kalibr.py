@@ -44,7 +44,9 @@ def test_known_transform():
     body, and its x axis is the body's -y axis (v_b = R_i_bᵀ v_i)."""
     t_i_b = [[0, -1, 0, 1], [1, 0, 0, 2], [0, 0, 1, 3], [0, 0, 0, 1]]
     imus = parse_kalibr({"imu0": {"T_i_b": t_i_b}}, "imu0:\n  T_i_b: ...\n", "k.yaml")
-    array, _ = apply_kalibr(unplaced(["a"]), imus)
+    array, report = apply_kalibr(unplaced(["a"]), imus)
+    assert report[0].endswith("body frame = the frame T_i_b maps from (imu0's T_i_b is not the identity: imu0 is "
+                              "not at its origin)")
     acc = array.accelerometers[0]
     assert acc.position_m.tolist() == [-2.0, 1.0, -3.0]
     assert (acc.rotation_body_sensor @ [1, 0, 0]).tolist() == [0.0, -1.0, 0.0]
@@ -178,4 +180,5 @@ def test_the_documented_example():
     array, report = apply_kalibr(unplaced(["imu0", "imu1"]), parse_kalibr(yaml.safe_load(block), block, "doc"))
     np.testing.assert_allclose(array.accelerometers[1].position_m, [-0.02, 0.01, 0.0], rtol=0, atol=1e-15)
     assert (array.accelerometers[1].rotation_body_sensor @ [1.0, 0.0, 0.0]).tolist() == [0.0, -1.0, 0.0]
+    assert report[0].endswith("body frame = the frame of imu0 (Kalibr's reference IMU)")
     assert "matched by rostopic" in report[0] and any("time_offset 0.0012 s is not applied" in r for r in report)

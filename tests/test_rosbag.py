@@ -435,6 +435,19 @@ def refused(argv: list[str], out_dir: Path, capsys, *parts: str, status: int = 2
     return err
 
 
+def test_a_ros2_bag_named_by_its_metadata_yaml(tmp_path, capsys):
+    """BAG/metadata.yaml reads as the bag folder BAG, as ros2 bag info takes either."""
+    log = simulate("random3d", array=cube_array(0.025, noise_std_mps2=NOISE_MPS2), rate_hz=500.0, duration_s=0.2,
+                   seed=1)
+    streams = [{"topic": f"/imu/{a.name}", "frame_id": a.name, "stamps_ns": log.timestamps_ns + T0_NS,
+                "accel": log.accel_mps2[:, 3 * i:3 * i + 3]} for i, a in enumerate(log.array.accelerometers)]
+    bag = write_bag(tmp_path / "bag", "mcap", streams)
+    rc, out, err = convert([str(bag / "metadata.yaml"), "--array", str(array_file(tmp_path / "array.toml", log.array)),
+                            "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert np.array_equal(gio.read_log(tmp_path / "log").accel_mps2, log.accel_mps2)
+
+
 def test_bag_without_imu_topics(tmp_path, capsys):
     bag = tmp_path / "strings.bag"
     with Writer1(bag) as w:

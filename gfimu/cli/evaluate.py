@@ -11,6 +11,7 @@ estimated); ``--errors-out`` writes the per-sample ω errors.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -52,6 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "implies --interpolate when not 0)")
     offset.add_argument("--estimate-time-offset", action="store_true",
                         help="estimate that offset (cross-correlation of |ω| within ±0.5 s), report it and apply it")
+    p.add_argument("--calibration", default=None, metavar="FILE",
+                   help="calibration.toml the estimate was made with (gfimu estimate --calibration): its gyro bias "
+                        "is removed from a reference's ω too, as gfimu estimate removes it from the gyro (default: "
+                        "the reference as it is)")
     p.add_argument("--errors-out", default=None, metavar="FILE",
                    help="also write the per-sample ω errors (timestamp, error x, y, z, norm [rad/s], used 0/1) "
                         "as CSV (atomically; never over an input)")
@@ -71,6 +76,32 @@ def _truth_path(arg: str, against: str) -> Path:
         if (path / name).is_file():
             return path / name
     raise CLIError(f"{path}: log folder has no {' or '.join(names)} to evaluate against")
+
+
+def _warn_gyro_is_reference(truth_path: Path, truth) -> None:
+    """A warning when the reference is the log's own gyroscope (convert mimu4444 --with-gyro): an estimate
+    that reads the gyro then agrees with it by construction."""
+    import numpy as np
+
+    imu = truth_path.parent / "imu.csv"
+    if truth_path.name != "reference.csv" or truth.omega_b_radps is None or not imu.is_file():
+        return
+    with imu.open(encoding="utf-8") as f:
+        header = f.readline()
+    if "w_x" not in header:
+        return
+    from .. import io as gio
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gyro = gio.read_log(truth_path.parent, check=False).gyro_b_radps
+    if gyro is None or gyro.shape != truth.omega_b_radps.shape:
+        return
+    same = np.all(np.isfinite(gyro), axis=1) & np.all(gyro == truth.omega_b_radps, axis=1)
+    if np.mean(same) > 0.9:
+        warnings.warn(f"{truth_path}: the reference is the log's own gyroscope (imu.csv's w_x, w_y, w_z); an "
+                      "estimate made with the gyro agrees with it by construction, so this is no independent check "
+                      "(a log without gyroscope channels, e.g. convert without --with-gyro, evaluates the accelerometers alone)", UserWarning, stacklevel=2)
 
 
 def _order(args) -> tuple[str, str]:
@@ -93,13 +124,21 @@ def run(args) -> int:
     from ..io.outputs import check_output, write_output
 
     reference_arg, estimate_arg = _order(args)
-    out = check_output(args.out, [reference_arg, estimate_arg], "--out", stdout=True)
+    inputs = [reference_arg, estimate_arg, args.calibration]
+    out = check_output(args.out, inputs, "--out", stdout=True)
     errors_out = None
     if args.errors_out is not None:
-        errors_out = check_output(args.errors_out, [reference_arg, estimate_arg], "--errors-out")
+        errors_out = check_output(args.errors_out, inputs, "--errors-out")
     truth_path = _truth_path(reference_arg, args.against)
     estimate = gio.read_motion_csv(estimate_arg, allow_nan=True)
     truth, valid = gio.read_motion_table(truth_path)
+    _warn_gyro_is_reference(truth_path, truth)
+    if args.calibration is not None:
+        from ..calibration import read_calibration
+
+        bias = read_calibration(args.calibration).gyro_bias_b_radps
+        if bias is not None and truth.omega_b_radps is not None and truth_path.name != "truth.csv":
+            truth = truth.replace(omega_b_radps=truth.omega_b_radps - bias)
     interpolate = args.interpolate
     offset_s = float(args.time_offset_s)
     if args.estimate_time_offset:
@@ -121,8 +160,17 @@ def run(args) -> int:
         raise CLIError("no reference row left to evaluate (check --t-start-s, --t-end-s, --moving-threshold-radps)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", EvaluationAlignmentWarning)
-        result = evaluate(estimate, truth, valid=use, sign_threshold_radps=args.sign_threshold,
-                          align="interpolate" if interpolate else "exact")
+        try:
+            result = evaluate(estimate, truth, valid=use, sign_threshold_radps=args.sign_threshold,
+                              align="interpolate" if interpolate else "exact")
+        except ValueError as exc:  # the files the mismatch is between
+            raise CLIError(f"{estimate_arg} vs {truth_path}: {exc}") from None
+        if result.n_invalid and (valid is None or np.any(use != np.asarray(valid, bool))):
+            # the rows the selection left out are not invalid reference: count those apart
+            invalid = 0 if valid is None else evaluate(
+                estimate, truth, valid=np.array(valid, bool), sign_threshold_radps=args.sign_threshold,
+                align="interpolate" if interpolate else "exact").n_invalid
+            result = dataclasses.replace(result, n_invalid=invalid, n_deselected=result.n_invalid - invalid)
     if args.format == "markdown":
         text = result.to_markdown(title=f"{estimate_arg} vs {truth_path}")
     elif args.format == "csv":

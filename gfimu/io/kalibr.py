@@ -168,8 +168,12 @@ def apply_kalibr(array: SensorArray, imus: list[KalibrImu], path: str | os.PathL
                              "accelerometer is needed", path)
     order, how = _match(array, imus)
     accs = []
-    lines = [f"extrinsics: {path}, Kalibr entries matched {how}; body frame = the frame of "
-             f"{imus[0].key} (Kalibr's reference IMU)"]
+    first = imus[0]
+    if np.allclose(first.rotation_i_b, np.eye(3), atol=1e-9) and np.allclose(first.translation_i_b_m, 0.0, atol=1e-12):
+        body = f"the frame of {first.key} (Kalibr's reference IMU)"
+    else:
+        body = f"the frame T_i_b maps from ({first.key}'s T_i_b is not the identity: {first.key} is not at its origin)"
+    lines = [f"extrinsics: {path}, Kalibr entries matched {how}; body frame = {body}"]
     for acc, j in zip(array.accelerometers, order):
         imu = imus[j]
         accs.append(replace(acc, position_m=imu.position_b_m, rotation_body_sensor=imu.rotation_body_sensor))

@@ -5,9 +5,10 @@ One rule for every file a command writes:
 - it is written through :func:`gfimu.io.atomic.atomic_path` (temporary file
   in the destination folder, fsync, rename; the temporary file is removed on
   any error and on SIGINT/SIGTERM);
-- it never replaces one of the command's inputs, nor any file of an input
-  log folder: paths are compared after resolving links, and by device and
-  inode (hard links);
+- it never replaces one of the command's inputs, nor a file of an input
+  log (``array.toml``, ``imu.csv``, ``truth.csv``, ``reference.csv``; other
+  files in a log folder, an earlier estimate, are no input): paths are
+  compared after resolving links, and by device and inode (hard links);
 - it never replaces anything that is not a regular file (a folder, a device
   such as ``/dev/null``, a FIFO, a socket);
 - ``-`` means standard output where the command allows it (tables, estimates).
@@ -36,11 +37,12 @@ STDOUT = "-"
 def input_files(paths: Iterable[str | os.PathLike | None]) -> list[Path]:
     """The files that stand behind a command's inputs.
 
-    A folder stands for every file in it (a log folder: its ``array.toml``,
-    ``imu.csv``, ``truth.csv``, ``reference.csv`` and whatever else it
-    holds); a file of a log folder also stands for the other files of that
-    log. ``None`` and ``-`` are skipped; paths that do not exist are kept
-    (compared by name).
+    A log folder (one holding ``array.toml`` and ``imu.csv``) stands for the
+    files a log owns (:data:`LOG_FILES`): an estimate, figure or calibration
+    written next to them is no input and may be written again. Any other
+    folder stands for every file in it (a folder of recordings). A file of a
+    log folder also stands for the other files of that log. ``None`` and
+    ``-`` are skipped; paths that do not exist are kept (compared by name).
     """
     out: list[Path] = []
     for p in paths:
@@ -49,7 +51,10 @@ def input_files(paths: Iterable[str | os.PathLike | None]) -> list[Path]:
         p = Path(p)
         out.append(p)
         if p.is_dir():
-            out.extend(c for c in p.iterdir() if c.is_file())
+            if (p / "array.toml").is_file() and (p / "imu.csv").is_file():
+                out.extend(p / name for name in LOG_FILES if (p / name).exists())
+            else:
+                out.extend(c for c in p.iterdir() if c.is_file())
         elif p.name in LOG_FILES and p.parent.is_dir():
             out.extend(p.parent / name for name in LOG_FILES if (p.parent / name).exists())
     return out

@@ -23,8 +23,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 import tomllib
+import warnings
 from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 import numpy as np
@@ -34,8 +37,8 @@ from ...array import Gyroscope, SensorArray
 from ...log import Log
 from ...motion import Motion
 from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
-from ..errors import LogFormatError
-from ..units import header_name_and_unit, time_unit_ns, timestamp_ns, unit_factor, unit_help
+from ..errors import LogFormatError, LogPlausibilityWarning
+from ..units import TIME_UNITS_NS, header_name_and_unit, time_unit_ns, timestamp_ns, unit_factor, unit_help
 
 MAP_FORMAT = "gfimu-csv-map/1"
 AXES = ("x", "y", "z")
@@ -60,7 +63,10 @@ z = "w_RS_S_z"
     "phyphox": f'''format = "{MAP_FORMAT}"
 name = "phyphox"
 # phyphox "Acceleration with g" (or "Linear Acceleration") export, one CSV file; a gyroscope
-# in the same file is read when present
+# in the same file is read when present; any of phyphox's CSV exports (comma, tab or semicolon,
+# decimal point or comma)
+[csv]
+decimal = "auto"
 [time]
 column = "Time"
 [[accelerometers]]
@@ -249,8 +255,8 @@ def parse_map(text: str, path: str) -> ColumnMap:
         if not _is_int(v) or v < 0:
             raise ctx.error(f"expected a whole number >= 0, got {v!r}", "csv", 0, key)
     decimal = csv.get("decimal", ".")
-    if decimal not in (".", ","):
-        raise ctx.error(f"expected \".\" or \",\", got {decimal!r}", "csv", 0, "decimal")
+    if decimal not in (".", ",", "auto"):
+        raise ctx.error(f"expected \".\", \",\" or \"auto\", got {decimal!r}", "csv", 0, "decimal")
     if decimal == "," and delimiter == ",":
         raise ctx.error("a decimal comma needs another delimiter", "csv", 0, "decimal")
     file = csv.get("file")
@@ -356,6 +362,10 @@ def _split(line: str, delimiter: str | None) -> list[str]:
     return [f.strip().strip('"').strip() for f in line.split(delimiter)]
 
 
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+"""A number written with a decimal comma (``decimal = "auto"``)."""
+
+
 def read_table(path: Path, layout: Layout) -> Table:
     """Split a text file by ``layout``; errors name the file and line."""
     try:
@@ -402,12 +412,37 @@ def read_table(path: Path, layout: Layout) -> Table:
         if len(r) != n_fields:
             what = "the header has" if headers else "the first row has"
             raise LogFormatError(f"row has {len(r)} fields, {what} {n_fields}", path, line)
-    if layout.decimal == ",":
+    if layout.decimal == "," or (layout.decimal == "auto" and delimiter != ","
+                                 and any(_DECIMAL_COMMA.match(f) for f in rows[0])):
         rows = [[f.replace(",", ".") for f in r] for r in rows]
     return Table(path, names, headers, units if headers else [None] * n_fields, rows, [ln for ln, _ in data])
 
 
 # --- reading ------------------------------------------------------------------------------
+
+PLAUSIBLE_RATE_HZ = (1.0, 100e3)
+"""Sample rates [Hz] an accelerometer array records at; times stepping outside suggest a wrong time unit."""
+
+
+def _rate_warning(t: np.ndarray, unit: str, table: Table, j: int) -> str | None:
+    """A warning when the median time step gives an implausible sample rate under the time unit read."""
+    if t.size < 2:
+        return None
+    step_ns = float(np.median(np.diff(t)))
+    lo, hi = PLAUSIBLE_RATE_HZ
+    if step_ns <= 0 or lo <= 1e9 / step_ns <= hi:
+        return None
+    try:
+        scale = time_unit_ns(unit)
+    except KeyError:
+        return None
+    raw = step_ns / scale
+    likely = sorted((abs(np.log10(1e9 / (raw * ns)) - 2.5), u) for u, ns in TIME_UNITS_NS.items()
+                    if ns != scale and lo <= 1e9 / (raw * ns) <= hi)
+    hint = f"; in [{likely[0][1]}] that is {1e9 / (raw * TIME_UNITS_NS[likely[0][1]]):.4g} Hz" if likely else ""
+    return (f"{table.path}: the times of {table.shown(j)} step by a median {raw:.6g} {unit}, a sample rate of "
+            f"{1e9 / step_ns:.4g} Hz, implausible for an accelerometer array: is the time unit [{unit}] right{hint}?")
+
 
 class _Reader:
     def __init__(self, cmap: ColumnMap, input_path: Path):
@@ -415,6 +450,7 @@ class _Reader:
         self.input = input_path
         self.folder = input_path if input_path.is_dir() else input_path.parent
         self.tables: dict[Path, Table] = {}
+        self.rate_warnings: list[str] = []  # issued once the recording has been read
 
     def error(self, message: str, column: Column) -> LogFormatError:
         return self.map.ctx.error(message, column.table, column.index, column.key)
@@ -427,6 +463,15 @@ class _Reader:
                                          "(give file = NAME here or [csv] file)", sensor.table, sensor.index)
             return self.input
         return self.folder / name
+
+    def existing_file_of(self, sensor: Sensor) -> Path:
+        """:meth:`file_of`, refused naming the map's ``file`` key when that file is missing."""
+        path = self.file_of(sensor)
+        if path != self.input and not path.exists():
+            if sensor.file is not None:
+                raise self.map.ctx.error(f"{path}: file not found", sensor.table, sensor.index, "file")
+            raise self.map.ctx.error(f"{path}: file not found", "csv", 0, "file")
+        return path
 
     def table(self, path: Path) -> Table:
         if path not in self.tables:
@@ -513,9 +558,21 @@ class _Reader:
         bad = np.flatnonzero(np.diff(t) <= 0)
         if bad.size:
             k = int(bad[0]) + 1
+            if t[k] == t[k - 1] and tokens[k].strip() != tokens[k - 1].strip():
+                try:
+                    later = Decimal(tokens[k].strip()) > Decimal(tokens[k - 1].strip())
+                except InvalidOperation:
+                    later = False
+                if later:  # distinct times that round to one nanosecond: a fraction of a ns, not a step back
+                    raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) and the previous row's {tokens[k - 1]} "
+                                         f"(line {table.lines[k - 1]}) are the same nanosecond in [{unit}]; "
+                                         "is the time unit right?", table.path, table.lines[k])
             raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) is not after the previous row's "
                                  f"{tokens[k - 1]} (line {table.lines[k - 1]}); time must be strictly increasing",
                                  table.path, table.lines[k])
+        warning = _rate_warning(t, unit, table, j)
+        if warning is not None:
+            self.rate_warnings.append(warning)
         return t, unit
 
     def values(self, table: Table, sensor: Sensor, kind: str, axes: tuple[str, ...]) -> tuple[np.ndarray, list[str]]:
@@ -632,7 +689,7 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     groups: dict[tuple, tuple[np.ndarray, str]] = {}
     blocks = []
     for sensor, axes, kind in sensors:
-        path = reader.file_of(sensor)
+        path = reader.existing_file_of(sensor)
         table = reader.table(path)
         key = (path, sensor.time.column, sensor.time.unit)
         if key not in groups:
@@ -675,10 +732,18 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         raise LogFormatError(f"holds {t_out.size} sample(s); a log needs at least two", base_key[0])
     reference = None
     if gyro_as_reference:
+        if omega is None and cmap.gyroscope is not None:  # optional, and not in the recording
+            where = reader.file_of(cmap.gyroscope)
+            names = ", ".join(" or ".join(map(str, c.column)) if isinstance(c.column, tuple) else str(c.column)
+                              for c in cmap.gyroscope.axes.values())
+            found = f"its columns ({names}) are not in {where}" if where.is_file() else f"{where} is not there"
+            raise LogFormatError(f"--gyro-as-reference: no gyroscope to take as the reference: {found}", input_path)
         if omega is None:
             raise LogFormatError("--gyro-as-reference: the map names no gyroscope columns", cmap.path)
         reference = Motion(t_out, omega_b_radps=omega.copy())
     log = Log(array, t_out, accel, gyro_b_radps=omega, reference=reference, source=str(input_path))
+    for warning in reader.rate_warnings:
+        warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
     return Conversion(log, tuple(report + geometry_report), unplaced)
 
 

@@ -225,6 +225,8 @@ def _messages(path: Path) -> tuple[str, dict[str, str], dict[str, TopicMessages]
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
         raise MissingExtraError(EXTRA_HINT) from None
+    if path.name == "metadata.yaml" and path.is_file():  # a ROS 2 bag named by its metadata: the bag is the folder
+        path = path.parent
     kind = _bag_kind(path)
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
