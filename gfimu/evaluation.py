@@ -64,6 +64,15 @@ class EvaluationAlignmentWarning(UserWarning):
     """The truth was interpolated at the estimate's timestamps."""
 
 
+class TimestampMismatchError(ValueError):
+    """Estimate and truth timestamps differ and ``align='exact'``; ``detail`` says where."""
+
+    def __init__(self, detail: str, hint: str = "pass align='interpolate'"):
+        self.detail = detail
+        super().__init__(f"estimate and truth timestamps do not match ({detail}); they must be equal, or {hint} to "
+                         "interpolate the truth at the estimate's timestamps")
+
+
 @dataclass(frozen=True)
 class QuantityMetrics:
     """Errors of one quantity.
@@ -355,8 +364,7 @@ def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, s
         else:
             k = int(np.flatnonzero(estimate.timestamps_ns != truth.timestamps_ns)[0])
             detail = (f"row {k} differs: estimate {estimate.timestamps_ns[k]} ns, truth {truth.timestamps_ns[k]} ns")
-        raise ValueError(f"estimate and truth timestamps do not match ({detail}); they must be equal, or pass "
-                         "align='interpolate' (--interpolate) to interpolate the truth at the estimate's timestamps")
+        raise TimestampMismatchError(detail)
     else:
         if len(truth) < 2:
             raise ValueError("cannot interpolate a truth with fewer than 2 rows")

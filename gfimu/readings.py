@@ -9,7 +9,8 @@ value there and the rest of the log is untouched:
 - readings that are not finite;
 - readings outside the sensor's range when the array states one;
 - isolated spikes (a Hampel identifier with a local scale): the reading's
-  distance from the median of the 5 samples centred on it exceeds
+  distance from the median of the 5 samples centred on it (at the first and
+  last two rows, from a robust straight line through the 5 end samples) exceeds
   :data:`SPIKE_SCALES` times the local noise scale, read from the second
   differences within ±:data:`SCALE_HALF_WIDTH` samples (leaving out those the
   sample itself touches), and no other accelerometer jumps at the same sample.
@@ -103,6 +104,23 @@ def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 out[s:s + step] = np.nanmedian(block, axis=2)
+    return out
+
+
+def _edge_line(x: np.ndarray) -> np.ndarray:
+    """A robust straight line through the rows of ``x`` (m, cols) per column, at those rows: the median of the
+    pairwise slopes and the median intercept (Theil-Sen), NaN readings left out. One gross error among the rows
+    moves it little; a ramp is followed exactly."""
+    t = np.arange(x.shape[0], dtype=float)
+    out = np.full(x.shape, np.nan)
+    i, j = np.triu_indices(x.shape[0], k=1)
+    for c in range(x.shape[1]):
+        slopes = (x[j, c] - x[i, c]) / (j - i)
+        slopes = slopes[np.isfinite(slopes)]
+        ok = np.isfinite(x[:, c])
+        if slopes.size:
+            slope = float(np.median(slopes))
+            out[:, c] = float(np.median(x[ok, c] - slope * t[ok])) + slope * t
     return out
 
 
@@ -223,6 +241,12 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
     spikes = np.zeros_like(bad_value)
     if n >= 2 * SCALE_HALF_WIDTH + 1:
         med = _rolling_median(work, MEDIAN_HALF_WIDTH)
+        # the first and last rows have a median window cut short, whose median lags a ramp: there, a
+        # robust line through the 2 h + 1 end rows instead (a spike at an end row still stands out of it)
+        h, m = MEDIAN_HALF_WIDTH, 2 * MEDIAN_HALF_WIDTH + 1
+        first, last = _edge_line(work[:m])[:h], _edge_line(work[n - m:])[m - h:]
+        med[:h] = np.where(np.isfinite(first), first, med[:h])
+        med[n - h:] = np.where(np.isfinite(last), last, med[n - h:])
         dev = np.abs(work - med)
         # local noise scale from the second differences around the sample, leaving out the three a
         # spike at k touches (k-1, k, k+1): mean |y[j+1] - 2 y[j] + y[j-1]| = σ √6 √(2/π) for white noise

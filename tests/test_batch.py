@@ -76,6 +76,36 @@ def test_a_failed_log_points_at_no_output_even_when_an_earlier_estimate_is_there
     assert row["status"] == "failed" and row["output"] == "" and "imu.csv" in row["message"]
 
 
+def test_a_log_argument_that_is_not_a_log_folder_is_a_failed_row_and_the_others_go_on(tmp_path):
+    """`gfimu batch logs/*` catching a README file and a folder without array.toml: both are failed rows of
+    the summary with their message, the real log is estimated, the exit status is 1."""
+    from gfimu.simulate import simulate
+
+    gio.write_log(simulate("reversal", duration_s=0.5, seed=1), tmp_path / "logs" / "log")
+    (tmp_path / "logs" / "README").write_text("recorded on the bench\n")
+    (tmp_path / "logs" / "notes").mkdir()
+    logs = [str(tmp_path / "logs" / name) for name in ("README", "log", "notes")]
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "gfimu", "batch", *logs, "--out", str(out), "--method", "inversion",
+                           "--workers", "1", "--quiet"], env=_env(), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and "README: failed" in proc.stderr and "notes: failed" in proc.stderr
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [Path(r["log"]).name for r in rows] == ["README", "log", "notes"]
+    assert [r["status"] for r in rows] == ["failed", "ok", "failed"]
+    assert "not a log folder" in rows[0]["message"] and "no array.toml" in rows[2]["message"]
+    assert "\n" not in rows[0]["message"] and rows[0]["output"] == "" and rows[2]["output"] == ""
+    assert (out / "log" / "estimate.csv").is_file()
+    assert sorted(p.name for p in out.iterdir()) == ["log", "summary.csv"]
+
+
+def test_an_output_that_is_a_file_is_still_refused_before_any_log(tmp_path):
+    (tmp_path / "out").write_text("")
+    proc = subprocess.run([sys.executable, "-m", "gfimu", "batch", str(tmp_path / "README"), "--out",
+                           str(tmp_path / "out"), "--quiet"], env=_env(), capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "exists and is not a folder" in proc.stderr and "Traceback" not in proc.stderr
+
+
 def _worker_environ():
     return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
 

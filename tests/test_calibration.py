@@ -220,3 +220,22 @@ def test_calibrate_and_apply_cli(tmp_path, capsys):
     gio.write_log(log.select(slice(0, 900)), tmp_path / "short")
     assert main(["calibrate", str(tmp_path / "short"), "--out", str(tmp_path / "bad.toml")]) == 2
     assert "at least 4 orientations" in capsys.readouterr().err
+
+
+def test_calibrate_cli_without_still_periods_says_what_to_do_on_the_command_line(tmp_path, capsys):
+    from gfimu import io as gio
+    from gfimu.cli import main
+
+    array = mimu4444_array()
+    gains, biases = true_errors(array, seed=11)
+    rng = np.random.default_rng(14)
+    y = readings(gains, biases, np.tile(orientations(1, seed=12)[0], (500, 1))) + 4.0 * rng.standard_normal((500, 24))
+    gio.write_log(Log(array, (np.arange(len(y)) * 16_000_000).astype(np.int64), y), tmp_path / "moving")
+    assert main(["calibrate", str(tmp_path / "moving"), "--out", str(tmp_path / "cal.toml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no still period found" in err
+    assert "held still for at least 2 s" in err and "several orientations" in err
+    for option in ("--accel-std", "--gyro-std", "--window-s", "--min-duration-s"):
+        assert option in err
+    assert "gfimu.calibration" not in err and "StillDetector" not in err
+    assert not (tmp_path / "cal.toml").exists()

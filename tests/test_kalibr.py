@@ -110,6 +110,28 @@ def test_convert_with_extrinsics_places_the_accelerometers(recording, capsys):
         np.testing.assert_allclose(b.rotation_body_sensor, a.rotation_body_sensor, rtol=0, atol=1e-12)
 
 
+def test_extrinsics_replace_the_places_of_array_toml_and_the_report_says_so(recording, capsys):
+    """--array and --extrinsics together: the positions and rotations written are the extrinsics', the
+    axes and names the array's, and one report line names both files."""
+    given = SensorArray((Accelerometer("left", [-0.05, 0.0, 0.0]), Accelerometer("right", [0.05, 0.0, 0.0])))
+    gio.write_array_toml(given, recording / "array.toml")
+    chain = random_array(2, seed=7)
+    (recording / "kalibr.yaml").write_text(kalibr_yaml(chain))
+    rc = main(["convert", "csv", str(recording / "f.csv"), "--map", str(recording / "map.toml"), "--array",
+               str(recording / "array.toml"), "--extrinsics", str(recording / "kalibr.yaml"), "--out",
+               str(recording / "log")])
+    out = capsys.readouterr().out
+    assert rc == 0
+    line = f"positions and rotations from {recording / 'kalibr.yaml'} replace those of {recording / 'array.toml'}"
+    assert out.splitlines().count(line) == 1, out
+    assert f"geometry: {recording / 'array.toml'}" not in out
+    log = gio.read_log(recording / "log", check=False)
+    assert [a.name for a in log.array.accelerometers] == ["left", "right"]
+    for a, b in zip(chain.accelerometers, log.array.accelerometers):
+        np.testing.assert_allclose(b.position_m, a.position_m, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(b.rotation_body_sensor, a.rotation_body_sensor, rtol=0, atol=1e-12)
+
+
 GOOD = [[1.0, 0.0, 0.0, 0.01], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
 
 

@@ -47,6 +47,33 @@ def test_a_spike_on_every_accelerometer_at_once_is_motion():
     assert alone.count == 2
 
 
+@pytest.mark.parametrize("power", [1, 2])
+def test_a_smooth_ramp_is_not_a_spike_at_the_first_or_last_row(power):
+    """One triad, noise free, every axis a line or a parabola in time: nothing is replaced, not even at the ends,
+    where the median window is cut short."""
+    t = np.arange(400) * 0.01
+    y = np.column_stack([0.5 + 3.0 * t ** power, 9.81 - 2.0 * t ** power, -1.0 + 0.7 * t ** power])
+    out, result = screen(y, sensor_of_axis=np.zeros(3, dtype=int), rate_hz=100.0)
+    assert result.count == 0, result.describe(["x", "y", "z"])
+    np.testing.assert_array_equal(out, y)
+
+
+@pytest.mark.parametrize("power", [1, 2])
+@pytest.mark.parametrize("row", [0, 1, -2, -1])
+def test_a_spike_at_the_first_or_last_rows_of_a_ramp_is_still_found(power, row):
+    rng = np.random.default_rng(2)
+    t = np.arange(400) * 0.01
+    y = np.column_stack([0.5 + 3.0 * t ** power, 9.81 - 2.0 * t ** power, -1.0 + 0.7 * t ** power])
+    y += rng.normal(size=y.shape) * 0.01
+    bad = y.copy()
+    bad[row, 1] += 100.0
+    out, result = screen(bad, sensor_of_axis=np.zeros(3, dtype=int), rate_hz=100.0)
+    assert result.spikes == 1 and result.replaced[row, 1] and result.count == 1
+    assert abs(out[row, 1] - y[row, 1]) < 0.5  # back near the ramp
+    _, clean = screen(y, sensor_of_axis=np.zeros(3, dtype=int), rate_hz=100.0)
+    assert clean.count == 0
+
+
 @pytest.mark.parametrize("method", ["smoother", "ml"])
 @pytest.mark.parametrize("value", ["1e30", "spike"])
 def test_one_corrupt_cell_does_not_spoil_the_estimate(tmp_path, method, value):

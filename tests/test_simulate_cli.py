@@ -51,6 +51,7 @@ def test_cli_array_choices_options_and_noise(tmp_path):
     (["random3d", "-O", "spin=3"], "no option"),
     (["random3d", "--duration-s", "-1"], "--duration-s"),
     (["random3d", "--array", "paper001", "--half-edge-m", "0.1"], "cube only"),
+    (["random3d", "--duration-s", "0.001", "--rate-hz", "500"], "a duration of 0.001 s at 500 Hz gives 0 sample(s)"),
 ])
 def test_cli_user_errors_exit_2_with_one_line(tmp_path, capsys, argv, message):
     assert main(["simulate", *argv, "--out", str(tmp_path / "x"), "--no-progress"]) == 2

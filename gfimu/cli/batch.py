@@ -17,8 +17,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "batch", help="run one method on many logs, in parallel on Dask (this machine or a cluster)",
         description="Estimate every LOG with one method on Dask distributed and write DIR/<log folder name>/"
                     "estimate.csv (as gfimu estimate would) and DIR/summary.csv (log, status, samples, seconds, "
-                    "ω RMSE where the log has a truth or reference, warnings, error message). A log that fails is "
-                    "reported in the summary and the exit status is 1; the others go on. Needs the distributed "
+                    "ω RMSE where the log has a truth or reference, warnings, error message). A log that fails, or a LOG "
+                    "that is not a log folder, is reported in the summary and the exit status is 1; the others go "
+                    "on. Needs the distributed "
                     "extra (pip install 'gfimu[distributed]').")
     p.add_argument("logs", nargs="+", metavar="LOG", help="log folders (array.toml + imu.csv)")
     p.add_argument("--method", default="smoother", choices=list(METHODS), help="estimation method (default: smoother)")
@@ -45,9 +46,6 @@ def run(args) -> int:
     from ..io.outputs import check_output, write_output
     from .estimate import method_options
 
-    for log in args.logs:
-        if not Path(log).is_dir():
-            raise CLIError(f"{log}: not a log folder")
     args.lag_s, args.sigma = None, False
     options = method_options(args)
     out_dir = Path(args.out)

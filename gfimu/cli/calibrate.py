@@ -66,7 +66,7 @@ def run(args) -> int:
 
 
 def _fit(args, log):
-    from ..calibration import StillDetector, fit
+    from ..calibration import StillDetector, find_still_periods, fit
 
     if args.until_s is not None:
         n = int((log.times_s <= args.until_s).sum())
@@ -75,4 +75,11 @@ def _fit(args, log):
         log = log.select(slice(0, n))
     det = StillDetector(window_s=args.window_s, accel_std_mps2=args.accel_std, gyro_std_radps=args.gyro_std,
                         min_duration_s=args.min_duration_s)
-    return fit(log, det)
+    periods = find_still_periods(log, det)
+    if not periods:
+        raise CLIError(f"{args.log}: no still period found: the recording needs the array held still for at least "
+                       f"{det.min_duration_s:g} s (plus {2 * det.trim_s:g} s trimmed) in each of several "
+                       "orientations (at least 4, not all in one plane); with such periods, loosen the detector: "
+                       f"--accel-std (now {det.accel_std_mps2:g} m/s^2), --gyro-std (now {det.gyro_std_radps:g} "
+                       f"rad/s), --window-s (now {det.window_s:g} s), --min-duration-s (now {det.min_duration_s:g} s)")
+    return fit(log, det, periods=periods)

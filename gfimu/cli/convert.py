@@ -61,6 +61,7 @@ def run(args) -> int:
         bar.step("read the recording")
         conversion = read_recording(args.format, args.input, **options)
         log = conversion.log
+        report = list(conversion.report)
         extrinsics_report: list[str] = []
         if args.extrinsics:
             from ..io.kalibr import apply_kalibr, read_kalibr
@@ -68,6 +69,10 @@ def run(args) -> int:
             bar.step("apply the extrinsics")
             array, extrinsics_report = apply_kalibr(log.array, read_kalibr(args.extrinsics), args.extrinsics)
             log = log.replace(array=array)
+            report, replaced = _without_geometry_lines(report, options.get("array"))
+            # --array (or the map's own places) and --extrinsics: the extrinsics win for position and rotation
+            extrinsics_report = [f"positions and rotations from {args.extrinsics} replace those of {source}"
+                                 for source in replaced] + extrinsics_report
         elif conversion.unplaced:
             raise CLIError(f"{args.input}: accelerometer(s) {', '.join(conversion.unplaced)} have no position or "
                            "rotation; give them in the map (position_m, rotation_body_sensor), with --array, or "
@@ -79,9 +84,23 @@ def run(args) -> int:
             log = apply_calibration(log, read_calibration(args.calibration))
         bar.step("write the log")
         gio.write_log(log, args.out)
-    for line in [*conversion.report, *extrinsics_report]:
+    for line in [*report, *extrinsics_report]:
         info(args, line, file=sys.stdout)
     if args.calibration:
         info(args, f"calibration applied: {args.calibration}", file=sys.stdout)
     info(args, f"log written: {args.out} ({len(log)} samples, {log.rate_hz:.2f} Hz)", file=sys.stdout)
     return 0
+
+
+def _without_geometry_lines(report: list[str], array: str | None) -> tuple[list[str], list[str]]:
+    """The report without its lines naming a file the geometry came from; and those files (``array`` first)."""
+    sources = [array] if array else []
+    kept = []
+    for line in report:
+        name = line[len("geometry: "):] if line.startswith("geometry: ") else None
+        if name is not None and (name in sources or Path(name).is_file()):
+            if name not in sources:
+                sources.append(name)
+            continue
+        kept.append(line)
+    return kept, sources

@@ -120,7 +120,8 @@ def run(args) -> int:
     import numpy as np
 
     from .. import io as gio
-    from ..evaluation import EvaluationAlignmentWarning, error_table, estimate_time_offset_s, evaluate, shifted
+    from ..evaluation import (EvaluationAlignmentWarning, TimestampMismatchError, error_table, estimate_time_offset_s,
+                              evaluate, shifted)
     from ..io.outputs import check_output, write_output
 
     reference_arg, estimate_arg = _order(args)
@@ -163,6 +164,9 @@ def run(args) -> int:
         try:
             result = evaluate(estimate, truth, valid=use, sign_threshold_radps=args.sign_threshold,
                               align="interpolate" if interpolate else "exact")
+        except TimestampMismatchError as exc:  # the command line's option, not the keyword
+            raise CLIError(f"{estimate_arg} vs {truth_path}: {TimestampMismatchError(exc.detail, 'give --interpolate')}"
+                           ) from None
         except ValueError as exc:  # the files the mismatch is between
             raise CLIError(f"{estimate_arg} vs {truth_path}: {exc}") from None
         if result.n_invalid and (valid is None or np.any(use != np.asarray(valid, bool))):

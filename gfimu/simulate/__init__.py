@@ -39,10 +39,10 @@ def sample_timestamps_ns(rate_hz: float, duration_s: float) -> np.ndarray:
         raise ValueError(f"duration_s must be a positive number, got {duration_s!r}")
     n = int(round(duration_s * rate_hz))
     if n < 2:
-        raise ValueError(f"duration_s={duration_s:g} at rate_hz={rate_hz:g} gives {n} sample(s); need at least 2")
+        raise ValueError(f"a duration of {duration_s:g} s at {rate_hz:g} Hz gives {n} sample(s); need at least 2")
     t = np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64)
     if np.any(np.diff(t) <= 0):
-        raise ValueError(f"rate_hz={rate_hz:g} is too high for nanosecond timestamps")
+        raise ValueError(f"a rate of {rate_hz:g} Hz is too high for nanosecond timestamps")
     return t
 
 
