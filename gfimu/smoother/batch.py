@@ -57,7 +57,7 @@ from .banded import (  # noqa: F401  (the banded core, also importable from here
 from .graph import SmootherOptions, SmootherProblem, options_reason
 from .initialise import initial_attitude, initial_estimate, initial_states, sign_chain
 from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
-from .result import SmootherResult
+from .result import SmootherEstimatorRuns, SmootherResult
 from .tuning import InitialStates, Tuning, make_problem, tuned_problem
 
 SOLVERS = ("numpy", "gtsam")
@@ -268,7 +268,7 @@ def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: sl
 
 
 @dataclass(frozen=True)
-class BatchSmootherEstimator(SmootherOptions):
+class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
     """Factor-graph smoother over the whole log (method "smoother").
 
     Options: see :class:`gfimu.smoother.graph.SmootherOptions`. Returns ω, ω̇
@@ -305,9 +305,6 @@ class BatchSmootherEstimator(SmootherOptions):
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
 
-    def options(self) -> SmootherOptions:
-        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
-
     def applicable(self, array: SensorArray) -> str | None:
         return options_reason(array, self.options(), attitude_supported=True)
 
@@ -315,16 +312,6 @@ class BatchSmootherEstimator(SmootherOptions):
         """The smoother on ``log`` (:func:`smooth`), with everything it produced."""
         return smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver,
                       auto_model=self.auto_model, tune_span_s=self.tune_span_s)
-
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
-        res = self.result(log, progress)
-        self._runs[:] = [res]
-        return res.motion
-
-    @property
-    def last_tuning(self) -> list:
-        """The tunings of the newest :meth:`estimate` (kept for existing callers; :meth:`result` returns them)."""
-        return list(self._runs[-1].tunings) if self._runs else []
 
     @property
     def last_calibration(self) -> list[dict]:

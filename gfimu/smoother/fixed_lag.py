@@ -81,7 +81,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections import deque
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -96,7 +96,7 @@ from .banded import solve
 from .graph import SmootherOptions, options_reason
 from .initialise import initial_estimate
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
-from .result import SmootherResult
+from .result import SmootherEstimatorRuns, SmootherResult
 from .tuning import tuned_problem
 
 
@@ -713,7 +713,7 @@ class FixedLagSmoother:
 
 
 @dataclass(frozen=True)
-class FixedLagEstimator(SmootherOptions):
+class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
     Model options: those of :class:`~gfimu.smoother.graph.SmootherOptions`
@@ -773,9 +773,6 @@ class FixedLagEstimator(SmootherOptions):
     _runs: list = field(default_factory=list, init=False, repr=False, compare=False)
     """The result of the newest :meth:`estimate`, behind :attr:`last_tuning`."""
 
-    def options(self) -> SmootherOptions:
-        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
-
     def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
         """A streaming smoother with these options."""
         return FixedLagSmoother(array, self.options(), lag_s=self.lag_s, rate_hz=rate_hz,
@@ -827,14 +824,3 @@ class FixedLagEstimator(SmootherOptions):
         motion = Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
                         specific_force_b_mps2=out[:, 6:], sigma=sigma)
         return SmootherResult(motion, () if smoother.tuning is None else (smoother.tuning,), windows=0)
-
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
-        res = self.result(log, progress)
-        self._runs[:] = [res]
-        return res.motion
-
-    @property
-    def last_tuning(self) -> list:
-        """The process noise chosen from the data in the newest :meth:`estimate`
-        (one :class:`gfimu.smoother.tuning.Tuning`, or empty when not tuned); :meth:`result` returns it."""
-        return list(self._runs[-1].tunings) if self._runs else []

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from ..motion import Motion
 
@@ -34,3 +34,26 @@ class SmootherResult:
     @property
     def sigma(self) -> dict:
         return self.motion.sigma
+
+
+class SmootherEstimatorRuns:
+    """What the batch and fixed-lag estimators share: their model options as plain
+    :class:`gfimu.smoother.graph.SmootherOptions`, and :meth:`estimate` keeping the newest
+    :class:`SmootherResult` (in the estimator's ``_runs`` list) behind :attr:`last_tuning`.
+    A subclass is a :class:`SmootherOptions` dataclass that defines ``result(log, progress)``."""
+
+    def options(self):
+        from .graph import SmootherOptions
+
+        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
+
+    def estimate(self, log, progress: bool = False) -> Motion:
+        res = self.result(log, progress)
+        self._runs[:] = [res]
+        return res.motion
+
+    @property
+    def last_tuning(self) -> list:
+        """The process noise chosen from the data in the newest :meth:`estimate`, per solve window
+        (:class:`gfimu.smoother.tuning.Tuning`; empty when not tuned); :meth:`result` returns it too."""
+        return list(self._runs[-1].tunings) if self._runs else []
