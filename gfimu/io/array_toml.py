@@ -26,7 +26,7 @@ import tomli_w
 
 from ..array import Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
 from .atomic import atomic_write_text
-from .errors import LogFormatError, LogFormatWarning
+from .errors import LogFormatError, LogFormatWarning, read_utf8_text
 
 ARRAY_FORMAT = "gfimu-array/1"
 ROTATION_TOLERANCE = 1e-6  # accepted as written
@@ -235,14 +235,7 @@ def read_array_toml(path: str | os.PathLike) -> SensorArray:
 def load_array_toml(path: str | os.PathLike) -> tuple[SensorArray, float | None]:
     """Read ``array.toml``: (array, its optional ``rate_hz``, the nominal sample rate in Hz)."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise LogFormatError("file not found", path) from None
-    try:
-        text = raw.decode("utf-8").lstrip("\ufeff")
-    except UnicodeDecodeError as exc:
-        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path) from None
+    text = read_utf8_text(path)
     if not text.strip():
         raise LogFormatError(f"file is empty; expected format = \"{ARRAY_FORMAT}\" and [[accelerometers]] tables", path)
     return _parse(text, path)

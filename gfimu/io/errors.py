@@ -11,6 +11,7 @@ reads but probably is not what the writer meant: a wrong unit or rate).
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 
 class LogFormatError(ValueError):
@@ -26,6 +27,26 @@ class LogFormatError(ValueError):
         self.line = line
         self.key = key
 
+
+
+def read_utf8_text(path: str | os.PathLike, missing: str = "file not found", folder: str | None = None,
+                   line_of_bad_byte: bool = False) -> str:
+    """The text of a UTF-8 file without its byte-order mark; a :class:`LogFormatError` naming the file
+    when it is missing (message ``missing``), a folder (message ``folder``; None lets the OS error
+    through) or not UTF-8 (with the line of the first bad byte when ``line_of_bad_byte``)."""
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise LogFormatError(missing, path) from None
+    except IsADirectoryError:
+        if folder is None:
+            raise
+        raise LogFormatError(folder, path) from None
+    try:
+        return raw.decode("utf-8").lstrip("\ufeff")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1 if line_of_bad_byte else None
+        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, line) from None
 
 class OutputError(OSError):
     """An output cannot be written where asked (it is an input, or not a regular file)."""

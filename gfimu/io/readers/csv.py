@@ -37,7 +37,7 @@ from ...array import Gyroscope, SensorArray
 from ...log import Log
 from ...motion import Motion
 from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
-from ..errors import LogFormatError, LogPlausibilityWarning
+from ..errors import LogFormatError, LogPlausibilityWarning, read_utf8_text
 from ..units import TIME_UNITS_NS, header_name_and_unit, time_unit_ns, timestamp_ns, unit_factor, unit_help
 
 MAP_FORMAT = "gfimu-csv-map/1"
@@ -318,17 +318,8 @@ def load_map(spec: str) -> ColumnMap:
     p = Path(spec)
     if not p.exists() and spec in PRESETS:
         return parse_map(PRESETS[spec], f"preset {spec}")
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise LogFormatError(f"column map not found (a TOML file, or a preset: {', '.join(sorted(PRESETS))})",
-                             spec) from None
-    except IsADirectoryError:
-        raise LogFormatError("is a folder; --map takes a TOML file or a preset name", spec) from None
-    try:
-        text = raw.decode("utf-8").lstrip("\ufeff")
-    except UnicodeDecodeError as exc:
-        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", spec) from None
+    text = read_utf8_text(spec, missing=f"column map not found (a TOML file, or a preset: {', '.join(sorted(PRESETS))})",
+                          folder="is a folder; --map takes a TOML file or a preset name")
     return parse_map(text, spec)
 
 
@@ -368,16 +359,7 @@ _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 
 def read_table(path: Path, layout: Layout) -> Table:
     """Split a text file by ``layout``; errors name the file and line."""
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise LogFormatError("file not found", path) from None
-    except IsADirectoryError:
-        raise LogFormatError("is a folder, expected a CSV file", path) from None
-    try:
-        text = raw.decode("utf-8").lstrip("\ufeff")
-    except UnicodeDecodeError as exc:
-        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, raw[: exc.start].count(b"\n") + 1) from None
+    text = read_utf8_text(path, folder="is a folder, expected a CSV file", line_of_bad_byte=True)
     lines = text.splitlines()
     header = None
     if layout.header_row:
