@@ -106,6 +106,10 @@ class Body:
         object.__setattr__(self, "principal_inertia_kgm2", tuple(float(v) for v in i))
 
 
+_GEOMETRY_REASONS: dict = {}
+"""Outcomes of :meth:`SensorArray.geometry_reason` per layout (the smoother asks once per problem)."""
+
+
 @dataclass(frozen=True)
 class SensorArray:
     """A rigid array of accelerometers, with optional gyro, inclinometer and body."""
@@ -267,6 +271,16 @@ class SensorArray:
         (:meth:`omega_condition_number` over :data:`MAX_OMEGA_CONDITION`; coplanar triads: infinite), whose
         samples then have several exact or nearly exact solutions besides ±ω."""
         limit = MAX_LINEAR_CONDITION if max_condition is None else max_condition
+        key = (self.name, limit, several_solutions,
+               tuple((a.position_m.tobytes(), a.rotation_body_sensor.tobytes(), tuple(a.axes)) for a in self.accelerometers))
+        if key not in _GEOMETRY_REASONS:
+            if len(_GEOMETRY_REASONS) > 64:
+                _GEOMETRY_REASONS.clear()
+            _GEOMETRY_REASONS[key] = self._geometry_reason(limit, several_solutions)
+        return _GEOMETRY_REASONS[key]
+
+    def _geometry_reason(self, limit: float, several_solutions: bool) -> str | None:
+        """:meth:`geometry_reason`, computed (it depends only on the names, positions and sensing axes)."""
         positions = np.array([a.position_m for a in self.accelerometers])
         centred = positions - positions.mean(axis=0)
         spread = np.linalg.svd(centred, compute_uv=False) if len(positions) > 1 else np.zeros(1)

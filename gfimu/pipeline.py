@@ -44,15 +44,16 @@ class EstimateRun:
 
 def estimate_log(log_dir: str | Path, method: str = "smoother", options: dict | None = None,
                  calibration: str | Path | None = None, progress: bool = False,
-                 orientation: str = "none") -> EstimateRun:
+                 orientation: str = "none", truth: bool = True) -> EstimateRun:
     """Read ``log_dir``, screen and calibrate its readings, run ``method`` with ``options``; warnings
-    (plausibility, replaced readings) go through :mod:`warnings`."""
+    (plausibility, replaced readings) go through :mod:`warnings`. ``truth=False``: the log's truth.csv
+    is not read (nothing here needs it; :func:`score` does)."""
     from . import io as gio
     from .methods import make_estimator
     from .readings import screen_log
 
     est = make_estimator(method, **dict(options or {}))
-    log = gio.read_log(log_dir)
+    log = gio.read_log(log_dir, truth=truth)
     log, screening = screen_log(log)
     _warn_replaced(log, screening)
     if calibration:

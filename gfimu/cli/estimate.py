@@ -71,7 +71,7 @@ def run(args) -> int:
                            "inclinometer, gyro or estimate")
     try:
         run_ = estimate_log(args.log, args.method, options, args.calibration, progress=show_progress(args),
-                            orientation=args.orientation)
+                            orientation=args.orientation, truth=False)
     except MethodNotApplicable as exc:
         raise CLIError(str(exc)) from None
     tum_chunks = None

@@ -52,8 +52,9 @@ def _check_same_timestamps(motion: Motion, t_imu: np.ndarray, path: Path, imu_pa
                              f"({t_imu[r]}); it needs the same timestamps as {imu_path.name}", path, r + 2)
 
 
-def read_log(path: str | os.PathLike, check: bool = True) -> Log:
-    """Read a log folder (array.toml, imu.csv, and truth.csv / reference.csv when present).
+def read_log(path: str | os.PathLike, check: bool = True, truth: bool = True) -> Log:
+    """Read a log folder (array.toml, imu.csv, and truth.csv / reference.csv when present; with
+    ``truth=False`` truth.csv is not read, for work that never looks at it).
 
     Gaps in time are reported with a :class:`LogGapWarning`; with ``check``,
     implausible values (a sample rate that disagrees with ``rate_hz``,
@@ -67,8 +68,9 @@ def read_log(path: str | os.PathLike, check: bool = True) -> Log:
     imu_path = folder / "imu.csv"
     array, declared_rate_hz = load_array_toml(array_path)
     t, accel, gyro, tilt, time_unit, accel_unit = read_imu_table(imu_path, array, array_path.name)
+    read_truth = truth
     truth = reference = invalid = None
-    if (folder / "truth.csv").is_file():
+    if read_truth and (folder / "truth.csv").is_file():
         truth = read_motion_csv(folder / "truth.csv")
         _check_same_timestamps(truth, t, folder / "truth.csv", imu_path)
     if (folder / "reference.csv").is_file():

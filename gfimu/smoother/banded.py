@@ -167,21 +167,33 @@ class BandStructure:
                     index[d, p] = m * m + order[q - m] * m + order[p]
         return cls(m, order, inverse, kd, index)
 
-    def band(self, diag: np.ndarray, lower: np.ndarray, scale: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
-        """Lower band storage (kd + 1, N m) of ``S A S`` in the band order: ``diag`` (N, m, m),
-        ``lower`` (N-1, m, m), ``scale`` (N, m) the diagonal of S, ``diagonal`` (N, m) A's diagonal
-        to use (e.g. damped) in place of the diagonal of ``diag``."""
+    def blocks(self, diag: np.ndarray, lower: np.ndarray) -> np.ndarray:
+        """(kd + 1, N, m) entries of A in the band order, unscaled: ``[d, k, p]`` is the entry d rows
+        below the diagonal in column p of sample k (``diag`` (N, m, m), ``lower`` (N-1, m, m));
+        :meth:`scaled` turns it into LAPACK band storage in place."""
         n, m = diag.shape[0], self.m
         flat = np.zeros((n, 2 * m * m + 1))
         flat[:, : m * m] = diag.reshape(n, m * m)
         flat[: n - 1, m * m: 2 * m * m] = lower.reshape(n - 1, m * m)
-        ab = np.take(flat, self.index, axis=1)  # (N, kd + 1, m)
-        ab[:, 0, :] = diagonal[:, self.order]
-        ab = np.ascontiguousarray(np.swapaxes(ab, 0, 1)).reshape(self.bandwidth + 1, n * m)
-        s = scale[:, self.order].reshape(-1)
+        return np.ascontiguousarray(np.swapaxes(np.take(flat, self.index, axis=1), 0, 1))
+
+    def scaled(self, blocks: np.ndarray, scale: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
+        """Lower band storage (kd + 1, N m) of ``S A S`` from :meth:`blocks` (scaled in place), with
+        ``scale`` (N, m) the diagonal of S and ``diagonal`` (N, m) the diagonal to use (e.g.
+        damped), both in the band order."""
+        _, n, m = blocks.shape
+        blocks[0] = diagonal
+        ab = blocks.reshape(self.bandwidth + 1, n * m)
+        s = scale.reshape(-1)
         for d in range(self.bandwidth + 1):
             ab[d, : n * m - d] *= s[: n * m - d] * s[d:]
         return ab
+
+    def band(self, diag: np.ndarray, lower: np.ndarray, scale: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
+        """Lower band storage (kd + 1, N m) of ``S A S`` in the band order: ``diag`` (N, m, m),
+        ``lower`` (N-1, m, m), ``scale`` (N, m) the diagonal of S, ``diagonal`` (N, m) A's diagonal
+        to use (e.g. damped) in place of the diagonal of ``diag``, both in the state order."""
+        return self.scaled(self.blocks(diag, lower), scale[:, self.order], diagonal[:, self.order])
 
     def to_band_order(self, b: np.ndarray, n: int) -> np.ndarray:
         """(N m[, k]) in state order -> band order."""
@@ -198,8 +210,13 @@ _STRUCTURES: dict = {}
 def band_structure(lower: np.ndarray) -> BandStructure:
     """:class:`BandStructure` of the nonzero pattern of ``lower`` (N-1, m, m), kept per pattern."""
     m = lower.shape[-1]
-    pattern = (np.count_nonzero(lower.reshape(-1, m * m), axis=0) > 0).reshape(m, m)
-    key = (m, pattern.tobytes())
+    return band_structure_of((np.count_nonzero(lower.reshape(-1, m * m), axis=0) > 0).reshape(m, m))
+
+
+def band_structure_of(pattern: np.ndarray) -> BandStructure:
+    """:class:`BandStructure` of an (m, m) nonzero pattern of the ``lower`` blocks, kept per pattern."""
+    pattern = np.asarray(pattern, dtype=bool)
+    key = (pattern.shape[0], pattern.tobytes())
     structure = _STRUCTURES.get(key)
     if structure is None:
         structure = _STRUCTURES[key] = BandStructure.of(pattern)
@@ -233,17 +250,25 @@ def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
     """Factor A (+ Marquardt damping) after symmetric Jacobi scaling, which keeps the
     factorisation accurate when the states have very different scales (e.g. ω̈); the band is
     narrowed by reordering the state within each sample (:class:`BandStructure`)."""
-    n, M = ne.diag.shape[:2]
     d = np.einsum("nii->ni", ne.diag)
     if damping:
         d = d + damping * (d + 1e-9)
-    if np.any(~(d > 0)):
-        k, i = np.argwhere(~(d > 0))[0]
-        raise np.linalg.LinAlgError(f"normal equations not positive definite: state {i} of sample {k} is unobserved")
-    sc = 1.0 / np.sqrt(d)
     structure = band_structure(ne.lower)
-    cb = cholesky_banded(structure.band(ne.diag, ne.lower, sc, d), lower=True, check_finite=False)
-    fac = Factorisation(cb, sc.reshape(-1), None, None, structure)
+    return factorise_blocks(structure, structure.blocks(ne.diag, ne.lower), d[:, structure.order], ne, damping)
+
+
+def factorise_blocks(structure: BandStructure, blocks: np.ndarray, diagonal: np.ndarray, ne: NormalEquations,
+                     damping: float = 0.0) -> Factorisation:
+    """:func:`factorise` of A given as :meth:`BandStructure.blocks` (overwritten) and the diagonal to
+    use (N, m), both in the band order; ``ne`` gives the border (``coupling``, ``border``) only."""
+    if np.any(~(diagonal > 0)):
+        k, p = np.argwhere(~(diagonal > 0))[0]
+        raise np.linalg.LinAlgError(f"normal equations not positive definite: state {structure.order[p]} of sample {k} "
+                                    "is unobserved")
+    n, M = diagonal.shape
+    sc = 1.0 / np.sqrt(diagonal)
+    cb = cholesky_banded(structure.scaled(blocks, sc, diagonal), lower=True, check_finite=False)
+    fac = Factorisation(cb, sc[:, structure.inverse].reshape(-1), None, None, structure)
     if ne.border.size:
         C = ne.coupling.reshape(n * M, -1)
         Y = fac.solve(C)
@@ -254,7 +279,7 @@ def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
 
 def solve_step(ne: NormalEquations, fac: Factorisation) -> tuple[np.ndarray, np.ndarray]:
     """Newton step (δx (N, m), δp (G,)) of the (damped) normal equations."""
-    n, M = ne.diag.shape[:2]
+    n, M = ne.grad.shape
     gx = ne.grad.reshape(-1)
     ax = fac.solve(gx)
     if fac.Y is None:

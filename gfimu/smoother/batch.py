@@ -66,26 +66,38 @@ length with a small constant, marginal σ included) and the same problem as a GT
 eliminated in time order and retracted here (a cross-check, slower by the Python factor callbacks)."""
 
 
+WINDOW_STRETCH = 1.25
+"""Solve windows may be up to this factor longer than ``window_s`` when that saves a window: a log a
+little longer than a whole number of windows is cut into equal windows instead of leaving a short
+last one (whose few seconds tell the noise levels poorly and still cost a whole tuning)."""
+
+
 def window_slices(n: int, rate_hz: float, window_s: float | None, overlap_s: float) -> list[tuple[slice, slice, slice]]:
-    """(solve slice, keep slice in the log, keep slice within the window) of overlapping windows."""
+    """(solve slice, keep slice in the log, keep slice within the window) of overlapping windows.
+
+    The log is cut into the fewest windows of at most ``window_s`` (stretched by up to
+    :data:`WINDOW_STRETCH`) that overlap by ``overlap_s``, all of one length (within a sample);
+    each keeps its samples up to the middle of its overlap with the next."""
     if window_s is None:
         return [(slice(0, n), slice(0, n), slice(0, n))]
     w = max(int(round(window_s * rate_hz)), 4)
     o = max(int(round(overlap_s * rate_hz)), 2)
     if n <= w:
         return [(slice(0, n), slice(0, n), slice(0, n))]
+    k = int(np.ceil((n - o) / (w - o)))
+    if k > 1 and (n - o) / (k - 1) + o <= WINDOW_STRETCH * w:
+        k -= 1
+    if k == 1:
+        return [(slice(0, n), slice(0, n), slice(0, n))]
+    starts = [int(round(i * (n - o) / k)) for i in range(k)]
+    stops = starts[1:] + [n - o]
+    stops = [s + o for s in stops]
     out = []
-    start = 0
     keep_from = 0
-    while True:
-        stop = min(start + w, n)
-        if stop == n:
-            out.append((slice(start, n), slice(keep_from, n), slice(keep_from - start, n - start)))
-            break
-        keep_to = stop - o // 2
+    for i, (start, stop) in enumerate(zip(starts, stops)):
+        keep_to = n if i == k - 1 else stop - o // 2
         out.append((slice(start, stop), slice(keep_from, keep_to), slice(keep_from - start, keep_to - start)))
         keep_from = keep_to
-        start = stop - o
     return out
 
 

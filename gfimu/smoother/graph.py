@@ -110,7 +110,8 @@ class SmootherOptions:
     initial_specific_force_std_mps2: float = 1000.0
     """Weak priors on the first state (zero mean) keeping the normal equations definite."""
     window_s: float | None = 30.0
-    """Solve logs longer than this in overlapping windows of this length (None: whole log)."""
+    """Solve logs longer than this in overlapping windows of at most this length, stretched by up to a
+    quarter when that saves a short last window (``gfimu.smoother.batch.window_slices``; None: whole log)."""
     overlap_s: float = 2.0
     """Overlap of consecutive windows; each half of it is taken from the nearer window."""
     max_iterations: int = 30

@@ -34,7 +34,8 @@ from typing import Callable
 import numpy as np
 
 from ..log import Log
-from .banded import NormalEquations, add_normal_equations, factorise, normal_equations, solve, solve_step
+from .banded import (Factorisation, NormalEquations, add_normal_equations, band_structure_of, factorise, factorise_blocks,
+                     normal_equations, solve, solve_step)
 from .graph import SmootherOptions, SmootherProblem
 from .groups import Term
 from .initialise import initial_estimate
@@ -126,12 +127,14 @@ def log_normaliser(problem: SmootherProblem) -> float:
 
 
 def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
-                            measurement: NormalEquations | None = None, total: NormalEquations | None = None) -> float:
+                            measurement: NormalEquations | None = None, total: NormalEquations | None = None,
+                            factorisation: Factorisation | None = None) -> float:
     """Log marginal likelihood of the data under ``problem`` linearised at ``states`` [nats] (module docstring).
 
     ``measurement``: the normal equations of the measurement factors at ``states`` (see
     :func:`measurement_normal_equations`), reused while only the process noise changes; ``total``:
-    those of all factors of ``problem`` at ``states`` when already known (see :class:`ProcessBasis`)."""
+    those of all factors of ``problem`` at ``states`` when already known, and ``factorisation`` their
+    factor when known too (see :class:`ProcessBasis`)."""
     P = np.zeros(problem.n_global) if params is None else params
     if total is not None:
         ne = total
@@ -139,7 +142,7 @@ def linearised_log_evidence(problem: SmootherProblem, states: np.ndarray, params
         ne = normal_equations(problem, states, P)
     else:
         ne = add_normal_equations(measurement, normal_equations(problem, states, P, problem.process_terms(states, P)))
-    fac = factorise(ne, 0.0)
+    fac = factorise(ne, 0.0) if factorisation is None else factorisation
     dx, dp = solve_step(ne, fac)
     c_min = ne.cost + 0.5 * (float(ne.grad.reshape(-1) @ dx.reshape(-1)) + float(ne.grad_global @ dp))
     logdet = 2.0 * float(np.sum(np.log(fac.cb[0]))) - 2.0 * float(np.sum(np.log(fac.scale)))
@@ -292,6 +295,64 @@ class ProcessBasis:
                                cost, (measurement.rows or 0) + self.rows)
 
 
+    def banded(self, measurement: NormalEquations) -> BandedSum:
+        """The same weighted sum kept in the band order of the banded Cholesky factorisation, so that
+        one setting costs a few vector additions and the factorisation (:class:`BandedSum`)."""
+        return BandedSum.of(self, measurement)
+
+
+@dataclass
+class BandedSum:
+    """:meth:`ProcessBasis.normal_equations` plus :func:`gfimu.smoother.banded.factorise`, with the
+    measurement's and each part's entries gathered into the band order once: a setting adds the
+    parts' few nonzero band entries, weighted, to the measurement's (the same sums in the same order,
+    so the same numbers as the general path) and factors the result."""
+
+    structure: object
+    measurement: NormalEquations
+    blocks: np.ndarray
+    """(kd + 1, N, m) the measurement's band entries (:meth:`gfimu.smoother.banded.BandStructure.blocks`)."""
+    parts: dict
+    """key -> (band rows, band columns, values (k, N), gradient columns, gradient values (N, j), cost)."""
+    rows: int
+
+    @classmethod
+    def of(cls, basis: ProcessBasis, measurement: NormalEquations) -> BandedSum:
+        n, m = measurement.grad.shape
+        pattern = np.count_nonzero(measurement.lower.reshape(-1, m * m), axis=0) > 0
+        for part in basis.parts.values():
+            idx, values = part.lower
+            pattern[idx[np.any(values != 0, axis=0)]] = True
+        structure = band_structure_of(pattern.reshape(m, m))
+        blocks = structure.blocks(measurement.diag, measurement.lower)
+        parts = {}
+        for key, part in basis.parts.items():
+            flat = np.zeros((n, 2 * m * m + 1))
+            flat[:, part.diag[0]] = part.diag[1]
+            flat[: n - 1, m * m + part.lower[0]] = part.lower[1]
+            band = np.take(flat, structure.index, axis=1)  # (N, kd + 1, m)
+            d, p = np.nonzero(np.any(band != 0, axis=0))
+            parts[key] = (d, p, np.ascontiguousarray(band[:, d, p].T), part.grad[0], part.grad[1], part.cost)
+        return cls(structure, measurement, blocks, parts, basis.rows)
+
+    def system(self, density: float, axis_factors, force_density: float) -> tuple[NormalEquations, Factorisation]:
+        """Normal equations (gradient, cost, border; no blocks) and factor at these settings."""
+        weights = {"const": 1.0, "force": 1.0 / force_density**2}
+        for a in range(3):
+            weights[a] = 1.0 / (density * axis_factors[a]) ** 2
+        me = self.measurement
+        blocks = self.blocks.copy()
+        grad = me.grad.copy()
+        cost = me.cost
+        for key, (d, p, values, g_idx, g_values, part_cost) in self.parts.items():
+            w = weights[key]
+            blocks[d, :, p] += w * values
+            grad[:, g_idx] += w * g_values
+            cost += w * part_cost
+        ne = NormalEquations(None, None, grad, me.coupling, me.border, me.grad_global, cost, (me.rows or 0) + self.rows)
+        return ne, factorise_blocks(self.structure, blocks, blocks[0].copy(), ne)
+
+
 def _row_entries(t: Term) -> np.ndarray:
     """(samples, rows, entries) of a term: residual and Jacobians side by side."""
     parts = [t.residual[:, :, None]] + [t.jac[k] for k in sorted(t.jac)]
@@ -416,6 +477,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
 
         cache = {}
         bases = {}
+        summed = {}
 
         def evidence(c, X):
             try:
@@ -431,8 +493,12 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                         bases[version] = ProcessBasis.of(log, settings_options(c), field, X,
                                                          np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA])
                     if bases[version] is not None:
-                        total = bases[version].normal_equations(float(np.exp(c["density"])), np.exp(c["axis"]),
-                                                                float(np.exp(c["force"])), cache[key])
+                        if key not in summed:
+                            summed.clear()
+                            summed[key] = bases[version].banded(cache[key])
+                        total, fac = summed[key].system(float(np.exp(c["density"])), np.exp(c["axis"]),
+                                                        float(np.exp(c["force"])))
+                        return linearised_log_evidence(problem, X, p0, total=total, factorisation=fac)
                 return linearised_log_evidence(problem, X, p0, cache[key], total)
             except np.linalg.LinAlgError:
                 return -np.inf
