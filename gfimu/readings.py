@@ -89,21 +89,30 @@ class Screening:
 
 
 def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
-    """Median over ±``half`` samples per column, ignoring NaN (edges: the samples that exist)."""
+    """Median over ±``half`` samples per column, ignoring NaN (edges: the samples that exist).
+
+    Windows without NaN take the plain median (a partition, several times faster than NaN-aware
+    medians); only the windows that hold a NaN (the edges, missing readings) take ``nanmedian``:
+    the same numbers either way."""
+    import warnings
+
     n = x.shape[0]
+    w = 2 * half + 1
     pad = np.full((half, x.shape[1]), np.nan)
     padded = np.concatenate([pad, x, pad])
-    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1, axis=0)  # (n, cols, w)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, w, axis=0)  # (n, cols, w)
+    missing = np.cumsum(np.isnan(padded), axis=0)
+    missing = missing[w - 1:] - np.concatenate([np.zeros((1, x.shape[1]), missing.dtype), missing[:-w]])  # NaN per window
     out = np.empty_like(x)
     step = 65536  # bounded memory on long logs
     for s in range(0, n, step):
-        block = windows[s:s + step]
-        with np.errstate(all="ignore"):
-            import warnings
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                out[s:s + step] = np.nanmedian(block, axis=2)
+        out[s:s + step] = np.median(windows[s:s + step], axis=2)
+    rows, cols = np.nonzero(missing)
+    for s in range(0, rows.size, step):
+        r, c = rows[s:s + step], cols[s:s + step]
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out[r, c] = np.nanmedian(windows[r, c], axis=1)
     return out
 
 

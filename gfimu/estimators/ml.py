@@ -229,12 +229,15 @@ class MLEstimator:
         c = b @ model.A  # (N, 6) Aᵀ b
         w = self._iterate(model, b, c, self._start(array, model, y, c, gyro), gyro, gyro_var)
         cost = _cost(model, b, w, gyro, gyro_var)
+        moved = np.ones(len(w), bool)  # samples whose start (the sample before) changed in the last pass
         for _ in range(self.neighbour_passes):
             first = w[:1] if previous is None else np.asarray(previous)[None, :]
             prev = np.vstack([first, w[:-1]])
-            # a start within 10 % of the current estimate (either sign) lies in its basin: skip it
+            # a start within 10 % of the current estimate (either sign) lies in its basin: skip it; so is
+            # a start that has not changed since the last pass (the iterations per sample are independent
+            # and deterministic: it would give the candidate already turned down)
             gap = np.minimum(np.linalg.norm(prev - w, axis=1), np.linalg.norm(prev + w, axis=1))
-            idx = np.nonzero(gap > 0.1 * np.linalg.norm(w, axis=1) + 1e-6)[0]
+            idx = np.nonzero((gap > 0.1 * np.linalg.norm(w, axis=1) + 1e-6) & moved)[0]
             if idx.size == 0:
                 break
             cand = self._iterate(model, b[idx], c[idx], prev[idx], None if gyro is None else gyro[idx], gyro_var)
@@ -244,6 +247,9 @@ class MLEstimator:
                 break
             w[idx[better]] = cand[better]
             cost[idx[better]] = cand_cost[better]
+            moved = np.zeros(len(w), bool)
+            changed = idx[better] + 1
+            moved[changed[changed < len(w)]] = True
         if gyro is None:
             w = self._multi_start(model, b, c, w, cost)
         return w
