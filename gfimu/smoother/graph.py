@@ -297,6 +297,7 @@ class SmootherProblem:
         # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
         self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
         self.all_positions_m = np.concatenate([p for _, p, _ in self.sensors])
+        self.all_rows = accelerometer.axis_rows(self.all_directions_b, self.all_positions_m)  # (axes, 12)
         # global variables: biases, scales, gyro bias
         self.global_blocks = {}  # name -> (slice, gtsam key)
         g = 0
@@ -378,7 +379,7 @@ class SmootherProblem:
             if base is None:
                 base = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
             self.accel_sigma_per_sample = np.array(base)  # whiten with the base noise
-            r = self.group(AccelerometerGroup).term(self, states, P).residual
+            r = self.group(AccelerometerGroup).whitened_residual(self, states, P)
             self.accel_sigma_per_sample = base / np.sqrt(weight(r, opt.accel_robust_threshold))
         if opt.process_robust_threshold > 0:
             if not hasattr(self, "_process_base"):

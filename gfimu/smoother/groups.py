@@ -180,6 +180,8 @@ class AccelerometerGroup(FactorGroup):
         return [self.term(problem, states, params)]
 
     def term(self, problem, X: np.ndarray, params: np.ndarray) -> Term:
+        if not any(name.startswith(("bias", "scale")) for name in problem.global_blocks):
+            return self._term_all_axes(problem, X)
         n = problem.n
         rows = []
         jx = []
@@ -213,14 +215,51 @@ class AccelerometerGroup(FactorGroup):
                 jg *= w[:, :, None]
         return Term("unary", r, {"x": J}, jg)
 
+    @staticmethod
+    def _prediction_all_axes(problem, X: np.ndarray):
+        """Rigid-body readings of every axis (N, axes) (eq. 6 of paper 000) and the products its
+        Jacobian reuses: ``sᵀ (ω × (ω × r)) = (sᵀω)(rᵀω) - (sᵀr)|ω|²``."""
+        d, p, rows = problem.all_directions_b, problem.all_positions_m, problem.all_rows
+        w, dw, f = X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE]
+        ws, wr, sr = w @ d.T, w @ p.T, np.einsum("ai,ai->a", d, p)
+        pred = f @ rows[:, 0:3].T + dw @ rows[:, 3:6].T + ws * wr - sr * np.sum(w * w, axis=1, keepdims=True)
+        return pred, ws, wr, sr
+
+    @staticmethod
+    def _whitening(problem, shape) -> np.ndarray:
+        if problem.accel_sigma_per_sample is None:
+            return np.broadcast_to(1.0 / problem.accel_sigma, shape)
+        return 1.0 / problem.accel_sigma_per_sample  # motion-dependent noise / robust re-weighting
+
+    def _term_all_axes(self, problem, X: np.ndarray) -> Term:
+        """:meth:`term` without per-sensor calibration: every axis at once, the whitened Jacobian
+        written straight into its columns (the same numbers as
+        :func:`gfimu.factors.accelerometer.accelerometer_residual`); gradient of the quadratic part
+        ``(rᵀω) s + (sᵀω) r - 2 (sᵀr) ω``."""
+        pred, ws, wr, sr = self._prediction_all_axes(problem, X)
+        d, p, rows, w = problem.all_directions_b, problem.all_positions_m, problem.all_rows, X[:, OMEGA]
+        white = self._whitening(problem, pred.shape)
+        r = (pred - problem.log.accel_mps2) * white
+        J = np.zeros(pred.shape + (problem.state_size,))
+        J[:, :, OMEGA] = (wr[:, :, None] * d + ws[:, :, None] * p - 2.0 * sr[:, None] * w[:, None, :]) * white[:, :, None]
+        J[:, :, OMEGA_DOT] = rows[:, 3:6] * white[:, :, None]
+        J[:, :, SPECIFIC_FORCE] = rows[:, 0:3] * white[:, :, None]
+        jg = np.zeros(pred.shape + (problem.n_global,)) if problem.n_global else None
+        return Term("unary", r, {"x": J}, jg)
+
+    def whitened_residual(self, problem, states, params) -> np.ndarray:
+        """(N, axes) whitened residuals, without the Jacobians."""
+        if any(name.startswith(("bias", "scale")) for name in problem.global_blocks):
+            return self.term(problem, states, params).residual
+        pred = self._prediction_all_axes(problem, states)[0]
+        return (pred - problem.log.accel_mps2) * self._whitening(problem, pred.shape)
+
     def squared_norm(self, problem, states, params):
         if problem.n_global:
             return super().squared_norm(problem, states, params)
-        rows = getattr(problem, "_all_rows", None)  # every axis at once, without the Jacobians
-        if rows is None:
-            rows = problem._all_rows = accelerometer.axis_rows(problem.all_directions_b, problem.all_positions_m)
         X = states
-        r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], rows) - problem.log.accel_mps2
+        r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
+                                                   problem.all_rows) - problem.log.accel_mps2
         sigma = problem.accel_sigma if problem.accel_sigma_per_sample is None else problem.accel_sigma_per_sample
         r = r / sigma
         return float(np.sum(r * r))
