@@ -176,3 +176,23 @@ def test_a_stuck_channel_and_a_clipped_stretch_do_not_spoil_the_estimate(tmp_pat
         return float(np.sqrt(np.mean(np.sum((w[away] - log.truth.omega_b_radps[away]) ** 2, axis=1))))
 
     assert rmse(out) < 1.5 * rmse(clean), (rmse(out), rmse(clean))
+
+
+def test_rolling_median_equals_the_nan_aware_median_of_every_window():
+    import warnings
+
+    from gfimu.readings import _rolling_median
+
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 3, 7, 500):
+        x = rng.normal(size=(n, 4))
+        x[rng.random((n, 4)) < 0.1] = np.nan
+        if n > 3:
+            x[:, 2] = np.nan  # a whole column missing
+        for half in (1, 2, 5):
+            padded = np.concatenate([np.full((half, 4), np.nan), x, np.full((half, 4), np.nan)])
+            windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1, axis=0)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                expected = np.nanmedian(windows, axis=2)
+            assert np.array_equal(_rolling_median(x, half), expected, equal_nan=True)
