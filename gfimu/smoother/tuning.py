@@ -61,6 +61,7 @@ class Tuning:
     log_evidence: float
     """Linearised log marginal likelihood at the selection [nats]."""
     evaluations: int
+    """Number of settings whose evidence was computed."""
     axis_factors: tuple = (1.0, 1.0, 1.0)
     """Selected factor on the density per body axis."""
     specific_force_density: float = float("nan")
@@ -478,8 +479,16 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
         cache = {}
         bases = {}
         summed = {}
+        known = {}  # evidence per setting at this linearisation: a search starts where the last one ended
 
         def evidence(c, X):
+            key = (version, float(c["scale"]), float(c["density"]), tuple(np.asarray(c["axis"], float).tolist()),
+                   float(c["force"]), tuple(np.asarray(c["freq"], float).tolist()))
+            if key not in known:
+                known[key] = evidence_at(c, X)
+            return known[key]
+
+        def evidence_at(c, X):
             try:
                 problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])), X[:, OMEGA])
                 key = (version, float(c["scale"]))
@@ -503,11 +512,9 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
             except np.linalg.LinAlgError:
                 return -np.inf
 
-        evaluations = 0
         version = 0
 
         def search(name, lo, hi, axis=None, step=np.log(10.0)):
-            nonlocal evaluations
 
             def f(v):
                 c = copy_settings(current)
@@ -518,8 +525,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                 return evidence(c, X)
 
             start = current[name] if axis is None else current[name][axis]
-            v, value, k = _maximise_1d(f, float(start), step, np.log(lo), np.log(hi))
-            evaluations += k
+            v, value, _ = _maximise_1d(f, float(start), step, np.log(lo), np.log(hi))
             if axis is None:
                 current[name] = v
             else:
@@ -530,7 +536,6 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
             """Per body axis whose solved ω has one dominant spectral line (80 % of its power): the
             oscillator at that frequency, refined with the axis density by coordinate ascent; kept where
             the evidence rises by more than 10 nats."""
-            nonlocal evaluations
             rate = float(log.rate_hz)
             t = log.times_s
             span_s = float(t[-1] - t[0])
@@ -552,8 +557,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                         c["freq"][a] = float(np.exp(v))
                         return evidence(c, X)
 
-                    v, trial, k = _maximise_1d(g, start, step, start - reach, start + reach)
-                    evaluations += k
+                    v, trial, _ = _maximise_1d(g, start, step, start - reach, start + reach)
                     current["freq"][a] = float(np.exp(v))
                     trial = search("axis", 1e-6, 1e2, axis=a)
                 if trial > value + 10.0:
@@ -562,7 +566,6 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                     step = np.log(1.002)
                     v = np.log(current["freq"][a])
                     up, down = g(v + step), g(v - step)
-                    evaluations += 2
                     curv = (up - 2.0 * trial + down) / step**2
                     current["freq_std"][a] = current["freq"][a] / np.sqrt(-curv) if curv < 0 else current["freq"][a] * 0.01
                     current["amp"][a] = np.sqrt(2.0) * float(np.std(X[:, a]))
@@ -585,7 +588,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
             value = search_frequencies(value)
         if accel_noise:
             value = search("scale", 1e-2, 1e3, step=np.log(1.5))
-        tuning = Tuning(model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value), evaluations,
+        tuning = Tuning(model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value), len(known),
                         tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])),
                         tuple(float(v) for v in current["freq"]), tuple(float(v) for v in current["freq_std"]),
                         tuple(float(v) for v in current["amp"]))
