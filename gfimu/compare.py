@@ -61,7 +61,7 @@ def metric_columns() -> list[str]:
     for key, _, _ in TABLE_QUANTITIES.values():
         cols += [f"{key}_rmse_{a}" for a in AXES] + [f"{key}_rmse_norm"]
         cols += [f"{key}_rel_rms_{a}" for a in AXES]
-    cols += ["w_wrong_sign_share", "w_flipped_share", "w_off_5radps_share"]
+    cols += ["w_flipped_share", "w_axis_sign_off_share", "w_off_5radps_share"]
     for key, _, _ in TABLE_QUANTITIES.values():
         cols += [f"{key}_rmse_norm_over_{b}" for b in BOUND_NAMES]
     return cols
@@ -92,7 +92,7 @@ def metrics_from_evaluation(result) -> dict[str, float]:
                 out[f"{key}_rel_rms_{a}"] = _num(m.relative_rms[k])
         out[f"{key}_rmse_norm"] = _num(m.rmse_norm)
         if fname == "omega_b_radps":
-            out["w_wrong_sign_share"] = _num(m.wrong_sign_share)
+            out["w_axis_sign_off_share"] = _num(m.axis_sign_off_share)
             out["w_flipped_share"] = _num(m.flipped_share)
             out["w_off_5radps_share"] = _num(m.large_error_share)
     return out
@@ -453,14 +453,14 @@ def format_markdown(result: ComparisonResult) -> str:
             lines.append("| " + " | ".join(cells) + " |")
         methods_ok = [r for r in ok if r["kind"] == "method"]
         rel_q = [(k, unit) for k, _, unit in quantities if _present(methods_ok, [f"{k}_rel_rms_{a}" for a in AXES])]
-        if methods_ok and (rel_q or _present(methods_ok, ["w_wrong_sign_share"])):
-            lines += ["", "Relative RMS error per axis (paper 004, eq. 7) in %, and shares of samples where ω has a wrong sign or is > 5 rad/s off.", ""]
-            head = ["method"] + [f"{SYMBOLS[k]}{a} rel. [%]" for k, _ in rel_q for a in AXES] + ["ω wrong sign [%]", "ω flipped [%]", "ω > 5 rad/s off [%]"]
+        if methods_ok and (rel_q or _present(methods_ok, ["w_axis_sign_off_share"])):
+            lines += ["", "Relative RMS error per axis (paper 004, eq. 7) in %, and shares of samples where ω has the wrong sign (ω_est · ω_true < 0), a component with the other sign, or is > 5 rad/s off.", ""]
+            head = ["method"] + [f"{SYMBOLS[k]}{a} rel. [%]" for k, _ in rel_q for a in AXES] + ["ω wrong sign [%]", "ω axis sign off [%]", "ω > 5 rad/s off [%]"]
             lines.append("| " + " | ".join(head) + " |")
             lines.append("|" + "---|" * len(head))
             for r in methods_ok:
                 cells = [r["method"]] + [_fmt(r[f"{k}_rel_rms_{a}"], 3, 100) for k, _ in rel_q for a in AXES]
-                cells += [_fmt(r["w_wrong_sign_share"], 3, 100), _fmt(r["w_flipped_share"], 3, 100),
+                cells += [_fmt(r["w_flipped_share"], 3, 100), _fmt(r["w_axis_sign_off_share"], 3, 100),
                           _fmt(r["w_off_5radps_share"], 3, 100)]
                 lines.append("| " + " | ".join(cells) + " |")
         ratio_cols = [(k, b) for k, _, _ in quantities for b in BOUND_NAMES

@@ -11,7 +11,9 @@ kept (matching timestamps, valid, finite):
   normalised by the RMS magnitude of the true vector t (the paper's
   "theoretical root mean square angular velocity magnitude"); applied to
   every vector quantity, not to attitude;
-- for ω only: ``wrong_sign_share``, ``wrong_sign_share_axis`` and
+- for ω only: ``flipped_share`` (the share of samples on the wrong sign: the whole
+  vector points the other way), ``axis_sign_off_share``, ``axis_sign_off_share_axis``
+  (a component's sign differs, which small components of a right vector also do) and
   ``large_error_share`` (defined in :class:`QuantityMetrics`).
 
 Attitude (quaternions): the error is the rotation vector of
@@ -56,8 +58,8 @@ AXES = ("x", "y", "z")
 def row_keys(large_error_radps: float = 5.0) -> tuple[str, ...]:
     """Keys of :attr:`EvaluationResult.rows`, in table order."""
     return ("quantity", "unit", "n_samples", "n_nonfinite", "rmse_x", "rmse_y", "rmse_z", "rmse_norm", "median_norm",
-            "relative_rms_x", "relative_rms_y", "relative_rms_z", "wrong_sign_share", "wrong_sign_share_x",
-            "wrong_sign_share_y", "wrong_sign_share_z", "flipped_share", f"share_off_{large_error_radps:g}radps")
+            "relative_rms_x", "relative_rms_y", "relative_rms_z", "axis_sign_off_share", "axis_sign_off_share_x",
+            "axis_sign_off_share_y", "axis_sign_off_share_z", "flipped_share", f"share_off_{large_error_radps:g}radps")
 
 
 class EvaluationAlignmentWarning(UserWarning):
@@ -79,9 +81,9 @@ class QuantityMetrics:
 
     ``quantity`` is the Motion field name (``omega_b_radps`` ...) or
     ``attitude_rad`` / ``tilt_rad``; ``label`` is its short name (``omega``).
-    ``wrong_sign_share_axis[j]``: among samples with |ω_true_j| above the sign
+    ``axis_sign_off_share_axis[j]``: among samples with |ω_true_j| above the sign
     threshold, the share where the estimate's component j has the other sign
-    or is zero (ω_est_j · ω_true_j ≤ 0). ``wrong_sign_share``: among samples
+    or is zero (ω_est_j · ω_true_j ≤ 0). ``axis_sign_off_share``: among samples
     with at least one such component, the share with at least one wrong sign.
     ``flipped_share``: among samples with ‖ω_true‖ above the sign threshold,
     the share whose estimate points into the opposite half-space
@@ -99,8 +101,8 @@ class QuantityMetrics:
     rmse_norm: float
     median_norm: float
     relative_rms: tuple[float, ...] | None = None
-    wrong_sign_share: float | None = None
-    wrong_sign_share_axis: tuple[float, ...] | None = None
+    axis_sign_off_share: float | None = None
+    axis_sign_off_share_axis: tuple[float, ...] | None = None
     large_error_share: float | None = None
     flipped_share: float | None = None
 
@@ -108,10 +110,10 @@ class QuantityMetrics:
         keys = row_keys(large_error_radps)
         r = dict.fromkeys(keys)
         r.update(quantity=self.quantity, unit=self.unit, n_samples=self.n, n_nonfinite=self.n_nonfinite,
-                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, wrong_sign_share=self.wrong_sign_share, flipped_share=self.flipped_share)
+                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, axis_sign_off_share=self.axis_sign_off_share, flipped_share=self.flipped_share)
         r[keys[-1]] = self.large_error_share
         for name, values in (("rmse", self.rmse), ("relative_rms", self.relative_rms),
-                             ("wrong_sign_share", self.wrong_sign_share_axis)):
+                             ("axis_sign_off_share", self.axis_sign_off_share_axis)):
             if values is not None:
                 for a, v in zip(AXES, values):
                     r[f"{name}_{a}"] = v
@@ -210,7 +212,7 @@ class EvaluationResult:
 
     def to_markdown(self, title: str | None = None) -> str:
         head = ["quantity", "unit", "n", "RMSE x", "RMSE y", "RMSE z", "RMSE norm", "median norm",
-                "rel. RMS x", "rel. RMS y", "rel. RMS z", "wrong sign", "flipped",
+                "rel. RMS x", "rel. RMS y", "rel. RMS z", "wrong sign", "axis sign off",
                 f"> {self.large_error_radps:g} rad/s"]
         lines = []
         if title:
@@ -220,11 +222,12 @@ class EvaluationResult:
             rmse = m.rmse or (None,) * 3
             rel = m.relative_rms or (None,) * 3
             cells = [m.label, m.unit, str(m.n), *map(_fmt, rmse), _fmt(m.rmse_norm), _fmt(m.median_norm),
-                     *map(_pct, rel), _pct(m.wrong_sign_share), _pct(m.flipped_share), _pct(m.large_error_share)]
+                     *map(_pct, rel), _pct(m.flipped_share), _pct(m.axis_sign_off_share), _pct(m.large_error_share)]
             lines.append("| " + " | ".join(cells) + " |")
-        lines += ["", f"{self.summary()}. Relative RMS: paper 004 eq. (7). Wrong sign: samples with a component of "
-                      f"|ω| > {self.sign_threshold_radps:g} rad/s estimated with the other sign; flipped: ω_est · ω_true < 0 "
-                      f"where ‖ω_true‖ > {self.sign_threshold_radps:g} rad/s."]
+        lines += ["", f"{self.summary()}. Relative RMS: paper 004 eq. (7). Wrong sign: samples whose ω points the "
+                      f"other way, ω_est · ω_true < 0 where ‖ω_true‖ > {self.sign_threshold_radps:g} rad/s; axis sign off: "
+                      f"samples with some component of |ω| > {self.sign_threshold_radps:g} rad/s estimated with the other "
+                      "sign (small components of a right ω count too)."]
         return "\n".join(lines) + "\n"
 
     def to_csv(self) -> str:
@@ -323,8 +326,8 @@ def _sign_metrics(est: np.ndarray, true: np.ndarray, threshold: float, large: fl
     big = np.linalg.norm(true, axis=1) > threshold
     flipped = np.sum(est * true, axis=1) < 0
     return {
-        "wrong_sign_share": float(share),
-        "wrong_sign_share_axis": tuple(float(v) for v in per_axis),
+        "axis_sign_off_share": float(share),
+        "axis_sign_off_share_axis": tuple(float(v) for v in per_axis),
         "large_error_share": float(np.mean(norm > large)) if norm.size else math.nan,
         "flipped_share": float(np.mean(flipped[big])) if np.any(big) else math.nan,
     }

@@ -49,7 +49,7 @@ def test_rows_match_evaluate_run_directly(noisy_log, noisy_result):
     assert r["w_rmse_norm"] == w.rmse_norm
     assert [r["dw_rel_rms_x"], r["dw_rel_rms_y"], r["dw_rel_rms_z"]] == list(dw.relative_rms)
     assert r["f_rmse_norm"] == f.rmse_norm
-    assert r["w_wrong_sign_share"] == w.wrong_sign_share
+    assert r["w_axis_sign_off_share"] == w.axis_sign_off_share
     assert r["w_off_5radps_share"] == w.large_error_share
     assert r["n_evaluated"] == len(noisy_log)
     # the linear inversion with σ = 0.07 m/s² on every axis: f error ≈ σ/2 per axis (4 triads)
@@ -172,7 +172,7 @@ def test_metrics_from_evaluation_handles_missing_quantities(noisy_log):
     est = noisy_log.truth.replace(omega_dot_b_radps2=None, specific_force_b_mps2=None, accel_b_mps2=None,
                                   quaternion_wb=None)
     m = metrics_from_evaluation(evaluate(est, noisy_log.truth))
-    assert m["w_rmse_norm"] == 0.0 and m["w_wrong_sign_share"] == 0.0
+    assert m["w_rmse_norm"] == 0.0 and m["w_axis_sign_off_share"] == 0.0
     assert "dw_rmse_norm" not in m and "f_rmse_x" not in m
 
 

@@ -36,8 +36,8 @@ def test_omega_metrics_by_hand():
     truth_rms = math.sqrt((1 + 4 + 9 + 2.0025) / 4)  # paper 004 eq. (7) denominator
     assert m.relative_rms == pytest.approx(tuple(v / truth_rms for v in m.rmse), rel=1e-15)
     # eligible (|true| > 0.1): x of row 0; y of rows 1, 3; z of rows 2, 3. Only row 0's x is wrong.
-    assert m.wrong_sign_share_axis == (1.0, 0.0, 0.0)
-    assert m.wrong_sign_share == 0.25
+    assert m.axis_sign_off_share_axis == (1.0, 0.0, 0.0)
+    assert m.axis_sign_off_share == 0.25
     assert m.large_error_share == 0.25  # row 3: |e| = 6.0008 > 5
     assert r.n_rows == r.n_compared == 4 and r.n_invalid == 0 and r.alignment == "exact"
 
@@ -45,14 +45,14 @@ def test_omega_metrics_by_hand():
 def test_sign_threshold_and_zero_estimates():
     est, truth = hand_motions()
     m = evaluate(est, truth, sign_threshold_radps=0.01)["omega"]
-    assert m.wrong_sign_share_axis == (1.0, 0.0, 0.0)  # x of rows 0 and 3 now eligible, both wrong
-    assert m.wrong_sign_share == 0.5
+    assert m.axis_sign_off_share_axis == (1.0, 0.0, 0.0)  # x of rows 0 and 3 now eligible, both wrong
+    assert m.axis_sign_off_share == 0.5
     zero = Motion(T, omega_b_radps=np.zeros((4, 3)))
     m = evaluate(zero, truth)["omega"]
-    assert m.wrong_sign_share_axis == (1.0, 1.0, 1.0) and m.wrong_sign_share == 1.0
+    assert m.axis_sign_off_share_axis == (1.0, 1.0, 1.0) and m.axis_sign_off_share == 1.0
     small = Motion(T, omega_b_radps=np.full((4, 3), 0.05))
     m = evaluate(small, small)["omega"]
-    assert all(math.isnan(v) for v in m.wrong_sign_share_axis) and math.isnan(m.wrong_sign_share)
+    assert all(math.isnan(v) for v in m.axis_sign_off_share_axis) and math.isnan(m.axis_sign_off_share)
 
 
 def test_flipped_share_counts_whole_vector_sign_errors():
@@ -61,7 +61,7 @@ def test_flipped_share_counts_whole_vector_sign_errors():
     assert m.flipped_share == 0.25
     est, truth = hand_motions()
     m = evaluate(Motion(T, omega_b_radps=-W_TRUE), truth)["omega"]
-    assert m.flipped_share == 1.0 and m.wrong_sign_share == 1.0
+    assert m.flipped_share == 1.0 and m.axis_sign_off_share == 1.0
     # a small component with the wrong sign is not a flip
     m = evaluate(Motion(T, omega_b_radps=W_TRUE * [[-1, 1, 1]]), truth)["omega"]
     assert m.flipped_share == 0.25  # row 0 is pure x; row 3's x is small, its vector keeps its sign
@@ -102,7 +102,7 @@ def test_every_common_vector_quantity_is_evaluated():
         assert m.rmse_norm == pytest.approx(1.3, rel=1e-12) and m.median_norm == pytest.approx(1.3, rel=1e-12)
         tv = getattr(truth, {"omega_dot": "omega_dot_b_radps2", "specific_force": "specific_force_b_mps2"}[name])
         assert m.relative_rms == pytest.approx(tuple(abs(offset) / np.sqrt(np.mean(np.sum(tv**2, axis=1)))), rel=1e-12)
-        assert m.wrong_sign_share is None and m.large_error_share is None
+        assert m.axis_sign_off_share is None and m.large_error_share is None
     assert r["specific_force_b_mps2"] is r["specific_force"] is r["f"]
     assert "dw" in r and "omega" not in r
     with pytest.raises(KeyError, match="no metrics for 'omega'"):
@@ -166,8 +166,8 @@ def test_output_formats_carry_the_numbers():
     rows = list(csv.DictReader(io.StringIO(r.to_csv())))
     assert len(rows) == 1 and rows[0]["quantity"] == "omega_b_radps" and rows[0]["n_samples"] == "4"
     assert float(rows[0]["rmse_z"]) == 3.0 and float(rows[0]["rmse_x"]) == r["omega"].rmse[0]
-    assert float(rows[0]["wrong_sign_share"]) == 0.25 and float(rows[0]["share_off_5radps"]) == 0.25
-    assert float(rows[0]["wrong_sign_share_x"]) == 1.0 and rows[0]["wrong_sign_share_y"] == "0.0"
+    assert float(rows[0]["axis_sign_off_share"]) == 0.25 and float(rows[0]["share_off_5radps"]) == 0.25
+    assert float(rows[0]["axis_sign_off_share_x"]) == 1.0 and rows[0]["axis_sign_off_share_y"] == "0.0"
     doc = json.loads(r.to_json())
     assert doc["n_compared"] == 4 and doc["quantities"][0]["median_norm"] == 1.25
     assert doc["quantities"][0]["relative_rms_z"] == pytest.approx(3.0 / math.sqrt(16.0025 / 4), rel=1e-15)
@@ -176,7 +176,7 @@ def test_output_formats_carry_the_numbers():
     assert md.startswith("### hand\n")
     assert "| omega | rad s^-1 | 4 | 1.001 | 0.25 | 3 | 3.173 | 1.25 | 50.1 % | 12.5 % | 150 % | 25 % | 25 % |" in md
     small = Motion(T, omega_b_radps=np.full((4, 3), 0.05))
-    assert json.loads(evaluate(small, small).to_json())["quantities"][0]["wrong_sign_share"] is None
+    assert json.loads(evaluate(small, small).to_json())["quantities"][0]["axis_sign_off_share"] is None
 
 
 def test_evaluate_log_uses_truth_else_reference_without_invalid_rows():

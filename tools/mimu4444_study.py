@@ -180,7 +180,7 @@ def metrics_row(motion, log, mask) -> dict:
         "rmse_x": row["rmse_x"], "rmse_y": row["rmse_y"], "rmse_z": row["rmse_z"],
         "rmse_norm": row["rmse_norm"], "median_norm": row["median_norm"],
         "large_error": row.get("share_off_5radps", row.get("large_error")),
-        "wrong_sign": row.get("wrong_sign_share", row.get("wrong_sign")),
+        "wrong_sign": row.get("flipped_share", row.get("wrong_sign")),
         # the accelerometer-only sign ambiguity: estimate in the opposite half-space of the reference
         "opposite": float(np.mean(np.sum(est * ref, axis=1) < 0)),
     }

@@ -26,8 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="errors of an estimate against truth or a reference (RMSE, relative RMS, sign errors)",
         description="Compare an estimate CSV with a truth or reference CSV (or a log folder's truth.csv, else "
                     "reference.csv): RMSE per axis and of the norm, median error norm, relative RMS error "
-                    "(paper 004 eq. 7) for every quantity both files have; for ω also the share of wrong signs "
-                    "and of errors over 5 rad/s. Rows marked invalid in the reference (valid = 0) are left out.",
+                    "(paper 004 eq. 7) for every quantity both files have; for ω also the share of samples on the "
+                    "wrong sign (ω_est · ω_ref < 0), of samples with a component of the other sign, and of errors "
+                    "over 5 rad/s. Rows marked invalid in the reference (valid = 0) are left out.",
     )
     p.add_argument("reference", help="truth or reference CSV, or a log folder (its truth.csv, else reference.csv)")
     p.add_argument("estimate", help="estimate CSV (as written by gfimu estimate)")
@@ -39,7 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--interpolate", action="store_true",
                    help="if the timestamps differ, interpolate the truth at the estimate's timestamps")
     p.add_argument("--sign-threshold", type=non_negative("rad/s"), default=0.1, metavar="RADPS",
-                   help="count wrong signs only for ω components above this magnitude (default 0.1 rad/s)")
+                   help="count signs only where ‖ω‖ (wrong sign) or the ω component (axis sign off) is above this "
+                        "magnitude [rad/s] (default 0.1)")
     p.add_argument("--moving-threshold-radps", type=non_negative("rad/s"), default=0.0, metavar="RADPS",
                    help="use only rows where the reference turns faster than this, |ω_ref| > RADPS "
                         "(default 0: every valid row)")
