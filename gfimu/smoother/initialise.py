@@ -188,12 +188,30 @@ def sign_resolved_omega(q_meas: np.ndarray, omega_dot: np.ndarray, dt_s: np.ndar
     return out
 
 
-SIGN_CHAIN_SCALE_RADPS = 5.0
-"""Cauchy scale of the sign chain's step residual (chosen on the first MIMU4444 recording)."""
+SIGN_CHAIN_SCALE_FACTOR = 2.0 * np.sqrt(3.0) / 1.538
+"""The sign chain's Cauchy scale over the median norm of the log's own step residuals (with the
+better sign): a three-axis Gaussian step of std σ per axis has median norm 1.538 σ, and the scale
+is 2 σ on each of its three axes, c² = 3 (2 σ)², as the accelerometer and motion-model losses
+(2 σ)."""
+
+
+def sign_chain_scale(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray) -> float | None:
+    """Cauchy scale [rad/s] of :func:`sign_chain` measured from the data: :data:`SIGN_CHAIN_SCALE_FACTOR`
+    times the median over the samples of ``min_s ||s ω_{k+1} - ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||``;
+    None (plain squares) when that is zero or there are too few samples."""
+    w = np.asarray(omega_b_radps, dtype=float)
+    d = np.asarray(omega_dot_b_radps2, dtype=float)
+    if len(w) < 3:
+        return None
+    h = np.broadcast_to(np.asarray(dt_s, dtype=float), (len(w) - 1,))
+    inc = 0.5 * h[:, None] * (d[:-1] + d[1:])
+    step = np.minimum(np.linalg.norm(w[1:] - w[:-1] - inc, axis=1), np.linalg.norm(-w[1:] - w[:-1] - inc, axis=1))
+    c = SIGN_CHAIN_SCALE_FACTOR * float(np.median(step[np.isfinite(step)])) if np.any(np.isfinite(step)) else 0.0
+    return c if np.isfinite(c) and c > 0 else None
 
 
 def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray,
-               robust_scale_radps: float | None = SIGN_CHAIN_SCALE_RADPS) -> np.ndarray:
+               robust_scale_radps: float | str | None = "data") -> np.ndarray:
     """Signs s_k = ±1 (N,) minimising ``Σ_k ρ(||s_{k+1} ω_{k+1} - s_k ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||)``.
 
     The accelerometers fix ω only up to its sign per sample (the quadratic terms, paper 000, eq. 6)
@@ -201,16 +219,17 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
     by dynamic programming (Viterbi, two states per sample, linear in N). It keeps a rotation that
     slows through zero and reverses (ω̇ keeps its sign) apart from one that bounces back.
 
-    ρ is the Cauchy loss ``c² log(1 + e²/c²)`` with ``c = robust_scale_radps`` (None: the plain
-    square ``e²``): one sample whose per-sample ω̇ (or ω) is off by hundreds of rad/s², e.g. from a
-    reading spike, costs at most a few c² whichever its sign, instead of flipping the run that
-    follows it onto the wrong sign branch. On the MIMU4444 recordings (62.5 Hz hand motion, scale
-    chosen on exp_1) the robust chain lowered the smoother's ω RMSE on the unseen exp_2 / exp_3
-    from 4.58 / 5.54 to 3.61 / 4.03 rad/s and its opposite-sign share from 0.73 / 1.68 % to
-    0.31 / 1.25 % (``tools/mimu4444_study.py``).
+    ρ is the Cauchy loss ``c² log(1 + e²/c²)`` with ``c = robust_scale_radps`` ('data': measured
+    from these samples by :func:`sign_chain_scale`; None: the plain square ``e²``): one sample whose
+    per-sample ω̇ (or ω) is off by hundreds of rad/s², e.g. from a reading spike, costs at most a few
+    c² whichever its sign, instead of flipping the run that follows it onto the wrong sign branch.
     """
-    if robust_scale_radps is not None and not (np.isfinite(robust_scale_radps) and robust_scale_radps > 0):
-        raise ValueError(f"sign_chain: robust_scale_radps must be a positive number or None, got {robust_scale_radps!r}")
+    if isinstance(robust_scale_radps, str):
+        if robust_scale_radps != "data":
+            raise ValueError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
+        robust_scale_radps = sign_chain_scale(omega_b_radps, omega_dot_b_radps2, dt_s)
+    elif robust_scale_radps is not None and not (np.isfinite(robust_scale_radps) and robust_scale_radps > 0):
+        raise ValueError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
     w = np.asarray(omega_b_radps, dtype=float)
     d = np.asarray(omega_dot_b_radps2, dtype=float)
     n = len(w)
