@@ -172,10 +172,16 @@ class BandStructure:
         below the diagonal in column p of sample k (``diag`` (N, m, m), ``lower`` (N-1, m, m));
         :meth:`scaled` turns it into LAPACK band storage in place."""
         n, m = diag.shape[0], self.m
-        flat = np.zeros((n, 2 * m * m + 1))
-        flat[:, : m * m] = diag.reshape(n, m * m)
-        flat[: n - 1, m * m: 2 * m * m] = lower.reshape(n - 1, m * m)
-        return np.ascontiguousarray(np.swapaxes(np.take(flat, self.index, axis=1), 0, 1))
+        out = np.zeros((self.bandwidth + 1, n, m))
+        d_flat, l_flat = diag.reshape(n, m * m), lower.reshape(n - 1, m * m)
+        for d in range(self.bandwidth + 1):
+            for p in range(m):
+                i = int(self.index[d, p])
+                if i < m * m:
+                    out[d, :, p] = d_flat[:, i]
+                elif i < 2 * m * m:
+                    out[d, : n - 1, p] = l_flat[:, i - m * m]
+        return out
 
     def scaled(self, blocks: np.ndarray, scale: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
         """Lower band storage (kd + 1, N m) of ``S A S`` from :meth:`blocks` (scaled in place), with
