@@ -57,6 +57,7 @@ from .banded import (  # noqa: F401  (the banded core, also importable from here
 from .graph import SmootherOptions, SmootherProblem, options_reason
 from .initialise import initial_attitude, initial_estimate, initial_states, sign_chain
 from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
+from .restarts import branch_restarts
 from .result import SmootherEstimatorRuns, SmootherResult
 from .tuning import InitialStates, Tuning, make_problem, tuned_problem
 
@@ -176,6 +177,8 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         elif auto is not None and not auto[0].consistent:
             problem, x0 = _moment_problem(part, opt, auto, solve_sl, tunings)
             res = solve_window(problem, x0, problem.options, solver=solver)
+            if opt.branch_restarts:
+                res = _restarted(problem, res, opt)
         else:
             problem, x0 = tuned_problem(part, opt, tunings, initial, tune_span_s)
             res = solve_window(problem, x0, opt, solver=solver)
@@ -227,6 +230,23 @@ def _auto_model(log: Log, opt: SmootherOptions, attitude: bool):
             log.array, check, motion.omega_b_radps)))
     chosen = replace(chosen, **keep)
     return chosen, (check, motion)
+
+
+def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions) -> SolveResult:
+    """``res`` with the local restarts of :func:`gfimu.smoother.restarts.branch_restarts`: short runs
+    on another branch of ω kept where the robust objective falls; the cost is the re-weighted cost at
+    the result."""
+    states, tried, kept = branch_restarts(problem, res.states)
+    if not kept:
+        return res
+    reweight = reweighting(problem, opt)
+    if reweight is not None:
+        reweight(states, res.params)
+    out = replace(res, states=states, cost=problem.cost(states, res.params))
+    if res.covariance is not None:
+        ne = normal_equations(problem, states, res.params)
+        out.covariance, out.param_covariance = marginal_covariances(ne, factorise(ne, 0.0))
+    return out
 
 
 def _moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):

@@ -171,6 +171,11 @@ class SmootherOptions:
     """Batch smoother: robust loss on the motion-model factors of each step (kinematics + ω̇ random walk,
     or the white-snap step), threshold on the step's whitened residual norm / sqrt(rows); 0 (default)
     keeps the Gaussian loss. Lets sudden hand jerks through without smoothing them away."""
+    branch_restarts: bool = True
+    """Batch smoother, robust model of an inconsistent log (:mod:`gfimu.smoother.auto`): after each
+    window's solve, move the short runs of samples between outlying motion-model steps to the other
+    branches of ω (sign-flipped, mirrored through the array's plane) and keep them where the robust
+    objective falls (:mod:`gfimu.smoother.restarts`)."""
 
     factor_groups: tuple = ()
     """Further factor groups (:class:`gfimu.smoother.groups.FactorGroup`) added to the model of every
