@@ -83,7 +83,7 @@ def test_marginal_covariances_equal_dense_inverse(small_log):
 ])
 def test_graph_path_equals_fast_path(small_log, options):
     """GTSAM graph of CustomFactors (linearize/optimize/retract) = banded vectorised engine."""
-    log = small_log.select(slice(0, 120))
+    log = small_log.select(slice(0, 60))
     problem = SmootherProblem(log, options)
     x0 = initial_states(log, options)
     fast = batch.solve(problem, x0, method="gn")
