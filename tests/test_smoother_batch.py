@@ -153,7 +153,11 @@ def test_window_initialisation_recovers_sign_through_zero():
 
 # --- accuracy on simulated logs (cube of half edge 0.05 m, 0.07 m/s², 500 Hz) -----
 
-@pytest.mark.parametrize("scenario", ["random3d", "turntable"])
+@pytest.mark.parametrize("scenario", [
+    "random3d",
+    # ~7 s; the turntable's accuracy stays in the fast set on the 5 cm cube (test_smoother_batch_tuning.py)
+    pytest.param("turntable", marks=pytest.mark.slow),
+])
 def test_smoother_accuracy(scenario):
     log = simulate(scenario, CUBE, rate_hz=500.0, duration_s=5.0, seed=1)
     est = BatchSmootherEstimator()
