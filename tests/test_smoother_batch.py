@@ -192,6 +192,7 @@ def test_reversal_has_no_sign_errors():
     assert best > 10 * omega_rmse(m, log.truth), per_method
 
 
+@pytest.mark.slow  # ~6 s; the same five triads stay in the fast set: test_smoother_batch_tuning.py (gain over ML)
 def test_arbitrary_array():
     arr = random_array(5, half_extent_m=0.03, noise_std_mps2=0.07, seed=7)
     log = simulate("random3d", arr, rate_hz=500.0, duration_s=5.0, seed=3)
