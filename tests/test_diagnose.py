@@ -151,10 +151,12 @@ def test_cli_text_json_figure_and_refusals(tmp_path, base, capsys):
     y = base.accel_mps2.copy()
     y[2000:3000, 4] = y[2000, 4]
     gio.write_log(base.replace(accel_mps2=y), folder)
+    from gfimu.cli import main
+
+    assert main(["diagnose", str(folder), "--quiet"]) == 0  # text, in this process; the json run below is a new one
+    text = capsys.readouterr()
+    assert "verdict: USE WITH CARE" in text.out and "a2_y: stuck" in text.out, text.err
     cmd = [sys.executable, "-m", "gfimu", "diagnose", str(folder), "--quiet"]
-    text = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    assert text.returncode == 0, text.stderr
-    assert "verdict: USE WITH CARE" in text.stdout and "a2_y: stuck" in text.stdout
     out, fig = tmp_path / "d.json", tmp_path / "d.png"
     run = subprocess.run(cmd + ["--format", "json", "--out", str(out), "--figure", str(fig)], env=env,
                          capture_output=True, text=True)
@@ -162,8 +164,6 @@ def test_cli_text_json_figure_and_refusals(tmp_path, base, capsys):
     doc = json.loads(out.read_text())
     assert doc["faults"][0]["column"] == "a2_y" and doc["timing"]["rate_hz"] == pytest.approx(500.0)
     assert fig.read_bytes()[:4] == b"\x89PNG"
-    from gfimu.cli import main
-
     before = (folder / "imu.csv").read_bytes()
     assert main(["diagnose", str(folder), "--quiet", "--out", str(folder / "imu.csv")]) == 2
     err = capsys.readouterr().err

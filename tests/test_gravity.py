@@ -92,7 +92,9 @@ def omega_fn(t):
     return amp * ramp[:, None] * osc, amp * (dramp[:, None] * osc + ramp[:, None] * dosc)
 
 
-def rk4_attitude(q0, t_end, h=1e-4):
+def rk4_attitude(q0, t_end, h=1e-3):
+    """Reference attitude by classic RK4 (at h = 1 ms within 2e-12 rad of h = 0.1 ms over 1 s, far below the
+    second-order errors compared with it)."""
     q = np.asarray(q0, float)
     f = lambda tt, qq: 0.5 * quaternion_multiply(qq, np.r_[0.0, omega_fn([tt])[0][0]])
     t = 0.0

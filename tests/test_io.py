@@ -369,7 +369,8 @@ def test_gyroscope_declared_but_absent(tmp_path):
 @pytest.mark.parametrize("body, message, line", [
     ("#timestamp [ns],a_x [m s^-2]\n1,2\n2,3,4\n3,4\n", r"imu\.csv:3: row has 3 fields, the header has 2", 3),
     ("#timestamp [ns],a_x [m s^-2]\n1,2\n\n3,4\n", r"imu\.csv:3: row is empty, the header has 2", 3),
-    ("#timestamp [ns],a_x [m s^-2]\n1,2\n1.5,3\n", r"imu\.csv:3: timestamp '1\.5' is not an integer number of nanoseconds", 3),
+    ("#timestamp [ns],a_x [m s^-2]\n1,2\n1.4,3\n", r"imu\.csv:3: timestamp 1\.4 and the previous one \(1 on line 2\) are "
+                                                    r"the same nanosecond in \[ns\]; is the time unit right\?", 3),
     ("#timestamp [ns],a_x [m s^-2]\n1,2\nx,3\n", r"imu\.csv:3: timestamp 'x' is not a number", 3),
     ("#timestamp [ns],a_x [m s^-2]\n5,2\n5,3\n", r"imu\.csv:3: timestamp 5 is not after the previous one", 3),
     ("#timestamp [ns],a_x [m s^-2]\n", r"imu\.csv:2: has a header but no data rows", 2),

@@ -124,11 +124,9 @@ def test_dominant_frequency():
     assert dominant_frequency_hz(np.sin(2 * np.pi * 0.1 * t), 500.0, 0.2, 25.0) is None
 
 
-def test_tuner_finds_the_turntable_frequency_and_beats_20_mrad(turntable_log):
+def test_tuner_finds_the_turntable_frequency_and_beats_20_mrad(turntable_5cm_smoother):
     """Paper 001's 1 Hz turntable on a 5 cm cube: z oscillates at 1 Hz, x and y do not move."""
-    log = turntable_log
-    est = BatchSmootherEstimator()
-    m = est.estimate(log)
+    log, est, m = turntable_5cm_smoother
     t = est.last_tuning[0]
     assert t.axis_frequencies_hz[:2] == (0.0, 0.0), t
     assert t.axis_frequencies_hz[2] == pytest.approx(1.0, rel=2e-3), t

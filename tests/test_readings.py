@@ -13,6 +13,28 @@ from gfimu.readings import screen, screen_log
 from gfimu.simulate import simulate
 
 REPO = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+
+@pytest.fixture(scope="module")
+def clean_run(tmp_path_factory):
+    """The clean 10 s log (random3d, 500 Hz, seed 3) written once, and its estimate by each method computed once
+    for the module: ``clean_run(method)`` gives (log, log folder, estimate CSV, command before ``--out``)."""
+    root = tmp_path_factory.mktemp("clean")
+    log = simulate("random3d", seed=3)
+    folder = root / "log"
+    gio.write_log(log, folder)
+    done = {}
+
+    def run(method):
+        cmd = [sys.executable, "-m", "gfimu", "estimate", str(folder), "--method", method, "--no-progress"]
+        if method not in done:
+            clean = root / f"clean-{method}.csv"
+            assert subprocess.run(cmd + ["--out", str(clean)], env=ENV, capture_output=True).returncode == 0
+            done[method] = clean
+        return log, folder, done[method], cmd
+
+    return run
 
 
 def test_clean_logs_are_left_alone():
@@ -76,23 +98,17 @@ def test_a_spike_at_the_first_or_last_rows_of_a_ramp_is_still_found(power, row):
 
 @pytest.mark.parametrize("method", ["smoother", "ml"])
 @pytest.mark.parametrize("value", ["1e30", "spike"])
-def test_one_corrupt_cell_does_not_spoil_the_estimate(tmp_path, method, value):
+def test_one_corrupt_cell_does_not_spoil_the_estimate(tmp_path, clean_run, method, value):
     """10 s at 500 Hz, one corrupt cell (1e30, or 1000 m/s² added to one sensor's axis): the ω RMSE
     away from it (±0.5 s) stays within 1.5x of the clean log's, exit 0, a warning naming the row."""
-    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    log = simulate("random3d", seed=3)
-    folder = tmp_path / "log"
-    gio.write_log(log, folder)
-    clean = tmp_path / "clean.csv"
-    run = [sys.executable, "-m", "gfimu", "estimate", str(folder), "--method", method, "--no-progress"]
-    assert subprocess.run(run + ["--out", str(clean)], env=env, capture_output=True).returncode == 0
+    log, folder, clean, run = clean_run(method)
     row, col = 2500, 4
     y = log.accel_mps2.copy()
     y[row, col] = 1e30 if value == "1e30" else y[row, col] + 1000.0
     bad = tmp_path / "bad"
     gio.write_log(log.replace(accel_mps2=y), bad)
     out = tmp_path / "bad.csv"
-    proc = subprocess.run(run[:4] + [str(bad)] + run[5:] + ["--out", str(out)], env=env, capture_output=True, text=True)
+    proc = subprocess.run(run[:4] + [str(bad)] + run[5:] + ["--out", str(out)], env=ENV, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert f"row {row} {log.array.accel_columns[col]}" in proc.stderr
     away = np.abs(log.times_s - log.times_s[row]) > 0.5
@@ -138,18 +154,12 @@ def test_a_quiet_array_at_rest_is_not_stuck():
 
 
 @pytest.mark.parametrize("method", ["smoother", "ml"])
-def test_a_stuck_channel_and_a_clipped_stretch_do_not_spoil_the_estimate(tmp_path, method):
+def test_a_stuck_channel_and_a_clipped_stretch_do_not_spoil_the_estimate(tmp_path, clean_run, method):
     """10 s at 500 Hz on the 5 cm cube: one channel stuck for 1 s, one clipped at its stated range; the ω RMSE away
     from them (±0.5 s) stays within 1.5x of the clean log's, exit 0, a warning naming the runs."""
     from dataclasses import replace as dc_replace
 
-    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    log = simulate("random3d", seed=3)
-    folder = tmp_path / "log"
-    gio.write_log(log, folder)
-    clean = tmp_path / "clean.csv"
-    run = [sys.executable, "-m", "gfimu", "estimate", str(folder), "--method", method, "--no-progress"]
-    assert subprocess.run(run + ["--out", str(clean)], env=env, capture_output=True).returncode == 0
+    log, folder, clean, run = clean_run(method)
     y = log.accel_mps2.copy()
     y[2000:2500, 4] = y[2000, 4]  # a2_y stuck for 1 s
     limit = 0.85 * np.abs(y[:, 7]).max()  # a3_y clipped at a stated range below its peaks
@@ -159,7 +169,7 @@ def test_a_stuck_channel_and_a_clipped_stretch_do_not_spoil_the_estimate(tmp_pat
     bad = tmp_path / "bad"
     gio.write_log(log.replace(accel_mps2=y, array=log.array.with_accelerometers(accs)), bad)
     out = tmp_path / "bad.csv"
-    proc = subprocess.run(run[:4] + [str(bad)] + run[5:] + ["--out", str(out)], env=env, capture_output=True, text=True)
+    proc = subprocess.run(run[:4] + [str(bad)] + run[5:] + ["--out", str(out)], env=ENV, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert "a2_y stuck rows 2000-2499" in proc.stderr and "a3_y clipped rows" in proc.stderr
     assert f"{int(clipped.sum())} clipped at the range" in proc.stderr and "500 stuck" in proc.stderr

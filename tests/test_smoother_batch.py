@@ -83,7 +83,7 @@ def test_marginal_covariances_equal_dense_inverse(small_log):
 ])
 def test_graph_path_equals_fast_path(small_log, options):
     """GTSAM graph of CustomFactors (linearize/optimize/retract) = banded vectorised engine."""
-    log = small_log.select(slice(0, 120))
+    log = small_log.select(slice(0, 60))
     problem = SmootherProblem(log, options)
     x0 = initial_states(log, options)
     fast = batch.solve(problem, x0, method="gn")
@@ -153,7 +153,11 @@ def test_window_initialisation_recovers_sign_through_zero():
 
 # --- accuracy on simulated logs (cube of half edge 0.05 m, 0.07 m/s², 500 Hz) -----
 
-@pytest.mark.parametrize("scenario", ["random3d", "turntable"])
+@pytest.mark.parametrize("scenario", [
+    "random3d",
+    # ~7 s; the turntable's accuracy stays in the fast set on the 5 cm cube (test_smoother_batch_tuning.py)
+    pytest.param("turntable", marks=pytest.mark.slow),
+])
 def test_smoother_accuracy(scenario):
     log = simulate(scenario, CUBE, rate_hz=500.0, duration_s=5.0, seed=1)
     est = BatchSmootherEstimator()
@@ -188,6 +192,7 @@ def test_reversal_has_no_sign_errors():
     assert best > 10 * omega_rmse(m, log.truth), per_method
 
 
+@pytest.mark.slow  # ~6 s; the same five triads stay in the fast set: test_smoother_batch_tuning.py (gain over ML)
 def test_arbitrary_array():
     arr = random_array(5, half_extent_m=0.03, noise_std_mps2=0.07, seed=7)
     log = simulate("random3d", arr, rate_hz=500.0, duration_s=5.0, seed=3)

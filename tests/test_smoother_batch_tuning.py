@@ -73,12 +73,11 @@ def test_tuner_recovers_the_density_of_the_process_model():
     assert tuned_rmse < fixed_rmse
 
 
-def test_tuned_smoother_on_the_turntable_5cm_cube():
+def test_tuned_smoother_on_the_turntable_5cm_cube(turntable_5cm_smoother):
     """1 Hz turntable about body z, 5 cm cube: the densities of x and y are driven down (ω is about z
     only), and ω is far better than with the fixed densities; the choice is reported per window."""
-    log = simulate("turntable", CUBE_5CM, rate_hz=500.0, duration_s=6.0, seed=1)
-    est = BatchSmootherEstimator()
-    tuned = omega_rmse(est.estimate(log), log.truth)
+    log, est, m = turntable_5cm_smoother  # 6 s at 500 Hz, seed 1 (tests/conftest.py)
+    tuned = omega_rmse(m, log.truth)
     fixed = omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(log), log.truth)
     assert len(est.last_tuning) == 1
     t = est.last_tuning[0]
@@ -151,15 +150,20 @@ def _arbitrary_array(seed=7):
 
 
 @pytest.mark.parametrize("scenario, array_name, max_rmse", [
-    ("random3d", "cube5", 0.04), ("turntable", "cube5", 0.03), ("reversal", "cube5", 0.03), ("random3d", "arbitrary", 0.065)])
-def test_default_smoother_gain_over_per_sample_ml(scenario, array_name, max_rmse):
+    ("random3d", "cube5", 0.04), ("turntable", "cube5", 0.03),
+    pytest.param("reversal", "cube5", 0.03, marks=pytest.mark.slow),  # ~8 s; reversal: test_smoother_batch.py
+    ("random3d", "arbitrary", 0.065)])
+def test_default_smoother_gain_over_per_sample_ml(request, scenario, array_name, max_rmse):
     """5 cm cube (and five triads at random within ±3 cm), 0.07 m/s², 500 Hz, 6 s: the default
     (tuned) smoother is ≥ 20x better than the per-sample ML estimate, with no sign error."""
     from gfimu.methods import make_estimator
 
-    array = CUBE_5CM if array_name == "cube5" else _arbitrary_array()
-    log = simulate(scenario, array, rate_hz=500.0, duration_s=6.0, seed=1)
-    m = BatchSmootherEstimator().estimate(log)
+    if (scenario, array_name) == ("turntable", "cube5"):  # the same log and estimate as in tests/conftest.py
+        log, _, m = request.getfixturevalue("turntable_5cm_smoother")
+    else:
+        array = CUBE_5CM if array_name == "cube5" else _arbitrary_array()
+        log = simulate(scenario, array, rate_hz=500.0, duration_s=6.0, seed=1)
+        m = BatchSmootherEstimator().estimate(log)
     rmse = omega_rmse(m, log.truth)
     ml = omega_rmse(make_estimator("ml").estimate(log), log.truth)
     assert ml / rmse > 20.0, (rmse, ml)

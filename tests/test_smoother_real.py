@@ -40,11 +40,24 @@ def scores(motion, part, mask):
     return float(np.sqrt(np.mean(np.sum((w - ref) ** 2, axis=1)))), float(np.mean(np.sum(w * ref, axis=1) < 0))
 
 
+@pytest.fixture(scope="module")
+def busiest(mimu4444_dir):
+    """``busiest(exp)``: :func:`busiest_part` of exp_<exp>, read and calibrated once for the module."""
+    parts = {}
+
+    def get(exp):
+        if exp not in parts:
+            parts[exp] = busiest_part(mimu4444_dir, exp)
+        return parts[exp]
+
+    return get
+
+
 @pytest.mark.parametrize("exp, max_rmse", [(2, 3.4), (3, 4.3)])  # measured 3.14, 4.06 (sign chain with Cauchy steps)
-def test_robust_settings_on_unseen_recordings(mimu4444_dir, exp, max_rmse):
+def test_robust_settings_on_unseen_recordings(busiest, exp, max_rmse):
     """Busiest 40 s (own calibration, shifted reference): the robust settings lower the ω RMSE and
     the opposite-sign share below those of the Gaussian real-data settings, to the measured level."""
-    part, mask = busiest_part(mimu4444_dir, exp)
+    part, mask = busiest(exp)
     plain = scores(BatchSmootherEstimator(**REAL_SETTINGS, auto_model=False).estimate(part), part, mask)
     robust = scores(BatchSmootherEstimator(**REAL_SETTINGS, **ROBUST, auto_model=False).estimate(part), part, mask)
     print(f"exp_{exp}: {mask.sum()} moving samples; Gaussian {plain[0]:.3f} rad/s, {plain[1]:.2%} opposite; "
@@ -56,11 +69,11 @@ def test_robust_settings_on_unseen_recordings(mimu4444_dir, exp, max_rmse):
 
 
 @pytest.mark.parametrize("exp", [2, 3])
-def test_default_model_matches_the_hand_chosen_settings(mimu4444_dir, exp):
+def test_default_model_matches_the_hand_chosen_settings(busiest, exp):
     """Busiest 40 s: the default smoother, with nothing set, finds the readings inconsistent with a
     rigid body (heavy tails, noise growing with |ω|), measures its noise from them and is within 10 %
     of the settings chosen by hand on exp_1, with under 1 % of the moving samples on the wrong sign."""
-    part, mask = busiest_part(mimu4444_dir, exp)
+    part, mask = busiest(exp)
     hand = scores(BatchSmootherEstimator(**REAL_SETTINGS, **ROBUST).estimate(part), part, mask)
     est = BatchSmootherEstimator()
     default = scores(est.estimate(part), part, mask)

@@ -66,7 +66,7 @@ def test_unknown_solver_is_refused_by_name():
 
 def test_cli_solver_option(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    sim = subprocess.run([sys.executable, "-m", "gfimu", "simulate", "turntable", "--duration-s", "0.3",
+    sim = subprocess.run([sys.executable, "-m", "gfimu", "simulate", "turntable", "--duration-s", "0.15",
                           "--out", str(tmp_path / "log")], env=env, capture_output=True, text=True)
     assert sim.returncode == 0, sim.stderr
     outs = {}

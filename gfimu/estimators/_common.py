@@ -21,6 +21,20 @@ def check_finite(values: np.ndarray, what: str, columns: Sequence[str] | None = 
         raise ValueError(f"{what}: non-finite value at sample {int(row)}{where}")
 
 
+def checked_readings(estimator, log, method: str) -> np.ndarray:
+    """``log.accel_mps2`` after the checks an estimator makes first: ``estimator.applicable(log.array)`` (ValueError
+    with its reason) and finite readings (ValueError naming the first non-finite sample and column)."""
+    reason = estimator.applicable(log.array)
+    if reason:
+        raise ValueError(f"{log.source}: method {method!r} cannot run: {reason}")
+    y = log.accel_mps2
+    if not np.all(np.isfinite(y)):
+        bad = np.argwhere(~np.isfinite(y))[0]
+        raise ValueError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column "
+                         f"{log.array.accel_columns[bad[1]]}")
+    return y
+
+
 def weighted_least_squares(S: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Estimator matrix ``A`` (x = A y) of the least squares ``y = S x`` and the covariance of x.
 

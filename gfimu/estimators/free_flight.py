@@ -47,6 +47,7 @@ from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rotations import skew
+from ._common import checked_readings
 
 OMEGA_SIGNS = ("positive", "negative", "auto")
 
@@ -193,13 +194,7 @@ class FreeFlightEstimator:
     # ------------------------------------------------------------------
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         array = log.array
-        reason = self.applicable(array)
-        if reason:
-            raise ValueError(f"{log.source}: method 'free-flight' cannot run: {reason}")
-        y = log.accel_mps2
-        if not np.all(np.isfinite(y)):
-            bad = np.argwhere(~np.isfinite(y))[0]
-            raise ValueError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column {array.accel_columns[bad[1]]}")
+        y = checked_readings(self, log, "free-flight")
         n = len(log)
         if n < 2:
             raise ValueError(f"{log.source}: free-flight needs at least 2 samples, got {n}")

@@ -60,6 +60,7 @@ from ..array import SensorArray
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
+from ._common import checked_readings
 
 
 def _fibonacci_hemisphere(n: int) -> np.ndarray:
@@ -178,13 +179,7 @@ class MLEstimator:
     # ------------------------------------------------------------------
     def estimate(self, log: Log, progress: bool = False) -> Motion:
         array = log.array
-        reason = self.applicable(array)
-        if reason:
-            raise ValueError(f"{log.source}: method 'ml' cannot run: {reason}")
-        y = log.accel_mps2
-        if not np.all(np.isfinite(y)):
-            bad = np.argwhere(~np.isfinite(y))[0]
-            raise ValueError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column {array.accel_columns[bad[1]]}")
+        y = checked_readings(self, log, "ml")
         gyro = None
         gyro_var = None
         if self.use_gyro:

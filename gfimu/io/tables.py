@@ -28,7 +28,6 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Iterator
-from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +37,8 @@ from ..log import GYRO_COLUMNS, TILT_COLUMNS, Log
 from ..motion import QUANTITIES, Motion
 from .atomic import atomic_write
 from .errors import LogFormatError
-from .units import KIND_OF_UNIT, TIME_UNITS_NS, UNITS, canonical_unit, unit_factor, unit_help
+from .units import (KIND_OF_UNIT, TIME_UNITS_NS, UNITS, TimestampError, canonical_unit, same_nanosecond, timestamps_ns,
+                    unit_factor, unit_help)
 
 TIMESTAMP_HEADER = "#timestamp [ns]"
 VALID_COLUMN = "valid"
@@ -257,16 +257,10 @@ class _Csv:
         prev = None  # (value, token) of the last row of the previous block
         for row0, lines in self._row_blocks():
             tokens = [ln[: ln.find(",")] for ln in lines]
-            part = None
-            if scale == 1:
-                try:
-                    part = np.array(tokens).astype(np.int64)
-                except (ValueError, OverflowError):
-                    part = None
-            if part is None:
-                part = np.empty(len(tokens), dtype=np.int64)
-                for k, tok in enumerate(tokens):
-                    part[k] = self._parse_time(tok, scale, row0 + k)
+            try:
+                part = timestamps_ns(tokens, scale)
+            except TimestampError as exc:
+                raise LogFormatError(str(exc), self.path, self.line_of_row(row0 + exc.index)) from None
             t[row0:row0 + len(tokens)] = part
             bad = np.flatnonzero(np.diff(part) <= 0) + 1
             if prev is not None and part[0] <= prev[0]:
@@ -274,28 +268,16 @@ class _Csv:
             if bad.size:
                 k = int(bad[0])
                 before = tokens[k - 1] if k > 0 else prev[1]
+                where = f"{before.strip()} on line {row0 + k + 1}"
+                if part[k] == (part[k - 1] if k > 0 else prev[0]) and same_nanosecond(before, tokens[k]):
+                    raise LogFormatError(
+                        f"timestamp {tokens[k].strip()} and the previous one ({where}) are the same nanosecond in "
+                        f"[{self.time_unit}]; is the time unit right?", self.path, self.line_of_row(row0 + k))
                 raise LogFormatError(
-                    f"timestamp {tokens[k].strip()} is not after the previous one ({before.strip()} on line "
-                    f"{row0 + k + 1}); timestamps must be strictly increasing", self.path, self.line_of_row(row0 + k))
+                    f"timestamp {tokens[k].strip()} is not after the previous one ({where}); timestamps must be "
+                    "strictly increasing", self.path, self.line_of_row(row0 + k))
             prev = (part[-1], tokens[-1])
         return t
-
-    def _parse_time(self, token: str, scale: int, row: int) -> int:
-        tok = token.strip()
-        try:
-            value = Decimal(tok) * scale
-        except InvalidOperation:
-            value = None
-        if value is None or not value.is_finite():
-            raise LogFormatError(f"timestamp {tok!r} is not a number", self.path, self.line_of_row(row))
-        ns = int(value.to_integral_value())
-        if scale == 1 and ns != value:
-            raise LogFormatError(f"timestamp {tok!r} is not an integer number of nanoseconds", self.path,
-                                 self.line_of_row(row))
-        if not -(2**63) <= ns < 2**63:
-            raise LogFormatError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds", self.path,
-                                 self.line_of_row(row))
-        return ns
 
     def values(self, indices: list[int], allow_nan: bool = False, rows: np.ndarray | None = None) -> np.ndarray:
         """Float values of the given columns (N, len(indices)), not yet unit-converted.

@@ -8,7 +8,9 @@ conversion is unambiguous and refused otherwise (never misread):
 - angular acceleration ``[rad s^-2]``; also ``[deg s^-2]``;
 - angle ``[rad]``; also ``[deg]``, ``[mrad]``;
 - timestamps ``[ns]``; also ``[us]``, ``[ms]``, ``[s]``, converted exactly
-  from the decimal text and rounded to the nearest nanosecond.
+  from the decimal text and rounded to the nearest nanosecond, a half to the
+  even one, in every unit (:func:`timestamps_ns`; the one rule of every
+  reader).
 
 Equivalent spellings are accepted (``m/s^2``, ``m/s²``, ``rad/s``,
 ``deg/s``, ``°``, ``µs`` ...).
@@ -18,7 +20,10 @@ from __future__ import annotations
 
 import math
 import re
-from decimal import Decimal, InvalidOperation
+from collections.abc import Sequence
+from decimal import MAX_PREC, ROUND_HALF_EVEN, Context, Decimal, InvalidOperation
+
+import numpy as np
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 
@@ -85,13 +90,64 @@ def time_unit_ns(unit: str) -> int:
     return TIME_UNITS_NS[canonical_unit(unit)]
 
 
+_EXACT = Context(prec=MAX_PREC, rounding=ROUND_HALF_EVEN)  # a product of decimals, not rounded
+_INT64 = (-(2**63), 2**63)
+
+
+class TimestampError(ValueError):
+    """A timestamp token that is no time; ``index`` is its place among the tokens given."""
+
+    def __init__(self, message: str, index: int):
+        super().__init__(message)
+        self.index = index
+
+
 def timestamp_ns(text: str, ns_per_unit: int) -> int:
-    """Integer nanoseconds of a timestamp written as decimal text in a unit of ``ns_per_unit`` ns, converted
-    exactly and rounded to the nearest nanosecond; ValueError if the text is not a finite number."""
+    """Integer nanoseconds of a timestamp written as decimal text in a unit of ``ns_per_unit`` ns.
+
+    The text is converted exactly and rounded to the nearest nanosecond, a half to the even one
+    (``1.5`` and ``2.5`` [ns] give 2, ``0.0000000015`` [s] gives 2), whatever the caller's decimal
+    context; ValueError, naming the token, if it is not a finite number or is outside 64-bit nanoseconds.
+    """
+    tok = text.strip()
     try:
-        value = Decimal(text.strip()) * ns_per_unit
+        value = Decimal(tok)
     except InvalidOperation:
-        raise ValueError(f"timestamp {text.strip()!r} is not a number") from None
+        raise ValueError(f"timestamp {tok!r} is not a number") from None
     if not value.is_finite():
-        raise ValueError(f"timestamp {text.strip()!r} is not a finite number")
-    return int(value.to_integral_value())
+        raise ValueError(f"timestamp {tok!r} is not a finite number")
+    if value and value.adjusted() > 30:  # far beyond 2^63 ns in any unit; not expanded to an integer
+        raise ValueError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds")
+    ns = _EXACT.multiply(value, ns_per_unit).to_integral_value(rounding=ROUND_HALF_EVEN)
+    if not _INT64[0] <= ns < _INT64[1]:
+        raise ValueError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds")
+    return int(ns)
+
+
+def timestamps_ns(tokens: Sequence[str], ns_per_unit: int) -> np.ndarray:
+    """int64 nanoseconds of timestamp tokens in a unit of ``ns_per_unit`` ns, by the rule of
+    :func:`timestamp_ns` (integer [ns] tokens read at once); TimestampError at the first bad token."""
+    if ns_per_unit == 1:
+        try:
+            return np.array(tokens).astype(np.int64).reshape(len(tokens))
+        except (ValueError, OverflowError):
+            pass
+    out = np.empty(len(tokens), dtype=np.int64)
+    for k, tok in enumerate(tokens):
+        try:
+            out[k] = timestamp_ns(tok, ns_per_unit)
+        except ValueError as exc:
+            raise TimestampError(str(exc), k) from None
+    return out
+
+
+def same_nanosecond(earlier: str, later: str) -> bool:
+    """Whether two timestamp tokens are distinct, increasing decimal times (the second after the first) that
+    round to one nanosecond: a unit too coarse for them (seconds written under ``[ns]``), not a step back."""
+    a, b = earlier.strip(), later.strip()
+    if a == b:
+        return False
+    try:
+        return Decimal(b) > Decimal(a)
+    except InvalidOperation:
+        return False

@@ -41,6 +41,7 @@ from ..log import Log
 from .graph import SmootherOptions
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
+
 class _LazyGtsam:
     """The ``gtsam`` module, imported on first use (the numpy engine and ``gfimu --help`` never need it)."""
 
@@ -65,6 +66,20 @@ def insert_state(values: gtsam.Values, k: int, omega, omega_dot, f) -> None:
     values.insert(kw, np.asarray(omega, dtype=float))
     values.insert(kd, np.asarray(omega_dot, dtype=float))
     values.insert(kf, np.asarray(f, dtype=float))
+
+
+def _linear_factor(noise_model, factor_keys: list[int], residual, jacobians: tuple) -> gtsam.CustomFactor:
+    """A factor whose residual ``residual(values)`` is linear in its keys' vectors: the Jacobians, one per
+    key, are the constants given, handed to GTSAM as they are (no per-call allocation)."""
+
+    def error(this, values, out):
+        r = residual(values)
+        if out is not None:
+            for i, J in enumerate(jacobians):
+                out[i] = J
+        return r
+
+    return gtsam.CustomFactor(noise_model, factor_keys, error)
 
 
 class SampleProblem:
@@ -222,18 +237,12 @@ class ArrayModel:
     def _fast_trapezoid_factor(self, w0: int, w1: int, d0: int, d1: int, h: float, noise) -> gtsam.CustomFactor:
         """``ω1 - ω0 - h/2 (ω̇0 + ω̇1)`` with its constant Jacobians, without per-call allocation."""
         half_h = 0.5 * h
-        eye, neg, jd = self._eye3, -self._eye3, -half_h * self._eye3
+        jd = -half_h * self._eye3
 
-        def error(this, values, jacobians):
-            r = values.atVector(w1) - values.atVector(w0) - half_h * (values.atVector(d0) + values.atVector(d1))
-            if jacobians is not None:
-                jacobians[0] = neg
-                jacobians[1] = eye
-                jacobians[2] = jd
-                jacobians[3] = jd
-            return r
+        def residual(values):
+            return values.atVector(w1) - values.atVector(w0) - half_h * (values.atVector(d0) + values.atVector(d1))
 
-        return gtsam.CustomFactor(noise, [w0, w1, d0, d1], error)
+        return _linear_factor(noise, [w0, w1, d0, d1], residual, (-self._eye3, self._eye3, jd, jd))
 
     def _fast_oscillator_factor(self, w0: int, w1: int, d0: int, d1: int, h: float, noise) -> gtsam.CustomFactor:
         """Exact oscillator step ``[ω1; ω̇1] - Φ [ω0; ω̇0]`` (:func:`gfimu.factors.process.oscillator_residual`)
@@ -245,17 +254,11 @@ class ArrayModel:
         jw0 = -np.vstack([np.diag(a), np.diag(c)])
         jd0 = -np.vstack([np.diag(b), np.diag(d)])
 
-        def error(this, values, jacobians):
+        def residual(values):
             x0, y0 = values.atVector(w0), values.atVector(d0)
-            r = np.concatenate([values.atVector(w1) - a * x0 - b * y0, values.atVector(d1) - c * x0 - d * y0])
-            if jacobians is not None:
-                jacobians[0] = jw0
-                jacobians[1] = top
-                jacobians[2] = jd0
-                jacobians[3] = bottom
-            return r
+            return np.concatenate([values.atVector(w1) - a * x0 - b * y0, values.atVector(d1) - c * x0 - d * y0])
 
-        return gtsam.CustomFactor(noise, [w0, w1, d0, d1], error)
+        return _linear_factor(noise, [w0, w1, d0, d1], residual, (jw0, top, jd0, bottom))
 
     def _process_noises(self, h: float):
         key = round(h * 1e9)

@@ -160,21 +160,29 @@ def _binary(problem, rows: int, pairs: list[tuple[slice, np.ndarray, np.ndarray]
     return J0, J1
 
 
-class AccelerometerGroup(FactorGroup):
+class _ArrayMeasurementGroup(FactorGroup):
+    """The array's measurement in the form ``options.measurement`` names (``formulation``), over every
+    sample, with the accelerometers' noise ``problem.accel_sigma`` (array.toml, :mod:`gfimu.noise`)."""
+
+    formulation = ""
+    measurement = True
+    per_sample = False
+
+    def applies(self, problem) -> bool:
+        return problem.options.measurement == self.formulation
+
+    def setup(self, problem) -> None:
+        problem.accel_sigma = noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2)
+
+
+class AccelerometerGroup(_ArrayMeasurementGroup):
     """The accelerometer equation of every sensor at every sample (paper 000, eq. 6), with the
     per-axis biases and scale-factor errors when self-calibrating. Noise: ``problem.accel_sigma``
     (array.toml, :mod:`gfimu.noise`), or ``problem.accel_sigma_per_sample`` when set (motion-dependent
     noise, robust re-weighting)."""
 
     name = "accelerometer"
-    measurement = True
-    per_sample = False
-
-    def applies(self, problem) -> bool:
-        return problem.options.measurement == "accelerometer"
-
-    def setup(self, problem) -> None:
-        problem.accel_sigma = noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2)
+    formulation = "accelerometer"
 
     def terms(self, problem, states, params):
         return [self.term(problem, states, params)]
@@ -284,19 +292,15 @@ class AccelerometerGroup(FactorGroup):
         return float(np.sum(np.log(problem.accel_sigma_per_sample)))
 
 
-class InversionGroup(FactorGroup):
+class InversionGroup(_ArrayMeasurementGroup):
     """``measurement='quadratic'``: the per-sample inversion ``[f, ω̇, q(ω)]`` (paper 000, eq. 7) with
     its covariance ``problem.x_cov`` (whitening ``problem.x_whiten``)."""
 
     name = "per-sample inversion"
-    measurement = True
-    per_sample = False
-
-    def applies(self, problem) -> bool:
-        return problem.options.measurement == "quadratic"
+    formulation = "quadratic"
 
     def setup(self, problem) -> None:
-        problem.accel_sigma = noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2)
+        super().setup(problem)
         problem.x_hat, problem.x_cov = quadratic.inversion(problem.log.array, problem.log.accel_mps2)
         problem.x_whiten = np.linalg.inv(np.linalg.cholesky(problem.x_cov))  # L⁻¹ with cov = L Lᵀ
 

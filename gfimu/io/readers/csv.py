@@ -27,7 +27,6 @@ import re
 import tomllib
 import warnings
 from dataclasses import dataclass
-from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +37,8 @@ from ...log import Log
 from ...motion import Motion
 from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
 from ..errors import LogFormatError, LogPlausibilityWarning, read_utf8_text
-from ..units import TIME_UNITS_NS, header_name_and_unit, time_unit_ns, timestamp_ns, unit_factor, unit_help
+from ..units import (TIME_UNITS_NS, TimestampError, header_name_and_unit, same_nanosecond, time_unit_ns, timestamps_ns,
+                     unit_factor, unit_help)
 
 MAP_FORMAT = "gfimu-csv-map/1"
 AXES = ("x", "y", "z")
@@ -520,35 +520,17 @@ class _Reader:
         j = self.find(table, column)
         scale, unit = self.unit(table, j, column, "time")
         tokens = table.field(j)
-        t = None
-        if scale == 1:
-            try:
-                t = np.array(tokens).astype(np.int64)
-            except (ValueError, OverflowError):
-                t = None
-        if t is None:
-            t = np.empty(len(tokens), dtype=np.int64)
-            for k, tok in enumerate(tokens):
-                try:
-                    ns = timestamp_ns(tok, int(scale))
-                except ValueError as exc:
-                    raise LogFormatError(f"{table.shown(j)}: {exc}", table.path, table.lines[k]) from None
-                if not -(2**63) <= ns < 2**63:
-                    raise LogFormatError(f"{table.shown(j)}: timestamp {tok!r} is out of range for 64-bit "
-                                         "nanoseconds", table.path, table.lines[k])
-                t[k] = ns
+        try:
+            t = timestamps_ns(tokens, int(scale))
+        except TimestampError as exc:
+            raise LogFormatError(f"{table.shown(j)}: {exc}", table.path, table.lines[exc.index]) from None
         bad = np.flatnonzero(np.diff(t) <= 0)
         if bad.size:
             k = int(bad[0]) + 1
-            if t[k] == t[k - 1] and tokens[k].strip() != tokens[k - 1].strip():
-                try:
-                    later = Decimal(tokens[k].strip()) > Decimal(tokens[k - 1].strip())
-                except InvalidOperation:
-                    later = False
-                if later:  # distinct times that round to one nanosecond: a fraction of a ns, not a step back
-                    raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) and the previous row's {tokens[k - 1]} "
-                                         f"(line {table.lines[k - 1]}) are the same nanosecond in [{unit}]; "
-                                         "is the time unit right?", table.path, table.lines[k])
+            if t[k] == t[k - 1] and same_nanosecond(tokens[k - 1], tokens[k]):
+                raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) and the previous row's {tokens[k - 1]} "
+                                     f"(line {table.lines[k - 1]}) are the same nanosecond in [{unit}]; "
+                                     "is the time unit right?", table.path, table.lines[k])
             raise LogFormatError(f"time {tokens[k]} ({table.shown(j)}) is not after the previous row's "
                                  f"{tokens[k - 1]} (line {table.lines[k - 1]}); time must be strictly increasing",
                                  table.path, table.lines[k])
