@@ -70,6 +70,14 @@ def _version() -> str:
             return "unknown"
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the version looked up only when asked (the lookup reads package metadata)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        sys.stdout.write(f"gfimu {_version()}\n")
+        parser.exit(0)
+
+
 SUMMARIES = {
     "demo": "run every method on built-in data and print an accuracy table",
     "simulate": "write a simulated log (exact rigid-body motion, synthetic readings, truth)",
@@ -106,7 +114,7 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     )
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback of an error instead of a one-line message")
-    parser.add_argument("--version", action="version", version=f"gfimu {_version()}")
+    parser.add_argument("--version", action=_VersionAction, nargs=0, help="show the version and exit")
     parser.add_argument("--quiet", "-q", action="store_true", help=QUIET_HELP)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
