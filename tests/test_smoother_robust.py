@@ -44,7 +44,7 @@ def test_process_weights_follow_the_step_residual():
     assert np.nonzero(big)[0].tolist() == [19]
     # the jump dominates its step: whitened rms over the 6 rows ≈ 50 / sqrt(6)
     assert w[19] == pytest.approx(3.0 / (50.0 / np.sqrt(6.0)), rel=0.05)
-    assert np.allclose((s0 / p.trapezoid_sigma) ** 2, (p._process_base[1] / p.omega_dot_step_sigma) ** 2)
+    assert np.allclose((s0 / p.trapezoid_sigma) ** 2, (p.base_noise()[2] / p.omega_dot_step_sigma) ** 2)
     p.set_robust_weights(np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2]))
     assert np.all((s0 / p.trapezoid_sigma) ** 2 > 0.99)
 

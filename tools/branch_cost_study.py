@@ -63,6 +63,7 @@ from gfimu.calibration import apply_calibration, read_calibration  # noqa: E402
 from gfimu.factors import accelerometer  # noqa: E402
 from gfimu.readings import screen_log  # noqa: E402
 from gfimu.smoother.banded import reweighting, solve, solve_reweighted  # noqa: E402
+from gfimu.smoother.graph import robust_loss  # noqa: E402
 from gfimu.smoother.batch import BatchSmootherEstimator, _auto_model, _moment_problem, window_slices  # noqa: E402
 from gfimu.smoother.groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: E402
 from gfimu.smoother.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE  # noqa: E402
@@ -85,11 +86,6 @@ def prepare(recording: Path, folder: Path):
         return apply_calibration(log, read_calibration(cal))
 
 
-def cauchy(u2: np.ndarray, c: float) -> np.ndarray:
-    """ρ of squared whitened residuals u²: the Cauchy loss ``c²/2 log(1 + u²/c²)`` (c > 0), else u²/2."""
-    return 0.5 * c * c * np.log1p(u2 / (c * c)) if c > 0 else 0.5 * u2
-
-
 class FrozenModel:
     """The objective of one solve window with the accelerometer noise frozen at one trajectory's |ω|
     and the robust losses as functions (not as weights): :meth:`parts` per sample, :meth:`resolve`."""
@@ -101,7 +97,7 @@ class FrozenModel:
         wn = np.linalg.norm(omega_b_radps, axis=1)
         self.sigma = np.sqrt(problem.accel_sigma[None, :] ** 2 + (self.slope * wn[:, None]) ** 2)
         self.base = (problem.trapezoid_sigma.copy(), problem.omega_dot_step_sigma.copy())
-        self.rows = accelerometer.axis_rows(problem.all_directions_b, problem.all_positions_m)
+        self.rows = problem.all_rows
 
     def parts(self, X: np.ndarray) -> dict:
         """Per-sample contributions (N,) to J: 'accelerometer', 'motion' (step k -> k+1 on sample k), 'other'."""
@@ -109,16 +105,11 @@ class FrozenModel:
         n = p.n
         r = (accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], self.rows)
              - p.log.accel_mps2) / self.sigma
-        acc = np.sum(cauchy(r * r, opt.accel_robust_threshold), axis=1)
-        saved = (p.trapezoid_sigma, p.omega_dot_step_sigma)
-        p.trapezoid_sigma, p.omega_dot_step_sigma = self.base
-        try:
-            e = p.group(MotionModelGroup).step_residual(p, X)
-        finally:
-            p.trapezoid_sigma, p.omega_dot_step_sigma = saved
+        acc = np.sum(robust_loss(r * r, opt.accel_robust_threshold, opt.robust_loss), axis=1)
+        e = p.group(MotionModelGroup).step_residual(p, X, self.base)
         rows = e.shape[1]
         motion = np.zeros(n)
-        motion[:-1] = rows * cauchy(np.mean(e * e, axis=1), opt.process_robust_threshold)
+        motion[:-1] = rows * robust_loss(np.mean(e * e, axis=1), opt.process_robust_threshold, opt.robust_loss)
         other = np.zeros(n)
         P = np.zeros(p.n_global)
         for g in p.groups:
@@ -140,11 +131,7 @@ class FrozenModel:
     def resolve(self, X: np.ndarray):
         """Robust re-weighted Levenberg-Marquardt under the frozen noise (each step lowers J), from X."""
         p = self.problem
-        p.trapezoid_sigma, p.omega_dot_step_sigma = self.base[0].copy(), self.base[1].copy()
-        if hasattr(p, "_process_base"):
-            del p._process_base
-        p.accel_sigma_per_sample = self.sigma.copy()
-        p._accel_sigma_unweighted = self.sigma.copy()
+        p.set_base_noise(self.sigma, *self.base)
         reweight = reweighting(p, replace(p.options, accel_noise_slope_mps2_per_radps=0.0))
         return solve(p, X, reweight=reweight, max_iterations=100)
 

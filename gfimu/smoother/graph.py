@@ -276,6 +276,27 @@ def options_reason(array: SensorArray, options: SmootherOptions, attitude_suppor
     return None
 
 
+def robust_weight(e: np.ndarray, c: float, loss: str) -> np.ndarray:
+    """IRLS weight ``ρ'(e) / e`` of whitened residuals ``e`` under the robust loss (:func:`robust_loss`)
+    of threshold ``c`` > 0: Cauchy ``1 / (1 + e²/c²)``, Huber ``min(1, c/|e|)``."""
+    e = np.abs(e)
+    if loss == "cauchy":
+        return 1.0 / (1.0 + (e / c) ** 2)
+    return np.where(e <= c, 1.0, c / np.maximum(e, 1e-300))
+
+
+def robust_loss(e2: np.ndarray, c: float, loss: str) -> np.ndarray:
+    """ρ of squared whitened residuals ``e²``, the loss whose IRLS weight is :func:`robust_weight`:
+    Cauchy ``c²/2 log(1 + e²/c²)``, Huber ``e²/2`` within c and ``c|e| - c²/2`` beyond; ``e²/2``
+    when c is 0 (no robust loss)."""
+    if c <= 0:
+        return 0.5 * e2
+    if loss == "cauchy":
+        return 0.5 * c * c * np.log1p(e2 / (c * c))
+    e = np.sqrt(e2)
+    return np.where(e <= c, 0.5 * e2, c * e - 0.5 * c * c)
+
+
 @dataclass
 class SmootherProblem:
     """The smoothing problem of one contiguous log (fast path and graph path)."""
@@ -290,6 +311,8 @@ class SmootherProblem:
         arr = self.log.array
         opt = self.options
         self.n = len(self.log)
+        self._accel_sigma_unweighted = None  # the noise the robust re-weighting starts from (base_noise)
+        self._process_base = None
         if self.n < 2:
             raise ValueError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
         self.dt_s = self.log.dt_s
@@ -361,6 +384,25 @@ class SmootherProblem:
         self.accel_sigma_per_sample = np.sqrt(self.accel_sigma[None, :] ** 2 + (slope_mps2_per_radps * wn[:, None]) ** 2)
         self._accel_sigma_unweighted = self.accel_sigma_per_sample
 
+    def base_noise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The noise the robust re-weighting starts from: accelerometer std (N, axes) (the
+        motion-dependent one when set), trapezoid and ω̇-step std of the motion-model steps (N-1,)."""
+        accel = self._accel_sigma_unweighted
+        if accel is None:
+            accel = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
+        process = (self.trapezoid_sigma, self.omega_dot_step_sigma) if self._process_base is None else self._process_base
+        return np.array(accel), process[0].copy(), process[1].copy()
+
+    def set_base_noise(self, accel_sigma: np.ndarray, trapezoid_sigma: np.ndarray,
+                       omega_dot_step_sigma: np.ndarray) -> None:
+        """Make these (as :meth:`base_noise` returns them) the current noise and the one the robust
+        re-weighting starts from (the white-jerk motion model)."""
+        self.accel_sigma_per_sample = np.array(accel_sigma, dtype=float)
+        self._accel_sigma_unweighted = self.accel_sigma_per_sample.copy()
+        self.trapezoid_sigma = np.array(trapezoid_sigma, dtype=float)
+        self.omega_dot_step_sigma = np.array(omega_dot_step_sigma, dtype=float)
+        self._process_base = None
+
     def set_robust_weights(self, states: np.ndarray, params: np.ndarray | None = None) -> None:
         """Robust (Huber or Cauchy) re-weighting at ``states`` (iteratively re-weighted least squares).
 
@@ -374,20 +416,17 @@ class SmootherProblem:
         P = np.zeros(self.n_global) if params is None else params
 
         def weight(e, c):
-            e = np.abs(e)
-            if opt.robust_loss == "cauchy":
-                return 1.0 / (1.0 + (e / c) ** 2)
-            return np.where(e <= c, 1.0, c / np.maximum(e, 1e-300))
+            return robust_weight(e, c, opt.robust_loss)
 
         if opt.accel_robust_threshold > 0 and opt.measurement == "accelerometer":
-            base = getattr(self, "_accel_sigma_unweighted", None)
+            base = self._accel_sigma_unweighted
             if base is None:
                 base = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
             self.accel_sigma_per_sample = np.array(base)  # whiten with the base noise
             r = self.group(AccelerometerGroup).whitened_residual(self, states, P)
             self.accel_sigma_per_sample = base / np.sqrt(weight(r, opt.accel_robust_threshold))
         if opt.process_robust_threshold > 0:
-            if not hasattr(self, "_process_base"):
+            if self._process_base is None:
                 self._process_base = (self.trapezoid_sigma.copy(), self.omega_dot_step_sigma.copy(),
                                       self.snap_whiten.copy() if self.snap else None)
             self.trapezoid_sigma, self.omega_dot_step_sigma = self._process_base[0].copy(), self._process_base[1].copy()

@@ -443,8 +443,9 @@ class MotionModelGroup(FactorGroup):
             problem._oscillator_whiten = np.linalg.inv(np.linalg.cholesky(cov))
             problem._oscillator_unit_sigma = problem.omega_dot_step_sigma.copy()
 
-    def step_residual(self, problem, X: np.ndarray) -> np.ndarray:
-        """(N-1, rows) whitened residual of every step (what the robust re-weighting weighs)."""
+    def step_residual(self, problem, X: np.ndarray, noise: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """(N-1, rows) whitened residual of every step (what the robust re-weighting weighs); ``noise``:
+        the (trapezoid, ω̇-step) std of the white-jerk steps to whiten with instead of the problem's."""
         W, D = OMEGA, OMEGA_DOT
         if problem.snap:
             ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D],
@@ -456,8 +457,9 @@ class MotionModelGroup(FactorGroup):
             return np.einsum("nij,nj->ni", problem.oscillator_whiten(), ro)
         rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
         rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
-        return np.concatenate([rk / (problem.trapezoid_sigma[:, None] * problem.axis_factors),
-                               rd / (problem.omega_dot_step_sigma[:, None] * problem.axis_factors)], axis=1)
+        trapezoid, step = (problem.trapezoid_sigma, problem.omega_dot_step_sigma) if noise is None else noise
+        return np.concatenate([rk / (trapezoid[:, None] * problem.axis_factors),
+                               rd / (step[:, None] * problem.axis_factors)], axis=1)
 
     def terms(self, problem, states, params):
         X, W, D, A = states, OMEGA, OMEGA_DOT, OMEGA_DDOT

@@ -25,7 +25,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..factors import accelerometer
-from .graph import SmootherProblem
+from .graph import SmootherProblem, robust_loss
 from .groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 
@@ -48,40 +48,20 @@ def applies(problem: SmootherProblem) -> bool:
             and problem.n > 2 * MARGIN_SAMPLES + RUN_SAMPLES)
 
 
-def _rho(u2: np.ndarray, c: float, loss: str) -> np.ndarray:
-    """The robust loss of squared whitened residuals whose IRLS weight the problem uses
-    (:meth:`SmootherProblem.set_robust_weights`); u²/2 when c is 0."""
-    if c <= 0:
-        return 0.5 * u2
-    if loss == "cauchy":
-        return 0.5 * c * c * np.log1p(u2 / (c * c))
-    u = np.sqrt(u2)
-    return np.where(u <= c, 0.5 * u2, c * u - 0.5 * c * c)
-
-
 class FrozenObjective:
     """The robust objective of a solved problem with its noise as the re-weighting left it: the
-    accelerometer noise at the solution's |ω| (un-reweighted), the motion-model steps' base noise."""
+    accelerometer noise at the solution's |ω| (un-reweighted), the motion-model steps' base noise
+    (:meth:`SmootherProblem.base_noise`)."""
 
     def __init__(self, problem: SmootherProblem):
         self.problem = problem
-        base = getattr(problem, "_accel_sigma_unweighted", None)
-        self.accel_sigma = (np.broadcast_to(problem.accel_sigma, (problem.n, problem.accel_sigma.size)).copy()
-                            if base is None else np.array(base))
-        process = getattr(problem, "_process_base", None)
-        self.trapezoid_sigma, self.omega_dot_step_sigma = ((problem.trapezoid_sigma.copy(), problem.omega_dot_step_sigma.copy())
-                                                           if process is None else (process[0].copy(), process[1].copy()))
-        self.rows = accelerometer.axis_rows(problem.all_directions_b, problem.all_positions_m)
+        self.accel_sigma, self.trapezoid_sigma, self.omega_dot_step_sigma = problem.base_noise()
+        self.rows = problem.all_rows
 
-    def step_norms(self, X: np.ndarray) -> np.ndarray:
-        """(N-1,) whitened step residual norms / √rows under the base noise."""
-        p = self.problem
-        saved = (p.trapezoid_sigma, p.omega_dot_step_sigma)
-        p.trapezoid_sigma, p.omega_dot_step_sigma = self.trapezoid_sigma, self.omega_dot_step_sigma
-        try:
-            e = p.group(MotionModelGroup).step_residual(p, X)
-        finally:
-            p.trapezoid_sigma, p.omega_dot_step_sigma = saved
+    def step_norms(self, X: np.ndarray) -> tuple[np.ndarray, int]:
+        """(N-1,) whitened step residual norms / √rows under the base noise, and the rows per step."""
+        e = self.problem.group(MotionModelGroup).step_residual(self.problem, X,
+                                                               (self.trapezoid_sigma, self.omega_dot_step_sigma))
         return np.sqrt(np.mean(e * e, axis=1)), e.shape[1]
 
     def __call__(self, X: np.ndarray) -> float:
@@ -90,9 +70,9 @@ class FrozenObjective:
         p, opt = self.problem, self.problem.options
         r = (accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], self.rows)
              - p.log.accel_mps2) / self.accel_sigma
-        total = float(np.sum(_rho(r * r, opt.accel_robust_threshold, opt.robust_loss)))
+        total = float(np.sum(robust_loss(r * r, opt.accel_robust_threshold, opt.robust_loss)))
         e, rows = self.step_norms(X)
-        total += rows * float(np.sum(_rho(e * e, opt.process_robust_threshold, opt.robust_loss)))
+        total += rows * float(np.sum(robust_loss(e * e, opt.process_robust_threshold, opt.robust_loss)))
         params = np.zeros(0)
         for g in p.groups:
             if isinstance(g, (AccelerometerGroup, MotionModelGroup)):
@@ -173,10 +153,8 @@ def local_resolve(objective: FrozenObjective, X: np.ndarray, a: int, b: int, mar
     opt = replace(p.options, factor_groups=tuple(p.options.factor_groups)
                   + (_HeldStates([i - lo for i in held], X[held]),))
     sub = SmootherProblem(p.log.select(slice(lo, hi)), opt)
-    sub.accel_sigma_per_sample = objective.accel_sigma[lo:hi].copy()
-    sub._accel_sigma_unweighted = sub.accel_sigma_per_sample.copy()
-    sub.trapezoid_sigma = objective.trapezoid_sigma[lo:hi - 1].copy()
-    sub.omega_dot_step_sigma = objective.omega_dot_step_sigma[lo:hi - 1].copy()
+    sub.set_base_noise(objective.accel_sigma[lo:hi], objective.trapezoid_sigma[lo:hi - 1],
+                       objective.omega_dot_step_sigma[lo:hi - 1])
     reweight = reweighting(sub, replace(opt, accel_noise_slope_mps2_per_radps=0.0))
     Y = X.copy()
     Y[lo:hi] = solve(sub, X[lo:hi], reweight=reweight, max_iterations=max_iterations).states
