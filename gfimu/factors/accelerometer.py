@@ -38,6 +38,26 @@ def axis_rows(directions_b: np.ndarray, positions_m: np.ndarray) -> np.ndarray:
     return rigid_body.structure_matrix(directions_b, positions_m)
 
 
+def rigid_body_readings(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, specific_force_b_mps2: np.ndarray,
+                        rows: np.ndarray, directions_b: np.ndarray, positions_m: np.ndarray):
+    """(N, n) readings ``S [f, ω̇, q(ω)]`` of axes with structure-matrix rows ``rows`` (n, 12),
+    sensing directions s and positions r (n, 3) (paper 000, eq. 6), the centripetal part written
+    ``sᵀ (ω × (ω × r)) = (sᵀω)(rᵀω) - (sᵀr)|ω|²``; and those products ``(sᵀω, rᵀω, sᵀr)`` for
+    :func:`omega_jacobian`."""
+    w = omega_b_radps
+    ws, wr, sr = w @ directions_b.T, w @ positions_m.T, np.einsum("ai,ai->a", directions_b, positions_m)
+    pred = (specific_force_b_mps2 @ rows[:, 0:3].T + omega_dot_b_radps2 @ rows[:, 3:6].T + ws * wr
+            - sr * np.sum(w * w, axis=1, keepdims=True))
+    return pred, (ws, wr, sr)
+
+
+def omega_jacobian(omega_b_radps: np.ndarray, products, directions_b: np.ndarray, positions_m: np.ndarray) -> np.ndarray:
+    """(N, n, 3) ∂reading/∂ω of :func:`rigid_body_readings`: ``(rᵀω) s + (sᵀω) r - 2 (sᵀr) ω``."""
+    ws, wr, sr = products
+    return (wr[:, :, None] * directions_b + ws[:, :, None] * positions_m
+            - 2.0 * sr[:, None] * omega_b_radps[:, None, :])
+
+
 def accelerometer_residual(
     omega_b_radps: np.ndarray,
     omega_dot_b_radps2: np.ndarray,
@@ -65,11 +85,9 @@ def accelerometer_residual(
         raise ValueError(f"accelerometer factor: readings have {y.shape[-1]} axes, geometry has {n}")
     s = np.asarray(directions_b, dtype=float).reshape(-1, 3)
     p = np.asarray(positions_m, dtype=float).reshape(-1, 3)
-    # sᵀ (ω × (ω × r)) = (sᵀω)(rᵀω) - (sᵀr)|ω|², its gradient (rᵀω) s + (sᵀω) r - 2 (sᵀr) ω
-    ws, wr, sr = w @ s.T, w @ p.T, np.einsum("ai,ai->a", s, p)
-    pred = f @ rows[:, 0:3].T + dw @ rows[:, 3:6].T + ws * wr - sr * np.sum(w * w, axis=1, keepdims=True)
+    pred, products = rigid_body_readings(w, dw, f, rows, s, p)
     n_samples = pred.shape[0]
-    jw = wr[:, :, None] * s + ws[:, :, None] * p - 2.0 * sr[:, None] * w[:, None, :]
+    jw = omega_jacobian(w, products, s, p)
     jd = np.broadcast_to(rows[:, 3:6], (n_samples, n, 3))
     jf = np.broadcast_to(rows[:, 0:3], (n_samples, n, 3))
     jac = {}

@@ -224,16 +224,6 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         return Term("unary", r, {"x": J}, jg)
 
     @staticmethod
-    def _prediction_all_axes(problem, X: np.ndarray):
-        """Rigid-body readings of every axis (N, axes) (eq. 6 of paper 000) and the products its
-        Jacobian reuses: ``sᵀ (ω × (ω × r)) = (sᵀω)(rᵀω) - (sᵀr)|ω|²``."""
-        d, p, rows = problem.all_directions_b, problem.all_positions_m, problem.all_rows
-        w, dw, f = X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE]
-        ws, wr, sr = w @ d.T, w @ p.T, np.einsum("ai,ai->a", d, p)
-        pred = f @ rows[:, 0:3].T + dw @ rows[:, 3:6].T + ws * wr - sr * np.sum(w * w, axis=1, keepdims=True)
-        return pred, ws, wr, sr
-
-    @staticmethod
     def _whitening(problem, shape) -> np.ndarray:
         if problem.accel_sigma_per_sample is None:
             return np.broadcast_to(1.0 / problem.accel_sigma, shape)
@@ -244,12 +234,12 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         written straight into its columns (the same numbers as
         :func:`gfimu.factors.accelerometer.accelerometer_residual`); gradient of the quadratic part
         ``(rᵀω) s + (sᵀω) r - 2 (sᵀr) ω``."""
-        pred, ws, wr, sr = self._prediction_all_axes(problem, X)
         d, p, rows, w = problem.all_directions_b, problem.all_positions_m, problem.all_rows, X[:, OMEGA]
+        pred, products = accelerometer.rigid_body_readings(w, X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], rows, d, p)
         white = self._whitening(problem, pred.shape)
         r = (pred - problem.log.accel_mps2) * white
         J = np.zeros(pred.shape + (problem.state_size,))
-        J[:, :, OMEGA] = (wr[:, :, None] * d + ws[:, :, None] * p - 2.0 * sr[:, None] * w[:, None, :]) * white[:, :, None]
+        J[:, :, OMEGA] = accelerometer.omega_jacobian(w, products, d, p) * white[:, :, None]
         J[:, :, OMEGA_DOT] = rows[:, 3:6] * white[:, :, None]
         J[:, :, SPECIFIC_FORCE] = rows[:, 0:3] * white[:, :, None]
         jg = np.zeros(pred.shape + (problem.n_global,)) if problem.n_global else None
@@ -259,7 +249,8 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         """(N, axes) whitened residuals, without the Jacobians."""
         if any(name.startswith(("bias", "scale")) for name in problem.global_blocks):
             return self.term(problem, states, params).residual
-        pred = self._prediction_all_axes(problem, states)[0]
+        pred, _ = accelerometer.rigid_body_readings(states[:, OMEGA], states[:, OMEGA_DOT], states[:, SPECIFIC_FORCE],
+                                                    problem.all_rows, problem.all_directions_b, problem.all_positions_m)
         return (pred - problem.log.accel_mps2) * self._whitening(problem, pred.shape)
 
     def squared_norm(self, problem, states, params):
