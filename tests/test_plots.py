@@ -147,16 +147,23 @@ def test_t2_and_step_size_figures(tmp_path):
     _check_png(plots.save_figure(fig, tmp_path / "step.png"))
 
 
-def test_cli_plot(tmp_path):
-    from gfimu.cli import main
+def _log_and_offset_estimate(tmp_path, duration_s: float):
+    """A simulated log folder ``log`` and ``est.csv``: its truth with ω off by 0.05 rad/s; returns the truth."""
     from gfimu.io import write_log, write_motion_csv
     from gfimu.simulate import simulate
 
-    log = simulate("random3d", duration_s=0.6, seed=2)
+    log = simulate("random3d", duration_s=duration_s, seed=2)
     write_log(log, tmp_path / "log")
     truth = log.truth
     write_motion_csv(truth.replace(omega_b_radps=truth.omega_b_radps + 0.05, accel_b_mps2=None, quaternion_wb=None),
                      tmp_path / "est.csv")
+    return truth
+
+
+def test_cli_plot(tmp_path):
+    from gfimu.cli import main
+
+    _log_and_offset_estimate(tmp_path, 0.6)
     out = tmp_path / "fig.png"
     assert main(["plot", str(tmp_path / "log"), str(tmp_path / "est.csv"), "--out", str(out), "--start-s", "0.1"]) == 0
     _check_png(out)
@@ -177,14 +184,9 @@ def test_estimate_labels_tell_files_apart():
 
 def test_cli_plot_sigma_columns_and_files_of_the_same_name(tmp_path):
     from gfimu.cli import main
-    from gfimu.io import write_log, write_motion_csv
-    from gfimu.simulate import simulate
+    from gfimu.io import write_motion_csv
 
-    log = simulate("random3d", duration_s=0.3, seed=2)
-    write_log(log, tmp_path / "log")
-    truth = log.truth
-    write_motion_csv(truth.replace(omega_b_radps=truth.omega_b_radps + 0.05, accel_b_mps2=None, quaternion_wb=None),
-                     tmp_path / "est.csv")
+    truth = _log_and_offset_estimate(tmp_path, 0.3)
     sigma = {"omega_b_radps": np.full((len(truth), 3), 0.02)}
     for folder in ("a", "b"):
         (tmp_path / folder).mkdir()
