@@ -277,25 +277,6 @@ class ProcessBasis:
         rows = sum(t.residual.size for ts in split.values() for t in ts)
         return cls(parts, rows, problem.n_global)
 
-    def normal_equations(self, density: float, axis_factors, force_density: float,
-                         measurement: NormalEquations) -> NormalEquations:
-        """The normal equations of ``measurement`` plus the process factors at these settings (see
-        the class docstring)."""
-        weights = {"const": 1.0, "force": 1.0 / force_density**2}
-        for a in range(3):
-            weights[a] = 1.0 / (density * axis_factors[a]) ** 2
-        diag, lower, grad = measurement.diag.copy(), measurement.lower.copy(), measurement.grad.copy()
-        cost = measurement.cost
-        for key, part in self.parts.items():
-            w = weights[key]
-            for target, (idx, values) in ((diag, part.diag), (lower, part.lower), (grad, part.grad)):
-                flat = target.reshape(target.shape[0], -1)
-                flat[:, idx] += w * values
-            cost += w * part.cost
-        return NormalEquations(diag, lower, grad, measurement.coupling, measurement.border, measurement.grad_global,
-                               cost, (measurement.rows or 0) + self.rows)
-
-
     def banded(self, measurement: NormalEquations) -> BandedSum:
         """The same weighted sum kept in the band order of the banded Cholesky factorisation, so that
         one setting costs a few vector additions and the factorisation (:class:`BandedSum`)."""
@@ -304,10 +285,11 @@ class ProcessBasis:
 
 @dataclass
 class BandedSum:
-    """:meth:`ProcessBasis.normal_equations` plus :func:`gfimu.smoother.banded.factorise`, with the
-    measurement's and each part's entries gathered into the band order once: a setting adds the
-    parts' few nonzero band entries, weighted, to the measurement's (the same sums in the same order,
-    so the same numbers as the general path) and factors the result."""
+    """The measurement's normal equations plus the weighted sum of :class:`ProcessBasis`, factored
+    (:func:`gfimu.smoother.banded.factorise`), with the measurement's and each part's entries gathered
+    into the band order once: a setting adds the parts' few nonzero band entries, weighted, to the
+    measurement's and factors the result (the evidence of the factors evaluated per setting, to
+    rounding: ``tests/test_banded_fast.py``)."""
 
     structure: object
     measurement: NormalEquations
@@ -495,7 +477,6 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                 if key not in cache:
                     cache.clear()
                     cache[key] = measurement_normal_equations(problem, X, p0)
-                total = None
                 if basis and not np.any(c["freq"] > 0):
                     if version not in bases:
                         bases.clear()
@@ -508,7 +489,7 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
                         total, fac = summed[key].system(float(np.exp(c["density"])), np.exp(c["axis"]),
                                                         float(np.exp(c["force"])))
                         return linearised_log_evidence(problem, X, p0, total=total, factorisation=fac)
-                return linearised_log_evidence(problem, X, p0, cache[key], total)
+                return linearised_log_evidence(problem, X, p0, cache[key])
             except np.linalg.LinAlgError:
                 return -np.inf
 
