@@ -195,19 +195,35 @@ is 2 σ on each of its three axes, c² = 3 (2 σ)², as the accelerometer and mo
 (2 σ)."""
 
 
+def _step_costs(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
+    """(N-1, 2, 2) ``||s_b ω_{k+1} - s_a ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||²`` for signs s_a, s_b in (+1, -1)."""
+    w = np.asarray(omega_b_radps, dtype=float)
+    d = np.asarray(omega_dot_b_radps2, dtype=float)
+    h = np.broadcast_to(np.asarray(dt_s, dtype=float), (len(w) - 1,))
+    inc = 0.5 * h[:, None] * (d[:-1] + d[1:])  # (N-1, 3)
+    signs = np.array([1.0, -1.0])
+    diff = signs[None, None, :, None] * w[1:, None, None, :] - signs[None, :, None, None] * w[:-1, None, None, :] \
+        - inc[:, None, None, :]
+    return np.sum(diff**2, axis=3)
+
+
+def _scale_of_steps(step: np.ndarray) -> float | None:
+    """:func:`sign_chain_scale` from :func:`_step_costs`."""
+    if len(step) < 2:
+        return None
+    better = np.sqrt(np.minimum(step[:, 0, 0], step[:, 0, 1]))
+    better = better[np.isfinite(better)]
+    c = SIGN_CHAIN_SCALE_FACTOR * float(np.median(better)) if better.size else 0.0
+    return c if np.isfinite(c) and c > 0 else None
+
+
 def sign_chain_scale(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray) -> float | None:
     """Cauchy scale [rad/s] of :func:`sign_chain` measured from the data: :data:`SIGN_CHAIN_SCALE_FACTOR`
     times the median over the samples of ``min_s ||s ω_{k+1} - ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||``;
     None (plain squares) when that is zero or there are too few samples."""
-    w = np.asarray(omega_b_radps, dtype=float)
-    d = np.asarray(omega_dot_b_radps2, dtype=float)
-    if len(w) < 3:
+    if len(omega_b_radps) < 3:
         return None
-    h = np.broadcast_to(np.asarray(dt_s, dtype=float), (len(w) - 1,))
-    inc = 0.5 * h[:, None] * (d[:-1] + d[1:])
-    step = np.minimum(np.linalg.norm(w[1:] - w[:-1] - inc, axis=1), np.linalg.norm(-w[1:] - w[:-1] - inc, axis=1))
-    c = SIGN_CHAIN_SCALE_FACTOR * float(np.median(step[np.isfinite(step)])) if np.any(np.isfinite(step)) else 0.0
-    return c if np.isfinite(c) and c > 0 else None
+    return _scale_of_steps(_step_costs(omega_b_radps, omega_dot_b_radps2, dt_s))
 
 
 def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: np.ndarray,
@@ -224,26 +240,19 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
     per-sample ω̇ (or ω) is off by hundreds of rad/s², e.g. from a reading spike, costs at most a few
     c² whichever its sign, instead of flipping the run that follows it onto the wrong sign branch.
     """
-    if isinstance(robust_scale_radps, str):
-        if robust_scale_radps != "data":
-            raise ValueError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
-        robust_scale_radps = sign_chain_scale(omega_b_radps, omega_dot_b_radps2, dt_s)
-    elif robust_scale_radps is not None and not (np.isfinite(robust_scale_radps) and robust_scale_radps > 0):
+    data = isinstance(robust_scale_radps, str) and robust_scale_radps == "data"
+    if not data and robust_scale_radps is not None and (
+            isinstance(robust_scale_radps, str) or not (np.isfinite(robust_scale_radps) and robust_scale_radps > 0)):
         raise ValueError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
-    w = np.asarray(omega_b_radps, dtype=float)
-    d = np.asarray(omega_dot_b_radps2, dtype=float)
-    n = len(w)
+    n = len(omega_b_radps)
     if n < 2:
         return np.ones(n)
-    h = np.broadcast_to(np.asarray(dt_s, dtype=float), (n - 1,))
-    inc = 0.5 * h[:, None] * (d[:-1] + d[1:])  # (N-1, 3)
-    signs = np.array([1.0, -1.0])
-    # step cost[k, a, b]: from sign a at k to sign b at k+1
-    diff = signs[None, None, :, None] * w[1:, None, None, :] - signs[None, :, None, None] * w[:-1, None, None, :] \
-        - inc[:, None, None, :]
-    step = np.sum(diff**2, axis=3)
+    step = _step_costs(omega_b_radps, omega_dot_b_radps2, dt_s)  # from sign a at k to sign b at k+1
+    if data:
+        robust_scale_radps = _scale_of_steps(step)
     if robust_scale_radps is not None:
         step = robust_scale_radps**2 * np.log1p(step / robust_scale_radps**2)
+    signs = np.array([1.0, -1.0])
     cost = np.zeros(2)
     back = np.zeros((n - 1, 2), dtype=np.int8)
     for k in range(n - 1):  # two states: a short loop of 2x2 minima
