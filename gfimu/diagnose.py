@@ -420,9 +420,7 @@ def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
     array = log.array
     columns = array.accel_columns
     timing = timing_of(log.timestamps_ns)
-    rng = getattr(array, "range_per_axis_mps2", None)
-    rng = rng() if callable(rng) else rng
-    faults, fault_mask = channel_faults(log.accel_mps2, columns, timing.rate_hz, rng)
+    faults, fault_mask = channel_faults(log.accel_mps2, columns, timing.rate_hz, array.range_per_axis_mps2)
     clean, screening = screen_log(log)
     stated = array.noise_std_per_axis_mps2
     sigma_axes = noise_policy.accel_noise_std(array)
@@ -431,8 +429,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
     if reason:
         raise ValueError(f"{log.source}: cannot diagnose the readings: {reason}")
     motion = estimator.estimate(clean, progress=progress)
-    check = check_model(clean, motion)
     residual = rigid_body_residual(clean, motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2)
+    check = check_model(clean, motion, residual)
     n_axes = array.n_axes
     dof = np.sqrt(n_axes / max(n_axes - 9, 1))
     ok = np.all(np.isfinite(residual), axis=1)

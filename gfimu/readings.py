@@ -307,9 +307,7 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
 
 def screen_log(log):
     """(log with gross errors replaced, :class:`Screening`); the log itself when none is found."""
-    sensor_of_axis = np.concatenate([np.full(len(a.axes), i) for i, a in enumerate(log.array.accelerometers)])
-    rng = getattr(log.array, "range_per_axis_mps2", None)
-    accel, result = screen(log.accel_mps2, rng() if callable(rng) else rng, sensor_of_axis,
+    accel, result = screen(log.accel_mps2, log.array.range_per_axis_mps2, log.array.axis_owner,
                            log.rate_hz if len(log) > 1 else None, log.array.structure_matrix())
     if result.count == 0:
         return log, result

@@ -144,9 +144,11 @@ def noise_vs_rate(residual_mps2: np.ndarray, omega_b_radps: np.ndarray, dof_fact
     return float(np.sqrt(a)), float(np.sqrt(b))
 
 
-def check_model(log: Log, ml_motion) -> ModelCheck:
-    """:class:`ModelCheck` of ``log`` from its per-sample ML estimate ``ml_motion`` (a Motion)."""
-    r = rigid_body_residual(log, ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2)
+def check_model(log: Log, ml_motion, residual: np.ndarray | None = None) -> ModelCheck:
+    """:class:`ModelCheck` of ``log`` from its per-sample ML estimate ``ml_motion`` (a Motion); ``residual``:
+    its :func:`rigid_body_residual` when already computed."""
+    r = residual if residual is not None else rigid_body_residual(
+        log, ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2)
     ok = np.all(np.isfinite(r), axis=1)
     r, omega = r[ok], ml_motion.omega_b_radps[ok]
     n_axes = r.shape[1]
