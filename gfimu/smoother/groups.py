@@ -187,18 +187,19 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
     def terms(self, problem, states, params):
         return [self.term(problem, states, params)]
 
+    @staticmethod
+    def _calibrated(problem) -> bool:
+        """Whether the problem estimates per-sensor biases or scale factors (then the sensors one by one)."""
+        return any(name.startswith(("bias", "scale")) for name in problem.global_blocks)
+
     def term(self, problem, X: np.ndarray, params: np.ndarray) -> Term:
-        if not any(name.startswith(("bias", "scale")) for name in problem.global_blocks):
+        if not self._calibrated(problem):
             return self._term_all_axes(problem, X)
-        n = problem.n
         rows = []
         jx = []
         m = problem.state_size
-        jg = np.zeros((n, problem.log.array.n_axes, problem.n_global)) if problem.n_global else None
-        groups = problem.sensors
-        if not any(name.startswith(("bias", "scale")) for name in problem.global_blocks):
-            groups = [(problem.all_directions_b, problem.all_positions_m, slice(0, problem.all_directions_b.shape[0]))]
-        for i, (d, p, cols) in enumerate(groups):
+        jg = np.zeros((problem.n, problem.log.array.n_axes, problem.n_global))
+        for i, (d, p, cols) in enumerate(problem.sensors):
             bias = problem.global_part(params, f"bias{i}")
             scale = problem.global_part(params, f"scale{i}")
             r, j = accelerometer.accelerometer_residual(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
@@ -209,18 +210,11 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
                 jg[:, cols, problem.global_blocks[f"bias{i}"][0]] = j["b"]
             if scale is not None:
                 jg[:, cols, problem.global_blocks[f"scale{i}"][0]] = j["s"]
-        if problem.accel_sigma_per_sample is None:
-            w = 1.0 / problem.accel_sigma
-            r = np.concatenate(rows, axis=1) * w
-            J = np.concatenate(jx, axis=1) * w[None, :, None]
-            if jg is not None:
-                jg *= w[None, :, None]
-        else:  # motion-dependent noise (iteratively re-weighted, see SmootherProblem.set_motion_dependent_noise)
-            w = 1.0 / problem.accel_sigma_per_sample
-            r = np.concatenate(rows, axis=1) * w
-            J = np.concatenate(jx, axis=1) * w[:, :, None]
-            if jg is not None:
-                jg *= w[:, :, None]
+        r = np.concatenate(rows, axis=1)
+        w = self._whitening(problem, r.shape)
+        r = r * w
+        J = np.concatenate(jx, axis=1) * w[:, :, None]
+        jg *= w[:, :, None]
         return Term("unary", r, {"x": J}, jg)
 
     @staticmethod
@@ -247,7 +241,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
 
     def whitened_residual(self, problem, states, params) -> np.ndarray:
         """(N, axes) whitened residuals, without the Jacobians."""
-        if any(name.startswith(("bias", "scale")) for name in problem.global_blocks):
+        if self._calibrated(problem):
             return self.term(problem, states, params).residual
         pred, _ = accelerometer.rigid_body_readings(states[:, OMEGA], states[:, OMEGA_DOT], states[:, SPECIFIC_FORCE],
                                                     problem.all_rows, problem.all_directions_b, problem.all_positions_m)
