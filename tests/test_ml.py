@@ -214,8 +214,7 @@ class _EveryStartEveryPass(MLEstimator):
     def _solve_chunk(self, array, model, y, gyro, gyro_var, previous):
         from gfimu.estimators.ml import _cost
 
-        b = y @ model.proj.T
-        c = b @ model.A
+        b, c = model.readings(y)
         w = self._iterate(model, b, c, self._start(array, model, y, c, gyro), gyro, gyro_var)
         cost = _cost(model, b, w, gyro, gyro_var)
         for _ in range(self.neighbour_passes):
@@ -243,3 +242,36 @@ def test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer():
     fast = MLEstimator().estimate(log).omega_b_radps
     plain = _EveryStartEveryPass().estimate(log).omega_b_radps
     assert np.array_equal(fast, plain)
+
+
+def test_closed_forms_of_the_iterations_match_the_direct_products():
+    """The LM pieces written out (Gram of J_q, J_qᵀ v, the 3 × 3 solve, the reduced cost) against the
+    plain products, solve and residual on random inputs."""
+    from gfimu import rigid_body
+    from gfimu.estimators.ml import (_ProjectedModel, _cost, _jacobian_gram, _monomials, _quadratic_terms_jacobian_t,
+                                     _solve_symmetric_3x3)
+    from gfimu.noise import accel_noise_std
+
+    rng = np.random.default_rng(4)
+    w = rng.normal(scale=5.0, size=(500, 3))
+    v = rng.normal(size=(500, 6))
+    Mx = rng.normal(size=(6, 6))
+    Mx = Mx @ Mx.T
+    J = rigid_body.quadratic_terms_jacobian(w)
+    direct = np.swapaxes(J, 1, 2) @ (Mx @ J)
+    np.testing.assert_allclose((_monomials(w) @ _jacobian_gram(Mx)).reshape(-1, 3, 3), direct, rtol=1e-12, atol=1e-12 * np.abs(direct).max())
+    np.testing.assert_allclose(_quadratic_terms_jacobian_t(w, v), np.einsum("nja,nj->na", J, v), rtol=1e-12, atol=1e-12)
+    # ill-scaled but definite systems (diagonals over twelve decades), and one singular one (LU fallback)
+    B = rng.normal(size=(500, 3, 3))
+    S = B @ np.swapaxes(B, 1, 2) + 1e-3 * np.eye(3)
+    S *= np.geomspace(1e-6, 1e6, 500)[:, None, None]
+    S[0] = np.diag([1.0, 2.0, 3.0])
+    rhs = rng.normal(size=(500, 3))
+    np.testing.assert_allclose(_solve_symmetric_3x3(S, rhs), np.linalg.solve(S, rhs[..., None])[..., 0], rtol=1e-7)
+    model = _ProjectedModel.build(mimu4444_array(), accel_noise_std(mimu4444_array()))
+    y = rng.normal(size=(500, model.proj.shape[0]))
+    b, c = model.readings(y)
+    full = y @ model.proj.T
+    residual = full - rigid_body.quadratic_terms(w) @ model.A.T
+    np.testing.assert_allclose(_cost(model, b, w, None, None), np.sum(residual**2, axis=1), rtol=1e-10)
+    np.testing.assert_allclose(c, full @ model.A, rtol=1e-12, atol=1e-12)

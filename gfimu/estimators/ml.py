@@ -83,6 +83,8 @@ class _ProjectedModel:
     lin_y: np.ndarray  # (6, n): [f, ω̇] = lin_y @ y - lin_q @ q(ω)
     lin_q: np.ndarray  # (6, 6)
     rank: int  # rank of A: independent equations left for ω
+    basis: np.ndarray  # (n, 6) Q of A = Q R (orthonormal columns)
+    R: np.ndarray  # (6, 6)
 
     @classmethod
     def build(cls, array: SensorArray, sigma: np.ndarray) -> "_ProjectedModel":
@@ -93,6 +95,7 @@ class _ProjectedModel:
         Hpinv = np.linalg.pinv(Hw)
         perp = np.eye(len(wgt)) - Hw @ Hpinv
         A = perp @ Sqw
+        Q, R = np.linalg.qr(A)
         return cls(
             weights=wgt,
             proj=perp * wgt[None, :],
@@ -101,7 +104,18 @@ class _ProjectedModel:
             lin_y=Hpinv * wgt[None, :],
             lin_q=Hpinv @ Sqw,
             rank=int(np.sum(np.linalg.svd(A, compute_uv=False) > 1e-9 * max(np.linalg.norm(Sqw), 1e-300))),
+            basis=Q,
+            R=R,
         )
+
+    def readings(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(z, c)`` of raw readings y (N, n): ``z`` (N, 7) holds ``Qᵀ b`` and ``|b - Q Qᵀ b|`` of the
+        projected whitened readings ``b = P⊥ W y``, so that ``|b - A q|² = |z[:6] - R q|² + z[6]²``
+        exactly (A = Q R; the cost :func:`_cost` works on 7 numbers per sample instead of n); ``c = Aᵀ b``."""
+        b = y @ self.proj.T
+        zq = b @ self.basis
+        rest = b - zq @ self.basis.T
+        return np.hstack([zq, np.sqrt(np.sum(rest * rest, axis=1))[:, None]]), b @ self.A
 
 
 @dataclass
@@ -220,8 +234,7 @@ class MLEstimator:
     # ------------------------------------------------------------------
     def _solve_chunk(self, array, model, y, gyro, gyro_var, previous):
         """ML ω for a block of samples; ``previous`` is the estimate just before the block."""
-        b = y @ model.proj.T  # (N, n) projected whitened readings
-        c = b @ model.A  # (N, 6) Aᵀ b
+        b, c = model.readings(y)  # (N, 7) the projected whitened readings reduced, (N, 6) Aᵀ b
         w = self._iterate(model, b, c, self._start(array, model, y, c, gyro), gyro, gyro_var)
         cost = _cost(model, b, w, gyro, gyro_var)
         moved = np.ones(len(w), bool)  # samples whose start (the sample before) changed in the last pass
@@ -320,36 +333,37 @@ class MLEstimator:
         return start
 
     def _iterate(self, model, b, c, w, gyro, gyro_var):
-        """Levenberg–Marquardt on ω for all samples at once."""
+        """Levenberg–Marquardt on ω for all samples at once (the 3 × 3 systems solved in closed form,
+        :func:`_solve_symmetric_3x3`)."""
         w = w.copy()
         lam = np.full(len(w), 1e-3)
         cost = _cost(model, b, w, gyro, gyro_var)
-        eye = np.eye(3)
+        gram = _jacobian_gram(model.M)
         active = np.ones(len(w), bool)
         for _ in range(self.max_iterations):
             idx = np.nonzero(active)[0]
             if idx.size == 0:
                 break
             wi = w[idx]
-            q = rigid_body.quadratic_terms(wi)
-            DqT = np.swapaxes(rigid_body.quadratic_terms_jacobian(wi), 1, 2)
-            g6 = c[idx] - q @ model.M  # Aᵀ r with r = b - A q
-            grad = (DqT @ g6[:, :, None])[:, :, 0]  # -½ ∂cost/∂ω
-            JtJ = DqT @ (model.M @ np.swapaxes(DqT, 1, 2))
+            g6 = c[idx] - rigid_body.quadratic_terms(wi) @ model.M  # Aᵀ r with r = b - A q
+            grad = _quadratic_terms_jacobian_t(wi, g6)  # -½ ∂cost/∂ω
+            JtJ = (_monomials(wi) @ gram).reshape(-1, 3, 3)  # J_qᵀ M J_q
             # exact Hessian: q is quadratic, so the residual curvature term is -Σ_j (Aᵀr)_j ∂²q_j/∂ω²;
             # with noise (non-zero residual) it turns Gauss–Newton's linear convergence into Newton's
-            hess = JtJ - np.einsum("nj,jab->nab", g6, _Q_HESSIAN)
-            tr = np.maximum(np.trace(JtJ, axis1=1, axis2=2), 1e-300)
+            hess = JtJ - (g6 @ _Q_HESSIAN_FLAT).reshape(-1, 3, 3)
+            tr = np.maximum(JtJ[:, 0, 0] + JtJ[:, 1, 1] + JtJ[:, 2, 2], 1e-300)
             m1 = hess[:, 0, 0]
             m2 = hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] * hess[:, 1, 0]
-            pos_def = (m1 > 1e-12 * tr) & (m2 > 1e-12 * tr**2) & (np.linalg.det(hess) > 1e-12 * tr**3)  # Sylvester
+            pos_def = (m1 > 1e-12 * tr) & (m2 > 1e-12 * tr**2) & (_det_symmetric_3x3(hess) > 1e-12 * tr**3)  # Sylvester
             JtJ = np.where(pos_def[:, None, None], hess, JtJ)
             if gyro is not None:
                 grad = grad + (gyro[idx] - wi) / gyro_var
-                JtJ = JtJ + eye / gyro_var
+                JtJ = JtJ + np.eye(3) / gyro_var
             diag = np.diagonal(JtJ, axis1=1, axis2=2)
             scale = np.maximum(diag, 1e-12 * np.max(diag, axis=1, keepdims=True) + 1e-300)
-            step = np.linalg.solve(JtJ + lam[idx, None, None] * scale[:, :, None] * eye, grad[..., None])[..., 0]
+            damped = JtJ.copy()
+            damped[:, [0, 1, 2], [0, 1, 2]] += lam[idx, None] * scale
+            step = _solve_symmetric_3x3(damped, grad)
             trial = wi + step
             tcost = _cost(model, b[idx], trial, None if gyro is None else gyro[idx], gyro_var)
             ok = tcost <= cost[idx]
@@ -361,6 +375,61 @@ class MLEstimator:
             flat = gain <= 1e-15 * (tcost + 1e-300)  # cost settled to rounding (noisy data)
             active[idx[(ok & (small | flat)) | (lam[idx] > 1e12)]] = False
         return w
+
+
+_Q_JACOBIAN_UNIT = rigid_body.quadratic_terms_jacobian(np.eye(3))
+"""(3, 6, 3): ∂q/∂ω at the unit vectors; ∂q/∂ω at ω is Σ_i ω_i of these (q is quadratic)."""
+
+
+def _jacobian_gram(M: np.ndarray) -> np.ndarray:
+    """(6, 9) ``G`` with ``J_q(ω)ᵀ M J_q(ω) = (m(ω) G).reshape(3, 3)``, m the monomials of
+    :func:`_monomials`: with ``J_q(ω) = Σ_i ω_i E_i`` the product is ``Σ_ik ω_i ω_k E_iᵀ M E_k``."""
+    E = _Q_JACOBIAN_UNIT
+    K = np.einsum("ija,jk,lkb->ilab", E, M, E)
+    return np.stack([K[0, 0], K[1, 1], K[2, 2], K[0, 1] + K[1, 0], K[0, 2] + K[2, 0], K[1, 2] + K[2, 1]]).reshape(6, 9)
+
+
+def _monomials(w: np.ndarray) -> np.ndarray:
+    """(N, 6) ``x², y², z², xy, xz, yz`` of ω (N, 3)."""
+    x, y, z = w[:, 0], w[:, 1], w[:, 2]
+    return np.stack([x * x, y * y, z * z, x * y, x * z, y * z], axis=1)
+
+
+def _quadratic_terms_jacobian_t(w: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``J_q(ω)ᵀ v`` (N, 3) for ω (N, 3) and v (N, 6), written out from :func:`gfimu.rigid_body.quadratic_terms_jacobian`."""
+    x, y, z = w[:, 0], w[:, 1], w[:, 2]
+    return np.stack([2 * x * (v[:, 0] + v[:, 1]) + y * v[:, 3] + z * v[:, 4],
+                     2 * y * (v[:, 0] + v[:, 2]) + x * v[:, 3] + z * v[:, 5],
+                     2 * z * (v[:, 1] + v[:, 2]) + x * v[:, 4] + y * v[:, 5]], axis=1)
+
+
+def _det_symmetric_3x3(m: np.ndarray) -> np.ndarray:
+    """Determinants of symmetric 3 × 3 matrices (..., 3, 3) by cofactors of the first row."""
+    a, b, c = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
+    d, e, f = m[..., 1, 1], m[..., 1, 2], m[..., 2, 2]
+    return a * (d * f - e * e) + b * (c * e - b * f) + c * (b * e - c * d)
+
+
+def _solve_symmetric_3x3(m: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """x (N, 3) with ``m x = rhs`` for symmetric positive definite 3 × 3 matrices m (N, 3, 3) (the
+    damped LM systems): the adjugate over the determinant of each matrix scaled to unit diagonal
+    (Jacobi), so that the closed form meets no range or cancellation issue the scaling can avoid;
+    a matrix whose scaled determinant is not positive (not definite to rounding) falls back to LU."""
+    s0, s1, s2 = (1.0 / np.sqrt(np.maximum(m[:, i, i], 1e-300)) for i in range(3))
+    a, d, f = m[:, 0, 0] * s0 * s0, m[:, 1, 1] * s1 * s1, m[:, 2, 2] * s2 * s2
+    b, c, e = m[:, 0, 1] * (s0 * s1), m[:, 0, 2] * (s0 * s2), m[:, 1, 2] * (s1 * s2)
+    r0, r1, r2 = rhs[:, 0] * s0, rhs[:, 1] * s1, rhs[:, 2] * s2
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        inv = 1.0 / det
+        x = np.stack([(c00 * r0 + c01 * r1 + c02 * r2) * inv * s0, (c01 * r0 + c11 * r1 + c12 * r2) * inv * s1,
+                      (c02 * r0 + c12 * r1 + c22 * r2) * inv * s2], axis=1)
+    bad = ~(det > 1e-12)
+    if np.any(bad):
+        x[bad] = np.linalg.solve(m[bad], rhs[bad][..., None])[..., 0]
+    return x
 
 
 _CONES = 8
@@ -378,12 +447,14 @@ _Q_HESSIAN = np.array(
     dtype=float,
 )
 """∂²q_j/∂ω² for the six quadratic terms (constant)."""
+_Q_HESSIAN_FLAT = _Q_HESSIAN.reshape(6, 9)
 
 
 def _cost(model: _ProjectedModel, b: np.ndarray, w: np.ndarray, gyro, gyro_var) -> np.ndarray:
-    """Negative log-likelihood (×2, f and ω̇ eliminated) per sample, from the residual itself."""
-    r = b - rigid_body.quadratic_terms(w) @ model.A.T
-    cost = np.sum(r * r, axis=1)
+    """Negative log-likelihood (×2, f and ω̇ eliminated) per sample, from the residual itself:
+    ``|b - A q|²`` as ``|z - R q|² + |b⊥|²`` of the reduced readings ``b`` (:meth:`_ProjectedModel.readings`)."""
+    r = b[:, :6] - rigid_body.quadratic_terms(w) @ model.R.T
+    cost = np.sum(r * r, axis=1) + b[:, 6] * b[:, 6]
     if gyro is not None:
         cost = cost + np.sum((gyro - w) ** 2, axis=1) / gyro_var
     return cost
