@@ -248,8 +248,8 @@ def test_closed_forms_of_the_iterations_match_the_direct_products():
     """The LM pieces written out (Gram of J_q, J_qᵀ v, the 3 × 3 solve, the reduced cost) against the
     plain products, solve and residual on random inputs."""
     from gfimu import rigid_body
-    from gfimu.estimators.ml import (_ProjectedModel, _cost, _jacobian_gram, _monomials, _quadratic_terms_jacobian_t,
-                                     _solve_symmetric_3x3)
+    from gfimu.estimators.ml import (_SYMMETRIC_FLAT, _ProjectedModel, _cost, _det_symmetric_3x3, _jacobian_gram, _monomials,
+                                     _quadratic_terms_jacobian_t, _solve_symmetric_3x3)
     from gfimu.noise import accel_noise_std
 
     rng = np.random.default_rng(4)
@@ -261,13 +261,15 @@ def test_closed_forms_of_the_iterations_match_the_direct_products():
     direct = np.swapaxes(J, 1, 2) @ (Mx @ J)
     np.testing.assert_allclose((_monomials(w) @ _jacobian_gram(Mx)).reshape(-1, 3, 3), direct, rtol=1e-12, atol=1e-12 * np.abs(direct).max())
     np.testing.assert_allclose(_quadratic_terms_jacobian_t(w, v), np.einsum("nja,nj->na", J, v), rtol=1e-12, atol=1e-12)
-    # ill-scaled but definite systems (diagonals over twelve decades), and one singular one (LU fallback)
+    # ill-scaled but definite systems (diagonals over twelve decades), and one nearly singular one (LU fallback)
     B = rng.normal(size=(500, 3, 3))
     S = B @ np.swapaxes(B, 1, 2) + 1e-3 * np.eye(3)
     S *= np.geomspace(1e-6, 1e6, 500)[:, None, None]
-    S[0] = np.diag([1.0, 2.0, 3.0])
+    S[0] = [[1.0, 1.0, 0.0], [1.0, 1.0 + 1e-14, 0.0], [0.0, 0.0, 1.0]]
     rhs = rng.normal(size=(500, 3))
-    np.testing.assert_allclose(_solve_symmetric_3x3(S, rhs), np.linalg.solve(S, rhs[..., None])[..., 0], rtol=1e-7)
+    packed = S.reshape(-1, 9)[:, _SYMMETRIC_FLAT]
+    np.testing.assert_allclose(_solve_symmetric_3x3(packed, rhs), np.linalg.solve(S, rhs[..., None])[..., 0], rtol=1e-7)
+    np.testing.assert_allclose(_det_symmetric_3x3(packed)[1:], np.linalg.det(S[1:]), rtol=1e-9)
     model = _ProjectedModel.build(mimu4444_array(), accel_noise_std(mimu4444_array()))
     y = rng.normal(size=(500, model.proj.shape[0]))
     b, c = model.readings(y)

@@ -284,11 +284,12 @@ class MLEstimator:
         if idx.size == 0:
             return w
         grid, cone = self._grid()
+        order = np.argsort(cone, kind="stable")  # the grid cone by cone, each in its own order
+        grid, bounds = grid[order], np.searchsorted(cone[order], np.arange(_CONES + 1))
         grid_cost = self._grid_cost(model, c[idx], grid)
         starts = np.empty((idx.size, _CONES, 3))
         for k in range(_CONES):
-            cols = np.nonzero(cone == k)[0]
-            starts[:, k] = grid[cols[np.argmin(grid_cost[:, cols], axis=1)]]
+            starts[:, k] = grid[bounds[k] + np.argmin(grid_cost[:, bounds[k]:bounds[k + 1]], axis=1)]
         rep = np.repeat(idx, _CONES)
         cand = self._iterate(model, b[rep], c[rep], starts.reshape(-1, 3), None, None)
         cand_cost = _cost(model, b[rep], cand, None, None).reshape(idx.size, _CONES)
@@ -311,7 +312,9 @@ class MLEstimator:
     def _grid_cost(self, model, c, grid):
         Qg = rigid_body.quadratic_terms(grid)
         quad = np.sum(Qg * (Qg @ model.M), axis=1)
-        return quad[None, :] - 2 * c @ Qg.T  # cost up to the per-sample constant |b|²
+        out = c @ (-2.0 * Qg.T)
+        out += quad[None, :]
+        return out  # cost up to the per-sample constant |b|²
 
     def _start(self, array, model, y, c, gyro):
         """Starting ω per sample: gyro, else the best of grid and inversion."""
@@ -333,37 +336,41 @@ class MLEstimator:
         return start
 
     def _iterate(self, model, b, c, w, gyro, gyro_var):
-        """Levenberg–Marquardt on ω for all samples at once (the 3 × 3 systems solved in closed form,
-        :func:`_solve_symmetric_3x3`)."""
+        """Levenberg–Marquardt on ω for all samples at once. The 3 × 3 matrices are symmetric and kept
+        as their six entries (:data:`_SYMMETRIC`), the systems solved in closed form
+        (:func:`_solve_symmetric_3x3`)."""
         w = w.copy()
         lam = np.full(len(w), 1e-3)
         cost = _cost(model, b, w, gyro, gyro_var)
-        gram = _jacobian_gram(model.M)
+        gram = _jacobian_gram(model.M)[:, _SYMMETRIC_FLAT]
+        qm = _MONOMIAL_TO_Q @ model.M  # q(ω) M from the monomials of ω
+        curvature = _Q_HESSIAN_FLAT[:, _SYMMETRIC_FLAT]
+        tol2 = self.tolerance_radps**2
         active = np.ones(len(w), bool)
         for _ in range(self.max_iterations):
             idx = np.nonzero(active)[0]
             if idx.size == 0:
                 break
             wi = w[idx]
-            g6 = c[idx] - rigid_body.quadratic_terms(wi) @ model.M  # Aᵀ r with r = b - A q
+            mono = _monomials(wi)
+            g6 = c[idx] - mono @ qm  # Aᵀ r with r = b - A q
             grad = _quadratic_terms_jacobian_t(wi, g6)  # -½ ∂cost/∂ω
-            JtJ = (_monomials(wi) @ gram).reshape(-1, 3, 3)  # J_qᵀ M J_q
+            JtJ = mono @ gram  # J_qᵀ M J_q
             # exact Hessian: q is quadratic, so the residual curvature term is -Σ_j (Aᵀr)_j ∂²q_j/∂ω²;
             # with noise (non-zero residual) it turns Gauss–Newton's linear convergence into Newton's
-            hess = JtJ - (g6 @ _Q_HESSIAN_FLAT).reshape(-1, 3, 3)
-            tr = np.maximum(JtJ[:, 0, 0] + JtJ[:, 1, 1] + JtJ[:, 2, 2], 1e-300)
-            m1 = hess[:, 0, 0]
-            m2 = hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] * hess[:, 1, 0]
-            pos_def = (m1 > 1e-12 * tr) & (m2 > 1e-12 * tr**2) & (_det_symmetric_3x3(hess) > 1e-12 * tr**3)  # Sylvester
-            JtJ = np.where(pos_def[:, None, None], hess, JtJ)
+            hess = JtJ - g6 @ curvature
+            tr = np.maximum(JtJ[:, 0] + JtJ[:, 3] + JtJ[:, 5], 1e-300)
+            h00, h01, h11 = hess[:, 0], hess[:, 1], hess[:, 3]
+            pos_def = ((h00 > 1e-12 * tr) & (h00 * h11 - h01 * h01 > 1e-12 * tr**2)
+                       & (_det_symmetric_3x3(hess) > 1e-12 * tr**3))  # Sylvester
+            JtJ = np.where(pos_def[:, None], hess, JtJ)
             if gyro is not None:
                 grad = grad + (gyro[idx] - wi) / gyro_var
-                JtJ = JtJ + np.eye(3) / gyro_var
-            diag = np.diagonal(JtJ, axis1=1, axis2=2)
+                JtJ[:, _DIAGONAL] += 1.0 / gyro_var
+            diag = JtJ[:, _DIAGONAL]
             scale = np.maximum(diag, 1e-12 * np.max(diag, axis=1, keepdims=True) + 1e-300)
-            damped = JtJ.copy()
-            damped[:, [0, 1, 2], [0, 1, 2]] += lam[idx, None] * scale
-            step = _solve_symmetric_3x3(damped, grad)
+            JtJ[:, _DIAGONAL] = diag + lam[idx, None] * scale
+            step = _solve_symmetric_3x3(JtJ, grad)
             trial = wi + step
             tcost = _cost(model, b[idx], trial, None if gyro is None else gyro[idx], gyro_var)
             ok = tcost <= cost[idx]
@@ -371,7 +378,8 @@ class MLEstimator:
             w[idx[ok]] = trial[ok]
             cost[idx[ok]] = tcost[ok]
             lam[idx] = np.where(ok, np.maximum(lam[idx] / 10, 1e-12), lam[idx] * 10)
-            small = np.linalg.norm(step, axis=1) <= self.tolerance_radps * (1 + np.linalg.norm(wi, axis=1))
+            size = 1.0 + np.sqrt(np.einsum("ij,ij->i", wi, wi))
+            small = np.einsum("ij,ij->i", step, step) <= tol2 * size * size
             flat = gain <= 1e-15 * (tcost + 1e-300)  # cost settled to rounding (noisy data)
             active[idx[(ok & (small | flat)) | (lam[idx] > 1e12)]] = False
         return w
@@ -404,20 +412,20 @@ def _quadratic_terms_jacobian_t(w: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _det_symmetric_3x3(m: np.ndarray) -> np.ndarray:
-    """Determinants of symmetric 3 × 3 matrices (..., 3, 3) by cofactors of the first row."""
-    a, b, c = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
-    d, e, f = m[..., 1, 1], m[..., 1, 2], m[..., 2, 2]
+    """Determinants of symmetric 3 × 3 matrices given as their six entries (N, 6) (:data:`_SYMMETRIC`)."""
+    a, b, c, d, e, f = m.T
     return a * (d * f - e * e) + b * (c * e - b * f) + c * (b * e - c * d)
 
 
 def _solve_symmetric_3x3(m: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """x (N, 3) with ``m x = rhs`` for symmetric positive definite 3 × 3 matrices m (N, 3, 3) (the
-    damped LM systems): the adjugate over the determinant of each matrix scaled to unit diagonal
-    (Jacobi), so that the closed form meets no range or cancellation issue the scaling can avoid;
-    a matrix whose scaled determinant is not positive (not definite to rounding) falls back to LU."""
-    s0, s1, s2 = (1.0 / np.sqrt(np.maximum(m[:, i, i], 1e-300)) for i in range(3))
-    a, d, f = m[:, 0, 0] * s0 * s0, m[:, 1, 1] * s1 * s1, m[:, 2, 2] * s2 * s2
-    b, c, e = m[:, 0, 1] * (s0 * s1), m[:, 0, 2] * (s0 * s2), m[:, 1, 2] * (s1 * s2)
+    """x (N, 3) with ``m x = rhs`` for symmetric positive definite 3 × 3 matrices given as their six
+    entries m (N, 6) (:data:`_SYMMETRIC`; the damped LM systems): the adjugate over the determinant
+    of each matrix scaled to unit diagonal (Jacobi), so that the closed form meets no range or
+    cancellation issue the scaling can avoid; a matrix whose scaled determinant is not positive
+    (not definite to rounding) falls back to LU."""
+    s0, s1, s2 = 1.0 / np.sqrt(np.maximum(m[:, _DIAGONAL], 1e-300)).T
+    a, d, f = m[:, 0] * s0 * s0, m[:, 3] * s1 * s1, m[:, 5] * s2 * s2
+    b, c, e = m[:, 1] * (s0 * s1), m[:, 2] * (s0 * s2), m[:, 4] * (s1 * s2)
     r0, r1, r2 = rhs[:, 0] * s0, rhs[:, 1] * s1, rhs[:, 2] * s2
     c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
     c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
@@ -428,7 +436,8 @@ def _solve_symmetric_3x3(m: np.ndarray, rhs: np.ndarray) -> np.ndarray:
                       (c02 * r0 + c12 * r1 + c22 * r2) * inv * s2], axis=1)
     bad = ~(det > 1e-12)
     if np.any(bad):
-        x[bad] = np.linalg.solve(m[bad], rhs[bad][..., None])[..., 0]
+        full = m[bad][:, _SYMMETRIC_UNPACK].reshape(-1, 3, 3)
+        x[bad] = np.linalg.solve(full, rhs[bad][..., None])[..., 0]
     return x
 
 
@@ -448,6 +457,14 @@ _Q_HESSIAN = np.array(
 )
 """∂²q_j/∂ω² for the six quadratic terms (constant)."""
 _Q_HESSIAN_FLAT = _Q_HESSIAN.reshape(6, 9)
+_SYMMETRIC = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+"""The six entries that a symmetric 3 × 3 matrix is kept as in the LM iterations."""
+_SYMMETRIC_FLAT = np.array([3 * i + j for i, j in _SYMMETRIC])
+_SYMMETRIC_UNPACK = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # the six entries -> the nine, row by row
+_DIAGONAL = np.array([0, 3, 5])
+_MONOMIAL_TO_Q = np.array([[1, 1, 0, 0, 0, 0], [1, 0, 1, 0, 0, 0], [0, 1, 1, 0, 0, 0],
+                           [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]], dtype=float)
+"""q(ω) = m(ω) @ this, m the monomials x², y², z², xy, xz, yz (:func:`_monomials`)."""
 
 
 def _cost(model: _ProjectedModel, b: np.ndarray, w: np.ndarray, gyro, gyro_var) -> np.ndarray:
