@@ -22,12 +22,18 @@ def trapezoid_sigma(omega_dot_density: float, dt_s) -> np.ndarray:
     return omega_dot_density * np.sqrt(np.asarray(dt_s, dtype=float) ** 3 / 12.0)
 
 
+def angular_velocity_step(omega0: np.ndarray, omega1: np.ndarray, omega_dot0: np.ndarray, omega_dot1: np.ndarray,
+                          dt_s: np.ndarray) -> np.ndarray:
+    """The residual of :func:`angular_velocity_residual` alone, (N, 3) arrays and ``dt_s`` (N,)."""
+    return omega1 - omega0 - 0.5 * dt_s[:, None] * (omega_dot0 + omega_dot1)
+
+
 def angular_velocity_residual(omega0, omega1, omega_dot0, omega_dot1, dt_s):
     """``ω1 - ω0 - h/2 (ω̇0 + ω̇1)`` (N, 3) with Jacobians on w0, w1, d0, d1 (N, 3, 3)."""
     w0, w1, d0, d1 = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (omega0, omega1, omega_dot0, omega_dot1))
     h = np.atleast_1d(np.asarray(dt_s, dtype=float))
     n = max(w0.shape[0], h.shape[0])
-    r = w1 - w0 - 0.5 * h[:, None] * (d0 + d1)
+    r = angular_velocity_step(w0, w1, d0, d1, h)
     eye = np.broadcast_to(np.eye(3), (n, 3, 3))
     half = -0.5 * h[:, None, None] * np.eye(3)
     half = np.broadcast_to(half, (n, 3, 3))

@@ -488,7 +488,7 @@ class SmootherProblem:
         if self.options.measurement == "quadratic" or self.n_global:
             return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
         measured = sum(g.squared_norm(self, states, params) for g in self.groups if g.measurement)
-        return 0.5 * (measured + sum(float(np.sum(t.residual**2)) for t in self.process_terms(states, params)))
+        return 0.5 * (measured + sum(g.squared_norm(self, states, params) for g in self.groups if not g.measurement))
 
     def log_normaliser(self) -> float:
         """``Σ log σ`` over every row of the model (the Gaussian normaliser of the evidence)."""

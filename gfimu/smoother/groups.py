@@ -324,6 +324,11 @@ class SpecificForceWalkGroup(FactorGroup):
         Jf0, Jf1 = _binary(problem, 3, [(SPECIFIC_FORCE, -np.eye(3), np.eye(3))])
         return [Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]})]
 
+    def squared_norm(self, problem, states, params):
+        """The same residual as :meth:`terms` without its Jacobians."""
+        r = (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * (1.0 / problem.force_step_sigma[:, None])
+        return float(np.sum(r * r))
+
     def gtsam_factors(self, problem):
         return [process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
                                                 diagonal_noise(np.full(3, problem.force_step_sigma[k])))
@@ -471,9 +476,23 @@ class MotionModelGroup(FactorGroup):
         J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
         J0[:, 0:3, D], J1[:, 0:3, D] = jk["d0"], jk["d1"]
         J0[:, 3:6, D], J1[:, 3:6, D] = -np.eye(3), np.eye(3)
-        wb = 1.0 / np.concatenate([problem.trapezoid_sigma[:, None] * problem.axis_factors,
-                                   problem.omega_dot_step_sigma[:, None] * problem.axis_factors], axis=1)
+        wb = self._white_jerk_weights(problem)
         return [Term("binary", np.concatenate([rk, rd], axis=1) * wb, {"x0": J0 * wb[:, :, None], "x1": J1 * wb[:, :, None]})]
+
+    @staticmethod
+    def _white_jerk_weights(problem) -> np.ndarray:
+        """(N-1, 6) whitening of the trapezoid and ω̇ random-walk rows."""
+        return 1.0 / np.concatenate([problem.trapezoid_sigma[:, None] * problem.axis_factors,
+                                     problem.omega_dot_step_sigma[:, None] * problem.axis_factors], axis=1)
+
+    def squared_norm(self, problem, states, params):
+        """The same residuals as :meth:`terms` (white jerk: without building its Jacobians)."""
+        if problem.snap or problem.oscillator:
+            return super().squared_norm(problem, states, params)
+        X, W, D = states, OMEGA, OMEGA_DOT
+        rk = kinematics.angular_velocity_step(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
+        r = np.concatenate([rk, X[1:, D] - X[:-1, D]], axis=1) * self._white_jerk_weights(problem)
+        return float(np.sum(r * r))
 
     def gtsam_factors(self, problem):
         out = []
