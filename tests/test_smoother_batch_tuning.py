@@ -209,3 +209,37 @@ def test_real_recording_settings_beat_the_per_sample_ml(mimu4444_dir):
     assert mask.sum() > 1500
     assert s_rmse < 0.85 * m_rmse, (s_rmse, m_rmse)
     assert s_opp < m_opp, (s_opp, m_opp)
+
+
+def test_minimum_of_a_stiff_setting_keeps_its_precision():
+    """An axis made stiff (factor 10⁻⁵, an oscillator on it) while the states come from the plain
+    model: the process cost at the linearisation point is about 10⁸ times the minimum, and
+    ``c(x̄) - ½ gᵀH⁻¹g`` loses nats to rounding; the minimum taken row by row stays near the one of
+    a QR factorisation of the dense Jacobian."""
+    from dataclasses import replace as _replace
+
+    from dense_evidence import dense_minimum
+
+    from gfimu.smoother.banded import factorise, normal_equations, solve, solve_step
+    from gfimu.smoother.tuning import linearised_half_cost
+
+    log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=0.6, seed=2)
+    plain = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5)
+    x = solve(make_problem(log, plain), initial_states(log, plain)).states
+    stiff = _replace(plain, process_axis_factors=(0.01, 1e-5, 0.3), process_axis_frequencies_hz=(0.0, 0.865, 0.0))
+    problem = make_problem(log, stiff)
+    ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))
+    dx, dp = solve_step(ne, factorise(ne, 0.0))
+    truth = dense_minimum(problem, x)
+    assert ne.cost > 1e7 * truth  # the regime where the subtraction cancels
+    # the banded step itself is only so accurate here (κ(H) is κ(J)²): the linearised cost at it is
+    # above the minimum, by a third of a nat, never below; the subtraction is off by over 2 nats
+    row_by_row = linearised_half_cost(ne.terms, dx, dp)
+    assert truth <= row_by_row < truth + 0.5
+    subtracted = ne.cost + 0.5 * float(ne.grad.reshape(-1) @ dx.reshape(-1))
+    assert abs(subtracted - truth) > 2.0
+    # a factor of 10⁻⁴ (a still stiffer axis than the evidence can tell apart) is exact to 10⁻⁶
+    problem = make_problem(log, _replace(stiff, process_axis_factors=(0.01, 1e-4, 0.3)))
+    ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))
+    dx, dp = solve_step(ne, factorise(ne, 0.0))
+    assert linearised_half_cost(ne.terms, dx, dp) == pytest.approx(dense_minimum(problem, x), rel=1e-6)

@@ -41,6 +41,9 @@ class NormalEquations:
     cost: float
     rows: int | None = None
     """Number of whitened residual rows."""
+    terms: list | None = None
+    """The terms summed, when every row came from one (None when a group added its products in
+    closed form, :meth:`gfimu.smoother.groups.FactorGroup.accumulate`)."""
 
 
 def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray, terms=None) -> NormalEquations:
@@ -54,7 +57,18 @@ def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.nd
     grad_g = np.zeros(G)
     cost = 0.0
     rows = 0
-    for t in (problem.terms(states, params) if terms is None else terms):
+    complete = terms is not None
+    if terms is None:  # the groups with closed-form products add them directly (FactorGroup.accumulate)
+        terms, complete = [], True
+        for group in problem.groups:
+            done = group.accumulate(problem, states, params, diag, lower, grad)
+            if done is None:
+                terms.extend(group.terms(problem, states, params))
+            else:
+                cost += done[0]
+                rows += done[1]
+                complete = False
+    for t in terms:
         r = t.residual
         cost += 0.5 * float(np.sum(r * r))
         rows += r.size
@@ -81,13 +95,14 @@ def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.nd
             Jg = t.jac_global
             border += np.einsum("nri,nrj->ij", Jg, Jg)
             grad_g += np.einsum("nri,nr->i", Jg, r)
-    return NormalEquations(diag, lower, grad, coupling, border, grad_g, cost, rows)
+    return NormalEquations(diag, lower, grad, coupling, border, grad_g, cost, rows, list(terms) if complete else None)
 
 
 def add_normal_equations(a: NormalEquations, b: NormalEquations) -> NormalEquations:
     """Normal equations of the union of two sets of factors on the same states."""
+    terms = a.terms + b.terms if a.terms is not None and b.terms is not None else None
     return NormalEquations(a.diag + b.diag, a.lower + b.lower, a.grad + b.grad, a.coupling + b.coupling, a.border + b.border,
-                           a.grad_global + b.grad_global, a.cost + b.cost, (a.rows or 0) + (b.rows or 0))
+                           a.grad_global + b.grad_global, a.cost + b.cost, (a.rows or 0) + (b.rows or 0), terms)
 
 
 def to_lower_banded(diag: np.ndarray, lower: np.ndarray) -> np.ndarray:

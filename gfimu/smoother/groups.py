@@ -91,6 +91,13 @@ class FactorGroup:
         depend on how the groups are cut)."""
         return [self.log_normaliser(problem)]
 
+    def accumulate(self, problem, states: np.ndarray, params: np.ndarray, diag: np.ndarray, lower: np.ndarray,
+                   grad: np.ndarray) -> tuple[float, int] | None:
+        """Add its ``JᵀJ`` blocks (``diag`` (N, m, m), ``lower`` (N-1, m, m)) and ``Jᵀr`` (``grad`` (N, m))
+        straight into the normal equations where it has them in closed form, returning (half its
+        squared residuals, its rows); None (the default): the caller accumulates its :meth:`terms`."""
+        return None
+
     def squared_norm(self, problem, states: np.ndarray, params: np.ndarray) -> float:
         """Sum of its squared whitened residuals at ``states`` (twice its share of the cost)."""
         return float(sum(float(np.sum(t.residual**2)) for t in self.terms(problem, states, params)))
@@ -144,6 +151,11 @@ class FirstStatePriorGroup(FactorGroup):
 
     def log_normaliser(self, problem):
         return float(np.sum(np.log(problem.first_sigma)))
+
+
+def _columns(columns: slice) -> np.ndarray:
+    """The state columns of a slice as an index array (for the diagonal entries of a block)."""
+    return np.arange(columns.start, columns.stop)
 
 
 def _padded(blocks: list[np.ndarray], state_size: int) -> np.ndarray:
@@ -329,6 +341,21 @@ class SpecificForceWalkGroup(FactorGroup):
         r = (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * (1.0 / problem.force_step_sigma[:, None])
         return float(np.sum(r * r))
 
+    def accumulate(self, problem, states, params, diag, lower, grad):
+        """Per axis the step ``u (f1 - f0)`` (u = 1/σ): ``JᵀJ`` adds u² to both diagonals and -u² to
+        the coupling, ``Jᵀr`` is ``∓u e``."""
+        u = 1.0 / problem.force_step_sigma
+        e = (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * u[:, None]
+        u2 = (u * u)[:, None]
+        f = _columns(SPECIFIC_FORCE)
+        diag[:-1, f, f] += u2
+        diag[1:, f, f] += u2
+        lower[:, f, f] -= u2
+        ue = u[:, None] * e
+        grad[:-1, f] -= ue
+        grad[1:, f] += ue
+        return 0.5 * float(np.sum(e * e)), e.size
+
     def gtsam_factors(self, problem):
         return [process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
                                                 diagonal_noise(np.full(3, problem.force_step_sigma[k])))
@@ -484,6 +511,46 @@ class MotionModelGroup(FactorGroup):
         """(N-1, 6) whitening of the trapezoid and ω̇ random-walk rows."""
         return 1.0 / np.concatenate([problem.trapezoid_sigma[:, None] * problem.axis_factors,
                                      problem.omega_dot_step_sigma[:, None] * problem.axis_factors], axis=1)
+
+    def accumulate(self, problem, states, params, diag, lower, grad):
+        """White jerk, per body axis with ``w = ω_a``, ``d = ω̇_a``, step h and row weights t (trapezoid),
+        u (ω̇ random walk): rows ``e1 = t (w1 - w0 - h/2 (d0 + d1))``, ``e2 = u (d1 - d0)``, so
+
+            J0ᵀJ0 = [[t², t²h/2], [t²h/2, t²h²/4 + u²]]     J1ᵀJ1 = [[t², -t²h/2], [-t²h/2, t²h²/4 + u²]]
+            J1ᵀJ0 = [[-t², -t²h/2], [t²h/2, t²h²/4 - u²]]    (rows w1, d1; columns w0, d0)
+            J0ᵀr = [-t e1, -t h/2 e1 - u e2]                 J1ᵀr = [t e1, -t h/2 e1 + u e2]
+
+        (the same sums as :meth:`terms`' Jacobians to rounding). None for the other motion models."""
+        if problem.snap or problem.oscillator:
+            return None
+        X, W, D = states, OMEGA, OMEGA_DOT
+        wb = self._white_jerk_weights(problem)
+        t, u = wb[:, 0:3], wb[:, 3:6]
+        h = problem.dt_s[:, None]
+        e1 = kinematics.angular_velocity_step(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s) * t
+        e2 = (X[1:, D] - X[:-1, D]) * u
+        t2, u2 = t * t, u * u
+        t2h = 0.5 * h * t2
+        t2hh = 0.5 * h * t2h
+        w, d = _columns(W), _columns(D)
+        diag[:-1, w, w] += t2
+        diag[1:, w, w] += t2
+        diag[:-1, w, d] += t2h
+        diag[:-1, d, w] += t2h
+        diag[1:, w, d] -= t2h
+        diag[1:, d, w] -= t2h
+        diag[:-1, d, d] += t2hh + u2
+        diag[1:, d, d] += t2hh + u2
+        lower[:, w, w] -= t2
+        lower[:, w, d] -= t2h
+        lower[:, d, w] += t2h
+        lower[:, d, d] += t2hh - u2
+        te1, the1, ue2 = t * e1, 0.5 * h * t * e1, u * e2
+        grad[:-1, w] -= te1
+        grad[1:, w] += te1
+        grad[:-1, d] -= the1 + ue2
+        grad[1:, d] += ue2 - the1
+        return 0.5 * float(np.sum(e1 * e1) + np.sum(e2 * e2)), e1.size + e2.size
 
     def squared_norm(self, problem, states, params):
         """The same residuals as :meth:`terms` (white jerk: without building its Jacobians)."""
