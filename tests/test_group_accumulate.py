@@ -1,5 +1,6 @@
-"""The groups that add their normal equations in closed form (FactorGroup.accumulate) give the same
-JᵀJ, Jᵀr, cost and row count as their Jacobians from ``terms``, with uneven steps and robust weights."""
+"""The groups that add their normal equations in closed form (FactorGroup.accumulate: accelerometers,
+white-jerk motion model, specific-force walk) give the same JᵀJ, Jᵀr, cost and row count as their
+Jacobians from ``terms``, with uneven steps and robust weights."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from gfimu.array import cube_array
 from gfimu.simulate import simulate
 from gfimu.smoother.banded import normal_equations
 from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.groups import MotionModelGroup, SpecificForceWalkGroup
+from gfimu.smoother.groups import AccelerometerGroup, MotionModelGroup, SpecificForceWalkGroup
 
 
 def _uneven(log):
@@ -35,8 +36,9 @@ def test_closed_form_normal_equations_match_the_jacobians(robust):
     params = np.zeros(problem.n_global)
     if robust:
         problem.set_robust_weights(states, params)
-    closed = [g for g in problem.groups if isinstance(g, (MotionModelGroup, SpecificForceWalkGroup))]
-    assert len(closed) == 2
+    closed = [g for g in problem.groups if isinstance(g, (AccelerometerGroup, MotionModelGroup, SpecificForceWalkGroup))]
+    assert len(closed) == 3
+    assert (problem.accel_sigma_per_sample is not None) == robust  # per-sample whitening, or one for all
     m = problem.state_size
     for group in closed:
         diag, lower, grad = np.zeros((len(log), m, m)), np.zeros((len(log) - 1, m, m)), np.zeros((len(log), m))
@@ -57,6 +59,15 @@ def test_closed_form_normal_equations_match_the_jacobians(robust):
     np.testing.assert_allclose(whole.grad, ref.grad, rtol=0, atol=1e-13 * np.abs(ref.grad).max())
     assert whole.cost == pytest.approx(ref.cost, rel=1e-13)
     assert whole.cost == pytest.approx(problem.cost(states, params), rel=1e-13)
+
+
+def test_calibrated_accelerometers_keep_their_jacobians():
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=500.0, duration_s=0.2, seed=4)
+    problem = SmootherProblem(log, SmootherOptions(self_calibrate_bias=True))
+    m, n = problem.state_size, len(log)
+    out = problem.group(AccelerometerGroup).accumulate(problem, np.zeros((n, m)), np.zeros(problem.n_global), np.zeros((n, m, m)),
+                                                       np.zeros((n - 1, m, m)), np.zeros((n, m)))
+    assert out is None
 
 
 def test_other_motion_models_keep_their_jacobians():

@@ -251,6 +251,40 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         jg = np.zeros(pred.shape + (problem.n_global,)) if problem.n_global else None
         return Term("unary", r, {"x": J}, jg)
 
+    def accumulate(self, problem, states, params, diag, lower, grad):
+        """Without per-sensor calibration: with whitening w_i of axis i, ``J_i = w_i [∂y_i/∂ω, c_i]``
+        where ``c_i`` (the structure-matrix row over ``[ω̇, f]``) is constant, so ``JᵀJ`` is the
+        per-sample ω block ``Σ J_ω,iᵀ J_ω,i``, the cross block ``Σ J_ω,iᵀ w_i c_iᵀ`` (one matrix product
+        over all samples) and ``Σ w_i² c_i c_iᵀ`` (constant unless the noise varies per sample)."""
+        if self._calibrated(problem):
+            return None
+        d, p, rows, w = problem.all_directions_b, problem.all_positions_m, problem.all_rows, states[:, OMEGA]
+        pred, products = accelerometer.rigid_body_readings(w, states[:, OMEGA_DOT], states[:, SPECIFIC_FORCE], rows, d, p)
+        white = self._whitening(problem, pred.shape)
+        r = (pred - problem.log.accel_mps2) * white
+        n, axes = r.shape
+        jw = accelerometer.omega_jacobian(w, products, d, p) * white[:, :, None]  # (N, axes, 3)
+        c = np.concatenate([rows[:, 3:6], rows[:, 0:3]], axis=1)  # (axes, 6) over [ω̇, f]
+        linear = slice(OMEGA_DOT.start, SPECIFIC_FORCE.stop)
+        if OMEGA.stop != OMEGA_DOT.start or OMEGA_DOT.stop != SPECIFIC_FORCE.start:
+            return None  # (the layout keeps ω, ω̇, f side by side)
+        jwt = np.swapaxes(jw, 1, 2)
+        diag[:, OMEGA, OMEGA] += jwt @ jw
+        wc = white[:, :, None] * c if problem.accel_sigma_per_sample is not None else None
+        if wc is None:  # one whitening for every sample
+            wc0 = white[0][:, None] * c
+            cross = (np.ascontiguousarray(jwt).reshape(n * 3, axes) @ wc0).reshape(n, 3, 6)
+            diag[:, linear, linear] += wc0.T @ wc0
+            grad[:, linear] += r @ wc0
+        else:
+            cross = jwt @ wc
+            diag[:, linear, linear] += ((white * white) @ (c[:, :, None] * c[:, None, :]).reshape(axes, 36)).reshape(n, 6, 6)
+            grad[:, linear] += np.einsum("na,naj->nj", r, wc)
+        diag[:, OMEGA, linear] += cross
+        diag[:, linear, OMEGA] += np.swapaxes(cross, 1, 2)
+        grad[:, OMEGA] += np.einsum("nai,na->ni", jw, r)
+        return 0.5 * float(np.sum(r * r)), r.size
+
     def whitened_residual(self, problem, states, params) -> np.ndarray:
         """(N, axes) whitened residuals, without the Jacobians."""
         if self._calibrated(problem):
