@@ -270,16 +270,16 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
             return None  # (the layout keeps ω, ω̇, f side by side)
         jwt = np.swapaxes(jw, 1, 2)
         diag[:, OMEGA, OMEGA] += jwt @ jw
-        wc = white[:, :, None] * c if problem.accel_sigma_per_sample is not None else None
-        if wc is None:  # one whitening for every sample
-            wc0 = white[0][:, None] * c
-            cross = (np.ascontiguousarray(jwt).reshape(n * 3, axes) @ wc0).reshape(n, 3, 6)
-            diag[:, linear, linear] += wc0.T @ wc0
-            grad[:, linear] += r @ wc0
-        else:
-            cross = jwt @ wc
+        if problem.accel_sigma_per_sample is None:  # one whitening for every sample
+            wc = white[0][:, None] * c
+            cross = (np.ascontiguousarray(jwt).reshape(n * 3, axes) @ wc).reshape(n, 3, 6)
+            diag[:, linear, linear] += wc.T @ wc
+            grad[:, linear] += r @ wc
+        else:  # Σ_a J_ω,a w_a c_aᵀ as one product of (J_ω w) with c
+            jww = np.ascontiguousarray(np.swapaxes(jw * white[:, :, None], 1, 2)).reshape(n * 3, axes)
+            cross = (jww @ c).reshape(n, 3, 6)
             diag[:, linear, linear] += ((white * white) @ (c[:, :, None] * c[:, None, :]).reshape(axes, 36)).reshape(n, 6, 6)
-            grad[:, linear] += np.einsum("na,naj->nj", r, wc)
+            grad[:, linear] += (r * white) @ c
         diag[:, OMEGA, linear] += cross
         diag[:, linear, OMEGA] += np.swapaxes(cross, 1, 2)
         grad[:, OMEGA] += np.einsum("nai,na->ni", jw, r)
