@@ -243,3 +243,21 @@ def test_minimum_of_a_stiff_setting_keeps_its_precision():
     ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))
     dx, dp = solve_step(ne, factorise(ne, 0.0))
     assert linearised_half_cost(ne.terms, dx, dp) == pytest.approx(dense_minimum(problem, x), rel=1e-6)
+
+
+def test_search_follows_the_evidence_only_for_a_nat_or_more():
+    """The 1-D search extends its grid past an edge only while the edge beats its inner neighbour by
+    more than a nat: a ridge rising by 0.1 nat a step keeps the start, a slope of 3 nats a step is
+    followed to its peak (found by the parabola)."""
+    from gfimu.smoother.tuning import EXTEND_MIN_GAIN_NATS, _maximise_1d
+
+    assert EXTEND_MIN_GAIN_NATS == 1.0
+    ridge = lambda x: -0.1 * x  # noqa: E731 (rises slowly toward small x without end)
+    x, _, evaluations = _maximise_1d(ridge, 0.0, 1.0, -20.0, 20.0)
+    assert x == pytest.approx(0.0) and evaluations == 3
+    peak = lambda x: -0.5 * (x + 6.3) ** 2  # noqa: E731
+    x, value, evaluations = _maximise_1d(peak, 0.0, 1.0, -20.0, 20.0)
+    assert x == pytest.approx(-6.3, abs=1e-9) and value == pytest.approx(0.0, abs=1e-12)
+    # with the gain threshold off, the ridge is walked to the limit of the range
+    x, _, _ = _maximise_1d(ridge, 0.0, 1.0, -20.0, 20.0, min_gain=0.0)
+    assert x == pytest.approx(-20.0)

@@ -417,9 +417,19 @@ def measurement_normal_equations(problem: SmootherProblem, states: np.ndarray, p
     return normal_equations(problem, states, P, terms[:1])
 
 
-def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 1) -> tuple[float, float, int]:
+EXTEND_MIN_GAIN_NATS = 1.0
+"""A 1-D search of the tuner follows the evidence past the edge of its grid, and takes an edge
+point, only where that point beats its inner neighbour by more than this [nats] (odds of e to 1,
+the usual bound below which a Bayes factor is not worth more than a bare mention). Along a flat
+ridge (an axis already stiff enough that stiffer changes nothing the data can tell) the search
+otherwise walks to the limit of its range, where the normal equations lose their precision."""
+
+
+def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 1,
+                 min_gain: float = EXTEND_MIN_GAIN_NATS) -> tuple[float, float, int]:
     """Maximise ``f`` over ``x`` (a log density) from a grid ``x0 + step·k``, |k| ≤ points,
-    extended while the best point is at an edge, then one parabolic refinement."""
+    extended while the best point is at an edge and beats its inner neighbour by more than
+    ``min_gain`` (:data:`EXTEND_MIN_GAIN_NATS`), then one parabolic refinement."""
     cache = {}
 
     def F(x):
@@ -429,10 +439,18 @@ def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 
             cache[key] = f(x)
         return cache[key], x
 
+    def best(vals):
+        i = int(np.argmax(vals))
+        if len(vals) > 1 and i == 0 and not vals[0] - vals[1] > min_gain:
+            i = 1
+        elif len(vals) > 1 and i == len(vals) - 1 and not vals[-1] - vals[-2] > min_gain:
+            i = len(vals) - 2
+        return i
+
     xs = [x0 + step * k for k in range(-points, points + 1)]
     vals = [F(x)[0] for x in xs]
     while True:
-        i = int(np.argmax(vals))
+        i = best(vals)
         if i == 0 and xs[0] - step >= lo:
             xs.insert(0, xs[0] - step)
             vals.insert(0, F(xs[0])[0])
@@ -441,7 +459,7 @@ def _maximise_1d(f, x0: float, step: float, lo: float, hi: float, points: int = 
             vals.append(F(xs[-1])[0])
         else:
             break
-    i = int(np.argmax(vals))
+    i = best(vals)
     best_x, best_v = xs[i], vals[i]
     if 0 < i < len(xs) - 1:
         a, b, c = vals[i - 1], vals[i], vals[i + 1]
