@@ -70,7 +70,7 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
             inputs = [log_dir] + ([calibration] if calibration else [])
             Path(output_csv).parent.mkdir(parents=True, exist_ok=True)
             out = check_output(output_csv, inputs, "--out")
-            run = estimate_log(log_dir, method, options, calibration)
+            run = estimate_log(log_dir, method, _one_process(method, options), calibration)
             write_output(out, gio.motion_csv_chunks(run.motion))
         rmse = score(run)
         row.update(status="ok", samples=run.samples, omega_rmse_radps=None if rmse is None else f"{rmse:.6g}",
@@ -85,6 +85,19 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
             folder.rmdir()
     row["seconds"] = f"{time.perf_counter() - t0:.3f}"
     return row
+
+
+def _one_process(method: str, options: dict) -> dict:
+    """``options`` with the estimator's own worker processes off unless set: the logs already run in
+    parallel, one per Dask worker."""
+    import dataclasses
+
+    from .methods import estimator_class
+
+    cls = estimator_class(method)
+    if "workers" not in options and dataclasses.is_dataclass(cls) and any(f.name == "workers" for f in dataclasses.fields(cls)):
+        return {**options, "workers": 1}
+    return options
 
 
 def local_cluster(workers: int):

@@ -19,6 +19,9 @@ and is re-weighted from each solution (iteratively re-weighted least squares).
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -140,13 +143,15 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, options: Smoother
 
 
 def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: InitialStates | None = None,
-           solver: str = "numpy", auto_model: bool = True, tune_span_s: float | None = 10.0) -> SmootherResult:
+           solver: str = "numpy", auto_model: bool = True, tune_span_s: float | None = 10.0,
+           workers: int = 1) -> SmootherResult:
     """The batch smoother on a whole log: overlapping solve windows, each with its process noise chosen
     from the data when ``options.tune_process_noise``.
 
     ``initial``: how each window's initial states are made (default
     :func:`gfimu.smoother.initialise.initial_estimate`); ``solver``: one of :data:`SOLVERS`;
-    ``auto_model``, ``tune_span_s``: see :class:`BatchSmootherEstimator`."""
+    ``auto_model``, ``tune_span_s``, ``workers``: see :class:`BatchSmootherEstimator` (here 1, in
+    this process, unless asked)."""
     opt = options
     reason = options_reason(log.array, opt, attitude_supported=True)
     if reason:
@@ -167,31 +172,23 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     notes = []
     iterations, cost = 0, 0.0
     opt, auto = _auto_model(log, opt, attitude) if auto_model else (opt, None)
-    previous = None  # (solve slice, attitudes) of the window before
-    for w, (solve_sl, keep_log, keep_win) in enumerate(progress_bar(windows, total=len(windows), desc="smoother",
-                                                                    enable=progress and len(windows) > 1)):
-        part = log.select(solve_sl)
-        if attitude:
-            res, problem = _solve_with_attitude(part, opt, previous, solve_sl, tunings, initial, solver)
-            previous = (solve_sl, problem.rotations(res.states))
-        elif auto is not None and not auto[0].consistent:
-            problem, x0 = _moment_problem(part, opt, auto, solve_sl, tunings)
-            res = solve_window(problem, x0, problem.options, solver=solver)
-            if opt.branch_restarts:
-                res = _restarted(problem, res, opt)
-        else:
-            problem, x0 = tuned_problem(part, opt, tunings, initial, tune_span_s)
-            res = solve_window(problem, x0, opt, solver=solver)
-        iterations += res.iterations
-        if not res.converged:
+    if attitude:  # each window starts from the attitude of the one before: in turn
+        outcomes = _attitude_windows(log, opt, windows, initial, solver, progress)
+    else:
+        context = _WindowContext(log, opt, auto, initial, solver, tune_span_s, windows)
+        outcomes = _run_windows(context, window_workers(workers, len(windows), solver), progress)
+    for w, ((solve_sl, keep_log, keep_win), out) in enumerate(zip(windows, outcomes)):
+        tunings.extend(out.tunings)
+        iterations += out.iterations
+        if not out.converged:
             notes.append(f"solve window {w + 1} of {len(windows)} (samples {solve_sl.start}..{solve_sl.stop - 1}) "
-                         f"stopped after {res.iterations} iterations without converging")
-        cost += float(res.cost)
-        m = min(M, res.states.shape[1])
-        states[keep_log, :m] = res.states[keep_win, :m]
+                         f"stopped after {out.iterations} iterations without converging")
+        cost += out.cost
+        m = min(M, out.states.shape[1])
+        states[keep_log, :m] = out.states[:, :m]
         if sd is not None:
-            sd[keep_log, :m] = np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win, :m]
-        calibration.append({name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()})
+            sd[keep_log, :m] = out.sd[:, :m]
+        calibration.append(out.calibration)
     sigma = {} if sd is None else layout.quantities(sd)
     extra = {}
     if attitude:
@@ -201,6 +198,111 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     motion = Motion(log.timestamps_ns, sigma=sigma, **layout.quantities(states), **extra)
     return SmootherResult(motion, tuple(tunings), tuple(calibration), iterations, cost, len(windows), tuple(notes),
                           auto[0] if auto else None)
+
+
+@dataclass
+class _WindowOutcome:
+    """What one solve window gives the whole log: its kept states (and σ), calibration, choices."""
+
+    states: np.ndarray
+    sd: np.ndarray | None
+    calibration: dict
+    tunings: list
+    iterations: int
+    cost: float
+    converged: bool
+
+    @classmethod
+    def of(cls, res: SolveResult, problem: SmootherProblem, keep_win: slice, tunings: list) -> _WindowOutcome:
+        sd = None if res.covariance is None else np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
+        return cls(res.states[keep_win], sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
+                   tunings, res.iterations, float(res.cost), bool(res.converged))
+
+
+@dataclass
+class _WindowContext:
+    """Everything a window without attitude needs, shared by the windows (and by the worker
+    processes, which inherit it when they start)."""
+
+    log: Log
+    options: SmootherOptions
+    auto: tuple | None
+    initial: InitialStates | None
+    solver: str
+    tune_span_s: float | None
+    windows: list
+
+    def solve(self, w: int) -> _WindowOutcome:
+        solve_sl, _, keep_win = self.windows[w]
+        part = self.log.select(solve_sl)
+        opt, tunings = self.options, []
+        if self.auto is not None and not self.auto[0].consistent:
+            problem, x0 = _moment_problem(part, opt, self.auto, solve_sl, tunings)
+            res = solve_window(problem, x0, problem.options, solver=self.solver)
+            if opt.branch_restarts:
+                res = _restarted(problem, res, opt)
+        else:
+            problem, x0 = tuned_problem(part, opt, tunings, self.initial, self.tune_span_s)
+            res = solve_window(problem, x0, opt, solver=self.solver)
+        return _WindowOutcome.of(res, problem, keep_win, tunings)
+
+
+def window_workers(workers: int, windows: int, solver: str = "numpy") -> int:
+    """Processes to solve ``windows`` windows with: ``workers`` (0: one per CPU this process may run
+    on), at most one per window; 1 where worker processes cannot start by forking this one (they
+    inherit the log instead of receiving a copy), in a daemonic process (e.g. a Dask worker) or with
+    the GTSAM solver."""
+    if workers < 0:
+        raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers}")
+    if workers == 0:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if (solver != "numpy" or "fork" not in multiprocessing.get_all_start_methods()
+            or multiprocessing.current_process().daemon):  # (a daemonic process may not start others)
+        return 1
+    return max(1, min(workers, windows))
+
+
+_CONTEXT: _WindowContext | None = None
+"""The context of the windows being solved, for the worker processes (set before they fork)."""
+
+
+def _solve_in_worker(w: int) -> _WindowOutcome:
+    return _CONTEXT.solve(w)
+
+
+def _run_windows(context: _WindowContext, workers: int, progress: bool) -> list[_WindowOutcome]:
+    """Every window of ``context``, in this process or spread over ``workers`` forked processes (each
+    window's numbers are the same either way: the windows do not depend on one another)."""
+    total = len(context.windows)
+    bar = progress_bar(range(total), total=total, desc="smoother", enable=progress and total > 1)
+    if workers <= 1:
+        return [context.solve(w) for w in bar]
+    global _CONTEXT
+    _CONTEXT = context
+    try:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            futures = {pool.submit(_solve_in_worker, w): w for w in range(total)}
+            out: list = [None] * total
+            done = iter(bar)
+            for future in as_completed(futures):
+                out[futures[future]] = future.result()
+                next(done, None)
+            return out
+    finally:
+        _CONTEXT = None
+
+
+def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: InitialStates | None, solver: str,
+                      progress: bool) -> list[_WindowOutcome]:
+    out = []
+    previous = None  # (solve slice, attitudes) of the window before
+    for solve_sl, _, keep_win in progress_bar(windows, total=len(windows), desc="smoother",
+                                              enable=progress and len(windows) > 1):
+        tunings: list = []
+        res, problem = _solve_with_attitude(log.select(solve_sl), opt, previous, solve_sl, tunings, initial, solver)
+        previous = (solve_sl, problem.rotations(res.states))
+        out.append(_WindowOutcome.of(res, problem, keep_win, tunings))
+    return out
 
 
 def _auto_model(log: Log, opt: SmootherOptions, attitude: bool):
@@ -325,6 +427,12 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
     residual is larger, heavy-tailed or grows with |ω| (real arrays) get the ML initialisation with
     its sign chain, the measured noise floor and slope, Cauchy losses and moment-estimated process
     noise. Options set to other than their defaults are kept either way; False: the options as given."""
+    workers: int = field(default=0, metadata={"unit": "processes", "help": "processes solving the solve windows at "
+                                              "once: 0 = one per CPU (at most one per window), 1 = all in this process"})
+    """Processes that solve the log's solve windows at once (forked from this one; the windows do not
+    depend on one another, so the numbers are the same): 0 (default) one per CPU this process may
+    run on, at most one per window; 1 all in this process. Attitude windows, which start from the
+    one before, and the GTSAM solver always run in this process."""
     solver: str = field(default="numpy", metadata={"unit": "", "help": "batch solver: 'numpy' (vectorised banded "
                                                    "Levenberg-Marquardt, default) or 'gtsam' (the same problem as a GTSAM graph)"})
     """'numpy': the vectorised banded Levenberg-Marquardt (default, linear in the length, fast);
@@ -334,6 +442,8 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if not (isinstance(self.workers, int) and self.workers >= 0):
+            raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {self.workers!r}")
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
 
@@ -343,7 +453,7 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> SmootherResult:
         """The smoother on ``log`` (:func:`smooth`), with everything it produced."""
         return smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver,
-                      auto_model=self.auto_model, tune_span_s=self.tune_span_s)
+                      auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers)
 
     @property
     def last_calibration(self) -> list[dict]:

@@ -24,6 +24,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "batch": (
         "window_s", "overlap_s", "max_iterations", "relative_tolerance", "compute_sigma", "init_window_s",
         "reweight_iterations", "initialisation", "ml_sign_chain", "branch_restarts", "auto_model", "solver",
+        "workers",
     ),
     "fixed-lag": (
         "lag_s", "relinearize_threshold", "relinearize_skip", "marginalise_every_s", "warmup_s", "gap_factor",
