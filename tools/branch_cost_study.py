@@ -6,7 +6,7 @@ For each recording (``data.bin``): convert and calibrate it as the plain flow do
 (``gfimu convert mimu4444``, ``gfimu calibrate``, in a temporary folder), screen and calibrate the
 readings as ``gfimu estimate`` does, and build the default batch smoother's model exactly as
 :func:`gfimu.smoother.batch.smooth` builds it for an inconsistent log (the model check of
-:mod:`gfimu.smoother.auto`, the per-window problem of ``_moment_problem``: the same windows, noise
+:mod:`gfimu.smoother.auto`, the per-window problem of ``moment_problem``: the same windows, noise
 floor and slope, Cauchy thresholds, process densities and local density factors). Per solve window:
 
 - **default**: the production window solve (:func:`gfimu.smoother.banded.solve_reweighted`) from
@@ -64,7 +64,7 @@ from gfimu.factors import accelerometer  # noqa: E402
 from gfimu.readings import screen_log  # noqa: E402
 from gfimu.smoother.banded import reweighting, solve, solve_reweighted  # noqa: E402
 from gfimu.smoother.graph import robust_loss  # noqa: E402
-from gfimu.smoother.batch import BatchSmootherEstimator, _auto_model, _moment_problem, window_slices  # noqa: E402
+from gfimu.smoother.batch import BatchSmootherEstimator, chosen_model, moment_problem, window_slices  # noqa: E402
 from gfimu.smoother.groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: E402
 from gfimu.smoother.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE  # noqa: E402
 from gfimu.smoother.restarts import BRANCHES, branch_restarts, plane_normal  # noqa: E402
@@ -200,7 +200,7 @@ def segment_restarts(model: FrozenModel, X: np.ndarray, normal: np.ndarray, widt
 def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: bool,
           reference_shift_ms: float = 0.0, restarts: str | None = None) -> dict:
     est = BatchSmootherEstimator()
-    opt, auto = _auto_model(log, est.options(), False)
+    opt, auto = chosen_model(log, est.options(), False)
     if auto is None or auto[0].consistent:
         raise SystemExit(f"{log.source}: the model check finds the log consistent; this study is about the robust model")
     aligned = log
@@ -223,11 +223,11 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
     for solve_sl, keep_log, keep_win in windows:
         part, part_ref = log.select(solve_sl), aligned.select(solve_sl)
         sols = {}
-        problem, x0 = _moment_problem(part, opt, auto, solve_sl, [])
+        problem, x0 = moment_problem(part, opt, auto, solve_sl, [])
         t0 = time.perf_counter()
         sols["default"] = solve_reweighted(problem, x0, problem.options, compute_sigma=False)
         seconds["default"] += time.perf_counter() - t0
-        problem_r, _ = _moment_problem(part, opt, auto, solve_sl, [])
+        problem_r, _ = moment_problem(part, opt, auto, solve_sl, [])
         t0 = time.perf_counter()
         sols["reference"] = solve_reweighted(problem_r, reference_start(x0, part_ref), problem_r.options,
                                              compute_sigma=False, warm=True)
@@ -235,12 +235,12 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
         frozen_at = sols["default" if sigma_from == "default" else "reference"].states[:, OMEGA]
         for k in names:
             if k == "pinned":  # ω held at the reference, ω̇ and f the model's best under the frozen noise
-                fresh, _ = _moment_problem(part_ref, pinned_opt, auto, solve_sl, [])
+                fresh, _ = moment_problem(part_ref, pinned_opt, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 res = model.resolve(reference_start(x0, part_ref))
                 X = res.states
             elif k == "restarted":  # the default's frozen solution with local restarts on the other branches
-                fresh, _ = _moment_problem(part, opt, auto, solve_sl, [])
+                fresh, _ = moment_problem(part, opt, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 if restarts == "runs":  # the library's restarts (what the default smoother now does)
                     model.resolve(default_states)  # the frozen noise and base weights on the problem
@@ -251,7 +251,7 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
                 restart_counts[1] += kept
             else:
                 production[k] += float(sols[k].cost)
-                fresh, _ = _moment_problem(part, opt, auto, solve_sl, [])
+                fresh, _ = moment_problem(part, opt, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 X = model.resolve(sols[k].states).states if resolve else sols[k].states
             if k == "default":

@@ -171,7 +171,7 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     tunings: list[Tuning] = []
     notes = []
     iterations, cost = 0, 0.0
-    opt, auto = _auto_model(log, opt, attitude) if auto_model else (opt, None)
+    opt, auto = chosen_model(log, opt, attitude) if auto_model else (opt, None)
     if attitude:  # each window starts from the attitude of the one before: in turn
         outcomes = _attitude_windows(log, opt, windows, initial, solver, progress)
     else:
@@ -237,7 +237,7 @@ class _WindowContext:
         part = self.log.select(solve_sl)
         opt, tunings = self.options, []
         if self.auto is not None and not self.auto[0].consistent:
-            problem, x0 = _moment_problem(part, opt, self.auto, solve_sl, tunings)
+            problem, x0 = moment_problem(part, opt, self.auto, solve_sl, tunings)
             res = solve_window(problem, x0, problem.options, solver=self.solver)
             if opt.branch_restarts:
                 res = _restarted(problem, res, opt)
@@ -305,7 +305,7 @@ def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: In
     return out
 
 
-def _auto_model(log: Log, opt: SmootherOptions, attitude: bool):
+def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
     """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.auto`."""
     if (attitude or opt.free_flight or opt.measurement != "accelerometer"
             or opt.self_calibrate_bias or opt.self_calibrate_scale):
@@ -351,7 +351,7 @@ def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions)
     return out
 
 
-def _moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
+def moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
     """Problem and initial states of one window of an inconsistent log: ML initialisation with its
     sign chain, the measured noise floor and slope, the process densities chosen for the log, and
     the jerk density lowered where the body rests (:func:`gfimu.smoother.auto.local_density_factors`)."""
