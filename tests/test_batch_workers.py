@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
+import time
+
 import numpy as np
 import pytest
 
@@ -76,3 +82,49 @@ def test_logs_run_on_dask_solve_their_windows_in_one_process():
     assert _one_process("smoother", {}) == {"workers": 1}
     assert _one_process("smoother", {"workers": 3}) == {"workers": 3}
     assert _one_process("ml", {}) == {}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupted_command_stops_its_workers(tmp_path, log, sig, status):
+    """Ctrl-C (SIGINT to the whole process group) or SIGTERM to the command while its workers solve
+    windows: one message, the usual status, no estimate, no process left behind."""
+    from gfimu import io as gio
+
+    folder = tmp_path / "log"
+    gio.write_log(log, folder)
+    out = tmp_path / "est.csv"
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "gfimu", "estimate", str(folder), "--method", "smoother",
+                             "-O", "window_s=1.2", "-O", "overlap_s=0.2", "-O", "workers=2", "--out", str(out),
+                             "--no-progress"], stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+    deadline = time.monotonic() + 60
+    children: list = []
+    while proc.poll() is None and time.monotonic() < deadline and len(children) < 2:
+        children = _children(proc.pid)
+        time.sleep(0.02)
+    assert len(children) == 2, "the workers never started"
+    if sig == signal.SIGINT:
+        os.killpg(proc.pid, sig)  # as a terminal's Ctrl-C
+    else:
+        proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == status, err
+    assert err.count("stopped by") == 1 and "Traceback" not in err, err
+    assert not out.exists()
+    time.sleep(0.5)
+    assert not [pid for pid in children if os.path.exists(f"/proc/{pid}")]
+
+
+def _children(pid: int) -> list[int]:
+    """Process ids whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    if int(f.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        out.append(int(entry))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import signal
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -266,29 +266,38 @@ _CONTEXT: _WindowContext | None = None
 """The context of the windows being solved, for the worker processes (set before they fork)."""
 
 
-def _solve_in_worker(w: int) -> _WindowOutcome:
-    return _CONTEXT.solve(w)
+def _solve_in_worker(w: int) -> tuple[int, _WindowOutcome]:
+    return w, _CONTEXT.solve(w)
+
+
+def _worker_signals() -> None:
+    """In a worker: SIGINT is the command's to handle (it stops the workers), SIGTERM ends the worker."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _run_windows(context: _WindowContext, workers: int, progress: bool) -> list[_WindowOutcome]:
     """Every window of ``context``, in this process or spread over ``workers`` forked processes (each
-    window's numbers are the same either way: the windows do not depend on one another)."""
+    window's numbers are the same either way: the windows do not depend on one another). An error
+    in a window, or an interruption, stops the other workers at once."""
     total = len(context.windows)
     bar = progress_bar(range(total), total=total, desc="smoother", enable=progress and total > 1)
     if workers <= 1:
         return [context.solve(w) for w in bar]
     global _CONTEXT
     _CONTEXT = context
+    pool = multiprocessing.get_context("fork").Pool(workers, initializer=_worker_signals)
     try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
-            futures = {pool.submit(_solve_in_worker, w): w for w in range(total)}
-            out: list = [None] * total
-            done = iter(bar)
-            for future in as_completed(futures):
-                out[futures[future]] = future.result()
-                next(done, None)
-            return out
+        out: list = [None] * total
+        done = iter(bar)
+        for w, outcome in pool.imap_unordered(_solve_in_worker, range(total)):
+            out[w] = outcome
+            next(done, None)
+        pool.close()
+        pool.join()
+        return out
     finally:
+        pool.terminate()
         _CONTEXT = None
 
 
