@@ -247,13 +247,18 @@ class _WindowContext:
         return _WindowOutcome.of(res, problem, keep_win, tunings)
 
 
+def check_workers(workers) -> None:
+    """ValueError unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
+    if not (isinstance(workers, int) and workers >= 0):
+        raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers!r}")
+
+
 def window_workers(workers: int, windows: int, solver: str = "numpy") -> int:
     """Processes to solve ``windows`` windows with: ``workers`` (0: one per CPU this process may run
     on), at most one per window; 1 where worker processes cannot start by forking this one (they
     inherit the log instead of receiving a copy), in a daemonic process (e.g. a Dask worker) or with
     the GTSAM solver."""
-    if workers < 0:
-        raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers}")
+    check_workers(workers)
     if workers == 0:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if (solver != "numpy" or "fork" not in multiprocessing.get_all_start_methods()
@@ -451,8 +456,7 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not (isinstance(self.workers, int) and self.workers >= 0):
-            raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {self.workers!r}")
+        check_workers(self.workers)
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
 

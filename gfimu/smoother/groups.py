@@ -235,20 +235,31 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
             return np.broadcast_to(1.0 / problem.accel_sigma, shape)
         return 1.0 / problem.accel_sigma_per_sample  # motion-dependent noise / robust re-weighting
 
+    def _all_axes(self, problem, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
+        """Every axis at once, without per-sensor calibration: the whitened residual (N, axes), the
+        whitening (N, axes) and the products of :func:`gfimu.factors.accelerometer.rigid_body_readings`."""
+        pred, products = accelerometer.rigid_body_readings(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
+                                                           problem.all_rows, problem.all_directions_b,
+                                                           problem.all_positions_m)
+        white = self._whitening(problem, pred.shape)
+        return (pred - problem.log.accel_mps2) * white, white, products
+
+    def _omega_jacobian(self, problem, X: np.ndarray, products, white: np.ndarray) -> np.ndarray:
+        """(N, axes, 3) whitened ∂reading/∂ω of every axis: ``(rᵀω) s + (sᵀω) r - 2 (sᵀr) ω``."""
+        return accelerometer.omega_jacobian(X[:, OMEGA], products, problem.all_directions_b,
+                                            problem.all_positions_m) * white[:, :, None]
+
     def _term_all_axes(self, problem, X: np.ndarray) -> Term:
         """:meth:`term` without per-sensor calibration: every axis at once, the whitened Jacobian
         written straight into its columns (the same numbers as
-        :func:`gfimu.factors.accelerometer.accelerometer_residual`); gradient of the quadratic part
-        ``(rᵀω) s + (sᵀω) r - 2 (sᵀr) ω``."""
-        d, p, rows, w = problem.all_directions_b, problem.all_positions_m, problem.all_rows, X[:, OMEGA]
-        pred, products = accelerometer.rigid_body_readings(w, X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], rows, d, p)
-        white = self._whitening(problem, pred.shape)
-        r = (pred - problem.log.accel_mps2) * white
-        J = np.zeros(pred.shape + (problem.state_size,))
-        J[:, :, OMEGA] = accelerometer.omega_jacobian(w, products, d, p) * white[:, :, None]
+        :func:`gfimu.factors.accelerometer.accelerometer_residual`)."""
+        rows = problem.all_rows
+        r, white, products = self._all_axes(problem, X)
+        J = np.zeros(r.shape + (problem.state_size,))
+        J[:, :, OMEGA] = self._omega_jacobian(problem, X, products, white)
         J[:, :, OMEGA_DOT] = rows[:, 3:6] * white[:, :, None]
         J[:, :, SPECIFIC_FORCE] = rows[:, 0:3] * white[:, :, None]
-        jg = np.zeros(pred.shape + (problem.n_global,)) if problem.n_global else None
+        jg = np.zeros(r.shape + (problem.n_global,)) if problem.n_global else None
         return Term("unary", r, {"x": J}, jg)
 
     def accumulate(self, problem, states, params, diag, lower, grad):
@@ -258,16 +269,12 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         over all samples) and ``Σ w_i² c_i c_iᵀ`` (constant unless the noise varies per sample)."""
         if self._calibrated(problem):
             return None
-        d, p, rows, w = problem.all_directions_b, problem.all_positions_m, problem.all_rows, states[:, OMEGA]
-        pred, products = accelerometer.rigid_body_readings(w, states[:, OMEGA_DOT], states[:, SPECIFIC_FORCE], rows, d, p)
-        white = self._whitening(problem, pred.shape)
-        r = (pred - problem.log.accel_mps2) * white
+        rows = problem.all_rows
+        r, white, products = self._all_axes(problem, states)
         n, axes = r.shape
-        jw = accelerometer.omega_jacobian(w, products, d, p) * white[:, :, None]  # (N, axes, 3)
+        jw = self._omega_jacobian(problem, states, products, white)  # (N, axes, 3)
         c = np.concatenate([rows[:, 3:6], rows[:, 0:3]], axis=1)  # (axes, 6) over [ω̇, f]
-        linear = slice(OMEGA_DOT.start, SPECIFIC_FORCE.stop)
-        if OMEGA.stop != OMEGA_DOT.start or OMEGA_DOT.stop != SPECIFIC_FORCE.start:
-            return None  # (the layout keeps ω, ω̇, f side by side)
+        linear = slice(OMEGA_DOT.start, SPECIFIC_FORCE.stop)  # (the layout keeps ω, ω̇, f side by side)
         jwt = np.swapaxes(jw, 1, 2)
         diag[:, OMEGA, OMEGA] += jwt @ jw
         if problem.accel_sigma_per_sample is None:  # one whitening for every sample
@@ -289,9 +296,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         """(N, axes) whitened residuals, without the Jacobians."""
         if self._calibrated(problem):
             return self.term(problem, states, params).residual
-        pred, _ = accelerometer.rigid_body_readings(states[:, OMEGA], states[:, OMEGA_DOT], states[:, SPECIFIC_FORCE],
-                                                    problem.all_rows, problem.all_directions_b, problem.all_positions_m)
-        return (pred - problem.log.accel_mps2) * self._whitening(problem, pred.shape)
+        return self._all_axes(problem, states)[0]
 
     def squared_norm(self, problem, states, params):
         if problem.n_global:
@@ -370,16 +375,20 @@ class SpecificForceWalkGroup(FactorGroup):
         Jf0, Jf1 = _binary(problem, 3, [(SPECIFIC_FORCE, -np.eye(3), np.eye(3))])
         return [Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]})]
 
+    @staticmethod
+    def _whitened_steps(problem, states: np.ndarray) -> np.ndarray:
+        """(N-1, 3) the residual of :meth:`terms`, ``(f1 - f0) / σ``, without its Jacobians."""
+        return (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * (1.0 / problem.force_step_sigma[:, None])
+
     def squared_norm(self, problem, states, params):
-        """The same residual as :meth:`terms` without its Jacobians."""
-        r = (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * (1.0 / problem.force_step_sigma[:, None])
+        r = self._whitened_steps(problem, states)
         return float(np.sum(r * r))
 
     def accumulate(self, problem, states, params, diag, lower, grad):
         """Per axis the step ``u (f1 - f0)`` (u = 1/σ): ``JᵀJ`` adds u² to both diagonals and -u² to
         the coupling, ``Jᵀr`` is ``∓u e``."""
         u = 1.0 / problem.force_step_sigma
-        e = (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * u[:, None]
+        e = self._whitened_steps(problem, states)
         u2 = (u * u)[:, None]
         f = _columns(SPECIFIC_FORCE)
         diag[:-1, f, f] += u2
@@ -557,12 +566,11 @@ class MotionModelGroup(FactorGroup):
         (the same sums as :meth:`terms`' Jacobians to rounding). None for the other motion models."""
         if problem.snap or problem.oscillator:
             return None
-        X, W, D = states, OMEGA, OMEGA_DOT
+        W, D = OMEGA, OMEGA_DOT
         wb = self._white_jerk_weights(problem)
         t, u = wb[:, 0:3], wb[:, 3:6]
         h = problem.dt_s[:, None]
-        e1 = kinematics.angular_velocity_step(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s) * t
-        e2 = (X[1:, D] - X[:-1, D]) * u
+        e1, e2 = self._white_jerk_rows(problem, states, wb)
         t2, u2 = t * t, u * u
         t2h = 0.5 * h * t2
         t2hh = 0.5 * h * t2h
@@ -586,13 +594,19 @@ class MotionModelGroup(FactorGroup):
         grad[1:, d] += ue2 - the1
         return 0.5 * float(np.sum(e1 * e1) + np.sum(e2 * e2)), e1.size + e2.size
 
+    @staticmethod
+    def _white_jerk_rows(problem, X: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N-1, 3) each: the whitened trapezoid and ω̇ random-walk rows of :meth:`terms`, without
+        their Jacobians (``weights``: :meth:`_white_jerk_weights`)."""
+        W, D = OMEGA, OMEGA_DOT
+        rk = kinematics.angular_velocity_step(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
+        return rk * weights[:, 0:3], (X[1:, D] - X[:-1, D]) * weights[:, 3:6]
+
     def squared_norm(self, problem, states, params):
         """The same residuals as :meth:`terms` (white jerk: without building its Jacobians)."""
         if problem.snap or problem.oscillator:
             return super().squared_norm(problem, states, params)
-        X, W, D = states, OMEGA, OMEGA_DOT
-        rk = kinematics.angular_velocity_step(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
-        r = np.concatenate([rk, X[1:, D] - X[:-1, D]], axis=1) * self._white_jerk_weights(problem)
+        r = np.concatenate(self._white_jerk_rows(problem, states, self._white_jerk_weights(problem)), axis=1)
         return float(np.sum(r * r))
 
     def gtsam_factors(self, problem):

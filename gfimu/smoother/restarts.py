@@ -77,7 +77,7 @@ class FrozenObjective:
         for g in p.groups:
             if isinstance(g, (AccelerometerGroup, MotionModelGroup)):
                 continue
-            total += 0.5 * sum(float(np.sum(t.residual ** 2)) for t in g.terms(p, X, params))
+            total += 0.5 * g.squared_norm(p, X, params)
         return total
 
 

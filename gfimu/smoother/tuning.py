@@ -184,17 +184,6 @@ def linearised_half_cost(terms: list, dx: np.ndarray, dp: np.ndarray) -> float:
     return total
 
 
-def quadratic_half_cost(ne: NormalEquations, dx: np.ndarray, dp: np.ndarray) -> float:
-    """``c + gᵀδ + ½ δᵀHδ`` of normal equations ``ne`` at the step: the same linearised cost as
-    :func:`linearised_half_cost` from the sums alone, for normal equations that do not keep their
-    terms (exact only when the cost at the linearisation point is of the order of the minimum)."""
-    quad = (float(np.einsum("ni,ni->", np.einsum("nij,nj->ni", ne.diag, dx), dx))
-            + 2.0 * float(np.einsum("ni,ni->", np.einsum("nij,nj->ni", ne.lower, dx[:-1]), dx[1:])))
-    if dp.size:
-        quad += 2.0 * float(np.einsum("ni,ni->", ne.coupling @ dp, dx)) + float(dp @ ne.border @ dp)
-    return ne.cost + float(ne.grad.reshape(-1) @ dx.reshape(-1)) + float(ne.grad_global @ dp) + 0.5 * quad
-
-
 PROBE_FACTORS = (2.0, 3.0, 5.0, 7.0)
 """Factors on the noise std of the motion rows of body axes x, y, z and of the specific-force rows
 with which :meth:`ProcessBasis.of` tells the rows apart."""
@@ -346,6 +335,9 @@ class BandedSum:
 
     @classmethod
     def of(cls, basis: ProcessBasis, measurement: NormalEquations) -> BandedSum:
+        if measurement.terms is None:
+            raise ValueError("BandedSum needs the measurement's normal equations with their terms "
+                             "(measurement_normal_equations)")
         n, m = measurement.grad.shape
         pattern = np.count_nonzero(measurement.lower.reshape(-1, m * m), axis=0) > 0
         for part in basis.parts.values():
@@ -372,12 +364,10 @@ class BandedSum:
         return weights
 
     def half_cost(self, dx: np.ndarray, dp: np.ndarray, density: float, axis_factors, force_density: float) -> float:
-        """The linearised cost at the step at these settings: the measurement's from its sums, each
-        process part's row by row (:func:`linearised_log_evidence`)."""
+        """The linearised cost at the step at these settings, the measurement's and each process part's
+        rows taken one by one (:func:`linearised_log_evidence`)."""
         weights = self.weights(density, axis_factors, force_density)
-        me = self.measurement
-        measured = linearised_half_cost(me.terms, dx, dp) if me.terms is not None else quadratic_half_cost(me, dx, dp)
-        return measured + sum(
+        return linearised_half_cost(self.measurement.terms, dx, dp) + sum(
             weights[key] * linearised_half_cost(terms, dx, dp) for key, terms in self.basis.terms.items())
 
     def system(self, density: float, axis_factors, force_density: float) -> tuple[NormalEquations, Factorisation]:
