@@ -88,6 +88,16 @@ class Screening:
                 f"their neighbours): {spans}; {where}{more}")
 
 
+def _median_of_five(a, b, c, d, e):
+    """Element-wise median of five arrays without NaN, by minima and maxima (six comparisons): the larger
+    of the two pairs' smaller values and the smaller of their larger values leave out the two extremes
+    of a, b, c, d, and the median of those two with e is the median of all five. Exactly the value
+    ``np.median`` picks, several times faster than sorting each window."""
+    low = np.maximum(np.minimum(a, b), np.minimum(c, d))
+    high = np.minimum(np.maximum(a, b), np.maximum(c, d))
+    return np.maximum(np.minimum(low, e), np.minimum(np.maximum(low, e), high))
+
+
 def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
     """Median over ±``half`` samples per column, ignoring NaN (edges: the samples that exist).
 
@@ -105,8 +115,12 @@ def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
     missing = missing[w - 1:] - np.concatenate([np.zeros((1, x.shape[1]), missing.dtype), missing[:-w]])  # NaN per window
     out = np.empty_like(x)
     step = 65536  # bounded memory on long logs
-    for s in range(0, n, step):
-        out[s:s + step] = np.median(windows[s:s + step], axis=2)
+    if w == 5:  # the middle of five values by comparisons alone (:func:`_median_of_five`): the same value
+        shifted = [padded[k:k + n] for k in range(5)]
+        out[:] = _median_of_five(*shifted)
+    else:
+        for s in range(0, n, step):
+            out[s:s + step] = np.median(windows[s:s + step], axis=2)
     rows, cols = np.nonzero(missing)
     for s in range(0, rows.size, step):
         r, c = rows[s:s + step], cols[s:s + step]
@@ -263,6 +277,7 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
         d2[1:-1] = np.abs(work[2:] - 2.0 * work[1:-1] + work[:-2])
         ok = np.isfinite(d2)
         d2 = np.where(ok, d2, 0.0)
+
         wide = np.ones(2 * SCALE_HALF_WIDTH + 1)
         near = np.ones(3)
 

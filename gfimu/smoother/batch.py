@@ -19,9 +19,6 @@ and is re-weighted from each solution (iteratively re-weighted least squares).
 
 from __future__ import annotations
 
-import multiprocessing
-import os
-import signal
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -30,6 +27,7 @@ from ..array import SensorArray
 from ..estimators.ml import MLEstimator
 from ..factors import GRAVITY_W_MPS2, _so3
 from ..log import Log
+from ..parallel import check_workers, fork_workers, forked_map
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rotations import quaternion_from_matrix
@@ -247,38 +245,12 @@ class _WindowContext:
         return _WindowOutcome.of(res, problem, keep_win, tunings)
 
 
-def check_workers(workers) -> None:
-    """ValueError unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
-    if not (isinstance(workers, int) and workers >= 0):
-        raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers!r}")
-
-
 def window_workers(workers: int, windows: int, solver: str = "numpy") -> int:
     """Processes to solve ``windows`` windows with: ``workers`` (0: one per CPU this process may run
-    on), at most one per window; 1 where worker processes cannot start by forking this one (they
-    inherit the log instead of receiving a copy), in a daemonic process (e.g. a Dask worker) or with
-    the GTSAM solver."""
+    on), at most one per window, forked so that they inherit the log (:func:`gfimu.parallel.fork_workers`:
+    1 in a daemonic process such as a Dask worker, or beside other threads); 1 with the GTSAM solver."""
     check_workers(workers)
-    if workers == 0:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if (solver != "numpy" or "fork" not in multiprocessing.get_all_start_methods()
-            or multiprocessing.current_process().daemon):  # (a daemonic process may not start others)
-        return 1
-    return max(1, min(workers, windows))
-
-
-_CONTEXT: _WindowContext | None = None
-"""The context of the windows being solved, for the worker processes (set before they fork)."""
-
-
-def _solve_in_worker(w: int) -> tuple[int, _WindowOutcome]:
-    return w, _CONTEXT.solve(w)
-
-
-def _worker_signals() -> None:
-    """In a worker: SIGINT is the command's to handle (it stops the workers), SIGTERM ends the worker."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    return 1 if solver != "numpy" else fork_workers(workers, windows)
 
 
 def _run_windows(context: _WindowContext, workers: int, progress: bool) -> list[_WindowOutcome]:
@@ -289,21 +261,12 @@ def _run_windows(context: _WindowContext, workers: int, progress: bool) -> list[
     bar = progress_bar(range(total), total=total, desc="smoother", enable=progress and total > 1)
     if workers <= 1:
         return [context.solve(w) for w in bar]
-    global _CONTEXT
-    _CONTEXT = context
-    pool = multiprocessing.get_context("fork").Pool(workers, initializer=_worker_signals)
-    try:
-        out: list = [None] * total
-        done = iter(bar)
-        for w, outcome in pool.imap_unordered(_solve_in_worker, range(total)):
-            out[w] = outcome
-            next(done, None)
-        pool.close()
-        pool.join()
-        return out
-    finally:
-        pool.terminate()
-        _CONTEXT = None
+    out: list = [None] * total
+    done = iter(bar)
+    for w, outcome in forked_map(context.solve, range(total), workers, ordered=False):
+        out[w] = outcome
+        next(done, None)
+    return out
 
 
 def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: InitialStates | None, solver: str,

@@ -1,0 +1,108 @@
+"""Work spread over forked worker processes: the policy of when that is safe, and one ordered map.
+
+A forked worker inherits the parent's memory (the log, the table being written) instead of
+receiving a pickled copy, so only small task descriptions go out and results come back. Forking is
+used only where it can be: the ``fork`` start method exists and this process is not daemonic (a Dask
+worker, a pool's worker: they may not start processes). Elsewhere everything runs in this process,
+with the same numbers.
+
+In a worker, SIGINT is left to the parent (which stops the workers and reports one interruption)
+and SIGTERM ends the worker; an error or an interruption in the parent terminates the workers at once
+(the parent's SIGINT and SIGTERM wait while it forks or stops them, so none is left behind).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+from collections.abc import Callable, Iterable, Iterator
+
+
+def check_workers(workers) -> None:
+    """ValueError unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
+    if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 0):
+        raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers!r}")
+
+
+def cpu_count() -> int:
+    """CPUs this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def can_fork() -> bool:
+    """Whether worker processes may be forked from this one now (module docstring)."""
+    return "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
+
+
+def fork_workers(workers: int, tasks: int) -> int:
+    """Processes to run ``tasks`` independent tasks with: ``workers`` (0: one per CPU), at most one per
+    task; 1 (this process) where forking is not safe (:func:`can_fork`)."""
+    check_workers(workers)
+    if workers == 0:
+        workers = cpu_count()
+    if workers <= 1 or tasks <= 1 or not can_fork():
+        return 1
+    return max(1, min(workers, tasks))
+
+
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+def _start_worker(func: Callable) -> None:
+    """In a forked worker: SIGINT is the parent's to handle, SIGTERM ends the worker; ``func`` is the job
+    (handed over by the fork, not pickled). The worker starts with both signals blocked (the parent's
+    mask while it forks) and takes them from here on."""
+    global _JOB
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _JOB = func
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+
+
+_JOB: Callable | None = None
+"""In a worker: the function it runs."""
+
+
+def _run_job(task):
+    return _JOB(task)
+
+
+def _run_indexed(item):
+    k, task = item
+    return k, _JOB(task)
+
+
+def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = True) -> Iterator:
+    """``func(task)`` for every task, in up to ``workers`` forked processes (:func:`fork_workers` decides how
+    many; 1: in this process, one task at a time). ``func`` and whatever it reads are inherited, not
+    pickled; the tasks and the results are pickled. Results come in task order (``ordered``), else as
+    they are done, as ``(index, result)`` pairs (in this process too). Closing the iterator early, an
+    error or an interruption stops the workers at once."""
+    tasks = list(tasks)
+    n = fork_workers(workers, len(tasks))
+    if n <= 1:
+        for k, task in enumerate(tasks):
+            yield func(task) if ordered else (k, func(task))
+        return
+    # SIGINT and SIGTERM wait while the workers are forked and while they are stopped: a signal in the
+    # middle of either would leave a worker behind, waiting for tasks for ever (and holding the
+    # command's standard output open)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        pool = multiprocessing.get_context("fork").Pool(n, initializer=_start_worker, initargs=(func,))
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    try:
+        if ordered:
+            yield from pool.imap(_run_job, tasks)
+        else:
+            yield from pool.imap_unordered(_run_indexed, list(enumerate(tasks)))
+        pool.close()
+        pool.join()
+    finally:
+        signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+        try:
+            pool.terminate()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
