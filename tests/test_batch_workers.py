@@ -81,7 +81,8 @@ def test_logs_run_on_dask_solve_their_windows_in_one_process():
 
     assert _one_process("smoother", {}) == {"workers": 1}
     assert _one_process("smoother", {"workers": 3}) == {"workers": 3}
-    assert _one_process("ml", {}) == {}
+    assert _one_process("ml", {}) == {"workers": 1}
+    assert _one_process("inversion", {}) == {}  # no workers of its own
 
 
 @pytest.mark.slow

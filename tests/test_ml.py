@@ -209,14 +209,14 @@ def test_three_triads_are_refused_and_one_more_axis_suffices():
 
 
 class _EveryStartEveryPass(MLEstimator):
-    """The neighbour passes without skipping starts that did not change (the plain definition)."""
+    """The neighbour passes without skipping starts that did not change (the plain definition), and the
+    restarts found for the samples that call for one after the passes (not beforehand)."""
 
-    def _solve_chunk(self, array, model, y, gyro, gyro_var, previous):
+    def _finish_chunk(self, model, prepared, gyro, gyro_var, previous):
         from gfimu.estimators.ml import _cost
 
-        b, c = model.readings(y)
-        w = self._iterate(model, b, c, self._start(array, model, y, c, gyro), gyro, gyro_var)
-        cost = _cost(model, b, w, gyro, gyro_var)
+        b, c, w, cost, _ = prepared
+        w, cost = w.copy(), cost.copy()
         for _ in range(self.neighbour_passes):
             first = w[:1] if previous is None else np.asarray(previous)[None, :]
             prev = np.vstack([first, w[:-1]])
@@ -235,13 +235,32 @@ class _EveryStartEveryPass(MLEstimator):
 
 
 def test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer():
-    # a noisy array turning slowly through zero: many samples take their neighbour's start
+    # a noisy array turning slowly through zero: many samples take their neighbour's start; three blocks
     from gfimu.simulate import SensorErrors, simulate
 
-    log = simulate("reversal", mimu4444_array(), rate_hz=100.0, duration_s=6.0, noise=SensorErrors(accel_noise_std_mps2=0.3), seed=3)
+    log = simulate("reversal", mimu4444_array(), rate_hz=100.0, duration_s=90.0, noise=SensorErrors(accel_noise_std_mps2=0.3), seed=3)
     fast = MLEstimator().estimate(log).omega_b_radps
-    plain = _EveryStartEveryPass().estimate(log).omega_b_radps
+    plain = _EveryStartEveryPass(workers=1).estimate(log).omega_b_radps
     assert np.array_equal(fast, plain)
+    assert np.array_equal(MLEstimator(workers=1).estimate(log).omega_b_radps, fast)  # blocks in workers or here
+
+
+def test_restarts_found_ahead_are_those_of_the_plain_definition():
+    """The restarts are worked out for every sample that calls for one before the neighbour passes, in
+    the blocks' workers, and taken for those that still call for one after them: the same estimate as
+    restarting after the passes. Ten axes (rank below 6): every sample restarts and some move."""
+    from gfimu.simulate import SensorErrors, simulate
+
+    three = random_array(seed=7, n=3)
+    extra = Accelerometer("e", [0.04, -0.03, 0.02], matrix_from_rotation_vector([0.4, 1.1, -0.7]), axes=("x",), noise_std_mps2=0.05)
+    ten = SensorArray(three.accelerometers + (extra,), "ten-axis")
+    log = simulate("random3d", ten, rate_hz=100.0, duration_s=90.0, noise=SensorErrors(accel_noise_std_mps2=0.05), seed=3)
+    fast = MLEstimator().estimate(log).omega_b_radps
+    plain = _EveryStartEveryPass(workers=1).estimate(log).omega_b_radps
+    assert np.array_equal(fast, plain)
+    no_restarts = MLEstimator(workers=1)
+    no_restarts._take_restarts = lambda w, cost, rows, best, best_cost: w
+    assert np.sum(np.any(no_restarts.estimate(log).omega_b_radps != fast, axis=1)) > 100  # restarts were taken
 
 
 def test_closed_forms_of_the_iterations_match_the_direct_products():

@@ -59,6 +59,7 @@ from .. import noise, rigid_body
 from ..array import SensorArray
 from ..log import Log
 from ..motion import Motion
+from ..parallel import check_workers, forked_map
 from ..progress import progress as progress_bar
 from ._common import checked_readings
 
@@ -118,6 +119,22 @@ class _ProjectedModel:
         return np.hstack([zq, np.sqrt(np.sum(rest * rest, axis=1))[:, None]]), b @ self.A
 
 
+_CHUNK = 4096
+"""Samples per block: the estimate goes block by block, each one starting its first sample's neighbour
+pass from the last sample of the block before."""
+
+
+class _PrepareChunk:
+    """:meth:`MLEstimator._prepare_chunk` of one block (a job for :func:`gfimu.parallel.forked_map`)."""
+
+    def __init__(self, estimator, array, model, y, gyro, gyro_var):
+        self.estimator, self.array, self.model, self.y, self.gyro, self.gyro_var = estimator, array, model, y, gyro, gyro_var
+
+    def __call__(self, sl: slice):
+        return self.estimator._prepare_chunk(self.array, self.model, self.y[sl], None if self.gyro is None else self.gyro[sl],
+                                             self.gyro_var)
+
+
 @dataclass
 class MLEstimator:
     """Per-sample maximum likelihood of f, ω̇ and ω (Skog et al. 2016).
@@ -137,7 +154,9 @@ class MLEstimator:
     - ``max_omega_radps=100.0``: largest |ω| in the starting grid;
     - ``neighbour_passes=3``: restarts from the previous sample (see module
       docstring);
-    - ``grid_directions=64``, ``grid_magnitudes=16``: size of the starting grid.
+    - ``grid_directions=64``, ``grid_magnitudes=16``: size of the starting grid;
+    - ``workers=0``: processes that start the blocks of 4,096 samples (0: one per CPU; 1: this
+      process alone; the same numbers either way, :mod:`gfimu.parallel`).
     """
 
     use_gyro: bool = False
@@ -149,6 +168,10 @@ class MLEstimator:
     neighbour_passes: int = 3
     grid_directions: int = 64
     grid_magnitudes: int = 16
+    workers: int = 0
+
+    def __post_init__(self):
+        check_workers(self.workers)
 
     # ------------------------------------------------------------------
     def applicable(self, array: SensorArray) -> str | None:
@@ -207,11 +230,13 @@ class MLEstimator:
         model = _ProjectedModel.build(array, sigma)
         n = len(log)
         omega = np.empty((n, 3))
-        chunk = 4096
+        chunks = [slice(start, min(start + _CHUNK, n)) for start in range(0, n, _CHUNK)]
+        # what each block needs of no other, in worker processes; then the blocks in turn, each
+        # continuing from the last sample of the one before
+        prepared = forked_map(_PrepareChunk(self, array, model, y, gyro, gyro_var), chunks, self.workers)
         previous = None
-        for start in progress_bar(range(0, n, chunk), total=(n + chunk - 1) // chunk, desc="ml", enable=progress):
-            sl = slice(start, min(start + chunk, n))
-            omega[sl] = self._solve_chunk(array, model, y[sl], None if gyro is None else gyro[sl], gyro_var, previous)
+        for sl, prep in progress_bar(zip(chunks, prepared), total=len(chunks), desc="ml", enable=progress):
+            omega[sl] = self._finish_chunk(model, prep, None if gyro is None else gyro[sl], gyro_var, previous)
             previous = omega[sl.stop - 1]
         q = rigid_body.quadratic_terms(omega)
         lin = y @ model.lin_y.T - q @ model.lin_q.T
@@ -234,9 +259,22 @@ class MLEstimator:
     # ------------------------------------------------------------------
     def _solve_chunk(self, array, model, y, gyro, gyro_var, previous):
         """ML ω for a block of samples; ``previous`` is the estimate just before the block."""
+        return self._finish_chunk(model, self._prepare_chunk(array, model, y, gyro, gyro_var), gyro, gyro_var, previous)
+
+    def _prepare_chunk(self, array, model, y, gyro, gyro_var):
+        """The part of :meth:`_solve_chunk` that needs no other block: (b, c, ω, cost, restarts) with ω
+        iterated from the grid or inversion start and ``restarts`` (:meth:`_restarts`) for every sample
+        whose cost at that ω calls for one (None with a gyro). The neighbour passes only lower costs,
+        so the samples that call for a restart after them are among these."""
         b, c = model.readings(y)  # (N, 7) the projected whitened readings reduced, (N, 6) Aᵀ b
         w = self._iterate(model, b, c, self._start(array, model, y, c, gyro), gyro, gyro_var)
         cost = _cost(model, b, w, gyro, gyro_var)
+        return b, c, w, cost, None if gyro is not None else self._restarts(model, b, c, self._restart_rows(model, cost))
+
+    def _finish_chunk(self, model, prepared, gyro, gyro_var, previous):
+        """The neighbour passes from ``previous`` (the estimate just before the block), then the restarts."""
+        b, c, w, cost, restarts = prepared
+        w, cost = w.copy(), cost.copy()
         moved = np.ones(len(w), bool)  # samples whose start (the sample before) changed in the last pass
         for _ in range(self.neighbour_passes):
             first = w[:1] if previous is None else np.asarray(previous)[None, :]
@@ -258,9 +296,11 @@ class MLEstimator:
             moved = np.zeros(len(w), bool)
             changed = idx[better] + 1
             moved[changed[changed < len(w)]] = True
-        if gyro is None:
-            w = self._multi_start(model, b, c, w, cost)
-        return w
+        if restarts is None:
+            return w
+        rows, best, best_cost = restarts
+        keep = np.isin(rows, self._restart_rows(model, cost))
+        return self._take_restarts(w, cost, rows[keep], best[keep], best_cost[keep])
 
     def _multi_start(self, model, b, c, w, cost):
         """Restart samples whose cost is implausibly high from the best grid point of every cone.
@@ -276,28 +316,43 @@ class MLEstimator:
         slightly lower but distant minimum is more often wrong than the
         estimate that the grid, inversion and neighbour starts gave.
         """
+        rows = self._restart_rows(model, cost)
+        return self._take_restarts(w, cost, *self._restarts(model, b, c, rows))
+
+    @staticmethod
+    def _restart_rows(model, cost) -> np.ndarray:
+        """The samples whose cost calls for a restart (:meth:`_multi_start`)."""
         dof = max(model.A.shape[0] - 9, 1)
         if model.rank < 6:
-            idx = np.arange(len(w))  # few redundant equations: local minima are common, restart all
-        else:
-            idx = np.nonzero(cost > dof + 6 * np.sqrt(2 * dof) + 3)[0]
-        if idx.size == 0:
-            return w
+            return np.arange(len(cost))  # few redundant equations: local minima are common, restart all
+        return np.nonzero(cost > dof + 6 * np.sqrt(2 * dof) + 3)[0]
+
+    def _restarts(self, model, b, c, rows):
+        """(rows, best ω (k, 3), its cost (k,)) of the restarts of samples ``rows`` from the best grid point
+        of every cone; each sample's own data alone decide them."""
+        if rows.size == 0:
+            return rows, np.zeros((0, 3)), np.zeros(0)
         grid, cone = self._grid()
         order = np.argsort(cone, kind="stable")  # the grid cone by cone, each in its own order
         grid, bounds = grid[order], np.searchsorted(cone[order], np.arange(_CONES + 1))
-        grid_cost = self._grid_cost(model, c[idx], grid)
-        starts = np.empty((idx.size, _CONES, 3))
+        grid_cost = self._grid_cost(model, c[rows], grid)
+        starts = np.empty((rows.size, _CONES, 3))
         for k in range(_CONES):
             starts[:, k] = grid[bounds[k] + np.argmin(grid_cost[:, bounds[k]:bounds[k + 1]], axis=1)]
-        rep = np.repeat(idx, _CONES)
+        rep = np.repeat(rows, _CONES)
         cand = self._iterate(model, b[rep], c[rep], starts.reshape(-1, 3), None, None)
-        cand_cost = _cost(model, b[rep], cand, None, None).reshape(idx.size, _CONES)
+        cand_cost = _cost(model, b[rep], cand, None, None).reshape(rows.size, _CONES)
         pick = np.argmin(cand_cost, axis=1)
-        best = cand.reshape(idx.size, _CONES, 3)[np.arange(idx.size), pick]
-        better = cand_cost[np.arange(idx.size), pick] < 0.5 * cost[idx]
+        return rows, cand.reshape(rows.size, _CONES, 3)[np.arange(rows.size), pick], cand_cost[np.arange(rows.size), pick]
+
+    @staticmethod
+    def _take_restarts(w, cost, rows, best, best_cost):
+        """``w`` with the restarts that at least halve the cost."""
+        if rows.size == 0:
+            return w
+        better = best_cost < 0.5 * cost[rows]
         w = w.copy()
-        w[idx[better]] = best[better]
+        w[rows[better]] = best[better]
         return w
 
     def _grid(self):
