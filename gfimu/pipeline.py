@@ -47,7 +47,7 @@ def estimate_log(log_dir: str | Path, method: str = "smoother", options: dict | 
                  orientation: str = "none", truth: bool = True) -> EstimateRun:
     """Read ``log_dir``, screen and calibrate its readings, run ``method`` with ``options``; warnings
     (plausibility, replaced readings) go through :mod:`warnings`. ``truth=False``: the log's truth.csv
-    is not read (nothing here needs it; :func:`score` does)."""
+    and reference.csv are not read (nothing here needs them; :func:`score` does)."""
     from . import io as gio
     from .methods import make_estimator
     from .readings import screen_log

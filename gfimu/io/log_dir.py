@@ -54,7 +54,8 @@ def _check_same_timestamps(motion: Motion, t_imu: np.ndarray, path: Path, imu_pa
 
 def read_log(path: str | os.PathLike, check: bool = True, truth: bool = True) -> Log:
     """Read a log folder (array.toml, imu.csv, and truth.csv / reference.csv when present; with
-    ``truth=False`` truth.csv is not read, for work that never looks at it).
+    ``truth=False`` neither truth.csv nor reference.csv is read, for work that never looks at them,
+    such as estimating).
 
     Gaps in time are reported with a :class:`LogGapWarning`; with ``check``,
     implausible values (a sample rate that disagrees with ``rate_hz``,
@@ -73,7 +74,7 @@ def read_log(path: str | os.PathLike, check: bool = True, truth: bool = True) ->
     if read_truth and (folder / "truth.csv").is_file():
         truth = read_motion_csv(folder / "truth.csv")
         _check_same_timestamps(truth, t, folder / "truth.csv", imu_path)
-    if (folder / "reference.csv").is_file():
+    if read_truth and (folder / "reference.csv").is_file():
         reference, valid = read_motion_table(folder / "reference.csv")
         _check_same_timestamps(reference, t, folder / "reference.csv", imu_path)
         if valid is not None:
