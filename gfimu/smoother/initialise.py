@@ -124,27 +124,34 @@ def _omega_from_moments(count, s1, s2, d1, d2, e, q_first, previous, continuity_
     a_e = np.einsum("lij,lj->i", A, e)  # Σ_l A_l E_l
     a_s2_a = np.einsum("lij,jk,lkm->im", A, s2, A)  # Σ_l A_l S2 A_l
 
-    def cost_and_step(w):  # (C, 3) -> cost (C,), JᵀJ (C, 3, 3), Jᵀr (C, 3)
-        aw = np.einsum("lij,cj->cli", A, w)  # A_l ω₀
-        a = np.einsum("cli,ci->cl", aw, w)
-        was1 = aw @ s1
+    def products(w):  # (C, 3) -> A_l ω₀ (C, 6, 3), ω₀ᵀ A_l ω₀ (C, 6), ω₀ᵀ A_l S1 (C, 6)
+        aw = np.einsum("lij,cj->cli", A, w)
+        return aw, np.einsum("cli,ci->cl", aw, w), aw @ s1
+
+    def cost_of(w):  # (C, 3) -> cost (C,)
+        aw, a, was1 = products(w)
         cost = np.sum(count * a * a + 4.0 * np.einsum("cli,ij,clj->cl", aw, s2, aw) + d2 + 4.0 * a * was1
                       + 2.0 * a * d1 + 4.0 * np.einsum("cli,li->cl", aw, e), axis=1)
+        if previous is not None:
+            dp = w - previous
+            cost = cost + w_c2 * np.sum(dp * dp, axis=1)
+        return cost
+
+    def step_of(w):  # (C, 3) -> JᵀJ (C, 3, 3), Jᵀr (C, 3) (the cost is not needed for the step)
+        aw, a, was1 = products(w)
         g = 2.0 * (np.einsum("cli,cl->ci", aw, count * a + 2.0 * was1 + d1) + a @ a_s1 + 2.0 * w @ a_s2_a + a_e)
         m2 = count * w[:, :, None] * w[:, None, :] + w[:, :, None] * s1 + s1[:, None] * w[:, None, :] + s2
         tr = np.trace(m2, axis1=1, axis2=2)
         H = tr[:, None, None] * np.eye(3) + 5.0 * m2 + 2.0 * np.einsum("cii->ci", m2)[:, :, None] * np.eye(3)
         if previous is not None:
-            dp = w - previous
-            cost = cost + w_c2 * np.sum(dp * dp, axis=1)
-            g = g + w_c2 * dp
+            g = g + w_c2 * (w - previous)
             H = H + w_c2 * np.eye(3)
-        return cost, H, g
+        return H, g
 
     for _ in range(iterations):
-        _, H, g = cost_and_step(w0)
+        H, g = step_of(w0)
         w0 = w0 - np.linalg.solve(H + 1e-9 * np.eye(3), g[..., None])[..., 0]
-    cost, _, _ = cost_and_step(w0)
+    cost = cost_of(w0)
     best = int(np.argmin(cost))
     return w0[best], float(cost[best])
 
