@@ -73,14 +73,16 @@ def _run_indexed(item):
     return k, _JOB(task)
 
 
-def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = True) -> Iterator:
+def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = True, min_tasks: int = 2) -> Iterator:
     """``func(task)`` for every task, in up to ``workers`` forked processes (:func:`fork_workers` decides how
     many; 1: in this process, one task at a time). ``func`` and whatever it reads are inherited, not
     pickled; the tasks and the results are pickled. Results come in task order (``ordered``), else as
     they are done, as ``(index, result)`` pairs (in this process too). Closing the iterator early, an
-    error or an interruption stops the workers at once."""
+    error or an interruption stops the workers at once. Fewer than ``min_tasks`` tasks run in this
+    process: starting and stopping workers costs about 20 ms, and copying their results back more,
+    which short work does not repay."""
     tasks = list(tasks)
-    n = fork_workers(workers, len(tasks))
+    n = fork_workers(workers, len(tasks)) if len(tasks) >= min_tasks else 1
     if n <= 1:
         for k, task in enumerate(tasks):
             yield func(task) if ordered else (k, func(task))

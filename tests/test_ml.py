@@ -235,10 +235,10 @@ class _EveryStartEveryPass(MLEstimator):
 
 
 def test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer():
-    # a noisy array turning slowly through zero: many samples take their neighbour's start; three blocks
+    # a noisy array turning slowly through zero: many samples take their neighbour's start; five blocks
     from gfimu.simulate import SensorErrors, simulate
 
-    log = simulate("reversal", mimu4444_array(), rate_hz=100.0, duration_s=90.0, noise=SensorErrors(accel_noise_std_mps2=0.3), seed=3)
+    log = simulate("reversal", mimu4444_array(), rate_hz=100.0, duration_s=170.0, noise=SensorErrors(accel_noise_std_mps2=0.3), seed=3)
     fast = MLEstimator().estimate(log).omega_b_radps
     plain = _EveryStartEveryPass(workers=1).estimate(log).omega_b_radps
     assert np.array_equal(fast, plain)
@@ -254,7 +254,7 @@ def test_restarts_found_ahead_are_those_of_the_plain_definition():
     three = random_array(seed=7, n=3)
     extra = Accelerometer("e", [0.04, -0.03, 0.02], matrix_from_rotation_vector([0.4, 1.1, -0.7]), axes=("x",), noise_std_mps2=0.05)
     ten = SensorArray(three.accelerometers + (extra,), "ten-axis")
-    log = simulate("random3d", ten, rate_hz=100.0, duration_s=90.0, noise=SensorErrors(accel_noise_std_mps2=0.05), seed=3)
+    log = simulate("random3d", ten, rate_hz=100.0, duration_s=170.0, noise=SensorErrors(accel_noise_std_mps2=0.05), seed=3)  # five blocks
     fast = MLEstimator().estimate(log).omega_b_radps
     plain = _EveryStartEveryPass(workers=1).estimate(log).omega_b_radps
     assert np.array_equal(fast, plain)

@@ -3,6 +3,7 @@ on, no fork where it may not happen; the CSV reader and writer give the same arr
 with workers as without."""
 
 import multiprocessing
+import os
 
 import numpy as np
 import pytest
@@ -50,6 +51,13 @@ def test_forked_map_inherits_the_function_and_keeps_the_order():
     assert list(forked_map(square, range(7), 2)) == expected
     assert sorted(forked_map(square, range(7), 2, ordered=False)) == list(enumerate(expected))
     assert list(forked_map(square, range(7), 1)) == expected
+
+
+@needs_fork
+def test_short_work_stays_in_this_process():
+    here = os.getpid()
+    assert set(forked_map(lambda k: os.getpid(), range(3), 2, min_tasks=4)) == {here}
+    assert here not in set(forked_map(lambda k: os.getpid(), range(4), 2, min_tasks=4))
 
 
 @needs_fork

@@ -155,8 +155,8 @@ class MLEstimator:
     - ``neighbour_passes=3``: restarts from the previous sample (see module
       docstring);
     - ``grid_directions=64``, ``grid_magnitudes=16``: size of the starting grid;
-    - ``workers=0``: processes that start the blocks of 4,096 samples (0: one per CPU; 1: this
-      process alone; the same numbers either way, :mod:`gfimu.parallel`).
+    - ``workers=0``: processes that start the blocks of 4,096 samples, from four blocks on (0: one
+      per CPU; 1: this process alone; the same numbers either way, :mod:`gfimu.parallel`).
     """
 
     use_gyro: bool = False
@@ -233,7 +233,7 @@ class MLEstimator:
         chunks = [slice(start, min(start + _CHUNK, n)) for start in range(0, n, _CHUNK)]
         # what each block needs of no other, in worker processes; then the blocks in turn, each
         # continuing from the last sample of the one before
-        prepared = forked_map(_PrepareChunk(self, array, model, y, gyro, gyro_var), chunks, self.workers)
+        prepared = forked_map(_PrepareChunk(self, array, model, y, gyro, gyro_var), chunks, self.workers, min_tasks=4)
         previous = None
         for sl, prep in progress_bar(zip(chunks, prepared), total=len(chunks), desc="ml", enable=progress):
             omega[sl] = self._finish_chunk(model, prep, None if gyro is None else gyro[sl], gyro_var, previous)

@@ -75,7 +75,7 @@ def _csv_chunks(header: list[str], timestamps_ns: np.ndarray, values: np.ndarray
     forked processes (0: one per CPU; :mod:`gfimu.parallel`), written in order: the same text either way."""
     yield ",".join(header) + "\n"
     yield from forked_map(_BlockText(timestamps_ns, values, fmt, flags), range(0, timestamps_ns.size, _ROWS_PER_BLOCK),
-                          workers)
+                          workers, min_tasks=PARALLEL_MIN_BLOCKS)
 
 
 def _float_formatter(digits: int | None):
@@ -85,6 +85,13 @@ def _float_formatter(digits: int | None):
         raise ValueError(f"digits must be between 1 and 17, got {digits}")
     spec = f"%.{int(digits)}g"
     return spec.__mod__
+
+
+PARALLEL_MIN_BLOCKS = 8
+"""Blocks (of :data:`_ROWS_PER_BLOCK` rows written, of :data:`_BLOCK_BYTES` read) from which a table is
+formatted or parsed in worker processes (:mod:`gfimu.parallel`); shorter tables in this process,
+where the workers would cost more than they save (`tools/bench_smoother.py`: 10,000 samples 0.45 s
+slower with workers for every table)."""
 
 
 # --- CSV reading ---------------------------------------------------------------
@@ -340,7 +347,7 @@ class _Csv:
         t = np.empty(self.n_rows, dtype=np.int64)
         out = np.empty((self.n_rows, len(indices)))
         parse = _BlockParser(self, indices)
-        for row0, part_t, part_v in forked_map(parse, self._spans, workers):
+        for row0, part_t, part_v in forked_map(parse, self._spans, workers, min_tasks=PARALLEL_MIN_BLOCKS):
             if part_t is None:  # text where a number belongs, or a timestamp that is not one
                 return self.timestamps_ns(), self.values(indices, allow_nan)
             t[row0:row0 + part_t.size] = part_t
