@@ -3,8 +3,9 @@
 A forked worker inherits the parent's memory (the log, the table being written) instead of
 receiving a pickled copy, so only small task descriptions go out and results come back. Forking is
 used only where it can be: the ``fork`` start method exists and this process is not daemonic (a Dask
-worker, a pool's worker: they may not start processes). Elsewhere everything runs in this process,
-with the same numbers.
+worker, a pool's worker: they may not start processes). Elsewhere, and where the workers cannot start
+(no semaphores without ``/dev/shm``, no processes left), everything runs in this process, with the
+same numbers.
 
 In a worker, SIGINT is left to the parent (which stops the workers and reports one interruption)
 and SIGTERM ends the worker; an error or an interruption in the parent terminates the workers at once
@@ -93,8 +94,14 @@ def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = Tr
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
         pool = multiprocessing.get_context("fork").Pool(n, initializer=_start_worker, initargs=(func,))
+    except (OSError, ImportError):  # no semaphores (a system without /dev/shm), no processes left: here
+        pool = None
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    if pool is None:
+        for k, task in enumerate(tasks):
+            yield func(task) if ordered else (k, func(task))
+        return
     try:
         if ordered:
             yield from pool.imap(_run_job, tasks)

@@ -60,6 +60,18 @@ def test_short_work_stays_in_this_process():
     assert here not in set(forked_map(lambda k: os.getpid(), range(4), 2, min_tasks=4))
 
 
+def test_work_stays_here_when_workers_cannot_start(monkeypatch):
+    import multiprocessing.context
+
+    def refuse(*args, **kwargs):
+        raise OSError(38, "Function not implemented")  # as sem_open without /dev/shm
+
+    monkeypatch.setattr(multiprocessing.context.ForkContext, "Pool", refuse, raising=False)
+    monkeypatch.setattr("gfimu.parallel.can_fork", lambda: True)
+    here = os.getpid()
+    assert list(forked_map(lambda k: (k, os.getpid()), range(5), 2)) == [(k, here) for k in range(5)]
+
+
 @needs_fork
 def test_an_error_in_a_worker_reaches_the_caller():
     def task(k):
