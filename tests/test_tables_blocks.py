@@ -100,3 +100,39 @@ def test_bad_utf8_names_its_line_across_blocks(tmp_path, block):
     path.write_bytes(bytes(raw))
     with pytest.raises(LogFormatError, match=rf"imu.csv:{line}: not UTF-8 text \(byte {at}\)"):
         tables.read_imu_csv(path, ARRAY)
+
+
+@pytest.mark.parametrize("cell, message", [
+    (None, None),
+    ("0.5", r"reference.csv:31: column 'valid' is 0\.5; expected 1 \(valid\) or 0 \(invalid\)"),
+    ("nan", r"reference.csv:31: column 'valid' is 'nan'; values must be finite"),
+    ("x", r"reference.csv:31: column 'valid' \(field 5\) value 'x' is not a number"),
+])
+def test_reference_valid_column_whatever_the_block(tmp_path, block, cell, message):
+    """A reference whose gyro saturated (NaN where valid is 0) reads the same in any blocks, and a
+    wrong 'valid' cell is named on its line."""
+    from gfimu.io import read_motion_table
+
+    n = 40
+    t = np.arange(n, dtype=np.int64) * 1_000_000
+    w = np.random.default_rng(4).normal(size=(n, 3))
+    valid = np.ones(n, dtype=int)
+    valid[[5, 6, 20]] = 0
+    wl = w.tolist()
+    rows = [f"{t[k]},{wl[k][0]!r},{'nan' if not valid[k] else repr(wl[k][1])},{wl[k][2]!r},{valid[k]}" for k in range(n)]
+    if cell is not None:
+        rows[29] = ",".join(rows[29].split(",")[:4] + [cell])
+    path = tmp_path / "reference.csv"
+    path.write_text("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],valid []\n" + "\n".join(rows) + "\n")
+    if message is not None:
+        with pytest.raises(LogFormatError, match=message):
+            read_motion_table(path)
+        return
+    motion, ok = read_motion_table(path)
+    assert ok.tolist() == (valid == 1).tolist()
+    np.testing.assert_array_equal(motion.omega_b_radps[ok], w[ok])
+    assert np.all(np.isnan(motion.omega_b_radps[~ok, 1]))
+    rows[12] = rows[12].replace(f",{wl[12][1]!r},", ",nan,")  # not finite where valid is 1: named
+    path.write_text("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],valid []\n" + "\n".join(rows) + "\n")
+    with pytest.raises(LogFormatError, match=r"reference.csv:14: column 'w_y' is 'nan'; values must be finite where valid is 1"):
+        read_motion_table(path)

@@ -341,21 +341,31 @@ class _Csv:
 
     def timestamps_and_values(self, indices: list[int], allow_nan: bool = False,
                               workers: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`timestamps_ns` and :meth:`values` in one pass over the file, its blocks parsed by up to
-        ``workers`` forked processes (0: one per CPU; :mod:`gfimu.parallel`). The same numbers and the
-        same errors: a block with a problem is read again by those two, which name it."""
+        """:meth:`timestamps_ns` and :meth:`values` in one pass over the file (:meth:`parsed`). The same
+        numbers and the same errors: where the pass finds a problem, those two read the file again and
+        name it."""
+        parsed = self.parsed(indices, workers)
+        if parsed is None:
+            return self.timestamps_ns(), self.values(indices, allow_nan)
+        if not allow_nan:
+            self._check_finite(parsed[1], indices, None)
+        return parsed
+
+    def parsed(self, indices: list[int], workers: int = 0) -> tuple[np.ndarray, np.ndarray] | None:
+        """(timestamps, values of ``indices``, finite or not) in one pass over the file, its blocks parsed
+        by up to ``workers`` forked processes (0: one per CPU, from :data:`PARALLEL_MIN_BLOCKS` blocks on;
+        :mod:`gfimu.parallel`); None where a timestamp or a value is not a number or the timestamps do not
+        increase (:meth:`timestamps_ns` and :meth:`values` name the first such line)."""
         t = np.empty(self.n_rows, dtype=np.int64)
         out = np.empty((self.n_rows, len(indices)))
         parse = _BlockParser(self, indices)
         for row0, part_t, part_v in forked_map(parse, self._spans, workers, min_tasks=PARALLEL_MIN_BLOCKS):
-            if part_t is None:  # text where a number belongs, or a timestamp that is not one
-                return self.timestamps_ns(), self.values(indices, allow_nan)
+            if part_t is None:
+                return None
             t[row0:row0 + part_t.size] = part_t
             out[row0:row0 + part_t.size] = part_v
         if t.size > 1 and not np.all(t[1:] > t[:-1]):
-            self.timestamps_ns()  # names the first step back
-        if not allow_nan:
-            self._check_finite(out, indices, None)
+            return None
         return t, out
 
     def _check_finite(self, out: np.ndarray, indices: list[int], rows: np.ndarray | None) -> None:
@@ -565,21 +575,31 @@ def read_motion_table(path: str | os.PathLike, allow_nan: bool = False) -> tuple
         raise LogFormatError(f"no motion columns (expected some of {known} ... with units)", path, 1)
     indices = [i for _, _, idx in groups for i in idx]
     factors = np.array([csv.factor(i, kinds[i]) for i in indices])
-    t = csv.timestamps_ns()
+    parsed = csv.parsed(indices + ([valid_index] if valid_index is not None else []))
+    t = csv.timestamps_ns() if parsed is None else parsed[0]
     valid = None
     if valid_index is not None:
         unit = csv.columns[valid_index][1]
         if unit is not None and canonical_unit(unit) != "":
             raise LogFormatError(f"column 'valid' has unit [{unit}]; expected 'valid []' with 1 (valid) or 0 "
                                  "(invalid)", path, 1)
-        raw = csv.values([valid_index])[:, 0]
+        raw = parsed[1][:, -1] if parsed is not None else None
+        if raw is None or not np.all(np.isfinite(raw)):
+            raw = csv.values([valid_index])[:, 0]  # (names a value that is not finite)
         bad = np.flatnonzero((raw != 0) & (raw != 1))
         if bad.size:
             r = int(bad[0])
             raise LogFormatError(f"column 'valid' is {float(raw[r])!r}; expected 1 (valid) or 0 (invalid)", path,
                                  csv.line_of_row(r))
         valid = raw == 1
-    values = csv.values(indices, allow_nan=allow_nan, rows=valid) * factors if indices else np.zeros((len(t), 0))
+    if not indices:
+        values = np.zeros((len(t), 0))
+    elif parsed is None:
+        values = csv.values(indices, allow_nan=allow_nan, rows=valid) * factors
+    else:
+        if not allow_nan:
+            csv._check_finite(parsed[1][:, :len(indices)], indices, valid)
+        values = parsed[1][:, :len(indices)] * factors
     kw: dict = {}
     sigma: dict = {}
     k = 0
