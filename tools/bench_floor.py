@@ -12,7 +12,8 @@ The log is the simulated cube log of ``tools/bench_smoother.py`` (random 3-D mot
   writes) through the command's CSV writer;
 - the whole command, each run its own process.
 
-The estimation is the whole command less these parts. For ``--target`` samples/s the command may take
+The processes run with Python's bytecode cache on (``tools/bench_env.py``). The estimation is the
+whole command less these parts. For ``--target`` samples/s the command may take
 samples / target seconds; the parts above take what they take whatever the estimation does, and the
 rest is the estimation's budget: the table gives the estimation throughput that budget asks for,
 against the one measured here and the one ``tools/bench_smoother.py`` measures on long logs.
@@ -35,6 +36,8 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from bench_env import command_env  # noqa: E402
 
 
 def best_of_processes(argv: list[str], repeats: int, env: dict) -> float:
@@ -70,7 +73,7 @@ def main(argv=None) -> int:
     from gfimu.readings import screen_log
     from gfimu.simulate import simulate
 
-    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    env = command_env(REPO)
     r = args.repeats
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "log"

@@ -12,7 +12,7 @@ With ``--command`` the log is written to a folder and the whole command
 instead, each repeat its own process (start-up, reading and writing included):
 wall time, CPU time of the child and its workers (user + system, ``os.wait4``) and
 its peak resident memory. Both run with one BLAS thread (OMP_NUM_THREADS=1, as
-the command line sets it).
+the command line sets it), the command with Python's bytecode cache on (``tools/bench_env.py``).
 
     python3 tools/bench_smoother.py [--durations 10 60 600] [--repeats 3] [--json bench_smoother.json]
     python3 tools/bench_smoother.py --command --durations 20 60 200 600 --repeats 3
@@ -40,6 +40,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from bench_env import command_env  # noqa: E402
 from gfimu.array import cube_array  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
 from gfimu.smoother.batch import BatchSmootherEstimator  # noqa: E402
@@ -82,7 +83,7 @@ def whole_command(log, repeats: int, sigma: bool, baseline: str | None = None) -
     from gfimu import io as gio
 
     def env_of(root):
-        return {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+        return command_env(Path(root))
 
     trees = [("this", env_of(REPO))] + ([("baseline", env_of(Path(baseline).resolve()))] if baseline else [])
     runs = {name: [] for name, _ in trees}

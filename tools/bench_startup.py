@@ -20,13 +20,15 @@ import sys
 import time
 from pathlib import Path
 
+from bench_env import command_env
+
 ROOT = Path(__file__).resolve().parents[1]
 COMMAND_LINES = (["--help"], ["--version"], ["estimate", "--help"], ["simulate", "--help"])
 HEAVY = ("numpy", "scipy", "gtsam", "matplotlib", "numba", "pandas")
 
 
 def run(args: list[str], repeats: int) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = command_env(ROOT, threads=None)
     walls = []
     for _ in range(repeats):
         t0 = time.perf_counter()

@@ -35,6 +35,8 @@ import time
 import warnings
 from pathlib import Path
 
+from bench_env import command_env
+
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -81,7 +83,7 @@ def main(argv=None) -> int:
     ap.add_argument("--option", "-O", action="append", default=[], help="-O KEY=VALUE for the estimate")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON here")
     args = ap.parse_args(argv)
-    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    env = command_env(REPO, threads=None)
     rows = []
     print(f"# {time.strftime('%Y-%m-%d')}, {platform.node()}, {os.cpu_count()} cores, {platform.processor() or platform.machine()}")
     print("| recording | samples | moving | convert s | calibrate s | estimate s | total s | total CPU s | peak MB | RMSE rad/s "
