@@ -8,7 +8,7 @@ For each MIMU4444 recording (``data.bin``) given, in a temporary folder::
     gfimu estimate LOG --method smoother --calibration cal.toml --out est.csv
 
 each as its own process (start-up included), wall time, CPU time (user + system)
-and peak resident memory of each step (``resource.getrusage`` of the children); then the estimate is scored
+and peak resident memory of each step (``os.wait4``: its worker processes included); then the estimate is scored
 against the board's gyro reference (mean of its gyros) on the moving, unsaturated
 samples (|ω_ref| > 2 rad/s, reference valid): RMSE of the ω error norm, its median
 and the share of samples with ``ω · ω_ref < 0`` (wrong sign). ``--option`` passes
@@ -16,6 +16,10 @@ and the share of samples with ``ω · ω_ref < 0`` (wrong sign). ``--option`` pa
 
     python3 tools/real_flow.py ../shared/data/mimu4444/exp_*/data.bin
     python3 tools/real_flow.py DATA.bin --preset hand-held-low-rate --json flow.json
+    python3 tools/real_flow.py ../shared/data/mimu4444/exp_*/data.bin --baseline ../old
+
+``--baseline DIR`` runs the same flow with another checkout (``git worktree add ../old COMMIT``) right
+after this one's on each recording: on a machine whose speed drifts, only runs side by side compare.
 
 The scoring uses the same library function as ``gfimu evaluate``; the figures in the
 README come from this script.
@@ -27,7 +31,6 @@ import argparse
 import json
 import os
 import platform
-import resource
 import subprocess
 import sys
 import tempfile
@@ -46,17 +49,19 @@ MOVING_RADPS = 2.0
 
 
 def run_step(args: list[str], env: dict) -> tuple[float, float, float]:
-    """(wall time [s], CPU time [s], peak RSS of the children so far [MB]) of ``python -m gfimu ARGS``;
-    exits on failure."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    """(wall time [s], CPU time [s], peak RSS [MB]) of ``python -m gfimu ARGS``, its worker processes
+    included (``os.wait4``); exits on failure."""
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "gfimu", *args], env=env, capture_output=True, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "gfimu", *args], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    err = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
+    proc.stderr.close()
+    proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
-        raise SystemExit(f"gfimu {' '.join(args)} failed ({proc.returncode}):\n{proc.stderr.strip()}")
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu, max(after.ru_maxrss, before.ru_maxrss) / 1024.0
+        raise SystemExit(f"gfimu {' '.join(args)} failed ({proc.returncode}):\n{err.strip()}")
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0
 
 
 def score(log_dir: Path, estimate_csv: Path) -> dict:
@@ -81,30 +86,37 @@ def main(argv=None) -> int:
     ap.add_argument("recordings", nargs="+", type=Path, help="MIMU4444 data.bin files")
     ap.add_argument("--preset", default=None, help="smoother preset to pass to the estimate (default: none)")
     ap.add_argument("--option", "-O", action="append", default=[], help="-O KEY=VALUE for the estimate")
+    ap.add_argument("--baseline", type=Path, default=None, metavar="DIR",
+                    help="also run the flow with another checkout of the package (its root folder, e.g. a `git "
+                         "worktree` of an earlier version), right after this one's on each recording")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON here")
     args = ap.parse_args(argv)
-    env = command_env(REPO, threads=None)
+    trees = [("this", command_env(REPO, threads=None))]
+    if args.baseline:
+        trees.append(("baseline", command_env(args.baseline.resolve(), threads=None)))
     rows = []
     print(f"# {time.strftime('%Y-%m-%d')}, {platform.node()}, {os.cpu_count()} cores, {platform.processor() or platform.machine()}")
     print("| recording | samples | moving | convert s | calibrate s | estimate s | total s | total CPU s | peak MB | RMSE rad/s "
           "| median rad/s | wrong sign |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for rec in args.recordings:
-        with tempfile.TemporaryDirectory() as tmp:
-            tmp = Path(tmp)
-            log, cal, est = tmp / "log", tmp / "cal.toml", tmp / "est.csv"
-            t_conv, c1, m1 = run_step(["convert", "mimu4444", str(rec), "--out", str(log)], env)
-            t_cal, c2, m2 = run_step(["calibrate", str(log), "--out", str(cal)], env)
-            extra = (["--preset", args.preset] if args.preset else []) + [x for o in args.option for x in ("-O", o)]
-            t_est, c3, m3 = run_step(["estimate", str(log), "--method", "smoother", "--calibration", str(cal),
-                                  "--out", str(est), "--no-progress", *extra], env)
-            row = {"recording": str(rec), **score(log, est), "convert_s": t_conv, "calibrate_s": t_cal,
-                   "estimate_s": t_est, "total_s": t_conv + t_cal + t_est, "peak_mb": max(m1, m2, m3),
-                   "convert_cpu_s": c1, "calibrate_cpu_s": c2, "estimate_cpu_s": c3, "total_cpu_s": c1 + c2 + c3}
-        rows.append(row)
-        print(f"| {rec.parent.name or rec.name} | {row['samples']} | {row['moving']} | {t_conv:.1f} | {t_cal:.1f} | {t_est:.1f} | "
-              f"{row['total_s']:.1f} | {row['total_cpu_s']:.1f} | {row['peak_mb']:.0f} | {row['rmse_radps']:.2f} | {row['median_radps']:.2f} | "
-              f"{100 * row['wrong_sign_share']:.2f} % |", flush=True)
+        for name, env in trees:  # with a baseline: its flow right after this one's, on the same recording
+            with tempfile.TemporaryDirectory() as tmp:
+                tmp = Path(tmp)
+                log, cal, est = tmp / "log", tmp / "cal.toml", tmp / "est.csv"
+                t_conv, c1, m1 = run_step(["convert", "mimu4444", str(rec), "--out", str(log)], env)
+                t_cal, c2, m2 = run_step(["calibrate", str(log), "--out", str(cal)], env)
+                extra = (["--preset", args.preset] if args.preset else []) + [x for o in args.option for x in ("-O", o)]
+                t_est, c3, m3 = run_step(["estimate", str(log), "--method", "smoother", "--calibration", str(cal),
+                                          "--out", str(est), "--no-progress", *extra], env)
+                row = {"recording": str(rec), "tree": name, **score(log, est), "convert_s": t_conv, "calibrate_s": t_cal,
+                       "estimate_s": t_est, "total_s": t_conv + t_cal + t_est, "peak_mb": max(m1, m2, m3),
+                       "convert_cpu_s": c1, "calibrate_cpu_s": c2, "estimate_cpu_s": c3, "total_cpu_s": c1 + c2 + c3}
+            rows.append(row)
+            label = (rec.parent.name or rec.name) + ("" if name == "this" else " (baseline)")
+            print(f"| {label} | {row['samples']} | {row['moving']} | {t_conv:.1f} | {t_cal:.1f} | {t_est:.1f} | "
+                  f"{row['total_s']:.1f} | {row['total_cpu_s']:.1f} | {row['peak_mb']:.0f} | {row['rmse_radps']:.2f} | "
+                  f"{row['median_radps']:.2f} | {100 * row['wrong_sign_share']:.2f} % |", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0
