@@ -74,6 +74,12 @@ def _run_indexed(item):
     return k, _JOB(task)
 
 
+def _here(func: Callable, tasks: list, ordered: bool) -> Iterator:
+    """:func:`forked_map` in this process, one task at a time."""
+    for k, task in enumerate(tasks):
+        yield func(task) if ordered else (k, func(task))
+
+
 def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = True, min_tasks: int = 2) -> Iterator:
     """``func(task)`` for every task, in up to ``workers`` forked processes (:func:`fork_workers` decides how
     many; 1: in this process, one task at a time). ``func`` and whatever it reads are inherited, not
@@ -85,8 +91,7 @@ def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = Tr
     tasks = list(tasks)
     n = fork_workers(workers, len(tasks)) if len(tasks) >= min_tasks else 1
     if n <= 1:
-        for k, task in enumerate(tasks):
-            yield func(task) if ordered else (k, func(task))
+        yield from _here(func, tasks, ordered)
         return
     # SIGINT and SIGTERM wait while the workers are forked and while they are stopped: a signal in the
     # middle of either would leave a worker behind, waiting for tasks for ever (and holding the
@@ -99,8 +104,7 @@ def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = Tr
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     if pool is None:
-        for k, task in enumerate(tasks):
-            yield func(task) if ordered else (k, func(task))
+        yield from _here(func, tasks, ordered)
         return
     try:
         if ordered:

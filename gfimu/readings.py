@@ -277,7 +277,6 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
         d2[1:-1] = np.abs(work[2:] - 2.0 * work[1:-1] + work[:-2])
         ok = np.isfinite(d2)
         d2 = np.where(ok, d2, 0.0)
-
         wide = np.ones(2 * SCALE_HALF_WIDTH + 1)
         near = np.ones(3)
 

@@ -231,7 +231,7 @@ class _EveryStartEveryPass(MLEstimator):
                 break
             w[idx[better]] = cand[better]
             cost[idx[better]] = cand_cost[better]
-        return self._multi_start(model, b, c, w, cost)
+        return self._take_restarts(w, cost, *self._restarts(model, b, c, self._restart_rows(model, cost)))
 
 
 def test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer():

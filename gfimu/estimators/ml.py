@@ -257,12 +257,8 @@ class MLEstimator:
         return Motion(log.timestamps_ns, omega_b_radps=omega, omega_dot_b_radps2=dw, specific_force_b_mps2=f, sigma=sig)
 
     # ------------------------------------------------------------------
-    def _solve_chunk(self, array, model, y, gyro, gyro_var, previous):
-        """ML ω for a block of samples; ``previous`` is the estimate just before the block."""
-        return self._finish_chunk(model, self._prepare_chunk(array, model, y, gyro, gyro_var), gyro, gyro_var, previous)
-
     def _prepare_chunk(self, array, model, y, gyro, gyro_var):
-        """The part of :meth:`_solve_chunk` that needs no other block: (b, c, ω, cost, restarts) with ω
+        """The part of a block's estimate that needs no other block: (b, c, ω, cost, restarts) with ω
         iterated from the grid or inversion start and ``restarts`` (:meth:`_restarts`) for every sample
         whose cost at that ω calls for one (None with a gyro). The neighbour passes only lower costs,
         so the samples that call for a restart after them are among these."""
@@ -302,8 +298,10 @@ class MLEstimator:
         keep = np.isin(rows, self._restart_rows(model, cost))
         return self._take_restarts(w, cost, rows[keep], best[keep], best_cost[keep])
 
-    def _multi_start(self, model, b, c, w, cost):
-        """Restart samples whose cost is implausibly high from the best grid point of every cone.
+    @staticmethod
+    def _restart_rows(model, cost) -> np.ndarray:
+        """The samples whose cost calls for a restart (:meth:`_restarts`, taken by :meth:`_take_restarts`):
+        those whose cost is implausibly high.
 
         With the noise model right, the minimum cost is about χ² with
         n_axes - 9 degrees of freedom; a sample above its mean + 6 standard
@@ -316,12 +314,6 @@ class MLEstimator:
         slightly lower but distant minimum is more often wrong than the
         estimate that the grid, inversion and neighbour starts gave.
         """
-        rows = self._restart_rows(model, cost)
-        return self._take_restarts(w, cost, *self._restarts(model, b, c, rows))
-
-    @staticmethod
-    def _restart_rows(model, cost) -> np.ndarray:
-        """The samples whose cost calls for a restart (:meth:`_multi_start`)."""
         dof = max(model.A.shape[0] - 9, 1)
         if model.rank < 6:
             return np.arange(len(cost))  # few redundant equations: local minima are common, restart all
@@ -497,7 +489,7 @@ def _solve_symmetric_3x3(m: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 _CONES = 8
-"""Direction cones of the multi-start (see ``MLEstimator._multi_start``)."""
+"""Direction cones of the multi-start (see ``MLEstimator._restarts``)."""
 
 _Q_HESSIAN = np.array(
     [

@@ -90,8 +90,8 @@ def _float_formatter(digits: int | None):
 PARALLEL_MIN_BLOCKS = 8
 """Blocks (of :data:`_ROWS_PER_BLOCK` rows written, of :data:`_BLOCK_BYTES` read) from which a table is
 formatted or parsed in worker processes (:mod:`gfimu.parallel`); shorter tables in this process,
-where the workers would cost more than they save (`tools/bench_smoother.py`: 10,000 samples 0.45 s
-slower with workers for every table)."""
+where starting the workers and copying their results back would cost more than they save (the
+10,000-sample cube log's reading, writing and model check each took longer with workers)."""
 
 
 # --- CSV reading ---------------------------------------------------------------
@@ -101,6 +101,11 @@ _HEADER_RE = re.compile(r"^(.*?)\s*\[([^\[\]]*)\]\s*$")
 
 _BLOCK_BYTES = 1 << 20
 """Bytes of text read, decoded and parsed at a time: the file is never held whole in memory."""
+
+
+def _timestamp_tokens(lines: list[str]) -> list[str]:
+    """The first field of each row."""
+    return [ln[: ln.find(",")] for ln in lines]
 
 
 class _Csv:
@@ -297,7 +302,7 @@ class _Csv:
         t = np.empty(self.n_rows, dtype=np.int64)
         prev = None  # (value, token) of the last row of the previous block
         for row0, lines in self._row_blocks():
-            tokens = [ln[: ln.find(",")] for ln in lines]
+            tokens = _timestamp_tokens(lines)
             try:
                 part = timestamps_ns(tokens, scale)
             except TimestampError as exc:
@@ -408,7 +413,7 @@ class _BlockParser:
         if not lines:
             return row0, np.zeros(0, dtype=np.int64), np.zeros((0, len(self.indices)))
         try:
-            t = timestamps_ns([ln[: ln.find(",")] for ln in lines], self.scale)
+            t = timestamps_ns(_timestamp_tokens(lines), self.scale)
             if not self.indices:
                 return row0, t, np.zeros((len(lines), 0))
             values = np.loadtxt(lines, delimiter=",", usecols=self.indices, dtype=float, ndmin=2, comments=None)

@@ -248,7 +248,7 @@ class _WindowContext:
 def window_workers(workers: int, windows: int, solver: str = "numpy") -> int:
     """Processes to solve ``windows`` windows with: ``workers`` (0: one per CPU this process may run
     on), at most one per window, forked so that they inherit the log (:func:`gfimu.parallel.fork_workers`:
-    1 in a daemonic process such as a Dask worker, or beside other threads); 1 with the GTSAM solver."""
+    1 in a daemonic process such as a Dask worker); 1 with the GTSAM solver."""
     check_workers(workers)
     return 1 if solver != "numpy" else fork_workers(workers, windows)
 
@@ -259,8 +259,6 @@ def _run_windows(context: _WindowContext, workers: int, progress: bool) -> list[
     in a window, or an interruption, stops the other workers at once."""
     total = len(context.windows)
     bar = progress_bar(range(total), total=total, desc="smoother", enable=progress and total > 1)
-    if workers <= 1:
-        return [context.solve(w) for w in bar]
     out: list = [None] * total
     done = iter(bar)
     for w, outcome in forked_map(context.solve, range(total), workers, ordered=False):
