@@ -47,6 +47,7 @@ def run(args) -> int:
     from .. import io as gio
     from ..io.outputs import prepare_log_folder
     from ..io.readers import read_recording
+    from ..io.readers._grid import nominal_rate_hz
 
     options = {dest: getattr(args, dest) for dest in args.reader_options}
     if not Path(args.input).exists():
@@ -83,7 +84,8 @@ def run(args) -> int:
             bar.step("apply the calibration")
             log = apply_calibration(log, read_calibration(args.calibration))
         bar.step("write the log")
-        gio.write_log(log, args.out)
+        # the rate measured: 1e9 / the median step of the log's timestamps [Hz] (readers/_grid.py)
+        gio.write_log(log, args.out, rate_hz=nominal_rate_hz(log.timestamps_ns))
     for line in [*report, *extrinsics_report]:
         info(args, line, file=sys.stdout)
     if args.calibration:

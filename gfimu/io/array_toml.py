@@ -294,9 +294,11 @@ def write_toml(doc: Mapping, path: str | os.PathLike, comment: str = "", finite:
     atomic_write_text(path, format_toml(doc, comment, finite))
 
 
-def array_to_dict(array: SensorArray) -> dict:
-    """The ``array.toml`` document of an array."""
+def array_to_dict(array: SensorArray, rate_hz: float | None = None) -> dict:
+    """The ``array.toml`` document of an array (with ``rate_hz``, the nominal sample rate, when given)."""
     doc: dict = {"format": ARRAY_FORMAT, "name": array.name}
+    if rate_hz is not None:
+        doc["rate_hz"] = float(rate_hz)
     accs = []
     for a in array.accelerometers:
         entry: dict = {"name": a.name, "position_m": np.asarray(a.position_m, dtype=float)}
@@ -322,14 +324,14 @@ def array_to_dict(array: SensorArray) -> dict:
     return doc
 
 
-def format_array_toml(array: SensorArray) -> str:
+def format_array_toml(array: SensorArray, rate_hz: float | None = None) -> str:
     """Deterministic ``array.toml`` text of an array (floats round-trip exactly)."""
     try:
-        return format_toml(array_to_dict(array))
+        return format_toml(array_to_dict(array, rate_hz))
     except ValueError as exc:
         raise ValueError(f"array.toml: {exc}") from None
 
 
-def write_array_toml(array: SensorArray, path: str | os.PathLike) -> None:
-    """Write ``array.toml`` atomically."""
-    atomic_write_text(path, format_array_toml(array))
+def write_array_toml(array: SensorArray, path: str | os.PathLike, rate_hz: float | None = None) -> None:
+    """Write ``array.toml`` atomically (with ``rate_hz`` when given)."""
+    atomic_write_text(path, format_array_toml(array, rate_hz))

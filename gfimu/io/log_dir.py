@@ -99,8 +99,9 @@ def read_log(path: str | os.PathLike, check: bool = True, truth: bool = True) ->
     return log
 
 
-def write_log(log: Log, path: str | os.PathLike) -> None:
-    """Write a log folder: array.toml, imu.csv, and truth.csv / reference.csv when present.
+def write_log(log: Log, path: str | os.PathLike, rate_hz: float | None = None) -> None:
+    """Write a log folder: array.toml (with ``rate_hz`` when given), imu.csv, and truth.csv / reference.csv
+    when present.
 
     Each file is written atomically; the folder is created when needed. A
     log file of an earlier log in the folder that this log does not have
@@ -122,7 +123,7 @@ def write_log(log: Log, path: str | os.PathLike) -> None:
         ["reference.csv"] if reference is not None else [])
     for name in LOG_FILES:
         destination(folder / name)
-    write_array_toml(log.array, folder / "array.toml")
+    write_array_toml(log.array, folder / "array.toml", rate_hz)
     write_imu_csv(log, folder / "imu.csv")
     if truth is not None:
         write_motion_csv(truth, folder / "truth.csv")

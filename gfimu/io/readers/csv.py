@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import re
 import tomllib
 import warnings
@@ -32,6 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from . import Conversion, Reader
+from ._grid import (GAP_FACTOR, MAX_GAP_PERIODS, find_gaps, interpolate, nominal_rate_hz,
+                    uniform_grid)
 from ...array import Gyroscope, SensorArray
 from ...log import Log
 from ...motion import Motion
@@ -635,8 +638,98 @@ def _array_and_order(cmap: ColumnMap, array_path: str | None, with_gyro: bool) -
     return array, order, unplaced, report
 
 
+MAX_SHOWN_GAPS = 5
+"""Gaps listed one by one in the report; the others are counted."""
+
+
+def _align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_periods: float,
+           resample_hz: float | None, report: list[str]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The log's timestamps and each block's values on them, never interpolated across a gap of any file.
+
+    The time base is the first accelerometer's rows (or, with ``resample_hz``, a uniform grid), over the
+    span all files share; its times strictly inside a gap of a file whose columns are interpolated (a step
+    over ``max_gap_periods`` of that file's nominal period) are left out, and the report says where.
+    """
+    def name(key: tuple) -> str:
+        same_file = sum(1 for k in groups if k[0] == key[0]) > 1
+        return str(key[0]) + (f" (time column {key[1]!r})" if same_file else "")
+
+    lo = max(int(g[0][0]) for g in groups.values())
+    hi = min(int(g[0][-1]) for g in groups.values())
+    t_base = groups[base_key][0]
+    if resample_hz is None:
+        in_span = (t_base >= lo) & (t_base <= hi)
+        grid = t_base[in_span]
+        interpolated = [k for k in groups if k != base_key]
+    else:
+        period = max(1, int(round(1e9 / resample_hz)))
+        grid = uniform_grid(lo, hi, period) if hi >= lo else np.zeros(0, dtype=np.int64)
+        interpolated = list(groups)
+    if len(groups) > 1 and grid.size < 2:
+        raise LogFormatError(f"the files {', '.join(str(k[0]) for k in groups)} share no common time span "
+                             "(are their times in the same clock and unit?)", base_key[0])
+    if resample_hz is not None:
+        report.append(f"resampled: {', '.join(name(k) for k in groups)} linearly interpolated onto a uniform grid "
+                      f"at {resample_hz:g} Hz (every {period} ns) over the span all files share "
+                      f"({(hi - lo) * 1e-9:.3f} s)")
+    elif len(groups) > 1:
+        report.append(f"aligned: {', '.join(name(k) for k in interpolated)} linearly interpolated onto the "
+                      f"timestamps of {base_key[0]}; {int(np.count_nonzero(~in_span))} row(s) of {base_key[0]} "
+                      "outside the span all files share left out")
+    t0 = int(grid[0]) if grid.size else 0
+    keep = np.ones(grid.size, dtype=bool)
+    found = []  # (start, end, file, lines, period, rows left out)
+    gaps = {k: find_gaps(groups[k][0], max_gap_periods) for k in groups}
+    for k in interpolated:
+        g = gaps[k]
+        t = groups[k][0]
+        for a, b in zip(g.start_ns.tolist(), g.end_ns.tolist()):
+            inside = (grid > a) & (grid < b)
+            n = int(np.count_nonzero(inside & keep))
+            if inside.any():
+                keep &= ~inside
+                i = int(np.searchsorted(t, a))
+                lines = (tables[k].lines[i], tables[k].lines[i + 1])
+                found.append((a, b, name(k), lines, g.period_ns, n))
+    found.sort()
+    for a, b, where, (la, lb), p, n in found[:MAX_SHOWN_GAPS]:
+        report.append(f"gap: {where} has no row from {(a - t0) * 1e-9:.3f} s to {(b - t0) * 1e-9:.3f} s of the log "
+                      f"(lines {la} to {lb}, a step of {(b - a) * 1e-9:.3f} s, over {max_gap_periods:g} of its "
+                      f"{p * 1e-6:.4g} ms periods): {n} row(s) of the time base in it left out, not interpolated")
+    if len(found) > MAX_SHOWN_GAPS:
+        rest = found[MAX_SHOWN_GAPS:]
+        report.append(f"gap: {len(rest)} more, {sum(f[5] for f in rest)} row(s) of the time base left out in them")
+    if found:
+        report.append(f"gaps: {len(found)} step(s) over {max_gap_periods:g} periods in the interpolated files, "
+                      f"{sum(f[5] for f in found)} row(s) of the time base left out; the log has a time gap at each")
+    elif resample_hz is not None or len(groups) > 1:
+        report.append(f"gaps: no step over {max_gap_periods:g} periods in the interpolated files")
+    if resample_hz is None and len(gaps[base_key]):
+        g = gaps[base_key]
+        report.append(f"gaps of the time base {base_key[0]}: {len(g)} step(s) over {max_gap_periods:g} of its "
+                      f"{g.period_ns * 1e-6:.4g} ms periods, kept as time gaps of the log")
+    t_out = grid[keep]
+    if resample_hz is None and t_out.size > 2:
+        dt = np.diff(t_out)
+        breaks = int(np.count_nonzero(dt > GAP_FACTOR * float(np.median(dt))))
+        if breaks > len(found) + len(gaps[base_key]):
+            rate = nominal_rate_hz(t_out)
+            report.append(f"timing: {breaks} step(s) of the log's timestamps exceed {GAP_FACTOR:g} of their median "
+                          f"{float(np.median(dt)) * 1e-6:.4g} ms (jitter of {base_key[0]}'s times); readers of the "
+                          f"log treat each as a break, where estimators restart: --resample-hz {rate:.4g} puts the "
+                          "log on a uniform grid")
+    columns = []
+    for key, values in blocks:
+        if key == base_key and resample_hz is None:
+            columns.append(values[in_span][keep])
+        else:
+            columns.append(interpolate(groups[key][0], values, t_out))
+    return t_out, columns
+
+
 def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
-                       gyro_as_reference: bool = False) -> Conversion:
+                       gyro_as_reference: bool = False, max_gap_periods: float = MAX_GAP_PERIODS,
+                       resample_hz: float | None = None) -> Conversion:
     """Read the file(s) of ``input_path`` with a column map (a TOML file or a preset name)."""
     cmap = load_map(map_spec)
     reader = _Reader(cmap, Path(input_path))
@@ -651,6 +744,7 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     if gyro is not None:
         sensors.append((gyro, AXES, "angular_rate"))
     groups: dict[tuple, tuple[np.ndarray, str]] = {}
+    tables: dict[tuple, Table] = {}
     blocks = []
     for sensor, axes, kind in sensors:
         path = reader.existing_file_of(sensor)
@@ -659,32 +753,14 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         if key not in groups:
             t, unit = reader.timestamps(table, sensor.time)
             groups[key] = (t, unit)
+            tables[key] = table
             report.append(f"{path}: {t.size} rows, time from {table.shown(reader.find(table, sensor.time))} "
                           f"in [{unit}]")
         values, shown = reader.values(table, sensor, kind, axes)
         blocks.append((key, values))
         report.append(f"  {sensor.name}: {', '.join(shown)}")
     base_key = blocks[0][0]
-    t = groups[base_key][0]
-    lo = max(g[0][0] for g in groups.values())
-    hi = min(g[0][-1] for g in groups.values())
-    keep = (t >= lo) & (t <= hi)
-    if len(groups) > 1:
-        if np.count_nonzero(keep) < 2:
-            raise LogFormatError(f"the files {', '.join(str(k[0]) for k in groups)} share no common time span "
-                                 "(are their times in the same clock and unit?)", base_key[0])
-        others = [str(k[0]) + ("" if k[0] != base_key[0] else f" (time column {k[1]!r})") for k in groups
-                  if k != base_key]
-        report.append(f"aligned: {', '.join(others)} linearly interpolated onto the timestamps of {base_key[0]}; "
-                      f"{int(np.count_nonzero(~keep))} row(s) of {base_key[0]} outside the span all files share "
-                      "left out")
-    t_out = t[keep]
-    columns = []
-    for key, values in blocks:
-        if key == base_key:
-            columns.append(values[keep])
-        else:
-            columns.append(resample_linear(groups[key][0], values, t_out))
+    t_out, columns = _align(groups, blocks, base_key, tables, max_gap_periods, resample_hz, report)
     n_acc = len(array.accelerometers)
     accel = np.hstack(columns[:n_acc])
     omega = None
@@ -725,11 +801,24 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gyro-as-reference", action="store_true",
                         help="also write the gyroscope [rad/s] as reference.csv, the angular-velocity reference of "
                              "gfimu evaluate (default: off)")
+    parser.add_argument("--max-gap-periods", type=float, default=MAX_GAP_PERIODS,
+                        help="a step of a file's times up to this many of its nominal periods (its median step) "
+                             "[periods] is interpolated over; in a longer one no row is interpolated, the log has a "
+                             f"time gap there and the report says where (default {MAX_GAP_PERIODS:g})")
+    parser.add_argument("--resample-hz", type=float, default=None, metavar="RATE",
+                        help="put the log on a uniform grid at RATE [Hz]: every file linearly interpolated, never "
+                             "across a gap (default: none: the first accelerometer's own timestamps)")
 
 
-def read(path, map: str, array: str | None = None, gyro_as_reference: bool = False) -> Conversion:  # noqa: A002
+def read(path, map: str, array: str | None = None, gyro_as_reference: bool = False,  # noqa: A002
+         max_gap_periods: float = MAX_GAP_PERIODS, resample_hz: float | None = None) -> Conversion:
     """Columns of one or more delimited text files, by a column map."""
-    return read_csv_recording(path, map, array, gyro_as_reference)
+    if not (math.isfinite(max_gap_periods) and max_gap_periods >= GAP_FACTOR):
+        raise ValueError(f"--max-gap-periods: expected a number >= {GAP_FACTOR:g}, got {max_gap_periods!r}")
+    if resample_hz is not None and not (math.isfinite(resample_hz) and 0 < resample_hz <= PLAUSIBLE_RATE_HZ[1]):
+        raise ValueError(f"--resample-hz: expected a rate in Hz above 0 and at most {PLAUSIBLE_RATE_HZ[1]:g}, "
+                         f"got {resample_hz!r}")
+    return read_csv_recording(path, map, array, gyro_as_reference, max_gap_periods, resample_hz)
 
 
 READER = Reader(

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from . import Conversion, Reader
+from ._grid import common_period_ns
 from ..errors import LogFormatError
 from ...log import Log
 
@@ -101,7 +102,7 @@ def align_streams(stamps_ns: list[np.ndarray], values: list[np.ndarray],
     if any(t.size < 2 for t in stamps):
         raise ValueError("a stream holds fewer than 2 messages")
     periods = [float(np.median(np.diff(t))) for t in stamps]
-    period = int(round(float(np.median(periods))))
+    period = common_period_ns(periods)  # the median of the streams' median periods (readers/_grid.py)
     start = max(int(t[0]) for t in stamps)
     end = min(int(t[-1]) for t in stamps)
     if end < start + period:
