@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .array import SensorArray
-from .motion import TIME_INDEX, Motion, _require_pandas
+from .motion import TIME_INDEX, Motion, _require_pandas, index_ns
 
 GYRO_COLUMNS = ("w_x", "w_y", "w_z")
 """Columns of the gyroscope readings (in B) in ``imu.csv`` and in :meth:`Log.to_dataframe`."""
@@ -180,9 +180,5 @@ class Log:
 
 
 def _timestamps_from_index(df, source: str) -> np.ndarray:
-    """The integer nanoseconds of a frame's index (``timestamp_ns``)."""
-    index = df.index
-    if not np.issubdtype(index.dtype, np.integer):
-        raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
-                         f"got dtype {index.dtype}")
-    return np.asarray(index, dtype=np.int64)
+    """The integer nanoseconds of a frame's index (``timestamp_ns``, or a DatetimeIndex: ns since the epoch)."""
+    return index_ns(df, source)

@@ -30,6 +30,25 @@ TIME_INDEX = "timestamp_ns"
 """Name of the index of the pandas frames: integer nanoseconds, as the CSV files' first column."""
 
 
+def index_ns(df, source: str) -> np.ndarray:
+    """The int64 nanoseconds of a frame's index: integer nanoseconds (``timestamp_ns``) as they are, or a
+    ``DatetimeIndex`` as nanoseconds since the epoch (a time zone converted to UTC; naive times taken as
+    UTC); ``ValueError`` names any other index and a missing time (NaT)."""
+    pd = _require_pandas("from_dataframe")
+    index = df.index
+    if isinstance(index, pd.DatetimeIndex):
+        if index.hasnans:
+            k = int(np.flatnonzero(np.asarray(index.isna()))[0])
+            raise ValueError(f"{source}: the DatetimeIndex holds a missing time (NaT) at row {k}")
+        if index.tz is not None:
+            index = index.tz_convert("UTC").tz_localize(None)
+        return np.asarray(index.to_numpy(dtype="datetime64[ns]")).view(np.int64).copy()
+    if not np.issubdtype(index.dtype, np.integer):
+        raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}) or be a "
+                         f"pandas.DatetimeIndex, got dtype {index.dtype}")
+    return np.asarray(index, dtype=np.int64)
+
+
 def _require_pandas(what: str):
     try:
         import pandas
@@ -124,10 +143,7 @@ class Motion:
         pd = _require_pandas("Motion.from_dataframe")
         if not isinstance(df, pd.DataFrame):
             raise TypeError(f"{source}: expected a pandas.DataFrame, got {type(df).__name__}")
-        index = df.index
-        if not np.issubdtype(index.dtype, np.integer):
-            raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
-                             f"got dtype {index.dtype}")
+        t_ns = index_ns(df, source)
         kw: dict = {}
         sigma: dict = {}
         for is_sigma in (False, True):
@@ -140,4 +156,4 @@ class Motion:
                                      f"{', '.join(cols)})")
                 if all(present):
                     (sigma if is_sigma else kw)[name] = df[cols].to_numpy(dtype=float)
-        return cls(np.asarray(index, dtype=np.int64), sigma=sigma, **kw)
+        return cls(t_ns, sigma=sigma, **kw)

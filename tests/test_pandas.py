@@ -82,3 +82,26 @@ def test_a_missing_pandas_is_named_with_its_extra(log, monkeypatch):
         log.to_dataframe()
     with pytest.raises(ImportError, match=r"Motion.to_dataframe needs pandas"):
         log.truth.to_dataframe()
+
+
+def test_a_datetime_index_is_read_as_nanoseconds_since_the_epoch(log):
+    """A DatetimeIndex (as pandas.to_datetime(df["time"], unit="ns") makes) is ns since the epoch; with a
+    time zone, the same instant in UTC; a missing time (NaT) is refused by row."""
+    df = log.to_dataframe()
+    t0 = 1_700_000_000_123_456_789
+    naive = df.set_index(pd.to_datetime(df.index.to_numpy() + t0, unit="ns"))
+    back = Log.from_dataframe(naive, log.array)
+    np.testing.assert_array_equal(back.timestamps_ns, log.timestamps_ns + t0)
+    np.testing.assert_array_equal(back.accel_mps2, log.accel_mps2)
+    zoned = naive.tz_localize("UTC").tz_convert("Europe/Berlin")
+    np.testing.assert_array_equal(Log.from_dataframe(zoned, log.array).timestamps_ns, log.timestamps_ns + t0)
+    micro = naive.set_index(naive.index.as_unit("us"))  # coarser storage: the same instants, truncated to us
+    np.testing.assert_array_equal(Log.from_dataframe(micro, log.array).timestamps_ns,
+                                  (log.timestamps_ns + t0) // 1000 * 1000)
+    motion = log.truth.to_dataframe()
+    motion = motion.set_index(pd.to_datetime(motion.index.to_numpy() + t0, unit="ns"))
+    np.testing.assert_array_equal(Motion.from_dataframe(motion).timestamps_ns, log.truth.timestamps_ns + t0)
+    with_nat = naive.index.to_numpy().copy()
+    with_nat[3] = np.datetime64("NaT")
+    with pytest.raises(ValueError, match="missing time \\(NaT\\) at row 3"):
+        Log.from_dataframe(naive.set_index(pd.DatetimeIndex(with_nat)), log.array)
