@@ -22,11 +22,13 @@ the first accelerometer's file by linear interpolation
 from __future__ import annotations
 
 import argparse
+import csv as _csv
 import dataclasses
 import math
 import re
 import tomllib
 import warnings
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -107,6 +109,109 @@ z = "z"
 }
 """Built-in column maps, used with ``--map NAME``."""
 
+_PHYPHOX_SENSORS = f'''format = "{MAP_FORMAT}"
+name = "phyphox"
+# phyphox's export of a sensor experiment as one CSV file per sensor (a folder, or the zip phyphox writes)
+[csv]
+decimal = "auto"
+[time]
+column = "Time"
+[[accelerometers]]
+name = "phone"
+file = {{file}}
+x = "X"
+y = "Y"
+z = "Z"
+[gyroscope]
+optional = true
+file = "Gyroscope.csv"
+x = "X"
+y = "Y"
+z = "Z"
+'''
+
+_SENSORLOGGER_ACCELEROMETER = f'''format = "{MAP_FORMAT}"
+name = "sensorlogger"
+# Sensor Logger's export without TotalAcceleration.csv: Accelerometer.csv, the acceleration without gravity
+[time]
+column = "time"
+unit = "ns"
+[[accelerometers]]
+name = "phone"
+file = "Accelerometer.csv"
+unit = "m/s^2"
+x = {{ column = "x", sign = {{sign}} }}
+y = {{ column = "y", sign = {{sign}} }}
+z = {{ column = "z", sign = {{sign}} }}
+[gyroscope]
+optional = true
+file = "Gyroscope.csv"
+unit = "rad/s"
+x = "x"
+y = "y"
+z = "z"
+'''
+
+
+def _metadata(source: "_Source", path: Path) -> dict[str, str]:
+    """The first row of Sensor Logger's Metadata.csv as {column: value} (empty when unreadable)."""
+    try:
+        text = source.text(path)
+        if text is None:
+            text = read_utf8_text(path)
+        rows = list(_csv.reader(text.splitlines()))
+    except (LogFormatError, OSError):
+        return {}
+    if len(rows) < 2:
+        return {}
+    return {k.strip().lower(): v.strip() for k, v in zip(rows[0], rows[1])}
+
+
+def _preset_for(name: str, source: "_Source") -> tuple[str, Path, list[str]]:
+    """(the preset's map text for what ``source`` holds, the input to read, report lines)."""
+    folder = source.folder
+    if not source.is_folder:
+        return PRESETS[name], source.input, []
+    if name == "euroc":
+        for sub in ("mav0/imu0/data.csv", "imu0/data.csv", "data.csv"):
+            if source.exists(folder / sub):
+                return PRESETS[name], folder / sub, [f"EuRoC: {folder / sub}"]
+        raise LogFormatError("holds no mav0/imu0/data.csv, imu0/data.csv or data.csv (give a EuRoC dataset folder, "
+                             "its mav0 or mav0/imu0 folder, or the data.csv)", source.input)
+    if name == "phyphox":
+        if source.exists(folder / "Raw Data.csv"):
+            return PRESETS[name].replace("[csv]\n", '[csv]\nfile = "Raw Data.csv"\n', 1), source.input, []
+        present = [f for f in ("Accelerometer.csv", "Linear Accelerometer.csv") if source.exists(folder / f)]
+        if not present:
+            raise LogFormatError("holds neither Accelerometer.csv, Linear Accelerometer.csv nor Raw Data.csv (a "
+                                 "phyphox export)", source.input)
+        meaning = ("the specific force (gravity included)" if present[0] == "Accelerometer.csv" else
+                   "the linear acceleration (gravity removed by the phone), not the specific force: the same at "
+                   "every sensor of a rigid body, so ω is unaffected")
+        return (_PHYPHOX_SENSORS.replace("{file}", f'"{present[0]}"'), source.input,
+                [f"phyphox: {present[0]}, {meaning}"])
+    if name == "sensorlogger":
+        if source.exists(folder / "TotalAcceleration.csv") or not source.exists(folder / "Accelerometer.csv"):
+            return PRESETS[name], source.input, ["Sensor Logger: TotalAcceleration.csv, the specific force "
+                                                 "(gravity included)"]
+        meta_path = next((folder / m for m in ("Metadata.csv", "metadata.csv") if source.exists(folder / m)), None)
+        meta = _metadata(source, meta_path) if meta_path is not None else {}
+        platform = meta.get("platform", "").lower()
+        if platform not in ("ios", "android"):
+            raise LogFormatError("holds Accelerometer.csv but no TotalAcceleration.csv, and no Metadata.csv naming "
+                                 "the platform (iOS and Android give Accelerometer.csv opposite signs): cannot be "
+                                 "read unambiguously", source.input)
+        standardised = meta.get("standardisation", "").lower() == "true"
+        flip = platform == "ios" and not standardised
+        how = ("its signs turned (iOS reports the opposite of Android's convention, +9.81 m/s² up at rest)" if flip
+               else "in Android's sign convention" + (" (Standardise Units & Frames on)" if platform == "ios" else ""))
+        return (_SENSORLOGGER_ACCELEROMETER.replace("{sign}", "-1" if flip else "1"), source.input,
+                [f"Sensor Logger ({meta_path.name}: platform {meta.get('platform')}, app "
+                 f"{meta.get('appversion', '?')}): Accelerometer.csv, the acceleration without gravity in m/s², "
+                 f"{how}; not the specific force (no TotalAcceleration.csv): the same at every sensor of a rigid "
+                 "body, so ω is unaffected"])
+    return PRESETS[name], source.input, []
+
 
 def resample_linear(t_src_ns: np.ndarray, values: np.ndarray, t_dst_ns: np.ndarray) -> np.ndarray:
     """``values`` (N, k) sampled at ``t_src_ns`` linearly interpolated at ``t_dst_ns`` (inside the source span)."""
@@ -136,7 +241,7 @@ class Sensor:
     """The columns of one accelerometer (or the gyroscope) and the file they are in."""
 
     name: str
-    file: str | None
+    file: str | tuple[str, ...] | None  # a tuple: alternatives, the first present is read
     time: Column
     axes: dict[str, Column]
     table: str
@@ -211,8 +316,10 @@ def _column(ctx: _TomlContext, value, table: str, index: int, key: str, default_
 def _sensor(ctx: _TomlContext, doc: dict, table: str, index: int, name: str, default_time: Column | None,
             kind: str) -> Sensor:
     file = doc.get("file")
-    if file is not None and (not isinstance(file, str) or not file.strip()):
-        raise ctx.error(f"expected a file name, got {file!r}", table, index, "file")
+    if isinstance(file, list) and file and all(isinstance(f, str) and f.strip() for f in file):
+        file = tuple(f.strip() for f in file)
+    elif file is not None and (not isinstance(file, str) or not file.strip()):
+        raise ctx.error(f"expected a file name or a list of alternative names, got {file!r}", table, index, "file")
     unit = doc.get("unit")
     if unit is not None and not isinstance(unit, str):
         raise ctx.error(f"expected a unit such as \"m/s^2\", got {unit!r}", table, index, "unit")
@@ -226,7 +333,7 @@ def _sensor(ctx: _TomlContext, doc: dict, table: str, index: int, name: str, def
     optional = doc.get("optional", False)
     if not isinstance(optional, bool):
         raise ctx.error(f"expected true or false, got {optional!r}", table, index, "optional")
-    return Sensor(name, None if file is None else file.strip(), time, axes, table, index, optional)
+    return Sensor(name, file.strip() if isinstance(file, str) else file, time, axes, table, index, optional)
 
 
 def parse_map(text: str, path: str) -> ColumnMap:
@@ -260,8 +367,6 @@ def parse_map(text: str, path: str) -> ColumnMap:
     decimal = csv.get("decimal", ".")
     if decimal not in (".", ",", "auto"):
         raise ctx.error(f"expected \".\", \",\" or \"auto\", got {decimal!r}", "csv", 0, "decimal")
-    if decimal == "," and delimiter == ",":
-        raise ctx.error("a decimal comma needs another delimiter", "csv", 0, "decimal")
     file = csv.get("file")
     if file is not None and (not isinstance(file, str) or not file.strip()):
         raise ctx.error(f"expected a file name, got {file!r}", "csv", 0, "file")
@@ -356,13 +461,20 @@ def _split(line: str, delimiter: str | None) -> list[str]:
     return [f.strip().strip('"').strip() for f in line.split(delimiter)]
 
 
+def _split_quoted(lines: list[str], delimiter: str) -> list[list[str]]:
+    """Lines split by a CSV tokenizer: a quoted field may hold the delimiter (``"9,81"`` in a comma file)."""
+    return [[f.strip() for f in r] for r in _csv.reader(lines, delimiter=delimiter, quotechar='"',
+                                                       skipinitialspace=True)]
+
+
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 """A number written with a decimal comma (``decimal = "auto"``)."""
 
 
-def read_table(path: Path, layout: Layout) -> Table:
-    """Split a text file by ``layout``; errors name the file and line."""
-    text = read_utf8_text(path, folder="is a folder, expected a CSV file", line_of_bad_byte=True)
+def read_table(path: Path, layout: Layout, text: str | None = None) -> Table:
+    """Split a text file (or ``text``, read from ``path``) by ``layout``; errors name the file and line."""
+    if text is None:
+        text = read_utf8_text(path, folder="is a folder, expected a CSV file", line_of_bad_byte=True)
     lines = text.splitlines()
     header = None
     if layout.header_row:
@@ -385,19 +497,27 @@ def read_table(path: Path, layout: Layout) -> Table:
     names: list[str] = []
     headers: list[str] = []
     units: list[str | None] = []
+    def split(block: list[str], quoted: bool) -> list[list[str]]:
+        """A CSV tokenizer where a field is quoted; the fast split otherwise."""
+        return _split_quoted(block, delimiter) if quoted else [_split(ln, delimiter) for ln in block]
+
+    quoted = delimiter is not None and any('"' in ln for _, ln in data)
     if header is not None:
-        headers = _split(header, delimiter)
+        headers = split([header], delimiter is not None and '"' in header)[0]
         for h in headers:
             n, u = header_name_and_unit(h)
             names.append(n)
             units.append(u)
-    rows = [_split(ln, delimiter) for _, ln in data]
+    rows = split([ln for _, ln in data], quoted)
     n_fields = len(headers) if headers else len(rows[0])
     for (line, _), r in zip(data, rows):
         if len(r) != n_fields:
             what = "the header has" if headers else "the first row has"
             raise LogFormatError(f"row has {len(r)} fields, {what} {n_fields}", path, line)
-    if layout.decimal == "," or (layout.decimal == "auto" and delimiter != ","
+    if layout.decimal == "," and delimiter == "," and not quoted:
+        raise LogFormatError("the map gives a decimal comma and a comma delimiter, but no field is quoted: a "
+                             "number like 9,81 can then not be told from two fields", path)
+    if layout.decimal == "," or (layout.decimal == "auto" and (delimiter != "," or quoted)
                                  and any(_DECIMAL_COMMA.match(f) for f in rows[0])):
         rows = [[f.replace(",", ".") for f in r] for r in rows]
     return Table(path, names, headers, units if headers else [None] * n_fields, rows, [ln for ln, _ in data])
@@ -429,11 +549,59 @@ def _rate_warning(t: np.ndarray, unit: str, table: Table, j: int) -> str | None:
             f"{1e9 / step_ns:.4g} Hz, implausible for an accelerometer array: is the time unit [{unit}] right{hint}?")
 
 
+class _PresetContext:
+    """Errors of a built-in preset name the recording, never a line of the preset's text."""
+
+    def __init__(self, name: str, input_path: Path):
+        self.name = name
+        self.input = input_path
+
+    def error(self, message: str, table: str = "", index: int = 0, key: str | None = None) -> LogFormatError:
+        return LogFormatError(f"{message} (read with the preset {self.name})", self.input)
+
+
+class _Source:
+    """The files of a recording: a file, a folder, or a zip archive (its members read in memory)."""
+
+    def __init__(self, input_path: Path):
+        self.input = input_path
+        self.members: dict[str, str] | None = None  # zip: name inside the archive's top folder -> member
+        if input_path.is_file() and zipfile.is_zipfile(input_path):
+            try:
+                with zipfile.ZipFile(input_path) as z:
+                    names = [n for n in z.namelist() if not n.endswith("/")]
+            except (zipfile.BadZipFile, OSError) as exc:
+                raise LogFormatError(f"cannot read this zip archive: {exc}", input_path) from None
+            tops = {n.split("/", 1)[0] for n in names if "/" in n}
+            strip = (next(iter(tops)) + "/") if len(tops) == 1 and all("/" in n for n in names) else ""
+            self.members = {n[len(strip):]: n for n in names}
+        self.is_folder = input_path.is_dir() or self.members is not None
+        self.folder = input_path if self.is_folder else input_path.parent
+
+    def exists(self, path: Path) -> bool:
+        if self.members is not None and self.input in path.parents:
+            return path.relative_to(self.input).as_posix() in self.members
+        return path.is_file()
+
+    def text(self, path: Path) -> str | None:
+        """The text of a zip member (None for a file on disk, which :func:`read_table` reads itself)."""
+        if self.members is None or self.input not in path.parents:
+            return None
+        with zipfile.ZipFile(self.input) as z:
+            raw = z.read(self.members[path.relative_to(self.input).as_posix()])
+        try:
+            return raw.decode("utf-8").lstrip("\ufeff")
+        except UnicodeDecodeError as exc:
+            raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path,
+                                 raw[: exc.start].count(b"\n") + 1) from None
+
+
 class _Reader:
-    def __init__(self, cmap: ColumnMap, input_path: Path):
+    def __init__(self, cmap: ColumnMap, input_path: Path, source: _Source | None = None):
         self.map = cmap
         self.input = input_path
-        self.folder = input_path if input_path.is_dir() else input_path.parent
+        self.source = source if source is not None else _Source(input_path)
+        self.folder = self.source.folder
         self.tables: dict[Path, Table] = {}
         self.rate_warnings: list[str] = []  # issued once the recording has been read
 
@@ -443,24 +611,29 @@ class _Reader:
     def file_of(self, sensor: Sensor) -> Path:
         name = sensor.file or self.map.file
         if name is None:
-            if self.input.is_dir():
-                raise self.map.ctx.error(f"{self.input} is a folder and the map names no file for this sensor "
+            if self.source.is_folder:
+                what = "a zip archive" if self.source.members is not None else "a folder"
+                raise self.map.ctx.error(f"{self.input} is {what} and the map names no file for this sensor "
                                          "(give file = NAME here or [csv] file)", sensor.table, sensor.index)
             return self.input
+        if isinstance(name, tuple):  # alternatives: the first present
+            return next((self.folder / n for n in name if self.source.exists(self.folder / n)), self.folder / name[0])
         return self.folder / name
 
     def existing_file_of(self, sensor: Sensor) -> Path:
         """:meth:`file_of`, refused naming the map's ``file`` key when that file is missing."""
         path = self.file_of(sensor)
-        if path != self.input and not path.exists():
+        if path != self.input and not self.source.exists(path):
+            shown = (" or ".join(str(self.folder / n) for n in sensor.file) if isinstance(sensor.file, tuple)
+                     else str(path))
             if sensor.file is not None:
-                raise self.map.ctx.error(f"{path}: file not found", sensor.table, sensor.index, "file")
-            raise self.map.ctx.error(f"{path}: file not found", "csv", 0, "file")
+                raise self.map.ctx.error(f"{shown}: file not found", sensor.table, sensor.index, "file")
+            raise self.map.ctx.error(f"{shown}: file not found", "csv", 0, "file")
         return path
 
     def table(self, path: Path) -> Table:
         if path not in self.tables:
-            self.tables[path] = read_table(path, self.map.layout)
+            self.tables[path] = read_table(path, self.map.layout, self.source.text(path))
         return self.tables[path]
 
     def find(self, table: Table, column: Column, required: bool = True) -> int | None:
@@ -558,6 +731,8 @@ class _Reader:
                         float(tok)
                     except ValueError:
                         what = "is empty" if not tok else f"value {tok!r} is not a number"
+                        if _DECIMAL_COMMA.match(tok):
+                            what += " (a decimal comma: give [csv] decimal = \",\" or \"auto\" in the map)"
                         raise LogFormatError(f"{table.shown(j)} (field {j + 1}) {what}", table.path,
                                              table.lines[k]) from None
                 raise
@@ -567,7 +742,7 @@ class _Reader:
 
     def gyro_present(self, sensor: Sensor) -> bool:
         path = self.file_of(sensor)
-        if not path.is_file():
+        if not self.source.exists(path):
             return False
         table = self.table(path)
         return all(self.find(table, c, required=False) is not None for c in sensor.axes.values())
@@ -731,10 +906,20 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
                        gyro_as_reference: bool = False, max_gap_periods: float = MAX_GAP_PERIODS,
                        resample_hz: float | None = None) -> Conversion:
     """Read the file(s) of ``input_path`` with a column map (a TOML file or a preset name)."""
-    cmap = load_map(map_spec)
-    reader = _Reader(cmap, Path(input_path))
-    gyro = cmap.gyroscope
+    input_path = Path(input_path)
     report: list[str] = []
+    if not Path(map_spec).exists() and map_spec in PRESETS:
+        source = _Source(input_path)
+        text, read_path, report = _preset_for(map_spec, source)
+        cmap = parse_map(text, f"preset {map_spec}")
+        cmap = dataclasses.replace(cmap, ctx=_PresetContext(map_spec, input_path))
+        if read_path != input_path:
+            source = _Source(read_path)
+        reader = _Reader(cmap, read_path, source)
+    else:
+        cmap = load_map(map_spec)
+        reader = _Reader(cmap, input_path)
+    gyro = cmap.gyroscope
     if gyro is not None and gyro.optional and not reader.gyro_present(gyro):
         report.append(f"gyroscope: not in {reader.file_of(gyro)}; none read")
         gyro = None
@@ -776,7 +961,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
             where = reader.file_of(cmap.gyroscope)
             names = ", ".join(" or ".join(map(str, c.column)) if isinstance(c.column, tuple) else str(c.column)
                               for c in cmap.gyroscope.axes.values())
-            found = f"its columns ({names}) are not in {where}" if where.is_file() else f"{where} is not there"
+            found = (f"its columns ({names}) are not in {where}" if reader.source.exists(where)
+                     else f"{where} is not there")
             raise LogFormatError(f"--gyro-as-reference: no gyroscope to take as the reference: {found}", input_path)
         if omega is None:
             raise LogFormatError("--gyro-as-reference: the map names no gyroscope columns", cmap.path)
