@@ -12,7 +12,10 @@ log. The checks:
 - the array size: an accelerometer more than 1 m from the body origin, or
   all of them within 1 mm of each other (``position_m`` is in metres);
 - gravity: the specific force of a still array, in m/s², far from
-  9.81 (readings in g or mg under a ``[m s^-2]`` header);
+  9.81 (readings in g or mg under a ``[m s^-2]`` header); a log without
+  a still stretch by the median over the whole log of the array's
+  common-mode specific force, whose size stays near 9.81 m/s² on any
+  hand-held or vehicle motion (:func:`check_specific_force_scale`);
 - readings that are NaN or infinite (masked later; counted here).
 """
 
@@ -134,10 +137,70 @@ def _still_specific_force_of(log: Log) -> float | None:
     return float(np.median(np.median(nw[still], axis=1))) if still.any() else None
 
 
+def median_specific_force(log: Log) -> float | None:
+    """Median over the log of |f| of the array's common mode [m/s², as read]: the mean over the three-axis
+    accelerometers of their readings turned into B (one triad: its |f|); None without a triad."""
+    arr = log.array
+    triads, col = [], 0
+    for a in arr.accelerometers:
+        if tuple(a.axes) == ("x", "y", "z"):
+            triads.append((col, np.asarray(a.rotation_body_sensor, dtype=float)))
+        col += len(a.axes)
+    if not triads or len(log) < 2:
+        return None
+    norms = []
+    with np.errstate(all="ignore"):
+        for start in range(0, len(log), _BLOCK_ROWS):
+            rows = slice(start, min(start + _BLOCK_ROWS, len(log)))
+            mean = sum(log.accel_mps2[rows, c:c + 3] @ rot.T for c, rot in triads) / len(triads)
+            norms.append(np.linalg.norm(mean, axis=1))
+    norm = np.concatenate(norms)
+    norm = norm[np.isfinite(norm)]
+    return float(np.median(norm)) if norm.size else None
+
+
+SCALE_BANDS = ((8.0, 12.0, "m/s² under a [g] unit", "m/s^2"), (0.07, 0.14, "g under an [m/s²] unit", "g"),
+               (70.0, 140.0, "mg under an [m/s²] unit", "mg"))
+"""(low, high, what, the unit to give) of median |f| / 9.80665 over a moving log: a unit misread."""
+
+
+def check_specific_force_scale(log: Log, where: str, gravity_included: bool = True) -> list[str]:
+    """The median |f| of the array's common mode over the whole log, far from 9.81 m/s² by a factor of
+    9.81 or 1000: a unit misread, found without a still stretch. ``where`` names the file, columns and the
+    unit read. A log of acceleration without gravity (``gravity_included`` False) is not checked, and the
+    g-read-as-m/s² band only when gravity is known to be included."""
+    if not gravity_included:
+        return []
+    m = median_specific_force(log)
+    if m is None or m <= 0:
+        return []
+    ratio = m / STANDARD_GRAVITY_MPS2
+    for lo, hi, what, unit in SCALE_BANDS:
+        if lo <= ratio <= hi:
+            return [f"{where}: over the whole log the accelerometers read a median |f| = {m:.4g} m/s², "
+                    f"{ratio:.3g} × gravity, where a moving body's specific force stays near "
+                    f"{STANDARD_GRAVITY_MPS2:g}: likely the values are in {what}; give the unit [{unit}] (in the "
+                    "header or the map)"]
+    return []
+
+
 def check_gravity(log: Log, imu_name: str, accel_units: str = "m s^-2") -> list[str]:
-    """|f| of a still array far from 9.81 m/s² (likely g or mg)."""
+    """|f| of a still array far from 9.81 m/s² (likely g or mg); without a still stretch, the median |f| of
+    the whole log by a factor of about 9.81 or 1000 above gravity (a unit misread that acceleration
+    without gravity cannot explain)."""
     g0 = _still_specific_force(log)
-    if g0 is None or g0 < 0.3:  # no still stretch, or free fall
+    if g0 is None:
+        m = median_specific_force(log)
+        ratio = None if m is None else m / STANDARD_GRAVITY_MPS2
+        if ratio is not None and (8.0 <= ratio <= 12.0 or 70.0 <= ratio <= 140.0):
+            cause = ("m/s² taken for g (scaled by 9.81)" if ratio <= 12.0 else
+                     "mg taken for m/s² (1000 times too large)")
+            return [f"{imu_name}: no still stretch, but over the whole log the accelerometers read a median |f| = "
+                    f"{m:.4g} m/s² (under [{accel_units}]), {ratio:.3g} × gravity, where a moving body's specific "
+                    f"force stays near {STANDARD_GRAVITY_MPS2:g}: likely {cause} when the log was written; check "
+                    "the unit of the recording it came from"]
+        return []
+    if g0 < 0.3:  # free fall
         return []
     ratio = g0 / STANDARD_GRAVITY_MPS2
     if 0.5 <= ratio <= 2.0:

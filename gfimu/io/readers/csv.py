@@ -42,6 +42,7 @@ from ...log import Log
 from ...motion import Motion
 from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
 from ..errors import LogFormatError, LogPlausibilityWarning, read_utf8_text
+from ..plausibility import check_specific_force_scale
 from ..units import (TIME_UNITS_NS, TimestampError, header_name_and_unit, same_nanosecond, time_unit_ns, timestamps_ns,
                      unit_factor, unit_help)
 
@@ -167,20 +168,21 @@ def _metadata(source: "_Source", path: Path) -> dict[str, str]:
     return {k.strip().lower(): v.strip() for k, v in zip(rows[0], rows[1])}
 
 
-def _preset_for(name: str, source: "_Source") -> tuple[str, Path, list[str]]:
-    """(the preset's map text for what ``source`` holds, the input to read, report lines)."""
+def _preset_for(name: str, source: "_Source") -> tuple[str, Path, list[str], bool]:
+    """(the preset's map text for what ``source`` holds, the input to read, report lines, whether the
+    accelerometer file read holds the acceleration without gravity)."""
     folder = source.folder
     if not source.is_folder:
-        return PRESETS[name], source.input, []
+        return PRESETS[name], source.input, [], False
     if name == "euroc":
         for sub in ("mav0/imu0/data.csv", "imu0/data.csv", "data.csv"):
             if source.exists(folder / sub):
-                return PRESETS[name], folder / sub, [f"EuRoC: {folder / sub}"]
+                return PRESETS[name], folder / sub, [f"EuRoC: {folder / sub}"], False
         raise LogFormatError("holds no mav0/imu0/data.csv, imu0/data.csv or data.csv (give a EuRoC dataset folder, "
                              "its mav0 or mav0/imu0 folder, or the data.csv)", source.input)
     if name == "phyphox":
         if source.exists(folder / "Raw Data.csv"):
-            return PRESETS[name].replace("[csv]\n", '[csv]\nfile = "Raw Data.csv"\n', 1), source.input, []
+            return PRESETS[name].replace("[csv]\n", '[csv]\nfile = "Raw Data.csv"\n', 1), source.input, [], False
         present = [f for f in ("Accelerometer.csv", "Linear Accelerometer.csv") if source.exists(folder / f)]
         if not present:
             raise LogFormatError("holds neither Accelerometer.csv, Linear Accelerometer.csv nor Raw Data.csv (a "
@@ -189,11 +191,11 @@ def _preset_for(name: str, source: "_Source") -> tuple[str, Path, list[str]]:
                    "the linear acceleration (gravity removed by the phone), not the specific force: the same at "
                    "every sensor of a rigid body, so ω is unaffected")
         return (_PHYPHOX_SENSORS.replace("{file}", f'"{present[0]}"'), source.input,
-                [f"phyphox: {present[0]}, {meaning}"])
+                [f"phyphox: {present[0]}, {meaning}"], present[0] != "Accelerometer.csv")
     if name == "sensorlogger":
         if source.exists(folder / "TotalAcceleration.csv") or not source.exists(folder / "Accelerometer.csv"):
             return PRESETS[name], source.input, ["Sensor Logger: TotalAcceleration.csv, the specific force "
-                                                 "(gravity included)"]
+                                                 "(gravity included)"], False
         meta_path = next((folder / m for m in ("Metadata.csv", "metadata.csv") if source.exists(folder / m)), None)
         meta = _metadata(source, meta_path) if meta_path is not None else {}
         platform = meta.get("platform", "").lower()
@@ -209,8 +211,8 @@ def _preset_for(name: str, source: "_Source") -> tuple[str, Path, list[str]]:
                 [f"Sensor Logger ({meta_path.name}: platform {meta.get('platform')}, app "
                  f"{meta.get('appversion', '?')}): Accelerometer.csv, the acceleration without gravity in m/s², "
                  f"{how}; not the specific force (no TotalAcceleration.csv): the same at every sensor of a rigid "
-                 "body, so ω is unaffected"])
-    return PRESETS[name], source.input, []
+                 "body, so ω is unaffected"], True)
+    return PRESETS[name], source.input, [], False
 
 
 def resample_linear(t_src_ns: np.ndarray, values: np.ndarray, t_dst_ns: np.ndarray) -> np.ndarray:
@@ -604,6 +606,7 @@ class _Reader:
         self.folder = self.source.folder
         self.tables: dict[Path, Table] = {}
         self.rate_warnings: list[str] = []  # issued once the recording has been read
+        self.accel_units: dict[Path, list[tuple[str, str]]] = {}  # file -> (column, unit read) of accelerometers
 
     def error(self, message: str, column: Column) -> LogFormatError:
         return self.map.ctx.error(message, column.table, column.index, column.key)
@@ -737,6 +740,8 @@ class _Reader:
                                              table.lines[k]) from None
                 raise
             out[:, c] = v * (factor * column.sign)
+            if kind == "acceleration":
+                self.accel_units.setdefault(table.path, []).append((table.shown(j), unit))
             shown.append(f"{a} = {'-' if column.sign < 0 else ''}{table.shown(j)} [{unit}]")
         return out, shown
 
@@ -908,9 +913,10 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     """Read the file(s) of ``input_path`` with a column map (a TOML file or a preset name)."""
     input_path = Path(input_path)
     report: list[str] = []
+    without_gravity = False  # the accelerometers read acceleration without gravity (a preset says so)
     if not Path(map_spec).exists() and map_spec in PRESETS:
         source = _Source(input_path)
-        text, read_path, report = _preset_for(map_spec, source)
+        text, read_path, report, without_gravity = _preset_for(map_spec, source)
         cmap = parse_map(text, f"preset {map_spec}")
         cmap = dataclasses.replace(cmap, ctx=_PresetContext(map_spec, input_path))
         if read_path != input_path:
@@ -930,6 +936,7 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         sensors.append((gyro, AXES, "angular_rate"))
     groups: dict[tuple, tuple[np.ndarray, str]] = {}
     tables: dict[tuple, Table] = {}
+    linear = without_gravity
     blocks = []
     for sensor, axes, kind in sensors:
         path = reader.existing_file_of(sensor)
@@ -944,6 +951,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         values, shown = reader.values(table, sensor, kind, axes)
         blocks.append((key, values))
         report.append(f"  {sensor.name}: {', '.join(shown)}")
+        if kind == "acceleration":
+            linear |= any("Linear" in sh for sh in shown)
     base_key = blocks[0][0]
     t_out, columns = _align(groups, blocks, base_key, tables, max_gap_periods, resample_hz, report)
     n_acc = len(array.accelerometers)
@@ -969,6 +978,14 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         reference = Motion(t_out, omega_b_radps=omega.copy())
     log = Log(array, t_out, accel, gyro_b_radps=omega, reference=reference, source=str(input_path))
     for warning in reader.rate_warnings:
+        warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
+    read_as = []
+    for path, cols in reader.accel_units.items():
+        names = [c for c, _ in cols]
+        units = sorted({u for _, u in cols})
+        read_as.append(f"{path} (columns {', '.join(names[:3])}{', ...' if len(names) > 3 else ''} read as "
+                       f"{', '.join(f'[{u}]' for u in units)})")
+    for warning in check_specific_force_scale(log, "; ".join(read_as), gravity_included=not linear):
         warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
     return Conversion(log, tuple(report + geometry_report), unplaced)
 
