@@ -15,8 +15,16 @@ Units come from the map or from the header (``a [m s^-2]``, ``Time (s)``) and
 are converted by :mod:`gfimu.io.units`; a column with no unit in either, or
 with two different ones, is refused. Sensors in different files (one file
 per sensor, as phone apps and EuRoC write) are brought onto the timestamps of
-the first accelerometer's file by linear interpolation
-(:func:`resample_linear`), over the time span all files share.
+the first accelerometer's file (or, with ``resample_hz``, onto a uniform
+grid) by linear interpolation, over the time span all files share, never
+across a gap of a file: a step longer than ``max_gap_periods`` of the file's
+nominal period (its median step, :mod:`gfimu.io.readers._grid`); the times
+of the time base inside a gap are left out and the report says where.
+
+INPUT may be a file, a folder or a zip archive (phyphox and Sensor Logger
+export zips); a preset picks its files from what the folder holds (phyphox's
+one file per sensor or its ``Raw Data.csv``; Sensor Logger's Android or iOS
+export; a EuRoC dataset folder at any level) and reports what it read.
 """
 
 from __future__ import annotations

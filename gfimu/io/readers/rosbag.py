@@ -8,7 +8,7 @@ messages of its ``topic`` when it names one, otherwise the Imu messages (on any 
 ``rotation_body_sensor`` in ``array.toml`` place it in the body frame B.
 
 The streams are not synchronous: each is read at its own header stamps and interpolated
-linearly onto one time base, a uniform grid at the median of the streams' median rates that
+linearly onto one time base, a uniform grid at the median of the streams' median periods that
 spans the overlap of all streams (from the latest first stamp to the earliest last stamp; never
 extrapolated). The interpolation of stream y at a grid time t between its stamps t_k <= t <
 t_{k+1} is y(t) = y_k + (t - t_k) / (t_{k+1} - t_k) (y_{k+1} - y_k). A stream whose stamps are
@@ -395,7 +395,7 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
         lines.append(f"gyro: the [gyroscope] of {array_path} is left out of the log (no --with-gyro)")
     out_array = replace(array, accelerometers=tuple(new_accs), gyroscope=gyroscope)
     a, b = al.overlap_ns
-    lines.append(f"time base: {1e9 / al.period_ns:.2f} Hz (the median of the streams' rates), over the overlap of all "
+    lines.append(f"time base: {1e9 / al.period_ns:.2f} Hz (the median of the streams' median periods), over the overlap of all "
                  f"streams ({(b - a) * 1e-9:.3f} s): {al.timestamps_ns.size} sample(s); linear interpolation on header "
                  f"stamps, a grid time at most {al.max_offset_ns * 1e-6:.3f} ms from a stamp")
     if al.long_gaps:
