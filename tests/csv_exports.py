@@ -70,6 +70,7 @@ def phyphox_export(path: Path, seconds: float = 4.0, rate_hz: float = 200.0, lin
     files["meta/time.csv"] = ('"event","experiment time","system time","system time text"\n'
                               '"START",0.000000000E0,1.700000000E9,"2023-11-14 22:13:20.000 UTC+00:00"\n')
     if as_zip:
+        path.parent.mkdir(parents=True, exist_ok=True)
         with zipfile.ZipFile(path, "w") as z:
             for n, text in files.items():
                 z.writestr(n, text)
@@ -107,6 +108,7 @@ def sensor_logger_export(path: Path, platform: str = "android", seconds: float =
                                  f"3,test,{T0_NS // 1_000_000},2023-11-14_22-13-20,UTC,{platform},1.41.1,x,"
                                  f"Accelerometer|Gravity|Gyroscope,10|10|10,{str(standardised).lower()},17\n")
     if as_zip:
+        path.parent.mkdir(parents=True, exist_ok=True)
         with zipfile.ZipFile(path, "w") as z:
             for name, text in files.items():
                 z.writestr(name, text)
