@@ -395,12 +395,31 @@ def write_calibration(cal: Calibration, path: str | Path) -> None:
 
 
 def read_calibration(path: str | Path) -> Calibration:
-    """Read a ``calibration.toml`` written by :func:`write_calibration` (or by hand)."""
+    """Read a ``calibration.toml`` written by :func:`write_calibration` (or by hand); a bad value is refused
+    naming the file, its line and the key."""
+    from .io.array_toml import _TomlContext
+
     path = Path(path)
+    text = path.read_text(encoding="utf-8")
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CalibrationError(f"{path}: not valid TOML: {exc}") from None
+    ctx = _TomlContext(path, text)
+
+    def fail(message: str, table: str = "", index: int = 0, key: str | None = None) -> CalibrationError:
+        return CalibrationError(str(ctx.error(message, table, index, key)))
+
+    def numbers(value, shape: tuple[int, ...] | None, what: str, table: str, index: int, key: str) -> np.ndarray:
+        """``value`` as finite floats of ``shape`` (None: any shape, checked by the caller)."""
+        try:
+            out = np.array(value, dtype=float)
+        except (TypeError, ValueError):
+            out = None
+        if out is None or (shape is not None and out.shape != shape) or not np.all(np.isfinite(out)):
+            raise fail(f"expected {what}, got {value!r}", table, index, key)
+        return out
+
     if doc.get("format") != FORMAT:
         raise CalibrationError(f"{path}: format must be {FORMAT!r}, got {doc.get('format')!r}")
     accs = doc.get("accelerometers")
@@ -408,20 +427,20 @@ def read_calibration(path: str | Path) -> Calibration:
         raise CalibrationError(f"{path}: no [[accelerometers]] table")
     sensors = []
     for k, a in enumerate(accs):
-        where = f"{path}: accelerometers[{k}]"
         for key in ("name", "bias_mps2", "gain"):
             if key not in a:
-                raise CalibrationError(f"{where}: missing key {key!r}")
+                raise fail(f"missing key {key!r}", "accelerometers", k)
         axes = tuple(a.get("axes", ["x", "y", "z"]))
         if any(x not in AXIS_INDEX for x in axes):
-            raise CalibrationError(f"{where}: axes must be among x, y, z; got {list(axes)}")
+            raise fail(f"axes must be among x, y, z; got {list(axes)}", "accelerometers", k, "axes")
+        gain = numbers(a["gain"], None, f"{len(axes)} rows of 3 numbers", "accelerometers", k, "gain")
+        bias = numbers(a["bias_mps2"], None, f"{len(axes)} numbers [m/s²]", "accelerometers", k, "bias_mps2")
         try:
-            sensors.append(SensorCalibration(str(a["name"]), axes, np.array(a["gain"], float), np.array(a["bias_mps2"], float)))
+            sensors.append(SensorCalibration(str(a["name"]), axes, gain, bias))
         except (CalibrationError, ValueError) as exc:
-            raise CalibrationError(f"{where}: {exc}") from None
+            raise fail(str(exc), "accelerometers", k) from None
     gyro = doc.get("gyroscope", {}).get("bias_b_radps")
     if gyro is not None:
-        gyro = np.asarray(gyro, float)
-        if gyro.shape != (3,):
-            raise CalibrationError(f"{path}: gyroscope.bias_b_radps must be 3 numbers")
-    return Calibration(tuple(sensors), gyro, float(doc.get("gravity_mps2", GRAVITY_MPS2)), dict(doc.get("fit", {})))
+        gyro = numbers(gyro, (3,), "3 numbers [rad/s]", "gyroscope", 0, "bias_b_radps")
+    gravity = numbers(doc.get("gravity_mps2", GRAVITY_MPS2), (), "a number [m/s²]", "", 0, "gravity_mps2")
+    return Calibration(tuple(sensors), gyro, float(gravity), dict(doc.get("fit", {})))

@@ -239,3 +239,40 @@ def test_calibrate_cli_without_still_periods_says_what_to_do_on_the_command_line
         assert option in err
     assert "gfimu.calibration" not in err and "StillDetector" not in err
     assert not (tmp_path / "cal.toml").exists()
+
+
+def test_read_calibration_names_the_line_and_key_of_a_value_that_is_no_number(tmp_path):
+    """'could not convert string to float' never reaches the user: the file, line and key are named."""
+    from gfimu.cli import main
+
+    good = 'format = "gfimu-calibration/1"\n[[accelerometers]]\nname = "a"\ngain = [[1,0,0],[0,1,0],[0,0,1]]\n'
+    cases = {
+        "bias": (good + 'bias_mps2 = ["abc", 0, 0]\n', "c.toml:5: accelerometers[0].bias_mps2: expected 3 numbers "
+                 "[m/s²], got ['abc', 0, 0]"),
+        "gain": (good.replace("[0,0,1]]", '[0,0,"x"]]') + "bias_mps2 = [0, 0, 0]\n",
+                 "c.toml:4: accelerometers[0].gain: expected 3 rows of 3 numbers"),
+        "gyro": (good + "bias_mps2 = [0, 0, 0]\n[gyroscope]\nbias_b_radps = [\"x\", 1, 2]\n",
+                 "c.toml:7: gyroscope.bias_b_radps: expected 3 numbers [rad/s], got ['x', 1, 2]"),
+        "gravity": ('gravity_mps2 = "abc"\n' + good + "bias_mps2 = [0, 0, 0]\n",
+                    "c.toml:1: gravity_mps2: expected a number [m/s²], got 'abc'"),
+    }
+    for name, (text, message) in cases.items():
+        p = tmp_path / "c.toml"
+        p.write_text(text)
+        with pytest.raises(cal.CalibrationError) as info:
+            cal.read_calibration(p)
+        assert str(info.value) == f"{tmp_path}/{message}" or str(info.value).startswith(f"{tmp_path}/{message}"), name
+    # and from the command line: exit 2, one line naming the file, line and key, nothing written
+    (tmp_path / "b.csv").write_text("t [ms],ax [g],ay [g],az [g]\n0,0,0,1\n10,0,0,1\n")
+    (tmp_path / "m.toml").write_text('format = "gfimu-csv-map/1"\n[time]\ncolumn = "t"\n[[accelerometers]]\n'
+                                     'name = "a"\nx = "ax"\ny = "ay"\nz = "az"\n')
+    p.write_text(cases["bias"][0])
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        rc = main(["convert", "csv", str(tmp_path / "b.csv"), "--map", str(tmp_path / "m.toml"), "--calibration",
+                   str(p), "--out", str(tmp_path / "log")])
+    assert rc == 2 and err.getvalue().strip() == f"gfimu convert: error: {tmp_path}/{cases['bias'][1]}"
+    assert not (tmp_path / "log").exists()
