@@ -51,17 +51,6 @@ class Gaps:
     def __len__(self) -> int:
         return int(self.start_ns.size)
 
-    def inside(self, t_ns: np.ndarray) -> np.ndarray:
-        """(len(t_ns),) True where a time lies strictly inside one of the gaps."""
-        t = np.asarray(t_ns, dtype=np.int64)
-        if not len(self):
-            return np.zeros(t.size, dtype=bool)
-        k = np.searchsorted(self.start_ns, t, side="left") - 1  # last gap starting strictly before t
-        ok = k >= 0
-        out = np.zeros(t.size, dtype=bool)
-        out[ok] = t[ok] < self.end_ns[k[ok]]
-        return out
-
 
 def find_gaps(stamps_ns: np.ndarray, max_gap_periods: float = MAX_GAP_PERIODS) -> Gaps:
     """The gaps of sorted, distinct ``stamps_ns``: steps over ``max_gap_periods`` × the nominal period."""

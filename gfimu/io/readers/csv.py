@@ -1038,7 +1038,7 @@ READER = Reader(
             "others) read by a column map (--map FILE.toml or a preset)",
     read=read,
     add_arguments=_add_arguments,
-    input_help="the CSV file, or the folder holding the files the map names",
+    input_help="the CSV file, or the folder or zip archive holding the files the map names",
 )
 
 __all__ = ["MAP_FORMAT", "PRESETS", "READER", "load_map", "parse_map", "read_csv_recording", "read_table",
