@@ -175,3 +175,23 @@ def test_a_decimal_comma_value_under_a_decimal_point_map_names_the_fix(tmp_path)
     assert rc == 2 and err.strip() == (f"gfimu convert: error: {tmp_path / 'x.csv'}:3: 'ax' (field 2) value '1,5' "
                                        "is not a number (a decimal comma: give [csv] decimal = \",\" or \"auto\" "
                                        "in the map)")
+
+
+def test_a_zip_with_one_top_folder_and_phyphox_raw_data_in_a_zip(tmp_path):
+    import zipfile
+
+    folder = sensor_logger_export(tmp_path / "2023-11-14_22-13-20", "android")
+    with zipfile.ZipFile(tmp_path / "sl.zip", "w") as z:
+        for p in sorted(folder.iterdir()):
+            z.write(p, arcname=f"{folder.name}/{p.name}")
+    log, out = converted(tmp_path, tmp_path / "sl.zip", "--map", "sensorlogger")
+    np.testing.assert_allclose(log.accel_mps2, motion((log.timestamps_ns - T0_NS) * 1e-9)[0], rtol=0, atol=1e-12)
+    raw = ("Time (s),Acceleration x (m/s^2),Acceleration y (m/s^2),Acceleration z (m/s^2),"
+           "Absolute acceleration (m/s^2)\n0.0,0.1,0.2,9.8,9.8\n0.01,0.1,0.25,9.8,9.8\n0.02,0.1,0.2,9.75,9.8\n")
+    with zipfile.ZipFile(tmp_path / "raw.zip", "w") as z:
+        z.writestr("Raw Data.csv", raw)
+    rc, out, err = run(str(tmp_path / "raw.zip"), "--map", "phyphox", "--out", str(tmp_path / "log2"))
+    assert rc == 0, err
+    log = gio.read_log(tmp_path / "log2", check=False)
+    assert log.timestamps_ns.tolist() == [0, 10_000_000, 20_000_000]
+    assert log.accel_mps2.tolist() == [[0.1, 0.2, 9.8], [0.1, 0.25, 9.8], [0.1, 0.2, 9.75]]
