@@ -61,8 +61,8 @@ def test_m_per_s2_values_under_a_g_header(moving, tmp_path):
     assert len(warning) == 1, err
     m = median_specific_force(moving) * G
     assert f"{csv} (columns 'a1_x [g]', 'a1_y [g]', 'a1_z [g]', ... read as [g])" in warning[0]
-    assert f"median |f| = {m:.4g} m/s²" in warning[0] and "likely the values are in m/s² under a [g] unit; give the " \
-                                                         "unit [m/s^2] (in the header or the map)" in warning[0]
+    assert f"median |f| = {m:.4g} m/s²" in warning[0]
+    assert "likely the values are in m/s² under a [g] unit; give the unit [m/s^2] (in the header or the map)" in warning[0]
     # reading the log written warns too, without a still stretch
     with pytest.warns(LogPlausibilityWarning, match=r"no still stretch, but .* likely m/s² taken for g"):
         gio.read_log(tmp_path / "log")

@@ -395,7 +395,7 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
         lines.append(f"gyro: the [gyroscope] of {array_path} is left out of the log (no --with-gyro)")
     out_array = replace(array, accelerometers=tuple(new_accs), gyroscope=gyroscope)
     a, b = al.overlap_ns
-    lines.append(f"time base: {1e9 / al.period_ns:.2f} Hz (the median of the streams' median periods), over the overlap of all "
+    lines.append(f"time base: {1e9 / al.period_ns:.2f} Hz (median of the median periods), over the overlap of all "
                  f"streams ({(b - a) * 1e-9:.3f} s): {al.timestamps_ns.size} sample(s); linear interpolation on header "
                  f"stamps, a grid time at most {al.max_offset_ns * 1e-6:.3f} ms from a stamp")
     if al.long_gaps:
