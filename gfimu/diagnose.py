@@ -189,10 +189,16 @@ class Diagnosis:
                   + (f", largest {t.largest_gap_s:.4g} s" if t.gaps else "")
                   + f"; {t.duplicates} repeated, {t.backwards} backward timestamp(s)", ""]
         m = self.model
+        level = (f"residual {m['noise_ratio']:.2f} x the stated noise" if m["noise_ratio"] is not None
+                 else "no noise level stated (measured from the residual)")
+        stated = (f"stated {self.stated_noise_mps2:.3g} m/s^2" if np.isfinite(self.stated_noise_mps2)
+                  else "none stated")
+        floored = (f"; below the readings' resolution, floored at {m['resolution_floor_mps2']:.3g} m/s^2"
+                   if m.get("floored") else "")
         lines += ["rigid-body consistency (per-sample ML fit)",
-                  f"  residual {m['noise_ratio']:.2f} x the stated noise, {100 * m['tail_share']:.2f} % beyond 4 sigma; "
+                  f"  {level}, {100 * m['tail_share']:.2f} % beyond 4 sigma; "
                   + ("consistent with a rigid body" if m["consistent"] else "inconsistent: " + "; ".join(m["reasons"])),
-                  f"  noise floor {self.noise_floor_mps2:.3g} m/s^2 (stated {self.stated_noise_mps2:.3g} m/s^2)"
+                  f"  noise floor {self.noise_floor_mps2:.3g} m/s^2 ({stated}{floored})"
                   f" + {m['noise_slope_mps2_per_radps']:.3g} m/s^2 per rad/s",
                   "  sensor      residual [m/s^2]  x others  skew [ms]"]
         for s in self.per_sensor:

@@ -106,13 +106,20 @@ def test_explicit_densities_disable_the_tuning(turntable_log):
     assert tunes_process_noise(SmootherOptions(tune_process_noise=True))
     for changes in ({"omega_dot_random_walk_radps2_per_sqrt_s": 12.0}, {"process_axis_factors": (1.0, 1.0, 0.5)},
                     {"specific_force_random_walk_mps2_per_sqrt_s": 3.0}, {"tune_process_noise": False}):
-        est = FixedLagEstimator(tune_window_s=1.0, **changes)
+        est = FixedLagEstimator(tune_window_s=1.0, auto_model=False, **changes)
         assert not tunes_process_noise(est.options())
         sm = est.smoother(CUBE_5CM, RATE_HZ)
         log = turntable_log
         outs = [sm.push(log.timestamps_ns[i], log.accel_mps2[i]) for i in range(150)]
         assert outs[-1].filtered is not None and sm.tuning is None  # streaming from the start, as given
         assert sm.options == est.options()
+        # with the model check (the default) the given densities are kept once the readings are checked
+        sm = FixedLagEstimator(tune_window_s=1.0, **changes).smoother(CUBE_5CM, RATE_HZ)
+        for i in range(int(1.5 * RATE_HZ)):
+            sm.push(log.timestamps_ns[i], log.accel_mps2[i])
+        assert sm.tuning is None and sm.stream_model is not None and sm.stream_model.check.consistent
+        for name in explicit_process_noise(est.options()):
+            assert getattr(sm.options, name) == getattr(est.options(), name)
 
 
 def test_stream_waits_for_the_stretch_then_catches_up(turntable_log):

@@ -40,6 +40,8 @@ import numpy as np
 
 from ..factors import kinematics, process
 from ._fixed_lag_model import ArrayModel
+from .graph import robust_weight
+from .restarts import plane_normal
 
 
 class FilterFailure(RuntimeError):
@@ -49,16 +51,15 @@ class FilterFailure(RuntimeError):
 class WindowFilter:
     """The window of one segment: means, marginal variances and cross-covariances with the newest state."""
 
-    def __init__(self, model: ArrayModel, capacity: int = 256, iterations: int = 2,
-                 step_tolerance_radps: float = 1e-6) -> None:
-        self.model = model
+    def __init__(self, model: ArrayModel, capacity: int = 256, iterations: int = 4,
+                 step_tolerance_radps: float = 1e-6, branches: bool = False) -> None:
         self.iterations = int(iterations)
         self.step_tolerance_radps = float(step_tolerance_radps)
-        o = model.options
-        self._prior_var = np.repeat(np.array([o.initial_omega_std_radps, o.initial_omega_dot_std_radps2,
-                                              o.initial_specific_force_std_mps2], dtype=float) ** 2, 3)
-        self._R = model.accel_sigma_mps2 ** 2
-        self._gyro_var = model.gyro_sigma_radps ** 2
+        self._process_cache: dict = {}
+        self.branches = bool(branches)
+        """Try the other branches of each update's minimum (see :meth:`measure`)."""
+        self._normal = plane_normal(np.concatenate([np.atleast_2d(pos) for _, pos, _ in model._geometry]))
+        self.set_model(model)
         self._cap = max(int(capacity), 8)
         self._mean = np.zeros((self._cap, 9))
         self._var = np.zeros((self._cap, 9))
@@ -67,7 +68,6 @@ class WindowFilter:
         self._lo = self._hi = 0
         self._base = 0  # index k of slot 0
         self._P = np.zeros((9, 9))  # covariance of the newest state
-        self._process_cache: dict = {}
         self.n_updates = 0
         m = model.S_q.shape[0]
         # Jacobian buffers: the ω̇ and f columns are constant; the gyroscope rows select ω
@@ -76,9 +76,20 @@ class WindowFilter:
         self._Hg = np.zeros((m + 3, 9))
         self._Hg[:m] = self._H
         self._Hg[m + np.arange(3), np.arange(3)] = 1.0
-        self._Rg = np.concatenate([self._R, np.full(3, self._gyro_var)])
         self._diag = (np.arange(m), np.arange(m))
         self._diag_g = (np.arange(m + 3), np.arange(m + 3))
+
+    def set_model(self, model: ArrayModel) -> None:
+        """Go on with the noise levels of ``model`` (the same array): the steps and readings to come
+        are weighted by it, the window keeps what it has."""
+        self.model = model
+        o = model.options
+        self._prior_var = np.repeat(np.array([o.initial_omega_std_radps, o.initial_omega_dot_std_radps2,
+                                              o.initial_specific_force_std_mps2], dtype=float) ** 2, 3)
+        self._R = model.accel_sigma_mps2 ** 2
+        self._gyro_var = model.gyro_sigma_radps ** 2
+        self._Rg = np.concatenate([self._R, np.full(3, self._gyro_var)])
+        self._process_cache.clear()
 
     # --- window -------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -170,6 +181,19 @@ class WindowFilter:
             return pred, H
         return np.concatenate([pred, x[:3]]), H
 
+    def flip_omega(self, k_first: int) -> None:
+        """ω → -ω for the states from ``k_first`` to the newest (the other branch of q(ω) = q(-ω)):
+        their means, and the covariances, by ``D = diag(-I, I, I)`` on each flipped state."""
+        first = self._slot(k_first)
+        lo, hi = self._lo, self._hi
+        self._mean[first:hi, 0:3] *= -1.0
+        # C_i = Cov(x_i, x_newest): the newest is flipped, so every C_i gets D on its right, and the
+        # flipped ones D on their left too
+        self._cross[lo:hi, :, 0:3] *= -1.0
+        self._cross[first:hi, 0:3, :] *= -1.0
+        self._P[0:3, 3:] *= -1.0
+        self._P[3:, 0:3] *= -1.0
+
     # --- updates ------------------------------------------------------------------------
     def start(self, k: int) -> None:
         """First state of a segment, index ``k``: the weak zero-mean priors."""
@@ -181,11 +205,16 @@ class WindowFilter:
         self._cross[0] = self._P
         self._hi = 1
 
-    def predict(self, k: int, h: float) -> None:
-        """Append state ``k`` one step of ``h`` seconds after the newest."""
+    def predict(self, k: int, h: float, jerk_factor: float = 1.0) -> None:
+        """Append state ``k`` one step of ``h`` seconds after the newest; ``jerk_factor`` scales the
+        std of the step's white-jerk noise (the local motion density of
+        :func:`gfimu.smoother.auto.local_density_factors`, as the batch smoother's robust model)."""
         if k != self._base + self._hi:
             raise ValueError(f"state {k} does not follow the window's newest state")
         F, FT, Q = self._process(h)
+        if jerk_factor != 1.0:
+            Q = Q.copy()
+            Q[:6, :6] *= jerk_factor * jerk_factor
         self._make_room()
         lo, hi = self._lo, self._hi
         x = F @ self._mean[hi - 1]
@@ -200,32 +229,49 @@ class WindowFilter:
         self._P = P
         self._hi = hi + 1
 
-    def measure(self, y: np.ndarray, gyro=None, start=None, extra=None) -> None:
-        """Gauss-Newton update of the newest state with its readings, moving every state of the window.
+    def _branch_starts(self, x: np.ndarray) -> list[np.ndarray]:
+        """x on the other branches: ω flipped, ω mirrored through the array's plane (ω̇ moved so that a
+        planar array's readings stay fitted), both (:mod:`gfimu.smoother.restarts`)."""
+        n = self._normal
+        w, dw = x[0:3], x[3:6]
+        wn = float(w @ n)
+        mirrored = x.copy()
+        mirrored[0:3] = w - 2.0 * wn * n
+        mirrored[3:6] = dw - 2.0 * wn * np.cross(n, w)
+        flipped = x.copy()
+        flipped[0:3] = -w
+        both = mirrored.copy()
+        both[0:3] = -mirrored[0:3]
+        return [flipped, mirrored, both]
 
-        ``extra``: the factor groups' rows at this sample (:meth:`ArrayModel.sample_terms`), or None."""
-        lo, hi = self._lo, self._hi
-        xp = self._mean[hi - 1].copy()
-        P = self._P
-        if gyro is not None:
-            y = np.concatenate([y, gyro])
-            R, diag = self._Rg, self._diag_g
-        else:
-            R, diag = self._R, self._diag
-        x = xp if start is None else np.asarray(start, dtype=float)
+    def _solve(self, y: np.ndarray, gyro, xp: np.ndarray, P: np.ndarray, x: np.ndarray, extra):
+        """Gauss-Newton on J from ``x``: (x, H, S⁻¹ [H, ν] at the last linearisation, J at x)."""
+        R = self._Rg if gyro is not None else self._R
+        diag = self._diag_g if gyro is not None else self._diag
+        m = self.model
+        slope, c_robust = m.accel_noise_slope_mps2_per_radps, m.accel_robust_threshold
+        n_acc = m.S_q.shape[0]
+        if extra is not None:
+            n_extra = extra(x)[0].size
+            y = np.concatenate([y, np.zeros(n_extra)])
+            R = np.concatenate([R, np.ones(n_extra)])
+            diag = (np.arange(R.size), np.arange(R.size))
+        elif slope > 0 or c_robust > 0:
+            R = R.copy()
         rhs = np.empty((R.size, 10))
-        extended = False
-        for _ in range(max(self.iterations, 1)):
+        iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
+        for it in range(iterations):
+            if slope > 0 or c_robust > 0:  # the accelerometer variances at x (motion-dependent, robust)
+                base = self._R if slope <= 0 else self._R + (slope * slope) * float(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+                R[:n_acc] = base
+                if c_robust > 0 and it > 0:
+                    r = y[:n_acc] - self._measure(x, None)[0]
+                    R[:n_acc] = base / robust_weight(r / np.sqrt(base), c_robust, m.robust_loss)
             pred, H = self._measure(x, gyro)
             if extra is not None:  # the groups' whitened rows: readings 0, prediction r(x), unit noise
                 r_e, J_e = extra(x)
                 H = np.vstack([H, J_e])
                 pred = np.concatenate([pred, r_e])
-                if not extended:
-                    y, R = np.concatenate([y, np.zeros(r_e.size)]), np.concatenate([R, np.ones(r_e.size)])
-                    diag = (np.arange(R.size), np.arange(R.size))
-                    rhs = np.empty((R.size, 10))
-                    extended = True
             rhs[:, :9] = H
             rhs[:, 9] = y - pred + H @ (x - xp)  # innovation of the linearisation at x
             PHt = P @ H.T
@@ -238,8 +284,46 @@ class WindowFilter:
             x_new = xp + PHt @ Z[:, -1]
             step = abs(x_new[0] - x[0]) + abs(x_new[1] - x[1]) + abs(x_new[2] - x[2])
             x = x_new
-            if step < self.step_tolerance_radps:
+            if step < self.step_tolerance_radps and (c_robust <= 0 or it > 0):
                 break
+        H = H.copy()
+        if not self.branches:
+            return x, H, Z, 0.0
+        pred = self._measure(x, gyro)[0]
+        if extra is not None:
+            pred = np.concatenate([pred, extra(x)[0]])
+        r = y - pred
+        d = x - xp
+        try:
+            prior = float(d @ np.linalg.solve(P, d))
+        except np.linalg.LinAlgError:
+            prior = 0.0
+        return x, H, Z, float(np.sum(r * r / R)) + prior
+
+    def measure(self, y: np.ndarray, gyro=None, start=None, extra=None) -> None:
+        """Gauss-Newton update of the newest state with its readings, moving every state of the window.
+
+        The update is the minimum of ``J(x) = ||y - h(x)||²_R + ||x - x̂||²_P`` (the readings and the
+        prediction x̂): Gauss-Newton from the prediction (or ``start``), and, with :attr:`branches`,
+        from the other branches of that minimum too (ω sign-flipped, ω mirrored through the array's
+        plane, both: :mod:`gfimu.smoother.restarts`), keeping the lowest J. The readings see ω only
+        through q(ω), and a planar array confuses ω with its mirror image; a prediction far from the
+        truth (fast motion between samples) otherwise leads Gauss-Newton onto such a branch.
+
+        ``extra``: the factor groups' rows at this sample (:meth:`ArrayModel.sample_terms`), or None."""
+        lo, hi = self._lo, self._hi
+        xp = self._mean[hi - 1].copy()
+        P = self._P
+        if gyro is not None:
+            y = np.concatenate([y, gyro])
+        best = self._solve(y, gyro, xp, P, xp if start is None else np.asarray(start, dtype=float), extra)
+        if self.branches and start is None and gyro is None:
+            for branch in self._branch_starts(best[0]):
+                candidate = self._solve(y, gyro, xp, P, branch, extra)
+                if candidate[3] < best[3]:
+                    best = candidate
+        _, H, Z, _ = best
+
         # the last linearisation moves the whole window
         g = H.T @ Z[:, -1]  # Hᵀ S⁻¹ ν
         A = H.T @ Z[:, :-1]  # Hᵀ S⁻¹ H

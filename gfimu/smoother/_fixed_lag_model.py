@@ -135,6 +135,12 @@ class ArrayModel:
         self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
         self.gyro_sigma_radps = float(noise.gyro_noise_std(array))  # as the batch smoother
         self.groups = tuple(options.factor_groups)
+        # the robust model of an inconsistent log (gfimu.smoother.auto): the noise grows with |ω| and
+        # each axis may be weighted by the robust loss of its whitened residual (the stream's model
+        # leaves that off: see gfimu.smoother.stream_model)
+        self.accel_noise_slope_mps2_per_radps = float(options.accel_noise_slope_mps2_per_radps)
+        self.accel_robust_threshold = float(options.accel_robust_threshold) if options.measurement == "accelerometer" else 0.0
+        self.robust_loss = options.robust_loss
 
     def sample_terms(self, t_ns: int, y: np.ndarray, gyro=None):
         """The factor groups of the options at one sample: None when none applies there, else a function

@@ -67,35 +67,78 @@ class ModelCheck:
     """Rigid-body consistency of a log, and the model it leads to (:func:`check_model`)."""
 
     consistent: bool
-    """Whether the readings follow the rigid-body model up to white noise of the stated level."""
+    """Whether the readings follow the rigid-body model up to white noise (of the stated level, when
+    one is stated)."""
     samples: int
     noise_ratio: float
-    """Robust residual scale / stated noise std."""
+    """Robust residual scale / stated noise std (NaN when no axis states a noise)."""
     tail_share: float
     """Share of residuals beyond 4 robust scales."""
     noise_floor_mps2: float
-    """σ₀ of the fit ``E[r²] = σ₀² + (s |ω|)²`` [m/s²]."""
+    """σ₀ of the fit ``E[r²] = σ₀² + (s |ω|)²`` [m/s²], at least :attr:`resolution_floor_mps2`."""
     noise_slope_mps2_per_radps: float
     """s of that fit [m/s² per rad/s] (0 when the residual does not grow with |ω|)."""
     omega_p90_radps: float
     """90th percentile of the per-sample |ω| [rad/s]."""
     stated_noise_mps2: float
-    """Mean stated noise std of the axes [m/s²]."""
+    """Mean stated noise std of the axes that state one [m/s²] (NaN when none does)."""
     reasons: tuple[str, ...] = ()
     """Why the log is inconsistent (empty when consistent)."""
+    resolution_floor_mps2: float = 0.0
+    """The smallest noise std the readings can show [m/s²]: their quantisation step / √12, and at least
+    1e-9 of their RMS (double precision); a measured floor below it is raised to it."""
+    floored: bool = False
+    """Whether the measured noise floor was below :attr:`resolution_floor_mps2` (and raised to it)."""
+    constant: bool = False
+    """Whether every reading is the same at every sample (nothing to estimate beyond one sample)."""
+
+    @property
+    def noise_stated(self) -> bool:
+        """Whether any axis states a noise std."""
+        return bool(np.isfinite(self.stated_noise_mps2))
 
     def describe(self) -> str:
+        if self.constant:
+            return "readings are constant: nothing to estimate beyond a single sample"
         head = ("readings consistent with a rigid body (Gaussian model, noise by marginal likelihood)" if self.consistent
                 else "readings disagree with a rigid body beyond white noise (robust model): " + "; ".join(self.reasons))
-        return (f"{head}. Residual {self.noise_ratio:.1f} x the stated {self.stated_noise_mps2:.3g} m/s^2, "
-                f"{100 * self.tail_share:.2f} % beyond 4 sigma, floor {self.noise_floor_mps2:.3g} m/s^2 "
+        if self.noise_stated:
+            level = (f"Residual {self.noise_ratio:.1f} x the stated {self.stated_noise_mps2:.3g} m/s^2, "
+                     f"floor {self.noise_floor_mps2:.3g} m/s^2")
+        else:
+            level = f"No noise level stated: measured {self.noise_floor_mps2:.3g} m/s^2 from the log's own residual"
+        if self.floored:
+            level += f" (below the readings' resolution, floored at {self.resolution_floor_mps2:.3g} m/s^2)"
+        return (f"{head}. {level}, {100 * self.tail_share:.2f} % beyond 4 sigma, "
                 f"+ {self.noise_slope_mps2_per_radps:.3g} m/s^2 per rad/s")
 
     def as_dict(self) -> dict:
-        return {"consistent": self.consistent, "samples": self.samples, "noise_ratio": self.noise_ratio,
+        def num(v):
+            return float(v) if np.isfinite(v) else None
+
+        return {"consistent": self.consistent, "samples": self.samples, "noise_ratio": num(self.noise_ratio),
                 "tail_share": self.tail_share, "noise_floor_mps2": self.noise_floor_mps2,
                 "noise_slope_mps2_per_radps": self.noise_slope_mps2_per_radps, "omega_p90_radps": self.omega_p90_radps,
-                "stated_noise_mps2": self.stated_noise_mps2, "reasons": list(self.reasons)}
+                "stated_noise_mps2": num(self.stated_noise_mps2), "reasons": list(self.reasons),
+                "resolution_floor_mps2": self.resolution_floor_mps2, "floored": self.floored,
+                "constant": self.constant}
+
+
+def resolution_floor(accel_mps2: np.ndarray) -> float:
+    """The smallest noise std [m/s²] readings ``accel_mps2`` (N, axes) can show: the median over the
+    axes of their quantisation step (the smallest gap between two of an axis' distinct values) / √12,
+    the std of rounding to that step, and at least 1e-9 of the readings' RMS (double precision)."""
+    a = np.asarray(accel_mps2, dtype=float)
+    a = a[np.all(np.isfinite(a), axis=1)]
+    if not a.size:
+        return 0.0
+    steps = []
+    for col in a.T:
+        u = np.unique(col)
+        if u.size >= 2:
+            steps.append(float(np.min(np.diff(u))))
+    quantum = float(np.median(steps)) / np.sqrt(12.0) if steps else 0.0
+    return max(quantum, 1e-9 * float(np.sqrt(np.mean(a * a))))
 
 
 def rigid_body_residual(log: Log, omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray,
@@ -146,7 +189,10 @@ def noise_vs_rate(residual_mps2: np.ndarray, omega_b_radps: np.ndarray, dof_fact
 
 def check_model(log: Log, ml_motion, residual: np.ndarray | None = None) -> ModelCheck:
     """:class:`ModelCheck` of ``log`` from its per-sample ML estimate ``ml_motion`` (a Motion); ``residual``:
-    its :func:`rigid_body_residual` when already computed."""
+    its :func:`rigid_body_residual` when already computed.
+
+    Where no axis states a noise std, the check is of Gaussianity alone (tails, growth with |ω|) and
+    the noise level is the one measured; axes without a stated std are left out of the ratio."""
     r = residual if residual is not None else rigid_body_residual(
         log, ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2)
     ok = np.all(np.isfinite(r), axis=1)
@@ -156,19 +202,35 @@ def check_model(log: Log, ml_motion, residual: np.ndarray | None = None) -> Mode
     stated = log.array.noise_std_per_axis_mps2
     stated = np.where(np.isfinite(stated) & (stated > 0), stated, np.nan)
     stated_mean = float(np.nanmean(stated)) if np.any(np.isfinite(stated)) else float("nan")
+    accel = log.accel_mps2[ok]
+    resolution = resolution_floor(accel)
+    constant = bool(len(accel) >= 2 and np.all(np.ptp(accel, axis=0) == 0))
     scale = 1.4826 * np.median(np.abs(r), axis=0) * np.sqrt(dof_factor)  # per axis
-    ratio = float(np.median(scale / stated)) if np.isfinite(stated_mean) else float("inf")
+    scale = np.maximum(scale, resolution)
+    ratio = float(np.nanmedian(scale / stated)) if np.isfinite(stated_mean) else float("nan")
     tail = float(np.mean(np.abs(r) > 4.0 * scale[None, :] / np.sqrt(dof_factor))) if r.size else 0.0
     floor, slope = noise_vs_rate(r, omega, dof_factor)
+    floored = floor < resolution
+    floor = max(floor, resolution)
     w90 = float(np.quantile(np.linalg.norm(omega, axis=1), 0.9)) if len(omega) else 0.0
     reasons = []
-    if not ratio < NOISE_RATIO_LIMIT:
-        reasons.append(f"residual {ratio:.1f} x the stated noise" if np.isfinite(ratio) else "no noise std stated")
+    if np.isfinite(ratio) and not ratio < NOISE_RATIO_LIMIT:
+        reasons.append(f"residual {ratio:.1f} x the stated noise")
     if tail > TAIL_SHARE_LIMIT:
         reasons.append(f"{100 * tail:.2f} % of residuals beyond 4 sigma")
     if floor > 0 and (slope * w90 / floor) ** 2 > SLOPE_VARIANCE_LIMIT:
         reasons.append(f"residual grows with |omega| ({slope:.3g} m/s^2 per rad/s)")
-    return ModelCheck(not reasons, int(len(r)), ratio, tail, floor, slope, w90, stated_mean, tuple(reasons))
+    return ModelCheck(not reasons, int(len(r)), ratio, tail, floor, slope, w90, stated_mean, tuple(reasons),
+                      resolution, bool(floored), constant)
+
+
+def measured_noise_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptions:
+    """``options`` for a consistent log: where no axis states a noise std, the measured floor is the
+    accelerometer noise (:func:`gfimu.noise.accel_noise_std` then fills every axis with it)."""
+    user_set = options.default_accel_noise_std_mps2 != SmootherOptions.default_accel_noise_std_mps2
+    if check.noise_stated or user_set or not check.noise_floor_mps2 > 0:
+        return options
+    return replace(options, default_accel_noise_std_mps2=float(check.noise_floor_mps2))
 
 
 def misfit_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptions:
@@ -209,7 +271,7 @@ MOTION_PERIOD_S = 0.5
 
 
 def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.ndarray,
-                     noise_var_force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                     noise_var_force: np.ndarray, with_motion: bool = False):
     """Per-axis jerk density [rad/s²/√s] and specific-force density [m/s²/√s] of the motion, from the
     steps of the per-sample estimate ``states`` [ω, ω̇, f]: a random walk of density q has steps of
     std ``q √h``; the estimate's own noise (variances ``noise_var_*``, independent per sample) gives
@@ -217,9 +279,11 @@ def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.nd
     q is the robust scale (1.4826 × median absolute value) of the motion's steps / √h, the scale
     of the Cauchy core that the robust motion-model loss expects (its heavy tail, the sudden jerks,
     goes through the loss). A log that rests part of the time keeps the density of its motion;
-    a log without motion gets the density of the noise."""
+    a log without motion gets the density of the noise. ``with_motion``: also say whether motion was
+    found (jerk, force, found)."""
     h = np.asarray(dt_s, dtype=float)
     out = []
+    found = False
     for sl, v in ((slice(3, 6), noise_var_jerk), (slice(6, 9), noise_var_force)):
         steps = np.diff(states[:, sl], axis=0) / np.sqrt(h)[:, None]
         rest = np.sqrt((v[:-1] + v[1:]) / h[:, None])
@@ -230,10 +294,11 @@ def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.nd
         floor = np.median(rest, axis=0)
         if np.count_nonzero(moving) >= max(10, 0.01 * len(z2)):
             q = 1.4826 * np.median(np.abs(steps[moving]), axis=0)
+            found = found or sl.start == 3
         else:
             q = floor
         out.append(np.maximum(q, floor))
-    return out[0], out[1]
+    return (out[0], out[1], found) if with_motion else (out[0], out[1])
 
 
 def with_densities(options: SmootherOptions, jerk: np.ndarray, force: np.ndarray) -> SmootherOptions:

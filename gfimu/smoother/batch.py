@@ -34,6 +34,7 @@ from ..rotations import quaternion_from_matrix
 from .auto import (
     check_model,
     estimate_noise_variances,
+    measured_noise_options,
     local_density_factors,
     misfit_options,
     motion_densities,
@@ -170,6 +171,10 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     notes = []
     iterations, cost = 0, 0.0
     opt, auto = chosen_model(log, opt, attitude) if auto_model else (opt, None)
+    if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
+        motion = MLEstimator().estimate(log)
+        return SmootherResult(motion, (), (), 0, 0.0, 0, (f"{log.source}: {auto[0].describe()}; the per-sample "
+                                                          "estimate is returned",), auto[0])
     if attitude:  # each window starts from the attitude of the one before: in turn
         outcomes = _attitude_windows(log, opt, windows, initial, solver, progress)
     else:
@@ -293,7 +298,7 @@ def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
     motion = ml.estimate(sample)
     check = check_model(sample, motion)
     if check.consistent:
-        return opt, (check, None)
+        return measured_noise_options(opt, check), (check, None)
     if step > 1:
         motion = ml.estimate(log)
     chosen = misfit_options(opt, check)

@@ -97,7 +97,23 @@ from .graph import SmootherOptions, options_reason
 from .initialise import initial_estimate
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .result import SmootherEstimatorRuns, SmootherResult
+from . import stream_model
+from .auto import measured_noise_options
+from .stream_model import LocalDensity, StreamModel, StreamSignChain
 from .tuning import tuned_problem
+from ..estimators.ml import MLEstimator
+
+OUTGROWN_FACTOR = 2.0
+"""The model is chosen again at once (at most once a second) when the local motion density exceeds
+its jerk density this many times (a factor four in power: the body moves faster than the model allows)."""
+
+
+def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | None:
+    """Why the fixed-lag smoother cannot check its model on the data (None if it can): the check
+    needs the per-sample ML fit of the accelerometers."""
+    if options.measurement != "accelerometer":
+        return "measurement is not 'accelerometer'"
+    return MLEstimator().applicable(array)
 
 
 class FixedLagSmootherError(RuntimeError):
@@ -236,7 +252,8 @@ class FixedLagSmoother:
                  rate_hz: float = 500.0, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10,
                  marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
                  fast_measurement: bool = True, tune_window_s: float = 3.0, engine: str = "numpy",
-                 clock_reset_s: float = 1.0) -> None:
+                 clock_reset_s: float = 1.0, auto_model: bool = False, retune_every_s: float = 10.0,
+                 model_window_s: float = 30.0, branches: bool = True) -> None:
         options = options or SmootherOptions()
         if engine not in ENGINES:
             raise ValueError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
@@ -257,8 +274,10 @@ class FixedLagSmoother:
             raise ValueError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
         if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
             raise ValueError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
-        if not (isinstance(tune_window_s, (int, float)) and math.isfinite(tune_window_s) and tune_window_s > 0):
-            raise ValueError(f"fixed-lag smoother: tune_window_s must be a positive number, got {tune_window_s!r}")
+        for name, v in (("tune_window_s", tune_window_s), ("retune_every_s", retune_every_s),
+                        ("model_window_s", model_window_s)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
         self.array = array
         self.options = options
         self.lag_s = float(lag_s)
@@ -272,7 +291,21 @@ class FixedLagSmoother:
         self.factorization = "QR"
         self.model = model.ArrayModel(array, options, fast_measurement)
         self.tuning = None  # gfimu.smoother.tuning.Tuning once chosen from the data
-        self._tune_pending = tunes_process_noise(options)
+        self._user_options = options
+        self._tune = tunes_process_noise(options)
+        self._auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
+        self._tune_pending = self._tune or self._auto
+        self.stream_model: StreamModel | None = None
+        """The model in use (:mod:`gfimu.smoother.stream_model`), once chosen."""
+        self.models: list[StreamModel] = []
+        """Every model chosen so far, oldest first."""
+        self._history: deque = deque(maxlen=max(2, int(round(max(model_window_s, tune_window_s) * self.rate_hz))))
+        self._retune_ns = int(round(retune_every_s * 1e9))
+        self._local = LocalDensity(array)
+        self._jerk_factor = 1.0
+        self._ml = MLEstimator(workers=1) if self._auto else None
+        self._branches = bool(branches)
+        self._signs = StreamSignChain(int(math.ceil(self.lag_s * self.rate_hz)) + 2)
         self._tune_n = max(2, int(round(tune_window_s * self.rate_hz)))
         # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
         self._tune_min_n = min(self._tune_n, max(2, int(round(1.0 * self.rate_hz))))
@@ -388,6 +421,7 @@ class FixedLagSmoother:
 
     def _process(self, sample) -> list[StateEstimate]:
         """One sample into the current segment (no tuning, no gap check); the states due."""
+        self._observe(sample)
         if self._smoother is None:
             self._warmup.append(sample)
             if len(self._warmup) < self._warmup_n:
@@ -412,9 +446,7 @@ class FixedLagSmoother:
         samples, self._tune_buffer = self._tune_buffer, []
         batch = None
         if not final or len(samples) >= self._tune_min_n:
-            self.tuning, tuned, batch = self._tune_and_solve(samples)
-            self.options = tuned
-            self.model = model.ArrayModel(self.array, tuned, self.fast_measurement, self.tuning.accel_noise_scale)
+            batch = self._choose(samples, first=True)
             self._tune_pending = False
         if batch is not None and final:  # the segment ends here: the batch solution is all there is to say
             return batch
@@ -433,25 +465,104 @@ class FixedLagSmoother:
             gyro = np.vstack([s[2] for s in samples])
         return Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag tuning stretch")
 
-    def tune(self, samples) -> tuple:
-        """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
-        (:class:`gfimu.smoother.tuning.Tuning`, options carrying it)."""
-        tunings: list = []
-        problem, _ = tuned_problem(self._stretch_log(samples), replace(self.options, tune_process_noise=True), tunings)
-        return tunings[-1], tunings[-1].for_stream(replace(problem.options, tune_process_noise=False))
-
-    def _tune_and_solve(self, samples):
-        """:meth:`tune`, plus the batch smoother's states of the stretch with the selection."""
+    def _choose(self, samples, first: bool = False):
+        """Choose the model on ``samples`` ((t_ns, accel, gyro, ...) tuples, oldest first) and go on with
+        it (:mod:`gfimu.smoother.stream_model`). The first choice of a consistent stretch whose process
+        noise is tuned also returns the batch smoother's states of the stretch (else None)."""
         part = self._stretch_log(samples)
+        ml = self._ml_motion(samples, part) if self._auto else None
+        check = stream_model.check_of(part, ml)
+        batch = None
+        base = self._user_options if check is None else measured_noise_options(self._user_options, check)
+        if check is not None and not check.consistent:
+            chosen = stream_model.robust(part, self._user_options, check, ml, self._tune, self.stream_model)
+        elif not self._tune or (check is not None and check.constant):
+            chosen = stream_model.StreamModel(base, 1.0, check, None, int(part.timestamps_ns[-1]), len(part))
+        elif first:
+            tuning, problem, x0 = self._tuned(part, base)
+            chosen = stream_model.from_tuning(tuning, problem.options, check, part)
+            batch = self._batch_states(part, problem, x0)
+        else:
+            span = part if len(part) <= self._tune_n else part.select(slice(len(part) - self._tune_n, None))
+            chosen = stream_model.gaussian(span, base, check)
+        if chosen.sign_scale_radps is None and ml is not None:
+            chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
+        self._use(chosen)
+        return batch
+
+    def _use(self, chosen: StreamModel) -> None:
+        self.stream_model = chosen
+        self.models.append(chosen)
+        self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
+        self.options = chosen.options
+        self.model = model.ArrayModel(self.array, chosen.options, self.fast_measurement, chosen.accel_noise_scale)
+        if isinstance(self._smoother, WindowFilter):
+            self._smoother.set_model(self.model)
+
+    def _ml_motion(self, samples, part: Log):
+        """The per-sample ML estimate of ``samples``, each computed once: kept in the samples' history
+        entries (their fourth item) and computed here for those that have none yet."""
+        rows = [s[3] if len(s) > 3 else None for s in samples]
+        todo = [i for i, r in enumerate(rows) if r is None]
+        if todo:
+            fresh = self._ml.estimate(part.select(np.asarray(todo)))
+            x = np.hstack([fresh.omega_b_radps, fresh.omega_dot_b_radps2, fresh.specific_force_b_mps2])
+            for j, i in enumerate(todo):
+                rows[i] = x[j]
+                if len(samples[i]) > 3:
+                    samples[i][3] = x[j]
+        x = np.vstack(rows)
+        return Motion(part.timestamps_ns, omega_b_radps=x[:, 0:3], omega_dot_b_radps2=x[:, 3:6],
+                      specific_force_b_mps2=x[:, 6:9])
+
+    def _tuned(self, part: Log, options: SmootherOptions | None = None):
+        """The batch smoother's process-noise selection on ``part``: (Tuning, problem, initial states)."""
         tunings: list = []
-        problem, x0 = tuned_problem(part, replace(self.options, tune_process_noise=True), tunings)
+        problem, x0 = tuned_problem(part, replace(options or self._user_options, tune_process_noise=True), tunings)
+        return tunings[-1], problem, x0
+
+    def _batch_states(self, part: Log, problem, x0) -> list[StateEstimate]:
+        """The batch smoother's states of ``part`` with ``problem``."""
         res = solve(problem, x0, None, compute_sigma=self.compute_sigma)
         X = res.states
         sd = np.sqrt(np.einsum("nii->ni", res.covariance)) if self.compute_sigma else None
-        states = [StateEstimate(int(t), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
-                                *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
-                  for j, t in enumerate(part.timestamps_ns)]
-        return tunings[-1], tunings[-1].for_stream(replace(problem.options, tune_process_noise=False)), states
+        return [StateEstimate(int(t), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
+                              *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
+                for j, t in enumerate(part.timestamps_ns)]
+
+    def tune(self, samples) -> tuple:
+        """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
+        (:class:`gfimu.smoother.tuning.Tuning`, options carrying it)."""
+        tuning, problem, _ = self._tuned(self._stretch_log(samples))
+        return tuning, tuning.for_stream(replace(problem.options, tune_process_noise=False))
+
+    def _observe(self, sample) -> None:
+        """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
+        choose again when due (every ``retune_every_s``) or when the motion outgrows the model."""
+        if not (self._auto or self._tune) or self.stream_model is None:
+            return
+        entry = [sample[0], sample[1], sample[2], None]
+        self._history.append(entry)
+        chosen = self.stream_model
+        o = chosen.options
+        q = o.omega_dot_random_walk_radps2_per_sqrt_s
+        if chosen.robust:
+            c = chosen.check
+            w2 = 0.0 if self._prev is None else float(self._prev[1] @ self._prev[1])
+            var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
+        else:
+            var = float(np.mean(self.model.accel_sigma_mps2 ** 2))
+        local = self._local.push(sample[0], sample[1], var)
+        self._jerk_factor = 1.0
+        if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
+            self._jerk_factor = min(1.0, local / q)
+        due = sample[0] - chosen.chosen_at_ns >= self._retune_ns
+        # a model chosen on a still stretch that the body now outmoves: choose again at once (at most once
+        # a second), on the history that now holds the motion
+        outgrown = (not chosen.moving and local is not None and local > OUTGROWN_FACTOR * q
+                    and sample[0] - chosen.chosen_at_ns >= 1e9)
+        if (due or outgrown) and len(self._history) >= self._tune_min_n:
+            self._choose(list(self._history))
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
@@ -500,11 +611,12 @@ class FixedLagSmoother:
         self._warmup: list = []
         self._k = -1
         self._prev = None  # (t_ns, omega, omega_dot, f) of the newest state (filtered)
+        self._signs.reset()
 
     def _new_smoother(self):
         if self.engine == "numpy":
             lag_n = int(math.ceil(self.lag_s * self.rate_hz * self.gap_factor)) + 4
-            return WindowFilter(self.model, capacity=4 * lag_n)
+            return WindowFilter(self.model, capacity=4 * lag_n, branches=self._branches)
         params = gtsam.ISAM2Params()
         # Only ω enters the factors nonlinearly (through q(ω)); the Jacobians of
         # ω̇ and f are constant, so relinearising them would only cost time.
@@ -610,8 +722,9 @@ class FixedLagSmoother:
         h = (t_ns - self._prev[0]) * 1e-9
         if isinstance(self._smoother, WindowFilter):
             try:
-                self._smoother.predict(k, h)
+                self._smoother.predict(k, h, self._jerk_factor)
                 self._smoother.measure(y, gyro, extra=self.model.sample_terms(t_ns, y, gyro))
+                self._follow_sign(k, t_ns)
             except FilterFailure as err:
                 self._k = k_prev
                 self._recover(sample, FixedLagSmootherError(
@@ -637,6 +750,16 @@ class FixedLagSmoother:
         self._window.append((k, t_ns))
         self._raw.append(sample)
         self._remember_newest()
+
+    def _follow_sign(self, k: int, t_ns: int) -> None:
+        """The streaming sign chain on the newest filtered state; flip ω where it says so."""
+        scale = None if self.stream_model is None else self.stream_model.sign_scale_radps
+        if scale is None:
+            return
+        x = self._smoother.mean(k)
+        first = self._signs.push(k, t_ns, x[0:3], x[3:6], scale, self._window[0][0] if self._window else k)
+        if first is not None:
+            self._smoother.flip_omega(first)
 
     def _recover(self, sample, err: FixedLagSmootherError) -> None:
         """After a failed update: rebuild the window from its raw samples, once.
@@ -747,7 +870,14 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     tune_process_noise: bool = True
     """Choose the process noise from the first ``tune_window_s`` of data (see above)."""
     tune_window_s: float = 3.0
-    """Length of the stretch of data the process noise is chosen on [s] (the stream's one-time start-up delay)."""
+    """Length of the stretch of data the model is first chosen on [s] (the stream's one-time start-up delay)."""
+    auto_model: bool = True
+    """Check the readings against the rigid-body model on the stream's recent past and use the model the
+    batch smoother would (Gaussian, or robust with the measured noise floor and slope); engine 'numpy'."""
+    retune_every_s: float = 10.0
+    """Choose the model again on the recent past this often [s] (and at once when the motion outgrows it)."""
+    model_window_s: float = 30.0
+    """Length of the recent past the model is chosen on [s]."""
 
     lag_s: float = 0.2
     """Seconds of future data behind each estimate (the output delay of a live stream)."""
@@ -780,7 +910,8 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
                                 relinearize_skip=self.relinearize_skip, marginalise_every_s=self.marginalise_every_s,
                                 warmup_s=self.warmup_s, gap_factor=self.gap_factor,
                                 fast_measurement=self.fast_measurement, tune_window_s=self.tune_window_s,
-                                engine=self.engine)
+                                engine=self.engine, auto_model=self.auto_model, retune_every_s=self.retune_every_s,
+                                model_window_s=self.model_window_s)
 
     def applicable(self, array: SensorArray) -> str | None:
         return fixed_lag_reason(array, self.options())

@@ -1,0 +1,260 @@
+"""The fixed-lag smoother's model, chosen from the stream's own recent past as the batch smoother
+chooses it for a whole log (:mod:`gfimu.smoother.auto`).
+
+A stream cannot see its future, and its first seconds are often still (a sensor is switched on
+at rest), so a model chosen once at the start is chosen on the wrong data. The fixed-lag
+smoother therefore keeps the last ``model_window_s`` of readings and chooses again on them
+every ``retune_every_s``, and at once when the motion outgrows the model in use
+(:class:`LocalDensity`). Each choice is the batch smoother's, on that stretch:
+
+1. the per-sample maximum-likelihood fit (:class:`gfimu.estimators.ml.MLEstimator`) and the
+   model check (:func:`gfimu.smoother.auto.check_model`): do the readings follow the rigid-body
+   model up to white noise, and with which noise floor and growth with |ω|;
+2. a consistent stretch: the process noise by marginal likelihood
+   (:func:`gfimu.smoother.tuning.tuned_problem`);
+3. an inconsistent stretch: the robust model (:func:`gfimu.smoother.auto.misfit_options`: the
+   measured noise floor and slope, Cauchy weights on the accelerometer axes, per-sample ML
+   initialisation with its sign chain) and the process densities of the motion seen so far
+   (:func:`gfimu.smoother.auto.motion_densities`), never lower than those of earlier choices
+   (a still stretch keeps the densities of the motion seen before).
+
+Options the user set away from their defaults are kept, as in the batch smoother.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from ..log import Log
+from .auto import (ModelCheck, check_model, estimate_noise_variances, misfit_options, motion_densities,
+                   with_densities)
+from .graph import SmootherOptions
+from .initialise import sign_chain_scale
+from .tuning import Tuning, tuned_problem
+
+CHECK_SAMPLES = 5000
+"""At most this many samples of the stretch enter the model check (evenly spread), as the batch smoother."""
+
+
+@dataclass(frozen=True)
+class StreamModel:
+    """One choice of the fixed-lag smoother's model (frozen; a new choice is a new value)."""
+
+    options: SmootherOptions
+    """The smoother's options with the chosen noise levels and model."""
+    accel_noise_scale: float
+    """Factor on the accelerometer noise std of every axis."""
+    check: ModelCheck | None
+    """The model check of the stretch (None when it could not be made: no ML fit on this array)."""
+    tuning: Tuning | None
+    """The process-noise selection (consistent stretches), else None."""
+    chosen_at_ns: int
+    """Timestamp of the newest sample of the stretch it was chosen on [ns]."""
+    samples: int
+    """Samples of that stretch."""
+    moving: bool = True
+    """Whether the process densities are those of motion (False: of the noise, on a still stretch)."""
+    sign_scale_radps: float | None = None
+    """Cauchy scale of the sign chain's steps (:func:`gfimu.smoother.initialise.sign_chain_scale` of the
+    stretch's per-sample estimate; None: no sign chain)."""
+
+    @property
+    def robust(self) -> bool:
+        """Whether this is the robust model of an inconsistent stretch."""
+        return self.check is not None and not self.check.consistent
+
+
+def _kept(options: SmootherOptions, chosen: SmootherOptions) -> dict:
+    """The options the user set away from their defaults that the choice would change."""
+    defaults = {f.name: f.default for f in fields(SmootherOptions)}
+    return {name: getattr(options, name) for name in defaults
+            if name != "tune_process_noise" and getattr(options, name) != defaults[name]
+            and getattr(chosen, name) != getattr(options, name)}
+
+
+def check_of(part: Log, ml_motion) -> ModelCheck | None:
+    """The model check of the stretch ``part`` from its per-sample ML estimate (None: no check)."""
+    if ml_motion is None:
+        return None
+    step = max(1, len(part) // CHECK_SAMPLES)
+    if step == 1:
+        return check_model(part, ml_motion)
+    sl = slice(0, None, step)
+    return check_model(part.select(sl), ml_motion.select(sl))
+
+
+def gaussian(part: Log, options: SmootherOptions, check: ModelCheck | None) -> StreamModel:
+    """The Gaussian model of a consistent stretch: the process noise by marginal likelihood."""
+    tunings: list = []
+    problem, _ = tuned_problem(part, replace(options, tune_process_noise=True), tunings)
+    return from_tuning(tunings[-1], problem.options, check, part)
+
+
+def from_tuning(tuning: Tuning, options: SmootherOptions, check: ModelCheck | None, part: Log) -> StreamModel:
+    """The model that carries ``tuning`` (the options it was chosen with) on a stream."""
+    chosen = tuning.for_stream(replace(options, tune_process_noise=False))
+    return StreamModel(chosen, float(tuning.accel_noise_scale), check, tuning, int(part.timestamps_ns[-1]), len(part))
+
+
+def robust(part: Log, options: SmootherOptions, check: ModelCheck, ml_motion, tune: bool,
+           previous: StreamModel | None = None) -> StreamModel:
+    """The robust model of an inconsistent stretch (module docstring); ``tune``: its process densities
+    from the motion (else those of ``options``)."""
+    chosen = misfit_options(options, check)
+    moving = True
+    if tune:
+        x = np.hstack([ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2])
+        jerk, force, moving = motion_densities(x, part.dt_s, *estimate_noise_variances(
+            part.array, check, ml_motion.omega_b_radps), with_motion=True)
+        if not moving and previous is not None and previous.robust and previous.moving:
+            o = previous.options  # a still stretch: the motion seen before still counts
+            jerk = o.omega_dot_random_walk_radps2_per_sqrt_s * np.asarray(o.process_axis_factors)
+            force = o.specific_force_random_walk_mps2_per_sqrt_s
+            moving = True
+        chosen = with_densities(chosen, jerk, force)
+    # no robust weights on the readings: a recursive update weighs each sample's axes once, at the
+    # estimate that sample itself moved, and a poor prediction (fast motion between samples) would
+    # have the informative axes weighted down (on the MIMU4444 recordings the Cauchy weights made the
+    # stream's error worse by half); the measured floor and slope carry the noise level
+    chosen = replace(chosen, accel_robust_threshold=0.0, process_robust_threshold=0.0)
+    chosen = replace(chosen, **_kept(options, chosen))
+    chosen = replace(chosen, tune_process_noise=False)
+    scale = 1.0
+    if math.isfinite(check.stated_noise_mps2) and check.stated_noise_mps2 > 0 and check.noise_floor_mps2 > 0:
+        scale = check.noise_floor_mps2 / check.stated_noise_mps2
+    return StreamModel(chosen, float(scale), check, None, int(part.timestamps_ns[-1]), len(part), moving,
+                       sign_scale(part, ml_motion))
+
+
+def sign_scale(part: Log, ml_motion) -> float | None:
+    """The sign chain's Cauchy scale on ``part`` from its per-sample ML estimate (None without one)."""
+    if ml_motion is None:
+        return None
+    return sign_chain_scale(ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, part.dt_s)
+
+
+class LocalDensity:
+    """The local motion density of a stream, causally: the step power of the per-sample inversion's
+    ω̇ (paper 000, eq. 7: linear in the readings) above what its own noise gives, averaged over the
+    last ``period_s`` — the trailing form of :func:`gfimu.smoother.auto.local_density_factors`.
+
+    :meth:`push` takes each sample's readings and the |ω| expected there (which sets the noise of a
+    robust model) and returns the local jerk density [rad/s²/√s], or None until two samples came.
+    Needs an array whose structure matrix has full column rank (12 unknowns); :attr:`available`
+    says whether it has."""
+
+    def __init__(self, array, period_s: float = 0.5) -> None:
+        S = array.structure_matrix()
+        self.available = S.shape[0] >= 12 and np.linalg.matrix_rank(S) == 12
+        self.period_s = float(period_s)
+        if self.available:
+            self._pinv_dw = np.linalg.pinv(S)[3:6]
+            self._c_dw = float(np.sum(np.diag(np.linalg.pinv(S.T @ S))[3:6]))
+        self._steps: deque = deque()  # (t_ns, step power, noise power) of the last period
+        self._sum_steps = 0.0
+        self._sum_noise = 0.0
+        self._prev = None  # (t_ns, ω̇, noise variance)
+
+    def reset(self) -> None:
+        self._steps.clear()
+        self._sum_steps = self._sum_noise = 0.0
+        self._prev = None
+
+    def push(self, t_ns: int, y: np.ndarray, noise_var_mps2: float) -> float | None:
+        if not self.available:
+            return None
+        dw = self._pinv_dw @ y
+        var = self._c_dw * noise_var_mps2  # summed over the three axes
+        prev, self._prev = self._prev, (t_ns, dw, var)
+        if prev is None:
+            return None
+        h = (t_ns - prev[0]) * 1e-9
+        if not h > 0:
+            return None
+        d = dw - prev[1]
+        step, noise = float(d @ d) / h, (var + prev[2]) / h
+        self._steps.append((t_ns, step, noise))
+        self._sum_steps += step
+        self._sum_noise += noise
+        cutoff = t_ns - int(self.period_s * 1e9)
+        while self._steps and self._steps[0][0] <= cutoff:
+            _, s0, n0 = self._steps.popleft()
+            self._sum_steps -= s0
+            self._sum_noise -= n0
+        n = len(self._steps)
+        mean_steps, mean_noise = max(self._sum_steps, 0.0) / n, max(self._sum_noise, 0.0) / n
+        excess = max(mean_steps - mean_noise, mean_noise)
+        return math.sqrt(excess / 3.0)
+
+
+class StreamSignChain:
+    """The sign chain of :func:`gfimu.smoother.initialise.sign_chain` over a stream, fixed-lag.
+
+    The accelerometers see ω only through q(ω) = q(-ω); ω̇ is sign-free. The batch smoother
+    starts from per-sample estimates whose signs follow the trapezoid of ω̇ best over the whole log
+    (dynamic programming, two states per sample, a Cauchy loss of scale c on each step's misfit
+    ``||s_{k+1} ω_{k+1} - s_k ω_k - h/2 (ω̇_k + ω̇_{k+1})||``). A recursive estimate carries its
+    sign by the motion model instead, and where the motion model is loose (real arrays: a large
+    jerk density) it can bounce back where the rotation slowed through zero and reversed.
+
+    Here the same dynamic programme runs on the smoother's own filtered states, the sign ``s``
+    of each relative to the smoother's: :meth:`push` takes the newest state and returns the index
+    from which the smoother should flip ω (every state still in its window on the best path's last
+    run of ``-``), when that path beats keeping the signs by more than ``margin`` (in units of c²);
+    the flipped states then count as ``+`` (the costs swap) and the chain starts again from them.
+    """
+
+    def __init__(self, window: int, margin: float = 1.0) -> None:
+        self.window = max(int(window), 2)
+        self.margin = float(margin)
+        self.flips = 0
+        """Flips so far (every segment)."""
+        self.reset()
+
+    def reset(self) -> None:
+        self._cost = np.zeros(2)
+        self._back: deque = deque()  # (k of the later state, best earlier sign per later sign)
+        self._prev = None  # (k, t_ns, ω, ω̇)
+
+    def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
+             oldest_k: int) -> int | None:
+        prev, self._prev = self._prev, (k, t_ns, np.array(omega, dtype=float), np.array(omega_dot, dtype=float))
+        if prev is None:
+            return None
+        h = (t_ns - prev[1]) * 1e-9
+        inc = 0.5 * h * (prev[3] + self._prev[3])
+        w0, w1 = prev[2], self._prev[2]
+        step = np.empty((2, 2))  # from sign a (at k-1) to sign b (at k)
+        for a, sa in enumerate((1.0, -1.0)):
+            for b, sb in enumerate((1.0, -1.0)):
+                e = sb * w1 - sa * w0 - inc
+                step[a, b] = float(e @ e)
+        c2 = scale_radps * scale_radps
+        step = c2 * np.log1p(step / c2)
+        total = self._cost[:, None] + step
+        back = np.argmin(total, axis=0)
+        self._cost = total[back, [0, 1]]
+        self._cost -= self._cost.min()  # only the difference matters (and it stays bounded)
+        self._back.append((k, back))
+        while len(self._back) > self.window or (self._back and self._back[0][0] <= oldest_k):
+            self._back.popleft()
+        if not self._cost[1] + self.margin * c2 < self._cost[0]:
+            return None
+        # the best path ends on '-': the states of its last run of '-' (within the window) flip
+        first = k
+        state = 1
+        for later_k, bp in reversed(self._back):
+            state = int(bp[state])
+            if state != 1:
+                break
+            first = later_k - 1
+        first = max(first, oldest_k)
+        self._cost = self._cost[::-1].copy()
+        self._back.clear()
+        self._prev = (k, t_ns, -self._prev[2], self._prev[3])
+        self.flips += 1
+        return first
