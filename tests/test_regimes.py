@@ -43,6 +43,7 @@ CELLS = {c.name: c for c in (
     Cell("noisefree-stated0", "handheld", 200.0, 10.0, 0.025, 0.0, 0.0),
     Cell("noisefree-unstated", "handheld", 200.0, 10.0, 0.025, 0.0, None),
     Cell("noise0.01-unstated", "handheld", 200.0, 10.0, 0.025, 0.01, None),
+    Cell("noise1-unstated", "handheld", 200.0, 30.0, 0.3, 1.0, None),
     Cell("50Hz-0.3m-noise0.1", "handheld", 50.0, 60.0, 0.3, 0.1, 0.1),
     Cell("5mm-noise0.01", "handheld", 1000.0, 2.0, 0.005, 0.01, 0.01),
     Cell("quant16", "handheld", 1000.0, 2.0, 0.025, 0.0, rm.QUANT_STD, quantised=True),
@@ -139,6 +140,17 @@ def test_noise_unstated_smoothers_not_worse(run):
     check(row, "fixed-lag")
 
 
+def test_loud_noise_unstated_batch_not_worse(run):
+    check(run("noise1-unstated"), "smoother")
+
+
+@pytest.mark.xfail(strict=True, reason="measured: 1 m/s² white noise not stated: fixed-lag ω RMSE 3.57 rad/s, 46 % wrong "
+                   "sign, against ml 1.52, 15 %: it weighs the readings with the default 0.07 m/s² and has no model "
+                   "check to measure the noise (default_accel_noise_std_mps2=1.0 or tune_accel_noise=True: 0.073 rad/s, 0 %)")
+def test_loud_noise_unstated_fixed_lag_not_worse(run):
+    check(run("noise1-unstated"), "fixed-lag")
+
+
 # ---------------------------------------------------------------- 50 Hz, 5 mm, 16-bit
 
 @pytest.mark.parametrize("name", ["50Hz-0.3m-noise0.1", "5mm-noise0.01", "quant16"])
@@ -214,7 +226,8 @@ def test_foreign_per_sample_recovers_pre_impact_omega(run, method):
                    "6000 samples (inversion: 0.0055 rad/s): the model check calls the log inconsistent ('no noise "
                    "std stated', '3.59 % of residuals beyond 4 sigma' of a round-off residual, median 3e-11 m/s²), "
                    "and the robust model's branch restarts re-solve locally about once per 3 samples (2005 "
-                   "in 60 s); without restarts 1.9 s but 0.065 rad/s; auto_model=False: 0.0055 rad/s in 0.8 s")
+                   "in 60 s; let run: 326 s, 0.47 rad/s, not converged after 30 iterations); without restarts 1.9 s but "
+                   "0.065 rad/s; auto_model=False: 0.0055 rad/s in 0.8 s")
 def test_foreign_batch_not_worse(run):
     check(run("foreign-ff-impact-4kHz"), "smoother")
 
