@@ -1,0 +1,323 @@
+"""The smoothers are never worse than the per-sample answer they start from: the rule of
+tools/regime_matrix.py asserted on a handful of its regimes, and tools/foreign_sim.py checked.
+
+Each cell is built once (a log folder in a temporary directory, read back as a user's log is), every
+method runs in a child process stopped at the cell's CPU-time budget, and the tests read the verdict of
+``regime_matrix.judge``: the batch smoother (``smoother``) and the fixed-lag smoother must each have
+ω RMSE ≤ max(1.1 × best per-sample, 1e-3 rad/s), a wrong-sign share ≤ the best per-sample's +
+0.5 %, and CPU time ≤ 2 s + 2 ms per sample; the batch smoother must keep its Gaussian model on a
+consistent log. The assertions that fail today are marked ``xfail(strict=True)`` with the numbers
+measured when they were written, so that each turns into a failure (XPASS) once the estimators are
+fixed and its mark must go.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+TOOLS = Path(__file__).resolve().parents[1] / "tools"
+
+
+def _load(name: str):
+    if str(TOOLS) not in sys.path:
+        sys.path.insert(0, str(TOOLS))
+    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+fs = sys.modules.get("foreign_sim") or _load("foreign_sim")
+rm = _load("regime_matrix")
+
+Cell = rm.Cell
+CELLS = {c.name: c for c in (
+    Cell("noisefree-stated0", "handheld", 200.0, 10.0, 0.025, 0.0, 0.0),
+    Cell("noisefree-unstated", "handheld", 200.0, 10.0, 0.025, 0.0, None),
+    Cell("noise0.01-unstated", "handheld", 200.0, 10.0, 0.025, 0.01, None),
+    Cell("noise1-unstated", "handheld", 200.0, 30.0, 0.3, 1.0, None),
+    Cell("50Hz-0.3m-noise0.1", "handheld", 50.0, 60.0, 0.3, 0.1, 0.1),
+    Cell("5mm-noise0.01", "handheld", 1000.0, 2.0, 0.005, 0.01, 0.01),
+    Cell("quant16", "handheld", 1000.0, 2.0, 0.025, 0.0, rm.QUANT_STD, quantised=True),
+    Cell("still60-then-motion", "still-then-motion", 100.0, 70.0, 0.025, 0.01, 0.01),
+    Cell("free-fall-rest-noisefree", "free-fall-rest", 200.0, 2.0, 0.025, 0.0, 0.0),
+    Cell("foreign-ff-impact-4kHz", "foreign", 4000.0, 1.5, noise_mps2=0.0, stated_mps2=None, foreign=True),
+)}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """``run(name)``: the cell's row of regime_matrix.run_cell (estimates kept), built and run once."""
+    folder = tmp_path_factory.mktemp("regimes")
+    done = {}
+
+    def get(name: str) -> dict:
+        if name not in done:
+            cell = CELLS[name]
+            samples = int(round(cell.rate_hz * cell.duration_s))
+            # stopped at the CPU-time budget (+1 s): a method that needs longer fails the rule anyway
+            done[name] = rm.run_cell(cell, folder, timeout_base=rm.time_budget_s(samples) + 1.0,
+                                     timeout_per_sample=0.0, keep_omega=True)
+        return done[name]
+
+    return get
+
+
+def failures(row: dict, method: str, kind: str = "estimate") -> list[str]:
+    """The verdict's reasons for ``method`` ('smoother' or 'fixed-lag'): ``kind`` 'estimate' (RMSE,
+    sign, time, error, timeout) or 'model' (the Gaussian model kept on a consistent log)."""
+    prefix = "batch: " if method == "smoother" else "fixed-lag: "
+    out = [r for r in row["verdict"]["reasons"] if r.startswith(prefix)]
+    is_model = [" on a consistent log" in r for r in out]
+    return [r for r, m in zip(out, is_model) if m == (kind == "model")]
+
+
+def check(row: dict, method: str, kind: str = "estimate") -> None:
+    bad = failures(row, method, kind)
+    res = row["results"]
+    summary = {m: {k: res[m].get(k) for k in ("rmse", "wrong_sign", "seconds", "model", "error", "timeout")
+                   if k in res[m]} for m in res}
+    assert not bad, f"{row['cell']}: {bad}; {summary}"
+
+
+# ---------------------------------------------------------------- noise-free, noise not stated
+
+def test_noise_free_stated_zero_batch_is_exact(run):
+    row = run("noisefree-stated0")
+    assert row["results"]["ml"]["rmse"] < 1e-9
+    check(row, "smoother")
+    assert row["results"]["smoother"]["rmse"] < 1e-9
+
+
+@pytest.mark.xfail(strict=True, reason="measured: noise stated as 0 counts as not stated (gfimu.noise.stated needs > 0), "
+                   "the model check gives 'no noise std stated' and the robust model")
+def test_noise_free_stated_zero_batch_keeps_gaussian_model(run):
+    check(run("noisefree-stated0"), "smoother", "model")
+
+
+@pytest.mark.xfail(strict=True, reason="measured: fixed-lag ω RMSE 0.0087 rad/s where ml is exact (1e-14): a stated 0 "
+                   "counts as not stated and the fixed-lag smoother weighs the readings with the default 0.07 m/s² "
+                   "(with default_accel_noise_std_mps2=1e-6: 2.4e-10 rad/s)")
+def test_noise_free_stated_zero_fixed_lag_not_worse(run):
+    check(run("noisefree-stated0"), "fixed-lag")
+
+
+def test_noise_free_unstated_batch_is_exact(run):
+    row = run("noisefree-unstated")
+    check(row, "smoother")
+    assert row["results"]["smoother"]["rmse"] < 1e-9
+
+
+@pytest.mark.xfail(strict=True, reason="measured: fixed-lag ω RMSE 0.0087 rad/s where ml is exact (1e-14): no stated "
+                   "noise, so the default 0.07 m/s² weighs the noise-free readings")
+def test_noise_free_unstated_fixed_lag_not_worse(run):
+    check(run("noisefree-unstated"), "fixed-lag")
+
+
+@pytest.mark.xfail(strict=True, reason="measured: array.toml without noise_std_mps2 -> model check reason "
+                   "'no noise std stated' -> robust model, on noise-free rigid readings")
+def test_noise_free_unstated_batch_keeps_gaussian_model(run):
+    check(run("noisefree-unstated"), "smoother", "model")
+
+
+@pytest.mark.xfail(strict=True, reason="measured: 0.01 m/s² white noise not stated -> 'no noise std stated' -> robust "
+                   "model (ω RMSE 0.0069 rad/s, still better than ml's 0.133)")
+def test_noise_unstated_batch_keeps_gaussian_model(run):
+    check(run("noise0.01-unstated"), "smoother", "model")
+
+
+def test_noise_unstated_smoothers_not_worse(run):
+    row = run("noise0.01-unstated")
+    check(row, "smoother")
+    check(row, "fixed-lag")
+
+
+def test_loud_noise_unstated_batch_not_worse(run):
+    check(run("noise1-unstated"), "smoother")
+
+
+@pytest.mark.xfail(strict=True, reason="measured: 1 m/s² white noise not stated: fixed-lag ω RMSE 3.57 rad/s, 46 % wrong "
+                   "sign, against ml 1.52, 15 %: it weighs the readings with the default 0.07 m/s² and has no model "
+                   "check to measure the noise (default_accel_noise_std_mps2=1.0 or tune_accel_noise=True: 0.073 rad/s, 0 %)")
+def test_loud_noise_unstated_fixed_lag_not_worse(run):
+    check(run("noise1-unstated"), "fixed-lag")
+
+
+# ---------------------------------------------------------------- 50 Hz, 5 mm, 16-bit
+
+@pytest.mark.parametrize("name", ["50Hz-0.3m-noise0.1", "5mm-noise0.01", "quant16"])
+def test_smoothers_pass(run, name):
+    row = run(name)
+    check(row, "smoother")
+    check(row, "smoother", "model")
+    check(row, "fixed-lag")
+    assert row["verdict"]["cell"] == "PASS"
+
+
+def test_quantised_readings_are_16_bit(run):
+    from gfimu import io as gio
+
+    log = gio.read_log(run("quant16")["log_dir"])
+    counts = log.accel_mps2 / rm.LSB_16G_16BIT_MPS2
+    assert np.max(np.abs(counts - np.round(counts))) < 1e-6
+    assert np.max(np.abs(log.accel_mps2)) <= 16 * rm.G
+
+
+# ---------------------------------------------------------------- a long still stretch, then motion
+
+@pytest.mark.xfail(strict=True, reason="measured: batch ω RMSE 1.31 rad/s, 53 % wrong sign, against ml 0.37, 0.7 %: "
+                   "the process noise is tuned on the middle 10 s of the window (tune_span_s), all at rest "
+                   "(tune_span_s=None: 0.056 rad/s, 0 % at 200 Hz)")
+def test_still_then_motion_batch_not_worse(run):
+    check(run("still60-then-motion"), "smoother")
+
+
+@pytest.mark.xfail(strict=True, reason="measured: fixed-lag ω RMSE 1.32 rad/s, 51 % wrong sign, against ml 0.37, "
+                   "0.7 %: the process noise is chosen once on the first 3 s (tune_window_s), all at rest "
+                   "(tune_window_s=70: 0.047 rad/s, 0 % at 200 Hz)")
+def test_still_then_motion_fixed_lag_not_worse(run):
+    check(run("still60-then-motion"), "fixed-lag")
+
+
+# ---------------------------------------------------------------- all readings zero
+
+@pytest.mark.xfail(strict=True, reason="measured: ValueError 'smoother option omega_dot_random_walk_radps2_per_sqrt_s "
+                   "must be a positive number, got 0.0', an option the user never set: noise stated 0 -> robust "
+                   "model -> auto.motion_densities gives a zero density from zero steps and zero noise")
+def test_zero_readings_batch(run):
+    check(run("free-fall-rest-noisefree"), "smoother")
+
+
+def test_zero_readings_fixed_lag(run):
+    row = run("free-fall-rest-noisefree")
+    check(row, "fixed-lag")
+    assert row["results"]["fixed-lag"]["rmse"] == 0.0
+
+
+# ---------------------------------------------------------------- foreign free flight with an impact, 4 kHz
+
+def _pre_impact(row) -> np.ndarray:
+    n = len(row["truth"])
+    t = np.arange(n) / 4000.0
+    return t < fs.Config.impact_time_s
+
+
+@pytest.mark.parametrize("method", ["inversion", "ml"])
+def test_foreign_per_sample_recovers_pre_impact_omega(run, method):
+    """|ω| = 8.7 rad/s; readings in g of 9.8 m/s² read as g of 9.80665 scale ω by √1.00068: 0.0029 rad/s."""
+    row = run("foreign-ff-impact-4kHz")
+    r = row["results"][method]
+    rmse, wrong = rm.score(r["omega"], row["truth"], _pre_impact(row))
+    scale_error = np.linalg.norm(fs.Config.omega0_radps) * (np.sqrt(rm.G / fs.FILE_G) - 1.0)
+    assert wrong == 0.0
+    assert rmse < 0.0035, rmse
+    assert rmse == pytest.approx(scale_error, rel=0.1)
+
+
+@pytest.mark.xfail(strict=True, reason="measured: the batch smoother does not finish within the 14 s budget for "
+                   "6000 samples (inversion: 0.0055 rad/s): the model check calls the log inconsistent ('no noise "
+                   "std stated', '3.59 % of residuals beyond 4 sigma' of a round-off residual, median 3e-11 m/s²), "
+                   "and the robust model's branch restarts re-solve locally about once per 3 samples (2005 "
+                   "in 60 s; let run: 326 s, 0.47 rad/s, not converged after 30 iterations); without restarts 1.9 s but "
+                   "0.065 rad/s; auto_model=False: 0.0055 rad/s in 0.8 s")
+def test_foreign_batch_not_worse(run):
+    check(run("foreign-ff-impact-4kHz"), "smoother")
+
+
+def test_foreign_fixed_lag_not_worse(run):
+    row = run("foreign-ff-impact-4kHz")
+    check(row, "fixed-lag")
+    pre = _pre_impact(row)
+    best = min(rm.score(row["results"][m]["omega"], row["truth"], pre)[0] for m in ("inversion", "ml"))
+    fixed = rm.score(row["results"]["fixed-lag"]["omega"], row["truth"], pre)[0]
+    assert fixed <= max(1.1 * best, rm.RMSE_FLOOR_RADPS)
+
+
+# ---------------------------------------------------------------- the independent simulator itself
+
+@pytest.fixture(scope="module")
+def foreign():
+    return fs.simulate(fs.Config())
+
+
+def test_foreign_sim_imports_no_gfimu():
+    tree = ast.parse((TOOLS / "foreign_sim.py").read_text())
+    names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+    names += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+    assert names and not [m for m in names if m.split(".")[0] == "gfimu"]
+
+
+def test_foreign_sim_conserves_energy_and_momentum_in_free_flight(foreign):
+    two_t, h2 = fs.energy_and_momentum(foreign["omega_radps"], foreign["inertia_kgm2"])
+    for phase in (0, 2):  # before the impact; on the support, whose reaction passes through the centre
+        sel = foreign["phase"] == phase
+        assert np.count_nonzero(sel) > 1000
+        assert np.ptp(two_t[sel]) / np.mean(two_t[sel]) < 1e-9
+        assert np.ptp(h2[sel]) / np.mean(h2[sel]) < 1e-9
+    before, after = two_t[foreign["phase"] == 0][-1], two_t[foreign["phase"] == 2][0]
+    assert after > 2 * before  # the impact's torque spins the body up
+
+
+def test_foreign_sim_impact_and_contact(foreign):
+    f = np.linalg.norm(foreign["specific_force_mps2"], axis=1)
+    phase = foreign["phase"]
+    assert np.all(f[phase == 0] == 0.0)
+    assert np.max(f[phase == 1]) == pytest.approx(15 * fs.G0, rel=1e-3)
+    assert np.count_nonzero(phase == 1) == 16  # 4 ms at 4 kHz
+    np.testing.assert_allclose(f[phase == 2], fs.G0, rtol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(foreign["quaternion_wb"], axis=1), 1.0, atol=1e-12)
+    d = np.linalg.norm(foreign["positions_m"], axis=1)
+    assert np.all((d >= 0.08 - 1e-12) & (d <= 0.15 + 1e-12))
+
+
+def test_foreign_sim_matches_gfimu_closed_form(foreign):
+    """The one cross-check against gfimu: its Jacobi-elliptic torque-free solution."""
+    from gfimu.simulate.free_flight import TorqueFreeMotion
+
+    sel = foreign["phase"] == 0
+    closed = TorqueFreeMotion.from_initial(foreign["inertia_kgm2"], np.asarray(fs.Config.omega0_radps))
+    np.testing.assert_allclose(closed.omega(foreign["t_s"][sel]), foreign["omega_radps"][sel], atol=1e-9)
+
+
+def test_foreign_recording_layout_and_conversion(foreign, tmp_path):
+    """The files are in the foreign layout, and `gfimu convert csv --map` reads them as the
+    readings (in g of 9.80665 m/s²) at the mapped places, leaving the recording untouched."""
+    import json
+
+    from gfimu import io as gio
+
+    cfg = fs.Config()
+    paths = fs.write_recording(foreign, tmp_path / "rec", cfg)
+    head = paths["readings"].read_text().splitlines()[:2]
+    assert head[0].replace(" ", "").split(",")[:4] == ["t_ms", "s1_ax", "s1_ay", "s1_az"]
+    assert head[1].startswith("0.0000,")
+    t_ms, omega = fs.read_truth(paths["truth"])
+    np.testing.assert_allclose(t_ms[:3], [0.0, 0.25, 0.5])
+    np.testing.assert_allclose(omega, foreign["omega_radps"], rtol=1e-11)
+    spec = json.loads(paths["sensors"].read_text())
+    np.testing.assert_allclose(spec["sensors"][1]["position_mm"], 1e3 * foreign["positions_m"][1], atol=1e-8)
+    before = {k: p.read_bytes() for k, p in paths.items()}
+    map_path = tmp_path / "map.toml"
+    map_path.write_text(rm.foreign_map_text(paths["sensors"], None))
+    rm.convert_foreign(tmp_path / "rec", map_path, tmp_path / "log")
+    assert {k: p.read_bytes() for k, p in paths.items()} == before
+    log = gio.read_log(tmp_path / "log")
+    assert len(log) == 6000 and log.timestamps_ns[1] == 250_000
+    expected = foreign["readings_mps2"].reshape(6000, 12) / fs.FILE_G * rm.G
+    np.testing.assert_allclose(log.accel_mps2, expected, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(log.array.axis_positions_m[:3], np.tile(foreign["positions_m"][0], (3, 1)), atol=1e-12)
+
+
+def test_regime_matrix_cli_rejects_unknown_cell():
+    proc = subprocess.run([sys.executable, str(TOOLS / "regime_matrix.py"), "--cells", "no-such-cell"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "no cell matches 'no-such-cell'" in proc.stderr
