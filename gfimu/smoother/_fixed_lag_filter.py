@@ -44,6 +44,12 @@ from .graph import robust_weight
 from .restarts import plane_normal
 
 
+BRANCH_PRIOR_MARGIN = 25.0
+"""A branch of an update's minimum is tried only when its distance from the prediction (squared,
+in the prediction's covariance) is within this of the minimum's cost (5 σ): further away, the
+readings, which fit both branches alike, cannot make up for it."""
+
+
 class FilterFailure(RuntimeError):
     """A numerical failure of an update (a singular innovation covariance, non-finite values)."""
 
@@ -318,7 +324,15 @@ class WindowFilter:
             y = np.concatenate([y, gyro])
         best = self._solve(y, gyro, xp, P, xp if start is None else np.asarray(start, dtype=float), extra)
         if self.branches and start is None and gyro is None:
+            try:
+                P_inv = np.linalg.inv(P)
+            except np.linalg.LinAlgError:
+                P_inv = None
             for branch in self._branch_starts(best[0]):
+                if P_inv is not None:  # a branch the prediction rules out by more than 5 σ is not tried
+                    d = branch - xp
+                    if float(d @ P_inv @ d) > best[3] + BRANCH_PRIOR_MARGIN:
+                        continue
                 candidate = self._solve(y, gyro, xp, P, branch, extra)
                 if candidate[3] < best[3]:
                     best = candidate

@@ -81,7 +81,7 @@ class ModelCheck:
     omega_p90_radps: float
     """90th percentile of the per-sample |ω| [rad/s]."""
     stated_noise_mps2: float
-    """Mean stated noise std of the axes that state one [m/s²] (NaN when none does)."""
+    """Mean stated noise std of the axes that state one [m/s²] (0: stated as noise-free; NaN when none does)."""
     reasons: tuple[str, ...] = ()
     """Why the log is inconsistent (empty when consistent)."""
     resolution_floor_mps2: float = 0.0
@@ -102,7 +102,10 @@ class ModelCheck:
             return "readings are constant: nothing to estimate beyond a single sample"
         head = ("readings consistent with a rigid body (Gaussian model, noise by marginal likelihood)" if self.consistent
                 else "readings disagree with a rigid body beyond white noise (robust model): " + "; ".join(self.reasons))
-        if self.noise_stated:
+        if self.noise_stated and self.stated_noise_mps2 == 0:
+            level = (f"Noise stated as 0: residual {self.noise_ratio:.1f} x the readings' resolution, "
+                     f"floor {self.noise_floor_mps2:.3g} m/s^2")
+        elif self.noise_stated:
             level = (f"Residual {self.noise_ratio:.1f} x the stated {self.stated_noise_mps2:.3g} m/s^2, "
                      f"floor {self.noise_floor_mps2:.3g} m/s^2")
         else:
@@ -199,15 +202,16 @@ def check_model(log: Log, ml_motion, residual: np.ndarray | None = None) -> Mode
     r, omega = r[ok], ml_motion.omega_b_radps[ok]
     n_axes = r.shape[1]
     dof_factor = n_axes / max(n_axes - 9, 1)
-    stated = log.array.noise_std_per_axis_mps2
-    stated = np.where(np.isfinite(stated) & (stated > 0), stated, np.nan)
+    stated = np.asarray(log.array.noise_std_per_axis_mps2, dtype=float)
+    stated = np.where(np.isfinite(stated) & (stated >= 0), stated, np.nan)  # 0: stated as noise-free
     stated_mean = float(np.nanmean(stated)) if np.any(np.isfinite(stated)) else float("nan")
     accel = log.accel_mps2[ok]
     resolution = resolution_floor(accel)
     constant = bool(len(accel) >= 2 and np.all(np.ptp(accel, axis=0) == 0))
     scale = 1.4826 * np.median(np.abs(r), axis=0) * np.sqrt(dof_factor)  # per axis
     scale = np.maximum(scale, resolution)
-    ratio = float(np.nanmedian(scale / stated)) if np.isfinite(stated_mean) else float("nan")
+    # a std stated as 0 promises no more than the readings' resolution
+    ratio = float(np.nanmedian(scale / np.maximum(stated, resolution))) if np.isfinite(stated_mean) else float("nan")
     tail = float(np.mean(np.abs(r) > 4.0 * scale[None, :] / np.sqrt(dof_factor))) if r.size else 0.0
     floor, slope = noise_vs_rate(r, omega, dof_factor)
     floored = floor < resolution
@@ -225,10 +229,11 @@ def check_model(log: Log, ml_motion, residual: np.ndarray | None = None) -> Mode
 
 
 def measured_noise_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptions:
-    """``options`` for a consistent log: where no axis states a noise std, the measured floor is the
-    accelerometer noise (:func:`gfimu.noise.accel_noise_std` then fills every axis with it)."""
+    """``options`` for a consistent log: where no axis states a noise std above 0 (none stated, or
+    stated as 0), the measured floor is the accelerometer noise (:func:`gfimu.noise.accel_noise_std`
+    then fills every axis with it)."""
     user_set = options.default_accel_noise_std_mps2 != SmootherOptions.default_accel_noise_std_mps2
-    if check.noise_stated or user_set or not check.noise_floor_mps2 > 0:
+    if check.stated_noise_mps2 > 0 or user_set or not check.noise_floor_mps2 > 0:
         return options
     return replace(options, default_accel_noise_std_mps2=float(check.noise_floor_mps2))
 
@@ -263,6 +268,8 @@ def estimate_noise_variances(array, check: ModelCheck, omega_b_radps: np.ndarray
     return var[:, None] * c[None, 3:6], var[:, None] * c[None, 0:3]
 
 
+DENSITY_FLOOR = 1e-9
+"""Smallest process density [per √s] :func:`with_densities` sets (exactly constant readings measure 0)."""
 MOTION_STEP_SIGMAS = 3.0
 """A stretch of the per-sample estimate is motion when the RMS of its steps (over the axes and
 :data:`MOTION_PERIOD_S`) exceeds this many times what the estimate's own noise gives."""
@@ -304,7 +311,8 @@ def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.nd
 def with_densities(options: SmootherOptions, jerk: np.ndarray, force: np.ndarray) -> SmootherOptions:
     """``options`` with per-axis jerk densities (their RMS and per-axis factors) and the RMS of the
     per-axis specific-force densities."""
-    jerk = np.asarray(jerk, dtype=float)
+    jerk = np.maximum(np.asarray(jerk, dtype=float), DENSITY_FLOOR)  # readings without any noise or motion
+    force = np.maximum(np.asarray(force, dtype=float), DENSITY_FLOOR)
     q = float(np.sqrt(np.mean(jerk**2)))
     return replace(options, omega_dot_random_walk_radps2_per_sqrt_s=q,
                    process_axis_factors=tuple(float(v) for v in jerk / q),

@@ -465,26 +465,35 @@ class FixedLagSmoother:
             gyro = np.vstack([s[2] for s in samples])
         return Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag tuning stretch")
 
-    def _choose(self, samples, first: bool = False):
+    def _choose(self, samples, first: bool = False, outgrown: bool = False):
         """Choose the model on ``samples`` ((t_ns, accel, gyro, ...) tuples, oldest first) and go on with
         it (:mod:`gfimu.smoother.stream_model`). The first choice of a consistent stretch whose process
-        noise is tuned also returns the batch smoother's states of the stretch (else None)."""
+        noise is tuned also returns the batch smoother's states of the stretch (else None).
+
+        A consistent stretch keeps the Gaussian model in use when that was chosen on motion and the
+        motion has not outgrown it (the tuner is the costly part of a choice); otherwise the tuner
+        runs on the newest ``tune_window_s`` of the stretch."""
         part = self._stretch_log(samples)
         ml = self._ml_motion(samples, part) if self._auto else None
         check = stream_model.check_of(part, ml)
         batch = None
         base = self._user_options if check is None else measured_noise_options(self._user_options, check)
+        previous = self.stream_model
+        t_end = int(part.timestamps_ns[-1])
         if check is not None and not check.consistent:
-            chosen = stream_model.robust(part, self._user_options, check, ml, self._tune, self.stream_model)
+            chosen = stream_model.robust(part, self._user_options, check, ml, self._tune, previous)
         elif not self._tune or (check is not None and check.constant):
-            chosen = stream_model.StreamModel(base, 1.0, check, None, int(part.timestamps_ns[-1]), len(part))
-        elif first:
-            tuning, problem, x0 = self._tuned(part, base)
-            chosen = stream_model.from_tuning(tuning, problem.options, check, part)
-            batch = self._batch_states(part, problem, x0)
+            chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part))
+        elif (not first and not outgrown and previous is not None and not previous.robust and previous.moving
+              and previous.tuning is not None):
+            chosen = replace(previous, check=check, chosen_at_ns=t_end, samples=len(part))
         else:
             span = part if len(part) <= self._tune_n else part.select(slice(len(part) - self._tune_n, None))
-            chosen = stream_model.gaussian(span, base, check)
+            tuning, problem, x0 = self._tuned(span, base)
+            chosen = stream_model.from_tuning(tuning, problem.options, check, span)
+            chosen = replace(chosen, chosen_at_ns=t_end, moving=stream_model.has_motion(part, ml, check))
+            if first:
+                batch = self._batch_states(span, problem, x0)
         if chosen.sign_scale_radps is None and ml is not None:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
         self._use(chosen)
@@ -562,7 +571,7 @@ class FixedLagSmoother:
         outgrown = (not chosen.moving and local is not None and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
         if (due or outgrown) and len(self._history) >= self._tune_min_n:
-            self._choose(list(self._history))
+            self._choose(list(self._history), outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.

@@ -130,6 +130,16 @@ def robust(part: Log, options: SmootherOptions, check: ModelCheck, ml_motion, tu
                        sign_scale(part, ml_motion))
 
 
+def has_motion(part: Log, ml_motion, check: ModelCheck | None) -> bool:
+    """Whether the per-sample ML estimate of ``part`` shows motion above its own noise
+    (:func:`gfimu.smoother.auto.motion_densities`); True when it cannot tell (no ML estimate)."""
+    if ml_motion is None or check is None:
+        return True
+    x = np.hstack([ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2])
+    return bool(motion_densities(x, part.dt_s, *estimate_noise_variances(part.array, check, ml_motion.omega_b_radps),
+                                 with_motion=True)[2])
+
+
 def sign_scale(part: Log, ml_motion) -> float | None:
     """The sign chain's Cauchy scale on ``part`` from its per-sample ML estimate (None without one)."""
     if ml_motion is None:

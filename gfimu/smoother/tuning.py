@@ -39,7 +39,7 @@ from .banded import (Factorisation, NormalEquations, add_normal_equations, band_
 from .graph import SmootherOptions, SmootherProblem
 from .groups import Term
 from .initialise import initial_estimate
-from .layout import OMEGA, StateLayout
+from .layout import OMEGA, OMEGA_DOT, StateLayout
 
 InitialStates = Callable[[Log, SmootherOptions], np.ndarray]
 """``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.initialise.initial_estimate`."""
@@ -649,13 +649,30 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     return best[:2]
 
 
+def most_moving_span(omega_dot: np.ndarray, width: int) -> tuple[int, int]:
+    """(start, stop) of the ``width`` samples of ``omega_dot`` (N, 3) whose steps have the largest
+    sum of squares, among starts half a width apart (the middle one where that ties)."""
+    n = len(omega_dot)
+    if width >= n:
+        return 0, n
+    power = np.concatenate([[0.0], np.cumsum(np.sum(np.diff(omega_dot, axis=0) ** 2, axis=1))])
+    middle = (n - width) // 2
+    starts = np.unique(np.concatenate([np.arange(0, n - width + 1, max(width // 2, 1)), [n - width, middle]]))
+    score = power[np.minimum(starts + width - 1, n - 1)] - power[starts]
+    best = starts[score >= score.max() * (1.0 - 1e-9)]
+    start = int(best[np.argmin(np.abs(best - middle))])
+    return start, start + width
+
+
 def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = None,
                   initial: InitialStates | None = None, span_s: float | None = None) -> tuple[SmootherProblem, np.ndarray]:
     """Problem and initial states of one solve window, with the process noise chosen from the data
     (:func:`tune`) when ``options.tune_process_noise``; the choice is appended to ``tunings``.
 
     ``initial``: how the initial states are made (default :func:`gfimu.smoother.initialise.initial_estimate`);
-    ``span_s``: choose on at most this much of the window, its middle [s] (None: the whole window)."""
+    ``span_s``: choose on at most this much of the window [s] (None: the whole window): the stretch
+    where the initial estimate's ω̇ moves most (the middle one among equals), so that a window that
+    rests in its middle is not tuned on its rest alone."""
     initial = initial or initial_estimate
     x0 = initial(part, options)
     if not options.tune_process_noise:
@@ -665,8 +682,7 @@ def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = No
     span = slice(0, len(part))
     if span_s is not None and part.times_s[-1] - part.times_s[0] > span_s:
         width = max(int(round(span_s * part.rate_hz)), 4)
-        start = (len(part) - width) // 2
-        span = slice(start, start + width)
+        span = slice(*most_moving_span(x0[:, OMEGA_DOT], width))
     tuning, tuned = tune(part.select(span), options, x0[span], models=models, accel_noise=options.tune_accel_noise,
                          states_out=solved)
     if tunings is not None:
