@@ -12,11 +12,12 @@ import numpy as np
 
 from . import rigid_body
 from .rotations import matrix_from_rotation_vector
+from .errors import InputError
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 
 
-class ArrayModelError(ValueError):
+class ArrayModelError(InputError):
     """The array cannot support the requested model (names the cause)."""
 
 

@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from .array import AXIS_INDEX, SensorArray
+from .errors import DataError, InputError
 from .io.array_toml import format_toml
 from .io.atomic import atomic_write_text
 
@@ -68,8 +69,12 @@ GRAVITY_MPS2 = 9.80665
 FORMAT = "gfimu-calibration/1"
 
 
-class CalibrationError(ValueError):
+class CalibrationError(DataError):
     """The data cannot support the calibration (names the cause)."""
+
+
+class CalibrationFileError(CalibrationError, InputError):
+    """A calibration file (or calibration given) is malformed (names the file and key)."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +91,7 @@ class SensorCalibration:
         bias = np.asarray(self.bias_mps2, dtype=float).reshape(-1)
         n = len(self.axes)
         if gain.shape != (n, 3) or bias.shape != (n,) or not (np.all(np.isfinite(gain)) and np.all(np.isfinite(bias))):
-            raise CalibrationError(f"calibration of {self.name!r}: gain must be {n}x3 and bias {n} finite numbers")
+            raise CalibrationFileError(f"calibration of {self.name!r}: gain must be {n}x3 and bias {n} finite numbers")
         object.__setattr__(self, "gain", gain)
         object.__setattr__(self, "bias_mps2", bias)
         object.__setattr__(self, "axes", tuple(self.axes))
@@ -315,9 +320,9 @@ def correct_readings(array: SensorArray, cal: Calibration, accel_mps2: np.ndarra
         try:
             sc = cal.sensor(acc.name)
         except KeyError as exc:
-            raise CalibrationError(exc.args[0]) from None
+            raise CalibrationFileError(exc.args[0]) from None
         if tuple(sc.axes) != tuple(acc.axes):
-            raise CalibrationError(f"calibration of {acc.name!r} is for axes {list(sc.axes)}, the log has {list(acc.axes)}")
+            raise CalibrationFileError(f"calibration of {acc.name!r} is for axes {list(sc.axes)}, the log has {list(acc.axes)}")
         t = sc.gain @ acc.directions_b.T  # (n, n): effective gain in the sensor's nominal axes
         if np.linalg.cond(t) > 1e6:
             raise CalibrationError(f"calibration gain of {acc.name!r} is singular")
@@ -335,6 +340,16 @@ def apply_calibration(log, cal: Calibration):
         if log.reference is not None and log.reference.omega_b_radps is not None:
             changes["reference"] = log.reference.replace(omega_b_radps=log.reference.omega_b_radps - cal.gyro_bias_b_radps)
     return log.replace(**changes)
+
+
+def apply_calibration_file(log, path: str | Path):
+    """:func:`apply_calibration` of the calibration read from ``path``; an error naming ``path`` when it
+    does not fit the log's array (an accelerometer it lacks, other axes, a singular gain)."""
+    cal = read_calibration(path)
+    try:
+        return apply_calibration(log, cal)
+    except CalibrationFileError as exc:
+        raise CalibrationFileError(f"{path}: {exc}") from None
 
 
 def fit(log, detector: StillDetector | None = None, periods: list[slice] | None = None, gravity_mps2: float = GRAVITY_MPS2) -> Calibration:
@@ -399,29 +414,44 @@ def read_calibration(path: str | Path) -> Calibration:
     path = Path(path)
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise CalibrationFileError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
-        raise CalibrationError(f"{path}: not valid TOML: {exc}") from None
+        raise CalibrationFileError(f"{path}: not valid TOML: {exc}") from None
     if doc.get("format") != FORMAT:
-        raise CalibrationError(f"{path}: format must be {FORMAT!r}, got {doc.get('format')!r}")
+        raise CalibrationFileError(f"{path}: format must be {FORMAT!r}, got {doc.get('format')!r}")
     accs = doc.get("accelerometers")
     if not isinstance(accs, list) or not accs:
-        raise CalibrationError(f"{path}: no [[accelerometers]] table")
+        raise CalibrationFileError(f"{path}: no [[accelerometers]] table")
     sensors = []
     for k, a in enumerate(accs):
         where = f"{path}: accelerometers[{k}]"
+        if not isinstance(a, dict):
+            raise CalibrationFileError(f"{where}: expected a table with name, gain and bias_mps2, got {a!r}")
         for key in ("name", "bias_mps2", "gain"):
             if key not in a:
-                raise CalibrationError(f"{where}: missing key {key!r}")
-        axes = tuple(a.get("axes", ["x", "y", "z"]))
+                raise CalibrationFileError(f"{where}: missing key {key!r}")
+        axes = a.get("axes", ["x", "y", "z"])
+        axes = tuple(axes) if isinstance(axes, list) else (axes,)
         if any(x not in AXIS_INDEX for x in axes):
-            raise CalibrationError(f"{where}: axes must be among x, y, z; got {list(axes)}")
+            raise CalibrationFileError(f"{where}: axes must be among x, y, z; got {list(axes)}")
         try:
             sensors.append(SensorCalibration(str(a["name"]), axes, np.array(a["gain"], float), np.array(a["bias_mps2"], float)))
-        except (CalibrationError, ValueError) as exc:
-            raise CalibrationError(f"{where}: {exc}") from None
-    gyro = doc.get("gyroscope", {}).get("bias_b_radps")
+        except (CalibrationError, ValueError, TypeError) as exc:
+            raise CalibrationFileError(f"{where}: {exc}") from None
+    gyroscope = doc.get("gyroscope", {})
+    gyro = gyroscope.get("bias_b_radps") if isinstance(gyroscope, dict) else gyroscope
     if gyro is not None:
-        gyro = np.asarray(gyro, float)
-        if gyro.shape != (3,):
-            raise CalibrationError(f"{path}: gyroscope.bias_b_radps must be 3 numbers")
-    return Calibration(tuple(sensors), gyro, float(doc.get("gravity_mps2", GRAVITY_MPS2)), dict(doc.get("fit", {})))
+        try:
+            gyro = np.asarray(gyro, float)
+        except (TypeError, ValueError):
+            gyro = np.empty(0)
+        if gyro.shape != (3,) or not np.all(np.isfinite(gyro)):
+            raise CalibrationFileError(f"{path}: gyroscope.bias_b_radps must be 3 numbers")
+    gravity = doc.get("gravity_mps2", GRAVITY_MPS2)
+    if isinstance(gravity, bool) or not isinstance(gravity, (int, float)) or not gravity > 0:
+        raise CalibrationFileError(f"{path}: gravity_mps2 must be a number > 0, got {gravity!r}")
+    fit = doc.get("fit", {})
+    if not isinstance(fit, dict):
+        raise CalibrationFileError(f"{path}: fit must be a table, got {fit!r}")
+    return Calibration(tuple(sensors), gyro, float(gravity), dict(fit))

@@ -37,6 +37,7 @@ from .motion import Motion
 from .smoother.bound import smoother_bound
 from .smoother.graph import SmootherOptions
 from .smoother.presets import expand_preset
+from .errors import InputError
 
 # Quantities in table order: field -> (short key, label for headers, unit)
 TABLE_QUANTITIES: dict[str, tuple[str, str, str]] = {
@@ -281,7 +282,7 @@ def reference_of(log: Log) -> tuple[Motion, str, np.ndarray | None]:
     if log.reference is not None:
         valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
         return log.reference, "reference", valid
-    raise ValueError(f"{log.source}: the log has neither truth.csv nor reference.csv to compare against")
+    raise InputError(f"{log.source}: the log has neither truth.csv nor reference.csv to compare against")
 
 
 def default_methods() -> list[str]:
@@ -345,17 +346,17 @@ def compare(
     """
     reference, against, valid = reference_of(log)
     if len(reference) != len(log):
-        raise ValueError(f"{log.source}: the {against} has {len(reference)} rows for {len(log)} samples")
+        raise InputError(f"{log.source}: the {against} has {len(reference)} rows for {len(log)} samples")
     methods = list(methods) if methods is not None else default_methods()
     if not methods:
-        raise ValueError("no method to compare")
+        raise InputError("no method to compare")
     options = dict(options or {})
     if "preset" in options.get("smoother", {}):  # the preset's settings, for the smoother and its bound
 
         options["smoother"] = expand_preset("smoother", options["smoother"])
     unknown_opts = sorted(set(options) - set(methods))
     if unknown_opts:
-        raise ValueError(f"options given for methods not compared: {unknown_opts}")
+        raise InputError(f"options given for methods not compared: {unknown_opts}")
     rows: list[dict] = []
     estimates: dict[str, Motion] = {}
     made: dict[str, Any] = {}
@@ -493,7 +494,7 @@ def condition_vs_scale(array, half_edges: np.ndarray, reference_half_edge: float
     positions = np.array([a.position_m for a in array.accelerometers])
     ref = float(reference_half_edge or np.max(np.abs(positions)))
     if ref <= 0:
-        raise ValueError(f"array {array.name!r}: all accelerometers at the origin; cannot scale the layout")
+        raise InputError(f"array {array.name!r}: all accelerometers at the origin; cannot scale the layout")
     out = []
     for h in np.asarray(half_edges, dtype=float):
         scaled = array.with_accelerometers([dc_replace(a, position_m=a.position_m * (h / ref)) for a in array.accelerometers])

@@ -38,6 +38,7 @@ from .log import Log
 from .readings import clipped_readings, runs_of, screen_log, stuck_runs
 from .rigid_body import quadratic_terms_jacobian
 from .smoother.auto import NOISE_RATIO_LIMIT, check_model, rigid_body_residual
+from .errors import InputError
 
 DEG_PER_RAD = 180.0 / np.pi
 BANDS_RADPS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, np.inf)
@@ -427,7 +428,7 @@ def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
     estimator = MLEstimator()
     reason = estimator.applicable(array)
     if reason:
-        raise ValueError(f"{log.source}: cannot diagnose the readings: {reason}")
+        raise InputError(f"{log.source}: cannot diagnose the readings: {reason}")
     motion = estimator.estimate(clean, progress=progress)
     residual = rigid_body_residual(clean, motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2)
     check = check_model(clean, motion, residual)

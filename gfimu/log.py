@@ -15,6 +15,7 @@ import numpy as np
 
 from .array import SensorArray
 from .motion import TIME_INDEX, Motion, _require_pandas
+from .errors import InputError
 
 GYRO_COLUMNS = ("w_x", "w_y", "w_z")
 """Columns of the gyroscope readings (in B) in ``imu.csv`` and in :meth:`Log.to_dataframe`."""
@@ -62,7 +63,7 @@ class Log:
         object.__setattr__(self, "accel_mps2", acc)
         if t.size > 1 and np.any(np.diff(t) <= 0):
             k = int(np.argmax(np.diff(t) <= 0)) + 1
-            raise ValueError(f"{self.source}: timestamps not strictly increasing at sample {k}")
+            raise InputError(f"{self.source}: timestamps not strictly increasing at sample {k}")
         for name, width in (("gyro_b_radps", 3), ("tilt_rad", 2)):
             v = getattr(self, name)
             if v is not None:
@@ -165,7 +166,7 @@ class Log:
             names += list(TILT_COLUMNS)
         missing = [n for n in names if n not in df.columns]
         if missing:
-            raise ValueError(f"{source}: column {missing[0]!r} is missing ({len(missing)} of the {len(names)} "
+            raise InputError(f"{source}: column {missing[0]!r} is missing ({len(missing)} of the {len(names)} "
                              f"reading columns of array {array.name!r}: {', '.join(names)})")
         values = df[names].to_numpy(dtype=float)
         n_acc = array.n_axes
@@ -183,6 +184,6 @@ def _timestamps_from_index(df, source: str) -> np.ndarray:
     """The integer nanoseconds of a frame's index (``timestamp_ns``)."""
     index = df.index
     if not np.issubdtype(index.dtype, np.integer):
-        raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
+        raise InputError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
                          f"got dtype {index.dtype}")
     return np.asarray(index, dtype=np.int64)

@@ -19,6 +19,8 @@ import dataclasses
 import importlib
 from typing import Any
 
+from .errors import InputError
+
 
 METHODS: dict[str, str] = {
     "inversion": "gfimu.estimators.inversion:InversionEstimator",
@@ -34,8 +36,10 @@ METHODS: dict[str, str] = {
 """Method name -> ``module:class`` of its estimator."""
 
 
-class UnknownMethodError(KeyError):
-    pass
+class UnknownMethodError(InputError, KeyError):
+    """No method of that name (the message lists them)."""
+
+    __str__ = InputError.__str__
 
 
 def estimator_class(name: str):
@@ -70,7 +74,7 @@ def make_estimator(name: str, **options: Any):
         known = {f.name for f in option_field_list(name)}
         unknown = sorted(set(options) - known)
         if unknown:
-            raise ValueError(f"method {name!r} has no option(s) {unknown}; options are: {sorted(known)}")
+            raise InputError(f"method {name!r} has no option(s) {unknown}; options are: {sorted(known)}")
     return cls(**options)
 
 

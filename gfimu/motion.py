@@ -16,6 +16,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .errors import InputError
+
 # field name -> (CSV column prefix, CSV unit, number of components, component suffixes)
 QUANTITIES: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "omega_b_radps": ("w", "rad s^-1", ("x", "y", "z")),
@@ -126,7 +128,7 @@ class Motion:
             raise TypeError(f"{source}: expected a pandas.DataFrame, got {type(df).__name__}")
         index = df.index
         if not np.issubdtype(index.dtype, np.integer):
-            raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
+            raise InputError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}), "
                              f"got dtype {index.dtype}")
         kw: dict = {}
         sigma: dict = {}
@@ -136,7 +138,7 @@ class Motion:
                 present = [c in df.columns for c in cols]
                 if any(present) and not all(present):
                     missing = cols[present.index(False)]
-                    raise ValueError(f"{source}: column {missing!r} is missing (a quantity needs all of "
+                    raise InputError(f"{source}: column {missing!r} is missing (a quantity needs all of "
                                      f"{', '.join(cols)})")
                 if all(present):
                     (sigma if is_sigma else kw)[name] = df[cols].to_numpy(dtype=float)

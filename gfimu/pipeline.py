@@ -18,9 +18,10 @@ from typing import Any
 import numpy as np
 
 from .motion import Motion
+from .errors import InputError
 
 
-class MethodNotApplicable(ValueError):
+class MethodNotApplicable(InputError):
     """The method cannot run on this log's array (the message says why)."""
 
 
@@ -57,9 +58,9 @@ def estimate_log(log_dir: str | Path, method: str = "smoother", options: dict | 
     log, screening = screen_log(log)
     _warn_replaced(log, screening)
     if calibration:
-        from .calibration import apply_calibration, read_calibration
+        from .calibration import apply_calibration_file
 
-        log = apply_calibration(log, read_calibration(calibration))
+        log = apply_calibration_file(log, calibration)
     reason = est.applicable(log.array)
     if reason:
         raise MethodNotApplicable(f"method {method!r} cannot run on {log_dir}: {reason}")

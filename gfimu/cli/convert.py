@@ -78,10 +78,10 @@ def run(args) -> int:
                            "rotation; give them in the map (position_m, rotation_body_sensor), with --array, or "
                            "with --extrinsics")
         if args.calibration:
-            from ..calibration import apply_calibration, read_calibration
+            from ..calibration import apply_calibration_file
 
             bar.step("apply the calibration")
-            log = apply_calibration(log, read_calibration(args.calibration))
+            log = apply_calibration_file(log, args.calibration)
         bar.step("write the log")
         gio.write_log(log, args.out)
     for line in [*report, *extrinsics_report]:

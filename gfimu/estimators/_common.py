@@ -7,6 +7,7 @@ from typing import Sequence
 import numpy as np
 
 from ..rigid_body import omega_from_quadratic_terms
+from ..errors import DataError, InputError
 
 # (i, j) -> index of ωiωj in q = [ωx²+ωy², ωx²+ωz², ωy²+ωz², ωxωy, ωxωz, ωyωz]
 _CROSS_INDEX = {(0, 1): 3, (0, 2): 4, (1, 2): 5}
@@ -18,7 +19,7 @@ def check_finite(values: np.ndarray, what: str, columns: Sequence[str] | None = 
     if bad.any():
         row, col = np.argwhere(bad)[0] if values.ndim == 2 else (int(np.argmax(bad)), None)
         where = f" column {columns[col]!r}" if columns is not None and col is not None else ""
-        raise ValueError(f"{what}: non-finite value at sample {int(row)}{where}")
+        raise DataError(f"{what}: non-finite value at sample {int(row)}{where}")
 
 
 def checked_readings(estimator, log, method: str) -> np.ndarray:
@@ -26,11 +27,11 @@ def checked_readings(estimator, log, method: str) -> np.ndarray:
     with its reason) and finite readings (ValueError naming the first non-finite sample and column)."""
     reason = estimator.applicable(log.array)
     if reason:
-        raise ValueError(f"{log.source}: method {method!r} cannot run: {reason}")
+        raise InputError(f"{log.source}: method {method!r} cannot run: {reason}")
     y = log.accel_mps2
     if not np.all(np.isfinite(y)):
         bad = np.argwhere(~np.isfinite(y))[0]
-        raise ValueError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column "
+        raise DataError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column "
                          f"{log.array.accel_columns[bad[1]]}")
     return y
 
@@ -112,10 +113,10 @@ def resolve_initial_omega(initial_omega, q_first: np.ndarray, first_segment: boo
             return np.zeros(3)
         if initial_omega == "quadratic":
             return omega_from_quadratic_terms_signed(q_first)[0]
-        raise ValueError(f"initial_omega must be 'zero', 'quadratic' or three numbers (rad/s), got {initial_omega!r}")
+        raise InputError(f"initial_omega must be 'zero', 'quadratic' or three numbers (rad/s), got {initial_omega!r}")
     w0 = np.asarray(initial_omega, dtype=float).reshape(-1)
     if w0.shape != (3,) or not np.all(np.isfinite(w0)):
-        raise ValueError(f"initial_omega must be 'zero', 'quadratic' or three finite numbers (rad/s), got {initial_omega!r}")
+        raise InputError(f"initial_omega must be 'zero', 'quadratic' or three finite numbers (rad/s), got {initial_omega!r}")
     return w0 if first_segment else omega_from_quadratic_terms_signed(q_first)[0]
 
 

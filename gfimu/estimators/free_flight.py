@@ -48,6 +48,7 @@ from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rotations import skew
 from ._common import checked_readings
+from ..errors import DataError, InputError
 
 OMEGA_SIGNS = ("positive", "negative", "auto")
 
@@ -173,11 +174,11 @@ class FreeFlightEstimator:
 
     def __post_init__(self) -> None:
         if self.omega_sign not in OMEGA_SIGNS:
-            raise ValueError(f"omega_sign must be one of {OMEGA_SIGNS}, got {self.omega_sign!r}")
+            raise InputError(f"omega_sign must be one of {OMEGA_SIGNS}, got {self.omega_sign!r}")
         if int(self.init_samples) < 1:
-            raise ValueError(f"init_samples must be >= 1, got {self.init_samples}")
+            raise InputError(f"init_samples must be >= 1, got {self.init_samples}")
         if int(self.starts) < 1:
-            raise ValueError(f"starts must be >= 1, got {self.starts}")
+            raise InputError(f"starts must be >= 1, got {self.starts}")
 
     def applicable(self, array: SensorArray) -> str | None:
         if array.body is None:
@@ -197,15 +198,15 @@ class FreeFlightEstimator:
         y = checked_readings(self, log, "free-flight")
         n = len(log)
         if n < 2:
-            raise ValueError(f"{log.source}: free-flight needs at least 2 samples, got {n}")
+            raise DataError(f"{log.source}: free-flight needs at least 2 samples, got {n}")
         model = _FreeFlightModel(array)
         t = log.times_s
         k = min(int(self.init_samples), n)
         if not np.any(y[:k]):
-            raise ValueError(f"{log.source}: the first {k} readings are all zero; free-flight needs a spinning body")
+            raise DataError(f"{log.source}: the first {k} readings are all zero; free-flight needs a spinning body")
         w_init, two_t, h2 = self._initial(model, y[:k], t[:k])
         if not (np.isfinite(two_t) and np.isfinite(h2) and two_t > 0 and h2 > 0):
-            raise ValueError(f"{log.source}: the first {k} readings show no rotation (2T = {two_t:.3g}); "
+            raise DataError(f"{log.source}: the first {k} readings show no rotation (2T = {two_t:.3g}); "
                              "free-flight needs a spinning body")
 
         accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))  # eq. 14: mean |a_s| over the N samples
@@ -320,7 +321,7 @@ class FreeFlightEstimator:
     def _sigma(array, model, omega):
         sig = array.noise_std_per_axis_mps2
         if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
-            raise ValueError(f"array {array.name!r}: compute_sigma needs noise_std_mps2 for every accelerometer axis")
+            raise InputError(f"array {array.name!r}: compute_sigma needs noise_std_mps2 for every accelerometer axis")
         s_w = np.empty_like(omega)
         s_dw = np.empty_like(omega)
         for i, w in enumerate(omega):

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import omega_from_quadratic_terms
@@ -45,7 +46,7 @@ def invert(array: SensorArray, accel_mps2: np.ndarray) -> tuple[np.ndarray, np.n
     single = a.ndim == 1
     a2 = a.reshape(1, -1) if single else a
     if a2.ndim != 2 or a2.shape[1] != array.n_axes:
-        raise ValueError(
+        raise InputError(
             f"accel_mps2 has shape {a.shape}; array {array.name!r} has {array.n_axes} accelerometer axes "
             f"({', '.join(array.accel_columns)})"
         )
@@ -78,7 +79,7 @@ def sigma_from_inversion(cov: np.ndarray, n: int) -> dict[str, np.ndarray]:
 
 def check_log_for_inversion(log: Log) -> None:
     if len(log) == 0:
-        raise ValueError(f"{log.source}: log has no samples")
+        raise DataError(f"{log.source}: log has no samples")
 
 
 @dataclass

@@ -62,6 +62,7 @@ from ..motion import Motion
 from ..parallel import check_workers, forked_map
 from ..progress import progress as progress_bar
 from ._common import checked_readings
+from ..errors import DataError, InputError
 
 
 def _fibonacci_hemisphere(n: int) -> np.ndarray:
@@ -221,10 +222,10 @@ class MLEstimator:
         gyro_var = None
         if self.use_gyro:
             if log.gyro_b_radps is None:
-                raise ValueError(f"{log.source}: use_gyro=True but the log has no gyro columns")
+                raise InputError(f"{log.source}: use_gyro=True but the log has no gyro columns")
             gyro = log.gyro_b_radps
             if not np.all(np.isfinite(gyro)):
-                raise ValueError(f"{log.source}: non-finite gyro reading at sample {int(np.argwhere(~np.isfinite(gyro))[0, 0])}")
+                raise DataError(f"{log.source}: non-finite gyro reading at sample {int(np.argwhere(~np.isfinite(gyro))[0, 0])}")
             gyro_var = float(array.gyroscope.noise_std_radps) ** 2
         sigma = self._axis_sigma(array)
         model = _ProjectedModel.build(array, sigma)

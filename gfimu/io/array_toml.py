@@ -27,6 +27,7 @@ import tomli_w
 from ..array import Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
 from .atomic import atomic_write_text
 from .errors import LogFormatError, LogFormatWarning, read_utf8_text
+from ..errors import InputError
 
 ARRAY_FORMAT = "gfimu-array/1"
 ROTATION_TOLERANCE = 1e-6  # accepted as written
@@ -327,7 +328,7 @@ def format_array_toml(array: SensorArray) -> str:
     try:
         return format_toml(array_to_dict(array))
     except ValueError as exc:
-        raise ValueError(f"array.toml: {exc}") from None
+        raise InputError(f"array.toml: {exc}") from None
 
 
 def write_array_toml(array: SensorArray, path: str | os.PathLike) -> None:

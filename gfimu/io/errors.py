@@ -13,8 +13,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..errors import InputError
 
-class LogFormatError(ValueError):
+
+class LogFormatError(InputError):
     """A log file does not follow the log format; the message names file and line or key."""
 
     def __init__(self, message: str, path: str | os.PathLike | None = None, line: int | None = None,
@@ -48,7 +50,7 @@ def read_utf8_text(path: str | os.PathLike, missing: str = "file not found", fol
         line = raw[: exc.start].count(b"\n") + 1 if line_of_bad_byte else None
         raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, line) from None
 
-class OutputError(OSError):
+class OutputError(InputError, OSError):
     """An output cannot be written where asked (it is an input, or not a regular file)."""
 
 

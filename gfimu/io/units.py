@@ -25,6 +25,8 @@ from decimal import MAX_PREC, ROUND_HALF_EVEN, Context, Decimal, InvalidOperatio
 
 import numpy as np
 
+from ..errors import InputError
+
 STANDARD_GRAVITY_MPS2 = 9.80665
 
 _DEG = math.pi / 180.0
@@ -94,7 +96,7 @@ _EXACT = Context(prec=MAX_PREC, rounding=ROUND_HALF_EVEN)  # a product of decima
 _INT64 = (-(2**63), 2**63)
 
 
-class TimestampError(ValueError):
+class TimestampError(InputError):
     """A timestamp token that is no time; ``index`` is its place among the tokens given."""
 
     def __init__(self, message: str, index: int):

@@ -24,6 +24,7 @@ from .scenarios import SCENARIOS, Scenario
 from .sensor_errors import SensorErrors
 from .trajectory import BodyKinematics, tilt_angles_rad
 from ..datasets.gtsam_recordings import RECORDINGS
+from ..errors import InputError
 
 __all__ = ["simulate", "SCENARIOS", "Scenario", "SensorErrors", "BodyKinematics", "motion_from_truth",
            "sample_timestamps_ns"]
@@ -34,15 +35,15 @@ _CHUNK = 20_000
 def sample_timestamps_ns(rate_hz: float, duration_s: float) -> np.ndarray:
     """``round(duration × rate)`` timestamps in ns from 0, at ``round(k · 1e9 / rate)``."""
     if not (np.isfinite(rate_hz) and rate_hz > 0):
-        raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
+        raise InputError(f"rate_hz must be a positive number, got {rate_hz!r}")
     if not (np.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s must be a positive number, got {duration_s!r}")
+        raise InputError(f"duration_s must be a positive number, got {duration_s!r}")
     n = int(round(duration_s * rate_hz))
     if n < 2:
-        raise ValueError(f"a duration of {duration_s:g} s at {rate_hz:g} Hz gives {n} sample(s); need at least 2")
+        raise InputError(f"a duration of {duration_s:g} s at {rate_hz:g} Hz gives {n} sample(s); need at least 2")
     t = np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64)
     if np.any(np.diff(t) <= 0):
-        raise ValueError(f"a rate of {rate_hz:g} Hz is too high for nanosecond timestamps")
+        raise InputError(f"a rate of {rate_hz:g} Hz is too high for nanosecond timestamps")
     return t
 
 
@@ -87,12 +88,12 @@ def simulate(
     acceleration), each plus its noise. ``progress`` shows a bar for long logs.
     """
     if scenario not in SCENARIOS:
-        raise ValueError(f"unknown scenario {scenario!r}; choose from {', '.join(SCENARIOS)}")
+        raise InputError(f"unknown scenario {scenario!r}; choose from {', '.join(SCENARIOS)}")
     spec = SCENARIOS[scenario]
     allowed = spec.options()
     unknown = sorted(set(scenario_options) - set(allowed))
     if unknown:
-        raise ValueError(f"scenario {scenario!r} has no option(s) {unknown}; its options are {sorted(allowed)}")
+        raise InputError(f"scenario {scenario!r} has no option(s) {unknown}; its options are {sorted(allowed)}")
     if array is None:
         array = spec.default_array()
     if not isinstance(array, SensorArray):

@@ -61,6 +61,7 @@ from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from .restarts import branch_restarts
 from .result import SmootherEstimatorRuns, SmootherResult
 from .tuning import InitialStates, Tuning, make_problem, tuned_problem
+from ..errors import DataError, InputError
 
 SOLVERS = ("numpy", "gtsam")
 """Solvers of the batch smoother: the vectorised banded Levenberg-Marquardt (default: linear in the
@@ -115,7 +116,7 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
     if solver == "numpy":
         return solve(problem, states, params, compute_sigma=compute_sigma, reweight=reweight, max_iterations=max_iterations)
     if solver != "gtsam":
-        raise ValueError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
+        raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
     limit = int(problem.options.max_iterations if max_iterations is None else max_iterations)
     X, P, iterations, converged = gtsam_levenberg_marquardt(problem, states, params, limit,
                                                             problem.options.relative_tolerance, reweight)
@@ -153,12 +154,12 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     opt = options
     reason = options_reason(log.array, opt, attitude_supported=True)
     if reason:
-        raise ValueError(f"{log.source}: {reason}")
+        raise InputError(f"{log.source}: {reason}")
     if solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
+        raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
     n = len(log)
     if n < 2:
-        raise ValueError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
+        raise DataError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
     layout = StateLayout.from_options(opt)
     attitude = layout.attitude
     M = layout.size
@@ -419,7 +420,7 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
         super().__post_init__()
         check_workers(self.workers)
         if self.solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+            raise InputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
 
     def applicable(self, array: SensorArray) -> str | None:
         return options_reason(array, self.options(), attitude_supported=True)

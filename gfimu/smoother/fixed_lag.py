@@ -98,9 +98,10 @@ from .initialise import initial_estimate
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .result import SmootherEstimatorRuns, SmootherResult
 from .tuning import tuned_problem
+from ..errors import DataError, InputError
 
 
-class FixedLagSmootherError(RuntimeError):
+class FixedLagSmootherError(DataError, RuntimeError):
     """The smoother could not solve an update (names the time and the cause)."""
 
 
@@ -239,26 +240,26 @@ class FixedLagSmoother:
                  clock_reset_s: float = 1.0) -> None:
         options = options or SmootherOptions()
         if engine not in ENGINES:
-            raise ValueError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+            raise InputError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
         reason = fixed_lag_reason(array, options)
         if reason:
-            raise ValueError(reason)
+            raise InputError(reason)
         if marginalise_every_s is None:  # about 125 updates per block, at most 0.25 s
             marginalise_every_s = min(0.25, 125.0 / rate_hz) if rate_hz > 0 else 0.25
         for name, v in (("lag_s", lag_s), ("rate_hz", rate_hz), ("relinearize_threshold", relinearize_threshold),
                         ("marginalise_every_s", marginalise_every_s)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
+                raise InputError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
         if not (isinstance(warmup_s, (int, float)) and math.isfinite(warmup_s) and warmup_s >= 0):
-            raise ValueError(f"fixed-lag smoother: warmup_s must be >= 0, got {warmup_s!r}")
+            raise InputError(f"fixed-lag smoother: warmup_s must be >= 0, got {warmup_s!r}")
         if not gap_factor > 1.0:
-            raise ValueError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
+            raise InputError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
         if int(relinearize_skip) < 1:
-            raise ValueError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
+            raise InputError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
         if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
-            raise ValueError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
+            raise InputError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
         if not (isinstance(tune_window_s, (int, float)) and math.isfinite(tune_window_s) and tune_window_s > 0):
-            raise ValueError(f"fixed-lag smoother: tune_window_s must be a positive number, got {tune_window_s!r}")
+            raise InputError(f"fixed-lag smoother: tune_window_s must be a positive number, got {tune_window_s!r}")
         self.array = array
         self.options = options
         self.lag_s = float(lag_s)
@@ -344,15 +345,15 @@ class FixedLagSmoother:
         t_ns = int(timestamp_ns)
         y = np.asarray(accel_row, dtype=float).reshape(-1)
         if y.shape != (self.array.n_axes,):
-            raise ValueError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
+            raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
         if not np.all(np.isfinite(y)):
             bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
-            raise ValueError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
+            raise DataError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
         gyro = None
         if gyro_row is not None and self.array.gyroscope is not None and self.options.use_gyro:
             gyro = np.asarray(gyro_row, dtype=float).reshape(-1)
             if gyro.shape != (3,):
-                raise ValueError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
+                raise InputError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
             if not np.all(np.isfinite(gyro)):
                 gyro = None  # a missing gyro sample: the accelerometers alone carry on
         smoothed: list[StateEstimate] = []
@@ -789,11 +790,11 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
         """The fixed-lag smoother over ``log`` sample by sample, with what it chose (:class:`SmootherResult`)."""
         n = len(log)
         if n < 2:
-            raise ValueError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
+            raise DataError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
                              "(a single reading does not tell the angular velocity)")
         reason = self.applicable(log.array)
         if reason:
-            raise ValueError(f"{log.source}: {reason}")
+            raise InputError(f"{log.source}: {reason}")
         rate_hz = log.rate_hz
         smoother = self.smoother(log.array, rate_hz)
         out = np.full((n, 9), np.nan)

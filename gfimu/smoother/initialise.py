@@ -34,6 +34,7 @@ from .banded import band_structure
 from .graph import STATE_SIZE, SmootherOptions
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
+from ..errors import InputError
 
 LIFTED = 12
 
@@ -250,7 +251,7 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
     data = isinstance(robust_scale_radps, str) and robust_scale_radps == "data"
     if not data and robust_scale_radps is not None and (
             isinstance(robust_scale_radps, str) or not (np.isfinite(robust_scale_radps) and robust_scale_radps > 0)):
-        raise ValueError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
+        raise InputError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
     n = len(omega_b_radps)
     if n < 2:
         return np.ones(n)

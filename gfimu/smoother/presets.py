@@ -26,6 +26,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from ..errors import InputError
+
 PRESETS: dict[str, tuple[str, dict[str, Any]]] = {
     "hand-held-low-rate": (
         "fast hand-held motion at 50–100 Hz on real sensors whose rigid-body residual exceeds their noise",
@@ -60,7 +62,7 @@ def apply_preset(name: str, options: Mapping[str, Any] | None = None) -> dict[st
     Raises ValueError naming the known presets when ``name`` is not one of them.
     """
     if not isinstance(name, str) or name not in PRESETS:
-        raise ValueError(f"unknown smoother preset {name!r}; presets: {describe_presets()}")
+        raise InputError(f"unknown smoother preset {name!r}; presets: {describe_presets()}")
     return {**PRESETS[name][1], **dict(options or {})}
 
 
@@ -75,6 +77,6 @@ def expand_preset(method: str, options: Mapping[str, Any] | None) -> dict[str, A
         return out
     name = out.pop("preset")
     if method not in PRESET_METHODS:
-        raise ValueError(f"presets apply to the method(s) {', '.join(PRESET_METHODS)}, not {method!r} "
+        raise InputError(f"presets apply to the method(s) {', '.join(PRESET_METHODS)}, not {method!r} "
                          f"(preset {name!r} given)")
     return apply_preset(name, out)
