@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import rigid_body
-from .rotations import matrix_from_rotation_vector
 from .errors import InputError
+from .rotations import matrix_from_rotation_vector
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 

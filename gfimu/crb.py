@@ -30,8 +30,8 @@ import numpy as np
 
 from . import rigid_body
 from .array import ArrayModelError, SensorArray
-from .motion import Motion
 from .errors import InputError
+from .motion import Motion
 
 PARAMETERS = ("f_x", "f_y", "f_z", "dw_x", "dw_y", "dw_z", "w_x", "w_y", "w_z")
 """Order of θ in the 9 × 9 covariance: specific force, ω̇, ω."""

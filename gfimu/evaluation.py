@@ -37,9 +37,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .errors import DataError, InputError
 from .motion import QUANTITIES, Motion
 from .rotations import quaternion_from_rotation_vector, quaternion_multiply, rotation_vector_from_quaternion
-from .errors import DataError, InputError
 
 # quantity identifier (Motion field name; attitude and tilt errors in rad) -> (short label, unit, CSV prefix)
 QUANTITY_INFO = {

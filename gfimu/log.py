@@ -14,8 +14,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .array import SensorArray
-from .motion import TIME_INDEX, Motion, _require_pandas
 from .errors import InputError
+from .motion import TIME_INDEX, Motion, _require_pandas
 
 GYRO_COLUMNS = ("w_x", "w_y", "w_z")
 """Columns of the gyroscope readings (in B) in ``imu.csv`` and in :meth:`Log.to_dataframe`."""

@@ -14,9 +14,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .errors import InputError
 from .motion import QUANTITIES, Motion
 from .io.atomic import atomic_path
-from .errors import InputError
 
 # field -> (symbol for titles, unit for axis labels)
 LABELS: dict[str, tuple[str, str]] = {

@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..rotations import matrix_from_quaternion, quaternion_multiply
-from ..errors import DataError, InputError
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 GRAVITY_W_MPS2 = np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2])

@@ -26,8 +26,8 @@ import tomli_w
 
 from ..array import Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
 from .atomic import atomic_write_text
-from .errors import LogFormatError, LogFormatWarning, read_utf8_text
 from ..errors import InputError
+from .errors import LogFormatError, LogFormatWarning, read_utf8_text
 
 ARRAY_FORMAT = "gfimu-array/1"
 ROTATION_TOLERANCE = 1e-6  # accepted as written

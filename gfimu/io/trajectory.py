@@ -25,9 +25,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from ..errors import DataError, InputError
 from ..motion import Motion
 from .atomic import atomic_write
-from ..errors import DataError, InputError
 
 TUM_HEADER = "# timestamp tx ty tz qx qy qz qw"
 

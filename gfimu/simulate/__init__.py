@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as _progress
@@ -24,7 +25,6 @@ from .scenarios import SCENARIOS, Scenario
 from .sensor_errors import SensorErrors
 from .trajectory import BodyKinematics, tilt_angles_rad
 from ..datasets.gtsam_recordings import RECORDINGS
-from ..errors import InputError
 
 __all__ = ["simulate", "SCENARIOS", "Scenario", "SensorErrors", "BodyKinematics", "motion_from_truth",
            "sample_timestamps_ns"]

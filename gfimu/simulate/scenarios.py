@@ -29,6 +29,7 @@ import numpy as np
 from scipy import interpolate
 
 from ..array import Body, SensorArray, single_triad
+from ..errors import InputError
 from .free_flight import TorqueFreeMotion, box_principal_inertia
 from .trajectory import (
     GRAVITY_W_MPS2,
@@ -42,7 +43,6 @@ from .trajectory import (
 from .. import rotations
 from ..datasets.gtsam_recordings import RECORDINGS
 from .defaults import DURATION_S, RATE_HZ, default_cube
-from ..errors import InputError
 
 # paper 004: the accelerometer sits at a corner of the block's +z face,
 # about 15 mm in from both edges and 7 mm above the face (IMU in its casing).

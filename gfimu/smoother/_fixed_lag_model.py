@@ -36,11 +36,11 @@ import numpy as np
 
 from .. import noise, rigid_body
 from ..array import SensorArray
+from ..errors import InputError
 from ..factors import accelerometer, kinematics, process
 from ..log import Log
 from .graph import SmootherOptions
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
-from ..errors import InputError
 
 
 class _LazyGtsam:

@@ -28,6 +28,7 @@ import numpy as np
 
 from .. import noise
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..factors import (
     _so3,
     accelerometer,
@@ -43,7 +44,6 @@ from ..factors import (
 from ..log import Log
 from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
-from ..errors import DataError, InputError
 
 STATE_SIZE = KINEMATIC_SIZE
 """State size of the default white-jerk model; white snap appends ω̈ (12); see :mod:`gfimu.smoother.layout`."""
@@ -321,7 +321,7 @@ class SmootherProblem:
         if np.any(bad):
             row, col = np.argwhere(bad)[0]
             raise DataError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
-                             f"({int(bad.sum())} such values); the smoother needs finite readings")
+                            f"({int(bad.sum())} such values); the smoother needs finite readings")
         self.sensors = accelerometer.array_geometry(arr)  # (directions, positions, column slice)
         # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
         self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import noise
+from ..errors import DataError
 from ..factors import (
     accelerometer,
     attitude_key,
@@ -47,7 +48,6 @@ from ..factors import (
     specific_force_key,
 )
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
-from ..errors import DataError
 
 
 @dataclass

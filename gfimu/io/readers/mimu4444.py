@@ -38,9 +38,9 @@ import numpy as np
 
 from . import Conversion, Reader
 from ...array import mimu4444_array
+from ...errors import InputError
 from ...log import Log
 from ...motion import Motion
-from ...errors import InputError
 
 PACKET_BYTES = 106
 HEADER = 0xAA

@@ -37,8 +37,8 @@ import numpy as np
 
 from . import Conversion, Reader
 from ..errors import LogFormatError
-from ...log import Log
 from ...errors import InputError, ResourceError
+from ...log import Log
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 GAP_FACTOR = 1.5  # a step over 1.5 median periods is a gap (as gfimu.log.Log.gaps)
