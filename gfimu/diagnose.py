@@ -31,6 +31,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .crb import crb_per_sample
+from .errors import InputError
 from .estimators.ml import MLEstimator
 from .io.plausibility import MAX_POSITION_M, MIN_EXTENT_M, RATE_TOLERANCE, still_specific_force
 from .io.units import STANDARD_GRAVITY_MPS2
@@ -38,7 +39,6 @@ from .log import Log
 from .readings import clipped_readings, runs_of, screen_log, stuck_runs
 from .rigid_body import quadratic_terms_jacobian
 from .smoother.auto import NOISE_RATIO_LIMIT, check_model, rigid_body_residual
-from .errors import InputError
 
 DEG_PER_RAD = 180.0 / np.pi
 BANDS_RADPS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, np.inf)
@@ -429,7 +429,7 @@ def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
     reason = estimator.applicable(array)
     if reason:
         raise InputError(f"{log.source}: cannot diagnose the readings: {reason}")
-    motion = estimator.estimate(clean, progress=progress)
+    motion = estimator.estimate_motion(clean, progress=progress)
     residual = rigid_body_residual(clean, motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2)
     check = check_model(clean, motion, residual)
     n_axes = array.n_axes

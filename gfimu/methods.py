@@ -7,8 +7,12 @@ comparison study ask one place, and nothing below imports upward.
 Every estimator is a small object configured at construction (a dataclass of options with
 documented defaults) that offers
 
+- ``method``: its name here;
 - ``applicable(array) -> str | None``: ``None`` when it can run on the array, else the reason;
-- ``estimate(log, progress=False) -> Motion``: one row per sample of the log.
+- ``estimate(log, progress=False) -> Estimate``: a :class:`gfimu.estimate.Estimate`, the
+  :class:`~gfimu.motion.Motion` (one row per sample of the log) and the
+  :class:`~gfimu.estimate.Report` of the run (options, timings, warnings, and where they apply
+  the model check, the noise chosen, iterations and cost). The estimator keeps nothing of a run.
 
 Classes are imported on first use so that ``gfimu --help`` stays fast.
 """

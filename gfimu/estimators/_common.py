@@ -2,19 +2,40 @@
 
 from __future__ import annotations
 
+import time
 from typing import Sequence
 
 import numpy as np
 
-from ..rigid_body import omega_from_quadratic_terms
 from ..errors import DataError, InputError
+from ..estimate import Estimate, Report
+from ..motion import Motion
+from ..rigid_body import omega_from_quadratic_terms
 
 # (i, j) -> index of ωiωj in q = [ωx²+ωy², ωx²+ωz², ωy²+ωz², ωxωy, ωxωz, ωyωz]
 _CROSS_INDEX = {(0, 1): 3, (0, 2): 4, (1, 2): 5}
 
 
+class PerSampleEstimator:
+    """What the per-sample estimators share: :meth:`estimate` runs the subclass's :meth:`estimate_motion`
+    and returns it with its :class:`~gfimu.estimate.Report` (the method's name, ``method``, its options
+    and the time taken). A subclass is a dataclass of options that defines ``method`` (its name in
+    :data:`gfimu.methods.METHODS`), ``applicable(array)`` and ``estimate_motion(log, progress)``."""
+
+    method = ""
+
+    def estimate(self, log, progress: bool = False) -> Estimate:
+        """The method on ``log``: :class:`~gfimu.estimate.Estimate` ``(motion, report)``."""
+        t0 = time.perf_counter()
+        motion = self.estimate_motion(log, progress=progress)
+        return Estimate(motion, Report.of(self.method, self, timings={"estimate": time.perf_counter() - t0}))
+
+    def estimate_motion(self, log, progress: bool = False) -> Motion:
+        raise NotImplementedError
+
+
 def check_finite(values: np.ndarray, what: str, columns: Sequence[str] | None = None) -> None:
-    """Raise ValueError naming the first sample (and column) that is not finite."""
+    """Raise :class:`~gfimu.errors.DataError` naming the first sample (and column) that is not finite."""
     bad = ~np.isfinite(values)
     if bad.any():
         row, col = np.argwhere(bad)[0] if values.ndim == 2 else (int(np.argmax(bad)), None)
@@ -23,8 +44,8 @@ def check_finite(values: np.ndarray, what: str, columns: Sequence[str] | None = 
 
 
 def checked_readings(estimator, log, method: str) -> np.ndarray:
-    """``log.accel_mps2`` after the checks an estimator makes first: ``estimator.applicable(log.array)`` (ValueError
-    with its reason) and finite readings (ValueError naming the first non-finite sample and column)."""
+    """``log.accel_mps2`` after the checks an estimator makes first: ``estimator.applicable(log.array)`` (InputError
+    with its reason) and finite readings (DataError naming the first non-finite sample and column)."""
     reason = estimator.applicable(log.array)
     if reason:
         raise InputError(f"{log.source}: method {method!r} cannot run: {reason}")
@@ -32,7 +53,7 @@ def checked_readings(estimator, log, method: str) -> np.ndarray:
     if not np.all(np.isfinite(y)):
         bad = np.argwhere(~np.isfinite(y))[0]
         raise DataError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column "
-                         f"{log.array.accel_columns[bad[1]]}")
+                        f"{log.array.accel_columns[bad[1]]}")
     return y
 
 

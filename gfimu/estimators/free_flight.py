@@ -43,12 +43,12 @@ from scipy.optimize import least_squares
 
 from .. import rigid_body
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rotations import skew
-from ._common import checked_readings
-from ..errors import DataError, InputError
+from ._common import PerSampleEstimator, checked_readings
 
 OMEGA_SIGNS = ("positive", "negative", "auto")
 
@@ -149,7 +149,7 @@ class _FreeFlightModel:
 
 
 @dataclass
-class FreeFlightEstimator:
+class FreeFlightEstimator(PerSampleEstimator):
     """ω of a torque-free body in free fall from its accelerometer(s) (paper 004, eqs. 11-14).
 
     Options (defaults):
@@ -166,6 +166,8 @@ class FreeFlightEstimator:
     catch first). Returns ω and ω̇ (from Euler's equations); the specific
     force at the centre of mass is zero by assumption and is not reported.
     """
+
+    method = "free-flight"
 
     omega_sign: str = "positive"
     init_samples: int = 50
@@ -193,7 +195,7 @@ class FreeFlightEstimator:
         return None
 
     # ------------------------------------------------------------------
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         array = log.array
         y = checked_readings(self, log, "free-flight")
         n = len(log)
@@ -207,7 +209,7 @@ class FreeFlightEstimator:
         w_init, two_t, h2 = self._initial(model, y[:k], t[:k])
         if not (np.isfinite(two_t) and np.isfinite(h2) and two_t > 0 and h2 > 0):
             raise DataError(f"{log.source}: the first {k} readings show no rotation (2T = {two_t:.3g}); "
-                             "free-flight needs a spinning body")
+                            "free-flight needs a spinning body")
 
         accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))  # eq. 14: mean |a_s| over the N samples
         omega = np.empty((n, 3))

@@ -15,12 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..array import ArrayModelError, SensorArray
+from ..errors import InputError
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import quadratic_terms, quadratic_terms_jacobian, structure_matrix
-from ._common import check_finite, weighted_least_squares
+from ._common import PerSampleEstimator, check_finite, weighted_least_squares
 from .inversion import check_log_for_inversion
-from ..errors import InputError
 
 
 def paper001_layout(lever_arm: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -136,7 +136,7 @@ def gyro_aided_solve(array: SensorArray, accel_mps2: np.ndarray, gyro_b_radps: n
 
 
 @dataclass
-class GyroAidedEstimator:
+class GyroAidedEstimator(PerSampleEstimator):
     """Accelerometers plus gyroscope (paper 001, eq. 8).
 
     f and ω̇ by least squares from ``a_m − W q(ω_m)``; ω is the gyroscope
@@ -149,6 +149,8 @@ class GyroAidedEstimator:
             sample), and of ω (the gyro's noise level), when the array gives
             them. Default False.
     """
+
+    method = "gyro-aided"
 
     compute_sigma: bool = False
 
@@ -164,7 +166,7 @@ class GyroAidedEstimator:
             return str(exc)
         return None
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         reason = self.applicable(log.array)
         if reason:

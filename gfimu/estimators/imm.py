@@ -50,14 +50,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rigid_body import omega_from_quadratic_terms
-from ._common import resolve_initial_omega, trapezoid_increments, validate_initial_omega
+from ._common import PerSampleEstimator, resolve_initial_omega, trapezoid_increments, validate_initial_omega
 from .integration import InitialOmega, sign_tracking_loop
 from .inversion import check_log_for_inversion, invert, sigma_from_inversion
-from ..errors import DataError, InputError
 
 ZERO, INTEGRATION, QUADRATIC = 0, 1, 2
 # axes contained in each quadratic sum a, b, c, and the axis each leaves out
@@ -155,7 +155,7 @@ def t2_from_trend(q: np.ndarray, intercept: float, slope: float) -> float:
 
 
 @dataclass
-class IMMEstimator:
+class IMMEstimator(PerSampleEstimator):
     """Context-based IMM of paper 002 §3.2 (zero / integration / quadratic models).
 
     Options (paper 002 values where it gives them):
@@ -174,6 +174,8 @@ class IMMEstimator:
             rad/s (see :class:`~gfimu.estimators.integration.PureIntegrationEstimator`).
         compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
     """
+
+    method = "imm"
 
     t1: float = 0.1
     t2: float | None = None
@@ -205,7 +207,7 @@ class IMMEstimator:
             raise DataError(f"imm: T2 = {t2:g} from the trend line does not exceed T1 = {self.t1:g}")
         return self.t1, t2
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         x, cov = invert(log.array, log.accel_mps2)
         q = x[:, 6:]

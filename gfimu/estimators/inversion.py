@@ -18,7 +18,8 @@ from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import omega_from_quadratic_terms
-from ._common import check_finite, continuity_signs, omega_from_quadratic_terms_signed, weighted_least_squares
+from ._common import (PerSampleEstimator, check_finite, continuity_signs, omega_from_quadratic_terms_signed,
+                      weighted_least_squares)
 
 
 def inversion_matrix(array: SensorArray) -> tuple[np.ndarray, np.ndarray]:
@@ -83,7 +84,7 @@ def check_log_for_inversion(log: Log) -> None:
 
 
 @dataclass
-class InversionEstimator:
+class InversionEstimator(PerSampleEstimator):
     """Paper 000 eq. 7 applied sample by sample; ω by magnitudes and cross-term signs.
 
     ω: magnitudes from the quadratic sums, relative signs from the cross terms
@@ -101,12 +102,14 @@ class InversionEstimator:
             when the array gives its noise levels. Default False.
     """
 
+    method = "inversion"
+
     compute_sigma: bool = False
 
     def applicable(self, array: SensorArray) -> str | None:
         return array.inversion_reason()
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         x, cov = invert(log.array, log.accel_mps2)
         q = x[:, 6:]

@@ -57,12 +57,12 @@ import numpy as np
 from .. import crb as crb_module
 from .. import noise, rigid_body
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..parallel import check_workers, forked_map
 from ..progress import progress as progress_bar
-from ._common import checked_readings
-from ..errors import DataError, InputError
+from ._common import PerSampleEstimator, checked_readings
 
 
 def _fibonacci_hemisphere(n: int) -> np.ndarray:
@@ -137,7 +137,7 @@ class _PrepareChunk:
 
 
 @dataclass
-class MLEstimator:
+class MLEstimator(PerSampleEstimator):
     """Per-sample maximum likelihood of f, ω̇ and ω (Skog et al. 2016).
 
     Options (defaults):
@@ -159,6 +159,8 @@ class MLEstimator:
     - ``workers=0``: processes that start the blocks of 4,096 samples, from four blocks on (0: one
       per CPU; 1: this process alone; the same numbers either way, :mod:`gfimu.parallel`).
     """
+
+    method = "ml"
 
     use_gyro: bool = False
     compute_sigma: bool = False
@@ -215,7 +217,7 @@ class MLEstimator:
         return noise.accel_noise_std(array)
 
     # ------------------------------------------------------------------
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         array = log.array
         y = checked_readings(self, log, "ml")
         gyro = None

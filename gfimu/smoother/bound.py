@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..factors import _so3
 from ..log import Log
 from ..motion import Motion
@@ -24,7 +25,6 @@ from .banded import factorise, marginal_covariances, normal_equations
 from .batch import window_slices
 from .graph import SmootherOptions, SmootherProblem
 from .layout import OMEGA_DOT, QUANTITIES
-from ..errors import InputError
 
 QUANTITY_SLICES = QUANTITIES
 
@@ -43,7 +43,7 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
     """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state.
 
     ``window_options``: the options of each solve window, e.g. with the process noise that the
-    batch smoother chose from the data (``[t.apply(options) for t in estimator.last_tuning]``).
+    batch smoother chose from the data (``[t.apply(options) for t in estimate.report.tunings]``).
     """
     opt = options or SmootherOptions()
     truth = truth or log.truth

@@ -81,11 +81,12 @@ from __future__ import annotations
 import math
 import warnings
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
@@ -96,9 +97,8 @@ from .banded import solve
 from .graph import SmootherOptions, options_reason
 from .initialise import initial_estimate
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
-from .result import SmootherEstimatorRuns, SmootherResult
+from .result import SmootherEstimator, SmootherResult
 from .tuning import tuned_problem
-from ..errors import DataError, InputError
 
 
 class FixedLagSmootherError(DataError, RuntimeError):
@@ -714,7 +714,7 @@ class FixedLagSmoother:
 
 
 @dataclass(frozen=True)
-class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
+class FixedLagEstimator(SmootherEstimator, SmootherOptions):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
     Model options: those of :class:`~gfimu.smoother.graph.SmootherOptions`
@@ -728,7 +728,7 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     batch smoother's tuner on that stretch: jerk density per body axis,
     specific-force density, and with ``tune_accel_noise`` the accelerometer
     noise scale); the stream then runs with it (its first outputs come
-    ``tune_window_s`` late). The choice is kept in :attr:`last_tuning`. Giving
+    ``tune_window_s`` late). The choice is in the report's ``tunings``. Giving
     any of ``omega_dot_random_walk_radps2_per_sqrt_s``,
     ``specific_force_random_walk_mps2_per_sqrt_s`` or ``process_axis_factors``
     (a value other than the default) uses the given densities and skips the
@@ -744,6 +744,8 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     the tuning), and so are ``max_iterations`` and ``relative_tolerance`` (the
     batch solves of the tuning stretch).
     """
+
+    method = "fixed-lag"
 
     tune_process_noise: bool = True
     """Choose the process noise from the first ``tune_window_s`` of data (see above)."""
@@ -771,9 +773,6 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     """Window solver: 'numpy' (a Kalman filter carrying the window's cross-covariances, about 0.2 ms per
     sample at 500 Hz with a 0.2 s lag) or 'gtsam' (iSAM2's IncrementalFixedLagSmoother, the reference)."""
 
-    _runs: list = field(default_factory=list, init=False, repr=False, compare=False)
-    """The result of the newest :meth:`estimate`, behind :attr:`last_tuning`."""
-
     def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
         """A streaming smoother with these options."""
         return FixedLagSmoother(array, self.options(), lag_s=self.lag_s, rate_hz=rate_hz,
@@ -791,7 +790,7 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
         n = len(log)
         if n < 2:
             raise DataError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
-                             "(a single reading does not tell the angular velocity)")
+                            "(a single reading does not tell the angular velocity)")
         reason = self.applicable(log.array)
         if reason:
             raise InputError(f"{log.source}: {reason}")

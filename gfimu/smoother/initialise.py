@@ -25,6 +25,7 @@ import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from .. import noise, rigid_body
+from ..errors import InputError
 from ..estimators.ml import MLEstimator
 from ..factors import _so3
 from ..log import Log
@@ -34,7 +35,6 @@ from .banded import band_structure
 from .graph import STATE_SIZE, SmootherOptions
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
-from ..errors import InputError
 
 LIFTED = 12
 
@@ -364,7 +364,7 @@ def initial_estimate(log: Log, options: SmootherOptions) -> np.ndarray:
     chained over time when ``ml_sign_chain``); free flight always uses its own initialisation."""
     if options.initialisation != "ml" or options.free_flight:
         return initial_states(log, options)
-    m = MLEstimator().estimate(log)
+    m = MLEstimator().estimate_motion(log)
     omega = m.omega_b_radps
     if options.ml_sign_chain:
         omega = omega * sign_chain(omega, m.omega_dot_b_radps2, log.dt_s)[:, None]
