@@ -98,6 +98,12 @@ BAD = [
      "cal.toml: gravity_mps2 must be a number > 0, got 'strong'"),
     ("cal-sensor", ["compare", "{log}", "--methods", "inversion", "--calibration", "{w}/cal.toml"],
      "cal.toml: calibration has no accelerometer 'a1'; it has ['zz']"),
+    ("cal-sensor", ["diagnose", "{log}", "--calibration", "{w}/cal.toml"],
+     "cal.toml: calibration has no accelerometer 'a1'; it has ['zz']"),
+    ("scenario-option", ["simulate", "random3d", "--out", "{w}/sim", "-O", "n_components='many'"],
+     "scenario 'random3d' option n_components: expected an integer, got 'many'"),
+    ("factor-groups", ["estimate", "{log}", "-O", "factor_groups=3", "--out", "{w}/e.csv"],
+     "smoother option factor_groups must be a tuple of FactorGroup objects"),
     ("orientation", ["estimate", "{log}", "--method", "inversion", "--orientation", "gyro", "--out", "{w}/e.csv"],
      "orientation source 'gyro' needs gyroscope columns w_x, w_y, w_z"),
     ("no-truth", ["compare", "{log}", "--methods", "inversion"], "the log has neither truth.csv nor reference.csv"),
@@ -110,7 +116,7 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("case, argv, message", BAD, ids=[c[0] for c in BAD])
+@pytest.mark.parametrize("case, argv, message", BAD, ids=[f"{c[1][0]}-{c[0]}" for c in BAD])
 def test_bad_inputs_exit_2_naming_the_thing(work, capsys, case, argv, message):
     setup_case(work, case)
     argv = [a.format(log=work / "log", w=work) for a in argv] + ["-q"]

@@ -59,6 +59,23 @@ def motion_from_truth(timestamps_ns, kinematics: BodyKinematics) -> Motion:
     )
 
 
+def _check_scenario_option(scenario: str, name: str, value, default) -> None:
+    """An :class:`~gfimu.errors.InputError` naming the option unless ``value`` has the kind of its default:
+    a finite number (an integer where the default is one), or as many finite numbers as a tuple default."""
+    def number(v) -> bool:
+        return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and bool(np.isfinite(v))
+
+    if isinstance(default, (int, np.integer)) and not isinstance(default, bool):
+        if not (number(value) and float(value).is_integer()):
+            raise InputError(f"scenario {scenario!r} option {name}: expected an integer, got {value!r}")
+    elif isinstance(default, (float, np.floating)):
+        if not number(value):
+            raise InputError(f"scenario {scenario!r} option {name}: expected a finite number, got {value!r}")
+    elif isinstance(default, tuple):
+        if not (isinstance(value, (tuple, list)) and len(value) == len(default) and all(number(v) for v in value)):
+            raise InputError(f"scenario {scenario!r} option {name}: expected {len(default)} finite numbers, got {value!r}")
+
+
 def simulate(
     scenario: str,
     array: SensorArray | None = None,
@@ -94,6 +111,8 @@ def simulate(
     unknown = sorted(set(scenario_options) - set(allowed))
     if unknown:
         raise InputError(f"scenario {scenario!r} has no option(s) {unknown}; its options are {sorted(allowed)}")
+    for name, value in scenario_options.items():
+        _check_scenario_option(scenario, name, value, allowed[name])
     if array is None:
         array = spec.default_array()
     if not isinstance(array, SensorArray):

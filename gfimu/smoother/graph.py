@@ -234,6 +234,10 @@ class SmootherOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
                 raise InputError(f"smoother option {name} must be >= 0 (0: off), got {v!r}")
+        groups = self.factor_groups
+        if not (isinstance(groups, (tuple, list)) and all(isinstance(g, FactorGroup) for g in groups)):
+            raise InputError(f"smoother option factor_groups must be a tuple of FactorGroup objects "
+                             f"(gfimu.smoother.groups), got {groups!r}")
 
     @property
     def robust(self) -> bool:
