@@ -173,14 +173,15 @@ def test_the_kinds(work):
     from gfimu.io.errors import LogFormatError, OutputError
     from gfimu.live import LiveInputError
     from gfimu.methods import UnknownMethodError, make_estimator
-    from gfimu.smoother.fixed_lag import FixedLagSmootherError
+    from gfimu.smoother.fixed_lag import FixedLagSmootherClosed, FixedLagSmootherError
 
     for cls in (LogFormatError, ArrayModelError, OptionError, CLIError, LiveInputError, UnknownMethodError,
-                CalibrationFileError, OutputError):
+                CalibrationFileError, OutputError, FixedLagSmootherClosed):
         assert issubclass(cls, InputError) and issubclass(cls, ValueError), cls
     for cls in (CalibrationError, FixedLagSmootherError):
         assert issubclass(cls, DataError), cls
     assert issubclass(OutputError, OSError) and issubclass(FixedLagSmootherError, RuntimeError)
+    assert issubclass(FixedLagSmootherClosed, RuntimeError)
     assert issubclass(ResourceError, OSError) and issubclass(ResourceError, GfimuError)
     assert not issubclass(ResourceError, ValueError)
     assert ResourceError.exit_status == 1 and InputError.exit_status == DataError.exit_status == 2

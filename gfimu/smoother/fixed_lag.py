@@ -105,7 +105,7 @@ class FixedLagSmootherError(DataError, RuntimeError):
     """The smoother could not solve an update (names the time and the cause)."""
 
 
-class FixedLagSmootherClosed(RuntimeError):
+class FixedLagSmootherClosed(InputError, RuntimeError):
     """:meth:`FixedLagSmoother.push` or :meth:`FixedLagSmoother.flush` after :meth:`FixedLagSmoother.close`."""
 
 
