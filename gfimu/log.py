@@ -154,7 +154,7 @@ class Log:
         """A log from readings in a ``pandas.DataFrame`` laid out as :meth:`to_dataframe` writes it: integer
         nanosecond index, the array's accelerometer columns (``<name>_<axis>`` in each sensor's frame, m/s²),
         ``w_x, w_y, w_z`` [rad/s] when the array has a gyroscope, ``tilt_x, tilt_y`` [rad] with an
-        inclinometer; other columns are ignored. ``ValueError`` names a missing column or a bad index."""
+        inclinometer; other columns are ignored. An :class:`~gfimu.errors.InputError` names a missing column or a bad index."""
         pd = _require_pandas("Log.from_dataframe")
         if not isinstance(df, pd.DataFrame):
             raise TypeError(f"{source}: expected a pandas.DataFrame, got {type(df).__name__}")

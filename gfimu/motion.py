@@ -121,7 +121,7 @@ class Motion:
     @classmethod
     def from_dataframe(cls, df, source: str = "<dataframe>") -> "Motion":
         """A Motion from a frame laid out as :meth:`to_dataframe` writes it (integer nanosecond index); a
-        quantity needs all its components or none (``ValueError`` names the missing one); other columns are
+        quantity needs all its components or none (an :class:`~gfimu.errors.InputError` names the missing one); other columns are
         ignored."""
         pd = _require_pandas("Motion.from_dataframe")
         if not isinstance(df, pd.DataFrame):

@@ -23,7 +23,7 @@ from .errors import InputError
 
 
 def check_workers(workers) -> None:
-    """ValueError unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
+    """An :class:`~gfimu.errors.InputError` unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
     if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 0):
         raise InputError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers!r}")
 

@@ -1,6 +1,6 @@
 """Errors and warnings of reading and writing logs.
 
-Every problem in a file raises :class:`LogFormatError` (a ``ValueError``)
+Every problem in a file raises :class:`LogFormatError` (a :class:`gfimu.errors.InputError`)
 whose message starts with ``file:line`` (or names the TOML key) and says what
 was expected. Problems that do not stop reading are warnings:
 :class:`LogGapWarning` (gaps in time), :class:`LogFormatWarning` (a value
@@ -51,7 +51,8 @@ def read_utf8_text(path: str | os.PathLike, missing: str = "file not found", fol
         raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, line) from None
 
 class OutputError(InputError, OSError):
-    """An output cannot be written where asked (it is an input, or not a regular file)."""
+    """An output cannot be written where asked (it is an input, or not a regular file): the user's
+    mistake (an :class:`~gfimu.errors.InputError`), also an ``OSError``."""
 
 
 class LogGapWarning(UserWarning):

@@ -47,7 +47,7 @@ def seconds_text(timestamps_ns: np.ndarray) -> list[str]:
 def tum_rows(motion: Motion, position_w_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(kept row mask, table (N, 7) of tx ty tz qx qy qz qw) of a Motion with attitude.
 
-    ``ValueError`` when the motion has no attitude (``quaternion_wb``).
+    An :class:`~gfimu.errors.InputError` when the motion has no attitude (``quaternion_wb``).
     """
     q = motion.quaternion_wb
     if q is None:

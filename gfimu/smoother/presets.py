@@ -59,7 +59,7 @@ def describe_presets() -> str:
 def apply_preset(name: str, options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The preset's options updated with ``options`` (explicit options win).
 
-    Raises ValueError naming the known presets when ``name`` is not one of them.
+    Raises an :class:`~gfimu.errors.InputError` naming the known presets when ``name`` is not one of them.
     """
     if not isinstance(name, str) or name not in PRESETS:
         raise InputError(f"unknown smoother preset {name!r}; presets: {describe_presets()}")
@@ -70,7 +70,7 @@ def expand_preset(method: str, options: Mapping[str, Any] | None) -> dict[str, A
     """``options`` of ``method`` with a ``preset`` entry replaced by the preset's settings.
 
     Options without ``preset`` come back unchanged (as a new dict); a preset for a
-    method other than those in :data:`PRESET_METHODS` is a ValueError.
+    method other than those in :data:`PRESET_METHODS` is an :class:`~gfimu.errors.InputError`.
     """
     out = dict(options or {})
     if "preset" not in out:
