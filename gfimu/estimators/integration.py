@@ -108,7 +108,6 @@ class PureIntegrationEstimator(_IntegratingEstimator):
 
     method = "pure-integration"
 
-
     def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         x, cov = invert(log.array, log.accel_mps2)
@@ -140,7 +139,6 @@ class IntegrationEstimator(_IntegratingEstimator):
     """
 
     method = "integration"
-
 
     def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
