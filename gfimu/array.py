@@ -11,12 +11,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import rigid_body
+from .errors import InputError
 from .rotations import matrix_from_rotation_vector
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 
 
-class ArrayModelError(ValueError):
+class ArrayModelError(InputError):
     """The array cannot support the requested model (names the cause)."""
 
 

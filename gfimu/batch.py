@@ -17,6 +17,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from .errors import GfimuError
+
 SUMMARY_COLUMNS = ("log", "output", "status", "samples", "seconds", "omega_rmse_radps", "warnings", "message")
 
 
@@ -74,11 +76,12 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
             write_output(out, gio.motion_csv_chunks(run.motion))
         rmse = score(run)
         row.update(status="ok", samples=run.samples, omega_rmse_radps=None if rmse is None else f"{rmse:.6g}",
-                   warnings=" | ".join(str(w.message) for w in caught))
+                   warnings=" | ".join([str(w.message) for w in caught] + list(run.report.warnings)))
     except Exception as exc:  # noqa: BLE001 - a broken log is reported, the others go on
         message = str(exc) or type(exc).__name__
-        if not isinstance(exc, (OSError, ValueError)):
-            message = f"{type(exc).__name__}: {message} ({traceback.format_exc(limit=1).splitlines()[-1]})"
+        if not isinstance(exc, (GfimuError, OSError)):  # not raised on purpose: a bug, named as one
+            message = (f"internal error: {type(exc).__name__}: {message} "
+                       f"({traceback.format_exc(limit=1).splitlines()[-1]})")
         row.update(output="", message=" ".join(message.split()))  # no estimate of this run to point at
         folder = Path(output_csv).parent
         if folder.is_dir() and not any(folder.iterdir()):  # leave no empty folder behind a failed log

@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from .array import AXIS_INDEX, SensorArray
+from .errors import DataError, InputError
 from .io.array_toml import format_toml
 from .io.atomic import atomic_write_text
 
@@ -68,8 +69,12 @@ GRAVITY_MPS2 = 9.80665
 FORMAT = "gfimu-calibration/1"
 
 
-class CalibrationError(ValueError):
+class CalibrationError(DataError):
     """The data cannot support the calibration (names the cause)."""
+
+
+class CalibrationFileError(CalibrationError, InputError):
+    """A calibration file (or calibration given) is malformed (names the file and key)."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +91,7 @@ class SensorCalibration:
         bias = np.asarray(self.bias_mps2, dtype=float).reshape(-1)
         n = len(self.axes)
         if gain.shape != (n, 3) or bias.shape != (n,) or not (np.all(np.isfinite(gain)) and np.all(np.isfinite(bias))):
-            raise CalibrationError(f"calibration of {self.name!r}: gain must be {n}x3 and bias {n} finite numbers")
+            raise CalibrationFileError(f"calibration of {self.name!r}: gain must be {n}x3 and bias {n} finite numbers")
         object.__setattr__(self, "gain", gain)
         object.__setattr__(self, "bias_mps2", bias)
         object.__setattr__(self, "axes", tuple(self.axes))
@@ -315,9 +320,9 @@ def correct_readings(array: SensorArray, cal: Calibration, accel_mps2: np.ndarra
         try:
             sc = cal.sensor(acc.name)
         except KeyError as exc:
-            raise CalibrationError(exc.args[0]) from None
+            raise CalibrationFileError(exc.args[0]) from None
         if tuple(sc.axes) != tuple(acc.axes):
-            raise CalibrationError(f"calibration of {acc.name!r} is for axes {list(sc.axes)}, the log has {list(acc.axes)}")
+            raise CalibrationFileError(f"calibration of {acc.name!r} is for axes {list(sc.axes)}, the log has {list(acc.axes)}")
         t = sc.gain @ acc.directions_b.T  # (n, n): effective gain in the sensor's nominal axes
         if np.linalg.cond(t) > 1e6:
             raise CalibrationError(f"calibration gain of {acc.name!r} is singular")
@@ -335,6 +340,16 @@ def apply_calibration(log, cal: Calibration):
         if log.reference is not None and log.reference.omega_b_radps is not None:
             changes["reference"] = log.reference.replace(omega_b_radps=log.reference.omega_b_radps - cal.gyro_bias_b_radps)
     return log.replace(**changes)
+
+
+def apply_calibration_file(log, path: str | Path):
+    """:func:`apply_calibration` of the calibration read from ``path``; an error naming ``path`` when it
+    does not fit the log's array (an accelerometer it lacks, other axes, a singular gain)."""
+    cal = read_calibration(path)
+    try:
+        return apply_calibration(log, cal)
+    except CalibrationFileError as exc:
+        raise CalibrationFileError(f"{path}: {exc}") from None
 
 
 def fit(log, detector: StillDetector | None = None, periods: list[slice] | None = None, gravity_mps2: float = GRAVITY_MPS2) -> Calibration:
@@ -400,15 +415,18 @@ def read_calibration(path: str | Path) -> Calibration:
     from .io.array_toml import _TomlContext
 
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise CalibrationFileError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise CalibrationError(f"{path}: not valid TOML: {exc}") from None
+        raise CalibrationFileError(f"{path}: not valid TOML: {exc}") from None
     ctx = _TomlContext(path, text)
 
-    def fail(message: str, table: str = "", index: int = 0, key: str | None = None) -> CalibrationError:
-        return CalibrationError(str(ctx.error(message, table, index, key)))
+    def fail(message: str, table: str = "", index: int = 0, key: str | None = None) -> CalibrationFileError:
+        return CalibrationFileError(str(ctx.error(message, table, index, key)))
 
     def numbers(value, shape: tuple[int, ...] | None, what: str, table: str, index: int, key: str) -> np.ndarray:
         """``value`` as finite floats of ``shape`` (None: any shape, checked by the caller)."""
@@ -421,10 +439,10 @@ def read_calibration(path: str | Path) -> Calibration:
         return out
 
     if doc.get("format") != FORMAT:
-        raise CalibrationError(f"{path}: format must be {FORMAT!r}, got {doc.get('format')!r}")
+        raise CalibrationFileError(f"{path}: format must be {FORMAT!r}, got {doc.get('format')!r}")
     accs = doc.get("accelerometers")
     if not isinstance(accs, list) or not accs:
-        raise CalibrationError(f"{path}: no [[accelerometers]] table")
+        raise CalibrationFileError(f"{path}: no [[accelerometers]] table")
     sensors = []
     for k, a in enumerate(accs):
         for key in ("name", "bias_mps2", "gain"):
@@ -442,5 +460,7 @@ def read_calibration(path: str | Path) -> Calibration:
     gyro = doc.get("gyroscope", {}).get("bias_b_radps")
     if gyro is not None:
         gyro = numbers(gyro, (3,), "3 numbers [rad/s]", "gyroscope", 0, "bias_b_radps")
-    gravity = numbers(doc.get("gravity_mps2", GRAVITY_MPS2), (), "a number [m/s²]", "", 0, "gravity_mps2")
+    gravity = numbers(doc.get("gravity_mps2", GRAVITY_MPS2), (), "a number > 0 [m/s²]", "", 0, "gravity_mps2")
+    if not gravity > 0:
+        raise fail(f"expected a number > 0 [m/s²], got {float(gravity)!r}", "", 0, "gravity_mps2")
     return Calibration(tuple(sensors), gyro, float(gravity), dict(doc.get("fit", {})))

@@ -28,6 +28,8 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from .crb import crb_per_sample
+from .errors import InputError
+from .estimate import Estimate, Report
 from .estimators.inversion import invert
 from .evaluation import evaluate
 from .io import write_motion_csv
@@ -136,7 +138,7 @@ def compute_bounds(log: Log, truth: Motion, valid: np.ndarray | None, which: Ite
     """Rows of the available bounds, each with a reason when it cannot be computed.
 
     ``smoother_tunings``: the process noise the smoother chose per solve window
-    (``BatchSmootherEstimator.last_tuning``); the smoother's bound then uses the same graph."""
+    (the ``tunings`` of its :class:`~gfimu.estimate.Report`); the smoother's bound then uses the same graph."""
     rows = []
     for name in which:
         label = BOUND_NAMES[name]
@@ -281,7 +283,7 @@ def reference_of(log: Log) -> tuple[Motion, str, np.ndarray | None]:
     if log.reference is not None:
         valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
         return log.reference, "reference", valid
-    raise ValueError(f"{log.source}: the log has neither truth.csv nor reference.csv to compare against")
+    raise InputError(f"{log.source}: the log has neither truth.csv nor reference.csv to compare against")
 
 
 def default_methods() -> list[str]:
@@ -289,11 +291,9 @@ def default_methods() -> list[str]:
     return list(METHODS)
 
 
-def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, progress: bool = False,
-               made: dict | None = None):
-    """Run one method: ``(status, reason, motion | None, seconds)``; never raises for the method's own failures.
-
-    ``made``: if given, receives the estimator object under ``name`` (e.g. for the smoother's tuning)."""
+def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, progress: bool = False):
+    """Run one method: ``(status, reason, estimate | None, seconds)``, the estimate a
+    :class:`~gfimu.estimate.Estimate` (motion and report); never raises for the method's own failures."""
 
     try:
         est = make_estimator(name, **dict(options or {}))
@@ -311,19 +311,18 @@ def run_method(name: str, log: Log, options: Mapping[str, Any] | None = None, pr
         return "failed", f"applicable() raised {type(exc).__name__}: {exc}", None, math.nan
     if reason:
         return "not applicable", str(reason), None, math.nan
-    if made is not None:
-        made[name] = est
     t0 = time.perf_counter()
     try:
-        motion = est.estimate(log, progress=progress)
+        estimate = est.estimate(log, progress=progress)
     except Exception as exc:  # noqa: BLE001 - one method failing must not stop the table
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return "failed", f"{type(exc).__name__}: {exc} (at {where.filename.split('/')[-1]}:{where.lineno})", None, math.nan
     seconds = time.perf_counter() - t0
-    if not isinstance(motion, Motion) or len(motion) != len(log):
-        got = len(motion) if isinstance(motion, Motion) else type(motion).__name__
-        return "failed", f"estimate returned {got} rows for a log of {len(log)} samples", None, seconds
-    return STATUS_OK, "", motion, seconds
+    if not isinstance(estimate, Estimate):
+        return "failed", f"estimate returned a {type(estimate).__name__}, not an Estimate (motion, report)", None, seconds
+    if len(estimate.motion) != len(log):
+        return "failed", f"estimate returned {len(estimate.motion)} rows for a log of {len(log)} samples", None, seconds
+    return STATUS_OK, "", estimate, seconds
 
 
 def compare(
@@ -345,26 +344,32 @@ def compare(
     """
     reference, against, valid = reference_of(log)
     if len(reference) != len(log):
-        raise ValueError(f"{log.source}: the {against} has {len(reference)} rows for {len(log)} samples")
+        raise InputError(f"{log.source}: the {against} has {len(reference)} rows for {len(log)} samples")
     methods = list(methods) if methods is not None else default_methods()
     if not methods:
-        raise ValueError("no method to compare")
+        raise InputError("no method to compare")
     options = dict(options or {})
     if "preset" in options.get("smoother", {}):  # the preset's settings, for the smoother and its bound
 
         options["smoother"] = expand_preset("smoother", options["smoother"])
     unknown_opts = sorted(set(options) - set(methods))
     if unknown_opts:
-        raise ValueError(f"options given for methods not compared: {unknown_opts}")
+        raise InputError(f"options given for methods not compared: {unknown_opts}")
     rows: list[dict] = []
     estimates: dict[str, Motion] = {}
-    made: dict[str, Any] = {}
+    which = list(BOUND_NAMES) if bounds is True else ([] if bounds is False else list(bounds))
+    unknown_bounds = [name for name in which if name not in BOUND_NAMES]
+    if unknown_bounds:
+        raise InputError(f"unknown bound(s) {unknown_bounds}; bounds are: {', '.join(BOUND_NAMES)}")
+    reports: dict[str, Report] = {}
     for name in methods:
-        status, reason, motion, seconds = run_method(name, log, options.get(name), progress=progress, made=made)
+        status, reason, estimate, seconds = run_method(name, log, options.get(name), progress=progress)
         row = _row(name, "method", status, reason)
         row["time_s"] = seconds
-        if motion is not None:
+        if estimate is not None:
+            motion = estimate.motion
             estimates[name] = motion
+            reports[name] = estimate.report
             row["samples_per_s"] = len(log) / seconds if seconds > 0 else math.inf
             try:
                 row.update(_evaluation_metrics(motion, reference, valid))
@@ -372,14 +377,13 @@ def compare(
                 row["status"] = "failed"
                 row["reason"] = f"evaluation failed: {type(exc).__name__}: {exc}"
         rows.append(row)
-    which = list(BOUND_NAMES) if bounds is True else ([] if bounds is False else list(bounds))
     if which:
         if against != "truth":
             for name in which:
                 rows.append(_row(BOUND_NAMES[name], "bound", "not applicable", "bounds are evaluated along a simulated truth"))
         else:
             smoother_options = {k: v for k, v in dict(options.get("smoother", {})).items() if k != "compute_sigma"}
-            tunings = list(getattr(made.get("smoother"), "last_tuning", []) or []) if "smoother" in estimates else []
+            tunings = list(reports["smoother"].tunings) if "smoother" in reports else []
             bound_rows = compute_bounds(log, reference, valid, which, gyro_noise_std_radps, smoother_options, tunings)
             rows.extend(bound_rows)
             _add_ratios(rows, bound_rows, which)
@@ -493,7 +497,7 @@ def condition_vs_scale(array, half_edges: np.ndarray, reference_half_edge: float
     positions = np.array([a.position_m for a in array.accelerometers])
     ref = float(reference_half_edge or np.max(np.abs(positions)))
     if ref <= 0:
-        raise ValueError(f"array {array.name!r}: all accelerometers at the origin; cannot scale the layout")
+        raise InputError(f"array {array.name!r}: all accelerometers at the origin; cannot scale the layout")
     out = []
     for h in np.asarray(half_edges, dtype=float):
         scaled = array.with_accelerometers([dc_replace(a, position_m=a.position_m * (h / ref)) for a in array.accelerometers])
@@ -516,7 +520,7 @@ def t2_sweep(log: Log, t2_values: Sequence[float], imm_options: Mapping[str, Any
     out = []
     for t2 in t2_values:
         est = make_estimator("imm", **{**dict(imm_options or {}), "t2": float(t2)})
-        out.append(omega_rmse_sum(est.estimate(log), reference, valid))
+        out.append(omega_rmse_sum(est.estimate(log).motion, reference, valid))
     return np.array(out)
 
 

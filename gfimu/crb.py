@@ -30,6 +30,7 @@ import numpy as np
 
 from . import rigid_body
 from .array import ArrayModelError, SensorArray
+from .errors import InputError
 from .motion import Motion
 
 PARAMETERS = ("f_x", "f_y", "f_z", "dw_x", "dw_y", "dw_z", "w_x", "w_y", "w_z")
@@ -127,7 +128,7 @@ def fisher_information(
     J[:, 6:, 6:] = np.einsum("naj,a,nak->njk", Dw, inv_var, Dw)
     if gyro_noise_std_radps is not None:
         if not (np.isfinite(gyro_noise_std_radps) and gyro_noise_std_radps > 0):
-            raise ValueError(f"gyro_noise_std_radps must be finite and > 0, got {gyro_noise_std_radps}")
+            raise InputError(f"gyro_noise_std_radps must be finite and > 0, got {gyro_noise_std_radps}")
         J[:, 6:, 6:] += np.eye(3) / gyro_noise_std_radps**2
     return J
 
@@ -177,7 +178,7 @@ def crb_per_sample(
     if w.ndim == 1:
         w = w[None, :]
     if w.ndim != 2 or w.shape[1] != 3 or not np.all(np.isfinite(w)):
-        raise ValueError(f"omega_b_radps must be finite with shape (N, 3), got shape {np.shape(omega_b_radps)}")
+        raise InputError(f"omega_b_radps must be finite with shape (N, 3), got shape {np.shape(omega_b_radps)}")
     sigma = axis_noise_std(array, noise_std_mps2)
     if gyro and gyro_noise_std_radps is None:
         if array.gyroscope is None or array.gyroscope.noise_std_radps is None:
@@ -191,5 +192,5 @@ def crb_per_sample(
 def crb_for_motion(array: SensorArray, motion: Motion, **options) -> CRBResult:
     """:func:`crb_per_sample` along a motion's ω (the bound does not depend on f or ω̇)."""
     if motion.omega_b_radps is None:
-        raise ValueError("the motion has no omega_b_radps to evaluate the bound at")
+        raise InputError("the motion has no omega_b_radps to evaluate the bound at")
     return crb_per_sample(array, motion.omega_b_radps, **options)

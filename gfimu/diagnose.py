@@ -31,6 +31,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .crb import crb_per_sample
+from .errors import InputError
 from .estimators.ml import MLEstimator
 from .io.plausibility import MAX_POSITION_M, MIN_EXTENT_M, RATE_TOLERANCE, still_specific_force
 from .io.units import STANDARD_GRAVITY_MPS2
@@ -433,8 +434,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
     estimator = MLEstimator()
     reason = estimator.applicable(array)
     if reason:
-        raise ValueError(f"{log.source}: cannot diagnose the readings: {reason}")
-    motion = estimator.estimate(clean, progress=progress)
+        raise InputError(f"{log.source}: cannot diagnose the readings: {reason}")
+    motion = estimator.estimate_motion(clean, progress=progress)
     residual = rigid_body_residual(clean, motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2)
     check = check_model(clean, motion, residual)
     n_axes = array.n_axes

@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .errors import DataError, InputError
 from .motion import QUANTITIES, Motion
 from .rotations import quaternion_from_rotation_vector, quaternion_multiply, rotation_vector_from_quaternion
 
@@ -66,7 +67,7 @@ class EvaluationAlignmentWarning(UserWarning):
     """The truth was interpolated at the estimate's timestamps."""
 
 
-class TimestampMismatchError(ValueError):
+class TimestampMismatchError(InputError):
     """Estimate and truth timestamps differ and ``align='exact'``; ``detail`` says where."""
 
     def __init__(self, detail: str, hint: str = "pass align='interpolate'"):
@@ -344,17 +345,17 @@ def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, s
     rows outside the truth's time span are left out (``n_outside``).
     """
     if align not in ("exact", "interpolate"):
-        raise ValueError(f"align must be 'exact' or 'interpolate', got {align!r}")
+        raise InputError(f"align must be 'exact' or 'interpolate', got {align!r}")
     if not (sign_threshold_radps >= 0 and large_error_radps > 0):
-        raise ValueError("sign_threshold_radps must be >= 0 and large_error_radps > 0")
+        raise InputError("sign_threshold_radps must be >= 0 and large_error_radps > 0")
     if valid is not None:
         valid = np.asarray(valid)
         if valid.shape != (len(truth),) or valid.dtype != bool:
-            raise ValueError(f"valid must be a boolean array of shape ({len(truth)},) (one per truth row), "
+            raise InputError(f"valid must be a boolean array of shape ({len(truth)},) (one per truth row), "
                              f"got {valid.dtype} {valid.shape}")
     common = [n for n in QUANTITIES if getattr(estimate, n) is not None and getattr(truth, n) is not None]
     if not common:
-        raise ValueError(f"no quantity in common: the estimate has {estimate.available()}, "
+        raise InputError(f"no quantity in common: the estimate has {estimate.available()}, "
                          f"the truth has {truth.available()}")
     n_rows = len(estimate)
     n_outside = 0
@@ -370,7 +371,7 @@ def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, s
         raise TimestampMismatchError(detail)
     else:
         if len(truth) < 2:
-            raise ValueError("cannot interpolate a truth with fewer than 2 rows")
+            raise DataError("cannot interpolate a truth with fewer than 2 rows")
         warnings.warn(f"interpolating the truth ({len(truth)} rows) at the estimate's {len(estimate)} timestamps",
                       EvaluationAlignmentWarning, stacklevel=2)
         truth, inside, valid = _interpolate_truth(truth, estimate.timestamps_ns, valid)
@@ -404,7 +405,7 @@ def evaluate_log(estimate: Motion, log, **options) -> EvaluationResult:
     if log.truth is not None:
         return evaluate(estimate, log.truth, **options)
     if log.reference is None:
-        raise ValueError(f"{log.source}: the log has neither truth nor reference to evaluate against")
+        raise InputError(f"{log.source}: the log has neither truth nor reference to evaluate against")
     valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
     return evaluate(estimate, log.reference, valid=valid, **options)
 
@@ -416,11 +417,11 @@ def estimate_time_offset_s(estimate: Motion, reference: Motion, valid: np.ndarra
     over the rows both cover, on the reference's time grid within ±``max_offset_s``, refined to a
     fraction of a sample by a parabola through the minimum."""
     if estimate.omega_b_radps is None or reference.omega_b_radps is None:
-        raise ValueError("a time offset is estimated from ω: both need omega columns")
+        raise InputError("a time offset is estimated from ω: both need omega columns")
     t_ref = reference.timestamps_ns * 1e-9
     t_est = estimate.timestamps_ns * 1e-9
     if len(t_ref) < 4 or len(t_est) < 4:
-        raise ValueError("too few rows to estimate a time offset")
+        raise DataError("too few rows to estimate a time offset")
     dt = float(np.median(np.diff(t_ref)))
     ref = np.linalg.norm(reference.omega_b_radps, axis=1)
     est_t = t_est

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import InputError
+
 ESTIMATE_HEADER = ("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],dw_x [rad s^-2],dw_y [rad s^-2],"
                    "dw_z [rad s^-2],f_x [m s^-2],f_y [m s^-2],f_z [m s^-2]")
 """The columns of the estimate rows (those of ``gfimu estimate`` for ω, ω̇ and f)."""
@@ -26,7 +28,7 @@ ESTIMATE_HEADER = ("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1]
 _HEADER_RE = re.compile(r"^\s*(.*?)\s*\[([^\[\]]*)\]\s*$")
 
 
-class LiveInputError(ValueError):
+class LiveInputError(InputError):
     """A header or row that cannot be read (the message names it)."""
 
 

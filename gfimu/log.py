@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .array import SensorArray
+from .errors import InputError
 from .motion import TIME_INDEX, Motion, _require_pandas, index_ns
 
 GYRO_COLUMNS = ("w_x", "w_y", "w_z")
@@ -62,7 +63,7 @@ class Log:
         object.__setattr__(self, "accel_mps2", acc)
         if t.size > 1 and np.any(np.diff(t) <= 0):
             k = int(np.argmax(np.diff(t) <= 0)) + 1
-            raise ValueError(f"{self.source}: timestamps not strictly increasing at sample {k}")
+            raise InputError(f"{self.source}: timestamps not strictly increasing at sample {k}")
         for name, width in (("gyro_b_radps", 3), ("tilt_rad", 2)):
             v = getattr(self, name)
             if v is not None:
@@ -153,7 +154,7 @@ class Log:
         """A log from readings in a ``pandas.DataFrame`` laid out as :meth:`to_dataframe` writes it: integer
         nanosecond index, the array's accelerometer columns (``<name>_<axis>`` in each sensor's frame, m/s²),
         ``w_x, w_y, w_z`` [rad/s] when the array has a gyroscope, ``tilt_x, tilt_y`` [rad] with an
-        inclinometer; other columns are ignored. ``ValueError`` names a missing column or a bad index."""
+        inclinometer; other columns are ignored. An :class:`~gfimu.errors.InputError` names a missing column or a bad index."""
         pd = _require_pandas("Log.from_dataframe")
         if not isinstance(df, pd.DataFrame):
             raise TypeError(f"{source}: expected a pandas.DataFrame, got {type(df).__name__}")
@@ -165,7 +166,7 @@ class Log:
             names += list(TILT_COLUMNS)
         missing = [n for n in names if n not in df.columns]
         if missing:
-            raise ValueError(f"{source}: column {missing[0]!r} is missing ({len(missing)} of the {len(names)} "
+            raise InputError(f"{source}: column {missing[0]!r} is missing ({len(missing)} of the {len(names)} "
                              f"reading columns of array {array.name!r}: {', '.join(names)})")
         values = df[names].to_numpy(dtype=float)
         n_acc = array.n_axes

@@ -7,8 +7,12 @@ comparison study ask one place, and nothing below imports upward.
 Every estimator is a small object configured at construction (a dataclass of options with
 documented defaults) that offers
 
+- ``method``: its name here;
 - ``applicable(array) -> str | None``: ``None`` when it can run on the array, else the reason;
-- ``estimate(log, progress=False) -> Motion``: one row per sample of the log.
+- ``estimate(log, progress=False) -> Estimate``: a :class:`gfimu.estimate.Estimate`, the
+  :class:`~gfimu.motion.Motion` (one row per sample of the log) and the
+  :class:`~gfimu.estimate.Report` of the run (options, timings, warnings, and where they apply
+  the model check, the noise chosen, iterations and cost). The estimator keeps nothing of a run.
 
 Classes are imported on first use so that ``gfimu --help`` stays fast.
 """
@@ -18,6 +22,8 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from typing import Any
+
+from .errors import InputError
 
 
 METHODS: dict[str, str] = {
@@ -34,8 +40,10 @@ METHODS: dict[str, str] = {
 """Method name -> ``module:class`` of its estimator."""
 
 
-class UnknownMethodError(KeyError):
-    pass
+class UnknownMethodError(InputError, KeyError):
+    """No method of that name (the message lists them)."""
+
+    __str__ = InputError.__str__
 
 
 def estimator_class(name: str):
@@ -70,7 +78,7 @@ def make_estimator(name: str, **options: Any):
         known = {f.name for f in option_field_list(name)}
         unknown = sorted(set(options) - known)
         if unknown:
-            raise ValueError(f"method {name!r} has no option(s) {unknown}; options are: {sorted(known)}")
+            raise InputError(f"method {name!r} has no option(s) {unknown}; options are: {sorted(known)}")
     return cls(**options)
 
 

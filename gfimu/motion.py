@@ -16,6 +16,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .errors import InputError
+
 # field name -> (CSV column prefix, CSV unit, number of components, component suffixes)
 QUANTITIES: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "omega_b_radps": ("w", "rad s^-1", ("x", "y", "z")),
@@ -39,12 +41,12 @@ def index_ns(df, source: str) -> np.ndarray:
     if isinstance(index, pd.DatetimeIndex):
         if index.hasnans:
             k = int(np.flatnonzero(np.asarray(index.isna()))[0])
-            raise ValueError(f"{source}: the DatetimeIndex holds a missing time (NaT) at row {k}")
+            raise InputError(f"{source}: the DatetimeIndex holds a missing time (NaT) at row {k}")
         if index.tz is not None:
             index = index.tz_convert("UTC").tz_localize(None)
         return np.asarray(index.to_numpy(dtype="datetime64[ns]")).view(np.int64).copy()
     if not np.issubdtype(index.dtype, np.integer):
-        raise ValueError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}) or be a "
+        raise InputError(f"{source}: the index must hold integer timestamps in nanoseconds ({TIME_INDEX}) or be a "
                          f"pandas.DatetimeIndex, got dtype {index.dtype}")
     return np.asarray(index, dtype=np.int64)
 
@@ -138,7 +140,7 @@ class Motion:
     @classmethod
     def from_dataframe(cls, df, source: str = "<dataframe>") -> "Motion":
         """A Motion from a frame laid out as :meth:`to_dataframe` writes it (integer nanosecond index); a
-        quantity needs all its components or none (``ValueError`` names the missing one); other columns are
+        quantity needs all its components or none (an :class:`~gfimu.errors.InputError` names the missing one); other columns are
         ignored."""
         pd = _require_pandas("Motion.from_dataframe")
         if not isinstance(df, pd.DataFrame):
@@ -152,7 +154,7 @@ class Motion:
                 present = [c in df.columns for c in cols]
                 if any(present) and not all(present):
                     missing = cols[present.index(False)]
-                    raise ValueError(f"{source}: column {missing!r} is missing (a quantity needs all of "
+                    raise InputError(f"{source}: column {missing!r} is missing (a quantity needs all of "
                                      f"{', '.join(cols)})")
                 if all(present):
                     (sigma if is_sigma else kw)[name] = df[cols].to_numpy(dtype=float)

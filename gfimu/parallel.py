@@ -19,11 +19,13 @@ import os
 import signal
 from collections.abc import Callable, Iterable, Iterator
 
+from .errors import InputError
+
 
 def check_workers(workers) -> None:
-    """ValueError unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
+    """An :class:`~gfimu.errors.InputError` unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
     if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 0):
-        raise ValueError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers!r}")
+        raise InputError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers!r}")
 
 
 def cpu_count() -> int:

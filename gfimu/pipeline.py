@@ -2,8 +2,8 @@
 
 :func:`estimate_log` reads a log folder, screens its readings for gross errors
 (:mod:`gfimu.readings`), applies a calibration, runs the method and returns an
-:class:`EstimateRun` (the estimate and what happened on the way); nothing is
-written here. :func:`score` gives the ω RMSE against the log's truth or
+:class:`EstimateRun` (the :class:`~gfimu.estimate.Estimate`, motion and report, and the log
+it was made from); nothing is written here. :func:`score` gives the ω RMSE against the log's truth or
 reference where it has one.
 """
 
@@ -11,67 +11,99 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .errors import InputError
+from .estimate import Estimate, Report
 from .motion import Motion
 
 
-class MethodNotApplicable(ValueError):
+class MethodNotApplicable(InputError):
     """The method cannot run on this log's array (the message says why)."""
 
 
 @dataclass(frozen=True)
 class EstimateRun:
-    """Outcome of :func:`estimate_log`."""
+    """Outcome of :func:`estimate_log`: the log's :class:`~gfimu.estimate.Estimate` and the log it was
+    made from."""
 
     log_dir: str
-    method: str
-    motion: Motion
-    samples: int
-    seconds: float
-    """Wall time of the estimation itself [s]."""
+    estimate: Estimate
+    """The motion and its :class:`~gfimu.estimate.Report` (the method's choices, the model check, the
+    warnings, and the time of every step: reading, screening, calibrating, the method's own, the
+    orientation)."""
     log: Any = field(repr=False, default=None)
     """The log as estimated (screened, calibrated)."""
     screening: Any = None
     """:class:`gfimu.readings.Screening` of the readings."""
-    model_check: Any = None
-    """The smoother's :class:`gfimu.smoother.auto.ModelCheck` (None for other methods)."""
+
+    @property
+    def motion(self) -> Motion:
+        return self.estimate.motion
+
+    @property
+    def report(self) -> Report:
+        return self.estimate.report
+
+    @property
+    def method(self) -> str:
+        return self.estimate.report.method
+
+    @property
+    def samples(self) -> int:
+        return len(self.estimate.motion)
 
 
-def estimate_log(log_dir: str | Path, method: str = "smoother", options: dict | None = None,
+def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | None = None,
                  calibration: str | Path | None = None, progress: bool = False,
                  orientation: str = "none", truth: bool = True) -> EstimateRun:
     """Read ``log_dir``, screen and calibrate its readings, run ``method`` with ``options``; warnings
-    (plausibility, replaced readings) go through :mod:`warnings`. ``truth=False``: the log's truth.csv
-    and reference.csv are not read (nothing here needs them; :func:`score` does)."""
+    (plausibility, replaced readings) go through :mod:`warnings`. ``method``: a method name (made
+    with ``options`` by :func:`gfimu.methods.make_estimator`) or an estimator already made (then
+    ``options`` stays None). ``truth=False``: the log's truth.csv and reference.csv are not read
+    (nothing here needs them; :func:`score` does)."""
     from . import io as gio
-    from .methods import make_estimator
     from .readings import screen_log
 
-    est = make_estimator(method, **dict(options or {}))
+    if isinstance(method, str):
+        from .methods import make_estimator
+
+        est = make_estimator(method, **dict(options or {}))
+    elif options:
+        raise InputError("estimate_log: options go with a method name, not with an estimator already made")
+    else:
+        est = method
+    timings = {}
+    t0 = time.perf_counter()
     log = gio.read_log(log_dir, truth=truth)
+    t1 = time.perf_counter()
     log, screening = screen_log(log)
     _warn_replaced(log, screening)
+    timings.update(read=t1 - t0, screen=time.perf_counter() - t1)
     if calibration:
-        from .calibration import apply_calibration, read_calibration
+        from .calibration import apply_calibration_file
 
-        log = apply_calibration(log, read_calibration(calibration))
+        t0 = time.perf_counter()
+        log = apply_calibration_file(log, calibration)
+        timings["calibrate"] = time.perf_counter() - t0
     reason = est.applicable(log.array)
     if reason:
-        raise MethodNotApplicable(f"method {method!r} cannot run on {log_dir}: {reason}")
-    t0 = time.perf_counter()
-    motion = est.estimate(log, progress=progress)
-    seconds = time.perf_counter() - t0
+        raise MethodNotApplicable(f"method {est.method!r} cannot run on {log_dir}: {reason}")
+    estimate = est.estimate(log, progress=progress)
+    timings.update(estimate.report.timings)
+    motion = estimate.motion
     if orientation != "none":
         from .estimators.gravity import add_orientation
 
+        t0 = time.perf_counter()
         motion = add_orientation(log, motion, source=orientation)
-    return EstimateRun(str(log_dir), method, motion, len(motion), seconds, log, screening,
-                       getattr(est, "last_model_check", None))
+        timings["orientation"] = time.perf_counter() - t0
+    report = replace(estimate.report, timings=timings)
+    return EstimateRun(str(log_dir), Estimate(motion, report), log, screening)
 
 
 def screened(log):

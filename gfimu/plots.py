@@ -14,6 +14,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .errors import InputError
 from .motion import QUANTITIES, Motion
 from .io.atomic import atomic_path
 
@@ -137,17 +138,17 @@ def plot_time_series(
     from ``time_origin_ns`` (default: the reference's first sample).
     """
     if not estimates:
-        raise ValueError("plot_time_series needs at least one estimate")
+        raise InputError("plot_time_series needs at least one estimate")
     quantities = list(quantities) if quantities is not None else default_quantities(reference, estimates)
     if not quantities:
-        raise ValueError("the reference and the estimates share no quantity to plot (ω, ω̇, a or f)")
+        raise InputError("the reference and the estimates share no quantity to plot (ω, ω̇, a or f)")
     for name in quantities:
         if name not in LABELS:
-            raise ValueError(f"cannot plot quantity {name!r}; choose among {list(LABELS)}")
+            raise InputError(f"cannot plot quantity {name!r}; choose among {list(LABELS)}")
         if getattr(reference, name) is None:
-            raise ValueError(f"the {reference_label} has no {LABELS[name][0]}")
+            raise InputError(f"the {reference_label} has no {LABELS[name][0]}")
         if all(getattr(m, name) is None for m in estimates.values()):
-            raise ValueError(f"no estimate has {LABELS[name][0]} ({', '.join(estimates)})")
+            raise InputError(f"no estimate has {LABELS[name][0]} ({', '.join(estimates)})")
     rows_per = 2 if errors else 1
     n_rows = rows_per * len(quantities)
     fig = _figure(13.0, 2.1 * n_rows + 1.0)
@@ -314,7 +315,7 @@ def plot_polhode(
     the three principal-plane projections of the paths.
     """
     if not omega_b_radps:
-        raise ValueError("plot_polhode needs at least one angular-velocity path")
+        raise InputError("plot_polhode needs at least one angular-velocity path")
     inertia = np.asarray(principal_inertia_kgm2, dtype=float)
     key = constants_from or next(iter(omega_b_radps))
     two_t, h2 = polhode_constants(omega_b_radps[key], inertia)

@@ -18,11 +18,11 @@ def mimu4444_dir() -> Path:
 @pytest.fixture(scope="session")
 def turntable_5cm_smoother():
     """Paper 001's 1 Hz turntable, 6 s at 500 Hz (seed 1), on a 5 cm cube at 0.07 m/s², and the default batch
-    smoother's estimate of it, computed once for the tests that check it: (log, estimator, estimate)."""
+    smoother's estimate of it, computed once for the tests that check it: (log, report, motion) of the run."""
     from gfimu.array import cube_array
     from gfimu.simulate import simulate
     from gfimu.smoother.batch import BatchSmootherEstimator
 
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=500.0, duration_s=6.0, seed=1)
-    est = BatchSmootherEstimator()
-    return log, est, est.estimate(log)
+    estimate = BatchSmootherEstimator().estimate(log)
+    return log, estimate.report, estimate.motion

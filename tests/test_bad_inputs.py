@@ -461,7 +461,7 @@ def test_fixed_lag_solver_failure_is_named_not_leaked(work, capsys, monkeypatch)
     monkeypatch.setattr(fixed_lag.FixedLagSmoother, "_new_smoother", lambda self: Failing(real_new(self)))
     err = refused(["estimate", str(work / "log"), "--method", "fixed-lag", "--out", str(work / "e.csv"),
                    "--no-progress", "-O", "tune_process_noise=False", "-O", "engine=gtsam"], work, capsys,
-                  "the estimation problem is under-determined", status=1)
+                  "the estimation problem is under-determined", status=2)  # the data's kind (gfimu.errors.DataError)
     assert "could not solve the state at t = " in err and "s after the stream start" in err
 
 

@@ -254,7 +254,7 @@ def test_read_calibration_names_the_line_and_key_of_a_value_that_is_no_number(tm
         "gyro": (good + "bias_mps2 = [0, 0, 0]\n[gyroscope]\nbias_b_radps = [\"x\", 1, 2]\n",
                  "c.toml:7: gyroscope.bias_b_radps: expected 3 numbers [rad/s], got ['x', 1, 2]"),
         "gravity": ('gravity_mps2 = "abc"\n' + good + "bias_mps2 = [0, 0, 0]\n",
-                    "c.toml:1: gravity_mps2: expected a number [m/s²], got 'abc'"),
+                    "c.toml:1: gravity_mps2: expected a number > 0 [m/s²], got 'abc'"),
     }
     for name, (text, message) in cases.items():
         p = tmp_path / "c.toml"

@@ -19,6 +19,7 @@ from gfimu.compare import (
     metrics_from_evaluation,
     t2_band,
 )
+from gfimu.estimate import Estimate, Report
 from gfimu.evaluation import evaluate
 from gfimu.simulate import SensorErrors, simulate
 
@@ -112,7 +113,7 @@ def test_failing_and_unknown_methods_do_not_stop_the_table(monkeypatch, noisy_lo
             return None
 
         def estimate(self, log, progress=False):
-            return noisy_log.truth.select(slice(0, 10))
+            return Estimate(noisy_log.truth.select(slice(0, 10)), Report("short"))
 
     module.Broken, module.Short = Broken, Short
     monkeypatch.setitem(sys.modules, "gfimu_broken_method", module)
@@ -220,7 +221,7 @@ def test_motion_level_and_t2_sweep():
     t2 = [1.0, 6.0]
     curve = t2_sweep(noisy, t2)
     for value, t in zip(curve, t2):
-        direct = make_estimator("imm", t2=t).estimate(noisy)
+        direct = make_estimator("imm", t2=t).estimate(noisy).motion
         err = direct.omega_b_radps - noisy.truth.omega_b_radps
         assert value == pytest.approx(np.sum(np.sqrt(np.mean(err**2, axis=0))), rel=1e-12)
         assert value == pytest.approx(omega_rmse_sum(direct, noisy.truth), rel=1e-12)
@@ -235,9 +236,9 @@ def test_smoother_bound_uses_the_process_noise_the_smoother_chose():
     result = compare(log, methods=["smoother"], bounds=["smoother_bound"])
     row, bound = result.row("smoother"), result.row("smoother bound")
     est = BatchSmootherEstimator()
-    est.estimate(log)
+    report = est.estimate(log).report
     tuned = smoother_bound(log, est.options(), log.truth,
-                           window_options=[t.apply(est.options()) for t in est.last_tuning]).sigma["omega_b_radps"]
+                           window_options=[t.apply(est.options()) for t in report.tunings]).sigma["omega_b_radps"]
     assert bound["w_rmse_norm"] == pytest.approx(np.sqrt(np.mean(np.sum(tuned**2, axis=1))), rel=1e-9)
     # on the smooth turntable the chosen noise is far below the default, and so is the bound
     default = smoother_bound(log, SmootherOptions(), log.truth).sigma["omega_b_radps"]

@@ -58,7 +58,7 @@ def test_candidate_selection_is_componentwise_sign_choice():
 @pytest.mark.parametrize("method", ["integration", "imm"])
 def test_noise_free_recovery(method):
     log = analytic_log(NOISELESS, sines())
-    m = make_estimator(method, initial_omega=tuple(log.truth.omega_b_radps[0])).estimate(log)
+    m = make_estimator(method, initial_omega=tuple(log.truth.omega_b_radps[0])).estimate(log).motion
     tol = 1e-9 if method == "integration" else 1e-4  # the IMM uses the trapezoid prediction between T1 and T2
     np.testing.assert_allclose(m.omega_b_radps, log.truth.omega_b_radps, atol=tol)
     np.testing.assert_allclose(m.omega_dot_b_radps2, log.truth.omega_dot_b_radps2, atol=1e-10)
@@ -69,7 +69,7 @@ def test_pure_integration_is_second_order_and_drift_free_without_noise():
     errs = []
     for rate in (200.0, 400.0):
         log = analytic_log(NOISELESS, sines(), rate_hz=rate)
-        m = make_estimator("pure-integration", initial_omega=tuple(log.truth.omega_b_radps[0])).estimate(log)
+        m = make_estimator("pure-integration", initial_omega=tuple(log.truth.omega_b_radps[0])).estimate(log).motion
         errs.append(np.abs(m.omega_b_radps - log.truth.omega_b_radps).max())
     assert errs[0] < 1e-3
     assert errs[0] / errs[1] == pytest.approx(4.0, rel=0.05)
@@ -78,9 +78,9 @@ def test_pure_integration_is_second_order_and_drift_free_without_noise():
 def test_pure_integration_initial_omega_options():
     log = analytic_log(NOISELESS, sines(offset=(1.0, -2.0, 0.5)), duration_s=0.2)
     w0 = log.truth.omega_b_radps[0]
-    zero = make_estimator("pure-integration").estimate(log)
+    zero = make_estimator("pure-integration").estimate(log).motion
     np.testing.assert_allclose(zero.omega_b_radps[0], 0.0)
-    quad = make_estimator("pure-integration", initial_omega="quadratic").estimate(log)
+    quad = make_estimator("pure-integration", initial_omega="quadratic").estimate(log).motion
     # 'quadratic' gives ω up to a global sign, with the largest component positive
     sign = np.sign(w0[np.argmax(np.abs(w0))])
     np.testing.assert_allclose(quad.omega_b_radps[0], sign * w0, atol=1e-9)
@@ -95,8 +95,8 @@ def test_integration_keeps_sign_where_inversion_flips():
     true = log.truth.omega_b_radps[:, 0]
     after = log.times_s > 2 * np.pi + 0.5
     assert np.any(after) and np.all(true[after] < -0.1)
-    inv = make_estimator("inversion").estimate(log).omega_b_radps[:, 0]
-    integ = make_estimator("integration").estimate(log).omega_b_radps[:, 0]
+    inv = make_estimator("inversion").estimate(log).motion.omega_b_radps[:, 0]
+    integ = make_estimator("integration").estimate(log).motion.omega_b_radps[:, 0]
     # inversion: magnitude right, sign lost after the zero crossing
     np.testing.assert_allclose(np.abs(inv), np.abs(true), atol=1e-6)
     assert np.all(inv[after] > 0)
@@ -109,7 +109,7 @@ def test_integration_restarts_at_gaps():
     t_ns[500:] += int(3e9)  # 3 s gap
     log = analytic_log(NOISELESS, sines(offset=(2.0, 0, 0)), t_ns=t_ns)
     assert len(log.segments()) == 2
-    pure = make_estimator("pure-integration", initial_omega=tuple(log.truth.omega_b_radps[0])).estimate(log)
+    pure = make_estimator("pure-integration", initial_omega=tuple(log.truth.omega_b_radps[0])).estimate(log).motion
     # second segment restarts from the quadratic terms, not by integrating across the gap
     w = log.truth.omega_b_radps[500]
     sign = np.sign(w[np.argmax(np.abs(w))])
@@ -126,7 +126,7 @@ def test_error_grows_linearly_with_noise(method):
         log = analytic_log(cube_array(noise_std_mps2=sd), fn, duration_s=2.0, noise_std=sd, seed=3)
         m = make_estimator(method, initial_omega=tuple(log.truth.omega_b_radps[0])) if method != "inversion" \
             else make_estimator(method)
-        est = m.estimate(log)
+        est = m.estimate(log).motion
         rms.append([np.sqrt(np.mean((getattr(est, k) - getattr(log.truth, k)) ** 2))
                     for k in ("specific_force_b_mps2", "omega_dot_b_radps2", "omega_b_radps")])
     rms = np.array(rms)
@@ -210,17 +210,17 @@ def test_imm_estimate_follows_the_cases():
         return np.column_stack([0 * t, 0 * t, 3.0 + 0 * t]), np.zeros((t.size, 3))
 
     log = analytic_log(NOISELESS, spin, duration_s=0.4)
-    est = IMMEstimator(t2=T2, initial_omega=(0.5, -0.4, 2.0)).estimate(log)
+    est = IMMEstimator(t2=T2, initial_omega=(0.5, -0.4, 2.0)).estimate(log).motion
     np.testing.assert_allclose(est.omega_b_radps, np.tile([0, 0, 3.0], (len(t), 1)), atol=1e-12)
     # all sums large: case 1 gives the quadratic magnitudes with the predicted signs
     log = analytic_log(NOISELESS, lambda t: (np.tile([3.0, -2.5, 2.0], (t.size, 1)), np.zeros((t.size, 3))),
                        duration_s=0.4)
-    est = IMMEstimator(t2=T2, initial_omega=(1.0, -1.0, 1.0)).estimate(log)
+    est = IMMEstimator(t2=T2, initial_omega=(1.0, -1.0, 1.0)).estimate(log).motion
     np.testing.assert_allclose(est.omega_b_radps, np.tile([3.0, -2.5, 2.0], (log.timestamps_ns.size, 1)), atol=1e-12)
     # all sums tiny: case 4 gives zero
     log = analytic_log(NOISELESS, lambda t: (np.tile([0.05, 0.04, 0.05], (t.size, 1)), np.zeros((t.size, 3))),
                        duration_s=0.4)
-    est = IMMEstimator(t2=T2, initial_omega=(1.0, -1.0, 1.0)).estimate(log)
+    est = IMMEstimator(t2=T2, initial_omega=(1.0, -1.0, 1.0)).estimate(log).motion
     np.testing.assert_array_equal(est.omega_b_radps, 0.0)
 
 
@@ -249,7 +249,7 @@ def test_bad_readings_are_named():
     acc = log.accel_mps2.copy()
     acc[7, 4] = np.nan
     with pytest.raises(ValueError, match=r"sample 7 column 'a2_y'"):
-        make_estimator("integration").estimate(log.replace(accel_mps2=acc))
+        make_estimator("integration").estimate(log.replace(accel_mps2=acc)).motion
 
 
 def test_sign_tracking_beats_inversion_through_zero_crossings_with_noise():
@@ -261,9 +261,9 @@ def test_sign_tracking_beats_inversion_through_zero_crossings_with_noise():
     def rmse(est):
         return np.sqrt(np.mean(np.sum((est.omega_b_radps - log.truth.omega_b_radps) ** 2, axis=1)))
 
-    inv = rmse(make_estimator("inversion").estimate(log))
-    integ = rmse(make_estimator("integration", initial_omega=w0).estimate(log))
-    imm = rmse(make_estimator("imm", initial_omega=w0).estimate(log))
+    inv = rmse(make_estimator("inversion").estimate(log).motion)
+    integ = rmse(make_estimator("integration", initial_omega=w0).estimate(log).motion)
+    imm = rmse(make_estimator("imm", initial_omega=w0).estimate(log).motion)
     assert inv > 1.5
     assert integ < 0.5 * inv and integ < 1.0
     assert imm < 0.5 * inv and imm < 1.0
@@ -273,7 +273,7 @@ def test_imm_restarts_at_gaps():
     t_ns = np.round(np.arange(1000) * 2e6).astype(np.int64)
     t_ns[500:] += int(3e9)
     log = analytic_log(NOISELESS, sines(amp=(1.0, 1.0, 1.0), offset=(0.5, 0.5, 0.5)), t_ns=t_ns)
-    est = IMMEstimator(t2=4.0, initial_omega="zero").estimate(log)
+    est = IMMEstimator(t2=4.0, initial_omega="zero").estimate(log).motion
     # all sums in [T1, T2): the IMM integrates; each segment starts from zero again
     assert np.all(imm_case(quadratic_terms(log.truth.omega_b_radps), 0.1, 4.0) == 0)
     np.testing.assert_allclose(est.omega_b_radps[[0, 500]], 0.0)

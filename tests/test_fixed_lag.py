@@ -93,8 +93,8 @@ def test_fast_trapezoid_factor_equals_kinematics_factor():
 
 def test_fast_and_shared_factor_paths_give_the_same_estimate():
     log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=0.8, seed=10)
-    fast = FixedLagEstimator(fast_measurement=True, tune_process_noise=False).estimate(log)
-    shared = FixedLagEstimator(fast_measurement=False, tune_process_noise=False).estimate(log)
+    fast = FixedLagEstimator(fast_measurement=True, tune_process_noise=False).estimate(log).motion
+    shared = FixedLagEstimator(fast_measurement=False, tune_process_noise=False).estimate(log).motion
     np.testing.assert_allclose(fast.omega_b_radps, shared.omega_b_radps, atol=1e-6)
     np.testing.assert_allclose(fast.specific_force_b_mps2, shared.specific_force_b_mps2, atol=1e-6)
 
@@ -103,7 +103,7 @@ def test_fast_and_shared_factor_paths_give_the_same_estimate():
 
 def test_noise_free_random_motion_is_recovered():
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=2.0, noise=SensorErrors.none(), seed=3)
-    est = FixedLagEstimator(tune_process_noise=False).estimate(log)
+    est = FixedLagEstimator(tune_process_noise=False).estimate(log).motion
     assert omega_rmse(est, log.truth) < 2e-3
     e_dw = est.omega_dot_b_radps2 - log.truth.omega_dot_b_radps2
     e_f = est.specific_force_b_mps2 - log.truth.specific_force_b_mps2
@@ -121,7 +121,7 @@ def test_sign_carried_through_zero_crossings_when_starting_spinning():
     f = np.column_stack([np.sin(t), np.cos(t), np.full_like(t, 9.8)])
     y = arr.predict_readings(f, dw, w) + np.random.default_rng(0).normal(0, 0.07, (t.size, arr.n_axes))
     log = Log(arr, np.round(t * 1e9).astype(np.int64), y)
-    est = FixedLagEstimator().estimate(log)
+    est = FixedLagEstimator().estimate(log).motion
     from gfimu.motion import Motion
     truth = Motion(log.timestamps_ns, omega_b_radps=w)
     assert wrong_sign_share(est, truth) == 0.0
@@ -133,7 +133,7 @@ def test_gyroscope_is_used():
     arr = paper001_array()
     log = simulate("random3d", arr, rate_hz=RATE_HZ, duration_s=1.5, seed=2)
     assert log.gyro_b_radps is not None
-    est = FixedLagEstimator(tune_process_noise=False).estimate(log)
+    est = FixedLagEstimator(tune_process_noise=False).estimate(log).motion
     assert omega_rmse(est, log.truth) < 0.01
 
 
@@ -195,7 +195,7 @@ def test_gap_restarts_without_integrating_across():
     keep[600:850] = False
     log = Log(full.array, full.timestamps_ns[keep], full.accel_mps2[keep], truth=full.truth.select(keep))
     assert len(log.gaps()) == 1
-    est = FixedLagEstimator().estimate(log)
+    est = FixedLagEstimator().estimate(log).motion
     assert np.all(np.isfinite(est.omega_b_radps))
     assert omega_rmse(est, log.truth) < 0.05
     assert wrong_sign_share(est, log.truth) == 0.0
@@ -223,7 +223,7 @@ def test_jittery_timestamps_every_sample_estimated_once():
     y = arr.predict_readings(f, dw, w) + rng.normal(0, 0.07, (t.size, arr.n_axes))
     log = Log(arr, np.round(t * 1e9).astype(np.int64), y)
     assert log.gaps() == []
-    est = FixedLagEstimator(gap_factor=2.0, tune_process_noise=False).estimate(log)
+    est = FixedLagEstimator(gap_factor=2.0, tune_process_noise=False).estimate(log).motion
     from gfimu.motion import Motion
     truth = Motion(log.timestamps_ns, omega_b_radps=w)
     assert omega_rmse(est, truth) < 0.03
@@ -232,7 +232,7 @@ def test_jittery_timestamps_every_sample_estimated_once():
 
 def test_sigma_matches_the_actual_error():
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.5, seed=7)
-    est = FixedLagEstimator(compute_sigma=True, tune_process_noise=False).estimate(log)
+    est = FixedLagEstimator(compute_sigma=True, tune_process_noise=False).estimate(log).motion
     sig = est.sigma["omega_b_radps"]
     assert np.all(np.isfinite(sig)) and np.all(sig > 0)
     err = est.omega_b_radps - log.truth.omega_b_radps
@@ -312,5 +312,5 @@ def test_cli_estimate_fixed_lag_on_a_log_folder(tmp_path, capsys):
     est = gio.read_motion_csv(out)
     np.testing.assert_array_equal(est.timestamps_ns, log.timestamps_ns)
     assert omega_rmse(est, log.truth) < 0.05
-    direct = FixedLagEstimator(lag_s=0.1).estimate(gio.read_log(tmp_path / "log"))
+    direct = FixedLagEstimator(lag_s=0.1).estimate(gio.read_log(tmp_path / "log")).motion
     np.testing.assert_allclose(est.omega_b_radps, direct.omega_b_radps, atol=1e-5)

@@ -125,8 +125,8 @@ def test_numpy_engine_gives_the_gtsam_engines_answers(scenario, array, rate_hz, 
     and the same one-sigma values within 1 %."""
     log = simulate(scenario, array, rate_hz=rate_hz, duration_s=duration_s, seed=1)
     kw = dict(tune_window_s=tune_window_s, compute_sigma=True)
-    ref = FixedLagEstimator(engine="gtsam", **kw).estimate(log)
-    new = FixedLagEstimator(engine="numpy", **kw).estimate(log)
+    ref = FixedLagEstimator(engine="gtsam", **kw).estimate(log).motion
+    new = FixedLagEstimator(engine="numpy", **kw).estimate(log).motion
     rmse_ref = omega_rmse(ref.omega_b_radps, log.truth.omega_b_radps)
     rmse_new = omega_rmse(new.omega_b_radps, log.truth.omega_b_radps)
     share = 0.25 if array.gyroscope is not None else 0.1

@@ -35,8 +35,8 @@ def test_within_one_and_a_half_times_the_batch_smoother(scenario):
     data to be chosen, does better on the turntable and the reversal (see tests/test_oscillator.py);
     a 2 s tuning stretch does not hold two periods of these motions."""
     log = simulate(scenario, CUBE_5CM, rate_hz=RATE_HZ, duration_s=4.0, seed=1)
-    batch = BatchSmootherEstimator(tune_axis_frequencies=False).estimate(log)
-    fixed = FixedLagEstimator(lag_s=0.2, tune_window_s=2.0).estimate(log)
+    batch = BatchSmootherEstimator(tune_axis_frequencies=False).estimate(log).motion
+    fixed = FixedLagEstimator(lag_s=0.2, tune_window_s=2.0).estimate(log).motion
     np.testing.assert_array_equal(fixed.timestamps_ns, log.timestamps_ns)
     truth = log.truth.omega_b_radps
     ratio = omega_rmse(fixed.omega_b_radps, truth) / omega_rmse(batch.omega_b_radps, truth)
@@ -53,12 +53,12 @@ def test_within_one_and_a_half_times_the_batch_smoother(scenario):
 def test_tuned_densities_equal_the_batch_tuner_on_the_stretch(turntable_log):
     log = turntable_log
     n = int(1.0 * RATE_HZ)
-    est = FixedLagEstimator(tune_window_s=1.0)
-    fixed = est.estimate(log)
-    batch = BatchSmootherEstimator()
-    batch_on_stretch = batch.estimate(log.select(slice(0, n)))
-    assert len(est.last_tuning) == 1 and len(batch.last_tuning) == 1
-    mine, ref = est.last_tuning[0], batch.last_tuning[0]
+    est = FixedLagEstimator(tune_window_s=1.0).estimate(log)
+    fixed = est.motion
+    batch = BatchSmootherEstimator().estimate(log.select(slice(0, n)))
+    batch_on_stretch = batch.motion
+    assert len(est.report.tunings) == 1 and len(batch.report.tunings) == 1
+    mine, ref = est.report.tunings[0], batch.report.tunings[0]
     assert mine.density == ref.density
     assert mine.axis_factors == ref.axis_factors
     assert mine.specific_force_density == ref.specific_force_density
@@ -75,13 +75,14 @@ def test_the_stream_after_the_stretch_is_the_fixed_lag_smoother_with_those_densi
     """Streaming with the tuned densities given explicitly (no tuning) gives the same states after the stretch."""
     log = turntable_log
     n = int(1.0 * RATE_HZ)
-    est = FixedLagEstimator(tune_window_s=1.0)
-    tuned = est.estimate(log)
-    t = est.last_tuning[0]
+    est = FixedLagEstimator(tune_window_s=1.0).estimate(log)
+    tuned = est.motion
+    t = est.report.tunings[0]
     explicit = FixedLagEstimator(omega_dot_random_walk_radps2_per_sqrt_s=t.density, process_axis_factors=t.axis_factors,
                                  specific_force_random_walk_mps2_per_sqrt_s=t.specific_force_density)
-    given = explicit.estimate(log)
-    assert explicit.last_tuning == []
+    run = explicit.estimate(log)
+    given = run.motion
+    assert run.report.tunings == ()
     np.testing.assert_allclose(tuned.omega_b_radps[n:], given.omega_b_radps[n:], atol=1e-9)
     np.testing.assert_allclose(tuned.omega_dot_b_radps2[n:], given.omega_dot_b_radps2[n:], atol=1e-7)
 
@@ -141,17 +142,17 @@ def test_stream_waits_for_the_stretch_then_catches_up(turntable_log):
 
 def test_a_log_shorter_than_the_stretch_is_tuned_on_whole_or_not_at_all(turntable_log):
     log = turntable_log.select(slice(0, 700))  # 1.4 s: tuned on all of it, the batch solution
-    est = FixedLagEstimator(tune_window_s=3.0)
-    fixed = est.estimate(log)
-    batch = BatchSmootherEstimator()
-    ref = batch.estimate(log)
-    assert est.last_tuning[0].axis_factors == batch.last_tuning[0].axis_factors
+    est = FixedLagEstimator(tune_window_s=3.0).estimate(log)
+    fixed = est.motion
+    batch = BatchSmootherEstimator().estimate(log)
+    ref = batch.motion
+    assert est.report.tunings[0].axis_factors == batch.report.tunings[0].axis_factors
     np.testing.assert_allclose(fixed.omega_b_radps, ref.omega_b_radps, atol=1e-12)
     short = turntable_log.select(slice(0, 300))  # 0.6 s: too short to tune on, streamed with the defaults
-    est = FixedLagEstimator(tune_window_s=3.0)
-    fixed = est.estimate(short)
-    assert est.last_tuning == []
-    given = FixedLagEstimator(tune_process_noise=False).estimate(short)
+    est = FixedLagEstimator(tune_window_s=3.0).estimate(short)
+    fixed = est.motion
+    assert est.report.tunings == ()
+    given = FixedLagEstimator(tune_process_noise=False).estimate(short).motion
     np.testing.assert_allclose(fixed.omega_b_radps, given.omega_b_radps, atol=1e-12)
 
 
@@ -183,9 +184,8 @@ def test_accelerometer_noise_scale_is_tuned_and_used(turntable_log):
     sm = FixedLagEstimator(tune_window_s=1.0, tune_accel_noise=True).smoother(CUBE_5CM, RATE_HZ)
     for i in range(len(log)):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
-    batch = BatchSmootherEstimator(tune_accel_noise=True)
-    batch.estimate(log.select(slice(0, 500)))
-    assert sm.tuning.accel_noise_scale == batch.last_tuning[0].accel_noise_scale
+    batch = BatchSmootherEstimator(tune_accel_noise=True).estimate(log.select(slice(0, 500)))
+    assert sm.tuning.accel_noise_scale == batch.report.tunings[0].accel_noise_scale
     np.testing.assert_allclose(sm.model.accel_sigma_mps2, 0.07 * sm.tuning.accel_noise_scale, rtol=1e-12)
 
 
@@ -193,7 +193,7 @@ def test_accelerometer_noise_scale_is_tuned_and_used(turntable_log):
 def test_sigma_of_the_stretch_and_of_the_stream_match_the_actual_error():
     """compute_sigma: the batch marginals for the stretch's states, gtsam's for the streamed ones."""
     log = simulate("random3d", CUBE_5CM, rate_hz=RATE_HZ, duration_s=2.0, seed=7)
-    est = FixedLagEstimator(compute_sigma=True, tune_window_s=1.0).estimate(log)
+    est = FixedLagEstimator(compute_sigma=True, tune_window_s=1.0).estimate(log).motion
     sig = est.sigma["omega_b_radps"]
     assert np.all(np.isfinite(sig)) and np.all(sig > 0)
     err = est.omega_b_radps - log.truth.omega_b_radps

@@ -43,7 +43,7 @@ def test_euler_equations_and_jacobian():
 @pytest.mark.parametrize("case", CASES)
 def test_noise_free_recovery(case):
     log = simulate(case, duration_s=0.5, noise=SensorErrors.none())
-    m = FreeFlightEstimator().estimate(log)
+    m = FreeFlightEstimator().estimate(log).motion
     np.testing.assert_allclose(m.omega_b_radps, log.truth.omega_b_radps, atol=1e-8)
     np.testing.assert_allclose(m.omega_dot_b_radps2, log.truth.omega_dot_b_radps2, atol=1e-6)
     assert m.specific_force_b_mps2 is None
@@ -59,7 +59,7 @@ def test_paper004_accuracy_with_realistic_sensor_errors(case):
     errors = SensorErrors(accel_noise_std_mps2=0.02, accel_bias_std_mps2=0.02, accel_scale_std=0.002,
                           accel_misalignment_std_rad=0.002)
     log = simulate(case, duration_s=0.5, noise=errors, seed=11)
-    err = relative_rms_error(FreeFlightEstimator().estimate(log).omega_b_radps, log.truth.omega_b_radps)
+    err = relative_rms_error(FreeFlightEstimator().estimate(log).motion.omega_b_radps, log.truth.omega_b_radps)
     assert np.all(err < 0.02), err
     assert np.all(err > 0)
 
@@ -69,21 +69,21 @@ def test_stable_spins_tolerate_ten_times_the_noise(case):
     errors = SensorErrors(accel_noise_std_mps2=0.2, accel_bias_std_mps2=0.1, accel_scale_std=0.005,
                           accel_misalignment_std_rad=0.005, accel_quantisation_mps2=0.01)
     log = simulate(case, duration_s=0.5, noise=errors, seed=11)
-    err = relative_rms_error(FreeFlightEstimator().estimate(log).omega_b_radps, log.truth.omega_b_radps)
+    err = relative_rms_error(FreeFlightEstimator().estimate(log).motion.omega_b_radps, log.truth.omega_b_radps)
     assert np.all(err < 0.02), err
 
 
 def test_sign_options():
     log = simulate("freeflight-minor", duration_s=0.5, noise=SensorErrors.none())
     truth = log.truth.omega_b_radps
-    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="negative").estimate(log).omega_b_radps, -truth, atol=1e-8)
+    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="negative").estimate(log).motion.omega_b_radps, -truth, atol=1e-8)
     # Euler's equations hold for -ω(t) only backwards in time: "auto" finds the sign
-    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="auto").estimate(log).omega_b_radps, truth, atol=1e-8)
+    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="auto").estimate(log).motion.omega_b_radps, truth, atol=1e-8)
     flipped = simulate("freeflight-major", duration_s=0.5, noise=SensorErrors.none(), spin_radps=-20.0)
     w = flipped.truth.omega_b_radps
     assert np.all(w[:, 2] < 0)
-    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="auto").estimate(flipped).omega_b_radps, w, atol=1e-8)
-    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="negative").estimate(flipped).omega_b_radps, w, atol=1e-8)
+    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="auto").estimate(flipped).motion.omega_b_radps, w, atol=1e-8)
+    np.testing.assert_allclose(FreeFlightEstimator(omega_sign="negative").estimate(flipped).motion.omega_b_radps, w, atol=1e-8)
 
 
 def test_independent_integration_with_a_rotated_sensor():
@@ -101,7 +101,7 @@ def test_independent_integration_with_a_rotated_sensor():
     y = arr.predict_readings(np.zeros_like(w), dw, w)  # free fall: zero specific force at the centre of mass
     ts = np.round(t * 1e9).astype(np.int64)
     log = Log(arr, ts, y, truth=Motion(ts, omega_b_radps=w))
-    m = FreeFlightEstimator(omega_sign="auto").estimate(log)
+    m = FreeFlightEstimator(omega_sign="auto").estimate(log).motion
     np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-7)
     # 2T and H² of the estimate stay constant
     two_t = np.sum(inertia * m.omega_b_radps**2, axis=1)
@@ -110,7 +110,7 @@ def test_independent_integration_with_a_rotated_sensor():
 
 def test_sigma_is_consistent_with_the_errors():
     log = simulate("freeflight-major", duration_s=0.5, seed=2)
-    m = FreeFlightEstimator(compute_sigma=True).estimate(log)
+    m = FreeFlightEstimator(compute_sigma=True).estimate(log).motion
     rms = np.sqrt(np.mean((m.omega_b_radps - log.truth.omega_b_radps) ** 2, axis=0))
     sigma = np.median(m.sigma["omega_b_radps"], axis=0)
     # the bound of eq. 13 alone ignores what the constants add, so it is an upper level
@@ -133,7 +133,7 @@ def test_applicability_and_bad_options():
     y = log.accel_mps2.copy()
     y[3, 1] = np.inf
     with pytest.raises(ValueError, match="sample 3"):
-        est.estimate(log.replace(accel_mps2=y))
+        est.estimate(log.replace(accel_mps2=y)).motion
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -141,11 +141,11 @@ def test_auto_sign_with_noise(case):
     """Paper 004's noise: the time asymmetry of Euler's equations picks the sign of either spin."""
     for spin_radps in (27.4, -27.4):
         log = simulate(case, duration_s=0.5, seed=4, spin_radps=spin_radps)
-        m = FreeFlightEstimator(omega_sign="auto").estimate(log)
+        m = FreeFlightEstimator(omega_sign="auto").estimate(log).motion
         assert np.all(np.sum(m.omega_b_radps * log.truth.omega_b_radps, axis=1) > 0)
 
 
 def test_no_rotation_is_reported():
     log = simulate("freeflight-major", duration_s=0.05, noise=SensorErrors.none())
     with pytest.raises(ValueError, match="spinning body"):
-        FreeFlightEstimator().estimate(log.replace(accel_mps2=np.zeros_like(log.accel_mps2)))
+        FreeFlightEstimator().estimate(log.replace(accel_mps2=np.zeros_like(log.accel_mps2))).motion

@@ -90,6 +90,6 @@ def test_the_cli_refuses_a_collinear_or_co_located_array_with_one_line(tmp_path,
 def test_the_near_planar_board_keeps_its_accuracy_with_the_smoother():
     """The study's MIMU4444 row (docs/geometry.md): ω RMSE 0.07 rad/s for the smoother on 5 s of random3d."""
     log = simulate("random3d", array=mimu4444_array(), duration_s=5.0, seed=1)
-    w = make_estimator("smoother").estimate(log).omega_b_radps
+    w = make_estimator("smoother").estimate(log).motion.omega_b_radps
     rmse = float(np.sqrt(np.mean(np.sum((w - log.truth.omega_b_radps) ** 2, axis=1))))
     assert rmse < 0.2, rmse

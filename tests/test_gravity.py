@@ -42,7 +42,7 @@ R_TILTED = matrix_from_rotation_vector([0.3, -0.2, 1.1])
 def test_static_tilted_array_inclinometer_compensation():
     assert R_TILTED[2, 2] > 0  # body z points upward, as the inclinometer convention assumes
     log = static_log(CUBE_INCL, R_TILTED)
-    est = add_orientation(log, make_estimator("inversion").estimate(log), "inclinometer")
+    est = add_orientation(log, make_estimator("inversion").estimate(log).motion, "inclinometer")
     np.testing.assert_allclose(est.accel_b_mps2, 0.0, atol=1e-9)
     # roll and pitch right, yaw zero: R(q)ᵀ e_z is the body's up vector and body x has no world-y part
     R = matrix_from_quaternion(est.quaternion_wb)
@@ -61,7 +61,7 @@ def test_gravity_from_tilt_direction_cosines():
 def test_static_gyro_and_estimate_sources_start_from_specific_force():
     arr = SensorArray(CUBE.accelerometers, "cube+gyro", gyroscope=Gyroscope(0.01))
     log = static_log(arr, R_TILTED, tilt=False)
-    est = make_estimator("inversion").estimate(log)
+    est = make_estimator("inversion").estimate(log).motion
     out = add_orientation(log, est, "gyro")
     np.testing.assert_allclose(out.accel_b_mps2, 0.0, atol=1e-9)
     # the accelerometer-derived ω at rest is sqrt(rounding) ≈ 1e-7 rad/s, hence a looser bound
@@ -76,7 +76,7 @@ def test_restart_at_gaps_reinitialises_the_attitude():
     log = Log(CUBE, np.concatenate([first.timestamps_ns, second.timestamps_ns]),
               np.vstack([first.accel_mps2, second.accel_mps2]))
     assert len(log.segments()) == 2
-    out = add_orientation(log, make_estimator("inversion").estimate(log), "estimate")
+    out = add_orientation(log, make_estimator("inversion").estimate(log).motion, "estimate")
     np.testing.assert_allclose(out.accel_b_mps2, 0.0, atol=1e-6)  # without the restart: errors of metres/s²
 
 
@@ -172,7 +172,7 @@ def rk4_stage(q, ta, tb, steps=4):
 @pytest.mark.parametrize("source, method", [("gyro", "inversion"), ("estimate", "integration")])
 def test_tumbling_body_gravity_removed(source, method):
     log = tumbling_log()
-    est = make_estimator(method).estimate(log)
+    est = make_estimator(method).estimate(log).motion
     out = add_orientation(log, est, source, initial_window_s=0.0)
     assert angle_between(out.quaternion_wb, log.truth.quaternion_wb).max() < 5e-5
     np.testing.assert_allclose(out.accel_b_mps2, 0.0, atol=5e-4)
@@ -180,7 +180,7 @@ def test_tumbling_body_gravity_removed(source, method):
 
 def test_add_orientation_errors():
     log = static_log(CUBE, R_TILTED, tilt=False)
-    est = make_estimator("inversion").estimate(log)
+    est = make_estimator("inversion").estimate(log).motion
     with pytest.raises(ValueError, match="needs tilt_x"):
         add_orientation(log, est, "inclinometer")
     with pytest.raises(ValueError, match="needs gyroscope"):
@@ -197,7 +197,7 @@ def test_moving_start_takes_the_vertical_from_the_inclinometer():
     R = matrix_from_quaternion(full.truth.quaternion_wb)
     log = full.replace(tilt_rad=np.arccos(R[:, 2, :2])).select(slice(300, None))
     assert np.abs(log.gyro_b_radps[0]).max() > 1.0
-    out = add_orientation(log, make_estimator("inversion").estimate(log), "gyro")
+    out = add_orientation(log, make_estimator("inversion").estimate(log).motion, "gyro")
     np.testing.assert_allclose(out.accel_b_mps2, 0.0, atol=5e-4)
     # heading is not observable: the attitude differs from the truth by a rotation about the vertical only
     up_est = matrix_from_quaternion(out.quaternion_wb)[:, 2, :]

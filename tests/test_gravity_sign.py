@@ -49,6 +49,6 @@ def test_smoothers_get_the_sign_of_a_constant_rotation(seed):
 
     log = simulate("turntable-constant", cube_array(0.025, 0.07), rate_hz=500.0, duration_s=3.0, seed=seed)
     for method in ("smoother", "fixed-lag"):
-        est = make_estimator(method).estimate(log)
+        est = make_estimator(method).estimate(log).motion
         err = est.omega_b_radps - log.truth.omega_b_radps
         assert np.sqrt(np.mean(np.sum(err**2, axis=1))) < 0.05, method

@@ -45,7 +45,7 @@ def make_log(array, t, w, dw, f, noise_std=0.0, seed=1, gyro_noise=None):
 def test_noise_free_recovery(array):
     t, w, dw, f = smooth_motion(3000)
     assert np.linalg.norm(w, axis=1).min() > 1.0
-    m = MLEstimator().estimate(make_log(array, t, w, dw, f))
+    m = MLEstimator().estimate(make_log(array, t, w, dw, f)).motion
     np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-8)
     np.testing.assert_allclose(m.omega_dot_b_radps2, dw, atol=1e-8)
     np.testing.assert_allclose(m.specific_force_b_mps2, f, atol=1e-8)
@@ -59,7 +59,7 @@ def test_sign_follows_omega_through_zero():
     w = 4 * np.sin(np.pi * t)[:, None] * d
     dw = 4 * np.pi * np.cos(np.pi * t)[:, None] * d
     f = np.tile([0.0, 0.0, 9.81], (len(t), 1))
-    m = MLEstimator().estimate(make_log(cube_array(), t, w, dw, f))
+    m = MLEstimator().estimate(make_log(cube_array(), t, w, dw, f)).motion
     np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-7)
 
 
@@ -72,7 +72,7 @@ def test_monte_carlo_covariance_reaches_the_bound(array, omega):
     t = np.arange(n) / 500.0
     log = make_log(array, t, np.tile(w0, (n, 1)), np.tile(dw0, (n, 1)), np.tile(f0, (n, 1)),
                    noise_std=array.noise_std_per_axis_mps2, seed=7)
-    m = MLEstimator(compute_sigma=True).estimate(log)
+    m = MLEstimator(compute_sigma=True).estimate(log).motion
     # constant ω carries no sign information (ω̇ = 0): compare modulo the sign
     w = m.omega_b_radps * np.sign(m.omega_b_radps @ w0)[:, None]
     err = np.hstack([m.specific_force_b_mps2 - f0, m.omega_dot_b_radps2 - dw0, w - w0])
@@ -92,7 +92,7 @@ def test_gyro_makes_a_nine_axis_array_usable():
     est = MLEstimator(use_gyro=True)
     assert est.applicable(arr) is None
     t, w, dw, f = smooth_motion(1000)
-    m = est.estimate(make_log(arr, t, w, dw, f))
+    m = est.estimate(make_log(arr, t, w, dw, f)).motion
     np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-9)
     np.testing.assert_allclose(m.omega_dot_b_radps2, dw, atol=1e-8)
     np.testing.assert_allclose(m.specific_force_b_mps2, f, atol=1e-8)
@@ -102,8 +102,8 @@ def test_gyro_improves_the_cube_with_noise():
     arr = SensorArray(cube_array().accelerometers, "cube+gyro", gyroscope=paper001_array().gyroscope)
     t, w, dw, f = smooth_motion(2000)
     log = make_log(arr, t, w, dw, f, noise_std=0.07, gyro_noise=0.01)
-    e_acc = MLEstimator().estimate(log).omega_b_radps - w
-    e_gyro = MLEstimator(use_gyro=True).estimate(log).omega_b_radps - w
+    e_acc = MLEstimator().estimate(log).motion.omega_b_radps - w
+    e_gyro = MLEstimator(use_gyro=True).estimate(log).motion.omega_b_radps - w
     rms_gyro = np.sqrt(np.mean(e_gyro**2))
     assert rms_gyro < 0.01 and rms_gyro < 0.2 * np.sqrt(np.mean(e_acc**2))
 
@@ -117,19 +117,19 @@ def test_applicability_and_bad_input():
     y = log.accel_mps2.copy()
     y[4, 7] = np.nan
     with pytest.raises(ValueError, match="sample 4, column a3_y"):
-        MLEstimator().estimate(log.replace(accel_mps2=y))
+        MLEstimator().estimate(log.replace(accel_mps2=y)).motion
     with pytest.raises(ValueError, match="no gyro"):
-        MLEstimator(use_gyro=True).estimate(make_log(paper001_array(), t, w, dw, f).replace(gyro_b_radps=None))
+        MLEstimator(use_gyro=True).estimate(make_log(paper001_array(), t, w, dw, f).replace(gyro_b_radps=None)).motion
 
 
 def test_unknown_noise_still_estimates_but_sigma_needs_it():
     arr = cube_array(noise_std_mps2=None)
     t, w, dw, f = smooth_motion(200)
     log = make_log(arr, t, w, dw, f)
-    np.testing.assert_allclose(MLEstimator().estimate(log).omega_b_radps, w, atol=1e-8)
+    np.testing.assert_allclose(MLEstimator().estimate(log).motion.omega_b_radps, w, atol=1e-8)
     with pytest.raises(ValueError, match="noise_std_mps2"):
-        MLEstimator(compute_sigma=True).estimate(log)
-    m = MLEstimator(compute_sigma=True, noise_std_mps2=0.07).estimate(log)
+        MLEstimator(compute_sigma=True).estimate(log).motion
+    m = MLEstimator(compute_sigma=True, noise_std_mps2=0.07).estimate(log).motion
     np.testing.assert_allclose(m.sigma["specific_force_b_mps2"], 0.035, rtol=1e-9)
 
 
@@ -139,7 +139,7 @@ def test_monte_carlo_with_gyro_reaches_the_bound_with_gyro():
     t = np.arange(n) / 500.0
     log = make_log(arr, t, np.tile(w0, (n, 1)), np.zeros((n, 3)), np.tile([0.0, 0.0, 9.81], (n, 1)),
                    noise_std=0.07, gyro_noise=0.01, seed=9)
-    m = MLEstimator(use_gyro=True, compute_sigma=True).estimate(log)
+    m = MLEstimator(use_gyro=True, compute_sigma=True).estimate(log).motion
     emp = np.mean((m.omega_b_radps - w0) ** 2, axis=0)
     bound = crb_per_sample(arr, w0[None], gyro=True).sigma_omega[0] ** 2
     np.testing.assert_allclose(emp / bound, 1.0, atol=0.15)
@@ -162,9 +162,9 @@ def test_real_mimu4444_recording_against_the_gyros(mimu4444_dir):
     ref = log.reference.omega_b_radps
     moving = ~log.invalid_reference & (np.linalg.norm(ref, axis=1) > 15.0)
     assert moving.sum() > 1000
-    w_ml = MLEstimator().estimate(log).omega_b_radps[moving]
+    w_ml = MLEstimator().estimate(log).motion.omega_b_radps[moving]
     e_ml = np.linalg.norm(w_ml - ref[moving], axis=1)
-    e_inv = np.linalg.norm(InversionEstimator().estimate(log).omega_b_radps[moving] - ref[moving], axis=1)
+    e_inv = np.linalg.norm(InversionEstimator().estimate(log).motion.omega_b_radps[moving] - ref[moving], axis=1)
     assert np.median(e_ml) < 3.5
     assert np.median(e_ml) < 0.2 * np.median(e_inv)
     assert np.sqrt(np.mean(e_ml**2)) < 10.0
@@ -179,7 +179,7 @@ def test_signs_with_noise_on_the_cube(scenario):
     from gfimu.simulate import simulate
 
     log = simulate(scenario, array=cube_array(), duration_s=5.0, seed=1)
-    m = MLEstimator().estimate(log)
+    m = MLEstimator().estimate(log).motion
     truth = log.truth
     big = np.linalg.norm(truth.omega_b_radps, axis=1) > 1.0
     assert big.sum() > 1000
@@ -203,7 +203,7 @@ def test_three_triads_are_refused_and_one_more_axis_suffices():
     ten = SensorArray(three.accelerometers + (extra,), "ten-axis")
     assert MLEstimator().applicable(ten) is None
     t, w, dw, f = smooth_motion(1000)
-    m = MLEstimator().estimate(make_log(ten, t, w, dw, f))
+    m = MLEstimator().estimate(make_log(ten, t, w, dw, f)).motion
     np.testing.assert_allclose(m.omega_b_radps, w, atol=1e-8)
     np.testing.assert_allclose(m.specific_force_b_mps2, f, atol=1e-8)
 
@@ -239,10 +239,10 @@ def test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer():
     from gfimu.simulate import SensorErrors, simulate
 
     log = simulate("reversal", mimu4444_array(), rate_hz=100.0, duration_s=170.0, noise=SensorErrors(accel_noise_std_mps2=0.3), seed=3)
-    fast = MLEstimator().estimate(log).omega_b_radps
-    plain = _EveryStartEveryPass(workers=1).estimate(log).omega_b_radps
+    fast = MLEstimator().estimate(log).motion.omega_b_radps
+    plain = _EveryStartEveryPass(workers=1).estimate(log).motion.omega_b_radps
     assert np.array_equal(fast, plain)
-    assert np.array_equal(MLEstimator(workers=1).estimate(log).omega_b_radps, fast)  # blocks in workers or here
+    assert np.array_equal(MLEstimator(workers=1).estimate(log).motion.omega_b_radps, fast)  # blocks in workers or here
 
 
 def test_restarts_found_ahead_are_those_of_the_plain_definition():
@@ -255,12 +255,12 @@ def test_restarts_found_ahead_are_those_of_the_plain_definition():
     extra = Accelerometer("e", [0.04, -0.03, 0.02], matrix_from_rotation_vector([0.4, 1.1, -0.7]), axes=("x",), noise_std_mps2=0.05)
     ten = SensorArray(three.accelerometers + (extra,), "ten-axis")
     log = simulate("random3d", ten, rate_hz=100.0, duration_s=170.0, noise=SensorErrors(accel_noise_std_mps2=0.05), seed=3)  # five blocks
-    fast = MLEstimator().estimate(log).omega_b_radps
-    plain = _EveryStartEveryPass(workers=1).estimate(log).omega_b_radps
+    fast = MLEstimator().estimate(log).motion.omega_b_radps
+    plain = _EveryStartEveryPass(workers=1).estimate(log).motion.omega_b_radps
     assert np.array_equal(fast, plain)
     no_restarts = MLEstimator(workers=1)
     no_restarts._take_restarts = lambda w, cost, rows, best, best_cost: w
-    assert np.sum(np.any(no_restarts.estimate(log).omega_b_radps != fast, axis=1)) > 100  # restarts were taken
+    assert np.sum(np.any(no_restarts.estimate(log).motion.omega_b_radps != fast, axis=1)) > 100  # restarts were taken
 
 
 def test_closed_forms_of_the_iterations_match_the_direct_products():

@@ -126,13 +126,13 @@ def test_dominant_frequency():
 
 def test_tuner_finds_the_turntable_frequency_and_beats_20_mrad(turntable_5cm_smoother):
     """Paper 001's 1 Hz turntable on a 5 cm cube: z oscillates at 1 Hz, x and y do not move."""
-    log, est, m = turntable_5cm_smoother
-    t = est.last_tuning[0]
+    log, report, m = turntable_5cm_smoother
+    t = report.tunings[0]
     assert t.axis_frequencies_hz[:2] == (0.0, 0.0), t
     assert t.axis_frequencies_hz[2] == pytest.approx(1.0, rel=2e-3), t
     assert 0 < t.axis_frequency_std_hz[2] < 2e-3 and t.axis_amplitude_radps[2] == pytest.approx(np.deg2rad(23.5) * 2 * np.pi, rel=0.02)
     rmse = omega_rmse(m, log.truth)
-    plain = omega_rmse(BatchSmootherEstimator(tune_axis_frequencies=False).estimate(log), log.truth)
+    plain = omega_rmse(BatchSmootherEstimator(tune_axis_frequencies=False).estimate(log).motion, log.truth)
     assert rmse < 0.02 and rmse < 0.8 * plain, (rmse, plain)
     z = float(np.sqrt(np.mean((m.omega_b_radps[:, 2] - log.truth.omega_b_radps[:, 2]) ** 2)))
     assert z < 0.006, z
@@ -140,9 +140,9 @@ def test_tuner_finds_the_turntable_frequency_and_beats_20_mrad(turntable_5cm_smo
 
 def test_reversal_frequencies_and_accuracy():
     log = simulate("reversal", CUBE_5CM, rate_hz=500.0, duration_s=6.0, seed=2)
-    est = BatchSmootherEstimator()
-    m = est.estimate(log)
-    np.testing.assert_allclose(est.last_tuning[0].axis_frequencies_hz, (0.55, 0.75, 0.95), rtol=2e-3)
+    estimate = BatchSmootherEstimator().estimate(log)
+    m = estimate.motion
+    np.testing.assert_allclose(estimate.report.tunings[0].axis_frequencies_hz, (0.55, 0.75, 0.95), rtol=2e-3)
     assert omega_rmse(m, log.truth) < 0.012
     big = np.abs(log.truth.omega_b_radps) > 0.1
     assert np.all(np.sign(m.omega_b_radps[big]) == np.sign(log.truth.omega_b_radps[big]))
@@ -152,10 +152,10 @@ def test_reversal_frequencies_and_accuracy():
 def test_random_motion_keeps_the_white_jerk():
     """Band-limited random motion has no dominant line: no oscillator, same result as without."""
     log = simulate("random3d", CUBE_5CM, rate_hz=500.0, duration_s=10.0, seed=1)
-    est = BatchSmootherEstimator()
-    m = est.estimate(log)
-    assert est.last_tuning[0].axis_frequencies_hz == (0.0, 0.0, 0.0)
-    np.testing.assert_allclose(m.omega_b_radps, BatchSmootherEstimator(tune_axis_frequencies=False).estimate(log).omega_b_radps)
+    estimate = BatchSmootherEstimator().estimate(log)
+    m = estimate.motion
+    assert estimate.report.tunings[0].axis_frequencies_hz == (0.0, 0.0, 0.0)
+    np.testing.assert_allclose(m.omega_b_radps, BatchSmootherEstimator(tune_axis_frequencies=False).estimate(log).motion.omega_b_radps)
 
 
 def test_stream_density_floor():

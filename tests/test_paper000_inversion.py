@@ -59,14 +59,14 @@ def test_unknown_noise_gives_nan_covariance_and_no_sigma():
     _, cov = inversion_matrix(arr)
     assert np.all(np.isnan(cov))
     log = analytic_log(arr, sines(), duration_s=0.1)
-    est = make_estimator("inversion", compute_sigma=True).estimate(log)
+    est = make_estimator("inversion", compute_sigma=True).estimate(log).motion
     assert est.sigma == {}
 
 
 def test_sigma_output_matches_covariance():
     arr = cube_array(noise_std_mps2=0.07)
     log = analytic_log(arr, sines(offset=(5, 5, 5)), duration_s=0.1)
-    est = make_estimator("inversion", compute_sigma=True).estimate(log)
+    est = make_estimator("inversion", compute_sigma=True).estimate(log).motion
     _, cov = inversion_matrix(arr)
     np.testing.assert_allclose(est.sigma["omega_dot_b_radps2"][0], np.sqrt(np.diag(cov)[3:6]))
     # far from zero the ω sigma is the linearised σ(ω²)/(2|ω|) (up to the softening term)
@@ -103,7 +103,7 @@ def test_continuity_signs_follow_the_previous_sample():
 
 def test_inversion_estimator_noise_free():
     log = analytic_log(cube_array(noise_std_mps2=None), sines(offset=(0.5, 0, 0)), duration_s=3.0)
-    est = make_estimator("inversion").estimate(log)
+    est = make_estimator("inversion").estimate(log).motion
     truth = log.truth
     w0 = truth.omega_b_radps[0]
     s = np.sign(w0[np.argmax(np.abs(w0))])  # the first sample's global sign is +, on the largest component

@@ -61,7 +61,7 @@ def test_eq10_angular_acceleration_is_free_of_gravity():
 def test_gyro_aided_noise_free_recovery(make_array):
     arr = make_array()
     log = analytic_log(arr, sines(amp=(8.0, 6.0, 9.0), offset=(2, -3, 1)), duration_s=1.0, gyro=True)
-    est = make_estimator("gyro-aided").estimate(log)
+    est = make_estimator("gyro-aided").estimate(log).motion
     np.testing.assert_allclose(est.omega_b_radps, log.truth.omega_b_radps, atol=0)
     np.testing.assert_allclose(est.omega_dot_b_radps2, log.truth.omega_dot_b_radps2, atol=1e-9)
     np.testing.assert_allclose(est.specific_force_b_mps2, log.truth.specific_force_b_mps2, atol=1e-11)
@@ -85,7 +85,7 @@ def test_gyro_aided_sigma_closed_form_and_monte_carlo():
     arr = paper001_array(lever_arm_m=L, noise_std_mps2=sd_a)
     # at rest: eq. 9 gives σ(f) = m σ √2 = σ/√2 and σ(ω̇) = n σ √6 with n = 1/(4L)
     still = analytic_log(arr, lambda t: (np.zeros((t.size, 3)), np.zeros((t.size, 3))), duration_s=0.02, gyro=True)
-    est = make_estimator("gyro-aided", compute_sigma=True).estimate(still)
+    est = make_estimator("gyro-aided", compute_sigma=True).estimate(still).motion
     np.testing.assert_allclose(est.sigma["specific_force_b_mps2"], sd_a / np.sqrt(2), rtol=1e-12)
     np.testing.assert_allclose(est.sigma["omega_dot_b_radps2"], np.sqrt(6) * sd_a / (4 * L), rtol=1e-12)
     np.testing.assert_allclose(est.sigma["omega_b_radps"], sd_g)
@@ -97,7 +97,7 @@ def test_gyro_aided_sigma_closed_form_and_monte_carlo():
     gyro = w + sd_g * rng.standard_normal((n, 3))
     x = gyro_aided_solve(arr, readings + sd_a * rng.standard_normal((n, 6)), gyro)
     one = still.replace(timestamps_ns=still.timestamps_ns[:1], accel_mps2=readings, gyro_b_radps=w, truth=None)
-    sig = make_estimator("gyro-aided", compute_sigma=True).estimate(one).sigma
+    sig = make_estimator("gyro-aided", compute_sigma=True).estimate(one).motion.sigma
     np.testing.assert_allclose(x.std(axis=0)[:3], sig["specific_force_b_mps2"][0], rtol=0.05)
     np.testing.assert_allclose(x.std(axis=0)[3:], sig["omega_dot_b_radps2"][0], rtol=0.05)
 

@@ -99,7 +99,7 @@ def test_cli_compare_applies_the_preset_to_the_smoother(hand_log_dir, tmp_path):
     from gfimu.readings import screen_log
 
     log, _ = screen_log(gio.read_log(hand_log_dir))  # the command replaces gross reading errors first
-    direct = make_estimator("smoother", **HAND_HELD).estimate(log)
+    direct = make_estimator("smoother", **HAND_HELD).estimate(log).motion
     np.testing.assert_allclose(est.omega_b_radps, direct.omega_b_radps, rtol=0, atol=1e-9)
 
 
@@ -135,8 +135,8 @@ def test_preset_reproduces_the_explicit_settings_on_the_real_recording(mimu4444_
     from test_smoother_real import busiest_part, scores
 
     part, mask = busiest_part(mimu4444_dir, 1)
-    preset = make_estimator("smoother", preset="hand-held-low-rate").estimate(part)
-    explicit = BatchSmootherEstimator(**HAND_HELD).estimate(part)
+    preset = make_estimator("smoother", preset="hand-held-low-rate").estimate(part).motion
+    explicit = BatchSmootherEstimator(**HAND_HELD).estimate(part).motion
     np.testing.assert_array_equal(preset.omega_b_radps, explicit.omega_b_radps)
     np.testing.assert_array_equal(preset.omega_dot_b_radps2, explicit.omega_dot_b_radps2)
     rmse, opposite = scores(preset, part, mask)

@@ -251,7 +251,7 @@ def _no_noise():
 def smoother_rmse(log) -> float:
     from gfimu.methods import make_estimator
 
-    motion = make_estimator("smoother").estimate(log)
+    motion = make_estimator("smoother").estimate(log).motion
     err = motion.omega_b_radps - log.truth.omega_b_radps
     return float(np.sqrt(np.mean(np.sum(err ** 2, axis=1))))
 

@@ -20,7 +20,7 @@ def test_consistent_logs_keep_the_gaussian_model(array):
     """White noise at the stated 0.07 m/s²: the check finds the readings consistent (ratio about 1,
     tail share near the Gaussian 6e-5, no slope)."""
     log = simulate("random3d", array, rate_hz=500.0, duration_s=3.0, seed=4)
-    check = auto.check_model(log, MLEstimator().estimate(log))
+    check = auto.check_model(log, MLEstimator().estimate(log).motion)
     assert check.consistent, check
     assert 0.8 < check.noise_ratio < 1.25 and check.tail_share < 0.002
     assert abs(check.noise_floor_mps2 - 0.07) < 0.01 and check.noise_slope_mps2_per_radps < 0.01
@@ -31,7 +31,7 @@ def test_noise_growing_with_the_rate_is_measured(array):
     """Noise std sqrt(0.07² + (0.05 |ω|)²): the slope is recovered within 15 %, the floor within 25 %
     (binned by the per-sample estimate's noisy |ω|, the slowest bin reads high: measured 0.083-0.087)."""
     log = _with_extra_noise(simulate("random3d", array, rate_hz=500.0, duration_s=3.0, seed=4), 0.05)
-    check = auto.check_model(log, MLEstimator().estimate(log))
+    check = auto.check_model(log, MLEstimator().estimate(log).motion)
     assert not check.consistent and any("grows with" in r for r in check.reasons)
     assert abs(check.noise_slope_mps2_per_radps - 0.05) < 0.0075, check
     assert abs(check.noise_floor_mps2 - 0.07) < 0.0175, check
@@ -123,6 +123,6 @@ def test_noise_chosen_on_the_middle_of_the_window_keeps_the_accuracy():
     def rmse(motion):
         return float(np.sqrt(np.mean(np.sum((motion.omega_b_radps - log.truth.omega_b_radps) ** 2, axis=1))))
 
-    span = rmse(BatchSmootherEstimator().estimate(log))
-    whole = rmse(BatchSmootherEstimator(tune_span_s=None).estimate(log))
+    span = rmse(BatchSmootherEstimator().estimate(log).motion)
+    whole = rmse(BatchSmootherEstimator(tune_span_s=None).estimate(log).motion)
     assert span < 1.1 * whole, (span, whole)

@@ -36,7 +36,7 @@ def best_per_sample_rmse(log):
             continue
         if est.applicable(log.array):
             continue
-        out[name] = omega_rmse(est.estimate(log), log.truth)
+        out[name] = omega_rmse(est.estimate(log).motion, log.truth)
     assert out, "no per-sample method to compare with"
     return min(out.values()), out
 
@@ -121,7 +121,7 @@ def test_attitude_with_inclinometer():
     from gfimu.rotations import matrix_from_quaternion
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=5.0, seed=1)
-    m = BatchSmootherEstimator(use_inclinometer=True).estimate(log)
+    m = BatchSmootherEstimator(use_inclinometer=True).estimate(log).motion
     up_true = matrix_from_quaternion(log.truth.quaternion_wb)[:, 2, :]
     up_est = matrix_from_quaternion(m.quaternion_wb)[:, 2, :]
     tilt_err = np.degrees(np.arccos(np.clip(np.sum(up_true * up_est, axis=1), -1, 1)))
@@ -134,8 +134,8 @@ def test_attitude_with_inclinometer():
 def test_quadratic_formulation_equals_accelerometer_factors_for_square_array(small_log):
     """With 12 axes, the per-sample inversion with its covariance carries the same information."""
     log = small_log
-    a = BatchSmootherEstimator(relative_tolerance=1e-14).estimate(log)
-    q = BatchSmootherEstimator(measurement="quadratic", relative_tolerance=1e-14).estimate(log)
+    a = BatchSmootherEstimator(relative_tolerance=1e-14).estimate(log).motion
+    q = BatchSmootherEstimator(measurement="quadratic", relative_tolerance=1e-14).estimate(log).motion
     np.testing.assert_allclose(q.omega_b_radps, a.omega_b_radps, atol=1e-7)
     np.testing.assert_allclose(q.specific_force_b_mps2, a.specific_force_b_mps2, atol=1e-7)
     assert "needs at least 12" in BatchSmootherEstimator(measurement="quadratic").applicable(single_triad())
@@ -161,7 +161,7 @@ def test_window_initialisation_recovers_sign_through_zero():
 def test_smoother_accuracy(scenario):
     log = simulate(scenario, CUBE, rate_hz=500.0, duration_s=5.0, seed=1)
     est = BatchSmootherEstimator()
-    rmse = omega_rmse(est.estimate(log), log.truth)
+    rmse = omega_rmse(est.estimate(log).motion, log.truth)
     best, per_method = best_per_sample_rmse(log)
     assert rmse < 0.02, (rmse, per_method)
     # random3d: ≥ 20x; turntable: the per-sample IMM does well on this simple motion (see report)
@@ -171,9 +171,9 @@ def test_smoother_accuracy(scenario):
 def test_snap_model_sharpens_omega_dot():
     """White angular snap (ω̈ random walk): same ω accuracy, ω̇ several times better on smooth motion."""
     log = simulate("turntable", CUBE, rate_hz=500.0, duration_s=5.0, seed=1)
-    jerk = BatchSmootherEstimator(tune_process_noise=False).estimate(log)
+    jerk = BatchSmootherEstimator(tune_process_noise=False).estimate(log).motion
     snap_est = BatchSmootherEstimator(motion_model="snap", tune_process_noise=False)
-    snap = snap_est.estimate(log)
+    snap = snap_est.estimate(log).motion
     assert omega_rmse(snap, log.truth) < 0.02
     dw = lambda m: float(np.sqrt(np.mean(np.sum((m.omega_dot_b_radps2 - log.truth.omega_dot_b_radps2) ** 2, axis=1))))
     assert dw(snap) < 0.4 * dw(jerk), (dw(snap), dw(jerk))
@@ -183,10 +183,10 @@ def test_snap_model_sharpens_omega_dot():
 
 def test_reversal_has_no_sign_errors():
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=5.0, seed=2)
-    m = BatchSmootherEstimator().estimate(log)
+    m = BatchSmootherEstimator().estimate(log).motion
     assert sign_error_share(m, log.truth) == 0.0
     assert omega_rmse(m, log.truth) < 0.03
-    inv = make_estimator("inversion").estimate(log)
+    inv = make_estimator("inversion").estimate(log).motion
     assert sign_error_share(inv, log.truth) > 0.1  # the per-sample inversion loses the sign
     best, per_method = best_per_sample_rmse(log)
     assert best > 10 * omega_rmse(m, log.truth), per_method
@@ -196,7 +196,7 @@ def test_reversal_has_no_sign_errors():
 def test_arbitrary_array():
     arr = random_array(5, half_extent_m=0.03, noise_std_mps2=0.07, seed=7)
     log = simulate("random3d", arr, rate_hz=500.0, duration_s=5.0, seed=3)
-    m = BatchSmootherEstimator().estimate(log)
+    m = BatchSmootherEstimator().estimate(log).motion
     rmse = omega_rmse(m, log.truth)
     best, per_method = best_per_sample_rmse(log)
     assert sign_error_share(m, log.truth) == 0.0
@@ -206,7 +206,7 @@ def test_arbitrary_array():
 def test_near_planar_mimu4444_array():
     arr = mimu4444_array(noise_std_mps2=0.05)
     log = simulate("random3d", arr, rate_hz=500.0, duration_s=5.0, seed=5)
-    m = BatchSmootherEstimator().estimate(log)
+    m = BatchSmootherEstimator().estimate(log).motion
     assert sign_error_share(m, log.truth) < 0.01
     assert omega_rmse(m, log.truth) < 0.15
 
@@ -214,7 +214,7 @@ def test_near_planar_mimu4444_array():
 def test_efficiency_and_sigma_consistency():
     log = simulate("random3d", CUBE, rate_hz=500.0, duration_s=5.0, seed=6)
     est = BatchSmootherEstimator(compute_sigma=True)
-    m = est.estimate(log)
+    m = est.estimate(log).motion
     bound = smoother_bound(log, est.options())
     eff = efficiency(m, log.truth, bound)
     assert 0.7 < eff.ratio["omega_b_radps"] < 1.1, eff.to_markdown()
@@ -228,8 +228,8 @@ def test_efficiency_and_sigma_consistency():
 def test_windows_match_whole_log_solve():
     """White-jerk model: the windowed solve is the whole-log solve to well within its uncertainty."""
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=8.0, seed=8)
-    whole = BatchSmootherEstimator(window_s=None, compute_sigma=True, tune_axis_frequencies=False).estimate(log)
-    windowed = BatchSmootherEstimator(window_s=4.5, overlap_s=2.0, tune_axis_frequencies=False).estimate(log)
+    whole = BatchSmootherEstimator(window_s=None, compute_sigma=True, tune_axis_frequencies=False).estimate(log).motion
+    windowed = BatchSmootherEstimator(window_s=4.5, overlap_s=2.0, tune_axis_frequencies=False).estimate(log).motion
     diff = np.abs(windowed.omega_b_radps - whole.omega_b_radps) / whole.sigma["omega_b_radps"]
     assert np.median(diff) < 0.01
     assert np.max(diff) < 0.1
@@ -241,8 +241,8 @@ def test_windows_with_the_oscillator_stay_within_the_accuracy():
     the windowed solve differs from the whole-log one by about its own sigma (not far below it),
     and is as accurate."""
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=8.0, seed=8)
-    whole = BatchSmootherEstimator(window_s=None, compute_sigma=True).estimate(log)
-    windowed = BatchSmootherEstimator(window_s=4.5, overlap_s=2.0).estimate(log)
+    whole = BatchSmootherEstimator(window_s=None, compute_sigma=True).estimate(log).motion
+    windowed = BatchSmootherEstimator(window_s=4.5, overlap_s=2.0).estimate(log).motion
     d = np.linalg.norm(windowed.omega_b_radps - whole.omega_b_radps, axis=1)
     sigma = np.linalg.norm(whole.sigma["omega_b_radps"], axis=1)
     assert np.sqrt(np.mean(d**2)) < 1.5 * np.sqrt(np.mean(sigma**2)) and np.max(d) < 0.02
@@ -256,15 +256,15 @@ def test_bias_self_calibration():
     log = simulate("random3d", CUBE, rate_hz=500.0, duration_s=5.0, seed=9)
     bias = np.random.default_rng(9).normal(size=CUBE.n_axes) * 0.1
     biased = log.replace(accel_mps2=log.accel_mps2 + bias)
-    est = BatchSmootherEstimator(self_calibrate_bias=True, bias_prior_std_mps2=0.2)
-    m = est.estimate(biased)
-    b_est = np.concatenate([est.last_calibration[0][f"bias{i}"] for i in range(4)])
+    est = BatchSmootherEstimator(self_calibrate_bias=True, bias_prior_std_mps2=0.2).estimate(biased)
+    m = est.motion
+    b_est = np.concatenate([est.report.calibration[0][f"bias{i}"] for i in range(4)])
     # the part of a bias pattern that looks like a constant specific force is not observable:
     # compare after removing it (projection on the f columns of S)
     Sf = CUBE.structure_matrix()[:, :3]
     proj = np.eye(12) - Sf @ np.linalg.pinv(Sf)
     assert np.max(np.abs(proj @ (b_est - bias))) < 0.01
-    plain = BatchSmootherEstimator().estimate(biased)
+    plain = BatchSmootherEstimator().estimate(biased).motion
     assert omega_rmse(m, log.truth) < 0.5 * omega_rmse(plain, log.truth)
     assert omega_rmse(m, log.truth) < 0.03
 
@@ -273,9 +273,9 @@ def test_bad_input_is_named(small_log):
     acc = small_log.accel_mps2.copy()
     acc[37, 4] = np.nan
     with pytest.raises(ValueError, match=r"a2_y is not finite at sample 37"):
-        BatchSmootherEstimator().estimate(small_log.replace(accel_mps2=acc))
+        BatchSmootherEstimator().estimate(small_log.replace(accel_mps2=acc)).motion
     with pytest.raises(ValueError, match="at least 2 samples"):
-        BatchSmootherEstimator().estimate(small_log.select(slice(0, 1)))
+        BatchSmootherEstimator().estimate(small_log.select(slice(0, 1))).motion
 
 
 def test_not_applicable_reasons():
@@ -300,9 +300,9 @@ def test_free_flight_beats_per_sample_free_flight(scenario):
     """Paper 004's block (one triad, 1 kHz) spun in free flight."""
     log = simulate(scenario, seed=1, duration_s=0.6)
     assert log.array.n_axes == 3 and log.rate_hz == pytest.approx(1000.0)
-    m = BatchSmootherEstimator(free_flight=True).estimate(log)
+    m = BatchSmootherEstimator(free_flight=True).estimate(log).motion
     smoother = relative_rms_error(m, log.truth)
-    per_sample = relative_rms_error(make_estimator("free-flight").estimate(log), log.truth)
+    per_sample = relative_rms_error(make_estimator("free-flight").estimate(log).motion, log.truth)
     assert smoother < 1e-3
     assert per_sample / smoother > 3.0, (smoother, per_sample)
 
@@ -312,7 +312,7 @@ def test_gyro_array_smoother_beats_raw_gyro():
     from gfimu.array import paper001_array
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=5.0, seed=1)
-    m = BatchSmootherEstimator().estimate(log)
+    m = BatchSmootherEstimator().estimate(log).motion
     raw = float(np.sqrt(np.mean(np.sum((log.gyro_b_radps - log.truth.omega_b_radps) ** 2, axis=1))))
     assert omega_rmse(m, log.truth) < 0.3 * raw
 
@@ -326,7 +326,7 @@ def test_log_with_gap():
     idx = np.nonzero(keep)[0]
     gapped = log.replace(timestamps_ns=log.timestamps_ns[idx], accel_mps2=log.accel_mps2[idx], truth=log.truth.select(idx))
     assert len(gapped.gaps()) == 1
-    m = BatchSmootherEstimator().estimate(gapped)
+    m = BatchSmootherEstimator().estimate(gapped).motion
     assert sign_error_share(m, gapped.truth) == 0.0
     assert omega_rmse(m, gapped.truth) < 0.03
 
@@ -339,7 +339,7 @@ def test_attitude_windows_are_continuous():
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=8.0, seed=2)
     # fixed process noise: with tuning each window would choose its own
-    whole = BatchSmootherEstimator(use_inclinometer=True, window_s=None, tune_process_noise=False).estimate(log)
-    windowed = BatchSmootherEstimator(use_inclinometer=True, window_s=4.5, overlap_s=2.0, tune_process_noise=False).estimate(log)
+    whole = BatchSmootherEstimator(use_inclinometer=True, window_s=None, tune_process_noise=False).estimate(log).motion
+    windowed = BatchSmootherEstimator(use_inclinometer=True, window_s=4.5, overlap_s=2.0, tune_process_noise=False).estimate(log).motion
     Ra, Rb = matrix_from_quaternion(whole.quaternion_wb), matrix_from_quaternion(windowed.quaternion_wb)
     assert np.degrees(np.max(np.linalg.norm(_so3.log(np.swapaxes(Ra, 1, 2) @ Rb), axis=1))) < 0.01

@@ -68,19 +68,19 @@ def test_tuner_recovers_the_density_of_the_process_model():
     assert 1 / 1.5 < tuning.specific_force_density / 3.0 < 1.5, tuning
     assert tuned.process_axis_factors == tuning.axis_factors
     # and the tuned smoother is at least as accurate as the default densities on its own model
-    tuned_rmse = omega_rmse(BatchSmootherEstimator(window_s=None).estimate(log), log.truth)
-    fixed_rmse = omega_rmse(BatchSmootherEstimator(window_s=None, tune_process_noise=False).estimate(log), log.truth)
+    tuned_rmse = omega_rmse(BatchSmootherEstimator(window_s=None).estimate(log).motion, log.truth)
+    fixed_rmse = omega_rmse(BatchSmootherEstimator(window_s=None, tune_process_noise=False).estimate(log).motion, log.truth)
     assert tuned_rmse < fixed_rmse
 
 
 def test_tuned_smoother_on_the_turntable_5cm_cube(turntable_5cm_smoother):
     """1 Hz turntable about body z, 5 cm cube: the densities of x and y are driven down (ω is about z
     only), and ω is far better than with the fixed densities; the choice is reported per window."""
-    log, est, m = turntable_5cm_smoother  # 6 s at 500 Hz, seed 1 (tests/conftest.py)
+    log, report, m = turntable_5cm_smoother  # 6 s at 500 Hz, seed 1 (tests/conftest.py)
     tuned = omega_rmse(m, log.truth)
-    fixed = omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(log), log.truth)
-    assert len(est.last_tuning) == 1
-    t = est.last_tuning[0]
+    fixed = omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(log).motion, log.truth)
+    assert len(report.tunings) == 1
+    t = report.tunings[0]
     assert max(t.axis_factors[:2]) <= 1e-3, t  # z: the 1 Hz oscillator, see tests/test_oscillator.py
     assert t.axis_frequencies_hz == (0.0, 0.0, pytest.approx(1.0, rel=2e-3)), t
     assert tuned < 0.7 * fixed, (tuned, fixed)
@@ -92,12 +92,12 @@ def test_accel_noise_scale_is_recovered():
     log = simulate("random3d", CUBE, rate_hz=500.0, duration_s=3.0, seed=2)
     rng = np.random.default_rng(0)
     noisy = log.replace(accel_mps2=log.accel_mps2 + rng.normal(size=log.accel_mps2.shape) * 0.07 * np.sqrt(8.0))
-    est = BatchSmootherEstimator(tune_accel_noise=True, tune_axis_frequencies=False)
-    m = est.estimate(noisy)
-    assert est.last_tuning[0].accel_noise_scale == pytest.approx(3.0, rel=0.1)
+    run = BatchSmootherEstimator(tune_accel_noise=True, tune_axis_frequencies=False).estimate(noisy)
+    m = run.motion
+    assert run.report.tunings[0].accel_noise_scale == pytest.approx(3.0, rel=0.1)
     problem = make_problem(noisy, SmootherOptions(), 3.0)
     np.testing.assert_allclose(problem.accel_sigma, 0.21)
-    assert omega_rmse(m, noisy.truth) < omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(noisy), noisy.truth)
+    assert omega_rmse(m, noisy.truth) < omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(noisy).motion, noisy.truth)
 
 
 def test_normal_equations_of_a_subset_of_terms_add_up():
@@ -123,20 +123,20 @@ def test_motion_dependent_noise_and_ml_initialisation():
     wn = np.linalg.norm(log.truth.omega_b_radps, axis=1)
     extra = rng.normal(size=log.accel_mps2.shape) * (0.2 * wn)[:, None]
     noisy = log.replace(accel_mps2=log.accel_mps2 + extra)
-    constant = omega_rmse(BatchSmootherEstimator(auto_model=False).estimate(noisy), noisy.truth)
+    constant = omega_rmse(BatchSmootherEstimator(auto_model=False).estimate(noisy).motion, noisy.truth)
     est = BatchSmootherEstimator(accel_noise_slope_mps2_per_radps=0.2, auto_model=False)
-    weighted = est.estimate(noisy)
+    weighted = est.estimate(noisy).motion
     assert omega_rmse(weighted, noisy.truth) < 0.9 * constant, (omega_rmse(weighted, noisy.truth), constant)
     problem = make_problem(noisy, SmootherOptions(accel_noise_slope_mps2_per_radps=0.2), 1.0, noisy.truth.omega_b_radps)
     np.testing.assert_allclose(problem.accel_sigma_per_sample[:, 0], np.sqrt(0.07**2 + (0.2 * wn) ** 2))
     from_ml = BatchSmootherEstimator(accel_noise_slope_mps2_per_radps=0.2, initialisation="ml",
-                                     auto_model=False).estimate(noisy)
+                                     auto_model=False).estimate(noisy).motion
     assert omega_rmse(from_ml, noisy.truth) < 1.1 * omega_rmse(weighted, noisy.truth)
     # the default model check measures the slope from the data (0.2 given; the per-sample estimate's
     # noisy |ω| flattens the fit at this noise: measured 0.14) and beats the constant noise
-    auto = BatchSmootherEstimator()
-    chosen = omega_rmse(auto.estimate(noisy), noisy.truth)
-    check = auto.last_model_check
+    auto = BatchSmootherEstimator().estimate(noisy)
+    chosen = omega_rmse(auto.motion, noisy.truth)
+    check = auto.report.model_check
     assert not check.consistent and 0.1 < check.noise_slope_mps2_per_radps < 0.3, check
     assert chosen < 0.9 * constant, (chosen, constant)
     with pytest.raises(ValueError, match="initialisation"):
@@ -163,9 +163,9 @@ def test_default_smoother_gain_over_per_sample_ml(request, scenario, array_name,
     else:
         array = CUBE_5CM if array_name == "cube5" else _arbitrary_array()
         log = simulate(scenario, array, rate_hz=500.0, duration_s=6.0, seed=1)
-        m = BatchSmootherEstimator().estimate(log)
+        m = BatchSmootherEstimator().estimate(log).motion
     rmse = omega_rmse(m, log.truth)
-    ml = omega_rmse(make_estimator("ml").estimate(log), log.truth)
+    ml = omega_rmse(make_estimator("ml").estimate(log).motion, log.truth)
     assert ml / rmse > 20.0, (rmse, ml)
     assert rmse < max_rmse, rmse
     w = log.truth.omega_b_radps
@@ -203,8 +203,8 @@ def test_real_recording_settings_beat_the_per_sample_ml(mimu4444_dir):
                                       omega_dot_random_walk_radps2_per_sqrt_s=3000.0,
                                       specific_force_random_walk_mps2_per_sqrt_s=300.0,
                                       accel_noise_slope_mps2_per_radps=0.03)
-    s_rmse, s_opp = scores(smoother.estimate(part))
-    m_rmse, m_opp = scores(make_estimator("ml").estimate(part))
+    s_rmse, s_opp = scores(smoother.estimate(part).motion)
+    m_rmse, m_opp = scores(make_estimator("ml").estimate(part).motion)
     print(f"smoother {s_rmse:.3f} rad/s, {s_opp:.2%} opposite; ml {m_rmse:.3f} rad/s, {m_opp:.2%}")
     assert mask.sum() > 1500
     assert s_rmse < 0.85 * m_rmse, (s_rmse, m_rmse)

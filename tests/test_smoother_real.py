@@ -58,8 +58,8 @@ def test_robust_settings_on_unseen_recordings(busiest, exp, max_rmse):
     """Busiest 40 s (own calibration, shifted reference): the robust settings lower the ω RMSE and
     the opposite-sign share below those of the Gaussian real-data settings, to the measured level."""
     part, mask = busiest(exp)
-    plain = scores(BatchSmootherEstimator(**REAL_SETTINGS, auto_model=False).estimate(part), part, mask)
-    robust = scores(BatchSmootherEstimator(**REAL_SETTINGS, **ROBUST, auto_model=False).estimate(part), part, mask)
+    plain = scores(BatchSmootherEstimator(**REAL_SETTINGS, auto_model=False).estimate(part).motion, part, mask)
+    robust = scores(BatchSmootherEstimator(**REAL_SETTINGS, **ROBUST, auto_model=False).estimate(part).motion, part, mask)
     print(f"exp_{exp}: {mask.sum()} moving samples; Gaussian {plain[0]:.3f} rad/s, {plain[1]:.2%} opposite; "
           f"robust {robust[0]:.3f} rad/s, {robust[1]:.2%} opposite")
     assert mask.sum() > 1500
@@ -74,10 +74,10 @@ def test_default_model_matches_the_hand_chosen_settings(busiest, exp):
     rigid body (heavy tails, noise growing with |ω|), measures its noise from them and is within 10 %
     of the settings chosen by hand on exp_1, with under 1 % of the moving samples on the wrong sign."""
     part, mask = busiest(exp)
-    hand = scores(BatchSmootherEstimator(**REAL_SETTINGS, **ROBUST).estimate(part), part, mask)
-    est = BatchSmootherEstimator()
-    default = scores(est.estimate(part), part, mask)
-    check = est.last_model_check
+    hand = scores(BatchSmootherEstimator(**REAL_SETTINGS, **ROBUST).estimate(part).motion, part, mask)
+    run = BatchSmootherEstimator().estimate(part)
+    default = scores(run.motion, part, mask)
+    check = run.report.model_check
     print(f"exp_{exp}: default {default[0]:.3f} rad/s, {default[1]:.2%} opposite; hand-chosen {hand[0]:.3f}, "
           f"{hand[1]:.2%}; {check.describe()}")
     assert not check.consistent and check.tail_share > 0.05 and check.noise_slope_mps2_per_radps > 0.01
@@ -98,7 +98,7 @@ def test_default_model_on_whole_recordings(mimu4444_dir, exp):
     raw, _ = read_mimu4444(mimu4444_dir / f"exp_{exp}" / "data.bin")
     log = calib.apply_calibration(raw, calib.fit(raw))
     mask = (np.linalg.norm(log.reference.omega_b_radps, axis=1) > 2.0) & ~log.invalid_reference
-    rmse, wrong = scores(BatchSmootherEstimator().estimate(log), log, mask)
+    rmse, wrong = scores(BatchSmootherEstimator().estimate(log).motion, log, mask)
     print(f"exp_{exp}: default {rmse:.3f} rad/s, {wrong:.2%} wrong sign")
     assert rmse < 5.0 and wrong < 0.02, (rmse, wrong)
 
@@ -108,7 +108,7 @@ def test_branch_restarts_on_unseen_recordings(mimu4444_dir, exp):
     """Busiest 40 s: the default smoother's local restarts of short runs on the other branches of ω
     (gfimu.smoother.restarts) do not raise the ω RMSE nor the wrong-sign share."""
     part, mask = busiest_part(mimu4444_dir, exp)
-    without = scores(BatchSmootherEstimator(branch_restarts=False).estimate(part), part, mask)
-    with_ = scores(BatchSmootherEstimator().estimate(part), part, mask)
+    without = scores(BatchSmootherEstimator(branch_restarts=False).estimate(part).motion, part, mask)
+    with_ = scores(BatchSmootherEstimator().estimate(part).motion, part, mask)
     print(f"exp_{exp}: restarts {with_[0]:.3f} rad/s, {with_[1]:.2%} opposite; without {without[0]:.3f}, {without[1]:.2%}")
     assert with_[0] <= without[0] + 1e-9 and with_[1] <= without[1] + 1e-9, (with_, without)

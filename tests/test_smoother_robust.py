@@ -60,16 +60,17 @@ def test_robust_accelerometer_loss_rejects_gross_outliers():
     log = log.replace(accel_mps2=y)
     common = dict(tune_process_noise=False, omega_dot_random_walk_radps2_per_sqrt_s=300.0,
                   specific_force_random_walk_mps2_per_sqrt_s=30.0, window_s=None)
-    gauss = omega_rmse(BatchSmootherEstimator(**common, auto_model=False).estimate(log), log.truth)
+    gauss = omega_rmse(BatchSmootherEstimator(**common, auto_model=False).estimate(log).motion, log.truth)
     robust = omega_rmse(BatchSmootherEstimator(**common, auto_model=False, accel_robust_threshold=2.0,
-                                               reweight_iterations=4).estimate(log), log.truth)
+                                               reweight_iterations=4).estimate(log).motion, log.truth)
     print(f"ω RMSE Gaussian {gauss:.4f}, Huber {robust:.4f} rad/s")
     assert robust < 0.8 * gauss, (robust, gauss)
     assert not SmootherOptions().robust and not BatchSmootherEstimator().robust
     # the default model check sees the spikes (heavy tails) and switches the robust losses on itself
-    est = BatchSmootherEstimator(**common)
-    chosen = omega_rmse(est.estimate(log), log.truth)
-    assert not est.last_model_check.consistent and est.last_model_check.tail_share > 0.006
+    est = BatchSmootherEstimator(**common).estimate(log)
+    chosen = omega_rmse(est.motion, log.truth)
+    check = est.report.model_check
+    assert not check.consistent and check.tail_share > 0.006
     assert chosen < 0.8 * gauss, (chosen, gauss)
 
 

@@ -39,14 +39,28 @@ def test_numpy_and_gtsam_solvers_agree_on_a_simulated_log():
     assert np.sqrt(np.mean(err**2)) < 3.0
 
 
-def test_estimate_keeps_the_newest_result_behind_last_tuning():
+def test_estimate_returns_the_run_as_a_value():
+    """estimate() gives the motion of result() with everything result() reports, and leaves the estimator
+    as it was (equal to a fresh one): nothing of a run is kept on it."""
+    import dataclasses
+
     log = simulate("turntable", duration_s=0.3, seed=1)
     est = make_estimator("smoother")
     res = est.result(log)
-    assert est.last_tuning == []  # result() leaves the estimator untouched
-    motion = est.estimate(log)
-    np.testing.assert_array_equal(motion.omega_b_radps, res.motion.omega_b_radps)
-    assert est.last_tuning == list(res.tunings) and len(res.tunings) == 1
+    run = est.estimate(log)
+    np.testing.assert_array_equal(run.motion.omega_b_radps, res.motion.omega_b_radps)
+    report = run.report
+    assert report.method == "smoother" and report.options["solver"] == "numpy" and report.options["auto_model"] is True
+    assert report.tunings == res.tunings and len(report.tunings) == 1
+    assert (report.iterations, report.cost, report.windows) == (res.iterations, res.cost, 1)
+    assert report.iterations > 0 and np.isfinite(report.cost)
+    assert report.model_check is not None and report.model_check == res.model_check
+    assert list(report.timings) == ["model check", "solve windows"] and all(t > 0 for t in report.timings.values())
+    assert est == make_estimator("smoother") and vars(est) == vars(make_estimator("smoother"))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        run.report = report
+    with pytest.raises(TypeError):  # the options recorded are read-only
+        report.options["solver"] = "gtsam"
 
 
 def test_a_log_shorter_than_the_motion_period_runs():

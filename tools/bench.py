@@ -58,17 +58,17 @@ def time_method(method: str, log, repeats: int) -> dict:
     reason = est.applicable(log.array)
     if reason:
         return {"method": method, "samples": len(log), "status": f"not applicable: {reason}"}
-    est.estimate(log.select(slice(0, min(len(log), 200))))  # warm-up: imports and caches, not timed
+    est.estimate(log.select(slice(0, min(len(log), 200)))).motion  # warm-up: imports and caches, not timed
     times = []
     n_runs = max(repeats, 1)
     while len(times) < n_runs:
         t0 = time.perf_counter()
-        est.estimate(log)
+        est.estimate(log).motion
         times.append(time.perf_counter() - t0)
         if len(times) == 1:  # fast methods: repeat until about 0.3 s in all, so the median is stable
             n_runs = max(n_runs, min(MAX_REPEATS, math.ceil(0.3 / max(times[0], 1e-6))))
     tracemalloc.start()
-    est.estimate(log)
+    est.estimate(log).motion
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     median = statistics.median(times)

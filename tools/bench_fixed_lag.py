@@ -108,7 +108,7 @@ def latency_run(args) -> dict:
     keep(sm.flush())
     n_min = min(len(log), int(round(60.0 * args.rate_hz)))
     rmse = float(np.sqrt(np.mean(np.sum((w[:n_min] - log.truth.omega_b_radps[:n_min]) ** 2, axis=1))))
-    batch = BatchSmootherEstimator().estimate(log.select(slice(0, n_min)))
+    batch = BatchSmootherEstimator().estimate(log.select(slice(0, n_min))).motion
     rmse_batch = float(np.sqrt(np.mean(np.sum((batch.omega_b_radps - log.truth.omega_b_radps[:n_min]) ** 2, axis=1))))
     n_tune = int(round(est.tune_window_s * args.rate_hz))
     tuning_push_ms = float(lat_ns[n_tune - 1] * 1e-6) if sm.tuning is not None and n_tune <= len(lat_ns) else None

@@ -50,11 +50,11 @@ def in_process(log, est, repeats: int) -> dict:
     walls, cpus = [], []
     for _ in range(max(repeats, 1)):
         c0, t0 = time.process_time(), time.perf_counter()
-        est.estimate(log)
+        est.estimate(log).motion
         walls.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
     tracemalloc.start()
-    est.estimate(log)
+    est.estimate(log).motion
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return {"median_time_s": statistics.median(walls), "median_cpu_s": statistics.median(cpus),

@@ -55,7 +55,7 @@ def causal_rmse(log, tuning, lag_s: float, indices) -> float:
     lag_n = int(round(lag_s * log.rate_hz))
     err = []
     for k in indices:
-        est = batch.estimate(log.select(slice(0, min(k + lag_n + 1, len(log)))))
+        est = batch.estimate(log.select(slice(0, min(k + lag_n + 1, len(log))))).motion
         err.append(est.omega_b_radps[k] - log.truth.omega_b_radps[k])
     return float(np.sqrt(np.mean(np.sum(np.square(err), axis=1))))
 
@@ -65,11 +65,12 @@ def run(scenario: str, args) -> dict:
                    seed=args.seed)
     truth = log.truth.omega_b_radps
     t0 = time.perf_counter()
-    batch = BatchSmootherEstimator().estimate(log)
+    batch = BatchSmootherEstimator().estimate(log).motion
     t_batch = time.perf_counter() - t0
     fixed_est = FixedLagEstimator(lag_s=args.lag_s, tune_window_s=args.tune_window_s)
     t0 = time.perf_counter()
-    fixed = fixed_est.estimate(log)
+    fixed_run = fixed_est.estimate(log)
+    fixed, fixed_tunings = fixed_run.motion, fixed_run.report.tunings
     t_fixed = time.perf_counter() - t0
     n_tune = int(round(args.tune_window_s * args.rate_hz))
     streamed = slice(min(n_tune, len(log) - 1), len(log))
@@ -83,10 +84,10 @@ def run(scenario: str, args) -> dict:
         "flipped_share": evaluate(fixed, log.truth)["omega_b_radps"].flipped_share,
         "time_batch_s": t_batch, "time_fixed_s": t_fixed,
     }
-    if args.causal_points > 0 and fixed_est.last_tuning and streamed.stop - streamed.start > 2:
+    if args.causal_points > 0 and fixed_tunings and streamed.stop - streamed.start > 2:
         idx = np.linspace(streamed.start, streamed.stop - 1, args.causal_points).astype(int)
         row["causal_points"] = rmse(batch.omega_b_radps[idx], truth[idx]), rmse(fixed.omega_b_radps[idx], truth[idx]), \
-            causal_rmse(log, fixed_est.last_tuning[0], args.lag_s, idx), causal_rmse(log, None, args.lag_s, idx)
+            causal_rmse(log, fixed_tunings[0], args.lag_s, idx), causal_rmse(log, None, args.lag_s, idx)
     return row
 
 

@@ -87,7 +87,7 @@ def main(argv=None) -> int:
                     try:
                         with warnings.catch_warnings():
                             warnings.simplefilter("ignore")
-                            w = est.estimate(log).omega_b_radps
+                            w = est.estimate(log).motion.omega_b_radps
                         err = w - log.truth.omega_b_radps
                         rmses.append(float(np.sqrt(np.nanmean(np.sum(err**2, axis=1)))))
                     except Exception as exc:  # noqa: BLE001 - the table records a failure

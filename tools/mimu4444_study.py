@@ -106,7 +106,7 @@ def run_method(name: str, log, options: dict, progress: bool, start_at_reference
         if start_at_reference and name == "smoother":
             motion = est.result(log, progress=progress, initial=started_at_reference).motion
         else:
-            motion = est.estimate(log, progress=progress)
+            motion = est.estimate(log, progress=progress).motion
     return motion, None, time.perf_counter() - t0
 
 

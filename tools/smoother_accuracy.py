@@ -106,7 +106,7 @@ def main(argv=None) -> int:
             if est.applicable(log.array):
                 continue
             try:
-                per[meth] = omega_errors(est.estimate(log), log.truth)
+                per[meth] = omega_errors(est.estimate(log).motion, log.truth)
             except Exception as exc:  # a per-sample method failing is reported, not fatal
                 per[meth] = {"error": str(exc)}
         ok = {k: v for k, v in per.items() if "rmse_radps" in v}
@@ -115,10 +115,11 @@ def main(argv=None) -> int:
             opts = dict(opts, tune_process_noise=False)
         smoother = BatchSmootherEstimator(**opts)
         t0 = time.perf_counter()
-        m = smoother.estimate(log)
+        run = smoother.estimate(log)
         elapsed = time.perf_counter() - t0
+        m, tunings = run.motion, run.report.tunings
         err = omega_errors(m, log.truth)
-        tuning = smoother.last_tuning[0] if smoother.last_tuning else None
+        tuning = tunings[0] if tunings else None
         bound_options = tuning.apply(smoother.options()) if tuning else smoother.options()
         eff = efficiency(m, log.truth, smoother_bound(log, bound_options)).ratio["omega_b_radps"]
         q = (bound_options.omega_dot_random_walk_radps2_per_sqrt_s * np.asarray(bound_options.process_axis_factors)
@@ -128,7 +129,7 @@ def main(argv=None) -> int:
         init = omega_errors(type(m)(log.timestamps_ns, omega_b_radps=x0[:, :3]), log.truth)
         rows.append({"case": name, "per_sample": per, "best_per_sample": best, "smoother": err, "gain": gain,
                      "efficiency": eff, "initialisation": init, "time_s": elapsed, "samples": len(log),
-                     "tuning": [t.as_dict() for t in smoother.last_tuning]})
+                     "tuning": [t.as_dict() for t in tunings]})
         print(f"| {name} | {best} {ok[best]['rmse_radps']:.4g} | {err['rmse_radps']:.4g} | {gain:.1f}x | "
               f"{err['sign_errors']:.2%} (best per-sample {ok[best]['sign_errors']:.1%}) | "
               f"{ok[best]['relative_rms']:.2e} → {err['relative_rms']:.2e} | {eff:.2f} | {init['rmse_radps']:.3g}, {init['sign_errors']:.2%} | "

@@ -201,7 +201,7 @@ def step_size_study(out: Path, quick: bool, seed: int) -> tuple[list[str], str]:
         log = simulate("random3d", array, rate_hz=1000.0 / h, duration_s=duration, noise=SensorErrors.none(), seed=seed)
         # paper 003 starts from a known initial state (eq. 8): give the integration the true ω(0)
         w0 = tuple(float(v) for v in log.truth.omega_b_radps[0])
-        motion = make_estimator("pure-integration", initial_omega=w0).estimate(log)
+        motion = make_estimator("pure-integration", initial_omega=w0).estimate(log).motion
         for label, source in zip(tilt, ("gyro", "estimate")):
             ev = evaluate(add_orientation(log, motion, source=source), log.truth)
             tilt[label].append(ev["tilt_rad"].rmse_norm)

@@ -4,12 +4,16 @@ Each sub-command lives in its own module with ``register(subparsers)``,
 which adds its parser and sets ``func`` to a function of the parsed args
 returning an exit code.
 
-Errors. A user mistake or a failure of the machine (a missing or unreadable
-file, a full disk, a log the method cannot solve) ends in one line
-``gfimu COMMAND: error: ...`` naming the file, option or step, and a non-zero
-exit status: 2 for a mistake in the command or its inputs, 1 for a failure
-of the system or of a computation, 130/143 when interrupted by SIGINT/SIGTERM
-(temporary files are removed first). ``--debug`` shows the traceback instead.
+Errors (:mod:`gfimu.errors`). A user mistake, data that cannot support the
+request or a failure of the machine (a malformed or missing file, a log the
+method cannot solve, a full disk) ends in one line ``gfimu COMMAND: error: ...``
+naming the file, key, row or option, and a non-zero exit status: 2 for a
+:class:`~gfimu.errors.GfimuError` of the input or data kind, 1 for a resource
+(an ``OSError``: permission, no space, interrupted I/O), 130/143 when
+interrupted by SIGINT/SIGTERM (temporary files are removed first). Any other
+exception is a bug, not a mistake of the user: ``gfimu COMMAND: internal error:
+TYPE: ... (run with --debug for the traceback)``, exit 1. ``--debug`` shows the
+traceback instead of the one line.
 Outputs follow :mod:`gfimu.io.outputs`: never over an input, never over
 anything but a regular file.
 
@@ -30,6 +34,8 @@ import os
 import sys
 import warnings
 
+from ..errors import GfimuError, InputError
+
 # One BLAS thread per process, as Dask workers run: the smoother's many small products are faster so
 # (about 1.5x on 2 cores), and the command gives the same numbers as `gfimu batch` on a cluster.
 # Effective when numpy is first imported after this point; the user's own setting wins.
@@ -42,7 +48,7 @@ EXIT_USAGE = 2
 EXIT_FAILURE = 1
 
 
-class CLIError(Exception):
+class CLIError(InputError):
     """A user error: printed as one line, exit status 2."""
 
 
@@ -212,28 +218,41 @@ def _first_line(exc: BaseException) -> str:
     return " ".join(lines[:2]) if lines else type(exc).__name__
 
 
-def error_message(exc: BaseException) -> tuple[str, int]:
-    """(message, exit status) for an exception that ends a command."""
-    from ..io.errors import LogFormatError, OutputError
+UNDER_DETERMINED = ("the estimation problem is under-determined ({}); likely causes: co-located or too few "
+                    "accelerometers, a stretch of constant or missing readings, or options that leave a state free")
 
-    if isinstance(exc, (CLIError, LogFormatError, OutputError)):
-        return str(exc), EXIT_USAGE
+
+def _under_determined(exc: BaseException) -> bool:
+    text = str(exc)
+    return "Indeterminant" in text or "Indeterminate" in text
+
+
+def error_message(exc: BaseException) -> tuple[str, int]:
+    """(message, exit status) for an exception that ends a command.
+
+    A :class:`gfimu.errors.GfimuError` is one of gfimu's own errors: its message, exit status 2
+    (input, data) or 1 (resource). An ``OSError`` is the operating system refusing (a resource):
+    the path and the reason, exit 1; so is running out of memory. GTSAM's "indeterminant linear
+    system" is the data not determining the states (exit 2). Anything else is a bug: an internal
+    error naming its type, exit 1."""
+    if isinstance(exc, GfimuError):
+        if isinstance(exc, OSError) and exc.errno is not None:
+            return os_error_message(exc), exc.exit_status
+        if _under_determined(exc):
+            return UNDER_DETERMINED.format(_first_line(exc)), exc.exit_status
+        return str(exc) or type(exc).__name__, exc.exit_status
     if isinstance(exc, OSError):
         return os_error_message(exc), EXIT_FAILURE
-    if isinstance(exc, KeyError):
-        return str(exc.args[0]) if exc.args else "missing key", EXIT_USAGE
-    if isinstance(exc, (ValueError, TypeError)):
-        return str(exc) or type(exc).__name__, EXIT_USAGE
     if isinstance(exc, MemoryError):
         return "out of memory (try a shorter log, or fewer methods)", EXIT_FAILURE
-    text = str(exc)
-    if isinstance(exc, RuntimeError) and ("Indeterminant" in text or "Indeterminate" in text):
-        return ("the estimation problem is under-determined (GTSAM: " + _first_line(exc) + "); likely causes: "
-                "co-located or too few accelerometers, a stretch of constant or missing readings, or options "
-                "that leave a state free"), EXIT_FAILURE
-    if isinstance(exc, RuntimeError):
-        return _first_line(exc), EXIT_FAILURE
-    return f"{type(exc).__name__}: {_first_line(exc)} (run with --debug for the traceback)", EXIT_FAILURE
+    if isinstance(exc, RuntimeError) and _under_determined(exc):
+        return UNDER_DETERMINED.format("GTSAM: " + _first_line(exc)), EXIT_USAGE
+    return internal_error_message(exc), EXIT_FAILURE
+
+
+def internal_error_message(exc: BaseException) -> str:
+    """The line for an exception gfimu did not raise on purpose: a bug, not a mistake of the user."""
+    return f"internal error: {type(exc).__name__}: {_first_line(exc)} (run with --debug for the traceback)"
 
 
 def _warning_printer(command: str):
@@ -278,7 +297,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             raise
         message, status = error_message(exc)
-        print(f"gfimu {args.command}: error: {message}", file=sys.stderr)
+        kind = "" if message.startswith("internal error: ") else "error: "
+        print(f"gfimu {args.command}: {kind}{message}", file=sys.stderr)
         return status
     finally:
         restore_signal_handlers(previous)

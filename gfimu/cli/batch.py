@@ -48,6 +48,9 @@ def run(args) -> int:
 
     args.lag_s, args.sigma = None, False
     options = method_options(args)
+    from ..methods import make_estimator
+
+    make_estimator(args.method, **options)  # the values checked here, before any log; each worker makes its own
     out_dir = Path(args.out)
     if out_dir.exists() and not out_dir.is_dir():
         raise CLIError(f"--out {out_dir}: exists and is not a folder")

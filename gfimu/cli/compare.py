@@ -83,9 +83,9 @@ def run(args) -> int:
 
     log = screened(log)
     if args.calibration:
-        from ..calibration import apply_calibration, read_calibration
+        from ..calibration import apply_calibration_file
 
-        log = apply_calibration(log, read_calibration(args.calibration))
+        log = apply_calibration_file(log, args.calibration)
     result = compare(log, methods=methods, options=options, bounds=not args.no_bounds,
                      estimates_dir=args.estimates_dir, progress=show_progress(args),
                      gyro_noise_std_radps=args.gyro_noise)

@@ -79,10 +79,10 @@ def run(args) -> int:
                            "rotation; give them in the map (position_m, rotation_body_sensor), with --array, or "
                            "with --extrinsics")
         if args.calibration:
-            from ..calibration import apply_calibration, read_calibration
+            from ..calibration import apply_calibration_file
 
             bar.step("apply the calibration")
-            log = apply_calibration(log, read_calibration(args.calibration))
+            log = apply_calibration_file(log, args.calibration)
         bar.step("write the log")
         # the rate measured: 1e9 / the median step of the log's timestamps [Hz] (readers/_grid.py)
         gio.write_log(log, args.out, rate_hz=nominal_rate_hz(log.timestamps_ns))

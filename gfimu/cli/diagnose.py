@@ -54,7 +54,12 @@ def run(args) -> int:
     with warnings.catch_warnings():  # the report states the gaps and the implausible values itself
         warnings.simplefilter("ignore", gio.LogGapWarning)
         log = gio.read_log(args.log, check=False)
-    result = diagnose(log, progress=show_progress(args), calibration=calibration)
+    from ..calibration import CalibrationFileError
+
+    try:
+        result = diagnose(log, progress=show_progress(args), calibration=calibration)
+    except CalibrationFileError as exc:  # the calibration does not fit this log's array: name its file
+        raise CalibrationFileError(f"{args.calibration}: {exc}") from None
     if figure is not None:
         from ..plots import save_figure
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from . import CLIError, add_no_progress, info, show_progress
 from .options import check_method_options, parse_options, positive
@@ -57,10 +58,12 @@ def run(args) -> int:
 
     from .. import io as gio
     from ..io.outputs import check_output, same_file, write_output
-    from ..pipeline import MethodNotApplicable, estimate_log
+    from ..methods import make_estimator
+    from ..pipeline import estimate_log
 
     out = check_output(args.out, [args.log, args.calibration], "--out", stdout=True)
     options = method_options(args)
+    estimator = make_estimator(args.method, **options)  # option values checked before any log is read
     tum = None
     if args.tum is not None:
         tum = check_output(args.tum, [args.log, args.calibration], "--tum")
@@ -69,11 +72,8 @@ def run(args) -> int:
         if args.orientation == "none" and not (options.get("estimate_attitude") or options.get("use_inclinometer")):
             raise CLIError("--tum writes the estimated orientation, but none is estimated: add --orientation "
                            "inclinometer, gyro or estimate")
-    try:
-        run_ = estimate_log(args.log, args.method, options, args.calibration, progress=show_progress(args),
-                            orientation=args.orientation, truth=False)
-    except MethodNotApplicable as exc:
-        raise CLIError(str(exc)) from None
+    run_ = estimate_log(args.log, estimator, calibration=args.calibration, progress=show_progress(args),
+                        orientation=args.orientation, truth=False)  # MethodNotApplicable: an InputError, exit 2
     tum_chunks = None
     if tum is not None:
         if run_.motion.quaternion_wb is None:
@@ -84,9 +84,13 @@ def run(args) -> int:
     write_output(out, gio.motion_csv_chunks(run_.motion))
     if tum_chunks is not None:
         write_output(tum, tum_chunks)
-    if run_.model_check is not None:  # what the smoother learnt about the readings and the model it chose
-        info(args, f"{args.method}: {run_.model_check.describe()}")
-    info(args, f"{args.method}: {run_.samples} samples in {run_.seconds:.2f} s -> "
+    report = run_.report
+    for note in report.warnings:  # what went less well than planned, e.g. a solve window that did not converge
+        warnings.warn(f"{args.method}: {note}", stacklevel=1)
+    for line in report.describe():  # what the method learnt about the readings and the model it chose
+        info(args, f"{args.method}: {line}")
+    steps = ", ".join(f"{name} {seconds:.2f}" for name, seconds in report.timings.items())
+    info(args, f"{args.method}: {run_.samples} samples in {report.seconds:.2f} s ({steps}) -> "
                f"{out if out is not None else 'standard output'}", file=sys.stderr if out is None else sys.stdout)
     if tum is not None:
         info(args, f"orientation: {int(np.sum(np.all(np.isfinite(run_.motion.quaternion_wb), axis=1)))} poses "
@@ -95,7 +99,8 @@ def run(args) -> int:
 
 
 def method_options(args) -> dict:
-    """The method's options from ``-O``, ``--preset``, ``--lag-s`` and ``--sigma``, checked."""
+    """The method's options from ``-O``, ``--preset``, ``--lag-s`` and ``--sigma``, their names and types
+    checked (their values when the estimator is made, :func:`gfimu.methods.make_estimator`)."""
     options = parse_options(args.option)
     if getattr(args, "preset", None) is not None:  # checked before the log is read
         if args.method != "smoother":
@@ -115,7 +120,4 @@ def method_options(args) -> dict:
     if getattr(args, "sigma", False):
         options["compute_sigma"] = True
     check_method_options(args.method, options)
-    from ..methods import make_estimator
-
-    make_estimator(args.method, **options)  # option values checked before any log is read
     return options

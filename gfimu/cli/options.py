@@ -14,8 +14,10 @@ import math
 import re
 from collections.abc import Callable
 
+from ..errors import InputError
 
-class OptionError(ValueError):
+
+class OptionError(InputError):
     """A method option (``-O KEY=VALUE``) is malformed or has a wrong value."""
 
 

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import DataError, InputError
+
 EUROC_FILE = "eqvio_processed_30s.csv"
 KITTI_FILE = "KittiEquivBiasedImu.txt"
 
@@ -83,7 +85,7 @@ def load_euroc(path: str | os.PathLike | None = None) -> RecordedImu:
         header = next(reader, None)
         need = ["row_type", "t_rel", "gx", "gy", "gz", "ax", "ay", "az"]
         if header is None or any(n not in header for n in need):
-            raise ValueError(f"{p}: header must contain {need}, got {header}")
+            raise InputError(f"{p}: header must contain {need}, got {header}")
         col = [header.index(n) for n in need[1:]]
         rows = []
         for line_no, row in enumerate(reader, start=2):
@@ -92,13 +94,13 @@ def load_euroc(path: str | os.PathLike | None = None) -> RecordedImu:
             try:
                 rows.append([float(row[c]) for c in col])
             except (ValueError, IndexError) as exc:
-                raise ValueError(f"{p}, line {line_no}: malformed imu row ({exc})") from None
+                raise InputError(f"{p}, line {line_no}: malformed imu row ({exc})") from None
     if len(rows) < 2:
-        raise ValueError(f"{p}: fewer than two imu rows")
+        raise DataError(f"{p}: fewer than two imu rows")
     data = np.array(rows)
     t = data[:, 0]
     if np.any(np.diff(t) <= 0):
-        raise ValueError(f"{p}: imu times not strictly increasing at row {int(np.argmax(np.diff(t) <= 0)) + 1}")
+        raise InputError(f"{p}: imu times not strictly increasing at row {int(np.argmax(np.diff(t) <= 0)) + 1}")
     return RecordedImu("euroc-V1_01_easy", t - t[0], data[:, 1:4], data[:, 4:7], str(p))
 
 
@@ -109,17 +111,17 @@ def load_kitti(path: str | os.PathLike | None = None) -> RecordedImu:
         header = fh.readline().split()
     need = ["Time", "accelX", "accelY", "accelZ", "omegaX", "omegaY", "omegaZ"]
     if any(n not in header for n in need):
-        raise ValueError(f"{p}: header must contain {need}, got {header}")
+        raise InputError(f"{p}: header must contain {need}, got {header}")
     try:
         data = np.loadtxt(p, skiprows=1, ndmin=2)
     except ValueError as exc:
-        raise ValueError(f"{p}: malformed row ({exc})") from None
+        raise InputError(f"{p}: malformed row ({exc})") from None
     if data.shape[1] != len(header):
-        raise ValueError(f"{p}: {data.shape[1]} columns per row, header has {len(header)}")
+        raise InputError(f"{p}: {data.shape[1]} columns per row, header has {len(header)}")
     idx = {n: header.index(n) for n in need}
     t = data[:, idx["Time"]]
     if np.any(np.diff(t) <= 0):
-        raise ValueError(f"{p}: times not strictly increasing at row {int(np.argmax(np.diff(t) <= 0)) + 2}")
+        raise InputError(f"{p}: times not strictly increasing at row {int(np.argmax(np.diff(t) <= 0)) + 2}")
     f = data[:, [idx["accelX"], idx["accelY"], idx["accelZ"]]]
     w = data[:, [idx["omegaX"], idx["omegaY"], idx["omegaZ"]]]
     return RecordedImu("kitti", t - t[0], w, f, str(p))

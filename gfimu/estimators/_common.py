@@ -2,36 +2,58 @@
 
 from __future__ import annotations
 
+import time
 from typing import Sequence
 
 import numpy as np
 
+from ..errors import DataError, InputError
+from ..estimate import Estimate, Report
+from ..motion import Motion
 from ..rigid_body import omega_from_quadratic_terms
 
 # (i, j) -> index of ωiωj in q = [ωx²+ωy², ωx²+ωz², ωy²+ωz², ωxωy, ωxωz, ωyωz]
 _CROSS_INDEX = {(0, 1): 3, (0, 2): 4, (1, 2): 5}
 
 
+class PerSampleEstimator:
+    """What the per-sample estimators share: :meth:`estimate` runs the subclass's :meth:`estimate_motion`
+    and returns it with its :class:`~gfimu.estimate.Report` (the method's name, ``method``, its options
+    and the time taken). A subclass is a dataclass of options that defines ``method`` (its name in
+    :data:`gfimu.methods.METHODS`), ``applicable(array)`` and ``estimate_motion(log, progress)``."""
+
+    method = ""
+
+    def estimate(self, log, progress: bool = False) -> Estimate:
+        """The method on ``log``: :class:`~gfimu.estimate.Estimate` ``(motion, report)``."""
+        t0 = time.perf_counter()
+        motion = self.estimate_motion(log, progress=progress)
+        return Estimate(motion, Report.of(self.method, self, timings={"estimate": time.perf_counter() - t0}))
+
+    def estimate_motion(self, log, progress: bool = False) -> Motion:
+        raise NotImplementedError
+
+
 def check_finite(values: np.ndarray, what: str, columns: Sequence[str] | None = None) -> None:
-    """Raise ValueError naming the first sample (and column) that is not finite."""
+    """Raise :class:`~gfimu.errors.DataError` naming the first sample (and column) that is not finite."""
     bad = ~np.isfinite(values)
     if bad.any():
         row, col = np.argwhere(bad)[0] if values.ndim == 2 else (int(np.argmax(bad)), None)
         where = f" column {columns[col]!r}" if columns is not None and col is not None else ""
-        raise ValueError(f"{what}: non-finite value at sample {int(row)}{where}")
+        raise DataError(f"{what}: non-finite value at sample {int(row)}{where}")
 
 
 def checked_readings(estimator, log, method: str) -> np.ndarray:
-    """``log.accel_mps2`` after the checks an estimator makes first: ``estimator.applicable(log.array)`` (ValueError
-    with its reason) and finite readings (ValueError naming the first non-finite sample and column)."""
+    """``log.accel_mps2`` after the checks an estimator makes first: ``estimator.applicable(log.array)`` (InputError
+    with its reason) and finite readings (DataError naming the first non-finite sample and column)."""
     reason = estimator.applicable(log.array)
     if reason:
-        raise ValueError(f"{log.source}: method {method!r} cannot run: {reason}")
+        raise InputError(f"{log.source}: method {method!r} cannot run: {reason}")
     y = log.accel_mps2
     if not np.all(np.isfinite(y)):
         bad = np.argwhere(~np.isfinite(y))[0]
-        raise ValueError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column "
-                         f"{log.array.accel_columns[bad[1]]}")
+        raise DataError(f"{log.source}: non-finite accelerometer reading at sample {bad[0]}, column "
+                        f"{log.array.accel_columns[bad[1]]}")
     return y
 
 
@@ -112,10 +134,10 @@ def resolve_initial_omega(initial_omega, q_first: np.ndarray, first_segment: boo
             return np.zeros(3)
         if initial_omega == "quadratic":
             return omega_from_quadratic_terms_signed(q_first)[0]
-        raise ValueError(f"initial_omega must be 'zero', 'quadratic' or three numbers (rad/s), got {initial_omega!r}")
+        raise InputError(f"initial_omega must be 'zero', 'quadratic' or three numbers (rad/s), got {initial_omega!r}")
     w0 = np.asarray(initial_omega, dtype=float).reshape(-1)
     if w0.shape != (3,) or not np.all(np.isfinite(w0)):
-        raise ValueError(f"initial_omega must be 'zero', 'quadratic' or three finite numbers (rad/s), got {initial_omega!r}")
+        raise InputError(f"initial_omega must be 'zero', 'quadratic' or three finite numbers (rad/s), got {initial_omega!r}")
     return w0 if first_segment else omega_from_quadratic_terms_signed(q_first)[0]
 
 

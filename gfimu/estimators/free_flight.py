@@ -43,11 +43,12 @@ from scipy.optimize import least_squares
 
 from .. import rigid_body
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rotations import skew
-from ._common import checked_readings
+from ._common import PerSampleEstimator, checked_readings
 
 OMEGA_SIGNS = ("positive", "negative", "auto")
 
@@ -148,7 +149,7 @@ class _FreeFlightModel:
 
 
 @dataclass
-class FreeFlightEstimator:
+class FreeFlightEstimator(PerSampleEstimator):
     """ω of a torque-free body in free fall from its accelerometer(s) (paper 004, eqs. 11-14).
 
     Options (defaults):
@@ -166,6 +167,8 @@ class FreeFlightEstimator:
     force at the centre of mass is zero by assumption and is not reported.
     """
 
+    method = "free-flight"
+
     omega_sign: str = "positive"
     init_samples: int = 50
     starts: int = 24
@@ -173,11 +176,11 @@ class FreeFlightEstimator:
 
     def __post_init__(self) -> None:
         if self.omega_sign not in OMEGA_SIGNS:
-            raise ValueError(f"omega_sign must be one of {OMEGA_SIGNS}, got {self.omega_sign!r}")
+            raise InputError(f"omega_sign must be one of {OMEGA_SIGNS}, got {self.omega_sign!r}")
         if int(self.init_samples) < 1:
-            raise ValueError(f"init_samples must be >= 1, got {self.init_samples}")
+            raise InputError(f"init_samples must be >= 1, got {self.init_samples}")
         if int(self.starts) < 1:
-            raise ValueError(f"starts must be >= 1, got {self.starts}")
+            raise InputError(f"starts must be >= 1, got {self.starts}")
 
     def applicable(self, array: SensorArray) -> str | None:
         if array.body is None:
@@ -192,21 +195,21 @@ class FreeFlightEstimator:
         return None
 
     # ------------------------------------------------------------------
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         array = log.array
         y = checked_readings(self, log, "free-flight")
         n = len(log)
         if n < 2:
-            raise ValueError(f"{log.source}: free-flight needs at least 2 samples, got {n}")
+            raise DataError(f"{log.source}: free-flight needs at least 2 samples, got {n}")
         model = _FreeFlightModel(array)
         t = log.times_s
         k = min(int(self.init_samples), n)
         if not np.any(y[:k]):
-            raise ValueError(f"{log.source}: the first {k} readings are all zero; free-flight needs a spinning body")
+            raise DataError(f"{log.source}: the first {k} readings are all zero; free-flight needs a spinning body")
         w_init, two_t, h2 = self._initial(model, y[:k], t[:k])
         if not (np.isfinite(two_t) and np.isfinite(h2) and two_t > 0 and h2 > 0):
-            raise ValueError(f"{log.source}: the first {k} readings show no rotation (2T = {two_t:.3g}); "
-                             "free-flight needs a spinning body")
+            raise DataError(f"{log.source}: the first {k} readings show no rotation (2T = {two_t:.3g}); "
+                            "free-flight needs a spinning body")
 
         accel_scale = float(np.mean(np.linalg.norm(y, axis=1)))  # eq. 14: mean |a_s| over the N samples
         omega = np.empty((n, 3))
@@ -320,7 +323,7 @@ class FreeFlightEstimator:
     def _sigma(array, model, omega):
         sig = array.noise_std_per_axis_mps2
         if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
-            raise ValueError(f"array {array.name!r}: compute_sigma needs noise_std_mps2 for every accelerometer axis")
+            raise InputError(f"array {array.name!r}: compute_sigma needs noise_std_mps2 for every accelerometer axis")
         s_w = np.empty_like(omega)
         s_dw = np.empty_like(omega)
         for i, w in enumerate(omega):

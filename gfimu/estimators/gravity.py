@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..rotations import matrix_from_quaternion, quaternion_multiply
@@ -44,15 +45,15 @@ def up_b_from_tilt(tilt_rad: np.ndarray) -> np.ndarray:
     """
     t = np.asarray(tilt_rad, dtype=float)
     if t.ndim != 2 or t.shape[1] != 2:
-        raise ValueError(f"tilt_rad must have shape (N, 2), got {t.shape}")
+        raise InputError(f"tilt_rad must have shape (N, 2), got {t.shape}")
     bad = ~np.all(np.isfinite(t), axis=1)
     if bad.any():
-        raise ValueError(f"tilt_rad: non-finite value at sample {int(np.argmax(bad))}")
+        raise DataError(f"tilt_rad: non-finite value at sample {int(np.argmax(bad))}")
     cx, cy = np.cos(t[:, 0]), np.cos(t[:, 1])
     rest = 1.0 - cx**2 - cy**2
     if np.any(rest < -1e-9):
         k = int(np.argmax(rest < -1e-9))
-        raise ValueError(
+        raise DataError(
             f"tilt_rad: sample {k} has tilt_x = {t[k, 0]:.6g} rad, tilt_y = {t[k, 1]:.6g} rad, "
             "whose direction cosines exceed 1 (cos²θx + cos²θy > 1)"
         )
@@ -73,7 +74,7 @@ def quaternion_from_up_b(up_b: np.ndarray) -> np.ndarray:
     u = np.atleast_2d(np.asarray(up_b, dtype=float))
     norm = np.linalg.norm(u, axis=1, keepdims=True)
     if np.any(norm == 0) or not np.all(np.isfinite(u)):
-        raise ValueError("quaternion_from_up_b: the vertical direction is zero or not finite")
+        raise DataError("quaternion_from_up_b: the vertical direction is zero or not finite")
     u = u / norm
     pitch = -np.arcsin(np.clip(u[:, 0], -1.0, 1.0))
     roll = np.arctan2(u[:, 1], u[:, 2])
@@ -109,9 +110,9 @@ def propagate_quaternion(q0_wb: np.ndarray, omega_b_radps: np.ndarray, timestamp
     w = np.asarray(omega_b_radps, dtype=float)
     t = np.asarray(timestamps_ns, dtype=np.int64)
     if w.ndim != 2 or w.shape[1] != 3 or len(w) != len(t):
-        raise ValueError(f"propagate_quaternion: omega {w.shape} and timestamps {t.shape} do not match")
+        raise InputError(f"propagate_quaternion: omega {w.shape} and timestamps {t.shape} do not match")
     if not np.all(np.isfinite(w)):
-        raise ValueError(f"propagate_quaternion: non-finite ω at sample {int(np.argmax(~np.all(np.isfinite(w), axis=1)))}")
+        raise DataError(f"propagate_quaternion: non-finite ω at sample {int(np.argmax(~np.all(np.isfinite(w), axis=1)))}")
     q0 = np.asarray(q0_wb, dtype=float).reshape(4)
     q0 = q0 / np.linalg.norm(q0)
     n = len(w)
@@ -137,7 +138,7 @@ def _initial_up_b(log: Log, motion: Motion, seg: slice, window_s: float | None) 
     if window_s is None:
         window_s = 0.0 if log.tilt_rad is not None else 0.05
     if not (np.isfinite(window_s) and window_s >= 0):
-        raise ValueError(f"add_orientation: initial_window_s must be >= 0, got {window_s!r}")
+        raise InputError(f"add_orientation: initial_window_s must be >= 0, got {window_s!r}")
     t = log.timestamps_ns[seg]
     k = max(1, int(np.searchsorted(t, t[0] + int(round(window_s * 1e9)), side="right")))
     if log.tilt_rad is not None:
@@ -145,7 +146,7 @@ def _initial_up_b(log: Log, motion: Motion, seg: slice, window_s: float | None) 
     else:
         up = motion.specific_force_b_mps2[seg][:k].mean(axis=0)  # at rest f = −g: points up
     if not np.linalg.norm(up) > 0:
-        raise ValueError(f"{log.source}: cannot find the vertical at sample {seg.start} (zero specific force)")
+        raise DataError(f"{log.source}: cannot find the vertical at sample {seg.start} (zero specific force)")
     return up / np.linalg.norm(up)
 
 
@@ -170,25 +171,25 @@ def add_orientation(log: Log, motion: Motion, source: str = "inclinometer",
     In all cases ``a = f + g_B`` with f the estimate's specific force.
     """
     if motion.specific_force_b_mps2 is None:
-        raise ValueError("add_orientation: the estimate has no specific force (f) to remove gravity from")
+        raise InputError("add_orientation: the estimate has no specific force (f) to remove gravity from")
     if len(motion) != len(log) or not np.array_equal(motion.timestamps_ns, log.timestamps_ns):
-        raise ValueError("add_orientation: the estimate's timestamps differ from the log's")
+        raise InputError("add_orientation: the estimate's timestamps differ from the log's")
     f = motion.specific_force_b_mps2
     if source == "inclinometer":
         if log.tilt_rad is None:
-            raise ValueError(f"{log.source}: orientation source 'inclinometer' needs tilt_x, tilt_y columns")
+            raise InputError(f"{log.source}: orientation source 'inclinometer' needs tilt_x, tilt_y columns")
         up = up_b_from_tilt(log.tilt_rad)
         return motion.replace(accel_b_mps2=f - STANDARD_GRAVITY_MPS2 * up, quaternion_wb=quaternion_from_up_b(up))
     if source == "gyro":
         if log.gyro_b_radps is None:
-            raise ValueError(f"{log.source}: orientation source 'gyro' needs gyroscope columns w_x, w_y, w_z")
+            raise InputError(f"{log.source}: orientation source 'gyro' needs gyroscope columns w_x, w_y, w_z")
         omega = log.gyro_b_radps
     elif source == "estimate":
         if motion.omega_b_radps is None:
-            raise ValueError("add_orientation: orientation source 'estimate' needs an estimate with ω")
+            raise InputError("add_orientation: orientation source 'estimate' needs an estimate with ω")
         omega = motion.omega_b_radps
     else:
-        raise ValueError(f"add_orientation: source must be 'inclinometer', 'gyro' or 'estimate', got {source!r}")
+        raise InputError(f"add_orientation: source must be 'inclinometer', 'gyro' or 'estimate', got {source!r}")
     quat = np.empty((len(log), 4))
     for seg in log.segments():
         q0 = quaternion_from_up_b(_initial_up_b(log, motion, seg, initial_window_s))[0]

@@ -15,10 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..array import ArrayModelError, SensorArray
+from ..errors import InputError
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import quadratic_terms, quadratic_terms_jacobian, structure_matrix
-from ._common import check_finite, weighted_least_squares
+from ._common import PerSampleEstimator, check_finite, weighted_least_squares
 from .inversion import check_log_for_inversion
 
 
@@ -78,9 +79,9 @@ def paper001_gain_matrix(m: float = 0.5, n: float = 0.25) -> tuple[np.ndarray, n
     another value).
     """
     if not np.isclose(m, 0.5):
-        raise ValueError(f"paper 001 eq. 9: m is the average of two opposite sensors and must be 0.5, got {m!r}")
+        raise InputError(f"paper 001 eq. 9: m is the average of two opposite sensors and must be 0.5, got {m!r}")
     if not (np.isfinite(n) and n > 0):
-        raise ValueError(f"paper 001 eq. 9: n = 1/(4 × lever arm) must be positive, got {n!r}")
+        raise InputError(f"paper 001 eq. 9: n = 1/(4 × lever arm) must be positive, got {n!r}")
     G = np.array(
         [
             [m, 0, 0, m, 0, 0],
@@ -126,7 +127,7 @@ def gyro_aided_solve(array: SensorArray, accel_mps2: np.ndarray, gyro_b_radps: n
     a = np.atleast_2d(np.asarray(accel_mps2, dtype=float))
     g = np.atleast_2d(np.asarray(gyro_b_radps, dtype=float))
     if a.shape[1] != array.n_axes or g.shape != (a.shape[0], 3):
-        raise ValueError(f"gyro-aided inversion: readings {a.shape} and gyro {g.shape} do not match the array "
+        raise InputError(f"gyro-aided inversion: readings {a.shape} and gyro {g.shape} do not match the array "
                          f"({array.n_axes} axes)")
     check_finite(a, "accel_mps2", array.accel_columns)
     check_finite(g, "gyro_b_radps", ["w_x", "w_y", "w_z"])
@@ -135,7 +136,7 @@ def gyro_aided_solve(array: SensorArray, accel_mps2: np.ndarray, gyro_b_radps: n
 
 
 @dataclass
-class GyroAidedEstimator:
+class GyroAidedEstimator(PerSampleEstimator):
     """Accelerometers plus gyroscope (paper 001, eq. 8).
 
     f and ω̇ by least squares from ``a_m − W q(ω_m)``; ω is the gyroscope
@@ -148,6 +149,8 @@ class GyroAidedEstimator:
             sample), and of ω (the gyro's noise level), when the array gives
             them. Default False.
     """
+
+    method = "gyro-aided"
 
     compute_sigma: bool = False
 
@@ -163,13 +166,13 @@ class GyroAidedEstimator:
             return str(exc)
         return None
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         reason = self.applicable(log.array)
         if reason:
             raise ArrayModelError(reason)
         if log.gyro_b_radps is None:
-            raise ValueError(f"{log.source}: method 'gyro-aided' needs gyroscope columns w_x, w_y, w_z")
+            raise InputError(f"{log.source}: method 'gyro-aided' needs gyroscope columns w_x, w_y, w_z")
         x = gyro_aided_solve(log.array, log.accel_mps2, log.gyro_b_radps)
         sigma = self._sigma(log) if self.compute_sigma else {}
         return Motion(log.timestamps_ns, omega_b_radps=log.gyro_b_radps.copy(), omega_dot_b_radps2=x[:, 3:6],

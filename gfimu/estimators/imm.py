@@ -50,11 +50,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rigid_body import omega_from_quadratic_terms
-from ._common import resolve_initial_omega, trapezoid_increments, validate_initial_omega
+from ._common import PerSampleEstimator, resolve_initial_omega, trapezoid_increments, validate_initial_omega
 from .integration import InitialOmega, sign_tracking_loop
 from .inversion import check_log_for_inversion, invert, sigma_from_inversion
 
@@ -154,7 +155,7 @@ def t2_from_trend(q: np.ndarray, intercept: float, slope: float) -> float:
 
 
 @dataclass
-class IMMEstimator:
+class IMMEstimator(PerSampleEstimator):
     """Context-based IMM of paper 002 §3.2 (zero / integration / quadratic models).
 
     Options (paper 002 values where it gives them):
@@ -174,6 +175,8 @@ class IMMEstimator:
         compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
     """
 
+    method = "imm"
+
     t1: float = 0.1
     t2: float | None = None
     t2_intercept: float = 3.0
@@ -187,11 +190,11 @@ class IMMEstimator:
         for name in ("t1", "h1", "h2", "t2_intercept", "t2_slope"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
-                raise ValueError(f"imm option {name} must be a finite number >= 0, got {v!r}")
+                raise InputError(f"imm option {name} must be a finite number >= 0, got {v!r}")
         if self.t2 is not None and not (np.isfinite(self.t2) and self.t2 > self.t1):
-            raise ValueError(f"imm option t2 must exceed t1 = {self.t1}, got {self.t2!r}")
+            raise InputError(f"imm option t2 must exceed t1 = {self.t1}, got {self.t2!r}")
         if self.h1 + self.h2 > 1.0:
-            raise ValueError(f"imm options h1 + h2 must not exceed 1 (bands would overlap), got {self.h1 + self.h2}")
+            raise InputError(f"imm options h1 + h2 must not exceed 1 (bands would overlap), got {self.h1 + self.h2}")
         validate_initial_omega(self.initial_omega)
 
     def applicable(self, array: SensorArray) -> str | None:
@@ -201,10 +204,10 @@ class IMMEstimator:
         """(T1, T2) used for a log whose inverted quadratic terms are q."""
         t2 = self.t2 if self.t2 is not None else t2_from_trend(q, self.t2_intercept, self.t2_slope)
         if not t2 > self.t1:
-            raise ValueError(f"imm: T2 = {t2:g} from the trend line does not exceed T1 = {self.t1:g}")
+            raise DataError(f"imm: T2 = {t2:g} from the trend line does not exceed T1 = {self.t1:g}")
         return self.t1, t2
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         x, cov = invert(log.array, log.accel_mps2)
         q = x[:, 6:]

@@ -29,7 +29,7 @@ from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rigid_body import omega_from_quadratic_terms
-from ._common import resolve_initial_omega, trapezoid_increments, validate_initial_omega
+from ._common import PerSampleEstimator, resolve_initial_omega, trapezoid_increments, validate_initial_omega
 from .inversion import check_log_for_inversion, invert, sigma_from_inversion
 
 SIGN_CANDIDATES = np.array(list(itertools.product((1.0, -1.0), repeat=3)))  # (8, 3)
@@ -80,7 +80,7 @@ def sign_tracking_loop(mag: list[float], inc: list[float], w0: float, alpha=None
 
 
 @dataclass
-class _IntegratingEstimator:
+class _IntegratingEstimator(PerSampleEstimator):
     """Options shared by the two integrating methods (documented on each)."""
 
     initial_omega: InitialOmega = "zero"
@@ -106,8 +106,9 @@ class PureIntegrationEstimator(_IntegratingEstimator):
         compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
     """
 
+    method = "pure-integration"
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         x, cov = invert(log.array, log.accel_mps2)
         omega = np.empty((len(log), 3))
@@ -137,8 +138,9 @@ class IntegrationEstimator(_IntegratingEstimator):
         compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
     """
 
+    method = "integration"
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         x, cov = invert(log.array, log.accel_mps2)
         mag = omega_from_quadratic_terms(x[:, 6:])

@@ -14,10 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import omega_from_quadratic_terms
-from ._common import check_finite, continuity_signs, omega_from_quadratic_terms_signed, weighted_least_squares
+from ._common import (PerSampleEstimator, check_finite, continuity_signs, omega_from_quadratic_terms_signed,
+                      weighted_least_squares)
 
 
 def inversion_matrix(array: SensorArray) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +47,7 @@ def invert(array: SensorArray, accel_mps2: np.ndarray) -> tuple[np.ndarray, np.n
     single = a.ndim == 1
     a2 = a.reshape(1, -1) if single else a
     if a2.ndim != 2 or a2.shape[1] != array.n_axes:
-        raise ValueError(
+        raise InputError(
             f"accel_mps2 has shape {a.shape}; array {array.name!r} has {array.n_axes} accelerometer axes "
             f"({', '.join(array.accel_columns)})"
         )
@@ -78,11 +80,11 @@ def sigma_from_inversion(cov: np.ndarray, n: int) -> dict[str, np.ndarray]:
 
 def check_log_for_inversion(log: Log) -> None:
     if len(log) == 0:
-        raise ValueError(f"{log.source}: log has no samples")
+        raise DataError(f"{log.source}: log has no samples")
 
 
 @dataclass
-class InversionEstimator:
+class InversionEstimator(PerSampleEstimator):
     """Paper 000 eq. 7 applied sample by sample; ω by magnitudes and cross-term signs.
 
     ω: magnitudes from the quadratic sums, relative signs from the cross terms
@@ -100,12 +102,14 @@ class InversionEstimator:
             when the array gives its noise levels. Default False.
     """
 
+    method = "inversion"
+
     compute_sigma: bool = False
 
     def applicable(self, array: SensorArray) -> str | None:
         return array.inversion_reason()
 
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         check_log_for_inversion(log)
         x, cov = invert(log.array, log.accel_mps2)
         q = x[:, 6:]

@@ -57,11 +57,12 @@ import numpy as np
 from .. import crb as crb_module
 from .. import noise, rigid_body
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..parallel import check_workers, forked_map
 from ..progress import progress as progress_bar
-from ._common import checked_readings
+from ._common import PerSampleEstimator, checked_readings
 
 
 def _fibonacci_hemisphere(n: int) -> np.ndarray:
@@ -136,7 +137,7 @@ class _PrepareChunk:
 
 
 @dataclass
-class MLEstimator:
+class MLEstimator(PerSampleEstimator):
     """Per-sample maximum likelihood of f, ω̇ and ω (Skog et al. 2016).
 
     Options (defaults):
@@ -158,6 +159,8 @@ class MLEstimator:
     - ``workers=0``: processes that start the blocks of 4,096 samples, from four blocks on (0: one
       per CPU; 1: this process alone; the same numbers either way, :mod:`gfimu.parallel`).
     """
+
+    method = "ml"
 
     use_gyro: bool = False
     compute_sigma: bool = False
@@ -214,17 +217,17 @@ class MLEstimator:
         return noise.accel_noise_std(array)
 
     # ------------------------------------------------------------------
-    def estimate(self, log: Log, progress: bool = False) -> Motion:
+    def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
         array = log.array
         y = checked_readings(self, log, "ml")
         gyro = None
         gyro_var = None
         if self.use_gyro:
             if log.gyro_b_radps is None:
-                raise ValueError(f"{log.source}: use_gyro=True but the log has no gyro columns")
+                raise InputError(f"{log.source}: use_gyro=True but the log has no gyro columns")
             gyro = log.gyro_b_radps
             if not np.all(np.isfinite(gyro)):
-                raise ValueError(f"{log.source}: non-finite gyro reading at sample {int(np.argwhere(~np.isfinite(gyro))[0, 0])}")
+                raise DataError(f"{log.source}: non-finite gyro reading at sample {int(np.argwhere(~np.isfinite(gyro))[0, 0])}")
             gyro_var = float(array.gyroscope.noise_std_radps) ** 2
         sigma = self._axis_sigma(array)
         model = _ProjectedModel.build(array, sigma)

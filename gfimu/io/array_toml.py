@@ -26,6 +26,7 @@ import tomli_w
 
 from ..array import Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
 from .atomic import atomic_write_text
+from ..errors import InputError
 from .errors import LogFormatError, LogFormatWarning, read_utf8_text
 
 ARRAY_FORMAT = "gfimu-array/1"
@@ -329,7 +330,7 @@ def format_array_toml(array: SensorArray, rate_hz: float | None = None) -> str:
     try:
         return format_toml(array_to_dict(array, rate_hz))
     except ValueError as exc:
-        raise ValueError(f"array.toml: {exc}") from None
+        raise InputError(f"array.toml: {exc}") from None
 
 
 def write_array_toml(array: SensorArray, path: str | os.PathLike, rate_hz: float | None = None) -> None:

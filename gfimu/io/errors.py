@@ -1,6 +1,6 @@
 """Errors and warnings of reading and writing logs.
 
-Every problem in a file raises :class:`LogFormatError` (a ``ValueError``)
+Every problem in a file raises :class:`LogFormatError` (a :class:`gfimu.errors.InputError`)
 whose message starts with ``file:line`` (or names the TOML key) and says what
 was expected. Problems that do not stop reading are warnings:
 :class:`LogGapWarning` (gaps in time), :class:`LogFormatWarning` (a value
@@ -13,8 +13,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..errors import InputError
 
-class LogFormatError(ValueError):
+
+class LogFormatError(InputError):
     """A log file does not follow the log format; the message names file and line or key."""
 
     def __init__(self, message: str, path: str | os.PathLike | None = None, line: int | None = None,
@@ -48,8 +50,9 @@ def read_utf8_text(path: str | os.PathLike, missing: str = "file not found", fol
         line = raw[: exc.start].count(b"\n") + 1 if line_of_bad_byte else None
         raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path, line) from None
 
-class OutputError(OSError):
-    """An output cannot be written where asked (it is an input, or not a regular file)."""
+class OutputError(InputError, OSError):
+    """An output cannot be written where asked (it is an input, or not a regular file): the user's
+    mistake (an :class:`~gfimu.errors.InputError`), also an ``OSError``."""
 
 
 class LogGapWarning(UserWarning):

@@ -40,6 +40,7 @@ from .atomic import atomic_write
 from .errors import LogFormatError
 from .units import (KIND_OF_UNIT, TIME_UNITS_NS, UNITS, TimestampError, canonical_unit, same_nanosecond, timestamps_ns,
                     unit_factor, unit_help)
+from ..errors import InputError
 
 TIMESTAMP_HEADER = "#timestamp [ns]"
 VALID_COLUMN = "valid"
@@ -82,7 +83,7 @@ def _float_formatter(digits: int | None):
     if digits is None:
         return float.__repr__
     if not 1 <= int(digits) <= 17:
-        raise ValueError(f"digits must be between 1 and 17, got {digits}")
+        raise InputError(f"digits must be between 1 and 17, got {digits}")
     spec = f"%.{int(digits)}g"
     return spec.__mod__
 
@@ -489,11 +490,11 @@ def write_imu_csv(log: Log, path: str | os.PathLike) -> None:
     parts = [log.accel_mps2]
     if array.gyroscope is not None:
         if log.gyro_b_radps is None:
-            raise ValueError(f"{log.source}: the array has a gyroscope but the log has no gyro readings")
+            raise InputError(f"{log.source}: the array has a gyroscope but the log has no gyro readings")
         parts.append(log.gyro_b_radps)
     if array.inclinometer is not None:
         if log.tilt_rad is None:
-            raise ValueError(f"{log.source}: the array has an inclinometer but the log has no tilt readings")
+            raise InputError(f"{log.source}: the array has an inclinometer but the log has no tilt readings")
         parts.append(log.tilt_rad)
     values = np.hstack(parts)
     atomic_write(path, _csv_chunks(header, log.timestamps_ns, values, float.__repr__))
@@ -531,7 +532,7 @@ def motion_csv_chunks(motion: Motion, digits: int | None = None, valid: np.ndarr
         header.append(f"{VALID_COLUMN} []")
         flags = valid.astype(bool).astype(np.int8)
     if not cols and valid is None:
-        raise ValueError(f"{path}: the motion has no quantities to write")
+        raise InputError(f"{path}: the motion has no quantities to write")
     return _csv_chunks(header, motion.timestamps_ns, values, fmt, flags)
 
 

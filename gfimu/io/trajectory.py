@@ -25,6 +25,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from ..errors import DataError, InputError
 from ..motion import Motion
 from .atomic import atomic_write
 
@@ -46,11 +47,11 @@ def seconds_text(timestamps_ns: np.ndarray) -> list[str]:
 def tum_rows(motion: Motion, position_w_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(kept row mask, table (N, 7) of tx ty tz qx qy qz qw) of a Motion with attitude.
 
-    ``ValueError`` when the motion has no attitude (``quaternion_wb``).
+    An :class:`~gfimu.errors.InputError` when the motion has no attitude (``quaternion_wb``).
     """
     q = motion.quaternion_wb
     if q is None:
-        raise ValueError("the estimate has no orientation (quaternion q_w..q_z) to write as a TUM trajectory")
+        raise InputError("the estimate has no orientation (quaternion q_w..q_z) to write as a TUM trajectory")
     n = len(motion)
     if position_w_m is None:
         position = np.zeros((n, 3))
@@ -69,7 +70,7 @@ def tum_chunks(motion: Motion, position_w_m: np.ndarray | None = None) -> Iterat
     stamps = motion.timestamps_ns[keep]
     table = table[keep]
     if not stamps.size:
-        raise ValueError("the estimate's orientation is not finite at any sample; no TUM trajectory to write")
+        raise DataError("the estimate's orientation is not finite at any sample; no TUM trajectory to write")
 
     def fmt(v: float) -> str:
         return "0" if v == 0 else repr(v)

@@ -25,6 +25,8 @@ from decimal import MAX_PREC, ROUND_HALF_EVEN, Context, Decimal, InvalidOperatio
 
 import numpy as np
 
+from ..errors import InputError
+
 STANDARD_GRAVITY_MPS2 = 9.80665
 
 _DEG = math.pi / 180.0
@@ -94,7 +96,7 @@ _EXACT = Context(prec=MAX_PREC, rounding=ROUND_HALF_EVEN)  # a product of decima
 _INT64 = (-(2**63), 2**63)
 
 
-class TimestampError(ValueError):
+class TimestampError(InputError):
     """A timestamp token that is no time; ``index`` is its place among the tokens given."""
 
     def __init__(self, message: str, index: int):
@@ -107,20 +109,20 @@ def timestamp_ns(text: str, ns_per_unit: int) -> int:
 
     The text is converted exactly and rounded to the nearest nanosecond, a half to the even one
     (``1.5`` and ``2.5`` [ns] give 2, ``0.0000000015`` [s] gives 2), whatever the caller's decimal
-    context; ValueError, naming the token, if it is not a finite number or is outside 64-bit nanoseconds.
+    context; an InputError, naming the token, if it is not a finite number or is outside 64-bit nanoseconds.
     """
     tok = text.strip()
     try:
         value = Decimal(tok)
     except InvalidOperation:
-        raise ValueError(f"timestamp {tok!r} is not a number") from None
+        raise InputError(f"timestamp {tok!r} is not a number") from None
     if not value.is_finite():
-        raise ValueError(f"timestamp {tok!r} is not a finite number")
+        raise InputError(f"timestamp {tok!r} is not a finite number")
     if value and value.adjusted() > 30:  # far beyond 2^63 ns in any unit; not expanded to an integer
-        raise ValueError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds")
+        raise InputError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds")
     ns = _EXACT.multiply(value, ns_per_unit).to_integral_value(rounding=ROUND_HALF_EVEN)
     if not _INT64[0] <= ns < _INT64[1]:
-        raise ValueError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds")
+        raise InputError(f"timestamp {tok!r} is out of range for 64-bit nanoseconds")
     return int(ns)
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as _progress
@@ -34,15 +35,15 @@ _CHUNK = 20_000
 def sample_timestamps_ns(rate_hz: float, duration_s: float) -> np.ndarray:
     """``round(duration × rate)`` timestamps in ns from 0, at ``round(k · 1e9 / rate)``."""
     if not (np.isfinite(rate_hz) and rate_hz > 0):
-        raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
+        raise InputError(f"rate_hz must be a positive number, got {rate_hz!r}")
     if not (np.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s must be a positive number, got {duration_s!r}")
+        raise InputError(f"duration_s must be a positive number, got {duration_s!r}")
     n = int(round(duration_s * rate_hz))
     if n < 2:
-        raise ValueError(f"a duration of {duration_s:g} s at {rate_hz:g} Hz gives {n} sample(s); need at least 2")
+        raise InputError(f"a duration of {duration_s:g} s at {rate_hz:g} Hz gives {n} sample(s); need at least 2")
     t = np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64)
     if np.any(np.diff(t) <= 0):
-        raise ValueError(f"a rate of {rate_hz:g} Hz is too high for nanosecond timestamps")
+        raise InputError(f"a rate of {rate_hz:g} Hz is too high for nanosecond timestamps")
     return t
 
 
@@ -56,6 +57,23 @@ def motion_from_truth(timestamps_ns, kinematics: BodyKinematics) -> Motion:
         specific_force_b_mps2=kinematics.specific_force_b_mps2,
         quaternion_wb=kinematics.quaternion_wb,
     )
+
+
+def _check_scenario_option(scenario: str, name: str, value, default) -> None:
+    """An :class:`~gfimu.errors.InputError` naming the option unless ``value`` has the kind of its default:
+    a finite number (an integer where the default is one), or as many finite numbers as a tuple default."""
+    def number(v) -> bool:
+        return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and bool(np.isfinite(v))
+
+    if isinstance(default, (int, np.integer)) and not isinstance(default, bool):
+        if not (number(value) and float(value).is_integer()):
+            raise InputError(f"scenario {scenario!r} option {name}: expected an integer, got {value!r}")
+    elif isinstance(default, (float, np.floating)):
+        if not number(value):
+            raise InputError(f"scenario {scenario!r} option {name}: expected a finite number, got {value!r}")
+    elif isinstance(default, tuple):
+        if not (isinstance(value, (tuple, list)) and len(value) == len(default) and all(number(v) for v in value)):
+            raise InputError(f"scenario {scenario!r} option {name}: expected {len(default)} finite numbers, got {value!r}")
 
 
 def simulate(
@@ -87,12 +105,14 @@ def simulate(
     acceleration), each plus its noise. ``progress`` shows a bar for long logs.
     """
     if scenario not in SCENARIOS:
-        raise ValueError(f"unknown scenario {scenario!r}; choose from {', '.join(SCENARIOS)}")
+        raise InputError(f"unknown scenario {scenario!r}; choose from {', '.join(SCENARIOS)}")
     spec = SCENARIOS[scenario]
     allowed = spec.options()
     unknown = sorted(set(scenario_options) - set(allowed))
     if unknown:
-        raise ValueError(f"scenario {scenario!r} has no option(s) {unknown}; its options are {sorted(allowed)}")
+        raise InputError(f"scenario {scenario!r} has no option(s) {unknown}; its options are {sorted(allowed)}")
+    for name, value in scenario_options.items():
+        _check_scenario_option(scenario, name, value, allowed[name])
     if array is None:
         array = spec.default_array()
     if not isinstance(array, SensorArray):

@@ -46,6 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
+from ..errors import InputError
+
 DELRIN_BLOCK_SIZE_M = (0.201, 0.147, 0.102)
 DELRIN_BLOCK_MASS_KG = 4.36
 
@@ -59,7 +61,7 @@ def box_principal_inertia(size_m=DELRIN_BLOCK_SIZE_M, mass_kg: float = DELRIN_BL
     """
     a, b, c = (float(v) for v in size_m)
     if min(a, b, c) <= 0 or mass_kg <= 0:
-        raise ValueError(f"box size {size_m!r} and mass {mass_kg!r} must be positive")
+        raise InputError(f"box size {size_m!r} and mass {mass_kg!r} must be positive")
     return mass_kg / 12.0 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
 
 
@@ -89,7 +91,7 @@ def small_oscillation_frequency_radps(inertia_kgm2, spin_axis: int, spin_radps: 
     j, k = [n for n in range(3) if n != spin_axis]
     prod = (i[spin_axis] - i[j]) * (i[spin_axis] - i[k])
     if prod <= 0:
-        raise ValueError(f"axis {spin_axis} is the intermediate axis of inertia {i.tolist()}: the spin is unstable")
+        raise InputError(f"axis {spin_axis} is the intermediate axis of inertia {i.tolist()}: the spin is unstable")
     return float(abs(spin_radps) * np.sqrt(prod / (i[j] * i[k])))
 
 
@@ -119,13 +121,13 @@ class TorqueFreeMotion:
         inertia = np.asarray(inertia_kgm2, dtype=float).reshape(-1)
         w0 = np.asarray(omega0_b_radps, dtype=float).reshape(-1)
         if inertia.shape != (3,) or np.any(inertia <= 0) or not np.all(np.isfinite(inertia)):
-            raise ValueError(f"principal inertia must be 3 positive numbers, got {inertia_kgm2!r}")
+            raise InputError(f"principal inertia must be 3 positive numbers, got {inertia_kgm2!r}")
         if w0.shape != (3,) or not np.all(np.isfinite(w0)):
-            raise ValueError(f"initial angular velocity must be 3 finite numbers, got {omega0_b_radps!r}")
+            raise InputError(f"initial angular velocity must be 3 finite numbers, got {omega0_b_radps!r}")
         order = np.argsort(-inertia, kind="stable")
         ia, ib, ic = inertia[order]
         if (ia - ib) <= 1e-9 * ia or (ib - ic) <= 1e-9 * ia:
-            raise ValueError(
+            raise InputError(
                 f"principal inertia {inertia.tolist()}: the elliptic closed form needs three distinct moments"
             )
         # Euler's equations are cyclic in (1, 2, 3): an odd relabelling flips the

@@ -29,6 +29,7 @@ import numpy as np
 from scipy import interpolate
 
 from ..array import Body, SensorArray, single_triad
+from ..errors import InputError
 from .free_flight import TorqueFreeMotion, box_principal_inertia
 from .trajectory import (
     GRAVITY_W_MPS2,
@@ -126,9 +127,9 @@ def _random_sines(rng, n_components, max_frequency_hz, rms, min_frequency_hz=0.1
     """(amplitude, frequency, phase) arrays (K, 3) with per-column RMS ``rms``."""
     k = int(n_components)
     if k < 1:
-        raise ValueError(f"n_components must be >= 1, got {n_components}")
+        raise InputError(f"n_components must be >= 1, got {n_components}")
     if not (max_frequency_hz > min_frequency_hz):
-        raise ValueError(f"max_frequency_hz must exceed {min_frequency_hz} Hz, got {max_frequency_hz}")
+        raise InputError(f"max_frequency_hz must exceed {min_frequency_hz} Hz, got {max_frequency_hz}")
     freq = rng.uniform(min_frequency_hz, max_frequency_hz, size=(k, 3))
     phase = rng.uniform(0.0, 2.0 * np.pi, size=(k, 3))
     amp = rng.uniform(0.5, 1.0, size=(k, 3))
@@ -229,7 +230,7 @@ def smooth_recording(times_s, values, bandwidth_hz: float, degree: int = 5) -> i
     """
     t = np.asarray(times_s, dtype=float)
     if not (bandwidth_hz > 0):
-        raise ValueError(f"bandwidth_hz must be positive, got {bandwidth_hz}")
+        raise InputError(f"bandwidth_hz must be positive, got {bandwidth_hz}")
     spacing = 0.5 / bandwidth_hz
     # knots on a grid fixed in recording time, so any window of a recording gets the same fit
     grid = np.arange(np.ceil(t[0] / spacing), np.floor(t[-1] / spacing) + 1) * spacing
@@ -246,11 +247,11 @@ def _recorded(times_s, recording, start_s, bandwidth_hz, still_s, array):
         # gravity into a; its mean over the initial still period is removed.
         still = rec.times_s <= still_s
         if np.count_nonzero(still) < 2:
-            raise ValueError(f"{recording}: still_s={still_s:g} s covers fewer than two samples")
+            raise InputError(f"{recording}: still_s={still_s:g} s covers fewer than two samples")
         rec = replace(rec, omega_radps=rec.omega_radps - rec.omega_radps[still].mean(axis=0))
     t_end = start_s + float(times_s[-1])
     if start_s < 0 or t_end > rec.duration_s + 1e-9:
-        raise ValueError(
+        raise InputError(
             f"{recording}: {start_s:g} s + {times_s[-1]:g} s goes beyond the recording "
             f"({rec.duration_s:.2f} s); shorten duration_s or move start_s"
         )

@@ -28,6 +28,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import InputError
 
 ADXL330_NOISE_XY_MPS2 = 0.0742
 ADXL330_NOISE_Z_MPS2 = 0.1039
@@ -62,12 +63,12 @@ class SensorErrors:
             if v is None:
                 continue
             if not isinstance(v, (int, float, np.floating, np.integer)) or np.isnan(v) or v < 0:
-                raise ValueError(f"SensorErrors.{f.name} must be a non-negative number, got {v!r}")
+                raise InputError(f"SensorErrors.{f.name} must be a non-negative number, got {v!r}")
             if f.name.endswith("range_mps2") or f.name.endswith("range_radps"):
                 if v == 0:
-                    raise ValueError(f"SensorErrors.{f.name} must be positive (use inf for no saturation)")
+                    raise InputError(f"SensorErrors.{f.name} must be positive (use inf for no saturation)")
             elif not np.isfinite(v):
-                raise ValueError(f"SensorErrors.{f.name} must be finite, got {v!r}")
+                raise InputError(f"SensorErrors.{f.name} must be finite, got {v!r}")
 
     @classmethod
     def none(cls) -> "SensorErrors":

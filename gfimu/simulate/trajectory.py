@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from .. import rotations
+from ..errors import DataError
 
 GRAVITY_W_MPS2 = np.array([0.0, 0.0, -9.80665])
 """Gravity in the world frame W (z up), as in the log format."""
@@ -74,7 +75,7 @@ def level_quaternion_from_specific_force(specific_force_b_mps2: np.ndarray) -> n
     f = np.asarray(specific_force_b_mps2, dtype=float).reshape(3)
     norm = np.linalg.norm(f)
     if not np.isfinite(norm) or norm < 1e-6:
-        raise ValueError(f"cannot level on a specific force of {f.tolist()} m/s² (no gravity direction)")
+        raise DataError(f"cannot level on a specific force of {f.tolist()} m/s² (no gravity direction)")
     up_b = f / norm
     ez = np.array([0.0, 0.0, 1.0])
     axis = np.cross(up_b, ez)

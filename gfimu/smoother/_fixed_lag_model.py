@@ -36,6 +36,7 @@ import numpy as np
 
 from .. import noise, rigid_body
 from ..array import SensorArray
+from ..errors import InputError
 from ..factors import accelerometer, kinematics, process
 from ..log import Log
 from .graph import SmootherOptions
@@ -109,7 +110,7 @@ class ArrayModel:
     def __init__(self, array: SensorArray, options: SmootherOptions, fast_measurement: bool = True,
                  accel_noise_scale: float = 1.0) -> None:
         if not (np.isfinite(accel_noise_scale) and accel_noise_scale > 0):
-            raise ValueError(f"accel_noise_scale must be a positive number, got {accel_noise_scale!r}")
+            raise InputError(f"accel_noise_scale must be a positive number, got {accel_noise_scale!r}")
         self.array = array
         self.options = options
         self.fast_measurement = bool(fast_measurement)
@@ -161,7 +162,7 @@ class ArrayModel:
             for group in groups:
                 for t in group.terms(view, np.asarray(x, dtype=float).reshape(1, KINEMATIC_SIZE), none):
                     if t.kind != "unary" or t.jac_global is not None or t.residual.shape[0] > 1:
-                        raise ValueError(f"factor group {group.name!r}: the fixed-lag smoother streams only terms of one "
+                        raise InputError(f"factor group {group.name!r}: the fixed-lag smoother streams only terms of one "
                                          "sample's state (unary, no calibration variables)")
                     if t.residual.shape[0]:
                         rows.append(t.residual[0])

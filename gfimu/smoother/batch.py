@@ -19,11 +19,13 @@ and is re-weighted from each solution (iteratively re-weighted least squares).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..estimators.ml import MLEstimator
 from ..factors import GRAVITY_W_MPS2, _so3
 from ..log import Log
@@ -60,7 +62,7 @@ from .graph import SmootherOptions, SmootherProblem, options_reason
 from .initialise import initial_attitude, initial_estimate, initial_states, sign_chain
 from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from .restarts import branch_restarts
-from .result import SmootherEstimatorRuns, SmootherResult
+from .result import SmootherEstimator, SmootherResult
 from .tuning import InitialStates, Tuning, make_problem, tuned_problem
 
 SOLVERS = ("numpy", "gtsam")
@@ -116,7 +118,7 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
     if solver == "numpy":
         return solve(problem, states, params, compute_sigma=compute_sigma, reweight=reweight, max_iterations=max_iterations)
     if solver != "gtsam":
-        raise ValueError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
+        raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
     limit = int(problem.options.max_iterations if max_iterations is None else max_iterations)
     X, P, iterations, converged = gtsam_levenberg_marquardt(problem, states, params, limit,
                                                             problem.options.relative_tolerance, reweight)
@@ -154,12 +156,12 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     opt = options
     reason = options_reason(log.array, opt, attitude_supported=True)
     if reason:
-        raise ValueError(f"{log.source}: {reason}")
+        raise InputError(f"{log.source}: {reason}")
     if solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
+        raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
     n = len(log)
     if n < 2:
-        raise ValueError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
+        raise DataError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
     layout = StateLayout.from_options(opt)
     attitude = layout.attitude
     M = layout.size
@@ -170,16 +172,24 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     tunings: list[Tuning] = []
     notes = []
     iterations, cost = 0, 0.0
-    opt, auto = chosen_model(log, opt, attitude) if auto_model else (opt, None)
+    timings = {}
+    t0 = time.perf_counter()
+    if auto_model:
+        opt, auto = chosen_model(log, opt, attitude)
+        timings["model check"] = time.perf_counter() - t0
+    else:
+        auto = None
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
-        motion = MLEstimator().estimate(log)
+        motion = MLEstimator().estimate_motion(log)
         return SmootherResult(motion, (), (), 0, 0.0, 0, (f"{log.source}: {auto[0].describe()}; the per-sample "
-                                                          "estimate is returned",), auto[0])
+                                                          "estimate is returned",), auto[0], timings)
+    t0 = time.perf_counter()
     if attitude:  # each window starts from the attitude of the one before: in turn
         outcomes = _attitude_windows(log, opt, windows, initial, solver, progress)
     else:
         context = _WindowContext(log, opt, auto, initial, solver, tune_span_s, windows)
         outcomes = _run_windows(context, window_workers(workers, len(windows), solver), progress)
+    timings["solve windows"] = time.perf_counter() - t0
     for w, ((solve_sl, keep_log, keep_win), out) in enumerate(zip(windows, outcomes)):
         tunings.extend(out.tunings)
         iterations += out.iterations
@@ -200,7 +210,7 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         extra["accel_b_mps2"] = states[:, layout.specific_force] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
     motion = Motion(log.timestamps_ns, sigma=sigma, **layout.quantities(states), **extra)
     return SmootherResult(motion, tuple(tunings), tuple(calibration), iterations, cost, len(windows), tuple(notes),
-                          auto[0] if auto else None)
+                          auto[0] if auto else None, timings)
 
 
 @dataclass
@@ -295,12 +305,12 @@ def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
         return opt, None
     step = max(1, len(log) // CHECK_SAMPLES)
     sample = log if step == 1 else log.select(slice(0, None, step))
-    motion = ml.estimate(sample)
+    motion = ml.estimate_motion(sample)
     check = check_model(sample, motion)
     if check.consistent:
         return measured_noise_options(opt, check), (check, None)
     if step > 1:
-        motion = ml.estimate(log)
+        motion = ml.estimate_motion(log)
     chosen = misfit_options(opt, check)
     defaults = {f.name: f.default for f in fields(SmootherOptions)}
     keep = {name: getattr(opt, name) for name in defaults
@@ -382,7 +392,7 @@ def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: sl
 
 
 @dataclass(frozen=True)
-class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
+class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     """Factor-graph smoother over the whole log (method "smoother").
 
     Options: see :class:`gfimu.smoother.graph.SmootherOptions`. Returns ω, ω̇
@@ -395,6 +405,8 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
     window by the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`);
     ``tune_process_noise=False`` uses the fixed densities.
     """
+
+    method = "smoother"
 
     tune_process_noise: bool = True
     tune_span_s: float | None = 10.0
@@ -417,14 +429,12 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
                                                    "Levenberg-Marquardt, default) or 'gtsam' (the same problem as a GTSAM graph)"})
     """'numpy': the vectorised banded Levenberg-Marquardt (default, linear in the length, fast);
     'gtsam': the same problem as a GTSAM graph, same schedule, eliminated in time order (a cross-check)."""
-    _runs: list = field(default_factory=list, init=False, repr=False, compare=False)
-    """The result of the newest :meth:`estimate`, behind :attr:`last_tuning` and its kin."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_workers(self.workers)
         if self.solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+            raise InputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
 
     def applicable(self, array: SensorArray) -> str | None:
         return options_reason(array, self.options(), attitude_supported=True)
@@ -433,16 +443,6 @@ class BatchSmootherEstimator(SmootherEstimatorRuns, SmootherOptions):
         """The smoother on ``log`` (:func:`smooth`), with everything it produced."""
         return smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver,
                       auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers)
-
-    @property
-    def last_calibration(self) -> list[dict]:
-        """The calibration estimates of the newest :meth:`estimate` (see :attr:`SmootherResult.calibration`)."""
-        return list(self._runs[-1].calibration) if self._runs else []
-
-    @property
-    def last_model_check(self):
-        """The :class:`gfimu.smoother.auto.ModelCheck` of the newest :meth:`estimate` (None when not run)."""
-        return self._runs[-1].model_check if self._runs else None
 
 
 def _hessian_diagonal(linear: gtsam.GaussianFactorGraph, dims: dict[int, int]) -> dict[int, np.ndarray]:

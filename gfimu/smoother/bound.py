@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..factors import _so3
 from ..log import Log
 from ..motion import Motion
@@ -32,7 +33,7 @@ def truth_states(truth: Motion) -> np.ndarray:
     """``[ω, ω̇, f]`` (N, 9) from a truth Motion (all three must be present)."""
     missing = [q for q in QUANTITY_SLICES if getattr(truth, q) is None]
     if missing:
-        raise ValueError(f"the bound needs truth of {missing}")
+        raise InputError(f"the bound needs truth of {missing}")
     return np.hstack([getattr(truth, q) for q in QUANTITY_SLICES])
 
 
@@ -42,24 +43,24 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
     """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state.
 
     ``window_options``: the options of each solve window, e.g. with the process noise that the
-    batch smoother chose from the data (``[t.apply(options) for t in estimator.last_tuning]``).
+    batch smoother chose from the data (``[t.apply(options) for t in estimate.report.tunings]``).
     """
     opt = options or SmootherOptions()
     truth = truth or log.truth
     if truth is None:
-        raise ValueError(f"{log.source}: the bound needs the truth (log.truth or truth=)")
+        raise InputError(f"{log.source}: the bound needs the truth (log.truth or truth=)")
     states = truth_states(truth)
     if opt.motion_model == "snap":  # ω̈ of the truth by central differences
         states = np.hstack([states, np.gradient(states[:, OMEGA_DOT], log.times_s, axis=0)])
     if opt.estimate_attitude or opt.use_inclinometer:
         if truth.quaternion_wb is None:
-            raise ValueError("the bound with attitude needs the true quaternion_wb")
+            raise InputError("the bound with attitude needs the true quaternion_wb")
         states = np.hstack([states, _so3.log(matrix_from_quaternion(truth.quaternion_wb))])
     n = len(log)
     sd = np.zeros((n, states.shape[1]))
     windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
     if window_options is not None and len(window_options) != len(windows):
-        raise ValueError(f"window_options has {len(window_options)} entries for {len(windows)} solve windows")
+        raise InputError(f"window_options has {len(window_options)} entries for {len(windows)} solve windows")
     for i, (solve_sl, keep_log, keep_win) in enumerate(windows):
         problem = SmootherProblem(log.select(solve_sl), opt if window_options is None else window_options[i])
         if problem.attitude:

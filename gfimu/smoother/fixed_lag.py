@@ -81,11 +81,12 @@ from __future__ import annotations
 import math
 import warnings
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..progress import progress as progress_bar
@@ -96,7 +97,7 @@ from .banded import solve
 from .graph import SmootherOptions, options_reason
 from .initialise import initial_estimate
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
-from .result import SmootherEstimatorRuns, SmootherResult
+from .result import SmootherEstimator, SmootherResult
 from . import stream_model
 from .auto import measured_noise_options
 from .stream_model import LocalDensity, StreamModel, StreamSignChain
@@ -116,11 +117,11 @@ def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | Non
     return MLEstimator().applicable(array)
 
 
-class FixedLagSmootherError(RuntimeError):
+class FixedLagSmootherError(DataError, RuntimeError):
     """The smoother could not solve an update (names the time and the cause)."""
 
 
-class FixedLagSmootherClosed(RuntimeError):
+class FixedLagSmootherClosed(InputError, RuntimeError):
     """:meth:`FixedLagSmoother.push` or :meth:`FixedLagSmoother.flush` after :meth:`FixedLagSmoother.close`."""
 
 
@@ -256,22 +257,22 @@ class FixedLagSmoother:
                  model_window_s: float = 30.0, branches: bool = True) -> None:
         options = options or SmootherOptions()
         if engine not in ENGINES:
-            raise ValueError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+            raise InputError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
         reason = fixed_lag_reason(array, options)
         if reason:
-            raise ValueError(reason)
+            raise InputError(reason)
         if marginalise_every_s is None:  # about 125 updates per block, at most 0.25 s
             marginalise_every_s = min(0.25, 125.0 / rate_hz) if rate_hz > 0 else 0.25
         for name, v in (("lag_s", lag_s), ("rate_hz", rate_hz), ("relinearize_threshold", relinearize_threshold),
                         ("marginalise_every_s", marginalise_every_s)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
+                raise InputError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
         if not (isinstance(warmup_s, (int, float)) and math.isfinite(warmup_s) and warmup_s >= 0):
-            raise ValueError(f"fixed-lag smoother: warmup_s must be >= 0, got {warmup_s!r}")
+            raise InputError(f"fixed-lag smoother: warmup_s must be >= 0, got {warmup_s!r}")
         if not gap_factor > 1.0:
-            raise ValueError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
+            raise InputError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
         if int(relinearize_skip) < 1:
-            raise ValueError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
+            raise InputError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
         if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
             raise ValueError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
         for name, v in (("tune_window_s", tune_window_s), ("retune_every_s", retune_every_s),
@@ -377,15 +378,15 @@ class FixedLagSmoother:
         t_ns = int(timestamp_ns)
         y = np.asarray(accel_row, dtype=float).reshape(-1)
         if y.shape != (self.array.n_axes,):
-            raise ValueError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
+            raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
         if not np.all(np.isfinite(y)):
             bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
-            raise ValueError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
+            raise DataError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
         gyro = None
         if gyro_row is not None and self.array.gyroscope is not None and self.options.use_gyro:
             gyro = np.asarray(gyro_row, dtype=float).reshape(-1)
             if gyro.shape != (3,):
-                raise ValueError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
+                raise InputError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
             if not np.all(np.isfinite(gyro)):
                 gyro = None  # a missing gyro sample: the accelerometers alone carry on
         smoothed: list[StateEstimate] = []
@@ -514,7 +515,7 @@ class FixedLagSmoother:
         rows = [s[3] if len(s) > 3 else None for s in samples]
         todo = [i for i, r in enumerate(rows) if r is None]
         if todo:
-            fresh = self._ml.estimate(part.select(np.asarray(todo)))
+            fresh = self._ml.estimate_motion(part.select(np.asarray(todo)))
             x = np.hstack([fresh.omega_b_radps, fresh.omega_dot_b_radps2, fresh.specific_force_b_mps2])
             for j, i in enumerate(todo):
                 rows[i] = x[j]
@@ -568,7 +569,7 @@ class FixedLagSmoother:
         due = sample[0] - chosen.chosen_at_ns >= self._retune_ns
         # a model chosen on a still stretch that the body now outmoves: choose again at once (at most once
         # a second), on the history that now holds the motion
-        outgrown = (not chosen.moving and local is not None and local > OUTGROWN_FACTOR * q
+        outgrown = (not chosen.moving and local is not None and self._local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
         if (due or outgrown) and len(self._history) >= self._tune_min_n:
             self._choose(list(self._history), outgrown=outgrown)
@@ -845,7 +846,7 @@ class FixedLagSmoother:
 
 
 @dataclass(frozen=True)
-class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
+class FixedLagEstimator(SmootherEstimator, SmootherOptions):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
     Model options: those of :class:`~gfimu.smoother.graph.SmootherOptions`
@@ -859,7 +860,7 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     batch smoother's tuner on that stretch: jerk density per body axis,
     specific-force density, and with ``tune_accel_noise`` the accelerometer
     noise scale); the stream then runs with it (its first outputs come
-    ``tune_window_s`` late). The choice is kept in :attr:`last_tuning`. Giving
+    ``tune_window_s`` late). The choice is in the report's ``tunings``. Giving
     any of ``omega_dot_random_walk_radps2_per_sqrt_s``,
     ``specific_force_random_walk_mps2_per_sqrt_s`` or ``process_axis_factors``
     (a value other than the default) uses the given densities and skips the
@@ -875,6 +876,8 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     the tuning), and so are ``max_iterations`` and ``relative_tolerance`` (the
     batch solves of the tuning stretch).
     """
+
+    method = "fixed-lag"
 
     tune_process_noise: bool = True
     """Choose the process noise from the first ``tune_window_s`` of data (see above)."""
@@ -909,9 +912,6 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
     """Window solver: 'numpy' (a Kalman filter carrying the window's cross-covariances, about 0.2 ms per
     sample at 500 Hz with a 0.2 s lag) or 'gtsam' (iSAM2's IncrementalFixedLagSmoother, the reference)."""
 
-    _runs: list = field(default_factory=list, init=False, repr=False, compare=False)
-    """The result of the newest :meth:`estimate`, behind :attr:`last_tuning`."""
-
     def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
         """A streaming smoother with these options."""
         return FixedLagSmoother(array, self.options(), lag_s=self.lag_s, rate_hz=rate_hz,
@@ -929,11 +929,11 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
         """The fixed-lag smoother over ``log`` sample by sample, with what it chose (:class:`SmootherResult`)."""
         n = len(log)
         if n < 2:
-            raise ValueError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
-                             "(a single reading does not tell the angular velocity)")
+            raise DataError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
+                            "(a single reading does not tell the angular velocity)")
         reason = self.applicable(log.array)
         if reason:
-            raise ValueError(f"{log.source}: {reason}")
+            raise InputError(f"{log.source}: {reason}")
         rate_hz = log.rate_hz
         smoother = self.smoother(log.array, rate_hz)
         out = np.full((n, 9), np.nan)
@@ -963,4 +963,9 @@ class FixedLagEstimator(SmootherEstimatorRuns, SmootherOptions):
             sigma = {"omega_b_radps": sig[:, :3], "omega_dot_b_radps2": sig[:, 3:6], "specific_force_b_mps2": sig[:, 6:]}
         motion = Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
                         specific_force_b_mps2=out[:, 6:], sigma=sigma)
-        return SmootherResult(motion, () if smoother.tuning is None else (smoother.tuning,), windows=0)
+        tunings = []
+        for m in smoother.models:
+            if m.tuning is not None and all(m.tuning is not t for t in tunings):
+                tunings.append(m.tuning)
+        return SmootherResult(motion, tuple(tunings), windows=0,
+                              model_check=None if smoother.stream_model is None else smoother.stream_model.check)

@@ -28,6 +28,7 @@ import numpy as np
 
 from .. import noise
 from ..array import SensorArray
+from ..errors import DataError, InputError
 from ..factors import (
     _so3,
     accelerometer,
@@ -203,36 +204,40 @@ class SmootherOptions:
         ):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise ValueError(f"smoother option {name} must be a positive number, got {v!r}")
+                raise InputError(f"smoother option {name} must be a positive number, got {v!r}")
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
-            raise ValueError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
+            raise InputError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
         if self.motion_model not in ("jerk", "snap"):
-            raise ValueError(f"smoother option motion_model must be 'jerk' or 'snap', got {self.motion_model!r}")
+            raise InputError(f"smoother option motion_model must be 'jerk' or 'snap', got {self.motion_model!r}")
         if self.measurement not in ("accelerometer", "quadratic"):
-            raise ValueError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
+            raise InputError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
         if not (np.isfinite(self.accel_noise_slope_mps2_per_radps) and self.accel_noise_slope_mps2_per_radps >= 0):
-            raise ValueError(f"smoother option accel_noise_slope_mps2_per_radps must be >= 0, got {self.accel_noise_slope_mps2_per_radps!r}")
+            raise InputError(f"smoother option accel_noise_slope_mps2_per_radps must be >= 0, got {self.accel_noise_slope_mps2_per_radps!r}")
         if self.initialisation not in ("sign-resolving", "ml"):
-            raise ValueError(f"smoother option initialisation must be 'sign-resolving' or 'ml', got {self.initialisation!r}")
+            raise InputError(f"smoother option initialisation must be 'sign-resolving' or 'ml', got {self.initialisation!r}")
         if int(self.reweight_iterations) < 1:
-            raise ValueError("smoother option reweight_iterations must be >= 1")
+            raise InputError("smoother option reweight_iterations must be >= 1")
         f = np.asarray(self.process_axis_factors, dtype=float)
         if f.shape != (3,) or not np.all(np.isfinite(f) & (f > 0)):
-            raise ValueError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")
+            raise InputError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")
         fr = np.asarray(self.process_axis_frequencies_hz, dtype=float)
         if fr.shape != (3,) or not np.all(np.isfinite(fr) & (fr >= 0)):
-            raise ValueError("smoother option process_axis_frequencies_hz must be 3 numbers >= 0, "
+            raise InputError("smoother option process_axis_frequencies_hz must be 3 numbers >= 0, "
                              f"got {self.process_axis_frequencies_hz!r}")
         if np.any(fr > 0) and self.motion_model != "jerk":
-            raise ValueError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
+            raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
         if int(self.max_iterations) < 1:
-            raise ValueError("smoother option max_iterations must be >= 1")
+            raise InputError("smoother option max_iterations must be >= 1")
         if self.robust_loss not in ("huber", "cauchy"):
-            raise ValueError(f"smoother option robust_loss must be 'huber' or 'cauchy', got {self.robust_loss!r}")
+            raise InputError(f"smoother option robust_loss must be 'huber' or 'cauchy', got {self.robust_loss!r}")
         for name in ("accel_robust_threshold", "process_robust_threshold"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
-                raise ValueError(f"smoother option {name} must be >= 0 (0: off), got {v!r}")
+                raise InputError(f"smoother option {name} must be >= 0 (0: off), got {v!r}")
+        groups = self.factor_groups
+        if not (isinstance(groups, (tuple, list)) and all(isinstance(g, FactorGroup) for g in groups)):
+            raise InputError(f"smoother option factor_groups must be a tuple of FactorGroup objects "
+                             f"(gfimu.smoother.groups), got {groups!r}")
 
     @property
     def robust(self) -> bool:
@@ -307,20 +312,20 @@ class SmootherProblem:
     def __post_init__(self) -> None:
         reason = options_reason(self.log.array, self.options, attitude_supported=True)
         if reason:
-            raise ValueError(reason)
+            raise InputError(reason)
         arr = self.log.array
         opt = self.options
         self.n = len(self.log)
         self._accel_sigma_unweighted = None  # the noise the robust re-weighting starts from (base_noise)
         self._process_base = None
         if self.n < 2:
-            raise ValueError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
+            raise DataError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
         self.dt_s = self.log.dt_s
         bad = ~np.isfinite(self.log.accel_mps2)
         if np.any(bad):
             row, col = np.argwhere(bad)[0]
-            raise ValueError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
-                             f"({int(bad.sum())} such values); the smoother needs finite readings")
+            raise DataError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
+                            f"({int(bad.sum())} such values); the smoother needs finite readings")
         self.sensors = accelerometer.array_geometry(arr)  # (directions, positions, column slice)
         # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
         self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
@@ -350,7 +355,7 @@ class SmootherProblem:
         self.attitude = self.layout.attitude
         self.use_inclinometer = bool(opt.use_inclinometer and self.log.tilt_rad is not None)
         if opt.use_inclinometer and self.log.tilt_rad is None:
-            raise ValueError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
+            raise InputError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
         if self.attitude:
             self.AT = self.layout.rotation
         # the model: every group that applies, the measurement first, then those placed first

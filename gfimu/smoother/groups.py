@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import noise
+from ..errors import DataError
 from ..factors import (
     accelerometer,
     attitude_key,
@@ -654,7 +655,7 @@ class GyroscopeGroup(FactorGroup):
     def setup(self, problem) -> None:
         if not np.all(np.isfinite(problem.log.gyro_b_radps)):
             row = int(np.argwhere(~np.isfinite(problem.log.gyro_b_radps))[0, 0])
-            raise ValueError(f"{problem.log.source}: gyroscope reading is not finite at sample {row}")
+            raise DataError(f"{problem.log.source}: gyroscope reading is not finite at sample {row}")
         problem.gyro_sigma = noise.gyro_noise_std(problem.log.array)
 
     def terms(self, problem, states, params):
@@ -723,7 +724,7 @@ class InclinometerGroup(FactorGroup):
     def setup(self, problem) -> None:
         if not np.all(np.isfinite(problem.log.tilt_rad)):
             row = int(np.argwhere(~np.isfinite(problem.log.tilt_rad))[0, 0])
-            raise ValueError(f"{problem.log.source}: inclinometer reading is not finite at sample {row}")
+            raise DataError(f"{problem.log.source}: inclinometer reading is not finite at sample {row}")
         problem.tilt_sigma = noise.tilt_noise_std(problem.log.array)
 
     def terms(self, problem, states, params):

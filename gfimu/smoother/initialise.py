@@ -25,6 +25,7 @@ import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from .. import noise, rigid_body
+from ..errors import InputError
 from ..estimators.ml import MLEstimator
 from ..factors import _so3
 from ..log import Log
@@ -250,7 +251,7 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
     data = isinstance(robust_scale_radps, str) and robust_scale_radps == "data"
     if not data and robust_scale_radps is not None and (
             isinstance(robust_scale_radps, str) or not (np.isfinite(robust_scale_radps) and robust_scale_radps > 0)):
-        raise ValueError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
+        raise InputError(f"sign_chain: robust_scale_radps must be a positive number, 'data' or None, got {robust_scale_radps!r}")
     n = len(omega_b_radps)
     if n < 2:
         return np.ones(n)
@@ -363,7 +364,7 @@ def initial_estimate(log: Log, options: SmootherOptions) -> np.ndarray:
     chained over time when ``ml_sign_chain``); free flight always uses its own initialisation."""
     if options.initialisation != "ml" or options.free_flight:
         return initial_states(log, options)
-    m = MLEstimator().estimate(log)
+    m = MLEstimator().estimate_motion(log)
     omega = m.omega_b_radps
     if options.ml_sign_chain:
         omega = omega * sign_chain(omega, m.omega_dot_b_radps2, log.dt_s)[:, None]

@@ -26,6 +26,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from ..errors import InputError
+
 PRESETS: dict[str, tuple[str, dict[str, Any]]] = {
     "hand-held-low-rate": (
         "fast hand-held motion at 50–100 Hz on real sensors whose rigid-body residual exceeds their noise",
@@ -57,10 +59,10 @@ def describe_presets() -> str:
 def apply_preset(name: str, options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The preset's options updated with ``options`` (explicit options win).
 
-    Raises ValueError naming the known presets when ``name`` is not one of them.
+    Raises an :class:`~gfimu.errors.InputError` naming the known presets when ``name`` is not one of them.
     """
     if not isinstance(name, str) or name not in PRESETS:
-        raise ValueError(f"unknown smoother preset {name!r}; presets: {describe_presets()}")
+        raise InputError(f"unknown smoother preset {name!r}; presets: {describe_presets()}")
     return {**PRESETS[name][1], **dict(options or {})}
 
 
@@ -68,13 +70,13 @@ def expand_preset(method: str, options: Mapping[str, Any] | None) -> dict[str, A
     """``options`` of ``method`` with a ``preset`` entry replaced by the preset's settings.
 
     Options without ``preset`` come back unchanged (as a new dict); a preset for a
-    method other than those in :data:`PRESET_METHODS` is a ValueError.
+    method other than those in :data:`PRESET_METHODS` is an :class:`~gfimu.errors.InputError`.
     """
     out = dict(options or {})
     if "preset" not in out:
         return out
     name = out.pop("preset")
     if method not in PRESET_METHODS:
-        raise ValueError(f"presets apply to the method(s) {', '.join(PRESET_METHODS)}, not {method!r} "
+        raise InputError(f"presets apply to the method(s) {', '.join(PRESET_METHODS)}, not {method!r} "
                          f"(preset {name!r} given)")
     return apply_preset(name, out)

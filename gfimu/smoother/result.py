@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
 
+from ..estimate import Estimate, Report
 from ..motion import Motion
 
 
@@ -30,30 +33,39 @@ class SmootherResult:
     model_check: object | None = None
     """The batch smoother's check of the readings against a rigid body (:class:`gfimu.smoother.auto.ModelCheck`),
     None when it did not run."""
+    timings: Mapping[str, float] = field(default_factory=dict)
+    """Seconds per step of the run (empty: not timed by step)."""
 
     @property
     def sigma(self) -> dict:
         return self.motion.sigma
 
+    def report(self, method: str, estimator, seconds: float) -> Report:
+        """The :class:`~gfimu.estimate.Report` of this run of ``estimator`` as ``method``, which took
+        ``seconds`` in all (the timings by step when the run has them)."""
+        return Report.of(method, estimator, timings=dict(self.timings) or {"estimate": seconds},
+                         warnings=self.warnings, model_check=self.model_check, tunings=self.tunings,
+                         calibration=self.calibration, iterations=self.iterations, cost=self.cost,
+                         windows=self.windows)
 
-class SmootherEstimatorRuns:
+
+class SmootherEstimator:
     """What the batch and fixed-lag estimators share: their model options as plain
-    :class:`gfimu.smoother.graph.SmootherOptions`, and :meth:`estimate` keeping the newest
-    :class:`SmootherResult` (in the estimator's ``_runs`` list) behind :attr:`last_tuning`.
-    A subclass is a :class:`SmootherOptions` dataclass that defines ``result(log, progress)``."""
+    :class:`gfimu.smoother.graph.SmootherOptions`, and :meth:`estimate` returning the motion with
+    the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing of it).
+    A subclass is a :class:`SmootherOptions` dataclass that defines ``method`` (its name in
+    :data:`gfimu.methods.METHODS`) and ``result(log, progress)`` (the :class:`SmootherResult`)."""
+
+    method = ""
 
     def options(self):
         from .graph import SmootherOptions
 
         return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
 
-    def estimate(self, log, progress: bool = False) -> Motion:
+    def estimate(self, log, progress: bool = False) -> Estimate:
+        """The smoother on ``log``: :class:`~gfimu.estimate.Estimate` ``(motion, report)``; the report
+        carries the noise chosen, the model check, the solver's iterations and cost, and its notes."""
+        t0 = time.perf_counter()
         res = self.result(log, progress)
-        self._runs[:] = [res]
-        return res.motion
-
-    @property
-    def last_tuning(self) -> list:
-        """The process noise chosen from the data in the newest :meth:`estimate`, per solve window
-        (:class:`gfimu.smoother.tuning.Tuning`; empty when not tuned); :meth:`result` returns it too."""
-        return list(self._runs[-1].tunings) if self._runs else []
+        return Estimate(res.motion, res.report(self.method, self, time.perf_counter() - t0))

@@ -147,6 +147,12 @@ def sign_scale(part: Log, ml_motion) -> float | None:
     return sign_chain_scale(ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, part.dt_s)
 
 
+RESOLVED_FACTOR = 4.0
+"""The local motion is resolved when its step power exceeds this many times the noise's (a motion
+density above the noise's by √3 in std): below, the local density is the noise's, which says
+nothing about the motion."""
+
+
 class LocalDensity:
     """The local motion density of a stream, causally: the step power of the per-sample inversion's
     ω̇ (paper 000, eq. 7: linear in the readings) above what its own noise gives, averaged over the
@@ -156,6 +162,9 @@ class LocalDensity:
     robust model) and returns the local jerk density [rad/s²/√s], or None until two samples came.
     Needs an array whose structure matrix has full column rank (12 unknowns); :attr:`available`
     says whether it has."""
+
+    resolved = False
+    """Whether the last period's steps stand clearly above what the noise gives (:data:`RESOLVED_FACTOR`)."""
 
     def __init__(self, array, period_s: float = 0.5) -> None:
         S = array.structure_matrix()
@@ -197,6 +206,7 @@ class LocalDensity:
             self._sum_noise -= n0
         n = len(self._steps)
         mean_steps, mean_noise = max(self._sum_steps, 0.0) / n, max(self._sum_noise, 0.0) / n
+        self.resolved = mean_steps > RESOLVED_FACTOR * mean_noise
         excess = max(mean_steps - mean_noise, mean_noise)
         return math.sqrt(excess / 3.0)
 

@@ -16,6 +16,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from ...errors import InputError
+
 
 @dataclass(frozen=True)
 class Conversion:
@@ -56,7 +58,7 @@ def reader_names() -> list[str]:
 def get_reader(name: str) -> Reader:
     """The reader of format ``name``; ValueError naming the known formats otherwise."""
     if name not in reader_names():
-        raise ValueError(f"unknown recording format {name!r}; formats: {', '.join(reader_names())}")
+        raise InputError(f"unknown recording format {name!r}; formats: {', '.join(reader_names())}")
     reader = importlib.import_module(f"{__name__}.{name}").READER
     if reader.name != name:  # pragma: no cover - a module must register its own name
         raise RuntimeError(f"reader module {name!r} registers the name {reader.name!r}")

@@ -38,6 +38,7 @@ import numpy as np
 
 from . import Conversion, Reader
 from ...array import mimu4444_array
+from ...errors import InputError
 from ...log import Log
 from ...motion import Motion
 
@@ -58,7 +59,7 @@ UPSIDE_DOWN_IMUS = (1, 3, 5, 7)  # 0-based: IMUs 2, 4, 6, 8
 ROTATION_BOARD_UPSIDE_DOWN = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-class MIMU4444FormatError(ValueError):
+class MIMU4444FormatError(InputError):
     """The byte stream holds no decodable MIMU4444 packet."""
 
 
@@ -378,7 +379,7 @@ def shift_reference(log, shift_ms: float):
     from scipy.interpolate import CubicSpline
 
     if log.reference is None or log.reference.omega_b_radps is None:
-        raise ValueError(f"{log.source}: no reference angular velocity to shift")
+        raise InputError(f"{log.source}: no reference angular velocity to shift")
     if shift_ms == 0:
         return log
     w = log.reference.omega_b_radps

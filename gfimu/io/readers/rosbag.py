@@ -38,6 +38,7 @@ import numpy as np
 from . import Conversion, Reader
 from ._grid import common_period_ns
 from ..errors import LogFormatError
+from ...errors import InputError, ResourceError
 from ...log import Log
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -46,7 +47,7 @@ MAX_GAP_PERIODS = 3.0  # default: gaps up to 3 periods (2 missing messages) are 
 EXTRA_HINT = "reading ROS bags needs the rosbags package: pip install 'gfimu[rosbag]'"
 
 
-class MissingExtraError(RuntimeError):
+class MissingExtraError(ResourceError, RuntimeError):
     """An optional dependency is not installed; the message names the extra to install."""
 
 
@@ -426,7 +427,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
 def read(path, array: str, with_gyro: bool = False, max_gap_periods: float = MAX_GAP_PERIODS) -> Conversion:
     """The array's accelerometers from the bag's Imu messages, aligned onto one time base."""
     if not (max_gap_periods >= GAP_FACTOR and math.isfinite(max_gap_periods)):
-        raise ValueError(f"--max-gap-periods: expected a number >= {GAP_FACTOR:g}, got {max_gap_periods!r}")
+        raise InputError(f"--max-gap-periods: expected a number >= {GAP_FACTOR:g}, got {max_gap_periods!r}")
     return read_bag(path, array, with_gyro=with_gyro, max_gap_periods=max_gap_periods)
 
 
