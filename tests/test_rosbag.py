@@ -712,3 +712,41 @@ def test_gyro_as_reference_from_a_topic_of_the_bag(tmp_path, capsys):
             f"{bag2}: --gyro-as-reference: topic '/imu/s2' provides no angular_velocity")
     refused([str(bag2), "--array", str(arr), "--gyro-as-reference", "/nope"], tmp_path / "log3", capsys,
             f"{bag2}: --gyro-as-reference: '/nope' is not an Imu topic of this bag")
+
+
+def test_extrinsics_from_openvins_and_hostile_yaml_with_a_bag(tmp_path, good, capsys):
+    """--extrinsics on `convert rosbag`: an OpenCV/OpenVINS file places the accelerometers (matched by rostopic);
+    a 'billion laughs' file is refused in well under a second, the bag and the YAML unchanged."""
+    import time
+
+    log, bags = good
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rots = [matrix_from_rotation_vector(v) for v in np.random.default_rng(4).normal(size=(4, 3))]
+    pos = np.random.default_rng(5).uniform(-0.05, 0.05, (4, 3))
+    text = "%YAML:1.0\n---\n"
+    for k, a in enumerate(log.array.accelerometers):
+        m = np.eye(4)
+        m[:3, :3] = rots[k].T
+        m[:3, 3] = -rots[k].T @ pos[k]
+        text += (f"imu{k}:\n   T_i_b: !!opencv-matrix\n      rows: 4\n      cols: 4\n      dt: d\n      data: [ "
+                 + ", ".join(f"{v:.17g}" for v in m.ravel()) + f" ]\n   rostopic: \"/imu/{a.name}\"\n")
+    (tmp_path / "chain.yaml").write_text(text)
+    rc, out, err = convert([str(bags["mcap"]), "--array", str(arr), "--extrinsics", str(tmp_path / "chain.yaml"),
+                            "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert "Kalibr entries matched by rostopic" in out
+    for k, a in enumerate(gio.read_log(tmp_path / "log").array.accelerometers):
+        np.testing.assert_allclose(a.position_m, pos[k], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(a.rotation_body_sensor, rots[k], rtol=0, atol=1e-15)
+    laughs = "a: &a [" + ",".join(['"lol"'] * 9) + "]\n"
+    for prev, name in zip("abcdefgh", "bcdefghi"):
+        laughs += f"{name}: &{name} [" + ",".join([f"*{prev}"] * 9) + "]\n"
+    (tmp_path / "laughs.yaml").write_text(laughs)
+    assert len(laughs) < 400
+    before = snapshot(bags["mcap"]) | snapshot(tmp_path / "laughs.yaml")
+    start = time.perf_counter()
+    refused([str(bags["mcap"]), "--array", str(arr), "--extrinsics", str(tmp_path / "laughs.yaml")],
+            tmp_path / "log2", capsys, f"{tmp_path / 'laughs.yaml'}:6: its aliases (*name) expand to more than "
+                                       "200000 nodes")
+    assert time.perf_counter() - start < 1.0
+    assert snapshot(bags["mcap"]) | snapshot(tmp_path / "laughs.yaml") == before
