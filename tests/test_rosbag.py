@@ -338,7 +338,7 @@ def test_with_gyro_mean_in_the_body_frame_and_covariances_as_stds(tmp_path, caps
     back = gio.read_log(tmp_path / "log")
     np.testing.assert_allclose(back.gyro_b_radps, log.truth.omega_b_radps, rtol=0, atol=1e-12)
     assert "gyro: mean angular velocity in B of 3 stream(s) (s0, s1, s3)" in out
-    assert "not provided (angular_velocity_covariance[0] = -1) by s2" in out
+    assert "not provided (angular_velocity_covariance[0] = -1, or not finite) by s2" in out
     std = float(np.sqrt((0.0025 + 0.0049 + 0.0121) / 3))
     assert [a.noise_std_mps2 for a in back.array.accelerometers] == [pytest.approx(std, rel=1e-12)] * 4
     # the mean of 3 gyros: variance (mean of the diagonal) / 3
@@ -750,3 +750,30 @@ def test_extrinsics_from_openvins_and_hostile_yaml_with_a_bag(tmp_path, good, ca
                                        "200000 nodes")
     assert time.perf_counter() - start < 1.0
     assert snapshot(bags["mcap"]) | snapshot(tmp_path / "laughs.yaml") == before
+
+
+def test_non_finite_readings_are_dropped_and_counted(tmp_path, capsys):
+    """A nan or inf linear_acceleration is no reading: dropped, counted, bridged like a gap; a stream whose
+    angular velocity is not finite somewhere is no gyro for --with-gyro."""
+    log = rotated_log()
+    streams = sync_streams(log, gyro_from=(0,))
+    accel = streams[0]["accel"].copy()
+    accel[10] = np.nan
+    accel[20, 1] = np.inf
+    gyro = streams[0]["gyro"].copy()
+    gyro[5, 2] = np.nan
+    streams[0] = {**streams[0], "accel": accel, "gyro": gyro}
+    bag = write_bag(tmp_path / "bag", "mcap", streams)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert "s0: topic /imu/s0: 2 message(s) dropped for a linear_acceleration that is not finite (nan or inf; " \
+           "message index 10, 20)" in out
+    back = gio.read_log(tmp_path / "log")
+    assert np.all(np.isfinite(back.accel_mps2))
+    a = log.accel_mps2[:, 0:3]
+    np.testing.assert_allclose(back.accel_mps2[[10, 20], 0:3], [(a[9] + a[11]) / 2, (a[19] + a[21]) / 2], rtol=0,
+                               atol=1e-12)
+    refused([str(bag), "--array", str(arr), "--with-gyro"], tmp_path / "log2", capsys,
+            "--with-gyro: no Imu stream of the array provides angular_velocity",
+            "or a message's angular_velocity is not finite")

@@ -154,7 +154,7 @@ class ImuStream:
     stamps_ns: np.ndarray  # (n,) int64
     accel_mps2: np.ndarray  # (n, 3) linear_acceleration, frame of header.frame_id
     gyro_radps: np.ndarray  # (n, 3) angular_velocity, same frame
-    gyro_given: np.ndarray  # (n,) angular_velocity_covariance[0] != -1
+    gyro_given: np.ndarray  # (n,) angular_velocity_covariance[0] != -1 and angular_velocity finite
     accel_var_mps2: np.ndarray  # (n, 3) diagonal of linear_acceleration_covariance; nan where not given
     gyro_var_radps: np.ndarray  # (n, 3) diagonal of angular_velocity_covariance; nan where not given
     duplicates: int = 0
@@ -234,9 +234,13 @@ class TopicMessages:
         """(n,) True where linear_acceleration_covariance[0] is not -1, the REP-145 mark for "not provided"."""
         return self.fields[:, 6] != -1
 
+    def accel_finite(self) -> np.ndarray:
+        """(n,) True where linear_acceleration is finite (a nan or inf is no reading)."""
+        return np.isfinite(self.fields[:, 0:3]).all(axis=1)
+
     def gyro_given(self) -> np.ndarray:
-        """(n,) True where angular_velocity_covariance[0] is not -1."""
-        return self.fields[:, 15] != -1
+        """(n,) True where angular_velocity_covariance[0] is not -1 and angular_velocity is finite."""
+        return (self.fields[:, 15] != -1) & np.isfinite(self.fields[:, 3:6]).all(axis=1)
 
 
 def _frame_name(frame_id: str) -> str:
@@ -305,7 +309,8 @@ def _stream(source: str, topics: list[str], parts: list[tuple[TopicMessages, np.
     first = np.concatenate([[True], np.diff(stamps) > 0])
     f = fields[order[first]]
     return ImuStream(
-        source, tuple(topics), tuple(frames), stamps[first], f[:, 0:3], f[:, 3:6], f[:, 15] != -1,
+        source, tuple(topics), tuple(frames), stamps[first], f[:, 0:3], f[:, 3:6],
+        (f[:, 15] != -1) & np.isfinite(f[:, 3:6]).all(axis=1),
         _diagonal_variance(f[:, 6:15]), _diagonal_variance(f[:, 15:24]),
         duplicates=int(np.count_nonzero(~first)), out_of_order=out_of_order, stamps_from_bag=from_bag,
     )
@@ -325,6 +330,17 @@ def _dropped(topic: str, m: TopicMessages, keep: np.ndarray) -> list[str]:
     first = np.nonzero(out)[0][:5].tolist()
     return [f"topic {topic}: {n} of its {len(m)} message(s) dropped for linear_acceleration_covariance[0] = -1 "
             f"(not provided; message index {', '.join(map(str, first))}{', ...' if n > 5 else ''})"]
+
+
+def _not_finite(topic: str, m: TopicMessages, sel: np.ndarray) -> list[str]:
+    """Report line for the messages ``sel`` selects whose linear_acceleration is nan or inf (dropped)."""
+    bad = sel & ~m.accel_finite()
+    n = int(np.count_nonzero(bad))
+    if not n:
+        return []
+    first = np.nonzero(bad)[0][:5].tolist()
+    return [f"topic {topic}: {n} message(s) dropped for a linear_acceleration that is not finite (nan or inf; "
+            f"message index {', '.join(map(str, first))}{', ...' if n > 5 else ''})"]
 
 
 def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
@@ -360,7 +376,8 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                                      f"{array_path}) is not an accelerometer: {_not_given(len(m))} (message 0 is "
                                      "the first)", path)
             notes.append(_dropped(acc.topic, m, given))
-            streams.append(_stream(f"topic {acc.topic}", [acc.topic], [(m, given)]))
+            notes[-1] += _not_finite(acc.topic, m, given)
+            streams.append(_stream(f"topic {acc.topic}", [acc.topic], [(m, given & m.accel_finite())]))
         else:
             hits = [(t, records[t].frame(acc.name)) for t in sorted(records)]
             hits = [(t, sel) for t, sel in hits if sel.any()]
@@ -385,9 +402,10 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                     for t, sel in no_accel]
             for t, sel in hits:
                 note += _dropped(t, records[t], sel | ~records[t].frame(acc.name))
+                note += _not_finite(t, records[t], sel)
             notes.append(note)
             streams.append(_stream(f"frame_id {acc.name!r} on {', '.join(on)}", on,
-                                   [(records[t], sel) for t, sel in hits]))
+                                   [(records[t], sel & records[t].accel_finite()) for t, sel in hits]))
     for acc, s in zip(array.accelerometers, streams):
         if s.stamps_ns.size < 2:
             raise LogFormatError(f"accelerometer {acc.name!r} ({s.source}): {s.stamps_ns.size} message(s) with "
@@ -396,7 +414,8 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
     gyro_streams = [k for k, s in enumerate(streams) if s.gyro_given.all() and ref_topic not in s.topics]
     if with_gyro and not gyro_streams:
         raise LogFormatError("--with-gyro: no Imu stream of the array provides angular_velocity (its "
-                             "angular_velocity_covariance[0] is -1, the ROS mark for not provided, in every stream"
+                             "angular_velocity_covariance[0] is -1, the ROS mark for not provided, or a message's "
+                             "angular_velocity is not finite, in every stream"
                              + (f"; the messages on {ref_topic} are the reference)" if ref_topic else ")"), path)
     values = []
     for acc, s in zip(array.accelerometers, streams):
@@ -460,8 +479,8 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                      + (f"; noise_std_radps {gstd:.6g} from angular_velocity_covariance" if gstd is not None else ""))
         left = [a.name for k, a in enumerate(array.accelerometers) if not streams[k].gyro_given.all()]
         if left:
-            lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1) by {', '.join(left)}; a stream "
-                         "is used only when all its messages provide it")
+            lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1, or not finite) by "
+                         f"{', '.join(left)}; a stream is used only when all its messages provide it")
     elif array.gyroscope is not None:
         gyroscope = None
         lines.append(f"gyro: the [gyroscope] of {array_path} is left out of the log (no --with-gyro)")
@@ -550,7 +569,7 @@ def _gyro_reference(topic: str, m: TopicMessages, array, grid_ns: np.ndarray, ma
              "not a gyroscope of the array"]
     if n_left:
         lines.append(f"reference: {n_left} message(s) of {topic} with angular_velocity_covariance[0] = -1 (not "
-                     "provided) left out")
+                     "provided) or an angular_velocity that is not finite left out")
     if invalid.any():
         lines.append(f"reference: {int(np.count_nonzero(invalid))} sample(s) outside its messages or in their gaps "
                      f"over {max_gap_periods:g} periods marked not valid")
