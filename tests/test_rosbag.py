@@ -777,3 +777,42 @@ def test_non_finite_readings_are_dropped_and_counted(tmp_path, capsys):
     refused([str(bag), "--array", str(arr), "--with-gyro"], tmp_path / "log2", capsys,
             "--with-gyro: no Imu stream of the array provides angular_velocity",
             "or a message's angular_velocity is not finite")
+
+
+LAUGHS = "a: &a [" + ",".join(['"lol"'] * 9) + "]\n" + "".join(
+    f"{n}: &{n} [" + ",".join([f"*{p}"] * 9) + "]\n" for p, n in zip("abcdefg", "bcdefgh")) + \
+    "rosbag2_bagfile_information: {version: 9, topics_with_message_count: [*h, *h, *h]}\n"
+
+
+@pytest.mark.parametrize("edit, parts", [
+    (lambda m: m.replace("  version: 9", "  version: '9'"),
+     ["metadata.yaml: rosbag2_bagfile_information.version: expected an integer, got '9'"]),
+    (lambda m: m.replace("rosbag2_bagfile_information:", "rosbag2_bagfile_information: 5\nx:"),
+     ["metadata.yaml: rosbag2_bagfile_information: expected a mapping, got 5"]),
+    (lambda m: m.replace("      name: /imu/s1", "      name: [1]"),
+     ["metadata.yaml: rosbag2_bagfile_information.topics_with_message_count[1].topic_metadata.name: expected text"]),
+    (lambda m: m.replace("\n  message_count: ", "\n  message_count: many #", 1),
+     ["metadata.yaml: rosbag2_bagfile_information.message_count: expected an integer, got 'many'"]),
+    (lambda m: LAUGHS, ["metadata.yaml:6: its aliases (*name) expand to more than 200000 nodes"]),
+    (lambda m: "rosbag2_bagfile_information: " + "[" * 5000 + "]" * 5000 + "\n",
+     ["metadata.yaml:1: nested deeper than 64 levels"]),
+    (lambda m: "just text\n", ["metadata.yaml: expected the key rosbag2_bagfile_information at the top"]),
+])
+def test_a_damaged_metadata_yaml_names_the_file_and_key(tmp_path, edit, parts, capsys):
+    """Damaged metadata.yaml: one line naming metadata.yaml and the key (rosbags itself said 'Invalid bag
+    metadata: ... not subscriptable' or 'maximum recursion depth exceeded' about the folder), in under a second."""
+    import time
+
+    log = rotated_log(0.1)
+    bag = write_bag(tmp_path / "bag", "sqlite3", sync_streams(log))
+    text = (bag / "metadata.yaml").read_text()
+    changed = edit(text)
+    assert changed != text
+    (bag / "metadata.yaml").write_text(changed)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    before = snapshot(bag) | snapshot(arr)
+    start = time.perf_counter()
+    err = refused([str(bag), "--array", str(arr)], tmp_path / "log", capsys, *parts)
+    assert time.perf_counter() - start < 1.0
+    assert err.startswith(f"gfimu convert: error: {bag / 'metadata.yaml'}")
+    assert snapshot(bag) | snapshot(arr) == before

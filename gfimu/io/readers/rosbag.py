@@ -183,6 +183,54 @@ def _storage_of_folder(path: Path) -> Path | None:
     return files[0] if files else None
 
 
+def _check_metadata(path: Path) -> None:
+    """Refuse a ROS 2 ``metadata.yaml`` that rosbags cannot read, naming the file and the key: parsed with
+    bounded depth and aliases (:mod:`gfimu.io.safe_yaml`), then the keys rosbags reads checked for their types."""
+    from ..safe_yaml import load_yaml
+
+    doc, _ = load_yaml(path, "the metadata.yaml of a ROS 2 bag")
+    top = "rosbag2_bagfile_information"
+
+    def bad(key: str, expected: str, value) -> LogFormatError:
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:80] + "..."
+        return LogFormatError(f"{key}: expected {expected}, got {shown} (not a ROS 2 bag's metadata, or damaged; "
+                              "ros2 bag reindex writes it anew)", path, None, key)
+
+    def get(node: dict, name: str, where: str, kind, expected: str):
+        if name not in node:
+            raise LogFormatError(f"{where}: has no {name} (not a ROS 2 bag's metadata, or damaged; ros2 bag reindex "
+                                 "writes it anew)", path, None, where)
+        value = node[name]
+        if not isinstance(value, kind) or isinstance(value, bool):
+            raise bad(f"{where}.{name}", expected, value)
+        return value
+
+    if not isinstance(doc, dict) or top not in doc:
+        raise LogFormatError(f"expected the key {top} at the top (not a ROS 2 bag's metadata)", path, None, top)
+    info = doc[top]
+    if not isinstance(info, dict):
+        raise bad(top, "a mapping", info)
+    get(info, "version", top, int, "an integer")
+    get(info, "storage_identifier", top, str, "text (sqlite3 or mcap)")
+    files = get(info, "relative_file_paths", top, list, "a list of file names")
+    for k, name in enumerate(files):
+        if not isinstance(name, str):
+            raise bad(f"{top}.relative_file_paths[{k}]", "a file name", name)
+    get(info, "message_count", top, int, "an integer")
+    get(get(info, "duration", top, dict, "a mapping"), "nanoseconds", f"{top}.duration", int, "an integer")
+    get(get(info, "starting_time", top, dict, "a mapping"), "nanoseconds_since_epoch", f"{top}.starting_time", int,
+        "an integer")
+    for k, entry in enumerate(get(info, "topics_with_message_count", top, list, "a list of topics")):
+        where = f"{top}.topics_with_message_count[{k}]"
+        if not isinstance(entry, dict):
+            raise bad(where, "a mapping", entry)
+        get(entry, "message_count", where, int, "an integer")
+        meta = get(entry, "topic_metadata", where, dict, "a mapping")
+        for name in ("name", "type", "serialization_format"):
+            get(meta, name, f"{where}.topic_metadata", str, "text")
+
+
 def _bag_kind(path: Path) -> str:
     """What ``path`` holds, from its first bytes (or metadata.yaml); LogFormatError when not a bag."""
     if path.is_dir():
@@ -263,6 +311,8 @@ def _messages(path: Path) -> tuple[str, dict[str, str], dict[str, TopicMessages]
     if storage is not None:  # metadata.yaml lost: its one storage file is read on its own, as a bare file is
         path = storage
     kind = _bag_kind(path)
+    if path.is_dir():
+        _check_metadata(path / "metadata.yaml")
     if storage is not None:
         kind = f"ROS 2 bag folder without metadata.yaml ({storage.name} read on its own, as a bare {kind})"
     try:
