@@ -268,6 +268,8 @@ def refused(folder: Path, name: str, capsys, *parts: str) -> str:
      ["k.yaml:3: imu0.time_offset: expected a number of seconds, got 'soon'"]),
     ("imu0:\n  T_i_b: [[1.0e+300, 0, 0, 0], [0, 1.0e+300, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n",
      ["k.yaml:2: imu0.T_i_b: not a rigid transform: its rotation part holds 1e+300"]),
+    ("imu0:\n  T_i_b: [[1, 0, 0, 1.0e+200], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n",
+     ["k.yaml:2: imu0.T_i_b: translation [1e+200, 0.0, 0.0] m puts the IMU 1e+200 m from the body origin"]),
     ("imu0:\n  T_i_b: [[.nan, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n",
      ["k.yaml:2: imu0.T_i_b: expected a 4x4 matrix of finite numbers"]),
     ("imu0:\n  T_i_b: [[true, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n",

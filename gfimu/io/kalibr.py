@@ -36,6 +36,7 @@ from .errors import LogFormatError, LogFormatWarning
 from .safe_yaml import MAX_YAML_NODES, OpenCVMatrix, load_yaml  # noqa: F401 (MAX_YAML_NODES: documented bound)
 
 BOTTOM_ROW_TOLERANCE = 1e-9
+MAX_TRANSLATION_M = 100.0  # an IMU of one rigid body; beyond, the numbers overflow the model (and are not metres)
 ORTHONORMAL_REPAIR_TOLERANCE = 1e-4  # max |RᵀR - I| taken as rounded digits (5 decimals give about 1e-5)
 
 
@@ -166,6 +167,12 @@ def parse_kalibr(doc, text: str, path: str | os.PathLike) -> list[KalibrImu]:
             raise LogFormatError(f"{where}: not a rigid transform: its bottom row is {m[3].tolist()}, expected "
                                  "[0, 0, 0, 1]", path, line, where)
         r = _rotation(m, where, path, line)
+        far = float(np.max(np.abs(m[:3, 3])))  # no overflow, unlike the norm of 1e200
+        if far > MAX_TRANSLATION_M / np.sqrt(3.0) and far * np.linalg.norm(m[:3, 3] / far) > MAX_TRANSLATION_M:
+            distance = far * np.linalg.norm(m[:3, 3] / far)
+            raise LogFormatError(f"{where}: translation {m[:3, 3].tolist()} m puts the IMU {distance:.3g} m from the "
+                                 f"body origin; an IMU of one rigid body lies within {MAX_TRANSLATION_M:g} m (T_i_b's "
+                                 "translation is in metres)", path, line, where)
         topic = entry.get("rostopic")
         if topic is not None and not isinstance(topic, str):
             raise LogFormatError(f"{key}.rostopic: expected a topic name, got {_shown(topic)}", path,
