@@ -150,7 +150,10 @@ def write_bag(path: Path, kind: str, streams: list[dict], extra_topic: bool = Tr
             record = s.get("record_ns", np.asarray(s["stamps_ns"]) + 300_000)
             for k, t in enumerate(s["stamps_ns"]):
                 gyro = None if s.get("gyro") is None else s["gyro"][k]
-                msg = imu_message(ts, int(t), s["frame_id"], s["accel"][k], gyro, s.get("accel_cov"), s.get("gyro_cov"))
+                accel_cov, gyro_cov = s.get("accel_cov"), s.get("gyro_cov")
+                accel_cov = accel_cov[k] if np.ndim(accel_cov) == 2 else accel_cov  # one per message
+                gyro_cov = gyro_cov[k] if np.ndim(gyro_cov) == 2 else gyro_cov
+                msg = imu_message(ts, int(t), s["frame_id"], s["accel"][k], gyro, accel_cov, gyro_cov)
                 events.append((int(record[k]), conns[s["topic"]], ser(msg)))
         events.sort(key=lambda e: e[0])
         for record_ns, conn, data in events:
@@ -335,7 +338,7 @@ def test_with_gyro_mean_in_the_body_frame_and_covariances_as_stds(tmp_path, caps
     back = gio.read_log(tmp_path / "log")
     np.testing.assert_allclose(back.gyro_b_radps, log.truth.omega_b_radps, rtol=0, atol=1e-12)
     assert "gyro: mean angular velocity in B of 3 stream(s) (s0, s1, s3)" in out
-    assert "not provided (angular_velocity_covariance[0] = -1) by s2" in out
+    assert "not provided (angular_velocity_covariance[0] = -1, or not finite) by s2" in out
     std = float(np.sqrt((0.0025 + 0.0049 + 0.0121) / 3))
     assert [a.noise_std_mps2 for a in back.array.accelerometers] == [pytest.approx(std, rel=1e-12)] * 4
     # the mean of 3 gyros: variance (mean of the diagonal) / 3
@@ -563,3 +566,253 @@ def test_without_the_rosbags_package(tmp_path, good, monkeypatch, capsys):
     monkeypatch.setitem(__import__("sys").modules, "rosbags", None)
     refused([str(bags["ros1"]), "--array", str(arr)], tmp_path / "log", capsys,
             "reading ROS bags needs the rosbags package: pip install 'gfimu[rosbag]'", status=1)
+
+
+# --- REP-145 "not provided", bag folders without metadata, tf1 frame ids, a gyro reference ----------
+
+def snapshot(root: Path) -> dict[str, bytes]:
+    """Every file under ``root`` (or ``root`` itself) with its bytes: inputs must stay byte-identical."""
+    files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file())
+    return {str(p): p.read_bytes() for p in files}
+
+
+NO_ACCEL = np.array([-1.0, 0, 0, 0, 0, 0, 0, 0, 0])
+
+
+def test_a_topic_without_linear_acceleration_named_by_topic_is_refused(tmp_path, capsys):
+    log = rotated_log()
+    streams = sync_streams(log)
+    streams[2] = {**streams[2], "accel": np.zeros_like(streams[2]["accel"]), "accel_cov": NO_ACCEL}
+    bag = write_bag(tmp_path / "bag", "mcap", streams)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    before = snapshot(bag) | snapshot(arr)
+    refused([str(bag), "--array", str(arr)], tmp_path / "log", capsys,
+            f"{bag}: topic '/imu/s2' (accelerometer 's2', accelerometers[2].topic of {arr}) is not an accelerometer: "
+            "its 250 messages give linear_acceleration_covariance[0] = -1, the REP-145 mark for linear acceleration "
+            "not provided (message 0 is the first)")
+    assert snapshot(bag) | snapshot(arr) == before
+
+
+def test_a_topic_without_linear_acceleration_matched_by_frame_id(tmp_path, capsys):
+    """A gyro-only topic whose frame_id is an accelerometer's name is not read as that accelerometer; when it is
+    the only one with that frame_id, the accelerometer is refused."""
+    log = rotated_log(gyro=True)
+    streams = sync_streams(log)
+    gyro_only = {**streams[0], "topic": "/gyro", "accel": np.zeros_like(streams[0]["accel"]), "accel_cov": NO_ACCEL,
+                 "gyro": log.truth.omega_b_radps @ np.asarray(log.array.accelerometers[0].rotation_body_sensor)}
+    bag = write_bag(tmp_path / "bag", "ros1", [*streams, gyro_only])
+    arr = array_file(tmp_path / "array.toml", replace(log.array, gyroscope=None), topics=False)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert np.array_equal(gio.read_log(tmp_path / "log").accel_mps2, log.accel_mps2)  # no zeros from /gyro
+    assert ("s0: topic /gyro: its 250 message(s) with header.frame_id 's0' leave linear_acceleration out "
+            "(linear_acceleration_covariance[0] = -1): not read as an accelerometer") in out
+    assert "s0: frame_id 's0' on /imu/s0 (frame_id 's0')" in out
+    bag = write_bag(tmp_path / "only", "ros1", [*streams[1:], gyro_only])
+    refused([str(bag), "--array", str(arr)], tmp_path / "log2", capsys,
+            f"{bag}: the Imu messages with header.frame_id 's0' (accelerometer 's0' of {arr}) are no accelerometer's: "
+            "on /gyro, its 250 messages give linear_acceleration_covariance[0] = -1",
+            "(message 0 of /gyro is the first)")
+
+
+@pytest.mark.parametrize("kind", ["ros1", "sqlite3"])
+def test_messages_without_linear_acceleration_are_dropped_and_counted(tmp_path, kind, capsys):
+    log = rotated_log()
+    streams = sync_streams(log)
+    cov = np.zeros((250, 9))
+    cov[[40, 41, 200], 0] = -1.0
+    accel = streams[1]["accel"].copy()
+    accel[[40, 41, 200]] = 0.0  # what such a message carries: 0, which is no reading
+    streams[1] = {**streams[1], "accel": accel, "accel_cov": cov}
+    bag = write_bag(tmp_path / "bag", kind, streams)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert ("s1: topic /imu/s1: 3 of its 250 message(s) dropped for linear_acceleration_covariance[0] = -1 "
+            "(not provided; message index 40, 41, 200)") in out
+    assert "s1: topic /imu/s1 (frame_id 's1'), 247 message(s) at 500.00 Hz; 2 gap(s), 3 message(s) missing" in out
+    back = gio.read_log(tmp_path / "log")
+    expected = log.accel_mps2.copy()
+    a = log.accel_mps2[:, 3:6]
+    expected[40, 3:6] = (2 * a[39] + a[42]) / 3  # bridged linearly between the kept neighbours
+    expected[41, 3:6] = (a[39] + 2 * a[42]) / 3
+    expected[200, 3:6] = (a[199] + a[201]) / 2
+    np.testing.assert_allclose(back.accel_mps2, expected, rtol=0, atol=1e-12)
+    assert not np.any(np.all(back.accel_mps2[:, 3:6] == 0.0, axis=1))
+
+
+@pytest.mark.parametrize("kind", ["sqlite3", "mcap"])
+def test_a_ros2_bag_folder_without_metadata_yaml(tmp_path, kind, capsys):
+    log = rotated_log()
+    bag = write_bag(tmp_path / "bag", kind, sync_streams(log))
+    (bag / "metadata.yaml").unlink()
+    (storage,) = bag.iterdir()
+    before = snapshot(tmp_path)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    before = snapshot(bag) | snapshot(arr)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert np.array_equal(gio.read_log(tmp_path / "log").accel_mps2, log.accel_mps2)
+    assert f"{bag}: ROS 2 bag folder without metadata.yaml ({storage.name} read on its own" in out
+    assert snapshot(bag) | snapshot(arr) == before  # nothing written into the bag folder
+    # two storage files and no metadata: their order is unknown
+    shutil.copy(storage, bag / f"second{storage.suffix}")
+    refused([str(bag), "--array", str(arr)], tmp_path / "log2", capsys,
+            f"{bag}: a ROS 2 bag folder without metadata.yaml holding 2 storage files")
+
+
+def test_ros1_frame_ids_with_a_leading_slash(tmp_path, capsys):
+    log = rotated_log()
+    streams = [{**s, "frame_id": "/" + s["frame_id"], "topic": "/imu"} for s in sync_streams(log)]
+    bag = write_bag(tmp_path / "bag", "ros1", streams)
+    arr = array_file(tmp_path / "array.toml", log.array, topics=False)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert np.array_equal(gio.read_log(tmp_path / "log").accel_mps2, log.accel_mps2)
+    assert "s3: frame_id 's3' on /imu (frame_id '/s3')" in out
+
+
+def test_gyro_as_reference_from_a_topic_of_the_bag(tmp_path, capsys):
+    log = rotated_log(gyro=True)
+    streams = sync_streams(log, gyro_from=(1,))
+    # a reference gyro on its own topic, frame 'ref' (no accelerometer): its axes are the body axes;
+    # it starts later and ends earlier than the accelerometers
+    ref = {"topic": "/ref", "frame_id": "ref", "stamps_ns": log.timestamps_ns[20:230] + T0_NS,
+           "accel": np.zeros((210, 3)), "accel_cov": NO_ACCEL, "gyro": log.truth.omega_b_radps[20:230]}
+    bag = write_bag(tmp_path / "bag", "mcap", [*streams, ref])
+    arr = array_file(tmp_path / "array.toml", replace(log.array, gyroscope=None))
+    before = snapshot(bag) | snapshot(arr)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log"), "--gyro-as-reference",
+                            "/ref", "--with-gyro"], capsys)
+    assert rc == 0, err
+    assert snapshot(bag) | snapshot(arr) == before
+    back = gio.read_log(tmp_path / "log")
+    assert len(back) == 250 and back.reference is not None
+    valid = ~back.invalid_reference
+    assert valid.tolist() == [False] * 20 + [True] * 210 + [False] * 20
+    np.testing.assert_allclose(back.reference.omega_b_radps[valid], log.truth.omega_b_radps[20:230], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back.gyro_b_radps, log.truth.omega_b_radps, rtol=0, atol=1e-12)  # from s1
+    assert "reference: angular velocity of /ref (210 message(s) at 500.00 Hz), its axes (frame_id 'ref') taken as " \
+           "the body axes" in out
+    assert "reference: 40 sample(s) outside its messages or in their gaps over 3 periods marked not valid" in out
+    # the gyro of an accelerometer's topic: turned into the body frame by that accelerometer's rotation, and no
+    # longer a gyroscope of the array; without a topic, the one topic providing angular velocity
+    bag2 = write_bag(tmp_path / "bag2", "sqlite3", streams)
+    rc, out, err = convert([str(bag2), "--array", str(arr), "--out", str(tmp_path / "log2"), "--gyro-as-reference"],
+                           capsys)
+    assert rc == 0, err
+    back = gio.read_log(tmp_path / "log2")
+    assert back.gyro_b_radps is None and back.invalid_reference is None
+    np.testing.assert_allclose(back.reference.omega_b_radps, log.truth.omega_b_radps, rtol=0, atol=1e-12)
+    assert "turned into the body frame by the rotation of accelerometer 's1'" in out
+    refused([str(bag2), "--array", str(arr), "--gyro-as-reference", "/imu/s1", "--with-gyro"], tmp_path / "log3",
+            capsys, "--with-gyro: no Imu stream of the array provides angular_velocity",
+            "the messages on /imu/s1 are the reference")
+    refused([str(bag2), "--array", str(arr), "--gyro-as-reference", "/imu/s2"], tmp_path / "log3", capsys,
+            f"{bag2}: --gyro-as-reference: topic '/imu/s2' provides no angular_velocity")
+    refused([str(bag2), "--array", str(arr), "--gyro-as-reference", "/nope"], tmp_path / "log3", capsys,
+            f"{bag2}: --gyro-as-reference: '/nope' is not an Imu topic of this bag")
+
+
+def test_extrinsics_from_openvins_and_hostile_yaml_with_a_bag(tmp_path, good, capsys):
+    """--extrinsics on `convert rosbag`: an OpenCV/OpenVINS file places the accelerometers (matched by rostopic);
+    a 'billion laughs' file is refused in well under a second, the bag and the YAML unchanged."""
+    import time
+
+    log, bags = good
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rots = [matrix_from_rotation_vector(v) for v in np.random.default_rng(4).normal(size=(4, 3))]
+    pos = np.random.default_rng(5).uniform(-0.05, 0.05, (4, 3))
+    text = "%YAML:1.0\n---\n"
+    for k, a in enumerate(log.array.accelerometers):
+        m = np.eye(4)
+        m[:3, :3] = rots[k].T
+        m[:3, 3] = -rots[k].T @ pos[k]
+        text += (f"imu{k}:\n   T_i_b: !!opencv-matrix\n      rows: 4\n      cols: 4\n      dt: d\n      data: [ "
+                 + ", ".join(f"{v:.17g}" for v in m.ravel()) + f" ]\n   rostopic: \"/imu/{a.name}\"\n")
+    (tmp_path / "chain.yaml").write_text(text)
+    rc, out, err = convert([str(bags["mcap"]), "--array", str(arr), "--extrinsics", str(tmp_path / "chain.yaml"),
+                            "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert "Kalibr entries matched by rostopic" in out
+    for k, a in enumerate(gio.read_log(tmp_path / "log").array.accelerometers):
+        np.testing.assert_allclose(a.position_m, pos[k], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(a.rotation_body_sensor, rots[k], rtol=0, atol=1e-15)
+    laughs = "a: &a [" + ",".join(['"lol"'] * 9) + "]\n"
+    for prev, name in zip("abcdefgh", "bcdefghi"):
+        laughs += f"{name}: &{name} [" + ",".join([f"*{prev}"] * 9) + "]\n"
+    (tmp_path / "laughs.yaml").write_text(laughs)
+    assert len(laughs) < 400
+    before = snapshot(bags["mcap"]) | snapshot(tmp_path / "laughs.yaml")
+    start = time.perf_counter()
+    refused([str(bags["mcap"]), "--array", str(arr), "--extrinsics", str(tmp_path / "laughs.yaml")],
+            tmp_path / "log2", capsys, f"{tmp_path / 'laughs.yaml'}:6: its aliases (*name) expand to more than "
+                                       "200000 nodes")
+    assert time.perf_counter() - start < 1.0
+    assert snapshot(bags["mcap"]) | snapshot(tmp_path / "laughs.yaml") == before
+
+
+def test_non_finite_readings_are_dropped_and_counted(tmp_path, capsys):
+    """A nan or inf linear_acceleration is no reading: dropped, counted, bridged like a gap; a stream whose
+    angular velocity is not finite somewhere is no gyro for --with-gyro."""
+    log = rotated_log()
+    streams = sync_streams(log, gyro_from=(0,))
+    accel = streams[0]["accel"].copy()
+    accel[10] = np.nan
+    accel[20, 1] = np.inf
+    gyro = streams[0]["gyro"].copy()
+    gyro[5, 2] = np.nan
+    streams[0] = {**streams[0], "accel": accel, "gyro": gyro}
+    bag = write_bag(tmp_path / "bag", "mcap", streams)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log")], capsys)
+    assert rc == 0, err
+    assert "s0: topic /imu/s0: 2 message(s) dropped for a linear_acceleration that is not finite (nan or inf; " \
+           "message index 10, 20)" in out
+    back = gio.read_log(tmp_path / "log")
+    assert np.all(np.isfinite(back.accel_mps2))
+    a = log.accel_mps2[:, 0:3]
+    np.testing.assert_allclose(back.accel_mps2[[10, 20], 0:3], [(a[9] + a[11]) / 2, (a[19] + a[21]) / 2], rtol=0,
+                               atol=1e-12)
+    refused([str(bag), "--array", str(arr), "--with-gyro"], tmp_path / "log2", capsys,
+            "--with-gyro: no Imu stream of the array provides angular_velocity",
+            "or a message's angular_velocity is not finite")
+
+
+LAUGHS = "a: &a [" + ",".join(['"lol"'] * 9) + "]\n" + "".join(
+    f"{n}: &{n} [" + ",".join([f"*{p}"] * 9) + "]\n" for p, n in zip("abcdefg", "bcdefgh")) + \
+    "rosbag2_bagfile_information: {version: 9, topics_with_message_count: [*h, *h, *h]}\n"
+
+
+@pytest.mark.parametrize("edit, parts", [
+    (lambda m: m.replace("  version: 9", "  version: '9'"),
+     ["metadata.yaml: rosbag2_bagfile_information.version: expected an integer, got '9'"]),
+    (lambda m: m.replace("rosbag2_bagfile_information:", "rosbag2_bagfile_information: 5\nx:"),
+     ["metadata.yaml: rosbag2_bagfile_information: expected a mapping, got 5"]),
+    (lambda m: m.replace("      name: /imu/s1", "      name: [1]"),
+     ["metadata.yaml: rosbag2_bagfile_information.topics_with_message_count[1].topic_metadata.name: expected text"]),
+    (lambda m: m.replace("\n  message_count: ", "\n  message_count: many #", 1),
+     ["metadata.yaml: rosbag2_bagfile_information.message_count: expected an integer, got 'many'"]),
+    (lambda m: LAUGHS, ["metadata.yaml:6: its aliases (*name) expand to more than 200000 nodes"]),
+    (lambda m: "rosbag2_bagfile_information: " + "[" * 5000 + "]" * 5000 + "\n",
+     ["metadata.yaml:1: nested deeper than 64 levels"]),
+    (lambda m: "just text\n", ["metadata.yaml: expected the key rosbag2_bagfile_information at the top"]),
+])
+def test_a_damaged_metadata_yaml_names_the_file_and_key(tmp_path, edit, parts, capsys):
+    """Damaged metadata.yaml: one line naming metadata.yaml and the key (rosbags itself said 'Invalid bag
+    metadata: ... not subscriptable' or 'maximum recursion depth exceeded' about the folder), in under a second."""
+    import time
+
+    log = rotated_log(0.1)
+    bag = write_bag(tmp_path / "bag", "sqlite3", sync_streams(log))
+    text = (bag / "metadata.yaml").read_text()
+    changed = edit(text)
+    assert changed != text
+    (bag / "metadata.yaml").write_text(changed)
+    arr = array_file(tmp_path / "array.toml", log.array)
+    before = snapshot(bag) | snapshot(arr)
+    start = time.perf_counter()
+    err = refused([str(bag), "--array", str(arr)], tmp_path / "log", capsys, *parts)
+    assert time.perf_counter() - start < 1.0
+    assert err.startswith(f"gfimu convert: error: {bag / 'metadata.yaml'}")
+    assert snapshot(bag) | snapshot(arr) == before

@@ -34,9 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "reference.csv are replaced or removed, other files are kept")
         fp.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings before writing")
         fp.add_argument("--extrinsics", default=None, metavar="KALIBR.yaml",
-                        help="Kalibr IMU-chain YAML (imu0, imu1, ... each with T_i_b, a 4x4 body-to-IMU transform): "
-                             "replaces every accelerometer's position [m] and rotation (default: none, the "
-                             "recording's own geometry)")
+                        help="Kalibr IMU-chain YAML (imu0, imu1, ... each with T_i_b, a 4x4 body-to-IMU transform, "
+                             "as rows or an OpenCV !!opencv-matrix; OpenVINS's %%YAML:1.0 files too): replaces every "
+                             "accelerometer's position [m] and rotation (default: none, the recording's own "
+                             "geometry)")
         add_no_progress(fp)
         before = {a.dest for a in fp._actions}
         reader.add_arguments(fp)

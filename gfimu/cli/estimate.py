@@ -39,8 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "by propagating the gyro or the estimated ω (paper 003); default: none")
     p.add_argument("--tum", default=None, metavar="FILE",
                    help="also write the estimated orientation as a TUM trajectory (timestamp [s], tx ty tz [m] "
-                        "= 0, qx qy qz qw of the body→world rotation), as evo reads it (`evo_traj tum FILE`); "
-                        "needs --orientation inclinometer|gyro|estimate (default: none written)")
+                        "= 0, qx qy qz qw of the body→world rotation), as evo reads it (`evo_traj tum FILE`; "
+                        "compare with `evo_ape tum REF FILE --align_origin -r angle_deg`: --align fails on the "
+                        "zero positions); needs --orientation inclinometer|gyro|estimate (default: none written)")
     add_no_progress(p)
     p.set_defaults(func=run)
 

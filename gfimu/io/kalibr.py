@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -31,9 +32,12 @@ import numpy as np
 
 from ..array import SensorArray
 from .array_toml import ROTATION_TOLERANCE
-from .errors import LogFormatError
+from .errors import LogFormatError, LogFormatWarning
+from .safe_yaml import MAX_YAML_NODES, OpenCVMatrix, load_yaml  # noqa: F401 (MAX_YAML_NODES: documented bound)
 
 BOTTOM_ROW_TOLERANCE = 1e-9
+MAX_TRANSLATION_M = 100.0  # an IMU of one rigid body; beyond, the numbers overflow the model (and are not metres)
+ORTHONORMAL_REPAIR_TOLERANCE = 1e-4  # max |RᵀR - I| taken as rounded digits (5 decimals give about 1e-5)
 
 
 @dataclass(frozen=True)
@@ -57,28 +61,6 @@ class KalibrImu:
         return self.rotation_i_b.T.copy()
 
 
-def _load_yaml(path: Path):
-    try:
-        import yaml
-    except ImportError:
-        raise LogFormatError("reading Kalibr YAML needs pyyaml: pip install 'gfimu[kalibr]' (or pyyaml)",
-                             path) from None
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise LogFormatError("file not found", path) from None
-    except IsADirectoryError:
-        raise LogFormatError("is a folder, expected a Kalibr YAML file", path) from None
-    except UnicodeDecodeError as exc:
-        raise LogFormatError(f"not UTF-8 text (byte {exc.start})", path) from None
-    try:
-        return yaml.safe_load(text), text
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise LogFormatError(f"not valid YAML: {problem}", path, None if mark is None else mark.line + 1) from None
-
-
 def _line_of(text: str, key: str, after: int = 0) -> int | None:
     """1-based line of the first ``key:`` on or after line ``after`` (None if not found)."""
     for n, line in enumerate(text.splitlines()[max(after - 1, 0):], start=max(after, 1)):
@@ -92,51 +74,120 @@ def _imu_number(key: str) -> int:
     return int(m.group(1)) if m else 1 << 30
 
 
+def _matrix(value, where: str, path: Path, line: int | None) -> np.ndarray:
+    """A 4x4 float matrix from rows of numbers or an ``!!opencv-matrix``; LogFormatError naming ``where``."""
+    if isinstance(value, OpenCVMatrix):
+        line = value.line or line
+        rows, cols, data = value.get("rows"), value.get("cols"), value.get("data")
+        if not (isinstance(rows, int) and isinstance(cols, int) and isinstance(data, list)):
+            raise LogFormatError(f"{where}: an !!opencv-matrix needs rows, cols and data (a list), got "
+                                 f"{_shown(dict(value))}", path, line, where)
+        if (rows, cols) != (4, 4) or len(data) != 16:
+            raise LogFormatError(f"{where}: expected a 4x4 !!opencv-matrix with 16 data values, got rows {rows}, "
+                                 f"cols {cols}, {len(data)} value(s)", path, line, where)
+        value = [data[4 * k:4 * k + 4] for k in range(4)]
+    ok = (isinstance(value, list) and len(value) == 4
+          and all(isinstance(r, list) and len(r) == 4 and all(_is_number(v) for v in r) for r in value))
+    m = np.array(value, dtype=float) if ok else np.zeros(0)
+    if not ok or not np.all(np.isfinite(m)):
+        raise LogFormatError(f"{where}: expected a 4x4 matrix of finite numbers (four rows of four), got "
+                             f"{_shown(value)}", path, line, where)
+    return m
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _shown(value, limit: int = 160) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _rotation(m: np.ndarray, where: str, path: Path, line: int | None) -> np.ndarray:
+    """The rotation part of ``m``: as written when orthonormal to ``ROTATION_TOLERANCE``; the nearest rotation,
+    with a warning, when within ``ORTHONORMAL_REPAIR_TOLERANCE`` (digits rounded away); else LogFormatError."""
+    r = m[:3, :3]
+    if np.max(np.abs(r)) > 1.0 + ORTHONORMAL_REPAIR_TOLERANCE:
+        raise LogFormatError(f"{where}: not a rigid transform: its rotation part holds {np.max(np.abs(r)):.6g}, "
+                             "and no element of a rotation exceeds 1 in size", path, line, where)
+    deviation = float(np.max(np.abs(r.T @ r - np.eye(3))))
+    det = float(np.linalg.det(r))
+    if det <= 0 or deviation > ORTHONORMAL_REPAIR_TOLERANCE:
+        raise LogFormatError(f"{where}: not a rigid transform: its rotation part is not a rotation (RᵀR differs "
+                             f"from the identity by {deviation:.3g}, determinant {det:.6g}; up to "
+                             f"{ORTHONORMAL_REPAIR_TOLERANCE:g} is taken as rounding and repaired)", path, line, where)
+    if deviation <= ROTATION_TOLERANCE:
+        return r.copy()
+    u, _, vt = np.linalg.svd(r)
+    fixed = u @ vt
+    where_text = f"{path}:{line}" if line else str(path)
+    warnings.warn(f"{where_text}: {where}: rotation orthonormal only to {deviation:.2g} (RᵀR - I, rounded digits?); "
+                  f"the nearest rotation is used, which moves no element by more than "
+                  f"{float(np.max(np.abs(fixed - r))):.2g} (write more digits to silence this)", LogFormatWarning,
+                  stacklevel=3)
+    return fixed
+
+
+def _hint(doc: dict) -> str:
+    """What else the file looks like, for the message that it holds no IMU chain."""
+    if isinstance(doc.get("relative_config_imu"), str):
+        return (f"; this looks like an OpenVINS estimator config, whose IMU chain is the file its "
+                f"relative_config_imu names ({doc['relative_config_imu']})")
+    return ""
+
+
 def parse_kalibr(doc, text: str, path: str | os.PathLike) -> list[KalibrImu]:
     """The IMU entries of a loaded Kalibr YAML, in chain order (imu0, imu1, ...)."""
     path = Path(path)
     if not isinstance(doc, dict):
         raise LogFormatError("expected a Kalibr IMU chain: entries imu0, imu1, ... each with T_i_b", path)
-    entries = [(k, v) for k, v in doc.items() if isinstance(v, dict)]
+    for key, value in doc.items():
+        if _imu_number(str(key)) < 1 << 30 and not isinstance(value, dict):
+            raise LogFormatError(f"{key}: expected an IMU entry (T_i_b, rostopic, ...), got {_shown(value)}", path,
+                                 _line_of(text, str(key)), str(key))
+    entries = [(k, v) for k, v in doc.items() if isinstance(v, dict) and not isinstance(v, OpenCVMatrix)]
     if not entries:
-        raise LogFormatError("no IMU entries (imu0, imu1, ... each with T_i_b, a 4x4 matrix)", path)
+        raise LogFormatError("no IMU entries (imu0, imu1, ... each with T_i_b, a 4x4 matrix)" + _hint(doc), path)
     entries.sort(key=lambda kv: (_imu_number(str(kv[0])), list(doc).index(kv[0])))
     out = []
     for key, entry in entries:
         key = str(key)
         line = _line_of(text, key)
         if "T_i_b" not in entry:
-            found = ", ".join(k for k in entry if str(k).startswith("T_")) or "none"
+            found = ", ".join(str(k) for k in entry if str(k).startswith("T_")) or "none"
+            camera = (" (a camera entry of a camera-IMU chain: --extrinsics needs the IMU chain)"
+                      if any(str(k) in ("T_cam_imu", "T_imu_cam") for k in entry) else "")
             raise LogFormatError(f"{key}: has no T_i_b (the 4x4 body-to-IMU transform Kalibr's IMU chain holds; "
-                                 f"transforms found: {found})", path, line, key)
+                                 f"transforms found: {found}){camera}", path, line, key)
         line = _line_of(text, "T_i_b", line or 0) or line
-        try:
-            m = np.array(entry["T_i_b"], dtype=float)
-        except (TypeError, ValueError):
-            m = np.zeros(0)
-        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-            raise LogFormatError(f"{key}.T_i_b: expected a 4x4 matrix of finite numbers (four rows of four), got "
-                                 f"{entry['T_i_b']!r}", path, line, f"{key}.T_i_b")
+        where = f"{key}.T_i_b"
+        m = _matrix(entry["T_i_b"], where, path, line)
         if np.max(np.abs(m[3] - [0.0, 0.0, 0.0, 1.0])) > BOTTOM_ROW_TOLERANCE:
-            raise LogFormatError(f"{key}.T_i_b: not a rigid transform: its bottom row is {m[3].tolist()}, expected "
-                                 "[0, 0, 0, 1]", path, line, f"{key}.T_i_b")
-        r = m[:3, :3]
-        deviation = float(np.max(np.abs(r @ r.T - np.eye(3))))
-        det = float(np.linalg.det(r))
-        if deviation > ROTATION_TOLERANCE or det < 0:
-            raise LogFormatError(f"{key}.T_i_b: not a rigid transform: its rotation part is not a rotation "
-                                 f"(R Rᵀ differs from the identity by {deviation:.3g}, determinant {det:.6g})",
-                                 path, line, f"{key}.T_i_b")
+            raise LogFormatError(f"{where}: not a rigid transform: its bottom row is {m[3].tolist()}, expected "
+                                 "[0, 0, 0, 1]", path, line, where)
+        r = _rotation(m, where, path, line)
+        far = float(np.max(np.abs(m[:3, 3])))  # no overflow, unlike the norm of 1e200
+        if far > MAX_TRANSLATION_M / np.sqrt(3.0) and far * np.linalg.norm(m[:3, 3] / far) > MAX_TRANSLATION_M:
+            distance = far * np.linalg.norm(m[:3, 3] / far)
+            raise LogFormatError(f"{where}: translation {m[:3, 3].tolist()} m puts the IMU {distance:.3g} m from the "
+                                 f"body origin; an IMU of one rigid body lies within {MAX_TRANSLATION_M:g} m (T_i_b's "
+                                 "translation is in metres)", path, line, where)
         topic = entry.get("rostopic")
+        if topic is not None and not isinstance(topic, str):
+            raise LogFormatError(f"{key}.rostopic: expected a topic name, got {_shown(topic)}", path,
+                                 _line_of(text, "rostopic", line or 0), f"{key}.rostopic")
         offset = entry.get("time_offset")
-        out.append(KalibrImu(key, topic if isinstance(topic, str) else None, r.copy(), m[:3, 3].copy(),
-                             float(offset) if isinstance(offset, (int, float)) else None))
+        if offset is not None and not (_is_number(offset) and np.isfinite(offset)):
+            raise LogFormatError(f"{key}.time_offset: expected a number of seconds, got {_shown(offset)}", path,
+                                 _line_of(text, "time_offset", line or 0), f"{key}.time_offset")
+        out.append(KalibrImu(key, topic, r, m[:3, 3].copy(), None if offset is None else float(offset)))
     return out
 
 
 def read_kalibr(path: str | os.PathLike) -> list[KalibrImu]:
     """The IMU entries of a Kalibr IMU-chain YAML file."""
-    doc, text = _load_yaml(Path(path))
+    doc, text = load_yaml(Path(path))
     return parse_kalibr(doc, text, path)
 
 

@@ -50,6 +50,7 @@ from ...log import Log
 from ...motion import Motion
 from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
 from ..errors import LogFormatError, LogPlausibilityWarning, read_utf8_text
+from ...errors import InputError
 from ..plausibility import check_specific_force_scale
 from ..units import (TIME_UNITS_NS, TimestampError, header_name_and_unit, same_nanosecond, time_unit_ns, timestamps_ns,
                      unit_factor, unit_help)
@@ -1025,9 +1026,9 @@ def read(path, map: str, array: str | None = None, gyro_as_reference: bool = Fal
          max_gap_periods: float = MAX_GAP_PERIODS, resample_hz: float | None = None) -> Conversion:
     """Columns of one or more delimited text files, by a column map."""
     if not (math.isfinite(max_gap_periods) and max_gap_periods >= GAP_FACTOR):
-        raise ValueError(f"--max-gap-periods: expected a number >= {GAP_FACTOR:g}, got {max_gap_periods!r}")
+        raise InputError(f"--max-gap-periods: expected a number >= {GAP_FACTOR:g}, got {max_gap_periods!r}")
     if resample_hz is not None and not (math.isfinite(resample_hz) and 0 < resample_hz <= PLAUSIBLE_RATE_HZ[1]):
-        raise ValueError(f"--resample-hz: expected a rate in Hz above 0 and at most {PLAUSIBLE_RATE_HZ[1]:g}, "
+        raise InputError(f"--resample-hz: expected a rate in Hz above 0 and at most {PLAUSIBLE_RATE_HZ[1]:g}, "
                          f"got {resample_hz!r}")
     return read_csv_recording(path, map, array, gyro_as_reference, max_gap_periods, resample_hz)
 

@@ -156,7 +156,7 @@ class ImuStream:
     stamps_ns: np.ndarray  # (n,) int64
     accel_mps2: np.ndarray  # (n, 3) linear_acceleration, frame of header.frame_id
     gyro_radps: np.ndarray  # (n, 3) angular_velocity, same frame
-    gyro_given: np.ndarray  # (n,) angular_velocity_covariance[0] != -1
+    gyro_given: np.ndarray  # (n,) angular_velocity_covariance[0] != -1 and angular_velocity finite
     accel_var_mps2: np.ndarray  # (n, 3) diagonal of linear_acceleration_covariance; nan where not given
     gyro_var_radps: np.ndarray  # (n, 3) diagonal of angular_velocity_covariance; nan where not given
     duplicates: int = 0
@@ -170,6 +170,67 @@ def _diagonal_variance(cov: np.ndarray) -> np.ndarray:
     unknown = (cov[:, 0] == -1) | np.all(cov == 0, axis=1) | np.any(~np.isfinite(diag) | (diag < 0), axis=1)
     diag[unknown] = np.nan
     return diag
+
+
+def _storage_of_folder(path: Path) -> Path | None:
+    """The one ``.db3`` or ``.mcap`` file of a ROS 2 bag folder that has lost its ``metadata.yaml`` (None when
+    ``path`` is not such a folder); LogFormatError when it holds several, which only the metadata can order."""
+    if not path.is_dir() or (path / "metadata.yaml").exists():
+        return None
+    files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix in (".db3", ".mcap"))
+    if len(files) > 1:
+        raise LogFormatError(f"a ROS 2 bag folder without metadata.yaml holding {len(files)} storage files "
+                             f"({', '.join(p.name for p in files)}); without the metadata their order is unknown: "
+                             "restore metadata.yaml (ros2 bag reindex) or give one file", path)
+    return files[0] if files else None
+
+
+def _check_metadata(path: Path) -> None:
+    """Refuse a ROS 2 ``metadata.yaml`` that rosbags cannot read, naming the file and the key: parsed with
+    bounded depth and aliases (:mod:`gfimu.io.safe_yaml`), then the keys rosbags reads checked for their types."""
+    from ..safe_yaml import load_yaml
+
+    doc, _ = load_yaml(path, "the metadata.yaml of a ROS 2 bag")
+    top = "rosbag2_bagfile_information"
+
+    def bad(key: str, expected: str, value) -> LogFormatError:
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:80] + "..."
+        return LogFormatError(f"{key}: expected {expected}, got {shown} (not a ROS 2 bag's metadata, or damaged; "
+                              "ros2 bag reindex writes it anew)", path, None, key)
+
+    def get(node: dict, name: str, where: str, kind, expected: str):
+        if name not in node:
+            raise LogFormatError(f"{where}: has no {name} (not a ROS 2 bag's metadata, or damaged; ros2 bag reindex "
+                                 "writes it anew)", path, None, where)
+        value = node[name]
+        if not isinstance(value, kind) or isinstance(value, bool):
+            raise bad(f"{where}.{name}", expected, value)
+        return value
+
+    if not isinstance(doc, dict) or top not in doc:
+        raise LogFormatError(f"expected the key {top} at the top (not a ROS 2 bag's metadata)", path, None, top)
+    info = doc[top]
+    if not isinstance(info, dict):
+        raise bad(top, "a mapping", info)
+    get(info, "version", top, int, "an integer")
+    get(info, "storage_identifier", top, str, "text (sqlite3 or mcap)")
+    files = get(info, "relative_file_paths", top, list, "a list of file names")
+    for k, name in enumerate(files):
+        if not isinstance(name, str):
+            raise bad(f"{top}.relative_file_paths[{k}]", "a file name", name)
+    get(info, "message_count", top, int, "an integer")
+    get(get(info, "duration", top, dict, "a mapping"), "nanoseconds", f"{top}.duration", int, "an integer")
+    get(get(info, "starting_time", top, dict, "a mapping"), "nanoseconds_since_epoch", f"{top}.starting_time", int,
+        "an integer")
+    for k, entry in enumerate(get(info, "topics_with_message_count", top, list, "a list of topics")):
+        where = f"{top}.topics_with_message_count[{k}]"
+        if not isinstance(entry, dict):
+            raise bad(where, "a mapping", entry)
+        get(entry, "message_count", where, int, "an integer")
+        meta = get(entry, "topic_metadata", where, dict, "a mapping")
+        for name in ("name", "type", "serialization_format"):
+            get(meta, name, f"{where}.topic_metadata", str, "text")
 
 
 def _bag_kind(path: Path) -> str:
@@ -214,8 +275,26 @@ class TopicMessages:
         return int(self.stamp_ns.size)
 
     def frame(self, name: str) -> np.ndarray:
-        """(n,) True where header.frame_id is ``name``."""
-        return self.frame_code == self.frame_ids.index(name) if name in self.frame_ids else np.zeros(len(self), bool)
+        """(n,) True where header.frame_id is ``name``, a leading ``/`` on either side ignored (tf in ROS 1
+        wrote frame ids as ``/imu``; tf2 and ROS 2 write ``imu``)."""
+        codes = [k for k, f in enumerate(self.frame_ids) if _frame_name(f) == _frame_name(name)]
+        return np.isin(self.frame_code, codes)
+
+    def accel_given(self) -> np.ndarray:
+        """(n,) True where linear_acceleration_covariance[0] is not -1, the REP-145 mark for "not provided"."""
+        return self.fields[:, 6] != -1
+
+    def accel_finite(self) -> np.ndarray:
+        """(n,) True where linear_acceleration is finite (a nan or inf is no reading)."""
+        return np.isfinite(self.fields[:, 0:3]).all(axis=1)
+
+    def gyro_given(self) -> np.ndarray:
+        """(n,) True where angular_velocity_covariance[0] is not -1 and angular_velocity is finite."""
+        return (self.fields[:, 15] != -1) & np.isfinite(self.fields[:, 3:6]).all(axis=1)
+
+
+def _frame_name(frame_id: str) -> str:
+    return frame_id[1:] if frame_id.startswith("/") else frame_id
 
 
 def _messages(path: Path) -> tuple[str, dict[str, str], dict[str, TopicMessages]]:
@@ -229,7 +308,15 @@ def _messages(path: Path) -> tuple[str, dict[str, str], dict[str, TopicMessages]
         raise MissingExtraError(EXTRA_HINT) from None
     if path.name == "metadata.yaml" and path.is_file():  # a ROS 2 bag named by its metadata: the bag is the folder
         path = path.parent
+    shown = path
+    storage = _storage_of_folder(path)
+    if storage is not None:  # metadata.yaml lost: its one storage file is read on its own, as a bare file is
+        path = storage
     kind = _bag_kind(path)
+    if path.is_dir():
+        _check_metadata(path / "metadata.yaml")
+    if storage is not None:
+        kind = f"ROS 2 bag folder without metadata.yaml ({storage.name} read on its own, as a bare {kind})"
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             topics = {name: info.msgtype for name, info in reader.topics.items()}
@@ -250,7 +337,7 @@ def _messages(path: Path) -> tuple[str, dict[str, str], dict[str, TopicMessages]
         raise
     except Exception as exc:  # noqa: BLE001 - a corrupt bag fails in many ways inside rosbags
         text = " ".join(str(exc).split()) or type(exc).__name__
-        raise LogFormatError(f"cannot read this {kind} (corrupt or truncated?): {text}", path) from None
+        raise LogFormatError(f"cannot read this {kind} (corrupt or truncated?): {text}", shown) from None
     out = {t: TopicMessages(np.array(rec, dtype=np.int64), np.array(stamp, dtype=np.int64),
                             np.array(code, dtype=np.int64), tuple(frames), np.array(fields, dtype=float).reshape(-1, 24))
            for t, (rec, stamp, code, frames, fields) in rows.items()}
@@ -274,14 +361,42 @@ def _stream(source: str, topics: list[str], parts: list[tuple[TopicMessages, np.
     first = np.concatenate([[True], np.diff(stamps) > 0])
     f = fields[order[first]]
     return ImuStream(
-        source, tuple(topics), tuple(frames), stamps[first], f[:, 0:3], f[:, 3:6], f[:, 15] != -1,
+        source, tuple(topics), tuple(frames), stamps[first], f[:, 0:3], f[:, 3:6],
+        (f[:, 15] != -1) & np.isfinite(f[:, 3:6]).all(axis=1),
         _diagonal_variance(f[:, 6:15]), _diagonal_variance(f[:, 15:24]),
         duplicates=int(np.count_nonzero(~first)), out_of_order=out_of_order, stamps_from_bag=from_bag,
     )
 
 
+def _not_given(n: int) -> str:
+    return (f"{'its' if n > 1 else 'its one'} {n} message{'s' if n > 1 else ''} give linear_acceleration_covariance[0] "
+            "= -1, the REP-145 mark for linear acceleration not provided")
+
+
+def _dropped(topic: str, m: TopicMessages, keep: np.ndarray) -> list[str]:
+    """Report line for the messages of ``topic`` that ``keep`` leaves out for not providing linear acceleration."""
+    out = ~keep & ~m.accel_given()
+    n = int(np.count_nonzero(out))
+    if not n:
+        return []
+    first = np.nonzero(out)[0][:5].tolist()
+    return [f"topic {topic}: {n} of its {len(m)} message(s) dropped for linear_acceleration_covariance[0] = -1 "
+            f"(not provided; message index {', '.join(map(str, first))}{', ...' if n > 5 else ''})"]
+
+
+def _not_finite(topic: str, m: TopicMessages, sel: np.ndarray) -> list[str]:
+    """Report line for the messages ``sel`` selects whose linear_acceleration is nan or inf (dropped)."""
+    bad = sel & ~m.accel_finite()
+    n = int(np.count_nonzero(bad))
+    if not n:
+        return []
+    first = np.nonzero(bad)[0][:5].tolist()
+    return [f"topic {topic}: {n} message(s) dropped for a linear_acceleration that is not finite (nan or inf; "
+            f"message index {', '.join(map(str, first))}{', ...' if n > 5 else ''})"]
+
+
 def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
-             max_gap_periods: float = MAX_GAP_PERIODS) -> Conversion:
+             max_gap_periods: float = MAX_GAP_PERIODS, gyro_as_reference: str | None = None) -> Conversion:
     """The Imu streams of a bag, aligned onto one time base, as a log of the array in ``array_path``."""
     from ..array_toml import load_array_toml
 
@@ -294,6 +409,7 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
         raise LogFormatError(f"no {IMU_TYPE} topic in this {kind} (topics: {listed})", path)
     imu_topics = ", ".join(sorted(records))
     streams: list[ImuStream] = []
+    notes: list[list[str]] = []  # per accelerometer: messages and topics left out
     for i, acc in enumerate(array.accelerometers):
         if acc.topic is not None:
             if acc.topic not in topics:
@@ -303,10 +419,17 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                 raise LogFormatError(f"accelerometers[{i}].topic: {acc.topic!r} (accelerometer {acc.name!r}) holds "
                                      f"{topics[acc.topic]} in {path}, not {IMU_TYPE} (its Imu topics: {imu_topics})",
                                      array_path)
-            if not len(records[acc.topic]):
+            m = records[acc.topic]
+            if not len(m):
                 raise LogFormatError(f"topic {acc.topic!r} (accelerometer {acc.name!r}) holds no message", path)
-            everything = np.ones(len(records[acc.topic]), bool)
-            streams.append(_stream(f"topic {acc.topic}", [acc.topic], [(records[acc.topic], everything)]))
+            given = m.accel_given()
+            if not given.any():
+                raise LogFormatError(f"topic {acc.topic!r} (accelerometer {acc.name!r}, accelerometers[{i}].topic of "
+                                     f"{array_path}) is not an accelerometer: {_not_given(len(m))} (message 0 is "
+                                     "the first)", path)
+            notes.append(_dropped(acc.topic, m, given))
+            notes[-1] += _not_finite(acc.topic, m, given)
+            streams.append(_stream(f"topic {acc.topic}", [acc.topic], [(m, given & m.accel_finite())]))
         else:
             hits = [(t, records[t].frame(acc.name)) for t in sorted(records)]
             hits = [(t, sel) for t, sel in hits if sel.any()]
@@ -316,23 +439,41 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                     f"no Imu message has header.frame_id {acc.name!r}, the name of accelerometer {acc.name!r} of "
                     f"{array_path}, which gives no topic (frame_ids in the bag: "
                     f"{', '.join(repr(f) for f in frames) or 'none'}; Imu topics: {imu_topics})", path)
+            no_accel = [(t, sel) for t, sel in hits if not (sel & records[t].accel_given()).any()]
+            hits = [(t, sel & records[t].accel_given()) for t, sel in hits if t not in {u for u, _ in no_accel}]
+            if not hits:
+                t, sel = no_accel[0]
+                raise LogFormatError(
+                    f"the Imu messages with header.frame_id {acc.name!r} (accelerometer {acc.name!r} of {array_path}) "
+                    f"are no accelerometer's: on {', '.join(t for t, _ in no_accel)}, "
+                    f"{_not_given(int(np.count_nonzero(sel)))} (message {int(np.argmax(sel))} of {t} is the first)",
+                    path)
             on = [t for t, _ in hits]
+            note = [f"topic {t}: its {int(np.count_nonzero(sel))} message(s) with header.frame_id {acc.name!r} leave "
+                    "linear_acceleration out (linear_acceleration_covariance[0] = -1): not read as an accelerometer"
+                    for t, sel in no_accel]
+            for t, sel in hits:
+                note += _dropped(t, records[t], sel | ~records[t].frame(acc.name))
+                note += _not_finite(t, records[t], sel)
+            notes.append(note)
             streams.append(_stream(f"frame_id {acc.name!r} on {', '.join(on)}", on,
-                                   [(records[t], sel) for t, sel in hits]))
+                                   [(records[t], sel & records[t].accel_finite()) for t, sel in hits]))
     for acc, s in zip(array.accelerometers, streams):
         if s.stamps_ns.size < 2:
             raise LogFormatError(f"accelerometer {acc.name!r} ({s.source}): {s.stamps_ns.size} message(s) with "
                                  "distinct stamps; at least 2 are needed", path)
-    gyro_streams = [k for k, s in enumerate(streams) if s.gyro_given.all()]
+    ref_topic = None if gyro_as_reference is None else _reference_topic(gyro_as_reference, records, path)
+    gyro_streams = [k for k, s in enumerate(streams) if s.gyro_given.all() and ref_topic not in s.topics]
     if with_gyro and not gyro_streams:
         raise LogFormatError("--with-gyro: no Imu stream of the array provides angular_velocity (its "
-                             "angular_velocity_covariance[0] is -1, the ROS mark for not provided, in every stream)",
-                             path)
+                             "angular_velocity_covariance[0] is -1, the ROS mark for not provided, or a message's "
+                             "angular_velocity is not finite, in every stream"
+                             + (f"; the messages on {ref_topic} are the reference)" if ref_topic else ")"), path)
     values = []
     for acc, s in zip(array.accelerometers, streams):
         cols = [("xyz".index(a)) for a in acc.axes]
         v = [s.accel_mps2[:, cols]]
-        if with_gyro and s.gyro_given.all():
+        if with_gyro and s.gyro_given.all() and ref_topic not in s.topics:
             v.append(s.gyro_radps @ np.asarray(acc.rotation_body_sensor).T)  # angular velocity in B
         values.append(np.hstack(v))
     try:
@@ -350,7 +491,7 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
         return f"{(int(t_ns) - int(t_start)) * 1e-9:.3f} s"
 
     new_accs = []
-    for acc, s in zip(array.accelerometers, streams):
+    for acc, s, note in zip(array.accelerometers, streams, notes):
         g = stream_gaps(s.stamps_ns)
         rate = 1e9 / g.period_ns if g.period_ns else float("nan")
         line = (f"{acc.name}: {s.source} (frame_id {', '.join(repr(f) for f in s.frame_ids)}), {s.stamps_ns.size} "
@@ -362,6 +503,7 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
         if s.stamps_from_bag:
             line += "; header stamps all zero: the bag's record times are used"
         lines.append(line)
+        lines += [f"{acc.name}: {n}" for n in note]
         var = np.nanmedian(s.accel_var_mps2, axis=0) if np.any(np.isfinite(s.accel_var_mps2)) else None
         if var is not None:
             cols = ["xyz".index(a) for a in acc.axes]
@@ -387,10 +529,10 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
         names = [array.accelerometers[k].name for k in gyro_streams]
         lines.append(f"gyro: mean angular velocity in B of {len(names)} stream(s) ({', '.join(names)}) as w_x, w_y, w_z"
                      + (f"; noise_std_radps {gstd:.6g} from angular_velocity_covariance" if gstd is not None else ""))
-        left = [a.name for k, a in enumerate(array.accelerometers) if k not in gyro_streams]
+        left = [a.name for k, a in enumerate(array.accelerometers) if not streams[k].gyro_given.all()]
         if left:
-            lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1) by {', '.join(left)}; a stream "
-                         "is used only when all its messages provide it")
+            lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1, or not finite) by "
+                         f"{', '.join(left)}; a stream is used only when all its messages provide it")
     elif array.gyroscope is not None:
         gyroscope = None
         lines.append(f"gyro: the [gyroscope] of {array_path} is left out of the log (no --with-gyro)")
@@ -405,8 +547,85 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
                      f"{shown}{', ...' if len(al.long_gaps) > 5 else ''}")
     else:
         lines.append(f"gaps over {max_gap_periods:g} periods: none")
-    log = Log(out_array, al.timestamps_ns, accel, gyro_b_radps=gyro, source=str(path))
+    reference = invalid = None
+    if ref_topic is not None:
+        reference, invalid, ref_lines = _gyro_reference(ref_topic, records[ref_topic], array, al.timestamps_ns,
+                                                        max_gap_periods, path)
+        lines += ref_lines
+    log = Log(out_array, al.timestamps_ns, accel, gyro_b_radps=gyro, reference=reference, invalid_reference=invalid,
+              source=str(path))
     return Conversion(log, tuple(lines))
+
+
+def _reference_topic(topic: str, records: dict[str, TopicMessages], path: Path) -> str:
+    """The Imu topic ``--gyro-as-reference`` takes: ``topic``, or when empty the one Imu topic providing
+    angular velocity."""
+    providing = sorted(t for t, m in records.items() if m.gyro_given().any())
+    if not topic:
+        if len(providing) != 1:
+            raise LogFormatError(f"--gyro-as-reference: {len(providing)} Imu topics provide angular_velocity "
+                                 f"({', '.join(providing) or 'none'}); name the one to take: --gyro-as-reference TOPIC",
+                                 path)
+        return providing[0]
+    if topic not in records:
+        raise LogFormatError(f"--gyro-as-reference: {topic!r} is not an Imu topic of this bag (its Imu topics: "
+                             f"{', '.join(sorted(records))})", path)
+    if not records[topic].gyro_given().any():
+        raise LogFormatError(f"--gyro-as-reference: topic {topic!r} provides no angular_velocity: "
+                             f"angular_velocity_covariance[0] is -1 (not provided) in all its {len(records[topic])} "
+                             "message(s)", path)
+    return topic
+
+
+def _gyro_reference(topic: str, m: TopicMessages, array, grid_ns: np.ndarray, max_gap_periods: float, path: Path):
+    """(reference Motion on ``grid_ns``, invalid rows, report lines): the angular velocity of ``topic`` in the body
+    frame, interpolated linearly onto the log's time base; rows outside its messages' span, or inside a gap of
+    more than ``max_gap_periods`` of its periods, are marked not valid."""
+    from ...motion import Motion
+
+    given = m.gyro_given()
+    s = _stream(f"topic {topic}", [topic], [(m, given)])
+    if s.stamps_ns.size < 2:
+        raise LogFormatError(f"--gyro-as-reference: topic {topic!r} holds {s.stamps_ns.size} message(s) with "
+                             "angular_velocity and distinct stamps; at least 2 are needed", path)
+    accs = [a for a in array.accelerometers if a.topic == topic]
+    if not accs:
+        frames = {_frame_name(f) for f in s.frame_ids}
+        accs = [a for a in array.accelerometers if a.topic is None and _frame_name(a.name) in frames]
+    if len(accs) == 1:
+        rotation = np.asarray(accs[0].rotation_body_sensor, dtype=float)
+        frame = f"turned into the body frame by the rotation of accelerometer {accs[0].name!r}"
+    elif not accs:
+        rotation = np.eye(3)
+        frame = (f"its axes (frame_id {', '.join(repr(f) for f in s.frame_ids)}) taken as the body axes: no "
+                 "accelerometer of the array reads this topic or frame")
+    else:
+        raise LogFormatError(f"--gyro-as-reference: the messages on {topic!r} carry the frame_ids of several "
+                             f"accelerometers ({', '.join(a.name for a in accs)}); which rotation turns them into the "
+                             "body frame is ambiguous", path)
+    omega = s.gyro_radps @ rotation.T
+    t = s.stamps_ns
+    k = np.clip(np.searchsorted(t, grid_ns, side="right") - 1, 0, t.size - 2)
+    frac = (grid_ns - t[k]).astype(float) / (t[k + 1] - t[k]).astype(float)
+    values = omega[k] + frac[:, None] * (omega[k + 1] - omega[k])
+    period = float(np.median(np.diff(t)))
+    long_gap = (t[k + 1] - t[k]) > max_gap_periods * period
+    invalid = (grid_ns < t[0]) | (grid_ns > t[-1]) | (long_gap & (frac > 0) & (frac < 1))
+    if invalid.all():
+        raise LogFormatError(f"--gyro-as-reference: the messages on {topic!r} do not overlap the accelerometers' time "
+                             f"base (theirs span {t[0]} to {t[-1]} ns, the log {grid_ns[0]} to {grid_ns[-1]} ns)", path)
+    values[invalid] = np.nan
+    n_left = int(np.count_nonzero(~given))
+    lines = [f"reference: angular velocity of {topic} ({s.stamps_ns.size} message(s) at "
+             f"{1e9 / period:.2f} Hz), {frame}, interpolated onto the time base, as reference.csv w_x, w_y, w_z; "
+             "not a gyroscope of the array"]
+    if n_left:
+        lines.append(f"reference: {n_left} message(s) of {topic} with angular_velocity_covariance[0] = -1 (not "
+                     "provided) or an angular_velocity that is not finite left out")
+    if invalid.any():
+        lines.append(f"reference: {int(np.count_nonzero(invalid))} sample(s) outside its messages or in their gaps "
+                     f"over {max_gap_periods:g} periods marked not valid")
+    return Motion(grid_ns, omega_b_radps=values), (invalid if invalid.any() else None), lines
 
 
 # --- reader of `gfimu convert rosbag` -------------------------------------------------------------
@@ -419,16 +638,23 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write the mean angular velocity (in the body frame) of the Imu messages that "
                              "provide it (angular_velocity_covariance[0] != -1) as the log's gyroscope channels "
                              "w_x.. [rad/s] (default: off)")
+    parser.add_argument("--gyro-as-reference", nargs="?", const="", default=None, metavar="TOPIC",
+                        help="also write the angular velocity [rad/s] of the Imu messages on TOPIC (without TOPIC: "
+                             "the one Imu topic that provides angular velocity), turned into the body frame, as "
+                             "reference.csv, the angular-velocity reference of gfimu evaluate; it is then not a "
+                             "gyroscope of the array (not part of --with-gyro's mean) (default: off)")
     parser.add_argument("--max-gap-periods", type=float, default=MAX_GAP_PERIODS,
                         help="a gap in a stream up to this many of its sample periods [periods] is interpolated over; "
                              f"a longer one becomes a time gap of the log (default {MAX_GAP_PERIODS:g})")
 
 
-def read(path, array: str, with_gyro: bool = False, max_gap_periods: float = MAX_GAP_PERIODS) -> Conversion:
+def read(path, array: str, with_gyro: bool = False, max_gap_periods: float = MAX_GAP_PERIODS,
+         gyro_as_reference: str | None = None) -> Conversion:
     """The array's accelerometers from the bag's Imu messages, aligned onto one time base."""
     if not (max_gap_periods >= GAP_FACTOR and math.isfinite(max_gap_periods)):
         raise InputError(f"--max-gap-periods: expected a number >= {GAP_FACTOR:g}, got {max_gap_periods!r}")
-    return read_bag(path, array, with_gyro=with_gyro, max_gap_periods=max_gap_periods)
+    return read_bag(path, array, with_gyro=with_gyro, max_gap_periods=max_gap_periods,
+                    gyro_as_reference=gyro_as_reference)
 
 
 READER = Reader(
