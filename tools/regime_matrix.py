@@ -414,7 +414,7 @@ def _model_of(log, est) -> tuple[str, str]:
         from gfimu.estimators.ml import MLEstimator
         from gfimu.smoother.auto import check_model
 
-        check = check_model(log, MLEstimator().estimate(log))
+        check = check_model(log, MLEstimator().estimate_motion(log))
     if check is None:
         return "n/a", ""
     return ("gaussian" if check.consistent else "robust"), check.describe()
@@ -443,17 +443,13 @@ def _run_child(conn, log_dir: str, method: str, options: dict, cpu_limit_s: floa
             if method == "smoother":  # the model it will take, known before a run that may not end
                 conn.send({"early_model": _model_of(log, est)})
             t0, cpu0 = time.perf_counter(), _cpu_seconds()
-            if method in SMOOTHERS:
-                res = est.result(log)
-                motion, check, result_warnings = res.motion, res.model_check, list(res.warnings)
-            else:
-                motion, check, result_warnings = est.estimate(log), None, []
+            estimate = est.estimate(log)
+            motion, check = estimate.motion, estimate.report.model_check
+            result_warnings = list(estimate.report.warnings)
             seconds, cpu = time.perf_counter() - t0, _cpu_seconds() - cpu0
         model = None
-        if method == "smoother":
+        if method in SMOOTHERS:
             model = "n/a" if check is None else ("gaussian" if check.consistent else "robust")
-        elif method == "fixed-lag":
-            model = "gaussian (no check)"
         conn.send({"omega": motion.omega_b_radps, "seconds": seconds, "cpu_seconds": cpu, "model": model,
                    "model_check": None if check is None else check.describe(),
                    "warnings": [str(w) for w in result_warnings] + [str(w.message) for w in caught][:5]})

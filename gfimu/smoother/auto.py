@@ -86,7 +86,7 @@ class ModelCheck:
     """Why the log is inconsistent (empty when consistent)."""
     resolution_floor_mps2: float = 0.0
     """The smallest noise std the readings can show [m/s²]: their quantisation step / √12, and at least
-    1e-9 of their RMS (double precision); a measured floor below it is raised to it."""
+    :data:`RELATIVE_RESOLUTION` of their RMS; a measured floor below it is raised to it."""
     floored: bool = False
     """Whether the measured noise floor was below :attr:`resolution_floor_mps2` (and raised to it)."""
     constant: bool = False
@@ -127,10 +127,16 @@ class ModelCheck:
                 "constant": self.constant}
 
 
+RELATIVE_RESOLUTION = 1e-7
+"""The readings' resolution is at least this fraction of their RMS: double precision carries 1e-16,
+but the smoothers' normal equations square the weights, and a weight of 1e-16 of the readings makes
+them singular; 1e-7 keeps every answer of an exact log within 1e-6 of it."""
+
+
 def resolution_floor(accel_mps2: np.ndarray) -> float:
     """The smallest noise std [m/s²] readings ``accel_mps2`` (N, axes) can show: the median over the
     axes of their quantisation step (the smallest gap between two of an axis' distinct values) / √12,
-    the std of rounding to that step, and at least 1e-9 of the readings' RMS (double precision)."""
+    the std of rounding to that step, and at least :data:`RELATIVE_RESOLUTION` of the readings' RMS."""
     a = np.asarray(accel_mps2, dtype=float)
     a = a[np.all(np.isfinite(a), axis=1)]
     if not a.size:
@@ -141,7 +147,7 @@ def resolution_floor(accel_mps2: np.ndarray) -> float:
         if u.size >= 2:
             steps.append(float(np.min(np.diff(u))))
     quantum = float(np.median(steps)) / np.sqrt(12.0) if steps else 0.0
-    return max(quantum, 1e-9 * float(np.sqrt(np.mean(a * a))))
+    return max(quantum, RELATIVE_RESOLUTION * float(np.sqrt(np.mean(a * a))))
 
 
 def rigid_body_residual(log: Log, omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray,

@@ -488,17 +488,31 @@ class FixedLagSmoother:
         elif (not first and not outgrown and previous is not None and not previous.robust and previous.moving
               and previous.tuning is not None):
             chosen = replace(previous, check=check, chosen_at_ns=t_end, samples=len(part))
+        elif ml is not None and stream_model.is_still(*self._newest(part, ml), check):
+            # a still stretch tells nothing of how the body will move: the motion seen before, else the
+            # densities as given, and the next motion asks for a choice at once
+            if previous is not None and not previous.robust and previous.moving:
+                chosen = replace(previous, check=check, chosen_at_ns=t_end, samples=len(part))
+            else:
+                chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part), moving=False)
         else:
             span = part if len(part) <= self._tune_n else part.select(slice(len(part) - self._tune_n, None))
             tuning, problem, x0 = self._tuned(span, base)
             chosen = stream_model.from_tuning(tuning, problem.options, check, span)
-            chosen = replace(chosen, chosen_at_ns=t_end, moving=stream_model.has_motion(part, ml, check))
+            chosen = replace(chosen, chosen_at_ns=t_end, moving=True)
             if first:
                 batch = self._batch_states(span, problem, x0)
         if chosen.sign_scale_radps is None and ml is not None:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
         self._use(chosen)
         return batch
+
+    def _newest(self, part: Log, ml):
+        """The newest ``tune_window_s`` of ``part`` and of its ML estimate ``ml``."""
+        if len(part) <= self._tune_n:
+            return part, ml
+        sl = slice(len(part) - self._tune_n, None)
+        return part.select(sl), ml.select(sl)
 
     def _use(self, chosen: StreamModel) -> None:
         self.stream_model = chosen

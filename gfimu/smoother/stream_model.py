@@ -140,6 +140,24 @@ def has_motion(part: Log, ml_motion, check: ModelCheck | None) -> bool:
                                  with_motion=True)[2])
 
 
+STILL_OMEGA_NOISE = 3.0
+"""A stretch is still when the 90th percentile of its per-sample |ω| is below this many times the
+|ω| that the readings' noise alone gives (and its ω̇ shows no motion above the noise)."""
+
+
+def is_still(part: Log, ml_motion, check: ModelCheck) -> bool:
+    """Whether ``part`` shows the body at rest (or turning too slowly for its readings to tell): no
+    motion of ω̇ above the noise (:func:`has_motion`) and |ω| within :data:`STILL_OMEGA_NOISE` times
+    the |ω| of noise alone, ``√σ_q`` with ``σ_q`` the std the floor puts on the quadratic terms
+    (paper 000, eq. 6)."""
+    if has_motion(part, ml_motion, check):
+        return False
+    S = part.array.structure_matrix()
+    c_q = float(np.mean(np.diag(np.linalg.pinv(S.T @ S))[6:9]))
+    omega_noise = math.sqrt(check.noise_floor_mps2 * math.sqrt(max(c_q, 0.0)))
+    return check.omega_p90_radps < STILL_OMEGA_NOISE * omega_noise
+
+
 def sign_scale(part: Log, ml_motion) -> float | None:
     """The sign chain's Cauchy scale on ``part`` from its per-sample ML estimate (None without one)."""
     if ml_motion is None:
