@@ -6,9 +6,7 @@ method runs in a child process stopped at the cell's CPU-time budget, and the te
 ``regime_matrix.judge``: the batch smoother (``smoother``) and the fixed-lag smoother must each have
 ω RMSE ≤ max(1.1 × best per-sample, 1e-3 rad/s), a wrong-sign share ≤ the best per-sample's +
 0.5 %, and CPU time ≤ 2 s + 2 ms per sample; the batch smoother must keep its Gaussian model on a
-consistent log. The assertions that fail today are marked ``xfail(strict=True)`` with the numbers
-measured when they were written, so that each turns into a failure (XPASS) once the estimators are
-fixed and its mark must go.
+consistent log.
 """
 
 from __future__ import annotations
@@ -97,15 +95,10 @@ def test_noise_free_stated_zero_batch_is_exact(run):
     assert row["results"]["smoother"]["rmse"] < 1e-9
 
 
-@pytest.mark.xfail(strict=True, reason="measured: noise stated as 0 counts as not stated (gfimu.noise.stated needs > 0), "
-                   "the model check gives 'no noise std stated' and the robust model")
 def test_noise_free_stated_zero_batch_keeps_gaussian_model(run):
     check(run("noisefree-stated0"), "smoother", "model")
 
 
-@pytest.mark.xfail(strict=True, reason="measured: fixed-lag ω RMSE 0.0087 rad/s where ml is exact (1e-14): a stated 0 "
-                   "counts as not stated and the fixed-lag smoother weighs the readings with the default 0.07 m/s² "
-                   "(with default_accel_noise_std_mps2=1e-6: 2.4e-10 rad/s)")
 def test_noise_free_stated_zero_fixed_lag_not_worse(run):
     check(run("noisefree-stated0"), "fixed-lag")
 
@@ -116,20 +109,14 @@ def test_noise_free_unstated_batch_is_exact(run):
     assert row["results"]["smoother"]["rmse"] < 1e-9
 
 
-@pytest.mark.xfail(strict=True, reason="measured: fixed-lag ω RMSE 0.0087 rad/s where ml is exact (1e-14): no stated "
-                   "noise, so the default 0.07 m/s² weighs the noise-free readings")
 def test_noise_free_unstated_fixed_lag_not_worse(run):
     check(run("noisefree-unstated"), "fixed-lag")
 
 
-@pytest.mark.xfail(strict=True, reason="measured: array.toml without noise_std_mps2 -> model check reason "
-                   "'no noise std stated' -> robust model, on noise-free rigid readings")
 def test_noise_free_unstated_batch_keeps_gaussian_model(run):
     check(run("noisefree-unstated"), "smoother", "model")
 
 
-@pytest.mark.xfail(strict=True, reason="measured: 0.01 m/s² white noise not stated -> 'no noise std stated' -> robust "
-                   "model (ω RMSE 0.0069 rad/s, still better than ml's 0.133)")
 def test_noise_unstated_batch_keeps_gaussian_model(run):
     check(run("noise0.01-unstated"), "smoother", "model")
 
@@ -144,9 +131,6 @@ def test_loud_noise_unstated_batch_not_worse(run):
     check(run("noise1-unstated"), "smoother")
 
 
-@pytest.mark.xfail(strict=True, reason="measured: 1 m/s² white noise not stated: fixed-lag ω RMSE 3.57 rad/s, 46 % wrong "
-                   "sign, against ml 1.52, 15 %: it weighs the readings with the default 0.07 m/s² and has no model "
-                   "check to measure the noise (default_accel_noise_std_mps2=1.0 or tune_accel_noise=True: 0.073 rad/s, 0 %)")
 def test_loud_noise_unstated_fixed_lag_not_worse(run):
     check(run("noise1-unstated"), "fixed-lag")
 
@@ -173,25 +157,16 @@ def test_quantised_readings_are_16_bit(run):
 
 # ---------------------------------------------------------------- a long still stretch, then motion
 
-@pytest.mark.xfail(strict=True, reason="measured: batch ω RMSE 1.31 rad/s, 53 % wrong sign, against ml 0.37, 0.7 %: "
-                   "the process noise is tuned on the middle 10 s of the window (tune_span_s), all at rest "
-                   "(tune_span_s=None: 0.056 rad/s, 0 % at 200 Hz)")
 def test_still_then_motion_batch_not_worse(run):
     check(run("still60-then-motion"), "smoother")
 
 
-@pytest.mark.xfail(strict=True, reason="measured: fixed-lag ω RMSE 1.32 rad/s, 51 % wrong sign, against ml 0.37, "
-                   "0.7 %: the process noise is chosen once on the first 3 s (tune_window_s), all at rest "
-                   "(tune_window_s=70: 0.047 rad/s, 0 % at 200 Hz)")
 def test_still_then_motion_fixed_lag_not_worse(run):
     check(run("still60-then-motion"), "fixed-lag")
 
 
 # ---------------------------------------------------------------- all readings zero
 
-@pytest.mark.xfail(strict=True, reason="measured: ValueError 'smoother option omega_dot_random_walk_radps2_per_sqrt_s "
-                   "must be a positive number, got 0.0', an option the user never set: noise stated 0 -> robust "
-                   "model -> auto.motion_densities gives a zero density from zero steps and zero noise")
 def test_zero_readings_batch(run):
     check(run("free-fall-rest-noisefree"), "smoother")
 
@@ -222,12 +197,6 @@ def test_foreign_per_sample_recovers_pre_impact_omega(run, method):
     assert rmse == pytest.approx(scale_error, rel=0.1)
 
 
-@pytest.mark.xfail(strict=True, reason="measured: the batch smoother does not finish within the 14 s budget for "
-                   "6000 samples (inversion: 0.0055 rad/s): the model check calls the log inconsistent ('no noise "
-                   "std stated', '3.59 % of residuals beyond 4 sigma' of a round-off residual, median 3e-11 m/s²), "
-                   "and the robust model's branch restarts re-solve locally about once per 3 samples (2005 "
-                   "in 60 s; let run: 326 s, 0.47 rad/s, not converged after 30 iterations); without restarts 1.9 s but "
-                   "0.065 rad/s; auto_model=False: 0.0055 rad/s in 0.8 s")
 def test_foreign_batch_not_worse(run):
     check(run("foreign-ff-impact-4kHz"), "smoother")
 
