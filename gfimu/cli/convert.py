@@ -83,7 +83,7 @@ def run(args) -> int:
             bar.step("apply the calibration")
             log = apply_calibration(log, read_calibration(args.calibration))
         bar.step("write the log")
-        gio.write_log(log, args.out)
+        gio.write_log(log, args.out, what="--out")
     for line in [*report, *extrinsics_report]:
         info(args, line, file=sys.stdout)
     if args.calibration:

@@ -10,13 +10,25 @@ from its SIGINT/SIGTERM handler, see :func:`install_signal_cleanup`).
 
 A destination that exists and is not a regular file (a folder, a device such
 as ``/dev/null``, a FIFO, a socket) is refused with :class:`OutputError`,
-never replaced. A destination that is a symbolic link is written through:
-the file it points to is replaced and the link is kept.
+never replaced; so is a name ending in ``/`` (it names a folder). A
+destination that is a symbolic link is written through: the file it points
+to is replaced and the link is kept.
+
+A whole folder (a log) is written with :func:`atomic_folder`: into a sibling
+temporary folder, then swapped in at once (the old folder renamed aside, the
+new one renamed in, the old one removed); on any failure or interruption the
+old folder stays as it was and the temporary one is removed. Nothing in the
+old folder is followed or written through: its links stay links.
+
+Temporary names are ``.NAME.XXXXXXXX.tmp`` with ``NAME`` cut to
+:data:`TEMP_NAME_BYTES` bytes, so that they fit the file system's limit
+(255 bytes) whatever the length of the destination's name.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import stat
 import sys
@@ -30,6 +42,15 @@ from .errors import OutputError
 
 _PENDING: set[str] = set()
 _LOCK = threading.Lock()
+
+TEMP_NAME_BYTES = 64
+"""Bytes of the destination's name kept in a temporary name (the rest of it is random)."""
+
+
+def temp_prefix(name: str) -> str:
+    """``.NAME.`` with ``NAME`` cut to :data:`TEMP_NAME_BYTES` bytes of UTF-8 (never inside a character)."""
+    cut = name.encode("utf-8", "surrogateescape")[:TEMP_NAME_BYTES].decode("utf-8", "ignore")
+    return f".{cut}."
 
 
 def file_kind(mode: int) -> str:
@@ -62,6 +83,9 @@ def destination(path: str | os.PathLike) -> Path:
     p = Path(path)
     if str(p) in ("", "."):
         raise OutputError(f"{str(path)!r}: not a file name")
+    text = os.fspath(path)
+    if isinstance(text, str) and (text.endswith(("/", os.sep)) or text.endswith(("/.", "/.."))):
+        raise OutputError(f"{text}: ends with '/', which names a folder; give a file name (without the '/')")
     target = Path(os.path.realpath(p)) if p.is_symlink() else p
     st = stat_or_none(target, str(p))
     if st is not None and not stat.S_ISREG(st.st_mode):
@@ -98,7 +122,10 @@ def remove_temporaries() -> int:
     n = 0
     for name in names:
         try:
-            os.unlink(name)
+            if os.path.isdir(name) and not os.path.islink(name):
+                shutil.rmtree(name)
+            else:
+                os.unlink(name)
             n += 1
         except OSError:
             pass
@@ -143,7 +170,7 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
     target = destination(path)
     folder = target.parent
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target.name), suffix=suffix, dir=folder)
     except OSError as exc:  # name the destination, not the temporary file
         raise _naming(exc, target) from None
     os.close(fd)
@@ -171,6 +198,123 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
     finally:
         _unregister(tmp)
     _fsync_folder(folder)
+
+
+def folder_destination(path: str | os.PathLike, what: str = "") -> Path:
+    """The folder :func:`atomic_folder` writes, after checks; :class:`OutputError` (its message starting
+    with ``what`` and the path) when it is a symbolic link or exists and is not a folder."""
+    p = Path(path)
+    shown = f"{what} {p}" if what else str(p)
+    if str(p) in ("", ".", "..") or p.name in ("", ".", ".."):
+        raise OutputError(f"{shown}: not a folder name that can be replaced; give the folder's own name")
+    try:
+        st = os.lstat(p)
+    except FileNotFoundError:
+        return p
+    except NotADirectoryError:
+        raise OutputError(f"{shown}: a part of this path is a file, not a folder") from None
+    if stat.S_ISLNK(st.st_mode):
+        raise OutputError(f"{shown}: is a symbolic link (to {os.readlink(p)}); refusing to write through it "
+                          "(give the folder itself)")
+    if not stat.S_ISDIR(st.st_mode):
+        raise OutputError(f"{shown}: exists and is {file_kind(st.st_mode)}; a log is written into a folder")
+    return p
+
+
+def _keep(src: Path, dst: Path) -> None:
+    """``src`` again as ``dst`` without touching ``src``: a hard link (a copy where the file system has
+    none); links are recreated as links, never followed; folders entry by entry."""
+    st = os.lstat(src)
+    if stat.S_ISLNK(st.st_mode):
+        os.symlink(os.readlink(src), dst)
+    elif stat.S_ISDIR(st.st_mode):
+        os.mkdir(dst)
+        for child in os.listdir(src):
+            _keep(src / child, dst / child)
+        shutil.copystat(src, dst, follow_symlinks=False)
+    else:
+        try:
+            os.link(src, dst, follow_symlinks=False)
+        except OSError:
+            if not stat.S_ISREG(st.st_mode):
+                raise
+            shutil.copy2(src, dst, follow_symlinks=False)
+
+
+def _blocked_signals():
+    """Block SIGINT and SIGTERM in this thread (returns the previous mask, None where it cannot)."""
+    try:
+        return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+@contextmanager
+def atomic_folder(path: str | os.PathLike, replaced: Iterable[str] = (), what: str = "") -> Iterator[Path]:
+    """A temporary folder next to ``path`` to write a whole folder into; on a normal exit it replaces
+    ``path`` at once.
+
+    The entries of an existing ``path`` not named in ``replaced`` are kept (hard
+    links, or copies; links stay links): the new folder gets them too. Then
+    the old folder is renamed aside, the new one renamed in (SIGINT and SIGTERM
+    held meanwhile) and the old one removed. On an exception (or SIGINT /
+    SIGTERM through :func:`install_signal_cleanup`) the temporary folder is
+    removed and ``path`` is left exactly as it was. ``path`` must not be a
+    symbolic link, and must be a folder if it exists (:func:`folder_destination`).
+    The folder above it is created when missing.
+    """
+    target = folder_destination(path, what)
+    parent = target.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    replaced = set(replaced)
+    try:
+        tmp = tempfile.mkdtemp(prefix=temp_prefix(target.name), suffix=".tmp", dir=parent)
+    except OSError as exc:
+        raise _naming(exc, target) from None
+    _register(tmp)
+    new = Path(tmp)
+    aside = None
+    try:
+        yield new
+        folder_destination(path, what)  # still no link planted meanwhile
+        if target.is_dir():
+            for name in sorted(os.listdir(target)):
+                if name not in replaced and not (new / name).exists() and not os.path.islink(new / name):
+                    _keep(target / name, new / name)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(new, 0o777 & ~umask)
+        mask = _blocked_signals()
+        try:
+            if target.is_dir():
+                aside = tempfile.mktemp(prefix=temp_prefix(target.name), suffix=".old", dir=parent)
+                os.rename(target, aside)
+                _register(aside)
+                try:
+                    os.rename(new, target)
+                except BaseException:
+                    os.rename(aside, target)
+                    _unregister(aside)
+                    aside = None
+                    raise
+            else:
+                os.rename(new, target)
+            _unregister(tmp)
+        finally:
+            if mask is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _unregister(tmp)
+        raise _naming(exc, target) if exc.filename in (None, tmp) else exc from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _unregister(tmp)
+        raise
+    if aside is not None:
+        shutil.rmtree(aside, ignore_errors=True)
+        _unregister(aside)
+    _fsync_folder(parent)
 
 
 def atomic_write(path: str | os.PathLike, chunks: Iterable[str] | Iterable[bytes], binary: bool = False) -> None:
