@@ -102,6 +102,18 @@ _HEADER_RE = re.compile(r"^(.*?)\s*\[([^\[\]]*)\]\s*$")
 _BLOCK_BYTES = 1 << 20
 """Bytes of text read, decoded and parsed at a time: the file is never held whole in memory."""
 
+MAX_LINE_BYTES = 1 << 16
+"""The longest line of a CSV table (64 KiB, header included; a row of a thousand columns is a tenth of
+it): a longer one is refused at once, naming its line, rather than read on (a file of NUL bytes, a
+binary recording given as CSV)."""
+
+
+def line_too_long(length: int, ended: bool = False) -> str:
+    """The message for a line of ``length`` bytes, over :data:`MAX_LINE_BYTES` (``ended``: the line end was
+    seen; otherwise reading stopped there)."""
+    what = f"{length} bytes" if ended else f"{length} bytes and no line end yet"
+    return f"line is longer than {MAX_LINE_BYTES} bytes ({what}); not a row of a CSV table (a binary file?)"
+
 
 def _timestamp_tokens(lines: list[str]) -> list[str]:
     """The first field of each row."""
@@ -217,7 +229,10 @@ class _Csv:
                 if last and not buf:
                     return
                 cut = len(buf) if last else buf.rfind(b"\n") + 1
-                if cut == 0:  # no line end yet: read on
+                if cut == 0 or len(buf) - cut > MAX_LINE_BYTES:  # no line end yet: read on
+                    if len(buf) - cut > MAX_LINE_BYTES:
+                        line = line0 + buf[:cut].count(b"\n") + 1
+                        raise LogFormatError(line_too_long(len(buf) - cut), self.path, line)
                     carry = buf
                     continue
                 block, carry = buf[:cut], buf[cut:]
@@ -245,6 +260,11 @@ class _Csv:
         lines = text.split("\n")
         if not last:
             lines.pop()  # the block ends with a line end
+        if lines and max(map(len, lines)) > MAX_LINE_BYTES // 4:  # characters: up to 4 bytes each
+            for k, ln in enumerate(lines):
+                size = len(ln.encode("utf-8"))
+                if size > MAX_LINE_BYTES:
+                    raise LogFormatError(line_too_long(size, ended=True), self.path, line0 + k + 1)
         return lines
 
     def _span_lines(self, span: tuple) -> tuple[int, list[str]]:
