@@ -6,7 +6,7 @@ written to a temporary file in the destination folder, flushed to disk
 interruption never leaves a half-written file and never loses the old one.
 The temporary file is removed on any error; while it exists it is listed in
 a registry that :func:`remove_temporaries` empties (the command line calls it
-from its SIGINT/SIGTERM handler, see :func:`install_signal_cleanup`).
+from its SIGINT/SIGTERM handler, :func:`gfimu.cli.main`).
 
 A destination that exists and is not a regular file (a folder, a device such
 as ``/dev/null``, a FIFO, a socket) is refused with :class:`OutputError`,
@@ -31,7 +31,6 @@ import os
 import shutil
 import signal
 import stat
-import sys
 import tempfile
 import threading
 from collections.abc import Iterable, Iterator
@@ -258,7 +257,7 @@ def atomic_folder(path: str | os.PathLike, replaced: Iterable[str] = (), what: s
     links, or copies; links stay links): the new folder gets them too. Then
     the old folder is renamed aside, the new one renamed in (SIGINT and SIGTERM
     held meanwhile) and the old one removed. On an exception (or SIGINT /
-    SIGTERM through :func:`install_signal_cleanup`) the temporary folder is
+    SIGTERM through the command line's handler) the temporary folder is
     removed and ``path`` is left exactly as it was. ``path`` must not be a
     symbolic link, and must be a folder if it exists (:func:`folder_destination`).
     The folder above it is created when missing.
@@ -342,36 +341,3 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     atomic_write(path, [data], binary=True)
-
-
-def install_signal_cleanup() -> dict:
-    """On SIGINT or SIGTERM: remove the temporary files being written, then exit 130 or 143.
-
-    Only from the main thread (signal handlers can be set nowhere else);
-    elsewhere this does nothing. Returns the previous handlers, for
-    :func:`restore_signal_handlers`.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-
-    def handler(signum, frame):  # noqa: ARG001
-        remove_temporaries()
-        name = signal.Signals(signum).name
-        try:
-            sys.stderr.write(f"gfimu: stopped by {name}; no output was left half-written\n")
-            sys.stderr.flush()
-        except (OSError, ValueError):
-            pass
-        raise SystemExit(128 + signum)
-
-    previous = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        previous[sig] = signal.signal(sig, handler)
-    return previous
-
-
-def restore_signal_handlers(previous: dict) -> None:
-    """Put back the handlers :func:`install_signal_cleanup` replaced."""
-    for sig, old in previous.items():
-        if old is not None:
-            signal.signal(sig, old)
