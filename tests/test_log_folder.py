@@ -194,3 +194,33 @@ def test_a_255_byte_output_name_is_written(old_log, tmp_path, capsys):
                  "--no-progress", "--quiet"]) == 0
     assert len(gio.read_log(folder)) == 30
     assert temporaries(tmp_path) == []
+
+
+def test_a_missing_input_file_and_a_missing_log_folder_both_exit_2(old_log, tmp_path, capsys):
+    missing = tmp_path / "nope.toml"
+    rc = main(["estimate", str(old_log), "--method", "inversion", "--calibration", str(missing), "--out", "-"])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{missing}: no such file or folder" in err and "Traceback" not in err
+    rc = main(["estimate", str(tmp_path / "nolog"), "--method", "inversion", "--out", "-"])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{tmp_path / 'nolog'}: log folder not found" in err
+
+
+def test_a_symlink_loop_log_is_one_failed_row_of_a_batch(old_log, tmp_path, capsys):
+    pytest.importorskip("dask.distributed")
+    import csv
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    os.symlink(logs / "loop2", logs / "loop")
+    os.symlink(logs / "loop", logs / "loop2")
+    out = tmp_path / "out"
+    rc = main(["batch", str(old_log), str(logs / "loop"), "--method", "inversion", "--out", str(out), "--workers", "1",
+               "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 1, err
+    rows = {Path(r["log"]).name: r for r in csv.DictReader(open(out / "summary.csv"))}
+    assert rows["log"]["status"] == "ok" and rows["log"]["samples"] == "200"
+    assert rows["loop"]["status"] == "failed"
+    assert "a loop of symbolic links" in rows["loop"]["message"]
+    assert f"{logs / 'loop'}: failed: {logs / 'loop'}: a loop of symbolic links" in err

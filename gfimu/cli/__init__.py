@@ -7,7 +7,7 @@ returning an exit code.
 Errors. A user mistake or a failure of the machine (a missing or unreadable
 file, a full disk, a log the method cannot solve) ends in one line
 ``gfimu COMMAND: error: ...`` naming the file, option or step, and a non-zero
-exit status: 2 for a mistake in the command or its inputs, 1 for a failure
+exit status: 2 for a mistake in the command or its inputs (a path that is not there included), 1 for a failure
 of the system or of a computation, 130/143 when interrupted by SIGINT/SIGTERM
 (temporary files are removed first). ``--debug`` shows the traceback instead.
 Outputs follow :mod:`gfimu.io.outputs`: never over an input, never over
@@ -220,6 +220,8 @@ def error_message(exc: BaseException) -> tuple[str, int]:
 
     if isinstance(exc, (CLIError, LogFormatError, OutputError)):
         return str(exc), EXIT_USAGE
+    if isinstance(exc, (FileNotFoundError, NotADirectoryError)) or (isinstance(exc, OSError) and exc.errno == errno.ELOOP):
+        return os_error_message(exc), EXIT_USAGE  # a path given on the command line that is not there
     if isinstance(exc, OSError):
         return os_error_message(exc), EXIT_FAILURE
     if isinstance(exc, KeyError):

@@ -9,6 +9,7 @@ whole or not at all.
 
 from __future__ import annotations
 
+import errno
 import os
 import warnings
 from pathlib import Path
@@ -29,6 +30,11 @@ LOG_FILES = ("array.toml", "imu.csv", "truth.csv", "reference.csv")
 
 def _log_folder(path: str | os.PathLike) -> Path:
     p = Path(path)
+    try:
+        os.stat(p)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise LogFormatError("a loop of symbolic links (too many levels of links); not a log folder", p) from None
     if p.is_file() and p.name in ("imu.csv", "array.toml"):
         p = p.parent
     if not p.exists():
