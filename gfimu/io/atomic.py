@@ -205,7 +205,8 @@ def folder_destination(path: str | os.PathLike, what: str = "") -> Path:
     p = Path(path)
     shown = f"{what} {p}" if what else str(p)
     if str(p) in ("", ".", "..") or p.name in ("", ".", ".."):
-        raise OutputError(f"{shown}: not a folder name that can be replaced; give the folder's own name")
+        raise OutputError(f"{shown}: the folder is replaced whole, so it must be named from outside it "
+                          f"(for example ../NAME, not . or ..)")
     try:
         st = os.lstat(p)
     except FileNotFoundError:
@@ -280,9 +281,12 @@ def atomic_folder(path: str | os.PathLike, replaced: Iterable[str] = (), what: s
             for name in sorted(os.listdir(target)):
                 if name not in replaced and not (new / name).exists() and not os.path.islink(new / name):
                     _keep(target / name, new / name)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(new, 0o777 & ~umask)
+        if target.is_dir():  # the old folder's permissions
+            os.chmod(new, stat.S_IMODE(os.stat(target).st_mode))
+        else:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(new, 0o777 & ~umask)
         mask = _blocked_signals()
         try:
             if target.is_dir():
