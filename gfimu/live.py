@@ -58,8 +58,9 @@ class LiveResult:
     smoother's time per sample, of arrival → estimate written, and of the latter after the first
     :data:`STEADY_AFTER_S` s (None when there is none); ``rate_hz`` and ``rate_from``
     (``"given"`` or ``"stream"``); ``ended``: how the session ended (``"end of input"``,
-    ``"EOF datagram"``, ``"SIGINT"``, ``"SIGTERM"``, ``"connection lost"``, ...); ``failure``: a
-    message when the stream broke or could not be read on (None otherwise).
+    ``"EOF datagram"``, ``"SIGINT"``, ``"SIGTERM"``, ``"connection lost"``, ``"input refused"``,
+    ``"stopped by an error"`` (the estimator or the output failed), ...); ``failure``: a message when
+    the stream broke, could not be read on, or the session failed (None otherwise).
     """
 
     rows_in: int
@@ -286,64 +287,70 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
 
     thread = threading.Thread(target=reader, name="gfimu-live-source", daemon=True)
     ended = None
+    crash: list[Exception] = []
     try:
         sink.start()
         thread.start()
-        last_status = time.monotonic()
-        while True:
-            if stop.is_set():  # a signal or the caller: what already arrived is still estimated
-                try:
-                    item = q.get_nowait()
-                except queue.Empty:
-                    break
-            else:
-                try:
-                    item = q.get(timeout=0.2)
-                except queue.Empty:
-                    item = False
-            if item is None:
-                break
-            if item is not False:
-                thing, arrived = item
-                if isinstance(thing, BadRow):
-                    bad += 1
-                    if len(reasons) < REASONS_KEPT:
-                        reasons.append(f"{thing.where}: {thing.reason}")
-                        say(f"warning: {thing.where} skipped: {thing.reason}")
-                        if len(reasons) == REASONS_KEPT:
-                            say("warning: further bad rows are counted, not shown")
+        try:
+            last_status = time.monotonic()
+            while True:
+                if stop.is_set():  # a signal or the caller: what already arrived is still estimated
+                    try:
+                        item = q.get_nowait()
+                    except queue.Empty:
+                        break
                 else:
-                    rows_in += 1
-                    if session is not None:
-                        feed(thing, arrived)
+                    try:
+                        item = q.get(timeout=0.2)
+                    except queue.Empty:
+                        item = False
+                if item is None:
+                    break
+                if item is not False:
+                    thing, arrived = item
+                    if isinstance(thing, BadRow):
+                        bad += 1
+                        if len(reasons) < REASONS_KEPT:
+                            reasons.append(f"{thing.where}: {thing.reason}")
+                            say(f"warning: {thing.where} skipped: {thing.reason}")
+                            if len(reasons) == REASONS_KEPT:
+                                say("warning: further bad rows are counted, not shown")
                     else:
-                        pending.append((thing, arrived))
-                        if len(pending) >= RATE_ROWS:
-                            rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
-                            if rate is not None:
-                                say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} "
-                                    f"samples (array.toml states no rate_hz; --rate-hz sets it)")
-                                start_session(rate)
-                            else:
-                                pending.pop(0)
-            if session is None and rate_hz is not None:
-                start_session(rate_hz)
-            if status_s and time.monotonic() - last_status >= status_s:
-                last_status = time.monotonic()
-                p = _stats(np.asarray(session.processing) * 1e3) if session else None
-                late = session.counts()[0] if session else 0
-                say(f"{rows_in} in, {rows_out} out, processing p50 {p[0] if p else float('nan'):.2f} ms "
-                    f"p99 {p[1] if p else float('nan'):.2f} ms, {overrun[0]} dropped, {late} late, {bad} bad")
-        if session is None and pending:  # the stream ended before RATE_ROWS samples
-            rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
-            if rate is None:
-                say(f"{len(pending)} sample(s) with no step forward in time: no rate, nothing estimated "
-                    "(--rate-hz sets the rate)")
-            else:
-                say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} samples")
-                start_session(rate)
-        if session is not None:
-            emit(list(session.smoother.flush()))
+                        rows_in += 1
+                        if session is not None:
+                            feed(thing, arrived)
+                        else:
+                            pending.append((thing, arrived))
+                            if len(pending) >= RATE_ROWS:
+                                rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
+                                if rate is not None:
+                                    say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} "
+                                        f"samples (array.toml states no rate_hz; --rate-hz sets it)")
+                                    start_session(rate)
+                                else:
+                                    pending.pop(0)
+                if session is None and rate_hz is not None:
+                    start_session(rate_hz)
+                if status_s and time.monotonic() - last_status >= status_s:
+                    last_status = time.monotonic()
+                    p = _stats(np.asarray(session.processing) * 1e3) if session else None
+                    late = session.counts()[0] if session else 0
+                    say(f"{rows_in} in, {rows_out} out, processing p50 {p[0] if p else float('nan'):.2f} ms "
+                        f"p99 {p[1] if p else float('nan'):.2f} ms, {overrun[0]} dropped, {late} late, {bad} bad")
+            if session is None and pending:  # the stream ended before RATE_ROWS samples
+                rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
+                if rate is None:
+                    say(f"{len(pending)} sample(s) with no step forward in time: no rate, nothing estimated "
+                        "(--rate-hz sets the rate)")
+                else:
+                    say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} samples")
+                    start_session(rate)
+            if session is not None:
+                emit(list(session.smoother.flush()))
+        except BrokenPipeError:  # standard output closed by its reader: the caller's to handle
+            raise
+        except Exception as exc:  # noqa: BLE001 - the estimator or the output failed: end with the counts
+            crash.append(exc)
         ended = caught[0] if caught else None
     finally:
         stop.set()
@@ -355,7 +362,12 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
         except OSError:
             pass
     failure = source.failure
-    if ended is None:
+    if crash:
+        exc = crash[0]
+        ended = "stopped by an error"
+        failure = (f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename
+                   else f"{type(exc).__name__}: {exc}")
+    elif ended is None:
         ended = source.ended
         if fatal:
             exc = fatal[0]

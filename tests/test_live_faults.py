@@ -274,3 +274,50 @@ def test_mimu4444_over_tcp_gives_the_estimate_of_the_converted_log(mimu4444_dir,
     np.testing.assert_array_equal(a.timestamps_ns, b.timestamps_ns)
     for name in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2"):
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-9)
+
+
+def test_the_three_parts_in_python_and_an_output_that_fails(log_dir):
+    """source -> gfimu.live.run -> sink from Python: the frozen LiveResult; an output that fails half-way
+    (a full disk) ends the session with its counts and the reason, not an exception."""
+    import dataclasses
+    import errno
+    import io
+
+    from gfimu.io.sources import StdinSource
+    from gfimu.live import EstimateSink, run
+    from gfimu.methods import make_estimator
+
+    array, _ = gio.load_array_toml(log_dir / "array.toml")
+    estimator = make_estimator("fixed-lag", tune_process_noise=False)
+
+    def source_of(data: bytes) -> StdinSource:
+        r, w = os.pipe()
+        threading.Thread(target=lambda: (os.write(w, data), os.close(w)), daemon=True).start()
+        return StdinSource(array, fd=r, name="pipe")
+
+    text = (log_dir / "imu.csv").read_bytes()
+    lines = text.split(b"\n")
+    data = b"\n".join(lines[:101] + [b"1e25," + lines[5].split(b",", 1)[1]] + lines[101:301]) + b"\n"
+    buf = io.StringIO()
+    result = run(source_of(data), estimator, EstimateSink(buf), rate_hz=500.0, signals=False)
+    assert (result.rows_in, result.rows_out, result.bad_rows) == (300, 300, 1)
+    assert result.bad_reasons == ("line 102: timestamp '1e25' is out of range for 64-bit nanoseconds",)
+    assert result.ended == "end of input" and result.failure is None and result.signal_exit is None
+    assert result.rate_hz == 500.0 and result.rate_from == "given"
+    assert buf.getvalue().splitlines()[0] == ("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],"
+                                              "dw_x [rad s^-2],dw_y [rad s^-2],dw_z [rad s^-2],f_x [m s^-2],"
+                                              "f_y [m s^-2],f_z [m s^-2]")
+    assert len(buf.getvalue().splitlines()) == 301
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.rows_in = 0
+
+    class Full(io.StringIO):
+        def write(self, s):
+            if self.tell() > 20_000:
+                raise OSError(errno.ENOSPC, "No space left on device", "est.csv")
+            return super().write(s)
+
+    result = run(source_of(data), estimator, EstimateSink(Full()), rate_hz=500.0, signals=False)
+    assert result.ended == "stopped by an error"
+    assert result.failure == "est.csv: No space left on device"
+    assert 0 < result.rows_out < 300

@@ -224,3 +224,12 @@ def test_a_symlink_loop_log_is_one_failed_row_of_a_batch(old_log, tmp_path, caps
     assert rows["loop"]["status"] == "failed"
     assert "a loop of symbolic links" in rows["loop"]["message"]
     assert f"{logs / 'loop'}: failed: {logs / 'loop'}: a loop of symbolic links" in err
+
+
+def test_out_dot_is_refused_naming_why(old_log, capsys, monkeypatch):
+    monkeypatch.chdir(old_log)
+    before = snapshot(old_log.parent)
+    rc = main(["simulate", "random3d", "--out", ".", "--force", "--duration-s", "0.2", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--out .: the folder is replaced whole, so it must be named from outside it" in err
+    assert snapshot(old_log.parent) == before
