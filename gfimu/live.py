@@ -55,7 +55,8 @@ class LiveResult:
     samples the smoother dropped, window restarts; ``missing``: samples that never came (gaps of
     more than 1.5 nominal steps); ``overrun_dropped``: samples dropped because the input outran
     the smoother; ``processing_ms``, ``latency_ms``, ``steady_latency_ms``: (p50, p99, max) of the
-    smoother's time per sample, of arrival → estimate written, and of the latter after the first
+    smoother's time per sample, of arrival → estimate written (samples that left the window while
+    the stream went on; not those flushed at its end), and of the latter after the first
     :data:`STEADY_AFTER_S` s (None when there is none); ``rate_hz`` and ``rate_from``
     (``"given"`` or ``"stream"``); ``ended``: how the session ended (``"end of input"``,
     ``"EOF datagram"``, ``"SIGINT"``, ``"SIGTERM"``, ``"connection lost"``, ``"input refused"``,
@@ -257,12 +258,14 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     latency: list[tuple[float, float]] = []
     rows_out = 0
 
-    def emit(states) -> None:
+    def emit(states, timed: bool = True) -> None:
         nonlocal rows_out
         if not states:
             return
         sink.write(states)
         rows_out += len(states)
+        if not timed:  # the window flushed at the end: their wait is the stream's end, not the lag
+            return
         now = time.perf_counter()
         for s in states:  # arrival of a sample -> its estimate written
             t = arrival.pop(int(s.timestamp_ns), None)
@@ -346,7 +349,7 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
                     say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} samples")
                     start_session(rate)
             if session is not None:
-                emit(list(session.smoother.flush()))
+                emit(list(session.smoother.flush()), timed=False)
         except BrokenPipeError:  # standard output closed by its reader: the caller's to handle
             raise
         except Exception as exc:  # noqa: BLE001 - the estimator or the output failed: end with the counts
