@@ -234,7 +234,7 @@ def test_binary_bytes_on_stdin_are_skipped_as_one_bad_row(log_dir, tmp_path):
 
 def test_mimu4444_over_tcp_gives_the_estimate_of_the_converted_log(mimu4444_dir, tmp_path):
     """The first ~20 s of a real recording's bytes: converted and estimated with --method fixed-lag, and
-    sent over TCP into gfimu live (rate from the stream): the same file."""
+    sent over TCP into gfimu live (rate from the stream): the same file, to the last byte."""
     data = (mimu4444_dir / "exp_1" / "data.bin").read_bytes()[:106 * 1250]
     part = tmp_path / "part.bin"
     part.write_bytes(data)
@@ -270,10 +270,8 @@ def test_mimu4444_over_tcp_gives_the_estimate_of_the_converted_log(mimu4444_dir,
     assert "from the median period of the first 64 samples" in proc.stderr
     n = len(gio.read_log(log))
     assert f"{n} samples in, {n} estimates out" in proc.stderr
-    a, b = gio.read_motion_csv(live), gio.read_motion_csv(batch)
-    np.testing.assert_array_equal(a.timestamps_ns, b.timestamps_ns)
-    for name in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2"):
-        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-9)
+    assert len(gio.read_motion_csv(live)) == n
+    assert live.read_bytes() == batch.read_bytes()
 
 
 def test_the_three_parts_in_python_and_an_output_that_fails(log_dir):
