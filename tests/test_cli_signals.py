@@ -17,11 +17,28 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _start(tmp_path):
+def _start(tmp_path, entry=("-m", "gfimu")):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.Popen([sys.executable, "-m", "gfimu", "simulate", "random3d", "--out", str(tmp_path / "log"),
-                             "--duration-s", "30", "--no-progress"], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    program = [sys.executable, *entry] if entry[0] == "-m" else list(entry)
+    return subprocess.Popen(program + ["simulate", "random3d", "--out", str(tmp_path / "log"), "--duration-s", "30",
+                                       "--no-progress"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def test_the_console_script_too(tmp_path):
+    """The ``gfimu`` entry point of pyproject.toml (gfimu.cli:main), two SIGINTs 50 ms apart."""
+    script = Path(sys.executable).with_name("gfimu")
+    if not script.exists():
+        pytest.skip("no gfimu console script next to this Python")
+    proc = _start(tmp_path, (str(script),))
+    _wait_for_numpy(proc)
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.05)
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip() == "gfimu: stopped by SIGINT; no output was left half-written"
 
 
 def _wait_for_numpy(proc, timeout_s: float = 60.0) -> None:
