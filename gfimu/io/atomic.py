@@ -270,7 +270,10 @@ def atomic_folder(path: str | os.PathLike, replaced: Iterable[str] = (), what: s
     try:
         tmp = tempfile.mkdtemp(prefix=temp_prefix(target.name), suffix=".tmp", dir=parent)
     except OSError as exc:
-        raise _naming(exc, target) from None
+        shown = f"{what} {target}" if what else str(target)
+        raise OutputError(f"{shown}: cannot create a folder next to it in {parent} "
+                          f"({(exc.strerror or str(exc)).lower()}); the new folder is written there first, then "
+                          "swapped in whole") from None
     _register(tmp)
     new = Path(tmp)
     aside = None
