@@ -98,7 +98,7 @@ def test_a_full_disk_while_writing_leaves_the_old_log(old_log, capsys, monkeypat
     rc = main(["simulate", "random3d", "--out", str(old_log), "--force", "--duration-s", "0.5", "--no-progress"])
     err = capsys.readouterr().err
     assert rc == 1
-    assert "truth.csv: no space left on the device" in err and "Traceback" not in err
+    assert f"error: {old_log / 'truth.csv'}: no space left on the device" in err and "Traceback" not in err
     assert snapshot(old_log.parent) == before
     assert temporaries(old_log.parent) == []
 

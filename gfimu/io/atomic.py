@@ -241,6 +241,19 @@ def _keep(src: Path, dst: Path) -> None:
             shutil.copy2(src, dst, follow_symlinks=False)
 
 
+def _in_place_of(exc: OSError, tmp: str, target: Path) -> OSError:
+    """The same error, naming the path in ``target`` rather than in the temporary folder ``tmp``."""
+    if isinstance(exc, OutputError) or exc.errno is None:
+        return exc
+    name = exc.filename
+    if name is None or name == tmp:
+        return _naming(exc, target)
+    name = os.fspath(name)
+    if isinstance(name, str) and name.startswith(tmp + os.sep):
+        return type(exc)(exc.errno, exc.strerror or str(exc), str(target) + name[len(tmp):])
+    return exc
+
+
 def _blocked_signals():
     """Block SIGINT and SIGTERM in this thread (returns the previous mask, None where it cannot)."""
     try:
@@ -312,7 +325,7 @@ def atomic_folder(path: str | os.PathLike, replaced: Iterable[str] = (), what: s
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         _unregister(tmp)
-        raise _naming(exc, target) if exc.filename in (None, tmp) else exc from None
+        raise _in_place_of(exc, tmp, target) from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         _unregister(tmp)
