@@ -75,6 +75,8 @@ def run(args) -> int:
         except (OSError, ValueError):
             pass
 
+    if args.rate_hz and declared_rate_hz and abs(args.rate_hz - declared_rate_hz) > 1e-6 * declared_rate_hz:
+        report(f"--rate-hz {args.rate_hz:g} replaces rate_hz = {declared_rate_hz:g} of {args.array}")
     out = sys.stdout if out_path is None else open(Path(out_path), "w", encoding="utf-8", newline="")
     try:
         result = run_live(source, estimator, EstimateSink(out, sigma=estimator.compute_sigma), rate_hz=rate_hz,
