@@ -1,10 +1,17 @@
 import signal
 import sys
 
-# A signal before gfimu.cli.main installs its handler (while gfimu.cli is imported): the same status,
-# and from then on ignored (main installs its own handler first thing).
-signal.signal(signal.SIGINT, lambda signum, frame: (signal.signal(signum, signal.SIG_IGN), sys.exit(130)))
-signal.signal(signal.SIGTERM, lambda signum, frame: (signal.signal(signum, signal.SIG_IGN), sys.exit(143)))
+
+def _early_signal(signum, frame):  # noqa: ARG001
+    """A signal before gfimu.cli.main installs its own handler (while gfimu.cli is imported): the same
+    status as later (130 / 143), and a second one ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    sys.exit(128 + signum)
+
+
+signal.signal(signal.SIGINT, _early_signal)
+signal.signal(signal.SIGTERM, _early_signal)
 
 from gfimu.cli import main  # noqa: E402
 
