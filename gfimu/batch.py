@@ -10,6 +10,7 @@ the logs and the output folder on a shared file system.
 
 from __future__ import annotations
 
+import os
 import time
 import traceback
 import warnings
@@ -51,7 +52,10 @@ def output_folders(logs: Iterable[str | Path], out_dir: str | Path) -> list[Path
     seen: dict[str, int] = {}
     out = []
     for log in logs:
-        name = Path(log).resolve().name or "log"
+        try:
+            name = Path(log).resolve().name or "log"
+        except (OSError, RuntimeError):  # a loop of symbolic links: its own row says so (run_one)
+            name = Path(os.path.abspath(log)).name or "log"
         seen[name] = seen.get(name, 0) + 1
         out.append(Path(out_dir) / (name if seen[name] == 1 else f"{name}-{seen[name]}"))
     return out

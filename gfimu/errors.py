@@ -10,7 +10,7 @@
   I/O, a missing optional package). Also an :class:`OSError`.
 
 The classes of the modules (``LogFormatError``, ``ArrayModelError``, ``OptionError``,
-``LiveInputError``, ...) subclass the kind they are. :class:`InputError` and
+``SourceError``, ...) subclass the kind they are. :class:`InputError` and
 :class:`DataError` are also ``ValueError`` s, so that code written against the ``ValueError``
 they replaced still catches them.
 

@@ -1,173 +1,394 @@
 """Live estimation: readings in as they come, estimates out as they leave the lag window.
 
-:class:`LiveSession` wraps the fixed-lag smoother (:mod:`gfimu.smoother.fixed_lag`)
-for a stream of imu.csv rows (text) or of decoded readings, and counts what
-happens: samples in and out, rows that could not be read, samples the smoother
-dropped for going back in time or repeating a timestamp and its clock resets
-(time going back by more than its ``clock_reset_s``: the window restarts),
-samples that never came, and the processing time of each sample. It formats estimate rows exactly as ``gfimu estimate`` writes
-them, so a log fed row by row gives the file ``gfimu estimate --method
-fixed-lag`` writes. No I/O here: the command (:mod:`gfimu.cli.live`) owns the
-sockets, files and signals.
+Three parts: a source (:mod:`gfimu.io.sources`: standard input, UDP, TCP,
+a serial port), :func:`run` (the fixed-lag smoother on the stream, with the
+counts of what happened), and a sink (:class:`EstimateSink`: the estimate
+table ``gfimu estimate`` writes, row by row, flushed as each sample leaves the
+window). :func:`run` returns a :class:`LiveResult`.
+
+Faults are contained: a row that cannot be read (text in a number field, a
+timestamp beyond 64-bit nanoseconds or not finite, a line of binary bytes)
+is skipped and counted, with the first few reasons kept; a sample going back
+in time or repeating one is dropped and counted by the smoother; time going
+back by more than its ``clock_reset_s`` restarts the window; a broken stream
+(a connection reset) ends the session with what was estimated; SIGINT and
+SIGTERM end it at once (the window flushed, every estimate written), also
+while the source is waiting for data.
 """
 
 from __future__ import annotations
 
-import re
+import queue
+import signal
+import threading
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .io.sources import BadRow, Reading, Source
+from .io.tables import motion_csv_chunks
+from .motion import Motion
 
-ESTIMATE_HEADER = ("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],dw_x [rad s^-2],dw_y [rad s^-2],"
-                   "dw_z [rad s^-2],f_x [m s^-2],f_y [m s^-2],f_z [m s^-2]")
-"""The columns of the estimate rows (those of ``gfimu estimate`` for ω, ω̇ and f)."""
+RATE_ROWS = 64
+"""Samples from whose timestamps the rate is taken when neither array.toml nor the caller gives it
+(the median period, as :attr:`gfimu.log.Log.rate_hz` takes it over a whole log)."""
 
-_HEADER_RE = re.compile(r"^\s*(.*?)\s*\[([^\[\]]*)\]\s*$")
+REASONS_KEPT = 5
+"""Bad rows whose reason is kept (and reported as it happens); the others are only counted."""
 
+STEADY_AFTER_S = 10.0
+"""Latency is also summarised for samples arriving this long after the first [s]: past the start,
+where the first seconds are held while the process noise is chosen on them."""
 
-class LiveInputError(InputError):
-    """A header or row that cannot be read (the message names it)."""
-
-
-@dataclass
-class LiveStats:
-    """Counts and processing times of a session."""
-
-    samples_in: int = 0
-    samples_out: int = 0
-    bad_rows: int = 0
-    late_or_repeated: int = 0
-    clock_resets: int = 0
-    missing: int = 0
-    """Samples that never arrived: gaps in time of more than 1.5 nominal steps."""
-    overrun_dropped: int = 0
-    processing_s: list = field(default_factory=list)
-
-    def percentiles_ms(self) -> tuple[float, float, float]:
-        """(p50, p99, max) processing time per sample [ms] (NaN before any sample)."""
-        if not self.processing_s:
-            return (float("nan"),) * 3
-        p = np.asarray(self.processing_s) * 1e3
-        return float(np.percentile(p, 50)), float(np.percentile(p, 99)), float(p.max())
-
-    def summary(self) -> str:
-        p50, p99, mx = self.percentiles_ms()
-        return (f"{self.samples_in} samples in, {self.samples_out} estimates out; {self.bad_rows} bad rows, "
-                f"{self.late_or_repeated} late or repeated, {self.missing} missing (gaps), {self.overrun_dropped} dropped (input faster than the "
-                f"smoother), {self.clock_resets} clock resets; processing per sample p50 {p50:.3f} ms, "
-                f"p99 {p99:.3f} ms, max {mx:.3f} ms")
+_SIGNAL_EXIT = {"SIGINT": 130, "SIGTERM": 143}
 
 
-def imu_row_parser(array, header: str):
-    """A function turning one imu.csv data row (text) into ``(timestamp_ns, accel_row, gyro_row)`` for
-    ``array``, given the imu.csv header line; columns may come in any order, units are converted
-    (``[g]``, ``[deg s^-1]``, ``[ms]``…) or refused."""
-    from .io.tables import imu_columns
-    from .io.units import TIME_UNITS_NS, unit_factor
+@dataclass(frozen=True)
+class LiveResult:
+    """What a live session did.
 
-    names = [c.strip() for c in header.strip().lstrip("\ufeff").split(",")]
-    parsed = []
-    for i, text in enumerate(names):
-        m = _HEADER_RE.match(text.lstrip("#"))
-        if not m:
-            raise LiveInputError(f"header column {i + 1} {text!r} has no [unit]")
-        parsed.append((m.group(1).strip(), m.group(2).strip()))
-    if not parsed or parsed[0][0] != "timestamp":
-        raise LiveInputError("the header must start with '#timestamp [ns]' (as imu.csv)")
-    time_unit = parsed[0][1]
-    if time_unit not in TIME_UNITS_NS:
-        raise LiveInputError(f"time unit [{time_unit}] not understood; use one of {', '.join(TIME_UNITS_NS)}")
-    time_factor = TIME_UNITS_NS[time_unit]
-    where = {name: (i, unit) for i, (name, unit) in enumerate(parsed)}
-    index, factor = [], []
-    for name, kind in imu_columns(array):
-        if name not in where:
-            raise LiveInputError(f"column '{name}' of the array is missing from the header")
-        i, unit = where[name]
-        try:
-            factor.append(unit_factor(unit, kind))
-        except ValueError as exc:
-            raise LiveInputError(f"column '{name}': {exc}") from None
-        index.append(i)
-    index_a, factor_a = np.array(index), np.array(factor)
-    n_acc = array.n_axes
-    gyro = array.gyroscope is not None
-    width = len(parsed)
-
-    def parse(row: str):
-        cells = row.strip().split(",")
-        if len(cells) != width:
-            raise LiveInputError(f"{len(cells)} values, expected {width}")
-        try:
-            t = int(cells[0]) if time_factor == 1 else int(round(float(cells[0]) * time_factor))
-            values = np.array([float(cells[i]) for i in index_a]) * factor_a
-        except ValueError as exc:
-            raise LiveInputError(f"not a number ({exc})") from None
-        if not np.all(np.isfinite(values)):
-            raise LiveInputError("a value is not finite")
-        return t, values[:n_acc], (values[n_acc:n_acc + 3] if gyro else None)
-
-    return parse
-
-
-def default_header(array) -> str:
-    """The imu.csv header of ``array`` (the column order of rows that come without a header, e.g. UDP)."""
-    from .io.tables import imu_columns
-
-    unit = {"acceleration": "m s^-2", "angular_rate": "rad s^-1", "angle": "rad"}
-    return ",".join(["#timestamp [ns]"] + [f"{name} [{unit[kind]}]" for name, kind in imu_columns(array)])
-
-
-class LiveSession:
-    """The fixed-lag smoother on a stream, with the counts of :class:`LiveStats`.
-
-    ``estimator``: a :class:`gfimu.smoother.fixed_lag.FixedLagEstimator` (its options and lag);
-    ``rate_hz``: the nominal rate (array.toml's ``rate_hz``) used to tell gaps.
+    ``rows_in``: samples read from the source; ``rows_out``: estimate rows written;
+    ``bad_rows``: rows that could not be read (skipped), ``bad_reasons`` the first
+    :data:`REASONS_KEPT` of them (``"line 7: ..."``); ``late_or_repeated``, ``clock_resets``:
+    samples the smoother dropped, window restarts; ``missing``: samples that never came (gaps of
+    more than 1.5 nominal steps); ``overrun_dropped``: samples dropped because the input outran
+    the smoother; ``processing_ms``, ``latency_ms``, ``steady_latency_ms``: (p50, p99, max) of the
+    smoother's time per sample, of arrival → estimate written (samples that left the window while
+    the stream went on; not those flushed at its end), and of the latter after the first
+    :data:`STEADY_AFTER_S` s (None when there is none); ``rate_hz`` and ``rate_from``
+    (``"given"`` or ``"stream"``); ``ended``: how the session ended (``"end of input"``,
+    ``"EOF datagram"``, ``"SIGINT"``, ``"SIGTERM"``, ``"connection lost"``, ``"input refused"``,
+    ``"stopped by an error"`` (the estimator or the output failed), ...); ``failure``: a message when
+    the stream broke, could not be read on, or the session failed (None otherwise).
     """
 
+    rows_in: int
+    rows_out: int
+    bad_rows: int
+    bad_reasons: tuple[str, ...]
+    late_or_repeated: int
+    clock_resets: int
+    missing: int
+    overrun_dropped: int
+    processing_ms: tuple[float, float, float] | None
+    latency_ms: tuple[float, float, float] | None
+    steady_latency_ms: tuple[float, float, float] | None
+    rate_hz: float | None
+    rate_from: str
+    ended: str
+    failure: str | None = None
+
+    @property
+    def signal_exit(self) -> int | None:
+        """128 + the signal number when a signal ended the session (130 SIGINT, 143 SIGTERM), else None."""
+        return _SIGNAL_EXIT.get(self.ended)
+
+    def summary(self) -> str:
+        """One line: the counts, the times and how it ended."""
+        text = (f"{self.rows_in} samples in, {self.rows_out} estimates out; {self.bad_rows} bad rows, "
+                f"{self.late_or_repeated} late or repeated, {self.missing} missing (gaps), {self.overrun_dropped} "
+                f"dropped (input faster than the smoother), {self.clock_resets} clock resets")
+        if self.processing_ms is not None:
+            text += "; processing per sample p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms".format(*self.processing_ms)
+        if self.latency_ms is not None:
+            text += "; latency arrival -> estimate written p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms".format(
+                *self.latency_ms)
+        if self.steady_latency_ms is not None:
+            text += "; after the first {:g} s: p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms".format(
+                STEADY_AFTER_S, *self.steady_latency_ms)
+        return text + f"; ended: {self.ended}"
+
+
+class EstimateSink:
+    """The estimate table of ``gfimu estimate`` (:func:`gfimu.io.tables.motion_csv_chunks`: the same header,
+    columns and number format) written to a text stream as the states come, flushed after each."""
+
+    def __init__(self, stream, sigma: bool = False):
+        self.stream = stream
+        self.sigma = bool(sigma)
+        self._started = False
+
+    def _motion(self, states) -> Motion:
+        n = len(states)
+        t = np.fromiter((s.timestamp_ns for s in states), dtype=np.int64, count=n)
+        v = np.array([np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+                      for s in states]).reshape(n, 9)
+        sigma = {}
+        if self.sigma:
+            sig = np.full((n, 9), np.nan)
+            for k, s in enumerate(states):
+                if s.sigma_omega_b_radps is not None:
+                    sig[k] = np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
+                                             s.sigma_specific_force_b_mps2])
+            sigma = {"omega_b_radps": sig[:, :3], "omega_dot_b_radps2": sig[:, 3:6], "specific_force_b_mps2": sig[:, 6:]}
+        return Motion(t, omega_b_radps=v[:, :3], omega_dot_b_radps2=v[:, 3:6], specific_force_b_mps2=v[:, 6:],
+                      sigma=sigma)
+
+    def start(self) -> None:
+        """The header line (written once, before any row)."""
+        if not self._started:
+            self._started = True
+            self.stream.write(next(iter(motion_csv_chunks(self._motion([])))))
+            self.stream.flush()
+
+    def write(self, states) -> None:
+        if not states:
+            return
+        self.start()
+        chunks = iter(motion_csv_chunks(self._motion(states)))
+        next(chunks)  # the header, written once by start()
+        for chunk in chunks:
+            self.stream.write(chunk)
+        self.stream.flush()
+
+
+class _Session:
+    """The fixed-lag smoother on one stream: samples in, states out, counts kept."""
+
     def __init__(self, array, estimator, rate_hz: float):
-        self.array = array
-        self.estimator = estimator
         self.rate_hz = float(rate_hz)
-        self.stats = LiveStats()
-        self._smoother = estimator.smoother(array, self.rate_hz)
-        self._last_t: int | None = None
-        self._use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
+        self.smoother = estimator.smoother(array, self.rate_hz)
+        self.use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
+        self.last_t: int | None = None
+        self.missing = 0
+        self.processing: list[float] = []
 
-    def push(self, timestamp_ns: int, accel_row, gyro_row=None) -> list[str]:
-        """One sample in; the estimate rows that left the lag window (text, with newlines). Late,
-        repeated and clock-reset samples are handled and counted by the smoother itself
-        (:meth:`gfimu.smoother.fixed_lag.FixedLagSmoother.push`)."""
-        self.stats.samples_in += 1
+    def push(self, r: Reading) -> list:
         t0 = time.perf_counter()
-        update = self._smoother.push(int(timestamp_ns), np.asarray(accel_row, dtype=float),
-                                     gyro_row if self._use_gyro else None)
-        counts = self._smoother.counts
-        self.stats.late_or_repeated = counts["duplicates"] + counts["out_of_order"]
-        self.stats.clock_resets = counts["clock_resets"]
+        update = self.smoother.push(int(r.timestamp_ns), np.asarray(r.accel, dtype=float),
+                                    r.gyro if self.use_gyro else None)
         if update.dropped is not None:
-            return self._rows(update.smoothed)
-        self.stats.processing_s.append(time.perf_counter() - t0)
-        if len(self.stats.processing_s) > 200_000:  # bounded memory on long streams
-            self.stats.processing_s = self.stats.processing_s[-100_000:]
-        if self._last_t is not None and timestamp_ns > self._last_t:
-            steps = (timestamp_ns - self._last_t) * 1e-9 * self.rate_hz
+            return list(update.smoothed)
+        self.processing.append(time.perf_counter() - t0)
+        if len(self.processing) > 200_000:  # bounded memory on long streams
+            del self.processing[:100_000]
+        if self.last_t is not None and r.timestamp_ns > self.last_t:
+            steps = (r.timestamp_ns - self.last_t) * 1e-9 * self.rate_hz
             if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
-                self.stats.missing += int(round(steps)) - 1
-        self._last_t = timestamp_ns
-        return self._rows(update.smoothed)
+                self.missing += int(round(steps)) - 1
+        self.last_t = r.timestamp_ns
+        return list(update.smoothed)
 
-    def flush(self) -> list[str]:
-        """The rows still in the window (end of the stream)."""
-        return self._rows(self._smoother.flush())
+    def counts(self) -> tuple[int, int]:
+        c = self.smoother.counts
+        return c["duplicates"] + c["out_of_order"], c["clock_resets"]
 
-    def _rows(self, states) -> list[str]:
-        rows = []
-        for s in states:
-            values = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
-            rows.append(f"{int(s.timestamp_ns)}," + ",".join(float.__repr__(float(v)) for v in values) + "\n")
-        self.stats.samples_out += len(rows)
-        return rows
+
+def rate_from_timestamps(timestamps_ns) -> float | None:
+    """The rate [Hz] of the median step between increasing timestamps (None with fewer than two steps
+    forward): the rule of :attr:`gfimu.log.Log.rate_hz`."""
+    t = np.asarray(timestamps_ns, dtype=np.int64)
+    dt = np.diff(t) * 1e-9
+    dt = dt[dt > 0]
+    if dt.size < 1:
+        return None
+    return 1.0 / float(np.median(dt))
+
+
+def _stats(values_ms) -> tuple[float, float, float] | None:
+    if len(values_ms) == 0:
+        return None
+    p = np.asarray(values_ms, dtype=float)
+    return float(np.percentile(p, 50)), float(np.percentile(p, 99)), float(p.max())
+
+
+def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None = None, queue_size: int = 5000,
+        stop: threading.Event | None = None, signals: bool = True, report: Callable[[str], None] | None = None,
+        status_s: float | None = None) -> LiveResult:
+    """The fixed-lag ``estimator`` on ``source``'s readings, estimates to ``sink``, until the source ends,
+    ``stop`` is set, SIGINT or SIGTERM (with ``signals``, from the main thread) or the stream breaks.
+
+    ``rate_hz``: the nominal rate (array.toml's ``rate_hz`` or the caller's); None takes it from the
+    timestamps of the first :data:`RATE_ROWS` samples (said through ``report``). At most
+    ``queue_size`` samples wait while the smoother is busy; beyond that the oldest is dropped and
+    counted. ``report`` receives one-line messages (the first bad rows, the rate taken, status lines
+    every ``status_s`` seconds when given). The source is closed at the end. A header that cannot be
+    read ends the session: ``ended`` is ``"input refused"`` and ``failure`` names the source and line;
+    a source that fails otherwise gives ``"source failed"``.
+    """
+    say = report or (lambda message: None)
+    stop = stop or threading.Event()
+    array = source.array
+    q: queue.Queue = queue.Queue(maxsize=max(int(queue_size), 1))
+    fatal: list[BaseException] = []
+    overrun = [0]
+    caught: list[str] = []
+
+    def reader():
+        try:
+            for item in source.items(stop):
+                _put((item, time.perf_counter()))
+                if stop.is_set():
+                    break
+        except BaseException as exc:  # noqa: BLE001 - handed to the main thread
+            fatal.append(exc)
+        finally:
+            _put(None)
+
+    def _put(item):
+        while True:
+            try:
+                q.put_nowait(item)
+                return
+            except queue.Full:  # the smoother falls behind: drop the oldest waiting sample
+                try:
+                    dropped = q.get_nowait()
+                    if dropped is not None:
+                        overrun[0] += 1
+                except queue.Empty:
+                    pass
+
+    def on_signal(signum, frame):  # noqa: ARG001
+        if not caught:
+            caught.append(signal.Signals(signum).name)
+        stop.set()
+
+    previous = {}
+    if signals and threading.current_thread() is threading.main_thread():
+        previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    session: _Session | None = None
+    pending: list[tuple[Reading, float]] = []  # samples held until the rate is known
+    rate_from = "given" if rate_hz is not None else "stream"
+    rows_in = bad = 0
+    reasons: list[str] = []
+    arrival: dict[int, float] = {}
+    latency: list[tuple[float, float]] = []
+    rows_out = 0
+
+    def emit(states, timed: bool = True) -> None:
+        nonlocal rows_out
+        if not states:
+            return
+        sink.write(states)
+        rows_out += len(states)
+        if not timed:  # the window flushed at the end: their wait is the stream's end, not the lag
+            return
+        now = time.perf_counter()
+        for s in states:  # arrival of a sample -> its estimate written
+            t = arrival.pop(int(s.timestamp_ns), None)
+            if t is not None:
+                latency.append((t, now - t))
+        if len(arrival) > 100_000:  # samples that never left (dropped): forget the oldest
+            for key in list(arrival)[:50_000]:
+                del arrival[key]
+        if len(latency) > 200_000:
+            del latency[:100_000]
+
+    def start_session(rate: float) -> None:
+        nonlocal session
+        session = _Session(array, estimator, rate)
+        for r, arrived in pending:
+            feed(r, arrived)
+        pending.clear()
+
+    def feed(r: Reading, arrived: float) -> None:
+        arrival[int(r.timestamp_ns)] = arrived
+        emit(session.push(r))
+
+    thread = threading.Thread(target=reader, name="gfimu-live-source", daemon=True)
+    ended = None
+    crash: list[Exception] = []
+    try:
+        sink.start()
+        thread.start()
+        try:
+            last_status = time.monotonic()
+            while True:
+                if stop.is_set():  # a signal or the caller: what already arrived is still estimated
+                    try:
+                        item = q.get_nowait()
+                    except queue.Empty:
+                        break
+                else:
+                    try:
+                        item = q.get(timeout=0.2)
+                    except queue.Empty:
+                        item = False
+                if item is None:
+                    break
+                if item is not False:
+                    thing, arrived = item
+                    if isinstance(thing, BadRow):
+                        bad += 1
+                        if len(reasons) < REASONS_KEPT:
+                            reasons.append(f"{thing.where}: {thing.reason}")
+                            say(f"warning: {thing.where} skipped: {thing.reason}")
+                            if len(reasons) == REASONS_KEPT:
+                                say("warning: further bad rows are counted, not shown")
+                    else:
+                        rows_in += 1
+                        if session is not None:
+                            feed(thing, arrived)
+                        else:
+                            pending.append((thing, arrived))
+                            if len(pending) >= RATE_ROWS:
+                                rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
+                                if rate is not None:
+                                    say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} "
+                                        f"samples (array.toml states no rate_hz; --rate-hz sets it)")
+                                    start_session(rate)
+                                else:
+                                    pending.pop(0)
+                if session is None and rate_hz is not None:
+                    start_session(rate_hz)
+                if status_s and time.monotonic() - last_status >= status_s:
+                    last_status = time.monotonic()
+                    p = _stats(np.asarray(session.processing) * 1e3) if session else None
+                    late = session.counts()[0] if session else 0
+                    say(f"{rows_in} in, {rows_out} out, processing p50 {p[0] if p else float('nan'):.2f} ms "
+                        f"p99 {p[1] if p else float('nan'):.2f} ms, {overrun[0]} dropped, {late} late, {bad} bad")
+            if session is None and pending:  # the stream ended before RATE_ROWS samples
+                rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
+                if rate is None:
+                    say(f"{len(pending)} sample(s) with no step forward in time: no rate, nothing estimated "
+                        "(--rate-hz sets the rate)")
+                else:
+                    say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} samples")
+                    start_session(rate)
+            if session is not None:
+                emit(list(session.smoother.flush()), timed=False)
+        except BrokenPipeError:  # standard output closed by its reader: the caller's to handle
+            raise
+        except Exception as exc:  # noqa: BLE001 - the estimator or the output failed: end with the counts
+            crash.append(exc)
+        ended = caught[0] if caught else None
+    finally:
+        stop.set()
+        for s, h in previous.items():
+            signal.signal(s, h)
+        thread.join(timeout=2 * 0.2 + 0.5)
+        try:
+            source.close()
+        except OSError:
+            pass
+    failure = source.failure
+    if crash:
+        exc = crash[0]
+        ended = "stopped by an error"
+        failure = (f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename
+                   else f"{type(exc).__name__}: {exc}")
+    elif ended is None:
+        ended = source.ended
+        if fatal:
+            exc = fatal[0]
+            ended = "input refused" if isinstance(exc, ValueError) else "source failed"
+            failure = str(exc) or type(exc).__name__
+    late, resets = session.counts() if session else (0, 0)
+    steady = None
+    if latency:
+        pairs = np.asarray(latency)
+        later = pairs[pairs[:, 0] > pairs[0, 0] + STEADY_AFTER_S, 1]
+        steady = _stats(later * 1e3)
+    result = LiveResult(
+        rows_in=rows_in, rows_out=rows_out, bad_rows=bad, bad_reasons=tuple(reasons), late_or_repeated=late,
+        clock_resets=resets, missing=session.missing if session else 0, overrun_dropped=overrun[0],
+        processing_ms=_stats(np.asarray(session.processing) * 1e3) if session else None,
+        latency_ms=_stats(np.asarray([d for _, d in latency]) * 1e3) if latency else None,
+        steady_latency_ms=steady, rate_hz=session.rate_hz if session else rate_hz, rate_from=rate_from,
+        ended=ended, failure=failure)
+    if fatal and not isinstance(fatal[0], Exception):
+        raise fatal[0]
+    return result

@@ -473,7 +473,7 @@ def test_calibration_that_is_a_folder_or_under_a_file(work, capsys):
              "--out", str(work / "e.csv")], work, capsys, f"{work / 'calfolder'}: is a folder, a file was expected",
             status=1)
     refused(["estimate", str(work / "log"), "--method", "inversion", "--calibration", str(work / "est.csv" / "x"),
-             "--out", str(work / "e.csv")], work, capsys, "a part of this path is a file, not a folder", status=1)
+             "--out", str(work / "e.csv")], work, capsys, "a part of this path is a file, not a folder", status=2)
 
 
 @pytest.mark.parametrize("exc, message", [

@@ -171,11 +171,11 @@ def test_the_kinds(work):
     from gfimu.cli import CLIError
     from gfimu.cli.options import OptionError
     from gfimu.io.errors import LogFormatError, OutputError
-    from gfimu.live import LiveInputError
+    from gfimu.io.sources import SourceError
     from gfimu.methods import UnknownMethodError, make_estimator
     from gfimu.smoother.fixed_lag import FixedLagSmootherClosed, FixedLagSmootherError
 
-    for cls in (LogFormatError, ArrayModelError, OptionError, CLIError, LiveInputError, UnknownMethodError,
+    for cls in (LogFormatError, ArrayModelError, OptionError, CLIError, SourceError, UnknownMethodError,
                 CalibrationFileError, OutputError, FixedLagSmootherClosed):
         assert issubclass(cls, InputError) and issubclass(cls, ValueError), cls
     for cls in (CalibrationError, FixedLagSmootherError):

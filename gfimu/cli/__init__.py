@@ -8,7 +8,8 @@ Errors (:mod:`gfimu.errors`). A user mistake, data that cannot support the
 request or a failure of the machine (a malformed or missing file, a log the
 method cannot solve, a full disk) ends in one line ``gfimu COMMAND: error: ...``
 naming the file, key, row or option, and a non-zero exit status: 2 for a
-:class:`~gfimu.errors.GfimuError` of the input or data kind, 1 for a resource
+:class:`~gfimu.errors.GfimuError` of the input or data kind and for a path given that is not
+there, 1 for a resource
 (an ``OSError``: permission, no space, interrupted I/O), 130/143 when
 interrupted by SIGINT/SIGTERM (temporary files are removed first). Any other
 exception is a bug, not a mistake of the user: ``gfimu COMMAND: internal error:
@@ -31,7 +32,9 @@ import argparse
 import errno
 import importlib
 import os
+import signal
 import sys
+import threading
 import warnings
 
 from ..errors import GfimuError, InputError
@@ -231,8 +234,9 @@ def error_message(exc: BaseException) -> tuple[str, int]:
     """(message, exit status) for an exception that ends a command.
 
     A :class:`gfimu.errors.GfimuError` is one of gfimu's own errors: its message, exit status 2
-    (input, data) or 1 (resource). An ``OSError`` is the operating system refusing (a resource):
-    the path and the reason, exit 1; so is running out of memory. GTSAM's "indeterminant linear
+    (input, data) or 1 (resource). A path that is not there (or a loop of links) is a mistake in the
+    command: exit 2. Any other ``OSError`` is the operating system refusing (a resource): the path
+    and the reason, exit 1; so is running out of memory. GTSAM's "indeterminant linear
     system" is the data not determining the states (exit 2). Anything else is a bug: an internal
     error naming its type, exit 1."""
     if isinstance(exc, GfimuError):
@@ -241,6 +245,8 @@ def error_message(exc: BaseException) -> tuple[str, int]:
         if _under_determined(exc):
             return UNDER_DETERMINED.format(_first_line(exc)), exc.exit_status
         return str(exc) or type(exc).__name__, exc.exit_status
+    if isinstance(exc, (FileNotFoundError, NotADirectoryError)) or (isinstance(exc, OSError) and exc.errno == errno.ELOOP):
+        return os_error_message(exc), EXIT_USAGE  # a path given on the command line that is not there
     if isinstance(exc, OSError):
         return os_error_message(exc), EXIT_FAILURE
     if isinstance(exc, MemoryError):
@@ -267,39 +273,103 @@ def _warning_printer(command: str):
     return show
 
 
+_SIGNALLED: list[int] = []
+"""The signal that is ending this run (empty while none came)."""
+
+
+def _remove_temporaries() -> None:
+    """Remove the temporary files and folders being written (only if the atomic writer was loaded: importing
+    it would import numpy)."""
+    atomic = sys.modules.get("gfimu.io.atomic")
+    if atomic is not None:
+        atomic.remove_temporaries()
+
+
+def _on_signal(signum, frame) -> None:  # noqa: ARG001
+    """SIGINT / SIGTERM: remove the temporary files, one line, exit 130 / 143. A second signal while the
+    first is ending the run changes nothing (no traceback, the same status)."""
+    if _SIGNALLED:
+        return
+    _SIGNALLED.append(signum)
+    if _PROGRAM:  # the process ends: a later signal, even during the interpreter's teardown, is ignored
+        _ignore_signals()
+    _remove_temporaries()
+    try:
+        sys.stderr.write(f"gfimu: stopped by {signal.Signals(signum).name}; no output was left half-written\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass
+    raise SystemExit(128 + signum)
+
+
+_PROGRAM: list[bool] = []
+"""Set while :func:`main` runs as the program (no ``argv`` given)."""
+
+
+def _ignore_signals() -> None:
+    """SIGINT and SIGTERM ignored from now on. The interpreter's teardown puts a Python handler back to
+    the default (death by the signal, exit -2); an ignored signal stays ignored."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+
+
+def _install_signal_handlers() -> dict:
+    """:func:`_on_signal` for SIGINT and SIGTERM (from the main thread only); the previous handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    _SIGNALLED.clear()
+    return {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The command line. ``argv`` None: the program's own (``sys.argv``); the SIGINT/SIGTERM handler is
+    installed first, before any import of the command, and once the command is done (or a signal is ending
+    it) SIGINT and SIGTERM are ignored to the end of the process, so that a signal at any time, once or
+    twice, ends in one line and 130 / 143. Given an ``argv`` (a call from
+    Python), the previous handlers are put back on return."""
+    _PROGRAM[:] = [argv is None]
+    previous = _install_signal_handlers()
+    try:
+        return _main(argv)
+    finally:
+        if argv is None:
+            _ignore_signals()  # the command is done: its exit status stands
+        else:
+            for sig, old in previous.items():
+                if old is not None:
+                    signal.signal(sig, old)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser(command_of(sys.argv[1:] if argv is None else list(argv)))
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, or a malformed command line (argparse printed why)
+        if _SIGNALLED:
+            raise
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE
-    from ..io.atomic import install_signal_cleanup, remove_temporaries, restore_signal_handlers  # after --help
-
-    previous = install_signal_cleanup()
     try:
         with warnings.catch_warnings():
             if not args.debug:
                 warnings.showwarning = _warning_printer(args.command)
             return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
-        remove_temporaries()
+        _remove_temporaries()
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except KeyboardInterrupt:
-        remove_temporaries()
+        _remove_temporaries()
         print(f"gfimu {args.command}: interrupted; no output was left half-written", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - every error becomes one line unless --debug
-        remove_temporaries()
+        _remove_temporaries()
         if args.debug:
             raise
         message, status = error_message(exc)
         kind = "" if message.startswith("internal error: ") else "error: "
         print(f"gfimu {args.command}: {kind}{message}", file=sys.stderr)
         return status
-    finally:
-        restore_signal_handlers(previous)
-

@@ -86,7 +86,7 @@ def run(args) -> int:
             log = apply_calibration_file(log, args.calibration)
         bar.step("write the log")
         # the rate measured: 1e9 / the median step of the log's timestamps [Hz] (readers/_grid.py)
-        gio.write_log(log, args.out, rate_hz=nominal_rate_hz(log.timestamps_ns))
+        gio.write_log(log, args.out, rate_hz=nominal_rate_hz(log.timestamps_ns), what="--out")
     for line in [*report, *extrinsics_report]:
         info(args, line, file=sys.stdout)
     if args.calibration:

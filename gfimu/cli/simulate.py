@@ -118,7 +118,7 @@ def run(args) -> int:
         noise = None
     log = simulate(args.scenario, array=_array(args), rate_hz=args.rate_hz, duration_s=args.duration_s,
                    noise=noise, seed=args.seed, progress=show_progress(args), **options)
-    gio.write_log(log, args.out)
+    gio.write_log(log, args.out, what="--out")
     info(args, f"{args.scenario}: {len(log)} samples at {log.rate_hz:g} Hz ({log.array.name}, "
           f"{log.array.n_axes} accelerometer axes) -> {args.out}", file=sys.stdout)
     return 0

@@ -6,20 +6,31 @@ written to a temporary file in the destination folder, flushed to disk
 interruption never leaves a half-written file and never loses the old one.
 The temporary file is removed on any error; while it exists it is listed in
 a registry that :func:`remove_temporaries` empties (the command line calls it
-from its SIGINT/SIGTERM handler, see :func:`install_signal_cleanup`).
+from its SIGINT/SIGTERM handler, :func:`gfimu.cli.main`).
 
 A destination that exists and is not a regular file (a folder, a device such
 as ``/dev/null``, a FIFO, a socket) is refused with :class:`OutputError`,
-never replaced. A destination that is a symbolic link is written through:
-the file it points to is replaced and the link is kept.
+never replaced; so is a name ending in ``/`` (it names a folder). A
+destination that is a symbolic link is written through: the file it points
+to is replaced and the link is kept.
+
+A whole folder (a log) is written with :func:`atomic_folder`: into a sibling
+temporary folder, then swapped in at once (the old folder renamed aside, the
+new one renamed in, the old one removed); on any failure or interruption the
+old folder stays as it was and the temporary one is removed. Nothing in the
+old folder is followed or written through: its links stay links.
+
+Temporary names are ``.NAME.XXXXXXXX.tmp`` with ``NAME`` cut to
+:data:`TEMP_NAME_BYTES` bytes, so that they fit the file system's limit
+(255 bytes) whatever the length of the destination's name.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import stat
-import sys
 import tempfile
 import threading
 from collections.abc import Iterable, Iterator
@@ -30,6 +41,15 @@ from .errors import OutputError
 
 _PENDING: set[str] = set()
 _LOCK = threading.Lock()
+
+TEMP_NAME_BYTES = 64
+"""Bytes of the destination's name kept in a temporary name (the rest of it is random)."""
+
+
+def temp_prefix(name: str) -> str:
+    """``.NAME.`` with ``NAME`` cut to :data:`TEMP_NAME_BYTES` bytes of UTF-8 (never inside a character)."""
+    cut = name.encode("utf-8", "surrogateescape")[:TEMP_NAME_BYTES].decode("utf-8", "ignore")
+    return f".{cut}."
 
 
 def file_kind(mode: int) -> str:
@@ -62,6 +82,9 @@ def destination(path: str | os.PathLike) -> Path:
     p = Path(path)
     if str(p) in ("", "."):
         raise OutputError(f"{str(path)!r}: not a file name")
+    text = os.fspath(path)
+    if isinstance(text, str) and (text.endswith(("/", os.sep)) or text.endswith(("/.", "/.."))):
+        raise OutputError(f"{text}: ends with '/', which names a folder; give a file name (without the '/')")
     target = Path(os.path.realpath(p)) if p.is_symlink() else p
     st = stat_or_none(target, str(p))
     if st is not None and not stat.S_ISREG(st.st_mode):
@@ -98,7 +121,10 @@ def remove_temporaries() -> int:
     n = 0
     for name in names:
         try:
-            os.unlink(name)
+            if os.path.isdir(name) and not os.path.islink(name):
+                shutil.rmtree(name)
+            else:
+                os.unlink(name)
             n += 1
         except OSError:
             pass
@@ -143,7 +169,7 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
     target = destination(path)
     folder = target.parent
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target.name), suffix=suffix, dir=folder)
     except OSError as exc:  # name the destination, not the temporary file
         raise _naming(exc, target) from None
     os.close(fd)
@@ -173,6 +199,143 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
     _fsync_folder(folder)
 
 
+def folder_destination(path: str | os.PathLike, what: str = "") -> Path:
+    """The folder :func:`atomic_folder` writes, after checks; :class:`OutputError` (its message starting
+    with ``what`` and the path) when it is a symbolic link or exists and is not a folder."""
+    p = Path(path)
+    shown = f"{what} {p}" if what else str(p)
+    if str(p) in ("", ".", "..") or p.name in ("", ".", ".."):
+        raise OutputError(f"{shown}: the folder is replaced whole, so it must be named from outside it "
+                          f"(for example ../NAME, not . or ..)")
+    try:
+        st = os.lstat(p)
+    except FileNotFoundError:
+        return p
+    except NotADirectoryError:
+        raise OutputError(f"{shown}: a part of this path is a file, not a folder") from None
+    if stat.S_ISLNK(st.st_mode):
+        raise OutputError(f"{shown}: is a symbolic link (to {os.readlink(p)}); refusing to write through it "
+                          "(give the folder itself)")
+    if not stat.S_ISDIR(st.st_mode):
+        raise OutputError(f"{shown}: exists and is {file_kind(st.st_mode)}; a log is written into a folder")
+    return p
+
+
+def _keep(src: Path, dst: Path) -> None:
+    """``src`` again as ``dst`` without touching ``src``: a hard link (a copy where the file system has
+    none); links are recreated as links, never followed; folders entry by entry."""
+    st = os.lstat(src)
+    if stat.S_ISLNK(st.st_mode):
+        os.symlink(os.readlink(src), dst)
+    elif stat.S_ISDIR(st.st_mode):
+        os.mkdir(dst)
+        for child in os.listdir(src):
+            _keep(src / child, dst / child)
+        shutil.copystat(src, dst, follow_symlinks=False)
+    else:
+        try:
+            os.link(src, dst, follow_symlinks=False)
+        except OSError:
+            if not stat.S_ISREG(st.st_mode):
+                raise
+            shutil.copy2(src, dst, follow_symlinks=False)
+
+
+def _in_place_of(exc: OSError, tmp: str, target: Path) -> OSError:
+    """The same error, naming the path in ``target`` rather than in the temporary folder ``tmp``."""
+    if isinstance(exc, OutputError) or exc.errno is None:
+        return exc
+    name = exc.filename
+    if name is None or name == tmp:
+        return _naming(exc, target)
+    name = os.fspath(name)
+    if isinstance(name, str) and name.startswith(tmp + os.sep):
+        return type(exc)(exc.errno, exc.strerror or str(exc), str(target) + name[len(tmp):])
+    return exc
+
+
+def _blocked_signals():
+    """Block SIGINT and SIGTERM in this thread (returns the previous mask, None where it cannot)."""
+    try:
+        return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+@contextmanager
+def atomic_folder(path: str | os.PathLike, replaced: Iterable[str] = (), what: str = "") -> Iterator[Path]:
+    """A temporary folder next to ``path`` to write a whole folder into; on a normal exit it replaces
+    ``path`` at once.
+
+    The entries of an existing ``path`` not named in ``replaced`` are kept (hard
+    links, or copies; links stay links): the new folder gets them too. Then
+    the old folder is renamed aside, the new one renamed in (SIGINT and SIGTERM
+    held meanwhile) and the old one removed. On an exception (or SIGINT /
+    SIGTERM through the command line's handler) the temporary folder is
+    removed and ``path`` is left exactly as it was. ``path`` must not be a
+    symbolic link, and must be a folder if it exists (:func:`folder_destination`).
+    The folder above it is created when missing.
+    """
+    target = folder_destination(path, what)
+    parent = target.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    replaced = set(replaced)
+    try:
+        tmp = tempfile.mkdtemp(prefix=temp_prefix(target.name), suffix=".tmp", dir=parent)
+    except OSError as exc:
+        shown = f"{what} {target}" if what else str(target)
+        raise OutputError(f"{shown}: cannot create a folder next to it in {parent} "
+                          f"({(exc.strerror or str(exc)).lower()}); the new folder is written there first, then "
+                          "swapped in whole") from None
+    _register(tmp)
+    new = Path(tmp)
+    aside = None
+    try:
+        yield new
+        folder_destination(path, what)  # still no link planted meanwhile
+        if target.is_dir():
+            for name in sorted(os.listdir(target)):
+                if name not in replaced and not (new / name).exists() and not os.path.islink(new / name):
+                    _keep(target / name, new / name)
+        if target.is_dir():  # the old folder's permissions
+            os.chmod(new, stat.S_IMODE(os.stat(target).st_mode))
+        else:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(new, 0o777 & ~umask)
+        mask = _blocked_signals()
+        try:
+            if target.is_dir():
+                aside = tempfile.mktemp(prefix=temp_prefix(target.name), suffix=".old", dir=parent)
+                os.rename(target, aside)
+                _register(aside)
+                try:
+                    os.rename(new, target)
+                except BaseException:
+                    os.rename(aside, target)
+                    _unregister(aside)
+                    aside = None
+                    raise
+            else:
+                os.rename(new, target)
+            _unregister(tmp)
+        finally:
+            if mask is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _unregister(tmp)
+        raise _in_place_of(exc, tmp, target) from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _unregister(tmp)
+        raise
+    if aside is not None:
+        shutil.rmtree(aside, ignore_errors=True)
+        _unregister(aside)
+    _fsync_folder(parent)
+
+
 def atomic_write(path: str | os.PathLike, chunks: Iterable[str] | Iterable[bytes], binary: bool = False) -> None:
     """Write text (or, with ``binary``, bytes) chunks to ``path`` atomically.
 
@@ -198,36 +361,3 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     atomic_write(path, [data], binary=True)
-
-
-def install_signal_cleanup() -> dict:
-    """On SIGINT or SIGTERM: remove the temporary files being written, then exit 130 or 143.
-
-    Only from the main thread (signal handlers can be set nowhere else);
-    elsewhere this does nothing. Returns the previous handlers, for
-    :func:`restore_signal_handlers`.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-
-    def handler(signum, frame):  # noqa: ARG001
-        remove_temporaries()
-        name = signal.Signals(signum).name
-        try:
-            sys.stderr.write(f"gfimu: stopped by {name}; no output was left half-written\n")
-            sys.stderr.flush()
-        except (OSError, ValueError):
-            pass
-        raise SystemExit(128 + signum)
-
-    previous = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        previous[sig] = signal.signal(sig, handler)
-    return previous
-
-
-def restore_signal_handlers(previous: dict) -> None:
-    """Put back the handlers :func:`install_signal_cleanup` replaced."""
-    for sig, old in previous.items():
-        if old is not None:
-            signal.signal(sig, old)

@@ -3,12 +3,13 @@
 The format is specified in ``docs/log-format.md``. :func:`read_log` reads
 and checks a folder; gaps in time are reported with a
 :class:`~gfimu.io.errors.LogGapWarning` (estimators restart at each gap, see
-:meth:`gfimu.log.Log.segments`). :func:`write_log` writes each file
-atomically.
+:meth:`gfimu.log.Log.segments`). :func:`write_log` writes the folder
+whole or not at all.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import warnings
 from pathlib import Path
@@ -19,7 +20,7 @@ from ..log import Log
 from ..motion import Motion
 from . import plausibility
 from .array_toml import load_array_toml, write_array_toml
-from .atomic import destination
+from .atomic import atomic_folder
 from .errors import LogFormatError, LogGapWarning, LogPlausibilityWarning
 from .tables import read_imu_table, read_motion_csv, read_motion_table, write_imu_csv, write_motion_csv
 
@@ -29,6 +30,11 @@ LOG_FILES = ("array.toml", "imu.csv", "truth.csv", "reference.csv")
 
 def _log_folder(path: str | os.PathLike) -> Path:
     p = Path(path)
+    try:
+        os.stat(p)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise LogFormatError("a loop of symbolic links (too many levels of links); not a log folder", p) from None
     if p.is_file() and p.name in ("imu.csv", "array.toml"):
         p = p.parent
     if not p.exists():
@@ -99,18 +105,22 @@ def read_log(path: str | os.PathLike, check: bool = True, truth: bool = True) ->
     return log
 
 
-def write_log(log: Log, path: str | os.PathLike, rate_hz: float | None = None) -> None:
-    """Write a log folder: array.toml (with ``rate_hz`` when given), imu.csv, and truth.csv / reference.csv
-    when present.
+def write_log(log: Log, path: str | os.PathLike, rate_hz: float | None = None, what: str = "") -> None:
+    """Write a log folder: array.toml (with ``rate_hz`` when given), imu.csv, and truth.csv /
+    reference.csv when present.
 
-    Each file is written atomically; the folder is created when needed. A
-    log file of an earlier log in the folder that this log does not have
-    (for example a ``truth.csv``) is removed, so the folder holds exactly this
-    log; other files are kept. Every destination is checked before anything
-    is written (see :func:`gfimu.io.atomic.destination`).
+    The folder is written whole or not at all (:func:`gfimu.io.atomic.atomic_folder`):
+    the new log goes into a temporary folder next to it, which then replaces
+    the old folder in one rename. An interruption (SIGINT, SIGTERM) or a
+    failure (a full disk) leaves the old folder exactly as it was. The log
+    files of an earlier log (:data:`LOG_FILES`) are not carried over, so the
+    folder holds exactly this log; its other files are kept. ``path`` must
+    not be a symbolic link, nor exist as anything but a folder; nothing in
+    the old folder is followed or written through. The folder (and the
+    folders above it) is created when needed. ``what`` (an option name)
+    starts the message of a refusal.
     """
     folder = Path(path)
-    folder.mkdir(parents=True, exist_ok=True)
     truth = log.truth
     reference = valid = None
     if truth is not None:
@@ -119,16 +129,10 @@ def write_log(log: Log, path: str | os.PathLike, rate_hz: float | None = None) -
         reference = log.reference if log.reference is not None else Motion(log.timestamps_ns)
         _check_same_timestamps(reference, log.timestamps_ns, folder / "reference.csv", folder / "imu.csv")
         valid = None if log.invalid_reference is None else ~np.asarray(log.invalid_reference, dtype=bool)
-    names = ["array.toml", "imu.csv"] + (["truth.csv"] if truth is not None else []) + (
-        ["reference.csv"] if reference is not None else [])
-    for name in LOG_FILES:
-        destination(folder / name)
-    write_array_toml(log.array, folder / "array.toml", rate_hz)
-    write_imu_csv(log, folder / "imu.csv")
-    if truth is not None:
-        write_motion_csv(truth, folder / "truth.csv")
-    if reference is not None:
-        write_motion_csv(reference, folder / "reference.csv", valid=valid)
-    for name in LOG_FILES:
-        if name not in names and (folder / name).is_file():
-            (folder / name).unlink()
+    with atomic_folder(folder, replaced=LOG_FILES, what=what) as new:
+        write_array_toml(log.array, new / "array.toml", rate_hz)
+        write_imu_csv(log, new / "imu.csv")
+        if truth is not None:
+            write_motion_csv(truth, new / "truth.csv")
+        if reference is not None:
+            write_motion_csv(reference, new / "reference.csv", valid=valid)

@@ -17,17 +17,21 @@ Log folders (``convert``, ``simulate``) are written by
 :func:`prepare_log_folder` + :func:`gfimu.io.write_log`: an existing
 non-empty folder is refused unless ``force``, and then only the files a log
 owns (:data:`gfimu.io.log_dir.LOG_FILES`) are replaced or removed, so no
-stale truth or reference of an earlier run stays next to the new log.
+stale truth or reference of an earlier run stays next to the new log. The
+folder is swapped in whole (:func:`gfimu.io.atomic.atomic_folder`): an
+interrupted or failed run leaves the old log as it was. A folder given as a
+symbolic link is refused, and links inside it are never written through.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from .atomic import atomic_write, destination, file_kind, stat_or_none
+from .atomic import atomic_write, destination, folder_destination, stat_or_none
 from .errors import OutputError
 from .log_dir import LOG_FILES
 
@@ -125,10 +129,8 @@ def prepare_log_folder(folder: str | os.PathLike, inputs: Iterable[str | os.Path
     """
     if str(folder) == STDOUT:
         raise OutputError(f"{what} -: a log is a folder; give its path")
-    p = Path(folder)
+    p = folder_destination(folder, what)
     st = stat_or_none(p, f"{what} {p}")
-    if st is not None and not os.path.isdir(p):
-        raise OutputError(f"{what} {p}: exists and is {file_kind(st.st_mode)}; a log is written into a folder")
     ins = input_files(inputs)
     for name in LOG_FILES:
         _refuse_inputs(p / name, str(p / name), ins, what)
@@ -141,7 +143,9 @@ def prepare_log_folder(folder: str | os.PathLike, inputs: Iterable[str | os.Path
                           f"({', '.join(LOG_FILES)} are replaced or removed, other files are kept)")
     for name in LOG_FILES:
         try:
-            destination(p / name)
-        except OutputError as exc:
-            raise OutputError(f"{what} {exc}") from None
+            mode = os.lstat(p / name).st_mode
+        except FileNotFoundError:
+            continue
+        if stat.S_ISDIR(mode):
+            raise OutputError(f"{what} {p / name}: exists and is a folder; refusing to replace it with a file")
     return p

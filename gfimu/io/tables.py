@@ -100,8 +100,68 @@ where starting the workers and copying their results back would cost more than t
 _HEADER_RE = re.compile(r"^(.*?)\s*\[([^\[\]]*)\]\s*$")
 
 
+def parse_header(header: str, path, line: int = 1) -> tuple[list[tuple[str, str | None]], str]:
+    """The (name, unit or None) of each column of a table's header line, and its timestamp unit (a key of
+    :data:`~gfimu.io.units.TIME_UNITS_NS`); :class:`LogFormatError` naming ``path`` and ``line`` when the
+    first column is not a timestamp with a time unit. The rules of every imu.csv and motion table, also
+    of the rows ``gfimu live`` reads."""
+    columns: list[tuple[str, str | None]] = []
+    for field in header.split(","):
+        field = field.strip().strip('"').strip()
+        m = _HEADER_RE.match(field)
+        columns.append((m.group(1).strip(), m.group(2).strip()) if m else (field.strip(), None))
+    first_name, first_unit = columns[0]
+    if first_name.lstrip("#").strip().lower() != "timestamp":
+        hint = " (columns must be separated by commas)" if (";" in header or "\t" in header) else ""
+        raise LogFormatError(f"the first column must be {TIMESTAMP_HEADER!r}, found {header.split(',')[0]!r}"
+                             f"{hint}", path, line)
+    unit = canonical_unit(first_unit) if first_unit is not None else None
+    if unit not in TIME_UNITS_NS:
+        raise LogFormatError(
+            f"timestamp unit [{first_unit}] not understood; expected [ns] (or, converted: [us], [ms], [s])"
+            if first_unit is not None else f"timestamp column has no unit; expected {TIMESTAMP_HEADER!r}",
+            path, line)
+    if len(columns) < 2:
+        raise LogFormatError("has only a timestamp column", path, line)
+    return columns, unit
+
+
+def find_column(names: list[str], name: str, path, line: int = 1) -> int | None:
+    """Index of column ``name`` among ``names``; :class:`LogFormatError` when it appears more than once."""
+    idx = [i for i, n in enumerate(names) if n == name]
+    if len(idx) > 1:
+        raise LogFormatError(f"column {name!r} appears {len(idx)} times (fields {', '.join(str(i + 1) for i in idx)})",
+                             path, line)
+    return idx[0] if idx else None
+
+
+def column_factor(columns: list[tuple[str, str | None]], index: int, kind: str, path, line: int = 1) -> float:
+    """The factor to SI of column ``index`` holding a quantity of ``kind``; :class:`LogFormatError` when its
+    unit is missing or not one of that kind."""
+    name, unit = columns[index]
+    if unit is None:
+        raise LogFormatError(f"column {name!r} has no unit; expected '{name} {unit_help(kind)}'", path, line)
+    try:
+        return unit_factor(unit, kind)
+    except KeyError:
+        raise LogFormatError(f"column {name!r} has unit [{unit}], which is not understood here; expected "
+                             f"{unit_help(kind)}", path, line) from None
+
+
 _BLOCK_BYTES = 1 << 20
 """Bytes of text read, decoded and parsed at a time: the file is never held whole in memory."""
+
+MAX_LINE_BYTES = 1 << 16
+"""The longest line of a CSV table (64 KiB, header included; a row of a thousand columns is a tenth of
+it): a longer one is refused at once, naming its line, rather than read on (a file of NUL bytes, a
+binary recording given as CSV)."""
+
+
+def line_too_long(length: int, ended: bool = False) -> str:
+    """The message for a line of ``length`` bytes, over :data:`MAX_LINE_BYTES` (``ended``: the line end was
+    seen; otherwise reading stopped there)."""
+    what = f"{length} bytes" if ended else f"{length} bytes and no line end yet"
+    return f"line is longer than {MAX_LINE_BYTES} bytes ({what}); not a row of a CSV table (a binary file?)"
 
 
 def _timestamp_tokens(lines: list[str]) -> list[str]:
@@ -182,26 +242,7 @@ class _Csv:
         self.names = [n for n, _ in self.columns]
 
     def _parse_header(self, header: str) -> None:
-        path = self.path
-        self.columns: list[tuple[str, str | None]] = []
-        for field in header.split(","):
-            field = field.strip().strip('"').strip()
-            m = _HEADER_RE.match(field)
-            self.columns.append((m.group(1).strip(), m.group(2).strip()) if m else (field.strip(), None))
-        first_name, first_unit = self.columns[0]
-        if first_name.lstrip("#").strip().lower() != "timestamp":
-            hint = " (columns must be separated by commas)" if (";" in header or "\t" in header) else ""
-            raise LogFormatError(f"the first column must be {TIMESTAMP_HEADER!r}, found {header.split(',')[0]!r}"
-                                 f"{hint}", path, 1)
-        unit = canonical_unit(first_unit) if first_unit is not None else None
-        if unit not in TIME_UNITS_NS:
-            raise LogFormatError(
-                f"timestamp unit [{first_unit}] not understood; expected [ns] (or, converted: [us], [ms], [s])"
-                if first_unit is not None else f"timestamp column has no unit; expected {TIMESTAMP_HEADER!r}",
-                path, 1)
-        self.time_unit = unit
-        if len(self.columns) < 2:
-            raise LogFormatError("has only a timestamp column", path, 1)
+        self.columns, self.time_unit = parse_header(header, self.path)
 
     def _blocks(self, spans: list | None = None) -> Iterator[tuple[int, list[str]]]:
         """(index of the first line, lines) over the whole file, header included, in blocks of whole lines
@@ -218,7 +259,10 @@ class _Csv:
                 if last and not buf:
                     return
                 cut = len(buf) if last else buf.rfind(b"\n") + 1
-                if cut == 0:  # no line end yet: read on
+                if cut == 0 or len(buf) - cut > MAX_LINE_BYTES:  # no line end yet: read on
+                    if len(buf) - cut > MAX_LINE_BYTES:
+                        line = line0 + buf[:cut].count(b"\n") + 1
+                        raise LogFormatError(line_too_long(len(buf) - cut), self.path, line)
                     carry = buf
                     continue
                 block, carry = buf[:cut], buf[cut:]
@@ -246,6 +290,11 @@ class _Csv:
         lines = text.split("\n")
         if not last:
             lines.pop()  # the block ends with a line end
+        if lines and max(map(len, lines)) > MAX_LINE_BYTES // 4:  # characters: up to 4 bytes each
+            for k, ln in enumerate(lines):
+                size = len(ln.encode("utf-8"))
+                if size > MAX_LINE_BYTES:
+                    raise LogFormatError(line_too_long(size, ended=True), self.path, line0 + k + 1)
         return lines
 
     def _span_lines(self, span: tuple) -> tuple[int, list[str]]:
@@ -282,21 +331,10 @@ class _Csv:
 
     def find(self, name: str) -> int | None:
         """Index of column ``name``; error when it appears more than once."""
-        idx = [i for i, n in enumerate(self.names) if n == name]
-        if len(idx) > 1:
-            raise LogFormatError(f"column {name!r} appears {len(idx)} times (fields {', '.join(str(i + 1) for i in idx)})",
-                                 self.path, 1)
-        return idx[0] if idx else None
+        return find_column(self.names, name, self.path)
 
     def factor(self, index: int, kind: str) -> float:
-        name, unit = self.columns[index]
-        if unit is None:
-            raise LogFormatError(f"column {name!r} has no unit; expected '{name} {unit_help(kind)}'", self.path, 1)
-        try:
-            return unit_factor(unit, kind)
-        except KeyError:
-            raise LogFormatError(f"column {name!r} has unit [{unit}], which is not understood here; expected "
-                                 f"{unit_help(kind)}", self.path, 1) from None
+        return column_factor(self.columns, index, kind, self.path)
 
     def timestamps_ns(self) -> np.ndarray:
         scale = TIME_UNITS_NS[self.time_unit]

@@ -24,8 +24,9 @@ disagreement with a rigid body, sample by sample:
   fitted to the median residual power in |ω| bins.
 
 The log is *consistent* when the noise ratio is below
-:data:`NOISE_RATIO_LIMIT`, the tail share below :data:`TAIL_SHARE_LIMIT` and the
-slope adds less than the floor's variance at the 90th percentile of |ω|
+:data:`NOISE_RATIO_LIMIT` (where a noise is stated), the tail share below
+:data:`TAIL_SHARE_LIMIT` and the residual's variance grows by less than the
+variance itself from the 10th to the 90th percentile of |ω|
 (:data:`SLOPE_VARIANCE_LIMIT`). These limits are statements about Gaussianity
 (a factor two on the noise, a hundred times the Gaussian tail), not values fitted
 to any recording.
@@ -55,8 +56,9 @@ NOISE_RATIO_LIMIT = 2.0
 TAIL_SHARE_LIMIT = 0.006
 """Largest share of residuals beyond 4 robust scales of a consistent log (100 × Gaussian)."""
 SLOPE_VARIANCE_LIMIT = 1.0
-"""Largest ``(s |ω|₉₀)² / σ₀²`` of a consistent log: the motion-dependent part of the residual
-variance at the 90th percentile of |ω| against the floor."""
+"""Largest growth of the residual variance from the 10th to the 90th percentile of |ω|, over the
+variance at the 10th, of a consistent log: ``s² (|ω|₉₀² - |ω|₁₀²) / (σ₀² + s² |ω|₁₀²)`` (for a
+log that also rests, ``(s |ω|₉₀)² / σ₀²``)."""
 ROBUST_THRESHOLD = 2.0
 """Cauchy loss threshold [robust σ] of the accelerometer axes and motion-model steps on an
 inconsistent log (95 % efficiency region of the Cauchy loss is about 2.4 σ; 2 σ favours robustness)."""
@@ -228,7 +230,11 @@ def check_model(log: Log, ml_motion, residual: np.ndarray | None = None) -> Mode
         reasons.append(f"residual {ratio:.1f} x the stated noise")
     if tail > TAIL_SHARE_LIMIT:
         reasons.append(f"{100 * tail:.2f} % of residuals beyond 4 sigma")
-    if floor > 0 and (slope * w90 / floor) ** 2 > SLOPE_VARIANCE_LIMIT:
+    w10 = float(np.quantile(np.linalg.norm(omega, axis=1), 0.1)) if len(omega) else 0.0
+    # the residual grows with |ω| when its power at the 90th percentile of |ω| exceeds its power at the
+    # 10th by more than SLOPE_VARIANCE_LIMIT times the latter (a log turning at one rate cannot tell)
+    low_power = floor**2 + (slope * w10) ** 2
+    if slope > 0 and slope**2 * (w90**2 - w10**2) > SLOPE_VARIANCE_LIMIT * low_power:
         reasons.append(f"residual grows with |omega| ({slope:.3g} m/s^2 per rad/s)")
     return ModelCheck(not reasons, int(len(r)), ratio, tail, floor, slope, w90, stated_mean, tuple(reasons),
                       resolution, bool(floored), constant)

@@ -23,7 +23,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     ),
     "batch": (
         "window_s", "overlap_s", "max_iterations", "relative_tolerance", "compute_sigma", "init_window_s",
-        "reweight_iterations", "initialisation", "ml_sign_chain", "branch_restarts", "auto_model", "solver",
+        "reweight_iterations", "initialisation", "ml_sign_chain", "branch_restarts", "solver",
         "workers",
     ),
     "fixed-lag": (
@@ -31,7 +31,8 @@ GROUPS: dict[str, tuple[str, ...]] = {
         "fast_measurement", "tune_window_s", "engine",
     ),
     "tuning": (
-        "tune_process_noise", "tune_span_s", "tune_axis_frequencies", "tune_motion_model", "tune_accel_noise",
+        "auto_model", "tune_process_noise", "tune_span_s", "tune_axis_frequencies", "tune_motion_model",
+        "tune_accel_noise", "retune_every_s", "model_window_s",
     ),
 }
 """Group -> option names."""

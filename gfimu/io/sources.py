@@ -1,0 +1,382 @@
+"""Live sources of readings: standard input, UDP, TCP and serial ports.
+
+A source turns a stream of bytes into :class:`Reading` items (one sample:
+timestamp, accelerometer row, gyro row or None) and :class:`BadRow` items (a
+row that could not be read, with where and why); it never raises on bad
+data, only when it cannot be opened (:class:`SourceError`). It ends when the
+stream ends or ``stop`` is set, and says why in :attr:`Source.ended` (and,
+for a broken stream, :attr:`Source.failure`). :func:`gfimu.live.run` reads
+it on a thread of its own.
+
+Text sources read imu.csv rows, by the header rules of imu.csv
+(:func:`gfimu.io.tables.parse_header`: the same timestamp units, column
+names and unit conversions) and the timestamp rule of imu.csv
+(:func:`gfimu.io.units.timestamp_ns`: exact decimal, 64-bit nanoseconds):
+
+- ``-``: standard input, the header line first;
+- ``udp://HOST:PORT``: one data row per datagram, in the column order of
+  imu.csv for the array (:func:`default_header`), or a header datagram
+  (starting with ``#``) first; a datagram ``EOF`` ends the stream.
+
+Binary sources read MIMU4444 packets (:class:`gfimu.io.readers.mimu4444.StreamDecoder`):
+
+- ``tcp://HOST:PORT``: connecting to the board's server;
+- ``serial:///dev/ttyUSB0?baud=N``: a serial port (needs pyserial).
+
+A line longer than :data:`gfimu.io.tables.MAX_LINE_BYTES` is skipped as a bad
+row without being held in memory.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+from types import SimpleNamespace
+from urllib.parse import parse_qs, urlparse
+
+import numpy as np
+
+from .errors import LogFormatError
+from .tables import (MAX_LINE_BYTES, TIMESTAMP_HEADER, _missing_imu_columns, column_factor, find_column, imu_columns,
+                     parse_header)
+from .units import TIME_UNITS_NS, UNITS, timestamp_ns
+
+from ..errors import InputError
+
+POLL_S = 0.2
+"""How often a waiting source looks at its ``stop`` event [s]."""
+
+
+class SourceError(InputError):
+    """A source that cannot be opened or is not understood (the message names it)."""
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One sample: timestamp [ns], accelerometer row [m/s²] (array column order), gyro row [rad/s] or None."""
+
+    timestamp_ns: int
+    accel: np.ndarray
+    gyro: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class BadRow:
+    """A row that could not be read: ``where`` (line or datagram number) and ``reason``."""
+
+    where: str
+    reason: str
+
+
+def default_header(array) -> str:
+    """The imu.csv header of ``array`` (the column order of rows that come without a header, e.g. UDP)."""
+    return ",".join([TIMESTAMP_HEADER] + [f"{name} [{UNITS[kind][0]}]" for name, kind in imu_columns(array)])
+
+
+class RowParser:
+    """imu.csv data rows (text) to :class:`Reading` for ``array``, given the header line; columns in any
+    order, units converted (``[g]``, ``[deg s^-1]``, ``[us]``…) or refused, as imu.csv. A bad header raises
+    :class:`~gfimu.io.errors.LogFormatError` naming ``name`` and ``line``; a bad row raises ValueError
+    (:meth:`parse`)."""
+
+    def __init__(self, array, header: str, name: str, line: int = 1):
+        columns, time_unit = parse_header(header.strip().lstrip("\ufeff"), name, line)
+        names = [n for n, _ in columns]
+        _missing_imu_columns(SimpleNamespace(names=names, path=name), array, "the array")
+        wanted = imu_columns(array)
+        self.index = [find_column(names, n, name, line) for n, _ in wanted]
+        self.factor = np.array([column_factor(columns, i, kind, name, line) for i, (_, kind) in zip(self.index, wanted)])
+        self.scale = TIME_UNITS_NS[time_unit]
+        self.width = len(columns)
+        self.n_acc = array.n_axes
+        self.gyro = array.gyroscope is not None
+
+    def parse(self, row: str) -> Reading:
+        cells = row.strip().split(",")
+        if len(cells) != self.width:
+            raise ValueError(f"{len(cells)} fields, the header has {self.width}")
+        t = timestamp_ns(cells[0], self.scale)
+        values = []
+        for i in self.index:
+            tok = cells[i].strip()
+            try:
+                values.append(float(tok))
+            except ValueError:
+                raise ValueError(f"field {i + 1} {tok!r} is not a number") from None
+        v = np.array(values) * self.factor
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            i = self.index[int(bad[0])]
+            raise ValueError(f"field {i + 1} {cells[i].strip()!r} is not finite")
+        return Reading(t, v[:self.n_acc], v[self.n_acc:self.n_acc + 3] if self.gyro else None)
+
+
+class Source:
+    """A stream of readings; :meth:`items` yields :class:`Reading` and :class:`BadRow` until the stream
+    ends or ``stop`` is set. After it: :attr:`ended` says why, :attr:`failure` is a message when the
+    stream broke (a connection reset) and None otherwise."""
+
+    name = "source"
+
+    def __init__(self, array):
+        self.array = array
+        self.ended = "not started"
+        self.failure: str | None = None
+
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release the socket or port (also when :meth:`items` was never run)."""
+
+
+class _TextRows:
+    """Rows of text from chunks of bytes: lines no longer than :data:`MAX_LINE_BYTES` (a longer one is
+    reported once and skipped, nothing of it held beyond that)."""
+
+    def __init__(self):
+        self.buffer = b""
+        self.discarding = False
+        self.line = 0
+
+    def feed(self, chunk: bytes) -> Iterator[tuple[int, bytes | None]]:
+        """(line number, line bytes without its end) — or (line number, None) for a line too long."""
+        data = self.buffer + chunk if self.buffer else chunk
+        start = 0
+        while True:
+            end = data.find(b"\n", start)
+            if end < 0:
+                break
+            self.line += 1
+            if self.discarding:
+                self.discarding = False
+            elif end - start > MAX_LINE_BYTES:
+                yield self.line, None
+            else:
+                yield self.line, data[start:end]
+            start = end + 1
+        rest = data[start:]
+        if len(rest) > MAX_LINE_BYTES and not self.discarding:
+            self.discarding = True
+            yield self.line + 1, None
+        self.buffer = b"" if self.discarding else rest
+
+    def tail(self) -> Iterator[tuple[int, bytes | None]]:
+        """The last line when the stream ends without a line end."""
+        if self.buffer and not self.discarding:
+            self.line += 1
+            yield self.line, self.buffer
+        self.buffer = b""
+
+
+def _decode(raw: bytes) -> str:
+    return raw.decode("utf-8", "replace").rstrip("\r")
+
+
+TOO_LONG = f"line longer than {MAX_LINE_BYTES} bytes (a binary stream?); skipped to its end"
+
+
+class StdinSource(Source):
+    """imu.csv text on a file descriptor (standard input by default): the header line first, then one
+    sample per line; empty lines are skipped. Reads with a timeout, so that ``stop`` ends it even on an
+    open pipe that sends nothing."""
+
+    def __init__(self, array, fd: int = 0, name: str = "standard input"):
+        super().__init__(array)
+        self.fd = fd
+        self.name = name
+
+    def _chunks(self, stop: threading.Event) -> Iterator[bytes]:
+        while not stop.is_set():
+            try:
+                ready, _, _ = select.select([self.fd], [], [], POLL_S)
+            except (OSError, ValueError):  # not selectable (a file on some systems): read on
+                ready = [self.fd]
+            if not ready:
+                continue
+            chunk = os.read(self.fd, 1 << 16)
+            if not chunk:
+                self.ended = "end of input"
+                return
+            yield chunk
+        self.ended = "stopped"
+
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+        rows = _TextRows()
+        parser = None
+
+        def lines():
+            for chunk in self._chunks(stop):
+                yield from rows.feed(chunk)
+            if self.ended == "end of input":
+                yield from rows.tail()
+
+        for line, raw in lines():
+            where = f"line {line}"
+            if raw is None:
+                yield BadRow(where, TOO_LONG)
+                continue
+            text = _decode(raw)
+            if not text.strip():
+                continue
+            if parser is None:
+                parser = RowParser(self.array, text, self.name, line)
+                continue
+            yield _parsed(parser, text, where)
+
+
+def _parsed(parser: RowParser, text: str, where: str) -> Reading | BadRow:
+    try:
+        return parser.parse(text)
+    except (ValueError, OverflowError) as exc:
+        return BadRow(where, str(exc))
+
+
+class UdpSource(Source):
+    """One imu.csv data row per datagram (columns in :func:`default_header`'s order, unless a header
+    datagram starting with ``#`` comes first); a datagram ``EOF`` ends the stream."""
+
+    def __init__(self, array, host: str, port: int, name: str):
+        super().__init__(array)
+        self.name = name
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:  # room for a few seconds of datagrams while the process is descheduled (the kernel may cap it)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+        except OSError:
+            pass
+        try:
+            self.sock.bind((host, port))
+        except OSError as exc:
+            self.sock.close()
+            raise SourceError(f"--source {name}: cannot bind: {exc.strerror or exc}") from None
+        self.sock.settimeout(POLL_S)
+
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+        parser = None
+        count = 0
+        while not stop.is_set():
+            try:
+                data, _ = self.sock.recvfrom(65536)
+            except socket.timeout:
+                continue
+            except OSError as exc:
+                self.ended, self.failure = "receive failed", f"{self.name}: {exc.strerror or exc}"
+                return
+            count += 1
+            text = _decode(data).strip()
+            if text.strip() == "EOF":  # an explicit end of stream
+                self.ended = "EOF datagram"
+                return
+            where = f"datagram {count}"
+            if parser is None:
+                if text.lstrip().startswith("#"):
+                    try:
+                        parser = RowParser(self.array, text, f"{self.name} {where}")
+                    except LogFormatError as exc:
+                        yield BadRow(where, f"header: {exc}")
+                    continue
+                parser = RowParser(self.array, default_header(self.array), self.name)
+            if not text.strip():
+                yield BadRow(where, "empty datagram")
+                continue
+            yield _parsed(parser, text, where)
+        self.ended = "stopped"
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class MimuSource(Source):
+    """MIMU4444 packets from TCP (``tcp://HOST:PORT``) or a serial port (``serial://DEVICE?baud=N``)."""
+
+    def __init__(self, array, url, name: str):
+        super().__init__(array)
+        self.name = name
+        if url.scheme == "tcp":
+            if not url.hostname or not url.port:
+                raise SourceError(f"--source {name}: expected tcp://HOST:PORT")
+            try:
+                self.conn = socket.create_connection((url.hostname, url.port), timeout=10)
+            except OSError as exc:
+                raise SourceError(f"--source {name}: cannot connect: {exc.strerror or exc}") from None
+            self.conn.settimeout(POLL_S)
+            self.port = None
+        else:
+            try:
+                import serial
+            except ImportError:
+                raise SourceError("serial sources need pyserial: pip install 'gfimu[serial]'") from None
+            try:
+                baud = int(parse_qs(url.query).get("baud", ["115200"])[0])
+            except ValueError:
+                raise SourceError(f"--source {name}: baud must be an integer") from None
+            try:
+                self.port = serial.Serial(url.path, baudrate=baud, timeout=POLL_S)
+            except (OSError, serial.SerialException) as exc:
+                raise SourceError(f"--source {name}: cannot open: {exc}") from None
+            self.conn = None
+
+    def _read(self) -> bytes | None:
+        """Bytes (b"" when none came in time), None at the end of the stream."""
+        if self.conn is None:
+            return self.port.read(4096)
+        try:
+            return self.conn.recv(65536) or None
+        except socket.timeout:
+            return b""
+
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+        from .readers.mimu4444 import StreamDecoder
+
+        decoder = StreamDecoder()
+        while not stop.is_set():
+            try:
+                chunk = self._read()
+            except OSError as exc:  # ConnectionResetError, a serial port unplugged
+                self.ended = "connection lost"
+                self.failure = f"{self.name}: {_os_words(exc)}"
+                return
+            if chunk is None:
+                self.ended = "end of stream (closed by the other side)"
+                return
+            for t_ns, accel in decoder.feed(chunk):
+                yield Reading(t_ns, accel, None)
+        self.ended = "stopped"
+
+    def close(self) -> None:
+        (self.conn if self.conn is not None else self.port).close()
+
+
+def _os_words(exc: OSError) -> str:
+    if isinstance(exc, ConnectionResetError):
+        return "connection reset by the other side"
+    return exc.strerror or str(exc) or type(exc).__name__
+
+
+SCHEMES = ("-", "udp", "tcp", "serial")
+
+
+def open_source(spec: str, array) -> Source:
+    """The source named by ``spec`` (``-``, ``udp://HOST:PORT``, ``tcp://HOST:PORT``,
+    ``serial://DEVICE?baud=N``) for ``array``; :class:`SourceError` when it is not understood or cannot be
+    opened."""
+    if spec == "-":
+        return StdinSource(array)
+    url = urlparse(spec)
+    if url.scheme not in SCHEMES:
+        raise SourceError(f"--source {spec}: expected -, udp://HOST:PORT, tcp://HOST:PORT or serial://DEVICE")
+    if url.scheme == "udp":
+        try:
+            port = url.port or 0
+        except ValueError:
+            raise SourceError(f"--source {spec}: the port is not a number from 0 to 65535") from None
+        return UdpSource(array, url.hostname or "0.0.0.0", port, spec)
+    try:
+        url.port
+    except ValueError:
+        raise SourceError(f"--source {spec}: the port is not a number from 0 to 65535") from None
+    return MimuSource(array, url, spec)
