@@ -95,7 +95,8 @@ SECTIONS = (
         "batch-throughput", "Batch smoother: throughput and memory", "bench_smoother.py",
         "The whole command `gfimu estimate LOG --method smoother` (start-up, reading and writing included) "
         "on simulated random motion, 10 cm cube of four triads, 500 Hz, for several log lengths: median wall "
-        "time and CPU time (worker processes included) over the repeats, and the peak resident memory.",
+        "time and CPU time (worker processes included) over the repeats, and the peak resident memory of its "
+        "largest process.",
         full=("--command", "--durations", "20", "60", "200", "600", "--repeats", "3"),
         quick=("--command", "--durations", "10", "20", "--repeats", "1"),
         drop=DROP + (r"^\s*\d+ s\s+\d+ samples\s+wall ",)),  # its progress lines: the table repeats them
