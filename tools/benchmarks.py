@@ -192,8 +192,9 @@ def run_section(section: Section, quick: bool, recordings_dir: Path, note: str |
         recs = recordings(recordings_dir, quick)
         if not recs:
             print(f"benchmarks: {section.name}: skipped, no MIMU4444 recording at {recordings_dir}", file=sys.stderr)
-            return "\n".join(head + [f"Skipped: no MIMU4444 recording (`exp_1/data.bin` ...) was found at "
-                                     f"`{shown(recordings_dir)}`.", END.format(section.name)]), True
+            return "\n".join(head + ([note, ""] if note else []) + [
+                f"Skipped: no MIMU4444 recording (`exp_1/data.bin` ...) was found at `{shown(recordings_dir)}`.",
+                END.format(section.name)]), True
         args += [str(r) for r in recs]
         display = list(section.quick if quick else section.full) + [shown(r) for r in recs]
     else:
