@@ -99,11 +99,16 @@ def test_a_log_argument_that_is_not_a_log_folder_is_a_failed_row_and_the_others_
     assert sorted(p.name for p in out.iterdir()) == ["log", "summary.csv"]
 
 
-def test_an_output_that_is_a_file_is_still_refused_before_any_log(tmp_path):
+def test_an_output_that_is_a_file_is_still_refused_before_any_log(tmp_path, capsys):
+    """Refused before any log is read, the file left as it was (run in this process: a new one would
+    only add the interpreter's start-up)."""
+    from gfimu.cli import main
+
     (tmp_path / "out").write_text("")
-    proc = subprocess.run([sys.executable, "-m", "gfimu", "batch", str(tmp_path / "README"), "--out",
-                           str(tmp_path / "out"), "--quiet"], env=_env(), capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2 and "exists and is not a folder" in proc.stderr and "Traceback" not in proc.stderr
+    assert main(["batch", str(tmp_path / "README"), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "exists and is not a folder" in err and "Traceback" not in err and err.count("\n") == 1
+    assert (tmp_path / "out").read_text() == ""
 
 
 def _worker_environ():

@@ -19,7 +19,7 @@ from gfimu.smoother.initialise import initial_estimate
 
 @pytest.fixture(scope="module")
 def log():
-    return simulate("random3d", cube_array(0.05, 0.07), rate_hz=250.0, duration_s=9.0, seed=3)
+    return simulate("random3d", cube_array(0.05, 0.07), rate_hz=250.0, duration_s=6.6, seed=3)  # four 2 s windows
 
 
 def _same(a, b):

@@ -245,10 +245,13 @@ def test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer():
     assert np.array_equal(MLEstimator(workers=1).estimate(log).motion.omega_b_radps, fast)  # blocks in workers or here
 
 
+@pytest.mark.slow
 def test_restarts_found_ahead_are_those_of_the_plain_definition():
     """The restarts are worked out for every sample that calls for one before the neighbour passes, in
     the blocks' workers, and taken for those that still call for one after them: the same estimate as
-    restarting after the passes. Ten axes (rank below 6): every sample restarts and some move."""
+    restarting after the passes. Ten axes (rank below 6): every sample restarts and some move.
+    Three estimates of 17,000 samples that all restart (about 10 s): in the slow set; the fast set keeps
+    the same equality for the neighbour passes (test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer)."""
     from gfimu.simulate import SensorErrors, simulate
 
     three = random_array(seed=7, n=3)

@@ -53,6 +53,22 @@ def busiest(mimu4444_dir):
     return get
 
 
+@pytest.fixture(scope="module")
+def default_estimate(busiest):
+    """``default_estimate(exp)``: the default smoother's estimate of ``busiest(exp)`` and its model check,
+    computed once for the module (two tests score it)."""
+    done = {}
+
+    def get(exp):
+        if exp not in done:
+            est = BatchSmootherEstimator()
+            estimate = est.estimate(busiest(exp)[0])
+            done[exp] = estimate.motion, estimate.report.model_check
+        return done[exp]
+
+    return get
+
+
 @pytest.mark.parametrize("exp, max_rmse", [(2, 3.4), (3, 4.3)])  # measured 3.14, 4.06 (sign chain with Cauchy steps)
 def test_robust_settings_on_unseen_recordings(busiest, exp, max_rmse):
     """Busiest 40 s (own calibration, shifted reference): the robust settings lower the ω RMSE and
@@ -69,15 +85,14 @@ def test_robust_settings_on_unseen_recordings(busiest, exp, max_rmse):
 
 
 @pytest.mark.parametrize("exp", [2, 3])
-def test_default_model_matches_the_hand_chosen_settings(busiest, exp):
+def test_default_model_matches_the_hand_chosen_settings(busiest, default_estimate, exp):
     """Busiest 40 s: the default smoother, with nothing set, finds the readings inconsistent with a
     rigid body (heavy tails, noise growing with |ω|), measures its noise from them and is within 10 %
     of the settings chosen by hand on exp_1, with under 1 % of the moving samples on the wrong sign."""
     part, mask = busiest(exp)
     hand = scores(BatchSmootherEstimator(**REAL_SETTINGS, **ROBUST).estimate(part).motion, part, mask)
-    run = BatchSmootherEstimator().estimate(part)
-    default = scores(run.motion, part, mask)
-    check = run.report.model_check
+    motion, check = default_estimate(exp)
+    default = scores(motion, part, mask)
     print(f"exp_{exp}: default {default[0]:.3f} rad/s, {default[1]:.2%} opposite; hand-chosen {hand[0]:.3f}, "
           f"{hand[1]:.2%}; {check.describe()}")
     assert not check.consistent and check.tail_share > 0.05 and check.noise_slope_mps2_per_radps > 0.01
@@ -104,11 +119,11 @@ def test_default_model_on_whole_recordings(mimu4444_dir, exp):
 
 
 @pytest.mark.parametrize("exp", [2, 3])
-def test_branch_restarts_on_unseen_recordings(mimu4444_dir, exp):
+def test_branch_restarts_on_unseen_recordings(busiest, default_estimate, exp):
     """Busiest 40 s: the default smoother's local restarts of short runs on the other branches of ω
     (gfimu.smoother.restarts) do not raise the ω RMSE nor the wrong-sign share."""
-    part, mask = busiest_part(mimu4444_dir, exp)
+    part, mask = busiest(exp)
     without = scores(BatchSmootherEstimator(branch_restarts=False).estimate(part).motion, part, mask)
-    with_ = scores(BatchSmootherEstimator().estimate(part).motion, part, mask)
+    with_ = scores(default_estimate(exp)[0], part, mask)
     print(f"exp_{exp}: restarts {with_[0]:.3f} rad/s, {with_[1]:.2%} opposite; without {without[0]:.3f}, {without[1]:.2%}")
     assert with_[0] <= without[0] + 1e-9 and with_[1] <= without[1] + 1e-9, (with_, without)

@@ -21,8 +21,8 @@ and the share of samples with ``ω · ω_ref < 0`` (wrong sign). ``--option`` pa
 ``--baseline DIR`` runs the same flow with another checkout (``git worktree add ../old COMMIT``) right
 after this one's on each recording: on a machine whose speed drifts, only runs side by side compare.
 
-The scoring uses the same library function as ``gfimu evaluate``; the figures in the
-README come from this script.
+The scoring uses the same library function as ``gfimu evaluate``; the real-flow figures of
+docs/benchmarks.md come from this script (``tools/benchmarks.py --only real-flow``).
 """
 
 from __future__ import annotations
