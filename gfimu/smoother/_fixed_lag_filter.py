@@ -74,6 +74,7 @@ class WindowFilter:
         self._lo = self._hi = 0
         self._base = 0  # index k of slot 0
         self._P = np.zeros((9, 9))  # covariance of the newest state
+        self._Q = None  # process noise of the newest step
         self.n_updates = 0
         m = model.S_q.shape[0]
         # Jacobian buffers: the ω̇ and f columns are constant; the gyroscope rows select ω
@@ -208,6 +209,7 @@ class WindowFilter:
         self._mean[0] = 0.0
         self._var[0] = self._prior_var
         self._P = np.diag(self._prior_var)
+        self._Q = None
         self._cross[0] = self._P
         self._hi = 1
 
@@ -233,6 +235,7 @@ class WindowFilter:
         self._var[hi] = np.diagonal(P)
         self._cross[hi] = P
         self._P = P
+        self._Q = Q
         self._hi = hi + 1
 
     def _branch_starts(self, x: np.ndarray) -> list[np.ndarray]:
@@ -336,6 +339,23 @@ class WindowFilter:
                 candidate = self._solve(y, gyro, xp, P, branch, extra)
                 if candidate[3] < best[3]:
                     best = candidate
+        c = self.model.process_robust_threshold
+        if c > 0 and start is None and self._Q is not None:
+            # the robust loss of the motion-model step (the batch smoother's IRLS weight of the step's
+            # whitened residual, its norm over √rows): a sudden jerk widens this step's process noise
+            d = best[0] - xp
+            try:
+                e2 = float(d @ np.linalg.solve(P, d)) / d.size
+            except np.linalg.LinAlgError:
+                e2 = 0.0
+            w = float(robust_weight(np.sqrt(e2), c, self.model.robust_loss))
+            if w < 1.0:
+                P = P + (1.0 / w - 1.0) * self._Q
+                P = 0.5 * (P + P.T)
+                self._P = P
+                self._cross[hi - 1] = P
+                self._var[hi - 1] = np.diagonal(P)
+                best = self._solve(y, gyro, xp, P, best[0], extra)
         _, H, Z, _ = best
 
         # the last linearisation moves the whole window

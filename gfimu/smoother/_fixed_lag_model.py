@@ -142,6 +142,7 @@ class ArrayModel:
         self.accel_noise_slope_mps2_per_radps = float(options.accel_noise_slope_mps2_per_radps)
         self.accel_robust_threshold = float(options.accel_robust_threshold) if options.measurement == "accelerometer" else 0.0
         self.robust_loss = options.robust_loss
+        self.process_robust_threshold = float(options.process_robust_threshold)
 
     def sample_terms(self, t_ns: int, y: np.ndarray, gyro=None):
         """The factor groups of the options at one sample: None when none applies there, else a function
