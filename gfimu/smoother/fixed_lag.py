@@ -37,28 +37,22 @@ Time gaps (a step longer than ``gap_factor`` times the nominal step, as
 (its states are emitted, smoothed with the data they have) and a new segment
 starts with a fresh initialisation.
 
-Process noise chosen from the data (``tune_process_noise``, on by default
-in :class:`FixedLagEstimator`): a stream cannot see its future, so the first
-``tune_window_s`` of data (a contiguous stretch) are buffered and the batch
-smoother's tuner (:func:`gfimu.smoother.tuning.tuned_problem`,
-i.e. :func:`gfimu.smoother.tuning.tune`: jerk density per body axis,
-specific-force density, optionally the accelerometer noise scale) is run on
-them, exactly as the batch smoother would on that stretch alone. The buffered
-samples are then smoothed with the selected densities and the stream goes on
-with them: outputs start ``tune_window_s`` late, once, and that one
-:meth:`FixedLagSmoother.push` pays for the tuning and the batch solve of the
-stretch (linear in its length: about 0.3-0.6 s for 3 s at 500 Hz) and for
-the catch-up of the buffered samples (a median update each: 1-2 s in all).
-The states of the stretch that come out then are the batch solution of the
-stretch (every one of them has at least ``lag_s`` of data after it); the
-stream continues from the fixed-lag smoother run over the stretch, so after
-it every output is exactly the fixed-lag smoother with the chosen densities.
-Periodic re-tuning is not done: once the densities are chosen, the stream
-costs what it costs with given densities.
-Densities given explicitly (any of ``omega_dot_random_walk_radps2_per_sqrt_s``,
-``specific_force_random_walk_mps2_per_sqrt_s``, ``process_axis_factors`` not at
-its default) are used as given and disable the tuning, as does
-``tune_process_noise=False``.
+The model chosen from the data (``auto_model``, on in :class:`FixedLagEstimator`):
+the batch smoother's model check and noise choice (:mod:`gfimu.smoother.auto`) made on
+the stream's own recent past and made again as the motion changes
+(:mod:`gfimu.smoother.stream_model`; ``docs/fixed-lag.md``). The first
+``tune_window_s`` of data are buffered and the model is chosen on them; for a
+consistent stretch whose process noise is tuned, the states of the stretch that come
+out then are the batch solution of the stretch and the stream continues from the
+fixed-lag smoother run over it. Every ``retune_every_s`` the choice is made again on
+the last ``model_window_s``, and at once when a model chosen at rest is outgrown.
+Without ``auto_model`` (the class's default), ``tune_process_noise`` chooses the
+process noise once on the first ``tune_window_s``, as the batch tuner would on that
+stretch alone. Densities given explicitly (any of
+``omega_dot_random_walk_radps2_per_sqrt_s``,
+``specific_force_random_walk_mps2_per_sqrt_s``, ``process_axis_factors`` not at its
+default) are used as given and disable the tuning, as does
+``tune_process_noise=False``; the model check still sets the noise levels.
 
 If an update fails (gtsam's ``IndeterminantLinearSystem``, a singular innovation covariance), the window
 is rebuilt once from its raw samples with a ``RuntimeWarning`` naming the
@@ -869,12 +863,12 @@ class FixedLagEstimator(SmootherEstimator, SmootherOptions):
     before a gap, the last window's smoothed values), exactly what a live
     stream would give with that delay.
 
-    Process noise: as in the batch smoother, ``tune_process_noise`` is on by
-    default, but chosen once, from the first ``tune_window_s`` of data (the
-    batch smoother's tuner on that stretch: jerk density per body axis,
-    specific-force density, and with ``tune_accel_noise`` the accelerometer
-    noise scale); the stream then runs with it (its first outputs come
-    ``tune_window_s`` late). The choice is in the report's ``tunings``. Giving
+    Model and process noise: as in the batch smoother, chosen from the data by
+    default (``auto_model``, ``tune_process_noise``): on the first
+    ``tune_window_s`` of data (its first outputs come that late), then again
+    every ``retune_every_s`` on the last ``model_window_s`` and when the motion
+    outgrows a model chosen at rest (module docstring). The choices are in the
+    report's ``tunings`` and ``model_check``. Giving
     any of ``omega_dot_random_walk_radps2_per_sqrt_s``,
     ``specific_force_random_walk_mps2_per_sqrt_s`` or ``process_axis_factors``
     (a value other than the default) uses the given densities and skips the
