@@ -42,6 +42,7 @@ from ..factors import kinematics, process
 from ._fixed_lag_model import ArrayModel
 from .graph import robust_weight
 from .restarts import plane_normal
+from .stream_model import branch
 
 
 BRANCH_PRIOR_MARGIN = 25.0
@@ -188,18 +189,28 @@ class WindowFilter:
             return pred, H
         return np.concatenate([pred, x[:3]]), H
 
-    def flip_omega(self, k_first: int) -> None:
-        """ω → -ω for the states from ``k_first`` to the newest (the other branch of q(ω) = q(-ω)):
-        their means, and the covariances, by ``D = diag(-I, I, I)`` on each flipped state."""
+    def move_branch(self, k_first: int, kind: int) -> None:
+        """The states from ``k_first`` to the newest onto branch ``kind`` of the readings' ambiguity
+        (:func:`gfimu.smoother.stream_model.branch`: bit 1 ω flipped, bit 2 mirrored through the array's
+        plane): their means, and the covariances by the linear part ``D = diag(A, I, I)`` (A = -I, the
+        mirror I - 2nnᵀ, or both) on each moved state."""
         first = self._slot(k_first)
         lo, hi = self._lo, self._hi
-        self._mean[first:hi, 0:3] *= -1.0
-        # C_i = Cov(x_i, x_newest): the newest is flipped, so every C_i gets D on its right, and the
-        # flipped ones D on their left too
-        self._cross[lo:hi, :, 0:3] *= -1.0
-        self._cross[first:hi, 0:3, :] *= -1.0
-        self._P[0:3, 3:] *= -1.0
-        self._P[3:, 0:3] *= -1.0
+        for i in range(first, hi):
+            w, dw = branch(kind, self._mean[i, 0:3], self._mean[i, 3:6], self._normal)
+            self._mean[i, 0:3], self._mean[i, 3:6] = w, dw
+        A = np.eye(3)
+        if kind & 2:
+            A = A - 2.0 * np.outer(self._normal, self._normal)
+        if kind & 1:
+            A = -A
+        D = np.eye(9)
+        D[0:3, 0:3] = A
+        # C_i = Cov(x_i, x_newest): the newest is moved, so every C_i gets Dᵀ on its right, the moved
+        # ones D on their left too
+        self._cross[lo:hi] = self._cross[lo:hi] @ D.T
+        self._cross[first:hi] = D @ self._cross[first:hi]
+        self._P = D @ self._P @ D.T
 
     # --- updates ------------------------------------------------------------------------
     def start(self, k: int) -> None:

@@ -94,6 +94,7 @@ from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .result import SmootherEstimator, SmootherResult
 from . import stream_model
 from .auto import measured_noise_options
+from .restarts import plane_normal
 from .stream_model import LocalDensity, StreamModel, StreamSignChain
 from .tuning import tuned_problem
 from ..estimators.ml import MLEstimator
@@ -300,7 +301,8 @@ class FixedLagSmoother:
         self._jerk_factor = 1.0
         self._ml = MLEstimator(workers=1) if self._auto else None
         self._branches = bool(branches)
-        self._signs = StreamSignChain(int(math.ceil(self.lag_s * self.rate_hz)) + 2)
+        self._signs = StreamSignChain(int(math.ceil(self.lag_s * self.rate_hz)) + 2, plane_normal(np.concatenate(
+            [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
         self._tune_n = max(2, int(round(tune_window_s * self.rate_hz)))
         # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
         self._tune_min_n = min(self._tune_n, max(2, int(round(1.0 * self.rate_hz))))
@@ -775,9 +777,9 @@ class FixedLagSmoother:
         if scale is None:
             return
         x = self._smoother.mean(k)
-        first = self._signs.push(k, t_ns, x[0:3], x[3:6], scale, self._window[0][0] if self._window else k)
-        if first is not None:
-            self._smoother.flip_omega(first)
+        moved = self._signs.push(k, t_ns, x[0:3], x[3:6], scale, self._window[0][0] if self._window else k)
+        if moved is not None:
+            self._smoother.move_branch(*moved)
 
     def _recover(self, sample, err: FixedLagSmootherError) -> None:
         """After a failed update: rebuild the window from its raw samples, once.

@@ -231,70 +231,92 @@ class LocalDensity:
         return math.sqrt(excess / 3.0)
 
 
+def branch(kind: int, omega: np.ndarray, omega_dot: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ω, ω̇) on branch ``kind`` of the readings' ambiguity (:mod:`gfimu.smoother.restarts`): bit 1
+    flips ω (q(ω) = q(-ω)), bit 2 mirrors ω through the array's plane of unit normal ``normal`` with
+    ω̇ moved so that a planar array's readings stay fitted; the four form a group (``a ^ b``)."""
+    w, dw = omega, omega_dot
+    if kind & 2:
+        wn = float(w @ normal)
+        w, dw = w - 2.0 * wn * normal, dw - 2.0 * wn * np.cross(normal, w)
+    if kind & 1:
+        w = -w
+    return w, dw
+
+
 class StreamSignChain:
-    """The sign chain of :func:`gfimu.smoother.initialise.sign_chain` over a stream, fixed-lag.
+    """The sign chain of :func:`gfimu.smoother.initialise.sign_chain` over a stream, fixed-lag, over the
+    four branches of the readings' ambiguity (:func:`branch`: ω flipped, mirrored through a planar
+    array's plane, both).
 
-    The accelerometers see ω only through q(ω) = q(-ω); ω̇ is sign-free. The batch smoother
-    starts from per-sample estimates whose signs follow the trapezoid of ω̇ best over the whole log
-    (dynamic programming, two states per sample, a Cauchy loss of scale c on each step's misfit
-    ``||s_{k+1} ω_{k+1} - s_k ω_k - h/2 (ω̇_k + ω̇_{k+1})||``). A recursive estimate carries its
-    sign by the motion model instead, and where the motion model is loose (real arrays: a large
-    jerk density) it can bounce back where the rotation slowed through zero and reversed.
+    The accelerometers see ω only through q(ω) = q(-ω), and a planar array also confuses ω with its
+    mirror image; the trapezoid of ω̇ tells them apart (a mirrored run of ω does not integrate its
+    own moved ω̇). The batch smoother starts from per-sample estimates whose signs follow the
+    trapezoid best over the whole log (dynamic programming, a Cauchy loss of scale c on each step's
+    misfit ``||ω_{k+1} - ω_k - h/2 (ω̇_k + ω̇_{k+1})||``) and restarts runs on the other branches. A
+    recursive estimate carries its branch by the motion model instead, and where the motion model is
+    loose (real arrays: a large jerk density) it can go over to another branch where the rotation
+    slows through zero or the normal component of ω does.
 
-    Here the same dynamic programme runs on the smoother's own filtered states, the sign ``s``
-    of each relative to the smoother's: :meth:`push` takes the newest state and returns the index
-    from which the smoother should flip ω (every state still in its window on the best path's last
-    run of ``-``), when that path beats keeping the signs by more than ``margin`` (in units of c²);
-    the flipped states then count as ``+`` (the costs swap) and the chain starts again from them.
+    Here the same dynamic programme runs on the smoother's own filtered states, each state's branch
+    relative to the smoother's: :meth:`push` takes the newest state and returns ``(first, kind)``
+    when the best path ends on another branch and beats keeping the smoother's by more than
+    ``margin`` (in units of c²): the states from ``first`` (the best path's last run on that branch,
+    within the window) are to be moved onto branch ``kind``; they then count as the smoother's own
+    (the costs are relabelled) and the chain starts again from them.
     """
 
-    def __init__(self, window: int, margin: float = 1.0) -> None:
+    def __init__(self, window: int, normal: np.ndarray, margin: float = 1.0, branches: int = 4) -> None:
         self.window = max(int(window), 2)
+        self.normal = np.asarray(normal, dtype=float)
         self.margin = float(margin)
+        self.branches = int(branches)
         self.flips = 0
-        """Flips so far (every segment)."""
+        """Moves so far (every segment)."""
         self.reset()
 
     def reset(self) -> None:
-        self._cost = np.zeros(2)
-        self._back: deque = deque()  # (k of the later state, best earlier sign per later sign)
-        self._prev = None  # (k, t_ns, ω, ω̇)
+        self._cost = np.zeros(self.branches)
+        self._back: deque = deque()  # (k of the later state, best earlier branch per later branch)
+        self._prev = None  # (k, t_ns, [(ω, ω̇) per branch])
 
     def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
-             oldest_k: int) -> int | None:
-        prev, self._prev = self._prev, (k, t_ns, np.array(omega, dtype=float), np.array(omega_dot, dtype=float))
+             oldest_k: int) -> tuple[int, int] | None:
+        w, dw = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
+        cur = [branch(b, w, dw, self.normal) for b in range(self.branches)]
+        prev, self._prev = self._prev, (k, t_ns, cur)
         if prev is None:
             return None
         h = (t_ns - prev[1]) * 1e-9
-        inc = 0.5 * h * (prev[3] + self._prev[3])
-        w0, w1 = prev[2], self._prev[2]
-        step = np.empty((2, 2))  # from sign a (at k-1) to sign b (at k)
-        for a, sa in enumerate((1.0, -1.0)):
-            for b, sb in enumerate((1.0, -1.0)):
-                e = sb * w1 - sa * w0 - inc
+        n = self.branches
+        step = np.empty((n, n))  # from branch a (at k-1) to branch b (at k)
+        for a, (w0, d0) in enumerate(prev[2]):
+            for b, (w1, d1) in enumerate(cur):
+                e = w1 - w0 - 0.5 * h * (d0 + d1)
                 step[a, b] = float(e @ e)
         c2 = scale_radps * scale_radps
         step = c2 * np.log1p(step / c2)
         total = self._cost[:, None] + step
         back = np.argmin(total, axis=0)
-        self._cost = total[back, [0, 1]]
-        self._cost -= self._cost.min()  # only the difference matters (and it stays bounded)
+        self._cost = total[back, np.arange(n)]
+        self._cost -= self._cost.min()  # only the differences matter (and they stay bounded)
         self._back.append((k, back))
         while len(self._back) > self.window or (self._back and self._back[0][0] <= oldest_k):
             self._back.popleft()
-        if not self._cost[1] + self.margin * c2 < self._cost[0]:
+        best = int(np.argmin(self._cost))
+        if best == 0 or not self._cost[best] + self.margin * c2 < self._cost[0]:
             return None
-        # the best path ends on '-': the states of its last run of '-' (within the window) flip
+        # the best path's last run on branch `best` (within the window) moves onto it
         first = k
-        state = 1
+        state = best
         for later_k, bp in reversed(self._back):
             state = int(bp[state])
-            if state != 1:
+            if state != best:
                 break
             first = later_k - 1
         first = max(first, oldest_k)
-        self._cost = self._cost[::-1].copy()
+        self._cost = self._cost[np.arange(n) ^ best].copy()
         self._back.clear()
-        self._prev = (k, t_ns, -self._prev[2], self._prev[3])
+        self._prev = (k, t_ns, [cur[b ^ best] for b in range(n)])
         self.flips += 1
-        return first
+        return first, best

@@ -1,0 +1,119 @@
+"""The fixed-lag smoother's model chosen from the stream (gfimu.smoother.stream_model): the branch
+group, the streaming branch chain on a constructed stream, a window moved onto another branch, the
+local density and the stillness test."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gfimu.array import cube_array
+from gfimu.estimators.ml import MLEstimator
+from gfimu.simulate import simulate
+from gfimu.smoother._fixed_lag_filter import WindowFilter
+from gfimu.smoother._fixed_lag_model import ArrayModel
+from gfimu.smoother.auto import check_model
+from gfimu.smoother.graph import SmootherOptions
+from gfimu.smoother.stream_model import LocalDensity, StreamSignChain, branch, is_still
+
+NORMAL = np.array([0.0, 0.0, 1.0])
+
+
+def test_the_four_branches_are_a_group_of_involutions():
+    rng = np.random.default_rng(0)
+    w, dw = rng.normal(size=3) * 5, rng.normal(size=3) * 50
+    for a in range(4):
+        wa, da = branch(a, w, dw, NORMAL)
+        for b in range(4):
+            wab, dab = branch(b, wa, da, NORMAL)
+            wc, dc = branch(a ^ b, w, dw, NORMAL)
+            np.testing.assert_allclose(wab, wc, atol=1e-12)
+            np.testing.assert_allclose(dab, dc, atol=1e-12)
+    wm, dm = branch(2, w, dw, NORMAL)
+    assert wm[2] == pytest.approx(-w[2]) and np.allclose(wm[:2], w[:2])
+
+
+def _rotation(n: int = 200, h: float = 0.01):
+    """A rotation whose ω passes through zero and reverses (ω̇ keeps its sign), with its exact ω̇."""
+    t = np.arange(n) * h
+    omega = np.stack([3.0 - 6.0 * t, 1.0 + 0.5 * np.sin(3 * t), 2.0 - 4.0 * t], axis=1)
+    omega_dot = np.stack([np.full(n, -6.0), 1.5 * np.cos(3 * t), np.full(n, -4.0)], axis=1)
+    return (t * 1e9).astype(np.int64), omega, omega_dot
+
+
+@pytest.mark.parametrize("kind", [1, 2, 3])
+def test_the_chain_finds_a_run_on_another_branch_and_where_it_starts(kind):
+    t_ns, omega, omega_dot = _rotation()
+    start = 120
+    chain = StreamSignChain(window=60, normal=NORMAL)
+    moved = None
+    for k in range(len(t_ns)):
+        w, dw = (omega[k], omega_dot[k]) if k < start else branch(kind, omega[k], omega_dot[k], NORMAL)
+        out = chain.push(k, int(t_ns[k]), w, dw, scale_radps=0.05, oldest_k=max(0, k - 50))
+        if out is not None and moved is None:
+            moved = (k, out)
+    assert moved is not None
+    k_found, (first, found_kind) = moved
+    assert found_kind == kind and first == start and k_found - start < 10
+
+
+def test_the_chain_keeps_a_consistent_stream():
+    t_ns, omega, omega_dot = _rotation()
+    chain = StreamSignChain(window=60, normal=NORMAL)
+    assert all(chain.push(k, int(t_ns[k]), omega[k], omega_dot[k], 0.05, max(0, k - 50)) is None
+               for k in range(len(t_ns)))
+    assert chain.flips == 0
+
+
+def test_moving_a_window_onto_a_branch_twice_gives_it_back():
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=200, duration_s=0.5, seed=1)
+    filt = WindowFilter(ArrayModel(log.array, SmootherOptions()), capacity=64)
+    filt._normal = NORMAL
+    filt.start(0)
+    filt.measure(log.accel_mps2[0])
+    for k in range(1, 30):
+        filt.predict(k, 0.005)
+        filt.measure(log.accel_mps2[k])
+    mean = filt._mean[filt._lo:filt._hi].copy()
+    cross = filt._cross[filt._lo:filt._hi].copy()
+    P = filt._P.copy()
+    filt.move_branch(10, 3)
+    w, dw = branch(3, mean[10, 0:3], mean[10, 3:6], NORMAL)
+    np.testing.assert_allclose(filt.mean(10)[0:3], w)
+    np.testing.assert_allclose(filt.mean(10)[3:6], dw)
+    np.testing.assert_allclose(filt.mean(5), mean[5])  # before the first moved state: untouched
+    filt.move_branch(10, 3)
+    np.testing.assert_allclose(filt._mean[filt._lo:filt._hi], mean, atol=1e-9)
+    np.testing.assert_allclose(filt._cross[filt._lo:filt._hi], cross, atol=1e-12)
+    np.testing.assert_allclose(filt._P, P, atol=1e-12)
+
+
+def test_local_density_is_the_noise_at_rest_and_rises_with_motion():
+    array = cube_array(0.05, 0.07)
+    S = array.structure_matrix()
+    rng = np.random.default_rng(2)
+    density = LocalDensity(array, period_s=0.5)
+    rest = np.zeros(12)
+    rest[2] = 9.81
+    h_ns = 5_000_000
+    for k in range(200):
+        density.push(k * h_ns, S @ rest + rng.normal(0, 0.07, S.shape[0]), 0.07**2)
+    assert not density.resolved
+    moving = rest.copy()
+    for k in range(200, 400):
+        moving[3:6] += rng.normal(0, 100.0 * np.sqrt(0.005), 3)  # a white-jerk ω̇ of 100 rad/s²/√s
+        q = density.push(k * h_ns, S @ moving + rng.normal(0, 0.07, S.shape[0]), 0.07**2)
+    assert density.resolved and 50.0 < q < 200.0
+
+
+def test_a_still_stretch_and_a_slow_turntable():
+    array = cube_array(0.05, 0.07)
+    turn = simulate("turntable", array, rate_hz=500, duration_s=3.0, seed=3)
+    ml = MLEstimator(workers=1).estimate_motion(turn)
+    assert not is_still(turn, ml, check_model(turn, ml))
+    S = array.structure_matrix()
+    x = np.zeros(12)
+    x[2] = 9.81
+    still = turn.__class__(array, turn.timestamps_ns, S @ x + np.random.default_rng(0).normal(0, 0.07, turn.accel_mps2.shape))
+    ml = MLEstimator(workers=1).estimate_motion(still)
+    assert is_still(still, ml, check_model(still, ml))
