@@ -7,10 +7,8 @@ follows the burst; a smoother held to a fixed jerk density of 5 rad/s²/√s can
 
 from __future__ import annotations
 
-import dataclasses
 import subprocess
 import sys
-import warnings
 
 import numpy as np
 import pytest
@@ -144,7 +142,7 @@ def test_bad_guard_value_is_named():
         BatchSmootherEstimator(guard="maybe")
 
 
-def test_cli_warning_names_the_span(tmp_path):
+def test_cli_warning_names_the_span(tmp_path, capsys):
     log_dir = tmp_path / "burst"
     write_log(burst_log(), log_dir, rate_hz=RATE_HZ)
     before = {p.name: p.read_bytes() for p in log_dir.iterdir()}
@@ -159,13 +157,13 @@ def test_cli_warning_names_the_span(tmp_path):
                                "estimate over 1 span(s), 0.20 s in all (1.40-1.60 s): the per-sample answer is used there")
     assert "-O guard=warn keeps the smoother's" in lines[0]
     assert out.is_file() and {p.name: p.read_bytes() for p in log_dir.iterdir()} == before
-    proc = subprocess.run(cmd + ["-O", "guard=off", "--out", str(tmp_path / "off.csv")], capture_output=True, text=True,
-                          timeout=120)
-    assert proc.returncode == 0 and "fits the readings worse" not in proc.stderr
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        proc = subprocess.run(cmd[:-2 * len(STIFF)] + ["-O", "guard=sometimes"], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2 and "guard must be one of" in proc.stderr and "Traceback" not in proc.stderr
+    from gfimu.cli import main
+
+    assert main(cmd[3:] + ["-O", "guard=off", "--out", str(tmp_path / "off.csv")]) == 0  # in this process
+    assert "fits the readings worse" not in capsys.readouterr().err
+    assert main(cmd[3:-2 * len(STIFF)] + ["-O", "guard=sometimes"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "guard must be one of 'replace', 'warn', 'off', got 'sometimes'" in err
 
 
 def test_report_dict_of_a_span():
@@ -174,3 +172,21 @@ def test_report_dict_of_a_span():
     assert d["spans"] == [{"start_s": 0.04, "end_s": 0.076, "first_sample": 10, "last_sample": 19, "samples": 10,
                            "excess_chi2_per_sample": 50.0, "rms_ratio": 2.5}]
     assert d["seconds"] == pytest.approx(0.036) and d["usable_samples"] == 100
+
+
+def test_diagnose_lists_the_spans_of_the_smoother_it_is_given():
+    import json
+
+    from gfimu.diagnose import diagnose
+
+    d = diagnose(burst_log(), smoother_options=STIFF)
+    (span,) = d.guard["spans"]
+    assert abs(span["first_sample"] - BURST.start) <= 3 and abs(span["last_sample"] - (BURST.stop - 1)) <= 3
+    assert f"{span['start_s']:.2f}-{span['end_s']:.2f} s" == "1.40-1.60 s" and span["samples"] > 40
+    assert json.loads(json.dumps(d.as_dict()))["guard"]["spans"][0]["first_sample"] == span["first_sample"]
+    text = d.to_text()
+    assert "1 span(s) where the smoother fits the readings worse than its model allows, 0.20 s in all" in text
+    assert f"  1.40-1.60 s  samples {span['first_sample']}-{span['last_sample']} ({span['samples']})" in text
+    assert any(w.startswith("the smoother fits the readings worse than the per-sample estimate over 1 span(s)")
+               for w in d.warnings)
+    assert d.verdict.startswith("USE WITH CARE")

@@ -119,15 +119,23 @@ class GuardResult:
     def seconds(self) -> float:
         return float(sum(s.seconds for s in self.spans))
 
-    def message(self) -> str | None:
-        """The one warning line on the spans (None without any); the caller names the method before it."""
+    def summary(self) -> str | None:
+        """The spans in a few words, e.g. ``fits the readings worse than the per-sample estimate over 2 span(s),
+        0.40 s in all (0.60-0.80 s, 2.48-2.68 s)`` (None without any)."""
         if not self.spans:
             return None
         listed = ", ".join(f"{s.start_s:.2f}-{s.end_s:.2f} s" for s in self.spans[:5])
         if len(self.spans) > 5:
             listed += f", ... {len(self.spans) - 5} more"
-        head = (f"fits the readings worse than the per-sample estimate over {len(self.spans)} span(s), "
+        return (f"fits the readings worse than the per-sample estimate over {len(self.spans)} span(s), "
                 f"{self.seconds:.2f} s in all ({listed})")
+
+    def message(self) -> str | None:
+        """The one warning line on the spans and what was done (None without any); the caller names the
+        method before it."""
+        head = self.summary()
+        if head is None:
+            return None
         if self.mode == "replace":
             return head + ": the per-sample answer is used there, its sign following the smoother's around it (-O guard=warn keeps the smoother's)"
         return head + ": the smoother's answer is kept (guard=warn; -O guard=replace uses the per-sample answer there)"
