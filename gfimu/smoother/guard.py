@@ -24,8 +24,8 @@ than :data:`MERGE_GAP_S` are bridged and spans shorter than :data:`MIN_SAMPLES` 
 Only samples where the per-sample fit is well determined count: its |ω| at least
 :data:`DETERMINED_FACTOR` times the std of its ω (the Cramér-Rao bound at that ω with the noise σ_k,
 :func:`gfimu.crb.crb_per_sample`; it falls as 1/|ω|, so this asks |ω|² above a multiple of σ_k over
-the lever arms, the |ω| the noise alone gives), and its own whitened residual within the χ²_ν quantile at :data:`OUTLIER_FALSE_ALARM`
-(ν = axes - 9): where the readings themselves disagree with a rigid body, neither fit says which
+the lever arms, the |ω| the noise alone gives), and its own whitened residual within the χ²_ν
+quantile at :data:`OUTLIER_FALSE_ALARM` (ν = axes - 9): where the readings themselves disagree with a rigid body, neither fit says which
 answer is right.
 
 The readings fix ω only up to its sign (q(ω) = q(-ω)): a smoother whose ω has the wrong sign fits
@@ -137,7 +137,8 @@ class GuardResult:
         if head is None:
             return None
         if self.mode == "replace":
-            return head + ": the per-sample answer is used there, its sign following the smoother's around it (-O guard=warn keeps the smoother's)"
+            return head + (": the per-sample answer is used there, its sign following the smoother's around it "
+                           "(-O guard=warn keeps the smoother's)")
         return head + ": the smoother's answer is kept (guard=warn; -O guard=replace uses the per-sample answer there)"
 
     def as_dict(self) -> dict:
