@@ -103,6 +103,12 @@ def test_a_corrupted_span_is_found_and_answered_per_sample(case):
         np.testing.assert_array_equal(fixed.omega_dot_b_radps2[sl], ml.omega_dot_b_radps2[sl])
     np.testing.assert_array_equal(fixed.omega_b_radps[outside], corrupted.omega_b_radps[outside])
     assert "over 2 span(s)" in found.message() and "0.60-0.80 s, 2.48-2.68 s" in found.message()
+    # a sample of a span without a per-sample answer keeps the smoother's; the others are still replaced
+    k = found.spans[0].start + 10
+    holed = ml.replace(omega_b_radps=np.where(np.arange(len(log))[:, None] == k, np.nan, ml.omega_b_radps))
+    patched = guard.replaced(corrupted, holed, found)
+    np.testing.assert_array_equal(patched.omega_b_radps[k], corrupted.omega_b_radps[k])
+    np.testing.assert_array_equal(np.delete(patched.omega_b_radps, k, 0), np.delete(fixed.omega_b_radps, k, 0))
     # the same span with ω flipped: the readings cannot tell ω from -ω, so neither can the guard
     w = good.omega_b_radps.copy()
     w[bad[1]] *= -1.0

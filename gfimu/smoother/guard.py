@@ -169,14 +169,12 @@ def usable_samples(log: Log, per_sample: Motion, check: ModelCheck, z_per_sample
     its own std, :func:`omega_noise`) and its whitened residual ``z_per_sample`` is no outlier (see the
     module docstring)."""
     wn = np.linalg.norm(per_sample.omega_b_radps, axis=1)
-    finite = np.all(np.isfinite(per_sample.omega_b_radps), axis=1)
-    noise = np.full(len(wn), np.inf)
-    if finite.any():
-        noise[finite] = omega_noise(log.array, per_sample.omega_b_radps[finite], var[finite])
-    ok = np.isfinite(z_per_sample) & (wn >= DETERMINED_FACTOR * noise) & (var > 0)
+    ok = np.isfinite(z_per_sample) & np.isfinite(wn) & (wn > 0) & (var > 0)
     nu = log.array.structure_matrix().shape[0] - DOF
     if nu > 0:
         ok &= z_per_sample <= chi2.isf(OUTLIER_FALSE_ALARM, nu)
+    if ok.any():  # the bound only where it can decide
+        ok[ok] = wn[ok] >= DETERMINED_FACTOR * omega_noise(log.array, per_sample.omega_b_radps[ok], var[ok])
     return ok
 
 
@@ -216,7 +214,7 @@ def check(log: Log, smoothed: Motion, per_sample: Motion, model_check: ModelChec
     in_flagged = np.convolve(beyond.astype(float), kernel, mode="same") > 0
     marked = in_flagged & ok & (delta > chi2.isf(SAMPLE_FALSE_ALARM, DOF))
     gap = max(int(round(MERGE_GAP_S / dt)), 1) if np.isfinite(dt) and dt > 0 else 1
-    t = log.times_s if hasattr(log, "times_s") else (log.timestamps_ns - log.timestamps_ns[0]) * 1e-9
+    t = log.times_s
     spans, current = [], None
     for a, b in _runs(marked):
         if current is not None and a - current[1] - 1 <= gap:
@@ -258,7 +256,10 @@ def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult) -> Motio
     for span in result.spans:
         a, b = span.start, span.stop
         idx = np.arange(max(a - 1, 0), min(b + 1, n - 1) + 1)
-        inner = (idx >= a) & (idx <= b)
+        # a sample of the span without a per-sample answer (not finite) keeps the smoother's
+        inner = (idx >= a) & (idx <= b) & np.all(np.isfinite(per_sample.omega_b_radps[idx]), axis=1) \
+            & np.all(np.isfinite(per_sample.omega_dot_b_radps2[idx]), axis=1) \
+            & np.all(np.isfinite(per_sample.specific_force_b_mps2[idx]), axis=1)
         seq_w = np.where(inner[:, None], per_sample.omega_b_radps[idx], w[idx])
         seq_wd = np.where(inner[:, None], per_sample.omega_dot_b_radps2[idx], wd[idx])
         signs = sign_chain(seq_w, seq_wd, np.diff(t[idx]) * 1e-9, scale)
@@ -268,7 +269,7 @@ def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult) -> Motio
             signs = signs * signs[-1]
         elif np.sum(signs[:, None] * seq_w * w[idx]) < 0:
             signs = -signs
-        sel = slice(a, b + 1)
+        sel = idx[inner]
         w[sel] = per_sample.omega_b_radps[sel] * signs[inner][:, None]
         wd[sel] = per_sample.omega_dot_b_radps2[sel]
         f[sel] = per_sample.specific_force_b_mps2[sel]
