@@ -196,3 +196,19 @@ def test_diagnose_lists_the_spans_of_the_smoother_it_is_given():
     assert any(w.startswith("the smoother fits the readings worse than the per-sample estimate over 1 span(s)")
                for w in d.warnings)
     assert d.verdict.startswith("USE WITH CARE")
+
+
+def test_a_smoother_reading_the_gyroscope_is_not_judged():
+    from gfimu.array import Gyroscope
+    from gfimu.log import Log as LogClass
+
+    log = burst_log()
+    truth = log.truth.omega_b_radps
+    gyro = truth + np.random.default_rng(1).normal(0.0, 0.01, truth.shape)
+    arr = type(log.array)(log.array.accelerometers, log.array.name, Gyroscope(0.01))
+    with_gyro = LogClass(arr, log.timestamps_ns, log.accel_mps2, gyro_b_radps=gyro, truth=log.truth, source="gyro")
+    est = BatchSmootherEstimator(**STIFF).estimate(with_gyro)
+    assert est.report.guard.note == "not checked: the smoother uses the gyroscope, which the per-sample fit does not"
+    assert est.report.guard.spans == () and est.report.warnings == ()
+    est = BatchSmootherEstimator(**STIFF, use_gyro=False).estimate(with_gyro)  # the accelerometers alone: judged
+    assert est.report.guard.note == "" and len(est.report.guard.spans) == 1

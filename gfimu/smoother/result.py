@@ -77,7 +77,8 @@ class SmootherEstimator:
         from .guard import GUARD_MODES
 
         if self.guard not in GUARD_MODES:
-            raise InputError(f"smoother option guard must be one of {', '.join(map(repr, GUARD_MODES))}, got {self.guard!r}")
+            raise InputError(f"smoother option guard must be one of {', '.join(map(repr, GUARD_MODES))}, "
+                             f"got {self.guard!r}")
         parent = super()
         if hasattr(parent, "__post_init__"):
             parent.__post_init__()
@@ -108,7 +109,8 @@ class SmootherEstimator:
 def guarded(log, res: SmootherResult, mode: str, options):
     """(motion, :class:`gfimu.smoother.guard.GuardResult`) of the smoother's result ``res`` on ``log`` with
     the guard in ``mode`` ('replace' or 'warn'). The guard does not judge a smoother that used more than
-    the accelerometers the per-sample fit sees (a gyroscope, self-calibration): the result says why."""
+    the accelerometers the per-sample fit sees (a gyroscope, an inclinometer, self-calibration): the result
+    says why."""
     from ..estimators.ml import MLEstimator
     from .auto import check_model
     from .guard import GuardResult, check, replaced
@@ -116,6 +118,9 @@ def guarded(log, res: SmootherResult, mode: str, options):
     why = None
     if options.use_gyro and log.array.gyroscope is not None and getattr(log, "gyro_b_radps", None) is not None:
         why = "the smoother uses the gyroscope, which the per-sample fit does not"
+    elif (options.estimate_attitude and options.use_inclinometer and log.array.inclinometer is not None
+          and getattr(log, "tilt_rad", None) is not None):
+        why = "the smoother uses the inclinometer, which the per-sample fit does not"
     elif options.self_calibrate_bias or options.self_calibrate_scale:
         why = "the smoother calibrates the readings, which the per-sample fit does not"
     elif res.model_check is not None and getattr(res.model_check, "constant", False):
