@@ -19,7 +19,10 @@
 - **expected accuracy**: the per-sample Cramér-Rao bound (:mod:`gfimu.crb`) at the fitted ω, with
   the stated and the measured noise;
 - **sign of ω**: whether the change of ω within 1 s windows is large enough, against the bound,
-  for the integral of ω̇ to tell ω from -ω (:func:`sign_resolution`).
+  for the integral of ω̇ to tell ω from -ω (:func:`sign_resolution`);
+- **the smoother against the per-sample fit**: the default batch smoother on the accelerometers
+  and its guard (:mod:`gfimu.smoother.guard`): the spans where it fits the readings worse than its
+  model allows (:func:`smoother_guard`).
 
 Every threshold below says where it comes from. Pure computation, no I/O.
 """
@@ -169,6 +172,9 @@ class Diagnosis:
     fix_first: tuple[str, ...]
     """The warnings that make every estimate wrong until fixed (units, positions, timestamps)."""
     verdict: str
+    guard: dict = field(default_factory=dict)
+    """The default smoother's guard on the accelerometers (:meth:`gfimu.smoother.guard.GuardResult.as_dict`:
+    ``spans`` with ``start_s``, ``end_s``, samples and excess; ``note`` when it did not run)."""
     figure_data: dict = field(default_factory=dict, repr=False, compare=False)
 
     def as_dict(self) -> dict:
@@ -238,6 +244,19 @@ class Diagnosis:
                   f"{SIGN_WINDOW_S:g} s windows",
                   "  (q(omega) = q(-omega): a sample gives omega up to its sign; the sign comes from how omega changes, "
                   "which omega_dot measures; where omega barely changes, the sign is carried from other windows or lost)"]
+        lines += ["", "smoother against the per-sample fit (default smoother on the accelerometers, its guard)"]
+        g = self.guard or {}
+        if g.get("note"):
+            lines.append(f"  {g['note']}")
+        else:
+            spans = g.get("spans", [])
+            lines.append(f"  {len(spans)} span(s) where the smoother fits the readings worse than its model allows, "
+                         f"{g.get('seconds', 0.0):.2f} s in all; {g.get('usable_samples', 0)} of {g.get('samples', 0)} "
+                         "samples judged (per-sample fit well determined, no outlier)")
+            for sp in spans:
+                lines.append(f"  {sp['start_s']:.2f}-{sp['end_s']:.2f} s  samples {sp['first_sample']}-"
+                             f"{sp['last_sample']} ({sp['samples']})  excess {sp['excess_chi2_per_sample']:.3g} "
+                             f"chi2 per sample (allowed 9 on average)  rms ratio {sp['rms_ratio']:.3g}")
         return "\n".join(lines) + "\n"
 
 
@@ -415,9 +434,9 @@ def _unit_suspect(g0: float | None) -> tuple[str | None, float | None]:
     return "unknown scale", ratio
 
 
-def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
+def diagnose(log: Log, progress: bool = False, calibration=None, smoother_options: dict | None = None) -> Diagnosis:
     """:class:`Diagnosis` of ``log`` (raw readings; ``calibration`` a :class:`gfimu.calibration.Calibration` to
-    apply first)."""
+    apply first; ``smoother_options``: options of the batch smoother whose guard is reported, default none)."""
     from . import noise as noise_policy
 
     if calibration is not None:
@@ -540,6 +559,9 @@ def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
                     "of the step")
     if screening.count:
         warn.append(f"{screening.count} reading(s) replaced by the screening")
+    guard = smoother_guard(clean, smoother_options)
+    if guard.get("spans"):
+        warn.append(f"the smoother {guard['message']}")
     share_sign = float(np.mean(sign_snr >= SIGN_SNR)) if sign_snr.size else 0.0
     all_warnings = tuple(fix + warn)
     crb_stated = float(np.median(so_norm))
@@ -557,7 +579,29 @@ def diagnose(log: Log, progress: bool = False, calibration=None) -> Diagnosis:
         float(check.stated_noise_mps2), tuple(sensors), tuple(bands), g0, f_median, unit, unit_scale, gyro_ratio, gyro_unit,
         pos_scale, extent, far, tuple(faults), int(screening.count), crb_stated, crb_stated * factor,
         float(np.median(np.sqrt(np.sum(sd**2, axis=1)))) * factor, float(np.median(wn)), float(np.quantile(wn, 0.9)),
-        float(np.mean(resolved)), share_sign, all_warnings, tuple(fix), verdict, figure)
+        float(np.mean(resolved)), share_sign, all_warnings, tuple(fix), verdict, guard=_json_clean(guard),
+        figure_data=figure)
+
+
+def smoother_guard(log: Log, options: dict | None = None) -> dict:
+    """The batch smoother (default options, or ``options``) on ``log``'s accelerometers (``use_gyro=False``: the
+    guard compares with the per-sample fit of the accelerometers alone) and what its guard found, in 'warn'
+    mode (:meth:`gfimu.smoother.guard.GuardResult.as_dict`, with the spans in a few words as ``message``);
+    ``note`` says why when the smoother cannot run on the log."""
+    from .errors import GfimuError
+    from .smoother.batch import BatchSmootherEstimator
+
+    estimator = BatchSmootherEstimator(**{**(options or {}), "use_gyro": False, "guard": "warn"})
+    reason = estimator.applicable(log.array)
+    if reason:
+        return {"mode": "warn", "spans": [], "note": f"smoother not run: {reason}"}
+    try:
+        result = estimator.estimate(log).report.guard
+    except GfimuError as e:
+        return {"mode": "warn", "spans": [], "note": f"smoother not run: {e}"}
+    out = result.as_dict()
+    out["message"] = result.summary() or ""
+    return out
 
 
 def diagnosis_figure(d: Diagnosis):

@@ -33,6 +33,8 @@ class Report:
     chosen from the data, per solve window, :class:`gfimu.smoother.tuning.Tuning`), ``calibration``
     (calibration variables estimated, per solve window), ``iterations`` and ``cost`` (solver
     iterations and final cost, summed over the windows), ``windows`` (solve windows; 0 for a stream),
+    ``guard`` (the smoothers' comparison with the per-sample estimate,
+    :class:`gfimu.smoother.guard.GuardResult`: the spans where the smoother fits the readings worse)
     and ``warnings``: plain-text notes on anything that went less well than planned."""
 
     method: str
@@ -45,6 +47,7 @@ class Report:
     iterations: int | None = None
     cost: float | None = None
     windows: int | None = None
+    guard: Any = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", _frozen_mapping(self.options))

@@ -43,6 +43,9 @@ def test_a_clean_log_reports_no_fault(clean):
     bounds = [b.crb_omega_radps for b in clean.bands if b.samples > 50]
     assert bounds == sorted(bounds, reverse=True) and len(bounds) >= 3
     assert clean.sign_window_share == 1.0
+    # the default smoother fits the readings as its model allows: no span
+    assert clean.guard["spans"] == [] and clean.guard["note"] == "" and clean.guard["usable_samples"] > 1000
+    assert "0 span(s) where the smoother fits the readings worse than its model allows" in clean.to_text()
 
 
 def test_readings_in_g_are_found_with_their_factor(base):

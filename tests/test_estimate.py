@@ -84,7 +84,8 @@ def test_pipeline_times_its_steps_around_the_methods(log_dir, tmp_path):
                             gio.read_log(log_dir).array.accelerometers), None)
     write_calibration(cal, tmp_path / "cal.toml")
     run = estimate_log(log_dir, "smoother", calibration=tmp_path / "cal.toml", orientation="gyro")
-    assert list(run.report.timings) == ["read", "screen", "calibrate", "model check", "solve windows", "orientation"]
+    assert list(run.report.timings) == ["read", "screen", "calibrate", "model check", "solve windows", "guard",
+                                        "orientation"]
     assert run.report.method == run.method == "smoother" and run.samples == 200
     assert run.report.model_check is not None and run.motion.quaternion_wb is not None
     est = make_estimator("inversion")

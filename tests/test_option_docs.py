@@ -1,4 +1,4 @@
-"""The smoothers' options listed in their four groups (model, batch, fixed-lag, tuning), every one
+"""The smoothers' options listed in their groups (model, batch, fixed-lag, tuning, guard), every one
 documented; the flat ``-O name=value`` keeps working."""
 
 import dataclasses

@@ -55,7 +55,7 @@ def test_estimate_returns_the_run_as_a_value():
     assert (report.iterations, report.cost, report.windows) == (res.iterations, res.cost, 1)
     assert report.iterations > 0 and np.isfinite(report.cost)
     assert report.model_check is not None and report.model_check == res.model_check
-    assert list(report.timings) == ["model check", "solve windows"] and all(t > 0 for t in report.timings.values())
+    assert list(report.timings) == ["model check", "solve windows", "guard"] and all(t > 0 for t in report.timings.values())
     assert est == make_estimator("smoother") and vars(est) == vars(make_estimator("smoother"))
     with pytest.raises(dataclasses.FrozenInstanceError):
         run.report = report

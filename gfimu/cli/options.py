@@ -256,7 +256,7 @@ COMMON_OPTION_DOCS = {
 
 def describe_options(method: str) -> str:
     """Every ``-O`` option of ``method``: name, unit, default and meaning, one block each; the smoothers'
-    options under their group (model, batch, fixed-lag, tuning: :mod:`gfimu.smoother.option_groups`).
+    options under their group (model, batch, fixed-lag, tuning, guard: :mod:`gfimu.smoother.option_groups`).
     A field's metadata (``unit``, ``help``) wins over what its name and docstring say."""
     from ..methods import estimator_class
     from ..smoother.option_groups import GROUP_OF, GROUPS

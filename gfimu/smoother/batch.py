@@ -182,7 +182,7 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
         motion = MLEstimator().estimate_motion(log)
         return SmootherResult(motion, (), (), 0, 0.0, 0, (f"{log.source}: {auto[0].describe()}; the per-sample "
-                                                          "estimate is returned",), auto[0], timings)
+                                                          "estimate is returned",), auto[0], timings, per_sample=motion)
     t0 = time.perf_counter()
     if attitude:  # each window starts from the attitude of the one before: in turn
         outcomes = _attitude_windows(log, opt, windows, initial, solver, progress)
@@ -210,7 +210,7 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         extra["accel_b_mps2"] = states[:, layout.specific_force] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
     motion = Motion(log.timestamps_ns, sigma=sigma, **layout.quantities(states), **extra)
     return SmootherResult(motion, tuple(tunings), tuple(calibration), iterations, cost, len(windows), tuple(notes),
-                          auto[0] if auto else None, timings)
+                          auto[0] if auto else None, timings, per_sample=auto[1] if auto else None)
 
 
 @dataclass

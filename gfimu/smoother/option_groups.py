@@ -1,5 +1,5 @@
-"""The smoothers' options in four groups: the model, the batch solver, the fixed-lag stream and
-the noise tuning (read by ``gfimu estimate --list-options``; every option keeps its flat name for
+"""The smoothers' options in five groups: the model, the batch solver, the fixed-lag stream,
+the noise tuning and the guard against the per-sample estimate (read by ``gfimu estimate --list-options``; every option keeps its flat name for
 ``-O name=value`` and the presets). :func:`nested` gives a flat options object as nested frozen
 dataclasses, one per group (``nested(options).model.motion_model``), and :func:`flatten` turns them
 back into the flat options."""
@@ -34,6 +34,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
         "auto_model", "tune_process_noise", "tune_span_s", "tune_axis_frequencies", "tune_motion_model",
         "tune_accel_noise", "retune_every_s", "model_window_s",
     ),
+    "guard": ("guard",),
 }
 """Group -> option names."""
 
@@ -41,7 +42,8 @@ GROUP_OF = {name: group for group, names in GROUPS.items() for name in names}
 """Option name -> its group."""
 
 
-ATTRIBUTE = {"model": "model", "batch": "batch", "fixed-lag": "fixed_lag", "tuning": "tuning", "other": "other"}
+ATTRIBUTE = {"model": "model", "batch": "batch", "fixed-lag": "fixed_lag", "tuning": "tuning", "guard": "guard",
+             "other": "other"}
 """Group -> attribute of :func:`nested`'s result (``other``: options in no group, e.g. an estimator's own)."""
 
 
@@ -61,7 +63,7 @@ def _classes(cls: type) -> tuple[type, dict[str, tuple[str, ...]]]:
 
 def nested(options):
     """``options`` (a flat options dataclass: :class:`gfimu.smoother.graph.SmootherOptions`, an estimator)
-    as nested frozen dataclasses: ``.model``, ``.batch``, ``.fixed_lag``, ``.tuning``, ``.other``, each
+    as nested frozen dataclasses: ``.model``, ``.batch``, ``.fixed_lag``, ``.tuning``, ``.guard``, ``.other``, each
     holding the options of that group the object has."""
     outer, members = _classes(type(options))
     parts = {f.name: f.type for f in dataclasses.fields(outer)}

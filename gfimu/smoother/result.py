@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
+from ..errors import InputError
 from ..estimate import Estimate, Report
 from ..motion import Motion
 
@@ -35,6 +37,9 @@ class SmootherResult:
     None when it did not run."""
     timings: Mapping[str, float] = field(default_factory=dict)
     """Seconds per step of the run (empty: not timed by step)."""
+    per_sample: Motion | None = None
+    """The per-sample ML estimate of the whole log when the run made one (the batch smoother's model
+    check of an inconsistent log); the guard (:mod:`gfimu.smoother.guard`) reuses it."""
 
     @property
     def sigma(self) -> dict:
@@ -49,14 +54,34 @@ class SmootherResult:
                          windows=self.windows)
 
 
+GUARD_HELP = ("compare the answer with the per-sample ML estimate where that is well determined: 'replace' "
+              "(default) uses the per-sample answer, its sign following the smoother's around it, over spans where "
+              "the smoother fits the readings worse than its model allows, and warns; 'warn' keeps the smoother's "
+              "answer and warns; 'off' skips the comparison")
+
+
+@dataclass(frozen=True)
 class SmootherEstimator:
     """What the batch and fixed-lag estimators share: their model options as plain
-    :class:`gfimu.smoother.graph.SmootherOptions`, and :meth:`estimate` returning the motion with
-    the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing of it).
+    :class:`gfimu.smoother.graph.SmootherOptions`, the ``guard`` option, and :meth:`estimate` returning
+    the motion with the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing of it).
     A subclass is a :class:`SmootherOptions` dataclass that defines ``method`` (its name in
     :data:`gfimu.methods.METHODS`) and ``result(log, progress)`` (the :class:`SmootherResult`)."""
 
     method = ""
+
+    guard: str = field(default="replace", metadata={"unit": "", "help": GUARD_HELP})
+    """'replace' (default), 'warn' or 'off': see :mod:`gfimu.smoother.guard`."""
+
+    def __post_init__(self) -> None:
+        from .guard import GUARD_MODES
+
+        if self.guard not in GUARD_MODES:
+            raise InputError(f"smoother option guard must be one of {', '.join(map(repr, GUARD_MODES))}, "
+                             f"got {self.guard!r}")
+        parent = super()
+        if hasattr(parent, "__post_init__"):
+            parent.__post_init__()
 
     def options(self):
         from .graph import SmootherOptions
@@ -65,7 +90,48 @@ class SmootherEstimator:
 
     def estimate(self, log, progress: bool = False) -> Estimate:
         """The smoother on ``log``: :class:`~gfimu.estimate.Estimate` ``(motion, report)``; the report
-        carries the noise chosen, the model check, the solver's iterations and cost, and its notes."""
+        carries the noise chosen, the model check, the solver's iterations and cost, its notes, and what
+        the guard found (:mod:`gfimu.smoother.guard`, unless ``guard='off'``)."""
         t0 = time.perf_counter()
         res = self.result(log, progress)
-        return Estimate(res.motion, res.report(self.method, self, time.perf_counter() - t0))
+        seconds = time.perf_counter() - t0
+        report = res.report(self.method, self, seconds)
+        if self.guard == "off":
+            return Estimate(res.motion, report)
+        t1 = time.perf_counter()
+        motion, outcome = guarded(log, res, self.guard, self.options())
+        note = outcome.message()
+        report = dataclasses.replace(report.with_timings(guard=time.perf_counter() - t1), guard=outcome,
+                                     warnings=report.warnings + ((note,) if note else ()))
+        return Estimate(motion, report)
+
+
+def guarded(log, res: SmootherResult, mode: str, options):
+    """(motion, :class:`gfimu.smoother.guard.GuardResult`) of the smoother's result ``res`` on ``log`` with
+    the guard in ``mode`` ('replace' or 'warn'). The guard does not judge a smoother that used more than
+    the accelerometers the per-sample fit sees (a gyroscope, an inclinometer, self-calibration): the result
+    says why."""
+    from ..estimators.ml import MLEstimator
+    from .auto import check_model
+    from .guard import GuardResult, check, replaced
+
+    why = None
+    if options.use_gyro and log.array.gyroscope is not None and getattr(log, "gyro_b_radps", None) is not None:
+        why = "the smoother uses the gyroscope, which the per-sample fit does not"
+    elif (options.estimate_attitude and options.use_inclinometer and log.array.inclinometer is not None
+          and getattr(log, "tilt_rad", None) is not None):
+        why = "the smoother uses the inclinometer, which the per-sample fit does not"
+    elif options.self_calibrate_bias or options.self_calibrate_scale:
+        why = "the smoother calibrates the readings, which the per-sample fit does not"
+    elif res.model_check is not None and getattr(res.model_check, "constant", False):
+        why = "the readings are constant"
+    elif len(log) < 2:
+        why = "fewer than 2 samples"
+    else:
+        why = MLEstimator().applicable(log.array)
+    if why:
+        return res.motion, GuardResult(mode, samples=len(log), note=f"not checked: {why}")
+    per_sample = res.per_sample if res.per_sample is not None else MLEstimator().estimate_motion(log)
+    model = res.model_check if res.model_check is not None and res.windows > 0 else check_model(log, per_sample)
+    outcome = check(log, res.motion, per_sample, model, mode)
+    return (replaced(res.motion, per_sample, outcome) if mode == "replace" else res.motion), outcome

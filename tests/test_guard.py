@@ -1,0 +1,214 @@
+"""The smoothers' guard (gfimu.smoother.guard): where the smoother fits the readings worse than its model
+allows against the per-sample ML estimate, the span is found, reported, and by default answered per sample.
+
+The log: a 5 cm cube (0.07 m/s²) turning smoothly at 2-4 rad/s, 3 s at 250 Hz, with a 12 Hz burst of
+4 rad/s over 1.40-1.60 s (samples 350-399). The default smoother (process noise by marginal likelihood)
+follows the burst; a smoother held to a fixed jerk density of 5 rad/s²/√s cannot, and misfits it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gfimu.array import cube_array
+from gfimu.estimators.ml import MLEstimator
+from gfimu.io.log_dir import write_log
+from gfimu.log import Log
+from gfimu.motion import Motion
+from gfimu.rigid_body import quadratic_terms
+from gfimu.smoother import guard
+from gfimu.smoother.batch import BatchSmootherEstimator
+from gfimu.smoother.fixed_lag import FixedLagEstimator
+
+RATE_HZ, BURST = 250.0, slice(350, 400)
+STIFF = dict(auto_model=False, tune_process_noise=False, omega_dot_random_walk_radps2_per_sqrt_s=5.0)
+"""A smoother too stiff for the burst."""
+
+
+def burst_log(seed: int = 0) -> Log:
+    arr = cube_array(0.025, noise_std_mps2=0.07)
+    t = np.arange(int(RATE_HZ * 3.0)) / RATE_HZ
+    rates = np.array([[3.0, 0.5, 0.3], [2.5, 0.4, np.pi / 2], [1.0, 0.3, 0.0]])  # amplitude, Hz, phase per axis
+    w = np.stack([a * np.sin(2 * np.pi * f * t + p) for a, f, p in rates], 1) + [0.0, 0.0, 2.0]
+    wd = np.stack([a * 2 * np.pi * f * np.cos(2 * np.pi * f * t + p) for a, f, p in rates], 1)
+    t0, width, freq, amp = 1.4, 0.2, 12.0, 4.0
+    inside = (t >= t0) & (t < t0 + width)
+    phase = np.pi * (t - t0) / width
+    env = np.where(inside, np.sin(phase) ** 2, 0.0)
+    denv = np.where(inside, 2 * np.sin(phase) * np.cos(phase) * np.pi / width, 0.0)
+    s, ds = np.sin(2 * np.pi * freq * (t - t0)), 2 * np.pi * freq * np.cos(2 * np.pi * freq * (t - t0))
+    d = np.array([1.0, -0.5, 0.3]) / np.linalg.norm([1.0, -0.5, 0.3])
+    w = w + amp * (env * s)[:, None] * d
+    wd = wd + amp * (denv * s + env * ds)[:, None] * d
+    f = np.tile([0.3, -0.2, 9.81], (t.size, 1))
+    S = arr.structure_matrix()
+    y = np.hstack([f, wd, quadratic_terms(w)]) @ S.T + np.random.default_rng(seed).normal(0.0, 0.07, (t.size, S.shape[0]))
+    ts = np.round(t * 1e9).astype(np.int64)
+    return Log(arr, ts, y, truth=Motion(ts, omega_b_radps=w, omega_dot_b_radps2=wd, specific_force_b_mps2=f),
+               source="burst")
+
+
+@pytest.fixture(scope="module")
+def case():
+    """The log, its per-sample ML estimate, and the default smoother's estimate with the guard off and on."""
+    log = burst_log()
+    off = BatchSmootherEstimator(guard="off").estimate(log)
+    on = BatchSmootherEstimator().estimate(log)
+    return log, MLEstimator().estimate_motion(log), off, on
+
+
+def _error(motion, log, sl=slice(None)):
+    return np.linalg.norm(motion.omega_b_radps[sl] - log.truth.omega_b_radps[sl], axis=1)
+
+
+def test_a_smoother_that_is_right_keeps_its_answer_bit_for_bit(case):
+    log, _, off, on = case
+    g = on.report.guard
+    assert g.spans == () and g.note == "" and g.mode == "replace"
+    assert g.usable > 0.8 * len(log)  # it judged most samples, and found nothing
+    for name in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2"):
+        assert np.array_equal(getattr(on.motion, name), getattr(off.motion, name))
+    assert on.report.warnings == off.report.warnings == ()
+    assert off.report.guard is None and "guard" in on.report.timings
+    assert np.sqrt(np.mean(_error(on.motion, log) ** 2)) < 0.06  # and it is right: 0.05 rad/s
+
+
+def test_a_corrupted_span_is_found_and_answered_per_sample(case):
+    log, ml, off, _ = case
+    good = off.motion
+    bad = (slice(150, 200), slice(620, 670))  # 0.60-0.796 s and 2.48-2.676 s
+    w = good.omega_b_radps.copy()
+    for sl in bad:
+        w[sl] += [1.0, 0.0, 0.0]  # q(ω) off by 2 ω_x + 1 (rad/s)², 0.1-0.3 m/s² at the sensors: 1.5-4 σ
+    corrupted = good.replace(omega_b_radps=w)
+    check = off.report.model_check
+    found = guard.check(log, corrupted, ml, check)
+    assert len(found.spans) == 2
+    fixed = guard.replaced(corrupted, ml, found)
+    outside = np.ones(len(log), bool)
+    for span, sl_bad in zip(found.spans, bad):
+        assert abs(span.start - sl_bad.start) <= 3 and abs(span.stop - (sl_bad.stop - 1)) <= 3, span
+        assert span.start_s == pytest.approx(span.start / RATE_HZ) and span.samples == span.stop - span.start + 1
+        assert span.excess > 30 and span.rms_ratio > 1.5
+        sl = slice(span.start, span.stop + 1)
+        outside[sl] = False
+        # the per-sample answer, with the sign the truth has (which the smoother had around the span)
+        np.testing.assert_array_equal(np.abs(fixed.omega_b_radps[sl]), np.abs(ml.omega_b_radps[sl]))
+        best_sign = np.minimum(_error(ml, log, sl),
+                               np.linalg.norm(-ml.omega_b_radps[sl] - log.truth.omega_b_radps[sl], axis=1))
+        np.testing.assert_allclose(_error(fixed, log, sl), best_sign, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(fixed.omega_dot_b_radps2[sl], ml.omega_dot_b_radps2[sl])
+    np.testing.assert_array_equal(fixed.omega_b_radps[outside], corrupted.omega_b_radps[outside])
+    assert "over 2 span(s)" in found.message() and "0.60-0.80 s, 2.48-2.68 s" in found.message()
+    # a sample of a span without a per-sample answer keeps the smoother's; the others are still replaced
+    k = found.spans[0].start + 10
+    holed = ml.replace(omega_b_radps=np.where(np.arange(len(log))[:, None] == k, np.nan, ml.omega_b_radps))
+    patched = guard.replaced(corrupted, holed, found)
+    np.testing.assert_array_equal(patched.omega_b_radps[k], corrupted.omega_b_radps[k])
+    np.testing.assert_array_equal(np.delete(patched.omega_b_radps, k, 0), np.delete(fixed.omega_b_radps, k, 0))
+    # the same span with ω flipped: the readings cannot tell ω from -ω, so neither can the guard
+    w = good.omega_b_radps.copy()
+    w[bad[1]] *= -1.0
+    assert guard.check(log, good.replace(omega_b_radps=w), ml, check).spans == ()
+
+
+@pytest.mark.parametrize("estimator", [BatchSmootherEstimator, FixedLagEstimator])
+def test_guard_modes_on_a_smoother_too_stiff_for_the_burst(case, estimator):
+    log, ml, _, _ = case
+    warn = estimator(guard="warn", **STIFF).estimate(log)
+    off = estimator(guard="off", **STIFF).estimate(log)
+    rep = estimator(**STIFF).estimate(log)
+    (span,) = warn.report.guard.spans
+    assert abs(span.start - BURST.start) <= 3 and abs(span.stop - (BURST.stop - 1)) <= 3, span
+    # warn: the smoother's answer, bit for bit, and one warning naming the span
+    np.testing.assert_array_equal(warn.motion.omega_b_radps, off.motion.omega_b_radps)
+    (note,) = warn.report.warnings
+    assert note.startswith("fits the readings worse than the per-sample estimate over 1 span(s), 0.20 s in all "
+                           f"({span.start_s:.2f}-{span.end_s:.2f} s)")
+    assert "the smoother's answer is kept" in note
+    # off: nothing checked, nothing said
+    assert off.report.guard is None and off.report.warnings == ()
+    # replace: the per-sample answer over the span, as accurate as the per-sample fit there and far better
+    # than the stiff smoother
+    sl = slice(span.start, span.stop + 1)
+    assert rep.report.guard.spans == warn.report.guard.spans
+    assert "the per-sample answer is used there" in rep.report.warnings[0]
+    np.testing.assert_array_equal(np.abs(rep.motion.omega_b_radps[sl]), np.abs(ml.omega_b_radps[sl]))
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    assert rms(_error(rep.motion, log, sl)) < 0.4 < 0.7 < rms(_error(off.motion, log, sl))
+    assert rms(_error(rep.motion, log, sl)) == pytest.approx(rms(np.minimum(
+        _error(ml, log, sl), np.linalg.norm(-ml.omega_b_radps[sl] - log.truth.omega_b_radps[sl], axis=1))), abs=1e-12)
+
+
+def test_bad_guard_value_is_named():
+    with pytest.raises(ValueError, match="guard must be one of 'replace', 'warn', 'off', got 'maybe'"):
+        BatchSmootherEstimator(guard="maybe")
+
+
+def test_cli_warning_names_the_span(tmp_path, capsys):
+    log_dir = tmp_path / "burst"
+    write_log(burst_log(), log_dir, rate_hz=RATE_HZ)
+    before = {p.name: p.read_bytes() for p in log_dir.iterdir()}
+    out = tmp_path / "est.csv"
+    cmd = [sys.executable, "-m", "gfimu", "estimate", str(log_dir), "--out", str(out), "--no-progress", "--method",
+           "smoother"] + [a for k, v in STIFF.items() for a in ("-O", f"{k}={v}")]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if "fits the readings worse" in ln]
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("gfimu estimate: warning: smoother: fits the readings worse than the per-sample "
+                               "estimate over 1 span(s), 0.20 s in all (1.40-1.60 s): the per-sample answer is used there")
+    assert "-O guard=warn keeps the smoother's" in lines[0]
+    assert out.is_file() and {p.name: p.read_bytes() for p in log_dir.iterdir()} == before
+    from gfimu.cli import main
+
+    assert main(cmd[3:] + ["-O", "guard=off", "--out", str(tmp_path / "off.csv")]) == 0  # in this process
+    assert "fits the readings worse" not in capsys.readouterr().err
+    assert main(cmd[3:-2 * len(STIFF)] + ["-O", "guard=sometimes"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "guard must be one of 'replace', 'warn', 'off', got 'sometimes'" in err
+
+
+def test_report_dict_of_a_span():
+    g = guard.GuardResult("warn", (guard.GuardSpan(10, 19, 0.04, 0.076, 50.0, 2.5),), usable=100, samples=200)
+    d = g.as_dict()
+    assert d["spans"] == [{"start_s": 0.04, "end_s": 0.076, "first_sample": 10, "last_sample": 19, "samples": 10,
+                           "excess_chi2_per_sample": 50.0, "rms_ratio": 2.5}]
+    assert d["seconds"] == pytest.approx(0.036) and d["usable_samples"] == 100
+
+
+def test_diagnose_lists_the_spans_of_the_smoother_it_is_given():
+    import json
+
+    from gfimu.diagnose import diagnose
+
+    d = diagnose(burst_log(), smoother_options=STIFF)
+    (span,) = d.guard["spans"]
+    assert abs(span["first_sample"] - BURST.start) <= 3 and abs(span["last_sample"] - (BURST.stop - 1)) <= 3
+    assert f"{span['start_s']:.2f}-{span['end_s']:.2f} s" == "1.40-1.60 s" and span["samples"] > 40
+    assert json.loads(json.dumps(d.as_dict()))["guard"]["spans"][0]["first_sample"] == span["first_sample"]
+    text = d.to_text()
+    assert "1 span(s) where the smoother fits the readings worse than its model allows, 0.20 s in all" in text
+    assert f"  1.40-1.60 s  samples {span['first_sample']}-{span['last_sample']} ({span['samples']})" in text
+    assert any(w.startswith("the smoother fits the readings worse than the per-sample estimate over 1 span(s)")
+               for w in d.warnings)
+    assert d.verdict.startswith("USE WITH CARE")
+
+
+def test_a_smoother_reading_the_gyroscope_is_not_judged():
+    from gfimu.array import Gyroscope
+    from gfimu.log import Log as LogClass
+
+    log = burst_log()
+    truth = log.truth.omega_b_radps
+    gyro = truth + np.random.default_rng(1).normal(0.0, 0.01, truth.shape)
+    arr = type(log.array)(log.array.accelerometers, log.array.name, Gyroscope(0.01))
+    with_gyro = LogClass(arr, log.timestamps_ns, log.accel_mps2, gyro_b_radps=gyro, truth=log.truth, source="gyro")
+    est = BatchSmootherEstimator(**STIFF).estimate(with_gyro)
+    assert est.report.guard.note == "not checked: the smoother uses the gyroscope, which the per-sample fit does not"
+    assert est.report.guard.spans == () and est.report.warnings == ()
+    est = BatchSmootherEstimator(**STIFF, use_gyro=False).estimate(with_gyro)  # the accelerometers alone: judged
+    assert est.report.guard.note == "" and len(est.report.guard.spans) == 1
