@@ -419,6 +419,11 @@ def read_calibration(path: str | Path) -> Calibration:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise CalibrationFileError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    from .io.errors import toml_nested_too_deep
+
+    too_deep = toml_nested_too_deep(text)
+    if too_deep:
+        raise CalibrationFileError(f"{path}: {too_deep}")
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -59,7 +59,27 @@ class ArgumentParser(argparse.ArgumentParser):
     """argparse with one-line errors: ``gfimu simulate: error: argument --rate-hz: ...`` (exit 2)."""
 
     def error(self, message: str):
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {shorten(message)} (see {self.prog} --help)\n")
+
+
+LONGEST_WORD = 1000
+"""A word (a run without spaces) of a message longer than this is cut (a value echoed at 129 kB; a path
+is shorter)."""
+
+
+def shorten(message: str) -> str:
+    """``message`` with each word longer than :data:`LONGEST_WORD` characters cut to its first 80 and
+    its length, ``aaaa…(129,000 characters)``: an error line quotes a value, never the whole of a huge one."""
+    import re
+
+    def cut(match):
+        word = match.group(0)
+        return f"{word[:80]}…({len(word):,} characters)"
+
+    message = re.sub(r"\S{%d,}" % (LONGEST_WORD + 1), cut, message)
+    if len(message) > 4 * LONGEST_WORD:
+        message = f"{message[:4 * LONGEST_WORD]}…({len(message):,} characters)"
+    return message
 
 
 def _version() -> str:
@@ -370,6 +390,7 @@ def _main(argv: list[str] | None) -> int:
         if args.debug:
             raise
         message, status = error_message(exc)
+        message = shorten(message)
         kind = "" if message.startswith("internal error: ") else "error: "
         print(f"gfimu {args.command}: {kind}{message}", file=sys.stderr)
         return status

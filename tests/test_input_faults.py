@@ -1,0 +1,180 @@
+"""Bad inputs seen from outside: the command, its exit status, one line naming the file, row, key or option,
+and the inputs byte for byte as they were."""
+
+from __future__ import annotations
+
+import hashlib
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from gfimu.cli import main
+from gfimu.io.tables import MAX_LINE_BYTES
+
+REPO = Path(__file__).resolve().parents[1]
+EUROC_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n")
+
+
+def _digest(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _gfimu(*args: str, cwd: Path, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "gfimu", *args], capture_output=True, text=True, timeout=timeout,
+                          cwd=cwd, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "1"})
+
+
+def _one_error_line(proc: subprocess.CompletedProcess, command: str) -> str:
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"gfimu {command}: error: "), proc.stderr
+    return lines[0]
+
+
+@pytest.fixture
+def log(tmp_path) -> Path:
+    d = tmp_path / "log"
+    assert main(["simulate", "random3d", "--out", str(d), "--rate-hz", "100", "--duration-s", "1", "--no-progress",
+                 "--quiet"]) == 0
+    return d
+
+
+def test_a_fifty_megabyte_line_of_a_converted_csv_is_refused_at_once(tmp_path):
+    data = tmp_path / "data.csv"
+    with open(data, "wb") as fh:
+        fh.write(EUROC_HEADER.encode())
+        fh.write(b"".join(b"%d,0.1,0.2,0.3,0,0,9.81\n" % (k * 5_000_000) for k in range(10)))
+        fh.write(b"\0" * (50 << 20))
+    before = _digest(tmp_path)
+    t0 = time.monotonic()
+    proc = _gfimu("convert", "csv", str(data), "--map", "euroc", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    elapsed = time.monotonic() - t0
+    assert proc.returncode == 2
+    line = _one_error_line(proc, "convert")
+    assert f"{data}:12: line is longer than {MAX_LINE_BYTES} bytes" in line
+    assert elapsed < 2.0 + 1.5  # start-up (imports) is most of it
+    assert _digest(tmp_path) == before and not (tmp_path / "out").exists()
+
+
+def test_a_long_line_with_its_line_end_is_named(tmp_path):
+    data = tmp_path / "data.csv"
+    data.write_bytes(EUROC_HEADER.encode() + b"0," + b"7" * (MAX_LINE_BYTES + 10) + b"\n5000000,1,2,3,4,5,6\n")
+    proc = _gfimu("convert", "csv", str(data), "--map", "euroc", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert proc.returncode == 2
+    assert f"{data}:2: line is longer than {MAX_LINE_BYTES} bytes ({MAX_LINE_BYTES + 12} bytes)" in \
+        _one_error_line(proc, "convert")
+
+
+def test_initial_omega_takes_three_numbers_in_any_form(log, tmp_path):
+    texts = []
+    for k, value in enumerate(["1,2,3", "[1,2,3]", "(1, 2, 3)", "-1,-2,-3"]):
+        out = tmp_path / f"e{k}.csv"
+        assert main(["estimate", str(log), "--method", "integration", "-O", f"initial_omega={value}", "--out",
+                     str(out), "--quiet"]) == 0
+        texts.append(out.read_text())
+    assert texts[0] == texts[1] == texts[2]
+    first = [float(v) for v in texts[0].splitlines()[1].split(",")[1:4]]
+    flipped = [float(v) for v in texts[3].splitlines()[1].split(",")[1:4]]
+    assert max(abs(v) for v in first) > 0.1
+    assert first == pytest.approx([-v for v in flipped], abs=1e-12)  # the start chooses the sign of ω
+
+
+@pytest.mark.parametrize("value, expected", [
+    ("[1,2]", "-O initial_omega=[1, 2]: expected three numbers as initial_omega=1,2,3 or initial_omega=[1,2,3], got 2"),
+    ("1", "-O initial_omega=1: expected text or three numbers as initial_omega=1,2,3"),
+    ("[1,'a',3]", "-O initial_omega=[1, 'a', 3]: expected text or three numbers"),
+])
+def test_initial_omega_of_another_shape_is_refused(log, tmp_path, capsys, value, expected):
+    assert main(["estimate", str(log), "--method", "integration", "-O", f"initial_omega={value}", "--out",
+                 str(tmp_path / "e.csv")]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and err.count("\n") == 1
+    assert not (tmp_path / "e.csv").exists()
+
+
+def test_process_axis_factors_take_three_numbers(log, tmp_path, capsys):
+    assert main(["estimate", str(log), "--method", "smoother", "-O", "process_axis_factors=1,2", "--out",
+                 str(tmp_path / "e.csv")]) == 2
+    assert ("-O process_axis_factors=(1, 2): expected three numbers as process_axis_factors=1,2,3 or "
+            "process_axis_factors=[1,2,3], got 2 (option of method 'smoother')") in capsys.readouterr().err
+
+
+def test_a_huge_option_value_is_quoted_in_part(log, tmp_path):
+    value = "a" * 129_000
+    for args, command in ((["estimate", str(log), "--method", "smoother", "-O", f"window_s={value}"], "estimate"),
+                          (["estimate", str(log), "--method", "integration", "-O", f"initial_omega={value}"],
+                           "estimate"),
+                          (["simulate", "random3d", "--rate-hz", value], "simulate")):
+        proc = _gfimu(*args, "--out", str(tmp_path / "o"), cwd=tmp_path)
+        assert proc.returncode == 2, proc.stderr
+        assert len(proc.stderr) < 600, len(proc.stderr)
+        assert "129,0" in proc.stderr and "characters)" in proc.stderr, proc.stderr
+        assert proc.stderr.startswith(f"gfimu {command}: error: ") or proc.stderr.startswith("gfimu: error: ")
+
+
+def test_compare_writes_no_estimate_into_the_log_folder(log, tmp_path):
+    before = _digest(log)
+    for folder in (str(log), str(log) + "/", str(log / ".")):
+        proc = _gfimu("compare", str(log), "--methods", "inversion", "--estimates-dir", folder, cwd=tmp_path)
+        assert proc.returncode == 2
+        assert f"--estimates-dir {log}: is the input log folder" in _one_error_line(proc, "compare")
+    assert _digest(log) == before
+
+
+@pytest.mark.parametrize("edit, key", [
+    (('position_m = [', 'position_m = [1e300, '), "accelerometers[0].position_m: [1e+300"),
+    (('axes = [', 'rotation_body_sensor = [[1e308, 0, 0], [0, 1e308, 0], [0, 0, 1e308]]\naxes = ['),
+     "accelerometers[0].rotation_body_sensor: [[1e+308, 0.0, 0.0]"),
+])
+def test_array_values_no_rotation_or_position_can_be(log, tmp_path, edit, key):
+    text = (log / "array.toml").read_text()
+    old, new = edit
+    head, _, tail = text.partition(old)
+    if old == 'position_m = [':
+        tail = tail.split(",", 1)[1]  # drop the first coordinate, replaced
+    (log / "array.toml").write_text(head + new + tail)
+    before = _digest(log)
+    proc = _gfimu("estimate", str(log), "--method", "inversion", "--out", str(tmp_path / "e.csv"), cwd=tmp_path)
+    assert proc.returncode == 2
+    line = _one_error_line(proc, "estimate")
+    assert f"{log / 'array.toml'}:" in line and key in line
+    assert _digest(log) == before
+
+
+def test_deeply_nested_toml_inputs_are_refused_naming_them(log, tmp_path):
+    deep = "x = " + "[" * 5000 + "]" * 5000 + "\n"
+    calibration = tmp_path / "cal.toml"
+    calibration.write_text(deep)
+    cmap = tmp_path / "map.toml"
+    cmap.write_text('format = "gfimu-csv-map/1"\n' + "y = " + "{a=" * 3000 + "1" + "}" * 3000 + "\n")
+    (tmp_path / "data.csv").write_text(EUROC_HEADER + "0,1,2,3,4,5,6\n")
+    array = log / "array.toml"
+    array.write_text(deep + array.read_text())
+    cases = [(["estimate", str(log), "--method", "inversion", "--out", str(tmp_path / "e.csv")], str(array)),
+             (["convert", "csv", str(tmp_path / "data.csv"), "--map", str(cmap), "--out", str(tmp_path / "o")],
+              str(cmap))]
+    log2 = tmp_path / "log2"
+    assert main(["simulate", "random3d", "--out", str(log2), "--rate-hz", "100", "--duration-s", "1", "--quiet"]) == 0
+    cases.append((["estimate", str(log2), "--calibration", str(calibration), "--method", "inversion", "--out",
+                   str(tmp_path / "e.csv")], str(calibration)))
+    for args, named in cases:
+        proc = _gfimu(*args, cwd=tmp_path)
+        assert proc.returncode == 2, proc.stderr
+        line = _one_error_line(proc, args[0])
+        assert f"{named}: nested deeper than 64 levels" in line
+
+
+def test_a_delimiter_of_the_wrong_type_is_named(tmp_path):
+    (tmp_path / "data.csv").write_text(EUROC_HEADER + "0,1,2,3,4,5,6\n")
+    cmap = tmp_path / "map.toml"
+    cmap.write_text('format = "gfimu-csv-map/1"\n[csv]\ndelimiter = [1, 2]\n[time]\ncolumn = 0\nunit = "ns"\n'
+                    '[[accelerometers]]\nname = "a"\nx = 4\ny = 5\nz = 6\nunit = "m/s^2"\n')
+    proc = _gfimu("convert", "csv", str(tmp_path / "data.csv"), "--map", str(cmap), "--out", str(tmp_path / "o"),
+                  cwd=tmp_path)
+    assert proc.returncode == 2
+    assert f"{cmap}:3: csv.delimiter: expected" in _one_error_line(proc, "convert")
