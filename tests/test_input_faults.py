@@ -178,3 +178,64 @@ def test_a_delimiter_of_the_wrong_type_is_named(tmp_path):
                   cwd=tmp_path)
     assert proc.returncode == 2
     assert f"{cmap}:3: csv.delimiter: expected" in _one_error_line(proc, "convert")
+
+
+def test_a_log_with_forty_percent_timing_jitter_is_one_segment(log, tmp_path):
+    """Android-like timing: steps of 10 ms ± 40 % (uniform) stay under the log's gap rule (1.5 × the median
+    step), so the estimators run over the whole log without a restart and without a gap warning."""
+    import numpy as np
+
+    from gfimu import io as gio
+
+    lines = (log / "imu.csv").read_text().splitlines()
+    rng = np.random.default_rng(7)
+    steps = np.round(10_000_000 * (1 + rng.uniform(-0.4, 0.4, len(lines) - 2))).astype(np.int64)
+    t = np.concatenate([[0], np.cumsum(steps)])
+    (log / "imu.csv").write_text("\n".join([lines[0]] + [f"{t[k]}," + ln.split(",", 1)[1]
+                                                         for k, ln in enumerate(lines[1:])]) + "\n")
+    (log / "truth.csv").unlink()
+    assert len(gio.read_log(log).segments()) == 1
+    proc = _gfimu("estimate", str(log), "--method", "integration", "--out", str(tmp_path / "e.csv"), cwd=tmp_path)
+    assert proc.returncode == 0 and "gap" not in proc.stderr, proc.stderr
+    # one step of 2.5 periods is a gap: said, with its line
+    t2 = t.copy()
+    t2[50:] += 15_000_000
+    (log / "imu.csv").write_text("\n".join([lines[0]] + [f"{t2[k]}," + ln.split(",", 1)[1]
+                                                         for k, ln in enumerate(lines[1:])]) + "\n")
+    proc = _gfimu("estimate", str(log), "--method", "integration", "--out", str(tmp_path / "e.csv"), cwd=tmp_path)
+    assert proc.returncode == 0
+    assert f"{log / 'imu.csv'}: 1 gap(s) in time" in proc.stderr and "before line 52" in proc.stderr
+
+
+def test_a_reading_of_1e308_gives_a_finite_estimate_and_a_warning_naming_it(log, tmp_path):
+    import numpy as np
+
+    lines = (log / "imu.csv").read_text().splitlines()
+    fields = lines[11].split(",")
+    fields[3] = "1e308"
+    lines[11] = ",".join(fields)
+    (log / "imu.csv").write_text("\n".join(lines) + "\n")
+    for method in ("inversion", "smoother"):
+        out = tmp_path / f"{method}.csv"
+        proc = _gfimu("estimate", str(log), "--method", method, "--out", str(out), cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+        assert "1 accelerometer reading(s) replaced by the median of their neighbours (1 out of range): row 10 a1_z" \
+            in proc.stderr
+        assert "overflow" not in proc.stderr and "internal error" not in proc.stderr
+        values = np.loadtxt(out, delimiter=",", skiprows=1)
+        assert values.shape[0] == 100 and np.all(np.isfinite(values))
+
+
+def test_a_column_of_nan_is_refused_naming_the_file_and_column(log, tmp_path):
+    lines = (log / "imu.csv").read_text().splitlines()
+    rows = [ln.split(",") for ln in lines[1:]]
+    for r in rows:
+        r[5] = "nan"
+    (log / "imu.csv").write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+    for args in (["estimate", str(log), "--method", "ml", "--out", str(tmp_path / "e.csv")],
+                 ["calibrate", str(log), "--out", str(tmp_path / "c.toml")]):
+        proc = _gfimu(*args, cwd=tmp_path)
+        assert proc.returncode == 2
+        errors = [ln for ln in proc.stderr.splitlines() if ": error: " in ln]
+        assert errors == [f"gfimu {args[0]}: error: {log}/imu.csv: column 'a2_y': 100 of 100 readings are not "
+                          "finite, the first at row 0, with no finite reading near them to replace them"], proc.stderr

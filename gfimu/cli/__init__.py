@@ -9,7 +9,7 @@ request or a failure of the machine (a malformed or missing file, a log the
 method cannot solve, a full disk) ends in one line ``gfimu COMMAND: error: ...``
 naming the file, key, row or option, and a non-zero exit status: 2 for a
 :class:`~gfimu.errors.GfimuError` of the input or data kind and for a path given that is not
-there, 1 for a resource
+there (or is too long to be one), 1 for a resource
 (an ``OSError``: permission, no space, interrupted I/O), 130/143 when
 interrupted by SIGINT/SIGTERM (temporary files are removed first). Any other
 exception is a bug, not a mistake of the user: ``gfimu COMMAND: internal error:
@@ -265,8 +265,9 @@ def error_message(exc: BaseException) -> tuple[str, int]:
         if _under_determined(exc):
             return UNDER_DETERMINED.format(_first_line(exc)), exc.exit_status
         return str(exc) or type(exc).__name__, exc.exit_status
-    if isinstance(exc, (FileNotFoundError, NotADirectoryError)) or (isinstance(exc, OSError) and exc.errno == errno.ELOOP):
-        return os_error_message(exc), EXIT_USAGE  # a path given on the command line that is not there
+    if isinstance(exc, (FileNotFoundError, NotADirectoryError)) or (
+            isinstance(exc, OSError) and exc.errno in (errno.ELOOP, errno.ENAMETOOLONG)):
+        return os_error_message(exc), EXIT_USAGE  # a path given on the command line that is not there (or cannot be)
     if isinstance(exc, OSError):
         return os_error_message(exc), EXIT_FAILURE
     if isinstance(exc, MemoryError):
