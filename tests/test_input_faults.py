@@ -239,3 +239,19 @@ def test_a_column_of_nan_is_refused_naming_the_file_and_column(log, tmp_path):
         errors = [ln for ln in proc.stderr.splitlines() if ": error: " in ln]
         assert errors == [f"gfimu {args[0]}: error: {log}/imu.csv: column 'a2_y': 100 of 100 readings are not "
                           "finite, the first at row 0, with no finite reading near them to replace them"], proc.stderr
+
+
+@pytest.mark.parametrize("text, expected", [
+    ('accelerometers = [5, 6]\n', ": accelerometers[0]: expected an [[accelerometers]] table, got 5"),
+    ('gyroscope = 5\n[[accelerometers]]\nname = "a1"\naxes = 5\nbias_mps2 = [0, 0, 0]\ngain = [[1, 0, 0], [0, 1, 0], '
+     '[0, 0, 1]]\n', ':5: accelerometers[0].axes: axes must be a list among "x", "y", "z"; got 5'),
+    ('gyroscope = 5\n[[accelerometers]]\nname = "a1"\nbias_mps2 = [0, 0, 0]\ngain = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n',
+     ":2: gyroscope: expected a table [gyroscope], got 5"),
+])
+def test_a_calibration_key_of_the_wrong_type_is_named(log, tmp_path, text, expected):
+    calibration = tmp_path / "cal.toml"
+    calibration.write_text('format = "gfimu-calibration/1"\n' + text)
+    proc = _gfimu("estimate", str(log), "--calibration", str(calibration), "--method", "inversion", "--out",
+                  str(tmp_path / "e.csv"), cwd=tmp_path)
+    assert proc.returncode == 2
+    assert f"{calibration}{expected}" in _one_error_line(proc, "estimate")

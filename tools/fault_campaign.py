@@ -242,6 +242,10 @@ def cases() -> list[Case]:
         ("calibration-gravity-negative", lambda t: t + "\n" if "gravity_mps2" not in t else
          t.replace("gravity_mps2 = ", "gravity_mps2 = -", 1)),
         ("calibration-int-sensors", lambda t: 'format = "gfimu-calibration/1"\naccelerometers = 5\n'),
+        ("calibration-list-of-ints", lambda t: 'format = "gfimu-calibration/1"\naccelerometers = [5, 6]\n'),
+        ("calibration-int-axes", lambda t: t.replace('axes = ["x", "y", "z"]', "axes = 5", 1)),
+        ("calibration-nested-axes", lambda t: t.replace('axes = ["x", "y", "z"]', 'axes = [["x"]]', 1)),
+        ("calibration-int-gyroscope", lambda t: t.replace("gravity_mps2", "gyroscope = 5\ngravity_mps2", 1)),
     ]:
         add(name, cal_est, (lambda f: lambda w: _edit(w / "calibration.toml", f))(fn), inputs=cal_in)
     # column maps and convert csv
