@@ -343,8 +343,34 @@ def refuse_unreplaceable(log, accel: np.ndarray | None = None) -> None:
                     "them to replace them")
 
 
+GYRO_OUT_OF_RANGE_RADPS = 1e4
+"""A gyroscope reading beyond ±1e4 rad/s (about 95,000 rpm) is read by no gyroscope: the screening reads it as
+NaN, with a warning (1e308 made the gyro-aided estimate infinite)."""
+
+
+def _screen_gyro(log):
+    """``log`` with gyroscope readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` read as NaN (a warning names the
+    first's line and column)."""
+    if log.gyro_b_radps is None:
+        return log
+    with np.errstate(invalid="ignore"):
+        huge = np.abs(log.gyro_b_radps) > GYRO_OUT_OF_RANGE_RADPS
+    if not huge.any():
+        return log
+    import warnings
+
+    row, col = (int(v) for v in np.argwhere(huge)[0])
+    where = f"{log.source}/imu.csv:{row + 2}" if log.source else f"sample {row}"
+    warnings.warn(f"{where}: {int(huge.sum())} gyroscope reading(s) beyond ±{GYRO_OUT_OF_RANGE_RADPS:g} rad/s (first in "
+                  f"column {('w_x', 'w_y', 'w_z')[col]!r}, {log.gyro_b_radps[row, col]:g}): no gyroscope reads that; "
+                  "read as NaN", stacklevel=3)
+    return log.replace(gyro_b_radps=np.where(huge, np.nan, log.gyro_b_radps))
+
+
 def screen_log(log):
-    """(log with gross errors replaced, :class:`Screening`); the log itself when none is found."""
+    """(log with gross errors replaced, :class:`Screening`); the log itself when none is found. Gyroscope
+    readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` are read as NaN (with a warning)."""
+    log = _screen_gyro(log)
     accel, result = screen(log.accel_mps2, log.array.range_per_axis_mps2, log.array.axis_owner,
                            log.rate_hz if len(log) > 1 else None, log.array.structure_matrix())
     refuse_unreplaceable(log, accel)

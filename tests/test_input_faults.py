@@ -255,3 +255,32 @@ def test_a_calibration_key_of_the_wrong_type_is_named(log, tmp_path, text, expec
                   str(tmp_path / "e.csv"), cwd=tmp_path)
     assert proc.returncode == 2
     assert f"{calibration}{expected}" in _one_error_line(proc, "estimate")
+
+
+def test_a_gyroscope_reading_of_1e308_is_read_as_nan_and_named(tmp_path):
+    import numpy as np
+
+    array = tmp_path / "array.toml"
+    log = tmp_path / "glog"
+    assert main(["simulate", "random3d", "--out", str(tmp_path / "plain"), "--rate-hz", "100", "--duration-s", "1",
+                 "--quiet"]) == 0
+    array.write_text((tmp_path / "plain" / "array.toml").read_text() + "\n[gyroscope]\nnoise_std_radps = 0.01\n")
+    assert main(["simulate", "random3d", "--array", str(array), "--out", str(log), "--rate-hz", "100",
+                 "--duration-s", "1", "--quiet"]) == 0
+    lines = (log / "imu.csv").read_text().splitlines()
+    column = lines[0].split(",").index("w_y [rad s^-1]")
+    fields = lines[31].split(",")
+    fields[column] = "1e308"
+    lines[31] = ",".join(fields)
+    (log / "imu.csv").write_text("\n".join(lines) + "\n")
+    warning = (f"gfimu estimate: warning: {log / 'imu.csv'}:32: 1 gyroscope reading(s) beyond ±10000 rad/s (first in "
+               "column 'w_y', 1e+308): no gyroscope reads that; read as NaN")
+    proc = _gfimu("estimate", str(log), "--method", "gyro-aided", "--out", str(tmp_path / "g.csv"), cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == [warning, (
+        f"gfimu estimate: error: {log}/imu.csv:32: gyroscope column 'w_y' is not finite (1 reading(s) NaN, infinite "
+        "or beyond ±1e4 rad/s); method 'gyro-aided' needs every gyroscope reading")]
+    out = tmp_path / "e.csv"
+    proc = _gfimu("estimate", str(log), "--method", "inversion", "--out", str(out), cwd=tmp_path)
+    assert proc.returncode == 0 and warning in proc.stderr and "overflow" not in proc.stderr, proc.stderr
+    assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
