@@ -284,3 +284,21 @@ def test_a_gyroscope_reading_of_1e308_is_read_as_nan_and_named(tmp_path):
     proc = _gfimu("estimate", str(log), "--method", "inversion", "--out", str(out), cwd=tmp_path)
     assert proc.returncode == 0 and warning in proc.stderr and "overflow" not in proc.stderr, proc.stderr
     assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
+
+
+def test_live_skips_a_row_beyond_any_accelerometer_range(log, tmp_path):
+    import numpy as np
+
+    lines = (log / "imu.csv").read_text().splitlines()
+    fields = lines[50].split(",")
+    fields[2] = "1e308"
+    lines[50] = ",".join(fields)
+    out = tmp_path / "live.csv"
+    proc = subprocess.run([sys.executable, "-m", "gfimu", "live", "--array", str(log / "array.toml"), "--source", "-",
+                           "--out", str(out)], input="\n".join(lines) + "\n", capture_output=True, text=True,
+                          timeout=120, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "1"})
+    assert proc.returncode == 0, proc.stderr
+    assert ("line 51 skipped: field 3 '1e308' is beyond any accelerometer's range (±1e+07 m/s²)" in proc.stderr)
+    assert "99 samples in, 99 estimates out; 1 bad rows" in proc.stderr
+    assert "overflow" not in proc.stderr and "Eigenvalues" not in proc.stderr
+    assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))

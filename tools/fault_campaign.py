@@ -393,6 +393,8 @@ def cases() -> list[Case]:
     add("live-empty", live, stdin=b"")
     add("live-nul", live, stdin=b"\0" * (5 << 20))
     add("live-bad-header", live, stdin=b"a,b,c\n1,2,3\n")
+    add("live-huge-values", live, None)
+    out[-1].setup = _live_huge_stdin
     add("live-nan-rows", live, None, stdin=None)
     out[-1].setup = _live_nan_stdin
     add("live-unsorted", live, None)
@@ -403,6 +405,13 @@ def cases() -> list[Case]:
 def _live_nan_stdin(w: Path) -> None:
     lines = (w / "log" / "imu.csv").read_text().splitlines()
     rows = [lines[0]] + [ln.split(",")[0] + ",nan" * (len(ln.split(",")) - 1) for ln in lines[1:50]] + lines[50:]
+    (w / "stdin").write_text("\n".join(rows) + "\n")
+
+
+def _live_huge_stdin(w: Path) -> None:
+    lines = (w / "log" / "imu.csv").read_text().splitlines()
+    rows = [lines[0]] + [",".join([ln.split(",")[0]] + ["1e308"] + ln.split(",")[2:]) if 40 <= k < 45 else ln
+                         for k, ln in enumerate(lines[1:])]
     (w / "stdin").write_text("\n".join(rows) + "\n")
 
 
