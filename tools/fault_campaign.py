@@ -298,6 +298,9 @@ def cases() -> list[Case]:
         _write("x.mcap", b"\x89MCAP0\r\n" + bytes(3000)), inputs=LOG_FILES + ["x.mcap"])
     add("bag-wrong-types", ["convert", "rosbag", "{w}/bag3", *bag_array, "--out", "{w}/out/log"],
         _make_wrong_type_bag, inputs=LOG_FILES)
+    for fault in ("nan", "huge", "back", "zero"):
+        add(f"bag-imu-{fault}", ["convert", "rosbag", "{w}/bag", "--array", "{w}/bagarray.toml", "--out",
+                                 "{w}/out/log"], _imu_bag(fault), inputs=LOG_FILES, expect={0})
     # bad options
     for name, args, expect in [
         ("opt-unknown-method", ["estimate", "{w}/log", "--method", "nope", *EST], {2}),
@@ -406,6 +409,51 @@ def _live_nan_stdin(w: Path) -> None:
     lines = (w / "log" / "imu.csv").read_text().splitlines()
     rows = [lines[0]] + [ln.split(",")[0] + ",nan" * (len(ln.split(",")) - 1) for ln in lines[1:50]] + lines[50:]
     (w / "stdin").write_text("\n".join(rows) + "\n")
+
+
+def _imu_bag(fault: str):
+    """A ROS 2 bag of four sensor_msgs/msg/Imu topics /imu0../imu3 (the log's accelerometers a1..a4 take them
+    through a copy of its array.toml with topics), with one fault: 'nan' or 'huge' a reading of /imu1, 'back'
+    a stamp of /imu2 going back 50 ms, 'zero' every header stamp 0."""
+
+    def setup(w: Path) -> None:
+        import math
+
+        import numpy as np
+        try:
+            from rosbags.rosbag2 import Writer
+            from rosbags.typesys import Stores, get_typestore
+        except ImportError:
+            (w / "bag").mkdir()
+            return
+        text = (w / "log" / "array.toml").read_text()
+        for i in range(4):
+            text = text.replace(f'name = "a{i + 1}"', f'name = "a{i + 1}"\ntopic = "/imu{i}"')
+        (w / "bagarray.toml").write_text(text)
+        store = get_typestore(Stores.ROS2_HUMBLE)
+        t_ = store.types
+        with Writer(w / "bag", version=8) as writer:
+            conns = [writer.add_connection(f"/imu{i}", "sensor_msgs/msg/Imu", typestore=store) for i in range(4)]
+            for k in range(200):
+                t = 1_000_000_000 + k * 10_000_000
+                for i, conn in enumerate(conns):
+                    ax, stamp = 0.1 * math.sin(k / 10 + i), t
+                    if k == 50 and i == 1 and fault in ("nan", "huge"):
+                        ax = float("nan") if fault == "nan" else 1e308
+                    if fault == "back" and k == 51 and i == 2:
+                        stamp = t - 50_000_000
+                    if fault == "zero":
+                        stamp = 0
+                    header = t_["std_msgs/msg/Header"](stamp=t_["builtin_interfaces/msg/Time"](
+                        sec=int(stamp // 10**9), nanosec=int(stamp % 10**9)), frame_id="x")
+                    vec = t_["geometry_msgs/msg/Vector3"]
+                    msg = t_["sensor_msgs/msg/Imu"](
+                        header=header, orientation=t_["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                        orientation_covariance=np.zeros(9), angular_velocity=vec(x=0.0, y=0.0, z=0.0),
+                        angular_velocity_covariance=np.zeros(9), linear_acceleration=vec(x=ax, y=0.0, z=9.81),
+                        linear_acceleration_covariance=np.zeros(9))
+                    writer.write(conn, t, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+    return setup
 
 
 def _live_huge_stdin(w: Path) -> None:
