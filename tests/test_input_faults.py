@@ -302,3 +302,16 @@ def test_live_skips_a_row_beyond_any_accelerometer_range(log, tmp_path):
     assert "99 samples in, 99 estimates out; 1 bad rows" in proc.stderr
     assert "overflow" not in proc.stderr and "Eigenvalues" not in proc.stderr
     assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
+
+
+@pytest.mark.parametrize("method, option, expected", [
+    ("ml", "grid_directions=0", "ml option grid_directions must be a whole number >= 1 (the size of the starting "
+                                "grid), got 0"),
+    ("ml", "grid_magnitudes=-1", "ml option grid_magnitudes must be a whole number >= 1"),
+    ("ml", "max_omega_radps=0", "ml option max_omega_radps must be a number > 0 [rad/s]"),
+    ("fixed-lag", "tune_window_s=0", "fixed-lag smoother: tune_window_s must be a positive number, got 0"),
+])
+def test_an_option_out_of_its_range_is_an_input_error(log, tmp_path, capsys, method, option, expected):
+    assert main(["estimate", str(log), "--method", method, "-O", option, "--out", str(tmp_path / "e.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gfimu estimate: error: ") and expected in err and "internal error" not in err
