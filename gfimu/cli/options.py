@@ -196,6 +196,11 @@ def _check_sequence(method: str, key: str, value, shape, flag: str, prefix: str)
                       f"{method!r})")
 
 
+OPTION_MAGNITUDE = (1e-100, 1e100)
+"""The magnitudes a number given to a method option may have (besides 0): no option means anything
+beyond (1e308 overflowed a window's sample count, 1e-320 a noise's inverse)."""
+
+
 def check_method_options(method: str, options: dict, flag: str = "-O", prefix: str = "") -> dict:
     """Check the type of each option of ``method`` against its documented default; returns the options.
 
@@ -235,6 +240,10 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
         if ok and kind == "float" and not math.isfinite(float(value)):
             raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected a finite number (option of method "
                               f"{method!r})")
+        if ok and kind == "float" and value != 0 and not OPTION_MAGNITUDE[0] <= abs(float(value)) <= OPTION_MAGNITUDE[1]:
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected 0 or a number of magnitude "
+                              f"{OPTION_MAGNITUDE[0]:g} to {OPTION_MAGNITUDE[1]:g} (option of method {method!r}, "
+                              f"default {default!r})")
         if not ok:
             expected = {"bool": "True or False", "int": "an integer", "float": "a number", "str": "text"}[kind]
             raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected {expected} (option of method "
