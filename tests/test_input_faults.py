@@ -127,7 +127,9 @@ def test_compare_writes_no_estimate_into_the_log_folder(log, tmp_path):
 
 
 @pytest.mark.parametrize("edit, key", [
-    (('position_m = [', 'position_m = [1e300, '), "accelerometers[0].position_m: [1e+300"),
+    (('position_m = [', 'position_m = [1e300, '), "accelerometers[0].position_m: [1e+300, 0.05, 0.05] puts the "
+                                                 "accelerometer 1e+300 m from the body origin; an accelerometer of "
+                                                 "one rigid body lies within 100 m"),
     (('axes = [', 'rotation_body_sensor = [[1e308, 0, 0], [0, 1e308, 0], [0, 0, 1e308]]\naxes = ['),
      "accelerometers[0].rotation_body_sensor: [[1e+308, 0.0, 0.0]"),
 ])

@@ -80,9 +80,10 @@ def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-MAX_POSITION_M = 1e3
-"""The farthest an accelerometer may sit from the body origin [m] (larger: no rigid array; a value overflows
-the structure matrix)."""
+MAX_POSITION_M = 100.0
+"""The farthest an accelerometer may sit from the body origin [m], as for a Kalibr IMU
+(:data:`gfimu.io.kalibr.MAX_TRANSLATION_M`): larger is no rigid array (and 1e300 overflows the structure
+matrix)."""
 
 
 def _vector(ctx: _TomlContext, value, n: int, table: str, index: int, key: str) -> np.ndarray:
@@ -196,9 +197,11 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
                             t, i)
         else:
             position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
-            if np.max(np.abs(position)) > MAX_POSITION_M:
-                raise ctx.error(f"{position.tolist()} is over {MAX_POSITION_M:g} m from the body origin: no place on a "
-                                "rigid array (position_m is in metres)", t, i, "position_m")
+            far = float(np.max(np.abs(position)))
+            if far > MAX_POSITION_M / np.sqrt(3.0) and far * np.linalg.norm(position / far) > MAX_POSITION_M:
+                raise ctx.error(f"{position.tolist()} puts the accelerometer {far * np.linalg.norm(position / far):.3g} m "
+                                f"from the body origin; an accelerometer of one rigid body lies within "
+                                f"{MAX_POSITION_M:g} m (position_m is in metres)", t, i, "position_m")
         rot = _rotation(ctx, a["rotation_body_sensor"], i, acc_name) if "rotation_body_sensor" in a else np.eye(3)
         axes = a.get("axes", ["x", "y", "z"])
         if (not isinstance(axes, list) or not axes or not all(isinstance(x, str) for x in axes)
