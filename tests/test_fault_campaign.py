@@ -18,7 +18,8 @@ SUBSET = (
     "calibration-int-sensors", "map-int-delimiter", "map-deep", "csv-nul-50MB", "kalibr-deep", "mimu-garbage",
     "bag-text", "opt-initial-omega", "opt-initial-omega-short", "opt-huge-value", "out-symlink-to-input",
     "out-batch-onto-log", "compare-estimates-into-log", "out-missing-folder", "out-is-folder", "live-binary",
-    "smoother-huge-value", "calibrate-nan-column", "ok-estimate",
+    "smoother-huge-value", "calibrate-nan-column", "ok-estimate", "live-huge-values", "opt-ml-grid-zero",
+    "opt-smoother-noise-1e-320", "calibration-list-of-ints", "bag-imu-nan",
 )
 
 
