@@ -314,6 +314,9 @@ def test_live_skips_a_row_beyond_any_accelerometer_range(log, tmp_path):
     ("fixed-lag", "tune_window_s=0", "fixed-lag smoother: tune_window_s must be a positive number, got 0"),
     ("smoother", "window_s=1e308", "-O window_s=1e+308: expected 0 or a number of magnitude 1e-100 to 1e+100 (option "
                                    "of method 'smoother', default 30.0)"),
+    ("smoother", "specific_force_random_walk_mps2_per_sqrt_s=1e-40",
+     "-O specific_force_random_walk_mps2_per_sqrt_s=1e-40: a noise density below 1e-09 [m/s²/√s] leaves the normal "
+     "equations singular"),
     ("fixed-lag", "initial_omega_std_radps=1e-320", "-O initial_omega_std_radps=1e-320: expected 0 or a number of "
                                                     "magnitude 1e-100 to 1e+100"),
 ])

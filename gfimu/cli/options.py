@@ -201,6 +201,11 @@ OPTION_MAGNITUDE = (1e-100, 1e100)
 beyond (1e308 overflowed a window's sample count, 1e-320 a noise's inverse)."""
 
 
+MIN_DENSITY = 1e-9
+"""The smallest noise density (an option whose name ends in ``_per_sqrt_s``) a method is given: the floor of
+the smoother's own tuned densities (1e-40 made its normal equations singular)."""
+
+
 def check_method_options(method: str, options: dict, flag: str = "-O", prefix: str = "") -> dict:
     """Check the type of each option of ``method`` against its documented default; returns the options.
 
@@ -240,6 +245,11 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
         if ok and kind == "float" and not math.isfinite(float(value)):
             raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected a finite number (option of method "
                               f"{method!r})")
+        if ok and kind == "float" and key.endswith("_per_sqrt_s") and 0 < abs(float(value)) < MIN_DENSITY:
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: a noise density below {MIN_DENSITY:g} "
+                              f"[{unit_of(key)}] leaves the normal equations singular (option of method {method!r}, "
+                              f"default {default!r}; the smoother's tuned densities are floored at {MIN_DENSITY:g} "
+                              "too)")
         if ok and kind == "float" and value != 0 and not OPTION_MAGNITUDE[0] <= abs(float(value)) <= OPTION_MAGNITUDE[1]:
             raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected 0 or a number of magnitude "
                               f"{OPTION_MAGNITUDE[0]:g} to {OPTION_MAGNITUDE[1]:g} (option of method {method!r}, "
