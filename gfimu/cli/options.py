@@ -196,9 +196,9 @@ def _check_sequence(method: str, key: str, value, shape, flag: str, prefix: str)
                       f"{method!r})")
 
 
-OPTION_MAGNITUDE = (1e-100, 1e100)
+OPTION_MAGNITUDE = (1e-100, 1e12)
 """The magnitudes a number given to a method option may have (besides 0): no option means anything
-beyond (1e308 overflowed a window's sample count, 1e-320 a noise's inverse)."""
+beyond (1e308 overflowed a window's sample count, 1e20 s a lag's, 1e-320 a noise's inverse)."""
 
 
 MIN_DENSITY = 1e-9
