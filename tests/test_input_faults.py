@@ -324,3 +324,11 @@ def test_an_option_out_of_its_range_is_an_input_error(log, tmp_path, capsys, met
     assert main(["estimate", str(log), "--method", method, "-O", option, "--out", str(tmp_path / "e.csv")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("gfimu estimate: error: ") and expected in err and "internal error" not in err
+
+
+def test_simulate_refuses_an_absurd_length_before_any_work(tmp_path, capsys):
+    assert main(["simulate", "random3d", "--duration-s", "1e12", "--out", str(tmp_path / "s")]) == 2
+    assert capsys.readouterr().err == (
+        "gfimu simulate: error: --duration-s 1e+12 at 500 Hz is 5e+14 samples; a simulated log holds at most 2e+07 "
+        "(give a shorter --duration-s or a lower --rate-hz)\n")
+    assert not (tmp_path / "s").exists()

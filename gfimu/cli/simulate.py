@@ -11,6 +11,9 @@ from .options import integer, non_negative, number, parse_options, positive
 
 ARRAY_CHOICES = ("cube", "paper001", "single-triad", "mimu4444")
 
+MAX_SAMPLES = 2e7
+"""The most samples ``gfimu simulate`` writes (5.6 hours at 1 kHz; more would not fit in memory)."""
+
 
 def _scenario_help() -> str:
     from ..simulate import SCENARIOS
@@ -110,6 +113,14 @@ def run(args) -> int:
     if args.no_noise and args.noise_std_mps2 is not None:
         raise CLIError("--no-noise and --noise-std-mps2 exclude each other")
     prepare_log_folder(args.out, [array_input], force=args.force)
+    from ..simulate import SCENARIOS
+
+    scenario = SCENARIOS[args.scenario]
+    rate = args.rate_hz if args.rate_hz is not None else scenario.rate_hz
+    if args.duration_s is not None and args.duration_s * rate > MAX_SAMPLES:
+        raise CLIError(f"--duration-s {args.duration_s:g} at {rate:g} Hz is {args.duration_s * rate:.3g} samples; a "
+                       f"simulated log holds at most {MAX_SAMPLES:.0e} (give a shorter --duration-s or a lower "
+                       "--rate-hz)")
     if args.no_noise:
         noise = SensorErrors.none()
     elif args.noise_std_mps2 is not None:
