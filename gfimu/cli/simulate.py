@@ -61,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"half edge of the cube array [m] (default {defaults.CUBE_HALF_EDGE_M:g})")
     p.add_argument("--rate-hz", type=number(0.0, 100e3, "Hz", low_open=True), default=None,
                    help="sample rate [Hz], at most 100 kHz (default: the scenario's)")
-    p.add_argument("--duration-s", type=positive("s"), default=None, help="length [s] (default: the scenario's)")
+    p.add_argument("--duration-s", type=positive("s"), default=None,
+                   help="length [s] (default: the scenario's; at most 2e7 samples with the rate)")
     p.add_argument("--noise-std-mps2", type=non_negative("m/s^2"), default=None,
                    help="white accelerometer noise per axis [m/s^2] (default: the array's noise_std_mps2, "
                         f"{defaults.ACCEL_NOISE_STD_MPS2:g} for the cube; the ADXL330 figures of paper 000 for an "
