@@ -419,6 +419,11 @@ def read_calibration(path: str | Path) -> Calibration:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise CalibrationFileError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    from .io.errors import toml_nested_too_deep
+
+    too_deep = toml_nested_too_deep(text)
+    if too_deep:
+        raise CalibrationFileError(f"{path}: {too_deep}")
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -445,18 +450,26 @@ def read_calibration(path: str | Path) -> Calibration:
         raise CalibrationFileError(f"{path}: no [[accelerometers]] table")
     sensors = []
     for k, a in enumerate(accs):
+        if not isinstance(a, dict):
+            raise fail(f"expected an [[accelerometers]] table, got {a!r}", "accelerometers", k)
         for key in ("name", "bias_mps2", "gain"):
             if key not in a:
                 raise fail(f"missing key {key!r}", "accelerometers", k)
-        axes = tuple(a.get("axes", ["x", "y", "z"]))
-        if any(x not in AXIS_INDEX for x in axes):
-            raise fail(f"axes must be among x, y, z; got {list(axes)}", "accelerometers", k, "axes")
+        if not isinstance(a["name"], str) or not a["name"]:
+            raise fail(f"expected the accelerometer's name (text), got {a['name']!r}", "accelerometers", k, "name")
+        axes = a.get("axes", ["x", "y", "z"])
+        if not isinstance(axes, list) or any(not isinstance(x, str) or x not in AXIS_INDEX for x in axes):
+            raise fail(f"axes must be a list among \"x\", \"y\", \"z\"; got {axes!r}", "accelerometers", k, "axes")
+        axes = tuple(axes)
         gain = numbers(a["gain"], None, f"{len(axes)} rows of 3 numbers", "accelerometers", k, "gain")
         bias = numbers(a["bias_mps2"], None, f"{len(axes)} numbers [m/s²]", "accelerometers", k, "bias_mps2")
         try:
             sensors.append(SensorCalibration(str(a["name"]), axes, gain, bias))
         except (CalibrationError, ValueError) as exc:
             raise fail(str(exc), "accelerometers", k) from None
+    for table in ("gyroscope", "fit"):
+        if not isinstance(doc.get(table, {}), dict):
+            raise fail(f"expected a table [{table}], got {doc[table]!r}", "", 0, table)
     gyro = doc.get("gyroscope", {}).get("bias_b_radps")
     if gyro is not None:
         gyro = numbers(gyro, (3,), "3 numbers [rad/s]", "gyroscope", 0, "bias_b_radps")

@@ -40,6 +40,11 @@ SCALE_HALF_WIDTH = 25
 """Half width [samples] of the window of the local scale."""
 MEDIAN_HALF_WIDTH = 2
 """Half width [samples] of the median a reading is compared with and replaced by."""
+OUT_OF_ANY_RANGE_MPS2 = 1e7
+"""A reading beyond ±1e7 m/s² (a million g; shock accelerometers read up to about 1e6 m/s²) is out of range
+whatever ``range_mps2`` says or when it says nothing: no accelerometer reads it (1e308 would overflow the
+screening and the estimators)."""
+
 CLIP_TOLERANCE = 1e-3
 """A reading within this fraction of the stated range is clipped (one count of a 10-bit converter is 2e-3 of its
 full scale; wider converters are finer); beyond the range by more than it, out of range."""
@@ -242,13 +247,14 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
     y = np.array(accel_mps2, dtype=float)
     n = y.shape[0]
     bad_value = ~np.isfinite(y)
-    out_range = np.zeros_like(bad_value)
+    with np.errstate(invalid="ignore"):
+        out_range = ~bad_value & (np.abs(y) > OUT_OF_ANY_RANGE_MPS2)
     clipped = np.zeros_like(bad_value)
     if range_mps2 is not None:
         limit = np.asarray(range_mps2, dtype=float)
         stated = np.isfinite(limit) & (limit > 0)
         with np.errstate(invalid="ignore"):
-            out_range = ~bad_value & stated[None, :] & (
+            out_range |= ~bad_value & stated[None, :] & (
                 np.abs(y) > (1 + CLIP_TOLERANCE) * np.where(stated, limit, np.inf)[None, :])
         clipped = clipped_readings(y, limit) & ~out_range
     stuck = np.zeros_like(bad_value)
@@ -319,10 +325,55 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
                         int(stuck.sum()), tuple(runs))
 
 
+def refuse_unreplaceable(log, accel: np.ndarray | None = None) -> None:
+    """A :class:`~gfimu.errors.DataError` naming ``imu.csv`` and the column when readings of ``accel`` (the
+    log's own by default) are not finite (a column of NaN: after the screening, none near them to
+    replace them by)."""
+    accel = log.accel_mps2 if accel is None else accel
+    left = ~np.isfinite(accel)
+    if not left.any():
+        return
+    from .errors import DataError
+
+    column = int(np.argmax(left.any(axis=0)))
+    name = log.array.accel_columns[column]
+    where = f"{log.source}/imu.csv" if log.source else "the readings"
+    raise DataError(f"{where}: column {name!r}: {int(left[:, column].sum())} of {len(log)} readings are not "
+                    f"finite, the first at row {int(np.argmax(left[:, column]))}, with no finite reading near "
+                    "them to replace them")
+
+
+GYRO_OUT_OF_RANGE_RADPS = 1e4
+"""A gyroscope reading beyond ±1e4 rad/s (about 95,000 rpm) is read by no gyroscope: the screening reads it as
+NaN, with a warning (1e308 made the gyro-aided estimate infinite)."""
+
+
+def _screen_gyro(log):
+    """``log`` with gyroscope readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` read as NaN (a warning names the
+    first's line and column)."""
+    if log.gyro_b_radps is None:
+        return log
+    with np.errstate(invalid="ignore"):
+        huge = np.abs(log.gyro_b_radps) > GYRO_OUT_OF_RANGE_RADPS
+    if not huge.any():
+        return log
+    import warnings
+
+    row, col = (int(v) for v in np.argwhere(huge)[0])
+    where = f"{log.source}/imu.csv:{row + 2}" if log.source else f"sample {row}"
+    warnings.warn(f"{where}: {int(huge.sum())} gyroscope reading(s) beyond ±{GYRO_OUT_OF_RANGE_RADPS:g} rad/s (first in "
+                  f"column {('w_x', 'w_y', 'w_z')[col]!r}, {log.gyro_b_radps[row, col]:g}): no gyroscope reads that; "
+                  "read as NaN", stacklevel=3)
+    return log.replace(gyro_b_radps=np.where(huge, np.nan, log.gyro_b_radps))
+
+
 def screen_log(log):
-    """(log with gross errors replaced, :class:`Screening`); the log itself when none is found."""
+    """(log with gross errors replaced, :class:`Screening`); the log itself when none is found. Gyroscope
+    readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` are read as NaN (with a warning)."""
+    log = _screen_gyro(log)
     accel, result = screen(log.accel_mps2, log.array.range_per_axis_mps2, log.array.axis_owner,
                            log.rate_hz if len(log) > 1 else None, log.array.structure_matrix())
+    refuse_unreplaceable(log, accel)
     if result.count == 0:
         return log, result
     return log.replace(accel_mps2=accel), result

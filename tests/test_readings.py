@@ -50,7 +50,8 @@ def test_gross_errors_found_and_replaced_by_the_neighbours_median():
     bad = y.copy()
     bad[100, 0], bad[500, 1], bad[900, 2], bad[1300, 0] = np.nan, 1e30, 9.81 + 1000.0, 200.0
     out, result = screen(bad, range_mps2=np.array([160.0, np.nan, np.nan]), sensor_of_axis=np.array([0, 1, 2]))
-    assert result.replaced.sum() == 4 and result.non_finite == 1 and result.out_of_range == 1 and result.spikes == 2
+    # 1e30 is beyond any accelerometer's range (readings.OUT_OF_ANY_RANGE_MPS2), stated or not
+    assert result.replaced.sum() == 4 and result.non_finite == 1 and result.out_of_range == 2 and result.spikes == 1
     assert set(zip(*np.nonzero(result.replaced))) == {(100, 0), (500, 1), (900, 2), (1300, 0)}
     for r, c in ((100, 0), (500, 1), (900, 2), (1300, 0)):
         assert abs(out[r, c] - np.median(y[r - 2:r + 3, c])) < 0.2  # the neighbours' level
@@ -206,3 +207,17 @@ def test_rolling_median_equals_the_nan_aware_median_of_every_window():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 expected = np.nanmedian(windows, axis=2)
             assert np.array_equal(_rolling_median(x, half), expected, equal_nan=True)
+
+
+def test_a_reading_of_1e308_is_out_of_range_without_a_stated_range():
+    """No accelerometer reads 1e308 m/s²: replaced as out of range (before, it overflowed the spike test,
+    stayed, and made the estimate infinite)."""
+    y = np.column_stack([np.sin(np.arange(300) * 0.05), np.zeros(300), 9.81 + np.zeros(300)])
+    y += np.random.default_rng(3).normal(size=y.shape) * 0.01
+    bad = y.copy()
+    bad[150, 1] = 1e308
+    bad[151, 1] = -1e7 * 1.0001
+    with np.errstate(all="raise"):
+        out, result = screen(bad)
+    assert result.out_of_range == 2 and result.count == 2
+    assert np.all(np.isfinite(out)) and abs(out[150, 1]) < 0.05 and abs(out[151, 1]) < 0.05

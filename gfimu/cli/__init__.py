@@ -9,7 +9,7 @@ request or a failure of the machine (a malformed or missing file, a log the
 method cannot solve, a full disk) ends in one line ``gfimu COMMAND: error: ...``
 naming the file, key, row or option, and a non-zero exit status: 2 for a
 :class:`~gfimu.errors.GfimuError` of the input or data kind and for a path given that is not
-there, 1 for a resource
+there (or is too long to be one), 1 for a resource
 (an ``OSError``: permission, no space, interrupted I/O), 130/143 when
 interrupted by SIGINT/SIGTERM (temporary files are removed first). Any other
 exception is a bug, not a mistake of the user: ``gfimu COMMAND: internal error:
@@ -59,7 +59,27 @@ class ArgumentParser(argparse.ArgumentParser):
     """argparse with one-line errors: ``gfimu simulate: error: argument --rate-hz: ...`` (exit 2)."""
 
     def error(self, message: str):
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {shorten(message)} (see {self.prog} --help)\n")
+
+
+LONGEST_WORD = 1000
+"""A word (a run without spaces) of a message longer than this is cut (a value echoed at 129 kB; a path
+is shorter)."""
+
+
+def shorten(message: str) -> str:
+    """``message`` with each word longer than :data:`LONGEST_WORD` characters cut to its first 80 and
+    its length, ``aaaa…(129,000 characters)``: an error line quotes a value, never the whole of a huge one."""
+    import re
+
+    def cut(match):
+        word = match.group(0)
+        return f"{word[:80]}…({len(word):,} characters)"
+
+    message = re.sub(r"\S{%d,}" % (LONGEST_WORD + 1), cut, message)
+    if len(message) > 4 * LONGEST_WORD:
+        message = f"{message[:4 * LONGEST_WORD]}…({len(message):,} characters)"
+    return message
 
 
 def _version() -> str:
@@ -245,8 +265,9 @@ def error_message(exc: BaseException) -> tuple[str, int]:
         if _under_determined(exc):
             return UNDER_DETERMINED.format(_first_line(exc)), exc.exit_status
         return str(exc) or type(exc).__name__, exc.exit_status
-    if isinstance(exc, (FileNotFoundError, NotADirectoryError)) or (isinstance(exc, OSError) and exc.errno == errno.ELOOP):
-        return os_error_message(exc), EXIT_USAGE  # a path given on the command line that is not there
+    if isinstance(exc, (FileNotFoundError, NotADirectoryError)) or (
+            isinstance(exc, OSError) and exc.errno in (errno.ELOOP, errno.ENAMETOOLONG)):
+        return os_error_message(exc), EXIT_USAGE  # a path given on the command line that is not there (or cannot be)
     if isinstance(exc, OSError):
         return os_error_message(exc), EXIT_FAILURE
     if isinstance(exc, MemoryError):
@@ -370,6 +391,7 @@ def _main(argv: list[str] | None) -> int:
         if args.debug:
             raise
         message, status = error_message(exc)
+        message = shorten(message)
         kind = "" if message.startswith("internal error: ") else "error: "
         print(f"gfimu {args.command}: {kind}{message}", file=sys.stderr)
         return status

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -55,6 +56,12 @@ def run(args) -> int:
     if out_dir.exists() and not out_dir.is_dir():
         raise CLIError(f"--out {out_dir}: exists and is not a folder")
     inputs = list(args.logs) + ([args.calibration] if args.calibration else [])
+    out_real = Path(os.path.realpath(out_dir))
+    for log in args.logs:
+        log_real = Path(os.path.realpath(log))
+        if log_real.is_dir() and (out_real == log_real or log_real in out_real.parents):
+            raise CLIError(f"--out {out_dir}: is {'the' if out_real == log_real else 'inside the'} input log folder "
+                           f"{log}; the estimates and summary go to a folder of their own (give another folder)")
     for folder in output_folders(args.logs, out_dir):  # each estimate is checked again where it is written
         target = folder / "estimate.csv"
         if target.exists() and not target.is_file():

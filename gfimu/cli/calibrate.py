@@ -77,6 +77,13 @@ def _fit(args, log):
                         min_duration_s=args.min_duration_s)
     periods = find_still_periods(log, det)
     if not periods:
+        import numpy as np
+
+        from ..readings import refuse_unreplaceable
+
+        all_bad = log.replace(accel_mps2=np.where(np.isfinite(log.accel_mps2).any(axis=0), 0.0, np.nan)
+                              * np.ones_like(log.accel_mps2))
+        refuse_unreplaceable(all_bad)  # a column with no finite reading: named, not "no still period"
         raise CLIError(f"{args.log}: no still period found: the recording needs the array held still for at least "
                        f"{det.min_duration_s:g} s (plus {2 * det.trim_s:g} s trimmed) in each of several "
                        "orientations (at least 4, not all in one plane); with such periods, loosen the detector: "

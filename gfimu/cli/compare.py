@@ -75,6 +75,14 @@ def run(args) -> int:
         folder = Path(args.estimates_dir)
         if folder.exists() and not folder.is_dir():
             raise CLIError(f"--estimates-dir {folder}: exists and is not a folder")
+        from ..io.outputs import same_file
+
+        log_folder = Path(args.log) if Path(args.log).is_dir() else Path(args.log).parent
+        if folder.is_dir() and (same_file(folder, log_folder)
+                                or ((folder / "array.toml").is_file() and (folder / "imu.csv").is_file())):
+            what = "the input log folder" if same_file(folder, log_folder) else "a log folder"
+            raise CLIError(f"--estimates-dir {folder}: is {what}; the estimates are written into a folder of "
+                           "their own, never into a log (give another folder)")
         if folder.is_dir():
             for name in methods or list(METHODS):
                 check_output(folder / f"{name}.csv", inputs, "--estimates-dir")

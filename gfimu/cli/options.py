@@ -16,6 +16,21 @@ from collections.abc import Callable
 
 from ..errors import InputError
 
+SHOWN_CHARS = 80
+"""At most this many characters of a value are quoted in a message."""
+
+
+def shown(value) -> str:
+    """``repr(value)``, or its first :data:`SHOWN_CHARS` characters and the length when longer:
+    ``'abc…' (129,000 characters)``."""
+    text = repr(value)
+    if len(text) <= SHOWN_CHARS:
+        return text
+    if isinstance(value, str):
+        head = repr(value[:SHOWN_CHARS])
+        return f"{head[:-1]}…{head[-1]} ({len(value):,} characters)"
+    return f"{text[:SHOWN_CHARS]}… ({len(text):,} characters)"
+
 
 class OptionError(InputError):
     """A method option (``-O KEY=VALUE``) is malformed or has a wrong value."""
@@ -25,9 +40,9 @@ def _number(text: str, unit: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number{f' [{unit}]' if unit else ''}, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a number{f' [{unit}]' if unit else ''}, got {shown(text)}") from None
     if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number{f' [{unit}]' if unit else ''}, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a finite number{f' [{unit}]' if unit else ''}, got {shown(text)}")
     return value
 
 
@@ -43,7 +58,7 @@ def number(low: float | None = None, high: float | None = None, unit: str = "", 
             lo = "" if low is None else f"{'>' if low_open else '>='} {low:g}"
             hi = "" if high is None else f"{'<' if high_open else '<='} {high:g}"
             rng = " and ".join(x for x in (lo, hi) if x)
-            raise argparse.ArgumentTypeError(f"must be a number {rng}{f' [{unit}]' if unit else ''}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"must be a number {rng}{f' [{unit}]' if unit else ''}, got {shown(text)}")
         return value
 
     parse.__name__ = "number"
@@ -67,11 +82,11 @@ def integer(low: int | None = None, high: int | None = None) -> Callable[[str], 
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected an integer, got {shown(text)}") from None
         if (low is not None and value < low) or (high is not None and value > high):
             bounds = ("" if low is None else f">= {low}", "" if high is None else f"<= {high}")
             rng = " and ".join(x for x in bounds if x)
-            raise argparse.ArgumentTypeError(f"must be an integer {rng}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"must be an integer {rng}, got {shown(text)}")
         return value
 
     parse.__name__ = "integer"
@@ -100,9 +115,9 @@ def parse_options(pairs: list[str] | None, flag: str = "-O") -> dict:
         key, sep, value = pair.partition("=")
         key = key.strip().replace("-", "_")
         if not sep or not key:
-            raise OptionError(f"{flag} {pair!r}: expected KEY=VALUE")
+            raise OptionError(f"{flag} {shown(pair)}: expected KEY=VALUE")
         if not key.isidentifier():
-            raise OptionError(f"{flag} {pair!r}: {key!r} is not an option name")
+            raise OptionError(f"{flag} {shown(pair)}: {shown(key)} is not an option name")
         out[key] = parse_value(value)
     return out
 
@@ -114,10 +129,10 @@ def parse_method_options(pairs: list[str] | None, methods: list[str] | None, fla
         head, sep, value = pair.partition("=")
         method, dot, key = head.partition(".")
         if not sep or not dot or not method.strip() or not key.strip():
-            raise OptionError(f"{flag} {pair!r}: expected METHOD.KEY=VALUE")
+            raise OptionError(f"{flag} {shown(pair)}: expected METHOD.KEY=VALUE")
         method = method.strip()
         if methods is not None and method not in methods:
-            raise OptionError(f"{flag} {pair!r}: method {method!r} is not among --methods {','.join(methods)}")
+            raise OptionError(f"{flag} {shown(pair)}: method {shown(method)} is not among --methods {','.join(methods)}")
         out.setdefault(method, {}).update(parse_options([f"{key}={value}"], flag))
     return out
 
@@ -139,13 +154,66 @@ def _kind_of(annotation, default) -> str | None:
     return None
 
 
+def _sequence_shape(cls, name: str) -> tuple[bool, int | None] | None:
+    """For a field whose type takes a tuple (``tuple[float, float, float]``, ``Union[str, tuple]``):
+    (text also allowed, the fixed length or None); None for any other field."""
+    import typing
+
+    try:
+        hint = typing.get_type_hints(cls).get(name)
+    except Exception:  # noqa: BLE001 - an annotation that does not resolve is simply not checked here
+        return None
+    options = typing.get_args(hint) if typing.get_origin(hint) is typing.Union else (hint,)
+    text = str in options
+    for option in options:
+        if option is tuple or typing.get_origin(option) is tuple:
+            args = typing.get_args(option)
+            length = len(args) if args and Ellipsis not in args else None
+            if not args or not all(a in (float, int) for a in args if a is not Ellipsis):
+                return None  # a tuple of objects (factor groups): not given on a command line
+            return text, length
+    return None
+
+
+def _check_sequence(method: str, key: str, value, shape, flag: str, prefix: str):
+    """A tuple-valued option: ``1,2,3`` or ``[1,2,3]`` or ``(1,2,3)`` -> a tuple of finite numbers."""
+    text_allowed, length = shape
+    if isinstance(value, str) and text_allowed:
+        return value
+    numbers = f"{'three' if length == 3 else (length or 'some')} numbers"
+    form = f"{numbers} as {key}=1,2,3 or {key}=[1,2,3]" if length == 3 else f"{numbers} as {key}=[a,b,...]"
+    if isinstance(value, (list, tuple)) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        if length is not None and len(value) != length:
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected {form}, got {len(value)} "
+                              f"(option of method {method!r})")
+        if not all(math.isfinite(float(v)) for v in value):
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected finite numbers (option of method "
+                              f"{method!r})")
+        return tuple(float(v) for v in value)
+    alternatives = "text or " if text_allowed else ""
+    raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected {alternatives}{form} (option of method "
+                      f"{method!r})")
+
+
+OPTION_MAGNITUDE = (1e-100, 1e12)
+"""The magnitudes a number given to a method option may have (besides 0): no option means anything
+beyond (1e308 overflowed a window's sample count, 1e20 s a lag's, 1e-320 a noise's inverse)."""
+
+
+MIN_DENSITY = 1e-9
+"""The smallest noise density (an option whose name ends in ``_per_sqrt_s``) a method is given: the floor of
+the smoother's own tuned densities (1e-40 made its normal equations singular)."""
+
+
 def check_method_options(method: str, options: dict, flag: str = "-O", prefix: str = "") -> dict:
     """Check the type of each option of ``method`` against its documented default; returns the options.
 
     A number where a number is expected (an integer is a valid float), True or
     False for a switch, text for text, ``None`` where the default is
-    ``None``; an unknown name lists the known ones. Ranges are checked by the
-    method itself (its errors name the option too).
+    ``None``, numbers (``1,2,3`` or ``[1,2,3]``, made a tuple in ``options``) where
+    the type is a tuple of numbers; an unknown name lists the known ones. Ranges are
+    checked by the method itself (its errors name the option too).
     """
     from ..methods import estimator_class
 
@@ -159,9 +227,14 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
         f = fields.get(key)
         if f is None:
             known = ", ".join(sorted(fields))
-            raise OptionError(f"{flag} {prefix}{key}=...: method {method!r} has no option {key!r}; "
+            raise OptionError(f"{flag} {prefix}{shown(key)[1:-1]}=...: method {method!r} has no option {shown(key)}; "
                               f"its options are: {known}")
         default = f.default if f.default is not dataclasses.MISSING else None
+        shape = _sequence_shape(cls, key)
+        if shape is not None:
+            if value is not None:
+                options[key] = _check_sequence(method, key, value, shape, flag, prefix)
+            continue
         kind = _kind_of(f.type, default)
         if kind is None or (value is None and default is None):
             continue
@@ -170,11 +243,21 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
               "float": isinstance(value, (int, float)) and not isinstance(value, bool),
               "str": isinstance(value, str)}[kind]
         if ok and kind == "float" and not math.isfinite(float(value)):
-            raise OptionError(f"{flag} {prefix}{key}={value!r}: expected a finite number (option of method {method!r})")
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected a finite number (option of method "
+                              f"{method!r})")
+        if ok and kind == "float" and key.endswith("_per_sqrt_s") and 0 < abs(float(value)) < MIN_DENSITY:
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: a noise density below {MIN_DENSITY:g} "
+                              f"[{unit_of(key)}] leaves the normal equations singular (option of method {method!r}, "
+                              f"default {default!r}; the smoother's tuned densities are floored at {MIN_DENSITY:g} "
+                              "too)")
+        if ok and kind == "float" and value != 0 and not OPTION_MAGNITUDE[0] <= abs(float(value)) <= OPTION_MAGNITUDE[1]:
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected 0 or a number of magnitude "
+                              f"{OPTION_MAGNITUDE[0]:g} to {OPTION_MAGNITUDE[1]:g} (option of method {method!r}, "
+                              f"default {default!r})")
         if not ok:
             expected = {"bool": "True or False", "int": "an integer", "float": "a number", "str": "text"}[kind]
-            raise OptionError(f"{flag} {prefix}{key}={value!r}: expected {expected} (option of method {method!r}, "
-                              f"default {default!r})")
+            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected {expected} (option of method "
+                              f"{method!r}, default {default!r})")
     return options
 
 

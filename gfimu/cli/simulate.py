@@ -11,6 +11,9 @@ from .options import integer, non_negative, number, parse_options, positive
 
 ARRAY_CHOICES = ("cube", "paper001", "single-triad", "mimu4444")
 
+MAX_SAMPLES = 2e7
+"""The most samples ``gfimu simulate`` writes (5.6 hours at 1 kHz; more would not fit in memory)."""
+
 
 def _scenario_help() -> str:
     from ..simulate import SCENARIOS
@@ -58,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"half edge of the cube array [m] (default {defaults.CUBE_HALF_EDGE_M:g})")
     p.add_argument("--rate-hz", type=number(0.0, 100e3, "Hz", low_open=True), default=None,
                    help="sample rate [Hz], at most 100 kHz (default: the scenario's)")
-    p.add_argument("--duration-s", type=positive("s"), default=None, help="length [s] (default: the scenario's)")
+    p.add_argument("--duration-s", type=positive("s"), default=None,
+                   help="length [s] (default: the scenario's; at most 2e7 samples with the rate)")
     p.add_argument("--noise-std-mps2", type=non_negative("m/s^2"), default=None,
                    help="white accelerometer noise per axis [m/s^2] (default: the array's noise_std_mps2, "
                         f"{defaults.ACCEL_NOISE_STD_MPS2:g} for the cube; the ADXL330 figures of paper 000 for an "
@@ -110,6 +114,14 @@ def run(args) -> int:
     if args.no_noise and args.noise_std_mps2 is not None:
         raise CLIError("--no-noise and --noise-std-mps2 exclude each other")
     prepare_log_folder(args.out, [array_input], force=args.force)
+    from ..simulate import SCENARIOS
+
+    scenario = SCENARIOS[args.scenario]
+    rate = args.rate_hz if args.rate_hz is not None else scenario.rate_hz
+    if args.duration_s is not None and args.duration_s * rate > MAX_SAMPLES:
+        raise CLIError(f"--duration-s {args.duration_s:g} at {rate:g} Hz is {args.duration_s * rate:.3g} samples; a "
+                       f"simulated log holds at most {MAX_SAMPLES:.0e} (give a shorter --duration-s or a lower "
+                       "--rate-hz)")
     if args.no_noise:
         noise = SensorErrors.none()
     elif args.noise_std_mps2 is not None:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..array import ArrayModelError, SensorArray
-from ..errors import InputError
+from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
 from ..rigid_body import quadratic_terms, quadratic_terms_jacobian, structure_matrix
@@ -173,6 +173,13 @@ class GyroAidedEstimator(PerSampleEstimator):
             raise ArrayModelError(reason)
         if log.gyro_b_radps is None:
             raise InputError(f"{log.source}: method 'gyro-aided' needs gyroscope columns w_x, w_y, w_z")
+        bad = ~np.isfinite(log.gyro_b_radps)
+        if bad.any():
+            row, col = (int(v) for v in np.argwhere(bad)[0])
+            where = f"{log.source}/imu.csv:{row + 2}" if log.source else f"sample {row}"
+            raise DataError(f"{where}: gyroscope column {('w_x', 'w_y', 'w_z')[col]!r} is not finite ({int(bad.sum())} "
+                            "reading(s) NaN, infinite or beyond ±1e4 rad/s); method 'gyro-aided' needs every "
+                            "gyroscope reading")
         x = gyro_aided_solve(log.array, log.accel_mps2, log.gyro_b_radps)
         sigma = self._sigma(log) if self.compute_sigma else {}
         return Motion(log.timestamps_ns, omega_b_radps=log.gyro_b_radps.copy(), omega_dot_b_radps2=x[:, 3:6],

@@ -34,7 +34,7 @@ from .inversion import check_log_for_inversion, invert, sigma_from_inversion
 
 SIGN_CANDIDATES = np.array(list(itertools.product((1.0, -1.0), repeat=3)))  # (8, 3)
 
-InitialOmega = Union[str, tuple]
+InitialOmega = Union[str, tuple[float, float, float]]
 
 
 def select_candidate(omega_abs: np.ndarray, omega_int: np.ndarray) -> np.ndarray:

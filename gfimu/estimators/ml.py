@@ -50,6 +50,7 @@ and the sign is fixed by the gyro.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,6 +176,15 @@ class MLEstimator(PerSampleEstimator):
 
     def __post_init__(self):
         check_workers(self.workers)
+        for name in ("grid_directions", "grid_magnitudes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise InputError(f"ml option {name} must be a whole number >= 1 (the size of the starting grid), "
+                                 f"got {value!r}")
+        if not (isinstance(self.max_omega_radps, (int, float)) and math.isfinite(self.max_omega_radps)
+                and self.max_omega_radps > 0):
+            raise InputError(f"ml option max_omega_radps must be a number > 0 [rad/s] (the largest |ω| of the "
+                             f"starting grid), got {self.max_omega_radps!r}")
 
     # ------------------------------------------------------------------
     def applicable(self, array: SensorArray) -> str | None:

@@ -27,7 +27,7 @@ import tomli_w
 from ..array import Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
 from .atomic import atomic_write_text
 from ..errors import InputError
-from .errors import LogFormatError, LogFormatWarning, read_utf8_text
+from .errors import LogFormatError, LogFormatWarning, read_utf8_text, toml_nested_too_deep
 
 ARRAY_FORMAT = "gfimu-array/1"
 ROTATION_TOLERANCE = 1e-6  # accepted as written
@@ -80,6 +80,12 @@ def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+MAX_POSITION_M = 100.0
+"""The farthest an accelerometer may sit from the body origin [m], as for a Kalibr IMU
+(:data:`gfimu.io.kalibr.MAX_TRANSLATION_M`): larger is no rigid array (and 1e300 overflows the structure
+matrix)."""
+
+
 def _vector(ctx: _TomlContext, value, n: int, table: str, index: int, key: str) -> np.ndarray:
     if not isinstance(value, list) or len(value) != n or not all(_is_number(v) for v in value):
         raise ctx.error(f"expected a list of {n} numbers, got {value!r}", table, index, key)
@@ -107,6 +113,9 @@ def _rotation(ctx: _TomlContext, value, index: int, name: str) -> np.ndarray:
     rot = np.array(value, dtype=float)
     if not np.all(np.isfinite(rot)):
         raise ctx.error("values must be finite", "accelerometers", index, key)
+    if np.max(np.abs(rot)) > 1.5:  # a rotation's entries lie in [-1, 1]
+        raise ctx.error(f"{rot.tolist()} is not a rotation matrix (an entry of size {np.max(np.abs(rot)):.3g}; a "
+                        "rotation's entries lie between -1 and 1)", "accelerometers", index, key)
     det = np.linalg.det(rot)
     if det < 0:
         raise ctx.error(f"{rot.tolist()} has determinant {det:.6g}: a reflection, not a rotation",
@@ -139,6 +148,9 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
            positions_required: bool = True) -> tuple[SensorArray, float | None]:
     """(array, declared rate_hz or None) from the text of an ``array.toml``."""
     path = Path(path)
+    too_deep = toml_nested_too_deep(text)
+    if too_deep:
+        raise LogFormatError(too_deep, path)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -185,6 +197,11 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
                             t, i)
         else:
             position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
+            far = float(np.max(np.abs(position)))
+            if far > MAX_POSITION_M / np.sqrt(3.0) and far * np.linalg.norm(position / far) > MAX_POSITION_M:
+                raise ctx.error(f"{position.tolist()} puts the accelerometer {far * np.linalg.norm(position / far):.3g} m "
+                                f"from the body origin; an accelerometer of one rigid body lies within "
+                                f"{MAX_POSITION_M:g} m (position_m is in metres)", t, i, "position_m")
         rot = _rotation(ctx, a["rotation_body_sensor"], i, acc_name) if "rotation_body_sensor" in a else np.eye(3)
         axes = a.get("axes", ["x", "y", "z"])
         if (not isinstance(axes, list) or not axes or not all(isinstance(x, str) for x in axes)

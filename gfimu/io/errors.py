@@ -31,6 +31,32 @@ class LogFormatError(InputError):
 
 
 
+MAX_TOML_DEPTH = 64
+"""The deepest nesting of arrays and tables a TOML input may have (an ``array.toml`` needs 3)."""
+
+
+def toml_nested_too_deep(text: str) -> str | None:
+    """Why ``text`` cannot be a gfimu TOML input by its nesting (None when it is not too deep): TOML nested
+    deeper than :data:`MAX_TOML_DEPTH` levels, or so deep that the TOML parser runs out of recursion."""
+    import tomllib
+
+    too_deep = f"nested deeper than {MAX_TOML_DEPTH} levels of arrays and tables (a gfimu TOML file needs a few); not read"
+    try:
+        doc = tomllib.loads(text)
+    except RecursionError:
+        return too_deep
+    except tomllib.TOMLDecodeError:
+        return None  # the caller names the syntax error
+    stack = [(doc, 1)]
+    while stack:
+        value, depth = stack.pop()
+        if depth > MAX_TOML_DEPTH:
+            return too_deep
+        children = value.values() if isinstance(value, dict) else value if isinstance(value, list) else ()
+        stack.extend((c, depth + 1) for c in children if isinstance(c, (dict, list)))
+    return None
+
+
 def read_utf8_text(path: str | os.PathLike, missing: str = "file not found", folder: str | None = None,
                    line_of_bad_byte: bool = False) -> str:
     """The text of a UTF-8 file without its byte-order mark; a :class:`LogFormatError` naming the file

@@ -112,6 +112,16 @@ class RowParser:
         if bad.size:
             i = self.index[int(bad[0])]
             raise ValueError(f"field {i + 1} {cells[i].strip()!r} is not finite")
+        from ..readings import GYRO_OUT_OF_RANGE_RADPS, OUT_OF_ANY_RANGE_MPS2
+
+        limit = np.full(v.size, GYRO_OUT_OF_RANGE_RADPS)
+        limit[:self.n_acc] = OUT_OF_ANY_RANGE_MPS2
+        huge = np.flatnonzero(np.abs(v) > limit)
+        if huge.size:  # no sensor reads it (1e308 overflows the smoother)
+            k = int(huge[0])
+            what = "accelerometer" if k < self.n_acc else "gyroscope"
+            raise ValueError(f"field {self.index[k] + 1} {cells[self.index[k]].strip()!r} is beyond any {what}'s range "
+                             f"(±{limit[k]:g} {'m/s²' if k < self.n_acc else 'rad/s'})")
         return Reading(t, v[:self.n_acc], v[self.n_acc:self.n_acc + 3] if self.gyro else None)
 
 

@@ -269,11 +269,11 @@ class FixedLagSmoother:
         if int(relinearize_skip) < 1:
             raise InputError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
         if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
-            raise ValueError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
+            raise InputError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
         for name, v in (("tune_window_s", tune_window_s), ("retune_every_s", retune_every_s),
                         ("model_window_s", model_window_s)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
+                raise InputError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
         self.array = array
         self.options = options
         self.lag_s = float(lag_s)

@@ -49,7 +49,7 @@ from ...array import Gyroscope, SensorArray
 from ...log import Log
 from ...motion import Motion
 from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
-from ..errors import LogFormatError, LogPlausibilityWarning, read_utf8_text
+from ..errors import LogFormatError, LogPlausibilityWarning, read_utf8_text, toml_nested_too_deep
 from ...errors import InputError
 from ..plausibility import check_specific_force_scale
 from ..units import (TIME_UNITS_NS, TimestampError, header_name_and_unit, same_nanosecond, time_unit_ns, timestamps_ns,
@@ -349,6 +349,9 @@ def _sensor(ctx: _TomlContext, doc: dict, table: str, index: int, name: str, def
 
 def parse_map(text: str, path: str) -> ColumnMap:
     """A column map from its TOML text; every problem names the map, the key and its line."""
+    too_deep = toml_nested_too_deep(text)
+    if too_deep:
+        raise LogFormatError(too_deep, path)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -364,7 +367,7 @@ def parse_map(text: str, path: str) -> ColumnMap:
         raise ctx.error(f"unknown key {unknown[0]!r} (known: delimiter, comment, header_row, skip_rows, decimal, "
                         "file)", "csv", 0, unknown[0])
     delimiter = csv.get("delimiter", "auto")
-    if delimiter != "auto" and delimiter not in DELIMITERS:
+    if delimiter != "auto" and (not isinstance(delimiter, str) or delimiter not in DELIMITERS):
         raise ctx.error(f"expected \"auto\", \",\", \";\", \"tab\", \"|\" or \"whitespace\", got {delimiter!r}",
                         "csv", 0, "delimiter")
     comment = csv.get("comment", "#")
@@ -482,11 +485,48 @@ _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 """A number written with a decimal comma (``decimal = "auto"``)."""
 
 
+def _refuse_long_lines(path: Path) -> None:
+    """A :class:`LogFormatError` naming the file and line when a line of ``path`` is longer than
+    :data:`~gfimu.io.tables.MAX_LINE_BYTES`, found reading a block at a time (a 50 MB line of NUL bytes is
+    refused after its first block, never held whole)."""
+    from ..tables import MAX_LINE_BYTES, line_too_long
+
+    try:
+        fh = open(path, "rb")
+    except (FileNotFoundError, IsADirectoryError):
+        return  # read_utf8_text names these
+    with fh:
+        line, current = 1, 0  # the line being read, its bytes so far
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            block = block.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+            parts = block.split(b"\n")
+            if current + len(parts[0]) > MAX_LINE_BYTES:
+                raise LogFormatError(line_too_long(current + len(parts[0]), ended=len(parts) > 1), path, line)
+            for k, part in enumerate(parts[1:-1], start=1):
+                if len(part) > MAX_LINE_BYTES:
+                    raise LogFormatError(line_too_long(len(part), ended=True), path, line + k)
+            if len(parts) > 1:
+                line += len(parts) - 1
+                current = len(parts[-1])
+                if current > MAX_LINE_BYTES:
+                    raise LogFormatError(line_too_long(current), path, line)
+            else:
+                current += len(parts[0])
+
+
 def read_table(path: Path, layout: Layout, text: str | None = None) -> Table:
-    """Split a text file (or ``text``, read from ``path``) by ``layout``; errors name the file and line."""
+    """Split a text file (or ``text``, read from ``path``) by ``layout``; errors name the file and line. A
+    line longer than :data:`~gfimu.io.tables.MAX_LINE_BYTES` is refused before the file is read whole."""
+    from ..tables import MAX_LINE_BYTES, line_too_long
+
     if text is None:
+        _refuse_long_lines(path)
         text = read_utf8_text(path, folder="is a folder, expected a CSV file", line_of_bad_byte=True)
     lines = text.splitlines()
+    if lines and max(map(len, lines)) > MAX_LINE_BYTES // 4:  # characters: up to 4 bytes each
+        for k, ln in enumerate(lines):
+            if len(ln.encode("utf-8")) > MAX_LINE_BYTES:
+                raise LogFormatError(line_too_long(len(ln.encode("utf-8")), ended=True), path, k + 1)
     header = None
     if layout.header_row:
         if len(lines) < layout.header_row:
