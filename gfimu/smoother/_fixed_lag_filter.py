@@ -251,21 +251,18 @@ class WindowFilter:
 
     def _branch_starts(self, x: np.ndarray) -> list[np.ndarray]:
         """x on the other branches: ω flipped, ω mirrored through the array's plane (ω̇ moved so that a
-        planar array's readings stay fitted), both (:mod:`gfimu.smoother.restarts`)."""
-        n = self._normal
-        w, dw = x[0:3], x[3:6]
-        wn = float(w @ n)
-        mirrored = x.copy()
-        mirrored[0:3] = w - 2.0 * wn * n
-        mirrored[3:6] = dw - 2.0 * wn * np.cross(n, w)
-        flipped = x.copy()
-        flipped[0:3] = -w
-        both = mirrored.copy()
-        both[0:3] = -mirrored[0:3]
-        return [flipped, mirrored, both]
+        planar array's readings stay fitted), both (:func:`gfimu.smoother.stream_model.branch`)."""
+        out = []
+        for kind in (1, 2, 3):
+            y = x.copy()
+            y[0:3], y[3:6] = branch(kind, x[0:3], x[3:6], self._normal)
+            out.append(y)
+        return out
 
-    def _solve(self, y: np.ndarray, gyro, xp: np.ndarray, P: np.ndarray, x: np.ndarray, extra):
-        """Gauss-Newton on J from ``x``: (x, H, S⁻¹ [H, ν] at the last linearisation, J at x)."""
+    def _solve(self, y: np.ndarray, gyro, xp: np.ndarray, P: np.ndarray, x: np.ndarray, extra,
+               iterations: int | None = None):
+        """Gauss-Newton on J from ``x`` (at most ``iterations`` steps; None: :attr:`iterations`): (x, H,
+        S⁻¹ [H, ν] at the last linearisation, J at x)."""
         R = self._Rg if gyro is not None else self._R
         diag = self._diag_g if gyro is not None else self._diag
         m = self.model
@@ -279,7 +276,8 @@ class WindowFilter:
         elif slope > 0 or c_robust > 0:
             R = R.copy()
         rhs = np.empty((R.size, 10))
-        iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
+        if iterations is None:
+            iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
         for it in range(iterations):
             if slope > 0 or c_robust > 0:  # the accelerometer variances at x (motion-dependent, robust)
                 base = self._R if slope <= 0 else self._R + (slope * slope) * float(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
@@ -347,7 +345,10 @@ class WindowFilter:
                     d = branch - xp
                     if float(d @ P_inv @ d) > best[3] + BRANCH_PRIOR_MARGIN:
                         continue
-                candidate = self._solve(y, gyro, xp, P, branch, extra)
+                # two steps tell a branch that loses; one that may win is solved to the end
+                candidate = self._solve(y, gyro, xp, P, branch, extra, iterations=2)
+                if candidate[3] < best[3]:
+                    candidate = self._solve(y, gyro, xp, P, candidate[0], extra)
                 if candidate[3] < best[3]:
                     best = candidate
         c = self.model.process_robust_threshold

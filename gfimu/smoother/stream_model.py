@@ -238,7 +238,9 @@ def branch(kind: int, omega: np.ndarray, omega_dot: np.ndarray, normal: np.ndarr
     w, dw = omega, omega_dot
     if kind & 2:
         wn = float(w @ normal)
-        w, dw = w - 2.0 * wn * normal, dw - 2.0 * wn * np.cross(normal, w)
+        n = normal
+        n_x_w = np.array([n[1] * w[2] - n[2] * w[1], n[2] * w[0] - n[0] * w[2], n[0] * w[1] - n[1] * w[0]])
+        w, dw = w - 2.0 * wn * n, dw - 2.0 * wn * n_x_w
     if kind & 1:
         w = -w
     return w, dw
