@@ -117,3 +117,27 @@ def test_a_still_stretch_and_a_slow_turntable():
     still = turn.__class__(array, turn.timestamps_ns, S @ x + np.random.default_rng(0).normal(0, 0.07, turn.accel_mps2.shape))
     ml = MLEstimator(workers=1).estimate_motion(still)
     assert is_still(still, ml, check_model(still, ml))
+
+
+def test_the_lazy_window_gives_the_eager_numbers(monkeypatch):
+    """The older states brought up to date every LAZY_STEPS updates (T, u, W) give every state's mean
+    and one-sigma of the update-by-update window to rounding."""
+    import gfimu.smoother._fixed_lag_filter as flt
+
+    log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=500, duration_s=0.6, seed=4)
+    out = {}
+    for steps in (1, 32):
+        monkeypatch.setattr(flt, "LAZY_STEPS", steps)
+        filt = WindowFilter(ArrayModel(log.array, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0)),
+                            capacity=512)
+        filt.start(0)
+        filt.measure(log.accel_mps2[0], start=np.r_[log.truth.omega_b_radps[0], np.zeros(6)])
+        for k in range(1, 250):
+            filt.predict(k, 0.002)
+            filt.measure(log.accel_mps2[k])
+            if k >= 150:
+                filt.drop_oldest()
+        ks = range(249 - len(filt) + 1, 250)
+        out[steps] = (np.array([filt.mean(k) for k in ks]), np.array([filt.sigma(k) for k in ks]))
+    np.testing.assert_allclose(out[32][0], out[1][0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out[32][1], out[1][1], rtol=1e-9, atol=1e-12)

@@ -45,6 +45,9 @@ from .restarts import plane_normal
 from .stream_model import branch
 
 
+LAZY_STEPS = 32
+"""Updates gathered before the window's older states are brought up to date (:meth:`WindowFilter._flush`)."""
+
 BRANCH_PRIOR_MARGIN = 25.0
 """A branch of an update's minimum is tried only when its distance from the prediction (squared,
 in the prediction's covariance) is within this of the minimum's cost (5 σ): further away, the
@@ -73,6 +76,10 @@ class WindowFilter:
         self._cross = np.zeros((self._cap, 9, 9))
         self._tmp = np.empty((self._cap, 9, 9))
         self._lo = self._hi = 0
+        self._split = 0  # states [lo, split) are updated lazily (see _flush), [split, hi) at once
+        self._T = np.eye(9)  # the old states' cross-covariances since the last flush: C_i T
+        self._u = np.zeros(9)  # ... their means: m_i + C_i u
+        self._W = np.zeros((9, 9))  # ... their variances: v_i - diag(C_i W C_iᵀ)
         self._base = 0  # index k of slot 0
         self._P = np.zeros((9, 9))  # covariance of the newest state
         self._Q = None  # process noise of the newest step
@@ -114,18 +121,47 @@ class WindowFilter:
         return s
 
     def mean(self, k: int) -> np.ndarray:
-        return self._mean[self._slot(k)]
+        s = self._slot(k)
+        if s >= self._split:
+            return self._mean[s]
+        return self._mean[s] + self._cross[s] @ self._u
 
     def sigma(self, k: int) -> np.ndarray:
-        return np.sqrt(np.clip(self._var[self._slot(k)], 0.0, None))
+        s = self._slot(k)
+        var = self._var[s]
+        if s < self._split:
+            C = self._cross[s]
+            var = var - np.einsum("ij,jk,ik->i", C, self._W, C)
+        return np.sqrt(np.clip(var, 0.0, None))
 
     def drop_oldest(self) -> None:
         if self._hi > self._lo:
             self._lo += 1
+            self._split = max(self._split, self._lo)
+
+    def _flush(self) -> None:
+        """Bring the old states up to date: every update moves each state of the window by products
+        with 9×9 matrices common to all of them (``C_i ← C_i M``, ``m_i += C_i g``, ``v_i -= diag(C_i A
+        C_iᵀ)``), so the old states' share of :data:`LAZY_STEPS` updates is gathered in T, u and W and
+        applied to them at once: O(window / LAZY_STEPS + LAZY_STEPS) per update instead of O(window),
+        the same numbers to rounding (what keeps a 0.2 s lag at 20 kHz, 4,000 states, affordable)."""
+        lo, split = self._lo, self._split
+        if split > lo:
+            C = self._cross[lo:split]
+            self._mean[lo:split] += np.einsum("lij,j->li", C, self._u)
+            self._var[lo:split] -= np.einsum("lij,jk,lik->li", C, self._W, C)
+            n = split - lo
+            tmp = np.matmul(C.reshape(9 * n, 9), self._T, out=self._tmp[lo:split].reshape(9 * n, 9))
+            self._cross[lo:split] = tmp.reshape(n, 9, 9)
+        self._T = np.eye(9)
+        self._u = np.zeros(9)
+        self._W = np.zeros((9, 9))
+        self._split = self._hi
 
     def _make_room(self) -> None:
         if self._hi < self._cap:
             return
+        self._flush()
         n = self._hi - self._lo
         if n >= self._cap // 2:  # a window longer than expected (irregular steps): grow
             cap = 2 * self._cap
@@ -141,6 +177,7 @@ class WindowFilter:
                 arr[:n] = arr[self._lo:self._hi]
         self._base += self._lo
         self._lo, self._hi = 0, n
+        self._split = n
 
     # --- model --------------------------------------------------------------------------
     def _process(self, h: float):
@@ -194,6 +231,7 @@ class WindowFilter:
         (:func:`gfimu.smoother.stream_model.branch`: bit 1 ω flipped, bit 2 mirrored through the array's
         plane): their means, and the covariances by the linear part ``D = diag(A, I, I)`` (A = -I, the
         mirror I - 2nnᵀ, or both) on each moved state."""
+        self._flush()
         first = self._slot(k_first)
         lo, hi = self._lo, self._hi
         for i in range(first, hi):
@@ -216,6 +254,10 @@ class WindowFilter:
     def start(self, k: int) -> None:
         """First state of a segment, index ``k``: the weak zero-mean priors."""
         self._lo = self._hi = 0
+        self._split = 0
+        self._T = np.eye(9)
+        self._u = np.zeros(9)
+        self._W = np.zeros((9, 9))
         self._base = k
         self._mean[0] = 0.0
         self._var[0] = self._prior_var
@@ -235,13 +277,15 @@ class WindowFilter:
             Q = Q.copy()
             Q[:6, :6] *= jerk_factor * jerk_factor
         self._make_room()
-        lo, hi = self._lo, self._hi
-        x = F @ self._mean[hi - 1]
+        lo, hi = self._split, self._hi  # the recent states at once, the old ones through T
+        x = F @ self.mean(self._base + hi - 1)
         P = F @ self._P @ FT + Q
         P = 0.5 * (P + P.T)
         n = hi - lo
-        tmp = np.matmul(self._cross[lo:hi].reshape(9 * n, 9), FT, out=self._tmp[lo:hi].reshape(9 * n, 9))
-        self._cross[lo:hi] = tmp.reshape(n, 9, 9)
+        if n:
+            tmp = np.matmul(self._cross[lo:hi].reshape(9 * n, 9), FT, out=self._tmp[lo:hi].reshape(9 * n, 9))
+            self._cross[lo:hi] = tmp.reshape(n, 9, 9)
+        self._T = self._T @ FT
         self._mean[hi] = x
         self._var[hi] = np.diagonal(P)
         self._cross[hi] = P
@@ -375,6 +419,11 @@ class WindowFilter:
         A = H.T @ Z[:, :-1]  # Hᵀ S⁻¹ H
         if not (np.all(np.isfinite(g)) and np.all(np.isfinite(A))):
             raise FilterFailure("non-finite values in the update")
+        lo = self._split  # the recent states at once; the old ones through T, u, W (_flush)
+        self._u = self._u + self._T @ g
+        TA = self._T @ A
+        self._W = self._W + TA @ self._T.T
+        self._T = self._T - TA @ P
         n = hi - lo
         cross = self._cross[lo:hi].reshape(9 * n, 9)  # the stack as one matrix: one BLAS call per product
         # (einsum, not BLAS gemv: OpenBLAS threads a gemv this size, and on a busy machine waiting for its
@@ -390,3 +439,5 @@ class WindowFilter:
         self._cross[hi - 1] = P_new
         self._var[hi - 1] = np.diagonal(P_new)
         self.n_updates += 1
+        if hi - self._split >= LAZY_STEPS:
+            self._flush()
