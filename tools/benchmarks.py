@@ -86,11 +86,11 @@ SECTIONS = (
     Section(
         "fixed-lag-real", "Fixed-lag smoother on the real recordings: accuracy against lag", "fixed_lag_real.py",
         "The MIMU4444 recordings converted with `gfimu convert mimu4444` (no calibration), then `ml`, the batch "
-        "smoother and the fixed-lag smoother at several lags (`-O lag_s=`), every estimate in the script's own process, one "
-        "after the other; ω against the mean of the board's gyros on the moving samples (|ω_ref| > 2 rad/s, "
-        "reference valid), as `gfimu evaluate log est.csv --moving-threshold-radps 2` scores it, the wall and "
-        "CPU time of each estimate (reading the log included), and whether the fixed-lag smoother meets its "
-        "two targets on each recording.",
+        "smoother and the fixed-lag smoother at several lags (`-O lag_s=`), every estimate in the script's own "
+        "process, one after the other; ω against the mean of the board's gyros on the moving samples "
+        "(|ω_ref| > 2 rad/s, reference valid), as `gfimu evaluate log est.csv --moving-threshold-radps 2` scores "
+        "it, the wall and CPU time of each estimate (reading the log included; worker processes too), and whether "
+        "the fixed-lag smoother meets its two targets on each recording.",
         full=("--recordings",), quick=("--quick", "--recordings"), recordings=True),
     Section(
         "fixed-lag-latency", "Fixed-lag smoother: latency, end to end, memory", "bench_fixed_lag.py",
