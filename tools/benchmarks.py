@@ -7,14 +7,14 @@ with few repeats (and one recording) to check that the page can be made, and say
 ``--only NAME`` (repeatable, or comma-separated) runs only those sections and replaces them in an
 existing page, each stating when and how it was run, the others kept as they were.
 
-    python3 tools/benchmarks.py --out docs/benchmarks.md            # the whole page (about 20 min on 2 cores)
+    python3 tools/benchmarks.py --out docs/benchmarks.md            # the whole page (about 40 min on 2 cores)
     python3 tools/benchmarks.py --out docs/benchmarks.md --quick    # a short run
     python3 tools/benchmarks.py --out docs/benchmarks.md --only real-flow
     python3 tools/benchmarks.py --list                              # the sections
 
 A script that fails leaves its section saying so (the command, its exit status and the end of its
 standard error), the other sections are still run and written, and the exit status is 1. The
-recordings of the ``real-flow`` section are read from ``--recordings`` (default
+recordings of the ``real-flow`` and ``fixed-lag-real`` sections are read from ``--recordings`` (default
 ``$GFIMU_MIMU4444_DIR`` or ``../shared/data/mimu4444`` beside the repository, as the tests do);
 without them that section says it was skipped.
 """
@@ -83,6 +83,15 @@ SECTIONS = (
         "mean of the board's gyros on the moving samples (|ω_ref| > 2 rad/s, reference valid), the figures "
         "`gfimu evaluate log est.csv --moving-threshold-radps 2` prints.",
         json=False, recordings=True),
+    Section(
+        "fixed-lag-real", "Fixed-lag smoother on the real recordings: accuracy against lag", "fixed_lag_real.py",
+        "The MIMU4444 recordings converted with `gfimu convert mimu4444` (no calibration), then `ml`, the batch "
+        "smoother and the fixed-lag smoother at several lags (`-O lag_s=`), every estimate in the script's own "
+        "process, one after the other; ω against the mean of the board's gyros on the moving samples "
+        "(|ω_ref| > 2 rad/s, reference valid), as `gfimu evaluate log est.csv --moving-threshold-radps 2` scores "
+        "it, the wall and CPU time of each estimate (reading the log included; worker processes too), and whether "
+        "the fixed-lag smoother meets its two targets on each recording.",
+        full=("--recordings",), quick=("--quick", "--recordings"), recordings=True),
     Section(
         "fixed-lag-latency", "Fixed-lag smoother: latency, end to end, memory", "bench_fixed_lag.py",
         "A simulated 500 Hz stream (random motion, 10 cm cube of four triads) pushed sample by sample into "
