@@ -32,6 +32,8 @@ def test_every_method_returns_its_motion_and_report(log, name):
     if est.applicable(log.array):
         pytest.skip(f"{name}: {est.applicable(log.array)}")
     before = dataclasses.asdict(est)
+    if name == "free-flight":  # its multi-start fit of a body not in free flight: 19 s on the 200 samples, 1.6 s on 8
+        log = log.select(slice(0, 8))
     run = est.estimate(log)
     assert isinstance(run, Estimate) and isinstance(run.motion, Motion) and isinstance(run.report, Report)
     assert len(run.motion) == len(log) and np.array_equal(run.motion.timestamps_ns, log.timestamps_ns)
