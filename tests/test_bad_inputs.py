@@ -458,7 +458,12 @@ def test_fixed_lag_solver_failure_is_named_not_leaked(work, capsys, monkeypatch)
                 raise RuntimeError("Indeterminant linear system detected while working near variable\n7 (Symbol: w7).")
             return self.inner.calculateEstimateVector(key)
 
-    monkeypatch.setattr(fixed_lag.FixedLagSmoother, "_new_smoother", lambda self: Failing(real_new(self)))
+    def failing_engine(self):
+        engine = real_new(self)  # the gtsam engine; its iSAM2 smoother fails
+        engine._smoother = Failing(engine._smoother)
+        return engine
+
+    monkeypatch.setattr(fixed_lag.FixedLagSmoother, "_new_smoother", failing_engine)
     err = refused(["estimate", str(work / "log"), "--method", "fixed-lag", "--out", str(work / "e.csv"),
                    "--no-progress", "-O", "tune_process_noise=False", "-O", "engine=gtsam"], work, capsys,
                   "the estimation problem is under-determined", status=2)  # the data's kind (gfimu.errors.DataError)

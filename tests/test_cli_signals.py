@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parents[1]
 def _start(tmp_path, entry=("-m", "gfimu")):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     program = [sys.executable, *entry] if entry[0] == "-m" else list(entry)
-    return subprocess.Popen(program + ["simulate", "random3d", "--out", str(tmp_path / "log"), "--duration-s", "30",
+    return subprocess.Popen(program + ["simulate", "random3d", "--out", str(tmp_path / "log"), "--duration-s", "600",
                                        "--no-progress"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
 

@@ -274,8 +274,9 @@ def test_gtsam_solver_failure_rebuilds_the_window_once_then_reports_the_time(mon
     out = []
     for i in range(300):
         out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
-    # one failed update: a warning, the window is rebuilt from its raw samples, nothing is lost
-    monkeypatch.setattr(sm, "_smoother", _FailingSmoother())
+    # one failed update of gtsam's smoother (inside the engine): a warning, the window is rebuilt from
+    # its raw samples, nothing is lost
+    monkeypatch.setattr(sm._smoother, "_smoother", _FailingSmoother())
     with pytest.warns(RuntimeWarning, match=r"t = 0\.600000 s.*Indeterminant.*re-initialising"):
         upd = sm.push(log.timestamps_ns[300], log.accel_mps2[300])
     out.extend(upd.smoothed)
@@ -292,8 +293,15 @@ def test_gtsam_solver_failure_rebuilds_the_window_once_then_reports_the_time(mon
     sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02, engine="gtsam")
     for i in range(50):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
-    monkeypatch.setattr(sm, "_smoother", _FailingSmoother())
-    monkeypatch.setattr(sm, "_new_smoother", lambda: _FailingSmoother())
+    monkeypatch.setattr(sm._smoother, "_smoother", _FailingSmoother())
+    new_engine = sm._new_smoother
+
+    def failing_engine():
+        engine = new_engine()
+        engine._smoother = _FailingSmoother()
+        return engine
+
+    monkeypatch.setattr(sm, "_new_smoother", failing_engine)
     with pytest.warns(RuntimeWarning), pytest.raises(FixedLagSmootherError, match=r"t = 0\.100000 s.*Indeterminant"):
         sm.push(log.timestamps_ns[50], log.accel_mps2[50])
 

@@ -353,6 +353,11 @@ def main(argv: list[str] | None = None) -> int:
     previous = _install_signal_handlers()
     try:
         return _main(argv)
+    except BaseException:
+        if _SIGNALLED:  # a signal is ending the run: its status, never a traceback (raised inside a C
+            # extension's import, the handler's SystemExit comes back as an ImportError)
+            raise SystemExit(128 + _SIGNALLED[0]) from None
+        raise
     finally:
         if argv is None:
             _ignore_signals()  # the command is done: its exit status stands
@@ -388,6 +393,8 @@ def _main(argv: list[str] | None) -> int:
         return 130
     except Exception as exc:  # noqa: BLE001 - every error becomes one line unless --debug
         _remove_temporaries()
+        if _SIGNALLED:  # the signal's own exit, already said (main)
+            raise
         if args.debug:
             raise
         message, status = error_message(exc)

@@ -250,6 +250,31 @@ class WindowFilter:
         self._cross[first:hi] = D @ self._cross[first:hi]
         self._P = D @ self._P @ D.T
 
+    # --- the window interface both engines share (gfimu.smoother._fixed_lag_gtsam.GtsamWindow) ----
+    def begin(self, k: int, t_ns: int, y, gyro=None, start=None, extra=None) -> None:
+        """The first state of a segment, index ``k``: the weak priors, then its readings (linearised
+        from ``start``)."""
+        self.start(k)
+        self.measure(y, gyro, start=start, extra=extra)
+
+    def advance(self, k: int, h: float, t_ns: int, y, gyro=None, extra=None, start=None, jerk_factor: float = 1.0,
+                prev=None) -> None:
+        """State ``k``, ``h`` seconds after the newest: predict, then its readings (linearised from
+        ``start``, else from the prediction and the other branches of the update's minimum)."""
+        self.predict(k, h, jerk_factor)
+        self.measure(y, gyro, start=start, extra=extra)
+
+    def commit(self) -> None:
+        """Nothing to do: every update is already solved."""
+
+    @property
+    def n_keys(self) -> int:
+        return 3 * len(self)
+
+    @property
+    def n_slots(self) -> int:
+        return self._cap
+
     # --- updates ------------------------------------------------------------------------
     def start(self, k: int) -> None:
         """First state of a segment, index ``k``: the weak zero-mean priors."""

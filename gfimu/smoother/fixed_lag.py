@@ -86,7 +86,7 @@ from ..motion import Motion
 from ..progress import progress as progress_bar
 from . import _fixed_lag_model as model
 from ._fixed_lag_filter import FilterFailure, WindowFilter
-from ._fixed_lag_model import gtsam  # imported on first use (engine 'gtsam')
+from ._fixed_lag_gtsam import GtsamWindow
 from .banded import solve
 from .graph import SmootherOptions, options_reason
 from .initialise import initial_estimate
@@ -326,21 +326,13 @@ class FixedLagSmoother:
     @property
     def n_keys(self) -> int:
         """Number of variables currently held by the window solver (three per state)."""
-        if self._smoother is None:
-            return 0
-        if isinstance(self._smoother, WindowFilter):
-            return 3 * len(self._smoother)
-        return len(self._smoother.timestamps())
+        return 0 if self._smoother is None else self._smoother.n_keys
 
     @property
     def n_factor_slots(self) -> int:
         """Number of factor slots in gtsam's graph (freed slots are reused); with the numpy
         engine, the number of preallocated window slots."""
-        if self._smoother is None:
-            return 0
-        if isinstance(self._smoother, WindowFilter):
-            return self._smoother.capacity
-        return int(self._smoother.getFactors().size())
+        return 0 if self._smoother is None else self._smoother.n_slots
 
     @property
     def window_length(self) -> int:
@@ -516,7 +508,7 @@ class FixedLagSmoother:
         self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
         self.options = chosen.options
         self.model = model.ArrayModel(self.array, chosen.options, self.fast_measurement, chosen.accel_noise_scale)
-        if isinstance(self._smoother, WindowFilter):
+        if self._smoother is not None:
             self._smoother.set_model(self.model)
 
     def _ml_motion(self, samples, part: Log):
@@ -625,7 +617,7 @@ class FixedLagSmoother:
 
     # --- internals ------------------------------------------------------------
     def _start_segment(self) -> None:
-        self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
+        self._smoother: WindowFilter | GtsamWindow | None = None  # the window engine of the segment
         self._window: deque = deque()  # (index, timestamp_ns) of states not yet emitted
         self._raw: deque = deque()  # (timestamp_ns, accel, gyro) of the same samples, for recovery
         self._warmup: list = []
@@ -634,30 +626,18 @@ class FixedLagSmoother:
         self._signs.reset()
 
     def _new_smoother(self):
+        """The window engine of a new segment (:data:`ENGINES`)."""
         if self.engine == "numpy":
             lag_n = int(math.ceil(self.lag_s * self.rate_hz * self.gap_factor)) + 4
             return WindowFilter(self.model, capacity=4 * lag_n, branches=self._branches)
-        params = gtsam.ISAM2Params()
-        # Only ω enters the factors nonlinearly (through q(ω)); the Jacobians of
-        # ω̇ and f are constant, so relinearising them would only cost time.
-        thresholds = gtsam.ISAM2ThresholdMap()
-        thresholds.insert(("w", np.full(3, self.relinearize_threshold)))
-        thresholds.insert(("d", np.full(3, 1e300)))
-        thresholds.insert(("f", np.full(3, 1e300)))
-        params.setRelinearizeThreshold(thresholds)
-        params.relinearizeSkip = self.relinearize_skip
-        # QR rather than Cholesky: the densities chosen from the data can be tiny about some axes
-        # (1e-4 of the others on a turntable), and gtsam's Cholesky then reports an indeterminate
-        # system; QR works on the square-root information and costs the same here.
-        params.setFactorization(self.factorization)
-        params.findUnusedFactorSlots = True  # reuse the slots of marginalised factors: bounded memory
         # Keys carry block-quantised timestamps, so gtsam marginalises one block of
         # states at a time (one re-elimination of the window per block rather than
         # per sample, which would also relinearise the window's factors). Every
         # state must be read at t + lag before its block goes: gtsam's lag is the
         # requested lag plus one block plus the longest step that is not a gap.
         margin_s = (self.gap_factor + 0.5) / self.rate_hz
-        return gtsam.IncrementalFixedLagSmoother(self.lag_s + self._block_s + margin_s, params)
+        return GtsamWindow(self.model, self.lag_s + self._block_s + margin_s, self._stamp, self.relinearize_threshold,
+                           self.relinearize_skip, self.factorization)
 
     def _time_s(self, t_ns: int) -> float:
         return (t_ns - self._origin_ns) * 1e-9
@@ -687,52 +667,28 @@ class FixedLagSmoother:
             if np.sum((x0[-2, OMEGA] + omega_hint) ** 2) < np.sum((x0[-2, OMEGA] - omega_hint) ** 2):
                 x0[:, OMEGA] *= -1.0
         self._smoother = self._new_smoother()
-        if isinstance(self._smoother, WindowFilter):
-            self._initialise_filter(x0)
-            return
-        graph = gtsam.NonlinearFactorGraph()
-        values = gtsam.Values()
-        stamps = {}
-        for j, (t_ns, y, g) in enumerate(self._warmup):
-            self._k += 1
-            k = self._k
-            if j == 0:
-                self.model.add_priors(graph, k)
-            else:
-                h = (t_ns - self._warmup[j - 1][0]) * 1e-9
-                self.model.add_process(graph, k - 1, k, h)
-            self.model.add_measurement(graph, k, y, g, self.model.sample_terms(t_ns, y, g))
-            model.insert_state(values, k, x0[j, OMEGA], x0[j, OMEGA_DOT], x0[j, SPECIFIC_FORCE])
-            t = self._stamp(t_ns)
-            for key in model.keys(k):
-                stamps[key] = t
-            self._window.append((k, t_ns))
-            self._raw.append((t_ns, y, g))
-        self._update(graph, values, stamps, self._warmup[-1][0])
-        self._warmup = []
-        self._remember_newest()
-
-    def _initialise_filter(self, x0: np.ndarray) -> None:
-        """The warm-up samples through the numpy window filter, each linearised from its initial value."""
-        filt = self._smoother
-        prev_t = None
+        engine = self._smoother
+        t_ns = self._warmup[0][0]
         try:
             for j, (t_ns, y, g) in enumerate(self._warmup):
                 self._k += 1
+                extra = self.model.sample_terms(t_ns, y, g)
                 if j == 0:
-                    filt.start(self._k)
+                    engine.begin(self._k, t_ns, y, g, start=x0[j], extra=extra)
                 else:
-                    filt.predict(self._k, (t_ns - prev_t) * 1e-9)
-                filt.measure(y, g, start=x0[j], extra=self.model.sample_terms(t_ns, y, g))
-                prev_t = t_ns
+                    engine.advance(self._k, (t_ns - self._warmup[j - 1][0]) * 1e-9, t_ns, y, g, extra=extra,
+                                   start=x0[j])
                 self._window.append((self._k, t_ns))
                 self._raw.append((t_ns, y, g))
+            engine.commit()
         except FilterFailure as err:
-            raise FixedLagSmootherError(
-                f"fixed-lag smoother failed at t = {self._time_s(t_ns):.6f} s after the stream start ({t_ns} ns): "
-                f"{err}") from err
+            raise self._failure(t_ns, err) from err
         self._warmup = []
         self._remember_newest()
+
+    def _failure(self, t_ns: int, err: Exception, what: str = "failed") -> FixedLagSmootherError:
+        return FixedLagSmootherError(f"fixed-lag smoother {what} at t = {self._time_s(t_ns):.6f} s after the stream "
+                                     f"start ({t_ns} ns): {err}".strip())
 
     def _add_sample(self, sample) -> None:
         t_ns, y, gyro = sample
@@ -740,32 +696,14 @@ class FixedLagSmoother:
         self._k += 1
         k = self._k
         h = (t_ns - self._prev[0]) * 1e-9
-        if isinstance(self._smoother, WindowFilter):
-            try:
-                self._smoother.predict(k, h, self._jerk_factor)
-                self._smoother.measure(y, gyro, extra=self.model.sample_terms(t_ns, y, gyro))
-                self._follow_sign(k, t_ns)
-            except FilterFailure as err:
-                self._k = k_prev
-                self._recover(sample, FixedLagSmootherError(
-                    f"fixed-lag smoother failed at t = {self._time_s(t_ns):.6f} s after the stream start "
-                    f"({t_ns} ns): {err}"))
-                return
-            self._window.append((k, t_ns))
-            self._raw.append(sample)
-            self._remember_newest()
-            return
-        omega0, omega_dot0, f0 = self.model.predict(self._prev[1], self._prev[2], self._prev[3], h, y)
-        graph = gtsam.NonlinearFactorGraph()
-        values = gtsam.Values()
-        self.model.add_process(graph, k_prev, k, h)
-        self.model.add_measurement(graph, k, y, gyro, self.model.sample_terms(t_ns, y, gyro))
-        model.insert_state(values, k, omega0, omega_dot0, f0)
-        t = self._stamp(t_ns)
         try:
-            self._update(graph, values, {key: t for key in model.keys(k)}, t_ns)
-        except FixedLagSmootherError as err:
-            self._recover(sample, err)
+            self._smoother.advance(k, h, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro),
+                                   jerk_factor=self._jerk_factor, prev=self._prev[1:])
+            self._smoother.commit()
+            self._follow_sign(k, t_ns)
+        except FilterFailure as err:
+            self._k = k_prev
+            self._recover(sample, self._failure(t_ns, err))
             return
         self._window.append((k, t_ns))
         self._raw.append(sample)
@@ -795,32 +733,17 @@ class FixedLagSmoother:
         self._warmup = samples
         self._initialise(omega_hint=hint)
 
-    def _update(self, graph, values, stamps, t_ns) -> None:
-        try:
-            self._smoother.update(graph, values, stamps)
-        except RuntimeError as err:
-            raise FixedLagSmootherError(
-                f"fixed-lag smoother failed at t = {self._time_s(t_ns):.6f} s after the stream start "
-                f"({t_ns} ns): {err}".strip()
-            ) from err
-
     def _remember_newest(self) -> None:
         k, t_ns = self._window[-1]
         w, dw, f = self._values_of(k, t_ns)
         self._prev = (t_ns, w, dw, f)
 
     def _values_of(self, k: int, t_ns: int):
-        if isinstance(self._smoother, WindowFilter):
-            x = self._smoother.mean(k)
-            return x[0:3].copy(), x[3:6].copy(), x[6:9].copy()
-        calc = self._smoother.calculateEstimateVector
-        kw, kd, kf = model.keys(k)
         try:
-            return calc(kw).reshape(3), calc(kd).reshape(3), calc(kf).reshape(3)
-        except RuntimeError as err:  # gtsam's IndeterminantLinearSystem and the like
-            raise FixedLagSmootherError(
-                f"fixed-lag smoother could not solve the state at t = {self._time_s(t_ns):.6f} s after the stream "
-                f"start ({t_ns} ns): {err}".strip()) from err
+            x = self._smoother.mean(k)
+        except FilterFailure as err:
+            raise self._failure(t_ns, err, "could not solve the state") from err
+        return x[0:3].copy(), x[3:6].copy(), x[6:9].copy()
 
     def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
         k, t_ns = entry
@@ -829,17 +752,12 @@ class FixedLagSmoother:
         else:
             w, dw, f = self._values_of(k, t_ns)
         sig = (None, None, None)
-        if with_sigma and isinstance(self._smoother, WindowFilter):
-            sd = self._smoother.sigma(k)
-            sig = (sd[0:3], sd[3:6], sd[6:9])
-        elif with_sigma:
+        if with_sigma:
             try:
-                sig = tuple(np.sqrt(np.clip(np.diag(self._smoother.marginalCovariance(key)), 0, None))
-                            for key in model.keys(k))
-            except RuntimeError as err:
-                raise FixedLagSmootherError(
-                    f"fixed-lag smoother could not compute the uncertainty at t = {self._time_s(t_ns):.6f} s after "
-                    f"the stream start ({t_ns} ns): {err}".strip()) from err
+                sd = self._smoother.sigma(k)
+            except FilterFailure as err:
+                raise self._failure(t_ns, err, "could not compute the uncertainty") from err
+            sig = (sd[0:3], sd[3:6], sd[6:9])
         return StateEstimate(t_ns, w, dw, f, *sig)
 
     def _emit_due(self) -> list[StateEstimate]:
@@ -850,8 +768,7 @@ class FixedLagSmoother:
         while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
             out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
             self._raw.popleft()
-            if isinstance(self._smoother, WindowFilter):
-                self._smoother.drop_oldest()
+            self._smoother.drop_oldest()
         return out
 
 
