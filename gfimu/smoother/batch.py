@@ -59,7 +59,7 @@ from .banded import (  # noqa: F401  (the banded core, also importable from here
     to_lower_banded,
 )
 from .graph import SmootherOptions, SmootherProblem, options_reason
-from .initialise import initial_attitude, initial_estimate, initial_states, sign_chain
+from .initialise import initial_attitude, initial_states, sign_chain
 from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from .restarts import branch_restarts
 from .result import SmootherEstimator, SmootherResult

@@ -39,7 +39,6 @@ Pure computation: no I/O.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
