@@ -41,8 +41,7 @@ import numpy as np
 from ..factors import kinematics, process
 from ._fixed_lag_model import ArrayModel
 from .graph import robust_weight
-from .restarts import plane_normal
-from .stream_model import branch
+from .restarts import branch, plane_normal
 
 
 LAZY_STEPS = 32
@@ -228,7 +227,7 @@ class WindowFilter:
 
     def move_branch(self, k_first: int, kind: int) -> None:
         """The states from ``k_first`` to the newest onto branch ``kind`` of the readings' ambiguity
-        (:func:`gfimu.smoother.stream_model.branch`: bit 1 ω flipped, bit 2 mirrored through the array's
+        (:func:`gfimu.smoother.restarts.branch`: bit 1 ω flipped, bit 2 mirrored through the array's
         plane): their means, and the covariances by the linear part ``D = diag(A, I, I)`` (A = -I, the
         mirror I - 2nnᵀ, or both) on each moved state."""
         self._flush()
@@ -320,7 +319,7 @@ class WindowFilter:
 
     def _branch_starts(self, x: np.ndarray) -> list[np.ndarray]:
         """x on the other branches: ω flipped, ω mirrored through the array's plane (ω̇ moved so that a
-        planar array's readings stay fitted), both (:func:`gfimu.smoother.stream_model.branch`)."""
+        planar array's readings stay fitted), both (:func:`gfimu.smoother.restarts.branch`)."""
         out = []
         for kind in (1, 2, 3):
             y = x.copy()

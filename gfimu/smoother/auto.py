@@ -51,6 +51,9 @@ from ..log import Log
 from ..rigid_body import quadratic_terms
 from .graph import SmootherOptions
 
+CHECK_SAMPLES = 5000
+"""The model check (:func:`gfimu.smoother.auto.check_model`) reads at most about this many samples,
+evenly spread over the log or the stream's recent past (120,000 residuals of an 8-triad array)."""
 NOISE_RATIO_LIMIT = 2.0
 """Largest robust residual scale over the stated noise std of a consistent log."""
 TAIL_SHARE_LIMIT = 0.006

@@ -34,6 +34,7 @@ from ..motion import Motion
 from ..progress import progress as progress_bar
 from ..rotations import quaternion_from_matrix
 from .auto import (
+    CHECK_SAMPLES,
     check_model,
     estimate_noise_variances,
     measured_noise_options,
@@ -106,9 +107,7 @@ def window_slices(n: int, rate_hz: float, window_s: float | None, overlap_s: flo
     return out
 
 
-CHECK_SAMPLES = 5000
-"""The model check (:func:`gfimu.smoother.auto.check_model`) reads at most about this many samples,
-evenly spread over the log (120,000 residuals of an 8-triad array)."""
+
 
 
 def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,

@@ -110,22 +110,38 @@ def plane_normal(positions_m: np.ndarray) -> np.ndarray:
     return np.linalg.svd(p - p.mean(axis=0))[2][-1]
 
 
+def branch(kind: int, omega: np.ndarray, omega_dot: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ω, ω̇) (each (3,) or (N, 3)) on branch ``kind`` of the readings' ambiguity: bit 1 flips ω
+    (q(ω) = q(-ω)), bit 2 mirrors ω through the plane of unit normal ``normal`` with ω̇ moved so that a
+    planar array's readings stay fitted sample by sample, ``ω' = ω - 2 (ω·n) n``,
+    ``ω̇' = ω̇ - 2 (ω·n) (n × ω)``; the four form a group (``a ^ b``)."""
+    w, dw = omega, omega_dot
+    if kind & 2:
+        n = normal
+        wn = (w @ n)[..., None] if w.ndim > 1 else float(w @ n)
+        n_x_w = np.stack([n[1] * w[..., 2] - n[2] * w[..., 1], n[2] * w[..., 0] - n[0] * w[..., 2],
+                          n[0] * w[..., 1] - n[1] * w[..., 0]], axis=-1)
+        w, dw = w - 2.0 * wn * n, dw - 2.0 * wn * n_x_w
+    if kind & 1:
+        w = -w
+    return w, dw
+
+
+def _on_branch(kind: int, X: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    out = X.copy()
+    out[:, OMEGA], out[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], normal)
+    return out
+
+
 def flipped(X: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """ω turned to -ω, ω̇ kept (the quadratic terms do not see the sign of ω)."""
-    out = X.copy()
-    out[:, OMEGA] = -X[:, OMEGA]
-    return out
+    return _on_branch(1, X, normal)
 
 
 def mirrored(X: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """ω mirrored through the plane of unit normal n, ω̇ moved so that a planar array's readings stay
-    fitted sample by sample: ``ω' = ω - 2 (ω·n) n``, ``ω̇' = ω̇ - 2 (ω·n) (n × ω)``."""
-    out = X.copy()
-    w = X[:, OMEGA]
-    wn = w @ normal
-    out[:, OMEGA] = w - 2.0 * wn[:, None] * normal[None, :]
-    out[:, OMEGA_DOT] = X[:, OMEGA_DOT] - 2.0 * wn[:, None] * np.cross(normal[None, :], w)
-    return out
+    fitted sample by sample (:func:`branch`)."""
+    return _on_branch(2, X, normal)
 
 
 BRANCHES = (flipped, mirrored)

@@ -30,14 +30,13 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from ..log import Log
-from .auto import (ModelCheck, check_model, estimate_noise_variances, misfit_options, motion_densities,
+from .auto import (CHECK_SAMPLES, ModelCheck, check_model, estimate_noise_variances, misfit_options, motion_densities,
                    with_densities)
 from .graph import SmootherOptions
 from .initialise import sign_chain_scale
+from .restarts import branch
 from .tuning import Tuning, tuned_problem
 
-CHECK_SAMPLES = 5000
-"""At most this many samples of the stretch enter the model check (evenly spread), as the batch smoother."""
 
 
 @dataclass(frozen=True)
@@ -229,21 +228,6 @@ class LocalDensity:
         self.resolved = mean_steps > RESOLVED_FACTOR * mean_noise
         excess = max(mean_steps - mean_noise, mean_noise)
         return math.sqrt(excess / 3.0)
-
-
-def branch(kind: int, omega: np.ndarray, omega_dot: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(ω, ω̇) on branch ``kind`` of the readings' ambiguity (:mod:`gfimu.smoother.restarts`): bit 1
-    flips ω (q(ω) = q(-ω)), bit 2 mirrors ω through the array's plane of unit normal ``normal`` with
-    ω̇ moved so that a planar array's readings stay fitted; the four form a group (``a ^ b``)."""
-    w, dw = omega, omega_dot
-    if kind & 2:
-        wn = float(w @ normal)
-        n = normal
-        n_x_w = np.array([n[1] * w[2] - n[2] * w[1], n[2] * w[0] - n[0] * w[2], n[0] * w[1] - n[1] * w[0]])
-        w, dw = w - 2.0 * wn * n, dw - 2.0 * wn * n_x_w
-    if kind & 1:
-        w = -w
-    return w, dw
 
 
 class StreamSignChain:
