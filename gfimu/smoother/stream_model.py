@@ -118,7 +118,7 @@ def robust(part: Log, options: SmootherOptions, check: ModelCheck, ml_motion, tu
     # no robust weights on the readings: a recursive update weighs each sample's axes once, at the
     # estimate that sample itself moved, and a poor prediction (fast motion between samples) would
     # have the informative axes weighted down (on the MIMU4444 recordings the Cauchy weights made the
-    # stream's error worse by half); the measured floor and slope carry the noise level
+    # stream's error worse, a trial not kept as a script); the measured floor and slope carry the noise level
     chosen = replace(chosen, accel_robust_threshold=0.0)
     chosen = replace(chosen, **_kept(options, chosen))
     chosen = replace(chosen, tune_process_noise=False)
