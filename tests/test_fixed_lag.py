@@ -8,7 +8,7 @@ import pytest
 
 from gfimu.array import Gyroscope, cube_array, paper001_array, single_triad
 from gfimu.methods import make_estimator
-from gfimu.factors import accelerometer, kinematics
+from gfimu.factors import accelerometer, kinematics, process
 from gfimu.log import Log
 from gfimu.simulate import SensorErrors, simulate
 from gfimu.smoother import _fixed_lag_model as model
@@ -74,21 +74,41 @@ def test_fast_accelerometer_factor_equals_per_sensor_factors_and_numerical_jacob
     np.testing.assert_allclose(A_ordered, num, rtol=1e-6, atol=1e-5)
 
 
-def test_fast_trapezoid_factor_equals_kinematics_factor():
+def test_step_is_the_white_jerk_of_the_batch_model():
+    """The stream's step comes from the batch model's groups: for the white jerk its transition is
+    x1 = [[I, h I], [0, I]] x0 on (ω, ω̇) and f1 = f0, its noise the closed form of the trapezoid and the
+    ω̇ random walk (σ_int² + h²/4 σ_ω̇², h/2 σ_ω̇², σ_ω̇² per axis, σ_f² on f), and the gtsam engine's factor
+    has the error of those three residuals, whitened."""
     rng = np.random.default_rng(5)
-    m = model.ArrayModel(cube_array(), SmootherOptions(), fast_measurement=True)
+    opts = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5, process_axis_factors=(0.1, 0.5, 2.0),
+                           specific_force_random_walk_mps2_per_sqrt_s=0.4)
+    m = model.ArrayModel(cube_array(), opts, fast_measurement=True)
+    h = 0.002
+    step = m.step(h)
+    I3 = np.eye(3)
+    F = np.eye(9)
+    F[0:3, 3:6] = h * I3
+    np.testing.assert_allclose(step.F, F, atol=1e-12)
+    axis = np.array([0.1, 0.5, 2.0])
+    s_int = kinematics.trapezoid_sigma(7.5, h) * axis
+    s_dw = process.random_walk_sigma(7.5, h) * axis
+    s_f = process.random_walk_sigma(0.4, h)
+    Q = np.zeros((9, 9))
+    Q[0:3, 0:3] = np.diag(s_int**2 + 0.25 * h * h * s_dw**2)
+    Q[0:3, 3:6] = Q[3:6, 0:3] = np.diag(0.5 * h * s_dw**2)
+    Q[3:6, 3:6] = np.diag(s_dw**2)
+    Q[6:, 6:] = s_f**2 * I3
+    np.testing.assert_allclose(step.Q, Q, rtol=1e-9, atol=1e-18)
+    assert step.c is None and step.H0 is None
     graph = gtsam.NonlinearFactorGraph()
-    m.add_process(graph, 3, 4, 0.002)
-    trapezoid = graph.at(0)
-    w0, w1, d0, d1 = rng.normal(size=(4, 3))
+    m.add_process(graph, 3, 4, h)
+    assert graph.size() == 1
+    w0, w1, d0, d1, f0, f1 = rng.normal(size=(6, 3))
     keys0, keys1 = model.keys(3), model.keys(4)
-    values = values_of([(keys0[0], w0), (keys1[0], w1), (keys0[1], d0), (keys1[1], d1),
-                        (keys0[2], np.zeros(3)), (keys1[2], np.zeros(3))])
-    r_ref, _ = kinematics.angular_velocity_residual(w0, w1, d0, d1, 0.002)
-    np.testing.assert_allclose(trapezoid.unwhitenedError(values), r_ref[0], atol=1e-14)
-    # noise: the batch smoother's trapezoid sigma q sqrt(h³/12)
-    sigma = kinematics.trapezoid_sigma(SmootherOptions().omega_dot_random_walk_radps2_per_sqrt_s, 0.002)
-    np.testing.assert_allclose(trapezoid.whitenedError(values), r_ref[0] / sigma, rtol=1e-12)
+    values = values_of([(keys0[0], w0), (keys1[0], w1), (keys0[1], d0), (keys1[1], d1), (keys0[2], f0), (keys1[2], f1)])
+    r_trap, _ = kinematics.angular_velocity_residual(w0, w1, d0, d1, h)
+    expected = 0.5 * (np.sum((r_trap[0] / s_int) ** 2) + np.sum(((d1 - d0) / s_dw) ** 2) + np.sum(((f1 - f0) / s_f) ** 2))
+    assert graph.at(0).error(values) == pytest.approx(expected, rel=1e-10)
 
 
 def test_fast_and_shared_factor_paths_give_the_same_estimate():

@@ -26,6 +26,8 @@ def dense_map(m: model.ArrayModel, times_s, Y, x_init, iterations=20):
     prior_sd = np.repeat([o.initial_omega_std_radps, o.initial_omega_dot_std_radps2,
                           o.initial_specific_force_std_mps2], 3)
     sig = m.accel_sigma_mps2
+    axis_factors = np.asarray(o.process_axis_factors, dtype=float)
+    natural_frequency_radps = 2 * np.pi * np.asarray(o.process_axis_frequencies_hz, dtype=float)
     X = np.array(x_init, dtype=float)
     for _ in range(iterations):
         rows, res = [], []
@@ -41,9 +43,9 @@ def dense_map(m: model.ArrayModel, times_s, Y, x_init, iterations=20):
         for k in range(1, n):
             h = times_s[k] - times_s[k - 1]
             q = o.omega_dot_random_walk_radps2_per_sqrt_s
-            if m.oscillator:
-                phi = process.oscillator_transition(h, m.natural_frequency_radps)[0]
-                cov = process.oscillator_step_covariance(q, h, m.natural_frequency_radps, m.axis_factors)[0]
+            if np.any(natural_frequency_radps > 0):
+                phi = process.oscillator_transition(h, natural_frequency_radps)[0]
+                cov = process.oscillator_step_covariance(q, h, natural_frequency_radps, axis_factors)[0]
                 W = np.linalg.inv(np.linalg.cholesky(cov))
                 Phi = np.zeros((6, 6))
                 for i in range(3):
@@ -52,8 +54,8 @@ def dense_map(m: model.ArrayModel, times_s, Y, x_init, iterations=20):
                 A0[:, :6], A1[:, :6] = -Phi, np.eye(6)
                 add([(k - 1, W @ A0), (k, W @ A1)], W @ (X[k, :6] - Phi @ X[k - 1, :6]))
             else:
-                s_int = kinematics.trapezoid_sigma(q, h) * m.axis_factors
-                s_dw = process.random_walk_sigma(q, h) * m.axis_factors
+                s_int = kinematics.trapezoid_sigma(q, h) * axis_factors
+                s_dw = process.random_walk_sigma(q, h) * axis_factors
                 A0, A1 = np.zeros((3, 9)), np.zeros((3, 9))
                 A0[:, :3], A0[:, 3:6] = -np.eye(3), -0.5 * h * np.eye(3)
                 A1[:, :3], A1[:, 3:6] = np.eye(3), -0.5 * h * np.eye(3)

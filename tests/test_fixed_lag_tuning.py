@@ -92,11 +92,12 @@ def test_per_axis_factors_and_noise_scale_enter_the_factors():
                           specific_force_random_walk_mps2_per_sqrt_s=0.4)
     m = model.ArrayModel(CUBE_5CM, opt, accel_noise_scale=2.5)
     h = 0.002
-    int_noise, dw_noise, f_noise, _ = m._process_noises(h)
+    Q = m.step(h).Q
     axis = np.array([1e-3, 0.2, 1.0])
-    np.testing.assert_allclose(int_noise.sigmas(), kinematics.trapezoid_sigma(7.5, h) * axis, rtol=1e-12)
-    np.testing.assert_allclose(dw_noise.sigmas(), process.random_walk_sigma(7.5, h) * axis, rtol=1e-12)
-    np.testing.assert_allclose(f_noise.sigmas(), np.full(3, process.random_walk_sigma(0.4, h)), rtol=1e-12)
+    s_int, s_dw = kinematics.trapezoid_sigma(7.5, h) * axis, process.random_walk_sigma(7.5, h) * axis
+    np.testing.assert_allclose(np.diagonal(Q)[3:6], s_dw**2, rtol=1e-9)
+    np.testing.assert_allclose(np.diagonal(Q)[0:3], s_int**2 + 0.25 * h * h * s_dw**2, rtol=1e-9)
+    np.testing.assert_allclose(np.diagonal(Q)[6:], np.full(3, process.random_walk_sigma(0.4, h) ** 2), rtol=1e-9)
     np.testing.assert_allclose(m.accel_noise.sigmas(), np.full(12, 2.5 * 0.07), rtol=1e-12)
 
 

@@ -35,7 +35,7 @@ def test_closed_form_normal_equations_match_the_jacobians(robust):
     states = rng.normal(scale=[3.0] * 3 + [30.0] * 3 + [5.0] * 3, size=(len(log), 9))
     params = np.zeros(problem.n_global)
     if robust:
-        problem.set_robust_weights(states, params)
+        problem = problem.reweighted(states, params)
     closed = [g for g in problem.groups if isinstance(g, (AccelerometerGroup, MotionModelGroup, SpecificForceWalkGroup))]
     assert len(closed) == 3
     assert (problem.accel_sigma_per_sample is not None) == robust  # per-sample whitening, or one for all

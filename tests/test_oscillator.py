@@ -175,7 +175,7 @@ def test_fixed_lag_model_adds_the_oscillator_step(fast):
     model = ArrayModel(CUBE_5CM, opt, fast_measurement=fast)
     graph = gtsam.NonlinearFactorGraph()
     model.add_process(graph, 0, 1, 0.002)
-    assert graph.size() == 2  # oscillator step + specific-force random walk
+    assert graph.size() == 1  # oscillator step and specific-force random walk, one factor of the step's rows
     from gfimu.smoother._fixed_lag_model import keys
 
     values = gtsam.Values()
@@ -187,4 +187,12 @@ def test_fixed_lag_model_adds_the_oscillator_step(fast):
                                        2 * np.pi * np.array([0.0, 2.0, 0.5]))
     cov = process.oscillator_step_covariance(opt.omega_dot_random_walk_radps2_per_sqrt_s, 0.002,
                                              2 * np.pi * np.array([0.0, 2.0, 0.5]), (1.0, 0.1, 0.01))[0]
-    assert graph.at(0).error(values) == pytest.approx(0.5 * r[0] @ np.linalg.solve(cov, r[0]), rel=1e-9)
+    s_f = process.random_walk_sigma(opt.specific_force_random_walk_mps2_per_sqrt_s, 0.002)
+    walk = 0.5 * np.sum(((states[1][2] - states[0][2]) / s_f) ** 2)
+    assert graph.at(0).error(values) == pytest.approx(0.5 * r[0] @ np.linalg.solve(cov, r[0]) + walk, rel=1e-9)
+    # the transition the numpy engine predicts with: the oscillator's Φ, its covariance
+    step = model.step(0.002)
+    phi = process.oscillator_transition(0.002, 2 * np.pi * np.array([0.0, 2.0, 0.5]))[0]
+    for i in range(3):
+        np.testing.assert_allclose(step.F[np.ix_([i, 3 + i], [i, 3 + i])], phi[i], atol=1e-12)
+    np.testing.assert_allclose(step.Q[:6, :6], cov, rtol=1e-8, atol=1e-14)

@@ -20,12 +20,12 @@ def test_huber_and_cauchy_weights_of_accelerometer_axes():
     states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
     for loss, expected in (("huber", 2.0 / 10.0), ("cauchy", 1.0 / (1.0 + 25.0))):
         p = SmootherProblem(log, SmootherOptions(robust_loss=loss, accel_robust_threshold=2.0))
-        p.set_robust_weights(states)
+        p = p.reweighted(states)
         ratio = (p.accel_sigma[None, :] / p.accel_sigma_per_sample) ** 2  # = weight
         assert ratio[7, 4] == pytest.approx(expected, rel=1e-9)
         ratio[7, 4] = 1.0
         assert np.allclose(ratio, 1.0, atol=1e-12)
-        p.set_robust_weights(states)  # idempotent: weights come from the base noise
+        p = p.reweighted(states)  # idempotent: weights come from the base noise
         assert (p.accel_sigma[4] / p.accel_sigma_per_sample[7, 4]) ** 2 == pytest.approx(expected, rel=1e-9)
 
 
@@ -38,14 +38,14 @@ def test_process_weights_follow_the_step_residual():
     p = SmootherProblem(log, SmootherOptions(process_robust_threshold=3.0))
     s0 = p.trapezoid_sigma.copy()
     states[20:, 0] += 50.0 * s0[19]  # ω_x jumps between samples 19 and 20
-    p.set_robust_weights(states)
+    p = p.reweighted(states)
     w = (s0 / p.trapezoid_sigma) ** 2
     big = np.abs(w - 1.0) > 1e-12
     assert np.nonzero(big)[0].tolist() == [19]
     # the jump dominates its step: whitened rms over the 6 rows ≈ 50 / sqrt(6)
     assert w[19] == pytest.approx(3.0 / (50.0 / np.sqrt(6.0)), rel=0.05)
     assert np.allclose((s0 / p.trapezoid_sigma) ** 2, (p.base_noise()[2] / p.omega_dot_step_sigma) ** 2)
-    p.set_robust_weights(np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2]))
+    p = p.reweighted(np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2]))
     assert np.all((s0 / p.trapezoid_sigma) ** 2 > 0.99)
 
 

@@ -130,9 +130,8 @@ class FrozenModel:
 
     def resolve(self, X: np.ndarray):
         """Robust re-weighted Levenberg-Marquardt under the frozen noise (each step lowers J), from X."""
-        p = self.problem
-        p.set_base_noise(self.sigma, *self.base)
-        reweight = reweighting(p, replace(p.options, accel_noise_slope_mps2_per_radps=0.0))
+        p = self.problem.with_base_noise(self.sigma, *self.base)
+        reweight = reweighting(replace(p.options, accel_noise_slope_mps2_per_radps=0.0))
         return solve(p, X, reweight=reweight, max_iterations=100)
 
 

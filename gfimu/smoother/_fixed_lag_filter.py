@@ -38,8 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..factors import kinematics, process
-from ._fixed_lag_model import ArrayModel
+from ._fixed_lag_model import ArrayModel, Step
 from .graph import robust_weight
 from .restarts import branch, plane_normal
 
@@ -64,7 +63,6 @@ class WindowFilter:
                  step_tolerance_radps: float = 1e-6, branches: bool = False) -> None:
         self.iterations = int(iterations)
         self.step_tolerance_radps = float(step_tolerance_radps)
-        self._process_cache: dict = {}
         self.branches = bool(branches)
         """Try the other branches of each update's minimum (see :meth:`measure`)."""
         self._normal = plane_normal(np.concatenate([np.atleast_2d(pos) for _, pos, _ in model._geometry]))
@@ -98,12 +96,10 @@ class WindowFilter:
         are weighted by it, the window keeps what it has."""
         self.model = model
         o = model.options
-        self._prior_var = np.repeat(np.array([o.initial_omega_std_radps, o.initial_omega_dot_std_radps2,
-                                              o.initial_specific_force_std_mps2], dtype=float) ** 2, 3)
+        self._prior_var = np.asarray(model.first_sigma[:9], dtype=float) ** 2
         self._R = model.accel_sigma_mps2 ** 2
         self._gyro_var = model.gyro_sigma_radps ** 2
         self._Rg = np.concatenate([self._R, np.full(3, self._gyro_var)])
-        self._process_cache.clear()
 
     # --- window -------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -179,37 +175,6 @@ class WindowFilter:
         self._split = n
 
     # --- model --------------------------------------------------------------------------
-    def _process(self, h: float):
-        key = round(h * 1e9)
-        cached = self._process_cache.get(key)
-        if cached is not None:
-            return cached
-        m, o = self.model, self.model.options
-        q_dw = o.omega_dot_random_walk_radps2_per_sqrt_s
-        F = np.eye(9)
-        Q = np.zeros((9, 9))
-        if m.oscillator:
-            phi = process.oscillator_transition(h, m.natural_frequency_radps)[0]
-            cov = process.oscillator_step_covariance(q_dw, h, m.natural_frequency_radps, m.axis_factors)[0]
-            for i in range(3):
-                F[i, i], F[i, 3 + i], F[3 + i, i], F[3 + i, 3 + i] = phi[i, 0, 0], phi[i, 0, 1], phi[i, 1, 0], phi[i, 1, 1]
-            Q[:6, :6] = cov
-        else:
-            s_int = float(kinematics.trapezoid_sigma(q_dw, h)) * m.axis_factors
-            s_dw = float(process.random_walk_sigma(q_dw, h)) * m.axis_factors
-            for i in range(3):
-                F[i, 3 + i] = h
-                Q[i, i] = s_int[i] ** 2 + 0.25 * h * h * s_dw[i] ** 2
-                Q[i, 3 + i] = Q[3 + i, i] = 0.5 * h * s_dw[i] ** 2
-                Q[3 + i, 3 + i] = s_dw[i] ** 2
-        s_f = float(process.random_walk_sigma(o.specific_force_random_walk_mps2_per_sqrt_s, h))
-        Q[6:, 6:] = s_f * s_f * np.eye(3)
-        if len(self._process_cache) > 64:  # irregular timestamps: keep the cache bounded
-            self._process_cache.clear()
-        cached = (F, np.ascontiguousarray(F.T), Q)
-        self._process_cache[key] = cached
-        return cached
-
     def _measure(self, x: np.ndarray, gyro):
         """Prediction ``h(x)`` and Jacobian H of the readings (and gyroscope) at ``x``."""
         m = self.model
@@ -256,11 +221,11 @@ class WindowFilter:
         self.start(k)
         self.measure(y, gyro, start=start, extra=extra)
 
-    def advance(self, k: int, h: float, t_ns: int, y, gyro=None, extra=None, start=None, jerk_factor: float = 1.0,
-                prev=None) -> None:
-        """State ``k``, ``h`` seconds after the newest: predict, then its readings (linearised from
-        ``start``, else from the prediction and the other branches of the update's minimum)."""
-        self.predict(k, h, jerk_factor)
+    def advance(self, k: int, step: Step, t_ns: int, y, gyro=None, extra=None, start=None, prev=None) -> None:
+        """State ``k``, one ``step`` (:meth:`ArrayModel.step`) after the newest: predict, then its readings
+        (linearised from ``start``, else from the prediction and the other branches of the update's
+        minimum)."""
+        self.predict(k, step)
         self.measure(y, gyro, start=start, extra=extra)
 
     def commit(self) -> None:
@@ -290,19 +255,22 @@ class WindowFilter:
         self._cross[0] = self._P
         self._hi = 1
 
-    def predict(self, k: int, h: float, jerk_factor: float = 1.0) -> None:
-        """Append state ``k`` one step of ``h`` seconds after the newest; ``jerk_factor`` scales the
-        std of the step's white-jerk noise (the local motion density of
-        :func:`gfimu.smoother.auto.local_density_factors`, as the batch smoother's robust model)."""
+    def predict(self, k: int, step: Step | float) -> None:
+        """Append state ``k`` one ``step`` after the newest (:class:`~gfimu.smoother._fixed_lag_model.Step`:
+        the step groups' rows as the transition ``x1 = F x0 + c + n``, n ~ N(0, Q), and their rows on the
+        newest state alone, applied to it first; a float: :meth:`ArrayModel.step` of that many seconds)."""
         if k != self._base + self._hi:
             raise ValueError(f"state {k} does not follow the window's newest state")
-        F, FT, Q = self._process(h)
-        if jerk_factor != 1.0:
-            Q = Q.copy()
-            Q[:6, :6] *= jerk_factor * jerk_factor
+        if not isinstance(step, Step):
+            step = self.model.step(float(step))
+        if step.H0 is not None:
+            self.update_linear(step.H0, step.z0)
+        F, FT, Q = step.F, step.FT, step.Q
         self._make_room()
         lo, hi = self._split, self._hi  # the recent states at once, the old ones through T
         x = F @ self.mean(self._base + hi - 1)
+        if step.c is not None:
+            x = x + step.c
         P = F @ self._P @ FT + Q
         P = 0.5 * (P + P.T)
         n = hi - lo
@@ -437,8 +405,25 @@ class WindowFilter:
                 self._var[hi - 1] = np.diagonal(P)
                 best = self._solve(y, gyro, xp, P, best[0], extra)
         _, H, Z, _ = best
+        self._update(H, Z, P)  # the last linearisation moves the whole window
 
-        # the last linearisation moves the whole window
+    def update_linear(self, H: np.ndarray, z: np.ndarray) -> None:
+        """A linear measurement ``H x = z`` (unit noise) of the newest state, moving the whole window."""
+        lo, hi = self._lo, self._hi
+        P = self._P
+        xp = self._mean[hi - 1] if hi - 1 >= self._split else self.mean(self._base + hi - 1)
+        S = H @ P @ H.T + np.eye(len(z))
+        rhs = np.column_stack([H, z - H @ xp])
+        try:
+            Z = np.linalg.solve(S, rhs)
+        except np.linalg.LinAlgError as err:
+            raise FilterFailure(f"singular innovation covariance ({err})") from err
+        self._update(H, Z, P)
+
+    def _update(self, H: np.ndarray, Z: np.ndarray, P: np.ndarray) -> None:
+        """Move every state of the window by the update ``S⁻¹ [H, ν]`` (``Z``) of the newest state, whose
+        covariance before it is ``P``."""
+        lo, hi = self._lo, self._hi
         g = H.T @ Z[:, -1]  # Hᵀ S⁻¹ ν
         A = H.T @ Z[:, :-1]  # Hᵀ S⁻¹ H
         if not (np.all(np.isfinite(g)) and np.all(np.isfinite(A))):

@@ -62,14 +62,12 @@ class GtsamWindow:
         self.model.add_priors(self._graph, k)
         self._add(k, t_ns, y, gyro, extra, np.asarray(start, dtype=float))
 
-    def advance(self, k: int, h: float, t_ns: int, y, gyro=None, extra=None, start=None, jerk_factor: float = 1.0,
-                prev=None) -> None:
-        """State ``k``, ``h`` seconds after the newest: the motion-model step and its readings, started
-        from ``start`` or from ``prev`` (the newest state's ω, ω̇, f) one step on. The local jerk factor
-        is the numpy engine's alone (the stream's robust model runs on it)."""
+    def advance(self, k: int, step, t_ns: int, y, gyro=None, extra=None, start=None, prev=None) -> None:
+        """State ``k``, one ``step`` (:meth:`ArrayModel.step`) after the newest: the step groups' rows and
+        its readings, started from ``start`` or from ``prev`` (the newest state's ω, ω̇, f) one step on."""
         if start is None:
-            start = np.concatenate(self.model.predict(prev[0], prev[1], prev[2], h, y))
-        self.model.add_process(self._graph, k - 1, k, h)
+            start = self.model.predict_step(step, np.concatenate(prev), y)
+        self.model.add_process(self._graph, k - 1, k, step)
         self._add(k, t_ns, y, gyro, extra, np.asarray(start, dtype=float))
 
     def commit(self) -> None:

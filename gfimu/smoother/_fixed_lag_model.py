@@ -1,45 +1,38 @@
-"""Factors and initial values of the fixed-lag smoother.
+"""The fixed-lag smoother's model: the batch smoother's factor groups, streamed.
 
-The same model as the batch smoother (:mod:`gfimu.smoother.graph`), with the
-key conventions of :mod:`gfimu.factors`: variables ``w``/``d``/``f`` of sample
-k hold ω [rad/s], ω̇ [rad/s²] and f [m/s²] in B.
+The key conventions of :mod:`gfimu.factors`: variables ``w``/``d``/``f`` of sample k hold ω [rad/s],
+ω̇ [rad/s²] and f [m/s²] in B. What each window engine adds per sample:
 
-- accelerometer equation of every sensor (paper 000, eq. 6):
-  :func:`gfimu.factors.accelerometer.make_accelerometer_factor`, or, with
-  ``fast_measurement``, one factor for all axes computing the same residual
-  and Jacobian with the structure matrix (``S [f, ω̇, q(ω)] - y``);
-- trapezoid ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})``:
-  :func:`gfimu.factors.kinematics.make_angular_velocity_factor` (or the same
-  residual with preallocated Jacobians with ``fast_measurement``);
-- random walks of ω̇ and f (``x_{k+1} - x_k``, the residual of
-  :mod:`gfimu.factors.process`) and priors as gtsam's own
-  ``BetweenFactorVector`` / ``PriorFactorVector``, evaluated without Python;
-- gyroscope on ω (residual ``ω - ω_meas``) as a ``PriorFactorVector``;
-- with ``process_axis_frequencies_hz`` set, the exact oscillator step of
-  (ω, ω̇) (:func:`gfimu.factors.process.oscillator_residual`) in place of the
-  trapezoid and the ω̇ random walk;
-- the factor groups given in ``SmootherOptions.factor_groups``
-  (:mod:`gfimu.smoother.groups`, those ``per_sample``), each evaluated on each
-  sample alone (:class:`SampleProblem`) from the same vectorised residual and
-  Jacobian the batch smoother uses (:meth:`ArrayModel.sample_terms`).
+- the step from the newest state to the new one (:meth:`ArrayModel.step`, a :class:`Step`): the
+  terms of the groups that tie consecutive samples (``FactorGroup.steps``: the motion model, white
+  jerk or driven oscillator, and the specific-force random walk of
+  :mod:`gfimu.smoother.groups`, and such groups given in ``SmootherOptions.factor_groups``),
+  evaluated by their own vectorised residual and Jacobian on the two samples (:class:`StreamView`)
+  with their own noise levels; the gtsam engine adds the rows as one factor
+  (:meth:`ArrayModel.add_process`), the numpy engine predicts with the transition they define;
+- the accelerometer equation of every sensor (paper 000, eq. 6), with the structure matrix
+  (``S [f, ω̇, q(ω)] - y``; :func:`gfimu.factors.accelerometer.make_accelerometer_factor` per sensor
+  without ``fast_measurement``), the gyroscope on ω, and the per-sample groups given in the options
+  (``FactorGroup.per_sample``), each evaluated on the sample alone (:meth:`ArrayModel.sample_terms`);
+- weak priors on the first state of a segment (the first-state prior group's stds).
 
-The process noise follows the options exactly as the batch smoother's
-:class:`~gfimu.smoother.graph.SmootherProblem` does: the trapezoid and ω̇
-random-walk stds are scaled per body axis by ``process_axis_factors``; the
-accelerometer noise std of every axis can be scaled by ``accel_noise_scale``
-(the factor chosen by :func:`gfimu.smoother.tuning.tune` with ``tune_accel_noise``).
+The accelerometer noise std of every axis can be scaled by ``accel_noise_scale`` (the factor chosen
+by :func:`gfimu.smoother.tuning.tune` with ``tune_accel_noise``).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import noise, rigid_body
 from ..array import SensorArray
 from ..errors import InputError
-from ..factors import accelerometer, kinematics, process
+from ..factors import accelerometer
 from ..log import Log
 from .graph import SmootherOptions
+from .groups import BUILT_IN, FirstStatePriorGroup, MotionModelGroup, group_noise
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 
@@ -83,25 +76,103 @@ def _linear_factor(noise_model, factor_keys: list[int], residual, jacobians: tup
     return gtsam.CustomFactor(noise_model, factor_keys, error)
 
 
-class SampleProblem:
-    """One sample of a stream seen as a problem of one sample, what a factor group is evaluated on
-    (the attributes of :class:`gfimu.smoother.graph.SmootherProblem` a per-sample group reads: its
-    one-sample ``log``, ``options``, ``n``, ``layout``, ``state_size``, no calibration variables)."""
+class StreamView:
+    """Samples of a stream seen as a problem of one sample (a per-sample group's terms) or of the two
+    samples of a step (a step group's terms): what a factor group reads of a
+    :class:`gfimu.smoother.graph.SmootherProblem` (``log``, ``options``, ``n``, ``dt_s``, ``layout``,
+    ``state_size``, its noise levels as attributes, no calibration variables), each group's noise
+    levels computed by its own :meth:`~gfimu.smoother.groups.FactorGroup.noise` on the view."""
 
-    def __init__(self, array: SensorArray, options: SmootherOptions, t_ns: int, y: np.ndarray, gyro=None) -> None:
-        self.log = Log(array, np.array([t_ns], dtype=np.int64), np.asarray(y, dtype=float)[None],
-                       gyro_b_radps=None if gyro is None else np.asarray(gyro, dtype=float)[None], source="fixed-lag stream")
+    def __init__(self, array: SensorArray, options: SmootherOptions, timestamps_ns, accel=None, gyro=None,
+                 dt_s: np.ndarray | None = None) -> None:
+        self.array = array
         self.options = options
-        self.n = 1
-        self.dt_s = np.zeros(0)
+        self.timestamps_ns = np.asarray(timestamps_ns, dtype=np.int64)
+        self.n = len(self.timestamps_ns)
+        self.dt_s = np.diff(self.timestamps_ns) * 1e-9 if dt_s is None else np.asarray(dt_s, dtype=float)
+        self._accel, self._gyro, self._log = accel, gyro, None
         self.layout = StateLayout()
         self.state_size = self.layout.size
         self.snap = self.attitude = False
+        self.use_gyro = self.use_inclinometer = False
         self.n_global = 0
         self.global_blocks: dict = {}
+        self.noise: dict = {}
+
+    @property
+    def log(self) -> Log:
+        """The view's samples as a log (built when a group asks for it)."""
+        if self._log is None:
+            m = len(self.array.accel_columns)
+            accel = np.zeros((self.n, m)) if self._accel is None else np.asarray(self._accel, dtype=float).reshape(self.n, -1)
+            gyro = None if self._gyro is None else np.asarray(self._gyro, dtype=float).reshape(self.n, 3)
+            self._log = Log(self.array, self.timestamps_ns, accel, gyro_b_radps=gyro, source="fixed-lag stream")
+        return self._log
+
+    def with_levels(self, groups) -> StreamView:
+        """The view with the noise levels of ``groups`` (:func:`gfimu.smoother.groups.group_noise`)."""
+        self.noise = group_noise(groups, self)
+        return self
+
+    def __getattr__(self, name: str):
+        if name.startswith("__") or name == "noise":
+            raise AttributeError(name)
+        try:
+            return self.__dict__["noise"][name]
+        except KeyError:
+            raise AttributeError(f"the stream's view has no attribute or noise level {name!r}") from None
 
     def global_part(self, params: np.ndarray, name: str) -> None:
         return None
+
+
+@dataclass(frozen=True)
+class Step:
+    """The process from one sample's state x0 = [ω, ω̇, f] to the next one's, x1, as the step groups give it.
+
+    Their whitened rows, ``r(x0, x1) ≈ r0 + J0 x0 + J1 x1`` (exact for linear groups, else their
+    linearisation at the newest state and its prediction), are the factor between the two states
+    (the gtsam engine adds them as they are). Minimising them over x1 for a given x0 is the
+    transition the numpy engine predicts with: with ``J1 = [Q1 Q2] [R1; 0]`` (QR),
+    ``x1 = F x0 + c + n``, ``F = -R1⁻¹ Q1ᵀ J0``, ``c = -R1⁻¹ Q1ᵀ r0``, ``n ~ N(0, Q)``,
+    ``Q = R1⁻¹ R1⁻ᵀ``; the rows that x1 cannot absorb, ``Q2ᵀ (r0 + J0 x0)``, are a measurement of x0
+    alone (``H0 x0 = z0``, unit noise; none for the built-in motion model and specific-force walk,
+    whose J1 is square). For the white jerk this is ``F = [[I, h I], [0, I]]``,
+    ``Q = [[σ_int² + h²/4 σ_ω̇², h/2 σ_ω̇²], [h/2 σ_ω̇², σ_ω̇²]]`` per axis; for the oscillator
+    Φ and its covariance (``tests/test_fixed_lag.py`` checks both)."""
+
+    J0: np.ndarray
+    J1: np.ndarray
+    r0: np.ndarray
+    F: np.ndarray
+    FT: np.ndarray
+    Q: np.ndarray
+    c: np.ndarray | None
+    H0: np.ndarray | None
+    z0: np.ndarray | None
+
+    @classmethod
+    def of(cls, J0: np.ndarray, J1: np.ndarray, r0: np.ndarray) -> Step:
+        rows, size = J1.shape
+        if rows < size:
+            raise InputError(f"the step groups give {rows} rows on the next state's {size} values: the fixed-lag "
+                             "smoother cannot predict it")
+        Qf, Rf = np.linalg.qr(J1, mode="complete")
+        R1, Q1, Q2 = Rf[:size], Qf[:, :size], Qf[:, size:]
+        if not np.all(np.isfinite(R1)) or np.min(np.abs(np.diagonal(R1))) <= 1e-12 * max(np.max(np.abs(R1)), 1e-300):
+            raise InputError("the step groups leave part of the next state undetermined: the fixed-lag smoother "
+                             "cannot predict it")
+        R1_inv = np.linalg.inv(R1)
+        F = -R1_inv @ (Q1.T @ J0)
+        Q = R1_inv @ R1_inv.T
+        Q = 0.5 * (Q + Q.T)
+        c = None if not np.any(r0) else -R1_inv @ (Q1.T @ r0)
+        H0 = z0 = None
+        if rows > size:
+            H0, z0 = Q2.T @ J0, -(Q2.T @ r0)
+            if not np.any(H0) and not np.any(z0):
+                H0 = z0 = None
+        return cls(J0, J1, r0, F, np.ascontiguousarray(F.T), Q, c, H0, z0)
 
 
 class ArrayModel:
@@ -130,12 +201,17 @@ class ArrayModel:
         self.linear_part_observable = np.linalg.matrix_rank(wL) == 6
         self._zero3 = np.zeros(3)
         self._eye3 = np.eye(3)
-        self._noise_cache: dict = {}
-        self.axis_factors = np.asarray(options.process_axis_factors, dtype=float)
-        self.natural_frequency_radps = 2.0 * np.pi * np.asarray(options.process_axis_frequencies_hz, dtype=float)
-        self.oscillator = bool(np.any(self.natural_frequency_radps > 0))
         self.gyro_sigma_radps = float(noise.gyro_noise_std(array))  # as the batch smoother
-        self.groups = tuple(options.factor_groups)
+        self.groups = tuple(g for g in options.factor_groups if g.per_sample)
+        """The per-sample groups of the options (:meth:`sample_terms`)."""
+        self.step_groups = tuple(g for g in BUILT_IN + tuple(options.factor_groups) if g.steps)
+        """The groups that tie consecutive samples, built-in (motion model, specific-force walk) and given
+        (:meth:`step`)."""
+        self._fixed_steps = tuple(g for g in self.step_groups if g.linear and g in BUILT_IN)
+        self._other_steps = tuple(g for g in self.step_groups if g not in self._fixed_steps)
+        self._step_cache: dict = {}
+        self.first_sigma = FirstStatePriorGroup().noise(StreamView(array, options, [0]))["first_sigma"]
+        """The first-state prior's stds, as the batch smoother's :class:`~gfimu.smoother.groups.FirstStatePriorGroup`."""
         # the robust model of an inconsistent log (gfimu.smoother.auto): the noise grows with |ω| and
         # each axis may be weighted by the robust loss of its whitened residual (the stream's model
         # leaves that off: see gfimu.smoother.stream_model)
@@ -145,17 +221,17 @@ class ArrayModel:
         self.process_robust_threshold = float(options.process_robust_threshold)
 
     def sample_terms(self, t_ns: int, y: np.ndarray, gyro=None):
-        """The factor groups of the options at one sample: None when none applies there, else a function
-        ``x -> (r, J)`` of the state ``[ω, ω̇, f]`` giving their whitened residual rows (R,) and Jacobian
-        (R, 9), from each group's :meth:`~gfimu.smoother.groups.FactorGroup.terms` on that sample alone."""
+        """The per-sample factor groups of the options at one sample: None when none applies there, else a
+        function ``x -> (r, J)`` of the state ``[ω, ω̇, f]`` giving their whitened residual rows (R,) and
+        Jacobian (R, 9), from each group's :meth:`~gfimu.smoother.groups.FactorGroup.terms` on that sample
+        alone."""
         if not self.groups:
             return None
-        view = SampleProblem(self.array, self.options, t_ns, y, gyro)
+        view = StreamView(self.array, self.options, [t_ns], y, gyro)
         groups = [g for g in self.groups if g.applies(view)]
         if not groups:
             return None
-        for group in groups:
-            group.setup(view)
+        view.with_levels(groups)
         none = np.zeros(0)
 
         def terms(x: np.ndarray):
@@ -173,6 +249,84 @@ class ArrayModel:
             return np.concatenate(rows), np.vstack(jacs)
 
         return terms
+
+    @staticmethod
+    def _step_rows(groups, view: StreamView, x0: np.ndarray, x1: np.ndarray, motion_factor: float = 1.0):
+        """(J0, J1, r0, motion) of ``groups``' terms on the two-sample ``view`` linearised at (x0, x1): rows
+        ``r0 + J0 x0 + J1 x1``, the motion model's rows (``motion``, a mask) divided by ``motion_factor``
+        (its stds times it, as :meth:`gfimu.smoother.graph.SmootherProblem.with_process_factors`)."""
+        X = np.vstack([x0, x1])
+        J0s, J1s, rs, motion = [], [], [], []
+        for group in groups:
+            scale = 1.0 / motion_factor if isinstance(group, MotionModelGroup) else 1.0
+            for t in group.terms(view, X, np.zeros(0)):
+                if t.jac_global is not None:
+                    raise InputError(f"factor group {group.name!r}: the fixed-lag smoother streams no calibration variables")
+                if t.kind == "binary":
+                    r, J0, J1 = t.residual[0], t.jac["x0"][0], t.jac["x1"][0]
+                elif t.kind == "unary":  # rows on one of the two states
+                    r, J = t.residual.reshape(-1), t.jac["x"].reshape(-1, KINEMATIC_SIZE)
+                    if t.residual.shape[0] == 0:
+                        continue
+                    on_first = t.first == 0 and t.residual.shape[0] == 1
+                    J0, J1 = (J, np.zeros_like(J)) if on_first else (np.zeros_like(J), J)
+                else:
+                    raise InputError(f"factor group {group.name!r}: the fixed-lag smoother streams only terms of one "
+                                     "sample or of two consecutive samples")
+                J0s.append(J0 * scale)
+                J1s.append(J1 * scale)
+                rs.append((r - J0 @ x0 - J1 @ x1) * scale)
+                motion.append(np.full(len(r), isinstance(group, MotionModelGroup)))
+        if not rs:
+            return np.zeros((0, KINEMATIC_SIZE)), np.zeros((0, KINEMATIC_SIZE)), np.zeros(0), np.zeros(0, dtype=bool)
+        return np.vstack(J0s), np.vstack(J1s), np.concatenate(rs), np.concatenate(motion)
+
+    def step(self, h: float, motion_factor: float = 1.0, t_ns: tuple[int, int] | None = None, readings=None,
+             x0: np.ndarray | None = None) -> Step:
+        """The process over one step of ``h`` seconds (:class:`Step`) from the step groups' own terms on the
+        two samples (:class:`StreamView`): the built-in linear ones (white jerk or driven oscillator,
+        specific-force random walk) kept per step length; the others (given in the options) evaluated
+        on the samples at ``t_ns`` (their timestamps) with ``readings`` ((accel0, gyro0), (accel1, gyro1)),
+        linearised at the newest state ``x0`` and its prediction. ``motion_factor``: the local motion
+        density's factor on the motion model's stds (:func:`gfimu.smoother.auto.local_density_factors`)."""
+        key = round(h * 1e9)
+        fixed = self._step_cache.get(key)
+        if fixed is None:
+            view = StreamView(self.array, self.options, [0, key], dt_s=np.array([h])).with_levels(self._fixed_steps)
+            zero = np.zeros(KINEMATIC_SIZE)
+            fixed = self._step_rows(self._fixed_steps, view, zero, zero)
+            fixed = {"rows": fixed, 1.0: Step.of(*fixed[:3])}
+            if len(self._step_cache) > 64:  # irregular timestamps: keep the cache bounded
+                self._step_cache.clear()
+            self._step_cache[key] = fixed
+        others = None
+        if self._other_steps and t_ns is not None:
+            (a0, g0), (a1, g1) = readings if readings is not None else ((None, None), (None, None))
+            view = StreamView(self.array, self.options, list(t_ns),
+                              None if a0 is None else np.vstack([a0, a1]),
+                              None if g0 is None or g1 is None else np.vstack([g0, g1]), dt_s=np.array([h]))
+            groups = [g for g in self._other_steps if g.applies(view)]
+            if groups:
+                view.with_levels(groups)
+                x0 = np.zeros(KINEMATIC_SIZE) if x0 is None else np.asarray(x0, dtype=float)
+                base = fixed[1.0] if motion_factor == 1.0 else Step.of(*self._scaled(fixed["rows"], motion_factor))
+                x1 = base.F @ x0 + (0.0 if base.c is None else base.c)
+                others = self._step_rows(groups, view, x0, x1, motion_factor)[:3]
+        if others is None:
+            if motion_factor == 1.0:
+                return fixed[1.0]
+            return Step.of(*self._scaled(fixed["rows"], motion_factor))
+        J0, J1, r0 = self._scaled(fixed["rows"], motion_factor)
+        return Step.of(np.vstack([J0, others[0]]), np.vstack([J1, others[1]]), np.concatenate([r0, others[2]]))
+
+    @staticmethod
+    def _scaled(rows, motion_factor: float):
+        """(J0, J1, r0) of the built-in step rows, the motion model's divided by ``motion_factor``."""
+        J0, J1, r0, motion = rows
+        if motion_factor == 1.0:
+            return J0, J1, r0
+        scale = np.where(motion, 1.0 / motion_factor, 1.0)
+        return J0 * scale[:, None], J1 * scale[:, None], r0 * scale
 
     # --- gtsam noise models (built on first use) --------------------------------------
     @property
@@ -242,78 +396,29 @@ class ArrayModel:
 
         return gtsam.CustomFactor(self.accel_noise, [kw, kd, kf], error)
 
-    def _fast_trapezoid_factor(self, w0: int, w1: int, d0: int, d1: int, h: float, noise) -> gtsam.CustomFactor:
-        """``ω1 - ω0 - h/2 (ω̇0 + ω̇1)`` with its constant Jacobians, without per-call allocation."""
-        half_h = 0.5 * h
-        jd = -half_h * self._eye3
+    def add_process(self, graph: gtsam.NonlinearFactorGraph, k0: int, k1: int, step: Step | float) -> None:
+        """The step groups' rows between samples k0 and k1 (a :class:`Step`, or a step length in seconds:
+        :meth:`step` of the built-in groups) as one factor on their ω, ω̇, f: ``r0 + J0 x0 + J1 x1``,
+        whitened (unit noise), its Jacobians the step's constants."""
+        if not isinstance(step, Step):
+            step = self.step(float(step))
+        k0_keys, k1_keys = keys(k0), keys(k1)
+        J0, J1, r0 = step.J0, step.J1, step.r0
+        jacobians = tuple(np.ascontiguousarray(J[:, sl]) for J in (J0, J1) for sl in (OMEGA, OMEGA_DOT, SPECIFIC_FORCE))
+        factor_keys = list(k0_keys) + list(k1_keys)
 
         def residual(values):
-            return values.atVector(w1) - values.atVector(w0) - half_h * (values.atVector(d0) + values.atVector(d1))
+            x0 = np.concatenate([values.atVector(k) for k in k0_keys])
+            x1 = np.concatenate([values.atVector(k) for k in k1_keys])
+            return r0 + J0 @ x0 + J1 @ x1
 
-        return _linear_factor(noise, [w0, w1, d0, d1], residual, (-self._eye3, self._eye3, jd, jd))
-
-    def _fast_oscillator_factor(self, w0: int, w1: int, d0: int, d1: int, h: float, noise) -> gtsam.CustomFactor:
-        """Exact oscillator step ``[ω1; ω̇1] - Φ [ω0; ω̇0]`` (:func:`gfimu.factors.process.oscillator_residual`)
-        with its constant Jacobians."""
-        phi = process.oscillator_transition(h, self.natural_frequency_radps)[0]
-        a, b, c, d = phi[:, 0, 0], phi[:, 0, 1], phi[:, 1, 0], phi[:, 1, 1]
-        top = np.vstack([self._eye3, np.zeros((3, 3))])
-        bottom = np.vstack([np.zeros((3, 3)), self._eye3])
-        jw0 = -np.vstack([np.diag(a), np.diag(c)])
-        jd0 = -np.vstack([np.diag(b), np.diag(d)])
-
-        def residual(values):
-            x0, y0 = values.atVector(w0), values.atVector(d0)
-            return np.concatenate([values.atVector(w1) - a * x0 - b * y0, values.atVector(d1) - c * x0 - d * y0])
-
-        return _linear_factor(noise, [w0, w1, d0, d1], residual, (jw0, top, jd0, bottom))
-
-    def _process_noises(self, h: float):
-        key = round(h * 1e9)
-        cached = self._noise_cache.get(key)
-        if cached is None:
-            o = self.options
-            q_dw = o.omega_dot_random_walk_radps2_per_sqrt_s
-            axis = self.axis_factors  # per body axis, as SmootherProblem
-            cached = (
-                gtsam.noiseModel.Diagonal.Sigmas(float(kinematics.trapezoid_sigma(q_dw, h)) * axis),
-                gtsam.noiseModel.Diagonal.Sigmas(float(process.random_walk_sigma(q_dw, h)) * axis),
-                gtsam.noiseModel.Isotropic.Sigma(
-                    3, float(process.random_walk_sigma(o.specific_force_random_walk_mps2_per_sqrt_s, h))),
-                gtsam.noiseModel.Gaussian.Covariance(
-                    process.oscillator_step_covariance(q_dw, h, self.natural_frequency_radps, axis)[0])
-                if self.oscillator else None,
-            )
-            if len(self._noise_cache) > 64:  # irregular timestamps: keep the cache bounded
-                self._noise_cache.clear()
-            self._noise_cache[key] = cached
-        return cached
-
-    def add_process(self, graph: gtsam.NonlinearFactorGraph, k0: int, k1: int, h: float) -> None:
-        w0, d0, f0 = keys(k0)
-        w1, d1, f1 = keys(k1)
-        int_noise, dw_noise, f_noise, osc_noise = self._process_noises(h)
-        if self.oscillator:
-            if self.fast_measurement:
-                graph.add(self._fast_oscillator_factor(w0, w1, d0, d1, h, osc_noise))
-            else:
-                graph.add(process.make_oscillator_factor(w0, w1, d0, d1, h, self.natural_frequency_radps, osc_noise))
-            graph.add(gtsam.BetweenFactorVector(f0, f1, self._zero3, f_noise))
-            return
-        if self.fast_measurement:
-            graph.add(self._fast_trapezoid_factor(w0, w1, d0, d1, h, int_noise))
-        else:
-            graph.add(kinematics.make_angular_velocity_factor(w0, w1, d0, d1, h, int_noise))
-        graph.add(gtsam.BetweenFactorVector(d0, d1, self._zero3, dw_noise))
-        graph.add(gtsam.BetweenFactorVector(f0, f1, self._zero3, f_noise))
+        graph.add(_linear_factor(gtsam.noiseModel.Unit.Create(len(r0)), factor_keys, residual, jacobians))
 
     def add_priors(self, graph: gtsam.NonlinearFactorGraph, k: int) -> None:
-        """Weak zero-mean priors on the first state of a segment, as the batch smoother."""
-        o = self.options
-        kw, kd, kf = keys(k)
-        for key, std in ((kw, o.initial_omega_std_radps), (kd, o.initial_omega_dot_std_radps2),
-                         (kf, o.initial_specific_force_std_mps2)):
-            graph.add(gtsam.PriorFactorVector(key, self._zero3, gtsam.noiseModel.Isotropic.Sigma(3, float(std))))
+        """Weak zero-mean priors on the first state of a segment (:attr:`first_sigma`, the batch smoother's
+        first-state prior)."""
+        for key, sl in zip(keys(k), (OMEGA, OMEGA_DOT, SPECIFIC_FORCE)):
+            graph.add(gtsam.PriorFactorVector(key, self._zero3, gtsam.noiseModel.Diagonal.Sigmas(self.first_sigma[sl])))
 
     # --- initial values ---------------------------------------------------------
     def predict(self, omega, omega_dot, f, h: float, y: np.ndarray):
@@ -323,3 +428,12 @@ class ArrayModel:
             return w, omega_dot, f
         x6 = self.pinv_lin_w @ (y - self.S_q @ rigid_body.quadratic_terms(w))
         return w, x6[3:], x6[:3]
+
+    def predict_step(self, step: Step, x0: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Initial value of the state one ``step`` after ``x0``: ω by the step's transition, then [f, ω̇]
+        from y given q(ω)."""
+        x = step.F @ x0 if step.c is None else step.F @ x0 + step.c
+        if not self.linear_part_observable:
+            return x
+        x6 = self.pinv_lin_w @ (y - self.S_q @ rigid_body.quadratic_terms(x[OMEGA]))
+        return np.concatenate([x[OMEGA], x6[3:], x6[:3]])

@@ -357,6 +357,8 @@ class SolveResult:
     converged: bool
     covariance: np.ndarray | None = None
     param_covariance: np.ndarray | None = None
+    problem: SmootherProblem | None = None
+    """The problem as the re-weighting left it at the solution (the one solved, without re-weighting)."""
 
 
 def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
@@ -369,7 +371,7 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     ``λ diag(H)`` is switched on, and raised tenfold, only while a step fails
     to lower the cost, and lowered again after each success.
 
-    ``reweight(states, params)``, when given, re-weights the factors (motion-dependent noise,
+    ``reweight(problem, states, params)``, when given, returns the problem re-weighted (motion-dependent noise,
     robust losses) at the current estimate before every iteration: iteratively re-weighted
     least squares with the Levenberg-Marquardt safeguard, each step accepted when it lowers the
     cost under the weights it was computed with. It stops when an iteration lowers that cost by
@@ -381,7 +383,7 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     X = np.array(states, dtype=float)
     P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
     if reweight is not None:
-        reweight(X, P)
+        problem = reweight(problem, X, P)
     ne = normal_equations(problem, X, P)
     lam = 0.0
     converged = False
@@ -413,14 +415,14 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
             converged, final_cost, ne = True, new_cost, None  # (no normal equations needed at the solution)
             break
         if reweight is not None:
-            reweight(X, P)
+            problem = reweight(problem, X, P)
         ne = normal_equations(problem, X, P)
         if reweight is not None:  # the weights move with every step: stop within the cost's own spread
             enough = max(enough, REWEIGHTED_TOLERANCE * np.sqrt(0.5 * (ne.rows or 1)))
         if decrease <= enough or np.max(np.abs(dx)) < 1e-12:
             converged = True
             break
-    result = SolveResult(X, P, ne.cost if ne is not None else final_cost, it, converged)
+    result = SolveResult(X, P, ne.cost if ne is not None else final_cost, it, converged, problem=problem)
     if compute_sigma:
         if ne is None:
             ne = normal_equations(problem, X, P)
@@ -429,18 +431,20 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     return result
 
 
-def reweighting(problem: SmootherProblem, options: SmootherOptions):
-    """The re-weighting callback of :func:`solve` for the motion-dependent accelerometer noise and
-    the robust losses of ``options``, or None when neither is on."""
+def reweighting(options: SmootherOptions):
+    """The re-weighting of :func:`solve` for the motion-dependent accelerometer noise and the robust
+    losses of ``options``: ``reweight(problem, states, params) -> problem`` (a new problem), or None
+    when neither is on."""
     slope = options.accel_noise_slope_mps2_per_radps > 0 and options.measurement == "accelerometer"
     if not (slope or options.robust):
         return None
 
-    def reweight(states: np.ndarray, params: np.ndarray) -> None:
+    def reweight(problem: SmootherProblem, states: np.ndarray, params: np.ndarray) -> SmootherProblem:
         if slope:
-            problem.set_motion_dependent_noise(states[:, 0:3], options.accel_noise_slope_mps2_per_radps)
+            problem = problem.with_motion_dependent_noise(states[:, 0:3], options.accel_noise_slope_mps2_per_radps)
         if options.robust:
-            problem.set_robust_weights(states, params)
+            problem = problem.reweighted(states, params)
+        return problem
 
     return reweight
 
@@ -452,7 +456,7 @@ def solve_reweighted(problem: SmootherProblem, states: np.ndarray, options: Smoo
     ``reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
     iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`)."""
     sigma = options.compute_sigma if compute_sigma is None else compute_sigma
-    reweight = reweighting(problem, options)
+    reweight = reweighting(options)
     if reweight is None:
         return solve(problem, states, params, compute_sigma=sigma)
     if warm:  # ``states`` is already a re-weighted solution

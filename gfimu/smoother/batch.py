@@ -119,10 +119,10 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
     if solver != "gtsam":
         raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
     limit = int(problem.options.max_iterations if max_iterations is None else max_iterations)
-    X, P, iterations, converged = gtsam_levenberg_marquardt(problem, states, params, limit,
-                                                            problem.options.relative_tolerance, reweight)
+    X, P, iterations, converged, problem = gtsam_levenberg_marquardt(problem, states, params, limit,
+                                                                     problem.options.relative_tolerance, reweight)
     ne = normal_equations(problem, X, P)
-    result = SolveResult(X, P, ne.cost, iterations, converged)
+    result = SolveResult(X, P, ne.cost, iterations, converged, problem=problem)
     if compute_sigma:
         result.covariance, result.param_covariance = marginal_covariances(ne, factorise(ne, 0.0))
     return result
@@ -135,7 +135,7 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, options: Smoother
     if solver == "numpy":
         return solve_reweighted(problem, states, options, params, compute_sigma)
     sigma = options.compute_sigma if compute_sigma is None else compute_sigma
-    reweight = reweighting(problem, options)
+    reweight = reweighting(options)
     if reweight is None:
         return solve_problem(problem, states, params, sigma, solver)
     first = solve_problem(problem, states, params, False, solver, max_iterations=max(1, int(options.reweight_iterations) - 1))
@@ -327,13 +327,14 @@ def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions)
     """``res`` with the local restarts of :func:`gfimu.smoother.restarts.branch_restarts`: short runs
     on another branch of ω kept where the robust objective falls; the cost is the re-weighted cost at
     the result."""
+    problem = res.problem or problem
     states, tried, kept = branch_restarts(problem, res.states)
     if not kept:
         return res
-    reweight = reweighting(problem, opt)
+    reweight = reweighting(opt)
     if reweight is not None:
-        reweight(states, res.params)
-    out = replace(res, states=states, cost=problem.cost(states, res.params))
+        problem = reweight(problem, states, res.params)
+    out = replace(res, states=states, cost=problem.cost(states, res.params), problem=problem)
     if res.covariance is not None:
         ne = normal_equations(problem, states, res.params)
         out.covariance, out.param_covariance = marginal_covariances(ne, factorise(ne, 0.0))
@@ -358,9 +359,7 @@ def moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunin
     problem = make_problem(part, opt, scale, x0[:, OMEGA])
     factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
                                     opt.omega_dot_random_walk_radps2_per_sqrt_s)
-    problem.trapezoid_sigma = problem.trapezoid_sigma * factors
-    problem.omega_dot_step_sigma = problem.omega_dot_step_sigma * factors
-    return problem, x0
+    return problem.with_process_factors(factors), x0
 
 
 def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: slice, tunings: list,
@@ -385,7 +384,7 @@ def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: sl
         start = prev_R[solve_sl.start - prev_sl.start]
     R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start, opt.use_inclinometer)
     problem = make_problem(part, opt, t.accel_noise_scale) if t is not None else SmootherProblem(part, opt)
-    problem.attitude_prior_wb = R[0]
+    problem = problem.with_noise(attitude_prior_wb=R[0])
     x0 = np.hstack([first.states, _so3.log(R)])
     return solve_problem(problem, x0, first.params if first.params.size else None, opt.compute_sigma, solver), problem
 
@@ -467,15 +466,15 @@ def gtsam_levenberg_marquardt(problem: SmootherProblem, states: np.ndarray, para
     with the states in time order (then the calibration variables), retract. The time ordering keeps
     the elimination a chain, linear in the length. Each iteration first tries the undamped
     Gauss-Newton step; Marquardt damping ``λ (diag(JᵀJ) + 10⁻⁹)`` is switched on and raised tenfold
-    only while a step fails to lower the cost. ``reweight(states, params)`` re-weights the problem
-    before every iteration (the graph is rebuilt with the new noise). Returns the states, the
-    calibration variables, the iterations and whether it converged."""
+    only while a step fails to lower the cost. ``reweight(problem, states, params)`` re-weights the
+    problem before every iteration (the graph is rebuilt with the new noise). Returns the states, the
+    calibration variables, the iterations, whether it converged and the problem as last re-weighted."""
     import gtsam  # only this path needs it (imported here: it is slow to import)
 
     P = np.zeros(problem.n_global) if params is None else np.asarray(params, dtype=float)
     X = np.array(states, dtype=float)
     if reweight is not None:
-        reweight(X, P)
+        problem = reweight(problem, X, P)
     graph = problem.gtsam_graph()
     values = problem.gtsam_values(X, P)
     ordering = problem.gtsam_ordering()
@@ -515,7 +514,7 @@ def gtsam_levenberg_marquardt(problem: SmootherProblem, states: np.ndarray, para
         enough = tolerance * max(new_cost, 1e-300)
         if reweight is not None:  # new weights at the new estimate: rebuild the graph with them
             X, P = problem.from_gtsam_values(values)
-            reweight(X, P)
+            problem = reweight(problem, X, P)
             graph = problem.gtsam_graph()
             cost = graph.error(values)
             enough = max(enough, REWEIGHTED_TOLERANCE * np.sqrt(0.5 * rows))
@@ -524,7 +523,7 @@ def gtsam_levenberg_marquardt(problem: SmootherProblem, states: np.ndarray, para
             converged = True
             break
     X, P = problem.from_gtsam_values(values)
-    return X, P, it, converged
+    return X, P, it, converged, problem
 
 
 gtsam_gauss_newton = gtsam_levenberg_marquardt
@@ -534,5 +533,5 @@ gtsam_gauss_newton = gtsam_levenberg_marquardt
 def solve_with_gtsam(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
                      iterations: int = 10, tolerance: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
     """States and calibration variables from :func:`gtsam_levenberg_marquardt`."""
-    X, P, _, _ = gtsam_levenberg_marquardt(problem, states, params, iterations, tolerance)
+    X, P = gtsam_levenberg_marquardt(problem, states, params, iterations, tolerance)[:2]
     return X, P

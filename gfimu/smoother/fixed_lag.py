@@ -186,10 +186,12 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
                                      "estimate_attitude") if getattr(options, name, False)]
     if unsupported:
         return f"the fixed-lag smoother does not support {', '.join(unsupported)} (use method 'smoother')"
-    whole = [getattr(g, "name", repr(g)) for g in getattr(options, "factor_groups", ()) if not getattr(g, "per_sample", False)]
+    whole = [getattr(g, "name", repr(g)) for g in getattr(options, "factor_groups", ())
+             if not (getattr(g, "per_sample", False) or getattr(g, "steps", False))]
     if whole:
         return (f"factor_groups {', '.join(whole)}: the fixed-lag smoother streams only groups whose rows each depend on "
-                "one sample's state (FactorGroup.per_sample; use method 'smoother')")
+                "one sample's state (FactorGroup.per_sample) or on two consecutive samples' (FactorGroup.steps; "
+                "use method 'smoother')")
     if getattr(options, "motion_model", "jerk") != "jerk":
         return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.motion_model!r} (use method 'smoother')"
     if options.measurement != "accelerometer":
@@ -623,6 +625,7 @@ class FixedLagSmoother:
         self._warmup: list = []
         self._k = -1
         self._prev = None  # (t_ns, omega, omega_dot, f) of the newest state (filtered)
+        self._prev_sample = None  # (t_ns, accel, gyro) of the newest state
         self._signs.reset()
 
     def _new_smoother(self):
@@ -676,8 +679,8 @@ class FixedLagSmoother:
                 if j == 0:
                     engine.begin(self._k, t_ns, y, g, start=x0[j], extra=extra)
                 else:
-                    engine.advance(self._k, (t_ns - self._warmup[j - 1][0]) * 1e-9, t_ns, y, g, extra=extra,
-                                   start=x0[j])
+                    engine.advance(self._k, self._step(self._warmup[j - 1], (t_ns, y, g), x0[j - 1], 1.0), t_ns, y, g,
+                                   extra=extra, start=x0[j])
                 self._window.append((self._k, t_ns))
                 self._raw.append((t_ns, y, g))
             engine.commit()
@@ -695,10 +698,9 @@ class FixedLagSmoother:
         k_prev = self._k
         self._k += 1
         k = self._k
-        h = (t_ns - self._prev[0]) * 1e-9
         try:
-            self._smoother.advance(k, h, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro),
-                                   jerk_factor=self._jerk_factor, prev=self._prev[1:])
+            step = self._step(self._prev_sample, sample, np.concatenate(self._prev[1:]), self._jerk_factor)
+            self._smoother.advance(k, step, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro), prev=self._prev[1:])
             self._smoother.commit()
             self._follow_sign(k, t_ns)
         except FilterFailure as err:
@@ -708,6 +710,13 @@ class FixedLagSmoother:
         self._window.append((k, t_ns))
         self._raw.append(sample)
         self._remember_newest()
+
+    def _step(self, previous, sample, x0: np.ndarray, motion_factor: float):
+        """The step from sample ``previous`` to ``sample`` (each (t_ns, accel, gyro)) as the model's step
+        groups give it (:meth:`ArrayModel.step`), linearised at the newest state ``x0``; ``motion_factor``:
+        the local motion density's factor on the motion model's stds."""
+        return self.model.step((sample[0] - previous[0]) * 1e-9, motion_factor, (previous[0], sample[0]),
+                               ((previous[1], previous[2]), (sample[1], sample[2])), x0)
 
     def _follow_sign(self, k: int, t_ns: int) -> None:
         """The streaming sign chain on the newest filtered state; flip ω where it says so."""
@@ -737,6 +746,7 @@ class FixedLagSmoother:
         k, t_ns = self._window[-1]
         w, dw, f = self._values_of(k, t_ns)
         self._prev = (t_ns, w, dw, f)
+        self._prev_sample = self._raw[-1]
 
     def _values_of(self, k: int, t_ns: int):
         try:

@@ -22,6 +22,7 @@ path), and the same problem as a GTSAM ``NonlinearFactorGraph`` of their factors
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,7 +43,8 @@ from ..factors import (
     specific_force_key,
 )
 from ..log import Log
-from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
+from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term, group_noise  # noqa: F401  (Term: also importable from here)
+from .noise_levels import NoiseLevels
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -302,9 +304,15 @@ def robust_loss(e2: np.ndarray, c: float, loss: str) -> np.ndarray:
     return np.where(e <= c, 0.5 * e2, c * e - 0.5 * c * c)
 
 
-@dataclass
+@dataclass(eq=False)
 class SmootherProblem:
-    """The smoothing problem of one contiguous log (fast path and graph path)."""
+    """The smoothing problem of one contiguous log (fast path and graph path): the log, the options,
+    the model's groups and their noise levels (:attr:`noise`, a frozen
+    :class:`~gfimu.smoother.noise_levels.NoiseLevels`; read as ``problem.NAME`` too).
+
+    Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
+    around new noise levels (:meth:`with_noise`, :meth:`with_motion_dependent_noise`,
+    :meth:`with_base_noise`, :meth:`reweighted`, :meth:`with_process_factors`), sharing the rest."""
 
     log: Log
     options: SmootherOptions = field(default_factory=SmootherOptions)
@@ -316,8 +324,6 @@ class SmootherProblem:
         arr = self.log.array
         opt = self.options
         self.n = len(self.log)
-        self._accel_sigma_unweighted = None  # the noise the robust re-weighting starts from (base_noise)
-        self._process_base = None
         if self.n < 2:
             raise DataError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
         self.dt_s = self.log.dt_s
@@ -359,91 +365,102 @@ class SmootherProblem:
         if self.attitude:
             self.AT = self.layout.rotation
         # the model: every group that applies, the measurement first, then those placed first
-        # (the first-state prior), then the rest in order; each sets its own noise
+        # (the first-state prior), then the rest in order; each gives its own noise levels
         groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
-        self.groups = sorted(groups, key=lambda g: 0 if g.measurement else 1 if g.first else 2)
-        for group in self.groups:
-            group.setup(self)
+        self.groups = tuple(sorted(groups, key=lambda g: 0 if g.measurement else 1 if g.first else 2))
+        self.noise = NoiseLevels(group_noise(self.groups, self))
+        object.__setattr__(self, "_built", True)
 
-    accel_sigma_per_sample: np.ndarray | None = None
-    """(N, n_axes) accelerometer noise std per sample and axis replacing ``accel_sigma`` when set."""
+    def __setattr__(self, name: str, value) -> None:
+        if self.__dict__.get("_built"):
+            raise AttributeError(f"a SmootherProblem is frozen once built (setting {name!r}): "
+                                 "make a new one with with_noise(...)")
+        object.__setattr__(self, name, value)
 
-    def oscillator_weight(self) -> np.ndarray:
-        """(N-1,) factor on the oscillator step's std: 1, or the robust re-weighting's (it scales
-        ``omega_dot_step_sigma``)."""
-        return self.omega_dot_step_sigma / self._oscillator_unit_sigma
+    def __getattr__(self, name: str):
+        """The noise levels read as attributes (``problem.accel_sigma``)."""
+        if name.startswith("__") or name in ("noise", "_built"):
+            raise AttributeError(name)
+        try:
+            return self.__dict__["noise"][name]
+        except KeyError:
+            raise AttributeError(f"SmootherProblem has no attribute or noise level {name!r}") from None
 
-    def oscillator_whiten(self) -> np.ndarray:
-        """(N-1, 6, 6) whitening of the oscillator steps (inverse Cholesky factor of their covariance)."""
-        return self._oscillator_whiten / self.oscillator_weight()[:, None, None]
+    def with_noise(self, **changes) -> SmootherProblem:
+        """The same problem with these noise levels changed (:meth:`NoiseLevels.replace`)."""
+        new = copy.copy(self)
+        object.__setattr__(new, "noise", self.noise.replace(**changes))
+        return new
 
-    def oscillator_covariance(self) -> np.ndarray:
-        """(N-1, 6, 6) covariance of the oscillator steps."""
-        return self._oscillator_cov * (self.oscillator_weight() ** 2)[:, None, None]
-
-    def set_motion_dependent_noise(self, omega_b_radps: np.ndarray, slope_mps2_per_radps: float) -> None:
+    def with_motion_dependent_noise(self, omega_b_radps: np.ndarray, slope_mps2_per_radps: float) -> SmootherProblem:
         """Noise std per sample ``sqrt(σ² + (slope |ω_k|)²)`` from an estimate of ω: the rigid-body
         residual of real arrays grows with the rotation rate (sensor positions, alignment and
         dynamic errors). Re-evaluated from each new estimate (iteratively re-weighted least squares)."""
         wn = np.linalg.norm(np.asarray(omega_b_radps, dtype=float), axis=1)
-        self.accel_sigma_per_sample = np.sqrt(self.accel_sigma[None, :] ** 2 + (slope_mps2_per_radps * wn[:, None]) ** 2)
-        self._accel_sigma_unweighted = self.accel_sigma_per_sample
+        sigma = np.sqrt(self.accel_sigma[None, :] ** 2 + (slope_mps2_per_radps * wn[:, None]) ** 2)
+        return self.with_noise(accel_sigma_per_sample=sigma, accel_base=sigma)
+
+    def with_process_factors(self, factors: np.ndarray) -> SmootherProblem:
+        """The white-jerk steps' stds times ``factors`` (N-1,) (the local motion density of
+        :func:`gfimu.smoother.auto.local_density_factors`)."""
+        return self.with_noise(trapezoid_sigma=self.trapezoid_sigma * factors,
+                               omega_dot_step_sigma=self.omega_dot_step_sigma * factors)
 
     def base_noise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The noise the robust re-weighting starts from: accelerometer std (N, axes) (the
         motion-dependent one when set), trapezoid and ω̇-step std of the motion-model steps (N-1,)."""
-        accel = self._accel_sigma_unweighted
+        accel = self.accel_base
         if accel is None:
             accel = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
-        process = (self.trapezoid_sigma, self.omega_dot_step_sigma) if self._process_base is None else self._process_base
-        return np.array(accel), process[0].copy(), process[1].copy()
+        process = (self.trapezoid_sigma, self.omega_dot_step_sigma) if self.process_base is None else self.process_base
+        return np.array(accel), np.array(process[0]), np.array(process[1])
 
-    def set_base_noise(self, accel_sigma: np.ndarray, trapezoid_sigma: np.ndarray,
-                       omega_dot_step_sigma: np.ndarray) -> None:
-        """Make these (as :meth:`base_noise` returns them) the current noise and the one the robust
+    def with_base_noise(self, accel_sigma: np.ndarray, trapezoid_sigma: np.ndarray,
+                        omega_dot_step_sigma: np.ndarray) -> SmootherProblem:
+        """These (as :meth:`base_noise` returns them) as the current noise and the one the robust
         re-weighting starts from (the white-jerk motion model)."""
-        self.accel_sigma_per_sample = np.array(accel_sigma, dtype=float)
-        self._accel_sigma_unweighted = self.accel_sigma_per_sample.copy()
-        self.trapezoid_sigma = np.array(trapezoid_sigma, dtype=float)
-        self.omega_dot_step_sigma = np.array(omega_dot_step_sigma, dtype=float)
-        self._process_base = None
+        accel = np.array(accel_sigma, dtype=float)
+        return self.with_noise(accel_sigma_per_sample=accel, accel_base=accel,
+                               trapezoid_sigma=np.array(trapezoid_sigma, dtype=float),
+                               omega_dot_step_sigma=np.array(omega_dot_step_sigma, dtype=float), process_base=None)
 
-    def set_robust_weights(self, states: np.ndarray, params: np.ndarray | None = None) -> None:
-        """Robust (Huber or Cauchy) re-weighting at ``states`` (iteratively re-weighted least squares).
+    def reweighted(self, states: np.ndarray, params: np.ndarray | None = None) -> SmootherProblem:
+        """The robust (Huber or Cauchy) re-weighting at ``states`` (iteratively re-weighted least squares).
 
         Each accelerometer axis (``accel_robust_threshold``) and each motion-model step
         (``process_robust_threshold``) gets the IRLS weight ``w(e)`` of its whitened residual e
         (for a step: its norm / sqrt(rows)); the weight divides the factor's variance. Weights are
-        computed against the un-reweighted noise (the motion-dependent one when set), so repeated
-        calls do not compound.
+        computed against the un-reweighted noise (the motion-dependent one when set), so re-weighting
+        a re-weighted problem does not compound.
         """
         opt = self.options
         P = np.zeros(self.n_global) if params is None else params
+        out = self
 
         def weight(e, c):
             return robust_weight(e, c, opt.robust_loss)
 
         if opt.accel_robust_threshold > 0 and opt.measurement == "accelerometer":
-            base = self._accel_sigma_unweighted
+            base = self.accel_base
             if base is None:
                 base = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
-            self.accel_sigma_per_sample = np.array(base)  # whiten with the base noise
-            r = self.group(AccelerometerGroup).whitened_residual(self, states, P)
-            self.accel_sigma_per_sample = base / np.sqrt(weight(r, opt.accel_robust_threshold))
+            plain = out.with_noise(accel_sigma_per_sample=np.array(base))  # whiten with the base noise
+            r = self.group(AccelerometerGroup).whitened_residual(plain, states, P)
+            out = out.with_noise(accel_sigma_per_sample=base / np.sqrt(weight(r, opt.accel_robust_threshold)))
         if opt.process_robust_threshold > 0:
-            if self._process_base is None:
-                self._process_base = (self.trapezoid_sigma.copy(), self.omega_dot_step_sigma.copy(),
-                                      self.snap_whiten.copy() if self.snap else None)
-            self.trapezoid_sigma, self.omega_dot_step_sigma = self._process_base[0].copy(), self._process_base[1].copy()
-            if self.snap:
-                self.snap_whiten, self.snap_cov = self._process_base[2].copy(), None
-            r = self.group(MotionModelGroup).step_residual(self, states)
+            base = self.process_base
+            if base is None:
+                base = (self.trapezoid_sigma, self.omega_dot_step_sigma, self.snap_whiten if self.snap else None)
+            plain = out.with_noise(trapezoid_sigma=base[0], omega_dot_step_sigma=base[1], process_base=base,
+                                   **({"snap_whiten": base[2], "snap_cov": None} if self.snap else {}))
+            r = self.group(MotionModelGroup).step_residual(plain, states)
             w = weight(np.sqrt(np.mean(r**2, axis=1)), opt.process_robust_threshold)
-            self.trapezoid_sigma = self.trapezoid_sigma / np.sqrt(w)
-            self.omega_dot_step_sigma = self.omega_dot_step_sigma / np.sqrt(w)
+            changes = {"trapezoid_sigma": base[0] / np.sqrt(w), "omega_dot_step_sigma": base[1] / np.sqrt(w)}
             if self.snap:
-                self.snap_whiten = self.snap_whiten * np.sqrt(w)[:, None, None]
-                self.snap_cov = np.linalg.inv(np.swapaxes(self.snap_whiten, 1, 2) @ self.snap_whiten)
+                whiten = base[2] * np.sqrt(w)[:, None, None]
+                changes.update(snap_whiten=whiten, snap_cov=np.linalg.inv(np.swapaxes(whiten, 1, 2) @ whiten))
+            out = plain.with_noise(**changes)
+        return out
 
     # --- calibration variables -------------------------------------------
     def global_part(self, params: np.ndarray, name: str) -> np.ndarray | None:

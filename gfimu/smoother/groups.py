@@ -2,8 +2,9 @@
 
 A group gives, for a :class:`gfimu.smoother.graph.SmootherProblem`,
 
-- :meth:`FactorGroup.setup`: its noise, set on the problem (the attributes the tuner and the
-  solvers scale, e.g. ``problem.trapezoid_sigma``),
+- :meth:`FactorGroup.noise`: its noise levels from the options and the log, gathered by the problem
+  into one frozen value (:mod:`gfimu.smoother.noise_levels`; read back as ``problem.trapezoid_sigma``
+  etc., re-weighted by making a new problem),
 - :meth:`FactorGroup.terms`: its whitened residuals and analytic Jacobians over all samples at
   once (vectorised; the batch solver and the tuner's normal equations),
 - :meth:`FactorGroup.gtsam_factors`: the same residuals as GTSAM factors (the graph path),
@@ -17,8 +18,10 @@ random walk of the gravity-free acceleration and the attitude prior; the motion 
 trapezoid kinematics and the ω̇ random walk, the driven oscillator, or white snap), the gyroscope
 (paper 001), free flight (paper 004, eq. 1), the inclinometer (paper 001) and the calibration
 priors. Further groups are given with ``SmootherOptions.factor_groups`` and reach every consumer
-without changing any of them; those whose terms are per sample (``per_sample``) also reach the
-fixed-lag smoother (:mod:`gfimu.smoother.fixed_lag`), which evaluates them on each sample alone.
+without changing any of them; those whose terms are per sample (``per_sample``) or tie two
+consecutive samples (``steps``) also reach the fixed-lag smoother (:mod:`gfimu.smoother.fixed_lag`),
+which evaluates them on each sample alone or on the two samples of each step, as it does the
+built-in motion model and specific-force walk.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import noise
-from ..errors import DataError
+from ..errors import DataError, InputError
 from ..factors import (
     accelerometer,
     attitude_key,
@@ -68,7 +71,7 @@ class Term:
 
 class FactorGroup:
     """One equation over the samples of a problem (see the module docstring). Subclasses set
-    :meth:`applies`, :meth:`setup` (their noise) and the three views; each is given the problem it
+    :meth:`applies`, :meth:`noise` (their noise levels) and the three views; each is given the problem it
     belongs to."""
 
     name = "group"
@@ -80,12 +83,22 @@ class FactorGroup:
     per_sample = True
     """Whether each of its rows depends on one sample's state only (unary terms, no calibration
     variables): the fixed-lag smoother can then stream it, evaluating it on each sample alone."""
+    steps = False
+    """Whether each of its rows ties two consecutive samples at most (binary terms of samples k, k+1, no
+    calibration variables): the fixed-lag smoother then takes it into every step, evaluating it on
+    the two samples (:meth:`gfimu.smoother._fixed_lag_model.ArrayModel.step`)."""
+    linear = False
+    """Whether its rows are affine in the states with Jacobians that depend on the step length and its
+    noise only (the fixed-lag smoother then keeps its step per step length)."""
 
     def applies(self, problem) -> bool:
         return True
 
-    def setup(self, problem) -> None:
-        """Set its noise on ``problem`` (once, when the problem is built); nothing by default."""
+    def noise(self, problem) -> dict:
+        """Its noise levels, name -> value, computed from the options and the log (once, when the problem
+        is built; :class:`gfimu.smoother.noise_levels.NoiseLevels`); its terms read them back as
+        ``problem.NAME``. None by default."""
+        return {}
 
     def log_normaliser_parts(self, problem) -> list[float]:
         """:meth:`log_normaliser` as the parts it sums (kept apart so that the sum's rounding does not
@@ -113,6 +126,24 @@ class FactorGroup:
         raise NotImplementedError
 
 
+def group_noise(groups, problem) -> dict:
+    """The noise levels of ``groups`` on ``problem`` (each group's :meth:`FactorGroup.noise`), merged; a
+    name given by two groups, or a group that still sets attributes with ``setup``, is an error."""
+    out: dict = {}
+    owner: dict = {}
+    for group in groups:
+        if callable(getattr(group, "setup", None)):
+            raise InputError(f"factor group {group.name!r}: give its noise levels with noise(problem) -> dict, "
+                             "not setup(problem) (a problem is frozen once built)")
+        levels = group.noise(problem)
+        for name in levels:
+            if name in out:
+                raise InputError(f"factor groups {owner[name]!r} and {group.name!r} both give the noise level {name!r}")
+            owner[name] = group.name
+        out.update(levels)
+    return out
+
+
 def unary_jacobian(problem, blocks: list[tuple[slice, np.ndarray]], rows: int, n: int) -> np.ndarray:
     """(n, rows, state size) Jacobian with the given (n, rows, 3) blocks at their state columns."""
     J = np.zeros((n, rows, problem.state_size))
@@ -129,13 +160,12 @@ class FirstStatePriorGroup(FactorGroup):
     first = True
     per_sample = False
 
-    def setup(self, problem) -> None:
+    def noise(self, problem) -> dict:
         opt = problem.options
-        problem.first_sigma = np.repeat(
-            [opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3
-        )
+        first = np.repeat([opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3)
         if problem.snap:
-            problem.first_sigma = np.concatenate([problem.first_sigma, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
+            first = np.concatenate([first, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
+        return {"first_sigma": first}
 
     def terms(self, problem, states, params):
         mk = problem.layout.motion_size
@@ -184,8 +214,9 @@ class _ArrayMeasurementGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return problem.options.measurement == self.formulation
 
-    def setup(self, problem) -> None:
-        problem.accel_sigma = noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2)
+    def noise(self, problem) -> dict:
+        return {"accel_sigma": noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2),
+                "accel_sigma_per_sample": None, "accel_base": None}
 
 
 class AccelerometerGroup(_ArrayMeasurementGroup):
@@ -336,10 +367,10 @@ class InversionGroup(_ArrayMeasurementGroup):
     name = "per-sample inversion"
     formulation = "quadratic"
 
-    def setup(self, problem) -> None:
-        super().setup(problem)
-        problem.x_hat, problem.x_cov = quadratic.inversion(problem.log.array, problem.log.accel_mps2)
-        problem.x_whiten = np.linalg.inv(np.linalg.cholesky(problem.x_cov))  # L⁻¹ with cov = L Lᵀ
+    def noise(self, problem) -> dict:
+        x_hat, x_cov = quadratic.inversion(problem.log.array, problem.log.accel_mps2)
+        return {**super().noise(problem), "x_hat": x_hat, "x_cov": x_cov,
+                "x_whiten": np.linalg.inv(np.linalg.cholesky(x_cov))}  # L⁻¹ with cov = L Lᵀ
 
     def terms(self, problem, states, params):
         X = states
@@ -361,13 +392,15 @@ class SpecificForceWalkGroup(FactorGroup):
 
     name = "specific-force random walk"
     per_sample = False
+    steps = True
+    linear = True
 
     def applies(self, problem) -> bool:
         return not problem.attitude
 
-    def setup(self, problem) -> None:
-        problem.force_step_sigma = process.random_walk_sigma(problem.options.specific_force_random_walk_mps2_per_sqrt_s,
-                                                             problem.dt_s)
+    def noise(self, problem) -> dict:
+        return {"force_step_sigma": process.random_walk_sigma(problem.options.specific_force_random_walk_mps2_per_sqrt_s,
+                                                              problem.dt_s)}
 
     def terms(self, problem, states, params):
         X = states
@@ -422,12 +455,11 @@ class AttitudeGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return bool(problem.attitude)
 
-    def setup(self, problem) -> None:
+    def noise(self, problem) -> dict:
         opt = problem.options
-        problem.attitude_prior_wb = np.eye(3)
-        problem.attitude_prior_sigma = np.array([10.0, 10.0, opt.initial_yaw_std_rad])
-        problem.attitude_step_sigma = process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, problem.dt_s)
-        problem.accel_step_sigma = process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, problem.dt_s)
+        return {"attitude_prior_wb": np.eye(3), "attitude_prior_sigma": np.array([10.0, 10.0, opt.initial_yaw_std_rad]),
+                "attitude_step_sigma": process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, problem.dt_s),
+                "accel_step_sigma": process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, problem.dt_s)}
 
     def terms(self, problem, states, params):
         X, AT = states, problem.layout.rotation
@@ -471,6 +503,22 @@ class AttitudeGroup(FactorGroup):
                 float(np.sum(np.log(problem.attitude_prior_sigma)))]
 
 
+def oscillator_weight(problem) -> np.ndarray:
+    """(N-1,) factor on the oscillator steps' std: 1, or the re-weighting's (which scales
+    ``omega_dot_step_sigma``)."""
+    return problem.omega_dot_step_sigma / problem.oscillator_unit_sigma
+
+
+def oscillator_whiten(problem) -> np.ndarray:
+    """(N-1, 6, 6) whitening of the oscillator steps (inverse Cholesky factor of their covariance)."""
+    return problem.oscillator_unit_whiten / oscillator_weight(problem)[:, None, None]
+
+
+def oscillator_covariance(problem) -> np.ndarray:
+    """(N-1, 6, 6) covariance of the oscillator steps."""
+    return problem.oscillator_unit_cov * (oscillator_weight(problem) ** 2)[:, None, None]
+
+
 class MotionModelGroup(FactorGroup):
     """The angular motion model, one step per pair of samples:
 
@@ -478,31 +526,36 @@ class MotionModelGroup(FactorGroup):
       (white angular jerk; stds ``problem.trapezoid_sigma``, ``problem.omega_dot_step_sigma``, per body
       axis times ``problem.axis_factors``), stacked as one 6-row step;
     - with ``process_axis_frequencies_hz``: the exact step of the driven oscillator per axis
-      (``problem.oscillator_whiten()``, :func:`gfimu.factors.process.oscillator_residual`);
+      (``oscillator_whiten(problem)``, :func:`gfimu.factors.process.oscillator_residual`);
     - 'snap': the exact white-snap step of ``[ω, ω̇, ω̈]`` (``problem.snap_whiten``, ``problem.snap_cov``).
     """
 
     name = "motion model"
     per_sample = False
+    steps = True
+    linear = True
 
-    def setup(self, problem) -> None:
+    def noise(self, problem) -> dict:
         opt = problem.options
+        out = {"snap_cov": None, "snap_whiten": None, "oscillator_unit_cov": None, "oscillator_unit_whiten": None,
+               "oscillator_unit_sigma": None, "process_base": None}
         if opt.motion_model == "snap":
             cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, problem.dt_s)
             axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)
-            problem.snap_cov = cov * axis[:, None] * axis[None, :]
-            problem.snap_whiten = np.linalg.inv(np.linalg.cholesky(cov)) / axis
+            out["snap_cov"] = cov * axis[:, None] * axis[None, :]
+            out["snap_whiten"] = np.linalg.inv(np.linalg.cholesky(cov)) / axis
         q = opt.omega_dot_random_walk_radps2_per_sqrt_s
-        problem.trapezoid_sigma = kinematics.trapezoid_sigma(q, problem.dt_s)
-        problem.omega_dot_step_sigma = process.random_walk_sigma(q, problem.dt_s)
-        problem.axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
-        problem.natural_frequency_radps = 2.0 * np.pi * np.asarray(opt.process_axis_frequencies_hz, dtype=float)
-        problem.oscillator = bool(np.any(problem.natural_frequency_radps > 0))
-        if problem.oscillator:
-            cov = process.oscillator_step_covariance(q, problem.dt_s, problem.natural_frequency_radps, problem.axis_factors)
-            problem._oscillator_cov = cov
-            problem._oscillator_whiten = np.linalg.inv(np.linalg.cholesky(cov))
-            problem._oscillator_unit_sigma = problem.omega_dot_step_sigma.copy()
+        out["trapezoid_sigma"] = kinematics.trapezoid_sigma(q, problem.dt_s)
+        out["omega_dot_step_sigma"] = process.random_walk_sigma(q, problem.dt_s)
+        out["axis_factors"] = axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
+        out["natural_frequency_radps"] = omega_n = 2.0 * np.pi * np.asarray(opt.process_axis_frequencies_hz, dtype=float)
+        out["oscillator"] = bool(np.any(omega_n > 0))
+        if out["oscillator"]:
+            cov = process.oscillator_step_covariance(q, problem.dt_s, omega_n, axis_factors)
+            out["oscillator_unit_cov"] = cov
+            out["oscillator_unit_whiten"] = np.linalg.inv(np.linalg.cholesky(cov))
+            out["oscillator_unit_sigma"] = out["omega_dot_step_sigma"]
+        return out
 
     def step_residual(self, problem, X: np.ndarray, noise: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """(N-1, rows) whitened residual of every step (what the robust re-weighting weighs); ``noise``:
@@ -515,7 +568,7 @@ class MotionModelGroup(FactorGroup):
         if problem.oscillator:
             ro, _ = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s,
                                                 problem.natural_frequency_radps)
-            return np.einsum("nij,nj->ni", problem.oscillator_whiten(), ro)
+            return np.einsum("nij,nj->ni", oscillator_whiten(problem), ro)
         rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
         rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
         trapezoid, step = (problem.trapezoid_sigma, problem.omega_dot_step_sigma) if noise is None else noise
@@ -536,7 +589,7 @@ class MotionModelGroup(FactorGroup):
             ro, jo = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s,
                                                  problem.natural_frequency_radps)
             J0, J1 = _binary(problem, 6, [(W, jo["w0"], jo["w1"]), (D, jo["d0"], jo["d1"])])
-            Wn = problem.oscillator_whiten()
+            Wn = oscillator_whiten(problem)
             return [Term("binary", np.einsum("nij,nj->ni", Wn, ro), {"x0": Wn @ J0, "x1": Wn @ J1})]
         # trapezoid kinematics + ω̇ random walk, stacked as one binary term (6 rows)
         rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
@@ -612,7 +665,7 @@ class MotionModelGroup(FactorGroup):
 
     def gtsam_factors(self, problem):
         out = []
-        oscillator_cov = problem.oscillator_covariance() if problem.oscillator and not problem.snap else None
+        oscillator_cov = oscillator_covariance(problem) if problem.oscillator and not problem.snap else None
         for k in range(problem.n - 1):
             w0, w1, d0, d1 = omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1)
             h = float(problem.dt_s[k])
@@ -633,7 +686,7 @@ class MotionModelGroup(FactorGroup):
         if problem.snap:
             return 0.5 * float(np.sum(np.linalg.slogdet(problem.snap_cov)[1]))
         if problem.oscillator:
-            return 0.5 * float(np.sum(np.linalg.slogdet(problem.oscillator_covariance())[1]))
+            return 0.5 * float(np.sum(np.linalg.slogdet(oscillator_covariance(problem))[1]))
         return float(sum(self.log_normaliser_parts(problem)))
 
     def log_normaliser_parts(self, problem):
@@ -652,11 +705,11 @@ class GyroscopeGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return bool(problem.use_gyro)
 
-    def setup(self, problem) -> None:
+    def noise(self, problem) -> dict:
         if not np.all(np.isfinite(problem.log.gyro_b_radps)):
             row = int(np.argwhere(~np.isfinite(problem.log.gyro_b_radps))[0, 0])
             raise DataError(f"{problem.log.source}: gyroscope reading is not finite at sample {row}")
-        problem.gyro_sigma = noise.gyro_noise_std(problem.log.array)
+        return {"gyro_sigma": noise.gyro_noise_std(problem.log.array)}
 
     def terms(self, problem, states, params):
         n, s = problem.n, problem.gyro_sigma
@@ -721,11 +774,11 @@ class InclinometerGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return bool(problem.attitude and problem.use_inclinometer)
 
-    def setup(self, problem) -> None:
+    def noise(self, problem) -> dict:
         if not np.all(np.isfinite(problem.log.tilt_rad)):
             row = int(np.argwhere(~np.isfinite(problem.log.tilt_rad))[0, 0])
             raise DataError(f"{problem.log.source}: inclinometer reading is not finite at sample {row}")
-        problem.tilt_sigma = noise.tilt_noise_std(problem.log.array)
+        return {"tilt_sigma": noise.tilt_noise_std(problem.log.array)}
 
     def terms(self, problem, states, params):
         s = problem.tilt_sigma

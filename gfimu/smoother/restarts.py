@@ -172,10 +172,9 @@ def local_resolve(objective: FrozenObjective, X: np.ndarray, a: int, b: int, mar
     held = [i for i in (lo, lo + 1) if lo > 0] + [i for i in (hi - 2, hi - 1) if hi < p.n]
     opt = replace(p.options, factor_groups=tuple(p.options.factor_groups)
                   + (_HeldStates([i - lo for i in held], X[held]),))
-    sub = SmootherProblem(p.log.select(slice(lo, hi)), opt)
-    sub.set_base_noise(objective.accel_sigma[lo:hi], objective.trapezoid_sigma[lo:hi - 1],
-                       objective.omega_dot_step_sigma[lo:hi - 1])
-    reweight = reweighting(sub, replace(opt, accel_noise_slope_mps2_per_radps=0.0))
+    sub = SmootherProblem(p.log.select(slice(lo, hi)), opt).with_base_noise(
+        objective.accel_sigma[lo:hi], objective.trapezoid_sigma[lo:hi - 1], objective.omega_dot_step_sigma[lo:hi - 1])
+    reweight = reweighting(replace(opt, accel_noise_slope_mps2_per_radps=0.0))
     Y = X.copy()
     Y[lo:hi] = solve(sub, X[lo:hi], reweight=reweight, max_iterations=max_iterations).states
     return Y
