@@ -157,6 +157,16 @@ class Step:
         if rows < size:
             raise InputError(f"the step groups give {rows} rows on the next state's {size} values: the fixed-lag "
                              "smoother cannot predict it")
+        if rows == size:  # no rows left for x0 alone: R1⁻¹ Q1ᵀ = J1⁻¹
+            try:
+                M = np.linalg.inv(J1)
+            except np.linalg.LinAlgError:
+                M = np.full((size, size), np.nan)
+            if np.all(np.isfinite(M)):
+                Q = M @ M.T
+                F = -M @ J0
+                return cls(J0, J1, r0, F, np.ascontiguousarray(F.T), 0.5 * (Q + Q.T),
+                           None if not np.any(r0) else -M @ r0, None, None)
         Qf, Rf = np.linalg.qr(J1, mode="complete")
         R1, Q1, Q2 = Rf[:size], Qf[:, :size], Qf[:, size:]
         if not np.all(np.isfinite(R1)) or np.min(np.abs(np.diagonal(R1))) <= 1e-12 * max(np.max(np.abs(R1)), 1e-300):
@@ -313,9 +323,17 @@ class ArrayModel:
                 x1 = base.F @ x0 + (0.0 if base.c is None else base.c)
                 others = self._step_rows(groups, view, x0, x1, motion_factor)[:3]
         if others is None:
+            unit = fixed[1.0]
             if motion_factor == 1.0:
-                return fixed[1.0]
-            return Step.of(*self._scaled(fixed["rows"], motion_factor))
+                return unit
+            J0, J1, r0 = self._scaled(fixed["rows"], motion_factor)
+            if unit.H0 is None and J1.shape[0] == J1.shape[1]:  # square J1: F stays, Q = J1⁻¹ diag(1/s²) J1⁻ᵀ
+                M = fixed.get("J1_inv")
+                if M is None:
+                    M = fixed["J1_inv"] = np.linalg.inv(fixed["rows"][1])
+                Q = (M * np.where(fixed["rows"][3], motion_factor * motion_factor, 1.0)) @ M.T
+                return Step(J0, J1, r0, unit.F, unit.FT, 0.5 * (Q + Q.T), unit.c, None, None)
+            return Step.of(J0, J1, r0)
         J0, J1, r0 = self._scaled(fixed["rows"], motion_factor)
         return Step.of(np.vstack([J0, others[0]]), np.vstack([J1, others[1]]), np.concatenate([r0, others[2]]))
 
