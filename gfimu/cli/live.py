@@ -52,13 +52,13 @@ def run(args) -> int:
     from ..methods import make_estimator
     from .options import check_method_options, parse_options
 
-    array, declared_rate_hz = gio.load_array_toml(args.array)
-    rate_hz = args.rate_hz or declared_rate_hz
-    out_path = check_output(args.out, [args.array], "--out", stdout=True)
     options = parse_options(args.option)
     options["lag_s"] = args.lag_s
     check_method_options("fixed-lag", options)
-    estimator = make_estimator("fixed-lag", **options)
+    estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
+    array, declared_rate_hz = gio.load_array_toml(args.array)
+    rate_hz = args.rate_hz or declared_rate_hz
+    out_path = check_output(args.out, [args.array], "--out", stdout=True)
     reason = estimator.applicable(array)
     if reason:
         raise CLIError(f"{args.array}: {reason}")
