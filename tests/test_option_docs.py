@@ -8,7 +8,7 @@ import pytest
 
 from gfimu import io as gio
 from gfimu.cli import main
-from gfimu.cli.options import describe_options
+from gfimu.cli.options import OptionError, check_method_options, describe_options, parse_options
 from gfimu.methods import estimator_class, make_estimator
 from gfimu.simulate import simulate
 from gfimu.smoother.option_groups import GROUPS
@@ -28,6 +28,13 @@ def test_every_smoother_option_is_listed_under_its_group(method, groups):
 
 
 def test_flat_options_keep_working():
+    # None where the declaration allows it: window_s=None solves the whole log at once
+    assert check_method_options("smoother", parse_options(["window_s=None", "tune_span_s=None"])) == {
+        "window_s": None, "tune_span_s": None}
+    assert check_method_options("fixed-lag", parse_options(["marginalise_every_s=None"])) == {
+        "marginalise_every_s": None}
+    with pytest.raises(OptionError, match=r"^-O lag_s=None: expected a number \(option of method 'fixed-lag', "):
+        check_method_options("fixed-lag", parse_options(["lag_s=None"]))
     est = make_estimator("smoother", window_s=10.0, solver="gtsam", tune_span_s=None)
     assert est.window_s == 10.0 and est.solver == "gtsam" and est.tune_span_s is None
     est = make_estimator("smoother", preset="hand-held-low-rate", window_s=10.0)

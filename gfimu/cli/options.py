@@ -153,6 +153,12 @@ def _kind_of(annotation, default) -> str | None:
     return None
 
 
+def _takes_none(annotation) -> bool:
+    """Whether a field's annotation allows None (``float | None``, ``Optional[float]``: window_s=None)."""
+    text = str(annotation).replace(" ", "")
+    return "None" in text.split("|") or text.startswith("Optional[")
+
+
 def _sequence_shape(cls, name: str) -> tuple[bool, int | None] | None:
     """For a field whose type takes a tuple (``tuple[float, float, float]``, ``Union[str, tuple]``):
     (text also allowed, the fixed length or None); None for any other field."""
@@ -249,7 +255,7 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
                 options[key] = _check_sequence(method, key, value, shape, flag, prefix)
             continue
         kind = _kind_of(f.type, default)
-        if kind is None or (value is None and default is None):
+        if kind is None or (value is None and (default is None or _takes_none(f.type))):
             continue
         ok = {"bool": isinstance(value, bool),
               "int": isinstance(value, int) and not isinstance(value, bool),

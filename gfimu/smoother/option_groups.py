@@ -246,7 +246,7 @@ def _group_property(group: str):
 
 
 def _from_groups(cls, *parts, **changes):
-    """The flat options from group values ``parts`` (the groups not given at their defaults) and ``changes``
+    """The flat options from the group values ``parts`` (a group not given keeps its defaults), then ``changes``
     by flat name."""
     own = groups_of(cls)
     values = {}
