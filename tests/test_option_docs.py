@@ -3,6 +3,8 @@ the flat ``-O name=value`` keeps working, and an option of the other smoother's 
 options are read (exit 2, one line naming it)."""
 
 import dataclasses
+import io
+from types import SimpleNamespace
 
 import pytest
 
@@ -84,3 +86,26 @@ def test_compare_names_the_method_of_the_refused_option(log_dir, tmp_path, capsy
                  "--out", str(tmp_path / "cmp.csv")]) == 2
     err = capsys.readouterr().err
     assert "-O fixed-lag.overlap_s=1: overlap_s is a batch-smoother option" in err
+
+
+def test_live_takes_the_lag_from_o_or_from_lag_s_and_refuses_both_disagreeing(log_dir, tmp_path, capsys,
+                                                                              monkeypatch):
+    import gfimu.live
+
+    made = []
+
+    def fake_run(source, estimator, sink, **kwargs):  # the session itself is tested in test_live.py
+        made.append(estimator)
+        return SimpleNamespace(failure=None, summary=lambda: "0 samples", signal_exit=None, ended="end of input")
+
+    monkeypatch.setattr(gfimu.live, "run", fake_run)
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))
+    base = ["live", "--array", str(log_dir / "array.toml"), "--rate-hz", "500", "--source", "-", "--quiet"]
+    assert main(base + ["--out", str(tmp_path / "a.csv"), "-O", "lag_s=0.3"]) == 0
+    assert main(base + ["--out", str(tmp_path / "b.csv"), "--lag-s", "0.1"]) == 0
+    assert main(base + ["--out", str(tmp_path / "c.csv")]) == 0
+    assert [e.lag_s for e in made] == [0.3, 0.1, 0.2]
+    capsys.readouterr()
+    assert main(base + ["--out", str(tmp_path / "d.csv"), "-O", "lag_s=0.3", "--lag-s", "0.2"]) == 2
+    assert "gfimu live: error: --lag-s 0.2 and -O lag_s=0.3 disagree; give the lag once" in capsys.readouterr().err
+    assert len(made) == 3 and not (tmp_path / "d.csv").exists()

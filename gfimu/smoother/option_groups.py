@@ -141,10 +141,12 @@ class BatchOptions:
         "array's plane) and keep them where the robust objective falls"))
     tune_span_s: float | None = option(10.0, "s", (
         "with tune_process_noise: choose the process noise on at most this much of each solve window, its "
-        "middle (None: the whole window)"))
+        "middle (10 s of readings fix a handful of noise levels well, and the choice then costs no more as "
+        "the window grows; None: the whole window)"))
     workers: int = option(0, "processes", (
         "processes solving the solve windows at once (the same numbers): 0 = one per CPU, at most one per "
-        "window; 1 = all in this process"))
+        "window; 1 = all in this process (attitude windows, which start from the one before, and the gtsam "
+        "solver always run in this process)"))
     solver: str = option("numpy", help=(
         "batch solver: 'numpy' (vectorised banded Levenberg-Marquardt, linear in the length) or 'gtsam' (the "
         "same problem as a GTSAM graph, eliminated in time order: a cross-check)"))
@@ -186,7 +188,8 @@ class TuningOptions:
         "choose the model from the log (gfimu.smoother.auto): readings that follow the rigid-body equation up to "
         "their stated noise keep the options; larger, heavy-tailed or |ω|-growing residuals (real arrays) get "
         "the ML initialisation with its sign chain, the measured noise floor and slope, Cauchy losses and "
-        "moment-estimated process noise; options set away from their defaults are kept either way"))
+        "moment-estimated process noise; options set away from their defaults are kept either way (the "
+        "fixed-lag smoother: on the stream's recent past, engine 'numpy')"))
     tune_process_noise: bool = option(False, help=(
         "choose the jerk/snap density per body axis and the specific-force density by maximising the marginal "
         "likelihood of the data (per solve window; the fixed-lag smoother on its first tune_window_s); on by "
