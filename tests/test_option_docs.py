@@ -71,6 +71,15 @@ def test_the_other_smoother_s_option_is_refused_when_parsed(log_dir, tmp_path, c
     assert not out.exists() and _files(log_dir) == before
 
 
+def test_estimate_refuses_two_different_lags(log_dir, tmp_path, capsys):
+    out = tmp_path / "est.csv"
+    assert main(["estimate", str(log_dir), "--method", "fixed-lag", "-O", "lag_s=0.3", "--lag-s", "0.2",
+                 "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == ("gfimu estimate: error: --lag-s 0.2 and -O lag_s=0.3 disagree; "
+                                               "give the lag once")
+    assert not out.exists()
+
+
 def test_live_refuses_a_batch_option_before_opening_anything(log_dir, tmp_path, capsys):
     out = tmp_path / "live.csv"
     assert main(["live", "--array", str(log_dir / "array.toml"), "--source", "udp://127.0.0.1:9",
