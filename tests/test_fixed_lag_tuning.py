@@ -8,7 +8,7 @@ from gfimu.factors import kinematics, process
 from gfimu.simulate import simulate
 from gfimu.smoother import _fixed_lag_model as model
 from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.fixed_lag import FixedLagEstimator, explicit_process_noise, tunes_process_noise
+from gfimu.smoother.fixed_lag import FixedLagEstimator, FixedLagSmoother, explicit_process_noise, tunes_process_noise
 from gfimu.smoother.graph import SmootherOptions
 
 RATE_HZ = 500.0
@@ -162,18 +162,21 @@ def test_batch_only_options_are_refused_with_the_reason():
     cases = {
         "tune_motion_model": {"tune_motion_model": True},
         "accel_noise_slope": {"accel_noise_slope_mps2_per_radps": 0.05},
-        "window_s": {"window_s": 10.0},
-        "overlap_s": {"overlap_s": 1.0},
-        "reweight_iterations": {"reweight_iterations": 2},
         "motion_model": {"motion_model": "snap"},
+        "accel_robust_threshold": {"accel_robust_threshold": 2.0},
     }
-    if hasattr(SmootherOptions(), "accel_robust_threshold"):  # the batch smoother's robust re-weighting
-        cases["accel_robust_threshold"] = {"accel_robust_threshold": 2.0}
     for word, changes in cases.items():
         reason = FixedLagEstimator(**changes).applicable(arr)
         assert reason and word in reason, (changes, reason)
         with pytest.raises(ValueError, match=word):
             FixedLagEstimator(**changes).smoother(arr, RATE_HZ)
+    # the batch smoother's own options are not options of the fixed-lag estimator at all...
+    for name, value in (("window_s", 10.0), ("overlap_s", 1.0), ("reweight_iterations", 2)):
+        with pytest.raises(TypeError, match=name):
+            FixedLagEstimator(**{name: value})
+        # ...and the streaming smoother given plain SmootherOptions refuses them by name
+        with pytest.raises(ValueError, match=f"^{name}: option\\(s\\) of the batch smoother"):
+            FixedLagSmoother(arr, SmootherOptions(**{name: value}), rate_hz=RATE_HZ)
     assert FixedLagEstimator(tune_accel_noise=True, initialisation="ml").applicable(arr) is None
     with pytest.raises(ValueError, match="tune_window_s"):
         FixedLagEstimator(tune_window_s=0.0).smoother(arr, RATE_HZ)

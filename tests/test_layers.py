@@ -2,7 +2,7 @@
 
 Layers, lowest first (a module may import its own layer and the layers below):
 
-core (error kinds, estimate and report, rigid body, array, log, motion, rotations, noise policy, progress, forked workers, bundled data)
+core (error kinds, estimate and report, rigid body, array, log, motion, rotations, noise policy, option declarations, progress, forked workers, bundled data)
 ← io (formats, readers, outputs) and simulate (synthetic logs), side by side
 ← estimators (the papers' per-sample methods, the per-sample bound, calibration)
 ← smoother (factors, model, solvers, tuning, fixed lag)
@@ -27,7 +27,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "gfimu"
 
 LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
     ("core", 0, ("gfimu", "gfimu.errors", "gfimu.estimate", "gfimu.rigid_body", "gfimu.rotations", "gfimu.motion", "gfimu.array", "gfimu.log",
-                 "gfimu.noise", "gfimu.progress", "gfimu.parallel", "gfimu.readings", "gfimu.datasets*")),
+                 "gfimu.noise", "gfimu.option", "gfimu.progress", "gfimu.parallel", "gfimu.readings", "gfimu.datasets*")),
     ("io", 1, ("gfimu.io*",)),
     ("simulate", 1, ("gfimu.simulate*",)),
     ("estimators", 2, ("gfimu.estimators*", "gfimu.crb", "gfimu.calibration")),

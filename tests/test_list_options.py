@@ -1,32 +1,55 @@
-"""``gfimu estimate --method M --list-options``: every -O option with unit, default and meaning."""
+"""``gfimu estimate --method M --list-options``: every -O option with its default, unit and help, read from the
+option's declaration (the field's metadata)."""
 
 import dataclasses
+import inspect
 
 import pytest
 
 from gfimu.cli import main
-from gfimu.cli.options import attribute_docs, describe_options, unit_of
+from gfimu.cli.options import describe_options
 from gfimu.methods import METHODS, estimator_class
 
 
 @pytest.mark.parametrize("method", list(METHODS))
-def test_every_option_is_listed_with_a_meaning(method, capsys):
+def test_every_option_is_listed_with_its_declared_default_unit_and_help(method, capsys):
     assert main(["estimate", "--method", method, "--list-options"]) == 0
     out = capsys.readouterr().out
-    cls = estimator_class(method)
-    for f in dataclasses.fields(cls):
-        if f.init and not f.name.startswith("_"):
-            assert f"\n{f.name} = " in out, f.name
+    for f in dataclasses.fields(estimator_class(method)):
+        if not f.init or f.name.startswith("_"):
+            continue
+        unit, help_ = f.metadata["unit"], f.metadata["help"]
+        assert help_, (method, f.name)
+        head = f"{f.name} = {f.default!r}" + (f" [{unit}]" if unit else "")
+        assert f"\n{head}\n    {help_}\n" in out, (method, f.name)
     assert "(no description)" not in out
 
 
-def test_units_defaults_and_docs_of_the_smoother():
-    text = describe_options("smoother")
-    assert "omega_dot_random_walk_radps2_per_sqrt_s = 30.0 [rad/s²/√s]" in text
-    assert "window_s = 30.0 [s]" in text and "auto_model = True\n" in text
-    docs = attribute_docs(estimator_class("smoother"))
-    assert docs["auto_model"].startswith("Choose the model from the log")
-    assert unit_of("accel_noise_slope_mps2_per_radps") == "m/s² per rad/s" and unit_of("reweight_iterations") == ""
+def test_hand_written_expectations():
+    smoother, fixed_lag = describe_options("smoother"), describe_options("fixed-lag")
+    for text in (smoother, fixed_lag):
+        assert "\nomega_dot_random_walk_radps2_per_sqrt_s = 30.0 [rad/s²/√s]\n    white angular jerk density" in text
+        assert "\naccel_noise_slope_mps2_per_radps = 0.0 [m/s² per rad/s]\n" in text
+        assert "\ntune_process_noise = True\n" in text and "\nauto_model = True\n" in text
+        assert "\nguard = 'replace'\n" in text
+    assert "\nwindow_s = 30.0 [s]\n" in smoother and "\nreweight_iterations = 3\n" in smoother
+    assert "\nworkers = 0 [processes]\n" in smoother
+    assert not [n for n in ("window_s", "overlap_s", "reweight_iterations", "solver") if f"\n{n} = " in fixed_lag]
+    assert "\nlag_s = 0.2 [s]\n" in fixed_lag and "\nrelinearize_threshold = 0.1 [rad/s]\n" in fixed_lag
+    assert not [n for n in ("lag_s", "relinearize_threshold", "engine", "retune_every_s") if f"\n{n} = " in smoother]
+    assert "\nnoise_std_mps2 = None [m/s²]\n" in describe_options("ml")
+    assert "\nt1 = 0.1 [(rad/s)²]\n" in describe_options("imm")
+
+
+def test_the_list_is_made_without_reading_any_source(monkeypatch):
+    expected = {m: describe_options(m) for m in METHODS}
+
+    def no_source(*args, **kwargs):
+        raise OSError("source not available")
+
+    monkeypatch.setattr(inspect, "getsource", no_source)
+    monkeypatch.setattr(inspect, "getsourcelines", no_source)
+    assert {m: describe_options(m) for m in METHODS} == expected
 
 
 def test_estimate_without_a_log_asks_for_one(capsys):

@@ -1,36 +1,104 @@
-"""The smoothers' options as nested dataclasses per group (gfimu.smoother.option_groups.nested), with the
-flat names unchanged."""
+"""The smoothers' options: declared once in their group dataclasses (gfimu.smoother.option_groups) with unit,
+default and help; the flat classes assembled from the groups keep every flat name and give the groups back."""
 
 from __future__ import annotations
 
-from dataclasses import FrozenInstanceError, fields
+from dataclasses import FrozenInstanceError, dataclass, fields, replace
 
 import pytest
 
+from gfimu.errors import InputError
 from gfimu.methods import make_estimator
+from gfimu.smoother.batch import BatchSmootherEstimator
+from gfimu.smoother.fixed_lag import FixedLagEstimator
 from gfimu.smoother.graph import SmootherOptions
-from gfimu.smoother.option_groups import GROUPS, flatten, nested
+from gfimu.smoother.option_groups import (GROUP_CLASSES, GROUPS, BatchOptions, ModelOptions, StreamOptions,
+                                          TuningOptions, assemble, groups_of)
 
 
-def test_nested_options_hold_every_flat_option_once_under_its_group():
-    opt = SmootherOptions(motion_model="snap", window_s=10.0, tune_accel_noise=True)
-    g = nested(opt)
-    assert g.model.motion_model == "snap" and g.batch.window_s == 10.0 and g.tuning.tune_accel_noise is True
-    seen = [f.name for part in fields(g) for f in fields(getattr(g, part.name))]
-    assert sorted(seen) == sorted(f.name for f in fields(SmootherOptions))
-    assert [f.name for f in fields(g.model)] == [n for n in GROUPS["model"] if n in seen]
-    assert fields(g.fixed_lag) == () and fields(g.other) == ()  # the batch options have no fixed-lag ones
+def _names(*groups):
+    return sorted(n for g in groups for n in GROUPS[g])
+
+
+def test_every_declaration_carries_a_one_line_help_and_a_unit():
+    seen = set()
+    for group, cls in GROUP_CLASSES.items():
+        for f in fields(cls):
+            assert f.name not in seen, f.name  # each option in one group only
+            seen.add(f.name)
+            assert set(f.metadata) == {"unit", "help"}, f.name
+            assert f.metadata["help"] and "\n" not in f.metadata["help"], f.name
+    f = {f.name: f for f in fields(ModelOptions)}["omega_dot_random_walk_radps2_per_sqrt_s"]
+    assert (f.default, f.metadata["unit"]) == (30.0, "rad/s²/√s")
+    f = {f.name: f for f in fields(BatchOptions)}["window_s"]
+    assert (f.default, f.metadata["unit"]) == (30.0, "s")
+    f = {f.name: f for f in fields(StreamOptions)}["relinearize_threshold"]
+    assert (f.default, f.metadata["unit"]) == (0.1, "rad/s")
+
+
+def test_each_flat_class_has_exactly_its_groups_with_the_declared_metadata():
+    assert sorted(f.name for f in fields(SmootherOptions)) == _names("model", "batch", "tuning")
+    assert sorted(f.name for f in fields(BatchSmootherEstimator)) == _names("model", "batch", "tuning", "guard")
+    assert sorted(f.name for f in fields(FixedLagEstimator)) == _names("model", "stream", "tuning", "guard")
+    assert groups_of(FixedLagEstimator) == ("model", "stream", "tuning", "guard")
+    for cls in (SmootherOptions, BatchSmootherEstimator, FixedLagEstimator):
+        for f in fields(cls):
+            declared = {d.name: d for d in fields(GROUP_CLASSES[f.metadata["group"]])}[f.name]
+            assert dict(f.metadata) == {**declared.metadata, "group": f.metadata["group"]}, (cls, f.name)
+            if f.name != "tune_process_noise":
+                assert f.default == declared.default, (cls, f.name)
+    # the one default the methods change: both estimators tune the process noise, the plain options do not
+    assert SmootherOptions().tune_process_noise is False
+    assert BatchSmootherEstimator().tune_process_noise is True and FixedLagEstimator().tune_process_noise is True
+
+
+def test_flat_options_round_trip_through_their_groups():
+    opt = SmootherOptions(motion_model="snap", window_s=10.0, tune_accel_noise=True, workers=2)
+    assert opt.model.motion_model == "snap" and opt.batch.window_s == 10.0 and opt.tuning.tune_accel_noise is True
+    assert isinstance(opt.batch, BatchOptions) and opt.batch.workers == 2
+    assert SmootherOptions.from_groups(opt.model, opt.batch, opt.tuning) == opt
+    assert SmootherOptions.from_groups(opt.model, opt.batch, opt.tuning, window_s=20.0) == replace(opt, window_s=20.0)
+    # a group left out keeps its defaults
+    assert SmootherOptions.from_groups(opt.model) == SmootherOptions(motion_model="snap")
+    assert SmootherOptions().model == ModelOptions() and SmootherOptions().tuning == TuningOptions()
     with pytest.raises(FrozenInstanceError):
-        g.model.motion_model = "jerk"
-    assert flatten(SmootherOptions, g) == opt
-    assert flatten(SmootherOptions, g, window_s=20.0) == SmootherOptions(motion_model="snap", window_s=20.0,
-                                                                       tune_accel_noise=True)
+        opt.model.motion_model = "jerk"
+    with pytest.raises(TypeError, match="no option group 'stream'"):
+        SmootherOptions.from_groups(StreamOptions())
     with pytest.raises(TypeError, match="no option lag_s"):
-        flatten(SmootherOptions, g, lag_s=0.1)
+        SmootherOptions.from_groups(opt.model, lag_s=0.1)
+    with pytest.raises(InputError, match="motion_model must be 'jerk' or 'snap'"):  # values checked when flat
+        SmootherOptions.from_groups(replace(opt.model, motion_model="quintic"))
 
 
-def test_an_estimator_s_own_options_are_grouped_too():
-    est = make_estimator("fixed-lag", lag_s=0.1, engine="gtsam")
-    g = nested(est)
-    assert g.fixed_lag.lag_s == 0.1 and g.fixed_lag.engine == "gtsam" and g.model.motion_model == "jerk"
-    assert flatten(type(est), g) == est
+def test_the_estimators_give_their_groups_back():
+    est = make_estimator("fixed-lag", lag_s=0.1, engine="gtsam", guard="warn", initialisation="ml")
+    assert est.stream.lag_s == 0.1 and est.stream.engine == "gtsam" and est.model.initialisation == "ml"
+    assert not hasattr(est, "batch")
+    assert FixedLagEstimator.from_groups(est.model, est.stream, est.tuning, guard="warn") == est
+    # the model given to the stream: the estimator's model and tuning, the batch group at its defaults
+    inner = est.options()
+    assert inner.model == est.model and inner.tuning == est.tuning and inner.batch == BatchOptions()
+    batch = make_estimator("smoother", window_s=12.0, solver="gtsam", tune_span_s=None)
+    assert batch.batch.window_s == 12.0 and batch.batch.solver == "gtsam" and batch.batch.tune_span_s is None
+    assert not hasattr(batch, "stream") and batch.options().batch == batch.batch
+
+
+def test_the_fixed_lag_estimator_checks_its_model_options_when_made():
+    with pytest.raises(InputError, match="omega_dot_random_walk_radps2_per_sqrt_s must be a positive number"):
+        FixedLagEstimator(omega_dot_random_walk_radps2_per_sqrt_s=-1.0)
+    with pytest.raises(InputError, match="guard must be one of"):
+        FixedLagEstimator(guard="sometimes")
+    # the batch group's options joined SmootherOptions from the batch estimator, and are checked there too
+    with pytest.raises(InputError, match=r"tune_span_s must be a positive number \[s\] or None, got -1.0"):
+        SmootherOptions(tune_span_s=-1.0)
+    with pytest.raises(InputError, match="workers must be 0"):
+        SmootherOptions(workers=-1)
+
+
+def test_an_option_is_declared_in_its_group_only():
+    with pytest.raises(TypeError, match="declares window_s: declare an option in its group only"):
+        @dataclass(frozen=True)
+        @assemble("model")
+        class Twice:
+            window_s: float = 1.0

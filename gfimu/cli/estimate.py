@@ -117,6 +117,8 @@ def method_options(args) -> dict:
     if getattr(args, "lag_s", None) is not None:
         if args.method != "fixed-lag":
             raise CLIError("--lag-s applies to --method fixed-lag only")
+        if "lag_s" in options and options["lag_s"] != args.lag_s:
+            raise CLIError(f"--lag-s {args.lag_s:g} and -O lag_s={options['lag_s']!r} disagree; give the lag once")
         options["lag_s"] = args.lag_s
     if getattr(args, "sigma", False):
         options["compute_sigma"] = True

@@ -29,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="'-' (imu.csv rows on standard input, header first), udp://HOST:PORT (one data row per "
                         "datagram), tcp://HOST:PORT or serial:///dev/ttyUSB0?baud=N (MIMU4444 packets)")
     p.add_argument("--out", required=True, metavar="DEST", help="estimate CSV to write, or - for standard output")
-    p.add_argument("--lag-s", type=positive("s"), default=0.2, help="lag of the smoother [s] (default 0.2)")
+    p.add_argument("--lag-s", type=positive("s"), default=None,
+                   help="lag of the smoother [s] (default: -O lag_s, else 0.2)")
     p.add_argument("--rate-hz", type=positive("Hz"), default=None,
                    help="nominal sample rate [Hz] (default: rate_hz of array.toml, else the median period of the "
                         "first 64 samples received)")
@@ -52,13 +53,16 @@ def run(args) -> int:
     from ..methods import make_estimator
     from .options import check_method_options, parse_options
 
+    options = parse_options(args.option)
+    if args.lag_s is not None:
+        if "lag_s" in options and options["lag_s"] != args.lag_s:
+            raise CLIError(f"--lag-s {args.lag_s:g} and -O lag_s={options['lag_s']!r} disagree; give the lag once")
+        options["lag_s"] = args.lag_s
+    check_method_options("fixed-lag", options)
+    estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
     rate_hz = args.rate_hz or declared_rate_hz
     out_path = check_output(args.out, [args.array], "--out", stdout=True)
-    options = parse_options(args.option)
-    options["lag_s"] = args.lag_s
-    check_method_options("fixed-lag", options)
-    estimator = make_estimator("fixed-lag", **options)
     reason = estimator.applicable(array)
     if reason:
         raise CLIError(f"{args.array}: {reason}")

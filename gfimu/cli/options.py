@@ -11,7 +11,6 @@ import argparse
 import ast
 import dataclasses
 import math
-import re
 from collections.abc import Callable
 
 from ..errors import InputError
@@ -154,6 +153,12 @@ def _kind_of(annotation, default) -> str | None:
     return None
 
 
+def _takes_none(annotation) -> bool:
+    """Whether a field's annotation allows None (``float | None``, ``Optional[float]``: window_s=None)."""
+    text = str(annotation).replace(" ", "")
+    return "None" in text.split("|") or text.startswith("Optional[")
+
+
 def _sequence_shape(cls, name: str) -> tuple[bool, int | None] | None:
     """For a field whose type takes a tuple (``tuple[float, float, float]``, ``Union[str, tuple]``):
     (text also allowed, the fixed length or None); None for any other field."""
@@ -206,6 +211,22 @@ MIN_DENSITY = 1e-9
 the smoother's own tuned densities (1e-40 made its normal equations singular)."""
 
 
+def _unknown_option(method: str, fields: dict, key: str, value, flag: str, prefix: str) -> str:
+    """The one-line error for ``key``, which ``method`` has not: an option of the other smoother's own group
+    (:mod:`gfimu.smoother.option_groups`) is named as that; else the method's options are listed."""
+    groups = {f.metadata.get("group") for f in fields.values()} - {None}
+    if groups:
+        from ..smoother.option_groups import GROUP_METHODS, GROUP_OF
+
+        group = GROUP_OF.get(key)
+        if group in GROUP_METHODS and group not in groups:
+            kind, owner = GROUP_METHODS[group]
+            return (f"{flag} {prefix}{key}={shown(value)}: {key} is a {kind} option (method {owner!r}, group "
+                    f"[{group}]); method {method!r} does not take it")
+    return (f"{flag} {prefix}{shown(key)[1:-1]}=...: method {method!r} has no option {shown(key)}; "
+            f"its options are: {', '.join(sorted(fields))}")
+
+
 def check_method_options(method: str, options: dict, flag: str = "-O", prefix: str = "") -> dict:
     """Check the type of each option of ``method`` against its documented default; returns the options.
 
@@ -226,9 +247,7 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
             continue
         f = fields.get(key)
         if f is None:
-            known = ", ".join(sorted(fields))
-            raise OptionError(f"{flag} {prefix}{shown(key)[1:-1]}=...: method {method!r} has no option {shown(key)}; "
-                              f"its options are: {known}")
+            raise OptionError(_unknown_option(method, fields, key, value, flag, prefix))
         default = f.default if f.default is not dataclasses.MISSING else None
         shape = _sequence_shape(cls, key)
         if shape is not None:
@@ -236,7 +255,7 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
                 options[key] = _check_sequence(method, key, value, shape, flag, prefix)
             continue
         kind = _kind_of(f.type, default)
-        if kind is None or (value is None and default is None):
+        if kind is None or (value is None and (default is None or _takes_none(f.type))):
             continue
         ok = {"bool": isinstance(value, bool),
               "int": isinstance(value, int) and not isinstance(value, bool),
@@ -247,7 +266,7 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
                               f"{method!r})")
         if ok and kind == "float" and key.endswith("_per_sqrt_s") and 0 < abs(float(value)) < MIN_DENSITY:
             raise OptionError(f"{flag} {prefix}{key}={shown(value)}: a noise density below {MIN_DENSITY:g} "
-                              f"[{unit_of(key)}] leaves the normal equations singular (option of method {method!r}, "
+                              f"[{f.metadata.get('unit', '')}] leaves the normal equations singular (option of method {method!r}, "
                               f"default {default!r}; the smoother's tuned densities are floored at {MIN_DENSITY:g} "
                               "too)")
         if ok and kind == "float" and value != 0 and not OPTION_MAGNITUDE[0] <= abs(float(value)) <= OPTION_MAGNITUDE[1]:
@@ -261,110 +280,34 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
     return options
 
 
-UNIT_SUFFIXES = (
-    ("_radps2_per_sqrt_s", "rad/s²/√s"), ("_radps3_per_sqrt_s", "rad/s³/√s"), ("_mps2_per_sqrt_s", "m/s²/√s"),
-    ("_rad_per_sqrt_s", "rad/√s"), ("_mps2_per_radps", "m/s² per rad/s"), ("_radps2", "rad/s²"),
-    ("_radps", "rad/s"), ("_mps2", "m/s²"), ("_hz", "Hz"), ("_nm", "N m"), ("_rad", "rad"), ("_s", "s"),
-    ("_m", "m"),
-)
-"""Unit of an option from the end of its name (names carry their units)."""
-
-
-def unit_of(name: str) -> str:
-    """The unit an option's name carries ('' when it has none: counts, switches, factors, choices)."""
-    for suffix, unit in UNIT_SUFFIXES:
-        if name.endswith(suffix):
-            return unit
-    return ""
-
-
-def attribute_docs(cls) -> dict[str, str]:
-    """Field name -> the docstring written under it in the class body, for ``cls`` and its bases
-    (the nearest class wins)."""
-    import ast
-    import inspect
-    import textwrap
-
-    docs: dict[str, str] = {}
-    for klass in reversed(cls.__mro__):
-        if klass is object:
-            continue
-        try:
-            source = textwrap.dedent(inspect.getsource(klass))
-        except (OSError, TypeError):
-            continue
-        body = ast.parse(source).body[0].body
-        for node, after in zip(body, body[1:] + [None]):
-            if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
-                doc = ""
-                if (isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant)
-                        and isinstance(after.value.value, str)):
-                    doc = " ".join(after.value.value.split())
-                if doc or node.target.id not in docs:
-                    docs[node.target.id] = doc
-        # bullets of the class docstring: "- ``name=default`` (and ``other=...``): meaning"
-        for bullet in re.split(r"\n\s*- ", "\n" + (klass.__doc__ or ""))[1:]:
-            head, sep, text = bullet.partition(":")
-            names = re.findall(r"``(\w+)=", head)
-            if sep and names:
-                meaning = " ".join(text.split())
-                for name in names:
-                    if not docs.get(name):
-                        docs[name] = meaning
-        # "name: meaning" (or "a, b: meaning") lines, continued on deeper-indented lines
-        lines = (klass.__doc__ or "").splitlines()
-        for i, line in enumerate(lines):
-            m = re.match(r"^(\s*)(\w+(?:,\s*\w+)*):\s+(.*)$", line)
-            if not m:
-                continue
-            indent, names = len(m.group(1)), [n.strip() for n in m.group(2).split(",")]
-            text = [m.group(3)]
-            for nxt in lines[i + 1:]:
-                if nxt.strip() and len(nxt) - len(nxt.lstrip()) > indent:
-                    text.append(nxt.strip())
-                else:
-                    break
-            for name in names:
-                if not docs.get(name) and name in getattr(klass, "__dataclass_fields__", {}):
-                    docs[name] = " ".join(" ".join(text).split())
-    return docs
-
-
-COMMON_OPTION_DOCS = {
-    "compute_sigma": "Also output one-sigma uncertainties of the estimates (sigma_ columns).",
-    "initial_omega": "ω of the first sample the integration starts from [rad/s] (None: zero).",
-}
-"""Meaning of options shared by several methods, where their class does not describe them."""
-
-
 def describe_options(method: str) -> str:
-    """Every ``-O`` option of ``method``: name, unit, default and meaning, one block each; the smoothers'
-    options under their group (model, batch, fixed-lag, tuning, guard: :mod:`gfimu.smoother.option_groups`).
-    A field's metadata (``unit``, ``help``) wins over what its name and docstring say."""
+    """Every ``-O`` option of ``method``: name, default, unit and help, one block each, from the option's
+    declaration (:func:`gfimu.option.option`: the field's metadata); the smoothers' options under their
+    group (model, batch, stream, tuning, guard: :mod:`gfimu.smoother.option_groups`)."""
     from ..methods import estimator_class
-    from ..smoother.option_groups import GROUP_OF, GROUPS
 
     cls = estimator_class(method)
     if not dataclasses.is_dataclass(cls):
         return f"method {method!r} has no options"
-    docs = attribute_docs(cls)
     lines = [f"options of method {method!r} (-O NAME=VALUE; values are JSON or plain text):", ""]
     fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
-    grouped = any(f.name in GROUP_OF for f in fields)
-    for group in (list(GROUPS) + [""]) if grouped else [""]:
-        members = [f for f in fields if (GROUP_OF.get(f.name, "") if grouped else "") == group]
+    sections = [("", fields)]
+    if any("group" in f.metadata for f in fields):
+        from ..smoother.option_groups import GROUPS
+
+        sections = [(group, [f for f in fields if f.metadata.get("group") == group]) for group in GROUPS]
+        sections.append(("other", [f for f in fields if "group" not in f.metadata]))
+    for group, members in sections:
         if not members:
             continue
-        if grouped:
-            lines.append(f"[{group or 'other'}]")
+        if group:
+            lines.append(f"[{group}]")
         for f in members:
             default = f.default if f.default is not dataclasses.MISSING else (
                 f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
-            unit = f.metadata.get("unit") or unit_of(f.name)
-            head = f"{f.name} = {default!r}" + (f" [{unit}]" if unit else "")
-            lines.append(head)
-            doc = f.metadata.get("help") or docs.get(f.name, "") or COMMON_OPTION_DOCS.get(f.name, "")
-            lines.append(f"    {doc}" if doc else "    (no description)")
-        if grouped:
+            unit = f.metadata.get("unit", "")
+            lines.append(f"{f.name} = {default!r}" + (f" [{unit}]" if unit else ""))
+            lines.append(f"    {f.metadata.get('help') or '(no description)'}")
+        if group:
             lines.append("")
     return "\n".join(lines).rstrip("\n") + "\n"

@@ -42,6 +42,7 @@ from scipy import sparse
 from scipy.optimize import least_squares
 
 from .. import rigid_body
+from ..option import option
 from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..log import Log
@@ -152,27 +153,20 @@ class _FreeFlightModel:
 class FreeFlightEstimator(PerSampleEstimator):
     """ω of a torque-free body in free fall from its accelerometer(s) (paper 004, eqs. 11-14).
 
-    Options (defaults):
-
-    - ``omega_sign="positive"``: branch of the ±ω ambiguity, "positive" /
-      "negative" on the spin axis, or "auto" (see module docstring);
-    - ``init_samples=50``: readings used to find ω(0), 2T and H²;
-    - ``starts=24``: multi-start points for the roots of eq. 13 at sample 0;
-    - ``compute_sigma=False``: one-sigma of ω from the Fisher information of
-      eq. 13 alone (accelerometer noise from the array), ignoring the
-      information added by the constants; ω̇'s follows to first order.
-
-    The whole log is taken as one free-flight phase (cut the throw and the
+    Options: ``gfimu estimate --method free-flight --list-options``. The whole log is taken as one free-flight phase (cut the throw and the
     catch first). Returns ω and ω̇ (from Euler's equations); the specific
     force at the centre of mass is zero by assumption and is not reported.
     """
 
     method = "free-flight"
 
-    omega_sign: str = "positive"
-    init_samples: int = 50
-    starts: int = 24
-    compute_sigma: bool = False
+    omega_sign: str = option("positive", help=(
+        "branch of the ±ω ambiguity: 'positive' or 'negative' on the spin axis, or 'auto' (module docstring)"))
+    init_samples: int = option(50, help="readings used to find ω(0), 2T and H²")
+    starts: int = option(24, help="multi-start points for the roots of eq. 13 at sample 0")
+    compute_sigma: bool = option(False, help=(
+        "one-sigma of ω from the Fisher information of eq. 13 alone (accelerometer noise from the array), "
+        "ignoring the information added by the constants; ω̇'s follows to first order"))
 
     def __post_init__(self) -> None:
         if self.omega_sign not in OMEGA_SIGNS:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..option import option
 from ..array import ArrayModelError, SensorArray
 from ..errors import DataError, InputError
 from ..log import Log
@@ -141,18 +142,14 @@ class GyroAidedEstimator(PerSampleEstimator):
 
     f and ω̇ by least squares from ``a_m − W q(ω_m)``; ω is the gyroscope
     reading itself (no blending: the gyro measures ω directly, and the
-    accelerometers carry only its squares).
-
-    Options:
-        compute_sigma: one-sigma of f and ω̇, from the accelerometer noise and
-            the gyro noise propagated through ``W q(ω_m)`` (first order, per
-            sample), and of ω (the gyro's noise level), when the array gives
-            them. Default False.
+    accelerometers carry only its squares). Options: ``gfimu estimate --method gyro-aided --list-options``.
     """
 
     method = "gyro-aided"
 
-    compute_sigma: bool = False
+    compute_sigma: bool = option(False, help=(
+        "one-sigma of f and ω̇, from the accelerometer noise and the gyro noise propagated through W q(ω_m) "
+        "(first order, per sample), and of ω (the gyro's noise level), when the array gives them"))
 
     def applicable(self, array: SensorArray) -> str | None:
         if array.gyroscope is None:

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..option import option
 from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..log import Log
@@ -158,33 +159,26 @@ def t2_from_trend(q: np.ndarray, intercept: float, slope: float) -> float:
 class IMMEstimator(PerSampleEstimator):
     """Context-based IMM of paper 002 §3.2 (zero / integration / quadratic models).
 
-    Options (paper 002 values where it gives them):
-        t1: zero-model threshold T1 on each quadratic sum, (rad/s)². Default
-            0.1 (§4.1: "T1 is set around 0.1").
-        t2: quadratic-model threshold T2, (rad/s)²; ``None`` (default) takes it
-            from the trend line below.
-        t2_intercept, t2_slope: trend line ``T2 = t2_intercept + t2_slope ·
-            mean(a + b + c)`` (§4.1, Fig. 8). Defaults 3.0 (rad/s)² and 0.02:
-            T2 = 3 at rest, within the paper's good range of 3-9 for levels of
-            motion up to 300 (rad/s)².
-        h1, h2: soft-switching half-widths as fractions of ``T2 - T1`` around
-            T1 and T2 (eqs. 16-17). Default 0.02 each ("around 2 %").
-        initial_omega: prediction for the first sample of each gap-free
-            segment: ``"zero"`` (default), ``"quadratic"`` or three numbers in
-            rad/s (see :class:`~gfimu.estimators.integration.PureIntegrationEstimator`).
-        compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
+    Options (paper 002 values where it gives them): ``gfimu estimate --method imm --list-options``.
     """
 
     method = "imm"
 
-    t1: float = 0.1
-    t2: float | None = None
-    t2_intercept: float = 3.0
-    t2_slope: float = 0.02
-    h1: float = 0.02
-    h2: float = 0.02
-    initial_omega: InitialOmega = "zero"
-    compute_sigma: bool = False
+    t1: float = option(0.1, "(rad/s)²", "zero-model threshold T1 on each quadratic sum (§4.1: \"T1 is set around 0.1\")")
+    t2: float | None = option(None, "(rad/s)²", (
+        "quadratic-model threshold T2; None takes it from the trend line t2_intercept + t2_slope · mean(a + b + c)"))
+    t2_intercept: float = option(3.0, "(rad/s)²", (
+        "intercept of the trend line of T2 (§4.1, Fig. 8): T2 = 3 at rest, within the paper's good range of 3-9 "
+        "for levels of motion up to 300 (rad/s)²"))
+    t2_slope: float = option(0.02, help="slope of the trend line of T2 on mean(a + b + c) (§4.1, Fig. 8)")
+    h1: float = option(0.02, help=(
+        "soft-switching half-width around T1, as a fraction of T2 - T1 (eq. 16; \"around 2 %\")"))
+    h2: float = option(0.02, help=(
+        "soft-switching half-width around T2, as a fraction of T2 - T1 (eq. 17; \"around 2 %\")"))
+    initial_omega: InitialOmega = option("zero", help=(
+        "prediction for the first sample of each gap-free segment: 'zero', 'quadratic' or three numbers in rad/s "
+        "(as method 'pure-integration')"))
+    compute_sigma: bool = option(False, help="one-sigma of f and ω̇ from the inversion (ω has none)")
 
     def __post_init__(self) -> None:
         for name in ("t1", "h1", "h2", "t2_intercept", "t2_slope"):

@@ -24,6 +24,7 @@ from typing import Union
 
 import numpy as np
 
+from ..option import option
 from ..array import SensorArray
 from ..log import Log
 from ..motion import Motion
@@ -81,10 +82,14 @@ def sign_tracking_loop(mag: list[float], inc: list[float], w0: float, alpha=None
 
 @dataclass
 class _IntegratingEstimator(PerSampleEstimator):
-    """Options shared by the two integrating methods (documented on each)."""
+    """Options shared by the two integrating methods."""
 
-    initial_omega: InitialOmega = "zero"
-    compute_sigma: bool = False
+    initial_omega: InitialOmega = option("zero", help=(
+        "ω at the start of each gap-free segment: 'zero' (body at rest, paper 000 footnote 3; the first sample "
+        "then takes positive signs), 'quadratic' (magnitudes from the first sample's quadratic sums, relative "
+        "signs from its cross terms, largest component positive) or three numbers in rad/s (first segment; "
+        "later segments use 'quadratic')"))
+    compute_sigma: bool = option(False, help="one-sigma of f and ω̇ from the inversion (ω has none)")
 
     def __post_init__(self) -> None:
         validate_initial_omega(self.initial_omega)
@@ -97,13 +102,7 @@ class _IntegratingEstimator(PerSampleEstimator):
 class PureIntegrationEstimator(_IntegratingEstimator):
     """Trapezoid integration of the inverted ω̇ (paper 002 eq. 8); f and ω̇ by inversion.
 
-    Options:
-        initial_omega: ω at the start of each gap-free segment: ``"zero"``
-            (default; body at rest, paper 000 footnote 3), ``"quadratic"``
-            (magnitudes from the first sample's quadratic sums, relative signs
-            from its cross terms, largest component positive) or three numbers
-            in rad/s (first segment; later segments use ``"quadratic"``).
-        compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
+    Options (``initial_omega``, ``compute_sigma``): ``gfimu estimate --method pure-integration --list-options``.
     """
 
     method = "pure-integration"
@@ -129,13 +128,8 @@ class IntegrationEstimator(_IntegratingEstimator):
     f and ω̇ come from the inversion; |ω| per axis from the quadratic sums
     (``ωx² = (a + b - c)/2`` …, clipped at zero); the sign of each component
     from the trapezoid prediction ``ω_{j-1} + h/2 (ω̇_{j-1} + ω̇_j)``. At the
-    first sample of each gap-free segment the prediction is ``initial_omega``.
-
-    Options:
-        initial_omega: ``"zero"`` (default, body at rest at the start; the
-            first sample then takes positive signs), ``"quadratic"`` or three
-            numbers in rad/s (see :class:`PureIntegrationEstimator`).
-        compute_sigma: one-sigma of f and ω̇ from the inversion (ω has none).
+    first sample of each gap-free segment the prediction is ``initial_omega``
+    (options: ``gfimu estimate --method integration --list-options``).
     """
 
     method = "integration"

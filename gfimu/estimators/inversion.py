@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..option import option
 from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..log import Log
@@ -94,17 +95,14 @@ class InversionEstimator(PerSampleEstimator):
     the previous sample's estimate (first sample of each gap-free segment:
     largest component positive). When |ω| passes near zero this continuity is
     lost and the sign may flip: the baseline behaviour the sign-tracking
-    methods ('integration', 'imm') improve on.
-
-    Options:
-        compute_sigma: also return one-sigma uncertainties of f, ω̇ (from the
-            inversion covariance) and ω (see :func:`omega_sigma_from_quadratic`)
-            when the array gives its noise levels. Default False.
+    methods ('integration', 'imm') improve on. Options: ``gfimu estimate --method inversion --list-options``.
     """
 
     method = "inversion"
 
-    compute_sigma: bool = False
+    compute_sigma: bool = option(False, help=(
+        "also output one-sigma uncertainties of f, ω̇ (from the inversion covariance) and ω "
+        "(omega_sigma_from_quadratic) when the array gives its noise levels"))
 
     def applicable(self, array: SensorArray) -> str | None:
         return array.inversion_reason()

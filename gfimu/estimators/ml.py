@@ -57,6 +57,7 @@ import numpy as np
 
 from .. import crb as crb_module
 from .. import noise, rigid_body
+from ..option import option
 from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..log import Log
@@ -141,38 +142,27 @@ class _PrepareChunk:
 class MLEstimator(PerSampleEstimator):
     """Per-sample maximum likelihood of f, ω̇ and ω (Skog et al. 2016).
 
-    Options (defaults):
-
-    - ``use_gyro=False``: add the array's gyro as a measurement of ω (needs a
-      gyro in the log and its ``noise_std_radps``);
-    - ``compute_sigma=False``: one-sigma from the inverse Fisher information at
-      the estimate (:mod:`gfimu.crb`); needs every axis' noise std;
-    - ``noise_std_mps2=None``: accelerometer noise std (scalar) overriding
-      array.toml; axes without a value are weighted as the mean of the others
-      (or 1 when none is given), which leaves the estimate unchanged when all
-      are equal;
-    - ``max_iterations=30`` and ``tolerance_radps=1e-12``: Levenberg–Marquardt
-      stopping rule (step size per sample);
-    - ``max_omega_radps=100.0``: largest |ω| in the starting grid;
-    - ``neighbour_passes=3``: restarts from the previous sample (see module
-      docstring);
-    - ``grid_directions=64``, ``grid_magnitudes=16``: size of the starting grid;
-    - ``workers=0``: processes that start the blocks of 4,096 samples, from four blocks on (0: one
-      per CPU; 1: this process alone; the same numbers either way, :mod:`gfimu.parallel`).
+    Options: ``gfimu estimate --method ml --list-options``.
     """
 
     method = "ml"
 
-    use_gyro: bool = False
-    compute_sigma: bool = False
-    noise_std_mps2: float | None = None
-    max_iterations: int = 30
-    tolerance_radps: float = 1e-12
-    max_omega_radps: float = 100.0
-    neighbour_passes: int = 3
-    grid_directions: int = 64
-    grid_magnitudes: int = 16
-    workers: int = 0
+    use_gyro: bool = option(False, help=(
+        "add the array's gyro as a measurement of ω (needs a gyro in the log and its noise_std_radps)"))
+    compute_sigma: bool = option(False, help=(
+        "one-sigma from the inverse Fisher information at the estimate (gfimu.crb); needs every axis' noise std"))
+    noise_std_mps2: float | None = option(None, "m/s²", (
+        "accelerometer noise std overriding array.toml (None: array.toml's; axes without one are weighted as the "
+        "mean of the others, or 1 when none is given, which leaves the estimate unchanged when all are equal)"))
+    max_iterations: int = option(30, help="Levenberg–Marquardt iterations per sample at most")
+    tolerance_radps: float = option(1e-12, "rad/s", "Levenberg–Marquardt stops when its step in ω is smaller")
+    max_omega_radps: float = option(100.0, "rad/s", "largest |ω| in the starting grid")
+    neighbour_passes: int = option(3, help="restarts from the previous sample (module docstring)")
+    grid_directions: int = option(64, help="directions of ω in the starting grid")
+    grid_magnitudes: int = option(16, help="magnitudes of ω in the starting grid")
+    workers: int = option(0, "processes", (
+        "processes that start the blocks of 4,096 samples, from four blocks on: 0 = one per CPU, 1 = this "
+        "process alone (the same numbers either way)"))
 
     def __post_init__(self):
         check_workers(self.workers)

@@ -20,7 +20,7 @@ and is re-weighted from each solution (iteratively re-weighted least squares).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -60,6 +60,7 @@ from .banded import (  # noqa: F401  (the banded core, also importable from here
     to_lower_banded,
 )
 from .graph import SmootherOptions, SmootherProblem, options_reason
+from .option_groups import assemble
 from .initialise import initial_attitude, initial_states, sign_chain
 from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from .restarts import branch_restarts
@@ -143,16 +144,19 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, options: Smoother
 
 
 def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: InitialStates | None = None,
-           solver: str = "numpy", auto_model: bool = True, tune_span_s: float | None = 10.0,
+           solver: str | None = None, auto_model: bool | None = None, tune_span_s: float | None = ...,
            workers: int = 1) -> SmootherResult:
     """The batch smoother on a whole log: overlapping solve windows, each with its process noise chosen
     from the data when ``options.tune_process_noise``.
 
     ``initial``: how each window's initial states are made (default
-    :func:`gfimu.smoother.initialise.initial_estimate`); ``solver``: one of :data:`SOLVERS`;
-    ``auto_model``, ``tune_span_s``, ``workers``: see :class:`BatchSmootherEstimator` (here 1, in
-    this process, unless asked)."""
+    :func:`gfimu.smoother.initialise.initial_estimate`); ``solver`` (one of :data:`SOLVERS`),
+    ``auto_model``, ``tune_span_s``: the options' unless given; ``workers``: here 1, in this process,
+    unless asked (:class:`BatchSmootherEstimator` passes its option)."""
     opt = options
+    solver = opt.solver if solver is None else solver
+    auto_model = opt.auto_model if auto_model is None else auto_model
+    tune_span_s = opt.tune_span_s if tune_span_s is ... else tune_span_s
     reason = options_reason(log.array, opt, attitude_supported=True)
     if reason:
         raise InputError(f"{log.source}: {reason}")
@@ -390,10 +394,12 @@ def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: sl
 
 
 @dataclass(frozen=True)
+@assemble(tune_process_noise=True)
 class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     """Factor-graph smoother over the whole log (method "smoother").
 
-    Options: see :class:`gfimu.smoother.graph.SmootherOptions`. Returns ω, ω̇
+    Options: those of :class:`gfimu.smoother.graph.SmootherOptions` (groups model, batch, tuning) and
+    ``guard`` (:mod:`gfimu.smoother.option_groups`; no fixed-lag option). Returns ω, ω̇
     and the specific force at the body origin for every sample, with
     one-sigma marginal uncertainties when ``compute_sigma``; :meth:`result`
     returns everything the run produced (:class:`SmootherResult`).
@@ -406,31 +412,8 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
 
     method = "smoother"
 
-    tune_process_noise: bool = True
-    tune_span_s: float | None = 10.0
-    """With ``tune_process_noise``: choose the process noise on at most this much of each solve
-    window, its middle [s] (the evidence of 10 s of readings fixes a handful of noise levels well;
-    the cost of the choice then stops growing with the window); None: on the whole window."""
-    auto_model: bool = True
-    """Choose the model from the log (:mod:`gfimu.smoother.auto`): logs whose readings follow the
-    rigid-body equation up to the stated white noise keep the options as they are; logs whose
-    residual is larger, heavy-tailed or grows with |ω| (real arrays) get the ML initialisation with
-    its sign chain, the measured noise floor and slope, Cauchy losses and moment-estimated process
-    noise. Options set to other than their defaults are kept either way; False: the options as given."""
-    workers: int = field(default=0, metadata={"unit": "processes", "help": "processes solving the solve windows at "
-                                              "once: 0 = one per CPU (at most one per window), 1 = all in this process"})
-    """Processes that solve the log's solve windows at once (forked from this one; the windows do not
-    depend on one another, so the numbers are the same): 0 (default) one per CPU this process may
-    run on, at most one per window; 1 all in this process. Attitude windows, which start from the
-    one before, and the GTSAM solver always run in this process."""
-    solver: str = field(default="numpy", metadata={"unit": "", "help": "batch solver: 'numpy' (vectorised banded "
-                                                   "Levenberg-Marquardt, default) or 'gtsam' (the same problem as a GTSAM graph)"})
-    """'numpy': the vectorised banded Levenberg-Marquardt (default, linear in the length, fast);
-    'gtsam': the same problem as a GTSAM graph, same schedule, eliminated in time order (a cross-check)."""
-
     def __post_init__(self) -> None:
         super().__post_init__()
-        check_workers(self.workers)
         if self.solver not in SOLVERS:
             raise InputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
 

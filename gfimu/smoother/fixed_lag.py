@@ -89,6 +89,7 @@ from ._fixed_lag_filter import FilterFailure, WindowFilter
 from ._fixed_lag_gtsam import GtsamWindow
 from .banded import solve
 from .graph import SmootherOptions, options_reason
+from .option_groups import GROUPS, assemble
 from .initialise import initial_estimate
 from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .result import SmootherEstimator, SmootherResult
@@ -180,8 +181,13 @@ def tunes_process_noise(options: SmootherOptions) -> bool:
 def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None:
     """Why the fixed-lag smoother cannot run on ``array`` with ``options`` (None if it can).
 
-    Batch-only options away from their defaults are refused with the reason,
-    never silently ignored."""
+    Model options the stream cannot honour, set away from their defaults, are refused with the reason,
+    never silently ignored. :class:`FixedLagEstimator` has no batch option; a :class:`SmootherOptions`
+    given to :class:`FixedLagSmoother` with one away from its default is refused too."""
+    batch = [name for name in GROUPS["batch"] if getattr(options, name) != getattr(_DEFAULTS, name)]
+    if batch:
+        return (f"{', '.join(batch)}: option(s) of the batch smoother (method 'smoother'), which the fixed-lag "
+                "smoother does not use (its window is lag_s)")
     unsupported = [name for name in ("self_calibrate_bias", "self_calibrate_scale", "free_flight", "use_inclinometer",
                                      "estimate_attitude") if getattr(options, name, False)]
     if unsupported:
@@ -201,10 +207,6 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
     if options.accel_noise_slope_mps2_per_radps > 0:
         return ("accel_noise_slope_mps2_per_radps: the motion-dependent accelerometer noise is re-weighted from a whole "
                 "solution, which a stream does not have (use method 'smoother')")
-    for name in ("window_s", "overlap_s", "reweight_iterations"):
-        if getattr(options, name) != getattr(_DEFAULTS, name):
-            return (f"{name} is an option of the batch smoother's solves; the fixed-lag smoother's window is "
-                    "lag_s (use method 'smoother', or leave it at its default)")
     for name in ("accel_robust_threshold", "process_robust_threshold", "robust_loss"):
         if hasattr(_DEFAULTS, name) and getattr(options, name) != getattr(_DEFAULTS, name):
             return (f"{name}: the robust re-weighting is iterated over whole solutions, which a stream does not "
@@ -783,11 +785,14 @@ class FixedLagSmoother:
 
 
 @dataclass(frozen=True)
-class FixedLagEstimator(SmootherEstimator, SmootherOptions):
+@assemble("model", "stream", "tuning", tune_process_noise=True)
+class FixedLagEstimator(SmootherEstimator):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
-    Model options: those of :class:`~gfimu.smoother.graph.SmootherOptions`
-    (shared with method ``"smoother"``). Each sample's estimate is its
+    Options: the groups model, stream, tuning and guard of :mod:`gfimu.smoother.option_groups`
+    (``gfimu estimate --method fixed-lag --list-options``); the batch smoother's group (``window_s``,
+    ``overlap_s``, ``reweight_iterations``, ...) is not among them, so such an option is refused where the
+    options are read. Each sample's estimate is its
     smoothed value ``lag_s`` seconds later (and, at the end of the log or
     before a gap, the last window's smoothed values), exactly what a live
     stream would give with that delay.
@@ -803,12 +808,11 @@ class FixedLagEstimator(SmootherEstimator, SmootherOptions):
     (a value other than the default) uses the given densities and skips the
     tuning, as does ``tune_process_noise=False``.
 
-    Batch-only options are refused by :meth:`applicable` with the reason when
+    Model options the stream cannot honour are refused by :meth:`applicable` with the reason when
     set away from their defaults: ``motion_model='snap'``, ``tune_motion_model``,
-    ``accel_noise_slope_mps2_per_radps``, ``window_s``, ``overlap_s``,
-    ``reweight_iterations``, the robust re-weighting options, self-calibration,
-    free flight, the attitude and the inclinometer, ``measurement='quadratic'``, factor groups that
-    are not per sample.
+    ``accel_noise_slope_mps2_per_radps`` and the robust re-weighting (the stream's model sets them itself),
+    self-calibration, free flight, the attitude and the inclinometer, ``measurement='quadratic'``, factor
+    groups that are not per sample.
     ``initialisation='ml'`` is honoured (initial states of each segment and of
     the tuning), and so are ``max_iterations`` and ``relative_tolerance`` (the
     batch solves of the tuning stretch).
@@ -816,38 +820,9 @@ class FixedLagEstimator(SmootherEstimator, SmootherOptions):
 
     method = "fixed-lag"
 
-    tune_process_noise: bool = True
-    """Choose the process noise from the first ``tune_window_s`` of data (see above)."""
-    tune_window_s: float = 3.0
-    """Length of the stretch of data the model is first chosen on [s] (the stream's one-time start-up delay)."""
-    auto_model: bool = True
-    """Check the readings against the rigid-body model on the stream's recent past and use the model the
-    batch smoother would (Gaussian, or robust with the measured noise floor and slope); engine 'numpy'."""
-    retune_every_s: float = 10.0
-    """Choose the model again on the recent past this often [s] (and at once when the motion outgrows it)."""
-    model_window_s: float = 30.0
-    """Length of the recent past the model is chosen on [s]."""
-
-    lag_s: float = 0.2
-    """Seconds of future data behind each estimate (the output delay of a live stream)."""
-    relinearize_threshold: float = 0.1
-    """iSAM2 relinearises ω when its update exceeds this [rad/s] (ω̇ and f enter linearly)."""
-    relinearize_skip: int = 10
-    """iSAM2 checks for relinearisation every this many updates."""
-    marginalise_every_s: float | None = None
-    """gtsam marginalises old states in blocks of this length [s] (the window holds lag_s to
-    lag_s + twice this); None: 125 samples, at most 0.25 s (0.25 s at 500 Hz, 0.125 s at 1 kHz)."""
-    warmup_s: float = 0.2
-    """Data gathered at the start of each segment for the sign-resolving initialisation."""
-    gap_factor: float = 1.5
-    """A step longer than this times the nominal step is a gap: the smoother restarts after it."""
-    fast_measurement: bool = True
-    """One factor for all accelerometer axes and a preallocated trapezoid factor (the same residuals as
-    :mod:`gfimu.factors`, fewer and cheaper Python calls); False uses the per-sensor factors of gfimu.factors
-    (engine 'gtsam' only)."""
-    engine: str = "numpy"
-    """Window solver: 'numpy' (a Kalman filter carrying the window's cross-covariances, about 0.2 ms per
-    sample at 500 Hz with a 0.2 s lag) or 'gtsam' (iSAM2's IncrementalFixedLagSmoother, the reference)."""
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.options()  # the model and tuning options checked as the batch smoother checks them
 
     def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
         """A streaming smoother with these options."""

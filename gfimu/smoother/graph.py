@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import noise
 from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..factors import (
@@ -43,8 +42,10 @@ from ..factors import (
     specific_force_key,
 )
 from ..log import Log
+from ..parallel import check_workers
 from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term, group_noise  # noqa: F401  (Term: also importable from here)
 from .noise_levels import NoiseLevels
+from .option_groups import assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -53,137 +54,13 @@ W, D, F, A = OMEGA, OMEGA_DOT, SPECIFIC_FORCE, OMEGA_DDOT
 
 
 @dataclass(frozen=True)
+@assemble("model", "batch", "tuning")
 class SmootherOptions:
-    """Options of the smoothers (batch and fixed-lag); defaults suit 100 Hz-1 kHz logs.
-
-    Noise densities are continuous-time: a random walk of density q has
-    step std ``q sqrt(h)``.
-    """
-
-    motion_model: str = "jerk"
-    """'jerk': ω̇ is a random walk (white angular jerk, state [ω, ω̇, f]); 'snap': ω̈ is a random walk
-    (white angular snap, state [ω, ω̇, f, ω̈]), smoother for slow, smooth motion."""
-    omega_dot_random_walk_radps2_per_sqrt_s: float = 30.0
-    """White angular jerk density ('jerk' model): how fast ω̇ may change. Larger follows faster motion, smooths less."""
-    omega_ddot_random_walk_radps3_per_sqrt_s: float = 300.0
-    """White angular snap density ('snap' model): how fast ω̈ may change."""
-    specific_force_random_walk_mps2_per_sqrt_s: float = 30.0
-    """How fast the specific force may change."""
-    measurement: str = "accelerometer"
-    """'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible);
-    'quadratic': the papers' formulation, the per-sample inversion [f, ω̇, q(ω)] with its covariance
-    (needs an invertible array, no self-calibration)."""
-    default_accel_noise_std_mps2: float = noise.DEFAULT_ACCEL_NOISE_STD_MPS2
-    """Accelerometer white-noise std [m/s²] when no axis of array.toml gives one (:mod:`gfimu.noise`:
-    an axis without one among axes with one takes their mean)."""
-    use_gyro: bool = True
-    """Use the gyroscope when the array has one."""
-    use_inclinometer: bool = False
-    """Use the inclinometer's tilt angles (paper 001); implies ``estimate_attitude``."""
-    estimate_attitude: bool = False
-    """Carry the attitude R_k (W←B) in the state and output orientation and gravity-free acceleration.
-    Tilt is observed through the inclinometer or, without one, through the random walk of the
-    gravity-free acceleration; yaw only through a weak prior (``initial_yaw_std_rad``)."""
-    accel_random_walk_mps2_per_sqrt_s: float = 30.0
-    """With the attitude: random walk of the gravity-free acceleration (replaces the specific-force one)."""
-    attitude_random_walk_rad_per_sqrt_s: float = 1e-3
-    """With the attitude: process noise of ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``."""
-    initial_yaw_std_rad: float = 1.0
-    """With the attitude: prior std of the first sample's yaw (tilt prior std is 10 rad: free)."""
-    self_calibrate_bias: bool = False
-    """Estimate a constant bias per accelerometer axis (and the gyro bias)."""
-    bias_prior_std_mps2: float = 0.1
-    """Prior std of each accelerometer bias (around 0)."""
-    gyro_bias_prior_std_radps: float = 0.05
-    """Prior std of the gyro bias (around 0) with ``self_calibrate_bias``."""
-    self_calibrate_scale: bool = False
-    """Estimate a constant scale-factor error per accelerometer axis."""
-    scale_prior_std: float = 0.01
-    """Prior std of each accelerometer scale-factor error (around 0) with ``self_calibrate_scale``."""
-    free_flight: bool = False
-    """Treat the whole log as torque-free free flight (paper 004): needs ``array.body``."""
-    torque_noise_std_nm: float = 1e-4
-    """Std of the unmodelled torque in the Euler factor [N m]."""
-    free_fall_std_mps2: float = 0.05
-    """Std of the specific force at the centre of mass in free flight [m/s²]."""
-    initial_omega_std_radps: float = 100.0
-    """Weak prior std of the first sample's ω (zero mean)."""
-    initial_omega_dot_std_radps2: float = 1000.0
-    """Weak prior std of the first sample's ω̇ (zero mean)."""
-    initial_specific_force_std_mps2: float = 1000.0
-    """Weak priors on the first state (zero mean) keeping the normal equations definite."""
-    window_s: float | None = 30.0
-    """Solve logs longer than this in overlapping windows of at most this length, stretched by up to a
-    quarter when that saves a short last window (``gfimu.smoother.batch.window_slices``; None: whole log)."""
-    overlap_s: float = 2.0
-    """Overlap of consecutive windows; each half of it is taken from the nearer window."""
-    max_iterations: int = 30
-    """Largest number of Levenberg-Marquardt iterations per solve."""
-    relative_tolerance: float = 1e-10
-    """Stop when the cost decreases by less than this fraction."""
-    compute_sigma: bool = False
-    """Fill ``Motion.sigma`` with marginal one-sigma uncertainties."""
-    init_window_s: float = 0.4
-    """Window of the sign-resolving initialisation (see :mod:`gfimu.smoother.initialise`)."""
-    accel_noise_slope_mps2_per_radps: float = 0.0
-    """Batch smoother: accelerometer noise std growing with the rotation rate,
-    ``sqrt(σ² + (slope |ω|)²)`` per sample, re-weighted from the current estimate of ω
-    (``reweight_iterations`` solves). Real arrays' rigid-body residual grows so (MIMU4444: about
-    0.2 + 0.047 |ω| m/s²); 0 keeps the constant noise of array.toml."""
-    reweight_iterations: int = 3
-    """Solves with the noise re-weighted from the previous solution when the slope above is set."""
-    initialisation: str = "sign-resolving"
-    """Batch smoother: 'sign-resolving' (:mod:`gfimu.smoother.initialise`) or 'ml' (the per-sample
-    maximum-likelihood estimate with its sign choice, :mod:`gfimu.estimators.ml`; slower, more robust
-    on real recordings with large model residuals and fast motion at low rates)."""
-    ml_sign_chain: bool = False
-    """Batch smoother with ``initialisation='ml'``: re-choose the sign of each sample's ML ω so that
-    consecutive samples follow the trapezoid of ML's (sign-free) ω̇, exactly by dynamic programming
-    (:func:`gfimu.smoother.initialise.sign_chain`). Fixes the per-sample sign choice where a fast
-    rotation slows through zero and reverses (the smoother alone stays in that local minimum)."""
-    process_axis_factors: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    """Factor on the jerk (or snap) density per body axis x, y, z (both smoothers): motion
-    about one body axis (turntable, pendulum) is far smoother about the others."""
-    process_axis_frequencies_hz: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """'jerk' model: natural frequency per body axis x, y, z [Hz]; with f > 0 the motion about that axis
-    is a driven oscillator ``ω̈ = -(2π f)² ω + white jerk`` (sinusoidal turntables and shakers, pendulums,
-    gait; :func:`gfimu.factors.process.oscillator_residual`), 0 the plain white jerk."""
-    tune_axis_frequencies: bool = True
-    """With ``tune_process_noise`` ('jerk' model): per body axis, try the oscillator at the dominant
-    frequency of the estimated ω and keep it where it raises the marginal likelihood."""
-    tune_process_noise: bool = False
-    """Choose the jerk/snap density per body axis and the specific-force density
-    by maximising the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`), per solve window.
-    The method 'smoother' and the fixed-lag smoother switch it on by default; the fixed-lag smoother
-    tunes once, on the first ``tune_window_s`` of each stream (:mod:`gfimu.smoother.fixed_lag`)."""
-    tune_motion_model: bool = False
-    """With ``tune_process_noise``: also choose 'jerk' or 'snap' by the same criterion. Off by default:
-    the white-snap normal equations become numerically stiff with small per-axis densities, and on the
-    5 cm turntable the snap model it selects gives a worse ω than the tuned jerk model."""
-    tune_accel_noise: bool = False
-    """With ``tune_process_noise``: also scale the accelerometer noise of every axis by the same
-    criterion (for real sensors whose rigid-body residual exceeds their white noise)."""
-    robust_loss: str = "huber"
-    """Batch smoother: loss of the robust re-weighting below, 'huber' or 'cauchy' (iteratively
-    re-weighted least squares, one re-weighting per extra solve of ``reweight_iterations``)."""
-    accel_robust_threshold: float = 0.0
-    """Batch smoother: robust loss on each accelerometer axis, threshold in standard deviations of
-    its (whitened) residual; 0 (default) keeps the Gaussian loss. For real arrays whose rigid-body
-    residual has heavy tails."""
-    process_robust_threshold: float = 0.0
-    """Batch smoother: robust loss on the motion-model factors of each step (kinematics + ω̇ random walk,
-    or the white-snap step), threshold on the step's whitened residual norm / sqrt(rows); 0 (default)
-    keeps the Gaussian loss. Lets sudden hand jerks through without smoothing them away."""
-    branch_restarts: bool = True
-    """Batch smoother, robust model of an inconsistent log (:mod:`gfimu.smoother.auto`): after each
-    window's solve, move the short runs of samples between outlying motion-model steps to the other
-    branches of ω (sign-flipped, mirrored through the array's plane) and keep them where the robust
-    objective falls (:mod:`gfimu.smoother.restarts`)."""
-
-    factor_groups: tuple = ()
-    """Further factor groups (:class:`gfimu.smoother.groups.FactorGroup`) added to the model of every
-    solve window: the batch solver, the tuner, the bound and the GTSAM graph all use them, and the
-    fixed-lag smoother those that are per sample (``FactorGroup.per_sample``)."""
+    """Options of the batch smoother's problem and solves: the groups ``model``, ``batch`` and ``tuning`` of
+    :mod:`gfimu.smoother.option_groups`, where each option is declared with its unit, default and help
+    (``options.model``, ``options.batch``, ``options.tuning``: the groups' values). Defaults suit
+    100 Hz-1 kHz logs. The fixed-lag smoother is given these options with the batch group at its defaults
+    (:meth:`gfimu.smoother.fixed_lag.FixedLagEstimator.options`)."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -207,6 +84,10 @@ class SmootherOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise InputError(f"smoother option {name} must be a positive number, got {v!r}")
+        span = self.tune_span_s
+        if span is not None and not (isinstance(span, (int, float)) and np.isfinite(span) and span > 0):
+            raise InputError(f"smoother option tune_span_s must be a positive number [s] or None, got {span!r}")
+        check_workers(self.workers)
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
             raise InputError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
         if self.motion_model not in ("jerk", "snap"):

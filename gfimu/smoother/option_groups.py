@@ -1,81 +1,304 @@
-"""The smoothers' options in five groups: the model, the batch solver, the fixed-lag stream,
-the noise tuning and the guard against the per-sample estimate (read by ``gfimu estimate --list-options``; every option keeps its flat name for
-``-O name=value`` and the presets). :func:`nested` gives a flat options object as nested frozen
-dataclasses, one per group (``nested(options).model.motion_model``), and :func:`flatten` turns them
-back into the flat options."""
+"""The smoothers' options, each declared once with its unit, default and help, in five groups.
+
+- :class:`ModelOptions` (``model``): the model both smoothers solve and how they start and stop its solves;
+- :class:`BatchOptions` (``batch``): the batch smoother's solve windows, re-weighting, restarts and workers;
+- :class:`StreamOptions` (``stream``): the fixed-lag smoother's lag, window engine and model updates;
+- :class:`TuningOptions` (``tuning``): the model and noise chosen from the data;
+- :class:`GuardOptions` (``guard``): the comparison with the per-sample estimate.
+
+Each field is made by :func:`gfimu.option.option`, whose metadata (``unit``, ``help``) ``gfimu estimate --list-options``
+prints. The flat option classes are assembled from the groups by :func:`assemble`:
+:class:`gfimu.smoother.graph.SmootherOptions` (model, batch, tuning) and the estimators of the methods
+'smoother' (model, batch, tuning, guard) and 'fixed-lag' (model, stream, tuning, guard). They keep every
+option under its flat name (``-O name=value``, the presets, ``SmootherOptions(window_s=10)``), add the
+group's name to each field's metadata, and give each group's values back as a frozen group dataclass
+(``options.model.motion_model``, ``options.batch.window_s``); ``cls.from_groups(model, batch, ...)``
+makes the flat options from group values. A method has no option of a group it does not carry: the
+fixed-lag smoother has no ``window_s``, the batch smoother no ``lag_s``.
+
+Values are checked by the flat classes (the group dataclasses only hold them).
+"""
 
 from __future__ import annotations
 
 import dataclasses
-from functools import lru_cache
+from dataclasses import dataclass
 
-GROUPS: dict[str, tuple[str, ...]] = {
-    "model": (
-        "motion_model", "omega_dot_random_walk_radps2_per_sqrt_s", "omega_ddot_random_walk_radps3_per_sqrt_s",
-        "specific_force_random_walk_mps2_per_sqrt_s", "default_accel_noise_std_mps2", "measurement", "use_gyro",
-        "use_inclinometer", "estimate_attitude", "accel_random_walk_mps2_per_sqrt_s",
-        "attitude_random_walk_rad_per_sqrt_s", "initial_yaw_std_rad", "self_calibrate_bias", "bias_prior_std_mps2",
-        "gyro_bias_prior_std_radps", "self_calibrate_scale", "scale_prior_std", "free_flight", "torque_noise_std_nm",
-        "free_fall_std_mps2", "initial_omega_std_radps", "initial_omega_dot_std_radps2",
-        "initial_specific_force_std_mps2", "accel_noise_slope_mps2_per_radps", "process_axis_factors",
-        "process_axis_frequencies_hz", "robust_loss", "accel_robust_threshold", "process_robust_threshold",
-        "factor_groups",
-    ),
-    "batch": (
-        "window_s", "overlap_s", "max_iterations", "relative_tolerance", "compute_sigma", "init_window_s",
-        "reweight_iterations", "initialisation", "ml_sign_chain", "branch_restarts", "solver",
-        "workers",
-    ),
-    "fixed-lag": (
-        "lag_s", "relinearize_threshold", "relinearize_skip", "marginalise_every_s", "warmup_s", "gap_factor",
-        "fast_measurement", "tune_window_s", "engine",
-    ),
-    "tuning": (
-        "auto_model", "tune_process_noise", "tune_span_s", "tune_axis_frequencies", "tune_motion_model",
-        "tune_accel_noise", "retune_every_s", "model_window_s",
-    ),
-    "guard": ("guard",),
-}
+from ..noise import DEFAULT_ACCEL_NOISE_STD_MPS2
+from ..option import option
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """The model both smoothers solve (factors, noise, priors) and how they start and stop its solves.
+    Noise densities are continuous-time: a random walk of density q has step std ``q sqrt(h)``."""
+
+    motion_model: str = option("jerk", help=(
+        "'jerk': ω̇ is a random walk (white angular jerk, state [ω, ω̇, f]); 'snap': ω̈ is a random walk (white "
+        "angular snap, state [ω, ω̇, f, ω̈]), smoother for slow, smooth motion (batch smoother only)"))
+    omega_dot_random_walk_radps2_per_sqrt_s: float = option(30.0, "rad/s²/√s", (
+        "white angular jerk density ('jerk' model): how fast ω̇ may change; larger follows faster motion, "
+        "smooths less"))
+    omega_ddot_random_walk_radps3_per_sqrt_s: float = option(300.0, "rad/s³/√s", (
+        "white angular snap density ('snap' model): how fast ω̈ may change"))
+    specific_force_random_walk_mps2_per_sqrt_s: float = option(30.0, "m/s²/√s", (
+        "random walk density of the specific force: how fast it may change"))
+    measurement: str = option("accelerometer", help=(
+        "'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible); "
+        "'quadratic': the per-sample inversion [f, ω̇, q(ω)] with its covariance (an invertible array, no "
+        "self-calibration; batch smoother only)"))
+    default_accel_noise_std_mps2: float = option(DEFAULT_ACCEL_NOISE_STD_MPS2, "m/s²", (
+        "accelerometer white-noise std when no axis of array.toml gives one (an axis without one among axes "
+        "with one takes their mean)"))
+    use_gyro: bool = option(True, help="use the gyroscope when the array has one")
+    use_inclinometer: bool = option(False, help=(
+        "use the inclinometer's tilt angles (paper 001); implies estimate_attitude (batch smoother only)"))
+    estimate_attitude: bool = option(False, help=(
+        "carry the attitude R_k (W←B) in the state and output orientation and gravity-free acceleration; tilt "
+        "is observed through the inclinometer or the random walk of the gravity-free acceleration, yaw only "
+        "through a weak prior (initial_yaw_std_rad; batch smoother only)"))
+    accel_random_walk_mps2_per_sqrt_s: float = option(30.0, "m/s²/√s", (
+        "with the attitude: random walk density of the gravity-free acceleration (replaces the specific-force "
+        "one)"))
+    attitude_random_walk_rad_per_sqrt_s: float = option(1e-3, "rad/√s", (
+        "with the attitude: process noise of R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)"))
+    initial_yaw_std_rad: float = option(1.0, "rad", (
+        "with the attitude: prior std of the first sample's yaw (the tilt prior, 10 rad, leaves it free)"))
+    self_calibrate_bias: bool = option(False, help=(
+        "estimate a constant bias per accelerometer axis and the gyro bias (batch smoother only)"))
+    bias_prior_std_mps2: float = option(0.1, "m/s²", "prior std of each accelerometer bias (around 0)")
+    gyro_bias_prior_std_radps: float = option(0.05, "rad/s", (
+        "prior std of the gyro bias (around 0) with self_calibrate_bias"))
+    self_calibrate_scale: bool = option(False, help=(
+        "estimate a constant scale-factor error per accelerometer axis (batch smoother only)"))
+    scale_prior_std: float = option(0.01, help=(
+        "prior std of each accelerometer scale-factor error (a fraction, around 0) with self_calibrate_scale"))
+    free_flight: bool = option(False, help=(
+        "treat the whole log as torque-free free flight (paper 004): needs [body] in array.toml (batch "
+        "smoother only)"))
+    torque_noise_std_nm: float = option(1e-4, "N m", "std of the unmodelled torque in the Euler factor")
+    free_fall_std_mps2: float = option(0.05, "m/s²", "std of the specific force at the centre of mass in free flight")
+    initial_omega_std_radps: float = option(100.0, "rad/s", "weak prior std of the first sample's ω (zero mean)")
+    initial_omega_dot_std_radps2: float = option(1000.0, "rad/s²", (
+        "weak prior std of the first sample's ω̇ (zero mean)"))
+    initial_specific_force_std_mps2: float = option(1000.0, "m/s²", (
+        "weak prior std of the first sample's specific force (zero mean), keeping the normal equations definite"))
+    accel_noise_slope_mps2_per_radps: float = option(0.0, "m/s² per rad/s", (
+        "accelerometer noise std growing with the rotation rate, sqrt(σ² + (slope |ω|)²) per sample, "
+        "re-weighted from the current ω over reweight_iterations solves (MIMU4444: about 0.047); 0 keeps the "
+        "noise of array.toml (the fixed-lag smoother's model sets it itself)"))
+    process_axis_factors: tuple[float, float, float] = option((1.0, 1.0, 1.0), help=(
+        "factor on the jerk (or snap) density per body axis x, y, z: motion about one body axis (turntable, "
+        "pendulum) is far smoother about the others"))
+    process_axis_frequencies_hz: tuple[float, float, float] = option((0.0, 0.0, 0.0), "Hz", (
+        "'jerk' model: natural frequency per body axis x, y, z; f > 0 makes the motion about that axis a "
+        "driven oscillator ω̈ = -(2π f)² ω + white jerk (turntables, shakers, pendulums, gait), 0 the plain "
+        "white jerk"))
+    robust_loss: str = option("huber", help=(
+        "loss of the robust re-weighting, 'huber' or 'cauchy' (iteratively re-weighted least squares, one "
+        "re-weighting per solve of reweight_iterations; the fixed-lag smoother's model sets it itself)"))
+    accel_robust_threshold: float = option(0.0, "σ", (
+        "robust loss on each accelerometer axis, threshold on its whitened residual; 0 keeps the Gaussian loss "
+        "(the fixed-lag smoother's model sets it itself)"))
+    process_robust_threshold: float = option(0.0, "σ", (
+        "robust loss on each motion-model step, threshold on its whitened residual norm / sqrt(rows); 0 keeps "
+        "the Gaussian loss; lets sudden jerks through unsmoothed (the fixed-lag smoother's model sets it "
+        "itself)"))
+    factor_groups: tuple = option((), help=(
+        "further factor groups (gfimu.smoother.groups.FactorGroup, from Python) added to the model of every "
+        "solve; the fixed-lag smoother takes those that are per sample"))
+    compute_sigma: bool = option(False, help=(
+        "also output one-sigma marginal uncertainties of the estimates (sigma_ columns)"))
+    max_iterations: int = option(30, help=(
+        "largest number of Levenberg-Marquardt iterations per solve (the fixed-lag smoother: of the solves of "
+        "its tuning stretch)"))
+    relative_tolerance: float = option(1e-10, help="stop a solve when the cost decreases by less than this fraction")
+    initialisation: str = option("sign-resolving", help=(
+        "initial states: 'sign-resolving' (gfimu.smoother.initialise) or 'ml' (the per-sample "
+        "maximum-likelihood estimate with its sign choice; slower, more robust on real recordings with large "
+        "model residuals and fast motion at low rates)"))
+    init_window_s: float = option(0.4, "s", "window of the sign-resolving initialisation")
+    ml_sign_chain: bool = option(False, help=(
+        "with initialisation='ml': re-choose the sign of each sample's ML ω so that consecutive samples follow "
+        "the trapezoid of ML's ω̇ (dynamic programming), fixing the per-sample sign choice where a fast "
+        "rotation slows through zero and reverses"))
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """The batch smoother's (method 'smoother') solve windows, re-weighting, restarts and workers."""
+
+    window_s: float | None = option(30.0, "s", (
+        "solve logs longer than this in overlapping windows of at most this length, stretched by up to a "
+        "quarter when that saves a short last window (None: the whole log at once)"))
+    overlap_s: float = option(2.0, "s", "overlap of consecutive windows; each half of it is taken from the nearer window")
+    reweight_iterations: int = option(3, help=(
+        "solves with the noise re-weighted from the previous solution when accel_noise_slope_mps2_per_radps or a "
+        "robust threshold is set"))
+    branch_restarts: bool = option(True, help=(
+        "robust model of an inconsistent log: after each window's solve, move the short runs of samples "
+        "between outlying motion-model steps to the other branches of ω (sign-flipped, mirrored through the "
+        "array's plane) and keep them where the robust objective falls"))
+    tune_span_s: float | None = option(10.0, "s", (
+        "with tune_process_noise: choose the process noise on at most this much of each solve window, its "
+        "middle (10 s of readings fix a handful of noise levels well, and the choice then costs no more as "
+        "the window grows; None: the whole window)"))
+    workers: int = option(0, "processes", (
+        "processes solving the solve windows at once (the same numbers): 0 = one per CPU, at most one per "
+        "window; 1 = all in this process (attitude windows, which start from the one before, and the gtsam "
+        "solver always run in this process)"))
+    solver: str = option("numpy", help=(
+        "batch solver: 'numpy' (vectorised banded Levenberg-Marquardt, linear in the length) or 'gtsam' (the "
+        "same problem as a GTSAM graph, eliminated in time order: a cross-check)"))
+
+
+@dataclass(frozen=True)
+class StreamOptions:
+    """The fixed-lag smoother's (method 'fixed-lag') lag, window engine and model updates."""
+
+    lag_s: float = option(0.2, "s", "seconds of future data behind each estimate (the output delay of a live stream)")
+    relinearize_threshold: float = option(0.1, "rad/s", (
+        "engine 'gtsam': iSAM2 relinearises ω when its update exceeds this (ω̇ and f enter linearly)"))
+    relinearize_skip: int = option(10, help="engine 'gtsam': iSAM2 checks for relinearisation every this many updates")
+    marginalise_every_s: float | None = option(None, "s", (
+        "engine 'gtsam': old states are marginalised in blocks of this length (the window holds lag_s to "
+        "lag_s + twice this); None: 125 samples, at most 0.25 s"))
+    warmup_s: float = option(0.2, "s", "data gathered at the start of each segment for its initialisation")
+    gap_factor: float = option(1.5, help=(
+        "a step longer than this times the nominal step is a gap: the smoother restarts after it"))
+    fast_measurement: bool = option(True, help=(
+        "one factor for all accelerometer axes and a preallocated trapezoid factor (the same residuals, "
+        "cheaper); False: the per-sensor factors of gfimu.factors (engine 'gtsam' only)"))
+    engine: str = option("numpy", help=(
+        "window solver: 'numpy' (a Kalman filter carrying the window's cross-covariances) or 'gtsam' (iSAM2's "
+        "IncrementalFixedLagSmoother, the reference)"))
+    tune_window_s: float = option(3.0, "s", (
+        "length of the stretch of data the model is first chosen on (the stream's one-time start-up delay)"))
+    retune_every_s: float = option(10.0, "s", (
+        "with auto_model: choose the model again on the recent past this often (and at once when the motion "
+        "outgrows it)"))
+    model_window_s: float = option(30.0, "s", "with auto_model: length of the recent past the model is chosen on")
+
+
+@dataclass(frozen=True)
+class TuningOptions:
+    """The model and the noise chosen from the data, by both smoothers."""
+
+    auto_model: bool = option(True, help=(
+        "choose the model from the log (gfimu.smoother.auto): readings that follow the rigid-body equation up to "
+        "their stated noise keep the options; larger, heavy-tailed or |ω|-growing residuals (real arrays) get "
+        "the ML initialisation with its sign chain, the measured noise floor and slope, Cauchy losses and "
+        "moment-estimated process noise; options set away from their defaults are kept either way (the "
+        "fixed-lag smoother: on the stream's recent past, engine 'numpy')"))
+    tune_process_noise: bool = option(False, help=(
+        "choose the jerk/snap density per body axis and the specific-force density by maximising the marginal "
+        "likelihood of the data (per solve window; the fixed-lag smoother on its first tune_window_s); on by "
+        "default in the methods 'smoother' and 'fixed-lag'"))
+    tune_axis_frequencies: bool = option(True, help=(
+        "with tune_process_noise ('jerk' model): per body axis, try the oscillator at the dominant frequency of "
+        "the estimated ω and keep it where it raises the marginal likelihood"))
+    tune_motion_model: bool = option(False, help=(
+        "with tune_process_noise: also choose 'jerk' or 'snap' by the same criterion (batch smoother only; off: "
+        "the snap model's normal equations become stiff with small per-axis densities)"))
+    tune_accel_noise: bool = option(False, help=(
+        "with tune_process_noise: also scale the accelerometer noise of every axis by the same criterion (for "
+        "sensors whose rigid-body residual exceeds their white noise)"))
+
+
+@dataclass(frozen=True)
+class GuardOptions:
+    """The comparison of the smoother's answer with the per-sample estimate (:mod:`gfimu.smoother.guard`)."""
+
+    guard: str = option("replace", help=(
+        "compare the answer with the per-sample ML estimate where that is well determined: 'replace' uses the "
+        "per-sample answer, its sign following the smoother's around it, over spans where the smoother fits the "
+        "readings worse than its model allows, and warns; 'warn' keeps the smoother's answer and warns; 'off' "
+        "skips the comparison"))
+
+
+GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "batch": BatchOptions, "stream": StreamOptions,
+                                  "tuning": TuningOptions, "guard": GuardOptions}
+"""Group name -> its dataclass, in the order ``--list-options`` lists them."""
+
+GROUP_METHODS = {"batch": ("batch-smoother", "smoother"), "stream": ("fixed-lag-smoother", "fixed-lag")}
+"""The groups only one smoother carries -> (what its options are called, the smoother's method)."""
+
+GROUPS: dict[str, tuple[str, ...]] = {name: tuple(f.name for f in dataclasses.fields(cls))
+                                      for name, cls in GROUP_CLASSES.items()}
 """Group -> option names."""
 
 GROUP_OF = {name: group for group, names in GROUPS.items() for name in names}
 """Option name -> its group."""
 
 
-ATTRIBUTE = {"model": "model", "batch": "batch", "fixed-lag": "fixed_lag", "tuning": "tuning", "guard": "guard",
-             "other": "other"}
-"""Group -> attribute of :func:`nested`'s result (``other``: options in no group, e.g. an estimator's own)."""
+def groups_of(cls) -> tuple[str, ...]:
+    """The option groups a flat options class (or object) carries, in :data:`GROUPS` order."""
+    names = {f.metadata.get("group") for f in dataclasses.fields(cls)}
+    return tuple(g for g in GROUPS if g in names)
 
 
-@lru_cache(maxsize=None)
-def _classes(cls: type) -> tuple[type, dict[str, tuple[str, ...]]]:
-    """The nested dataclass of the flat options class ``cls`` and group -> its option names (in the order of
-    :data:`GROUPS`, as ``--list-options`` lists them)."""
-    names = [f.name for f in dataclasses.fields(cls) if f.init]
-    members = {group: tuple(n for n in GROUPS[group] if n in names) for group in GROUPS}
-    members["other"] = tuple(n for n in names if n not in GROUP_OF)
-    parts = []
-    for group, own in members.items():
-        part = dataclasses.make_dataclass(f"{cls.__name__}_{ATTRIBUTE[group]}", [(n, object) for n in own], frozen=True)
-        parts.append((ATTRIBUTE[group], part))
-    return dataclasses.make_dataclass(f"{cls.__name__}_groups", parts, frozen=True), members
+def _group_property(group: str):
+    part = GROUP_CLASSES[group]
+
+    def get(self):
+        return part(**{n: getattr(self, n) for n in GROUPS[group]})
+
+    get.__name__ = group
+    get.__doc__ = f"The {group} options as a frozen :class:`{part.__name__}`."
+    return property(get)
 
 
-def nested(options):
-    """``options`` (a flat options dataclass: :class:`gfimu.smoother.graph.SmootherOptions`, an estimator)
-    as nested frozen dataclasses: ``.model``, ``.batch``, ``.fixed_lag``, ``.tuning``, ``.guard``, ``.other``, each
-    holding the options of that group the object has."""
-    outer, members = _classes(type(options))
-    parts = {f.name: f.type for f in dataclasses.fields(outer)}
-    return outer(**{ATTRIBUTE[group]: parts[ATTRIBUTE[group]](**{n: getattr(options, n) for n in own})
-                    for group, own in members.items()})
-
-
-def flatten(cls: type, grouped, **changes):
-    """The flat options of class ``cls`` from :func:`nested`'s ``grouped`` (with ``changes`` by flat name)."""
-    _, members = _classes(cls)
-    values = {n: getattr(getattr(grouped, ATTRIBUTE[group]), n) for group, own in members.items() for n in own}
-    unknown = set(changes) - set(values)
+def _from_groups(cls, *parts, **changes):
+    """The flat options from the group values ``parts`` (a group not given keeps its defaults), then ``changes``
+    by flat name."""
+    own = groups_of(cls)
+    values = {}
+    for part in parts:
+        group = next((g for g, c in GROUP_CLASSES.items() if isinstance(part, c)), None)
+        if group not in own:
+            raise TypeError(f"{cls.__name__} has no option group {group or type(part).__name__!r} "
+                            f"(its groups: {', '.join(own)})")
+        values.update({n: getattr(part, n) for n in GROUPS[group]})
+    known = {f.name for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(changes) - known)
     if unknown:
-        raise TypeError(f"{cls.__name__} has no option {', '.join(sorted(unknown))}")
+        raise TypeError(f"{cls.__name__} has no option {', '.join(unknown)}")
     return cls(**{**values, **changes})
+
+
+def assemble(*groups: str, **defaults):
+    """Class decorator, under ``@dataclass``: the class gets the fields of the option ``groups`` (their
+    defaults, types and metadata, with the group's name added to the metadata), a property per group
+    returning its values (none for ``guard``, the option of that name) and ``from_groups``. ``defaults``
+    changes the default of a field of these groups or of a base class; the metadata stays the declaration's.
+    The class body declares no option of a group."""
+
+    def wrap(cls):
+        own = dict(cls.__dict__.get("__annotations__", {}))
+        clash = sorted(n for n in own if n in GROUP_OF)
+        if clash:
+            raise TypeError(f"{cls.__name__} declares {', '.join(clash)}: declare an option in its group only")
+        inherited = {}
+        for base in reversed(cls.__mro__[1:]):
+            inherited.update(getattr(base, "__dataclass_fields__", {}))
+        annotations = {}
+        left = dict(defaults)
+        for group in groups:
+            for f in dataclasses.fields(GROUP_CLASSES[group]):
+                annotations[f.name] = f.type
+                setattr(cls, f.name, dataclasses.field(default=left.pop(f.name, f.default),
+                                                       metadata={**f.metadata, "group": group}))
+        for name in list(left):
+            f = inherited.get(name)
+            if f is None or "group" not in f.metadata:
+                raise TypeError(f"{cls.__name__}: no option {name!r} whose default could change")
+            annotations[name] = f.type
+            setattr(cls, name, dataclasses.field(default=left.pop(name), metadata=f.metadata))
+        cls.__annotations__ = {**annotations, **own}
+        for group in groups:
+            if group != "guard":
+                setattr(cls, group, _group_property(group))
+        cls.from_groups = classmethod(_from_groups)
+        return cls
+
+    return wrap

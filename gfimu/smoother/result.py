@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, fields
 from ..errors import InputError
 from ..estimate import Estimate, Report
 from ..motion import Motion
+from .option_groups import assemble
 
 
 @dataclass(frozen=True)
@@ -54,24 +55,17 @@ class SmootherResult:
                          windows=self.windows)
 
 
-GUARD_HELP = ("compare the answer with the per-sample ML estimate where that is well determined: 'replace' "
-              "(default) uses the per-sample answer, its sign following the smoother's around it, over spans where "
-              "the smoother fits the readings worse than its model allows, and warns; 'warn' keeps the smoother's "
-              "answer and warns; 'off' skips the comparison")
-
-
 @dataclass(frozen=True)
+@assemble("guard")
 class SmootherEstimator:
-    """What the batch and fixed-lag estimators share: their model options as plain
-    :class:`gfimu.smoother.graph.SmootherOptions`, the ``guard`` option, and :meth:`estimate` returning
-    the motion with the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing of it).
-    A subclass is a :class:`SmootherOptions` dataclass that defines ``method`` (its name in
-    :data:`gfimu.methods.METHODS`) and ``result(log, progress)`` (the :class:`SmootherResult`)."""
+    """What the batch and fixed-lag estimators share: their options as plain
+    :class:`gfimu.smoother.graph.SmootherOptions` (:meth:`options`), the ``guard`` option, and :meth:`estimate`
+    returning the motion with the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing
+    of it). A subclass is a dataclass of option groups (:mod:`gfimu.smoother.option_groups`) that defines
+    ``method`` (its name in :data:`gfimu.methods.METHODS`) and ``result(log, progress)`` (the
+    :class:`SmootherResult`)."""
 
     method = ""
-
-    guard: str = field(default="replace", metadata={"unit": "", "help": GUARD_HELP})
-    """'replace' (default), 'warn' or 'off': see :mod:`gfimu.smoother.guard`."""
 
     def __post_init__(self) -> None:
         from .guard import GUARD_MODES
@@ -86,7 +80,8 @@ class SmootherEstimator:
     def options(self):
         from .graph import SmootherOptions
 
-        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions)})
+        own = {f.name for f in fields(self)}
+        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions) if f.name in own})
 
     def estimate(self, log, progress: bool = False) -> Estimate:
         """The smoother on ``log``: :class:`~gfimu.estimate.Estimate` ``(motion, report)``; the report
