@@ -45,10 +45,10 @@ def run(args) -> int:
         raise CLIError("gfimu batch needs dask.distributed: pip install 'gfimu[distributed]'") from None
     from ..batch import output_folders, run_batch
     from ..io.outputs import check_output, write_output
-    from .estimate import method_options
+    from .options import method_options
 
-    args.lag_s, args.sigma = None, False
-    options = method_options(args)
+    options = method_options(args.method, args.option, preset=getattr(args, "preset", None),
+                             solver=getattr(args, "solver", None))
     from ..methods import make_estimator
 
     make_estimator(args.method, **options)  # the values checked here, before any log; each worker makes its own

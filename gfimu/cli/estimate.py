@@ -7,7 +7,7 @@ import sys
 import warnings
 
 from . import CLIError, add_no_progress, info, show_progress
-from .options import check_method_options, parse_options, positive
+from .options import method_options, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
+    """Options -> estimator -> outputs checked -> the estimate of the log (gfimu.pipeline) -> written -> report."""
     if args.list_options:
         from .options import describe_options
 
@@ -58,30 +59,26 @@ def run(args) -> int:
     import numpy as np
 
     from .. import io as gio
-    from ..io.outputs import check_output, same_file, write_output
+    from ..io import trajectory
+    from ..io.outputs import check_outputs, write_output
     from ..methods import make_estimator
     from ..pipeline import estimate_log
 
-    out = check_output(args.out, [args.log, args.calibration], "--out", stdout=True)
-    options = method_options(args)
+    options = method_options(args.method, args.option, preset=args.preset, solver=args.solver, lag_s=args.lag_s,
+                             sigma=args.sigma)
     estimator = make_estimator(args.method, **options)  # option values checked before any log is read
-    tum = None
-    if args.tum is not None:
-        tum = check_output(args.tum, [args.log, args.calibration], "--tum")
-        if out is not None and same_file(out, tum):
-            raise CLIError(f"--tum {args.tum}: the same file as --out {args.out}; give the trajectory its own name")
-        if args.orientation == "none" and not (options.get("estimate_attitude") or options.get("use_inclinometer")):
-            raise CLIError("--tum writes the estimated orientation, but none is estimated: add --orientation "
-                           "inclinometer, gyro or estimate")
+    if args.tum is not None and args.orientation == "none" and not (options.get("estimate_attitude")
+                                                                     or options.get("use_inclinometer")):
+        raise CLIError("--tum writes the estimated orientation, but none is estimated: add --orientation "
+                       "inclinometer, gyro or estimate")
+    out, tum = check_outputs({"--out": args.out, "--tum": args.tum}, [args.log, args.calibration], stdout="--out")
     run_ = estimate_log(args.log, estimator, calibration=args.calibration, progress=show_progress(args),
                         orientation=args.orientation, truth=False)  # MethodNotApplicable: an InputError, exit 2
     tum_chunks = None
     if tum is not None:
         if run_.motion.quaternion_wb is None:
             raise CLIError(f"--tum {args.tum}: method {args.method!r} gave no orientation to write")
-        from ..io.trajectory import tum_chunks as make_tum_chunks
-
-        tum_chunks = make_tum_chunks(run_.motion)  # checked before anything is written
+        tum_chunks = trajectory.tum_chunks(run_.motion)  # checked before anything is written
     write_output(out, gio.motion_csv_chunks(run_.motion))
     if tum_chunks is not None:
         write_output(tum, tum_chunks)
@@ -97,30 +94,3 @@ def run(args) -> int:
         info(args, f"orientation: {int(np.sum(np.all(np.isfinite(run_.motion.quaternion_wb), axis=1)))} poses "
                    f"-> {tum} (TUM: timestamp tx ty tz qx qy qz qw)", file=sys.stderr if out is None else sys.stdout)
     return 0
-
-
-def method_options(args) -> dict:
-    """The method's options from ``-O``, ``--preset``, ``--lag-s`` and ``--sigma``, their names and types
-    checked (their values when the estimator is made, :func:`gfimu.methods.make_estimator`)."""
-    options = parse_options(args.option)
-    if getattr(args, "preset", None) is not None:  # checked before the log is read
-        if args.method != "smoother":
-            raise CLIError(f"--preset applies to --method smoother only, not {args.method!r}")
-        from ..smoother.presets import apply_preset
-
-        apply_preset(args.preset)
-        options["preset"] = args.preset
-    if getattr(args, "solver", None) is not None:
-        if args.method != "smoother":
-            raise CLIError(f"--solver applies to --method smoother only, not {args.method!r}")
-        options["solver"] = args.solver
-    if getattr(args, "lag_s", None) is not None:
-        if args.method != "fixed-lag":
-            raise CLIError("--lag-s applies to --method fixed-lag only")
-        if "lag_s" in options and options["lag_s"] != args.lag_s:
-            raise CLIError(f"--lag-s {args.lag_s:g} and -O lag_s={options['lag_s']!r} disagree; give the lag once")
-        options["lag_s"] = args.lag_s
-    if getattr(args, "sigma", False):
-        options["compute_sigma"] = True
-    check_method_options(args.method, options)
-    return options

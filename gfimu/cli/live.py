@@ -51,14 +51,9 @@ def run(args) -> int:
     from ..live import EstimateSink
     from ..live import run as run_live
     from ..methods import make_estimator
-    from .options import check_method_options, parse_options
+    from .options import method_options
 
-    options = parse_options(args.option)
-    if args.lag_s is not None:
-        if "lag_s" in options and options["lag_s"] != args.lag_s:
-            raise CLIError(f"--lag-s {args.lag_s:g} and -O lag_s={options['lag_s']!r} disagree; give the lag once")
-        options["lag_s"] = args.lag_s
-    check_method_options("fixed-lag", options)
+    options = method_options("fixed-lag", args.option, lag_s=args.lag_s)
     estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
     rate_hz = args.rate_hz or declared_rate_hz

@@ -280,6 +280,34 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
     return options
 
 
+def method_options(method: str, pairs: list[str] | None, preset: str | None = None, solver: str | None = None,
+                   lag_s: float | None = None, sigma: bool = False, flag: str = "-O") -> dict:
+    """The options of ``method`` from the ``-O KEY=VALUE`` ``pairs`` and the command's own flags (``--preset``,
+    ``--solver``, ``--lag-s``, ``--sigma``), their names and types checked (:func:`check_method_options`;
+    their values when the estimator is made, :func:`gfimu.methods.make_estimator`)."""
+    options = parse_options(pairs, flag)
+    if preset is not None:  # checked before the log is read
+        if method != "smoother":
+            raise OptionError(f"--preset applies to --method smoother only, not {method!r}")
+        from ..smoother.presets import apply_preset
+
+        apply_preset(preset)
+        options["preset"] = preset
+    if solver is not None:
+        if method != "smoother":
+            raise OptionError(f"--solver applies to --method smoother only, not {method!r}")
+        options["solver"] = solver
+    if lag_s is not None:
+        if method != "fixed-lag":
+            raise OptionError("--lag-s applies to --method fixed-lag only")
+        if "lag_s" in options and options["lag_s"] != lag_s:
+            raise OptionError(f"--lag-s {lag_s:g} and {flag} lag_s={options['lag_s']!r} disagree; give the lag once")
+        options["lag_s"] = lag_s
+    if sigma:
+        options["compute_sigma"] = True
+    return check_method_options(method, options, flag)
+
+
 def describe_options(method: str) -> str:
     """Every ``-O`` option of ``method``: name, default, unit and help, one block each, from the option's
     declaration (:func:`gfimu.option.option`: the field's metadata); the smoothers' options under their

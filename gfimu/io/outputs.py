@@ -107,6 +107,22 @@ def check_output(path: str | os.PathLike | None, inputs: Iterable[str | os.PathL
     return target
 
 
+def check_outputs(paths: dict, inputs: Iterable[str | os.PathLike | None] = (), stdout: str | None = None) -> list:
+    """:func:`check_output` of each of ``paths`` (option -> path or None), in order, and no two the same file;
+    ``stdout``: the option that may be ``-``. Returns the checked targets in the same order."""
+    out = []
+    seen: list[tuple[str, Path]] = []
+    for what, path in paths.items():
+        target = check_output(path, inputs, what, stdout=what == stdout)
+        for other, earlier in seen:
+            if target is not None and same_file(target, earlier):
+                raise OutputError(f"{what} {path}: the same file as {other} {earlier}; give each output its own name")
+        if target is not None:
+            seen.append((what, target))
+        out.append(target)
+    return out
+
+
 def write_output(target: Path | None, chunks: Iterable[str]) -> None:
     """Write text chunks to ``target`` atomically, or to standard output when ``target`` is ``None``."""
     if target is None:
