@@ -102,3 +102,25 @@ def test_sign_chain_recovers_a_reversal_through_zero():
     assert np.all(np.sum(fixed[big] * omega[big], axis=1) > 0)
     assert np.mean(np.sum(given[big] * omega[big], axis=1) > 0) < 0.7  # the input was far off
     assert sign_chain(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(0)).tolist() == [1.0]
+
+
+def test_a_problem_is_frozen_and_reweighting_makes_a_new_one():
+    """Nothing is set on a problem once built: a re-weighting returns a new problem whose noise levels
+    differ where the weights say, the original keeps its own, and the levels' arrays are read-only."""
+    log = process_model_log([30.0, 30.0, 30.0], 30.0, duration_s=0.2)
+    t = log.truth
+    states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
+    states[20:, 0] += 1.0  # one outlying step
+    p = SmootherProblem(log, SmootherOptions(process_robust_threshold=3.0))
+    before = p.trapezoid_sigma.copy()
+    q = p.reweighted(states)
+    assert q is not p and q.log is p.log and q.groups is p.groups
+    np.testing.assert_array_equal(p.trapezoid_sigma, before)
+    assert q.trapezoid_sigma[19] > 2 * before[19] and np.array_equal(np.delete(q.trapezoid_sigma, 19), np.delete(before, 19))
+    with pytest.raises(AttributeError, match="frozen"):
+        p.trapezoid_sigma = before
+    with pytest.raises(AttributeError, match="frozen"):
+        p.new_attribute = 1
+    with pytest.raises(ValueError):
+        p.trapezoid_sigma[0] = 1.0  # read-only
+    assert p.with_noise(accel_sigma=2 * p.accel_sigma).accel_sigma[0] == 2 * p.accel_sigma[0]
