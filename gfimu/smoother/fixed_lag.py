@@ -569,9 +569,9 @@ class FixedLagSmoother:
         if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
             self._jerk_factor = min(1.0, local / q)
         due = sample[0] - chosen.chosen_at_ns >= self._retune_ns
-        # a model chosen on a still stretch that the body now outmoves: choose again at once (at most once
-        # a second), on the history that now holds the motion
-        outgrown = (not chosen.moving and local is not None and self._local.resolved and local > OUTGROWN_FACTOR * q
+        # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
+        # again at once (at most once a second), on the history that now holds the motion
+        outgrown = (local is not None and self._local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
         if (due or outgrown) and len(self._history) >= self._tune_min_n:
             self._choose(list(self._history), outgrown=outgrown)
@@ -766,6 +766,7 @@ class FixedLagSmoother:
         cutoff_ns = newest_ns - int(round(self.lag_s * 1e9)) + 1000  # 1 µs tolerance
         out = []
         while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
+            self._smoother.settle_oldest(lambda i: self._raw[i][1])
             out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
             self._raw.popleft()
             self._smoother.drop_oldest()
