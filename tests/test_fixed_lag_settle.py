@@ -1,4 +1,4 @@
-"""The fixed-lag window's branch decided again as a state leaves it (WindowFilter.settle_oldest):
+"""The fixed-lag window's branches decided again before the oldest state leaves (WindowFilter.settle):
 an interior run of states moved onto another branch of the readings' ambiguity, the decision that
 moves it back with the lag's data on both sides, and the cases where nothing is decided."""
 
@@ -74,11 +74,11 @@ def test_a_run_on_another_branch_goes_back_when_its_first_state_leaves(kind):
     apart = np.linalg.norm(branch(kind, truth, np.zeros_like(truth), filt._normal)[0] - truth, axis=1) > 3.0
     a = next(k for k in range(20, 50) if apart[k:k + 4].all())
     filt.move_branch(a, kind, a + 4)
-    for _ in range(a):  # the states before the run leave the window; its first is the oldest
-        assert filt.settle_oldest(lambda i: log.accel_mps2[filt._base + filt._lo + i]) == 0
+    for _ in range(a - 1):  # the states before the run leave the window; its first follows the oldest
+        assert filt.settle(lambda i: log.accel_mps2[filt._base + filt._lo + i]) == 0
         filt.drop_oldest()
     assert np.linalg.norm(filt.mean(a)[0:3] - truth[a]) > 3.0  # on the other branch
-    assert filt.settle_oldest(lambda i: log.accel_mps2[a + i]) == 4
+    assert filt.settle(lambda i: log.accel_mps2[a - 1 + i]) == 4
     assert filt.n_settled == 1
     after = np.array([filt.mean(k)[0:3] for k in range(a, a + 4)])
     # back on the branch of the truth, as close to it as the filter had the run before the move
@@ -94,7 +94,7 @@ def test_a_consistent_window_is_left_alone():
     filt = _window(log, 100)
     before = np.array([filt.mean(k) for k in range(100)])
     for k in range(60):
-        assert filt.settle_oldest(lambda i: log.accel_mps2[k + i]) == 0
+        assert filt.settle(lambda i: log.accel_mps2[k + i]) == 0
         filt.drop_oldest()
     assert filt.n_settled == 0
     np.testing.assert_allclose(np.array([filt.mean(k) for k in range(60, 100)]), before[60:], atol=1e-9)
@@ -104,7 +104,7 @@ def test_nothing_is_decided_with_a_gyroscope():
     log = _stream(gyro=True)
     filt = _window(log, 60, gyro=True)
     filt.move_branch(30, 1, 34)
-    for _ in range(30):
+    for _ in range(29):
         filt.drop_oldest()
-    assert filt.settle_oldest(lambda i: log.accel_mps2[30 + i]) == 0
+    assert filt.settle(lambda i: log.accel_mps2[29 + i]) == 0
     assert np.linalg.norm(filt.mean(30)[0:3] + log.truth.omega_b_radps[30]) < 1.0  # still flipped

@@ -52,7 +52,7 @@ LAZY_STEPS = 32
 SETTLE_FALSE_ALARM = 1e-3
 """A motion-model step is outlying when its whitened residual over the six ω, ω̇ rows (χ²₆ under the
 model) exceeds the χ²₆ quantile at this probability (22.5, an RMS over the rows of 1.93): only a state
-entered by such a step is decided again on its branch (:meth:`WindowFilter.settle_oldest`)."""
+entered by such a step is decided again on its branch (:meth:`WindowFilter.settle`)."""
 
 
 def _chi2_6_quantile(p: float) -> float:
@@ -110,7 +110,6 @@ class WindowFilter:
         self._Q = None  # process noise of the newest step
         self._F = None  # transition of the newest step
         self._steps: dict = {}  # k -> (F, Q) of the step into state k (the window's states)
-        self._last = None  # (k, mean) of the state that left the window last
         self._unsettled = False  # an update used rows the branch decision cannot evaluate (gyroscope, groups)
         self.n_updates = 0
         self.n_settled = 0
@@ -167,9 +166,7 @@ class WindowFilter:
 
     def drop_oldest(self) -> None:
         if self._hi > self._lo:
-            k = self._base + self._lo
-            self._last = (k, self.mean(k).copy())
-            self._steps.pop(k, None)
+            self._steps.pop(self._base + self._lo, None)
             self._lo += 1
             self._split = max(self._split, self._lo)
 
@@ -317,14 +314,16 @@ class WindowFilter:
             out[b] = np.sum(robust_loss(r * r / R, m.accel_robust_threshold, m.robust_loss), axis=1)
         return out
 
-    def settle_oldest(self, readings) -> int:
-        """Decide again the branch of the oldest state, now that the window holds the lag's data after
-        it: where the step into it from the state that left before it is outlying (:data:`SETTLE_FALSE_ALARM`),
-        the branches of the window's states (four each: ω flipped, mirrored, both) that minimise the
+    def settle(self, readings) -> int:
+        """Decide again the branch of the state after the oldest, before the oldest leaves the window:
+        where the step into it from the oldest is outlying (:data:`SETTLE_FALSE_ALARM`), the branches of
+        the window's states after the oldest (four each: ω flipped, mirrored, both) that minimise the
         window's objective — the motion-model steps (:meth:`_step_costs`) and the readings
-        (:meth:`_readings_costs`) — with the state before and the newest state on their own branch,
-        by dynamic programming (exact over the 4ⁿ choices: the objective is a chain); if that puts the
-        oldest state on another branch, its run on that branch moves there (:meth:`move_branch`).
+        (:meth:`_readings_costs`) — with the oldest and the newest state on their own branch, by dynamic
+        programming (exact over the 4ⁿ choices: the objective is a chain); if that puts the state after
+        the oldest on another branch, its run on that branch moves there (:meth:`move_branch`) and is
+        re-solved with the states next to it (:meth:`_resolve_run`). Every state is so decided once,
+        with the window's data on both sides, before it becomes the oldest and leaves.
 
         The filter carries one branch per state; a run of states that went over to another branch
         (fast motion between samples leads the prediction, and so each update's minimum, onto it) and
@@ -332,19 +331,20 @@ class WindowFilter:
         both sides of the run tell apart: the batch smoother's restarts
         (:mod:`gfimu.smoother.restarts`) over a window that ends at the newest state.
 
-        ``readings``: the accelerometer readings of the window's i-th state, ``readings(i)``. Nothing
-        is done with :attr:`branches` off, when the segment's updates used a gyroscope or factor
-        groups (rows this decision does not evaluate), or without a state before the oldest.
-        Returns the number of states moved."""
-        if not self.branches or self._unsettled or self._last is None or self._hi - self._lo < 2:
+        ``readings``: the accelerometer readings of the window's i-th state (0: the oldest),
+        ``readings(i)``. Nothing is done with :attr:`branches` off, when the segment's updates used a
+        gyroscope or factor groups (rows this decision does not evaluate), or with fewer than three
+        states. Returns the number of states moved."""
+        lo, hi = self._lo, self._hi
+        if not self.branches or self._unsettled or hi - lo < 3:
             return 0
-        k = self._base + self._lo
-        k_prev, x_prev = self._last
-        step = self._steps.get(k)
-        if k_prev != k - 1 or step is None:
+        k0 = self._base + lo
+        step = self._steps.get(k0 + 1)
+        if step is None:
             return 0
+        x_prev = self.mean(k0)
         F, Q = step
-        d = self.mean(k)[:6] - F[:6] @ x_prev
+        d = self.mean(k0 + 1)[:6] - F[:6, :6] @ x_prev[:6]
         try:
             e2 = float(d @ np.linalg.solve(Q[:6, :6], d))
         except np.linalg.LinAlgError:
@@ -352,17 +352,16 @@ class WindowFilter:
         if not e2 > OUTLYING_STEP2:
             return 0
         self._flush()
-        lo, hi = self._lo, self._hi
-        X = np.vstack([x_prev[None], self._mean[lo:hi]])
-        steps = [self._steps.get(self._base + i) for i in range(lo, hi)]
+        X = self._mean[lo:hi].copy()  # the oldest (held), then the states decided
+        steps = [self._steps.get(self._base + i) for i in range(lo + 1, hi)]
         if any(s is None for s in steps):
             return 0
         step_cost = self._step_costs(X, steps)
-        Y = np.vstack([np.asarray(readings(i), dtype=float) for i in range(hi - lo)])
+        Y = np.vstack([np.asarray(readings(i), dtype=float) for i in range(1, hi - lo)])
         node = self._readings_costs(X[1:], Y)
         node = node - node[0][None, :]  # only the differences between branches count
-        # Viterbi from the state before (branch 0) to the newest (branch 0)
-        n = hi - lo
+        # Viterbi from the oldest (branch 0) to the newest (branch 0)
+        n = hi - lo - 1
         cost = step_cost[0, :, 0] + node[:, 0]
         back = np.zeros((n, 4), dtype=np.int8)
         for j in range(1, n):
@@ -380,19 +379,21 @@ class WindowFilter:
         stop = 1
         while stop < n and path[stop] == kind:
             stop += 1
-        self.move_branch(k, kind, None if stop == n else k + stop)
-        self._resolve_run(x_prev, min(stop + SETTLE_MARGIN, n - 1), steps, Y)
+        self.move_branch(k0 + 1, kind, k0 + 1 + stop)
+        self._resolve_run(min(stop + SETTLE_MARGIN, n - 1), steps, Y)
         self.n_settled += 1
         return stop
 
-    def _resolve_run(self, x_prev: np.ndarray, m: int, steps: list, Y: np.ndarray) -> None:
-        """Gauss-Newton on the means of the window's oldest ``m`` states (just moved onto another
-        branch, and the states after them) in the window's objective, the state before them and the
-        state after them held: the filter fitted their ω̇ and f to the run's former branch, and the
-        move carries over only the part of that fit that the branch map moves."""
+    def _resolve_run(self, m: int, steps: list, Y: np.ndarray) -> None:
+        """Gauss-Newton on the means of the ``m`` states after the oldest (a run just moved onto another
+        branch, and the states after it) in the window's objective (``steps``: (F, Q) of the steps from
+        the oldest on; ``Y``: the readings of the states after the oldest), the oldest and the state after
+        them held: the filter fitted their ω̇ and f to the run's former branch, and the move carries over
+        only the part of that fit that the branch map moves."""
         if m < 1:
             return
-        lo = self._lo
+        lo = self._lo + 1
+        x_prev = self._mean[lo - 1]
         mdl = self.model
         c_proc, loss = mdl.process_robust_threshold, mdl.robust_loss
         X = self._mean[lo:lo + m].copy()
@@ -487,7 +488,6 @@ class WindowFilter:
         self._Q = None
         self._F = None
         self._steps = {}
-        self._last = None
         self._unsettled = False
         self._cross[0] = self._P
         self._hi = 1

@@ -104,7 +104,7 @@ class GtsamWindow:
     def move_branch(self, k_first: int, kind: int, k_stop: int | None = None) -> None:
         raise NotImplementedError("the gtsam engine keeps its states' branch (the stream's model runs on the numpy engine)")
 
-    def settle_oldest(self, readings) -> int:
+    def settle(self, readings) -> int:
         """Nothing: the gtsam engine keeps its states' branch (the numpy engine decides it again)."""
         return 0
 

@@ -766,7 +766,7 @@ class FixedLagSmoother:
         cutoff_ns = newest_ns - int(round(self.lag_s * 1e9)) + 1000  # 1 µs tolerance
         out = []
         while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
-            self._smoother.settle_oldest(lambda i: self._raw[i][1])
+            self._smoother.settle(lambda i: self._raw[i][1])
             out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
             self._raw.popleft()
             self._smoother.drop_oldest()
