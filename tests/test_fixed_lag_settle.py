@@ -108,3 +108,33 @@ def test_nothing_is_decided_with_a_gyroscope():
         filt.drop_oldest()
     assert filt.settle(lambda i: log.accel_mps2[29 + i]) == 0
     assert np.linalg.norm(filt.mean(30)[0:3] + log.truth.omega_b_radps[30]) < 1.0  # still flipped
+
+
+def test_a_window_filtered_with_an_outgrown_model_is_solved_again_with_the_new_one():
+    from dataclasses import replace
+
+    from gfimu.array import cube_array
+    from gfimu.smoother.fixed_lag import FixedLagSmoother
+    from gfimu.smoother.stream_model import StreamModel
+
+    log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=200, duration_s=3.0, seed=5, omega_rms_radps=4.0)
+    slow = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=0.5)  # far below the motion's
+    sm = FixedLagSmoother(log.array, slow, lag_s=1.0, rate_hz=200)
+    for k in range(400):
+        sm.push(log.timestamps_ns[k], log.accel_mps2[k])
+    ks = [k for k, _ in sm._window]
+    truth = log.truth.omega_b_radps
+
+    def window_error():
+        return np.sqrt(np.mean([np.sum((sm._smoother.mean(k)[0:3] - truth[k]) ** 2) for k in ks]))
+
+    before = window_error()
+    fast = replace(slow, omega_dot_random_walk_radps2_per_sqrt_s=30.0)
+    sm._use(StreamModel(fast, 1.0, None, None, int(log.timestamps_ns[399]), 400))
+    sm._replay_window()
+    after = window_error()
+    assert [k for k, _ in sm._window] == ks  # the same states, none emitted
+    assert after < 0.5 * before, (before, after)
+    # and the stream goes on from the solved window
+    upd = sm.push(log.timestamps_ns[400], log.accel_mps2[400])
+    assert len(upd.smoothed) == 1 and upd.smoothed[0].timestamp_ns == log.timestamps_ns[ks[0]]

@@ -493,7 +493,37 @@ class FixedLagSmoother:
         if chosen.sign_scale_radps is None and ml is not None:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
         self._use(chosen)
+        if outgrown:
+            self._replay_window()
         return batch
+
+    def _replay_window(self) -> None:
+        """The window solved again from its raw samples with the model just chosen because the motion
+        outgrew the one before: its states, not yet emitted, were filtered with a model the motion
+        had outgrown (the first second of a motion that speeds up), and are emitted only when they
+        reach the lag. The oldest state starts again from its readings, linearised at its current
+        value (so it keeps its branch), the others from the prediction as they came; a window that
+        fails to solve again is kept as it was."""
+        if self._smoother is None or len(self._window) < 2:
+            return
+        entries, raws = list(self._window), list(self._raw)
+        k0 = entries[0][0]
+        start = self._smoother.mean(k0)
+        engine = self._new_smoother()
+        try:
+            t, y, g = raws[0]
+            engine.begin(k0, t, y, g, start=start, extra=self.model.sample_terms(t, y, g))
+            for j in range(1, len(entries)):
+                k, t = entries[j]
+                _, y, g = raws[j]
+                engine.advance(k, (t - entries[j - 1][1]) * 1e-9, t, y, g, extra=self.model.sample_terms(t, y, g),
+                               jerk_factor=self._jerk_factor)
+            engine.commit()
+        except FilterFailure:
+            return
+        self._smoother = engine
+        self._signs.reset()
+        self._remember_newest()
 
     def _newest(self, part: Log, ml):
         """The newest ``tune_window_s`` of ``part`` and of its ML estimate ``ml``."""
