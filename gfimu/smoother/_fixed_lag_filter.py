@@ -67,6 +67,7 @@ def _chi2_6_quantile(p: float) -> float:
 
 
 OUTLYING_STEP2 = _chi2_6_quantile(SETTLE_FALSE_ALARM)
+"""That quantile (22.46 at 1e-3)."""
 
 SETTLE_MARGIN = 4
 """States after a moved run re-solved with it (:meth:`WindowFilter._resolve_run`)."""
@@ -113,7 +114,7 @@ class WindowFilter:
         self._unsettled = False  # an update used rows the branch decision cannot evaluate (gyroscope, groups)
         self.n_updates = 0
         self.n_settled = 0
-        """Runs of states moved onto another branch when they were about to leave the window."""
+        """Runs of states moved onto another branch by :meth:`settle`."""
         m = model.S_q.shape[0]
         # Jacobian buffers: the ω̇ and f columns are constant; the gyroscope rows select ω
         self._H = np.zeros((m, 9))
