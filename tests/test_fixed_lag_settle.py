@@ -9,7 +9,11 @@ import pytest
 
 from gfimu.array import mimu4444_array
 from gfimu.simulate import simulate
-from gfimu.smoother._fixed_lag_filter import OUTLYING_STEP2, SETTLE_FALSE_ALARM, WindowFilter
+from gfimu.smoother._fixed_lag_filter import (
+    OUTLYING_STEP2,
+    SETTLE_FALSE_ALARM,
+    WindowFilter,
+)
 from gfimu.smoother._fixed_lag_model import ArrayModel
 from gfimu.smoother.graph import SmootherOptions
 from gfimu.smoother.restarts import branch
@@ -94,7 +98,7 @@ def test_a_consistent_window_is_left_alone():
     filt = _window(log, 100)
     before = np.array([filt.mean(k) for k in range(100)])
     for k in range(60):
-        assert filt.settle(lambda i: log.accel_mps2[k + i]) == 0
+        assert filt.settle(lambda i, k=k: log.accel_mps2[k + i]) == 0
         filt.drop_oldest()
     assert filt.n_settled == 0
     np.testing.assert_allclose(np.array([filt.mean(k) for k in range(60, 100)]), before[60:], atol=1e-9)
