@@ -36,15 +36,42 @@ arrays are compacted when the new end reaches their capacity.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ._fixed_lag_model import ArrayModel, Step
-from .graph import robust_weight
+from .graph import robust_loss, robust_weight
 from .restarts import branch, plane_normal
 
 
 LAZY_STEPS = 32
 """Updates gathered before the window's older states are brought up to date (:meth:`WindowFilter._flush`)."""
+
+SETTLE_FALSE_ALARM = 1e-3
+"""A motion-model step is outlying when its whitened residual over the six ω, ω̇ rows (χ²₆ under the
+model) exceeds the χ²₆ quantile at this probability (22.5, an RMS over the rows of 1.93): only a state
+entered by such a step is decided again on its branch (:meth:`WindowFilter.settle`)."""
+
+
+def _chi2_6_quantile(p: float) -> float:
+    """The χ²₆ quantile at upper tail probability ``p``: ``P(χ²₆ > x) = e^(-x/2) (1 + x/2 + x²/8)``
+    (even degrees of freedom: a Poisson sum), solved by bisection."""
+    lo, hi = 0.0, 1000.0
+    for _ in range(100):
+        x = 0.5 * (lo + hi)
+        tail = math.exp(-0.5 * x) * (1.0 + 0.5 * x + 0.125 * x * x)
+        lo, hi = (x, hi) if tail > p else (lo, x)
+    return 0.5 * (lo + hi)
+
+
+OUTLYING_STEP2 = _chi2_6_quantile(SETTLE_FALSE_ALARM)
+"""That quantile (22.46 at 1e-3)."""
+
+SETTLE_MARGIN = 4
+"""States after a moved run re-solved with it (:meth:`WindowFilter._resolve_run`)."""
+SETTLE_ITERATIONS = 5
+"""Gauss-Newton steps of that re-solve at most."""
 
 BRANCH_PRIOR_MARGIN = 25.0
 """A branch of an update's minimum is tried only when its distance from the prediction (squared,
@@ -80,7 +107,12 @@ class WindowFilter:
         self._base = 0  # index k of slot 0
         self._P = np.zeros((9, 9))  # covariance of the newest state
         self._Q = None  # process noise of the newest step
+        self._F = None  # transition of the newest step
+        self._steps: dict = {}  # k -> (F, Q) of the step into state k (the window's states)
+        self._unsettled = False  # an update used rows the branch decision cannot evaluate (gyroscope, groups)
         self.n_updates = 0
+        self.n_settled = 0
+        """Runs of states moved onto another branch by :meth:`settle`."""
         m = model.S_q.shape[0]
         # Jacobian buffers: the ω̇ and f columns are constant; the gyroscope rows select ω
         self._H = np.zeros((m, 9))
@@ -131,6 +163,7 @@ class WindowFilter:
 
     def drop_oldest(self) -> None:
         if self._hi > self._lo:
+            self._steps.pop(self._base + self._lo, None)
             self._lo += 1
             self._split = max(self._split, self._lo)
 
@@ -190,15 +223,16 @@ class WindowFilter:
             return pred, H
         return np.concatenate([pred, x[:3]]), H
 
-    def move_branch(self, k_first: int, kind: int) -> None:
-        """The states from ``k_first`` to the newest onto branch ``kind`` of the readings' ambiguity
-        (:func:`gfimu.smoother.restarts.branch`: bit 1 ω flipped, bit 2 mirrored through the array's
-        plane): their means, and the covariances by the linear part ``D = diag(A, I, I)`` (A = -I, the
-        mirror I - 2nnᵀ, or both) on each moved state."""
+    def move_branch(self, k_first: int, kind: int, k_stop: int | None = None) -> None:
+        """The states from ``k_first`` to the newest (or to ``k_stop``, excluded) onto branch ``kind`` of
+        the readings' ambiguity (:func:`gfimu.smoother.restarts.branch`: bit 1 ω flipped, bit 2 mirrored
+        through the array's plane): their means, and the covariances by the linear part
+        ``D = diag(A, I, I)`` (A = -I, the mirror I - 2nnᵀ, or both) on each moved state."""
         self._flush()
         first = self._slot(k_first)
         lo, hi = self._lo, self._hi
-        for i in range(first, hi):
+        stop = hi if k_stop is None else self._slot(k_stop)
+        for i in range(first, stop):
             w, dw = branch(kind, self._mean[i, 0:3], self._mean[i, 3:6], self._normal)
             self._mean[i, 0:3], self._mean[i, 3:6] = w, dw
         A = np.eye(3)
@@ -208,11 +242,176 @@ class WindowFilter:
             A = -A
         D = np.eye(9)
         D[0:3, 0:3] = A
-        # C_i = Cov(x_i, x_newest): the newest is moved, so every C_i gets Dᵀ on its right, the moved
-        # ones D on their left too
-        self._cross[lo:hi] = self._cross[lo:hi] @ D.T
-        self._cross[first:hi] = D @ self._cross[first:hi]
-        self._P = D @ self._P @ D.T
+        # C_i = Cov(x_i, x_newest): the moved ones get D on their left; when the newest is moved, every
+        # C_i gets Dᵀ on its right too
+        self._cross[first:stop] = D @ self._cross[first:stop]
+        if stop == hi:
+            self._cross[lo:hi] = self._cross[lo:hi] @ D.T
+            self._P = D @ self._P @ D.T
+
+    def _step_costs(self, X: np.ndarray, steps: list) -> np.ndarray:
+        """(4, 4, n - 1) costs of the motion-model steps between the n states ``X`` (ω, ω̇ columns
+        first; ``steps``: (F, Q) of each step), from branch a of state j to branch b of state j + 1: the
+        model's loss (:func:`gfimu.smoother.graph.robust_loss`, the Cauchy loss of the robust model at
+        its threshold) of the RMS over the six ω, ω̇ rows of the step's whitened residual, times six."""
+        n = len(X)
+        W = np.empty((4, n, 6))
+        for b in range(4):
+            W[b, :, 0:3], W[b, :, 3:6] = branch(b, X[:, 0:3], X[:, 3:6], self._normal)
+        F = np.stack([f[:6, :6] for f, _ in steps])
+        Q_inv = np.linalg.inv(np.stack([q[:6, :6] for _, q in steps]))
+        pred = np.einsum("jkl,ajl->ajk", F, W[:, :-1])  # F x_j on each branch a
+        d = W[None, :, 1:] - pred[:, None]  # (a, b, j, 6)
+        e2 = np.einsum("abjk,jkl,abjl->abj", d, Q_inv, d) / 6.0
+        return 6.0 * robust_loss(e2, self.model.process_robust_threshold, self.model.robust_loss)
+
+    def _readings_costs(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """(4, n) costs of the readings ``Y`` of the n states ``X`` on each branch: half the squared
+        residual over the accelerometer variances at each state's |ω| (the same on every branch: the
+        branches keep |ω|). A planar array's readings fit all four alike; the flip always."""
+        m = self.model
+        R = self._R[None, :] + (m.accel_noise_slope_mps2_per_radps ** 2) * np.sum(X[:, 0:3] ** 2, axis=1)[:, None]
+        out = np.empty((4, len(X)))
+        for b in range(4):
+            w, dw = branch(b, X[:, 0:3], X[:, 3:6], self._normal)
+            wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
+            q = np.stack([wx * wx + wy * wy, wx * wx + wz * wz, wy * wy + wz * wz, wx * wy, wx * wz, wy * wz], axis=1)
+            r = Y - (dw @ m.S_dw.T + X[:, 6:9] @ m.S_f.T + q @ m.S_q.T)
+            out[b] = np.sum(robust_loss(r * r / R, m.accel_robust_threshold, m.robust_loss), axis=1)
+        return out
+
+    def settle(self, readings) -> int:
+        """Decide again the branch of the state after the oldest, before the oldest leaves the window:
+        where the step into it from the oldest is outlying (:data:`SETTLE_FALSE_ALARM`), the branches of
+        the window's states after the oldest (four each: ω flipped, mirrored, both) that minimise the
+        window's objective — the motion-model steps (:meth:`_step_costs`) and the readings
+        (:meth:`_readings_costs`) — with the oldest and the newest state on their own branch, by dynamic
+        programming (exact over the 4ⁿ choices: the objective is a chain); if that puts the state after
+        the oldest on another branch, its run on that branch moves there (:meth:`move_branch`) and is
+        re-solved with the states next to it (:meth:`_resolve_run`). Every state is so decided once,
+        with the window's data on both sides, before it becomes the oldest and leaves.
+
+        The filter carries one branch per state; a run of states that went over to another branch
+        (fast motion between samples leads the prediction, and so each update's minimum, onto it) and
+        came back is a local minimum a Gaussian update cannot leave, and one that the lag's data on
+        both sides of the run tell apart: the batch smoother's restarts
+        (:mod:`gfimu.smoother.restarts`) over a window that ends at the newest state.
+
+        ``readings``: the accelerometer readings of the window's i-th state (0: the oldest),
+        ``readings(i)``. Nothing is done with :attr:`branches` off, when the segment's updates used a
+        gyroscope or factor groups (rows this decision does not evaluate), or with fewer than three
+        states. Returns the number of states moved."""
+        lo, hi = self._lo, self._hi
+        if not self.branches or self._unsettled or hi - lo < 3:
+            return 0
+        k0 = self._base + lo
+        step = self._steps.get(k0 + 1)
+        if step is None:
+            return 0
+        x_prev = self.mean(k0)
+        F, Q = step
+        d = self.mean(k0 + 1)[:6] - F[:6, :6] @ x_prev[:6]
+        try:
+            e2 = float(d @ np.linalg.solve(Q[:6, :6], d))
+        except np.linalg.LinAlgError:
+            return 0
+        if not e2 > OUTLYING_STEP2:
+            return 0
+        self._flush()
+        X = self._mean[lo:hi].copy()  # the oldest (held), then the states decided
+        steps = [self._steps.get(self._base + i) for i in range(lo + 1, hi)]
+        if any(s is None for s in steps):
+            return 0
+        step_cost = self._step_costs(X, steps)
+        Y = np.vstack([np.asarray(readings(i), dtype=float) for i in range(1, hi - lo)])
+        node = self._readings_costs(X[1:], Y)
+        node = node - node[0][None, :]  # only the differences between branches count
+        # Viterbi from the oldest (branch 0) to the newest (branch 0)
+        n = hi - lo - 1
+        cost = step_cost[0, :, 0] + node[:, 0]
+        back = np.zeros((n, 4), dtype=np.int8)
+        for j in range(1, n):
+            total = cost[:, None] + step_cost[:, :, j]
+            back[j] = np.argmin(total, axis=0)
+            cost = total[back[j], np.arange(4)] + node[:, j]
+        path = np.zeros(n, dtype=np.int8)
+        state = 0
+        for j in range(n - 1, 0, -1):
+            state = int(back[j][state])
+            path[j - 1] = state
+        kind = int(path[0])
+        if kind == 0:
+            return 0
+        stop = 1
+        while stop < n and path[stop] == kind:
+            stop += 1
+        self.move_branch(k0 + 1, kind, k0 + 1 + stop)
+        self._resolve_run(min(stop + SETTLE_MARGIN, n - 1), steps, Y)
+        self.n_settled += 1
+        return stop
+
+    def _resolve_run(self, m: int, steps: list, Y: np.ndarray) -> None:
+        """Gauss-Newton on the means of the ``m`` states after the oldest (a run just moved onto another
+        branch, and the states after it) in the window's objective (``steps``: (F, Q) of the steps from
+        the oldest on; ``Y``: the readings of the states after the oldest), the oldest and the state after
+        them held: the filter fitted their ω̇ and f to the run's former branch, and the move carries over
+        only the part of that fit that the branch map moves."""
+        if m < 1:
+            return
+        lo = self._lo + 1
+        x_prev = self._mean[lo - 1]
+        mdl = self.model
+        c_proc, loss = mdl.process_robust_threshold, mdl.robust_loss
+        X = self._mean[lo:lo + m].copy()
+        x_next = self._mean[lo + m]
+        # whitening of each step (ω, ω̇ and f rows): L with Lᵀ L = Q⁻¹
+        Ls = []
+        Fs = []
+        for j in range(m + 1):
+            F, Q = steps[j]
+            Ls.append(np.linalg.cholesky(np.linalg.inv(Q)).T)
+            Fs.append(F)
+        N = 9 * m
+        for _ in range(SETTLE_ITERATIONS):
+            A = np.zeros((N, N))
+            g = np.zeros(N)
+            for j in range(m):  # readings
+                pred, H = self._measure(X[j], None)
+                R = self._R + (mdl.accel_noise_slope_mps2_per_radps ** 2) * float(X[j, 0:3] @ X[j, 0:3])
+                r = Y[j] - pred
+                sl = slice(9 * j, 9 * j + 9)
+                HR = H.T / R
+                A[sl, sl] += HR @ H
+                g[sl] += HR @ r
+            chain = [x_prev] + list(X) + [x_next]
+            for j in range(m + 1):  # steps j -> j + 1 of the chain (the held ends are chain 0 and m + 1)
+                L, F = Ls[j], Fs[j]
+                e = L @ (chain[j + 1] - F @ chain[j])
+                w = 1.0
+                if c_proc > 0:
+                    w = float(robust_weight(np.sqrt(float(e[:6] @ e[:6]) / 6.0), c_proc, loss))
+                Jb, Ja = L, -L @ F  # d e / d x_{j+1}, d e / d x_j
+                if j >= 1:
+                    sa = slice(9 * (j - 1), 9 * j)
+                    A[sa, sa] += w * Ja.T @ Ja
+                    g[sa] -= w * Ja.T @ e
+                if j < m:
+                    sb = slice(9 * j, 9 * j + 9)
+                    A[sb, sb] += w * Jb.T @ Jb
+                    g[sb] -= w * Jb.T @ e
+                if 1 <= j < m:
+                    A[sa, sb] += w * Ja.T @ Jb
+                    A[sb, sa] += w * Jb.T @ Ja
+            try:
+                dx = np.linalg.solve(A, g)
+            except np.linalg.LinAlgError:
+                return
+            if not np.all(np.isfinite(dx)):
+                return
+            X += dx.reshape(m, 9)
+            if np.max(np.abs(dx.reshape(m, 9)[:, 0:3])) < 1e-3:
+                break
+        self._mean[lo:lo + m] = X
 
     # --- the window interface both engines share (gfimu.smoother._fixed_lag_gtsam.GtsamWindow) ----
     def begin(self, k: int, t_ns: int, y, gyro=None, start=None, extra=None) -> None:
@@ -226,6 +425,9 @@ class WindowFilter:
         (linearised from ``start``, else from the prediction and the other branches of the update's
         minimum)."""
         self.predict(k, step)
+        self._steps[k] = (self._F, self._Q)
+        if isinstance(step, Step) and (step.c is not None or step.H0 is not None):
+            self._unsettled = True  # rows of given step groups, which the branch decision does not evaluate
         self.measure(y, gyro, start=start, extra=extra)
 
     def commit(self) -> None:
@@ -252,6 +454,9 @@ class WindowFilter:
         self._var[0] = self._prior_var
         self._P = np.diag(self._prior_var)
         self._Q = None
+        self._F = None
+        self._steps = {}
+        self._unsettled = False
         self._cross[0] = self._P
         self._hi = 1
 
@@ -283,6 +488,7 @@ class WindowFilter:
         self._cross[hi] = P
         self._P = P
         self._Q = Q
+        self._F = F
         self._hi = hi + 1
 
     def _branch_starts(self, x: np.ndarray) -> list[np.ndarray]:
@@ -368,6 +574,8 @@ class WindowFilter:
         lo, hi = self._lo, self._hi
         xp = self._mean[hi - 1].copy()
         P = self._P
+        if gyro is not None or extra is not None:
+            self._unsettled = True
         if gyro is not None:
             y = np.concatenate([y, gyro])
         best = self._solve(y, gyro, xp, P, xp if start is None else np.asarray(start, dtype=float), extra)

@@ -99,8 +99,12 @@ class GtsamWindow:
     def set_model(self, array_model) -> None:
         self.model = array_model
 
-    def move_branch(self, k_first: int, kind: int) -> None:
+    def move_branch(self, k_first: int, kind: int, k_stop: int | None = None) -> None:
         raise NotImplementedError("the gtsam engine keeps its states' branch (the stream's model runs on the numpy engine)")
+
+    def settle(self, readings) -> int:
+        """Nothing: the gtsam engine keeps its states' branch (the numpy engine decides it again)."""
+        return 0
 
     @property
     def n_keys(self) -> int:

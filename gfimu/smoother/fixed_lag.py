@@ -497,7 +497,38 @@ class FixedLagSmoother:
         if chosen.sign_scale_radps is None and ml is not None:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
         self._use(chosen)
+        if outgrown:
+            self._replay_window()
         return batch
+
+    def _replay_window(self) -> None:
+        """The window solved again from its raw samples with the model just chosen because the motion
+        outgrew the one before: its states, not yet emitted, were filtered with a model the motion
+        had outgrown (the first second of a motion that speeds up), and are emitted only when they
+        reach the lag. The oldest state starts again from its readings, linearised at its current
+        value (so it keeps its branch), the others from the prediction as they came; a window that
+        fails to solve again is kept as it was. The numpy engine's window only (gtsam's keeps its
+        states; the stream's own model runs on the numpy engine)."""
+        if self.engine != "numpy" or self._smoother is None or len(self._window) < 2:
+            return
+        entries, raws = list(self._window), list(self._raw)
+        k0 = entries[0][0]
+        start = self._smoother.mean(k0)
+        engine = self._new_smoother()
+        try:
+            t, y, g = raws[0]
+            engine.begin(k0, t, y, g, start=start, extra=self.model.sample_terms(t, y, g))
+            for j in range(1, len(entries)):
+                k, t = entries[j]
+                _, y, g = raws[j]
+                step = self._step(raws[j - 1], raws[j], engine.mean(entries[j - 1][0]), self._jerk_factor)
+                engine.advance(k, step, t, y, g, extra=self.model.sample_terms(t, y, g))
+            engine.commit()
+        except FilterFailure:
+            return
+        self._smoother = engine
+        self._signs.reset()
+        self._remember_newest()
 
     def _newest(self, part: Log, ml):
         """The newest ``tune_window_s`` of ``part`` and of its ML estimate ``ml``."""
@@ -573,9 +604,9 @@ class FixedLagSmoother:
         if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
             self._jerk_factor = min(1.0, local / q)
         due = sample[0] - chosen.chosen_at_ns >= self._retune_ns
-        # a model chosen on a still stretch that the body now outmoves: choose again at once (at most once
-        # a second), on the history that now holds the motion
-        outgrown = (not chosen.moving and local is not None and self._local.resolved and local > OUTGROWN_FACTOR * q
+        # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
+        # again at once (at most once a second), on the history that now holds the motion
+        outgrown = (local is not None and self._local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
         if (due or outgrown) and len(self._history) >= self._tune_min_n:
             self._choose(list(self._history), outgrown=outgrown)
@@ -778,6 +809,7 @@ class FixedLagSmoother:
         cutoff_ns = newest_ns - int(round(self.lag_s * 1e9)) + 1000  # 1 µs tolerance
         out = []
         while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
+            self._smoother.settle(lambda i: self._raw[i][1])
             out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
             self._raw.popleft()
             self._smoother.drop_oldest()
