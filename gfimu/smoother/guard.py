@@ -240,8 +240,9 @@ def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult) -> Motio
     """``smoothed`` with the per-sample ω, ω̇ and f over ``result``'s spans (the gravity-free
     acceleration, where present, moved by the same change of f; the attitude kept; σ unknown there:
     NaN). ω takes the signs of :func:`gfimu.smoother.initialise.sign_chain` over the span and the
-    smoother's samples next to it, oriented to agree with the sample before the span (or after it,
-    for a span at the log's start; for a span over the whole log, with the smoother's ω in the span).
+    smoother's samples next to it, the chain as a whole oriented to agree most with the smoother's ω
+    there (Σ ω_chain · ω_smoother over the span and its two neighbours: where the motion starts or
+    stops next to the span, the neighbours turn too slowly to tell the sign, the span's own samples do).
     Without spans: ``smoothed`` itself."""
     if not result.spans:
         return smoothed
@@ -262,11 +263,7 @@ def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult) -> Motio
         seq_w = np.where(inner[:, None], per_sample.omega_b_radps[idx], w[idx])
         seq_wd = np.where(inner[:, None], per_sample.omega_dot_b_radps2[idx], wd[idx])
         signs = sign_chain(seq_w, seq_wd, np.diff(t[idx]) * 1e-9, scale)
-        if a > 0:
-            signs = signs * signs[0]
-        elif b < n - 1:
-            signs = signs * signs[-1]
-        elif np.sum(signs[:, None] * seq_w * w[idx]) < 0:
+        if np.sum(signs[:, None] * seq_w * w[idx]) < 0:  # the orientation that agrees most with the smoother's ω
             signs = -signs
         sel = idx[inner]
         w[sel] = per_sample.omega_b_radps[sel] * signs[inner][:, None]
