@@ -68,6 +68,11 @@ def _chi2_6_quantile(p: float) -> float:
 OUTLYING_STEP2 = _chi2_6_quantile(SETTLE_FALSE_ALARM)
 """That quantile (22.46 at 1e-3)."""
 
+SETTLE_STATES = 64
+"""States after the oldest that the branch decision weighs at most (:meth:`WindowFilter.settle`; the last
+of them held on its own branch): the runs it moves are a few samples long (one to five on the MIMU4444
+recordings at 62.5 Hz), and the states beyond add only more samples whose branch must agree, at O(states)
+per decision (a 0.2 s lag at 20 kHz holds 4,000)."""
 SETTLE_MARGIN = 4
 """States after a moved run re-solved with it (:meth:`WindowFilter._resolve_run`)."""
 SETTLE_ITERATIONS = 5
@@ -285,7 +290,8 @@ class WindowFilter:
         where the step into it from the oldest is outlying (:data:`SETTLE_FALSE_ALARM`), the branches of
         the window's states after the oldest (four each: ω flipped, mirrored, both) that minimise the
         window's objective — the motion-model steps (:meth:`_step_costs`) and the readings
-        (:meth:`_readings_costs`) — with the oldest and the newest state on their own branch, by dynamic
+        (:meth:`_readings_costs`) — with the oldest and the newest state (or the last of
+        :data:`SETTLE_STATES` after the oldest) on their own branch, by dynamic
         programming (exact over the 4ⁿ choices: the objective is a chain); if that puts the state after
         the oldest on another branch, its run on that branch moves there (:meth:`move_branch`) and is
         re-solved with the states next to it (:meth:`_resolve_run`). Every state is so decided once,
@@ -302,6 +308,7 @@ class WindowFilter:
         gyroscope or factor groups (rows this decision does not evaluate), or with fewer than three
         states. Returns the number of states moved."""
         lo, hi = self._lo, self._hi
+        hi = min(hi, lo + 1 + SETTLE_STATES)
         if not self.branches or self._unsettled or hi - lo < 3:
             return 0
         k0 = self._base + lo
