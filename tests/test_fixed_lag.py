@@ -12,7 +12,7 @@ from gfimu.factors import accelerometer, kinematics, process
 from gfimu.log import Log
 from gfimu.simulate import SensorErrors, simulate
 from gfimu.smoother import _fixed_lag_model as model
-from gfimu.smoother.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError
+from gfimu.smoother.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError, fixed_lag_reason
 from gfimu.smoother.graph import SmootherOptions
 
 RATE_HZ = 500.0
@@ -277,7 +277,7 @@ def test_bad_input_is_refused_with_the_cause():
         FixedLagSmoother(arr, SmootherOptions(), lag_s=0.0)
     assert "gyroscope" in FixedLagEstimator().applicable(single_triad())
     assert FixedLagEstimator().applicable(replace(single_triad(), gyroscope=Gyroscope(0.01))) is None
-    assert "self_calibrate_bias" in FixedLagEstimator(self_calibrate_bias=True).applicable(arr)
+    assert "self_calibrate_bias" in fixed_lag_reason(arr, SmootherOptions(self_calibrate_bias=True))
     assert "motion_model" in FixedLagEstimator(motion_model="snap").applicable(arr)
     with pytest.raises(ValueError, match="no option"):
         make_estimator("fixed-lag", lag=0.2)

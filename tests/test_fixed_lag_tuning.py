@@ -161,9 +161,7 @@ def test_batch_only_options_are_refused_with_the_reason():
     arr = CUBE_5CM
     cases = {
         "tune_motion_model": {"tune_motion_model": True},
-        "accel_noise_slope": {"accel_noise_slope_mps2_per_radps": 0.05},
         "motion_model": {"motion_model": "snap"},
-        "accel_robust_threshold": {"accel_robust_threshold": 2.0},
     }
     for word, changes in cases.items():
         reason = FixedLagEstimator(**changes).applicable(arr)
@@ -176,6 +174,16 @@ def test_batch_only_options_are_refused_with_the_reason():
             FixedLagEstimator(**{name: value})
         # ...and the streaming smoother given plain SmootherOptions refuses them by name
         with pytest.raises(ValueError, match=f"^{name}: option\\(s\\) of the batch smoother"):
+            FixedLagSmoother(arr, SmootherOptions(**{name: value}), rate_hz=RATE_HZ)
+    # ...nor the parts of the model only the batch smoother has; given in plain SmootherOptions, the streaming
+    # smoother says why it cannot take them
+    for name, value, word in (("accel_noise_slope_mps2_per_radps", 0.05, "accel_noise_slope"),
+                              ("accel_robust_threshold", 2.0, "accel_robust_threshold"),
+                              ("self_calibrate_bias", True, "self_calibrate_bias"),
+                              ("estimate_attitude", True, "estimate_attitude")):
+        with pytest.raises(TypeError, match=name):
+            FixedLagEstimator(**{name: value})
+        with pytest.raises(ValueError, match=word):
             FixedLagSmoother(arr, SmootherOptions(**{name: value}), rate_hz=RATE_HZ)
     assert FixedLagEstimator(tune_accel_noise=True, initialisation="ml").applicable(arr) is None
     with pytest.raises(ValueError, match="tune_window_s"):

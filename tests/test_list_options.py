@@ -29,11 +29,15 @@ def test_hand_written_expectations():
     smoother, fixed_lag = describe_options("smoother"), describe_options("fixed-lag")
     for text in (smoother, fixed_lag):
         assert "\nomega_dot_random_walk_radps2_per_sqrt_s = 30.0 [rad/s²/√s]\n    white angular jerk density" in text
-        assert "\naccel_noise_slope_mps2_per_radps = 0.0 [m/s² per rad/s]\n" in text
         assert "\ntune_process_noise = True\n" in text and "\nauto_model = True\n" in text
         assert "\nguard = 'replace'\n" in text
     assert "\nwindow_s = 30.0 [s]\n" in smoother and "\nreweight_iterations = 3\n" in smoother
     assert "\nworkers = 0 [processes]\n" in smoother
+    assert "\naccel_noise_slope_mps2_per_radps = 0.0 [m/s² per rad/s]\n" in smoother and "\n[batch_model]\n" in smoother
+    batch_only = ("estimate_attitude", "use_inclinometer", "self_calibrate_bias", "free_flight", "measurement",
+                  "accel_robust_threshold", "omega_ddot_random_walk_radps3_per_sqrt_s")
+    assert all(f"\n{n} = " in smoother for n in batch_only)
+    assert not [n for n in batch_only if f"\n{n} = " in fixed_lag]
     assert not [n for n in ("window_s", "overlap_s", "reweight_iterations", "solver") if f"\n{n} = " in fixed_lag]
     assert "\nlag_s = 0.2 [s]\n" in fixed_lag and "\nrelinearize_threshold = 0.1 [rad/s]\n" in fixed_lag
     assert not [n for n in ("lag_s", "relinearize_threshold", "engine", "retune_every_s") if f"\n{n} = " in smoother]

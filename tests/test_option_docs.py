@@ -16,7 +16,7 @@ from gfimu.simulate import simulate
 from gfimu.smoother.option_groups import GROUPS
 
 
-@pytest.mark.parametrize("method, groups", [("smoother", ("model", "batch", "tuning", "guard")),
+@pytest.mark.parametrize("method, groups", [("smoother", ("model", "batch_model", "batch", "tuning", "guard")),
                                             ("fixed-lag", ("model", "stream", "tuning", "guard"))])
 def test_every_smoother_option_is_listed_under_its_group(method, groups):
     names = [f.name for f in dataclasses.fields(estimator_class(method)) if f.init]

@@ -37,8 +37,9 @@ def test_every_declaration_carries_a_one_line_help_and_a_unit():
 
 
 def test_each_flat_class_has_exactly_its_groups_with_the_declared_metadata():
-    assert sorted(f.name for f in fields(SmootherOptions)) == _names("model", "batch", "tuning")
-    assert sorted(f.name for f in fields(BatchSmootherEstimator)) == _names("model", "batch", "tuning", "guard")
+    assert sorted(f.name for f in fields(SmootherOptions)) == _names("model", "batch_model", "batch", "tuning")
+    assert sorted(f.name for f in fields(BatchSmootherEstimator)) == _names("model", "batch_model", "batch", "tuning",
+                                                                            "guard")
     assert sorted(f.name for f in fields(FixedLagEstimator)) == _names("model", "stream", "tuning", "guard")
     assert groups_of(FixedLagEstimator) == ("model", "stream", "tuning", "guard")
     for cls in (SmootherOptions, BatchSmootherEstimator, FixedLagEstimator):
@@ -58,6 +59,9 @@ def test_flat_options_round_trip_through_their_groups():
     assert isinstance(opt.batch, BatchOptions) and opt.batch.workers == 2
     assert SmootherOptions.from_groups(opt.model, opt.batch, opt.tuning) == opt
     assert SmootherOptions.from_groups(opt.model, opt.batch, opt.tuning, window_s=20.0) == replace(opt, window_s=20.0)
+    attitude = SmootherOptions(estimate_attitude=True, initial_yaw_std_rad=0.5)
+    assert attitude.batch_model.estimate_attitude is True
+    assert SmootherOptions.from_groups(attitude.model, attitude.batch_model) == attitude
     # a group left out keeps its defaults
     assert SmootherOptions.from_groups(opt.model) == SmootherOptions(motion_model="snap")
     assert SmootherOptions().model == ModelOptions() and SmootherOptions().tuning == TuningOptions()

@@ -311,7 +311,7 @@ def method_options(method: str, pairs: list[str] | None, preset: str | None = No
 def describe_options(method: str) -> str:
     """Every ``-O`` option of ``method``: name, default, unit and help, one block each, from the option's
     declaration (:func:`gfimu.option.option`: the field's metadata); the smoothers' options under their
-    group (model, batch, stream, tuning, guard: :mod:`gfimu.smoother.option_groups`)."""
+    group (model, batch_model, batch, stream, tuning, guard: :mod:`gfimu.smoother.option_groups`)."""
     from ..methods import estimator_class
 
     cls = estimator_class(method)

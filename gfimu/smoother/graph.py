@@ -54,7 +54,7 @@ W, D, F, A = OMEGA, OMEGA_DOT, SPECIFIC_FORCE, OMEGA_DDOT
 
 
 @dataclass(frozen=True)
-@assemble("model", "batch", "tuning")
+@assemble("model", "batch_model", "batch", "tuning")
 class SmootherOptions:
     """Options of the batch smoother's problem and solves: the groups ``model``, ``batch`` and ``tuning`` of
     :mod:`gfimu.smoother.option_groups`, where each option is declared with its unit, default and help

@@ -1,6 +1,8 @@
-"""The smoothers' options, each declared once with its unit, default and help, in five groups.
+"""The smoothers' options, each declared once with its unit, default and help, in six groups.
 
 - :class:`ModelOptions` (``model``): the model both smoothers solve and how they start and stop its solves;
+- :class:`BatchModelOptions` (``batch_model``): the parts of the model only the batch smoother has (attitude,
+  inclinometer, self-calibration, free flight, white snap, the per-sample inversion, robust losses);
 - :class:`BatchOptions` (``batch``): the batch smoother's solve windows, re-weighting, restarts and workers;
 - :class:`StreamOptions` (``stream``): the fixed-lag smoother's lag, window engine and model updates;
 - :class:`TuningOptions` (``tuning``): the model and noise chosen from the data;
@@ -8,13 +10,13 @@
 
 Each field is made by :func:`gfimu.option.option`, whose metadata (``unit``, ``help``) ``gfimu estimate --list-options``
 prints. The flat option classes are assembled from the groups by :func:`assemble`:
-:class:`gfimu.smoother.graph.SmootherOptions` (model, batch, tuning) and the estimators of the methods
-'smoother' (model, batch, tuning, guard) and 'fixed-lag' (model, stream, tuning, guard). They keep every
+:class:`gfimu.smoother.graph.SmootherOptions` (model, batch_model, batch, tuning) and the estimators of
+the methods 'smoother' (those and guard) and 'fixed-lag' (model, stream, tuning, guard). They keep every
 option under its flat name (``-O name=value``, the presets, ``SmootherOptions(window_s=10)``), add the
 group's name to each field's metadata, and give each group's values back as a frozen group dataclass
 (``options.model.motion_model``, ``options.batch.window_s``); ``cls.from_groups(model, batch, ...)``
 makes the flat options from group values. A method has no option of a group it does not carry: the
-fixed-lag smoother has no ``window_s``, the batch smoother no ``lag_s``.
+fixed-lag smoother has no ``window_s`` nor ``estimate_attitude``, the batch smoother no ``lag_s``.
 
 Values are checked by the flat classes (the group dataclasses only hold them).
 """
@@ -39,18 +41,57 @@ class ModelOptions:
     omega_dot_random_walk_radps2_per_sqrt_s: float = option(30.0, "rad/s²/√s", (
         "white angular jerk density ('jerk' model): how fast ω̇ may change; larger follows faster motion, "
         "smooths less"))
-    omega_ddot_random_walk_radps3_per_sqrt_s: float = option(300.0, "rad/s³/√s", (
-        "white angular snap density ('snap' model): how fast ω̈ may change"))
     specific_force_random_walk_mps2_per_sqrt_s: float = option(30.0, "m/s²/√s", (
         "random walk density of the specific force: how fast it may change"))
-    measurement: str = option("accelerometer", help=(
-        "'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible); "
-        "'quadratic': the per-sample inversion [f, ω̇, q(ω)] with its covariance (an invertible array, no "
-        "self-calibration; batch smoother only)"))
     default_accel_noise_std_mps2: float = option(DEFAULT_ACCEL_NOISE_STD_MPS2, "m/s²", (
         "accelerometer white-noise std when no axis of array.toml gives one (an axis without one among axes "
         "with one takes their mean)"))
     use_gyro: bool = option(True, help="use the gyroscope when the array has one")
+    initial_omega_std_radps: float = option(100.0, "rad/s", "weak prior std of the first sample's ω (zero mean)")
+    initial_omega_dot_std_radps2: float = option(1000.0, "rad/s²", (
+        "weak prior std of the first sample's ω̇ (zero mean)"))
+    initial_specific_force_std_mps2: float = option(1000.0, "m/s²", (
+        "weak prior std of the first sample's specific force (zero mean), keeping the normal equations definite"))
+    process_axis_factors: tuple[float, float, float] = option((1.0, 1.0, 1.0), help=(
+        "factor on the jerk (or snap) density per body axis x, y, z: motion about one body axis (turntable, "
+        "pendulum) is far smoother about the others"))
+    process_axis_frequencies_hz: tuple[float, float, float] = option((0.0, 0.0, 0.0), "Hz", (
+        "'jerk' model: natural frequency per body axis x, y, z; f > 0 makes the motion about that axis a "
+        "driven oscillator ω̈ = -(2π f)² ω + white jerk (turntables, shakers, pendulums, gait), 0 the plain "
+        "white jerk"))
+    factor_groups: tuple = option((), help=(
+        "further factor groups (gfimu.smoother.groups.FactorGroup, from Python) added to the model of every "
+        "solve; the fixed-lag smoother takes those that are per sample"))
+    compute_sigma: bool = option(False, help=(
+        "also output one-sigma marginal uncertainties of the estimates (sigma_ columns)"))
+    max_iterations: int = option(30, help=(
+        "largest number of Levenberg-Marquardt iterations per solve (the fixed-lag smoother: of the solves of "
+        "its tuning stretch)"))
+    relative_tolerance: float = option(1e-10, help="stop a solve when the cost decreases by less than this fraction")
+    initialisation: str = option("sign-resolving", help=(
+        "initial states: 'sign-resolving' (gfimu.smoother.initialise) or 'ml' (the per-sample "
+        "maximum-likelihood estimate with its sign choice; slower, more robust on real recordings with large "
+        "model residuals and fast motion at low rates)"))
+    init_window_s: float = option(0.4, "s", "window of the sign-resolving initialisation")
+    ml_sign_chain: bool = option(False, help=(
+        "with initialisation='ml': re-choose the sign of each sample's ML ω so that consecutive samples follow "
+        "the trapezoid of ML's ω̇ (dynamic programming), fixing the per-sample sign choice where a fast "
+        "rotation slows through zero and reverses"))
+
+
+@dataclass(frozen=True)
+class BatchModelOptions:
+    """The parts of the model only the batch smoother (method 'smoother') has: the white-snap density, the
+    per-sample inversion as measurement, the attitude and the inclinometer, self-calibration, free flight,
+    and the motion-dependent noise and robust losses it re-weights over whole solutions (the fixed-lag
+    smoother chooses its own from the stream, :mod:`gfimu.smoother.stream_model`)."""
+
+    omega_ddot_random_walk_radps3_per_sqrt_s: float = option(300.0, "rad/s³/√s", (
+        "white angular snap density ('snap' model): how fast ω̈ may change"))
+    measurement: str = option("accelerometer", help=(
+        "'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible); "
+        "'quadratic': the per-sample inversion [f, ω̇, q(ω)] with its covariance (an invertible array, no "
+        "self-calibration; batch smoother only)"))
     use_inclinometer: bool = option(False, help=(
         "use the inclinometer's tilt angles (paper 001); implies estimate_attitude (batch smoother only)"))
     estimate_attitude: bool = option(False, help=(
@@ -78,22 +119,10 @@ class ModelOptions:
         "smoother only)"))
     torque_noise_std_nm: float = option(1e-4, "N m", "std of the unmodelled torque in the Euler factor")
     free_fall_std_mps2: float = option(0.05, "m/s²", "std of the specific force at the centre of mass in free flight")
-    initial_omega_std_radps: float = option(100.0, "rad/s", "weak prior std of the first sample's ω (zero mean)")
-    initial_omega_dot_std_radps2: float = option(1000.0, "rad/s²", (
-        "weak prior std of the first sample's ω̇ (zero mean)"))
-    initial_specific_force_std_mps2: float = option(1000.0, "m/s²", (
-        "weak prior std of the first sample's specific force (zero mean), keeping the normal equations definite"))
     accel_noise_slope_mps2_per_radps: float = option(0.0, "m/s² per rad/s", (
         "accelerometer noise std growing with the rotation rate, sqrt(σ² + (slope |ω|)²) per sample, "
         "re-weighted from the current ω over reweight_iterations solves (MIMU4444: about 0.047); 0 keeps the "
         "noise of array.toml (the fixed-lag smoother's model sets it itself)"))
-    process_axis_factors: tuple[float, float, float] = option((1.0, 1.0, 1.0), help=(
-        "factor on the jerk (or snap) density per body axis x, y, z: motion about one body axis (turntable, "
-        "pendulum) is far smoother about the others"))
-    process_axis_frequencies_hz: tuple[float, float, float] = option((0.0, 0.0, 0.0), "Hz", (
-        "'jerk' model: natural frequency per body axis x, y, z; f > 0 makes the motion about that axis a "
-        "driven oscillator ω̈ = -(2π f)² ω + white jerk (turntables, shakers, pendulums, gait), 0 the plain "
-        "white jerk"))
     robust_loss: str = option("huber", help=(
         "loss of the robust re-weighting, 'huber' or 'cauchy' (iteratively re-weighted least squares, one "
         "re-weighting per solve of reweight_iterations; the fixed-lag smoother's model sets it itself)"))
@@ -104,24 +133,6 @@ class ModelOptions:
         "robust loss on each motion-model step, threshold on its whitened residual norm / sqrt(rows); 0 keeps "
         "the Gaussian loss; lets sudden jerks through unsmoothed (the fixed-lag smoother's model sets it "
         "itself)"))
-    factor_groups: tuple = option((), help=(
-        "further factor groups (gfimu.smoother.groups.FactorGroup, from Python) added to the model of every "
-        "solve; the fixed-lag smoother takes those that are per sample"))
-    compute_sigma: bool = option(False, help=(
-        "also output one-sigma marginal uncertainties of the estimates (sigma_ columns)"))
-    max_iterations: int = option(30, help=(
-        "largest number of Levenberg-Marquardt iterations per solve (the fixed-lag smoother: of the solves of "
-        "its tuning stretch)"))
-    relative_tolerance: float = option(1e-10, help="stop a solve when the cost decreases by less than this fraction")
-    initialisation: str = option("sign-resolving", help=(
-        "initial states: 'sign-resolving' (gfimu.smoother.initialise) or 'ml' (the per-sample "
-        "maximum-likelihood estimate with its sign choice; slower, more robust on real recordings with large "
-        "model residuals and fast motion at low rates)"))
-    init_window_s: float = option(0.4, "s", "window of the sign-resolving initialisation")
-    ml_sign_chain: bool = option(False, help=(
-        "with initialisation='ml': re-choose the sign of each sample's ML ω so that consecutive samples follow "
-        "the trapezoid of ML's ω̇ (dynamic programming), fixing the per-sample sign choice where a fast "
-        "rotation slows through zero and reverses"))
 
 
 @dataclass(frozen=True)
@@ -216,11 +227,12 @@ class GuardOptions:
         "skips the comparison"))
 
 
-GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "batch": BatchOptions, "stream": StreamOptions,
-                                  "tuning": TuningOptions, "guard": GuardOptions}
+GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "batch_model": BatchModelOptions, "batch": BatchOptions,
+                                  "stream": StreamOptions, "tuning": TuningOptions, "guard": GuardOptions}
 """Group name -> its dataclass, in the order ``--list-options`` lists them."""
 
-GROUP_METHODS = {"batch": ("batch-smoother", "smoother"), "stream": ("fixed-lag-smoother", "fixed-lag")}
+GROUP_METHODS = {"batch_model": ("batch-smoother", "smoother"), "batch": ("batch-smoother", "smoother"),
+                 "stream": ("fixed-lag-smoother", "fixed-lag")}
 """The groups only one smoother carries -> (what its options are called, the smoother's method)."""
 
 GROUPS: dict[str, tuple[str, ...]] = {name: tuple(f.name for f in dataclasses.fields(cls))
