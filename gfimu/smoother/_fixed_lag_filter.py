@@ -91,6 +91,10 @@ class FilterFailure(RuntimeError):
 class WindowFilter:
     """The window of one segment: means, marginal variances and cross-covariances with the newest state."""
 
+    replays = True
+    """Whether the stream may solve the window again from its raw samples (a new window, each state
+    predicted from the one before it)."""
+
     def __init__(self, model: ArrayModel, capacity: int = 256, iterations: int = 4,
                  step_tolerance_radps: float = 1e-6, branches: bool = False) -> None:
         self.iterations = int(iterations)

@@ -24,6 +24,11 @@ from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 class GtsamWindow:
     """iSAM2's fixed-lag smoother over the window of one segment."""
 
+    replays = False
+    """Whether the stream may solve the window again from its raw samples: not here (each new state's start
+    value comes from the states before it, which iSAM2 gives only after a commit; the stream's own model
+    runs on the numpy engine)."""
+
     def __init__(self, array_model, smoother_lag_s: float, stamp, relinearize_threshold: float,
                  relinearize_skip: int, factorization: str = "QR") -> None:
         self.model = array_model

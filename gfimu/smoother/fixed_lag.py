@@ -507,9 +507,9 @@ class FixedLagSmoother:
         had outgrown (the first second of a motion that speeds up), and are emitted only when they
         reach the lag. The oldest state starts again from its readings, linearised at its current
         value (so it keeps its branch), the others from the prediction as they came; a window that
-        fails to solve again is kept as it was. The numpy engine's window only (gtsam's keeps its
-        states; the stream's own model runs on the numpy engine)."""
-        if self.engine != "numpy" or self._smoother is None or len(self._window) < 2:
+        fails to solve again is kept as it was. Where the engine replays (``replays``: the numpy
+        engine; gtsam's keeps its states)."""
+        if self._smoother is None or not self._smoother.replays or len(self._window) < 2:
             return
         entries, raws = list(self._window), list(self._raw)
         k0 = entries[0][0]
