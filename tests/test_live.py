@@ -1,16 +1,18 @@
 """gfimu live: standard input, UDP datagrams, MIMU4444 packets over TCP, signals."""
 
-import os
 import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from live_net import OneShotServer
+from live_net import env as _env
+from live_net import free_port as _free_port
+from live_net import wait_until_bound as _wait_until_bound
 
 from gfimu import io as gio
 from gfimu.simulate import simulate
@@ -18,38 +20,11 @@ from gfimu.simulate import simulate
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _env():
-    return {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-
-
 @pytest.fixture(scope="module")
 def log_dir(tmp_path_factory):
     folder = tmp_path_factory.mktemp("live") / "log"
     gio.write_log(simulate("reversal", duration_s=5.0, seed=2), folder)
     return folder
-
-
-def _free_port(kind=socket.SOCK_DGRAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait_until_bound(port: int, proc, timeout_s: float = 120.0) -> None:
-    """Wait until a UDP socket on 127.0.0.1:``port`` is bound (read from /proc/net/udp, so a loaded
-    machine's slow start-up cannot make the test send before the command listens)."""
-    table = Path("/proc/net/udp")
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            return
-        if not table.exists():  # not Linux: fall back to a fixed wait
-            time.sleep(2.0)
-            return
-        if any(line.split()[1].endswith(f":{port:04X}") for line in table.read_text().splitlines()[1:]):
-            time.sleep(0.2)
-            return
-        time.sleep(0.05)
 
 
 def test_stdin_rows_give_the_fixed_lag_estimate(log_dir, tmp_path):
@@ -139,25 +114,12 @@ def test_mimu4444_packets_over_tcp(mimu4444_dir, tmp_path):
     np.testing.assert_array_equal([t for t, _ in rows], log.timestamps_ns[:len(rows)])
     np.testing.assert_array_equal(np.array([a for _, a in rows]), log.accel_mps2[:len(rows)])
 
-    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    server.bind(("127.0.0.1", 0))
-    server.listen(1)
-    port = server.getsockname()[1]
-
-    def serve():
-        conn, _ = server.accept()
-        for i in range(0, len(data), 777):
-            conn.sendall(data[i:i + 777])
-        time.sleep(0.5)
-        conn.close()
-
-    threading.Thread(target=serve, daemon=True).start()
     gio.write_array_toml(log.array, tmp_path / "array.toml")
     out = tmp_path / "tcp.csv"
-    proc = subprocess.run([sys.executable, "-m", "gfimu", "live", "--array", str(tmp_path / "array.toml"),
-                           "--rate-hz", "62.5", "--source", f"tcp://127.0.0.1:{port}", "--out", str(out), "--quiet"],
-                          env=_env(), capture_output=True, text=True, timeout=120)
-    server.close()
+    with OneShotServer(data, chunk=777) as server:
+        proc = subprocess.run([sys.executable, "-m", "gfimu", "live", "--array", str(tmp_path / "array.toml"),
+                               "--rate-hz", "62.5", "--source", f"tcp://127.0.0.1:{server.port}", "--out", str(out),
+                               "--quiet"], env=_env(), capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     est = gio.read_motion_csv(out)
     np.testing.assert_array_equal(est.timestamps_ns, log.timestamps_ns[:len(rows)])

@@ -16,15 +16,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from live_net import OneShotServer
+from live_net import env as _env
+from live_net import free_port as _free_port
+from live_net import wait_until_bound as _wait_until_bound
 
 from gfimu import io as gio
 from gfimu.simulate import simulate
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _env():
-    return {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
 
 def _live(*args):
@@ -38,25 +38,6 @@ def log_dir(tmp_path_factory):
     gio.write_log(simulate("reversal", duration_s=3.0, seed=4), folder)
     assert "rate_hz" not in (folder / "array.toml").read_text()
     return folder
-
-
-def _free_port(kind=socket.SOCK_DGRAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait_until_bound(port: int, proc, timeout_s: float = 120.0) -> None:
-    table = Path("/proc/net/udp")
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and proc.poll() is None:
-        if not table.exists():
-            time.sleep(3.0)
-            return
-        if any(line.split()[1].endswith(f":{port:04X}") for line in table.read_text().splitlines()[1:]):
-            time.sleep(0.2)
-            return
-        time.sleep(0.05)
 
 
 def _wait_for(proc, text: str, timeout_s: float = 120.0) -> list[str]:
@@ -164,24 +145,12 @@ def test_a_tcp_reset_ends_the_session_with_the_summary(tmp_path):
     raw = np.zeros((8, 6), dtype=np.int16)
     raw[:, 2] = 2048
     data = b"".join(_packet(k, k * 1_024_000, raw) for k in range(300))
-    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    server.bind(("127.0.0.1", 0))
-    server.listen(1)
-    port = server.getsockname()[1]
-
-    def serve():
-        conn, _ = server.accept()
-        conn.sendall(data)
-        time.sleep(1.5)
-        conn.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # close = RST
-        conn.close()
-
-    threading.Thread(target=serve, daemon=True).start()
     out = tmp_path / "tcp.csv"
-    proc = subprocess.run(_live("--array", tmp_path / "array.toml", "--source", f"tcp://127.0.0.1:{port}", "--out",
-                                out, "--quiet", "-O", "tune_process_noise=False"),
-                          env=_env(), capture_output=True, text=True, timeout=120)
-    server.close()
+    with OneShotServer(data, hold_s=1.5, reset=True) as server:
+        port = server.port
+        proc = subprocess.run(_live("--array", tmp_path / "array.toml", "--source", f"tcp://127.0.0.1:{port}", "--out",
+                                    out, "--quiet", "-O", "tune_process_noise=False"),
+                              env=_env(), capture_output=True, text=True, timeout=120)
     assert proc.returncode == 1, proc.stderr
     assert f"gfimu live: error: tcp://127.0.0.1:{port}: connection reset by the other side" in proc.stderr
     assert "300 samples in, 300 estimates out" in proc.stderr and "ended: connection lost" in proc.stderr
@@ -249,23 +218,10 @@ def test_mimu4444_over_tcp_gives_the_estimate_of_the_converted_log(mimu4444_dir,
                            str(batch), "--no-progress"], env=_env(), capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
 
-    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    server.bind(("127.0.0.1", 0))
-    server.listen(1)
-    port = server.getsockname()[1]
-
-    def serve():
-        conn, _ = server.accept()
-        for i in range(0, len(data), 1001):
-            conn.sendall(data[i:i + 1001])
-        time.sleep(0.5)
-        conn.close()
-
-    threading.Thread(target=serve, daemon=True).start()
     live = tmp_path / "live.csv"
-    proc = subprocess.run(_live("--array", toml, "--source", f"tcp://127.0.0.1:{port}", "--out", live, "--quiet"),
-                          env=_env(), capture_output=True, text=True, timeout=300)
-    server.close()
+    with OneShotServer(data, chunk=1001) as server:
+        proc = subprocess.run(_live("--array", toml, "--source", f"tcp://127.0.0.1:{server.port}", "--out", live,
+                                    "--quiet"), env=_env(), capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "from the median period of the first 64 samples" in proc.stderr
     n = len(gio.read_log(log))
