@@ -373,15 +373,20 @@ def _not_given(n: int) -> str:
             "= -1, the REP-145 mark for linear acceleration not provided")
 
 
+def _message_indices(mask: np.ndarray, shown: int = 5) -> str:
+    """``message index 3, 9, ...``: the first ``shown`` messages ``mask`` selects."""
+    idx = np.nonzero(mask)[0]
+    return f"message index {', '.join(map(str, idx[:shown].tolist()))}{', ...' if idx.size > shown else ''}"
+
+
 def _dropped(topic: str, m: TopicMessages, keep: np.ndarray) -> list[str]:
     """Report line for the messages of ``topic`` that ``keep`` leaves out for not providing linear acceleration."""
     out = ~keep & ~m.accel_given()
     n = int(np.count_nonzero(out))
     if not n:
         return []
-    first = np.nonzero(out)[0][:5].tolist()
     return [f"topic {topic}: {n} of its {len(m)} message(s) dropped for linear_acceleration_covariance[0] = -1 "
-            f"(not provided; message index {', '.join(map(str, first))}{', ...' if n > 5 else ''})"]
+            f"(not provided; {_message_indices(out)})"]
 
 
 def _not_finite(topic: str, m: TopicMessages, sel: np.ndarray) -> list[str]:
@@ -390,9 +395,8 @@ def _not_finite(topic: str, m: TopicMessages, sel: np.ndarray) -> list[str]:
     n = int(np.count_nonzero(bad))
     if not n:
         return []
-    first = np.nonzero(bad)[0][:5].tolist()
     return [f"topic {topic}: {n} message(s) dropped for a linear_acceleration that is not finite (nan or inf; "
-            f"message index {', '.join(map(str, first))}{', ...' if n > 5 else ''})"]
+            f"{_message_indices(bad)})"]
 
 
 def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
