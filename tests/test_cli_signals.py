@@ -32,13 +32,18 @@ def test_the_console_script_too(tmp_path):
         pytest.skip("no gfimu console script next to this Python")
     proc = _start(tmp_path, (str(script),))
     _wait_for_numpy(proc)
+    err = _interrupt(proc)
+    assert proc.returncode == 130, err
+    assert err.strip() == "gfimu: stopped by SIGINT; no output was left half-written"
+
+
+def _interrupt(proc) -> str:
+    """Ctrl-C (a second one if the first did not end it within 50 ms); the command's standard error."""
     proc.send_signal(signal.SIGINT)
     time.sleep(0.05)
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
-    assert err.strip() == "gfimu: stopped by SIGINT; no output was left half-written"
+    return proc.communicate(timeout=60)[1]
 
 
 def _wait_for_numpy(proc, timeout_s: float = 60.0) -> None:
@@ -82,11 +87,7 @@ def test_two_sigints_50_ms_apart(tmp_path, delay_s):
     proc = _start(tmp_path)
     _wait_for_numpy(proc)
     time.sleep(delay_s)
-    proc.send_signal(signal.SIGINT)
-    time.sleep(0.05)
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    err = _interrupt(proc)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert [p.name for p in tmp_path.iterdir()] == []
