@@ -171,6 +171,10 @@ def test_cli_text_json_figure_and_refusals(tmp_path, base, capsys):
     assert main(["diagnose", str(folder), "--quiet", "--out", str(folder / "imu.csv")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is an input" in err and (folder / "imu.csv").read_bytes() == before
+    kept = out.read_bytes()
+    assert main(["diagnose", str(folder), "--quiet", "--out", str(out), "--figure", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--figure {out}: the same file as --out" in err and out.read_bytes() == kept
     assert main(["diagnose", str(tmp_path / "nowhere"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "gfimu diagnose: error:" in err and "log folder not found" in err and err.count("\n") == 1

@@ -286,6 +286,11 @@ def test_cli_reference_first_moving_window_offset_and_errors(tmp_path, capsys):
     table = np.array(rows[1:], dtype=float)
     np.testing.assert_allclose(table[:, 1:4], err, atol=1e-9)
     np.testing.assert_array_equal(table[:, 5] == 1, moving)
+    # the two outputs on one file: refused before anything is written
+    before = errors.read_bytes()
+    assert main(["evaluate", ref, est, "--errors-out", str(errors), "--out", str(errors)]) == 2
+    assert "--errors-out " + str(errors) + ": the same file as --out" in capsys.readouterr().err
+    assert errors.read_bytes() == before
 
 
 def test_cli_rows_left_out_by_the_selection_are_not_called_invalid_reference(tmp_path, capsys):

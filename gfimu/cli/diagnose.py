@@ -38,14 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from .. import io as gio
     from ..diagnose import diagnose, diagnosis_figure
-    from ..io.outputs import check_output, write_output
+    from ..io.outputs import check_outputs, write_output
 
-    out = check_output(args.out, [args.log, args.calibration], "--out", stdout=True)
-    figure = check_output(args.figure, [args.log, args.calibration], "--figure")
-    if figure is not None and args.out is not None and out is not None and figure == out:
-        from . import CLIError
-
-        raise CLIError("--figure and --out name the same file")
+    out, figure = check_outputs({"--out": args.out, "--figure": args.figure}, [args.log, args.calibration],
+                                stdout="--out")
     calibration = None
     if args.calibration:
         from ..calibration import read_calibration

@@ -124,14 +124,11 @@ def run(args) -> int:
     from .. import io as gio
     from ..evaluation import (EvaluationAlignmentWarning, TimestampMismatchError, error_table, estimate_time_offset_s,
                               evaluate, shifted)
-    from ..io.outputs import check_output, write_output
+    from ..io.outputs import check_outputs, write_output
 
     reference_arg, estimate_arg = _order(args)
     inputs = [reference_arg, estimate_arg, args.calibration]
-    out = check_output(args.out, inputs, "--out", stdout=True)
-    errors_out = None
-    if args.errors_out is not None:
-        errors_out = check_output(args.errors_out, inputs, "--errors-out")
+    out, errors_out = check_outputs({"--out": args.out, "--errors-out": args.errors_out}, inputs, stdout="--out")
     truth_path = _truth_path(reference_arg, args.against)
     estimate = gio.read_motion_csv(estimate_arg, allow_nan=True)
     truth, valid = gio.read_motion_table(truth_path)
