@@ -136,7 +136,6 @@ class WindowFilter:
         """Go on with the noise levels of ``model`` (the same array): the steps and readings to come
         are weighted by it, the window keeps what it has."""
         self.model = model
-        o = model.options
         self._prior_var = np.asarray(model.first_sigma[:9], dtype=float) ** 2
         self._R = model.accel_sigma_mps2 ** 2
         self._gyro_var = model.gyro_sigma_radps ** 2
@@ -582,7 +581,7 @@ class WindowFilter:
         truth (fast motion between samples) otherwise leads Gauss-Newton onto such a branch.
 
         ``extra``: the factor groups' rows at this sample (:meth:`ArrayModel.sample_terms`), or None."""
-        lo, hi = self._lo, self._hi
+        hi = self._hi
         xp = self._mean[hi - 1].copy()
         P = self._P
         if gyro is not None or extra is not None:
@@ -628,9 +627,8 @@ class WindowFilter:
 
     def update_linear(self, H: np.ndarray, z: np.ndarray) -> None:
         """A linear measurement ``H x = z`` (unit noise) of the newest state, moving the whole window."""
-        lo, hi = self._lo, self._hi
         P = self._P
-        xp = self._mean[hi - 1] if hi - 1 >= self._split else self.mean(self._base + hi - 1)
+        xp = self.mean(self._base + self._hi - 1)
         S = H @ P @ H.T + np.eye(len(z))
         rhs = np.column_stack([H, z - H @ xp])
         try:
@@ -642,7 +640,7 @@ class WindowFilter:
     def _update(self, H: np.ndarray, Z: np.ndarray, P: np.ndarray) -> None:
         """Move every state of the window by the update ``S⁻¹ [H, ν]`` (``Z``) of the newest state, whose
         covariance before it is ``P``."""
-        lo, hi = self._lo, self._hi
+        hi = self._hi
         g = H.T @ Z[:, -1]  # Hᵀ S⁻¹ ν
         A = H.T @ Z[:, :-1]  # Hᵀ S⁻¹ H
         if not (np.all(np.isfinite(g)) and np.all(np.isfinite(A))):

@@ -33,6 +33,7 @@ from ..factors import accelerometer
 from ..log import Log
 from .graph import SmootherOptions
 from .groups import BUILT_IN, FirstStatePriorGroup, MotionModelGroup, group_noise
+from .noise_levels import ReadsNoiseLevels
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 
@@ -76,7 +77,7 @@ def _linear_factor(noise_model, factor_keys: list[int], residual, jacobians: tup
     return gtsam.CustomFactor(noise_model, factor_keys, error)
 
 
-class StreamView:
+class StreamView(ReadsNoiseLevels):
     """Samples of a stream seen as a problem of one sample (a per-sample group's terms) or of the two
     samples of a step (a step group's terms): what a factor group reads of a
     :class:`gfimu.smoother.graph.SmootherProblem` (``log``, ``options``, ``n``, ``dt_s``, ``layout``,
@@ -113,14 +114,6 @@ class StreamView:
         """The view with the noise levels of ``groups`` (:func:`gfimu.smoother.groups.group_noise`)."""
         self.noise = group_noise(groups, self)
         return self
-
-    def __getattr__(self, name: str):
-        if name.startswith("__") or name == "noise":
-            raise AttributeError(name)
-        try:
-            return self.__dict__["noise"][name]
-        except KeyError:
-            raise AttributeError(f"the stream's view has no attribute or noise level {name!r}") from None
 
     def global_part(self, params: np.ndarray, name: str) -> None:
         return None

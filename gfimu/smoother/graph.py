@@ -44,7 +44,7 @@ from ..factors import (
 from ..log import Log
 from ..parallel import check_workers
 from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term, group_noise  # noqa: F401  (Term: also importable from here)
-from .noise_levels import NoiseLevels
+from .noise_levels import NoiseLevels, ReadsNoiseLevels
 from .option_groups import assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
@@ -186,7 +186,7 @@ def robust_loss(e2: np.ndarray, c: float, loss: str) -> np.ndarray:
 
 
 @dataclass(eq=False)
-class SmootherProblem:
+class SmootherProblem(ReadsNoiseLevels):
     """The smoothing problem of one contiguous log (fast path and graph path): the log, the options,
     the model's groups and their noise levels (:attr:`noise`, a frozen
     :class:`~gfimu.smoother.noise_levels.NoiseLevels`; read as ``problem.NAME`` too).
@@ -257,15 +257,6 @@ class SmootherProblem:
             raise AttributeError(f"a SmootherProblem is frozen once built (setting {name!r}): "
                                  "make a new one with with_noise(...)")
         object.__setattr__(self, name, value)
-
-    def __getattr__(self, name: str):
-        """The noise levels read as attributes (``problem.accel_sigma``)."""
-        if name.startswith("__") or name in ("noise", "_built"):
-            raise AttributeError(name)
-        try:
-            return self.__dict__["noise"][name]
-        except KeyError:
-            raise AttributeError(f"SmootherProblem has no attribute or noise level {name!r}") from None
 
     def with_noise(self, **changes) -> SmootherProblem:
         """The same problem with these noise levels changed (:meth:`NoiseLevels.replace`)."""

@@ -59,3 +59,17 @@ class NoiseLevels(Mapping):
 
     def __repr__(self) -> str:
         return f"NoiseLevels({', '.join(sorted(self._values))})"
+
+
+class ReadsNoiseLevels:
+    """Mixin: the object's noise levels (its ``noise`` attribute, a mapping) read as attributes,
+    ``problem.trapezoid_sigma``, by the factor groups' terms (a problem, a view of a few samples of a stream)."""
+
+    def __getattr__(self, name: str):
+        if name.startswith("__") or name in ("noise", "_built"):
+            raise AttributeError(name)
+        try:
+            return self.__dict__["noise"][name]
+        except KeyError:
+            raise AttributeError(f"{type(self).__name__} has no attribute or noise level {name!r}") from None
+
