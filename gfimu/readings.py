@@ -139,17 +139,28 @@ def _edge_line(x: np.ndarray) -> np.ndarray:
     """A robust straight line through the rows of ``x`` (m, cols) per column, at those rows: the median of the
     pairwise slopes and the median intercept (Theil-Sen), NaN readings left out. One gross error among the rows
     moves it little; a ramp is followed exactly."""
+    import warnings
+
     t = np.arange(x.shape[0], dtype=float)
-    out = np.full(x.shape, np.nan)
     i, j = np.triu_indices(x.shape[0], k=1)
-    for c in range(x.shape[1]):
-        slopes = (x[j, c] - x[i, c]) / (j - i)
-        slopes = slopes[np.isfinite(slopes)]
-        ok = np.isfinite(x[:, c])
-        if slopes.size:
-            slope = float(np.median(slopes))
-            out[:, c] = float(np.median(x[ok, c] - slope * t[ok])) + slope * t
-    return out
+    def median(v):  # NaN left out (the plain median when there is none: the same value, faster)
+        if np.isnan(v).any():
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # a column without two finite rows: NaN
+                return np.nanmedian(v, axis=0)
+        return np.median(v, axis=0)
+
+    slope = median((x[j] - x[i]) / (j - i)[:, None])
+    intercept = median(x - slope[None, :] * t[:, None])
+    return intercept[None, :] + slope[None, :] * t[:, None]
+
+
+def _centred_sum(x: np.ndarray, half: int) -> np.ndarray:
+    """Per column, the sum of the rows within ±``half`` of each row (those that exist)."""
+    n = x.shape[0]
+    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    k = np.arange(n)
+    return c[np.minimum(k + half + 1, n)] - c[np.maximum(k - half, 0)]
 
 
 def runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -283,14 +294,8 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
         d2[1:-1] = np.abs(work[2:] - 2.0 * work[1:-1] + work[:-2])
         ok = np.isfinite(d2)
         d2 = np.where(ok, d2, 0.0)
-        wide = np.ones(2 * SCALE_HALF_WIDTH + 1)
-        near = np.ones(3)
-
-        def window_sum(x, kernel):
-            return np.apply_along_axis(lambda c: np.convolve(c, kernel, mode="same"), 0, x)
-
-        total = window_sum(d2, wide) - window_sum(d2, near)
-        number = window_sum(ok.astype(float), wide) - window_sum(ok.astype(float), near)
+        total = _centred_sum(d2, SCALE_HALF_WIDTH) - _centred_sum(d2, 1)
+        number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
         local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
         # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
         floor = 1e-6 * max(float(np.nanmedian(np.abs(work))) if np.any(np.isfinite(work)) else 1.0, 1.0)
