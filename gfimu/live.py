@@ -79,6 +79,10 @@ class LiveResult:
     rate_from: str
     ended: str
     failure: str | None = None
+    replaced_readings: int = 0
+    """Accelerometer readings the screening replaced (gross errors, :class:`gfimu.readings.StreamScreen`)."""
+    screening_ms: tuple[float, float, float] | None = None
+    """(p50, p99, max) of the screening's time per block of samples it decides (None without screening)."""
 
     @property
     def signal_exit(self) -> int | None:
@@ -89,9 +93,12 @@ class LiveResult:
         """One line: the counts, the times and how it ended."""
         text = (f"{self.rows_in} samples in, {self.rows_out} estimates out; {self.bad_rows} bad rows, "
                 f"{self.late_or_repeated} late or repeated, {self.missing} missing (gaps), {self.overrun_dropped} "
-                f"dropped (input faster than the smoother), {self.clock_resets} clock resets")
+                f"dropped (input faster than the smoother), {self.clock_resets} clock resets, "
+                f"{self.replaced_readings} readings replaced by the screening")
         if self.processing_ms is not None:
             text += "; processing per sample p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms".format(*self.processing_ms)
+        if self.screening_ms is not None:
+            text += "; screening per block p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms".format(*self.screening_ms)
         if self.latency_ms is not None:
             text += "; latency arrival -> estimate written p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms".format(
                 *self.latency_ms)
@@ -145,35 +152,92 @@ class EstimateSink:
 
 
 class _Session:
-    """The fixed-lag smoother on one stream: samples in, states out, counts kept."""
+    """The fixed-lag smoother on one stream: samples in, screened (:class:`gfimu.readings.StreamScreen`, unless
+    the estimator's ``screen_readings`` is off), states out, counts kept."""
 
     def __init__(self, array, estimator, rate_hz: float):
+        from .readings import StreamScreen
+
         self.rate_hz = float(rate_hz)
+        self.array = array
         self.smoother = estimator.smoother(array, self.rate_hz)
         self.use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
+        self.screens = bool(getattr(estimator, "screen_readings", False))
+        self.screen = StreamScreen(array, self.rate_hz) if self.screens else None
+        self.replaced = 0
+        """Readings the screening replaced (in screens ended by a clock reset and the current one)."""
         self.last_t: int | None = None
+        self.late = 0  # samples late or repeated, dropped before the screening
         self.missing = 0
-        self.processing: list[float] = []
+        self.processing: list[float] = []  # the smoother's update per sample [s]
+        self.screening: list[float] = []  # the screening's decision per block [s]
 
     def push(self, r: Reading) -> list:
-        t0 = time.perf_counter()
-        update = self.smoother.push(int(r.timestamp_ns), np.asarray(r.accel, dtype=float),
-                                    r.gyro if self.use_gyro else None)
-        if update.dropped is not None:
-            return list(update.smoothed)
-        self.processing.append(time.perf_counter() - t0)
-        if len(self.processing) > 200_000:  # bounded memory on long streams
-            del self.processing[:100_000]
-        if self.last_t is not None and r.timestamp_ns > self.last_t:
-            steps = (r.timestamp_ns - self.last_t) * 1e-9 * self.rate_hz
+        t = int(r.timestamp_ns)
+        row = (t, np.asarray(r.accel, dtype=float), r.gyro if self.use_gyro else None)
+        if self.last_t is not None and t <= self.last_t:
+            if self.last_t - t <= self.smoother.clock_reset_s * 1e9:
+                if self.screen is None:  # the smoother drops and counts it
+                    return list(self.smoother.push(*row).smoothed)
+                self.late += 1  # the rows before it are still in the screening: dropped here
+                return []
+            if self.screen is not None:  # a clock reset: the rows held go first, then a new screening
+                states = self._smooth(self.screen.flush())
+                self._new_screen()
+                states += self._smooth(self._screened(row))
+                self.last_t = t
+                return states
+        states = self._smooth(self._screened(row) if self.screen is not None else [row])
+        if self.last_t is not None and t > self.last_t:
+            steps = (t - self.last_t) * 1e-9 * self.rate_hz
             if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
                 self.missing += int(round(steps)) - 1
-        self.last_t = r.timestamp_ns
-        return list(update.smoothed)
+        self.last_t = t
+        return states
+
+    def _new_screen(self) -> None:
+        from .readings import StreamScreen
+
+        self.replaced += self.screen.count
+        self.screen = StreamScreen(self.array, self.rate_hz)
+
+    def _screened(self, row) -> list:
+        """The rows the screening decides on ``row``'s arrival (a block, or none), its time kept per block."""
+        t0 = time.perf_counter()
+        rows = self.screen.push(*row)
+        if rows:
+            _keep(self.screening, time.perf_counter() - t0)
+        return rows
+
+    def _smooth(self, rows) -> list:
+        """The smoother's update on each row, its time kept per row (not for a row it drops)."""
+        states = []
+        for row in rows:
+            t0 = time.perf_counter()
+            update = self.smoother.push(*row)
+            if update.dropped is None:
+                _keep(self.processing, time.perf_counter() - t0)
+            states.extend(update.smoothed)
+        return states
+
+    def flush(self) -> list:
+        """The rows still held by the screening, then the window: every state left."""
+        states = self._smooth(self.screen.flush()) if self.screen is not None else []
+        return states + list(self.smoother.flush())
+
+    @property
+    def replaced_readings(self) -> int:
+        return self.replaced + (self.screen.count if self.screen is not None else 0)
 
     def counts(self) -> tuple[int, int]:
         c = self.smoother.counts
-        return c["duplicates"] + c["out_of_order"], c["clock_resets"]
+        return self.late + c["duplicates"] + c["out_of_order"], c["clock_resets"]
+
+
+def _keep(times: list, value: float) -> None:
+    times.append(value)
+    if len(times) > 200_000:  # bounded memory on long streams
+        del times[:100_000]
 
 
 def rate_from_timestamps(timestamps_ns) -> float | None:
@@ -211,6 +275,8 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     say = report or (lambda message: None)
     stop = stop or threading.Event()
     array = source.array
+    # readings that are not finite or beyond any range: replaced by the screening, or bad rows without it
+    source.keep_gross_errors = bool(getattr(estimator, "screen_readings", False))
     q: queue.Queue = queue.Queue(maxsize=max(int(queue_size), 1))
     fatal: list[BaseException] = []
     overrun = [0]
@@ -349,7 +415,9 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
                     say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} samples")
                     start_session(rate)
             if session is not None:
-                emit(list(session.smoother.flush()), timed=False)
+                emit(session.flush(), timed=False)
+                if session.screen is not None and session.screen.count:
+                    say(f"warning: {session.screen.describe()}")
         except BrokenPipeError:  # standard output closed by its reader: the caller's to handle
             raise
         except Exception as exc:  # noqa: BLE001 - the estimator or the output failed: end with the counts
@@ -388,7 +456,8 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
         processing_ms=_stats(np.asarray(session.processing) * 1e3) if session else None,
         latency_ms=_stats(np.asarray([d for _, d in latency]) * 1e3) if latency else None,
         steady_latency_ms=steady, rate_hz=session.rate_hz if session else rate_hz, rate_from=rate_from,
-        ended=ended, failure=failure)
+        ended=ended, failure=failure, replaced_readings=session.replaced_readings if session else 0,
+        screening_ms=_stats(np.asarray(session.screening) * 1e3) if session and session.screening else None)
     if fatal and not isinstance(fatal[0], Exception):
         raise fatal[0]
     return result

@@ -81,7 +81,8 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
     t0 = time.perf_counter()
     log = gio.read_log(log_dir, truth=truth)
     t1 = time.perf_counter()
-    log, screening = screen_log(log)
+    # the fixed-lag smoother screens as gfimu live does, row by row (gfimu.readings.StreamScreen)
+    log, screening = getattr(est, "screen", screen_log)(log)
     _warn_replaced(log, screening)
     timings.update(read=t1 - t0, screen=time.perf_counter() - t1)
     if calibration:

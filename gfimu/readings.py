@@ -73,9 +73,12 @@ class Screening:
     def count(self) -> int:
         return int(self.replaced.sum())
 
-    def describe(self, columns: list[str] | tuple[str, ...], limit: int = 5) -> str:
-        """One line: counts by kind and the first rows and columns."""
+    def describe(self, columns: list[str] | tuple[str, ...], limit: int = 5, row_numbers=None) -> str:
+        """One line: counts by kind and the first rows and columns (``row_numbers``: the row number of each row
+        of :attr:`replaced`, when it holds only some rows)."""
         rows, cols = np.nonzero(self.replaced)
+        if row_numbers is not None:
+            rows = np.asarray(row_numbers)[rows]
         where = ", ".join(f"row {r} {columns[c]}" for r, c in zip(rows[:limit], cols[:limit]))
         more = f" and {len(rows) - limit} more" if len(rows) > limit else ""
         kinds = ", ".join(f"{n} {name}" for n, name in ((self.non_finite, "not finite"),
@@ -109,8 +112,6 @@ def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
     Windows without NaN take the plain median (a partition, several times faster than NaN-aware
     medians); only the windows that hold a NaN (the edges, missing readings) take ``nanmedian``:
     the same numbers either way."""
-    import warnings
-
     n = x.shape[0]
     w = 2 * half + 1
     pad = np.full((half, x.shape[1]), np.nan)
@@ -129,10 +130,19 @@ def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
     rows, cols = np.nonzero(missing)
     for s in range(0, rows.size, step):
         r, c = rows[s:s + step], cols[s:s + step]
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            out[r, c] = np.nanmedian(windows[r, c], axis=1)
+        out[r, c] = _nanmedian_last(windows[r, c])
     return out
+
+
+def _nanmedian_last(v: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(v, axis=-1)`` (the mean of the middle two finite values, NaN where there is none) by
+    one sort, without its warnings and its per-call cost on small arrays."""
+    s = np.sort(v, axis=-1)  # NaN last
+    k = np.count_nonzero(~np.isnan(v), axis=-1)
+    lo = np.take_along_axis(s, np.maximum((k - 1) // 2, 0)[..., None], axis=-1)[..., 0]
+    hi = np.take_along_axis(s, np.minimum(k // 2, v.shape[-1] - 1)[..., None], axis=-1)[..., 0]
+    with np.errstate(invalid="ignore"):
+        return np.where(k > 0, (lo + hi) / 2, np.nan)
 
 
 def _edge_line(x: np.ndarray) -> np.ndarray:
@@ -178,6 +188,13 @@ def clipped_readings(accel_mps2: np.ndarray, range_mps2) -> np.ndarray:
         return np.isfinite(y) & stated[None, :] & (np.abs(y) >= (1 - CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
 
 
+def stuck_min_samples(rate_hz: float | None) -> int:
+    """The shortest stuck run [samples]: :data:`STUCK_MIN_S` at ``rate_hz``, at least :data:`STUCK_MIN_SAMPLES`."""
+    if rate_hz is not None and np.isfinite(rate_hz) and rate_hz > 0:
+        return max(STUCK_MIN_SAMPLES, round(STUCK_MIN_S * rate_hz))
+    return STUCK_MIN_SAMPLES
+
+
 def stuck_runs(accel_mps2: np.ndarray, rate_hz: float | None = None,
                exclude: np.ndarray | None = None) -> list[tuple[int, int, int]]:
     """(column, first row, stop row) of the runs in which a channel repeats one value for at least
@@ -189,17 +206,14 @@ def stuck_runs(accel_mps2: np.ndarray, rate_hz: float | None = None,
         return []
     changed = np.zeros((n, m), bool)
     changed[1:] = y[1:] != y[:-1]
-    min_len = STUCK_MIN_SAMPLES
-    if rate_hz is not None and np.isfinite(rate_hz) and rate_hz > 0:
-        min_len = max(min_len, int(round(STUCK_MIN_S * rate_hz)))
+    min_len = stuck_min_samples(rate_hz)
     out = []
-    for c in range(m):
-        same = np.zeros(n, bool)
-        same[1:] = (y[1:, c] == y[:-1, c]) & np.isfinite(y[1:, c])
-        if exclude is not None:
-            same[1:] &= ~exclude[1:, c] & ~exclude[:-1, c]
-        if np.count_nonzero(same) < min_len - 1:
-            continue
+    repeats = np.zeros((n, m), bool)
+    repeats[1:] = (y[1:] == y[:-1]) & np.isfinite(y[1:])
+    if exclude is not None:
+        repeats[1:] &= ~exclude[1:] & ~exclude[:-1]
+    for c in np.nonzero(np.count_nonzero(repeats, axis=0) >= min_len - 1)[0].tolist():
+        same = repeats[:, c]
         others = np.delete(changed, c, axis=1)
         for a, b in runs_of(same):
             start = a - 1  # the first sample holding the repeated value
@@ -246,6 +260,10 @@ def _line_fill(y: np.ndarray, bad: np.ndarray) -> None:
             y[idx, c] = np.interp(idx, good, y[good, c])
 
 
+KINDS = ("non_finite", "out_of_range", "spikes", "clipped", "stuck")
+"""The kinds of gross error, in the order :class:`Screening` counts them."""
+
+
 def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
            sensor_of_axis: np.ndarray | None = None, rate_hz: float | None = None,
            structure_matrix: np.ndarray | None = None) -> tuple[np.ndarray, Screening]:
@@ -255,6 +273,15 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
     accelerometers at the same sample is a real event of the body (a knock), not a gross error;
     ``rate_hz`` the sample rate (for the shortest stuck run); ``structure_matrix`` (n_axes, 12) the array's S,
     to replace clipped and stuck readings by the other axes' rigid-body prediction."""
+    y, kinds, runs = _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix)
+    replaced = np.logical_or.reduce([kinds[k] for k in KINDS])
+    return y, Screening(replaced, *(int(kinds[k].sum()) for k in KINDS), runs=tuple(runs))
+
+
+def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, ends=(True, True)):
+    """(readings with gross errors replaced, {kind: (N, n_axes) bool} for each of :data:`KINDS`, runs of
+    clipped and stuck readings): :func:`screen`'s work. ``ends``: whether the first and the last rows are
+    the log's own (a stream's buffer cut from its middle is not: the rows near its cut are not decided)."""
     y = np.array(accel_mps2, dtype=float)
     n = y.shape[0]
     bad_value = ~np.isfinite(y)
@@ -284,9 +311,12 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
         # the first and last rows have a median window cut short, whose median lags a ramp: there, a
         # robust line through the 2 h + 1 end rows instead (a spike at an end row still stands out of it)
         h, m = MEDIAN_HALF_WIDTH, 2 * MEDIAN_HALF_WIDTH + 1
-        first, last = _edge_line(work[:m])[:h], _edge_line(work[n - m:])[m - h:]
-        med[:h] = np.where(np.isfinite(first), first, med[:h])
-        med[n - h:] = np.where(np.isfinite(last), last, med[n - h:])
+        if ends[0]:
+            first = _edge_line(work[:m])[:h]
+            med[:h] = np.where(np.isfinite(first), first, med[:h])
+        if ends[1]:
+            last = _edge_line(work[n - m:])[m - h:]
+            med[n - h:] = np.where(np.isfinite(last), last, med[n - h:])
         dev = np.abs(work - med)
         # local noise scale from the second differences around the sample, leaving out the three a
         # spike at k touches (k-1, k, k+1): mean |y[j+1] - 2 y[j] + y[j-1]| = σ √6 √(2/π) for white noise
@@ -298,7 +328,8 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
         number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
         local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
         # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
-        floor = 1e-6 * max(float(np.nanmedian(np.abs(work))) if np.any(np.isfinite(work)) else 1.0, 1.0)
+        typical = _nanmedian_last(np.abs(work).reshape(1, -1))[0]
+        floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
         spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
         if sensor_of_axis is not None and np.any(spikes):
             sensors = np.asarray(sensor_of_axis)
@@ -326,8 +357,8 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
                     nearest = good[np.clip(np.searchsorted(good, idx), 0, good.size - 1)]
                     fill[idx, c] = y[nearest, c]
         y = np.where(short, fill, y)
-    return y, Screening(replaced, int(bad_value.sum()), int(out_range.sum()), int(spikes.sum()), int(clipped.sum()),
-                        int(stuck.sum()), tuple(runs))
+    kinds = dict(zip(KINDS, (bad_value, out_range, spikes, clipped, stuck)))
+    return y, kinds, runs
 
 
 def refuse_unreplaceable(log, accel: np.ndarray | None = None) -> None:
@@ -381,4 +412,167 @@ def screen_log(log):
     refuse_unreplaceable(log, accel)
     if result.count == 0:
         return log, result
+    return log.replace(accel_mps2=accel), result
+
+
+STREAM_BLOCK_S = 0.05
+"""The stream screening decides its readings in blocks of this length [s] (at least one sample): one
+:func:`screen` of its buffer per block."""
+
+
+def stream_delay_samples(rate_hz: float | None) -> int:
+    """Samples a stream's reading waits for before it is screened (:class:`StreamScreen`): the
+    look-ahead of :func:`screen`'s decisions. A spike's local scale reaches :data:`SCALE_HALF_WIDTH` + 1
+    samples ahead and its replacement, the median of :data:`MEDIAN_HALF_WIDTH` neighbours, waits for
+    theirs; a stuck run counts once it lasts :func:`stuck_min_samples`."""
+    return max(SCALE_HALF_WIDTH + 1 + MEDIAN_HALF_WIDTH, stuck_min_samples(rate_hz) - 1)
+
+
+class StreamScreen:
+    """:func:`screen_log`'s rule on readings as they come: each reading is decided (and replaced when it is a
+    gross error) once :func:`stream_delay_samples` later ones have arrived, from a buffer of that many before
+    and after it, so its decision is the one :func:`screen` takes on the whole log wherever the evidence
+    lies within that reach (a reading between two spikes, a stuck channel, a clipped run: all of them).
+    What differs lies beyond it: a clipped or missing run longer than the buffer is bridged from the good
+    readings the buffer holds, and a stuck run longer than it is judged on the part the buffer holds.
+
+    ``push(timestamp_ns, accel_row, gyro_row)`` returns the rows decided by it, oldest first, as
+    ``(timestamp_ns, accel_row, gyro_row)``; :meth:`flush` decides the rest, the last arrived being the
+    stream's end (as a log's last row is). Gyroscope readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` are
+    NaN at once. :meth:`screening` is what was replaced, as :class:`Screening`.
+
+    The same rows in the same order give the same rows out, whatever their timing: ``gfimu live`` and
+    ``gfimu estimate --method fixed-lag`` (:func:`screen_stream`) screen a recording alike.
+    """
+
+    def __init__(self, array, rate_hz: float | None):
+        self.columns = tuple(array.accel_columns)
+        self.range_mps2 = array.range_per_axis_mps2
+        self.sensor_of_axis = array.axis_owner
+        self.structure_matrix = array.structure_matrix()
+        self.rate_hz = rate_hz
+        self.delay = stream_delay_samples(rate_hz)
+        """Samples a reading waits for before it is decided."""
+        self.block = max(1, round(STREAM_BLOCK_S * rate_hz)) if rate_hz and np.isfinite(rate_hz) else 1
+        self._history = self.delay + MEDIAN_HALF_WIDTH
+        self._times: list[int] = []
+        self._accel: list[np.ndarray] = []
+        self._gyro: list = []
+        self._first = 0  # stream index of the buffer's first row
+        self._next = 0  # stream index of the first undecided row
+        self._counts = dict.fromkeys(KINDS, 0)
+        self._replaced: dict[int, np.ndarray] = {}
+        self._open: dict[tuple[str, int], int] = {}
+        self._runs: list[tuple[str, int, int, int]] = []
+        self.gyro_out_of_range = 0
+        """Gyroscope readings read as NaN (beyond :data:`GYRO_OUT_OF_RANGE_RADPS`)."""
+
+    @property
+    def count(self) -> int:
+        """Readings replaced so far."""
+        return sum(self._counts.values())
+
+    def push(self, timestamp_ns: int, accel_row, gyro_row=None) -> list[tuple]:
+        self._times.append(int(timestamp_ns))
+        self._accel.append(np.array(accel_row, dtype=float).reshape(-1))
+        if gyro_row is not None:
+            gyro_row = np.array(gyro_row, dtype=float).reshape(-1)
+            with np.errstate(invalid="ignore"):
+                huge = np.abs(gyro_row) > GYRO_OUT_OF_RANGE_RADPS
+            if huge.any():
+                self.gyro_out_of_range += int(huge.sum())
+                gyro_row = np.where(huge, np.nan, gyro_row)
+        self._gyro.append(gyro_row)
+        newest = self._first + len(self._times)
+        ready = newest - self.delay
+        if ready - self._next >= self.block and len(self._times) >= 2 * SCALE_HALF_WIDTH + 1:
+            return self._decide(ready)
+        return []
+
+    def flush(self) -> list[tuple]:
+        """The rows still held, decided with the newest as the end of the stream."""
+        out = self._decide(self._first + len(self._times))
+        for (kind, col), start in sorted(self._open.items(), key=lambda item: (item[1], item[0][1])):
+            self._runs.append((kind, col, start, self._next - 1))
+        self._open.clear()
+        return out
+
+    def screening(self, n: int | None = None) -> Screening:
+        """What was replaced among the first ``n`` rows (default: all decided), as :class:`Screening`."""
+        n = self._next if n is None else n
+        replaced = np.zeros((n, len(self.columns)), bool)
+        for row, mask in self._replaced.items():
+            if row < n:
+                replaced[row] = mask
+        runs = sorted(self._runs, key=lambda r: (r[2], r[1]))
+        return Screening(replaced, *(self._counts[k] for k in KINDS), runs=tuple(runs))
+
+    def describe(self, limit: int = 5) -> str:
+        """:meth:`Screening.describe` of what was replaced so far (rows counted from the first pushed)."""
+        rows = sorted(self._replaced)
+        mask = np.array([self._replaced[r] for r in rows]).reshape(len(rows), len(self.columns))
+        runs = sorted(self._runs + [(k, c, a, self._next - 1) for (k, c), a in self._open.items()],
+                      key=lambda r: (r[2], r[1]))
+        return Screening(mask, *(self._counts[k] for k in KINDS), runs=tuple(runs)).describe(
+            self.columns, limit, row_numbers=rows)
+
+    def _decide(self, upto: int) -> list[tuple]:
+        """Rows ``[self._next, upto)`` decided from the buffer, returned, and the buffer cut to the history."""
+        if upto <= self._next:
+            return []
+        end = upto == self._first + len(self._times)  # flush: the newest row is the stream's last
+        y, kinds, _ = _screen(np.vstack(self._accel), self.range_mps2, self.sensor_of_axis, self.rate_hz,
+                              self.structure_matrix, ends=(self._first == 0, end))
+        a, b = self._next - self._first, upto - self._first
+        out = [(self._times[k], y[k], self._gyro[k]) for k in range(a, b)]
+        replaced = np.zeros((b - a, y.shape[1]), bool)
+        for kind in KINDS:
+            mask = kinds[kind][a:b]
+            self._counts[kind] += int(mask.sum())
+            replaced |= mask
+            if kind in ("clipped", "stuck"):
+                self._track_runs(kind, mask)
+        for k in np.nonzero(replaced.any(axis=1))[0]:
+            self._replaced[self._next + int(k)] = replaced[k]
+        self._next = upto
+        cut = max(0, upto - self._history - self._first)
+        if cut:
+            del self._times[:cut], self._accel[:cut], self._gyro[:cut]
+            self._first += cut
+        return out
+
+    def _track_runs(self, kind: str, mask: np.ndarray) -> None:
+        """Runs of ``kind`` per column across blocks: those that end within ``mask`` (rows from ``self._next``)
+        are kept, those reaching its end stay open."""
+        busy = set(np.nonzero(mask.any(axis=0))[0].tolist()) | {c for k, c in self._open if k == kind}
+        for col in sorted(busy):
+            key = (kind, col)
+            column = mask[:, col]
+            if key in self._open and not column[0]:
+                self._runs.append((kind, col, self._open.pop(key), self._next - 1))
+            for a, b in runs_of(column):
+                start = self._open.pop(key, self._next + a) if a == 0 else self._next + a
+                if b == column.size:
+                    self._open[key] = start
+                else:
+                    self._runs.append((kind, col, start, self._next + b - 1))
+
+
+def screen_stream(log):
+    """(log screened by :class:`StreamScreen` row by row, :class:`Screening`): what ``gfimu live`` makes of the
+    log's rows; the log itself when nothing is replaced. As :func:`screen_log`, a column with no finite
+    reading near its missing ones is refused."""
+    screen_ = StreamScreen(log.array, log.rate_hz if len(log) > 1 else None)
+    gyro = log.gyro_b_radps
+    rows = []
+    for i in range(len(log)):
+        rows.extend(screen_.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i]))
+    rows.extend(screen_.flush())
+    result = screen_.screening(len(log))
+    if screen_.gyro_out_of_range:
+        log = _screen_gyro(log)
+    if result.count == 0:
+        return log, result
+    accel = np.vstack([r[1] for r in rows])
+    refuse_unreplaceable(log, accel)
     return log.replace(accel_mps2=accel), result

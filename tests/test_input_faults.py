@@ -288,21 +288,42 @@ def test_a_gyroscope_reading_of_1e308_is_read_as_nan_and_named(tmp_path):
     assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
 
 
-def test_live_skips_a_row_beyond_any_accelerometer_range(log, tmp_path):
+@pytest.mark.parametrize("value", ["1e308", "nan"])
+def test_live_replaces_a_reading_beyond_any_range_as_estimate_does(log, tmp_path, value):
+    """A reading of 1e308 or NaN in the stream is replaced by the screening, as gfimu estimate replaces it in the
+    log: live's file equals estimate --method fixed-lag's byte for byte, and both name the reading. With
+    screen_readings=False, live skips the row instead and says why."""
     import numpy as np
 
     lines = (log / "imu.csv").read_text().splitlines()
     fields = lines[50].split(",")
-    fields[2] = "1e308"
+    fields[2] = value
     lines[50] = ",".join(fields)
+    (log / "imu.csv").write_text("\n".join(lines) + "\n")
+    env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "1"}
+    est = tmp_path / "est.csv"
+    proc = _gfimu("estimate", str(log), "--method", "fixed-lag", "--out", str(est), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    kind = "out of range" if value == "1e308" else "not finite"
+    named = f"1 accelerometer reading(s) replaced by the median of their neighbours (1 {kind}): row 49 a1_y"
+    assert named in proc.stderr
     out = tmp_path / "live.csv"
     proc = subprocess.run([sys.executable, "-m", "gfimu", "live", "--array", str(log / "array.toml"), "--source", "-",
                            "--out", str(out)], input="\n".join(lines) + "\n", capture_output=True, text=True,
-                          timeout=120, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "1"})
+                          timeout=120, env=env)
     assert proc.returncode == 0, proc.stderr
-    assert ("line 51 skipped: field 3 '1e308' is beyond any accelerometer's range (±1e+07 m/s²)" in proc.stderr)
-    assert "99 samples in, 99 estimates out; 1 bad rows" in proc.stderr
+    assert "100 samples in, 100 estimates out; 0 bad rows" in proc.stderr
+    assert "1 readings replaced by the screening" in proc.stderr and named[2:] in proc.stderr
     assert "overflow" not in proc.stderr and "Eigenvalues" not in proc.stderr
+    assert out.read_bytes() == est.read_bytes()
+    assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
+    proc = subprocess.run([sys.executable, "-m", "gfimu", "live", "--array", str(log / "array.toml"), "--source", "-",
+                           "--out", str(out), "-O", "screen_readings=False"], input="\n".join(lines) + "\n",
+                          capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    reason = ("is beyond any accelerometer's range (±1e+07 m/s²)" if value == "1e308" else "is not finite")
+    assert f"line 51 skipped: field 3 '{value}' {reason}" in proc.stderr
+    assert "99 samples in, 99 estimates out; 1 bad rows" in proc.stderr
     assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
 
 

@@ -221,3 +221,99 @@ def test_a_reading_of_1e308_is_out_of_range_without_a_stated_range():
         out, result = screen(bad)
     assert result.out_of_range == 2 and result.count == 2
     assert np.all(np.isfinite(out)) and abs(out[150, 1]) < 0.05 and abs(out[151, 1]) < 0.05
+
+
+def _stream_screened(array, y, timestamps_ns, rate_hz, range_mps2=None):
+    """(rows out of a StreamScreen pushed the rows of ``y`` one by one and flushed, its Screening), with the given
+    per-axis range (the array's when None)."""
+    from types import SimpleNamespace
+
+    from gfimu.readings import StreamScreen
+
+    view = SimpleNamespace(accel_columns=array.accel_columns, axis_owner=array.axis_owner,
+                           structure_matrix=array.structure_matrix,
+                           range_per_axis_mps2=array.range_per_axis_mps2 if range_mps2 is None else range_mps2)
+    stream = StreamScreen(view, rate_hz)
+    rows = []
+    for t, row in zip(timestamps_ns, y):
+        rows.extend(stream.push(t, row))
+    rows.extend(stream.flush())
+    return rows, stream.screening(len(y))
+
+
+@pytest.mark.parametrize("rate_hz", [62.5, 500.0, 2000.0])
+@pytest.mark.parametrize("case", range(4))
+def test_the_stream_screening_takes_the_whole_log_decisions(rate_hz, case):
+    """Readings screened as they come (StreamScreen, each decided from a buffer around it) get the decisions and the
+    values of screen() on the whole log, at 62.5-2000 Hz: spikes (also at the first and last rows), readings that are
+    not finite or beyond any range, a channel stuck for 5 samples to 0.6 s, a channel clipped at its stated range, a
+    run of 35 missing readings; every row comes out once, in order, with its own timestamp."""
+    from gfimu.array import random_array
+
+    array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
+    log = simulate("random3d", array=array, seed=4, rate_hz=rate_hz, duration_s=min(10.0, 4000 / rate_hz))
+    n = len(log)
+    rng = np.random.default_rng(case)
+    y = log.accel_mps2.copy()
+    k, c = rng.integers(0, n, size=8), rng.integers(0, 15, size=8)
+    y[k, c] += rng.choice([-1, 1], 8) * rng.uniform(5, 500, 8)
+    y[rng.integers(0, n, 3), rng.integers(0, 15, 3)] = np.nan
+    y[rng.integers(0, n, 2), rng.integers(0, 15, 2)] = 1e9
+    start, length, column = rng.integers(0, n - 1), rng.integers(5, int(0.6 * rate_hz)), rng.integers(0, 15)
+    y[start:start + length, column] = y[start, column]
+    limit = np.full(15, np.inf)
+    clipped = rng.integers(0, 15)
+    limit[clipped] = 0.8 * np.nanmax(np.abs(y[:, clipped][np.abs(y[:, clipped]) < 1e8]))
+    y[:, clipped] = np.clip(y[:, clipped], -limit[clipped], limit[clipped])
+    if case == 1:
+        y[:2, 1], y[-2:, 4] = 77.0, -55.0
+    if case == 2:
+        y[5:40, 6] = np.nan
+    whole, expected = screen(y, limit, array.axis_owner, rate_hz, array.structure_matrix())
+    rows, got = _stream_screened(array, y, log.timestamps_ns, rate_hz, limit)
+    assert [r[0] for r in rows] == log.timestamps_ns.tolist()
+    assert expected.count > 0
+    np.testing.assert_array_equal(got.replaced, expected.replaced)
+    assert (got.non_finite, got.out_of_range, got.spikes, got.clipped, got.stuck) == (
+        expected.non_finite, expected.out_of_range, expected.spikes, expected.clipped, expected.stuck)
+    assert got.runs == expected.runs
+    np.testing.assert_allclose(np.vstack([r[1] for r in rows]), whole, rtol=0, atol=1e-12)
+
+
+def test_the_stream_screening_waits_its_delay_and_no_longer():
+    """Each reading leaves the stream screening once stream_delay_samples later ones arrived, in blocks of
+    STREAM_BLOCK_S: at 500 Hz the delay is the 0.2 s of the shortest stuck run (99 samples), at 62.5 Hz the 28
+    samples of the spike rule's reach."""
+    from gfimu.readings import STREAM_BLOCK_S, StreamScreen, stream_delay_samples
+
+    assert stream_delay_samples(500.0) == 99 and stream_delay_samples(62.5) == 28
+    log = simulate("random3d", seed=1, duration_s=2.0)
+    stream = StreamScreen(log.array, 500.0)
+    block = round(STREAM_BLOCK_S * 500.0)
+    decided = 0
+    for i in range(len(log)):
+        out = stream.push(log.timestamps_ns[i], log.accel_mps2[i])
+        if out:
+            assert out[0][0] == log.timestamps_ns[decided] and out[-1][0] == log.timestamps_ns[i - 99]
+            decided += len(out)
+        assert i - 99 - block < decided  # never more than the delay and one block behind
+    assert decided + len(stream.flush()) == len(log)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("exp, replaced", [(1, 1), (2, 8), (3, 7)])
+def test_the_stream_screening_of_a_real_recording_is_the_whole_log_screening(mimu4444_dir, exp, replaced):
+    """The three MIMU4444 recordings as gfimu convert reads them: screened row by row (what gfimu live and
+    estimate --method fixed-lag do) they get the same replaced readings (1, 8 and 7: spikes and clipped readings)
+    and the same values as screened whole (what the other methods do)."""
+    from gfimu.io.readers.mimu4444 import read_mimu4444
+    from gfimu.readings import screen_stream
+
+    log, _ = read_mimu4444(mimu4444_dir / f"exp_{exp}" / "data.bin")
+    whole, expected = screen_log(log)
+    stream, got = screen_stream(log)
+    assert expected.count == replaced
+    np.testing.assert_array_equal(got.replaced, expected.replaced)
+    assert got.runs == expected.runs and got.describe(log.array.accel_columns) == expected.describe(
+        log.array.accel_columns)
+    np.testing.assert_array_equal(stream.accel_mps2, whole.accel_mps2)

@@ -83,7 +83,8 @@ class RowParser:
     :class:`~gfimu.io.errors.LogFormatError` naming ``name`` and ``line``; a bad row raises ValueError
     (:meth:`parse`)."""
 
-    def __init__(self, array, header: str, name: str, line: int = 1):
+    def __init__(self, array, header: str, name: str, line: int = 1, keep_gross_errors: bool = False):
+        self.keep_gross_errors = bool(keep_gross_errors)
         columns, time_unit = parse_header(header.strip().lstrip("\ufeff"), name, line)
         names = [n for n, _ in columns]
         _missing_imu_columns(SimpleNamespace(names=names, path=name), array, "the array")
@@ -108,6 +109,8 @@ class RowParser:
             except ValueError:
                 raise ValueError(f"field {i + 1} {tok!r} is not a number") from None
         v = np.array(values) * self.factor
+        if self.keep_gross_errors:
+            return Reading(t, v[:self.n_acc], v[self.n_acc:self.n_acc + 3] if self.gyro else None)
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
             i = self.index[int(bad[0])]
@@ -136,6 +139,9 @@ class Source:
         self.array = array
         self.ended = "not started"
         self.failure: str | None = None
+        self.keep_gross_errors = False
+        """True: a text row whose readings are not finite or beyond any sensor's range is passed on, for the
+        screening downstream to replace (:class:`gfimu.readings.StreamScreen`); False: it is a bad row."""
 
     def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
         raise NotImplementedError
@@ -234,7 +240,7 @@ class StdinSource(Source):
             if not text.strip():
                 continue
             if parser is None:
-                parser = RowParser(self.array, text, self.name, line)
+                parser = RowParser(self.array, text, self.name, line, self.keep_gross_errors)
                 continue
             yield _parsed(parser, text, where)
 
@@ -285,11 +291,13 @@ class UdpSource(Source):
             if parser is None:
                 if text.lstrip().startswith("#"):
                     try:
-                        parser = RowParser(self.array, text, f"{self.name} {where}")
+                        parser = RowParser(self.array, text, f"{self.name} {where}",
+                                           keep_gross_errors=self.keep_gross_errors)
                     except LogFormatError as exc:
                         yield BadRow(where, f"header: {exc}")
                     continue
-                parser = RowParser(self.array, default_header(self.array), self.name)
+                parser = RowParser(self.array, default_header(self.array), self.name,
+                                   keep_gross_errors=self.keep_gross_errors)
             if not text.strip():
                 yield BadRow(where, "empty datagram")
                 continue

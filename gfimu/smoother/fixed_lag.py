@@ -869,6 +869,17 @@ class FixedLagEstimator(SmootherEstimator):
     def applicable(self, array: SensorArray) -> str | None:
         return fixed_lag_reason(array, self.options())
 
+    def screen(self, log: Log):
+        """(``log`` screened as a stream of its rows, :class:`~gfimu.readings.Screening`): the readings
+        :meth:`result` is given by ``gfimu estimate`` are those ``gfimu live`` gives the smoother
+        (:func:`gfimu.readings.screen_stream`); with ``screen_readings=False``, the log as it is."""
+        from ..readings import Screening, refuse_unreplaceable, screen_stream
+
+        if self.screen_readings:
+            return screen_stream(log)
+        refuse_unreplaceable(log)
+        return log, Screening(np.zeros(log.accel_mps2.shape, bool), 0, 0, 0)
+
     def result(self, log: Log, progress: bool = False) -> SmootherResult:
         """The fixed-lag smoother over ``log`` sample by sample, with what it chose (:class:`SmootherResult`)."""
         n = len(log)

@@ -189,6 +189,12 @@ class StreamOptions:
         "with auto_model: choose the model again on the recent past this often (and at once when the motion "
         "outgrows it)"))
     model_window_s: float = option(30.0, "s", "with auto_model: length of the recent past the model is chosen on")
+    screen_readings: bool = option(True, help=(
+        "screen the readings for gross errors as they come, by the rule gfimu estimate applies to a whole log "
+        "(gfimu.readings.StreamScreen): each reading waits max(28 samples, 0.2 s) plus at most 0.05 s for its "
+        "decision before it reaches the smoother, which delays every estimate by as much; False: the readings "
+        "reach the smoother as they come (a reading that is not finite or beyond any accelerometer's range is "
+        "then skipped by gfimu live and refused by gfimu estimate)"))
 
 
 @dataclass(frozen=True)
