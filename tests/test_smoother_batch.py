@@ -343,3 +343,40 @@ def test_attitude_windows_are_continuous():
     windowed = BatchSmootherEstimator(use_inclinometer=True, window_s=4.5, overlap_s=2.0, tune_process_noise=False).estimate(log).motion
     Ra, Rb = matrix_from_quaternion(whole.quaternion_wb), matrix_from_quaternion(windowed.quaternion_wb)
     assert np.degrees(np.max(np.linalg.norm(_so3.log(np.swapaxes(Ra, 1, 2) @ Rb), axis=1))) < 0.01
+
+
+def test_a_window_that_starts_on_the_other_sign_takes_the_sign_of_the_window_before(monkeypatch):
+    """Solve windows of a long log are solved apart; a window whose start has no past of its own can settle on
+    the other sign of ω (the readings see ω ωᵀ). When its overlap with the window before has the other sign there,
+    it is solved again from its solution turned to that window's sign and kept because its cost falls: here the
+    second of three windows is made to come out turned (every ω of it sign-flipped), and the estimate ends with
+    no sample on the wrong sign and the error of the untouched solve."""
+    log = simulate("random3d", cube_array(0.05, noise_std_mps2=0.07), rate_hz=100.0, duration_s=75.0, seed=2,
+                   omega_rms_radps=1.0, max_frequency_hz=0.5)
+    est = BatchSmootherEstimator(window_s=30.0, workers=1)  # the windows in this process, to turn one
+    aligned = batch._align_signs
+    done = []
+    monkeypatch.setattr(batch, "_align_signs", lambda context, outcomes: done.extend(aligned(context, outcomes)) or done)
+    plain = est.estimate(log).motion
+    assert sign_error_share(plain, log.truth) < 0.01 and done == []  # windows that agree are left alone
+    solve = batch._WindowContext.solve
+    costs = {}
+
+    def turned(self, w):
+        out = solve(self, w)
+        if w == 1:  # the whole window on the other sign: readings fitted, ω̇ against the change of ω
+            part = self.log.select(self.windows[w][0])
+            problem, _ = batch.tuned_problem(part, self.options, [], self.initial, self.tune_span_s)
+            X = out.solved.copy()
+            X[:, batch.OMEGA] *= -1.0
+            costs["right"] = problem.cost(out.solved, None)
+            out.solved, out.states = X, X[self.windows[w][2]]
+            out.cost = costs["turned"] = problem.cost(X, None)
+        return out
+
+    monkeypatch.setattr(batch._WindowContext, "solve", turned)
+    motion = est.estimate(log).motion
+    assert done == [1]
+    assert costs["right"] < costs["turned"]
+    assert sign_error_share(motion, log.truth) == sign_error_share(plain, log.truth)
+    np.testing.assert_allclose(omega_rmse(motion, log.truth), omega_rmse(plain, log.truth), rtol=0.05)

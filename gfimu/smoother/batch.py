@@ -73,6 +73,9 @@ length with a small constant, marginal σ included) and the same problem as a GT
 eliminated in time order and retracted here (a cross-check, slower by the Python factor callbacks)."""
 
 
+ALIGN_CUTS = 20
+"""A window whose start has the other sign of ω than the window before is turned to that sign up to one of
+this many cuts (the lowest local minima of |ω| past the overlap, and the window's end), the one of least cost."""
 WINDOW_STRETCH = 1.25
 """Solve windows may be up to this factor longer than ``window_s`` when that saves a window: a log a
 little longer than a whole number of windows is cut into equal windows instead of leaving a short
@@ -192,6 +195,7 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     else:
         context = _WindowContext(log, opt, auto, initial, solver, tune_span_s, windows)
         outcomes = _run_windows(context, window_workers(workers, len(windows), solver), progress)
+        _align_signs(context, outcomes)
     timings["solve windows"] = time.perf_counter() - t0
     for w, ((solve_sl, keep_log, keep_win), out) in enumerate(zip(windows, outcomes)):
         tunings.extend(out.tunings)
@@ -227,12 +231,14 @@ class _WindowOutcome:
     iterations: int
     cost: float
     converged: bool
+    solved: np.ndarray | None = None
+    """The states of the whole solve window (its overlaps with its neighbours included)."""
 
     @classmethod
     def of(cls, res: SolveResult, problem: SmootherProblem, keep_win: slice, tunings: list) -> _WindowOutcome:
         sd = None if res.covariance is None else np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
         return cls(res.states[keep_win], sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
-                   tunings, res.iterations, float(res.cost), bool(res.converged))
+                   tunings, res.iterations, float(res.cost), bool(res.converged), res.states)
 
 
 @dataclass
@@ -262,6 +268,36 @@ class _WindowContext:
             res = solve_window(problem, x0, opt, solver=self.solver)
         return _WindowOutcome.of(res, problem, keep_win, tunings)
 
+    def aligned(self, w: int, outcome: _WindowOutcome, earlier_omega_b_radps: np.ndarray) -> _WindowOutcome | None:
+        """Window ``w`` solved again with the sign of ω the window before found over their overlap
+        (``earlier_omega_b_radps``, the overlap's first rows of this window), when its own solution has the
+        other sign there: its solution turned to that sign up to the cut (a local minimum of |ω| past the
+        overlap, or the window's end) of least cost, re-solved; the outcome when its cost is lower than
+        ``outcome``'s, else None. Windows of the Gaussian model without calibration variables only (the robust
+        model has its restarts)."""
+        if self.auto is not None and not self.auto[0].consistent:
+            return None
+        solve_sl, _, keep_win = self.windows[w]
+        part = self.log.select(solve_sl)
+        tunings: list = []
+        problem, _ = tuned_problem(part, self.options, tunings, self.initial, self.tune_span_s)
+        if problem.n_global:  # calibration variables: their values are not kept to compare costs at
+            return None
+        X = outcome.solved
+        start = earlier_omega_b_radps.shape[0]
+        cuts = _low_speed_cuts(X[:, OMEGA], start) + [len(X)]
+        best, best_cost = None, np.inf
+        for cut in cuts:
+            Y = X.copy()
+            Y[:cut, OMEGA] *= -1.0
+            c = problem.cost(Y, None)
+            if c < best_cost:
+                best, best_cost = Y, c
+        res = solve_window(problem, best, self.options, solver=self.solver)
+        if not res.cost < outcome.cost or np.sum(res.states[:start, OMEGA] * earlier_omega_b_radps) <= 0:
+            return None
+        return _WindowOutcome.of(res, problem, keep_win, tunings)
+
 
 def window_workers(workers: int, windows: int, solver: str = "numpy") -> int:
     """Processes to solve ``windows`` windows with: ``workers`` (0: one per CPU this process may run
@@ -283,6 +319,38 @@ def _run_windows(context: _WindowContext, workers: int, progress: bool) -> list[
         out[w] = outcome
         next(done, None)
     return out
+
+
+def _low_speed_cuts(omega_b_radps: np.ndarray, first: int = 1) -> list[int]:
+    """The :data:`ALIGN_CUTS` lowest local minima of |ω| from row ``first`` on (the rows where ω may change
+    sign at least cost), in time order."""
+    speed = np.linalg.norm(omega_b_radps, axis=1)
+    if len(speed) < first + 3:
+        return []
+    inner = speed[first:-1]
+    minima = np.nonzero((inner <= speed[first - 1:-2]) & (inner < speed[first + 1:]))[0] + first
+    return sorted(minima[np.argsort(speed[minima])[:ALIGN_CUTS]].tolist())
+
+
+def _align_signs(context: _WindowContext, outcomes: list[_WindowOutcome]) -> list[int]:
+    """Each window, in turn, whose ω over its overlap with the window before has the other sign than that
+    window's (a window's start has no past of its own to set the sign by, the one before has) solved again
+    with that sign (:meth:`_WindowContext.aligned`) and kept where its cost falls; their indices."""
+    aligned = []
+    for w in range(1, len(outcomes)):
+        before, here = context.windows[w - 1][0], context.windows[w][0]
+        overlap = before.stop - here.start
+        if overlap < 2 or outcomes[w].solved is None:
+            continue
+        earlier = outcomes[w - 1].solved[here.start - before.start:, OMEGA]
+        if np.sum(earlier * outcomes[w].solved[:overlap, OMEGA]) >= 0:
+            continue
+        better = context.aligned(w, outcomes[w], earlier)
+        if better is not None:
+            better.iterations += outcomes[w].iterations
+            outcomes[w] = better
+            aligned.append(w)
+    return aligned
 
 
 def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: InitialStates | None, solver: str,
