@@ -76,6 +76,10 @@ eliminated in time order and retracted here (a cross-check, slower by the Python
 ALIGN_CUTS = 20
 """A window whose start has the other sign of ω than the window before is turned to that sign up to one of
 this many cuts (the lowest local minima of |ω| past the overlap, and the window's end), the one of least cost."""
+ALIGN_MIN_GAIN = 5.0
+"""... and the turned solution is kept only when its cost (a negative log-likelihood) is lower by this much: the
+readings at least e⁵ ≈ 150 times likelier (a window whose overlap rests, where ω is noise and either sign fits
+as well, keeps its own)."""
 WINDOW_STRETCH = 1.25
 """Solve windows may be up to this factor longer than ``window_s`` when that saves a window: a log a
 little longer than a whole number of windows is cut into equal windows instead of leaving a short
@@ -273,8 +277,8 @@ class _WindowContext:
         (``earlier_omega_b_radps``, the overlap's first rows of this window), when its own solution has the
         other sign there: its solution turned to that sign up to the cut (a local minimum of |ω| past the
         overlap, or the window's end) of least cost, re-solved; the outcome when its cost is lower than
-        ``outcome``'s, else None. Windows of the Gaussian model without calibration variables only (the robust
-        model has its restarts)."""
+        ``outcome``'s by :data:`ALIGN_MIN_GAIN`, else None. Windows of the Gaussian model without calibration
+        variables only (the robust model has its restarts)."""
         if self.auto is not None and not self.auto[0].consistent:
             return None
         solve_sl, _, keep_win = self.windows[w]
@@ -294,7 +298,8 @@ class _WindowContext:
             if c < best_cost:
                 best, best_cost = Y, c
         res = solve_window(problem, best, self.options, solver=self.solver)
-        if not res.cost < outcome.cost or np.sum(res.states[:start, OMEGA] * earlier_omega_b_radps) <= 0:
+        agrees = np.sum(res.states[:start, OMEGA] * earlier_omega_b_radps) > 0
+        if not (agrees and res.cost < outcome.cost - ALIGN_MIN_GAIN):
             return None
         return _WindowOutcome.of(res, problem, keep_win, tunings)
 
