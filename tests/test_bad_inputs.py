@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from live_net import env as _env
 
 from gfimu import io as gio
 from gfimu.array import cube_array
@@ -528,12 +529,6 @@ def test_debug_keeps_the_traceback(work):
 
 
 # --- signals --------------------------------------------------------------------------------------
-
-def _env() -> dict:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    return env
-
 
 SLOW_WRITER = """
 import sys, time

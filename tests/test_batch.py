@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from live_net import env as _env
 
 pytest.importorskip("dask.distributed")
 
@@ -17,10 +18,6 @@ from gfimu import io as gio  # noqa: E402
 from gfimu.batch import output_folders  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _env():
-    return {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
 
 @pytest.fixture(scope="module")

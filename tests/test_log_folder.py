@@ -19,15 +19,12 @@ import time
 from pathlib import Path
 
 import pytest
+from live_net import env as _env
 
 from gfimu import io as gio
 from gfimu.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _env():
-    return {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
 
 def snapshot(root: Path) -> dict[str, str]:
