@@ -351,7 +351,7 @@ def test_a_window_that_starts_on_the_other_sign_takes_the_sign_of_the_window_bef
     it is solved again from its solution turned to that window's sign and kept because its cost falls: here the
     second of three windows is made to come out turned (every ω of it sign-flipped), and the estimate ends with
     no sample on the wrong sign and the error of the untouched solve."""
-    log = simulate("random3d", cube_array(0.05, noise_std_mps2=0.07), rate_hz=100.0, duration_s=75.0, seed=2,
+    log = simulate("random3d", cube_array(0.05, noise_std_mps2=0.07), rate_hz=50.0, duration_s=65.0, seed=2,
                    omega_rms_radps=1.0, max_frequency_hz=0.5)
     est = BatchSmootherEstimator(window_s=30.0, workers=1)  # the windows in this process, to turn one
     aligned = batch._align_signs
