@@ -292,7 +292,7 @@ def test_a_gyroscope_reading_of_1e308_is_read_as_nan_and_named(tmp_path):
 def test_live_replaces_a_reading_beyond_any_range_as_estimate_does(log, tmp_path, value):
     """A reading of 1e308 or NaN in the stream is replaced by the screening, as gfimu estimate replaces it in the
     log: live's file equals estimate --method fixed-lag's byte for byte, and both name the reading. With
-    screen_readings=False, live skips the row instead and says why."""
+    screen_readings=False, live skips the row instead and says why, and estimate refuses the log naming the line."""
     import numpy as np
 
     lines = (log / "imu.csv").read_text().splitlines()
@@ -325,6 +325,11 @@ def test_live_replaces_a_reading_beyond_any_range_as_estimate_does(log, tmp_path
     assert f"line 51 skipped: field 3 '{value}' {reason}" in proc.stderr
     assert "99 samples in, 99 estimates out; 1 bad rows" in proc.stderr
     assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
+    proc = _gfimu("estimate", str(log), "--method", "fixed-lag", "-O", "screen_readings=False", "--out",
+                  str(tmp_path / "unscreened.csv"), cwd=tmp_path)
+    assert proc.returncode == 2 and not (tmp_path / "unscreened.csv").exists()
+    assert f"{log / 'imu.csv'}:51: column 'a1_y' reads {float(value):g} (1 such reading(s)): not a reading; with " \
+        "screen_readings=False the readings are used as they are" in proc.stderr
 
 
 @pytest.mark.parametrize("method, option, expected", [

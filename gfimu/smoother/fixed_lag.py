@@ -873,11 +873,18 @@ class FixedLagEstimator(SmootherEstimator):
         """(``log`` screened as a stream of its rows, :class:`~gfimu.readings.Screening`): the readings
         :meth:`result` is given by ``gfimu estimate`` are those ``gfimu live`` gives the smoother
         (:func:`gfimu.readings.screen_stream`); with ``screen_readings=False``, the log as it is."""
-        from ..readings import Screening, refuse_unreplaceable, screen_stream
+        from ..readings import OUT_OF_ANY_RANGE_MPS2, Screening, screen_stream
 
         if self.screen_readings:
             return screen_stream(log)
-        refuse_unreplaceable(log)
+        with np.errstate(invalid="ignore"):
+            bad = ~np.isfinite(log.accel_mps2) | (np.abs(log.accel_mps2) > OUT_OF_ANY_RANGE_MPS2)
+        if bad.any():
+            row, col = (int(v) for v in np.argwhere(bad)[0])
+            where = f"{log.source}/imu.csv:{row + 2}" if log.source else f"sample {row}"
+            raise DataError(f"{where}: column {log.array.accel_columns[col]!r} reads {log.accel_mps2[row, col]:g} "
+                            f"({int(bad.sum())} such reading(s)): not a reading; with screen_readings=False the "
+                            "readings are used as they are (True, the default, replaces such readings)")
         return log, Screening(np.zeros(log.accel_mps2.shape, bool), 0, 0, 0)
 
     def result(self, log: Log, progress: bool = False) -> SmootherResult:
