@@ -27,6 +27,7 @@ def log_dir(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_stdin_rows_give_the_fixed_lag_estimate(log_dir, tmp_path):
     """Fed a log's imu.csv on standard input: the same rows and values as gfimu estimate --method fixed-lag."""
     batch = tmp_path / "batch.csv"

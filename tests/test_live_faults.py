@@ -201,6 +201,7 @@ def test_binary_bytes_on_stdin_are_skipped_as_one_bad_row(log_dir, tmp_path):
     assert len(gio.read_motion_csv(out)) == 200
 
 
+@pytest.mark.slow
 def test_mimu4444_over_tcp_gives_the_estimate_of_the_converted_log(mimu4444_dir, tmp_path):
     """The first ~20 s of a real recording's bytes: converted and estimated with --method fixed-lag, and
     sent over TCP into gfimu live (rate from the stream): the same file, to the last byte."""

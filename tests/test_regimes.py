@@ -127,6 +127,7 @@ def test_noise_unstated_smoothers_not_worse(run):
     check(row, "fixed-lag")
 
 
+@pytest.mark.slow
 def test_loud_noise_unstated_batch_not_worse(run):
     check(run("noise1-unstated"), "smoother")
 
@@ -157,6 +158,7 @@ def test_quantised_readings_are_16_bit(run):
 
 # ---------------------------------------------------------------- a long still stretch, then motion
 
+@pytest.mark.slow
 def test_still_then_motion_batch_not_worse(run):
     check(run("still60-then-motion"), "smoother")
 
