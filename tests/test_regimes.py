@@ -132,13 +132,14 @@ def test_loud_noise_unstated_batch_not_worse(run):
     check(run("noise1-unstated"), "smoother")
 
 
+@pytest.mark.slow
 def test_loud_noise_unstated_fixed_lag_not_worse(run):
     check(run("noise1-unstated"), "fixed-lag")
 
 
 # ---------------------------------------------------------------- 50 Hz, 5 mm, 16-bit
 
-@pytest.mark.parametrize("name", ["50Hz-0.3m-noise0.1", "5mm-noise0.01", "quant16"])
+@pytest.mark.parametrize("name", [pytest.param("50Hz-0.3m-noise0.1", marks=pytest.mark.slow), "5mm-noise0.01", "quant16"])
 def test_smoothers_pass(run, name):
     row = run(name)
     check(row, "smoother")
@@ -163,6 +164,7 @@ def test_still_then_motion_batch_not_worse(run):
     check(run("still60-then-motion"), "smoother")
 
 
+@pytest.mark.slow
 def test_still_then_motion_fixed_lag_not_worse(run):
     check(run("still60-then-motion"), "fixed-lag")
 
