@@ -226,23 +226,29 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
 
 @dataclass
 class _WindowOutcome:
-    """What one solve window gives the whole log: its kept states (and σ), calibration, choices."""
+    """What one solve window gives the whole log: its states (those it keeps, and σ), calibration, choices."""
 
-    states: np.ndarray
+    solved: np.ndarray
+    """The states of the whole solve window (its overlaps with its neighbours included)."""
+    keep: slice
+    """The rows of :attr:`solved` the log keeps."""
     sd: np.ndarray | None
     calibration: dict
     tunings: list
     iterations: int
     cost: float
     converged: bool
-    solved: np.ndarray | None = None
-    """The states of the whole solve window (its overlaps with its neighbours included)."""
+
+    @property
+    def states(self) -> np.ndarray:
+        """The kept states."""
+        return self.solved[self.keep]
 
     @classmethod
     def of(cls, res: SolveResult, problem: SmootherProblem, keep_win: slice, tunings: list) -> _WindowOutcome:
         sd = None if res.covariance is None else np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
-        return cls(res.states[keep_win], sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
-                   tunings, res.iterations, float(res.cost), bool(res.converged), res.states)
+        return cls(res.states, keep_win, sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
+                   tunings, res.iterations, float(res.cost), bool(res.converged))
 
 
 @dataclass
@@ -345,7 +351,7 @@ def _align_signs(context: _WindowContext, outcomes: list[_WindowOutcome]) -> lis
     for w in range(1, len(outcomes)):
         before, here = context.windows[w - 1][0], context.windows[w][0]
         overlap = before.stop - here.start
-        if overlap < 2 or outcomes[w].solved is None:
+        if overlap < 2:
             continue
         earlier = outcomes[w - 1].solved[here.start - before.start:, OMEGA]
         if np.sum(earlier * outcomes[w].solved[:overlap, OMEGA]) >= 0:
