@@ -40,6 +40,7 @@ import math
 
 import numpy as np
 
+from ..rigid_body import quadratic_terms
 from ._fixed_lag_model import ArrayModel, Step
 from .graph import robust_loss, robust_weight
 from .restarts import branch, plane_normal
@@ -282,9 +283,7 @@ class WindowFilter:
         out = np.empty((4, len(X)))
         for b in range(4):
             w, dw = branch(b, X[:, 0:3], X[:, 3:6], self._normal)
-            wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
-            q = np.stack([wx * wx + wy * wy, wx * wx + wz * wz, wy * wy + wz * wz, wx * wy, wx * wz, wy * wz], axis=1)
-            r = Y - (dw @ m.S_dw.T + X[:, 6:9] @ m.S_f.T + q @ m.S_q.T)
+            r = Y - (dw @ m.S_dw.T + X[:, 6:9] @ m.S_f.T + quadratic_terms(w) @ m.S_q.T)
             out[b] = np.sum(robust_loss(r * r / R, m.accel_robust_threshold, m.robust_loss), axis=1)
         return out
 
