@@ -30,6 +30,7 @@ import numpy as np
 from .io.sources import BadRow, Reading, Source
 from .io.tables import motion_csv_chunks
 from .motion import Motion
+from .readings import StreamScreen
 
 RATE_ROWS = 64
 """Samples from whose timestamps the rate is taken when neither array.toml nor the caller gives it
@@ -156,14 +157,11 @@ class _Session:
     the estimator's ``screen_readings`` is off), states out, counts kept."""
 
     def __init__(self, array, estimator, rate_hz: float):
-        from .readings import StreamScreen
-
         self.rate_hz = float(rate_hz)
         self.array = array
         self.smoother = estimator.smoother(array, self.rate_hz)
         self.use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
-        self.screens = bool(getattr(estimator, "screen_readings", False))
-        self.screen = StreamScreen(array, self.rate_hz) if self.screens else None
+        self.screen = StreamScreen(array, self.rate_hz) if getattr(estimator, "screen_readings", False) else None
         self.replaced = 0
         """Readings the screening replaced (in screens ended by a clock reset and the current one)."""
         self.last_t: int | None = None
@@ -196,8 +194,6 @@ class _Session:
         return states
 
     def _new_screen(self) -> None:
-        from .readings import StreamScreen
-
         self.replaced += self.screen.count
         self.screen = StreamScreen(self.array, self.rate_hz)
 
