@@ -492,8 +492,7 @@ class StreamScreen:
     def flush(self) -> list[tuple]:
         """The rows still held, decided with the newest as the end of the stream."""
         out = self._decide(self._first + len(self._times))
-        for (kind, col), start in sorted(self._open.items(), key=lambda item: (item[1], item[0][1])):
-            self._runs.append((kind, col, start, self._next - 1))
+        self._runs = self._runs_so_far()
         self._open.clear()
         return out
 
@@ -504,17 +503,20 @@ class StreamScreen:
         for row, mask in self._replaced.items():
             if row < n:
                 replaced[row] = mask
-        runs = sorted(self._runs, key=lambda r: (r[2], r[1]))
-        return Screening(replaced, *(self._counts[k] for k in KINDS), runs=tuple(runs))
+        return Screening(replaced, *(self._counts[k] for k in KINDS), runs=tuple(self._runs_so_far()))
 
     def describe(self, limit: int = 5) -> str:
         """:meth:`Screening.describe` of what was replaced so far (rows counted from the first pushed)."""
         rows = sorted(self._replaced)
         mask = np.array([self._replaced[r] for r in rows]).reshape(len(rows), len(self.columns))
-        runs = sorted(self._runs + [(k, c, a, self._next - 1) for (k, c), a in self._open.items()],
-                      key=lambda r: (r[2], r[1]))
-        return Screening(mask, *(self._counts[k] for k in KINDS), runs=tuple(runs)).describe(
+        return Screening(mask, *(self._counts[k] for k in KINDS), runs=tuple(self._runs_so_far())).describe(
             self.columns, limit, row_numbers=rows)
+
+    def _runs_so_far(self) -> list[tuple[str, int, int, int]]:
+        """The runs of clipped and stuck readings decided so far, those still open ending at the last decided
+        row, in the order of :attr:`Screening.runs` (first row, then column)."""
+        runs = self._runs + [(kind, col, start, self._next - 1) for (kind, col), start in self._open.items()]
+        return sorted(runs, key=lambda r: (r[2], r[1]))
 
     def _decide(self, upto: int) -> list[tuple]:
         """Rows ``[self._next, upto)`` decided from the buffer, returned, and the buffer cut to the history."""
