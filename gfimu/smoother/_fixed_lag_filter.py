@@ -41,6 +41,7 @@ import math
 import numpy as np
 
 from ..rigid_body import quadratic_terms
+from . import _filter_kernels as kernels
 from ._fixed_lag_model import ArrayModel, Step
 from .graph import robust_loss, robust_weight
 from .restarts import branch, plane_normal
@@ -96,6 +97,10 @@ class WindowFilter:
     """Whether the stream may solve the window again from its raw samples (a new window, each state
     predicted from the one before it)."""
 
+    compiled = True
+    """Updates of the accelerometer readings alone through the compiled kernels
+    (:mod:`gfimu.smoother._filter_kernels`); False: the numpy expressions they replace (the tests' oracle)."""
+
     def __init__(self, model: ArrayModel, capacity: int = 256, iterations: int = 4,
                  step_tolerance_radps: float = 1e-6, branches: bool = False) -> None:
         self.iterations = int(iterations)
@@ -141,6 +146,11 @@ class WindowFilter:
         self._R = model.accel_sigma_mps2 ** 2
         self._gyro_var = model.gyro_sigma_radps ** 2
         self._Rg = np.concatenate([self._R, np.full(3, self._gyro_var)])
+        # the kernels' operands: contiguous copies of the structure matrix's blocks, the loss as a code
+        self._kernel_model = (np.ascontiguousarray(self._R, dtype=float), np.ascontiguousarray(model.S_q, dtype=float),
+                              np.ascontiguousarray(model.S_dw, dtype=float), np.ascontiguousarray(model.S_f, dtype=float),
+                              float(model.accel_noise_slope_mps2_per_radps), float(model.accel_robust_threshold),
+                              kernels.loss_code(model.accel_robust_threshold, model.robust_loss))
 
     # --- window -------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -569,6 +579,20 @@ class WindowFilter:
             prior = 0.0
         return x, H, Z, float(np.sum(r * r / R)) + prior
 
+    def _search(self, y, xp, P, x0, branches: bool):
+        """(x, H, Z, J) of :func:`kernels.search <gfimu.smoother._filter_kernels.search>` on the readings
+        ``y`` alone: Gauss-Newton from ``x0``, then, with ``branches``, from the other branches of that
+        minimum (J is 0 without)."""
+        R0, S_q, S_dw, S_f, slope, c_robust, loss = self._kernel_model
+        iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
+        x, H, Z, J, ok = kernels.search(np.ascontiguousarray(y, dtype=float), xp, np.ascontiguousarray(P),
+                                        np.array(x0, dtype=float), R0, S_q, S_dw, S_f, slope, c_robust, loss,
+                                        iterations, self.step_tolerance_radps, bool(branches), self._normal,
+                                        BRANCH_PRIOR_MARGIN)
+        if not ok:
+            raise FilterFailure("singular innovation covariance")
+        return x, H, Z, float(J)
+
     def measure(self, y: np.ndarray, gyro=None, start=None, extra=None) -> None:
         """Gauss-Newton update of the newest state with its readings, moving every state of the window.
 
@@ -587,8 +611,13 @@ class WindowFilter:
             self._unsettled = True
         if gyro is not None:
             y = np.concatenate([y, gyro])
-        best = self._solve(y, gyro, xp, P, xp if start is None else np.asarray(start, dtype=float), extra)
-        if self.branches and start is None and gyro is None:
+        x0 = xp if start is None else np.asarray(start, dtype=float)
+        compiled = self.compiled and gyro is None and extra is None
+        if compiled:
+            best = self._search(y, xp, P, x0, self.branches and start is None)
+        else:
+            best = self._solve(y, gyro, xp, P, x0, extra)
+        if self.branches and start is None and gyro is None and not compiled:
             try:
                 P_inv = np.linalg.inv(P)
             except np.linalg.LinAlgError:
@@ -620,7 +649,10 @@ class WindowFilter:
                 self._P = P
                 self._cross[hi - 1] = P
                 self._var[hi - 1] = np.diagonal(P)
-                best = self._solve(y, gyro, xp, P, best[0], extra)
+                if compiled:
+                    best = self._search(y, xp, P, best[0], False)
+                else:
+                    best = self._solve(y, gyro, xp, P, best[0], extra)
         _, H, Z, _ = best
         self._update(H, Z, P)  # the last linearisation moves the whole window
 
@@ -640,6 +672,17 @@ class WindowFilter:
         """Move every state of the window by the update ``S⁻¹ [H, ν]`` (``Z``) of the newest state, whose
         covariance before it is ``P``."""
         hi = self._hi
+        if self.compiled:
+            lo = self._split
+            T, u, W, P_new, ok = kernels.update_window(np.ascontiguousarray(H, dtype=float),
+                                                       np.ascontiguousarray(Z, dtype=float), P, self._T, self._u,
+                                                       self._W, self._mean[lo:hi], self._var[lo:hi],
+                                                       self._cross[lo:hi])
+            if not ok:
+                raise FilterFailure("non-finite values in the update")
+            self._T, self._u, self._W = T, u, W
+            self._updated(P_new)
+            return
         g = H.T @ Z[:, -1]  # Hᵀ S⁻¹ ν
         A = H.T @ Z[:, :-1]  # Hᵀ S⁻¹ H
         if not (np.all(np.isfinite(g)) and np.all(np.isfinite(A))):
@@ -659,7 +702,11 @@ class WindowFilter:
         # C_i (I - A P) = C_i - (C_i A) P
         cross -= CA @ P
         P_new = P - P @ A @ P
-        P_new = 0.5 * (P_new + P_new.T)
+        self._updated(0.5 * (P_new + P_new.T))
+
+    def _updated(self, P_new: np.ndarray) -> None:
+        """The newest state's covariance after an update; the lazy states brought up to date when due."""
+        hi = self._hi
         self._P = P_new
         self._cross[hi - 1] = P_new
         self._var[hi - 1] = np.diagonal(P_new)

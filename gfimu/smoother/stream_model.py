@@ -268,24 +268,21 @@ class StreamSignChain:
 
     def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
              oldest_k: int) -> tuple[int, int] | None:
+        from ._filter_kernels import chain_step
+
         w, dw = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
-        cur = [branch(b, w, dw, self.normal) for b in range(self.branches)]
-        prev, self._prev = self._prev, (k, t_ns, cur)
-        if prev is None:
+        if self._prev is None:
+            cur = np.stack([np.concatenate(branch(b, w, dw, self.normal)) for b in range(self.branches)])
+            self._prev = (k, t_ns, cur[:, 0:3].copy(), cur[:, 3:6].copy())
             return None
-        h = (t_ns - prev[1]) * 1e-9
+        prev = self._prev
         n = self.branches
-        step = np.empty((n, n))  # from branch a (at k-1) to branch b (at k)
-        for a, (w0, d0) in enumerate(prev[2]):
-            for b, (w1, d1) in enumerate(cur):
-                e = w1 - w0 - 0.5 * h * (d0 + d1)
-                step[a, b] = float(e @ e)
         c2 = scale_radps * scale_radps
-        step = c2 * np.log1p(step / c2)
-        total = self._cost[:, None] + step
-        back = np.argmin(total, axis=0)
-        self._cost = total[back, np.arange(n)]
-        self._cost -= self._cost.min()  # only the differences matter (and they stay bounded)
+        # from branch a (at k-1) to branch b (at k): the Cauchy loss of the trapezoid's misfit, the lowest
+        # total kept per b (only the differences matter, and they stay bounded)
+        cur_w, cur_dw, back, self._cost = chain_step(prev[2], prev[3], w, dw, self.normal, (t_ns - prev[1]) * 1e-9,
+                                                     c2, self._cost)
+        self._prev = (k, t_ns, cur_w, cur_dw)
         self._back.append((k, back))
         while len(self._back) > self.window or (self._back and self._back[0][0] <= oldest_k):
             self._back.popleft()
@@ -301,8 +298,9 @@ class StreamSignChain:
                 break
             first = later_k - 1
         first = max(first, oldest_k)
-        self._cost = self._cost[np.arange(n) ^ best].copy()
+        relabel = np.arange(n) ^ best
+        self._cost = self._cost[relabel].copy()
         self._back.clear()
-        self._prev = (k, t_ns, [cur[b ^ best] for b in range(n)])
+        self._prev = (k, t_ns, cur_w[relabel].copy(), cur_dw[relabel].copy())
         self.flips += 1
         return first, best

@@ -1,0 +1,349 @@
+"""Compiled kernels of the fixed-lag window filter's update (:mod:`gfimu.smoother._fixed_lag_filter`).
+
+The per-sample work of the numpy engine is a few dozen products of 9×9 and m×9 matrices: in numpy
+each costs a call (microseconds of dispatch for nanoseconds of arithmetic), so the update is
+written here once more as loops that numba compiles to machine code. Each kernel is the numpy
+expression it replaces, term for term; the numpy expressions stay in the filter as the oracle the
+tests compare these kernels with (``tests/test_filter_kernels.py``), and the filter falls back to
+them where a kernel does not apply (gyroscope rows, factor groups' rows).
+
+- :func:`solve` is :meth:`WindowFilter._solve <gfimu.smoother._fixed_lag_filter.WindowFilter._solve>`
+  for the accelerometer readings alone: Gauss-Newton (iterated Kalman) on
+  ``J(x) = ||y - h(x)||²_R + ||x - x̂||²_P`` with ``h(x) = S_ω̇ ω̇ + S_f f + S_q q(ω)``
+  (paper 000, eq. 6), the accelerometer variances at ``x`` (motion-dependent, robust);
+- :func:`search` is the branch search of :meth:`WindowFilter.measure`: Gauss-Newton from the
+  prediction and from the other three branches of its minimum (ω flipped, mirrored through the
+  array's plane, both: :func:`gfimu.smoother.restarts.branch`), keeping the lowest J;
+- :func:`update_window` is :meth:`WindowFilter._update`: one update of the newest state moving
+  every state of the window (means, marginal variances, cross-covariances);
+- :func:`chain_step` is one step of :class:`gfimu.smoother.stream_model.StreamSignChain`.
+
+Compiled on first use and cached on disk (numba's ``cache=True``: beside this file, or in the user's
+cache folder where that is not writable), so only the first run on a machine pays the compilation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+LOSS_NONE, LOSS_CAUCHY, LOSS_HUBER = 0, 1, 2
+
+
+def loss_code(c: float, loss: str) -> int:
+    """The kernels' code of a robust loss of threshold ``c`` (:func:`gfimu.smoother.graph.robust_loss`)."""
+    if c <= 0:
+        return LOSS_NONE
+    return LOSS_CAUCHY if loss == "cauchy" else LOSS_HUBER
+
+
+@njit(cache=True, inline="always")
+def _weight(e: float, c: float, loss: int) -> float:
+    """:func:`gfimu.smoother.graph.robust_weight` of one whitened residual."""
+    e = abs(e)
+    if loss == LOSS_CAUCHY:
+        return 1.0 / (1.0 + (e / c) ** 2)
+    if e <= c:
+        return 1.0
+    return c / max(e, 1e-300)
+
+
+@njit(cache=True)
+def _lu_solve(S, B):
+    """``S⁻¹ B`` by Gaussian elimination with partial pivoting (LAPACK's getrf/getrs, unblocked), in place:
+    S is overwritten, B becomes the solution; False where a pivot is exactly zero or not finite."""
+    n = S.shape[0]
+    k_rhs = B.shape[1]
+    for c in range(n):
+        p, best = c, abs(S[c, c])
+        for r in range(c + 1, n):
+            v = abs(S[r, c])
+            if v > best:
+                p, best = r, v
+        if not best > 0.0 or not np.isfinite(best):
+            return False
+        if p != c:
+            for j in range(n):
+                S[c, j], S[p, j] = S[p, j], S[c, j]
+            for j in range(k_rhs):
+                B[c, j], B[p, j] = B[p, j], B[c, j]
+        inv = 1.0 / S[c, c]
+        for r in range(c + 1, n):
+            f = S[r, c] * inv
+            if f != 0.0:
+                S[r, c] = f
+                for j in range(c + 1, n):
+                    S[r, j] -= f * S[c, j]
+                for j in range(k_rhs):
+                    B[r, j] -= f * B[c, j]
+    for c in range(n - 1, -1, -1):
+        inv = 1.0 / S[c, c]
+        for j in range(k_rhs):
+            v = B[c, j]
+            for i in range(c + 1, n):
+                v -= S[c, i] * B[i, j]
+            B[c, j] = v * inv
+    return True
+
+
+@njit(cache=True)
+def _quadratic_form_inverse(P, d):
+    """``dᵀ P⁻¹ d`` (the prior's cost), or -1 where P is singular."""
+    n = d.shape[0]
+    S = P.copy()
+    B = np.empty((n, 1))
+    for i in range(n):
+        B[i, 0] = d[i]
+    if not _lu_solve(S, B):
+        return -1.0
+    v = 0.0
+    for i in range(n):
+        v += d[i] * B[i, 0]
+    return v
+
+
+@njit(cache=True)
+def _predict_readings(x, S_q, S_dw, S_f, pred, H):
+    """``h(x)`` into ``pred`` and its Jacobian into H (the ω̇ and f columns are set once, here too)."""
+    wx, wy, wz = x[0], x[1], x[2]
+    q0, q1, q2 = wx * wx + wy * wy, wx * wx + wz * wz, wy * wy + wz * wz
+    q3, q4, q5 = wx * wy, wx * wz, wy * wz
+    m = S_q.shape[0]
+    for i in range(m):
+        a0, a1, a2, a3, a4, a5 = S_q[i, 0], S_q[i, 1], S_q[i, 2], S_q[i, 3], S_q[i, 4], S_q[i, 5]
+        H[i, 0] = 2.0 * wx * (a0 + a1) + wy * a3 + wz * a4
+        H[i, 1] = 2.0 * wy * (a0 + a2) + wx * a3 + wz * a5
+        H[i, 2] = 2.0 * wz * (a1 + a2) + wx * a4 + wy * a5
+        s = a0 * q0 + a1 * q1 + a2 * q2 + a3 * q3 + a4 * q4 + a5 * q5
+        for j in range(3):
+            H[i, 3 + j] = S_dw[i, j]
+            H[i, 6 + j] = S_f[i, j]
+            s += S_dw[i, j] * x[3 + j] + S_f[i, j] * x[6 + j]
+        pred[i] = s
+
+
+@njit(cache=True)
+def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost):
+    """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, Z, J, ok)``, ``Z = S⁻¹ [H, ν]``
+    at the last linearisation, J at x (0 unless ``with_cost``), ``ok`` False where the innovation
+    covariance is singular (the filter's ``FilterFailure``)."""
+    m = y.shape[0]
+    R = R0.copy()
+    H = np.zeros((m, 9))
+    pred = np.empty(m)
+    Z = np.zeros((m, 10))
+    PHt = np.empty((9, m))
+    S = np.empty((m, m))
+    x = x.copy()
+    x_new = np.empty(9)
+    adaptive = slope > 0.0 or c_robust > 0.0
+    for it in range(iterations):
+        if adaptive:
+            w2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+            for i in range(m):
+                R[i] = R0[i] + (slope * slope) * w2 if slope > 0.0 else R0[i]
+            if c_robust > 0.0 and it > 0:
+                _predict_readings(x, S_q, S_dw, S_f, pred, H)
+                for i in range(m):
+                    R[i] = R[i] / _weight((y[i] - pred[i]) / np.sqrt(R[i]), c_robust, loss)
+        _predict_readings(x, S_q, S_dw, S_f, pred, H)
+        for i in range(m):  # [H, ν], ν the innovation of the linearisation at x
+            s = 0.0
+            for j in range(9):
+                Z[i, j] = H[i, j]
+                s += H[i, j] * (x[j] - xp[j])
+            Z[i, 9] = y[i] - pred[i] + s
+        for a in range(9):  # P Hᵀ
+            for i in range(m):
+                s = 0.0
+                for b in range(9):
+                    s += P[a, b] * H[i, b]
+                PHt[a, i] = s
+        for i in range(m):  # S = H P Hᵀ + R
+            for k in range(i, m):
+                s = 0.0
+                for a in range(9):
+                    s += H[i, a] * PHt[a, k]
+                S[i, k] = s
+                S[k, i] = s
+            S[i, i] += R[i]
+        if not _lu_solve(S, Z):  # Z ← S⁻¹ [H, ν]
+            return x, H, Z, 0.0, False
+        step = 0.0
+        for a in range(9):
+            s = xp[a]
+            for i in range(m):
+                s += PHt[a, i] * Z[i, 9]
+            x_new[a] = s
+        step = abs(x_new[0] - x[0]) + abs(x_new[1] - x[1]) + abs(x_new[2] - x[2])
+        x[:] = x_new
+        if step < tolerance and (c_robust <= 0.0 or it > 0):
+            break
+    if not with_cost:
+        return x, H, Z, 0.0, True
+    H_last = H.copy()
+    _predict_readings(x, S_q, S_dw, S_f, pred, H)
+    cost = 0.0
+    for i in range(m):
+        r = y[i] - pred[i]
+        cost += r * r / R[i]
+    prior = _quadratic_form_inverse(P, x - xp)
+    return x, H_last, Z, cost + max(prior, 0.0), True
+
+
+@njit(cache=True)
+def branch_state(kind, x, normal):
+    """x (9,) with its ω, ω̇ on branch ``kind`` (:func:`gfimu.smoother.restarts.branch`)."""
+    out = x.copy()
+    if kind & 2:
+        wn = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2]
+        nxw0 = normal[1] * x[2] - normal[2] * x[1]
+        nxw1 = normal[2] * x[0] - normal[0] * x[2]
+        nxw2 = normal[0] * x[1] - normal[1] * x[0]
+        for j in range(3):
+            out[j] = x[j] - 2.0 * wn * normal[j]
+        out[3] = x[3] - 2.0 * wn * nxw0
+        out[4] = x[4] - 2.0 * wn * nxw1
+        out[5] = x[5] - 2.0 * wn * nxw2
+    if kind & 1:
+        for j in range(3):
+            out[j] = -out[j]
+    return out
+
+
+@njit(cache=True)
+def search(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
+           prior_margin):
+    """The update's minimum: Gauss-Newton from ``start``, then (``branches``) from the other three branches
+    of that minimum, each tried only when the prediction does not rule it out by more than
+    ``prior_margin`` (squared, in P) beyond the minimum's cost; two steps tell a branch that loses, one
+    that may win is solved to the end. ``(x, H, Z, J, ok)`` of the lowest J."""
+    x, H, Z, J, ok = solve(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
+                           branches)
+    if not ok or not branches:
+        return x, H, Z, J, ok
+    x_first = x.copy()  # the branches of the first minimum are tried
+    for kind in range(1, 4):
+        b = branch_state(kind, x_first, normal)
+        distance = _quadratic_form_inverse(P, b - xp)
+        if distance > J + prior_margin:  # (P singular: -1, tried)
+            continue
+        cx, cH, cZ, cJ, cok = solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, 2, tolerance, True)
+        if not cok:
+            return cx, cH, cZ, cJ, cok
+        if cJ < J:
+            cx, cH, cZ, cJ, cok = solve(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
+                                        tolerance, True)
+            if not cok:
+                return cx, cH, cZ, cJ, cok
+        if cJ < J:
+            x, H, Z, J = cx, cH, cZ, cJ
+    return x, H, Z, J, True
+
+
+@njit(cache=True)
+def _mm(A, B):
+    """A B of small matrices."""
+    n, k = A.shape
+    p = B.shape[1]
+    out = np.zeros((n, p))
+    for i in range(n):
+        for c in range(k):
+            a = A[i, c]
+            if a != 0.0:
+                for j in range(p):
+                    out[i, j] += a * B[c, j]
+    return out
+
+
+@njit(cache=True)
+def update_window(H, Z, P, T, u, W, mean, var, cross):
+    """The update ``S⁻¹ [H, ν]`` (Z) of the newest state (covariance P before it) on the window: the
+    recent states ``mean``, ``var``, ``cross`` (n, ...) in place, the old ones' factors ``(T, u, W)``
+    returned new, with the newest state's covariance after it; ``ok`` False on non-finite values."""
+    m = H.shape[0]
+    g = np.zeros(9)
+    A = np.zeros((9, 9))
+    for i in range(9):
+        s = 0.0
+        for r in range(m):
+            s += H[r, i] * Z[r, 9]
+        g[i] = s
+        for j in range(9):
+            s = 0.0
+            for r in range(m):
+                s += H[r, i] * Z[r, j]
+            A[i, j] = s
+    for i in range(9):
+        if not np.isfinite(g[i]):
+            return T, u, W, P, False
+        for j in range(9):
+            if not np.isfinite(A[i, j]):
+                return T, u, W, P, False
+    u = u + _mm(T, g.reshape(9, 1)).reshape(9)
+    TA = _mm(T, A)
+    W = W + _mm(TA, T.T)
+    T = T - _mm(TA, P)
+    n = mean.shape[0]
+    CA = np.empty((9, 9))
+    for l in range(n):
+        C = cross[l]
+        for i in range(9):
+            s = 0.0
+            for j in range(9):
+                s += C[i, j] * g[j]
+            mean[l, i] += s
+        for i in range(9):
+            for j in range(9):
+                s = 0.0
+                for k in range(9):
+                    s += C[i, k] * A[k, j]
+                CA[i, j] = s
+        for i in range(9):
+            s = 0.0
+            for j in range(9):
+                s += CA[i, j] * C[i, j]
+            var[l, i] -= s
+        # C (I - A P) = C - (C A) P
+        for i in range(9):
+            for j in range(9):
+                s = 0.0
+                for k in range(9):
+                    s += CA[i, k] * P[k, j]
+                C[i, j] -= s
+    P_new = P - _mm(P, _mm(A, P))
+    P_new = 0.5 * (P_new + P_new.T)
+    return T, u, W, P_new, True
+
+
+@njit(cache=True)
+def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
+    """One step of the streaming sign chain: the newest state's (ω, ω̇) on each branch ``(cur_w, cur_dw)``
+    (4, 3), the best earlier branch for each later one and the chain's new costs (lowest 0), from the
+    earlier state's branches ``prev_w``, ``prev_dw`` (4, 3) and costs ``cost`` (4,): the Cauchy loss of
+    scale ``c2`` (c²) of each trapezoid misfit ``ω_b - ω_a - h/2 (ω̇_a + ω̇_b)``."""
+    nb = cost.shape[0]
+    x = np.zeros(9)
+    x[0:3], x[3:6] = w, dw
+    cur_w = np.empty((nb, 3))
+    cur_dw = np.empty((nb, 3))
+    for b in range(nb):
+        xb = branch_state(b, x, normal)
+        cur_w[b], cur_dw[b] = xb[0:3], xb[3:6]
+    back = np.zeros(nb, dtype=np.int64)
+    new = np.empty(nb)
+    for b in range(nb):
+        best, arg = np.inf, 0
+        for a in range(nb):
+            e2 = 0.0
+            for j in range(3):
+                e = cur_w[b, j] - prev_w[a, j] - 0.5 * h * (prev_dw[a, j] + cur_dw[b, j])
+                e2 += e * e
+            total = cost[a] + c2 * np.log1p(e2 / c2)
+            if total < best:
+                best, arg = total, a
+        back[b], new[b] = arg, best
+    low = new.min()
+    for b in range(nb):
+        new[b] -= low
+    return cur_w, cur_dw, back, new

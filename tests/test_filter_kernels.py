@@ -1,0 +1,167 @@
+"""The fixed-lag filter's compiled kernels against the numpy expressions they replace (the oracle)."""
+
+import numpy as np
+import pytest
+
+from gfimu.array import cube_array
+from gfimu.simulate import simulate
+from gfimu.smoother import _filter_kernels as kernels
+from gfimu.smoother import _fixed_lag_filter as flf
+from gfimu.smoother import _fixed_lag_model as model
+from gfimu.smoother.fixed_lag import FixedLagEstimator
+from gfimu.smoother.graph import SmootherOptions
+from gfimu.smoother.restarts import branch
+
+
+def _random_spd(rng, n, scale):
+    A = rng.normal(size=(n, n))
+    return scale * (A @ A.T + n * np.eye(n))
+
+
+def _filter(slope=0.0, robust=0.0, branches=True):
+    array = cube_array(0.05, noise_std_mps2=0.05)
+    options = SmootherOptions()
+    m = model.ArrayModel(array, options)
+    f = flf.WindowFilter(m, branches=branches)
+    if slope or robust:
+        m.accel_noise_slope_mps2_per_radps = slope
+        m.accel_robust_threshold = robust
+        f.set_model(m)
+    return f, m
+
+
+@pytest.mark.parametrize("slope, robust", [(0.0, 0.0), (0.02, 0.0), (0.0, 2.0), (0.02, 2.0)])
+def test_solve_is_the_numpy_gauss_newton(slope, robust):
+    f, m = _filter(slope, robust)
+    rng = np.random.default_rng(3)
+    n_acc = m.S_q.shape[0]
+    R0, S_q, S_dw, S_f, slope_k, c_k, loss = f._kernel_model
+    for trial in range(20):
+        x_true = rng.normal(size=9) * np.repeat([3.0, 20.0, 5.0], 3)
+        xp = x_true + rng.normal(size=9) * 0.3
+        P = _random_spd(rng, 9, 0.05)
+        q = np.array([x_true[0] ** 2 + x_true[1] ** 2, x_true[0] ** 2 + x_true[2] ** 2, x_true[1] ** 2 + x_true[2] ** 2,
+                      x_true[0] * x_true[1], x_true[0] * x_true[2], x_true[1] * x_true[2]])
+        y = m.S_q @ q + m.S_dw @ x_true[3:6] + m.S_f @ x_true[6:] + rng.normal(size=n_acc) * 0.05
+        if trial % 5 == 0:
+            y[trial % n_acc] += 3.0  # an outlier for the robust loss
+        iterations = max(f.iterations, 1) + (1 if robust > 0 else 0)
+        want = f._solve(y, None, xp, P, xp, None)
+        got = kernels.solve(y, xp, P, xp.copy(), R0, S_q, S_dw, S_f, slope_k, c_k, loss, iterations,
+                            f.step_tolerance_radps, True)
+        assert got[4]
+        # the same arithmetic in another order: agreement to rounding scaled by the problem's condition
+        scale = np.abs(want[0]).max() + 1.0
+        np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(got[2], want[2], rtol=1e-7, atol=1e-9 * np.abs(want[2]).max())
+        assert got[3] == pytest.approx(want[3], rel=1e-7, abs=1e-9)
+
+
+def test_singular_innovation_is_reported_not_raised():
+    f, m = _filter()
+    R0, S_q, S_dw, S_f, slope, c, loss = f._kernel_model
+    y = np.zeros(m.S_q.shape[0])
+    got = kernels.solve(y, np.zeros(9), np.zeros((9, 9)), np.zeros(9), np.zeros_like(R0), S_q, S_dw, S_f, slope, c, loss,
+                        3, 1e-6, True)
+    assert got[4] is False
+
+
+def test_the_lu_solve_is_numpys_solve():
+    rng = np.random.default_rng(5)
+    for n in (1, 3, 9, 24, 48):
+        S = rng.normal(size=(n, n)) + n * np.eye(n)
+        B = rng.normal(size=(n, 10))
+        want = np.linalg.solve(S, B)
+        S_work, B_work = S.copy(), B.copy()
+        assert kernels._lu_solve(S_work, B_work)
+        np.testing.assert_allclose(B_work, want, rtol=0, atol=1e-12 * np.abs(want).max() * np.linalg.cond(S))
+
+
+@pytest.mark.parametrize("kind", [0, 1, 2, 3])
+def test_branch_state_is_the_branch_map(kind):
+    rng = np.random.default_rng(kind)
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    x = rng.normal(size=9)
+    w, dw = branch(kind, x[0:3], x[3:6], normal)
+    got = kernels.branch_state(kind, x, normal)
+    np.testing.assert_allclose(got[0:3], w, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got[3:6], dw, rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(got[6:], x[6:])
+
+
+def test_update_window_is_the_numpy_update():
+    rng = np.random.default_rng(11)
+    n, m = 7, 12
+    cross = rng.normal(size=(n, 9, 9))
+    mean = rng.normal(size=(n, 9))
+    var = np.abs(rng.normal(size=(n, 9))) + 1.0
+    H = rng.normal(size=(m, 9))
+    Z = rng.normal(size=(m, 10)) * 0.1
+    P = _random_spd(rng, 9, 0.1)
+    T, u, W = rng.normal(size=(9, 9)), rng.normal(size=9), rng.normal(size=(9, 9))
+    # the numpy expression of WindowFilter._update
+    g, A = H.T @ Z[:, -1], H.T @ Z[:, :-1]
+    want_u, want_W, want_T = u + T @ g, W + (T @ A) @ T.T, T - (T @ A) @ P
+    want_mean = mean + np.einsum("lij,j->li", cross, g)
+    CA = cross @ A
+    want_var = var - np.einsum("lij,lij->li", CA, cross)
+    want_cross = cross - CA @ P
+    want_P = P - P @ A @ P
+    want_P = 0.5 * (want_P + want_P.T)
+    got_mean, got_var, got_cross = mean.copy(), var.copy(), cross.copy()
+    T2, u2, W2, P2, ok = kernels.update_window(H, Z, P, T, u, W, got_mean, got_var, got_cross)
+    assert ok
+    for got, want in ((T2, want_T), (u2, want_u), (W2, want_W), (P2, want_P), (got_mean, want_mean),
+                      (got_var, want_var), (got_cross, want_cross)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * (np.abs(want).max() + 1.0))
+    Z[0, 0] = np.nan
+    before = got_mean.copy()
+    assert not kernels.update_window(H, Z, P, T, u, W, got_mean, got_var, got_cross)[4]
+    np.testing.assert_array_equal(got_mean, before)  # nothing moved
+
+
+def _chain_step_numpy(prev_w, prev_dw, w, dw, normal, h, c2, cost):
+    """The streaming sign chain's step as numpy expressions (the oracle of kernels.chain_step)."""
+    n = len(cost)
+    cur = [branch(b, w, dw, normal) for b in range(n)]
+    step = np.empty((n, n))
+    for a in range(n):
+        for b in range(n):
+            e = cur[b][0] - prev_w[a] - 0.5 * h * (prev_dw[a] + cur[b][1])
+            step[a, b] = float(e @ e)
+    total = cost[:, None] + c2 * np.log1p(step / c2)
+    back = np.argmin(total, axis=0)
+    new = total[back, np.arange(n)]
+    return np.array([c[0] for c in cur]), np.array([c[1] for c in cur]), back, new - new.min()
+
+
+@pytest.mark.parametrize("n_branches", [2, 4])
+def test_chain_step_is_the_numpy_chain(n_branches):
+    rng = np.random.default_rng(7)
+    normal = np.array([0.0, 0.6, 0.8])
+    for _ in range(50):
+        prev_w, prev_dw = rng.normal(size=(n_branches, 3)), rng.normal(size=(n_branches, 3)) * 10
+        w, dw = rng.normal(size=3), rng.normal(size=3) * 10
+        cost = np.abs(rng.normal(size=n_branches))
+        want = _chain_step_numpy(prev_w, prev_dw, w, dw, normal, 0.002, 0.3, cost)
+        got = kernels.chain_step(prev_w, prev_dw, w, dw, normal, 0.002, 0.3, cost)
+        for a, b in zip(got[:2], want[:2]):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-14)
+        np.testing.assert_array_equal(got[2], want[2])
+        np.testing.assert_allclose(got[3], want[3], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("scenario, noise", [("random3d", 0.07), ("reversal", 0.02)])
+def test_a_whole_stream_through_the_kernels_is_the_numpy_stream(monkeypatch, scenario, noise):
+    log = simulate(scenario, array=cube_array(0.025, noise_std_mps2=noise), rate_hz=500.0, duration_s=6.0, seed=4)
+    estimator = FixedLagEstimator(tune_window_s=2.0)
+    compiled = estimator.estimate(log).motion
+    monkeypatch.setattr(flf.WindowFilter, "compiled", False)
+    oracle = estimator.estimate(log).motion
+    # the same updates in another order of summation: differences at the level of the solver's rounding,
+    # far below the estimate's error against the truth (about 1e-2 rad/s here)
+    np.testing.assert_allclose(compiled.omega_b_radps, oracle.omega_b_radps, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(compiled.omega_dot_b_radps2, oracle.omega_dot_b_radps2, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(compiled.specific_force_b_mps2, oracle.specific_force_b_mps2, rtol=0, atol=1e-6)
