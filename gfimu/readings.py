@@ -456,7 +456,9 @@ class StreamScreen:
         self.block = max(1, round(STREAM_BLOCK_S * rate_hz)) if rate_hz and np.isfinite(rate_hz) else 1
         self._history = self.delay + MEDIAN_HALF_WIDTH
         self._times: list[int] = []
-        self._accel: list[np.ndarray] = []
+        # the buffer's readings, rows [0, len(self._times)) of an array that grows as needed (one copy of the
+        # rows kept per block, not a stack of rows per decision)
+        self._accel = np.empty((2 * (self.delay + self.block) + self._history + 8, len(self.columns)))
         self._gyro: list = []
         self._first = 0  # stream index of the buffer's first row
         self._next = 0  # stream index of the first undecided row
@@ -473,8 +475,11 @@ class StreamScreen:
         return sum(self._counts.values())
 
     def push(self, timestamp_ns: int, accel_row, gyro_row=None) -> list[tuple]:
+        n = len(self._times)
+        if n == self._accel.shape[0]:
+            self._accel = np.concatenate([self._accel, np.empty_like(self._accel)])
+        self._accel[n] = np.asarray(accel_row, dtype=float).reshape(-1)
         self._times.append(int(timestamp_ns))
-        self._accel.append(np.array(accel_row, dtype=float).reshape(-1))
         if gyro_row is not None:
             gyro_row = np.array(gyro_row, dtype=float).reshape(-1)
             with np.errstate(invalid="ignore"):
@@ -523,7 +528,7 @@ class StreamScreen:
         if upto <= self._next:
             return []
         end = upto == self._first + len(self._times)  # flush: the newest row is the stream's last
-        y, kinds, _ = _screen(np.vstack(self._accel), self.range_mps2, self.sensor_of_axis, self.rate_hz,
+        y, kinds, _ = _screen(self._accel[:len(self._times)], self.range_mps2, self.sensor_of_axis, self.rate_hz,
                               self.structure_matrix, ends=(self._first == 0, end))
         a, b = self._next - self._first, upto - self._first
         out = [(self._times[k], y[k], self._gyro[k]) for k in range(a, b)]
@@ -539,7 +544,9 @@ class StreamScreen:
         self._next = upto
         cut = max(0, upto - self._history - self._first)
         if cut:
-            del self._times[:cut], self._accel[:cut], self._gyro[:cut]
+            kept = len(self._times) - cut
+            self._accel[:kept] = self._accel[cut:cut + kept]
+            del self._times[:cut], self._gyro[:cut]
             self._first += cut
         return out
 

@@ -347,3 +347,39 @@ def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
     for b in range(nb):
         new[b] -= low
     return cur_w, cur_dw, back, new
+
+
+@njit(cache=True)
+def predict_window(F, Q, c, P, x_newest, T, cross):
+    """The prediction one step after the newest state (:meth:`WindowFilter.predict`): the new state's mean
+    ``F x + c`` and covariance ``F P Fᵀ + Q`` (symmetrised), the recent states' cross-covariances
+    ``C_i Fᵀ`` in place and the old ones' factor ``T Fᵀ`` returned."""
+    x = _mm(F, x_newest.reshape(9, 1)).reshape(9) + c
+    FP = _mm(F, P)
+    P_new = _mm(FP, F.T) + Q
+    P_new = 0.5 * (P_new + P_new.T)
+    row = np.empty(9)
+    for l in range(cross.shape[0]):
+        C = cross[l]
+        for i in range(9):
+            for j in range(9):
+                s = 0.0
+                for k in range(9):
+                    s += C[i, k] * F[j, k]
+                row[j] = s
+            for j in range(9):
+                C[i, j] = row[j]
+    return x, P_new, _mm(T, F.T)
+
+
+@njit(cache=True)
+def step_residual2(F, Q, x0, x1):
+    """``dᵀ Q⁻¹ d`` over the six ω, ω̇ rows of the step from x0 to x1, ``d = x1 - F x0`` (-1 where Q's block
+    is singular): the motion-model step's squared whitened residual (:meth:`WindowFilter.settle`)."""
+    d = np.empty(6)
+    for i in range(6):
+        s = x1[i]
+        for j in range(6):
+            s -= F[i, j] * x0[j]
+        d[i] = s
+    return _quadratic_form_inverse(np.ascontiguousarray(Q[:6, :6]), d)

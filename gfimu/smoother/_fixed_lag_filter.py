@@ -86,6 +86,9 @@ in the prediction's covariance) is within this of the minimum's cost (5 σ): fur
 readings, which fit both branches alike, cannot make up for it."""
 
 
+_ZERO9 = np.zeros(9)
+
+
 class FilterFailure(RuntimeError):
     """A numerical failure of an update (a singular innovation covariance, non-finite values)."""
 
@@ -327,13 +330,17 @@ class WindowFilter:
         step = self._steps.get(k0 + 1)
         if step is None:
             return 0
-        x_prev = self.mean(k0)
         F, Q = step
-        d = self.mean(k0 + 1)[:6] - F[:6, :6] @ x_prev[:6]
-        try:
-            e2 = float(d @ np.linalg.solve(Q[:6, :6], d))
-        except np.linalg.LinAlgError:
-            return 0
+        if self.compiled:
+            e2 = kernels.step_residual2(F, Q, self.mean(k0), self.mean(k0 + 1))
+            if e2 < 0:  # singular
+                return 0
+        else:
+            d = self.mean(k0 + 1)[:6] - F[:6, :6] @ self.mean(k0)[:6]
+            try:
+                e2 = float(d @ np.linalg.solve(Q[:6, :6], d))
+            except np.linalg.LinAlgError:
+                return 0
         if not e2 > OUTLYING_STEP2:
             return 0
         self._flush()
@@ -492,16 +499,21 @@ class WindowFilter:
         F, FT, Q = step.F, step.FT, step.Q
         self._make_room()
         lo, hi = self._split, self._hi  # the recent states at once, the old ones through T
-        x = F @ self.mean(self._base + hi - 1)
-        if step.c is not None:
-            x = x + step.c
-        P = F @ self._P @ FT + Q
-        P = 0.5 * (P + P.T)
-        n = hi - lo
-        if n:
-            tmp = np.matmul(self._cross[lo:hi].reshape(9 * n, 9), FT, out=self._tmp[lo:hi].reshape(9 * n, 9))
-            self._cross[lo:hi] = tmp.reshape(n, 9, 9)
-        self._T = self._T @ FT
+        if self.compiled:
+            x, P, self._T = kernels.predict_window(np.ascontiguousarray(F, dtype=float), np.ascontiguousarray(Q, dtype=float),
+                                                   _ZERO9 if step.c is None else np.asarray(step.c, dtype=float),
+                                                   self._P, self.mean(self._base + hi - 1), self._T, self._cross[lo:hi])
+        else:
+            x = F @ self.mean(self._base + hi - 1)
+            if step.c is not None:
+                x = x + step.c
+            P = F @ self._P @ FT + Q
+            P = 0.5 * (P + P.T)
+            n = hi - lo
+            if n:
+                tmp = np.matmul(self._cross[lo:hi].reshape(9 * n, 9), FT, out=self._tmp[lo:hi].reshape(9 * n, 9))
+                self._cross[lo:hi] = tmp.reshape(n, 9, 9)
+            self._T = self._T @ FT
         self._mean[hi] = x
         self._var[hi] = np.diagonal(P)
         self._cross[hi] = P
