@@ -415,17 +415,24 @@ def screen_log(log):
     return log.replace(accel_mps2=accel), result
 
 
-STREAM_BLOCK_S = 0.05
+STREAM_BLOCK_S = 0.02
 """The stream screening decides its readings in blocks of this length [s] (at least one sample): one
 :func:`screen` of its buffer per block."""
 
 
 def stream_delay_samples(rate_hz: float | None) -> int:
-    """Samples a stream's reading waits for before it is screened (:class:`StreamScreen`): the
-    look-ahead of :func:`screen`'s decisions. A spike's local scale reaches :data:`SCALE_HALF_WIDTH` + 1
-    samples ahead and its replacement, the median of :data:`MEDIAN_HALF_WIDTH` neighbours, waits for
-    theirs; a stuck run counts once it lasts :func:`stuck_min_samples`."""
-    return max(SCALE_HALF_WIDTH + 1 + MEDIAN_HALF_WIDTH, stuck_min_samples(rate_hz) - 1)
+    """Samples a stream's reading waits for before it is screened (:class:`StreamScreen`): the look-ahead of
+    :func:`screen`'s spike rule. A spike's local scale reaches :data:`SCALE_HALF_WIDTH` + 1 samples ahead and its
+    replacement, the median of :data:`MEDIAN_HALF_WIDTH` neighbours, waits for theirs. A stuck run is not waited
+    for: it counts from the reading at which it has lasted :func:`stuck_min_samples` within the buffer (its
+    first ``stuck_min_samples - 1 - delay`` readings, where that is positive, pass as they are)."""
+    return SCALE_HALF_WIDTH + 1 + MEDIAN_HALF_WIDTH
+
+
+def stream_wait_s(rate_hz: float) -> float:
+    """The longest a reading waits in the stream screening [s]: its delay and one block."""
+    block = max(1, round(STREAM_BLOCK_S * rate_hz))
+    return (stream_delay_samples(rate_hz) + block) / rate_hz
 
 
 class StreamScreen:
@@ -445,7 +452,11 @@ class StreamScreen:
     ``gfimu estimate --method fixed-lag`` (:func:`screen_stream`) screen a recording alike.
     """
 
-    def __init__(self, array, rate_hz: float | None):
+    def __init__(self, array, rate_hz: float | None, clean=None):
+        self.clean = clean
+        """None, or ``clean(first, stop)``: True where the rows ``[first, stop)`` (counted from the first pushed)
+        are known to hold nothing the rule would replace, so that a block whose buffer lies there is passed
+        without running the rule (:func:`screen_stream`: from the whole-log screening)."""
         self.columns = tuple(array.accel_columns)
         self.range_mps2 = array.range_per_axis_mps2
         self.sensor_of_axis = array.axis_owner
@@ -454,7 +465,8 @@ class StreamScreen:
         self.delay = stream_delay_samples(rate_hz)
         """Samples a reading waits for before it is decided."""
         self.block = max(1, round(STREAM_BLOCK_S * rate_hz)) if rate_hz and np.isfinite(rate_hz) else 1
-        self._history = self.delay + MEDIAN_HALF_WIDTH
+        # rows kept behind the first undecided one: the spike rule's reach, and a stuck run's shortest length
+        self._history = max(self.delay, stuck_min_samples(rate_hz)) + MEDIAN_HALF_WIDTH
         self._times: list[int] = []
         # the buffer's readings, rows [0, len(self._times)) of an array that grows as needed (one copy of the
         # rows kept per block, not a stack of rows per decision)
@@ -528,8 +540,13 @@ class StreamScreen:
         if upto <= self._next:
             return []
         end = upto == self._first + len(self._times)  # flush: the newest row is the stream's last
-        y, kinds, _ = _screen(self._accel[:len(self._times)], self.range_mps2, self.sensor_of_axis, self.rate_hz,
-                              self.structure_matrix, ends=(self._first == 0, end))
+        n = len(self._times)
+        if self.clean is not None and self.clean(self._first, self._first + n):
+            y = self._accel[:n].copy()
+            kinds = {kind: np.zeros(y.shape, bool) for kind in KINDS}
+        else:
+            y, kinds, _ = _screen(self._accel[:n], self.range_mps2, self.sensor_of_axis, self.rate_hz,
+                                  self.structure_matrix, ends=(self._first == 0, end))
         a, b = self._next - self._first, upto - self._first
         out = [(self._times[k], y[k], self._gyro[k]) for k in range(a, b)]
         replaced = np.zeros((b - a, y.shape[1]), bool)
@@ -571,7 +588,19 @@ def screen_stream(log):
     """(log screened by :class:`StreamScreen` row by row, :class:`Screening`): what ``gfimu live`` makes of the
     log's rows; the log itself when nothing is replaced. As :func:`screen_log`, a column with no finite
     reading near its missing ones is refused."""
-    screen_ = StreamScreen(log.array, log.rate_hz if len(log) > 1 else None)
+    rate_hz = log.rate_hz if len(log) > 1 else None
+    # The rule on the whole log first: a block whose buffer, and the rule's reach around it, holds nothing the
+    # whole-log rule replaces is passed as it is (the rule decides a reading from the readings within its reach,
+    # which are those of the whole log there); the others are decided from their buffer as a stream decides them.
+    _, whole = _screen(log.accel_mps2, log.array.range_per_axis_mps2, log.array.axis_owner, rate_hz,
+                       log.array.structure_matrix())[:2]
+    flagged = np.concatenate([[0], np.cumsum(np.logical_or.reduce([whole[k] for k in KINDS]).any(axis=1))])
+    reach = stream_delay_samples(rate_hz) + stuck_min_samples(rate_hz) + MEDIAN_HALF_WIDTH
+
+    def clean(first: int, stop: int) -> bool:
+        return bool(flagged[min(stop + reach, len(log))] == flagged[max(first - reach, 0)])
+
+    screen_ = StreamScreen(log.array, rate_hz, clean=clean)
     gyro = log.gyro_b_radps
     rows = []
     for i in range(len(log)):

@@ -247,7 +247,9 @@ def test_the_stream_screening_takes_the_whole_log_decisions(rate_hz, case):
     """Readings screened as they come (StreamScreen, each decided from a buffer around it) get the decisions and the
     values of screen() on the whole log, at 62.5-2000 Hz: spikes (also at the first and last rows), readings that are
     not finite or beyond any range, a channel stuck for 5 samples to 0.6 s, a channel clipped at its stated range, a
-    run of 35 missing readings; every row comes out once, in order, with its own timestamp."""
+    run of 35 missing readings; every row comes out once, in order, with its own timestamp. The one difference: the
+    stream does not wait for a stuck run, so where the shortest stuck run is longer than the delay (at 500 and
+    2000 Hz) a run's first readings, at most stuck_min_samples - 1 - delay of them, pass as they are."""
     from gfimu.array import random_array
 
     array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
@@ -269,35 +271,75 @@ def test_the_stream_screening_takes_the_whole_log_decisions(rate_hz, case):
         y[:2, 1], y[-2:, 4] = 77.0, -55.0
     if case == 2:
         y[5:40, 6] = np.nan
+    from gfimu.readings import stream_delay_samples, stuck_min_samples
+
     whole, expected = screen(y, limit, array.axis_owner, rate_hz, array.structure_matrix())
     rows, got = _stream_screened(array, y, log.timestamps_ns, rate_hz, limit)
     assert [r[0] for r in rows] == log.timestamps_ns.tolist()
     assert expected.count > 0
-    np.testing.assert_array_equal(got.replaced, expected.replaced)
-    assert (got.non_finite, got.out_of_range, got.spikes, got.clipped, got.stuck) == (
-        expected.non_finite, expected.out_of_range, expected.spikes, expected.clipped, expected.stuck)
-    assert got.runs == expected.runs
-    np.testing.assert_allclose(np.vstack([r[1] for r in rows]), whole, rtol=0, atol=1e-12)
+    passed = max(stuck_min_samples(rate_hz) - 1 - stream_delay_samples(rate_hz), 0)
+    missed = expected.replaced & ~got.replaced
+    assert not np.any(got.replaced & ~expected.replaced)
+    first_of_run = np.zeros_like(missed)
+    first_of_run[start:start + passed, column] = True
+    assert not np.any(missed & ~first_of_run)  # only the stuck run's first readings
+    if rate_hz == 62.5:
+        assert not missed.any()
+    assert (got.non_finite, got.out_of_range, got.spikes, got.clipped) == (
+        expected.non_finite, expected.out_of_range, expected.spikes, expected.clipped)
+    assert got.stuck == expected.stuck - int(missed.sum())
+    same = ~missed.any(axis=1)
+    np.testing.assert_allclose(np.vstack([r[1] for r in rows])[same], whole[same], rtol=0, atol=1e-12)
+    got_runs = {(r[0], r[1], r[3]): r[2] for r in got.runs}
+    assert set(got_runs) == {(r[0], r[1], r[3]) for r in expected.runs}
+    for kind, col, first, last in expected.runs:
+        assert first <= got_runs[kind, col, last] <= first + passed
 
 
 def test_the_stream_screening_waits_its_delay_and_no_longer():
-    """Each reading leaves the stream screening once stream_delay_samples later ones arrived, in blocks of
-    STREAM_BLOCK_S: at 500 Hz the delay is the 0.2 s of the shortest stuck run (99 samples), at 62.5 Hz the 28
-    samples of the spike rule's reach."""
-    from gfimu.readings import STREAM_BLOCK_S, StreamScreen, stream_delay_samples
+    """Each reading leaves the stream screening once stream_delay_samples later ones arrived (the 28 samples of
+    the spike rule's reach, at every rate), in blocks of STREAM_BLOCK_S."""
+    from gfimu.readings import STREAM_BLOCK_S, StreamScreen, stream_delay_samples, stream_wait_s
 
-    assert stream_delay_samples(500.0) == 99 and stream_delay_samples(62.5) == 28
+    assert stream_delay_samples(500.0) == 28 and stream_delay_samples(62.5) == 28
+    block = round(STREAM_BLOCK_S * 500.0)
+    assert stream_wait_s(500.0) == pytest.approx((28 + block) / 500.0, rel=1e-12)
     log = simulate("random3d", seed=1, duration_s=2.0)
     stream = StreamScreen(log.array, 500.0)
-    block = round(STREAM_BLOCK_S * 500.0)
     decided = 0
     for i in range(len(log)):
         out = stream.push(log.timestamps_ns[i], log.accel_mps2[i])
         if out:
-            assert out[0][0] == log.timestamps_ns[decided] and out[-1][0] == log.timestamps_ns[i - 99]
+            assert out[0][0] == log.timestamps_ns[decided] and out[-1][0] == log.timestamps_ns[i - 28]
             decided += len(out)
-        assert i - 99 - block < decided  # never more than the delay and one block behind
+        if i >= 2 * 25:  # the rule decides once its buffer holds a whole local-scale window (51 rows)
+            assert i - 28 - block < decided  # never more than the delay and one block behind
     assert decided + len(stream.flush()) == len(log)
+
+
+@pytest.mark.parametrize("rate_hz", [62.5, 500.0])
+def test_a_logs_stream_screening_passes_clean_blocks_as_the_rule_would(rate_hz):
+    """screen_stream passes the blocks whose neighbourhood the whole-log rule finds clean without running the rule
+    on them; it gives the rows, decisions and runs of pushing the rows one by one through the rule."""
+    from gfimu.array import random_array
+    from gfimu.readings import screen_stream
+
+    array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
+    log = simulate("random3d", array=array, seed=4, rate_hz=rate_hz, duration_s=min(10.0, 4000 / rate_hz))
+    n = len(log)
+    rng = np.random.default_rng(9)
+    y = log.accel_mps2.copy()
+    y[rng.integers(0, n, 6), rng.integers(0, 15, 6)] += 300.0
+    y[n // 2, 3] = np.nan
+    start = n // 3
+    y[start:start + int(0.5 * rate_hz), 5] = y[start, 5]
+    log = log.replace(accel_mps2=y)
+    fast, fast_result = screen_stream(log)
+    rows, slow_result = _stream_screened(array, y, log.timestamps_ns, rate_hz)
+    assert fast_result.count > 0
+    np.testing.assert_array_equal(fast_result.replaced, slow_result.replaced)
+    assert fast_result.runs == slow_result.runs
+    np.testing.assert_array_equal(fast.accel_mps2, np.vstack([r[1] for r in rows]))
 
 
 @pytest.mark.slow
