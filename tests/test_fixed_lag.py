@@ -342,3 +342,19 @@ def test_cli_estimate_fixed_lag_on_a_log_folder(tmp_path, capsys):
     assert omega_rmse(est, log.truth) < 0.05
     direct = FixedLagEstimator(lag_s=0.1).estimate(gio.read_log(tmp_path / "log")).motion
     np.testing.assert_allclose(est.omega_b_radps, direct.omega_b_radps, atol=1e-5)
+
+
+@pytest.mark.parametrize("rate_hz, lag_s, screen, expected_s", [
+    (500.0, 0.2, True, 0.2 - (28 + 10) / 500.0),  # the screening's 28 samples and a 10-sample block inside the lag
+    (20000.0, 0.2, True, 0.2 - (28 + 400) / 20000.0),
+    (62.5, 0.2, True, 0.2),  # 28 samples are 0.45 s at 62.5 Hz: more than half the lag, so on top of it
+    (500.0, 0.1, True, 0.1),  # 0.076 s is more than half of 0.1 s
+    (500.0, 0.2, False, 0.2),  # no screening, nothing to wait for
+])
+def test_the_screenings_wait_is_taken_from_the_lag_where_it_fits(rate_hz, lag_s, screen, expected_s):
+    """lag_s is the delay of an estimate after its sample arrives: the stream screening's wait comes out of
+    the smoother's own lag where it is at most half of it."""
+    from gfimu.smoother.fixed_lag import FixedLagEstimator
+
+    estimator = FixedLagEstimator(lag_s=lag_s, screen_readings=screen)
+    assert estimator.window_lag_s(rate_hz) == pytest.approx(expected_s, rel=1e-12)

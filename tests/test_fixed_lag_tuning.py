@@ -126,8 +126,11 @@ def test_explicit_densities_disable_the_tuning(turntable_log):
 
 def test_stream_waits_for_the_stretch_then_catches_up(turntable_log):
     log = turntable_log
-    sm = FixedLagEstimator(tune_window_s=1.0, lag_s=0.2).smoother(CUBE_5CM, RATE_HZ)
-    n, lag_n = int(1.0 * RATE_HZ), int(0.2 * RATE_HZ)
+    estimator = FixedLagEstimator(tune_window_s=1.0, lag_s=0.2)
+    sm = estimator.smoother(CUBE_5CM, RATE_HZ)
+    # the smoother's own lag: 0.2 s less the screening's 28 samples and 10-sample block, 38 samples
+    assert sm.lag_s == pytest.approx(0.2 - 38 / RATE_HZ, rel=1e-12) == estimator.window_lag_s(RATE_HZ)
+    n, lag_n = int(1.0 * RATE_HZ), int(round(sm.lag_s * RATE_HZ))
     for i in range(n - 1):
         upd = sm.push(log.timestamps_ns[i], log.accel_mps2[i])
         assert upd.smoothed == () and upd.filtered is None

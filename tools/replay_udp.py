@@ -1,15 +1,17 @@
 #!/usr/bin/env python3
-"""Replay a log over UDP at its own rate into ``gfimu live`` and print its latency summary.
+"""Replay a log over UDP at its own rate into ``gfimu live`` and measure when each estimate row appears.
 
-Starts ``gfimu live --source udp://127.0.0.1:PORT`` on the log's array, sends each
-imu.csv row as one datagram at the time it was recorded (1x, or ``--speed``), then
-an ``EOF`` datagram; ``gfimu live`` measures, per sample, the time from the
-datagram's arrival to its estimate row being written (the lag + the smoother's
-processing) and prints p50/p99/max with its counts (dropped, late, processing time
-per sample).
+Starts ``gfimu live --source udp://127.0.0.1:PORT --out -`` on the log's array, sends each imu.csv row as
+one datagram at the time it was recorded (1x, or ``--speed``), then an ``EOF`` datagram, and reads the
+estimate rows from the command's standard output as they are written. Each row's latency is the time
+from its sample's datagram being sent to the row being read here (the lag, the screening, the smoother's
+processing and the pipe); the tool prints p50/p99/max of it over the whole replay and past its first
+10 s, the rows in and out, how long the replay took against the recording (above real time: the rows
+kept up), the live command's own summary line, and its peak memory.
 
     python3 tools/replay_udp.py LOG [--seconds 60] [--lag-s 0.2] [--speed 1]
-    python3 tools/replay_udp.py --simulate 60        # a simulated 500 Hz random3d log
+    python3 tools/replay_udp.py --simulate 60            # a simulated 500 Hz random3d log
+    python3 tools/replay_udp.py --cell impacts-20kHz     # a regime-matrix cell's log (tools/regime_matrix.py)
 """
 
 from __future__ import annotations
@@ -17,15 +19,45 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+STEADY_AFTER_S = 10.0
+
+
+def _wait_bound(port: int, proc, timeout_s: float = 60.0) -> None:
+    """Until a UDP socket is bound to ``port`` on this machine (Linux: /proc/net/udp), the command has ended,
+    or ``timeout_s``; elsewhere 3 s."""
+    table = Path("/proc/net/udp")
+    if not table.exists():
+        time.sleep(3.0)
+        return
+    key = f":{port:04X} "
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end and proc.poll() is None:
+        if any(key in line.split("rem_address")[0] for line in table.read_text().splitlines()[1:]):
+            time.sleep(0.2)  # its reader thread starts
+            return
+        time.sleep(0.05)
+
+
+def _percentiles(values_s) -> str:
+    if not len(values_s):
+        return "none"
+    v = np.asarray(values_s) * 1e3
+    return f"p50 {np.percentile(v, 50):.1f} ms, p99 {np.percentile(v, 99):.1f} ms, max {v.max():.1f} ms"
 
 
 def main(argv=None) -> int:
@@ -35,15 +67,32 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=None, help="replay only the first S s")
     ap.add_argument("--lag-s", type=float, default=0.2)
     ap.add_argument("--speed", type=float, default=1.0, help="replay speed (1: the recorded rate)")
+    ap.add_argument("--cell", default=None, help="replay the log of this regime-matrix cell (e.g. impacts-20kHz)")
+    ap.add_argument("--duration-s", type=float, default=None, help="with --cell: its length [s] (default: the cell's)")
+    ap.add_argument("-O", dest="options", action="append", default=[], metavar="KEY=VALUE",
+                    help="an option of gfimu live (-O key=value), repeatable")
     args = ap.parse_args(argv)
     from gfimu import io as gio
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        log_dir = Path(args.log) if args.log else tmp / "log"
-        if not args.log:
+        if args.cell:
+            from dataclasses import replace
+
+            import regime_matrix
+
+            cell = next((c for c in regime_matrix.CELLS if c.name == args.cell), None)
+            if cell is None:
+                ap.error(f"no cell {args.cell!r}; tools/regime_matrix.py --help lists them")
+            if args.duration_s is not None:
+                cell = replace(cell, duration_s=args.duration_s)
+            log_dir, _ = regime_matrix.build_log(cell, tmp)
+        elif args.log:
+            log_dir = Path(args.log)
+        else:
             from gfimu.simulate import simulate
 
+            log_dir = tmp / "log"
             gio.write_log(simulate("random3d", duration_s=args.simulate, seed=0), log_dir)
         lines = (log_dir / "imu.csv").read_text().splitlines()[1:]
         stamps = [int(line.split(",", 1)[0]) for line in lines]
@@ -55,29 +104,57 @@ def main(argv=None) -> int:
             probe.bind(("127.0.0.1", 0))
             port = probe.getsockname()[1]
         env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+        options = [a for o in args.options for a in ("-O", o)]
         proc = subprocess.Popen([sys.executable, "-m", "gfimu", "live", "--array", str(log_dir / "array.toml"),
                                  "--rate-hz", f"{rate_hz:.6f}", "--source", f"udp://127.0.0.1:{port}",
-                                 "--out", str(tmp / "live.csv"), "--lag-s", str(args.lag_s), "--quiet"],
-                                env=env, stderr=subprocess.PIPE, text=True)
-        time.sleep(3.0)  # the command starts and binds its socket
+                                 "--out", "-", "--lag-s", str(args.lag_s), "--quiet", *options],
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+        sent_at: dict[int, float] = {}
+        seen: list[tuple[int, float]] = []
+
+        def read_rows() -> None:
+            for line in proc.stdout:
+                now = time.perf_counter()
+                if line[:1].isdigit() or line[:1] == "-":
+                    seen.append((int(line.split(",", 1)[0]), now))
+
+        reader = threading.Thread(target=read_rows, daemon=True)
+        reader.start()
+        _wait_bound(port, proc)  # the command starts and binds its socket
         start = time.perf_counter()
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 22)
             for line, t in zip(lines, stamps):
                 due = start + (t - stamps[0]) * 1e-9 / args.speed
                 delay = due - time.perf_counter()
-                if delay > 0:
+                if delay > 0.0005:
                     time.sleep(delay)
+                sent_at[t] = time.perf_counter()
                 s.sendto(line.encode(), ("127.0.0.1", port))
             sent_s = time.perf_counter() - start
             time.sleep(args.lag_s + 0.5)
             s.sendto(b"EOF", ("127.0.0.1", port))
+        errors: list[str] = []
+        err_reader = threading.Thread(target=lambda: errors.append(proc.stderr.read()), daemon=True)
+        err_reader.start()
         try:
-            _, err = proc.communicate(timeout=300)
+            proc.wait(timeout=600)
         except subprocess.TimeoutExpired:
             proc.kill()
-            _, err = proc.communicate()
+            proc.wait()
+        reader.join(timeout=30)
+        err_reader.join(timeout=30)
+        err = "".join(errors)
+        done_s = (seen[-1][1] - start) if seen else float("nan")
+    peak_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    latency = [(t, now - sent_at[t]) for t, now in seen if t in sent_at]
+    steady = [d for t, d in latency if (t - stamps[0]) * 1e-9 >= STEADY_AFTER_S]
+    recorded_s = (stamps[-1] - stamps[0]) * 1e-9
     print(f"# {time.strftime('%Y-%m-%d')}, {platform.node()}, {os.cpu_count()} cores: {len(lines)} samples at "
-          f"{rate_hz:.1f} Hz sent in {sent_s:.1f} s (speed {args.speed:g}), lag {args.lag_s} s")
+          f"{rate_hz:.1f} Hz ({recorded_s:.1f} s) sent in {sent_s:.1f} s (speed {args.speed:g}), lag {args.lag_s} s")
+    print(f"rows out {len(seen)} of {len(lines)}; last row {done_s - recorded_s / args.speed:+.2f} s after the last "
+          f"sample was due; latency datagram -> row on stdout {_percentiles([d for _, d in latency])}; past the first "
+          f"{STEADY_AFTER_S:g} s {_percentiles(steady)}; peak memory of gfimu live {peak_mib:.0f} MiB")
     print(err.strip().splitlines()[-1] if err.strip() else "(no summary from gfimu live)")
     return 0
 

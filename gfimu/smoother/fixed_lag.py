@@ -856,9 +856,22 @@ class FixedLagEstimator(SmootherEstimator):
         super().__post_init__()
         self.options()  # the model and tuning options checked as the batch smoother checks them
 
+    def window_lag_s(self, rate_hz: float) -> float:
+        """The smoother's own lag [s] at ``rate_hz``: ``lag_s`` less the stream screening's wait
+        (:func:`gfimu.readings.stream_wait_s`) when the readings are screened and that wait is at most half of
+        ``lag_s``, so that each estimate leaves ``lag_s`` after its sample arrived, the screening's look-ahead
+        inside it; where the wait is longer (low rates: the spike rule's 28 samples are 0.45 s at 62.5 Hz) the
+        smoother keeps ``lag_s`` and an estimate leaves ``lag_s`` plus the wait after its sample."""
+        if not self.screen_readings:
+            return self.lag_s
+        from ..readings import stream_wait_s
+
+        wait = stream_wait_s(rate_hz)
+        return self.lag_s - wait if wait <= 0.5 * self.lag_s else self.lag_s
+
     def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
-        """A streaming smoother with these options."""
-        return FixedLagSmoother(array, self.options(), lag_s=self.lag_s, rate_hz=rate_hz,
+        """A streaming smoother with these options (its lag :meth:`window_lag_s`)."""
+        return FixedLagSmoother(array, self.options(), lag_s=self.window_lag_s(rate_hz), rate_hz=rate_hz,
                                 relinearize_threshold=self.relinearize_threshold,
                                 relinearize_skip=self.relinearize_skip, marginalise_every_s=self.marginalise_every_s,
                                 warmup_s=self.warmup_s, gap_factor=self.gap_factor,

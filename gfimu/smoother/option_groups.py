@@ -167,7 +167,9 @@ class BatchOptions:
 class StreamOptions:
     """The fixed-lag smoother's (method 'fixed-lag') lag, window engine and model updates."""
 
-    lag_s: float = option(0.2, "s", "seconds of future data behind each estimate (the output delay of a live stream)")
+    lag_s: float = option(0.2, "s", "the delay of each estimate after its sample arrives (a live stream's output "
+                          "delay): the seconds of future data behind it, less the screening's look-ahead where that is "
+                          "at most half of it (28 samples and a 0.02 s block: 0.076 s at 500 Hz), else plus it")
     relinearize_threshold: float = option(0.1, "rad/s", (
         "engine 'gtsam': iSAM2 relinearises ω when its update exceeds this (ω̇ and f enter linearly)"))
     relinearize_skip: int = option(10, help="engine 'gtsam': iSAM2 checks for relinearisation every this many updates")
