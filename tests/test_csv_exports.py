@@ -59,6 +59,8 @@ def test_phyphox_linear_accelerometer_export(tmp_path):
     log, out = converted(tmp_path, src, "--map", "phyphox")
     np.testing.assert_allclose(log.accel_mps2, motion(log.timestamps_ns * 1e-9)[1], rtol=0, atol=1e-8)
     assert "phyphox: Linear Accelerometer.csv, the linear acceleration (gravity removed by the phone)" in out
+    assert log.array.readings == "linear_acceleration"
+    assert 'readings = "linear_acceleration"' in (tmp_path / "log" / "array.toml").read_text()
 
 
 def test_phyphox_errors_name_the_export_not_the_preset(tmp_path):
@@ -92,15 +94,24 @@ def test_sensor_logger_android_reads_total_acceleration(tmp_path, as_zip):
 
 
 @pytest.mark.parametrize("standardised", [False, True])
-def test_sensor_logger_ios_reads_the_acceleration_without_gravity_in_androids_signs(tmp_path, standardised):
+@pytest.mark.parametrize("gravity", [False, True])
+def test_sensor_logger_ios_reads_the_acceleration_without_gravity_in_androids_signs(tmp_path, standardised, gravity):
     src = sensor_logger_export(tmp_path / "rec", "ios", standardised=standardised)
+    if not gravity:
+        (src / "Gravity.csv").unlink()
     log, out = converted(tmp_path, src, "--map", "sensorlogger")
-    _, a, w = motion((log.timestamps_ns - T0_NS) * 1e-9)
-    np.testing.assert_allclose(log.accel_mps2, a, rtol=0, atol=1e-12)  # +x when the phone accelerates to +x
+    f, a, w = motion((log.timestamps_ns - T0_NS) * 1e-9)
+    # with Gravity.csv beside it, the phone's gravity is added back: the specific force, a sum of two numbers
+    # below 12 m/s² (a few ulps of 10, 2e-15 each); without it, the linear acceleration as read
+    np.testing.assert_allclose(log.accel_mps2, f if gravity else a, rtol=0, atol=1e-12)  # +x when it accelerates to +x
     np.testing.assert_allclose(log.gyro_b_radps, w, rtol=0, atol=1e-12)
     assert "platform ios, app 1.41.1): Accelerometer.csv, the acceleration without gravity in m/s²" in out
     assert ("its signs turned" in out) != standardised
     assert "not the specific force (no TotalAcceleration.csv)" in out
+    assert log.array.readings == ("specific_force" if gravity else "linear_acceleration")
+    assert ('readings = "linear_acceleration"' in (tmp_path / "log" / "array.toml").read_text()) != gravity
+    assert ("the linear acceleration plus the phone's own gravity vector (Gravity.csv)" in out) == gravity
+    assert ("(the export holds no Gravity.csv to add back)" in out) != gravity
 
 
 def test_sensor_logger_accelerometer_without_metadata_is_ambiguous(tmp_path):
