@@ -80,6 +80,7 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
     timings = {}
     t0 = time.perf_counter()
     log = gio.read_log(log_dir, truth=truth)
+    _warn_dead(log)
     t1 = time.perf_counter()
     # the fixed-lag smoother screens as gfimu live does, row by row (gfimu.readings.StreamScreen)
     log, screening = getattr(est, "screen", screen_log)(log)
@@ -141,6 +142,15 @@ def screened(log):
     clean, screening = screen_log(log)
     _warn_replaced(log, screening)
     return clean
+
+
+def _warn_dead(log) -> None:
+    """A warning line per kind of channel that measures nothing (dead, constant, placeholder values)."""
+    from .readings import dead_channels, describe_dead_channels
+
+    columns = log.array.accel_columns
+    for line in describe_dead_channels(dead_channels(log.accel_mps2, columns), len(columns)):
+        warnings.warn(f"{log.source}: {line}; the estimate from them is not a measurement", stacklevel=3)
 
 
 def _warn_replaced(log, screening) -> None:
