@@ -948,11 +948,17 @@ def _align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_pe
                       f"{sum(f[5] for f in found)} row(s) of the time base left out; the log has a time gap at each")
     elif resample_hz is not None or len(groups) > 1:
         report.append(f"gaps: no step over {max_gap_periods:g} periods in the interpolated files")
+    t_out = grid[keep]
     if resample_hz is None and len(gaps[base_key]):
         g = gaps[base_key]
-        report.append(f"gaps of the time base {base_key[0]}: {len(g)} step(s) over {max_gap_periods:g} of its "
-                      f"{g.period_ns * 1e-6:.4g} ms periods, kept as time gaps of the log")
-    t_out = grid[keep]
+        # only those whose two rows are both in the written log (the others lie in rows left out)
+        step = np.searchsorted(t_out, g.start_ns)
+        inside = step < t_out.size - 1
+        inside[inside] &= (t_out[step[inside]] == g.start_ns[inside]) & (t_out[step[inside] + 1] == g.end_ns[inside])
+        kept = int(np.count_nonzero(inside))
+        report.append(f"gaps of the time base {base_key[0]}: {kept} step(s) over {max_gap_periods:g} of its "
+                      f"{g.period_ns * 1e-6:.4g} ms periods, kept as time gaps of the log"
+                      + (f" ({len(g) - kept} more in rows left out)" if kept < len(g) else ""))
     if resample_hz is None and t_out.size > 2:
         dt = np.diff(t_out)
         breaks = int(np.count_nonzero(dt > GAP_FACTOR * float(np.median(dt))))
