@@ -206,3 +206,29 @@ def test_a_zip_with_one_top_folder_and_phyphox_raw_data_in_a_zip(tmp_path):
     log = gio.read_log(tmp_path / "log2", check=False)
     assert log.timestamps_ns.tolist() == [0, 10_000_000, 20_000_000]
     assert log.accel_mps2.tolist() == [[0.1, 0.2, 9.8], [0.1, 0.25, 9.8], [0.1, 0.2, 9.75]]
+
+
+def test_sensor_logger_export_resaved_with_a_decimal_comma_gets_the_hint_on_its_time_column(tmp_path):
+    """A spreadsheet in a decimal-comma locale re-saves the export with ';' and '1,70000000000000E+018': the time
+    column's error gives the same hint as a value column's."""
+    src = sensor_logger_export(tmp_path / "rec", "android")
+    for path in src.glob("*.csv"):
+        if path.name == "Metadata.csv":
+            continue
+        lines = path.read_text().splitlines()
+        rows = [lines[0].replace(",", ";")]
+        for line in lines[1:]:
+            v = line.split(",")
+            time = f"{float(v[0]):.14E}".replace("E+18", "E+018").replace(".", ",")
+            rows.append(";".join([time] + [x.replace(".", ",") for x in v[1:]]))
+        path.write_text("\n".join(rows) + "\n")
+    before = snapshot(tmp_path)
+    rc, out, err = run(str(src), "--map", "sensorlogger", "--out", str(tmp_path / "log"))
+    hint = ' (a decimal comma: give [csv] decimal = "," or "auto" in the map)'
+    assert rc == 2 and err.strip() == (f"gfimu convert: error: {src / 'TotalAcceleration.csv'}:2: 'time': timestamp "
+                                       f"'1,70000000000000E+018' is not a number{hint}")
+    assert snapshot(tmp_path) == before
+    text = (src / "TotalAcceleration.csv").read_text().replace("1,70000000000000E+018", "1700000000000000000", 1)
+    (src / "TotalAcceleration.csv").write_text(text)
+    rc, out, err = run(str(src), "--map", "sensorlogger", "--out", str(tmp_path / "log"))
+    assert rc == 2 and err.strip().endswith(f"is not a number{hint}") and ":3: 'time'" in err

@@ -766,7 +766,9 @@ class _Reader:
         try:
             t = timestamps_ns(tokens, int(scale))
         except TimestampError as exc:
-            raise LogFormatError(f"{table.shown(j)}: {exc}", table.path, table.lines[exc.index]) from None
+            hint = (" (a decimal comma: give [csv] decimal = \",\" or \"auto\" in the map)"
+                    if _DECIMAL_COMMA.match(tokens[exc.index].strip()) else "")
+            raise LogFormatError(f"{table.shown(j)}: {exc}{hint}", table.path, table.lines[exc.index]) from None
         bad = np.flatnonzero(np.diff(t) <= 0)
         if bad.size:
             k = int(bad[0]) + 1
