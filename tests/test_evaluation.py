@@ -348,7 +348,6 @@ def test_cli_warns_when_the_reference_is_the_logs_own_gyroscope(tmp_path, capsys
 
     log = simulate("reversal", duration_s=0.2, seed=1)
     w = log.truth.omega_b_radps
-    import contextlib
     import dataclasses
 
     from gfimu.array import Gyroscope
