@@ -116,6 +116,9 @@ def test_a_linear_acceleration_log_refuses_attitude_and_still_gives_omega(tmp_pa
         assert rc == 2 and REFUSAL in err and "refused" in err, err
         assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("gfimu estimate: error: ")
         assert not (tmp_path / "est.csv").exists() and not (tmp_path / "t.tum").exists()
+    rc, _, err = run("calibrate", log_dir, "--out", str(tmp_path / "cal.toml"))
+    assert rc == 2 and 'readings = "linear_acceleration"' in err and "fits the accelerometers against gravity" in err
+    assert not (tmp_path / "cal.toml").exists()
     rc, _, err = run("estimate", log_dir, "--out", str(tmp_path / "est.csv"), "--quiet")
     assert rc == 0, err
     est = estimate_table(tmp_path / "est.csv")
