@@ -497,7 +497,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
     # units and sizes
     g0 = still_specific_force(log)
     f_median = float(np.nanmedian(np.linalg.norm(motion.specific_force_b_mps2, axis=1)))
-    unit, unit_scale = _unit_suspect(g0 if g0 is not None else f_median)
+    unit, unit_scale = (_unit_suspect(g0 if g0 is not None else f_median) if array.readings == "specific_force"
+                        else (None, None))  # linear acceleration: no gravity to measure the scale by
     gyro_ratio = gyro_unit = None
     if log.gyro_b_radps is not None:
         valid = np.all(np.isfinite(log.gyro_b_radps), axis=1) & resolved

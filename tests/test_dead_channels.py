@@ -77,3 +77,20 @@ def test_diagnose_and_estimate_name_them(tmp_path, base, kind, text):
     lines = [line for line in err.splitlines() if text in line]
     assert len(lines) == 1 and lines[0].startswith("gfimu estimate: warning: ")
     assert lines[0].endswith("; the estimate from them is not a measurement")
+
+
+def test_a_linear_acceleration_log_is_not_taken_for_readings_in_g(base):
+    """|f| far from 9.81 is a unit mistake only for specific force: a log of linear acceleration (gravity removed)
+    reads about 1 m/s² and is no 'readings in g'."""
+    from dataclasses import replace
+
+    t = base.truth
+    gravity_b = t.specific_force_b_mps2 - t.accel_b_mps2  # -g in B at each sample
+    zeros = np.zeros_like(gravity_b)
+    f_free = base.accel_mps2 - base.array.predict_readings(gravity_b, zeros, zeros)
+    # a hand-held phone's size (median |a| 1.2 m/s²): all readings scaled alike stay a rigid body's (ω by √c)
+    f_free *= 1.2 / float(np.median(np.linalg.norm(t.accel_b_mps2, axis=1)))
+    specific = diagnose(base.replace(accel_mps2=f_free))
+    assert specific.accel_unit_suspect is not None  # taken for specific force, the scale looks wrong
+    linear = diagnose(base.replace(accel_mps2=f_free, array=replace(base.array, readings="linear_acceleration")))
+    assert linear.accel_unit_suspect is None and not any("readings likely in" in w for w in linear.warnings)
