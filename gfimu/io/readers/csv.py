@@ -1047,8 +1047,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     if array.readings == "linear_acceleration":
         linear = True
         report.append("readings: linear acceleration (gravity removed by the phone), recorded as readings = "
-                      "\"linear_acceleration\" in array.toml: ω is estimated, attitude and gravity-free outputs are "
-                      "refused" + ("" if gravity_sensor is not None or not without_gravity else
+                      "\"linear_acceleration\" in array.toml: ω and the acceleration a are estimated, attitude "
+                      "(--orientation, --tum) is refused" + ("" if gravity_sensor is not None or not without_gravity else
                                    " (the export holds no Gravity.csv to add back)"))
     if t_out.size < 2:
         raise LogFormatError(f"holds {t_out.size} sample(s); a log needs at least two", base_key[0])
