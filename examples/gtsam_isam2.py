@@ -16,10 +16,10 @@ The gyro reaches ω only through the keyframe rotations, the accelerometers give
 two together give ω, and the gyro bias, at the log's rate. ``gtsam.ISAM2`` is updated once per keyframe
 with that keyframe's factors and initial values.
 
-Run it on a log folder with a gyroscope (``gfimu simulate random3d --out LOG`` with a gyro in its array,
-or ``gfimu convert ... --with-gyro``)::
+Run it on a log folder with a gyroscope (``gfimu convert ... --with-gyro``, or a simulated one with a gyro
+in its array), or let it write the simulated log of docs/gtsam.md first (``--simulate``, into a new folder)::
 
-    python examples/gtsam_isam2.py LOG [--keyframe 10] [--seconds 2] [--out estimate.csv]
+    python examples/gtsam_isam2.py LOG [--simulate] [--keyframe 10] [--seconds 2] [--out estimate.csv]
 
 It prints the ω RMSE against the log's truth when it has one, and writes ω, ω̇ and f as an estimate CSV
 with ``--out``. ``tests/test_gtsam_example.py`` runs it on a simulated log. Needs ``gtsam`` (the
@@ -173,7 +173,23 @@ def _full_triad(values: np.ndarray, axes: str) -> np.ndarray:
     return out
 
 
+def simulated_log():
+    """The log of docs/gtsam.md and tests/test_gtsam_example.py: 2 s of ``random3d`` motion at 200 Hz seen by the
+    5 cm cube (0.07 m/s² noise) and a gyro with 0.01 rad/s noise and a constant bias drawn with 0.02 rad/s per
+    axis, seed 3."""
+    from dataclasses import replace
+
+    from gfimu.array import Gyroscope, cube_array
+    from gfimu.simulate import SensorErrors, simulate
+
+    array = replace(cube_array(0.025, noise_std_mps2=0.07), gyroscope=Gyroscope(0.01))
+    return simulate("random3d", array=array, rate_hz=200.0, duration_s=2.0, seed=3,
+                    noise=SensorErrors(gyro_bias_std_radps=0.02))
+
+
 def main(argv: list[str] | None = None) -> int:
+    from pathlib import Path
+
     from gfimu import io as gio
     from gfimu.motion import Motion
 
@@ -182,7 +198,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keyframe", type=int, default=10, help="samples per AHRS factor and ISAM2 update (default 10)")
     parser.add_argument("--seconds", type=float, default=None, help="use only the first seconds of the log")
     parser.add_argument("--out", default=None, help="write ω, ω̇ and f as an estimate CSV here")
+    parser.add_argument("--simulate", action="store_true",
+                        help="first write LOG, a new folder: the simulated log of docs/gtsam.md (simulated_log())")
     args = parser.parse_args(argv)
+    if args.simulate:
+        if Path(args.log).exists():
+            parser.error(f"--simulate writes {args.log}, which exists; name a new folder")
+        gio.write_log(simulated_log(), args.log)
+        print(f"log written: {args.log}")
     log = gio.read_log(args.log)
     if args.seconds is not None:
         log = log.select(np.nonzero((log.timestamps_ns - log.timestamps_ns[0]) * 1e-9 <= args.seconds)[0])

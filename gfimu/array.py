@@ -107,6 +107,9 @@ class Body:
         object.__setattr__(self, "principal_inertia_kgm2", tuple(float(v) for v in i))
 
 
+READINGS = ("specific_force", "linear_acceleration")
+"""Values of ``array.toml``'s ``readings``: what the accelerometers report."""
+
 _GEOMETRY_REASONS: dict = {}
 """Outcomes of :meth:`SensorArray.geometry_reason` per layout (the smoother asks once per problem)."""
 
@@ -120,8 +123,14 @@ class SensorArray:
     gyroscope: Gyroscope | None = None
     inclinometer: Inclinometer | None = None
     body: Body | None = None
+    readings: str = "specific_force"
+    """What the accelerometers report (``array.toml``'s ``readings``): ``"specific_force"`` (f = a − g, the
+    contract's readings) or ``"linear_acceleration"`` (a, gravity already removed by the recording device, as
+    phone apps' "linear acceleration"; ω is unaffected, attitude and gravity-free outputs are refused)."""
 
     def __post_init__(self) -> None:
+        if self.readings not in READINGS:
+            raise ArrayModelError(f"readings must be one of {', '.join(map(repr, READINGS))}, got {self.readings!r}")
         accs = tuple(self.accelerometers)
         if not accs:
             raise ArrayModelError("array has no accelerometers")
@@ -335,7 +344,8 @@ class SensorArray:
         return x @ self.structure_matrix().T
 
     def with_accelerometers(self, accelerometers) -> "SensorArray":
-        return SensorArray(tuple(accelerometers), self.name, self.gyroscope, self.inclinometer, self.body)
+        return SensorArray(tuple(accelerometers), self.name, self.gyroscope, self.inclinometer, self.body,
+                           self.readings)
 
 
 MAX_LINEAR_CONDITION = 40.0

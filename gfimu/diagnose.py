@@ -39,7 +39,7 @@ from .estimators.ml import MLEstimator
 from .io.plausibility import MAX_POSITION_M, MIN_EXTENT_M, RATE_TOLERANCE, still_specific_force
 from .io.units import STANDARD_GRAVITY_MPS2
 from .log import Log
-from .readings import clipped_readings, runs_of, screen_log, stuck_runs
+from .readings import clipped_readings, dead_channels, describe_dead_channels, runs_of, screen_log, stuck_runs
 from .rigid_body import quadratic_terms_jacobian
 from .smoother.auto import NOISE_RATIO_LIMIT, check_model, rigid_body_residual
 
@@ -116,7 +116,8 @@ class BandReport:
 class ChannelFault:
     column: str
     kind: str
-    """'stuck' (one value repeated while the others move) or 'clipped' (pinned at the range or at an extreme)."""
+    """'stuck' (one value repeated while the others move) or 'clipped' (pinned at the range or at an extreme);
+    'dead', 'constant' or 'placeholder' (:func:`gfimu.readings.dead_channels`: no measurement at all)."""
     samples: int
     first_row: int
     last_row: int
@@ -230,7 +231,7 @@ class Diagnosis:
                   f"  {self.screened_readings} reading(s) replaced by the screening (not finite, out of range, spikes, "
                   "clipped, stuck)"]
         if not self.faults:
-            lines.append("  no stuck or clipped channel")
+            lines.append("  no stuck, clipped, dead or constant channel")
         for f in self.faults:
             lines.append(f"  {f.column}: {f.kind} at {f.value_mps2:.6g} m/s^2 for {f.samples} sample(s), rows "
                          f"{f.first_row}-{f.last_row}")
@@ -496,7 +497,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
     # units and sizes
     g0 = still_specific_force(log)
     f_median = float(np.nanmedian(np.linalg.norm(motion.specific_force_b_mps2, axis=1)))
-    unit, unit_scale = _unit_suspect(g0 if g0 is not None else f_median)
+    unit, unit_scale = (_unit_suspect(g0 if g0 is not None else f_median) if array.readings == "specific_force"
+                        else (None, None))  # linear acceleration: no gravity to measure the scale by
     gyro_ratio = gyro_unit = None
     if log.gyro_b_radps is not None:
         valid = np.all(np.isfinite(log.gyro_b_radps), axis=1) & resolved
@@ -534,11 +536,14 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
         fix.append(f"position_m likely not in metres ({why}): multiply the positions by {pos_scale:g}")
     if gyro_unit:
         fix.append(f"gyroscope reads {gyro_ratio:.3g} x the accelerometers' |omega|: likely in deg/s (write [deg s^-1])")
+    dead = dead_channels(log.accel_mps2, columns)
+    fix += describe_dead_channels(dead, len(columns))
     if timing.backwards or timing.duplicates:
         fix.append(f"{timing.backwards} backward and {timing.duplicates} repeated timestamp(s)")
     for f in faults:
         warn.append(f"{f.column} {f.kind} at {f.value_mps2:.6g} m/s^2 for {f.samples} sample(s) (rows {f.first_row}-"
                     f"{f.last_row})")
+    faults += [ChannelFault(d.column, d.kind, d.samples, d.first_row, len(log) - 1, d.value_mps2) for d in dead]
     for i, s in enumerate(sensors):
         if not np.isfinite(s.skew_s):
             continue

@@ -80,6 +80,7 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
     timings = {}
     t0 = time.perf_counter()
     log = gio.read_log(log_dir, truth=truth)
+    _warn_dead(log)
     t1 = time.perf_counter()
     # the fixed-lag smoother screens as gfimu live does, row by row (gfimu.readings.StreamScreen)
     log, screening = getattr(est, "screen", screen_log)(log)
@@ -94,9 +95,18 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
     reason = est.applicable(log.array)
     if reason:
         raise MethodNotApplicable(f"method {est.method!r} cannot run on {log_dir}: {reason}")
+    linear = log.array.readings == "linear_acceleration"
+    if linear:
+        _refuse_attitude(log_dir, est, orientation)
     estimate = est.estimate(log, progress=progress)
     timings.update(estimate.report.timings)
     motion = estimate.motion
+    if linear and motion.specific_force_b_mps2 is not None:
+        # the readings had gravity removed: what the method took for the specific force is the acceleration a
+        sigma = dict(motion.sigma)
+        if "specific_force_b_mps2" in sigma:
+            sigma["accel_b_mps2"] = sigma.pop("specific_force_b_mps2")
+        motion = motion.replace(accel_b_mps2=motion.specific_force_b_mps2, specific_force_b_mps2=None, sigma=sigma)
     if orientation != "none":
         from .estimators.gravity import add_orientation
 
@@ -105,6 +115,22 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
         timings["orientation"] = time.perf_counter() - t0
     report = replace(estimate.report, timings=timings)
     return EstimateRun(str(log_dir), Estimate(motion, report), log, screening)
+
+
+LINEAR_ACCELERATION_REFUSAL = (
+    "its array.toml says readings = \"linear_acceleration\": the phone removed gravity from the readings, so "
+    "there is no gravity left to find the attitude from and no specific force to remove it from; ω and the "
+    "gravity-free acceleration a are estimated without it. For attitude, convert the export with its gravity "
+    "(Sensor Logger's Gravity.csv beside Accelerometer.csv, or TotalAcceleration.csv; phyphox's Accelerometer.csv "
+    "\"with g\")")
+
+
+def _refuse_attitude(log_dir, est, orientation: str) -> None:
+    """Attitude asked of a log whose readings are the linear acceleration: refused, saying why."""
+    asked = [f"--orientation {orientation}"] if orientation != "none" else []
+    asked += [f"-O {name}=True" for name in ("estimate_attitude", "use_inclinometer") if getattr(est, name, False) is True]
+    if asked:
+        raise InputError(f"{log_dir}: {' and '.join(asked)} refused: {LINEAR_ACCELERATION_REFUSAL}")
 
 
 def screened(log):
@@ -116,6 +142,15 @@ def screened(log):
     clean, screening = screen_log(log)
     _warn_replaced(log, screening)
     return clean
+
+
+def _warn_dead(log) -> None:
+    """A warning line per kind of channel that measures nothing (dead, constant, placeholder values)."""
+    from .readings import dead_channels, describe_dead_channels
+
+    columns = log.array.accel_columns
+    for line in describe_dead_channels(dead_channels(log.accel_mps2, columns), len(columns)):
+        warnings.warn(f"{log.source}: {line}; the estimate from them is not a measurement", stacklevel=3)
 
 
 def _warn_replaced(log, screening) -> None:

@@ -222,6 +222,63 @@ def stuck_runs(accel_mps2: np.ndarray, rate_hz: float | None = None,
     return out
 
 
+PLACEHOLDER_VALUES_MPS2 = (-999.0, 999.0, -9999.0, 9999.0, -99999.0, 99999.0, -32768.0, 32767.0, 65535.0,
+                          -2147483648.0, 2147483647.0)
+"""Fill values loggers and spreadsheets write where a reading is missing (-999, the 16- and 32-bit integer limits):
+a reading exactly equal to one (beyond any phone or IMU accelerometer's range but the 1e7 m/s² bound) is a
+placeholder, not a measurement."""
+
+
+@dataclass(frozen=True)
+class DeadChannel:
+    """A channel that carries no measurement (:func:`dead_channels`)."""
+
+    column: str
+    kind: str
+    """'dead' (every reading exactly 0), 'constant' (every finite reading one value) or 'placeholder' (readings
+    exactly at a fill value of :data:`PLACEHOLDER_VALUES_MPS2`)."""
+    value_mps2: float
+    samples: int
+    first_row: int
+
+
+def dead_channels(accel_mps2: np.ndarray, columns) -> list[DeadChannel]:
+    """Channels of readings (N, n_axes) that measure nothing: every finite reading exactly 0 (*dead*), every
+    finite reading one other value (*constant*: no real accelerometer, whose noise moves its last bit, reads one
+    value over a whole log of three samples or more), or readings exactly at a fill value (*placeholder*)."""
+    y = np.asarray(accel_mps2, dtype=float)
+    out = []
+    for c, name in enumerate(columns):
+        col = y[:, c]
+        finite = np.flatnonzero(np.isfinite(col))
+        if finite.size >= STUCK_MIN_SAMPLES and np.all(col[finite] == col[finite[0]]):
+            v = float(col[finite[0]])
+            out.append(DeadChannel(name, "dead" if v == 0.0 else "constant", v, int(finite.size), int(finite[0])))
+            continue
+        at = np.isin(col, PLACEHOLDER_VALUES_MPS2)
+        if at.any():
+            rows = np.flatnonzero(at)
+            out.append(DeadChannel(name, "placeholder", float(col[rows[0]]), int(rows.size), int(rows[0])))
+    return out
+
+
+def describe_dead_channels(found: list[DeadChannel], n_columns: int) -> list[str]:
+    """One line per kind of :func:`dead_channels` finding, naming the columns (the first few)."""
+    lines = []
+    for kind, what in (("dead", "read exactly 0 in every row (a dead sensor, or no data written)"),
+                       ("constant", "read one value in every row (a stuck sensor, or a value filled in)"),
+                       ("placeholder", "hold a fill value (a missing reading written as a number)")):
+        hits = [d for d in found if d.kind == kind]
+        if not hits:
+            continue
+        names = ", ".join(d.column + (f" = {d.value_mps2:g}" if kind != "dead" else "") +
+                          (f" ({d.samples} rows from row {d.first_row})" if kind == "placeholder" else "")
+                          for d in hits[:6]) + (f" and {len(hits) - 6} more" if len(hits) > 6 else "")
+        every = "all " if len(hits) == n_columns else ""
+        lines.append(f"{every}{len(hits)} of {n_columns} accelerometer channel(s) {what}: {names}")
+    return lines
+
+
 def _rigid_body_fill(y: np.ndarray, bad: np.ndarray, structure_matrix: np.ndarray | None) -> np.ndarray:
     """(N, n_axes) bool: the readings of ``bad`` that were replaced in ``y`` (in place) by the rigid-body
     prediction of the good axes of their sample, where those determine the 12 unknowns."""

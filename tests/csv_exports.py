@@ -47,9 +47,10 @@ def _phyphox_number(x: float, decimal: str) -> str:
 
 
 def phyphox_export(path: Path, seconds: float = 4.0, rate_hz: float = 200.0, linear: bool = False,
-                   style: str = "comma", as_zip: bool = False, gyro: bool = True) -> Path:
+                   style: str = "comma", as_zip: bool = False, gyro: bool = True, gravity: bool = False) -> Path:
     """phyphox's per-sensor export: a folder, or the zip phyphox writes (``as_zip``); ``style`` is
-    "comma", "tab" or "semicolon" (decimal comma). The gyroscope runs on its own clock (3 ms later)."""
+    "comma", "tab" or "semicolon" (decimal comma). The gyroscope runs on its own clock (3 ms later).
+    ``gravity``: also the gravity sensor's ``Gravity.csv`` (same clock as the accelerometer)."""
     delimiter, decimal = {"comma": (",", "."), "tab": ("\t", "."), "semicolon": (";", ",")}[style]
     files: dict[str, str] = {}
     t_acc = np.arange(int(seconds * rate_hz)) / rate_hz + 0.0123
@@ -60,6 +61,10 @@ def phyphox_export(path: Path, seconds: float = 4.0, rate_hz: float = 200.0, lin
     lines = [delimiter.join(f'"{h}"' for h in ("Time (s)", f"X ({unit})", f"Y ({unit})", f"Z ({unit})"))]
     lines += [delimiter.join(_phyphox_number(v, decimal) for v in (t, *row)) for t, row in zip(t_acc, values)]
     files[name] = "\n".join(lines) + "\n"
+    if gravity:
+        lines = [lines[0]] + [delimiter.join(_phyphox_number(v, decimal) for v in (t, *row))
+                              for t, row in zip(t_acc, f - a)]
+        files["Gravity.csv"] = "\n".join(lines) + "\n"
     if gyro:
         t_gyr = np.arange(int(seconds * rate_hz)) / rate_hz + 0.0153
         w = motion(t_gyr)[2]

@@ -31,8 +31,9 @@ def _sensorlogger(platform, as_zip, standardised=False):
     def build(tmp: Path):
         src = sensor_logger_export(tmp / ("rec.zip" if as_zip else "rec"), platform, as_zip=as_zip,
                                    standardised=standardised)
+        # iOS: Accelerometer.csv plus the Gravity.csv beside it, the specific force as Android's TotalAcceleration
         return (src, "sensorlogger", "TotalAcceleration.csv" if platform == "android" else "Accelerometer.csv",
-                T0_NS, 0 if platform == "android" else 1)
+                T0_NS, 0)
     return build
 
 
@@ -84,8 +85,9 @@ def test_corpus(tmp_path, case):
     np.testing.assert_allclose(log.accel_mps2, expected[which], rtol=0, atol=1e-8)
     assert log.gyro_b_radps is not None
     np.testing.assert_allclose(log.gyro_b_radps, expected[2], rtol=0, atol=2e-5)
-    rate = tomllib.loads((tmp_path / "log" / "array.toml").read_text())["rate_hz"]
-    assert rate == 1e9 / float(np.median(np.diff(log.timestamps_ns)))
+    doc = tomllib.loads((tmp_path / "log" / "array.toml").read_text())
+    assert doc["rate_hz"] == 1e9 / float(np.median(np.diff(log.timestamps_ns)))
+    assert doc["readings"] == ("linear_acceleration" if which == 1 else "specific_force")
 
 
 def test_corpus_real_euroc_rows_as_a_dataset_folder(tmp_path):

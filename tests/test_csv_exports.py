@@ -59,6 +59,8 @@ def test_phyphox_linear_accelerometer_export(tmp_path):
     log, out = converted(tmp_path, src, "--map", "phyphox")
     np.testing.assert_allclose(log.accel_mps2, motion(log.timestamps_ns * 1e-9)[1], rtol=0, atol=1e-8)
     assert "phyphox: Linear Accelerometer.csv, the linear acceleration (gravity removed by the phone)" in out
+    assert log.array.readings == "linear_acceleration"
+    assert 'readings = "linear_acceleration"' in (tmp_path / "log" / "array.toml").read_text()
 
 
 def test_phyphox_errors_name_the_export_not_the_preset(tmp_path):
@@ -92,15 +94,24 @@ def test_sensor_logger_android_reads_total_acceleration(tmp_path, as_zip):
 
 
 @pytest.mark.parametrize("standardised", [False, True])
-def test_sensor_logger_ios_reads_the_acceleration_without_gravity_in_androids_signs(tmp_path, standardised):
+@pytest.mark.parametrize("gravity", [False, True])
+def test_sensor_logger_ios_reads_the_acceleration_without_gravity_in_androids_signs(tmp_path, standardised, gravity):
     src = sensor_logger_export(tmp_path / "rec", "ios", standardised=standardised)
+    if not gravity:
+        (src / "Gravity.csv").unlink()
     log, out = converted(tmp_path, src, "--map", "sensorlogger")
-    _, a, w = motion((log.timestamps_ns - T0_NS) * 1e-9)
-    np.testing.assert_allclose(log.accel_mps2, a, rtol=0, atol=1e-12)  # +x when the phone accelerates to +x
+    f, a, w = motion((log.timestamps_ns - T0_NS) * 1e-9)
+    # with Gravity.csv beside it, the phone's gravity is added back: the specific force, a sum of two numbers
+    # below 12 m/s² (a few ulps of 10, 2e-15 each); without it, the linear acceleration as read
+    np.testing.assert_allclose(log.accel_mps2, f if gravity else a, rtol=0, atol=1e-12)  # +x when it accelerates to +x
     np.testing.assert_allclose(log.gyro_b_radps, w, rtol=0, atol=1e-12)
     assert "platform ios, app 1.41.1): Accelerometer.csv, the acceleration without gravity in m/s²" in out
     assert ("its signs turned" in out) != standardised
     assert "not the specific force (no TotalAcceleration.csv)" in out
+    assert log.array.readings == ("specific_force" if gravity else "linear_acceleration")
+    assert ('readings = "linear_acceleration"' in (tmp_path / "log" / "array.toml").read_text()) != gravity
+    assert ("the linear acceleration plus the phone's own gravity vector (Gravity.csv)" in out) == gravity
+    assert ("(the export holds no Gravity.csv to add back)" in out) != gravity
 
 
 def test_sensor_logger_accelerometer_without_metadata_is_ambiguous(tmp_path):
@@ -195,3 +206,29 @@ def test_a_zip_with_one_top_folder_and_phyphox_raw_data_in_a_zip(tmp_path):
     log = gio.read_log(tmp_path / "log2", check=False)
     assert log.timestamps_ns.tolist() == [0, 10_000_000, 20_000_000]
     assert log.accel_mps2.tolist() == [[0.1, 0.2, 9.8], [0.1, 0.25, 9.8], [0.1, 0.2, 9.75]]
+
+
+def test_sensor_logger_export_resaved_with_a_decimal_comma_gets_the_hint_on_its_time_column(tmp_path):
+    """A spreadsheet in a decimal-comma locale re-saves the export with ';' and '1,70000000000000E+018': the time
+    column's error gives the same hint as a value column's."""
+    src = sensor_logger_export(tmp_path / "rec", "android")
+    for path in src.glob("*.csv"):
+        if path.name == "Metadata.csv":
+            continue
+        lines = path.read_text().splitlines()
+        rows = [lines[0].replace(",", ";")]
+        for line in lines[1:]:
+            v = line.split(",")
+            time = f"{float(v[0]):.14E}".replace("E+18", "E+018").replace(".", ",")
+            rows.append(";".join([time] + [x.replace(".", ",") for x in v[1:]]))
+        path.write_text("\n".join(rows) + "\n")
+    before = snapshot(tmp_path)
+    rc, out, err = run(str(src), "--map", "sensorlogger", "--out", str(tmp_path / "log"))
+    hint = ' (a decimal comma: give [csv] decimal = "," or "auto" in the map)'
+    assert rc == 2 and err.strip() == (f"gfimu convert: error: {src / 'TotalAcceleration.csv'}:2: 'time': timestamp "
+                                       f"'1,70000000000000E+018' is not a number{hint}")
+    assert snapshot(tmp_path) == before
+    text = (src / "TotalAcceleration.csv").read_text().replace("1,70000000000000E+018", "1700000000000000000", 1)
+    (src / "TotalAcceleration.csv").write_text(text)
+    rc, out, err = run(str(src), "--map", "sensorlogger", "--out", str(tmp_path / "log"))
+    assert rc == 2 and err.strip().endswith(f"is not a number{hint}") and ":3: 'time'" in err

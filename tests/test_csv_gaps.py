@@ -215,3 +215,26 @@ def test_the_rosbag_converter_writes_the_rate_it_measured(tmp_path, capsys):
     assert main(["convert", "rosbag", str(bag), "--array", str(array_file(tmp_path / "array.toml", log.array)),
                  "--out", str(tmp_path / "r"), "--no-progress"]) == 0
     assert tomllib.loads((tmp_path / "r" / "array.toml").read_text())["rate_hz"] == 400.0
+
+
+def test_gaps_of_the_time_base_counted_only_where_the_written_log_has_them(tmp_path):
+    """The accelerometer file has 7 gaps: 3 before the gyroscope starts, 3 inside the gyroscope's own gap (both
+    sets in rows left out) and 1 in the written log: the report counts 1, and says where the rest went."""
+    acc_t = stamps(20_000, 10_000_000)
+    drop = np.zeros(acc_t.size, bool)
+    for start_s in (1.0, 2.0, 3.0, 70.0, 80.0, 90.0, 150.0):
+        drop[int(start_s * 100):int(start_s * 100) + 20] = True  # 0.21 s steps: 21 periods
+    acc_t = acc_t[~drop]
+    gyr_t = stamps(20_000, 10_000_000, offset_ns=3_000_000)
+    gyr_t = gyr_t[(gyr_t > T0 + 5_000_000_000) & ~((gyr_t > T0 + 60_000_000_000) & (gyr_t < T0 + 100_000_000_000))]
+    sensor_logger_export(tmp_path / "rec", acc_t, gyr_t)
+    rc, out, err = run(str(tmp_path / "rec"), "--map", "sensorlogger", "--out", str(tmp_path / "log"))
+    assert rc == 0, err
+    line = next(x for x in out.splitlines() if x.startswith("gaps of the time base"))
+    assert line.endswith("1 step(s) over 3 of its 10 ms periods, kept as time gaps of the log (6 more in rows "
+                         "left out)"), line
+    t = gio.read_log(tmp_path / "log").timestamps_ns
+    steps = np.diff(t)
+    # the written log: the accelerometer's one gap (0.21 s) and the gyroscope's (40 s), nothing else over 3 periods
+    big = sorted(steps[steps > 30_000_000].tolist())
+    assert len(big) == 2 and big[0] == 210_000_000 and 40e9 < big[1] < 40.1e9

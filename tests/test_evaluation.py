@@ -1,5 +1,6 @@
 """Evaluation metrics against hand-computed values, and the evaluate command."""
 
+import contextlib
 import csv
 import io
 import json
@@ -361,3 +362,35 @@ def test_cli_warns_when_the_reference_is_the_logs_own_gyroscope(tmp_path, capsys
     gio.write_log(log.replace(truth=None, reference=Motion(log.timestamps_ns, omega_b_radps=w)), tmp_path / "plain")
     assert main(["evaluate", str(tmp_path / "plain"), str(tmp_path / "est.csv"), "--format", "json"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_a_reference_that_is_the_logs_own_gyro_is_warned_about_with_advice_that_works(tmp_path, capsys):
+    """evaluate warns when reference.csv is imu.csv's own gyroscope; the advice names options that exist and,
+    followed (estimate -O use_gyro=False), gives an estimate that evaluates without the warning's cause."""
+    import dataclasses
+
+    from gfimu.array import Gyroscope
+    from gfimu.simulate import simulate
+
+    array = dataclasses.replace(cube_array(), gyroscope=Gyroscope(0.01))
+    sim = simulate("random3d", array=array, seed=1, duration_s=2.0)
+    log = sim.replace(truth=None, reference=Motion(sim.timestamps_ns, omega_b_radps=sim.gyro_b_radps.copy()))
+    gio.write_log(log, tmp_path / "log")
+    for extra in ([], ["-O", "use_gyro=False"]):
+        assert main(["estimate", str(tmp_path / "log"), *extra, "--out", str(tmp_path / "est.csv"), "--quiet"]) == 0
+        capsys.readouterr()
+        assert main(["evaluate", str(tmp_path / "log"), str(tmp_path / "est.csv")]) == 0
+        err = capsys.readouterr().err
+        assert "the reference is the log's own gyroscope" in err
+        assert "gfimu estimate -O use_gyro=False" in err and "convert mimu4444 or rosbag without --with-gyro" in err
+        assert "convert without --with-gyro" not in err
+    def help_text(*command: str) -> str:
+        with contextlib.suppress(SystemExit):
+            main(list(command))
+        return capsys.readouterr().out
+
+    assert "--with-gyro" in help_text("convert", "mimu4444", "--help")
+    assert "--with-gyro" in help_text("convert", "rosbag", "--help")
+    assert "--with-gyro" not in help_text("convert", "csv", "--help")
+    assert "use_gyro" in help_text("estimate", "--method", "smoother", "--list-options")
+    assert "use_gyro" in help_text("estimate", "--method", "ml", "--list-options")

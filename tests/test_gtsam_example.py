@@ -15,7 +15,7 @@ pytest.importorskip("gtsam")
 
 from gfimu import io as gio  # noqa: E402
 from gfimu.array import Gyroscope, cube_array  # noqa: E402
-from gfimu.simulate import SensorErrors, simulate  # noqa: E402
+from gfimu.simulate import simulate  # noqa: E402
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "gtsam_isam2.py"
 
@@ -35,10 +35,8 @@ def rmse(a, b) -> float:
 @pytest.fixture(scope="module")
 def log():
     """2 s of random3d motion at 200 Hz: the 5 cm cube (0.07 m/s²) and a gyro with 0.01 rad/s noise and a
-    constant bias drawn with 0.02 rad/s per axis."""
-    array = replace(cube_array(0.025, noise_std_mps2=0.07), gyroscope=Gyroscope(0.01))
-    return simulate("random3d", array=array, rate_hz=200.0, duration_s=2.0, seed=3,
-                    noise=SensorErrors(gyro_bias_std_radps=0.02))
+    constant bias drawn with 0.02 rad/s per axis (the example's own ``simulated_log``, as docs/gtsam.md runs it)."""
+    return load_example().simulated_log()
 
 
 def test_isam2_recovers_omega(log):
@@ -95,3 +93,24 @@ def test_the_example_runs_on_a_log_folder(log, tmp_path, capsys):
     np.testing.assert_allclose(est.specific_force_b_mps2, direct.specific_force_b_mps2, rtol=1e-9, atol=1e-12)
     assert f"omega RMSE against the truth: {rmse(direct.omega_b_radps, part.truth.omega_b_radps):.5f} rad/s" in out
     assert {p.name: p.read_bytes() for p in (tmp_path / "log").iterdir()} == before
+
+
+def test_the_documented_command_writes_its_log_and_prints_the_documented_figure(tmp_path, capsys):
+    """docs/gtsam.md's command: `python examples/gtsam_isam2.py sim --simulate --keyframe 10` writes the log it
+    solves (no file the repository does not ship) and prints the figure the page gives; a folder that exists is
+    refused, untouched."""
+    import re
+
+    example = load_example()
+    assert example.main([str(tmp_path / "sim"), "--simulate", "--keyframe", "10"]) == 0
+    out = capsys.readouterr().out
+    assert f"log written: {tmp_path / 'sim'}" in out and "400 samples, 40 ISAM2 updates" in out
+    figure = float(re.search(r"omega RMSE against the truth: ([0-9.]+) rad/s", out).group(1))
+    page = (EXAMPLE.parents[1] / "docs" / "gtsam.md").read_text()
+    assert "python examples/gtsam_isam2.py sim --simulate --keyframe 10" in page
+    assert f"truth: {figure:.4f} rad/s" in page  # the page's figure is the command's, to its 4 decimals
+    before = {p.name: p.read_bytes() for p in (tmp_path / "sim").iterdir()}
+    with pytest.raises(SystemExit):
+        example.main([str(tmp_path / "sim"), "--simulate"])
+    assert "which exists; name a new folder" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in (tmp_path / "sim").iterdir()} == before

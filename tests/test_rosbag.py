@@ -816,3 +816,34 @@ def test_a_damaged_metadata_yaml_names_the_file_and_key(tmp_path, edit, parts, c
     assert time.perf_counter() - start < 1.0
     assert err.startswith(f"gfimu convert: error: {bag / 'metadata.yaml'}")
     assert snapshot(bag) | snapshot(arr) == before
+
+
+def test_gyro_as_reference_on_a_topic_several_accelerometers_share(tmp_path, capsys):
+    """A board publishing its accelerometers on one topic, the chips mounted alike (one rotation): the gyro of
+    that topic is the reference, turned by the rotation they share; with different rotations, refused naming
+    them."""
+    from gfimu.array import Gyroscope
+
+    rng = np.random.default_rng(5)
+    turn = matrix_from_rotation_vector(np.array([0.3, -1.1, 0.7]))
+    accs = tuple(Accelerometer(f"s{i}", rng.uniform(-0.03, 0.03, 3), turn, noise_std_mps2=NOISE_MPS2)
+                 for i in range(4))
+    log = simulate("random3d", array=SensorArray(accs, "alike", Gyroscope(0.01)), rate_hz=500.0, duration_s=0.5,
+                   seed=2)
+    streams = sync_streams(log, topic="/imu", gyro_from=(1,))
+    bag = write_bag(tmp_path / "bag", "ros1", streams)
+    shared = SensorArray(tuple(replace(a, topic="/imu") for a in accs), "alike")
+    arr = tmp_path / "array.toml"
+    gio.write_array_toml(shared, arr)
+    rc, out, err = convert([str(bag), "--array", str(arr), "--out", str(tmp_path / "log"), "--gyro-as-reference"],
+                           capsys)
+    assert rc == 0, err
+    back = gio.read_log(tmp_path / "log")
+    # the sensor-frame gyro R^T ω turned back by R: a 3x3 product of numbers below 10 rad/s, a few ulps
+    np.testing.assert_allclose(back.reference.omega_b_radps, log.truth.omega_b_radps, rtol=0, atol=1e-12)
+    assert "turned into the body frame by the rotation its accelerometers 's0', 's1', 's2', 's3' share" in out
+    other = SensorArray((replace(accs[0], topic="/imu", rotation_body_sensor=np.eye(3)),
+                         *(replace(a, topic="/imu") for a in accs[1:])), "unlike")
+    gio.write_array_toml(other, tmp_path / "other.toml")
+    refused([str(bag), "--array", str(tmp_path / "other.toml"), "--gyro-as-reference"], tmp_path / "log2", capsys,
+            "carry the frame_ids of several accelerometers (s0, s1, s2, s3) with different rotations")

@@ -116,6 +116,17 @@ SECTIONS = (
         "size of `imu.csv`, the time to read, and the peak of the largest worker process parsing blocks.",
         quick=("--minutes", "2")),
     Section(
+        "phone-exports", "Phone exports of linear acceleration: attitude and gravity-free acceleration",
+        "phone_exports.py",
+        "Real Sensor Logger and phyphox exports whose accelerometer file is the linear acceleration (gravity "
+        "removed by the phone), read from `$GFIMU_PHONE_EXPORTS_DIR` (not shipped: their repositories state no "
+        "licence; SOURCE names them): `gfimu convert csv --map sensorlogger|phyphox`, then `gfimu estimate "
+        "--orientation gyro`; before (the readings taken for the specific force, as gfimu read them until "
+        "array.toml recorded `readings`) and now (the export's own Gravity.csv added back, or attitude refused "
+        "and ω and a estimated without it). The first attitude is compared with the phone's own gravity vector "
+        "(the first row of its Gravity.csv).",
+        json=False),
+    Section(
         "startup", "Start-up of the command", "bench_startup.py",
         "Wall time of a few command lines that do no work, each in a fresh process, and which heavy "
         "modules each one imports.",

@@ -48,6 +48,10 @@ def run(args) -> int:
     with steps("calibrate", ["read the log", "find still periods and fit", "write"], show_progress(args)) as bar:
         bar.step("read the log")
         log = gio.read_log(args.log)
+        if log.array.readings == "linear_acceleration":
+            raise CLIError(f"{args.log}: its array.toml says readings = \"linear_acceleration\" (gravity removed by "
+                           "the phone): a calibration fits the accelerometers against gravity, which these readings "
+                           "no longer hold; calibrate from the specific force (convert the export with its gravity)")
         bar.step("find still periods and fit")
         cal = _fit(args, log)
         bar.step("write")

@@ -103,7 +103,9 @@ def _warn_gyro_is_reference(truth_path: Path, truth) -> None:
     if np.mean(same) > 0.9:
         warnings.warn(f"{truth_path}: the reference is the log's own gyroscope (imu.csv's w_x, w_y, w_z); an "
                       "estimate made with the gyro agrees with it by construction, so this is no independent check "
-                      "(a log without gyroscope channels, e.g. convert without --with-gyro, evaluates the accelerometers alone)", UserWarning, stacklevel=2)
+                      "(to evaluate the accelerometers alone, estimate without the gyro: gfimu estimate -O use_gyro=False with "
+                      "the smoothers or ml; or convert mimu4444 or rosbag without --with-gyro, which writes no gyroscope "
+                      "channels)", UserWarning, stacklevel=2)
 
 
 def _order(args) -> tuple[str, str]:

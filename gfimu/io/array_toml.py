@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ..array import Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
+from ..array import READINGS, Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
 from .atomic import atomic_write_text
 from ..errors import InputError
 from .errors import LogFormatError, LogFormatWarning, read_utf8_text, toml_nested_too_deep
@@ -168,6 +168,10 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
     rate_hz = doc.get("rate_hz")
     if rate_hz is not None and (not _is_number(rate_hz) or not math.isfinite(rate_hz) or rate_hz <= 0):
         raise ctx.error(f"expected the nominal sample rate in Hz, a number > 0, got {rate_hz!r}", key="rate_hz")
+    readings = doc.get("readings", "specific_force")
+    if readings not in READINGS:
+        raise ctx.error(f"expected what the accelerometers report, {' or '.join(map(repr, READINGS))}, got "
+                        f"{readings!r}", key="readings")
     accs_doc = doc.get("accelerometers")
     if accs_doc is None:
         raise ctx.error("no [[accelerometers]] table; an array needs at least one accelerometer", key="accelerometers")
@@ -242,7 +246,8 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
             body = Body(tuple(inertia))
         except ArrayModelError as exc:
             raise ctx.error(str(exc), "body", 0, "principal_inertia_kgm2") from None
-    return SensorArray(tuple(accs), name, gyro, inclinometer, body), (None if rate_hz is None else float(rate_hz))
+    return (SensorArray(tuple(accs), name, gyro, inclinometer, body, readings),
+            (None if rate_hz is None else float(rate_hz)))
 
 
 def read_array_toml(path: str | os.PathLike) -> SensorArray:
@@ -317,6 +322,7 @@ def array_to_dict(array: SensorArray, rate_hz: float | None = None) -> dict:
     doc: dict = {"format": ARRAY_FORMAT, "name": array.name}
     if rate_hz is not None:
         doc["rate_hz"] = float(rate_hz)
+    doc["readings"] = array.readings
     accs = []
     for a in array.accelerometers:
         entry: dict = {"name": a.name, "position_m": np.asarray(a.position_m, dtype=float)}

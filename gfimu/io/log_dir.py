@@ -99,7 +99,8 @@ def read_log(path: str | os.PathLike, check: bool = True, truth: bool = True) ->
         found = (plausibility.check_rate(t, declared_rate_hz, time_unit, str(imu_path), str(array_path))
                  + plausibility.check_geometry(array, str(array_path))
                  + plausibility.check_finite(log, str(imu_path))
-                 + plausibility.check_gravity(log, str(imu_path), accel_unit or "m s^-2"))
+                 + (plausibility.check_gravity(log, str(imu_path), accel_unit or "m s^-2")
+                    if array.readings == "specific_force" else []))
         for message in found:
             warnings.warn(message, LogPlausibilityWarning, stacklevel=2)
     return log

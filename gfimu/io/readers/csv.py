@@ -163,6 +163,21 @@ z = "z"
 '''
 
 
+def _gravity_map(name: str, source: "_Source", accel_map: str) -> tuple[str, str] | None:
+    """(a one-accelerometer map reading the export's own gravity vector, in the same axes, signs and units as
+    ``accel_map`` reads the linear acceleration; the file's name), or None when the export holds none:
+    Sensor Logger's Gravity.csv, a phyphox gravity sensor's Gravity.csv."""
+    if not source.is_folder or name not in ("sensorlogger", "phyphox"):
+        return None
+    file = "Gravity.csv"
+    if not source.exists(source.folder / file):
+        return None
+    for linear in ('"Accelerometer.csv"', '"Linear Accelerometer.csv"'):
+        if f"file = {linear}" in accel_map:
+            return accel_map.replace(f"file = {linear}", f'file = "{file}"', 1), file
+    return None
+
+
 def _metadata(source: "_Source", path: Path) -> dict[str, str]:
     """The first row of Sensor Logger's Metadata.csv as {column: value} (empty when unreadable)."""
     try:
@@ -751,7 +766,9 @@ class _Reader:
         try:
             t = timestamps_ns(tokens, int(scale))
         except TimestampError as exc:
-            raise LogFormatError(f"{table.shown(j)}: {exc}", table.path, table.lines[exc.index]) from None
+            hint = (" (a decimal comma: give [csv] decimal = \",\" or \"auto\" in the map)"
+                    if _DECIMAL_COMMA.match(tokens[exc.index].strip()) else "")
+            raise LogFormatError(f"{table.shown(j)}: {exc}{hint}", table.path, table.lines[exc.index]) from None
         bad = np.flatnonzero(np.diff(t) <= 0)
         if bad.size:
             k = int(bad[0]) + 1
@@ -933,11 +950,17 @@ def _align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_pe
                       f"{sum(f[5] for f in found)} row(s) of the time base left out; the log has a time gap at each")
     elif resample_hz is not None or len(groups) > 1:
         report.append(f"gaps: no step over {max_gap_periods:g} periods in the interpolated files")
+    t_out = grid[keep]
     if resample_hz is None and len(gaps[base_key]):
         g = gaps[base_key]
-        report.append(f"gaps of the time base {base_key[0]}: {len(g)} step(s) over {max_gap_periods:g} of its "
-                      f"{g.period_ns * 1e-6:.4g} ms periods, kept as time gaps of the log")
-    t_out = grid[keep]
+        # only those whose two rows are both in the written log (the others lie in rows left out)
+        step = np.searchsorted(t_out, g.start_ns)
+        inside = step < t_out.size - 1
+        inside[inside] &= (t_out[step[inside]] == g.start_ns[inside]) & (t_out[step[inside] + 1] == g.end_ns[inside])
+        kept = int(np.count_nonzero(inside))
+        report.append(f"gaps of the time base {base_key[0]}: {kept} step(s) over {max_gap_periods:g} of its "
+                      f"{g.period_ns * 1e-6:.4g} ms periods, kept as time gaps of the log"
+                      + (f" ({len(g) - kept} more in rows left out)" if kept < len(g) else ""))
     if resample_hz is None and t_out.size > 2:
         dt = np.diff(t_out)
         breaks = int(np.count_nonzero(dt > GAP_FACTOR * float(np.median(dt))))
@@ -974,6 +997,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     else:
         cmap = load_map(map_spec)
         reader = _Reader(cmap, input_path)
+    gravity = _gravity_map(map_spec, reader.source, text) if without_gravity else None
+    gravity_sensor = None if gravity is None else parse_map(gravity[0], f"preset {map_spec}").accelerometers[0]
     gyro = cmap.gyroscope
     if gyro is not None and gyro.optional and not reader.gyro_present(gyro):
         report.append(f"gyroscope: not in {reader.file_of(gyro)}; none read")
@@ -983,6 +1008,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     sensors = [(cmap.accelerometers[i], acc.axes, "acceleration") for acc, i in zip(array.accelerometers, order)]
     if gyro is not None:
         sensors.append((gyro, AXES, "angular_rate"))
+    if gravity_sensor is not None:
+        sensors.append((gravity_sensor, AXES, "acceleration"))
     groups: dict[tuple, tuple[np.ndarray, str]] = {}
     tables: dict[tuple, Table] = {}
     linear = without_gravity
@@ -999,8 +1026,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
                           f"in [{unit}]")
         values, shown = reader.values(table, sensor, kind, axes)
         blocks.append((key, values))
-        report.append(f"  {sensor.name}: {', '.join(shown)}")
-        if kind == "acceleration":
+        report.append(f"  {'gravity' if sensor is gravity_sensor else sensor.name}: {', '.join(shown)}")
+        if kind == "acceleration" and sensor is not gravity_sensor:
             linear |= any("Linear" in sh for sh in shown)
     base_key = blocks[0][0]
     t_out, columns = _align(groups, blocks, base_key, tables, max_gap_periods, resample_hz, report)
@@ -1011,6 +1038,18 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         omega = columns[n_acc]
         if cmap.gyro_rotation is not None:
             omega = omega @ cmap.gyro_rotation.T
+    if gravity_sensor is not None:  # the export's own gravity added back: the readings are the specific force
+        accel = accel + columns[-1]
+        linear = False
+        report.append(f"specific force: the linear acceleration plus the phone's own gravity vector ({gravity[1]}), "
+                      "so attitude and gravity-free acceleration can be estimated")
+    array = dataclasses.replace(array, readings="linear_acceleration" if linear else array.readings)
+    if array.readings == "linear_acceleration":
+        linear = True
+        report.append("readings: linear acceleration (gravity removed by the phone), recorded as readings = "
+                      "\"linear_acceleration\" in array.toml: ω and the acceleration a are estimated, attitude "
+                      "(--orientation, --tum) is refused" + ("" if gravity_sensor is not None or not without_gravity else
+                                   " (the export holds no Gravity.csv to add back)"))
     if t_out.size < 2:
         raise LogFormatError(f"holds {t_out.size} sample(s); a log needs at least two", base_key[0])
     reference = None

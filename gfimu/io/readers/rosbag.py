@@ -596,17 +596,22 @@ def _gyro_reference(topic: str, m: TopicMessages, array, grid_ns: np.ndarray, ma
     if not accs:
         frames = {_frame_name(f) for f in s.frame_ids}
         accs = [a for a in array.accelerometers if a.topic is None and _frame_name(a.name) in frames]
-    if len(accs) == 1:
-        rotation = np.asarray(accs[0].rotation_body_sensor, dtype=float)
-        frame = f"turned into the body frame by the rotation of accelerometer {accs[0].name!r}"
+    rotations = [np.asarray(a.rotation_body_sensor, dtype=float) for a in accs]
+    # several accelerometers on the reference's topic (or frame) with one rotation (to the 1e-9 of a rotation
+    # written out in decimal): that rotation turns the gyro, whichever of them it belongs with
+    if accs and all(np.allclose(r, rotations[0], rtol=0, atol=1e-9) for r in rotations[1:]):
+        rotation = rotations[0]
+        frame = (f"turned into the body frame by the rotation of accelerometer {accs[0].name!r}" if len(accs) == 1
+                 else f"turned into the body frame by the rotation its accelerometers "
+                      f"{', '.join(repr(a.name) for a in accs)} share")
     elif not accs:
         rotation = np.eye(3)
         frame = (f"its axes (frame_id {', '.join(repr(f) for f in s.frame_ids)}) taken as the body axes: no "
                  "accelerometer of the array reads this topic or frame")
     else:
         raise LogFormatError(f"--gyro-as-reference: the messages on {topic!r} carry the frame_ids of several "
-                             f"accelerometers ({', '.join(a.name for a in accs)}); which rotation turns them into the "
-                             "body frame is ambiguous", path)
+                             f"accelerometers ({', '.join(a.name for a in accs)}) with different rotations; which "
+                             "rotation turns them into the body frame is ambiguous", path)
     omega = s.gyro_radps @ rotation.T
     t = s.stamps_ns
     k = np.clip(np.searchsorted(t, grid_ns, side="right") - 1, 0, t.size - 2)
