@@ -10,7 +10,8 @@ with ``numpy.savetxt``. Against it, each a fresh process on the same log:
 - ``fixed-lag``: ``python -m gfimu estimate LOG --method fixed-lag --out X``;
 - ``help``: ``gfimu --help`` (the installed command when there is one, else ``python -m gfimu --help``);
 - ``import``: ``python -c "import gfimu.cli"`` and ``estimate-import``: what ``gfimu estimate`` imports
-  before it reads the log (``gfimu.cli.estimate``, ``gfimu.pipeline``, ``gfimu.smoother.batch``);
+  before it reads the log (``gfimu.cli.estimate``, ``gfimu.pipeline``, the batch smoother, its guard, the
+  per-sample ML estimate it checks against, the output writer);
 - ``pass``: ``python -c pass``, the interpreter's own start.
 
 The commands run in one loop: each round runs every command once, in an order turned by one place
@@ -55,7 +56,7 @@ DESCRIPTION = {
     "fixed-lag": "gfimu estimate LOG --method fixed-lag",
     "help": "gfimu --help",
     "import": "python -c \"import gfimu.cli\"",
-    "estimate-import": "imports of gfimu estimate (cli.estimate, pipeline, smoother.batch)",
+    "estimate-import": "imports of gfimu estimate (cli.estimate, pipeline, smoother.batch, guard, ml, outputs)",
     "pass": "python -c pass",
 }
 
@@ -71,7 +72,8 @@ def commands(log: Path, out: Path) -> dict[str, list[str]]:
                       str(out / "fixed-lag.csv")],
         "help": helps,
         "import": [py, "-c", "import gfimu.cli"],
-        "estimate-import": [py, "-c", "import gfimu.cli, gfimu.cli.estimate, gfimu.pipeline, gfimu.smoother.batch"],
+        "estimate-import": [py, "-c", "import gfimu.cli, gfimu.cli.estimate, gfimu.pipeline, gfimu.smoother.batch, "
+                            "gfimu.smoother.guard, gfimu.estimators.ml, gfimu.io.outputs"],
         "pass": [py, "-c", "pass"],
     }
 
