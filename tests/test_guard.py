@@ -234,3 +234,22 @@ def test_omega_noise_is_the_bounds_omega_block(array):
     assert np.array_equal(np.isinf(got), np.isinf(expected)) and np.isinf(got[:2]).all()
     finite = np.isfinite(expected)
     np.testing.assert_allclose(got[finite], expected[finite], rtol=1e-10)
+
+
+def test_a_short_clean_log_is_fitted_per_sample_once(monkeypatch, case):
+    """On a log short enough that the model check fits every sample (here 750 < 2 × CHECK_SAMPLES), the guard
+    takes that fit instead of computing it again, and finds what it finds with a fit of its own."""
+    log, ml, _, on = case
+    calls = []
+    real = MLEstimator.estimate_motion
+
+    def counted(self, lg, *args, **kwargs):
+        calls.append(len(lg))
+        return real(self, lg, *args, **kwargs)
+
+    monkeypatch.setattr(MLEstimator, "estimate_motion", counted)
+    est = BatchSmootherEstimator().estimate(log)
+    assert calls == [len(log)]
+    assert est.report.guard == on.report.guard
+    again = guard.check(log, est.motion, ml, est.report.model_check, "replace")
+    assert again == est.report.guard and again.usable > 0.8 * len(log)
