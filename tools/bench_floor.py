@@ -8,6 +8,8 @@ with ``numpy.savetxt``. Against it, each a fresh process on the same log:
 
 - ``batch``: ``python -m gfimu estimate LOG --out X`` (the batch smoother, the default);
 - ``fixed-lag``: ``python -m gfimu estimate LOG --method fixed-lag --out X``;
+- ``batch-serial``: the batch command with ``-O workers=1``: its solve windows in its own process, one after
+  the other, instead of in forked workers (whether the workers pay on this machine);
 - ``help``: ``gfimu --help`` (the installed command when there is one, else ``python -m gfimu --help``);
 - ``import``: ``python -c "import gfimu.cli"`` and ``estimate-import``: what ``gfimu estimate`` imports
   before it reads the log (``gfimu.cli.estimate``, ``gfimu.pipeline``, the batch smoother, its guard, the
@@ -49,11 +51,12 @@ from bench_env import command_env  # noqa: E402
 FLOOR = ("import sys, numpy, scipy.linalg\n"
          "a = numpy.loadtxt(sys.argv[1], delimiter=',', ndmin=2)\n"
          "numpy.savetxt(sys.argv[2], a[:, :10], delimiter=',', header='t,1,2,3,4,5,6,7,8,9')\n")
-NAMES = ("floor", "batch", "fixed-lag", "help", "import", "estimate-import", "pass")
+NAMES = ("floor", "batch", "fixed-lag", "batch-serial", "help", "import", "estimate-import", "pass")
 DESCRIPTION = {
     "floor": "floor: numpy + scipy.linalg, loadtxt imu.csv, savetxt 10 columns",
     "batch": "gfimu estimate LOG (batch smoother)",
     "fixed-lag": "gfimu estimate LOG --method fixed-lag",
+    "batch-serial": "gfimu estimate LOG -O workers=1 (batch, no worker processes)",
     "help": "gfimu --help",
     "import": "python -c \"import gfimu.cli\"",
     "estimate-import": "imports of gfimu estimate (cli.estimate, pipeline, smoother.batch, guard, ml, outputs)",
@@ -70,6 +73,7 @@ def commands(log: Path, out: Path) -> dict[str, list[str]]:
         "batch": [py, "-m", "gfimu", "estimate", str(log), "--out", str(out / "batch.csv")],
         "fixed-lag": [py, "-m", "gfimu", "estimate", str(log), "--method", "fixed-lag", "--out",
                       str(out / "fixed-lag.csv")],
+        "batch-serial": [py, "-m", "gfimu", "estimate", str(log), "-O", "workers=1", "--out", str(out / "batch-serial.csv")],
         "help": helps,
         "import": [py, "-c", "import gfimu.cli"],
         "estimate-import": [py, "-c", "import gfimu.cli, gfimu.cli.estimate, gfimu.pipeline, gfimu.smoother.batch, "
@@ -110,7 +114,7 @@ def measure(log: Path, names: list[str], runs: int, env: dict) -> dict[str, dict
                 wall, cpu = timed(argvs[name], env)
                 walls[name].append(wall)
                 cpus[name].append(cpu)
-                if r == 0 and name in ("floor", "batch", "fixed-lag"):  # each writes one row per sample
+                if r == 0 and name in ("floor", "batch", "fixed-lag", "batch-serial"):  # one row per sample
                     n_in, n_out = rows_of(log / "imu.csv"), rows_of(out / f"{name}.csv")
                     if n_in != n_out:
                         raise SystemExit(f"bench_floor: {name} wrote {n_out} rows for {n_in} samples")
@@ -129,7 +133,7 @@ def report(title: str, res: dict[str, dict], runs: int) -> None:
         cratio = (f"{r['cpu_s'] / floor['cpu_s']:.2f}" if floor else "")
         print(f"| {DESCRIPTION[name]} | {r['wall_s']:.3f} | {ratio} | {r['cpu_s']:.3f} | {cratio} |")
     print()
-    pairs = [("batch", "floor"), ("fixed-lag", "floor"), ("fixed-lag", "batch")]
+    pairs = [("batch", "floor"), ("fixed-lag", "floor"), ("fixed-lag", "batch"), ("batch", "batch-serial")]
     said = [f"{a} ÷ {b} = {res[a]['wall_s'] / res[b]['wall_s']:.2f} wall, "
             f"{res[a]['cpu_s'] / max(res[b]['cpu_s'], 1e-9):.2f} CPU"
             for a, b in pairs if a in res and b in res]

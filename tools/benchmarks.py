@@ -114,7 +114,8 @@ SECTIONS = (
         "A 60 s, 500 Hz simulated log of a cube of four triads (30,000 samples). The floor is a Python process "
         "that imports numpy and scipy.linalg, reads the log's `imu.csv` with `numpy.loadtxt` and writes a "
         "10-column CSV of the same length with `numpy.savetxt`; against it the whole `gfimu estimate LOG` "
-        "command (batch smoother) and `gfimu estimate LOG --method fixed-lag`, and the start-up of `gfimu --help`, "
+        "command (batch smoother), the same with `-O workers=1` (no worker processes for its solve windows) and "
+        "`gfimu estimate LOG --method fixed-lag`, and the start-up of `gfimu --help`, "
         "of importing `gfimu.cli` and of what `gfimu estimate` imports, each a fresh process. All run in one loop, "
         "each once per round in a turning order; medians of the rounds, wall and CPU time (worker processes "
         "included), and each as a multiple of the floor's.",
