@@ -212,3 +212,44 @@ def test_a_smoother_reading_the_gyroscope_is_not_judged():
     assert est.report.guard.spans == () and est.report.warnings == ()
     est = BatchSmootherEstimator(**STIFF, use_gyro=False).estimate(with_gyro)  # the accelerometers alone: judged
     assert est.report.guard.note == "" and len(est.report.guard.spans) == 1
+
+
+@pytest.mark.parametrize("array", [cube_array(0.025), cube_array(0.05, noise_std_mps2=0.02)], ids=["cube", "cube-5cm"])
+def test_omega_noise_is_the_bounds_omega_block(array):
+    """The std of the per-sample ω from the 3×3 Schur complement equals the root of the trace of the ω block of
+    the 9×9 Cramér-Rao bound (the expression it replaces), to rounding; inf where that bound is singular (ω = 0)
+    and where it is nearly so the bound itself answers."""
+    from gfimu.crb import crb_per_sample
+
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(400, 3)) * rng.choice([1e-3, 1.0, 30.0], size=(400, 1))
+    w[:2] = 0.0
+    w[2] = [1e-9, 0.0, 0.0]
+    var = rng.uniform(0.5, 2.0, 400)
+    bound = crb_per_sample(array, w, noise_std_mps2=1.0)
+    with np.errstate(invalid="ignore"):
+        expected = np.sqrt(np.maximum(np.trace(bound.covariance[:, 6:9, 6:9], axis1=1, axis2=2), 0.0) * var)
+    expected = np.where(np.isfinite(expected) & ~bound.singular, expected, np.inf)
+    got = guard.omega_noise(array, w, var)
+    assert np.array_equal(np.isinf(got), np.isinf(expected)) and np.isinf(got[:2]).all()
+    finite = np.isfinite(expected)
+    np.testing.assert_allclose(got[finite], expected[finite], rtol=1e-10)
+
+
+def test_a_short_clean_log_is_fitted_per_sample_once(monkeypatch, case):
+    """On a log short enough that the model check fits every sample (here 750 < 2 × CHECK_SAMPLES), the guard
+    takes that fit instead of computing it again, and finds what it finds with a fit of its own."""
+    log, ml, _, on = case
+    calls = []
+    real = MLEstimator.estimate_motion
+
+    def counted(self, lg, *args, **kwargs):
+        calls.append(len(lg))
+        return real(self, lg, *args, **kwargs)
+
+    monkeypatch.setattr(MLEstimator, "estimate_motion", counted)
+    est = BatchSmootherEstimator().estimate(log)
+    assert calls == [len(log)]
+    assert est.report.guard == on.report.guard
+    again = guard.check(log, est.motion, ml, est.report.model_check, "replace")
+    assert again == est.report.guard and again.usable > 0.8 * len(log)

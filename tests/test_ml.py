@@ -299,3 +299,27 @@ def test_closed_forms_of_the_iterations_match_the_direct_products():
     residual = full - rigid_body.quadratic_terms(w) @ model.A.T
     np.testing.assert_allclose(_cost(model, b, w, None, None), np.sum(residual**2, axis=1), rtol=1e-10)
     np.testing.assert_allclose(c, full @ model.A, rtol=1e-12, atol=1e-12)
+
+
+def test_viterbi_signs_minimise_the_transition_cost_over_every_sign_sequence():
+    """The two-state recursion against every one of the 2^m sign sequences of a short run (up to the overall
+    sign, which the costs do not see when the integral is zero, and which the integral fixes otherwise)."""
+    import itertools
+
+    from gfimu.estimators.ml import _viterbi_signs
+
+    rng = np.random.default_rng(11)
+    for trial in range(20):
+        m = 8
+        u = rng.normal(size=(m, 3))
+        integral = np.cumsum(rng.normal(size=(m, 3)) * rng.choice([0.1, 1.0, 3.0]), axis=0)
+        inc = np.diff(integral, axis=0)
+
+        def cost(s):
+            v = np.asarray(s)[:, None] * u
+            return float(np.sum((v[1:] - v[:-1] - inc) ** 2))
+
+        best = min(itertools.product((1.0, -1.0), repeat=m), key=cost)
+        got = _viterbi_signs(u, integral)
+        assert set(np.unique(got)) <= {1.0, -1.0}
+        assert cost(got) == pytest.approx(cost(best), rel=1e-12, abs=1e-12)

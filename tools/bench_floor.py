@@ -1,24 +1,33 @@
 #!/usr/bin/env python3
-"""Where the time of ``gfimu estimate LOG --method smoother`` goes on one log, and how fast the estimation
-would have to be for a given whole-command throughput.
+"""Whole ``gfimu estimate`` commands against a data-movement floor, measured in one loop.
 
-The log is the simulated cube log of ``tools/bench_smoother.py`` (random 3-D motion, cube array, 500 Hz,
-``--duration-s`` long). Each part is timed on its own, the best of ``--repeats`` runs:
+The floor is what any tool that reads a log and writes an estimate must at least do: a Python process
+that imports numpy and ``scipy.linalg``, reads the log's ``imu.csv`` with ``numpy.loadtxt`` and writes a
+10-column CSV of the same length (a timestamp and nine columns, as many as ω, ω̇ and the specific force)
+with ``numpy.savetxt``. Against it, each a fresh process on the same log:
 
-- start: a Python process that imports nothing of ours (``python -c pass``);
-- imports: a fresh process importing what the command imports (``gfimu.cli`` and the smoother);
-- reading ``LOG`` (``gfimu.io.read_log`` as the command calls it) and screening its readings;
-- writing an estimate of the log's length (the truth's ω, ω̇ and acceleration: the columns the smoother
-  writes) through the command's CSV writer;
-- the whole command, each run its own process.
+- ``batch``: ``python -m gfimu estimate LOG --out X`` (the batch smoother, the default);
+- ``fixed-lag``: ``python -m gfimu estimate LOG --method fixed-lag --out X``;
+- ``batch-serial``: the batch command with ``-O workers=1``: its solve windows in its own process, one after
+  the other, instead of in forked workers (whether the workers pay on this machine);
+- ``help``: ``gfimu --help`` (the installed command when there is one, else ``python -m gfimu --help``);
+- ``import``: ``python -c "import gfimu.cli"`` and ``estimate-import``: what ``gfimu estimate`` imports
+  before it reads the log (``gfimu.cli.estimate``, ``gfimu.pipeline``, the batch smoother, its guard, the
+  per-sample ML estimate it checks against, the output writer);
+- ``pass``: ``python -c pass``, the interpreter's own start.
 
-The processes run with Python's bytecode cache on (``tools/bench_env.py``). The estimation is the
-whole command less these parts. For ``--target`` samples/s the command may take
-samples / target seconds; the parts above take what they take whatever the estimation does, and the
-rest is the estimation's budget: the table gives the estimation throughput that budget asks for,
-against the one measured here and the one ``tools/bench_smoother.py`` measures on long logs.
+The commands run in one loop: each round runs every command once, in an order turned by one place
+each round, so that a change of the machine's load falls on all of them alike; the table gives the
+median over ``--runs`` rounds of the wall time and of the CPU time (user + system of the process and
+of the worker processes it waited for, ``resource.getrusage(RUSAGE_CHILDREN)``), and each as a multiple
+of the floor's. The processes run with Python's bytecode cache on and one BLAS thread
+(``tools/bench_env.py``).
 
-    python3 tools/bench_floor.py [--duration-s 60] [--target 30000] [--repeats 5] [--json bench_floor.json]
+The log is a simulated cube of four triads (``gfimu simulate random3d``, 5 cm half edge, 500 Hz,
+``--duration-s`` long, default noise), or ``--log DIR`` (a log folder), or each MIMU4444 ``data.bin``
+given as an argument (converted with ``gfimu convert mimu4444`` first; one table each).
+
+    python3 tools/bench_floor.py [--runs 5] [--duration-s 60] [--log DIR] [--only batch,fixed-lag] [data.bin ...]
 """
 
 from __future__ import annotations
@@ -26,96 +35,168 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
+import resource
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_env import command_env  # noqa: E402
 
+FLOOR = ("import sys, numpy, scipy.linalg\n"
+         "a = numpy.loadtxt(sys.argv[1], delimiter=',', ndmin=2)\n"
+         "numpy.savetxt(sys.argv[2], a[:, :10], delimiter=',', header='t,1,2,3,4,5,6,7,8,9')\n")
+NAMES = ("floor", "batch", "fixed-lag", "batch-serial", "help", "import", "estimate-import", "pass")
+DESCRIPTION = {
+    "floor": "floor: numpy + scipy.linalg, loadtxt imu.csv, savetxt 10 columns",
+    "batch": "gfimu estimate LOG (batch smoother)",
+    "fixed-lag": "gfimu estimate LOG --method fixed-lag",
+    "batch-serial": "gfimu estimate LOG -O workers=1 (batch, no worker processes)",
+    "help": "gfimu --help",
+    "import": "python -c \"import gfimu.cli\"",
+    "estimate-import": "imports of gfimu estimate (cli.estimate, pipeline, smoother.batch, guard, ml, outputs)",
+    "pass": "python -c pass",
+}
 
-def best_of_processes(argv: list[str], repeats: int, env: dict) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        subprocess.run(argv, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        times.append(time.perf_counter() - t0)
-    return min(times)
+
+def commands(log: Path, out: Path) -> dict[str, list[str]]:
+    py = sys.executable
+    script = Path(py).with_name("gfimu")
+    helps = [str(script), "--help"] if script.is_file() else [py, "-m", "gfimu", "--help"]
+    return {
+        "floor": [py, "-c", FLOOR, str(log / "imu.csv"), str(out / "floor.csv")],
+        "batch": [py, "-m", "gfimu", "estimate", str(log), "--out", str(out / "batch.csv")],
+        "fixed-lag": [py, "-m", "gfimu", "estimate", str(log), "--method", "fixed-lag", "--out",
+                      str(out / "fixed-lag.csv")],
+        "batch-serial": [py, "-m", "gfimu", "estimate", str(log), "-O", "workers=1", "--out", str(out / "batch-serial.csv")],
+        "help": helps,
+        "import": [py, "-c", "import gfimu.cli"],
+        "estimate-import": [py, "-c", "import gfimu.cli, gfimu.cli.estimate, gfimu.pipeline, gfimu.smoother.batch, "
+                            "gfimu.smoother.guard, gfimu.estimators.ml, gfimu.io.outputs"],
+        "pass": [py, "-c", "pass"],
+    }
 
 
-def best_in_process(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+def timed(argv: list[str], env: dict) -> tuple[float, float]:
+    """(wall, CPU) seconds of one process (CPU: user + system of it and the children it waited for)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    done = subprocess.run(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        tail = done.stderr.decode(errors="replace").strip().splitlines()[-3:]
+        raise SystemExit(f"bench_floor: {' '.join(argv[:6])} ... exited {done.returncode}: {' / '.join(tail)}")
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def rows_of(path: Path) -> int:
+    with open(path, "rb") as fh:
+        return sum(1 for line in fh if line.strip() and not line.startswith(b"#"))
+
+
+def measure(log: Path, names: list[str], runs: int, env: dict) -> dict[str, dict]:
+    with tempfile.TemporaryDirectory(prefix="bench-floor-") as tmp:
+        out = Path(tmp)
+        argvs = commands(log, out)
+        walls: dict[str, list[float]] = {n: [] for n in names}
+        cpus: dict[str, list[float]] = {n: [] for n in names}
+        for r in range(runs):
+            order = names[r % len(names):] + names[:r % len(names)]
+            for name in order:
+                for f in out.iterdir():
+                    f.unlink()
+                wall, cpu = timed(argvs[name], env)
+                walls[name].append(wall)
+                cpus[name].append(cpu)
+                if r == 0 and name in ("floor", "batch", "fixed-lag", "batch-serial"):  # one row per sample
+                    n_in, n_out = rows_of(log / "imu.csv"), rows_of(out / f"{name}.csv")
+                    if n_in != n_out:
+                        raise SystemExit(f"bench_floor: {name} wrote {n_out} rows for {n_in} samples")
+    return {n: {"wall_s": statistics.median(walls[n]), "cpu_s": statistics.median(cpus[n]),
+                "walls_s": walls[n], "cpus_s": cpus[n]} for n in names}
+
+
+def report(title: str, res: dict[str, dict], runs: int) -> None:
+    print(title)
+    print()
+    floor = res.get("floor")
+    print("| command | wall s | × floor | CPU s | × floor |")
+    print("|---|---:|---:|---:|---:|")
+    for name, r in res.items():
+        ratio = (f"{r['wall_s'] / floor['wall_s']:.2f}" if floor else "")
+        cratio = (f"{r['cpu_s'] / floor['cpu_s']:.2f}" if floor else "")
+        print(f"| {DESCRIPTION[name]} | {r['wall_s']:.3f} | {ratio} | {r['cpu_s']:.3f} | {cratio} |")
+    print()
+    pairs = [("batch", "floor"), ("fixed-lag", "floor"), ("fixed-lag", "batch"), ("batch", "batch-serial")]
+    said = [f"{a} ÷ {b} = {res[a]['wall_s'] / res[b]['wall_s']:.2f} wall, "
+            f"{res[a]['cpu_s'] / max(res[b]['cpu_s'], 1e-9):.2f} CPU"
+            for a, b in pairs if a in res and b in res]
+    if said:
+        print(f"Medians of {runs} rounds: " + "; ".join(said) + ".")
+    if "pass" in res:
+        start = [f"{DESCRIPTION[n]} {res[n]['wall_s'] - res['pass']['wall_s']:+.3f} s"
+                 for n in ("help", "import", "estimate-import") if n in res]
+        if start:
+            print(f"Start-up beyond the interpreter's own ({res['pass']['wall_s']:.3f} s): " + "; ".join(start) + ".")
+    print()
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration-s", type=float, default=60.0, help="length of the cube log [s] (default 60)")
-    ap.add_argument("--target", type=float, default=30000.0, help="whole-command throughput to budget for [samples/s] (default 30000)")
-    ap.add_argument("--repeats", type=int, default=5, help="runs of each part; the best is kept (default 5)")
+    ap.add_argument("recordings", nargs="*", type=Path, help="MIMU4444 data.bin files, each converted and measured")
+    ap.add_argument("--runs", type=int, default=5, help="rounds of the loop; medians are shown (default 5)")
+    ap.add_argument("--duration-s", type=float, default=60.0, help="length of the simulated cube log [s] (default 60)")
+    ap.add_argument("--log", type=Path, help="measure on this log folder instead of a simulated one")
+    ap.add_argument("--only", default=",".join(NAMES),
+                    help=f"comma-separated commands to run, of {', '.join(NAMES)} (default all)")
     ap.add_argument("--json", default="bench_floor.json", help="where to write the results")
     args = ap.parse_args(argv)
-
-    from gfimu import io as gio
-    from gfimu.array import cube_array
-    from gfimu.io.atomic import atomic_write
-    from gfimu.io.tables import motion_csv_chunks
-    from gfimu.readings import screen_log
-    from gfimu.simulate import simulate
-
+    names = [n.strip() for n in args.only.split(",") if n.strip()]
+    unknown = [n for n in names if n not in NAMES]
+    if unknown or not names:
+        ap.error(f"--only: no command {', '.join(map(repr, unknown)) or 'given'}; the commands are {', '.join(NAMES)}")
+    if args.runs < 1:
+        ap.error("--runs: at least 1")
+    if args.log is not None and not (args.log / "imu.csv").is_file():
+        ap.error(f"--log {args.log}: no imu.csv in that folder")
+    for rec in args.recordings:
+        if not rec.is_file():
+            ap.error(f"{rec}: no such file")
     env = command_env(REPO)
-    r = args.repeats
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp) / "log"
-        log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=500.0, duration_s=args.duration_s, seed=0)
-        gio.write_log(log, folder)
-        n = len(log)
-        truth = log.truth
-        estimate = truth.replace(quaternion_wb=None, specific_force_b_mps2=None)
-        parts = {
-            "start": best_of_processes([sys.executable, "-c", "pass"], r, env),
-            "imports": best_of_processes([sys.executable, "-c", "import gfimu.cli, gfimu.cli.estimate, gfimu.io, "
-                                          "gfimu.pipeline, gfimu.smoother.batch"], r, env),
-            "read": best_in_process(lambda: gio.read_log(folder, truth=False), r),
-            "screen": best_in_process(lambda: screen_log(log), r),
-            "write": best_in_process(lambda: atomic_write(Path(tmp) / "est.csv", motion_csv_chunks(estimate)), r),
-        }
-        command = best_of_processes([sys.executable, "-m", "gfimu", "estimate", str(folder), "--method", "smoother",
-                                     "--out", str(Path(tmp) / "cmd.csv"), "--no-progress"], r, env)
-    floor = sum(parts.values())
-    estimation = command - floor
-    budget = n / args.target
-    print(f"# {time.strftime('%Y-%m-%d')}, {platform.node() or 'this machine'}, {os.cpu_count()} CPUs; cube log "
-          f"{args.duration_s:g} s at 500 Hz = {n} samples; best of {r} runs each")
-    print("| part | s |")
-    print("|---|---:|")
-    for name, s in parts.items():
-        print(f"| {name} | {s:.3f} |")
-    print(f"| everything but the estimation | {floor:.3f} |")
-    print(f"| the whole command | {command:.3f} ({n / command:,.0f} samples/s) |")
-    print(f"| the estimation (the rest) | {estimation:.3f} ({n / max(estimation, 1e-9):,.0f} samples/s) |")
-    left = budget - floor
-    if left > 0:
-        need = f"{n / left:,.0f} samples/s, {estimation / left:.1f}× the estimation measured here"
-    else:
-        need = "impossible: the parts other than the estimation already take longer"
-    print(f"\n{args.target:,.0f} samples/s for the whole command allows {budget:.3f} s; the estimation would have "
-          f"{max(left, 0):.3f} s: {need}.")
-    Path(args.json).write_text(json.dumps({
-        "date": time.strftime("%Y-%m-%d %H:%M %Z"), "platform": platform.platform(), "cpus": os.cpu_count(),
-        "samples": n, "repeats": r, "parts_s": parts, "floor_s": floor, "command_s": command,
-        "estimation_s": estimation, "target_samples_per_s": args.target, "budget_s": budget,
-        "estimation_budget_s": left}, indent=2))
+    results = {}
+    load = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory(prefix="bench-floor-logs-") as tmp:
+        logs: list[tuple[str, Path]] = []
+        if args.log is not None:
+            logs.append((f"log {args.log}", args.log))
+        for rec in args.recordings:
+            folder = Path(tmp) / f"{rec.parent.name}-{len(logs)}"
+            subprocess.run([sys.executable, "-m", "gfimu", "convert", "mimu4444", str(rec), "--out", str(folder),
+                            "--quiet"], env=env, check=True)
+            logs.append((f"MIMU4444 {rec.parent.name}/{rec.name} (converted)", folder))
+        if not logs:
+            folder = Path(tmp) / "cube"
+            subprocess.run([sys.executable, "-m", "gfimu", "simulate", "random3d", "--out", str(folder),
+                            "--duration-s", f"{args.duration_s:g}", "--rate-hz", "500", "--seed", "0", "--quiet"],
+                           env=env, check=True)
+            (folder / "truth.csv").unlink()  # the command would not read it; the floor does not either
+            logs.append((f"simulated cube of four triads (random3d, 500 Hz, {args.duration_s:g} s)", folder))
+        print(f"{os.cpu_count()} CPUs, 1-minute load average {load:.1f} at the start; "
+              f"medians of {args.runs} rounds, each command once per round in a turning order")
+        print()
+        for title, folder in logs:
+            n = rows_of(folder / "imu.csv")
+            res = measure(folder, names, args.runs, env)
+            report(f"{title}: {n} samples, imu.csv {(folder / 'imu.csv').stat().st_size / 1e6:.1f} MB", res, args.runs)
+            results[title] = {"samples": n, **res}
+    Path(args.json).write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M %Z"), "cpus": os.cpu_count(),
+                                           "load_average_1min": load, "runs": args.runs, "logs": results}, indent=2))
     print(f"results written to {args.json}")
     return 0
 

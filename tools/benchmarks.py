@@ -110,6 +110,24 @@ SECTIONS = (
         quick=("--command", "--durations", "10", "20", "--repeats", "1"),
         drop=DROP + (r"^\s*\d+ s\s+\d+ samples\s+wall ",)),  # its progress lines: the table repeats them
     Section(
+        "floor", "Whole commands against a data-movement floor", "bench_floor.py",
+        "A 60 s, 500 Hz simulated log of a cube of four triads (30,000 samples). The floor is a Python process "
+        "that imports numpy and scipy.linalg, reads the log's `imu.csv` with `numpy.loadtxt` and writes a "
+        "10-column CSV of the same length with `numpy.savetxt`; against it the whole `gfimu estimate LOG` "
+        "command (batch smoother), the same with `-O workers=1` (no worker processes for its solve windows) and "
+        "`gfimu estimate LOG --method fixed-lag`, and the start-up of `gfimu --help`, "
+        "of importing `gfimu.cli` and of what `gfimu estimate` imports, each a fresh process. All run in one loop, "
+        "each once per round in a turning order; medians of the rounds, wall and CPU time (worker processes "
+        "included), and each as a multiple of the floor's.",
+        full=("--runs", "5"), quick=("--runs", "1", "--duration-s", "10")),
+    Section(
+        "floor-real", "Batch and fixed-lag whole commands on the real recordings", "bench_floor.py",
+        "The same loop on the MIMU4444 recordings (converted with `gfimu convert mimu4444`, 10 minutes at "
+        "62.5 Hz, 8 triads): the floor, `gfimu estimate LOG` and `gfimu estimate LOG --method fixed-lag`, "
+        "medians of the rounds, and fixed-lag ÷ batch.",
+        full=("--runs", "3", "--only", "floor,batch,fixed-lag"),
+        quick=("--runs", "1", "--only", "floor,batch,fixed-lag"), recordings=True),
+    Section(
         "reader-memory", "Reading a log: memory and time", "bench_reader_memory.py",
         "A 500 Hz log of eight triads written with the library's writer, then read in a fresh process: "
         "peak resident memory above the process's memory before reading, as MB and as a multiple of the "

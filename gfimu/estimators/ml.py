@@ -607,19 +607,33 @@ def _viterbi_signs(u: np.ndarray, integral: np.ndarray) -> np.ndarray:
     for a, sa in enumerate((1.0, -1.0)):
         for b, sb in enumerate((1.0, -1.0)):
             costs[:, a, b] = np.sum((sb * cur - sa * prev - inc) ** 2, axis=1)
-    back = np.empty((m - 1, 2), dtype=np.int8)
+    # the two-state recursion on plain floats (the sums and comparisons in the same order, one list of
+    # back pointers per state): the loop is the only per-sample Python work of the estimate
+    back0, back1 = [], []
     a0, a1 = 0.0, 0.0
-    for k, c in enumerate(costs.tolist()):
-        n0a, n0b = a0 + c[0][0], a1 + c[1][0]
-        n1a, n1b = a0 + c[0][1], a1 + c[1][1]
-        back[k, 0] = 0 if n0a <= n0b else 1
-        back[k, 1] = 0 if n1a <= n1b else 1
-        a0, a1 = min(n0a, n0b), min(n1a, n1b)
-    state = np.empty(m, dtype=np.int8)
+    for c00, c01, c10, c11 in costs.reshape(m - 1, 4).tolist():
+        n0a, n0b = a0 + c00, a1 + c10
+        n1a, n1b = a0 + c01, a1 + c11
+        if n0a <= n0b:
+            back0.append(0)
+            b0 = n0a
+        else:
+            back0.append(1)
+            b0 = n0b
+        if n1a <= n1b:
+            back1.append(0)
+            a1 = n1a
+        else:
+            back1.append(1)
+            a1 = n1b
+        a0 = b0
     tie = abs(a0 - a1) <= 1e-12 * max(a0, a1, 1e-300)
-    state[-1] = 0 if tie else int(a1 < a0)
+    s = 0 if tie else int(a1 < a0)
+    path = [s]
     for k in range(m - 2, -1, -1):
-        state[k] = back[k, state[k + 1]]
+        s = back1[k] if s else back0[k]
+        path.append(s)
+    state = np.array(path[::-1], dtype=np.int8)
     signs = np.where(state == 0, 1.0, -1.0)
     if tie:
         # no sign information (ω̇ = 0 throughout): largest mean component positive

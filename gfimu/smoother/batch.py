@@ -378,7 +378,8 @@ def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: In
 
 
 def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
-    """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.auto`."""
+    """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.auto`; the ML motion is the
+    whole log's (:class:`MLEstimator` with its defaults) where the check computed it, else None."""
     if (attitude or opt.free_flight or opt.measurement != "accelerometer"
             or opt.self_calibrate_bias or opt.self_calibrate_scale):
         return opt, None
@@ -389,8 +390,8 @@ def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
     sample = log if step == 1 else log.select(slice(0, None, step))
     motion = ml.estimate_motion(sample)
     check = check_model(sample, motion)
-    if check.consistent:
-        return measured_noise_options(opt, check), (check, None)
+    if check.consistent:  # the ML motion of the whole log is kept for the guard (it would compute it again)
+        return measured_noise_options(opt, check), (check, motion if step == 1 else None)
     if step > 1:
         motion = ml.estimate_motion(log)
     chosen = misfit_options(opt, check)

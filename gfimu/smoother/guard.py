@@ -42,8 +42,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri  # the χ² inverse survival function (scipy.stats.chi2.isf's own)
 
+from .. import rigid_body
 from ..crb import crb_per_sample
 from ..log import Log
 from ..motion import Motion
@@ -154,12 +155,52 @@ def noise_variance(check: ModelCheck, omega_b_radps: np.ndarray) -> np.ndarray:
 def omega_noise(array, omega_b_radps: np.ndarray, var: np.ndarray) -> np.ndarray:
     """(N,) std of the per-sample fit's ω [rad/s] at ``omega_b_radps`` for noise variances ``var``: the
     root of the trace of the Cramér-Rao bound's ω block (:func:`gfimu.crb.crb_per_sample`, which falls as
-    1/|ω|: the readings see ω through q(ω)); inf where the information is singular."""
-    bound = crb_per_sample(array, omega_b_radps, noise_std_mps2=1.0)
-    trace = np.trace(bound.covariance[:, 6:9, 6:9], axis1=1, axis2=2)
+    1/|ω|: the readings see ω through q(ω)); inf where the information is singular.
+
+    The ω block of the inverse of the information ``[[A, B_k], [B_kᵀ, C_k]]`` is the inverse of its Schur
+    complement ``C_k - B_kᵀ A⁻¹ B_k = D_kᵀ P D_k``, with ``D_k = S_q ∂q/∂ω(ω_k)`` and the one projection
+    ``P = I - L (LᵀL)⁻¹ Lᵀ`` off the linear columns ``L`` of the structure matrix (unit noise): a 3×3 matrix per
+    sample instead of a 9×9 eigen-decomposition. Where that 3×3 is nearly singular (its determinant, scaled
+    to a unit diagonal, at most 1e-6), and on an array whose ``L`` is nearly rank-deficient, the bound itself
+    gives the trace and says whether the sample is singular."""
+    w = np.asarray(omega_b_radps, dtype=float).reshape(-1, 3)
+    S = np.asarray(array.structure_matrix(), dtype=float)
+    lin, Sq = S[:, :6], S[:, 6:]
+    A = lin.T @ lin
+    d = np.sqrt(np.diagonal(A))
+    if w.shape[0] == 0:
+        return np.zeros(0)
+    if S.shape[0] < 9:  # fewer readings than unknowns: singular everywhere
+        return np.full(w.shape[0], np.inf)
+    va = np.linalg.eigvalsh(A / d[:, None] / d[None, :]) if np.all(d > 0) else np.zeros(1)
+    if va[0] <= 1e-8 * va[-1]:  # L (nearly) rank-deficient: the projection would lose the digits
+        bound = crb_per_sample(array, w, noise_std_mps2=1.0)
+        trace = np.trace(bound.covariance[:, 6:9, 6:9], axis1=1, axis2=2)
+        singular = bound.singular
+    else:
+        P = np.eye(S.shape[0]) - lin @ np.linalg.solve(A, lin.T)
+        Dq = rigid_body.quadratic_terms_jacobian(w)  # (N, 6, 3)
+        M = np.swapaxes(Dq, 1, 2) @ ((Sq.T @ P @ Sq) @ Dq)  # D_kᵀ P D_k, (N, 3, 3)
+        m00, m11, m22 = M[:, 0, 0], M[:, 1, 1], M[:, 2, 2]
+        m01 = 0.5 * (M[:, 0, 1] + M[:, 1, 0])
+        m02 = 0.5 * (M[:, 0, 2] + M[:, 2, 0])
+        m12 = 0.5 * (M[:, 1, 2] + M[:, 2, 1])
+        # the principal 2×2 minors and the determinant: trace(M⁻¹) = their sum over it (the adjugate)
+        c0, c1, c2 = m11 * m22 - m12**2, m00 * m22 - m02**2, m00 * m11 - m01**2
+        det = m00 * c0 - m01 * (m01 * m22 - m12 * m02) + m02 * (m01 * m12 - m11 * m02)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            trace = (c0 + c1 + c2) / det
+            scaled_det = det / (m00 * m11 * m22)
+        # nearly singular (scaled to a unit diagonal, a determinant this small): the bound itself decides there
+        singular = np.zeros(w.shape[0], bool)
+        near = np.flatnonzero(~(scaled_det > 1e-6))
+        if near.size:
+            bound = crb_per_sample(array, w[near], noise_std_mps2=1.0)
+            trace[near] = np.trace(bound.covariance[:, 6:9, 6:9], axis1=1, axis2=2)
+            singular[near] = bound.singular
     with np.errstate(invalid="ignore"):
         out = np.sqrt(np.maximum(trace, 0.0) * var)
-    return np.where(np.isfinite(out) & ~bound.singular, out, np.inf)
+    return np.where(np.isfinite(out) & ~singular, out, np.inf)
 
 
 def usable_samples(log: Log, per_sample: Motion, check: ModelCheck, z_per_sample: np.ndarray,
@@ -171,7 +212,7 @@ def usable_samples(log: Log, per_sample: Motion, check: ModelCheck, z_per_sample
     ok = np.isfinite(z_per_sample) & np.isfinite(wn) & (wn > 0) & (var > 0)
     nu = log.array.structure_matrix().shape[0] - DOF
     if nu > 0:
-        ok &= z_per_sample <= chi2.isf(OUTLIER_FALSE_ALARM, nu)
+        ok &= z_per_sample <= chdtri(nu, OUTLIER_FALSE_ALARM)
     if ok.any():  # the bound only where it can decide
         ok[ok] = wn[ok] >= DETERMINED_FACTOR * omega_noise(log.array, per_sample.omega_b_radps[ok], var[ok])
     return ok
@@ -207,11 +248,11 @@ def check(log: Log, smoothed: Motion, per_sample: Motion, model_check: ModelChec
     m = np.rint(np.convolve(ok.astype(float), kernel, mode="same")).astype(int)
     allowance = np.full(n, np.inf)
     has = m >= MIN_SAMPLES
-    allowance[has] = chi2.isf(FALSE_ALARM, DOF * m[has])
+    allowance[has] = chdtri(DOF * m[has], FALSE_ALARM)
     beyond = total > allowance
     # the samples of windows beyond their allowance, each window spreading over its own samples
     in_flagged = np.convolve(beyond.astype(float), kernel, mode="same") > 0
-    marked = in_flagged & ok & (delta > chi2.isf(SAMPLE_FALSE_ALARM, DOF))
+    marked = in_flagged & ok & (delta > chdtri(DOF, SAMPLE_FALSE_ALARM))
     gap = max(int(round(MERGE_GAP_S / dt)), 1) if np.isfinite(dt) and dt > 0 else 1
     t = log.times_s
     spans, current = [], None
