@@ -47,24 +47,70 @@ class BatchResult:
         return buf.getvalue()
 
 
+RESERVED_NAMES = ("summary.csv",)
+"""Names in the output folder a log's folder cannot take (the summary is written there)."""
+
+NAME_JOIN = "__"
+"""Joins the parts of a log's path into its output folder's name when its folder name alone is not unique."""
+
+
+def _path_parts(log: str | Path) -> tuple[str, ...]:
+    try:
+        p = Path(log).resolve()
+    except (OSError, RuntimeError):  # a loop of symbolic links: its own row says so (run_one)
+        p = Path(os.path.abspath(log))
+    return tuple(part for part in p.parts if part not in ("/", "")) or ("log",)
+
+
 def output_folders(logs: Iterable[str | Path], out_dir: str | Path) -> list[Path]:
-    """``out_dir/<log folder name>`` per log; repeated names get ``-2``, ``-3``... in the order given."""
-    seen: dict[str, int] = {}
-    out = []
-    for log in logs:
-        try:
-            name = Path(log).resolve().name or "log"
-        except (OSError, RuntimeError):  # a loop of symbolic links: its own row says so (run_one)
-            name = Path(os.path.abspath(log)).name or "log"
-        seen[name] = seen.get(name, 0) + 1
-        out.append(Path(out_dir) / (name if seen[name] == 1 else f"{name}-{seen[name]}"))
-    return out
+    """``out_dir/<name>`` per log, every name different and none of :data:`RESERVED_NAMES`.
+
+    A log's name is its folder's name; logs whose folder names are the same (``a/log``, ``b/log``) take
+    as many parts of their whole (resolved) path as make them differ, joined by :data:`NAME_JOIN`
+    (``a__log``, ``b__log``), so that a name never depends on the order of the logs and never takes
+    another log's name. The same log given twice, or names that the whole paths cannot tell apart, are
+    refused (:class:`~gfimu.io.errors.OutputError`) before any work: two results never go to one folder.
+    """
+    from .io.errors import OutputError
+
+    logs = list(logs)
+    parts = [_path_parts(log) for log in logs]
+    first: dict[tuple[str, ...], int] = {}
+    for i, p in enumerate(parts):
+        if p in first:
+            raise OutputError(f"LOG {logs[i]}: the same log as {logs[first[p]]} (given twice); its estimate would "
+                              f"be written twice to one folder of --out {out_dir}")
+        first[p] = i
+    depth = [1] * len(logs)
+
+    def name(i: int) -> str:
+        return NAME_JOIN.join(parts[i][-depth[i]:])
+
+    while True:
+        groups: dict[str, list[int]] = {}
+        for i in range(len(logs)):
+            groups.setdefault(name(i), []).append(i)
+        clash = [(n, g) for n, g in groups.items() if len(g) > 1 or n in RESERVED_NAMES or n.startswith(".")]
+        if not clash:
+            break
+        grown = False
+        for n, g in clash:
+            for i in g:
+                if depth[i] < len(parts[i]):
+                    depth[i] += 1
+                    grown = True
+        if not grown:
+            n, g = clash[0]
+            shown = " and ".join(str(logs[i]) for i in g)
+            raise OutputError(f"--out {out_dir}: {shown} would be written to one folder {n!r} (or a name the output "
+                              "folder keeps); give the logs folders of different names")
+    return [Path(out_dir) / name(i) for i in range(len(logs))]
 
 
 def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibration: str | None) -> dict:
     """Estimate one log and write its estimate; the summary row (status ok or failed)."""
     from . import io as gio
-    from .io.outputs import check_output, write_output
+    from .io.outputs import check_output_within, write_output
     from .pipeline import estimate_log, score
 
     row = {"log": str(log_dir), "output": str(output_csv), "status": "failed", "samples": None, "seconds": None,
@@ -74,8 +120,10 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             inputs = [log_dir] + ([calibration] if calibration else [])
-            Path(output_csv).parent.mkdir(parents=True, exist_ok=True)
-            out = check_output(output_csv, inputs, "--out")
+            target = Path(output_csv)
+            check_output_within(target.parent.parent, Path(target.parent.name) / target.name, inputs, "--out")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            out = check_output_within(target.parent.parent, Path(target.parent.name) / target.name, inputs, "--out")
             run = estimate_log(log_dir, method, _one_process(method, options), calibration)
             write_output(out, gio.motion_csv_chunks(run.motion))
         rmse = score(run)
@@ -88,7 +136,7 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
                        f"({traceback.format_exc(limit=1).splitlines()[-1]})")
         row.update(output="", message=" ".join(message.split()))  # no estimate of this run to point at
         folder = Path(output_csv).parent
-        if folder.is_dir() and not any(folder.iterdir()):  # leave no empty folder behind a failed log
+        if not folder.is_symlink() and folder.is_dir() and not any(folder.iterdir()):  # leave no empty folder behind a failed log
             folder.rmdir()
     row["seconds"] = f"{time.perf_counter() - t0:.3f}"
     return row

@@ -27,6 +27,7 @@ Temporary names are ``.NAME.XXXXXXXX.tmp`` with ``NAME`` cut to
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import signal
@@ -361,3 +362,59 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     atomic_write(path, [data], binary=True)
+
+
+LOCK_SUFFIX = ".lock"
+"""Suffix of the companion lock file of an output being written (``.NAME.lock`` next to it)."""
+
+
+def lock_name(target: Path) -> Path:
+    """The companion lock file of ``target``: ``.NAME.lock`` in its folder (``NAME`` cut as in temporary names)."""
+    return target.parent / (temp_prefix(target.name)[:-1] + LOCK_SUFFIX)
+
+
+@contextmanager
+def output_lock(path: str | os.PathLike, what: str = "--out") -> Iterator[Path]:
+    """Hold the one writer's lock of the output ``path`` while the block runs; a second writer is refused.
+
+    The lock is an exclusive ``flock`` on the companion file ``.NAME.lock`` next to ``path`` (created
+    without following a link); the kernel releases it when the process ends however it ends (SIGKILL
+    included), so a lock is never left stale. Another process holding it: :class:`OutputError` naming
+    ``what`` and the path, before anything is written. The file is removed when the block ends.
+    """
+    import fcntl
+
+    target = Path(path)
+    lock = lock_name(target)
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0), 0o644)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise OutputError(f"{what} {target}: its lock file {lock} is a symbolic link; refusing to "
+                                  "follow it") from None
+            raise _naming(exc, lock) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(f"{what} {target}: another gfimu process is writing this file now (it holds "
+                              f"{lock}); give this one another output") from None
+        except OSError:
+            os.close(fd)
+            raise
+        try:  # the file locked is still the one under that name (not removed by a writer just ending)
+            same = os.path.samestat(os.fstat(fd), os.lstat(lock))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        yield lock
+    finally:
+        try:
+            os.unlink(lock)
+        except OSError:
+            pass
+        os.close(fd)
