@@ -1034,7 +1034,9 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         units = sorted({u for _, u in cols})
         read_as.append(f"{path} (columns {', '.join(names[:3])}{', ...' if len(names) > 3 else ''} read as "
                        f"{', '.join(f'[{u}]' for u in units)})")
-    for warning in check_specific_force_scale(log, "; ".join(read_as), gravity_included=not linear):
+    read_units = {u for cols in reader.accel_units.values() for _, u in cols}
+    for warning in check_specific_force_scale(log, "; ".join(read_as), gravity_included=not linear,
+                                              read_unit=read_units.pop() if len(read_units) == 1 else "m s^-2"):
         warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
     return Conversion(log, tuple(report + geometry_report), unplaced)
 
