@@ -171,6 +171,64 @@ def local_cluster(workers: int):
         return LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
 
 
+SCHEDULER_TIMEOUT_S = 20.0
+"""Seconds to connect to a scheduler, and for it to say its first words once connected."""
+
+_MAX_FIRST_FRAME = 1 << 26
+"""A Dask peer starts with the length of its first message, a few hundred bytes; anything beyond this is not Dask."""
+
+
+def check_scheduler(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> None:
+    """Check that ``address`` (``tcp://HOST:PORT`` or ``HOST:PORT``) is a Dask scheduler before handing it to
+    Dask: the connection within ``timeout_s``, then the scheduler's first bytes (a Dask peer speaks first: the
+    length of its first message) within ``timeout_s`` too. A peer that accepts and never answers, or answers
+    with something else (an SSH server's banner), is refused with :class:`~gfimu.errors.ResourceError` naming
+    the address, instead of a wait without end or a huge allocation. Other schemes (``tls://``, ``inproc://``)
+    are left to Dask."""
+    import socket
+    import struct
+    from urllib.parse import urlparse
+
+    from .errors import InputError, ResourceError
+
+    text = address if "://" in address else f"tcp://{address}"
+    url = urlparse(text)
+    if url.scheme != "tcp":
+        return
+    try:
+        host, port = url.hostname, url.port
+    except ValueError:
+        raise InputError(f"--scheduler {address}: the port is not a number from 0 to 65535") from None
+    if not host or not port:
+        raise InputError(f"--scheduler {address}: expected tcp://HOST:PORT")
+    try:
+        conn = socket.create_connection((host, port), timeout=timeout_s)
+    except TimeoutError:
+        raise ResourceError(f"--scheduler {address}: no connection within {timeout_s:g} s") from None
+    except OSError as exc:
+        raise ResourceError(f"--scheduler {address}: cannot connect: {exc.strerror or exc}") from None
+    with conn:
+        conn.settimeout(timeout_s)
+        head = b""
+        try:
+            while len(head) < 8:
+                chunk = conn.recv(8 - len(head))
+                if not chunk:
+                    raise ResourceError(f"--scheduler {address}: the peer closed the connection without a word; "
+                                        "not a Dask scheduler")
+                head += chunk
+        except TimeoutError:
+            raise ResourceError(f"--scheduler {address}: accepts connections but says nothing within {timeout_s:g} s "
+                                "(a Dask scheduler speaks first); not a Dask scheduler, or a stuck one") from None
+        except OSError as exc:
+            raise ResourceError(f"--scheduler {address}: {exc.strerror or exc}") from None
+    (length,) = struct.unpack("<Q", head)
+    if length > _MAX_FIRST_FRAME:
+        shown = head.decode("ascii", "replace") if head[:4].isascii() else head.hex()
+        raise ResourceError(f"--scheduler {address}: answers {shown!r}..., not a Dask scheduler (an SSH or other "
+                            "server on that port?)")
+
+
 def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smoother", options: dict | None = None,
               calibration: str | Path | None = None, scheduler: str | None = None, workers: int = 2,
               on_done: Callable[[dict], None] | None = None) -> BatchResult:
@@ -185,7 +243,8 @@ def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smooth
         cluster = local_cluster(workers)
         client = Client(cluster)
     else:
-        client = Client(scheduler, timeout="20s")
+        check_scheduler(str(scheduler))
+        client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S:g}s")
     try:
         futures, index = [], {}
         for i, (log, folder) in enumerate(zip(logs, folders)):

@@ -89,7 +89,10 @@ def _run(args, out_dir: Path, summary: Path, options: dict) -> int:
         result = run_batch(args.logs, out_dir, args.method, options, args.calibration, args.scheduler, args.workers,
                            on_done=done)
     except OSError as exc:
-        raise CLIError(f"Dask scheduler {args.scheduler or '(local cluster)'}: {exc}") from None
+        text = str(exc)
+        if not text.startswith("--scheduler "):
+            text = f"Dask scheduler {args.scheduler or '(local cluster)'}: {text}"
+        raise CLIError(text) from None
     finally:
         bar.close()
     write_output(summary, [result.summary_csv()])

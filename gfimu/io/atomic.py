@@ -132,13 +132,44 @@ def remove_temporaries() -> int:
     return n
 
 
+RESOURCE_ERRNOS = frozenset(getattr(errno, name) for name in (
+    "ENOSPC", "EDQUOT", "EIO", "EROFS", "EACCES", "EPERM", "EMFILE", "ENFILE", "ENOMEM", "EFBIG", "EXDEV")
+    if hasattr(errno, name))
+"""Errors of writing that are the machine refusing (a full disk, no permission, ...): raised as
+:class:`gfimu.errors.ResourceError`."""
+
+_RESOURCE_TYPES: dict[type, type] = {}
+
+
+def resource_error(exc: OSError, filename: str | os.PathLike | None = None) -> OSError:
+    """``exc`` (naming ``filename`` when given) as a :class:`gfimu.errors.ResourceError` when its errno is one
+    of :data:`RESOURCE_ERRNOS`: also still an instance of its own type (``PermissionError``, ...), so that
+    code catching that goes on working. Other errors come back as they are (renamed when asked)."""
+    from ..errors import GfimuError, ResourceError
+
+    name = exc.filename if filename is None else filename
+    if exc.errno is None or isinstance(exc, OutputError):
+        return exc
+    if isinstance(exc, GfimuError):
+        return exc if filename is None else type(exc)(exc.errno, exc.strerror or str(exc), str(name))
+    if exc.errno not in RESOURCE_ERRNOS:
+        return exc if filename is None else type(exc)(exc.errno, exc.strerror or str(exc), str(name))
+    kind = _RESOURCE_TYPES.get(type(exc))
+    if kind is None:
+        kind = _RESOURCE_TYPES[type(exc)] = type(type(exc).__name__, (ResourceError, type(exc)),
+                                                 {"__module__": ResourceError.__module__})
+    out = kind(exc.errno, exc.strerror or str(exc), None if name is None else str(name))
+    return out
+
+
 def _naming(exc: OSError, target: Path) -> OSError:
-    """The same error, naming the destination instead of the temporary file."""
+    """The same error, naming the destination instead of the temporary file (a :class:`ResourceError` for a
+    full disk, no permission, ...: :func:`resource_error`)."""
     if isinstance(exc, OutputError):
         return exc
     if exc.errno is None:
         return exc
-    return type(exc)(exc.errno, exc.strerror or str(exc), str(target))
+    return resource_error(exc, target)
 
 
 def _remove(tmp: str) -> None:
@@ -191,7 +222,7 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
         _remove(tmp)
         if exc.filename in (None, tmp) or exc.filename2 == tmp:
             raise _naming(exc, target) from None
-        raise
+        raise resource_error(exc) from None
     except BaseException:
         _remove(tmp)
         raise
@@ -251,8 +282,8 @@ def _in_place_of(exc: OSError, tmp: str, target: Path) -> OSError:
         return _naming(exc, target)
     name = os.fspath(name)
     if isinstance(name, str) and name.startswith(tmp + os.sep):
-        return type(exc)(exc.errno, exc.strerror or str(exc), str(target) + name[len(tmp):])
-    return exc
+        return resource_error(exc, str(target) + name[len(tmp):])
+    return resource_error(exc)
 
 
 def _blocked_signals():
