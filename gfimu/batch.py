@@ -47,24 +47,70 @@ class BatchResult:
         return buf.getvalue()
 
 
+RESERVED_NAMES = ("summary.csv",)
+"""Names in the output folder a log's folder cannot take (the summary is written there)."""
+
+NAME_JOIN = "__"
+"""Joins the parts of a log's path into its output folder's name when its folder name alone is not unique."""
+
+
+def _path_parts(log: str | Path) -> tuple[str, ...]:
+    try:
+        p = Path(log).resolve()
+    except (OSError, RuntimeError):  # a loop of symbolic links: its own row says so (run_one)
+        p = Path(os.path.abspath(log))
+    return tuple(part for part in p.parts if part not in ("/", "")) or ("log",)
+
+
 def output_folders(logs: Iterable[str | Path], out_dir: str | Path) -> list[Path]:
-    """``out_dir/<log folder name>`` per log; repeated names get ``-2``, ``-3``... in the order given."""
-    seen: dict[str, int] = {}
-    out = []
-    for log in logs:
-        try:
-            name = Path(log).resolve().name or "log"
-        except (OSError, RuntimeError):  # a loop of symbolic links: its own row says so (run_one)
-            name = Path(os.path.abspath(log)).name or "log"
-        seen[name] = seen.get(name, 0) + 1
-        out.append(Path(out_dir) / (name if seen[name] == 1 else f"{name}-{seen[name]}"))
-    return out
+    """``out_dir/<name>`` per log, every name different and none of :data:`RESERVED_NAMES`.
+
+    A log's name is its folder's name; logs whose folder names are the same (``a/log``, ``b/log``) take
+    as many parts of their whole (resolved) path as make them differ, joined by :data:`NAME_JOIN`
+    (``a__log``, ``b__log``), so that a name never depends on the order of the logs and never takes
+    another log's name. The same log given twice, or names that the whole paths cannot tell apart, are
+    refused (:class:`~gfimu.io.errors.OutputError`) before any work: two results never go to one folder.
+    """
+    from .io.errors import OutputError
+
+    logs = list(logs)
+    parts = [_path_parts(log) for log in logs]
+    first: dict[tuple[str, ...], int] = {}
+    for i, p in enumerate(parts):
+        if p in first:
+            raise OutputError(f"LOG {logs[i]}: the same log as {logs[first[p]]} (given twice); its estimate would "
+                              f"be written twice to one folder of --out {out_dir}")
+        first[p] = i
+    depth = [1] * len(logs)
+
+    def name(i: int) -> str:
+        return NAME_JOIN.join(parts[i][-depth[i]:])
+
+    while True:
+        groups: dict[str, list[int]] = {}
+        for i in range(len(logs)):
+            groups.setdefault(name(i), []).append(i)
+        clash = [(n, g) for n, g in groups.items() if len(g) > 1 or n in RESERVED_NAMES or n.startswith(".")]
+        if not clash:
+            break
+        grown = False
+        for n, g in clash:
+            for i in g:
+                if depth[i] < len(parts[i]):
+                    depth[i] += 1
+                    grown = True
+        if not grown:
+            n, g = clash[0]
+            shown = " and ".join(str(logs[i]) for i in g)
+            raise OutputError(f"--out {out_dir}: {shown} would be written to one folder {n!r} (or a name the output "
+                              "folder keeps); give the logs folders of different names")
+    return [Path(out_dir) / name(i) for i in range(len(logs))]
 
 
 def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibration: str | None) -> dict:
     """Estimate one log and write its estimate; the summary row (status ok or failed)."""
     from . import io as gio
-    from .io.outputs import check_output, write_output
+    from .io.outputs import check_output_within, write_output
     from .pipeline import estimate_log, score
 
     row = {"log": str(log_dir), "output": str(output_csv), "status": "failed", "samples": None, "seconds": None,
@@ -74,8 +120,10 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             inputs = [log_dir] + ([calibration] if calibration else [])
-            Path(output_csv).parent.mkdir(parents=True, exist_ok=True)
-            out = check_output(output_csv, inputs, "--out")
+            target = Path(output_csv)
+            check_output_within(target.parent.parent, Path(target.parent.name) / target.name, inputs, "--out")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            out = check_output_within(target.parent.parent, Path(target.parent.name) / target.name, inputs, "--out")
             run = estimate_log(log_dir, method, _one_process(method, options), calibration)
             write_output(out, gio.motion_csv_chunks(run.motion))
         rmse = score(run)
@@ -88,7 +136,7 @@ def run_one(log_dir: str, output_csv: str, method: str, options: dict, calibrati
                        f"({traceback.format_exc(limit=1).splitlines()[-1]})")
         row.update(output="", message=" ".join(message.split()))  # no estimate of this run to point at
         folder = Path(output_csv).parent
-        if folder.is_dir() and not any(folder.iterdir()):  # leave no empty folder behind a failed log
+        if not folder.is_symlink() and folder.is_dir() and not any(folder.iterdir()):  # leave no empty folder behind a failed log
             folder.rmdir()
     row["seconds"] = f"{time.perf_counter() - t0:.3f}"
     return row
@@ -123,6 +171,64 @@ def local_cluster(workers: int):
         return LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
 
 
+SCHEDULER_TIMEOUT_S = 20.0
+"""Seconds to connect to a scheduler, and for it to say its first words once connected."""
+
+_MAX_FIRST_FRAME = 1 << 26
+"""A Dask peer starts with the length of its first message, a few hundred bytes; anything beyond this is not Dask."""
+
+
+def check_scheduler(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> None:
+    """Check that ``address`` (``tcp://HOST:PORT`` or ``HOST:PORT``) is a Dask scheduler before handing it to
+    Dask: the connection within ``timeout_s``, then the scheduler's first bytes (a Dask peer speaks first: the
+    length of its first message) within ``timeout_s`` too. A peer that accepts and never answers, or answers
+    with something else (an SSH server's banner), is refused with :class:`~gfimu.errors.ResourceError` naming
+    the address, instead of a wait without end or a huge allocation. Other schemes (``tls://``, ``inproc://``)
+    are left to Dask."""
+    import socket
+    import struct
+    from urllib.parse import urlparse
+
+    from .errors import InputError, ResourceError
+
+    text = address if "://" in address else f"tcp://{address}"
+    url = urlparse(text)
+    if url.scheme != "tcp":
+        return
+    try:
+        host, port = url.hostname, url.port
+    except ValueError:
+        raise InputError(f"--scheduler {address}: the port is not a number from 0 to 65535") from None
+    if not host or not port:
+        raise InputError(f"--scheduler {address}: expected tcp://HOST:PORT")
+    try:
+        conn = socket.create_connection((host, port), timeout=timeout_s)
+    except TimeoutError:
+        raise ResourceError(f"--scheduler {address}: no connection within {timeout_s:g} s") from None
+    except OSError as exc:
+        raise ResourceError(f"--scheduler {address}: cannot connect: {exc.strerror or exc}") from None
+    with conn:
+        conn.settimeout(timeout_s)
+        head = b""
+        try:
+            while len(head) < 8:
+                chunk = conn.recv(8 - len(head))
+                if not chunk:
+                    raise ResourceError(f"--scheduler {address}: the peer closed the connection without a word; "
+                                        "not a Dask scheduler")
+                head += chunk
+        except TimeoutError:
+            raise ResourceError(f"--scheduler {address}: accepts connections but says nothing within {timeout_s:g} s "
+                                "(a Dask scheduler speaks first); not a Dask scheduler, or a stuck one") from None
+        except OSError as exc:
+            raise ResourceError(f"--scheduler {address}: {exc.strerror or exc}") from None
+    (length,) = struct.unpack("<Q", head)
+    if length > _MAX_FIRST_FRAME:
+        shown = head.decode("ascii", "replace") if head[:4].isascii() else head.hex()
+        raise ResourceError(f"--scheduler {address}: answers {shown!r}..., not a Dask scheduler (an SSH or other "
+                            "server on that port?)")
+
+
 def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smoother", options: dict | None = None,
               calibration: str | Path | None = None, scheduler: str | None = None, workers: int = 2,
               on_done: Callable[[dict], None] | None = None) -> BatchResult:
@@ -137,7 +243,8 @@ def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smooth
         cluster = local_cluster(workers)
         client = Client(cluster)
     else:
-        client = Client(scheduler, timeout="20s")
+        check_scheduler(str(scheduler))
+        client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S:g}s")
     try:
         futures, index = [], {}
         for i, (log, folder) in enumerate(zip(logs, folders)):

@@ -36,7 +36,7 @@ import numpy as np
 from .crb import crb_per_sample
 from .errors import InputError
 from .estimators.ml import MLEstimator
-from .io.plausibility import MAX_POSITION_M, MIN_EXTENT_M, RATE_TOLERANCE, still_specific_force
+from .io.plausibility import MAX_POSITION_M, MIN_EXTENT_M, RATE_TOLERANCE, still_specific_force, suggested_factor
 from .io.units import STANDARD_GRAVITY_MPS2
 from .log import Log
 from .readings import clipped_readings, dead_channels, describe_dead_channels, runs_of, screen_log, stuck_runs
@@ -423,11 +423,16 @@ def sign_resolution(omega_b_radps: np.ndarray, sigma_omega: np.ndarray, sigma_om
 
 # --- the diagnosis -----------------------------------------------------------
 
-def _unit_suspect(g0: float | None) -> tuple[str | None, float | None]:
-    if g0 is None or g0 < 0.3:
+def _unit_suspect(g0: float | None, still: bool = True) -> tuple[str | None, float | None]:
+    """(unit, factor to m/s²) the readings are likely in, from |f| of a still stretch (``still``) or the median
+    |f| of a moving log (there a larger |f| is a wrong scale only beyond
+    :data:`~gfimu.io.plausibility.MOVING_HIGH` × gravity); (None, None) when |f| is near gravity."""
+    from .io.plausibility import MOVING_HIGH
+
+    if g0 is None or not g0 > 0 or not np.isfinite(g0):
         return None, None
     ratio = STANDARD_GRAVITY_MPS2 / g0
-    if 1 / 2 <= ratio <= 2:
+    if 1 / 2 <= ratio <= 2 or (not still and 1 / MOVING_HIGH < ratio < 1 / 2):
         return None, None
     for name, scale in (("g", STANDARD_GRAVITY_MPS2), ("mg", STANDARD_GRAVITY_MPS2 / 1000)):
         if scale / UNIT_TOLERANCE <= ratio <= scale * UNIT_TOLERANCE:
@@ -497,7 +502,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
     # units and sizes
     g0 = still_specific_force(log)
     f_median = float(np.nanmedian(np.linalg.norm(motion.specific_force_b_mps2, axis=1)))
-    unit, unit_scale = (_unit_suspect(g0 if g0 is not None else f_median) if array.readings == "specific_force"
+    unit, unit_scale = (_unit_suspect(g0 if g0 is not None else f_median, still=g0 is not None)
+                        if array.readings == "specific_force"
                         else (None, None))  # linear acceleration: no gravity to measure the scale by
     gyro_ratio = gyro_unit = None
     if log.gyro_b_radps is not None:
@@ -528,7 +534,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
         what = f"still |f| = {g0:.4g}" if g0 is not None else f"median |f| = {f_median:.4g} (no still stretch)"
         fix.append(f"{what} read as m/s^2, not {STANDARD_GRAVITY_MPS2:g}: readings likely in {unit} "
                    f"(multiply by {unit_scale:.6g}; write the column units as [{unit}])" if unit != "unknown scale"
-                   else f"{what} read as m/s^2: check the unit and scale of the readings")
+                   else f"{what} read as m/s^2: {suggested_factor(1.0 / unit_scale)}; check the unit and scale of "
+                        "the readings")
     if pos_scale is not None:
         why = (f"farthest accelerometer {far:.4g} m from the origin" if far > MAX_POSITION_M else
                f"accelerometers within {extent * 1e3:.3g} mm of each other" if extent < MIN_EXTENT_M else

@@ -236,6 +236,120 @@ def _keep(times: list, value: float) -> None:
         del times[:100_000]
 
 
+UNIT_CHECK_S = 3.0
+"""Seconds of the first readings (of stream time) on which the units are checked, as ``gfimu estimate`` checks
+a log's (:func:`gfimu.io.plausibility.check_gravity`)."""
+
+UNIT_CHECK_ROWS = 20_000
+"""At most this many first readings are held for that check."""
+
+
+class _FirstRowsCheck:
+    """The plausibility check ``gfimu estimate`` makes of a log's readings (gravity's magnitude at rest, or the
+    median |f| of a moving log: readings in another unit than their header says, by whatever factor), made once
+    on the first :data:`UNIT_CHECK_S` s of the stream; its warnings go to ``say`` with the same words."""
+
+    def __init__(self, array, source: Source, say: Callable[[str], None]):
+        self.array, self.source, self.say = array, source, say
+        self.t: list[int] = []
+        self.accel: list[np.ndarray] = []
+        self.done = False
+
+    def add(self, r: Reading) -> None:
+        if self.done:
+            return
+        t = int(r.timestamp_ns)
+        if self.t and t <= self.t[-1]:
+            return  # late, repeated or a clock reset: not part of the stretch checked
+        self.t.append(t)
+        self.accel.append(np.asarray(r.accel, dtype=float))
+        if t - self.t[0] >= UNIT_CHECK_S * 1e9 or len(self.t) >= UNIT_CHECK_ROWS:
+            self.finish()
+
+    def finish(self) -> None:
+        if self.done:
+            return
+        self.done = True
+        if len(self.t) < 5:
+            return
+        from .io.plausibility import check_gravity
+        from .log import Log
+
+        name = getattr(self.source, "name", "source")
+        unit = getattr(self.source, "accel_unit", None) or "m s^-2"
+        log = Log(self.array, np.asarray(self.t, dtype=np.int64), np.vstack(self.accel), source=name)
+        try:
+            for message in check_gravity(log, f"{name} (first {len(self.t)} rows)", unit):
+                self.say(f"warning: {message}")
+        finally:
+            self.t, self.accel = [], []
+
+
+RATE_WATCH_STEPS = 32
+"""Consecutive steps forward at one steady period, away from the nominal one, after which the rate is measured
+again from them (:class:`_RateWatch`)."""
+
+
+class _RateWatch:
+    """Tells when a stream's rate has changed: the last :data:`RATE_WATCH_STEPS` steps forward all within 10 %
+    of their median, and that median more than 1.5 times longer or shorter than the nominal step (every step a
+    gap, or two samples per step). Returns the new rate once, then watches against it."""
+
+    def __init__(self, rate_hz: float):
+        self.rate_hz = float(rate_hz)
+        self.steps: list[int] = []
+        self.last: int | None = None
+
+    def step(self, t_ns: int) -> float | None:
+        t = int(t_ns)
+        if self.last is None or t <= self.last:
+            self.last = t if self.last is None or t < self.last - int(1e9) else self.last
+            return None
+        self.steps.append(t - self.last)
+        self.last = t
+        if len(self.steps) > RATE_WATCH_STEPS:
+            del self.steps[0]
+        if len(self.steps) < RATE_WATCH_STEPS:
+            return None
+        steps = np.asarray(self.steps, dtype=float)
+        median = float(np.median(steps))
+        if median <= 0 or np.max(np.abs(steps - median)) > 0.1 * median:
+            return None
+        ratio = median * 1e-9 * self.rate_hz
+        if 1 / 1.5 <= ratio <= 1.5:
+            return None
+        self.rate_hz = 1e9 / median
+        self.steps.clear()
+        return self.rate_hz
+
+
+def _rerate(session: "_Session", array, estimator, rate_hz: float) -> list:
+    """``session`` on at ``rate_hz``: the states still held at the old rate (its screening, its window), then a
+    new smoother and screening at the new rate; the counts so far are kept."""
+    states = session.flush()
+    old = session.smoother.counts
+    session.late += old["duplicates"] + old["out_of_order"]
+    if session.screen is not None:
+        session.replaced += session.screen.count
+    session.rate_hz = float(rate_hz)
+    session.smoother = estimator.smoother(array, session.rate_hz)
+    if session.screen is not None:
+        session.screen = StreamScreen(array, session.rate_hz)
+    return states
+
+
+def _on_rate_change(session: "_Session", watch: _RateWatch, r: Reading, array, estimator,
+                    say: Callable[[str], None], emit: Callable) -> None:
+    """After each sample: when ``watch`` finds the stream's rate changed, say so and go on at the new rate."""
+    old = watch.rate_hz
+    new = watch.step(r.timestamp_ns)
+    if new is None:
+        return
+    say(f"warning: the stream's rate changed: {RATE_WATCH_STEPS} steps in a row of {1e3 / new:.4g} ms where "
+        f"{old:.6g} Hz was taken; the rate is measured again, {new:.6g} Hz, and the window restarts once at it")
+    emit(_rerate(session, array, estimator, new), timed=False)
+
+
 def rate_from_timestamps(timestamps_ns) -> float | None:
     """The rate [Hz] of the median step between increasing timestamps (None with fewer than two steps
     forward): the rule of :attr:`gfimu.log.Log.rate_hz`."""
@@ -339,9 +453,13 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
         if len(latency) > 200_000:
             del latency[:100_000]
 
+    units = _FirstRowsCheck(array, source, say)
+    watch: list[_RateWatch] = []
+
     def start_session(rate: float) -> None:
         nonlocal session
         session = _Session(array, estimator, rate)
+        watch[:] = [_RateWatch(rate)]
         for r, arrived in pending:
             feed(r, arrived)
         pending.clear()
@@ -349,6 +467,7 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     def feed(r: Reading, arrived: float) -> None:
         arrival[int(r.timestamp_ns)] = arrived
         emit(session.push(r))
+        _on_rate_change(session, watch[0], r, array, estimator, say, emit)
 
     thread = threading.Thread(target=reader, name="gfimu-live-source", daemon=True)
     ended = None
@@ -382,6 +501,7 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
                                 say("warning: further bad rows are counted, not shown")
                     else:
                         rows_in += 1
+                        units.add(thing)
                         if session is not None:
                             feed(thing, arrived)
                         else:
@@ -402,6 +522,7 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
                     late = session.counts()[0] if session else 0
                     say(f"{rows_in} in, {rows_out} out, processing p50 {p[0] if p else float('nan'):.2f} ms "
                         f"p99 {p[1] if p else float('nan'):.2f} ms, {overrun[0]} dropped, {late} late, {bad} bad")
+            units.finish()
             if session is None and pending:  # the stream ended before RATE_ROWS samples
                 rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
                 if rate is None:
@@ -423,7 +544,8 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
         stop.set()
         for s, h in previous.items():
             signal.signal(s, h)
-        thread.join(timeout=2 * 0.2 + 0.5)
+        if thread.ident is not None:  # started (the output may fail before: its header is written first)
+            thread.join(timeout=2 * 0.2 + 0.5)
         try:
             source.close()
         except OSError:

@@ -52,15 +52,33 @@ def fork_workers(workers: int, tasks: int) -> int:
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
-def _start_worker(func: Callable) -> None:
+def _start_worker(func: Callable, parent: int | None = None) -> None:
     """In a forked worker: SIGINT is the parent's to handle, SIGTERM ends the worker; ``func`` is the job
     (handed over by the fork, not pickled). The worker starts with both signals blocked (the parent's
-    mask while it forks) and takes them from here on."""
+    mask while it forks) and takes them from here on. It ends with its parent (``parent``, the pid), however
+    the parent ends (SIGKILL included): quietly, never writing a result into a closed pipe."""
     global _JOB
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _JOB = func
+    _die_with_parent(parent)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+
+
+def _die_with_parent(parent: int | None) -> None:
+    """SIGTERM (its default action: the end, without a word) to this process when its parent dies (Linux's
+    ``PR_SET_PDEATHSIG``); a parent already gone ends it at once. Elsewhere nothing."""
+    if parent is None:
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the parent died before the request was made
+        os._exit(0)
 
 
 _JOB: Callable | None = None
@@ -100,7 +118,7 @@ def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = Tr
     # command's standard output open)
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
-        pool = multiprocessing.get_context("fork").Pool(n, initializer=_start_worker, initargs=(func,))
+        pool = multiprocessing.get_context("fork").Pool(n, initializer=_start_worker, initargs=(func, os.getpid()))
     except (OSError, ImportError):  # no semaphores (a system without /dev/shm), no processes left: here
         pool = None
     finally:

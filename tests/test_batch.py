@@ -54,8 +54,23 @@ def scheduler(tmp_path_factory):
 
 
 def test_output_folders_are_unique():
+    """Folder names alone where they differ; the whole path's parts where they do not, so no name depends on the
+    order of the logs or takes another log's (``log-2`` was once ``b/log``'s and ``c/log-2``'s)."""
     folders = output_folders(["a/log", "b/log", "c/other", "d/log"], "out")
-    assert [f.name for f in folders] == ["log", "log-2", "other", "log-3"]
+    assert [f.name for f in folders] == ["a__log", "b__log", "other", "d__log"]
+    folders = output_folders(["a/log", "b/log", "c/log-2"], "out")
+    assert [f.name for f in folders] == ["a__log", "b__log", "log-2"]
+    assert [f.name for f in output_folders(["x/a/log", "y/a/log", "z"], "out")] == ["x__a__log", "y__a__log", "z"]
+    # the summary's name is kept for the summary
+    assert [f.name for f in output_folders(["p/summary.csv", "q"], "out")] == ["p__summary.csv", "q"]
+
+
+def test_output_folders_refuse_one_log_twice(tmp_path):
+    from gfimu.io.errors import OutputError
+
+    (tmp_path / "log").mkdir()
+    with pytest.raises(OutputError, match="given twice"):
+        output_folders([tmp_path / "log", str(tmp_path / "log") + "/"], "out")
 
 
 def test_a_failed_log_points_at_no_output_even_when_an_earlier_estimate_is_there(tmp_path):

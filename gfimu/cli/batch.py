@@ -43,8 +43,9 @@ def run(args) -> int:
         import dask.distributed  # noqa: F401
     except ImportError:
         raise CLIError("gfimu batch needs dask.distributed: pip install 'gfimu[distributed]'") from None
-    from ..batch import output_folders, run_batch
-    from ..io.outputs import check_output, write_output
+    from ..batch import output_folders
+    from ..io.atomic import output_lock
+    from ..io.outputs import check_output, check_output_within
     from .options import method_options
 
     options = method_options(args.method, args.option, preset=getattr(args, "preset", None),
@@ -62,12 +63,20 @@ def run(args) -> int:
         if log_real.is_dir() and (out_real == log_real or log_real in out_real.parents):
             raise CLIError(f"--out {out_dir}: is {'the' if out_real == log_real else 'inside the'} input log folder "
                            f"{log}; the estimates and summary go to a folder of their own (give another folder)")
-    for folder in output_folders(args.logs, out_dir):  # each estimate is checked again where it is written
-        target = folder / "estimate.csv"
-        if target.exists() and not target.is_file():
-            raise CLIError(f"--out: {target} exists and is not a regular file")
+    folders = output_folders(args.logs, out_dir)  # unique names, or refused before any work
+    for folder in folders:  # each estimate is checked again where it is written
+        check_output_within(out_dir, Path(folder.name) / "estimate.csv", inputs, "--out")
+    check_output_within(out_dir, "summary.csv", inputs, "--out")
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = check_output(out_dir / "summary.csv", inputs, "--out")
+    with output_lock(summary, "--out"):  # one batch at a time writes into this folder
+        return _run(args, out_dir, summary, options)
+
+
+def _run(args, out_dir: Path, summary: Path, options: dict) -> int:
+    from ..batch import run_batch
+    from ..io.outputs import write_output
+
     bar = _Bar(len(args.logs), enable=show_progress(args))
     failed = []
 
@@ -80,7 +89,10 @@ def run(args) -> int:
         result = run_batch(args.logs, out_dir, args.method, options, args.calibration, args.scheduler, args.workers,
                            on_done=done)
     except OSError as exc:
-        raise CLIError(f"Dask scheduler {args.scheduler or '(local cluster)'}: {exc}") from None
+        text = str(exc)
+        if not text.startswith("--scheduler "):
+            text = f"Dask scheduler {args.scheduler or '(local cluster)'}: {text}"
+        raise CLIError(text) from None
     finally:
         bar.close()
     write_output(summary, [result.summary_csv()])

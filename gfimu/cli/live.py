@@ -10,6 +10,8 @@ argument that cannot be used.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
 from pathlib import Path
 
@@ -46,14 +48,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args) -> int:
     from .. import io as gio
+    from ..io.atomic import output_lock
     from ..io.outputs import check_output
     from ..io.sources import SourceError, open_source
-    from ..live import EstimateSink
-    from ..live import run as run_live
     from ..methods import make_estimator
     from .options import method_options
 
     options = method_options("fixed-lag", args.option, lag_s=args.lag_s)
+    _refuse_unapplied(options)
     estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
     rate_hz = args.rate_hz or declared_rate_hz
@@ -63,10 +65,19 @@ def run(args) -> int:
         raise CLIError(f"{args.array}: {reason}")
     if args.queue < 1:
         raise CLIError(f"--queue {args.queue}: must be at least 1")
-    try:
-        source = open_source(args.source, array)
-    except SourceError as exc:
-        raise CLIError(str(exc)) from None
+    with contextlib.ExitStack() as held:
+        if out_path is not None:  # one writer at a time: a second session on this file is refused, before any work
+            held.enter_context(output_lock(out_path, "--out"))
+        try:
+            source = open_source(args.source, array)
+        except SourceError as exc:
+            raise CLIError(str(exc)) from None
+        return _session(args, source, estimator, out_path, rate_hz, declared_rate_hz)
+
+
+def _session(args, source, estimator, out_path, rate_hz, declared_rate_hz) -> int:
+    from ..live import EstimateSink
+    from ..live import run as run_live
 
     def report(message: str) -> None:
         try:
@@ -76,14 +87,18 @@ def run(args) -> int:
 
     if args.rate_hz and declared_rate_hz and abs(args.rate_hz - declared_rate_hz) > 1e-6 * declared_rate_hz:
         report(f"--rate-hz {args.rate_hz:g} replaces rate_hz = {declared_rate_hz:g} of {args.array}")
-    out = sys.stdout if out_path is None else open(Path(out_path), "w", encoding="utf-8", newline="")
-    try:
-        result = run_live(source, estimator, EstimateSink(out, sigma=estimator.compute_sigma), rate_hz=rate_hz,
-                          queue_size=args.queue, report=report,
-                          status_s=None if getattr(args, "quiet", False) else args.status_s)
-    finally:
-        if out is not sys.stdout:
-            out.close()
+    with contextlib.ExitStack() as held:
+        out = sys.stdout if out_path is None else held.enter_context(
+            open(Path(out_path), "w", encoding="utf-8", newline=""))
+        try:
+            result = run_live(source, estimator, EstimateSink(out, sigma=estimator.compute_sigma), rate_hz=rate_hz,
+                              queue_size=args.queue, report=report,
+                              status_s=None if getattr(args, "quiet", False) else args.status_s)
+        except BrokenPipeError:  # standard output closed by its reader: the session cannot go on
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to flush into it
+            report(f"error: --out {args.out}: the output was closed by its reader (a broken pipe); the session "
+                   "ended there")
+            return EXIT_FAILURE
     if result.failure:
         report(f"error: {result.failure}")
     report(result.summary())
@@ -92,3 +107,17 @@ def run(args) -> int:
     if result.ended == "input refused":
         return EXIT_USAGE
     return EXIT_FAILURE if result.failure else 0
+
+
+UNAPPLIED = {"guard": "off"}
+"""Options of the fixed-lag method that ``gfimu live`` cannot apply, with the one value it runs with."""
+
+
+def _refuse_unapplied(options: dict) -> None:
+    """Refuse (exit 2) an option live accepts by name but cannot apply, rather than ignore it."""
+    value = options.get("guard")
+    if value is not None and str(value) != UNAPPLIED["guard"]:
+        raise CLIError(f"-O guard={value}: the guard compares the smoothed answer with the per-sample estimate "
+                       "over spans of the whole log, after the fact; gfimu live writes each estimate as it leaves "
+                       "the lag window and cannot apply it (give -O guard=off, or run gfimu estimate --method "
+                       "fixed-lag on the recorded log)")

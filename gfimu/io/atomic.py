@@ -27,6 +27,7 @@ Temporary names are ``.NAME.XXXXXXXX.tmp`` with ``NAME`` cut to
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import signal
@@ -131,13 +132,44 @@ def remove_temporaries() -> int:
     return n
 
 
+RESOURCE_ERRNOS = frozenset(getattr(errno, name) for name in (
+    "ENOSPC", "EDQUOT", "EIO", "EROFS", "EACCES", "EPERM", "EMFILE", "ENFILE", "ENOMEM", "EFBIG", "EXDEV")
+    if hasattr(errno, name))
+"""Errors of writing that are the machine refusing (a full disk, no permission, ...): raised as
+:class:`gfimu.errors.ResourceError`."""
+
+_RESOURCE_TYPES: dict[type, type] = {}
+
+
+def resource_error(exc: OSError, filename: str | os.PathLike | None = None) -> OSError:
+    """``exc`` (naming ``filename`` when given) as a :class:`gfimu.errors.ResourceError` when its errno is one
+    of :data:`RESOURCE_ERRNOS`: also still an instance of its own type (``PermissionError``, ...), so that
+    code catching that goes on working. Other errors come back as they are (renamed when asked)."""
+    from ..errors import GfimuError, ResourceError
+
+    name = exc.filename if filename is None else filename
+    if exc.errno is None or isinstance(exc, OutputError):
+        return exc
+    if isinstance(exc, GfimuError):
+        return exc if filename is None else type(exc)(exc.errno, exc.strerror or str(exc), str(name))
+    if exc.errno not in RESOURCE_ERRNOS:
+        return exc if filename is None else type(exc)(exc.errno, exc.strerror or str(exc), str(name))
+    kind = _RESOURCE_TYPES.get(type(exc))
+    if kind is None:
+        kind = _RESOURCE_TYPES[type(exc)] = type(type(exc).__name__, (ResourceError, type(exc)),
+                                                 {"__module__": ResourceError.__module__})
+    out = kind(exc.errno, exc.strerror or str(exc), None if name is None else str(name))
+    return out
+
+
 def _naming(exc: OSError, target: Path) -> OSError:
-    """The same error, naming the destination instead of the temporary file."""
+    """The same error, naming the destination instead of the temporary file (a :class:`ResourceError` for a
+    full disk, no permission, ...: :func:`resource_error`)."""
     if isinstance(exc, OutputError):
         return exc
     if exc.errno is None:
         return exc
-    return type(exc)(exc.errno, exc.strerror or str(exc), str(target))
+    return resource_error(exc, target)
 
 
 def _remove(tmp: str) -> None:
@@ -190,7 +222,7 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
         _remove(tmp)
         if exc.filename in (None, tmp) or exc.filename2 == tmp:
             raise _naming(exc, target) from None
-        raise
+        raise resource_error(exc) from None
     except BaseException:
         _remove(tmp)
         raise
@@ -250,8 +282,8 @@ def _in_place_of(exc: OSError, tmp: str, target: Path) -> OSError:
         return _naming(exc, target)
     name = os.fspath(name)
     if isinstance(name, str) and name.startswith(tmp + os.sep):
-        return type(exc)(exc.errno, exc.strerror or str(exc), str(target) + name[len(tmp):])
-    return exc
+        return resource_error(exc, str(target) + name[len(tmp):])
+    return resource_error(exc)
 
 
 def _blocked_signals():
@@ -361,3 +393,59 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     atomic_write(path, [data], binary=True)
+
+
+LOCK_SUFFIX = ".lock"
+"""Suffix of the companion lock file of an output being written (``.NAME.lock`` next to it)."""
+
+
+def lock_name(target: Path) -> Path:
+    """The companion lock file of ``target``: ``.NAME.lock`` in its folder (``NAME`` cut as in temporary names)."""
+    return target.parent / (temp_prefix(target.name)[:-1] + LOCK_SUFFIX)
+
+
+@contextmanager
+def output_lock(path: str | os.PathLike, what: str = "--out") -> Iterator[Path]:
+    """Hold the one writer's lock of the output ``path`` while the block runs; a second writer is refused.
+
+    The lock is an exclusive ``flock`` on the companion file ``.NAME.lock`` next to ``path`` (created
+    without following a link); the kernel releases it when the process ends however it ends (SIGKILL
+    included), so a lock is never left stale. Another process holding it: :class:`OutputError` naming
+    ``what`` and the path, before anything is written. The file is removed when the block ends.
+    """
+    import fcntl
+
+    target = Path(path)
+    lock = lock_name(target)
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0), 0o644)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise OutputError(f"{what} {target}: its lock file {lock} is a symbolic link; refusing to "
+                                  "follow it") from None
+            raise _naming(exc, lock) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(f"{what} {target}: another gfimu process is writing this file now (it holds "
+                              f"{lock}); give this one another output") from None
+        except OSError:
+            os.close(fd)
+            raise
+        try:  # the file locked is still the one under that name (not removed by a writer just ending)
+            same = os.path.samestat(os.fstat(fd), os.lstat(lock))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        yield lock
+    finally:
+        try:
+            os.unlink(lock)
+        except OSError:
+            pass
+        os.close(fd)

@@ -31,7 +31,7 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from .atomic import atomic_write, destination, folder_destination, stat_or_none
+from .atomic import atomic_write, destination, file_kind, folder_destination, stat_or_none
 from .errors import OutputError
 from .log_dir import LOG_FILES
 
@@ -165,3 +165,43 @@ def prepare_log_folder(folder: str | os.PathLike, inputs: Iterable[str | os.Path
         if stat.S_ISDIR(mode):
             raise OutputError(f"{what} {p / name}: exists and is a folder; refusing to replace it with a file")
     return p
+
+
+def check_output_within(root: str | os.PathLike, rel: str | os.PathLike, inputs: Iterable[str | os.PathLike | None] = (),
+                        what: str = "--out") -> Path:
+    """Check the file ``root/rel`` a command writes inside its output folder ``root``, before it is written.
+
+    Besides :func:`check_output`'s refusals: no part of ``rel`` may be a symbolic link (a link planted in the
+    output folder would take the file outside it), ``..`` or absolute, and every part but the last that
+    exists must be a folder. Missing folders are fine (the caller creates them). Returns the path.
+    """
+    rel = Path(rel)
+    if rel.is_absolute() or any(part in ("", ".", "..") for part in rel.parts):
+        raise OutputError(f"{what} {root}: {rel} is not a name inside the output folder")
+    cur = Path(root)
+    for k, part in enumerate(rel.parts):
+        cur = cur / part
+        try:
+            st = os.lstat(cur)
+        except FileNotFoundError:
+            break
+        except NotADirectoryError:
+            raise OutputError(f"{what} {cur}: a part of this path is a file, not a folder") from None
+        if stat.S_ISLNK(st.st_mode):
+            raise OutputError(f"{what} {cur}: is a symbolic link (to {os.readlink(cur)}) in the output folder; "
+                              f"refusing to write through it (remove it, or give another --out)")
+        if k < len(rel.parts) - 1 and not stat.S_ISDIR(st.st_mode):
+            raise OutputError(f"{what} {cur}: exists and is {file_kind(st.st_mode)}, not a folder")
+    target = Path(root) / rel
+    if Path(os.path.realpath(root)) / rel != Path(os.path.realpath(target)):
+        raise OutputError(f"{what} {target}: resolves to {os.path.realpath(target)}, outside the output folder "
+                          f"{root}; refusing to write there")
+    try:
+        destination_ok = stat_or_none(target.parent, f"{what} {target}") is None
+    except OutputError:
+        raise
+    if destination_ok:
+        _refuse_inputs(target, str(target), input_files(inputs), what)
+        return target
+    check_output(target, inputs, what)
+    return target

@@ -164,7 +164,38 @@ SCALE_BANDS = ((8.0, 12.0, "m/s² under a [g] unit", "m/s^2"), (0.07, 0.14, "g u
 """(low, high, what, the unit to give) of median |f| / 9.80665 over a moving log: a unit misread."""
 
 
-def check_specific_force_scale(log: Log, where: str, gravity_included: bool = True) -> list[str]:
+MOVING_HIGH = 6.0
+"""Median |f| / g over a moving log above which the readings' scale is taken as wrong (whatever the factor):
+the body's common-mode specific force would have to exceed 6 g for most of the log."""
+MOVING_LOW = 0.05
+"""Median |f| / g over a moving log below which the readings' scale is suspect: 1/20 of gravity for most of
+the log is either a unit off by a factor or an array in free fall the whole time."""
+
+KNOWN_ACCEL_UNITS = (("m/s²", 1.0), ("g", STANDARD_GRAVITY_MPS2), ("mg", STANDARD_GRAVITY_MPS2 * 1e-3),
+                     ("cm/s² (gal)", 1e-2), ("mm/s²", 1e-3), ("ft/s²", 0.3048), ("µg", STANDARD_GRAVITY_MPS2 * 1e-6))
+"""Units an accelerometer's values are commonly written in, with their size in m/s²."""
+
+
+def suggested_factor(ratio: float, read_unit: str = "m s^-2") -> str:
+    """Words for readings whose |f| is ``ratio`` × gravity where gravity was expected: the factor that brings
+    them to gravity, and the unit their values are likely in (from :data:`KNOWN_ACCEL_UNITS`, relative to
+    ``read_unit``, the unit they were read under) when one fits within 15 %."""
+    from .units import UNITS, canonical_unit
+
+    factor = 1.0 / ratio
+    text = f"scaled by {factor:.4g} they would read gravity"
+    read = UNITS["acceleration"][1].get(canonical_unit(read_unit or "m s^-2"))
+    if read is not None:
+        size = read * factor  # m/s² per unit of the values, if the body saw gravity
+        near = [(abs(np.log(size / unit_size)), name) for name, unit_size in KNOWN_ACCEL_UNITS
+                if abs(size / unit_size - 1.0) <= 0.15]
+        if near and canonical_unit(min(near)[1].split()[0]) != canonical_unit(read_unit or "m s^-2"):
+            return f"{text}: likely the values are in {min(near)[1]}, not [{read_unit}]"
+    return text
+
+
+def check_specific_force_scale(log: Log, where: str, gravity_included: bool = True,
+                               read_unit: str = "m s^-2") -> list[str]:
     """The median |f| of the array's common mode over the whole log, far from 9.81 m/s² by a factor of
     9.81 or 1000: a unit misread, found without a still stretch. ``where`` names the file, columns and the
     unit read. A log of acceleration without gravity (``gravity_included`` False) is not checked, and the
@@ -181,6 +212,12 @@ def check_specific_force_scale(log: Log, where: str, gravity_included: bool = Tr
                     f"{ratio:.3g} × gravity, where a moving body's specific force stays near "
                     f"{STANDARD_GRAVITY_MPS2:g}: likely the values are in {what}; give the unit [{unit}] (in the "
                     "header or the map)"]
+    if ratio >= MOVING_HIGH or ratio <= MOVING_LOW:
+        return [f"{where}: over the whole log the accelerometers read a median |f| = {m:.4g} m/s², {ratio:.3g} × "
+                f"gravity, where a moving body's specific force stays near {STANDARD_GRAVITY_MPS2:g}: "
+                f"{suggested_factor(ratio, read_unit)}" + ("" if ratio >= MOVING_HIGH else
+                                                " (or the array was in free fall the whole time)")
+                + "; check the unit of the values (in the header or the map)"]
     return []
 
 
@@ -199,10 +236,19 @@ def check_gravity(log: Log, imu_name: str, accel_units: str = "m s^-2") -> list[
                     f"{m:.4g} m/s² (under [{accel_units}]), {ratio:.3g} × gravity, where a moving body's specific "
                     f"force stays near {STANDARD_GRAVITY_MPS2:g}: likely {cause} when the log was written; check "
                     "the unit of the recording it came from"]
-        return []
-    if g0 < 0.3:  # free fall
+        if ratio is not None and 0 < ratio and (ratio >= MOVING_HIGH or ratio <= MOVING_LOW):
+            return [f"{imu_name}: no still stretch, but over the whole log the accelerometers read a median |f| = "
+                    f"{m:.4g} m/s² (under [{accel_units}]), {ratio:.3g} × gravity, where a moving body's specific "
+                    f"force stays near {STANDARD_GRAVITY_MPS2:g}: {suggested_factor(ratio, accel_units)}"
+                    + ("" if ratio >= MOVING_HIGH else " (or the array was in free fall the whole time)")
+                    + "; check the unit of the recording it came from"]
         return []
     ratio = g0 / STANDARD_GRAVITY_MPS2
+    if g0 < 0.3:  # the sensors agree and hold steady on a tiny |f|: a scale off by a factor (free fall's noise
+        # would not agree between sensors)
+        return [f"{imu_name}: over a still stretch the accelerometers agree on |f| = {g0:.4g} m/s² (read under "
+                f"[{accel_units}]), {ratio:.3g} × gravity: {suggested_factor(ratio, accel_units)} (or the array "
+                "was in free fall); check the unit and scale of the accelerometer readings"]
     if 0.5 <= ratio <= 2.0:
         return []
     where = (f"{imu_name}: at rest the accelerometers read |f| = {g0:.4g} m/s² (read under [{accel_units}]), "
@@ -213,7 +259,7 @@ def check_gravity(log: Log, imu_name: str, accel_units: str = "m s^-2") -> list[
         return [f"{where}: likely the readings are in mg; write the column units as [mg] to convert them"]
     if 8 <= ratio <= 12:
         return [f"{where}: likely readings in m/s² under a [g] header; write the column units as [m s^-2]"]
-    return [f"{where}: check the unit and scale of the accelerometer readings"]
+    return [f"{where}: {suggested_factor(ratio, accel_units)}; check the unit and scale of the accelerometer readings"]
 
 
 def check_finite(log: Log, imu_name: str) -> list[str]:

@@ -40,7 +40,6 @@ from urllib.parse import parse_qs, urlparse
 
 import numpy as np
 
-from .errors import LogFormatError
 from .tables import (MAX_LINE_BYTES, TIMESTAMP_HEADER, _missing_imu_columns, column_factor, find_column, imu_columns,
                      parse_header)
 from .units import TIME_UNITS_NS, UNITS, timestamp_ns
@@ -92,6 +91,8 @@ class RowParser:
         self.index = [find_column(names, n, name, line) for n, _ in wanted]
         self.factor = np.array([column_factor(columns, i, kind, name, line) for i, (_, kind) in zip(self.index, wanted)])
         self.scale = TIME_UNITS_NS[time_unit]
+        self.accel_unit = (columns[self.index[0]][1] if self.index and array.n_axes else None) or "m s^-2"
+        """The unit the first accelerometer column is read under (named by the plausibility check)."""
         self.width = len(columns)
         self.n_acc = array.n_axes
         self.gyro = array.gyroscope is not None
@@ -139,6 +140,8 @@ class Source:
         self.array = array
         self.ended = "not started"
         self.failure: str | None = None
+        self.accel_unit: str | None = None
+        """The unit of the accelerometer columns, once known (a text source's header)."""
         self.keep_gross_errors = False
         """True: a text row whose readings are not finite or beyond any sensor's range is passed on, for the
         screening downstream to replace (:class:`gfimu.readings.StreamScreen`); False: it is a bad row."""
@@ -241,6 +244,7 @@ class StdinSource(Source):
                 continue
             if parser is None:
                 parser = RowParser(self.array, text, self.name, line, self.keep_gross_errors)
+                self.accel_unit = parser.accel_unit
                 continue
             yield _parsed(parser, text, where)
 
@@ -289,12 +293,10 @@ class UdpSource(Source):
                 return
             where = f"datagram {count}"
             if parser is None:
-                if text.lstrip().startswith("#"):
-                    try:
-                        parser = RowParser(self.array, text, f"{self.name} {where}",
-                                           keep_gross_errors=self.keep_gross_errors)
-                    except LogFormatError as exc:
-                        yield BadRow(where, f"header: {exc}")
+                if text.lstrip().startswith("#"):  # a header that cannot be read ends the session (exit 2)
+                    parser = RowParser(self.array, text, f"{self.name} {where}",
+                                       keep_gross_errors=self.keep_gross_errors)
+                    self.accel_unit = parser.accel_unit
                     continue
                 parser = RowParser(self.array, default_header(self.array), self.name,
                                    keep_gross_errors=self.keep_gross_errors)
@@ -325,13 +327,16 @@ class MimuSource(Source):
             self.port = None
         else:
             try:
-                import serial
-            except ImportError:
-                raise SourceError("serial sources need pyserial: pip install 'gfimu[serial]'") from None
-            try:
                 baud = int(parse_qs(url.query).get("baud", ["115200"])[0])
             except ValueError:
                 raise SourceError(f"--source {name}: baud must be an integer") from None
+            if not 0 < baud <= 100_000_000:
+                raise SourceError(f"--source {name}: baud={baud} is no baud rate (a positive number of bits per "
+                                  "second, e.g. baud=115200)")
+            try:
+                import serial
+            except ImportError:
+                raise SourceError("serial sources need pyserial: pip install 'gfimu[serial]'") from None
             try:
                 self.port = serial.Serial(url.path, baudrate=baud, timeout=POLL_S)
             except (OSError, serial.SerialException) as exc:
@@ -389,9 +394,11 @@ def open_source(spec: str, array) -> Source:
         raise SourceError(f"--source {spec}: expected -, udp://HOST:PORT, tcp://HOST:PORT or serial://DEVICE")
     if url.scheme == "udp":
         try:
-            port = url.port or 0
+            port = url.port
         except ValueError:
             raise SourceError(f"--source {spec}: the port is not a number from 0 to 65535") from None
+        if not port:
+            raise SourceError(f"--source {spec}: give the port to listen on, udp://HOST:PORT (e.g. udp://0.0.0.0:5005)")
         return UdpSource(array, url.hostname or "0.0.0.0", port, spec)
     try:
         url.port

@@ -258,7 +258,9 @@ class _Csv:
                 last = not data
                 if last and not buf:
                     return
-                cut = len(buf) if last else buf.rfind(b"\n") + 1
+                # the last line end, LF or a lone CR (a CR as the block's last byte may be the first half of a
+                # CRLF: the block is cut before it)
+                cut = len(buf) if last else max(buf.rfind(b"\n"), buf.rfind(b"\r", 0, len(buf) - 1)) + 1
                 if cut == 0 or len(buf) - cut > MAX_LINE_BYTES:  # no line end yet: read on
                     if len(buf) - cut > MAX_LINE_BYTES:
                         line = line0 + buf[:cut].count(b"\n") + 1

@@ -626,6 +626,50 @@ class _PresetContext:
         return LogFormatError(f"{message} (read with the preset {self.name})", self.input)
 
 
+ZIP_MEMBER_BYTES = 1 << 30
+"""Largest zip member read, inflated [bytes]."""
+ZIP_BOMB_BYTES = 64 << 20
+"""A member inflating beyond this many bytes ..."""
+ZIP_BOMB_RATIO = 100
+"""... to more than this many times its compressed size is refused as a zip bomb (sensor tables compress 3 to
+20 times)."""
+
+
+def _zip_member(archive: Path, member: str, shown: Path) -> bytes:
+    """The bytes of ``member`` of ``archive``, inflated a block at a time and refused (a :class:`LogFormatError`
+    naming ``shown``) as soon as they pass :data:`ZIP_MEMBER_BYTES`, or :data:`ZIP_BOMB_BYTES` at more than
+    :data:`ZIP_BOMB_RATIO` times the member's compressed size: a small archive never takes the memory of what it
+    claims to hold."""
+    try:
+        with zipfile.ZipFile(archive) as z:
+            info = z.getinfo(member)
+            packed = max(int(info.compress_size), 1)
+            limit = min(ZIP_MEMBER_BYTES, max(ZIP_BOMB_BYTES, ZIP_BOMB_RATIO * packed))
+            if info.file_size > limit:
+                raise LogFormatError(_zip_too_big(info.file_size, packed, limit), shown)
+            blocks, size = [], 0
+            with z.open(info) as fh:
+                while True:
+                    block = fh.read(1 << 20)
+                    if not block:
+                        break
+                    size += len(block)
+                    if size > limit:
+                        raise LogFormatError(_zip_too_big(size, packed, limit, more=True), shown)
+                    blocks.append(block)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, NotImplementedError) as exc:
+        if isinstance(exc, LogFormatError):
+            raise
+        raise LogFormatError(f"cannot read this member of the zip archive {archive}: {exc}", shown) from None
+    return b"".join(blocks)
+
+
+def _zip_too_big(size: int, packed: int, limit: int, more: bool = False) -> str:
+    return (f"inflates to {'more than ' if more else ''}{size / 2**20:.1f} MiB from {packed / 2**10:.1f} KiB in the zip "
+            f"archive, beyond the {limit / 2**20:.0f} MiB read from a member of that size (a zip bomb?); unpack it "
+            "and give the folder if it is a real recording")
+
+
 class _Source:
     """The files of a recording: a file, a folder, or a zip archive (its members read in memory)."""
 
@@ -638,6 +682,10 @@ class _Source:
                     names = [n for n in z.namelist() if not n.endswith("/")]
             except (zipfile.BadZipFile, OSError) as exc:
                 raise LogFormatError(f"cannot read this zip archive: {exc}", input_path) from None
+            twice = sorted({n for n in names if names.count(n) > 1})
+            if twice:  # which of the two is read would depend on the zip library
+                raise LogFormatError(f"the zip archive holds {twice[0]!r} {names.count(twice[0])} times; which one is "
+                                     "the recording is not known (keep one)", input_path)
             tops = {n.split("/", 1)[0] for n in names if "/" in n}
             strip = (next(iter(tops)) + "/") if len(tops) == 1 and all("/" in n for n in names) else ""
             self.members = {n[len(strip):]: n for n in names}
@@ -653,8 +701,7 @@ class _Source:
         """The text of a zip member (None for a file on disk, which :func:`read_table` reads itself)."""
         if self.members is None or self.input not in path.parents:
             return None
-        with zipfile.ZipFile(self.input) as z:
-            raw = z.read(self.members[path.relative_to(self.input).as_posix()])
+        raw = _zip_member(self.input, self.members[path.relative_to(self.input).as_posix()], path)
         try:
             return raw.decode("utf-8").lstrip("\ufeff")
         except UnicodeDecodeError as exc:
@@ -1073,7 +1120,9 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         units = sorted({u for _, u in cols})
         read_as.append(f"{path} (columns {', '.join(names[:3])}{', ...' if len(names) > 3 else ''} read as "
                        f"{', '.join(f'[{u}]' for u in units)})")
-    for warning in check_specific_force_scale(log, "; ".join(read_as), gravity_included=not linear):
+    read_units = {u for cols in reader.accel_units.values() for _, u in cols}
+    for warning in check_specific_force_scale(log, "; ".join(read_as), gravity_included=not linear,
+                                              read_unit=read_units.pop() if len(read_units) == 1 else "m s^-2"):
         warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
     return Conversion(log, tuple(report + geometry_report), unplaced)
 
