@@ -101,3 +101,65 @@ def test_evaluate_reports_coverage_from_an_estimate_csv_with_sigma(tmp_path, cap
     assert float(row["coverage_1sigma_x"]) == 0.75 and float(row["mean_nees"]) == pytest.approx(2.8775, rel=1e-12)
     assert main(["evaluate", str(tmp_path / "truth.csv"), str(tmp_path / "est.csv")]) == 0
     assert "| omega | 4 | 75 % | 75 % | 100 % | 75 % | 100 % | 100 % | 2.87" in capsys.readouterr().out
+
+
+def _ar1(rng, shape, std, corr):
+    out = np.empty(shape)
+    e = rng.standard_normal(shape) * std * math.sqrt(1.0 - corr * corr)
+    out[0] = rng.standard_normal(shape[1:]) * std
+    for i in range(1, shape[0]):
+        out[i] = corr * out[i - 1] + e[i]
+    return out
+
+
+def _coverage(log, estimator, white, monkeypatch):
+    from gfimu.smoother import batch, fixed_lag
+
+    with monkeypatch.context() as mp:
+        if white:  # the model's σ alone, as before the scaling
+            mp.setattr(batch, "_calibrates_sigma", lambda *a: False)
+            mp.setattr(fixed_lag, "calibrates_stream", lambda *a: False)
+        motion = estimator.estimate(log).motion
+    err = motion.omega_b_radps - log.truth.omega_b_radps
+    return sigma_metrics(err, motion.sigma["omega_b_radps"]), motion
+
+
+@pytest.fixture(scope="module")
+def simulated_logs():
+    from dataclasses import replace
+
+    from gfimu.simulate import SensorErrors, simulate
+
+    clean = simulate("random3d", cube_array(0.05, 0.01), rate_hz=100.0, duration_s=30.0,
+                     noise=SensorErrors(accel_noise_std_mps2=0.01), seed=3)
+    # an error array.toml does not state: 0.05 m/s² per axis, correlated 0.95 from one sample to the next
+    misfit = replace(clean, accel_mps2=clean.accel_mps2 + _ar1(np.random.default_rng(5), clean.accel_mps2.shape,
+                                                               0.05, 0.95))
+    return clean, misfit
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["smoother", "fixed-lag"])
+def test_sigma_covers_an_unstated_correlated_misfit_and_stays_where_the_model_is_right(simulated_logs, method,
+                                                                                        monkeypatch):
+    from gfimu.methods import make_estimator
+
+    clean, misfit = simulated_logs
+    est = make_estimator(method, compute_sigma=True)
+    white, m_white = _coverage(misfit, est, True, monkeypatch)
+    scaled, m_scaled = _coverage(misfit, est, False, monkeypatch)
+    assert np.array_equal(m_white.omega_b_radps, m_scaled.omega_b_radps)  # the estimate itself is untouched
+    # the white-noise σ is several times too small: a third of the samples within 1σ at most
+    assert max(white["coverage_1sigma"]) < 0.35 and white["mean_nees"] > 20
+    # scaled: the target band over the three axes together (each axis' share, from 30 s of errors
+    # correlated over a second or so, scatters by about ±0.06 about it)
+    one, two = np.mean(scaled["coverage_1sigma"]), np.mean(scaled["coverage_2sigma"])
+    assert 0.60 <= one <= 0.76 and 0.90 <= two <= 0.99, scaled
+    assert all(0.6 <= v <= 0.85 for v in scaled["coverage_1sigma"]), scaled
+    assert 1.0 < scaled["mean_nees"] < 4.0
+    # a log the model describes: σ stays the model's (within 3 %), the coverage with it
+    right, m_right = _coverage(clean, est, False, monkeypatch)
+    plain, m_plain = _coverage(clean, est, True, monkeypatch)
+    ratio = m_right.sigma["omega_b_radps"] / m_plain.sigma["omega_b_radps"]
+    assert 0.97 < np.median(ratio) < 1.03
+    assert np.allclose(right["coverage_1sigma"], plain["coverage_1sigma"], atol=0.03)
