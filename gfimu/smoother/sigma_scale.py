@@ -30,8 +30,6 @@ so far (:class:`RunningSigmaScale`: causal). The estimates themselves are not to
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 
 from ..rigid_body import quadratic_terms, quadratic_terms_jacobian
@@ -41,6 +39,8 @@ MAX_LAG = 64
 RANK_TOLERANCE = 1e-6
 """A direction of the whitened Jacobian counts (rank, single-sample variance) when its singular value
 exceeds this times the largest."""
+CHUNK = 20000
+"""Samples whose Jacobians the batch smoother's factor takes at once."""
 MIN_SAMPLES = 16
 """The running factor stays 1 until this many samples' residuals are in."""
 
@@ -50,14 +50,15 @@ def _geometry(array):
     return S[:, 0:3], S[:, 3:6], S[:, 6:12]
 
 
-def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np.ndarray, robust=None):
+def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np.ndarray, robust=None,
+           geometry=None):
     """(p (N, m), rank (N,), single-sample variances (N, 9)) of the readings ``accel_mps2`` (N, m) at the
     estimates ``states`` (N, ≥9: ω, ω̇, f) with the noise std ``noise_std_mps2`` (N, m) or (m,): the parity
     residual, the rank of the whitened Jacobian and the variance of each state from that sample alone
     (module docstring). ``robust``: (loss, threshold) of the smoother's robust re-weighting of the
     accelerometer axes, or None: each axis' std is then the one the re-weighting gives at the estimate,
     ``std / √w(r/std)`` (:func:`gfimu.smoother.graph.robust_weight`), the noise the smoother's σ assumed."""
-    S_f, S_dw, S_q = _geometry(array)
+    S_f, S_dw, S_q = _geometry(array) if geometry is None else geometry
     X = np.asarray(states, dtype=float)
     w, dw, f = X[:, 0:3], X[:, 3:6], X[:, 6:9]
     y = np.asarray(accel_mps2, dtype=float)
@@ -75,23 +76,24 @@ def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np
     keep = s > RANK_TOLERANCE * s[:, :1]
     Uk = U * keep[:, None, :]
     p = z - np.einsum("nmr,nr->nm", Uk, np.einsum("nmr,nm->nr", Uk, z))
-    with np.errstate(divide="ignore"):
-        inv_s2 = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, np.inf)
+    inv_s2 = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, 0.0)
     Vt2 = Vt ** 2
-    with np.errstate(invalid="ignore"):
-        single = np.einsum("nrj,nr->nj", np.where(Vt2 > 0, Vt2, 0.0), np.where(np.isinf(inv_s2), 0.0, inv_s2))
-        unseen = np.any((Vt2 > 1e-12) & ~keep[:, :, None], axis=1)
-    single = np.where(unseen, np.inf, single)
+    single = np.einsum("nrj,nr->nj", Vt2, inv_s2)
+    unseen = np.any((Vt2 > 1e-12) & ~keep[:, :, None], axis=1)
+    single[unseen] = np.inf
     return p, keep.sum(axis=1), single
 
 
 def long_run_factors(rho: np.ndarray) -> np.ndarray:
     """τ(L) for L = 0 … len(rho) (``rho[k-1]``: the autocorrelation at lag k), each at least 1."""
+    rho = np.asarray(rho, dtype=float)
     K = len(rho)
     out = np.ones(K + 1)
-    k = np.arange(1, K + 1)
-    for L in range(2, K + 1):
-        out[L] = 1.0 + 2.0 * float(np.sum((1.0 - k[:L - 1] / L) * rho[:L - 1]))
+    if K:
+        c1 = np.cumsum(rho)[:K - 1]  # Σ_{k<L} ρ_k for L = 2 … K
+        c2 = np.cumsum(np.arange(1, K + 1) * rho)[:K - 1]  # Σ_{k<L} k ρ_k
+        L = np.arange(2, K + 1)
+        out[2:] = 1.0 + 2.0 * (c1 - c2 / L)
     return np.maximum(out, 1.0)
 
 
@@ -100,8 +102,8 @@ def scale_factors(sd: np.ndarray, single: np.ndarray, variance_factor: float, ta
     between whole spans)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         span = single / (sd * sd)
-    span = np.where(np.isfinite(span), span, np.inf)
-    L = np.clip(np.nan_to_num(span, nan=0.0, posinf=len(tau) - 1), 0, len(tau) - 1)
+    top = len(tau) - 1
+    L = np.where(np.isnan(span), 0.0, np.minimum(span, top))  # nothing known (σ 0 or NaN): no span
     return np.sqrt(variance_factor * np.interp(L, np.arange(len(tau)), tau))
 
 
@@ -112,10 +114,12 @@ class RunningSigmaScale:
 
     def __init__(self, array, max_lag: int = MAX_LAG):
         self.array = array
+        self._geometry = _geometry(array)
         self.robust = None
         """(loss, threshold) of the robust re-weighting in use (:func:`parity`), or None."""
         self.max_lag = int(max_lag)
-        self._recent: deque = deque(maxlen=self.max_lag)  # the newest parity residuals, newest last
+        self._ring: np.ndarray | None = None  # the newest parity residuals, row i % max_lag of sample i
+        self._held = 0  # rows of the ring filled since the last reset
         self._power = 0.0
         self._dof = 0.0
         self._lagged = np.zeros(self.max_lag)
@@ -123,7 +127,7 @@ class RunningSigmaScale:
 
     def reset(self) -> None:
         """A new segment: the lagged products do not reach across it (the sums so far are kept)."""
-        self._recent.clear()
+        self._held = 0
 
     @property
     def variance_factor(self) -> float:
@@ -134,28 +138,61 @@ class RunningSigmaScale:
             return np.ones(self.max_lag + 1)
         return long_run_factors(self._lagged / self._power)
 
+    def _parity(self, y: np.ndarray, x: np.ndarray, std: np.ndarray):
+        """:func:`parity` of one sample (the same numbers, without the batch's broadcasting)."""
+        S_f, S_dw, S_q = self._geometry
+        w = x[0:3]
+        inv = 1.0 / std
+        z = (y - S_f @ x[6:9] - S_dw @ x[3:6] - S_q @ quadratic_terms(w)) * inv
+        if self.robust is not None and self.robust[1] > 0:
+            from .graph import robust_weight
+
+            weight = np.sqrt(robust_weight(z, float(self.robust[1]), self.robust[0]))
+            z, inv = z * weight, inv * weight
+        J = np.empty((len(y), 9))
+        J[:, 0:3] = S_q @ quadratic_terms_jacobian(w)
+        J[:, 3:6] = S_dw
+        J[:, 6:9] = S_f
+        J *= inv[:, None]
+        U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+        keep = sv > RANK_TOLERANCE * sv[0]
+        Uk = U[:, keep]
+        p = z - Uk @ (Uk.T @ z)
+        single = (Vt[keep] ** 2).T @ (1.0 / sv[keep] ** 2)
+        single[np.any(Vt[~keep] ** 2 > 1e-12, axis=0)] = np.inf
+        return p, int(np.count_nonzero(keep)), single
+
     def scaled(self, accel_mps2: np.ndarray, state: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray) -> np.ndarray:
         """``sd`` (9,) of ``state`` (9,: ω, ω̇, f) scaled by the factor with this sample's residual included."""
-        p, rank, single = parity(self.array, np.asarray(accel_mps2, dtype=float)[None], np.asarray(state)[None, :9],
-                                 np.asarray(noise_std_mps2, dtype=float)[None], self.robust)
-        p = p[0]
+        sd = np.asarray(sd, dtype=float)
+        p, rank, single = self._parity(np.asarray(accel_mps2, dtype=float), np.asarray(state, dtype=float)[:9],
+                                       np.asarray(noise_std_mps2, dtype=float))
         if np.all(np.isfinite(p)):
             self._power += float(p @ p)
-            self._dof += float(len(p) - rank[0])
-            if self._recent:
-                past = np.array(self._recent)[::-1]  # lag 1 first
-                self._lagged[:len(past)] += past @ p
-            self._recent.append(p)
+            self._dof += float(len(p) - rank)
+            if self._ring is None:
+                self._ring = np.zeros((self.max_lag, len(p)))
+            K = self.max_lag
+            held = min(self._held, K)
+            if held:
+                rows = (self._held - np.arange(1, held + 1)) % K  # lag 1 first
+                self._lagged[:held] += self._ring[rows] @ p
+            self._ring[self._held % K] = p
+            self._held += 1
             self.samples += 1
-        return np.asarray(sd, dtype=float) * scale_factors(np.asarray(sd, dtype=float)[None], single,
-                                                           self.variance_factor, self.tau())[0]
+        return sd * scale_factors(sd, single, self.variance_factor, self.tau())
 
 
 def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
                      robust=None, max_lag: int = MAX_LAG) -> np.ndarray:
     """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the whole log's
     residuals (the batch smoother's; module docstring). Rows with a non-finite residual do not count."""
-    p, rank, single = parity(array, accel_mps2, states[:, :9], noise_std_mps2, robust)
+    n = len(states)
+    noise = np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), np.shape(accel_mps2))
+    geometry = _geometry(array)
+    parts = [parity(array, accel_mps2[i:i + CHUNK], states[i:i + CHUNK, :9], noise[i:i + CHUNK], robust, geometry)
+             for i in range(0, n, CHUNK)]  # in blocks: the Jacobians of a long log at once would not fit
+    p, rank, single = (np.concatenate([part[j] for part in parts]) for j in range(3))
     ok = np.all(np.isfinite(p), axis=1)
     out = np.array(sd, dtype=float)
     if np.count_nonzero(ok) < MIN_SAMPLES:
@@ -165,7 +202,6 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     dof = float(np.sum((p.shape[1] - rank)[ok]))
     if power <= 0 or dof <= 0:
         return out
-    n = len(q)
     lags = min(max_lag, n - 1)
     lagged = np.array([float(np.sum(q[k:] * q[:n - k])) for k in range(1, lags + 1)])
     tau = long_run_factors(lagged / power)
