@@ -14,7 +14,11 @@ kept (matching timestamps, valid, finite):
 - for ω only: ``flipped_share`` (the share of samples on the wrong sign: the whole
   vector points the other way), ``axis_sign_off_share``, ``axis_sign_off_share_axis``
   (a component's sign differs, which small components of a right vector also do) and
-  ``large_error_share`` (defined in :class:`QuantityMetrics`).
+  ``large_error_share`` (defined in :class:`QuantityMetrics`);
+- when the estimate carries one-sigma values (``gfimu estimate --sigma``), the calibration of that σ:
+  ``coverage_1sigma`` / ``coverage_2sigma`` per axis, the share of rows with |e_j| < σ_j (resp. 2σ_j;
+  0.683 and 0.954 for a Gaussian error of that σ), and ``mean_nees``, the mean over rows of
+  Σ_j (e_j/σ_j)² (the number of axes, 3, when σ is right); over the rows whose σ is finite and positive.
 
 Attitude (quaternions): the error is the rotation vector of
 R_trueᵀ R_est, in B, in rad (its norm is the attitude error angle); a
@@ -60,7 +64,9 @@ def row_keys(large_error_radps: float = 5.0) -> tuple[str, ...]:
     """Keys of :attr:`EvaluationResult.rows`, in table order."""
     return ("quantity", "unit", "n_samples", "n_nonfinite", "rmse_x", "rmse_y", "rmse_z", "rmse_norm", "median_norm",
             "relative_rms_x", "relative_rms_y", "relative_rms_z", "axis_sign_off_share", "axis_sign_off_share_x",
-            "axis_sign_off_share_y", "axis_sign_off_share_z", "flipped_share", f"share_off_{large_error_radps:g}radps")
+            "axis_sign_off_share_y", "axis_sign_off_share_z", "flipped_share", f"share_off_{large_error_radps:g}radps",
+            "coverage_1sigma_x", "coverage_1sigma_y", "coverage_1sigma_z", "coverage_2sigma_x", "coverage_2sigma_y",
+            "coverage_2sigma_z", "mean_nees", "n_sigma")
 
 
 class EvaluationAlignmentWarning(UserWarning):
@@ -106,15 +112,25 @@ class QuantityMetrics:
     axis_sign_off_share_axis: tuple[float, ...] | None = None
     large_error_share: float | None = None
     flipped_share: float | None = None
+    coverage_1sigma: tuple[float, ...] | None = None
+    """Per axis, the share of rows with |error| < σ (the estimate's one-sigma value); None without σ."""
+    coverage_2sigma: tuple[float, ...] | None = None
+    """Per axis, the share of rows with |error| < 2σ."""
+    mean_nees: float | None = None
+    """Mean over rows of Σ_j (error_j / σ_j)² (normalised estimation error squared, diagonal σ)."""
+    n_sigma: int | None = None
+    """Rows whose σ is finite and positive on every axis (those the three above are taken over)."""
 
     def row(self, large_error_radps: float = 5.0) -> dict:
         keys = row_keys(large_error_radps)
         r = dict.fromkeys(keys)
         r.update(quantity=self.quantity, unit=self.unit, n_samples=self.n, n_nonfinite=self.n_nonfinite,
-                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, axis_sign_off_share=self.axis_sign_off_share, flipped_share=self.flipped_share)
-        r[keys[-1]] = self.large_error_share
+                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, axis_sign_off_share=self.axis_sign_off_share, flipped_share=self.flipped_share,
+                 mean_nees=self.mean_nees, n_sigma=self.n_sigma)
+        r[f"share_off_{large_error_radps:g}radps"] = self.large_error_share
         for name, values in (("rmse", self.rmse), ("relative_rms", self.relative_rms),
-                             ("axis_sign_off_share", self.axis_sign_off_share_axis)):
+                             ("axis_sign_off_share", self.axis_sign_off_share_axis),
+                             ("coverage_1sigma", self.coverage_1sigma), ("coverage_2sigma", self.coverage_2sigma)):
             if values is not None:
                 for a, v in zip(AXES, values):
                     r[f"{name}_{a}"] = v
@@ -225,6 +241,16 @@ class EvaluationResult:
             cells = [m.label, m.unit, str(m.n), *map(_fmt, rmse), _fmt(m.rmse_norm), _fmt(m.median_norm),
                      *map(_pct, rel), _pct(m.flipped_share), _pct(m.axis_sign_off_share), _pct(m.large_error_share)]
             lines.append("| " + " | ".join(cells) + " |")
+        calibrated = [m for m in self.metrics if m.coverage_1sigma is not None]
+        if calibrated:
+            lines += ["", "| quantity | n with σ | < 1σ x | < 1σ y | < 1σ z | < 2σ x | < 2σ y | < 2σ z | mean NEES |",
+                      "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+            for m in calibrated:
+                lines.append("| " + " | ".join([m.label, str(m.n_sigma), *map(_pct, m.coverage_1sigma),
+                                                 *map(_pct, m.coverage_2sigma), _fmt(m.mean_nees)]) + " |")
+            lines += ["", "σ calibration: the share of rows whose error is within the estimate's one-sigma value "
+                          "(a Gaussian error of that σ: 68.3 %) and within 2σ (95.4 %) per axis; mean NEES "
+                          f"Σ_j (e_j/σ_j)² over the axes ({len(AXES)} when σ is right)."]
         lines += ["", f"{self.summary()}. Relative RMS: paper 004 eq. (7). Wrong sign: samples whose ω points the "
                       f"other way, ω_est · ω_true < 0 where ‖ω_true‖ > {self.sign_threshold_radps:g} rad/s; axis sign off: "
                       f"samples with some component of |ω| > {self.sign_threshold_radps:g} rad/s estimated with the other "
@@ -334,6 +360,21 @@ def _sign_metrics(est: np.ndarray, true: np.ndarray, threshold: float, large: fl
     }
 
 
+def sigma_metrics(err: np.ndarray, sigma: np.ndarray) -> dict:
+    """The calibration of one-sigma values ``sigma`` (N, k) against the errors ``err`` (N, k), over the rows
+    whose σ is finite and positive on every axis: ``coverage_1sigma``, ``coverage_2sigma`` (per axis, the
+    share with |e| < σ, < 2σ), ``mean_nees`` (mean of Σ_j (e_j/σ_j)²) and ``n_sigma`` (those rows)."""
+    with np.errstate(invalid="ignore"):
+        ok = np.all(np.isfinite(sigma) & (sigma > 0), axis=1) & np.all(np.isfinite(err), axis=1)
+    n = int(np.count_nonzero(ok))
+    if n == 0:
+        return {"n_sigma": 0}
+    z = np.abs(err[ok]) / sigma[ok]
+    return {"coverage_1sigma": tuple(float(v) for v in np.mean(z < 1.0, axis=0)),
+            "coverage_2sigma": tuple(float(v) for v in np.mean(z < 2.0, axis=0)),
+            "mean_nees": float(np.mean(np.sum(z * z, axis=1))), "n_sigma": n}
+
+
 def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, sign_threshold_radps: float = 0.1,
              large_error_radps: float = 5.0, align: str = "exact") -> EvaluationResult:
     """Errors of ``estimate`` against ``truth`` (or a reference) for every quantity both have.
@@ -395,6 +436,9 @@ def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, s
                                            m.median_norm))
             continue
         extra = _sign_metrics(est, tru, sign_threshold_radps, large_error_radps) if name == "omega_b_radps" else {}
+        sigma = estimate.sigma.get(name)
+        if sigma is not None:
+            extra.update(sigma_metrics(est - tru, np.asarray(sigma, dtype=float)[finite]))
         metrics.append(_vector_metrics(name, est - tru, tru, n_nonfinite, **extra))
     return EvaluationResult(tuple(metrics), n_rows, int(np.sum(keep)), n_invalid, n_outside, alignment,
                             float(sign_threshold_radps), float(large_error_radps))

@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "reference.csv): RMSE per axis and of the norm, median error norm, relative RMS error "
                     "(paper 004 eq. 7) for every quantity both files have; for ω also the share of samples on the "
                     "wrong sign (ω_est · ω_ref < 0), of samples with a component of the other sign, and of errors "
-                    "over 5 rad/s. Rows marked invalid in the reference (valid = 0) are left out.",
+                    "over 5 rad/s; when the estimate has σ columns (gfimu estimate --sigma), per axis the share of rows within "
+                    "1σ and 2σ and the mean NEES. Rows marked invalid in the reference (valid = 0) are left out.",
     )
     p.add_argument("reference", help="truth or reference CSV, or a log folder (its truth.csv, else reference.csv)")
     p.add_argument("estimate", help="estimate CSV (as written by gfimu estimate)")

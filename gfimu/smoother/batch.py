@@ -65,6 +65,7 @@ from .initialise import initial_attitude, initial_states, sign_chain
 from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from .restarts import branch_restarts
 from .result import SmootherEstimator, SmootherResult
+from .sigma_scale import calibrated_sigma
 from .tuning import InitialStates, Tuning, make_problem, tuned_problem
 
 SOLVERS = ("numpy", "gtsam")
@@ -213,6 +214,10 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         if sd is not None:
             sd[keep_log, :m] = out.sd[:, :m]
         calibration.append(out.calibration)
+    if sd is not None and outcomes and all(out.noise is not None for out in outcomes) and _calibrates_sigma(log, opt):
+        noise_std = np.vstack([out.noise for out in outcomes])
+        sd = calibrated_sigma(log.array, log.accel_mps2, states, sd, noise_std,
+                              (opt.robust_loss, opt.accel_robust_threshold) if opt.accel_robust_threshold > 0 else None)
     sigma = {} if sd is None else layout.quantities(sd)
     extra = {}
     if attitude:
@@ -238,6 +243,8 @@ class _WindowOutcome:
     iterations: int
     cost: float
     converged: bool
+    noise: np.ndarray | None = None
+    """The accelerometer noise std the solution assumed on the kept rows before any robust weight (N, axes)."""
 
     @property
     def states(self) -> np.ndarray:
@@ -247,8 +254,9 @@ class _WindowOutcome:
     @classmethod
     def of(cls, res: SolveResult, problem: SmootherProblem, keep_win: slice, tunings: list) -> _WindowOutcome:
         sd = None if res.covariance is None else np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
+        noise = None if sd is None else (res.problem or problem).base_noise()[0][keep_win]
         return cls(res.states, keep_win, sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
-                   tunings, res.iterations, float(res.cost), bool(res.converged))
+                   tunings, res.iterations, float(res.cost), bool(res.converged), noise)
 
 
 @dataclass
@@ -375,6 +383,14 @@ def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: In
         previous = (solve_sl, problem.rotations(res.states))
         out.append(_WindowOutcome.of(res, problem, keep_win, tunings))
     return out
+
+
+def _calibrates_sigma(log: Log, opt: SmootherOptions) -> bool:
+    """Whether σ is scaled by the readings' misfit (:mod:`gfimu.smoother.sigma_scale`): the accelerometers
+    alone, as they are (no gyroscope, inclinometer or calibration variables the residual would leave out)."""
+    return (opt.measurement == "accelerometer" and not (opt.self_calibrate_bias or opt.self_calibrate_scale)
+            and not (opt.use_gyro and log.array.gyroscope is not None and log.gyro_b_radps is not None)
+            and not (opt.estimate_attitude and opt.use_inclinometer and log.array.inclinometer is not None))
 
 
 def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):

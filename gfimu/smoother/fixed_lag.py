@@ -97,6 +97,7 @@ from . import stream_model
 from .auto import measured_noise_options
 from .restarts import plane_normal
 from .stream_model import LocalDensity, StreamModel, StreamSignChain
+from .sigma_scale import RunningSigmaScale, calibrates_stream
 from .tuning import tuned_problem
 from ..estimators.ml import MLEstimator
 
@@ -324,6 +325,8 @@ class FixedLagSmoother:
         self.n_clock_resets = 0
         """Times the clock went back by more than ``clock_reset_s`` (each restarted the window)."""
         self.closed = False
+        self._sigma_scale = RunningSigmaScale(array) if self.compute_sigma and calibrates_stream(array, options) else None
+        self._readings: dict = {}  # t_ns -> accel of the samples not yet emitted (σ's running scale)
         self._start_segment()
 
     # --- public API ---------------------------------------------------------
@@ -403,14 +406,36 @@ class FixedLagSmoother:
             self._origin_ns = t_ns
         self._last_t_ns = t_ns
         sample = (t_ns, y, gyro)
+        if self._sigma_scale is not None:
+            self._readings[t_ns] = y
         if self._tune_pending:
             self._tune_buffer.append(sample)
             if len(self._tune_buffer) < self._tune_n:
-                return FixedLagUpdate(tuple(smoothed), None)
+                return FixedLagUpdate(self._scaled(smoothed), None)
             smoothed.extend(self._tune_and_replay())
         else:
             smoothed.extend(self._process(sample))
-        return FixedLagUpdate(tuple(smoothed), None if self._smoother is None else self._read(self._window[-1]))
+        return FixedLagUpdate(self._scaled(smoothed), None if self._smoother is None else self._read(self._window[-1]))
+
+    def _scaled(self, states) -> tuple[StateEstimate, ...]:
+        """``states`` with σ scaled by the misfit of the readings emitted so far (:mod:`gfimu.smoother.sigma_scale`)."""
+        if self._sigma_scale is None:
+            return tuple(states)
+        out = []
+        for s in states:
+            y = self._readings.pop(s.timestamp_ns, None)
+            if s.sigma_omega_b_radps is None or y is None:
+                out.append(s)
+                continue
+            m = self.model
+            x = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+            std = np.sqrt(m.accel_sigma_mps2 ** 2 + m.accel_noise_slope_mps2_per_radps ** 2 * float(x[:3] @ x[:3]))
+            self._sigma_scale.robust = (m.robust_loss, m.accel_robust_threshold) if m.accel_robust_threshold > 0 else None
+            sd = self._sigma_scale.scaled(y, x, np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
+                                                                s.sigma_specific_force_b_mps2]), std)
+            out.append(replace(s, sigma_omega_b_radps=sd[0:3], sigma_omega_dot_b_radps2=sd[3:6],
+                               sigma_specific_force_b_mps2=sd[6:9]))
+        return tuple(out)
 
     def _process(self, sample) -> list[StateEstimate]:
         """One sample into the current segment (no tuning, no gap check); the states due."""
@@ -620,8 +645,10 @@ class FixedLagSmoother:
         """
         if self.closed:
             raise FixedLagSmootherClosed("fixed-lag smoother: flush after close()")
-        out = self._end_segment()
+        out = self._scaled(self._end_segment())
         self._last_t_ns = None
+        if self._sigma_scale is not None:
+            self._sigma_scale.reset()
         return out
 
     def close(self) -> tuple[StateEstimate, ...]:

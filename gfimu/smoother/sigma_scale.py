@@ -1,0 +1,216 @@
+"""The smoothers' one-sigma values scaled to what the readings show: the misfit the model did not state.
+
+Both smoothers compute σ from the noise their model assumes: white accelerometer noise of the stated
+(or measured, or tuned) level, growing with |ω| under the robust model. A real array's readings also
+disagree with a rigid body in ways that are neither white nor of that level (sensor positions and
+alignment, scale errors, vibration, timing), and the smoother averages such an error over neighbouring
+samples as if it were white. This module measures both from the readings themselves and scales σ by
+them:
+
+- **Parity residual.** At sample i the whitened reading residual z_i = W_i (y_i − h(x̂_i)) (W_i: the
+  inverse of the noise std the model assumed) is projected onto the orthogonal complement of the
+  columns of the whitened measurement Jacobian J_i = W_i ∂h/∂x (x = [ω, ω̇, f]): p_i = (I − J_i J_i⁺) z_i.
+  To first order p_i = (I − J_i J_i⁺) W_i e_i, the reading error alone: whatever the smoother made of the
+  states, this part of the residual cannot be fitted by them. Under the model it has
+  E|p_i|² = m − rank J_i (m: accelerometer axes).
+- **Variance factor** s² = Σ_i |p_i|² / Σ_i (m − rank J_i): the realised misfit against the assumed
+  noise (1 when the noise is as stated).
+- **Correlation in time.** ρ_k = Σ_i p_i · p_{i−k} / Σ_i |p_i|², k = 1 … :data:`MAX_LAG`. A state the
+  smoother estimates from L samples' worth of readings has, under an error of this correlation, the
+  variance of white noise times τ(L) = 1 + 2 Σ_{k<L} (1 − k/L) ρ_k (the mean of L correlated samples
+  against that of L independent ones; linear between whole L), taken at least 1.
+- **Span.** L_ij = σ²_single,ij / σ²_ij: the variance of state j from sample i's readings alone
+  ((J_iᵀ J_i)⁺, infinite along directions one sample does not see, such as ω at rest) over the
+  smoother's; at most :data:`MAX_LAG`.
+
+The reported σ_ij becomes σ_ij √(s² τ(L_ij)). The batch smoother takes s² and ρ over the whole log
+(:func:`calibrated_sigma`); the fixed-lag smoother, which writes σ as it goes, over the samples emitted
+so far (:class:`RunningSigmaScale`: causal). The estimates themselves are not touched.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..rigid_body import quadratic_terms, quadratic_terms_jacobian
+
+MAX_LAG = 64
+"""Longest lag [samples] of the residual's autocorrelation, and longest span L taken."""
+RANK_TOLERANCE = 1e-6
+"""A direction of the whitened Jacobian counts (rank, single-sample variance) when its singular value
+exceeds this times the largest."""
+CHUNK = 20000
+"""Samples whose Jacobians the batch smoother's factor takes at once."""
+MIN_SAMPLES = 16
+"""The running factor stays 1 until this many samples' residuals are in."""
+
+
+def _geometry(array):
+    S = array.structure_matrix()
+    return S[:, 0:3], S[:, 3:6], S[:, 6:12]
+
+
+def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np.ndarray, robust=None,
+           geometry=None):
+    """(p (N, m), rank (N,), single-sample variances (N, 9)) of the readings ``accel_mps2`` (N, m) at the
+    estimates ``states`` (N, ≥9: ω, ω̇, f) with the noise std ``noise_std_mps2`` (N, m) or (m,): the parity
+    residual, the rank of the whitened Jacobian and the variance of each state from that sample alone
+    (module docstring). ``robust``: (loss, threshold) of the smoother's robust re-weighting of the
+    accelerometer axes, or None: each axis' std is then the one the re-weighting gives at the estimate,
+    ``std / √w(r/std)`` (:func:`gfimu.smoother.graph.robust_weight`), the noise the smoother's σ assumed."""
+    S_f, S_dw, S_q = _geometry(array) if geometry is None else geometry
+    X = np.asarray(states, dtype=float)
+    w, dw, f = X[:, 0:3], X[:, 3:6], X[:, 6:9]
+    y = np.asarray(accel_mps2, dtype=float)
+    inv = 1.0 / np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), y.shape)
+    z = (y - f @ S_f.T - dw @ S_dw.T - quadratic_terms(w) @ S_q.T) * inv
+    if robust is not None and robust[1] > 0:
+        from .graph import robust_weight
+
+        weight = np.sqrt(robust_weight(z, float(robust[1]), robust[0]))
+        z, inv = z * weight, inv * weight
+    J = np.concatenate([np.einsum("mk,nkj->nmj", S_q, quadratic_terms_jacobian(w)),
+                        np.broadcast_to(S_dw, (len(X),) + S_dw.shape), np.broadcast_to(S_f, (len(X),) + S_f.shape)],
+                       axis=2) * inv[:, :, None]
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > RANK_TOLERANCE * s[:, :1]
+    Uk = U * keep[:, None, :]
+    p = z - np.einsum("nmr,nr->nm", Uk, np.einsum("nmr,nm->nr", Uk, z))
+    inv_s2 = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, 0.0)
+    Vt2 = Vt ** 2
+    single = np.einsum("nrj,nr->nj", Vt2, inv_s2)
+    unseen = np.any((Vt2 > 1e-12) & ~keep[:, :, None], axis=1)
+    single[unseen] = np.inf
+    return p, keep.sum(axis=1), single
+
+
+def long_run_factors(rho: np.ndarray) -> np.ndarray:
+    """τ(L) for L = 0 … len(rho) (``rho[k-1]``: the autocorrelation at lag k), each at least 1."""
+    rho = np.asarray(rho, dtype=float)
+    K = len(rho)
+    out = np.ones(K + 1)
+    if K:
+        c1 = np.cumsum(rho)[:K - 1]  # Σ_{k<L} ρ_k for L = 2 … K
+        c2 = np.cumsum(np.arange(1, K + 1) * rho)[:K - 1]  # Σ_{k<L} k ρ_k
+        L = np.arange(2, K + 1)
+        out[2:] = 1.0 + 2.0 * (c1 - c2 / L)
+    return np.maximum(out, 1.0)
+
+
+def scale_factors(sd: np.ndarray, single: np.ndarray, variance_factor: float, tau: np.ndarray) -> np.ndarray:
+    """(N, 9) factors on σ: √(s² τ(L_ij)), L_ij = single_ij / sd_ij² within 0 … len(tau) − 1 (τ linear
+    between whole spans)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        span = single / (sd * sd)
+    top = len(tau) - 1
+    L = np.where(np.isnan(span), 0.0, np.minimum(span, top))  # nothing known (σ 0 or NaN): no span
+    return np.sqrt(variance_factor * np.interp(L, np.arange(len(tau)), tau))
+
+
+class RunningSigmaScale:
+    """The factor on σ from the residuals seen so far (the fixed-lag smoother's, causal): :meth:`scaled`
+    takes one emitted state with its reading, adds its parity residual to the running sums and returns
+    its σ scaled by the factor of those sums."""
+
+    def __init__(self, array, max_lag: int = MAX_LAG):
+        self.array = array
+        self._geometry = _geometry(array)
+        self.robust = None
+        """(loss, threshold) of the robust re-weighting in use (:func:`parity`), or None."""
+        self.max_lag = int(max_lag)
+        self._ring: np.ndarray | None = None  # the newest parity residuals, row i % max_lag of sample i
+        self._held = 0  # rows of the ring filled since the last reset
+        self._power = 0.0
+        self._dof = 0.0
+        self._lagged = np.zeros(self.max_lag)
+        self.samples = 0
+
+    def reset(self) -> None:
+        """A new segment: the lagged products do not reach across it (the sums so far are kept)."""
+        self._held = 0
+
+    @property
+    def variance_factor(self) -> float:
+        return self._power / self._dof if self._dof > 0 and self.samples >= MIN_SAMPLES else 1.0
+
+    def tau(self) -> np.ndarray:
+        if self.samples < MIN_SAMPLES or self._power <= 0:
+            return np.ones(self.max_lag + 1)
+        return long_run_factors(self._lagged / self._power)
+
+    def _parity(self, y: np.ndarray, x: np.ndarray, std: np.ndarray):
+        """:func:`parity` of one sample (the same numbers, without the batch's broadcasting)."""
+        S_f, S_dw, S_q = self._geometry
+        w = x[0:3]
+        inv = 1.0 / std
+        z = (y - S_f @ x[6:9] - S_dw @ x[3:6] - S_q @ quadratic_terms(w)) * inv
+        if self.robust is not None and self.robust[1] > 0:
+            from .graph import robust_weight
+
+            weight = np.sqrt(robust_weight(z, float(self.robust[1]), self.robust[0]))
+            z, inv = z * weight, inv * weight
+        J = np.empty((len(y), 9))
+        J[:, 0:3] = S_q @ quadratic_terms_jacobian(w)
+        J[:, 3:6] = S_dw
+        J[:, 6:9] = S_f
+        J *= inv[:, None]
+        U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+        keep = sv > RANK_TOLERANCE * sv[0]
+        Uk = U[:, keep]
+        p = z - Uk @ (Uk.T @ z)
+        single = (Vt[keep] ** 2).T @ (1.0 / sv[keep] ** 2)
+        single[np.any(Vt[~keep] ** 2 > 1e-12, axis=0)] = np.inf
+        return p, int(np.count_nonzero(keep)), single
+
+    def scaled(self, accel_mps2: np.ndarray, state: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray) -> np.ndarray:
+        """``sd`` (9,) of ``state`` (9,: ω, ω̇, f) scaled by the factor with this sample's residual included."""
+        sd = np.asarray(sd, dtype=float)
+        p, rank, single = self._parity(np.asarray(accel_mps2, dtype=float), np.asarray(state, dtype=float)[:9],
+                                       np.asarray(noise_std_mps2, dtype=float))
+        if np.all(np.isfinite(p)):
+            self._power += float(p @ p)
+            self._dof += float(len(p) - rank)
+            if self._ring is None:
+                self._ring = np.zeros((self.max_lag, len(p)))
+            K = self.max_lag
+            held = min(self._held, K)
+            if held:
+                rows = (self._held - np.arange(1, held + 1)) % K  # lag 1 first
+                self._lagged[:held] += self._ring[rows] @ p
+            self._ring[self._held % K] = p
+            self._held += 1
+            self.samples += 1
+        return sd * scale_factors(sd, single, self.variance_factor, self.tau())
+
+
+def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
+                     robust=None, max_lag: int = MAX_LAG) -> np.ndarray:
+    """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the whole log's
+    residuals (the batch smoother's; module docstring). Rows with a non-finite residual do not count."""
+    n = len(states)
+    noise = np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), np.shape(accel_mps2))
+    geometry = _geometry(array)
+    parts = [parity(array, accel_mps2[i:i + CHUNK], states[i:i + CHUNK, :9], noise[i:i + CHUNK], robust, geometry)
+             for i in range(0, n, CHUNK)]  # in blocks: the Jacobians of a long log at once would not fit
+    p, rank, single = (np.concatenate([part[j] for part in parts]) for j in range(3))
+    ok = np.all(np.isfinite(p), axis=1)
+    out = np.array(sd, dtype=float)
+    if np.count_nonzero(ok) < MIN_SAMPLES:
+        return out
+    q = np.where(ok[:, None], p, 0.0)
+    power = float(np.sum(q * q))
+    dof = float(np.sum((p.shape[1] - rank)[ok]))
+    if power <= 0 or dof <= 0:
+        return out
+    lags = min(max_lag, n - 1)
+    lagged = np.array([float(np.sum(q[k:] * q[:n - k])) for k in range(1, lags + 1)])
+    tau = long_run_factors(lagged / power)
+    out[:, :9] = out[:, :9] * scale_factors(out[:, :9], single, power / dof, tau)
+    return out
+
+
+def calibrates_stream(array, options) -> bool:
+    """Whether the fixed-lag smoother scales σ (the accelerometers alone as they are: no gyroscope or
+    calibration variables the residual would leave out)."""
+    return (options.measurement == "accelerometer" and not (options.self_calibrate_bias or options.self_calibrate_scale)
+            and not (options.use_gyro and array.gyroscope is not None))
