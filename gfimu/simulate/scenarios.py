@@ -11,6 +11,7 @@ Scenarios
 turntable               paper 001 bench: axis tilted 12°, ±23.5° at 1 Hz, origin 30 mm off the axis
 turntable-constant      same bench turning at a constant 180 °/s
 random3d                band-limited random 3-D rotation and translation (paper 002's hand-held test)
+slow3d                  the same, slow: |ω| below 1 rad/s (a hovering drone, a slow hand)
 reversal                ω_i = A_i sin(2π f_i t + φ_i): every axis crosses zero about every second
 freeflight-major        paper 004's Delrin block spun near its major axis (closed-form Euler solution)
 freeflight-intermediate ... near its intermediate axis (unstable: the block flips)
@@ -150,6 +151,23 @@ def random3d(times_s, rng, array, *, omega_rms_radps: float = 1.5, max_frequency
     omega_sines = _random_sines(rng, n_components, max_frequency_hz, omega_rms_radps)
     position_sines = _random_sines(rng, n_components, max_position_frequency_hz, position_rms_m)
     return _sines_motion(times_s, omega_sines, position_sines, array)
+
+
+def slow3d(times_s, rng, array, *, omega_rms_radps: float = 0.3, max_omega_radps: float = 1.0,
+           max_frequency_hz: float = 1.0, position_rms_m: float = 0.05, max_position_frequency_hz: float = 1.0,
+           n_components: int = 6):
+    """Slow random 3-D rotation and translation: :func:`random3d`'s sums of sines with ``omega_rms_radps``
+    per ω component and frequencies up to ``max_frequency_hz``, scaled down where needed so that |ω|
+    does not exceed ``max_omega_radps`` over the log (a hovering drone, a slow hand). The readings then see ω
+    through q(ω) ~ |ω|², small against the noise."""
+    if not max_omega_radps > 0:
+        raise InputError(f"max_omega_radps must be positive, got {max_omega_radps}")
+    amp, freq, phase = _random_sines(rng, n_components, max_frequency_hz, omega_rms_radps)
+    peak = float(np.max(np.linalg.norm(sum_of_sines(times_s, amp, freq, phase), axis=1))) if times_s.size else 0.0
+    if peak > max_omega_radps:
+        amp = amp * (max_omega_radps / peak)
+    position_sines = _random_sines(rng, n_components, max_position_frequency_hz, position_rms_m)
+    return _sines_motion(times_s, (amp, freq, phase), position_sines, array)
 
 
 def reversal(times_s, rng, array, *, amplitude_radps=(2.0, 2.5, 3.0), frequency_hz=(0.55, 0.75, 0.95),
@@ -307,6 +325,8 @@ SCENARIOS: dict[str, Scenario] = {
                  turntable_constant, _cube),
         Scenario("random3d", "band-limited random 3-D rotation and translation (paper 002)", RATE_HZ, DURATION_S,
                  random3d, _cube),
+        Scenario("slow3d", "slow random 3-D rotation and translation, |ω| below 1 rad/s", RATE_HZ, 20.0,
+                 slow3d, _cube),
         Scenario("reversal", "ω_i = A_i sin(2π f_i t + φ_i): zero crossings on every axis", RATE_HZ, DURATION_S,
                  reversal, _cube),
         Scenario("freeflight-major", "paper 004 block in free flight, spun near its major axis", 1000.0, 2.0,

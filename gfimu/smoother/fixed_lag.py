@@ -95,15 +95,36 @@ from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .result import SmootherEstimator, SmootherResult
 from . import stream_model
 from .auto import measured_noise_options
-from .restarts import plane_normal
+from .restarts import branch, plane_normal
 from .stream_model import LocalDensity, StreamModel, StreamSignChain
 from .sigma_scale import RunningSigmaScale, calibrates_stream
-from .tuning import tuned_problem
+from .tuning import make_problem, tuned_problem
 from ..estimators.ml import MLEstimator
 
 OUTGROWN_FACTOR = 2.0
 """The model is chosen again at once (at most once a second) when the local motion density exceeds
 its jerk density this many times (a factor four in power: the body moves faster than the model allows)."""
+
+SIGN_ERROR_PROBABILITY = 1e-3
+"""The start of a segment is held until the branch of ω it is on is this unlikely to be the wrong one
+(:meth:`FixedLagSmoother._start_evidence`): with equal prior odds, the posterior probability of the other
+branch is ``1 / (1 + e^Λ)`` for a log-likelihood ratio Λ, so the sign is decided once Λ exceeds
+:data:`SIGN_DECISION_NATS`."""
+SIGN_DECISION_NATS = math.log((1.0 - SIGN_ERROR_PROBABILITY) / SIGN_ERROR_PROBABILITY)
+"""ln(999) = 6.9 nats."""
+
+
+AGREEMENT_CHI2 = 3.0
+"""The filter's ω at the lag (the next row it would give) agrees with the re-solve of the held stretch
+when their difference, in the re-solve's posterior covariance of that ω (3 values), is at most the mean
+of χ²₃: the stream's departure from the data's answer is then no larger than that answer's own
+uncertainty (their sum at most twice its variance), and the recursion, which linearises each reading
+once, has taken in what the start told.
+Before that (slow rotation: the readings see ω through q(ω), whose slope 2|ω| is small, so a poor
+first linearisation fades over seconds) the stream would carry the start's error on."""
+SAME_BRANCH = 0.5
+"""Two solutions of the held stretch are one minimum (not two branches) when the RMS of their ω
+difference is below this fraction of the RMS of ω: the branches of ω differ by about 2 |ω|."""
 
 
 def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | None:
@@ -254,7 +275,7 @@ class FixedLagSmoother:
                  marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
                  fast_measurement: bool = True, tune_window_s: float = 3.0, engine: str = "numpy",
                  clock_reset_s: float = 1.0, auto_model: bool = False, retune_every_s: float = 10.0,
-                 model_window_s: float = 30.0, branches: bool = True) -> None:
+                 model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0) -> None:
         options = options or SmootherOptions()
         if engine not in ENGINES:
             raise InputError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
@@ -279,6 +300,8 @@ class FixedLagSmoother:
                         ("model_window_s", model_window_s)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
+        if not (isinstance(hold_max_s, (int, float)) and math.isfinite(hold_max_s) and hold_max_s >= 0):
+            raise InputError(f"fixed-lag smoother: hold_max_s must be >= 0, got {hold_max_s!r}")
         self.array = array
         self.options = options
         self.lag_s = float(lag_s)
@@ -327,6 +350,14 @@ class FixedLagSmoother:
         self.closed = False
         self._sigma_scale = RunningSigmaScale(array) if self.compute_sigma and calibrates_stream(array, options) else None
         self._readings: dict = {}  # t_ns -> accel of the samples not yet emitted (σ's running scale)
+        self.hold_max_s = float(hold_max_s) if engine == "numpy" else 0.0
+        self._check_every_ns = int(round(max(self.lag_s, 0.5) * 1e9))
+        self.starts: list[dict] = []
+        """How the start of each segment was decided (:meth:`_release_start`): ``held_s`` (how long its
+        first rows were held), ``evidence_nats`` (the log-likelihood ratio of its branch of ω over the next
+        best; inf: no other minimum), ``open`` (True: released at ``hold_max_s`` or at the segment's end
+        without reaching :data:`SIGN_DECISION_NATS`)."""
+        self._held: list = []
         self._start_segment()
 
     # --- public API ---------------------------------------------------------
@@ -673,6 +704,8 @@ class FixedLagSmoother:
         replayed = self._tune_and_replay(final=True) if self._tune_buffer else []
         if self._smoother is None and self._warmup:
             self._initialise()
+        if self._deciding and self._smoother is not None:
+            replayed = list(replayed) + self._release_start(final=True)
         out = tuple(replayed) + tuple(self._read(entry, with_sigma=self.compute_sigma) for entry in self._window)
         self._start_segment()
         return out
@@ -687,6 +720,9 @@ class FixedLagSmoother:
         self._prev = None  # (t_ns, omega, omega_dot, f) of the newest state (filtered)
         self._prev_sample = None  # (t_ns, accel, gyro) of the newest state
         self._signs.reset()
+        self._deciding = self.hold_max_s > 0  # the segment's first rows are held (_hold_start)
+        self._held = []  # (t_ns, raw sample, filtered state) of the rows held so far
+        self._next_check_ns = None
 
     def _new_smoother(self):
         """The window engine of a new segment (:data:`ENGINES`)."""
@@ -798,7 +834,9 @@ class FixedLagSmoother:
         warnings.warn(f"{err}; re-initialising the fixed-lag window", RuntimeWarning, stacklevel=3)
         samples = list(self._raw) + [sample]
         hint = self._prev[1]
+        held, deciding = self._held, self._deciding
         self._start_segment()
+        self._held, self._deciding = held, deciding  # the rows held stay held
         self._warmup = samples
         self._initialise(omega_hint=hint)
 
@@ -837,10 +875,128 @@ class FixedLagSmoother:
         out = []
         while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
             self._smoother.settle(lambda i: self._raw[i][1])
+            if self._deciding:  # held: its filtered value is kept as the start of the re-solve
+                k, t_ns = self._window.popleft()
+                self._held.append((t_ns, self._raw.popleft(), self._smoother.mean(k).copy()))
+                self._smoother.drop_oldest()
+                continue
             out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
             self._raw.popleft()
             self._smoother.drop_oldest()
+        if self._deciding:
+            return self._hold_start(newest_ns)
         return out
+
+    # --- the start of a segment, held until the data decide the sign of ω -------------------------
+    def _hold_start(self, newest_ns: int) -> list[StateEstimate]:
+        """While the start of the segment is held (its rows past the lag kept back): every
+        ``max(lag_s, 0.5 s)`` the evidence for the branch of ω is weighed (:meth:`_release_start`)."""
+        if not self._held:
+            return []
+        if self._next_check_ns is None:
+            self._next_check_ns = self._held[0][0] + self._check_every_ns
+        held_s = (self._held[-1][0] - self._held[0][0]) * 1e-9
+        if newest_ns < self._next_check_ns and held_s < self.hold_max_s:
+            return []
+        self._next_check_ns = newest_ns + self._check_every_ns
+        return self._release_start(final=False)
+
+    def _start_evidence(self):
+        """The held rows and the window solved as the batch smoother solves a stretch (the stream's model,
+        Levenberg-Marquardt on the whole stretch), from the filtered states and from them moved onto each
+        other branch of ω (:func:`~gfimu.smoother.restarts.branch`: flipped, mirrored through the array's
+        plane, both). Returns (problem, best solution, the best other minimum's solution or None,
+        log-likelihood ratio of the best over it [nats]: the difference of their costs, each the negative
+        log-likelihood of the stretch up to one constant; inf when every start ends in the best minimum)."""
+        samples = [h[1] for h in self._held] + list(self._raw)
+        X = np.vstack([h[2] for h in self._held] + [self._smoother.mean(k) for k, _ in self._window])
+        part = self._stretch_log(samples)
+        scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
+        problem = make_problem(part, replace(self.options, tune_process_noise=False), scale, X[:, OMEGA])
+        solutions = [solve(problem, X)]
+        for kind in (1, 2, 3):
+            Xb = X.copy()
+            Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)
+            solutions.append(solve(problem, Xb))
+        order = sorted(range(len(solutions)), key=lambda i: solutions[i].cost)
+        best = solutions[order[0]]
+        w = best.states[:, OMEGA]
+        size = math.sqrt(float(np.mean(np.sum(w * w, axis=1))))
+        for i in order[1:]:
+            d = solutions[i].states[:, OMEGA] - w
+            if math.sqrt(float(np.mean(np.sum(d * d, axis=1)))) > SAME_BRANCH * size:
+                return problem, best, solutions[i], float(solutions[i].cost - best.cost)
+        return problem, best, None, math.inf
+
+    def _release_start(self, final: bool) -> list[StateEstimate]:
+        """The held rows, re-solved on the branch the data chose, once the log-likelihood ratio of that
+        branch over the next best reaches :data:`SIGN_DECISION_NATS` and the filter's newest ω agrees with
+        the re-solve's (:data:`AGREEMENT_CHI2`), once they span ``hold_max_s``, or at the segment's end
+        (``final``: then the window's rows too, and the segment ends); else nothing.
+
+        The window goes on from the re-solved states (:meth:`_restart_window`). σ (with
+        ``compute_sigma``) is the solve's, widened by the other branch's share of the posterior, ``p (1 -
+        p) (ω - ω')²`` per axis with ``p = 1 / (1 + e^Λ)``: a start released undecided says so in its σ
+        (and in :attr:`starts`)."""
+        if not self._held and not final:
+            return []
+        problem, best, other, evidence = self._start_evidence()
+        held_s = (self._held[-1][0] - self._held[0][0]) * 1e-9 if self._held else 0.0
+        X = best.states
+        cov = solve(problem, X, compute_sigma=True, max_iterations=1).covariance
+        j = len(self._held)  # the next row the stream would give, lag_s behind
+        d = self._smoother.mean(self._window[0][0])[0:3] - X[j, OMEGA]
+        try:
+            chi2 = float(d @ np.linalg.solve(cov[j][OMEGA, OMEGA], d))
+        except np.linalg.LinAlgError:
+            chi2 = math.inf
+        decided = evidence >= SIGN_DECISION_NATS and chi2 <= AGREEMENT_CHI2
+        if not (decided or final or held_s >= self.hold_max_s):
+            return []
+        sd = None
+        if self.compute_sigma:
+            sd = np.sqrt(np.einsum("nii->ni", cov))
+            if other is not None:
+                p = 1.0 / (1.0 + math.exp(min(evidence, 700.0)))
+                sd[:, OMEGA] = np.sqrt(sd[:, OMEGA] ** 2 + p * (1.0 - p) * (X[:, OMEGA] - other.states[:, OMEGA]) ** 2)
+        times = [h[0] for h in self._held] + [t for _, t in self._window]
+        n_out = len(times) if final else len(self._held)
+        out = [StateEstimate(int(times[j]), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
+                             *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
+               for j in range(n_out)]
+        self.starts.append({"held_s": held_s, "evidence_nats": evidence, "agreement_chi2": chi2, "open": not decided})
+        self._deciding = False
+        held = [h[1] for h in self._held]
+        self._held = []
+        if final:
+            self._window.clear()
+            return out
+        self._restart_window(X, held)
+        return out
+
+    def _restart_window(self, X: np.ndarray, held: list) -> None:
+        """The window solved again from the held samples ``held`` and its own, each linearised at its
+        re-solved state (rows of ``X``), the held ones then marginalised: the stream goes on from the
+        decided branch with what the held rows told. A window that fails to solve again is kept as it was."""
+        raws = held + list(self._raw)
+        k0 = self._window[0][0] - len(held)
+        engine = self._new_smoother()
+        try:
+            for j, (t, y, g) in enumerate(raws):
+                extra = self.model.sample_terms(t, y, g)
+                if j == 0:
+                    engine.begin(k0, t, y, g, start=X[0], extra=extra)
+                    continue
+                engine.advance(k0 + j, self._step(raws[j - 1], raws[j], X[j - 1], 1.0), t, y, g, extra=extra,
+                               start=X[j])
+                if j <= len(held):
+                    engine.drop_oldest()
+            engine.commit()
+        except FilterFailure:
+            return
+        self._smoother = engine
+        self._signs.reset()
+        self._remember_newest()
 
 
 @dataclass(frozen=True)
@@ -901,7 +1057,7 @@ class FixedLagEstimator(SmootherEstimator):
         return FixedLagSmoother(array, self.options(), lag_s=self.window_lag_s(rate_hz), rate_hz=rate_hz,
                                 relinearize_threshold=self.relinearize_threshold,
                                 relinearize_skip=self.relinearize_skip, marginalise_every_s=self.marginalise_every_s,
-                                warmup_s=self.warmup_s, gap_factor=self.gap_factor,
+                                warmup_s=self.warmup_s, hold_max_s=self.hold_max_s, gap_factor=self.gap_factor,
                                 fast_measurement=self.fast_measurement, tune_window_s=self.tune_window_s,
                                 engine=self.engine, auto_model=self.auto_model, retune_every_s=self.retune_every_s,
                                 model_window_s=self.model_window_s)

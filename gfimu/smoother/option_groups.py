@@ -177,6 +177,10 @@ class StreamOptions:
         "engine 'gtsam': old states are marginalised in blocks of this length (the window holds lag_s to "
         "lag_s + twice this); None: 125 samples, at most 0.25 s"))
     warmup_s: float = option(0.2, "s", "data gathered at the start of each segment for its initialisation")
+    hold_max_s: float = option(4.0, "s", (
+        "engine 'numpy': the first rows of each segment are held until the data decide the sign of ω (a "
+        "log-likelihood ratio of 6.9 nats between its branches), then come out re-solved; at most this long "
+        "(0: no hold)"))
     gap_factor: float = option(1.5, help=(
         "a step longer than this times the nominal step is a gap: the smoother restarts after it"))
     fast_measurement: bool = option(True, help=(
