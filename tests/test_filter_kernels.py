@@ -165,3 +165,30 @@ def test_a_whole_stream_through_the_kernels_is_the_numpy_stream(monkeypatch, sce
     np.testing.assert_allclose(compiled.omega_b_radps, oracle.omega_b_radps, rtol=0, atol=1e-7)
     np.testing.assert_allclose(compiled.omega_dot_b_radps2, oracle.omega_dot_b_radps2, rtol=0, atol=1e-4)
     np.testing.assert_allclose(compiled.specific_force_b_mps2, oracle.specific_force_b_mps2, rtol=0, atol=1e-6)
+
+
+def test_the_kernels_readings_are_the_arrays_rigid_body_equation():
+    """h(x) of the compiled update is paper 000's eq. 6 through the array's structure matrix, S [f, ω̇, q(ω)],
+    and its Jacobian the derivative of that (central differences)."""
+    from gfimu.rigid_body import quadratic_terms
+
+    f, m = _filter()
+    array = cube_array(0.05, noise_std_mps2=0.05)
+    S = array.structure_matrix()
+    rng = np.random.default_rng(2)
+    R0, S_q, S_dw, S_f, *_ = f._kernel_model
+    for _ in range(5):
+        x = rng.normal(size=9) * np.repeat([4.0, 30.0, 9.0], 3)
+        pred, H = np.empty(S.shape[0]), np.zeros((S.shape[0], 9))
+        kernels._predict_readings(x, S_q, S_dw, S_f, pred, H)
+        want = S @ np.concatenate([x[6:9], x[3:6], quadratic_terms(x[0:3])])
+        np.testing.assert_allclose(pred, want, rtol=0, atol=1e-12 * np.abs(want).max())
+        step = 1e-6
+        for j in range(9):
+            d = np.zeros(9)
+            d[j] = step
+            hi, lo = np.empty_like(pred), np.empty_like(pred)
+            kernels._predict_readings(x + d, S_q, S_dw, S_f, hi, np.zeros_like(H))
+            kernels._predict_readings(x - d, S_q, S_dw, S_f, lo, np.zeros_like(H))
+            # h is quadratic: the central difference is exact up to rounding of |h| / step
+            np.testing.assert_allclose(H[:, j], (hi - lo) / (2 * step), rtol=0, atol=1e-9 * np.abs(want).max() / step)

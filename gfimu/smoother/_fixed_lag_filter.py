@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from ..rigid_body import quadratic_terms
+from ..rigid_body import quadratic_terms, quadratic_terms_jacobian
 from . import _filter_kernels as kernels
 from ._fixed_lag_model import ArrayModel, Step
 from .graph import robust_loss, robust_weight
@@ -233,14 +233,10 @@ class WindowFilter:
     def _measure(self, x: np.ndarray, gyro):
         """Prediction ``h(x)`` and Jacobian H of the readings (and gyroscope) at ``x``."""
         m = self.model
-        wx, wy, wz = x[0], x[1], x[2]
-        q = np.array([wx * wx + wy * wy, wx * wx + wz * wz, wy * wy + wz * wz, wx * wy, wx * wz, wy * wz])
-        dq = np.array([[2 * wx, 2 * wy, 0.0], [2 * wx, 0.0, 2 * wz], [0.0, 2 * wy, 2 * wz],
-                       [wy, wx, 0.0], [wz, 0.0, wx], [0.0, wz, wy]])
         H = self._H if gyro is None else self._Hg
         n = m.S_q.shape[0]
-        H[:n, :3] = m.S_q @ dq
-        pred = H[:n, 3:] @ x[3:] + m.S_q @ q
+        H[:n, :3] = m.S_q @ quadratic_terms_jacobian(x[:3])
+        pred = H[:n, 3:] @ x[3:] + m.S_q @ quadratic_terms(x[:3])
         if gyro is None:
             return pred, H
         return np.concatenate([pred, x[:3]]), H

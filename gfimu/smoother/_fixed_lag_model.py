@@ -32,7 +32,7 @@ from ..errors import InputError
 from ..factors import accelerometer
 from ..log import Log
 from .graph import SmootherOptions
-from .groups import BUILT_IN, FirstStatePriorGroup, MotionModelGroup, group_noise
+from .groups import BUILT_IN, FirstStatePriorGroup, group_noise
 from .noise_levels import ReadsNoiseLevels
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
@@ -261,7 +261,7 @@ class ArrayModel:
         X = np.vstack([x0, x1])
         J0s, J1s, rs, motion = [], [], [], []
         for group in groups:
-            scale = 1.0 / motion_factor if isinstance(group, MotionModelGroup) else 1.0
+            scale = 1.0 / motion_factor if group.motion else 1.0
             for t in group.terms(view, X, np.zeros(0)):
                 if t.jac_global is not None:
                     raise InputError(f"factor group {group.name!r}: the fixed-lag smoother streams no calibration variables")
@@ -279,7 +279,7 @@ class ArrayModel:
                 J0s.append(J0 * scale)
                 J1s.append(J1 * scale)
                 rs.append((r - J0 @ x0 - J1 @ x1) * scale)
-                motion.append(np.full(len(r), isinstance(group, MotionModelGroup)))
+                motion.append(np.full(len(r), group.motion))
         if not rs:
             return np.zeros((0, KINEMATIC_SIZE)), np.zeros((0, KINEMATIC_SIZE)), np.zeros(0), np.zeros(0, dtype=bool)
         return np.vstack(J0s), np.vstack(J1s), np.concatenate(rs), np.concatenate(motion)

@@ -90,6 +90,9 @@ class FactorGroup:
     linear = False
     """Whether its rows are affine in the states with Jacobians that depend on the step length and its
     noise only (the fixed-lag smoother then keeps its step per step length)."""
+    motion = False
+    """Whether its rows are the motion model's, whose stds the local motion density scales
+    (:meth:`gfimu.smoother.graph.SmootherProblem.with_process_factors`; the fixed-lag smoother's steps)."""
 
     def applies(self, problem) -> bool:
         return True
@@ -529,6 +532,8 @@ class MotionModelGroup(FactorGroup):
       (``oscillator_whiten(problem)``, :func:`gfimu.factors.process.oscillator_residual`);
     - 'snap': the exact white-snap step of ``[ω, ω̇, ω̈]`` (``problem.snap_whiten``, ``problem.snap_cov``).
     """
+
+    motion = True
 
     name = "motion model"
     per_sample = False
