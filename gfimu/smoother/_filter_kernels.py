@@ -383,3 +383,37 @@ def step_residual2(F, Q, x0, x1):
             s -= F[i, j] * x0[j]
         d[i] = s
     return _quadratic_form_inverse(np.ascontiguousarray(Q[:6, :6]), d)
+
+
+@njit(cache=True)
+def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
+                   prior_margin, c_process, process_loss, Q, robust_step, T, u, W, mean, var, cross):
+    """:meth:`WindowFilter.measure <gfimu.smoother._fixed_lag_filter.WindowFilter.measure>` on the readings
+    alone, in one call: the update's minimum (:func:`search`), then with ``robust_step`` the robust loss of
+    the motion-model step (threshold ``c_process``): where the step's whitened residual ``(x - x̂)ᵀ P⁻¹ (x - x̂)
+    / 9`` gives an IRLS weight w < 1, the prediction's covariance widened by ``(1/w - 1) Q`` and the minimum
+    solved again from where it is; then :func:`update_window` with the last linearisation. Returns
+    ``(T, u, W, P_after, P_before, ok)``: ``P_before`` the newest state's covariance the update started from
+    (widened or not), ``ok`` False on a singular innovation covariance or non-finite values (nothing moved)."""
+    x, H, Z, J, ok = search(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches,
+                            normal, prior_margin)
+    if not ok:
+        return T, u, W, P, P, False
+    if robust_step and c_process > 0.0:
+        e2 = _quadratic_form_inverse(P, x - xp)
+        e2 = max(e2, 0.0) / 9.0  # (P singular: 0)
+        w = _weight(np.sqrt(e2), c_process, process_loss)
+        if w < 1.0:
+            P = P + (1.0 / w - 1.0) * Q
+            P = 0.5 * (P + P.T)
+            last = cross.shape[0] - 1  # the newest state: its covariance is the widened one
+            for i in range(9):
+                var[last, i] = P[i, i]
+                for j in range(9):
+                    cross[last, i, j] = P[i, j]
+            x, H, Z, J, ok = search(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
+                                    False, normal, prior_margin)
+            if not ok:
+                return T, u, W, P, P, False
+    T2, u2, W2, P_after, ok = update_window(H, Z, P, T, u, W, mean, var, cross)
+    return T2, u2, W2, P_after, P, ok

@@ -601,6 +601,26 @@ class WindowFilter:
             raise FilterFailure("singular innovation covariance")
         return x, H, Z, float(J)
 
+    def _measure_compiled(self, y, xp, P, x0, from_prediction: bool) -> None:
+        """:meth:`measure` on the readings alone through :func:`kernels.measure_update
+        <gfimu.smoother._filter_kernels.measure_update>` (the branches and the robust step only from the
+        prediction, as :meth:`measure` tries them)."""
+        R0, S_q, S_dw, S_f, slope, c_robust, loss = self._kernel_model
+        iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
+        c_process = float(self.model.process_robust_threshold)
+        robust_step = from_prediction and self._Q is not None and c_process > 0
+        hi, lo = self._hi, self._split
+        T, u, W, P_after, P_before, ok = kernels.measure_update(
+            np.ascontiguousarray(y, dtype=float), xp, np.ascontiguousarray(P), np.array(x0, dtype=float), R0, S_q,
+            S_dw, S_f, slope, c_robust, loss, iterations, self.step_tolerance_radps, self.branches and from_prediction,
+            self._normal, BRANCH_PRIOR_MARGIN, c_process, kernels.loss_code(c_process, self.model.robust_loss),
+            self._Q if robust_step else P, robust_step, self._T, self._u, self._W, self._mean[lo:hi],
+            self._var[lo:hi], self._cross[lo:hi])
+        if not ok:
+            raise FilterFailure("singular innovation covariance or non-finite values in the update")
+        self._T, self._u, self._W = T, u, W
+        self._updated(P_after)
+
     def measure(self, y: np.ndarray, gyro=None, start=None, extra=None) -> None:
         """Gauss-Newton update of the newest state with its readings, moving every state of the window.
 
@@ -621,6 +641,9 @@ class WindowFilter:
             y = np.concatenate([y, gyro])
         x0 = xp if start is None else np.asarray(start, dtype=float)
         compiled = self.compiled and gyro is None and extra is None
+        if compiled:  # the whole update in one compiled call
+            self._measure_compiled(y, xp, P, x0, start is None)
+            return
         if compiled:
             best = self._search(y, xp, P, x0, self.branches and start is None)
         else:
