@@ -87,7 +87,7 @@ BAD = [
     ("fixed-lag-engine", ["estimate", "{log}", "--method", "fixed-lag", "-O", "engine='x'", "--out", "{w}/e.csv"],
      "fixed-lag smoother: engine must be one of numpy, gtsam, got 'x'"),
     ("array-noise", ["estimate", "{log}", "--method", "inversion", "--out", "{w}/e.csv"],
-     "log/array.toml:8: accelerometers[0].noise_std_mps2: expected a finite number >= 0, got 'loud'"),
+     "log/array.toml:9: accelerometers[0].noise_std_mps2: expected a finite number >= 0, got 'loud'"),
     ("imu-unit", ["estimate", "{log}", "--method", "inversion", "--out", "{w}/e.csv"],
      "log/imu.csv:1: column 'a1_x' has unit [furlong]"),
     ("imu-cell", ["estimate", "{log}", "--method", "inversion", "--out", "{w}/e.csv"],
