@@ -221,3 +221,16 @@ def test_a_robust_stream_through_the_kernels_is_the_numpy_stream(monkeypatch):
     oracle = run()
     assert compiled.shape == oracle.shape == (len(log), 3)
     np.testing.assert_allclose(compiled, oracle, rtol=0, atol=1e-7)
+
+
+def test_flush_window_is_the_numpy_flush():
+    rng = np.random.default_rng(13)
+    n = 40
+    cross, mean, var = rng.normal(size=(n, 9, 9)), rng.normal(size=(n, 9)), np.abs(rng.normal(size=(n, 9))) + 2.0
+    T, u, W = rng.normal(size=(9, 9)), rng.normal(size=9), rng.normal(size=(9, 9))
+    want_mean = mean + np.einsum("lij,j->li", cross, u)
+    want_var = var - np.einsum("lij,jk,lik->li", cross, W, cross)
+    want_cross = cross @ T
+    kernels.flush_window(T, u, W, mean, var, cross)
+    for got, want in ((mean, want_mean), (var, want_var), (cross, want_cross)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * (np.abs(want).max() + 1.0))

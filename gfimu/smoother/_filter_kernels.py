@@ -417,3 +417,34 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
                 return T, u, W, P, P, False
     T2, u2, W2, P_after, ok = update_window(H, Z, P, T, u, W, mean, var, cross)
     return T2, u2, W2, P_after, P, ok
+
+
+@njit(cache=True)
+def flush_window(T, u, W, mean, var, cross):
+    """The lazy states brought up to date (:meth:`WindowFilter._flush`): for each state's cross-covariance C,
+    ``m += C u``, ``v -= diag(C W Cᵀ)``, ``C ← C T``, in place."""
+    CW = np.empty((9, 9))
+    row = np.empty(9)
+    for l in range(mean.shape[0]):
+        C = cross[l]
+        for i in range(9):
+            s = 0.0
+            for k in range(9):
+                s += C[i, k] * u[k]
+            mean[l, i] += s
+            for j in range(9):
+                s = 0.0
+                for k in range(9):
+                    s += C[i, k] * W[k, j]
+                CW[i, j] = s
+            s = 0.0
+            for j in range(9):
+                s += CW[i, j] * C[i, j]
+            var[l, i] -= s
+            for j in range(9):
+                s = 0.0
+                for k in range(9):
+                    s += C[i, k] * T[k, j]
+                row[j] = s
+            for j in range(9):
+                C[i, j] = row[j]

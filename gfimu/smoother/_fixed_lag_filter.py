@@ -196,7 +196,10 @@ class WindowFilter:
         applied to them at once: O(window / LAZY_STEPS + LAZY_STEPS) per update instead of O(window),
         the same numbers to rounding (what keeps a 0.2 s lag at 20 kHz, 4,000 states, affordable)."""
         lo, split = self._lo, self._split
-        if split > lo:
+        if split > lo and self.compiled:
+            kernels.flush_window(self._T, self._u, self._W, self._mean[lo:split], self._var[lo:split],
+                                 self._cross[lo:split])
+        elif split > lo:
             C = self._cross[lo:split]
             self._mean[lo:split] += np.einsum("lij,j->li", C, self._u)
             self._var[lo:split] -= np.einsum("lij,jk,lik->li", C, self._W, C)
