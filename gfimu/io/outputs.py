@@ -37,6 +37,8 @@ from .log_dir import LOG_FILES
 
 STDOUT = "-"
 
+STDOUT_CLOSED = "--out -: standard output is closed (started with it shut); give --out a file name"
+
 
 def input_files(paths: Iterable[str | os.PathLike | None]) -> list[Path]:
     """The files that stand behind a command's inputs.
@@ -96,6 +98,8 @@ def check_output(path: str | os.PathLike | None, inputs: Iterable[str | os.PathL
     if str(path) == STDOUT:
         if not stdout:
             raise OutputError(f"{what} -: this output cannot go to standard output; give a file name")
+        if sys.stdout is None:
+            raise OutputError(STDOUT_CLOSED.replace("--out", what, 1))
         return None
     shown = str(path)
     try:
@@ -126,6 +130,8 @@ def check_outputs(paths: dict, inputs: Iterable[str | os.PathLike | None] = (), 
 def write_output(target: Path | None, chunks: Iterable[str]) -> None:
     """Write text chunks to ``target`` atomically, or to standard output when ``target`` is ``None``."""
     if target is None:
+        if sys.stdout is None:
+            raise OutputError(STDOUT_CLOSED)
         for chunk in chunks:
             sys.stdout.write(chunk)
         sys.stdout.flush()
