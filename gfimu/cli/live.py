@@ -59,6 +59,7 @@ def run(args) -> int:
     estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
     rate_hz = args.rate_hz or declared_rate_hz
+    _refuse_rate(rate_hz, "--rate-hz" if args.rate_hz else f"{args.array}: rate_hz")
     out_path = check_output(args.out, [args.array], "--out", stdout=True)
     reason = estimator.applicable(array)
     if reason:
@@ -121,3 +122,11 @@ def _refuse_unapplied(options: dict) -> None:
                        "over spans of the whole log, after the fact; gfimu live writes each estimate as it leaves "
                        "the lag window and cannot apply it (give -O guard=off, or run gfimu estimate --method "
                        "fixed-lag on the recorded log)")
+
+
+def _refuse_rate(rate_hz: float | None, what: str) -> None:
+    """A rate beyond any IMU's sizes the smoother's window at millions of samples: refused before anything."""
+    from ..io.plausibility import MAX_RATE_HZ
+
+    if rate_hz is not None and rate_hz > MAX_RATE_HZ:
+        raise CLIError(f"{what} {rate_hz:g}: beyond any IMU's rate ({MAX_RATE_HZ:g} Hz at most)")
