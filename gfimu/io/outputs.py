@@ -11,7 +11,11 @@ One rule for every file a command writes:
   compared after resolving links, and by device and inode (hard links);
 - it never replaces anything that is not a regular file (a folder, a device
   such as ``/dev/null``, a FIFO, a socket);
-- ``-`` means standard output where the command allows it (tables, estimates).
+- ``-`` means standard output where the command allows it (tables, estimates);
+- a file written inside a command's own output folder (``batch``) never goes through a link in that
+  folder nor outside it (:func:`check_output_within`);
+- a file written as a stream goes (``live``) has one writer at a time
+  (:func:`gfimu.io.atomic.output_lock`: a second writer is refused).
 
 Log folders (``convert``, ``simulate``) are written by
 :func:`prepare_log_folder` + :func:`gfimu.io.write_log`: an existing
