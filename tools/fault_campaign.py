@@ -476,6 +476,10 @@ def containment_cases() -> list[Case]:
     add("kalibr-large-no-alias", conv + ["--extrinsics", "{w}/kalibr.yaml"], _write(
         "kalibr.yaml", "imu0:\n  T_i_b: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n  rostopic: /imu0\n  junk: ["
         + ",".join(["1.5"] * 300_000) + "]\n"), {2}, "values", inputs=["data.csv", "map.toml", "kalibr.yaml"])
+    add("mimu-random-counters", ["convert", "mimu4444", "{w}/data.bin", "--out", "{w}/out/log"], _random_counters,
+        {0}, "the packet counter does not count", inputs=["data.bin"])
+    add("live-tcp-garbage", ["live", "--array", "{w}/log/array.toml", "--source", "tcp://127.0.0.1:{port}", "--out",
+                             "{w}/out/l.csv"], _garbage_peer, {0}, "1 bad rows")
     phyphox = ["convert", "csv", "{w}/export.zip", "--map", "phyphox", "--out", "{w}/out/log"]
     add("zip-bomb", phyphox, _zip_bomb, {2}, "zip bomb", inputs=["export.zip"])
     add("zip-member-twice", phyphox, _zip_twice, {2}, "2 times", inputs=["export.zip"])
@@ -520,6 +524,53 @@ def _ssh_peer(w: Path) -> None:
 
     threading.Thread(target=serve, daemon=True).start()
     (w / "port").write_text(str(srv.getsockname()[1]))
+
+
+def _garbage_peer(w: Path) -> None:
+    """A TCP server in this process that sends 64 KiB of random bytes to the first connection and closes it."""
+    import socket
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    _PEERS.append(srv)
+    data = os.urandom(1 << 16)
+
+    def serve():
+        try:
+            conn, _ = srv.accept()
+        except OSError:
+            return
+        with conn:
+            conn.sendall(data)
+        srv.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    (w / "port").write_text(str(srv.getsockname()[1]))
+
+
+def _random_counters(w: Path) -> None:
+    """data.bin (the real recording's first packets, or none) with each packet's counter drawn at random and its
+    checksum made right again."""
+    import numpy as np
+
+    path = w / "data.bin"
+    if not path.exists():
+        path.write_bytes(b"")
+        return
+    sys.path.insert(0, str(REPO))
+    from gfimu.io.readers.mimu4444 import find_packets
+
+    d = bytearray(path.read_bytes())
+    starts, _, _ = find_packets(np.frombuffer(bytes(d), dtype=np.uint8))
+    rng = np.random.default_rng(1)
+    for s in starts:
+        c = int(rng.integers(0, 65536))
+        d[s + 1], d[s + 2] = c >> 8, c & 255
+        check = sum(d[s:s + 104]) % 65536
+        d[s + 104], d[s + 105] = check >> 8, check & 255
+    path.write_bytes(bytes(d))
 
 
 def _live_g_header(w: Path) -> None:

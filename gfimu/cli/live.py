@@ -100,6 +100,12 @@ def _session(args, source, estimator, out_path, rate_hz, declared_rate_hz) -> in
             report(f"error: --out {args.out}: the output was closed by its reader (a broken pipe); the session "
                    "ended there")
             return EXIT_FAILURE
+        except OSError as exc:
+            if out_path is not None or exc.errno is None:
+                raise
+            from ..io.atomic import resource_error  # standard output on a full disk: named as the output
+
+            raise resource_error(exc, "standard output (--out -)") from None
     if result.failure:
         report(f"error: {result.failure}")
     report(result.summary())

@@ -136,9 +136,16 @@ def write_output(target: Path | None, chunks: Iterable[str]) -> None:
     if target is None:
         if sys.stdout is None:
             raise OutputError(STDOUT_CLOSED)
-        for chunk in chunks:
-            sys.stdout.write(chunk)
-        sys.stdout.flush()
+        try:
+            for chunk in chunks:
+                sys.stdout.write(chunk)
+            sys.stdout.flush()
+        except BrokenPipeError:  # its reader stopped (head): the command line ends quietly
+            raise
+        except OSError as exc:  # a full disk behind the redirection: name where it was going
+            from .atomic import resource_error
+
+            raise resource_error(exc, "standard output (--out -)") from None
         return
     atomic_write(target, chunks)
 
