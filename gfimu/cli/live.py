@@ -2,9 +2,10 @@
 
 Only the arguments are read here: the source is :func:`gfimu.io.sources.open_source`, the session
 :func:`gfimu.live.run`, the sink :class:`gfimu.live.EstimateSink` (see ``docs/live.md``). The summary
-goes to standard error however the session ends. Exit status: 0 at the end of the stream, 130 after
-SIGINT, 143 after SIGTERM, 1 when the stream broke (a connection reset), 2 for a header or an
-argument that cannot be used.
+goes to standard error however the session ends (but when standard output's reader went away: one line,
+exit 1). Exit status: 0 at the end of the stream, 130 after SIGINT, 143 after SIGTERM, 1 when the stream
+broke (a connection reset) or the output failed, 2 for a header, an argument or an option that cannot be
+used (``-O guard`` other than off, a rate beyond any IMU's) and for an output another session is writing.
 """
 
 from __future__ import annotations
