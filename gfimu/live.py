@@ -350,6 +350,18 @@ def _on_rate_change(session: "_Session", watch: _RateWatch, r: Reading, array, e
     emit(_rerate(session, array, estimator, new), timed=False)
 
 
+def _check_rate(rate_hz: float, source: Source) -> None:
+    """A rate beyond any IMU's (timestamps 1 ns apart) would size the smoother's window at hundreds of millions
+    of samples: refused (the session ends with the message) instead of running out of memory."""
+    from .errors import DataError
+    from .io.plausibility import MAX_RATE_HZ
+
+    if rate_hz > MAX_RATE_HZ:
+        raise DataError(f"{getattr(source, 'name', 'source')}: a rate of {rate_hz:.4g} Hz (steps of "
+                        f"{1e9 / rate_hz:.4g} ns), beyond any IMU's ({MAX_RATE_HZ:g} Hz at most): check the unit of "
+                        "the timestamps (or --rate-hz)")
+
+
 def rate_from_timestamps(timestamps_ns) -> float | None:
     """The rate [Hz] of the median step between increasing timestamps (None with fewer than two steps
     forward): the rule of :attr:`gfimu.log.Log.rate_hz`."""
@@ -458,6 +470,7 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
 
     def start_session(rate: float) -> None:
         nonlocal session
+        _check_rate(rate, source)
         session = _Session(array, estimator, rate)
         watch[:] = [_RateWatch(rate)]
         for r, arrived in pending:

@@ -82,6 +82,8 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
     log = gio.read_log(log_dir, truth=truth)
     _warn_dead(log)
     t1 = time.perf_counter()
+    _check_stream_rate(log, est)
+    _check_noise(log, log_dir)
     # the fixed-lag smoother screens as gfimu live does, row by row (gfimu.readings.StreamScreen)
     log, screening = getattr(est, "screen", screen_log)(log)
     _warn_replaced(log, screening)
@@ -171,3 +173,30 @@ def score(run: EstimateRun) -> float | None:
     err = run.motion.omega_b_radps[keep] - truth.omega_b_radps[keep]
     err = err[np.all(np.isfinite(err), axis=1)]
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else None
+
+
+def _check_stream_rate(log, est) -> None:
+    """A streaming smoother sizes its windows in samples from the rate: a rate beyond any IMU's (timestamps 1 ns
+    apart, read under the wrong unit) would ask for hundreds of millions of states. Refused, naming the file."""
+    from .errors import DataError
+    from .io.plausibility import MAX_RATE_HZ
+
+    if getattr(est, "method", "") != "fixed-lag" or len(log) < 2:
+        return
+    rate = log.rate_hz
+    if rate > MAX_RATE_HZ:
+        raise DataError(f"{log.source}/imu.csv: the timestamps step by a median {1e9 / rate:.4g} ns, a rate of "
+                        f"{rate:.4g} Hz, beyond any IMU's ({MAX_RATE_HZ:g} Hz at most); the fixed-lag smoother sizes "
+                        "its window from the rate: check the unit of the timestamps")
+
+
+def _check_noise(log, log_dir) -> None:
+    """A stated noise beyond :data:`gfimu.io.array_toml.MAX_NOISE_STD` (warned of when read) gives the readings
+    no weight and overflows the estimators' weights: refused before estimating, naming the sensor."""
+    from .errors import DataError
+    from .io.array_toml import MAX_NOISE_STD
+
+    for a in log.array.accelerometers:
+        if a.noise_std_mps2 is not None and a.noise_std_mps2 > MAX_NOISE_STD:
+            raise DataError(f"{log_dir}/array.toml: accelerometer {a.name!r}: noise_std_mps2 = {a.noise_std_mps2:g} "
+                            f"leaves its readings no weight (at most {MAX_NOISE_STD:g} m/s²); give the noise in m/s²")

@@ -31,6 +31,17 @@ def _campaign():
     return module
 
 
+CONTAINMENT = (
+    "batch-link-in-out", "batch-same-folder-names", "batch-log-twice", "batch-log-named-summary",
+    "batch-scheduler-ssh", "live-g-header", "live-guard-replace", "live-udp-no-port", "live-serial-baud-negative",
+    "live-1ns-steps", "live-rate-1e9", "array-400-digit-position", "array-range-tiny", "array-noise-1e300",
+    "imu-underscore-number", "imu-cr-line-ends", "imu-1ns-steps-fixed-lag", "opt-axis-frequency-1e308",
+    "map-column-twice", "map-mg-over-mps2", "mimu-one-packet", "kalibr-large-no-alias", "zip-member-twice",
+    "simulate-full-disk", "mimu-random-counters", "live-tcp-garbage",
+)
+"""The cases of live and batch containment, units by any factor, bounded resources and the message cases, each
+with the words its standard error must hold (zip-bomb, the slowest to build, runs with the slow tests)."""
+
 campaign = _campaign()
 CASES = {c.name: c for c in campaign.cases()}
 
@@ -72,3 +83,18 @@ def test_a_broken_command_is_caught(base, monkeypatch):
                           ["log/imu.csv"])
     result = campaign.run_case(touch, base / "base", base / "work")
     assert result["verdict"] == "FAIL" and "e.csv written outside the output folder" in result["problems"]
+
+
+@pytest.mark.parametrize("name", CONTAINMENT)
+def test_containment_case(base, name):
+    if name.startswith("mimu-") and not (base / "base" / "data.bin").exists():
+        pytest.skip("needs the MIMU4444 recording")
+    result = campaign.run_case(CASES[name], base / "base", base / "work")
+    assert result["verdict"] == "ok", result
+    assert result["exit"] in CASES[name].expect
+
+
+@pytest.mark.slow
+def test_the_zip_bomb_case(base):
+    result = campaign.run_case(CASES["zip-bomb"], base / "base", base / "work")
+    assert result["verdict"] == "ok" and result["exit"] == 2, result

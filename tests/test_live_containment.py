@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -221,6 +220,20 @@ def test_live_says_when_its_reader_goes_away(log_dir, tmp_path):
     err = proc.stderr.decode()
     assert proc.returncode == 1, err
     assert "Traceback" not in err and len(_errors(err)) == 1 and "closed by its reader" in err
+
+
+@pytest.mark.parametrize("command", [["estimate", "{log}", "--method", "inversion", "--out", "-"],
+                                     ["live", "--array", "{log}/array.toml", "--source", "-", "--out", "-"]])
+def test_standard_output_on_a_full_disk_is_named(log_dir, command):
+    """--out - redirected to /dev/full: exit 1 and one line naming standard output, not an internal error."""
+    args = [a.replace("{log}", str(log_dir)) for a in command]
+    with open("/dev/full", "wb") as full, open(log_dir / "imu.csv", "rb") as rows:
+        proc = subprocess.run([sys.executable, "-m", "gfimu", *args], env=_env(), stdout=full, stdin=rows,
+                              stderr=subprocess.PIPE, timeout=120)
+    err = proc.stderr.decode()
+    assert proc.returncode == 1, err
+    assert _errors(err) == [f"gfimu {command[0]}: error: standard output (--out -): no space left on the device"]
+    assert "Traceback" not in err and "internal error" not in err
 
 
 # --- batch -----------------------------------------------------------------------------------------------

@@ -5,7 +5,6 @@ ending quietly with their parent, a scheduler address that never answers or is n
 from __future__ import annotations
 
 import errno
-import os
 import resource
 import signal
 import socket
@@ -25,7 +24,6 @@ from gfimu import io as gio
 from gfimu.errors import ResourceError
 from gfimu.simulate import simulate
 
-REPO = Path(__file__).resolve().parents[1]
 
 
 def _run(args, limit_as: int | None = None, **kw):

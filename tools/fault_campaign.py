@@ -48,6 +48,9 @@ class Case:
     stdin: bytes | None = None
     expect: set[int] | None = None  # exit statuses this case must end with (None: any of EXIT_OK)
     setup: object = None  # a function of the case's folder that makes its inputs
+    message: str | None = None  # words standard error must hold (the error line, or a warning)
+    produces: list[str] = field(default_factory=list)  # files (relative to the case's folder) the run must write
+    file_limit: int | None = None  # RLIMIT_FSIZE of the child [bytes]: a disk that fills up at that size
 
     @property
     def command(self) -> str:
@@ -402,6 +405,7 @@ def cases() -> list[Case]:
     ]:
         add(name, args, inputs=LOG_FILES + ["est.csv", "data.csv", "map.toml"], expect={0})
     # live over standard input
+    out.extend(containment_cases())
     live = ["live", "--array", "{w}/log/array.toml", "--source", "-", "--out", "{w}/out/l.csv"]
     add("live-binary", live, stdin=os.urandom(20000))
     add("live-empty", live, stdin=b"")
@@ -414,6 +418,203 @@ def cases() -> list[Case]:
     add("live-unsorted", live, None)
     out[-1].setup = _live_unsorted_stdin
     return out
+
+
+def containment_cases() -> list[Case]:
+    """live and batch against a careless user, units by any factor, bounded resources, and one line per message
+    case (each with the words its line must hold)."""
+    out: list[Case] = []
+    logs = LOG_FILES + ["est.csv", "data.csv", "map.toml"]
+
+    def add(name, args, setup=None, expect=None, message=None, inputs=None, stdin=None, produces=(), file_limit=None):
+        out.append(Case(name, args, list(logs if inputs is None else inputs), stdin, expect, setup, message,
+                        list(produces), file_limit))
+
+    batch = ["batch", "--method", "inversion", "--workers", "1"]
+    add("batch-link-in-out", batch + ["{w}/log", "--out", "{w}/out/b"], _link_in_out, {2}, "is a symbolic link")
+    add("batch-same-folder-names", batch + ["{w}/a/log", "{w}/b/log", "{w}/c/log-2", "--out", "{w}/out/b"],
+        _three_logs, {0}, produces=["out/b/a__log/estimate.csv", "out/b/b__log/estimate.csv",
+                                    "out/b/log-2/estimate.csv", "out/b/summary.csv"])
+    add("batch-log-twice", batch + ["{w}/log", "{w}/log/", "--out", "{w}/out/b"], None, {2}, "given twice")
+    add("batch-log-named-summary", batch + ["{w}/summary.csv", "--out", "{w}/out/b"],
+        lambda w: shutil.copytree(w / "log", w / "summary.csv"), {0},
+        produces=["out/b/summary.csv"])
+    add("batch-scheduler-ssh", batch + ["{w}/log", "--out", "{w}/out/b", "--scheduler", "tcp://127.0.0.1:{port}"],
+        _ssh_peer, {2}, "not a Dask scheduler")
+    live = ["live", "--array", "{w}/log/array.toml", "--out", "{w}/out/l.csv"]
+    add("live-g-header", live + ["--source", "-"], _live_g_header, {0}, "× gravity")
+    add("live-guard-replace", live + ["--source", "-", "-O", "guard=replace"], None, {2}, "-O guard=replace")
+    add("live-udp-no-port", live + ["--source", "udp://127.0.0.1"], None, {2}, "give the port")
+    add("live-serial-baud-negative", live + ["--source", "serial:///dev/null?baud=-5"], None, {2}, "baud=-5")
+    add("live-1ns-steps", live + ["--source", "-"], _live_1ns, {1}, "beyond any IMU")
+    add("live-rate-1e9", live + ["--source", "-", "--rate-hz", "1e9"], None, {2}, "--rate-hz")
+    est = ["estimate", "{w}/log", "--method", "inversion", *EST]
+    add("array-400-digit-position", est, lambda w: _edit(w / "log" / "array.toml", lambda t: t.replace(
+        "position_m = [", "position_m = [" + "9" * 400 + ", ", 1).replace("9" * 400 + ", 0.05, ", "9" * 400 + ", ", 1)),
+        {2}, "position_m")
+    add("array-range-tiny", est, lambda w: _edit(w / "log" / "array.toml", lambda t: t.replace(
+        "noise_std_mps2 = 0.07", "noise_std_mps2 = 0.07\nrange_mps2 = 1e-300", 1)), {2}, "range_mps2")
+    add("array-noise-1e300", est, lambda w: _edit(w / "log" / "array.toml", lambda t: t.replace(
+        "noise_std_mps2 = 0.07", "noise_std_mps2 = 1e300", 1)), {2}, "noise_std_mps2")
+    add("imu-underscore-number", est, lambda w: _imu_rows(w, lambda r: _field(r, 4, 2, "1_0.5")), {2}, "'1_0.5'")
+    add("imu-cr-line-ends", est, lambda w: (w / "log" / "imu.csv").write_bytes(
+        (w / "log" / "imu.csv").read_bytes().replace(b"\n", b"\r")), {0})
+    add("imu-1ns-steps-fixed-lag", ["estimate", "{w}/log", "--method", "fixed-lag", *EST],
+        lambda w: _imu_rows(w, lambda r: [f"{k}," + x.split(",", 1)[1] for k, x in enumerate(r)]), {2},
+        "beyond any IMU")
+    add("opt-axis-frequency-1e308", ["estimate", "{w}/log", "--method", "smoother", "-O",
+                                     "process_axis_frequencies_hz=1e308,0,0", *EST], None, {2},
+        "process_axis_frequencies_hz")
+    conv = ["convert", "csv", "{w}/data.csv", "--map", "{w}/map.toml", "--out", "{w}/out/log"]
+    add("map-column-twice", conv, lambda w: _edit(w / "map.toml", lambda t: t.replace('y = "ay"', 'y = "ax"', 1)),
+        {2}, "mapped to a.x already", inputs=["data.csv", "map.toml"])
+    add("map-mg-over-mps2", conv, _moving_csv_mg, {0}, "likely the values are in m/s², not [mg]",
+        inputs=["data.csv", "map.toml"])
+    add("mimu-one-packet", ["convert", "mimu4444", "{w}/data.bin", "--out", "{w}/out/log"],
+        lambda w: (w / "data.bin").write_bytes((w / "data.bin").read_bytes()[:120]) if (w / "data.bin").exists()
+        else _write("data.bin", b"")(w), {2}, "data.bin", inputs=["data.bin"])
+    add("kalibr-large-no-alias", conv + ["--extrinsics", "{w}/kalibr.yaml"], _write(
+        "kalibr.yaml", "imu0:\n  T_i_b: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n  rostopic: /imu0\n  junk: ["
+        + ",".join(["1.5"] * 300_000) + "]\n"), {2}, "values", inputs=["data.csv", "map.toml", "kalibr.yaml"])
+    add("mimu-random-counters", ["convert", "mimu4444", "{w}/data.bin", "--out", "{w}/out/log"], _random_counters,
+        {0}, "the packet counter does not count", inputs=["data.bin"])
+    add("live-tcp-garbage", ["live", "--array", "{w}/log/array.toml", "--source", "tcp://127.0.0.1:{port}", "--out",
+                             "{w}/out/l.csv"], _garbage_peer, {0}, "1 bad rows")
+    phyphox = ["convert", "csv", "{w}/export.zip", "--map", "phyphox", "--out", "{w}/out/log"]
+    add("zip-bomb", phyphox, _zip_bomb, {2}, "zip bomb", inputs=["export.zip"])
+    add("zip-member-twice", phyphox, _zip_twice, {2}, "2 times", inputs=["export.zip"])
+    add("simulate-full-disk", ["simulate", "reversal", "--duration-s", "5", "--out", "{w}/out/s"], None, {1},
+        "imu.csv", inputs=[], file_limit=1 << 16)
+    return out
+
+
+def _link_in_out(w: Path) -> None:
+    (w / "elsewhere").mkdir()
+    (w / "out" / "b").mkdir()
+    os.symlink("../../elsewhere", w / "out" / "b" / "log")
+
+
+def _three_logs(w: Path) -> None:
+    for rel in ("a/log", "b/log", "c/log-2"):
+        shutil.copytree(w / "log", w / rel)
+
+
+_PEERS: list = []
+
+
+def _ssh_peer(w: Path) -> None:
+    """A TCP server in this process that greets like an SSH server and never says more; its port in the case's
+    arguments (``{port}``)."""
+    import socket
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    _PEERS.append(srv)
+
+    def serve():
+        while True:
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                return
+            _PEERS.append(conn)
+            conn.sendall(b"SSH-2.0-OpenSSH_9.6\r\n")
+
+    threading.Thread(target=serve, daemon=True).start()
+    (w / "port").write_text(str(srv.getsockname()[1]))
+
+
+def _garbage_peer(w: Path) -> None:
+    """A TCP server in this process that sends 64 KiB of random bytes to the first connection and closes it."""
+    import socket
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    _PEERS.append(srv)
+    data = os.urandom(1 << 16)
+
+    def serve():
+        try:
+            conn, _ = srv.accept()
+        except OSError:
+            return
+        with conn:
+            conn.sendall(data)
+        srv.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    (w / "port").write_text(str(srv.getsockname()[1]))
+
+
+def _random_counters(w: Path) -> None:
+    """data.bin (the real recording's first packets, or none) with each packet's counter drawn at random and its
+    checksum made right again."""
+    import numpy as np
+
+    path = w / "data.bin"
+    if not path.exists():
+        path.write_bytes(b"")
+        return
+    sys.path.insert(0, str(REPO))
+    from gfimu.io.readers.mimu4444 import find_packets
+
+    d = bytearray(path.read_bytes())
+    starts, _, _ = find_packets(np.frombuffer(bytes(d), dtype=np.uint8))
+    rng = np.random.default_rng(1)
+    for s in starts:
+        c = int(rng.integers(0, 65536))
+        d[s + 1], d[s + 2] = c >> 8, c & 255
+        check = sum(d[s:s + 104]) % 65536
+        d[s + 104], d[s + 105] = check >> 8, check & 255
+    path.write_bytes(bytes(d))
+
+
+def _live_g_header(w: Path) -> None:
+    lines = (w / "log" / "imu.csv").read_text().splitlines()
+    (w / "stdin").write_text("\n".join([lines[0].replace("[m s^-2]", "[g]")] + lines[1:]) + "\n")
+
+
+def _live_1ns(w: Path) -> None:
+    lines = (w / "log" / "imu.csv").read_text().splitlines()
+    (w / "stdin").write_text("\n".join([lines[0]] + [f"{k}," + x.split(",", 1)[1] for k, x in enumerate(lines[1:])])
+                             + "\n")
+
+
+def _moving_csv_mg(w: Path) -> None:
+    """data.csv: the log's readings (m/s², moving) under a map whose unit says mg."""
+    lines = (w / "log" / "imu.csv").read_text().splitlines()[1:]
+    rows = [f"{int(ln.split(',')[0]) // 1_000_000}," + ",".join(ln.split(",")[1:13]) for ln in lines]
+    (w / "data.csv").write_text("t [ms],ax,ay,az,bx,by,bz,cx,cy,cz,dx,dy,dz\n" + "\n".join(rows) + "\n")
+    _edit(w / "map.toml", lambda t: t.replace('unit = "m/s^2"', 'unit = "mg"'))
+
+
+def _zip_bomb(w: Path) -> None:
+    import zipfile
+
+    row = b"0.0100000000E0,0.0000000000E0,0.0000000000E0,9.8100000000E0\n"
+    with zipfile.ZipFile(w / "export.zip", "w", zipfile.ZIP_DEFLATED, compresslevel=9) as z:
+        with z.open("Accelerometer.csv", "w", force_zip64=True) as fh:
+            fh.write(b'"Time (s)","X (m/s^2)","Y (m/s^2)","Z (m/s^2)"\n')
+            block = row * ((1 << 20) // len(row))
+            for _ in range(200):
+                fh.write(block)
+
+
+def _zip_twice(w: Path) -> None:
+    import warnings
+    import zipfile
+
+    text = "\n".join(['"Time (s)","X (m/s^2)","Y (m/s^2)","Z (m/s^2)"']
+                     + [f"{k / 100:.4f},0.1,0.2,9.8" for k in range(200)]) + "\n"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with zipfile.ZipFile(w / "export.zip", "w") as z:
+            z.writestr("Accelerometer.csv", text)
+            z.writestr("Accelerometer.csv", text.replace("9.8", "0.98"))
 
 
 def _live_nan_stdin(w: Path) -> None:
@@ -509,6 +710,18 @@ def _limit_memory() -> None:
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_BYTES, MEMORY_BYTES))
 
 
+def _limits(file_limit: int | None):
+    """The child's limits: memory, and with ``file_limit`` files no larger than that (a full disk: EFBIG)."""
+    def apply() -> None:
+        _limit_memory()
+        if file_limit is not None:
+            import signal
+
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (file_limit, file_limit))
+    return apply
+
+
 def _names_something(line: str, args: list[str], w: Path) -> bool:
     """The error line names a path, an option or a key: a path of the case, an argument given (its first
     40 characters: a long one is quoted in part), an option's or key's name, or a quoted name."""
@@ -533,6 +746,8 @@ def run_case(case: Case, base: Path, work: Path) -> dict:
     if case.setup is not None:
         case.setup(w)
     args = [a.replace("{w}", str(w)) for a in case.args]
+    if (w / "port").exists():
+        args = [a.replace("{port}", (w / "port").read_text()) for a in args]
     stdin = case.stdin
     if stdin is None and (w / "stdin").exists():
         stdin = (w / "stdin").read_bytes()
@@ -543,7 +758,8 @@ def run_case(case: Case, base: Path, work: Path) -> dict:
     t0 = time.monotonic()
     try:
         proc = subprocess.run([sys.executable, "-m", "gfimu", *args], input=stdin if stdin is not None else b"",
-                              capture_output=True, timeout=TIMEOUT_S, env=env, cwd=w, preexec_fn=_limit_memory)
+                              capture_output=True, timeout=TIMEOUT_S, env=env, cwd=w,
+                              preexec_fn=_limits(case.file_limit))
         code, stderr = proc.returncode, proc.stderr.decode("utf-8", "replace")
     except subprocess.TimeoutExpired as exc:
         code, stderr = None, (exc.stderr or b"").decode("utf-8", "replace")
@@ -570,13 +786,18 @@ def run_case(case: Case, base: Path, work: Path) -> dict:
             problems.append("the error names no path, option or key")
         elif others and case.command != "live":  # live prints its session's counts too
             problems.append(f"{len(others)} line(s) on standard error besides the error and warnings")
+    if case.message is not None and case.message not in stderr:
+        problems.append(f"standard error does not say {case.message!r}")
+    for rel in case.produces:
+        if not (w / rel).is_file() or (w / rel).is_symlink():
+            problems.append(f"{rel} not written")
     for rel, digest in before_inputs.items():
         p = w / rel
         if not p.is_file() or hashlib.sha256(p.read_bytes()).hexdigest() != digest:
             problems.append(f"input {rel} changed")
     after = _digests(w)
     for rel, digest in after.items():
-        if rel.startswith("out/") or rel == "stdin":
+        if rel.startswith("out/") or rel in ("stdin", "port"):
             continue
         if outside_before.get(rel) != digest:
             problems.append(f"{rel} written outside the output folder")

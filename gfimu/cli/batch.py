@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "batch", help="run one method on many logs, in parallel on Dask (this machine or a cluster)",
         description="Estimate every LOG with one method on Dask distributed and write DIR/<log folder name>/"
-                    "estimate.csv (as gfimu estimate would) and DIR/summary.csv (log, status, samples, seconds, "
+                    "estimate.csv (as gfimu estimate would; logs of the same folder name take the parts of their "
+                    "paths that tell them apart, a__log and b__log) and DIR/summary.csv (log, status, samples, seconds, "
                     "ω RMSE where the log has a truth or reference, warnings, error message). A log that fails, or a LOG "
                     "that is not a log folder, is reported in the summary and the exit status is 1; the others go "
                     "on. Needs the distributed "

@@ -84,6 +84,11 @@ def run(args) -> int:
 
             bar.step("apply the calibration")
             log = apply_calibration_file(log, args.calibration)
+        if len(log) < 2:  # one sample tells no rate, and no estimator reads it
+            from ..errors import DataError
+
+            raise DataError(f"{args.input}: {len(log)} sample(s) read; a log needs at least 2 (its rate is measured "
+                            "from their timestamps)")
         bar.step("write the log")
         # the rate measured: 1e9 / the median step of the log's timestamps [Hz] (readers/_grid.py)
         gio.write_log(log, args.out, rate_hz=nominal_rate_hz(log.timestamps_ns), what="--out")

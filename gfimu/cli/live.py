@@ -2,9 +2,10 @@
 
 Only the arguments are read here: the source is :func:`gfimu.io.sources.open_source`, the session
 :func:`gfimu.live.run`, the sink :class:`gfimu.live.EstimateSink` (see ``docs/live.md``). The summary
-goes to standard error however the session ends. Exit status: 0 at the end of the stream, 130 after
-SIGINT, 143 after SIGTERM, 1 when the stream broke (a connection reset), 2 for a header or an
-argument that cannot be used.
+goes to standard error however the session ends (but when standard output's reader went away: one line,
+exit 1). Exit status: 0 at the end of the stream, 130 after SIGINT, 143 after SIGTERM, 1 when the stream
+broke (a connection reset) or the output failed, 2 for a header, an argument or an option that cannot be
+used (``-O guard`` other than off, a rate beyond any IMU's) and for an output another session is writing.
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ def run(args) -> int:
     estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
     rate_hz = args.rate_hz or declared_rate_hz
+    _refuse_rate(rate_hz, "--rate-hz" if args.rate_hz else f"{args.array}: rate_hz")
     out_path = check_output(args.out, [args.array], "--out", stdout=True)
     reason = estimator.applicable(array)
     if reason:
@@ -99,6 +101,12 @@ def _session(args, source, estimator, out_path, rate_hz, declared_rate_hz) -> in
             report(f"error: --out {args.out}: the output was closed by its reader (a broken pipe); the session "
                    "ended there")
             return EXIT_FAILURE
+        except OSError as exc:
+            if out_path is not None or exc.errno is None:
+                raise
+            from ..io.atomic import resource_error  # standard output on a full disk: named as the output
+
+            raise resource_error(exc, "standard output (--out -)") from None
     if result.failure:
         report(f"error: {result.failure}")
     report(result.summary())
@@ -121,3 +129,11 @@ def _refuse_unapplied(options: dict) -> None:
                        "over spans of the whole log, after the fact; gfimu live writes each estimate as it leaves "
                        "the lag window and cannot apply it (give -O guard=off, or run gfimu estimate --method "
                        "fixed-lag on the recorded log)")
+
+
+def _refuse_rate(rate_hz: float | None, what: str) -> None:
+    """A rate beyond any IMU's sizes the smoother's window at millions of samples: refused before anything."""
+    from ..io.plausibility import MAX_RATE_HZ
+
+    if rate_hz is not None and rate_hz > MAX_RATE_HZ:
+        raise CLIError(f"{what} {rate_hz:g}: beyond any IMU's rate ({MAX_RATE_HZ:g} Hz at most)")

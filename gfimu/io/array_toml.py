@@ -86,9 +86,25 @@ MAX_POSITION_M = 100.0
 matrix)."""
 
 
+def _finite(v) -> bool:
+    """``v`` a finite number, also a float can hold (an integer of 400 digits is none)."""
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
+def _shown(value) -> str:
+    """``repr`` of a value cut to 80 characters (a 400-digit number is named, not printed whole)."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:60] + f"... ({len(text)} characters)"
+
+
 def _vector(ctx: _TomlContext, value, n: int, table: str, index: int, key: str) -> np.ndarray:
     if not isinstance(value, list) or len(value) != n or not all(_is_number(v) for v in value):
-        raise ctx.error(f"expected a list of {n} numbers, got {value!r}", table, index, key)
+        raise ctx.error(f"expected a list of {n} numbers, got {_shown(value)}", table, index, key)
+    if not all(_finite(v) for v in value):
+        raise ctx.error(f"values must be finite, got {_shown(value)}", table, index, key)
     out = np.array(value, dtype=float)
     if not np.all(np.isfinite(out)):
         raise ctx.error(f"values must be finite, got {value!r}", table, index, key)
@@ -99,9 +115,24 @@ def _optional_std(ctx: _TomlContext, table_value: dict, table: str, index: int, 
     if key not in table_value:
         return None
     v = table_value[key]
-    if not _is_number(v) or not math.isfinite(v) or v < 0:
-        raise ctx.error(f"expected a finite number >= 0, got {v!r}", table, index, key)
+    if not _is_number(v) or not _finite(v) or v < 0:
+        raise ctx.error(f"expected a finite number >= 0, got {_shown(v)}", table, index, key)
+    if v > MAX_NOISE_STD:  # said, not refused: the file is still what it says (and round-trips)
+        from .errors import LogPlausibilityWarning
+
+        words = (f"{v!r} is no sensor noise (beyond {MAX_NOISE_STD:g}: the readings would count for nothing); the "
+                 "unit is m/s², rad/s or rad")
+        warnings.warn(str(ctx.error(words, table, index, key)), LogPlausibilityWarning, stacklevel=2)
     return float(v)
+
+
+MAX_NOISE_STD = 1e3
+"""The largest noise standard deviation a sensor of array.toml states without a warning (m/s², rad/s or rad):
+beyond it the readings carry no information (1e300 is a unit or a typing mistake)."""
+
+MIN_RANGE_MPS2 = 1.0
+"""The smallest full scale an accelerometer may state [m/s²]: one that cannot read a tenth of gravity is a unit
+mistake (the smallest ranges sold are ±2 g, 19.6 m/s²)."""
 
 
 def _rotation(ctx: _TomlContext, value, index: int, name: str) -> np.ndarray:
@@ -219,9 +250,12 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
         full_scale = None
         if "range_mps2" in a:
             full_scale = a["range_mps2"]
-            if not _is_number(full_scale) or not math.isfinite(full_scale) or full_scale <= 0:
-                raise ctx.error(f"expected the full scale in m/s², a finite number > 0, got {full_scale!r}", t, i,
-                                "range_mps2")
+            if not _is_number(full_scale) or not _finite(full_scale) or full_scale <= 0:
+                raise ctx.error(f"expected the full scale in m/s², a finite number > 0, got {_shown(full_scale)}", t,
+                                i, "range_mps2")
+            if full_scale < MIN_RANGE_MPS2:
+                raise ctx.error(f"{full_scale!r} m/s² is no accelerometer's full scale (at least {MIN_RANGE_MPS2:g}: "
+                                "±2 g is 19.6); is the unit m/s²?", t, i, "range_mps2")
             full_scale = float(full_scale)
         try:
             accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise, topic=topic, range_mps2=full_scale))

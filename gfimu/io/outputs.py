@@ -11,7 +11,11 @@ One rule for every file a command writes:
   compared after resolving links, and by device and inode (hard links);
 - it never replaces anything that is not a regular file (a folder, a device
   such as ``/dev/null``, a FIFO, a socket);
-- ``-`` means standard output where the command allows it (tables, estimates).
+- ``-`` means standard output where the command allows it (tables, estimates);
+- a file written inside a command's own output folder (``batch``) never goes through a link in that
+  folder nor outside it (:func:`check_output_within`);
+- a file written as a stream goes (``live``) has one writer at a time
+  (:func:`gfimu.io.atomic.output_lock`: a second writer is refused).
 
 Log folders (``convert``, ``simulate``) are written by
 :func:`prepare_log_folder` + :func:`gfimu.io.write_log`: an existing
@@ -36,6 +40,8 @@ from .errors import OutputError
 from .log_dir import LOG_FILES
 
 STDOUT = "-"
+
+STDOUT_CLOSED = "--out -: standard output is closed (started with it shut); give --out a file name"
 
 
 def input_files(paths: Iterable[str | os.PathLike | None]) -> list[Path]:
@@ -96,6 +102,8 @@ def check_output(path: str | os.PathLike | None, inputs: Iterable[str | os.PathL
     if str(path) == STDOUT:
         if not stdout:
             raise OutputError(f"{what} -: this output cannot go to standard output; give a file name")
+        if sys.stdout is None:
+            raise OutputError(STDOUT_CLOSED.replace("--out", what, 1))
         return None
     shown = str(path)
     try:
@@ -126,9 +134,18 @@ def check_outputs(paths: dict, inputs: Iterable[str | os.PathLike | None] = (), 
 def write_output(target: Path | None, chunks: Iterable[str]) -> None:
     """Write text chunks to ``target`` atomically, or to standard output when ``target`` is ``None``."""
     if target is None:
-        for chunk in chunks:
-            sys.stdout.write(chunk)
-        sys.stdout.flush()
+        if sys.stdout is None:
+            raise OutputError(STDOUT_CLOSED)
+        try:
+            for chunk in chunks:
+                sys.stdout.write(chunk)
+            sys.stdout.flush()
+        except BrokenPipeError:  # its reader stopped (head): the command line ends quietly
+            raise
+        except OSError as exc:  # a full disk behind the redirection: name where it was going
+            from .atomic import resource_error
+
+            raise resource_error(exc, "standard output (--out -)") from None
         return
     atomic_write(target, chunks)
 

@@ -37,6 +37,7 @@ def check_yaml_size(yaml, text: str, path: Path) -> None:
     which pyyaml produces without recursion."""
     sizes: dict[str, int] = {}  # anchor -> nodes of its node, aliases expanded
     stack: list[list] = []  # open collections: [nodes so far, anchor]
+    aliases = 0  # alias events seen: without any, a document too large is large, not an alias bomb
     for event in yaml.parse(text, Loader=yaml.SafeLoader):
         if isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
             if len(stack) >= MAX_YAML_DEPTH:
@@ -53,6 +54,7 @@ def check_yaml_size(yaml, text: str, path: Path) -> None:
                 raise LogFormatError(f"alias *{event.anchor} refers to a node that contains it (or to no anchor): "
                                      "not read", path, event.start_mark.line + 1)
             n, anchor = sizes[event.anchor], None
+            aliases += 1
         else:
             continue
         if anchor is not None:
@@ -65,6 +67,9 @@ def check_yaml_size(yaml, text: str, path: Path) -> None:
             break
     else:
         return
+    if not aliases:
+        raise LogFormatError(f"holds more than {MAX_YAML_NODES} values (a calibration or a bag's metadata has a few "
+                             "hundred): not read; is it the right file?", path, event.start_mark.line + 1)
     raise LogFormatError(f"its aliases (*name) expand to more than {MAX_YAML_NODES} nodes (nested aliases, a "
                          "'billion laughs' document?); a calibration or a bag's metadata has a few hundred: not read",
                          path, event.start_mark.line + 1)

@@ -356,6 +356,7 @@ class MimuSource(Source):
         from .readers.mimu4444 import StreamDecoder
 
         decoder = StreamDecoder()
+        skipped = received = 0
         while not stop.is_set():
             try:
                 chunk = self._read()
@@ -368,6 +369,11 @@ class MimuSource(Source):
                 return
             for t_ns, accel in decoder.feed(chunk):
                 yield Reading(t_ns, accel, None)
+            received += len(chunk)
+            if decoder.skipped_bytes > skipped:  # bytes that are no packet: a bad row per stretch of them
+                yield BadRow(f"byte {received}", f"{decoder.skipped_bytes - skipped} byte(s) that are no MIMU4444 "
+                                                 "packet")
+                skipped = decoder.skipped_bytes
         self.ended = "stopped"
 
     def close(self) -> None:

@@ -434,11 +434,15 @@ class _Csv:
             for i in indices:
                 tok = fields[i].strip()
                 try:
+                    if "_" in tok:  # Python's float() takes 1_0.5 as 10.5; no CSV reader does
+                        raise ValueError(tok)
                     float(tok)
                 except ValueError:
-                    what = "is empty" if not tok else f"value {tok!r} is not a number"
+                    what = "is empty" if not tok else f"value {tok[:40]!r} is not a number"
                     raise LogFormatError(f"column {self.names[i]!r} (field {i + 1}) {what}", self.path,
                                          self.line_of_row(row0 + k)) from None
+        raise LogFormatError(f"a value in columns {', '.join(repr(self.names[i]) for i in indices[:3])}... is not a "
+                             f"number", self.path, self.line_of_row(row0))
 
 
 class _BlockParser:

@@ -107,6 +107,9 @@ class SmootherOptions:
         if fr.shape != (3,) or not np.all(np.isfinite(fr) & (fr >= 0)):
             raise InputError("smoother option process_axis_frequencies_hz must be 3 numbers >= 0, "
                              f"got {self.process_axis_frequencies_hz!r}")
+        if np.any(fr > 1e4):  # beyond any array's Nyquist frequency: ω = 2πf overflows the oscillator's step
+            raise InputError("smoother option process_axis_frequencies_hz must be at most 1e4 Hz (a natural frequency "
+                             f"of the motion, below half the sample rate), got {self.process_axis_frequencies_hz!r}")
         if np.any(fr > 0) and self.motion_model != "jerk":
             raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
         if int(self.max_iterations) < 1:

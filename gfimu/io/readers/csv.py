@@ -831,12 +831,21 @@ class _Reader:
             self.rate_warnings.append(warning)
         return t, unit
 
+    def _one_use(self, table: Table, j: int, column: Column, axis: str) -> None:
+        """Refuse a column of ``table`` mapped to a second axis (two readings of one number are no two readings)."""
+        used = self.__dict__.setdefault("_used", {})
+        other = used.setdefault((table.path, j), axis)
+        if other != axis:
+            raise self.error(f"column {table.shown(j)} of {table.path} is mapped to {other} already; each axis needs a "
+                             "column of its own", column)
+
     def values(self, table: Table, sensor: Sensor, kind: str, axes: tuple[str, ...]) -> tuple[np.ndarray, list[str]]:
         out = np.empty((len(table.rows), len(axes)))
         shown = []
         for c, a in enumerate(axes):
             column = sensor.axes[a]
             j = self.find(table, column)
+            self._one_use(table, j, column, f"{sensor.name}.{a}")
             factor, unit = self.unit(table, j, column, kind)
             tokens = table.field(j)
             try:

@@ -287,7 +287,28 @@ def decode(data: bytes | np.ndarray, gap_factor: float = 1.5) -> Recording:
         duration_s=float((t_ns[-1] - t_ns[0]) * 1e-9),
         gap_indices=gap_idx,
     )
+    _check_counters(report)
     return Recording(t_ns, acc, gyr, clipped, invalid, report)
+
+
+COUNTER_DISORDER = 0.1
+"""Share of packets out of order or after a counter gap beyond which the counters are said not to count."""
+
+
+def _check_counters(report: DecodeReport) -> None:
+    """A warning when the packet counter does not count: more than :data:`COUNTER_DISORDER` of the packets
+    repeated, out of order or after a gap (random counters: the times made from them are not to be trusted)."""
+    import warnings
+
+    from ..errors import LogPlausibilityWarning
+
+    packets = report.n_packets + report.duplicates_removed
+    disorder = report.duplicates_removed + report.counter_gaps
+    if packets >= 10 and disorder > COUNTER_DISORDER * packets:
+        warnings.warn(f"the packet counter does not count: {report.duplicates_removed} of {packets} packets repeated or "
+                      f"out of order and {report.counter_gaps} counter gap(s) ({report.dropped_packets} packets "
+                      "missing by the counter); the times made from it are not to be trusted (a damaged or "
+                      "another device's recording?)", LogPlausibilityWarning, stacklevel=2)
 
 
 def to_log(rec: Recording, with_gyro: bool = False, source: str = "<memory>"):
