@@ -164,7 +164,8 @@ class FixedLagUpdate:
     """What one :meth:`FixedLagSmoother.push` gives back.
 
     ``smoothed``: states that reached the lag (final values, oldest first;
-    usually one, several after a warm-up, a gap or a clock reset, none at the start).
+    usually one, several after a warm-up, a gap or a clock reset, none at the start; the first rows of a
+    segment all at once when its start is released, :meth:`FixedLagSmoother._release_start`).
     ``filtered``: the newest state given data up to now (``None`` while the
     first samples of a segment are being gathered for the initialisation, and
     when the sample was dropped).
@@ -876,8 +877,9 @@ class FixedLagSmoother:
 
     def _start_evidence(self):
         """The held rows and the window solved as the batch smoother solves a stretch (the stream's model,
-        Levenberg-Marquardt on the whole stretch), from the filtered states and from them moved onto each
-        other branch of ω (:func:`~gfimu.smoother.restarts.branch`: flipped, mirrored through the array's
+        Levenberg-Marquardt on the whole stretch), from the filtered states, from the batch smoother's own
+        initial states of the stretch (:func:`~gfimu.smoother.initialise.initial_estimate`) and from the
+        filtered states moved onto each other branch of ω (:func:`~gfimu.smoother.restarts.branch`: flipped, mirrored through the array's
         plane, both). Returns (problem, best solution, the best other minimum's solution or None,
         log-likelihood ratio of the best over it [nats]: the difference of their costs, each the negative
         log-likelihood of the stretch up to one constant; inf when every start ends in the best minimum)."""
@@ -886,7 +888,7 @@ class FixedLagSmoother:
         part = self._stretch_log(samples)
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
         problem = make_problem(part, replace(self.options, tune_process_noise=False), scale, X[:, OMEGA])
-        solutions = [solve(problem, X)]
+        solutions = [solve(problem, X), solve(problem, initial_estimate(part, problem.options))]
         for kind in (1, 2, 3):
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)
