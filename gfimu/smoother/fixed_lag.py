@@ -697,6 +697,7 @@ class FixedLagSmoother:
         self._deciding = self.hold_max_s > 0  # the segment's first rows are held (_hold_start)
         self._held = []  # (t_ns, raw sample, filtered state) of the rows held so far
         self._next_check_ns = None
+        self._last_resolve = None  # (timestamps, ω) of the held stretch's re-solve at the previous check
 
     def _new_smoother(self):
         """The window engine of a new segment (:data:`ENGINES`)."""
@@ -904,10 +905,13 @@ class FixedLagSmoother:
         return problem, best, None, math.inf
 
     def _release_start(self, final: bool) -> list[StateEstimate]:
-        """The held rows, re-solved on the branch the data chose, once the log-likelihood ratio of that
-        branch over the next best reaches :data:`SIGN_DECISION_NATS` and the filter's newest ω agrees with
-        the re-solve's (:data:`AGREEMENT_CHI2`), once they span ``hold_max_s``, or at the segment's end
-        (``final``: then the window's rows too, and the segment ends); else nothing.
+        """The held rows, re-solved on the branch the data chose, once the data have decided them: the
+        log-likelihood ratio of that branch over the next best reaches :data:`SIGN_DECISION_NATS`, the
+        filter's ω at the lag agrees with the re-solve's, and the rows of the previous check's re-solve
+        moved with the data since by no more than their uncertainty (both :data:`AGREEMENT_CHI2`, the
+        second a mean over the rows: a short stretch of slow rotation, whose Gaussian posterior is far
+        too narrow, is re-solved differently as data come); else once they span ``hold_max_s``, or at the
+        segment's end (``final``: then the window's rows too, and the segment ends); else nothing.
 
         The window goes on from the re-solved states (:meth:`_restart_window`). σ (with
         ``compute_sigma``) is the solve's, widened by the other branch's share of the posterior, ``p (1 -
@@ -925,7 +929,9 @@ class FixedLagSmoother:
             chi2 = float(d @ np.linalg.solve(cov[j][OMEGA, OMEGA], d))
         except np.linalg.LinAlgError:
             chi2 = math.inf
-        decided = evidence >= SIGN_DECISION_NATS and chi2 <= AGREEMENT_CHI2
+        times = [h[0] for h in self._held] + [t for _, t in self._window]
+        moved = self._moved(np.asarray(times, dtype=np.int64), X[:, OMEGA], cov[:, OMEGA, OMEGA])
+        decided = evidence >= SIGN_DECISION_NATS and chi2 <= AGREEMENT_CHI2 and moved <= AGREEMENT_CHI2
         if not (decided or final or held_s >= self.hold_max_s):
             return []
         sd = None
@@ -934,12 +940,12 @@ class FixedLagSmoother:
             if other is not None:
                 p = 1.0 / (1.0 + math.exp(min(evidence, 700.0)))
                 sd[:, OMEGA] = np.sqrt(sd[:, OMEGA] ** 2 + p * (1.0 - p) * (X[:, OMEGA] - other.states[:, OMEGA]) ** 2)
-        times = [h[0] for h in self._held] + [t for _, t in self._window]
         n_out = len(times) if final else len(self._held)
         out = [StateEstimate(int(times[j]), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
                              *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
                for j in range(n_out)]
-        self.starts.append({"held_s": held_s, "evidence_nats": evidence, "agreement_chi2": chi2, "open": not decided})
+        self.starts.append({"held_s": held_s, "evidence_nats": evidence, "agreement_chi2": chi2, "moved_chi2": moved,
+                            "open": not decided})
         self._deciding = False
         held = [h[1] for h in self._held]
         self._held = []
@@ -948,6 +954,20 @@ class FixedLagSmoother:
             return out
         self._restart_window(X, held)
         return out
+
+    def _moved(self, times: np.ndarray, omega: np.ndarray, cov: np.ndarray) -> float:
+        """How far the rows of the previous check's re-solve moved with the data since: the mean over
+        them of the change of ω in the new re-solve's covariance (``cov``, (N, 3, 3)); inf at the first
+        check (or when the rows are not the same). Kept for the next check."""
+        last, self._last_resolve = self._last_resolve, (times, omega.copy())
+        if last is None or len(last[0]) > len(times) or not np.array_equal(last[0], times[:len(last[0])]):
+            return math.inf
+        m = len(last[0])
+        d = omega[:m] - last[1]
+        try:
+            return float(np.mean(np.einsum("ni,ni->n", d, np.linalg.solve(cov[:m], d[..., None])[..., 0])))
+        except np.linalg.LinAlgError:
+            return math.inf
 
     def _restart_window(self, X: np.ndarray, held: list) -> None:
         """The window solved again from the held samples ``held`` and its own, each linearised at its
