@@ -678,7 +678,7 @@ class FixedLagSmoother:
         replayed = self._tune_and_replay(final=True) if self._tune_buffer else []
         if self._smoother is None and self._warmup:
             self._initialise()
-        if self._deciding and self._smoother is not None:
+        if self._deciding and self._smoother is not None and self._held:
             replayed = list(replayed) + self._release_start(final=True)
         out = tuple(replayed) + tuple(self._read(entry, with_sigma=self.compute_sigma) for entry in self._window)
         self._start_segment()
@@ -917,9 +917,16 @@ class FixedLagSmoother:
         ``compute_sigma``) is the solve's, widened by the other branch's share of the posterior, ``p (1 -
         p) (ω - ω')²`` per axis with ``p = 1 / (1 + e^Λ)``: a start released undecided says so in its σ
         (and in :attr:`starts`)."""
-        if not self._held and not final:
+        if not self._held:
             return []
-        problem, best, other, evidence = self._start_evidence()
+        try:
+            problem, best, other, evidence = self._start_evidence()
+        except (np.linalg.LinAlgError, FloatingPointError, ValueError):  # not solvable: the rows as filtered
+            out = [StateEstimate(int(t), x[0:3].copy(), x[3:6].copy(), x[6:9].copy()) for t, _, x in self._held]
+            self.starts.append({"held_s": (self._held[-1][0] - self._held[0][0]) * 1e-9, "evidence_nats": math.nan,
+                                "agreement_chi2": math.nan, "moved_chi2": math.nan, "open": True})
+            self._held, self._deciding = [], False
+            return out
         held_s = (self._held[-1][0] - self._held[0][0]) * 1e-9 if self._held else 0.0
         X = best.states
         cov = solve(problem, X, compute_sigma=True, max_iterations=1).covariance
