@@ -479,7 +479,7 @@ class FixedLagSmoother:
         for sample in samples:
             out.extend(self._process(sample))
         if batch is not None:
-            out = batch[:len(out)]
+            out = batch[:len(out) + self._start_from_batch(batch)]
         return out
 
     def _stretch_log(self, samples) -> Log:
@@ -961,6 +961,24 @@ class FixedLagSmoother:
             return out
         self._restart_window(X, held)
         return out
+
+    def _start_from_batch(self, batch: list) -> int:
+        """The held rows of a tuning stretch whose batch solution ``batch`` comes out (:meth:`_tune_and_replay`):
+        the batch smoother has decided them on the whole stretch; the window goes on from its states. Returns
+        the number of held rows so released (0 when nothing is held or the rows are not the stretch's)."""
+        n = len(self._held)
+        rows = [h[0] for h in self._held] + [t for _, t in self._window]
+        if not (self._deciding and n) or len(batch) < len(rows) or any(
+                batch[j].timestamp_ns != t for j, t in enumerate(rows)):
+            return 0
+        X = np.array([np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+                      for s in batch[:len(rows)]])
+        self.starts.append({"held_s": (rows[n - 1] - rows[0]) * 1e-9, "evidence_nats": math.nan,
+                            "agreement_chi2": math.nan, "moved_chi2": math.nan, "open": False})
+        held = [h[1] for h in self._held]
+        self._held, self._deciding = [], False
+        self._restart_window(X, held)
+        return n
 
     def _moved(self, times: np.ndarray, omega: np.ndarray, cov: np.ndarray) -> float:
         """How far the rows of the previous check's re-solve moved with the data since: the mean over
