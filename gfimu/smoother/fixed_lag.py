@@ -32,6 +32,11 @@ state that has just reached the lag (smoothed with ``lag_s`` seconds of
 future data), after which it leaves the window. Memory stays bounded: the
 engine keeps only the window and this module keeps only deques of window length.
 
+The first rows of a segment are held (numpy engine, at most ``hold_max_s``): kept back past the
+lag until the data decide ω (the branch log-likelihood ratio, the stream agreeing with a re-solve of
+the held stretch, that re-solve no longer moving with the data; :meth:`FixedLagSmoother._release_start`),
+then given re-solved, with the window going on from the re-solved states (``docs/fixed-lag.md``).
+
 Time gaps (a step longer than ``gap_factor`` times the nominal step, as
 :meth:`gfimu.log.Log.gaps`) are not integrated across: the window is flushed
 (its states are emitted, smoothed with the data they have) and a new segment
