@@ -162,7 +162,8 @@ def test_gyroscope_is_used():
 def test_push_returns_lagged_smoothed_states_and_newest_filtered():
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.2, seed=4)
     lag_s = 0.1
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=lag_s, rate_hz=RATE_HZ, warmup_s=0.05)
+    # no hold of the start (hold_max_s=0): every row comes out lag_s after its sample once the warm-up is done
+    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=lag_s, rate_hz=RATE_HZ, warmup_s=0.05, hold_max_s=0.0)
     lag_ns = round(lag_s * 1e9)
     emitted = []
     warmup_n = int(round(0.05 * RATE_HZ))

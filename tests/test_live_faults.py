@@ -243,7 +243,8 @@ def test_the_three_parts_in_python_and_an_output_that_fails(log_dir):
     from gfimu.methods import make_estimator
 
     array, _ = gio.load_array_toml(log_dir / "array.toml")
-    estimator = make_estimator("fixed-lag", tune_process_noise=False, auto_model=False)  # streams from the first row
+    # streams from the first row (no tuning stretch, no hold of the start)
+    estimator = make_estimator("fixed-lag", tune_process_noise=False, auto_model=False, hold_max_s=0.0)
 
     def source_of(data: bytes) -> StdinSource:
         r, w = os.pipe()

@@ -75,6 +75,14 @@ SECTIONS = (
         "smoother chooses its process noise), and the share of samples whose ω points the wrong way.",
         quick=("--duration-s", "5", "--scenarios", "random3d,reversal"), json=False),
     Section(
+        "slow-motion", "Slow motion: every method", "slow_motion.py",
+        "ω RMSE (rad/s) of every method on a slow random 3-D rotation (the `slow3d` scenario, |ω| at most "
+        "1 rad/s: a hovering drone, a slow hand) seen by the 10 cm cube of four triads (0.07 m/s², 500 Hz, "
+        "20 s), over the whole log, over its first 2 s and after, and the share of those first samples whose "
+        "ω points the wrong way. The fixed-lag smoother holds the first rows of the stream until the data "
+        "decide ω (docs/fixed-lag.md).",
+        quick=("--duration-s", "6"), json=False),
+    Section(
         "real-flow", "A real recording, from convert to estimate", "real_flow.py",
         "The commands of the README's real-recording flow on the MIMU4444 recordings (8 IMUs on a 19 mm "
         "board, 62.5 Hz, hand motion in the last two minutes of each ten): `gfimu convert mimu4444`, "

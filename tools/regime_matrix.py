@@ -320,7 +320,7 @@ CELLS: tuple[Cell, ...] = (
     Cell("vehicle-50Hz-30min", "vehicle", 50.0, 1800.0, 0.3, 0.01, 0.01),
     Cell("impacts-20kHz", "impacts", 20000.0, 0.5, 0.025, 0.1, 0.1, motion_options={"n_impacts": 2}),
     Cell("still60-noisefree-stated0", "still-then-motion", 200.0, 70.0, 0.025, 0.0, 0.0),
-    Cell("slow-5cm-500Hz", "slow", 500.0, 20.0, 0.05, 0.07, 0.07, slow=True, quick=True,
+    Cell("slow-5cm-500Hz", "slow", 500.0, 20.0, 0.05, 0.07, 0.07, slow=True,
          note="a hovering drone or a slow hand: |ω| at most 1 rad/s"),
     Cell("slow-2.5cm-500Hz", "slow", 500.0, 20.0, 0.025, 0.07, 0.07, slow=True),
     Cell("slow-10cm-100Hz", "slow", 100.0, 20.0, 0.1, 0.07, 0.07, slow=True),

@@ -32,6 +32,11 @@ state that has just reached the lag (smoothed with ``lag_s`` seconds of
 future data), after which it leaves the window. Memory stays bounded: the
 engine keeps only the window and this module keeps only deques of window length.
 
+The first rows of a segment are held (numpy engine, at most ``hold_max_s``): kept back past the
+lag until the data decide ω (the branch log-likelihood ratio, the stream agreeing with a re-solve of
+the held stretch, that re-solve no longer moving with the data; :meth:`FixedLagSmoother._release_start`),
+then given re-solved, with the window going on from the re-solved states (``docs/fixed-lag.md``).
+
 Time gaps (a step longer than ``gap_factor`` times the nominal step, as
 :meth:`gfimu.log.Log.gaps`) are not integrated across: the window is flushed
 (its states are emitted, smoothed with the data they have) and a new segment
@@ -165,7 +170,8 @@ class FixedLagUpdate:
     """What one :meth:`FixedLagSmoother.push` gives back.
 
     ``smoothed``: states that reached the lag (final values, oldest first;
-    usually one, several after a warm-up, a gap or a clock reset, none at the start).
+    usually one, several after a warm-up, a gap or a clock reset, none at the start; the first rows of a
+    segment all at once when its start is released, :meth:`FixedLagSmoother._release_start`).
     ``filtered``: the newest state given data up to now (``None`` while the
     first samples of a segment are being gathered for the initialisation, and
     when the sample was dropped).
@@ -503,7 +509,7 @@ class FixedLagSmoother:
         for sample in samples:
             out.extend(self._process(sample))
         if batch is not None:
-            out = batch[:len(out)]
+            out = batch[:len(out) + self._start_from_batch(batch)]
         return out
 
     def _stretch_log(self, samples) -> Log:
@@ -704,7 +710,7 @@ class FixedLagSmoother:
         replayed = self._tune_and_replay(final=True) if self._tune_buffer else []
         if self._smoother is None and self._warmup:
             self._initialise()
-        if self._deciding and self._smoother is not None:
+        if self._deciding and self._smoother is not None and self._held:
             replayed = list(replayed) + self._release_start(final=True)
         out = tuple(replayed) + tuple(self._read(entry, with_sigma=self.compute_sigma) for entry in self._window)
         self._start_segment()
@@ -723,6 +729,7 @@ class FixedLagSmoother:
         self._deciding = self.hold_max_s > 0  # the segment's first rows are held (_hold_start)
         self._held = []  # (t_ns, raw sample, filtered state) of the rows held so far
         self._next_check_ns = None
+        self._last_resolve = None  # (timestamps, ω) of the held stretch's re-solve at the previous check
 
     def _new_smoother(self):
         """The window engine of a new segment (:data:`ENGINES`)."""
@@ -903,8 +910,9 @@ class FixedLagSmoother:
 
     def _start_evidence(self):
         """The held rows and the window solved as the batch smoother solves a stretch (the stream's model,
-        Levenberg-Marquardt on the whole stretch), from the filtered states and from them moved onto each
-        other branch of ω (:func:`~gfimu.smoother.restarts.branch`: flipped, mirrored through the array's
+        Levenberg-Marquardt on the whole stretch), from the filtered states, from the batch smoother's own
+        initial states of the stretch (:func:`~gfimu.smoother.initialise.initial_estimate`) and from the
+        filtered states moved onto each other branch of ω (:func:`~gfimu.smoother.restarts.branch`: flipped, mirrored through the array's
         plane, both). Returns (problem, best solution, the best other minimum's solution or None,
         log-likelihood ratio of the best over it [nats]: the difference of their costs, each the negative
         log-likelihood of the stretch up to one constant; inf when every start ends in the best minimum)."""
@@ -913,7 +921,7 @@ class FixedLagSmoother:
         part = self._stretch_log(samples)
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
         problem = make_problem(part, replace(self.options, tune_process_noise=False), scale, X[:, OMEGA])
-        solutions = [solve(problem, X)]
+        solutions = [solve(problem, X), solve(problem, initial_estimate(part, problem.options))]
         for kind in (1, 2, 3):
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)
@@ -929,18 +937,28 @@ class FixedLagSmoother:
         return problem, best, None, math.inf
 
     def _release_start(self, final: bool) -> list[StateEstimate]:
-        """The held rows, re-solved on the branch the data chose, once the log-likelihood ratio of that
-        branch over the next best reaches :data:`SIGN_DECISION_NATS` and the filter's newest ω agrees with
-        the re-solve's (:data:`AGREEMENT_CHI2`), once they span ``hold_max_s``, or at the segment's end
-        (``final``: then the window's rows too, and the segment ends); else nothing.
+        """The held rows, re-solved on the branch the data chose, once the data have decided them: the
+        log-likelihood ratio of that branch over the next best reaches :data:`SIGN_DECISION_NATS`, the
+        filter's ω at the lag agrees with the re-solve's, and the rows of the previous check's re-solve
+        moved with the data since by no more than their uncertainty (both :data:`AGREEMENT_CHI2`, the
+        second a mean over the rows: a short stretch of slow rotation, whose Gaussian posterior is far
+        too narrow, is re-solved differently as data come); else once they span ``hold_max_s``, or at the
+        segment's end (``final``: then the window's rows too, and the segment ends); else nothing.
 
         The window goes on from the re-solved states (:meth:`_restart_window`). σ (with
         ``compute_sigma``) is the solve's, widened by the other branch's share of the posterior, ``p (1 -
         p) (ω - ω')²`` per axis with ``p = 1 / (1 + e^Λ)``: a start released undecided says so in its σ
         (and in :attr:`starts`)."""
-        if not self._held and not final:
+        if not self._held:
             return []
-        problem, best, other, evidence = self._start_evidence()
+        try:
+            problem, best, other, evidence = self._start_evidence()
+        except (np.linalg.LinAlgError, FloatingPointError, ValueError):  # not solvable: the rows as filtered
+            out = [StateEstimate(int(t), x[0:3].copy(), x[3:6].copy(), x[6:9].copy()) for t, _, x in self._held]
+            self.starts.append({"held_s": (self._held[-1][0] - self._held[0][0]) * 1e-9, "evidence_nats": math.nan,
+                                "agreement_chi2": math.nan, "moved_chi2": math.nan, "open": True})
+            self._held, self._deciding = [], False
+            return out
         held_s = (self._held[-1][0] - self._held[0][0]) * 1e-9 if self._held else 0.0
         X = best.states
         cov = solve(problem, X, compute_sigma=True, max_iterations=1).covariance
@@ -950,7 +968,9 @@ class FixedLagSmoother:
             chi2 = float(d @ np.linalg.solve(cov[j][OMEGA, OMEGA], d))
         except np.linalg.LinAlgError:
             chi2 = math.inf
-        decided = evidence >= SIGN_DECISION_NATS and chi2 <= AGREEMENT_CHI2
+        times = [h[0] for h in self._held] + [t for _, t in self._window]
+        moved = self._moved(np.asarray(times, dtype=np.int64), X[:, OMEGA], cov[:, OMEGA, OMEGA])
+        decided = evidence >= SIGN_DECISION_NATS and chi2 <= AGREEMENT_CHI2 and moved <= AGREEMENT_CHI2
         if not (decided or final or held_s >= self.hold_max_s):
             return []
         sd = None
@@ -959,12 +979,12 @@ class FixedLagSmoother:
             if other is not None:
                 p = 1.0 / (1.0 + math.exp(min(evidence, 700.0)))
                 sd[:, OMEGA] = np.sqrt(sd[:, OMEGA] ** 2 + p * (1.0 - p) * (X[:, OMEGA] - other.states[:, OMEGA]) ** 2)
-        times = [h[0] for h in self._held] + [t for _, t in self._window]
         n_out = len(times) if final else len(self._held)
         out = [StateEstimate(int(times[j]), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
                              *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
                for j in range(n_out)]
-        self.starts.append({"held_s": held_s, "evidence_nats": evidence, "agreement_chi2": chi2, "open": not decided})
+        self.starts.append({"held_s": held_s, "evidence_nats": evidence, "agreement_chi2": chi2, "moved_chi2": moved,
+                            "open": not decided})
         self._deciding = False
         held = [h[1] for h in self._held]
         self._held = []
@@ -973,6 +993,38 @@ class FixedLagSmoother:
             return out
         self._restart_window(X, held)
         return out
+
+    def _start_from_batch(self, batch: list) -> int:
+        """The held rows of a tuning stretch whose batch solution ``batch`` comes out (:meth:`_tune_and_replay`):
+        the batch smoother has decided them on the whole stretch; the window goes on from its states. Returns
+        the number of held rows so released (0 when nothing is held or the rows are not the stretch's)."""
+        n = len(self._held)
+        rows = [h[0] for h in self._held] + [t for _, t in self._window]
+        if not (self._deciding and n) or len(batch) < len(rows) or any(
+                batch[j].timestamp_ns != t for j, t in enumerate(rows)):
+            return 0
+        X = np.array([np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+                      for s in batch[:len(rows)]])
+        self.starts.append({"held_s": (rows[n - 1] - rows[0]) * 1e-9, "evidence_nats": math.nan,
+                            "agreement_chi2": math.nan, "moved_chi2": math.nan, "open": False})
+        held = [h[1] for h in self._held]
+        self._held, self._deciding = [], False
+        self._restart_window(X, held)
+        return n
+
+    def _moved(self, times: np.ndarray, omega: np.ndarray, cov: np.ndarray) -> float:
+        """How far the rows of the previous check's re-solve moved with the data since: the mean over
+        them of the change of ω in the new re-solve's covariance (``cov``, (N, 3, 3)); inf at the first
+        check (or when the rows are not the same). Kept for the next check."""
+        last, self._last_resolve = self._last_resolve, (times, omega.copy())
+        if last is None or len(last[0]) > len(times) or not np.array_equal(last[0], times[:len(last[0])]):
+            return math.inf
+        m = len(last[0])
+        d = omega[:m] - last[1]
+        try:
+            return float(np.mean(np.einsum("ni,ni->n", d, np.linalg.solve(cov[:m], d[..., None])[..., 0])))
+        except np.linalg.LinAlgError:
+            return math.inf
 
     def _restart_window(self, X: np.ndarray, held: list) -> None:
         """The window solved again from the held samples ``held`` and its own, each linearised at its

@@ -1,0 +1,56 @@
+"""The fixed-lag smoother's start waits for evidence: the first rows of a segment are held until the
+data decide ω, then come out re-solved (gfimu.smoother.fixed_lag, FixedLagSmoother._release_start)."""
+
+import numpy as np
+
+from gfimu.array import cube_array
+from gfimu.simulate import simulate
+from gfimu.smoother.batch import BatchSmootherEstimator
+from gfimu.smoother.fixed_lag import FixedLagEstimator
+
+
+def _rmse(est, truth, rows=slice(None)):
+    return float(np.sqrt(np.mean(np.sum((est[rows] - truth[rows]) ** 2, axis=1))))
+
+
+def test_slow_motion_start_is_held_and_the_log_stays_within_twice_the_batch_smoother():
+    """Slow rotation (|ω| at most 1 rad/s), a 10 cm cube of four triads, 0.07 m/s², 500 Hz, 6 s: the
+    readings see ω through q(ω) ~ |ω|², and a stream that commits at once starts 0.17 rad/s off over its
+    first 2 s (5.8 times the batch smoother there; 2.7 times over the log; 1.9 % of those samples with
+    the wrong sign). Held and re-solved: within twice the batch smoother over the log and within 2.5
+    times over the first 2 s (measured 1.44 and 1.8), no wrong sign, far below the per-sample methods
+    (imm: 0.49 rad/s)."""
+    log = simulate("slow3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=500.0, duration_s=6.0, seed=0)
+    truth = log.truth.omega_b_radps
+    first = log.times_s - log.times_s[0] < 2.0
+    batch = BatchSmootherEstimator().result(log).motion.omega_b_radps
+    fixed = FixedLagEstimator()
+    fl = fixed.result(log).motion.omega_b_radps
+    assert _rmse(fl, truth) <= 2.0 * _rmse(batch, truth)
+    assert _rmse(fl, truth, first) <= 2.5 * _rmse(batch, truth, first)
+    moving = np.linalg.norm(truth, axis=1) > 0.1
+    assert not np.any((np.sum(fl * truth, axis=1) < 0) & moving & first)
+    from gfimu.methods import make_estimator
+
+    imm = make_estimator("imm").estimate_motion(log).omega_b_radps
+    assert _rmse(fl, truth) < 0.5 * _rmse(imm, truth)
+
+
+def test_the_hold_is_bounded_and_every_row_comes_out_once_in_order():
+    """hold_max_s bounds the hold: at 200 Hz with hold_max_s = 1 s and lag 0.2 s, the first rows come out
+    at the latest when the held rows span 1 s (the sample 1.2 s in, plus one check), all at once, then
+    one per push; every timestamp once, in order; the decision is recorded in ``starts``."""
+    log = simulate("slow3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=200.0, duration_s=4.0, seed=1)
+    sm = FixedLagEstimator(hold_max_s=1.0).smoother(log.array, 200.0)
+    first_out, out = None, []
+    for i in range(len(log)):
+        upd = sm.push(log.timestamps_ns[i], log.accel_mps2[i])
+        if upd.smoothed and first_out is None:
+            first_out = i
+            assert len(upd.smoothed) > 1  # the held rows together
+        out.extend(upd.smoothed)
+    out.extend(sm.flush())
+    np.testing.assert_array_equal([s.timestamp_ns for s in out], log.timestamps_ns)
+    assert first_out is not None and first_out <= int(round((3.0 + 1.0 + 0.2 + 0.5) * 200.0))
+    assert len(sm.starts) >= 1 and sm.starts[0]["held_s"] <= 1.0 + 1e-9
+    assert set(sm.starts[0]) == {"held_s", "evidence_nats", "agreement_chi2", "moved_chi2", "open"}
