@@ -44,8 +44,8 @@ def default_workers() -> int:
     the 1-minute load average already reaches that number of CPUs. Then other work keeps every CPU busy, and
     (the scheduler sharing the CPUs between sessions, not between processes) more processes of this
     command would not get more CPU time, only the cost of starting them and of sending their results
-    back (on a 2-CPU machine at a load of 9, the batch smoother's whole command with its two window
-    workers took 1.10 times the CPU time of one process; ``tools/bench_floor.py``, batch ÷ batch-serial)."""
+    back: on a 2-CPU machine at a load of 9 the batch smoother's whole command took 1.3 times as long with
+    its two window workers as in one process (``tools/bench_floor.py``, batch ÷ batch-serial)."""
     n = cpu_count()
     try:
         load = os.getloadavg()[0]
