@@ -23,8 +23,7 @@ from .errors import InputError
 
 
 def check_workers(workers) -> None:
-    """An :class:`~gfimu.errors.InputError` unless ``workers`` is 0 (one per CPU, :func:`default_workers`) or a
-    positive number of processes."""
+    """An :class:`~gfimu.errors.InputError` unless ``workers`` is 0 (one per CPU) or a positive number of processes."""
     if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 0):
         raise InputError(f"workers must be 0 (one per CPU) or a positive number of processes, got {workers!r}")
 
@@ -39,27 +38,12 @@ def can_fork() -> bool:
     return "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
 
 
-def default_workers() -> int:
-    """What ``workers=0`` means: one process per CPU this process may run on, or 1 (this process alone) when
-    the 1-minute load average already reaches that number of CPUs. Then other work keeps every CPU busy, and
-    (the scheduler sharing the CPUs between sessions, not between processes) more processes of this
-    command would not get more CPU time, only the cost of starting them and of sending their results
-    back: on a 2-CPU machine at a load of 9 the batch smoother's whole command took 1.3 times as long with
-    its two window workers as in one process (``tools/bench_floor.py``, batch ÷ batch-serial)."""
-    n = cpu_count()
-    try:
-        load = os.getloadavg()[0]
-    except (AttributeError, OSError):  # no load average on this system
-        return n
-    return 1 if load >= n else n
-
-
 def fork_workers(workers: int, tasks: int) -> int:
-    """Processes to run ``tasks`` independent tasks with: ``workers`` (0: :func:`default_workers`), at most
-    one per task; 1 (this process) where forking is not safe (:func:`can_fork`)."""
+    """Processes to run ``tasks`` independent tasks with: ``workers`` (0: one per CPU), at most one per
+    task; 1 (this process) where forking is not safe (:func:`can_fork`)."""
     check_workers(workers)
     if workers == 0:
-        workers = default_workers()
+        workers = cpu_count()
     if workers <= 1 or tasks <= 1 or not can_fork():
         return 1
     return max(1, min(workers, tasks))

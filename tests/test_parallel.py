@@ -149,24 +149,3 @@ def test_writing_with_workers_gives_the_same_text(monkeypatch):
         two = "".join(tables._csv_chunks(["#timestamp [ns]", "a", "b", "c", "d"], t, values, fmt, flags, workers=2))
         assert one == two
         assert one.count("\n") == 101 and ",nan," in one
-
-
-def test_workers_0_is_one_per_cpu_unless_the_load_fills_them(monkeypatch):
-    """workers=0: one process per CPU on a machine with CPUs to spare, this process alone when the 1-minute
-    load average already reaches the CPU count (more processes would share the same CPUs); a number given
-    is kept either way."""
-    import gfimu.parallel as parallel
-
-    monkeypatch.setattr(parallel, "cpu_count", lambda: 4)
-    monkeypatch.setattr(parallel, "can_fork", lambda: True)
-    monkeypatch.setattr(parallel.os, "getloadavg", lambda: (3.5, 3.0, 3.0))
-    assert parallel.default_workers() == 4 and fork_workers(0, 10) == 4 and fork_workers(0, 3) == 3
-    monkeypatch.setattr(parallel.os, "getloadavg", lambda: (4.0, 1.0, 1.0))
-    assert parallel.default_workers() == 1 and fork_workers(0, 10) == 1
-    assert fork_workers(2, 10) == 2  # asked for: kept
-
-    def no_load():
-        raise OSError("no load average")
-
-    monkeypatch.setattr(parallel.os, "getloadavg", no_load)
-    assert parallel.default_workers() == 4

@@ -161,8 +161,8 @@ class MLEstimator(PerSampleEstimator):
     grid_directions: int = option(64, help="directions of ω in the starting grid")
     grid_magnitudes: int = option(16, help="magnitudes of ω in the starting grid")
     workers: int = option(0, "processes", (
-        "processes that start the blocks of 4,096 samples, from four blocks on: 0 = one per CPU (1 when the "
-        "1-minute load average already fills every CPU), 1 = this process alone (the same numbers either way)"))
+        "processes that start the blocks of 4,096 samples, from four blocks on: 0 = one per CPU, 1 = this "
+        "process alone (the same numbers either way)"))
 
     def __post_init__(self):
         check_workers(self.workers)

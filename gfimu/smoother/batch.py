@@ -312,9 +312,8 @@ class _WindowContext:
 
 def window_workers(workers: int, windows: int, solver: str = "numpy") -> int:
     """Processes to solve ``windows`` windows with: ``workers`` (0: one per CPU this process may run
-    on, 1 when the load already fills them: :func:`gfimu.parallel.default_workers`), at most one per
-    window, forked so that they inherit the log (:func:`gfimu.parallel.fork_workers`: 1 in a daemonic
-    process such as a Dask worker); 1 with the GTSAM solver."""
+    on), at most one per window, forked so that they inherit the log (:func:`gfimu.parallel.fork_workers`:
+    1 in a daemonic process such as a Dask worker); 1 with the GTSAM solver."""
     check_workers(workers)
     return 1 if solver != "numpy" else fork_workers(workers, windows)
 

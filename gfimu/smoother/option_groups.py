@@ -155,8 +155,8 @@ class BatchOptions:
         "middle (10 s of readings fix a handful of noise levels well, and the choice then costs no more as "
         "the window grows; None: the whole window)"))
     workers: int = option(0, "processes", (
-        "processes solving the solve windows at once (the same numbers): 0 = one per CPU (1 when the "
-        "1-minute load average already fills every CPU), at most one per window; 1 = all in this process (attitude windows, which start from the one before, and the gtsam "
+        "processes solving the solve windows at once (the same numbers): 0 = one per CPU, at most one per "
+        "window; 1 = all in this process (attitude windows, which start from the one before, and the gtsam "
         "solver always run in this process)"))
     solver: str = option("numpy", help=(
         "batch solver: 'numpy' (vectorised banded Levenberg-Marquardt, linear in the length) or 'gtsam' (the "
