@@ -42,3 +42,17 @@ def test_an_unknown_command_and_a_folder_without_a_log_are_refused(tmp_path):
     done = run("--log", str(tmp_path), cwd=tmp_path)
     assert done.returncode == 2 and f"--log {tmp_path}: no imu.csv" in done.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_baseline_checkout_runs_the_gfimu_commands_in_the_same_loop(tmp_path):
+    log = tmp_path / "log"
+    log.mkdir()
+    (log / "imu.csv").write_text("#timestamp [ns],a\n0,1.0\n1000000,2.0\n")
+    done = run("--log", str(log), "--runs", "1", "--only", "floor,import", "--baseline", str(REPO), "--json",
+               str(tmp_path / "b.json"), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert '| python -c "import gfimu.cli" [baseline] |' in done.stdout
+    (entry,) = json.loads((tmp_path / "b.json").read_text())["logs"].values()
+    assert sorted(entry) == ["floor", "import", "import@baseline", "samples"]
+    done = run("--log", str(log), "--baseline", str(tmp_path), cwd=tmp_path)
+    assert done.returncode == 2 and f"--baseline {tmp_path}: not a gfimu checkout" in done.stderr

@@ -27,7 +27,10 @@ The log is a simulated cube of four triads (``gfimu simulate random3d``, 5 cm ha
 ``--duration-s`` long, default noise), or ``--log DIR`` (a log folder), or each MIMU4444 ``data.bin``
 given as an argument (converted with ``gfimu convert mimu4444`` first; one table each).
 
-    python3 tools/bench_floor.py [--runs 5] [--duration-s 60] [--log DIR] [--only batch,fixed-lag] [data.bin ...]
+With ``--baseline DIR`` (another checkout of gfimu) each gfimu command selected also runs with that
+checkout's package, in the same loop, as ``NAME@baseline``: a before/after comparison under the same load.
+
+    python3 tools/bench_floor.py [--runs 5] [--duration-s 60] [--log DIR] [--only batch,fixed-lag] [--baseline DIR] [data.bin ...]
 """
 
 from __future__ import annotations
@@ -82,6 +85,15 @@ def commands(log: Path, out: Path) -> dict[str, list[str]]:
     }
 
 
+GFIMU_COMMANDS = ("batch", "fixed-lag", "batch-serial", "help", "import", "estimate-import")
+"""The commands that run gfimu's code (``--baseline`` runs them with the other checkout too)."""
+
+
+def describe(name: str) -> str:
+    base, _, tag = name.partition("@")
+    return DESCRIPTION[base] + (f" [{tag}]" if tag else "")
+
+
 def timed(argv: list[str], env: dict) -> tuple[float, float]:
     """(wall, CPU) seconds of one process (CPU: user + system of it and the children it waited for)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -100,10 +112,16 @@ def rows_of(path: Path) -> int:
         return sum(1 for line in fh if line.strip() and not line.startswith(b"#"))
 
 
-def measure(log: Path, names: list[str], runs: int, env: dict) -> dict[str, dict]:
+def measure(log: Path, names: list[str], runs: int, env: dict, baseline_env: dict | None = None) -> dict[str, dict]:
     with tempfile.TemporaryDirectory(prefix="bench-floor-") as tmp:
         out = Path(tmp)
         argvs = commands(log, out)
+        envs = {n: env for n in names}
+        if baseline_env is not None:
+            for n in [n for n in names if n in GFIMU_COMMANDS]:
+                argvs[n + "@baseline"] = [a.replace(str(out / f"{n}.csv"), str(out / f"{n}@baseline.csv")) for a in argvs[n]]
+                envs[n + "@baseline"] = baseline_env
+                names = names + [n + "@baseline"]
         walls: dict[str, list[float]] = {n: [] for n in names}
         cpus: dict[str, list[float]] = {n: [] for n in names}
         for r in range(runs):
@@ -111,10 +129,10 @@ def measure(log: Path, names: list[str], runs: int, env: dict) -> dict[str, dict
             for name in order:
                 for f in out.iterdir():
                     f.unlink()
-                wall, cpu = timed(argvs[name], env)
+                wall, cpu = timed(argvs[name], envs[name])
                 walls[name].append(wall)
                 cpus[name].append(cpu)
-                if r == 0 and name in ("floor", "batch", "fixed-lag", "batch-serial"):  # one row per sample
+                if r == 0 and name.partition("@")[0] in ("floor", "batch", "fixed-lag", "batch-serial"):  # a row a sample
                     n_in, n_out = rows_of(log / "imu.csv"), rows_of(out / f"{name}.csv")
                     if n_in != n_out:
                         raise SystemExit(f"bench_floor: {name} wrote {n_out} rows for {n_in} samples")
@@ -131,17 +149,20 @@ def report(title: str, res: dict[str, dict], runs: int) -> None:
     for name, r in res.items():
         ratio = (f"{r['wall_s'] / floor['wall_s']:.2f}" if floor else "")
         cratio = (f"{r['cpu_s'] / floor['cpu_s']:.2f}" if floor else "")
-        print(f"| {DESCRIPTION[name]} | {r['wall_s']:.3f} | {ratio} | {r['cpu_s']:.3f} | {cratio} |")
+        print(f"| {describe(name)} | {r['wall_s']:.3f} | {ratio} | {r['cpu_s']:.3f} | {cratio} |")
     print()
-    pairs = [("batch", "floor"), ("fixed-lag", "floor"), ("fixed-lag", "batch"), ("batch", "batch-serial")]
+    pairs = [("batch", "floor"), ("fixed-lag", "floor"), ("fixed-lag", "batch"), ("batch", "batch-serial"),
+             ("batch@baseline", "floor"), ("fixed-lag@baseline", "floor"), ("batch", "batch@baseline"),
+             ("fixed-lag", "fixed-lag@baseline")]
     said = [f"{a} ÷ {b} = {res[a]['wall_s'] / res[b]['wall_s']:.2f} wall, "
             f"{res[a]['cpu_s'] / max(res[b]['cpu_s'], 1e-9):.2f} CPU"
             for a, b in pairs if a in res and b in res]
     if said:
         print(f"Medians of {runs} rounds: " + "; ".join(said) + ".")
     if "pass" in res:
-        start = [f"{DESCRIPTION[n]} {res[n]['wall_s'] - res['pass']['wall_s']:+.3f} s"
-                 for n in ("help", "import", "estimate-import") if n in res]
+        start = [f"{describe(n)} {res[n]['wall_s'] - res['pass']['wall_s']:+.3f} s"
+                 for n in ("help", "import", "estimate-import", "help@baseline", "import@baseline",
+                           "estimate-import@baseline") if n in res]
         if start:
             print(f"Start-up beyond the interpreter's own ({res['pass']['wall_s']:.3f} s): " + "; ".join(start) + ".")
     print()
@@ -155,6 +176,8 @@ def main(argv=None) -> int:
     ap.add_argument("--log", type=Path, help="measure on this log folder instead of a simulated one")
     ap.add_argument("--only", default=",".join(NAMES),
                     help=f"comma-separated commands to run, of {', '.join(NAMES)} (default all)")
+    ap.add_argument("--baseline", type=Path, metavar="DIR",
+                    help="another gfimu checkout: its package runs the selected gfimu commands too, in the same loop")
     ap.add_argument("--json", default="bench_floor.json", help="where to write the results")
     args = ap.parse_args(argv)
     names = [n.strip() for n in args.only.split(",") if n.strip()]
@@ -168,7 +191,10 @@ def main(argv=None) -> int:
     for rec in args.recordings:
         if not rec.is_file():
             ap.error(f"{rec}: no such file")
+    if args.baseline is not None and not (args.baseline / "gfimu" / "__init__.py").is_file():
+        ap.error(f"--baseline {args.baseline}: not a gfimu checkout (no gfimu/__init__.py)")
     env = command_env(REPO)
+    baseline_env = command_env(args.baseline.resolve()) if args.baseline is not None else None
     results = {}
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench-floor-logs-") as tmp:
@@ -192,7 +218,7 @@ def main(argv=None) -> int:
         print()
         for title, folder in logs:
             n = rows_of(folder / "imu.csv")
-            res = measure(folder, names, args.runs, env)
+            res = measure(folder, names, args.runs, env, baseline_env)
             report(f"{title}: {n} samples, imu.csv {(folder / 'imu.csv').stat().st_size / 1e6:.1f} MB", res, args.runs)
             results[title] = {"samples": n, **res}
     Path(args.json).write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M %Z"), "cpus": os.cpu_count(),
