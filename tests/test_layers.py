@@ -38,11 +38,6 @@ LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
     ("cli", 7, ("gfimu.cli*", "gfimu.__main__")),
 ]
 
-LAZY_ALIASES = {("gfimu.estimators", "gfimu.methods")}
-"""Names kept reachable from their old place and resolved from the layer above on first attribute
-access (``importlib`` inside a module ``__getattr__``), never at import time."""
-
-
 def module_name(path: Path) -> str:
     parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
     if parts[-1] == "__init__":
@@ -138,8 +133,6 @@ def test_no_upward_or_sideways_import():
         layer, rank = layer_of(src)
         for dst in sorted(targets):
             dlayer, drank = layer_of(dst)
-            if (src, dst) in LAZY_ALIASES:
-                continue
             if drank > rank or (drank == rank and dlayer != layer):
                 bad.append(f"{src} ({layer}) imports {dst} ({dlayer})")
     assert not bad, "imports against the layers:\n" + "\n".join(bad)
@@ -150,13 +143,3 @@ def test_the_checks_catch_a_cycle_and_an_upward_import():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
     assert layer_of("gfimu.smoother.batch")[1] > layer_of("gfimu.estimators.ml")[1]
     assert layer_of("gfimu.io.readers.mimu4444") == ("io", 1)
-
-
-@pytest.mark.parametrize("alias", sorted(LAZY_ALIASES))
-def test_lazy_aliases_resolve(alias):
-    import importlib
-
-    low, high = alias
-    module = importlib.import_module(low)
-    for name in getattr(module, "_REGISTRY_NAMES", ()):
-        assert getattr(module, name) is getattr(importlib.import_module(high), name)
