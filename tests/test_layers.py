@@ -156,6 +156,44 @@ def test_no_import_cycle_between_folders():
     assert cycle is None, "folders importing each other: " + " -> ".join(cycle)
 
 
+def top_package(name: str, modules: dict[str, Path]) -> str:
+    """``gfimu.smoother`` for ``gfimu.smoother.graph``; ``gfimu`` for a module at the package's top."""
+    path = modules.get(name)
+    if path is not None and path.parent == PACKAGE and path.name != "__init__.py":
+        return "gfimu"
+    return ".".join(name.split(".")[:2])
+
+
+def private_imports() -> list[str]:
+    """``from X import _name`` (or of a module ``X._mod``) where X is in another top package than the importer."""
+    modules = package_modules()
+    bad = []
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                base = package.split(".")[: len(package.split(".")) - node.level + 1] if node.level else []
+                target = ".".join(base + ([node.module] if node.module else []))
+                names = [f"{target}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            for full in names:
+                parts = full.split(".")
+                if parts[0] != "gfimu" or not any(p.startswith("_") and not p.startswith("__") for p in parts[1:]):
+                    continue
+                owner = full if full in modules else full.rpartition(".")[0]
+                if top_package(owner, modules) != top_package(name, modules):
+                    bad.append(f"{name} imports {full}")
+    return bad
+
+
+def test_no_private_name_crosses_packages():
+    bad = private_imports()
+    assert not bad, "private names used from another package:\n" + "\n".join(bad)
+
+
 def test_no_upward_or_sideways_import():
     bad = []
     for src, targets in graph().items():

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from . import Conversion, Reader
-from ._grid import common_period_ns
+from ..time_grid import common_period_ns
 from ..errors import LogFormatError
 from ...errors import InputError, MissingExtraError
 from ...log import Log
@@ -98,7 +98,7 @@ def align_streams(stamps_ns: list[np.ndarray], values: list[np.ndarray],
     if any(t.size < 2 for t in stamps):
         raise ValueError("a stream holds fewer than 2 messages")
     periods = [float(np.median(np.diff(t))) for t in stamps]
-    period = common_period_ns(periods)  # the median of the streams' median periods (readers/_grid.py)
+    period = common_period_ns(periods)  # the median of the streams' median periods (io/time_grid.py)
     start = max(int(t[0]) for t in stamps)
     end = min(int(t[-1]) for t in stamps)
     if end < start + period:
