@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import GfimuError
+from .errors import GfimuError, MissingExtraError
 
 SUMMARY_COLUMNS = ("log", "output", "status", "samples", "seconds", "omega_rmse_radps", "warnings", "message")
 
@@ -162,8 +162,11 @@ def local_cluster(workers: int):
     back to the system: the smoother's many small arrays then cost more in system calls than in arithmetic
     (a 2000-sample log: 6.4 s instead of 2.1 s). These workers keep glibc's own, adaptive threshold.
     """
-    import dask
-    from dask.distributed import LocalCluster
+    try:
+        import dask
+        from dask.distributed import LocalCluster
+    except ImportError:
+        raise MissingExtraError("a local Dask cluster", "dask.distributed", "distributed") from None
 
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
@@ -235,7 +238,10 @@ def run_batch(logs: list[str | Path], out_dir: str | Path, method: str = "smooth
     """Run ``method`` on every log on Dask: on the scheduler at ``scheduler`` (``tcp://host:port``), or
     on a ``LocalCluster`` of ``workers`` single-threaded processes started here and closed after.
     ``on_done(row)`` is called as each log finishes (progress)."""
-    from dask.distributed import Client, as_completed
+    try:
+        from dask.distributed import Client, as_completed
+    except ImportError:
+        raise MissingExtraError("run_batch", "dask.distributed", "distributed") from None
 
     folders = output_folders(logs, out_dir)
     cluster = None

@@ -412,7 +412,7 @@ def write_calibration(cal: Calibration, path: str | Path) -> None:
 def read_calibration(path: str | Path) -> Calibration:
     """Read a ``calibration.toml`` written by :func:`write_calibration` (or by hand); a bad value is refused
     naming the file, its line and the key."""
-    from .io.array_toml import _TomlContext
+    from .io.array_toml import TomlContext
 
     path = Path(path)
     try:
@@ -428,7 +428,7 @@ def read_calibration(path: str | Path) -> Calibration:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CalibrationFileError(f"{path}: not valid TOML: {exc}") from None
-    ctx = _TomlContext(path, text)
+    ctx = TomlContext(path, text)
 
     def fail(message: str, table: str = "", index: int = 0, key: str | None = None) -> CalibrationFileError:
         return CalibrationFileError(str(ctx.error(message, table, index, key)))

@@ -7,7 +7,8 @@
   (constant or non-finite readings, too few samples, streams that do not overlap, a problem
   the solver finds under-determined).
 - :class:`ResourceError`: the machine refused (disk full, permission denied, interrupted
-  I/O, a missing optional package). Also an :class:`OSError`.
+  I/O, a missing optional package: :class:`MissingExtraError`, which names the extra to
+  install). Also an :class:`OSError`.
 
 The classes of the modules (``LogFormatError``, ``ArrayModelError``, ``OptionError``,
 ``SourceError``, ...) subclass the kind they are. :class:`InputError` and
@@ -48,3 +49,19 @@ class ResourceError(GfimuError, OSError):
 
     kind = "resource"
     exit_status = 1
+
+
+class MissingExtraError(ResourceError, RuntimeError):
+    """An optional package is not installed; the message names the extra that installs it.
+
+    ``MissingExtraError("gfimu plot", "matplotlib", "plot")`` reads ``gfimu plot needs matplotlib,
+    which is not installed: pip install 'gfimu[plot]'``. The extras are those of ``pyproject.toml``:
+    ``plot`` (matplotlib), ``kalibr`` (pyyaml), ``rosbag`` (rosbags), ``serial`` (pyserial),
+    ``pandas`` and ``distributed`` (dask)."""
+
+    def __init__(self, what: str, package: str | None = None, extra: str | None = None):
+        self.package, self.extra = package, extra
+        if package is None or extra is None:  # one message already written (as unpickling passes it back)
+            super().__init__(what)
+        else:
+            super().__init__(f"{what} needs {package}, which is not installed: pip install 'gfimu[{extra}]'")

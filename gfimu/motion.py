@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, MissingExtraError
 
 # field name -> (CSV column prefix, CSV unit, number of components, component suffixes)
 QUANTITIES: dict[str, tuple[str, str, tuple[str, ...]]] = {
@@ -55,7 +55,7 @@ def _require_pandas(what: str):
     try:
         import pandas
     except ImportError:
-        raise ImportError(f"{what} needs pandas, which is not installed: pip install 'gfimu[pandas]'") from None
+        raise MissingExtraError(what, "pandas", "pandas") from None
     return pandas
 
 

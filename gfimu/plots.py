@@ -14,7 +14,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, MissingExtraError
 from .motion import QUANTITIES, Motion
 from .io.atomic import atomic_path
 
@@ -31,14 +31,17 @@ AXES = ("x", "y", "z")
 def _figure(width_in: float, height_in: float):
     try:
         from matplotlib.figure import Figure
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("figures need matplotlib: pip install 'gfimu[plot]'") from exc
+    except ImportError:
+        raise MissingExtraError("drawing figures", "matplotlib", "plot") from None
     return Figure(figsize=(width_in, height_in), layout="constrained")
 
 
 def save_figure(fig, path, dpi: int = 110) -> Path:
     """Write ``fig`` to ``path`` (format from the suffix) with the Agg canvas, atomically."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+    except ImportError:
+        raise MissingExtraError("drawing figures", "matplotlib", "plot") from None
 
 
     path = Path(path)

@@ -8,7 +8,7 @@ import pytest
 from gfimu import rigid_body
 from gfimu.array import Accelerometer, cube_array
 from gfimu.factors import (
-    _so3,
+    so3 as _so3,
     accelerometer,
     euler,
     free_fall,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gfimu.array import cube_array, paper001_array
-from gfimu.factors import _so3
+from gfimu.factors import so3 as _so3
 from gfimu.rotations import matrix_from_quaternion
 from gfimu.simulate import simulate
 from gfimu.smoother import groups

@@ -9,6 +9,7 @@ pd = pytest.importorskip("pandas")
 
 from gfimu import io as gio  # noqa: E402
 from gfimu.array import paper001_array  # noqa: E402
+from gfimu.errors import MissingExtraError  # noqa: E402
 from gfimu.log import Log  # noqa: E402
 from gfimu.motion import Motion  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
@@ -78,9 +79,9 @@ def test_a_missing_pandas_is_named_with_its_extra(log, monkeypatch):
         return real(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_pandas)
-    with pytest.raises(ImportError, match=r"Log.to_dataframe needs pandas.*gfimu\[pandas\]"):
+    with pytest.raises(MissingExtraError, match=r"Log.to_dataframe needs pandas.*gfimu\[pandas\]"):
         log.to_dataframe()
-    with pytest.raises(ImportError, match=r"Motion.to_dataframe needs pandas"):
+    with pytest.raises(MissingExtraError, match=r"Motion.to_dataframe needs pandas"):
         log.truth.to_dataframe()
 
 

@@ -565,7 +565,7 @@ def test_without_the_rosbags_package(tmp_path, good, monkeypatch, capsys):
         monkeypatch.delitem(__import__("sys").modules, name)
     monkeypatch.setitem(__import__("sys").modules, "rosbags", None)
     refused([str(bags["ros1"]), "--array", str(arr)], tmp_path / "log", capsys,
-            "reading ROS bags needs the rosbags package: pip install 'gfimu[rosbag]'", status=1)
+            "reading ROS bags needs rosbags, which is not installed: pip install 'gfimu[rosbag]'", status=1)
 
 
 # --- REP-145 "not provided", bag folders without metadata, tf1 frame ids, a gyro reference ----------

@@ -97,7 +97,7 @@ def test_graph_path_equals_fast_path(small_log, options):
 
 def test_graph_path_equals_fast_path_with_attitude_and_inclinometer():
     from gfimu.array import paper001_array
-    from gfimu.factors import _so3
+    from gfimu.factors import so3 as _so3
     from gfimu.smoother.initialise import initial_attitude
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.2, seed=3)
@@ -334,7 +334,7 @@ def test_log_with_gap():
 def test_attitude_windows_are_continuous():
     """Each window starts its attitude (and yaw anchor) from the previous window's solution."""
     from gfimu.array import paper001_array
-    from gfimu.factors import _so3
+    from gfimu.factors import so3 as _so3
     from gfimu.rotations import matrix_from_quaternion
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=8.0, seed=2)

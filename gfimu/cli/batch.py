@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from . import CLIError, add_no_progress, info, show_progress
+from ..errors import MissingExtraError
 from .options import integer
 
 
@@ -43,7 +44,7 @@ def run(args) -> int:
     try:
         import dask.distributed  # noqa: F401
     except ImportError:
-        raise CLIError("gfimu batch needs dask.distributed: pip install 'gfimu[distributed]'") from None
+        raise MissingExtraError("gfimu batch", "dask.distributed", "distributed") from None
     from ..batch import output_folders
     from ..io.atomic import output_lock
     from ..io.outputs import check_output, check_output_within

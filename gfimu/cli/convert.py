@@ -48,7 +48,7 @@ def run(args) -> int:
     from .. import io as gio
     from ..io.outputs import prepare_log_folder
     from ..io.readers import read_recording
-    from ..io.readers._grid import nominal_rate_hz
+    from ..io.time_grid import nominal_rate_hz
 
     options = {dest: getattr(args, dest) for dest in args.reader_options}
     if not Path(args.input).exists():
@@ -90,7 +90,7 @@ def run(args) -> int:
             raise DataError(f"{args.input}: {len(log)} sample(s) read; a log needs at least 2 (its rate is measured "
                             "from their timestamps)")
         bar.step("write the log")
-        # the rate measured: 1e9 / the median step of the log's timestamps [Hz] (readers/_grid.py)
+        # the rate measured: 1e9 / the median step of the log's timestamps [Hz] (io/time_grid.py)
         gio.write_log(log, args.out, rate_hz=nominal_rate_hz(log.timestamps_ns), what="--out")
     for line in [*report, *extrinsics_report]:
         info(args, line, file=sys.stdout)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from . import CLIError, add_no_progress, info, show_progress
+from ..errors import MissingExtraError
 from .options import non_negative
 
 PREFIXES = {"a": "accel_b_mps2", "f": "specific_force_b_mps2", "dw": "omega_dot_b_radps2", "w": "omega_b_radps"}
@@ -85,7 +86,10 @@ def _run(args, bar) -> str:
     from ..io.outputs import check_output
 
     out = check_output(args.out, [args.log, *args.estimates], "--out")
-    from matplotlib.backend_bases import FigureCanvasBase
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError:
+        raise MissingExtraError("gfimu plot", "matplotlib", "plot") from None
 
     formats = FigureCanvasBase.get_supported_filetypes()
     if out.suffix.lower().lstrip(".") not in formats:

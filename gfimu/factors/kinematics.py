@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _so3, custom_factor, rotation_at, vector_at
+from . import so3, custom_factor, rotation_at, vector_at
 
 
 def trapezoid_sigma(omega_dot_density: float, dt_s) -> np.ndarray:
@@ -51,13 +51,13 @@ def attitude_residual(rot0, rot1, omega0, omega1, dt_s):
     w1 = np.atleast_2d(np.asarray(omega1, dtype=float))
     h = np.atleast_1d(np.asarray(dt_s, dtype=float))
     phi = 0.5 * h[:, None] * (w0 + w1)
-    E = _so3.exp(phi)
+    E = so3.exp(phi)
     delta = np.swapaxes(E, -1, -2) @ np.swapaxes(R0, -1, -2) @ R1
-    e = _so3.log(delta)
-    jl_inv = _so3.left_jacobian_inverse(e)
+    e = so3.log(delta)
+    jl_inv = so3.left_jacobian_inverse(e)
     j_r0 = -jl_inv @ np.swapaxes(E, -1, -2)
-    j_r1 = _so3.right_jacobian_inverse(e)
-    j_w = -0.5 * h[:, None, None] * (jl_inv @ _so3.right_jacobian(phi))
+    j_r1 = so3.right_jacobian_inverse(e)
+    j_w = -0.5 * h[:, None, None] * (jl_inv @ so3.right_jacobian(phi))
     return e, {"r0": j_r0, "r1": j_r1, "w0": j_w, "w1": j_w}
 
 

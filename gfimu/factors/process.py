@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import custom_factor, vector_at
-from . import _so3
+from . import so3
 from . import rotation_at
 
 
@@ -142,8 +142,8 @@ def attitude_prior_residual(rotation_wb, prior_wb):
 
     R = np.asarray(rotation_wb, dtype=float).reshape(-1, 3, 3)
     P = np.asarray(prior_wb, dtype=float).reshape(-1, 3, 3)
-    e = _so3.log(R @ np.swapaxes(P, -1, -2))
-    return e, {"r": _so3.left_jacobian_inverse(e) @ R}
+    e = so3.log(R @ np.swapaxes(P, -1, -2))
+    return e, {"r": so3.left_jacobian_inverse(e) @ R}
 
 
 def make_attitude_prior_factor(key_attitude: int, prior_wb, noise_model):

@@ -9,6 +9,7 @@
 - :mod:`gfimu.io.outputs`: the output policy of every command (never over an input or a
   non-regular file; ``-`` for standard output; log folders and ``--force``);
 - :mod:`gfimu.io.plausibility`: warnings for likely unit, rate and size mistakes;
+- :mod:`gfimu.io.time_grid`: the nominal period of a stream, its gaps, interpolation within them;
 - :mod:`gfimu.io.readers`: one module per recorded format, found by
   :func:`gfimu.io.readers.reader_names`.
 

@@ -63,7 +63,9 @@ def _key_lines(text: str) -> dict[tuple, int]:
     return out
 
 
-class _TomlContext:
+class TomlContext:
+    """A TOML file's path and the line of each of its keys, for errors that name ``file:line`` and the key."""
+
     def __init__(self, path: Path, text: str):
         self.path = path
         self.lines = _key_lines(text)
@@ -100,7 +102,7 @@ def _shown(value) -> str:
     return text if len(text) <= 80 else text[:60] + f"... ({len(text)} characters)"
 
 
-def _vector(ctx: _TomlContext, value, n: int, table: str, index: int, key: str) -> np.ndarray:
+def _vector(ctx: TomlContext, value, n: int, table: str, index: int, key: str) -> np.ndarray:
     if not isinstance(value, list) or len(value) != n or not all(_is_number(v) for v in value):
         raise ctx.error(f"expected a list of {n} numbers, got {_shown(value)}", table, index, key)
     if not all(_finite(v) for v in value):
@@ -111,7 +113,7 @@ def _vector(ctx: _TomlContext, value, n: int, table: str, index: int, key: str) 
     return out
 
 
-def _optional_std(ctx: _TomlContext, table_value: dict, table: str, index: int, key: str) -> float | None:
+def _optional_std(ctx: TomlContext, table_value: dict, table: str, index: int, key: str) -> float | None:
     if key not in table_value:
         return None
     v = table_value[key]
@@ -135,7 +137,7 @@ MIN_RANGE_MPS2 = 1.0
 mistake (the smallest ranges sold are ±2 g, 19.6 m/s²)."""
 
 
-def _rotation(ctx: _TomlContext, value, index: int, name: str) -> np.ndarray:
+def _rotation(ctx: TomlContext, value, index: int, name: str) -> np.ndarray:
     key = "rotation_body_sensor"
     if (not isinstance(value, list) or len(value) != 3
             or not all(isinstance(r, list) and len(r) == 3 and all(_is_number(v) for v in r) for r in value)):
@@ -187,7 +189,7 @@ def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORM
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"line (\d+)", str(exc))
         raise LogFormatError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None) from None
-    ctx = _TomlContext(path, text)
+    ctx = TomlContext(path, text)
     fmt = doc.get("format")
     if fmt is None:
         raise ctx.error(f"key is missing; the first line should be format = \"{expected_format}\"", key="format")

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..array import SensorArray
+from ..errors import MissingExtraError
 from .array_toml import ROTATION_TOLERANCE
 from .errors import LogFormatError, LogFormatWarning
 from .safe_yaml import MAX_YAML_NODES, OpenCVMatrix, load_yaml  # noqa: F401 (MAX_YAML_NODES: documented bound)
@@ -237,7 +238,10 @@ def apply_kalibr(array: SensorArray, imus: list[KalibrImu], path: str | os.PathL
 
 def kalibr_yaml(array: SensorArray, topics: list[str] | None = None) -> str:
     """Kalibr IMU-chain YAML text of an array's accelerometer places (T_i_b from position and rotation)."""
-    import yaml
+    try:
+        import yaml
+    except ImportError:
+        raise MissingExtraError("writing Kalibr YAML", "pyyaml", "kalibr") from None
 
     doc = {}
     for k, acc in enumerate(array.accelerometers):

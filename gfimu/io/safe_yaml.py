@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 
 from .errors import LogFormatError
+from ..errors import MissingExtraError
 
 MAX_YAML_DEPTH = 64  # nesting of collections; a Kalibr chain needs 3
 MAX_YAML_NODES = 200_000  # nodes once every alias is expanded; a Kalibr chain of 8 IMUs has about 300
@@ -26,7 +27,7 @@ def _yaml_module(path: Path):
     try:
         import yaml
     except ImportError:
-        raise LogFormatError("reading YAML needs pyyaml: pip install 'gfimu[kalibr]' (or pyyaml)", path) from None
+        raise MissingExtraError(f"{path}: reading YAML", "pyyaml", "kalibr") from None
     return yaml
 
 

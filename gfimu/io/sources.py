@@ -44,7 +44,7 @@ from .tables import (MAX_LINE_BYTES, TIMESTAMP_HEADER, _missing_imu_columns, col
                      parse_header)
 from .units import TIME_UNITS_NS, UNITS, timestamp_ns
 
-from ..errors import InputError
+from ..errors import InputError, MissingExtraError
 
 POLL_S = 0.2
 """How often a waiting source looks at its ``stop`` event [s]."""
@@ -336,7 +336,7 @@ class MimuSource(Source):
             try:
                 import serial
             except ImportError:
-                raise SourceError("serial sources need pyserial: pip install 'gfimu[serial]'") from None
+                raise MissingExtraError(f"--source {name}: a serial port", "pyserial", "serial") from None
             try:
                 self.port = serial.Serial(url.path, baudrate=baud, timeout=POLL_S)
             except (OSError, serial.SerialException) as exc:

@@ -14,6 +14,9 @@ synthetic readings.
 
 from __future__ import annotations
 
+import sys
+from types import ModuleType
+
 import numpy as np
 
 from ..array import SensorArray
@@ -162,3 +165,14 @@ def _array_with_noise_levels(array: SensorArray, noise: SensorErrors) -> SensorA
 def _recording_duration(scenario: str) -> float:
 
     return RECORDINGS[scenario]().longest_segment().duration_s
+
+
+class _CallablePackage(ModuleType):
+    """This package, callable as its function :func:`simulate`: importing ``gfimu.simulate`` binds the
+    package to the name ``gfimu.simulate``, which ``from gfimu import simulate`` then finds."""
+
+    def __call__(self, *args, **kwargs) -> Log:
+        return simulate(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallablePackage

@@ -27,7 +27,7 @@ import numpy as np
 from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..estimators.ml import MLEstimator
-from ..factors import GRAVITY_W_MPS2, _so3
+from ..factors import GRAVITY_W_MPS2, so3 as _so3
 from ..log import Log
 from ..parallel import check_workers, fork_workers, forked_map
 from ..motion import Motion

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..factors import _so3
+from ..factors import so3 as _so3
 from ..log import Log
 from ..motion import Motion
 from ..rotations import matrix_from_quaternion

@@ -30,7 +30,7 @@ import numpy as np
 from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..factors import (
-    _so3,
+    so3 as _so3,
     accelerometer,
     attitude_key,
     bias_key,

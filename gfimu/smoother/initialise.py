@@ -27,7 +27,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded
 from .. import noise, rigid_body
 from ..errors import InputError
 from ..estimators.ml import MLEstimator
-from ..factors import _so3
+from ..factors import so3 as _so3
 from ..log import Log
 from ..rigid_body import quadratic_terms
 from ..rotations import skew

@@ -18,7 +18,7 @@ per sensor, as phone apps and EuRoC write) are brought onto the timestamps of
 the first accelerometer's file (or, with ``resample_hz``, onto a uniform
 grid) by linear interpolation, over the time span all files share, never
 across a gap of a file: a step longer than ``max_gap_periods`` of the file's
-nominal period (its median step, :mod:`gfimu.io.readers._grid`); the times
+nominal period (its median step, :mod:`gfimu.io.time_grid`); the times
 of the time base inside a gap are left out and the report says where.
 
 INPUT may be a file, a folder or a zip archive (phyphox and Sensor Logger
@@ -43,12 +43,12 @@ from pathlib import Path
 import numpy as np
 
 from . import Conversion, Reader
-from ._grid import (GAP_FACTOR, MAX_GAP_PERIODS, find_gaps, interpolate, nominal_rate_hz,
-                    uniform_grid)
+from ..time_grid import (GAP_FACTOR, MAX_GAP_PERIODS, find_gaps, interpolate, nominal_rate_hz,
+                         uniform_grid)
 from ...array import Gyroscope, SensorArray
 from ...log import Log
 from ...motion import Motion
-from ..array_toml import _TomlContext, parse_array_toml, read_array_toml
+from ..array_toml import TomlContext as _TomlContext, parse_array_toml, read_array_toml
 from ..errors import LogFormatError, LogPlausibilityWarning, read_utf8_text, toml_nested_too_deep
 from ...errors import InputError
 from ..plausibility import check_specific_force_scale

@@ -36,19 +36,14 @@ from pathlib import Path
 import numpy as np
 
 from . import Conversion, Reader
-from ._grid import common_period_ns
+from ..time_grid import common_period_ns
 from ..errors import LogFormatError
-from ...errors import InputError, ResourceError
+from ...errors import InputError, MissingExtraError
 from ...log import Log
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 GAP_FACTOR = 1.5  # a step over 1.5 median periods is a gap (as gfimu.log.Log.gaps)
 MAX_GAP_PERIODS = 3.0  # default: gaps up to 3 periods (2 missing messages) are interpolated over
-EXTRA_HINT = "reading ROS bags needs the rosbags package: pip install 'gfimu[rosbag]'"
-
-
-class MissingExtraError(ResourceError, RuntimeError):
-    """An optional dependency is not installed; the message names the extra to install."""
 
 
 # --- the pure part: streams onto one time base --------------------------------------------------
@@ -103,7 +98,7 @@ def align_streams(stamps_ns: list[np.ndarray], values: list[np.ndarray],
     if any(t.size < 2 for t in stamps):
         raise ValueError("a stream holds fewer than 2 messages")
     periods = [float(np.median(np.diff(t))) for t in stamps]
-    period = common_period_ns(periods)  # the median of the streams' median periods (readers/_grid.py)
+    period = common_period_ns(periods)  # the median of the streams' median periods (io/time_grid.py)
     start = max(int(t[0]) for t in stamps)
     end = min(int(t[-1]) for t in stamps)
     if end < start + period:
@@ -305,7 +300,7 @@ def _messages(path: Path) -> tuple[str, dict[str, str], dict[str, TopicMessages]
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
-        raise MissingExtraError(EXTRA_HINT) from None
+        raise MissingExtraError("reading ROS bags", "rosbags", "rosbag") from None
     if path.name == "metadata.yaml" and path.is_file():  # a ROS 2 bag named by its metadata: the bag is the folder
         path = path.parent
     shown = path
