@@ -61,7 +61,8 @@ class ModelOptions:
         "white jerk"))
     factor_groups: tuple = option((), help=(
         "further factor groups (gfimu.smoother.groups.FactorGroup, from Python) added to the model of every "
-        "solve; the fixed-lag smoother takes those that are per sample"))
+        "solve; the fixed-lag smoother takes those whose rows each tie one sample (per_sample) or two "
+        "consecutive samples (steps)"))
     compute_sigma: bool = option(False, help=(
         "also output one-sigma marginal uncertainties of the estimates (sigma_ columns)"))
     max_iterations: int = option(30, help=(
