@@ -86,14 +86,14 @@ class Gyroscope:
 
 @dataclass(frozen=True)
 class Inclinometer:
-    """A two-axis inclinometer giving tilt_x, tilt_y (log format, paper 001)."""
+    """A two-axis inclinometer giving tilt_x, tilt_y (log format, Lu, Tsai & Lin 2010)."""
 
     noise_std_rad: float | None = None
 
 
 @dataclass(frozen=True)
 class Body:
-    """Principal moments of inertia about the axes of B (paper 004)."""
+    """Principal moments of inertia about the axes of B (McGinnis, Perkins & King 2012)."""
 
     principal_inertia_kgm2: tuple[float, float, float]
 
@@ -179,7 +179,7 @@ class SensorArray:
             [np.full(len(a.axes), np.nan if a.range_mps2 is None else a.range_mps2) for a in self.accelerometers]
         )
 
-    # --- linear model (paper 000, eqs. 6-7) -------------------------------
+    # --- linear model (Ho & Lin 2009, eqs. 6-7) -------------------------------
     def structure_matrix(self) -> np.ndarray:
         """(n_axes, 12) structure matrix S: readings = S @ [f, ω̇, q(ω)]."""
         return rigid_body.structure_matrix(self.axis_directions_b, self.axis_positions_m)
@@ -361,21 +361,21 @@ the smoothers accept without a gyroscope. From the same study: flattened triads 
 # --- built-in layouts --------------------------------------------------------
 
 def cube_array(half_edge_m: float = 0.05, noise_std_mps2: float | None = 0.07, name: str | None = None) -> SensorArray:
-    """Four triads on alternate corners of a cube (paper 000, Fig. 2)."""
+    """Four triads on alternate corners of a cube (Ho & Lin 2009, Fig. 2)."""
     corners = half_edge_m * np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
     accs = tuple(Accelerometer(f"a{i + 1}", p, noise_std_mps2=noise_std_mps2) for i, p in enumerate(corners))
     return SensorArray(accs, name or f"cube-12 (half edge {half_edge_m:g} m)")
 
 
 def single_triad(position_m=(0.0, 0.0, 0.0), noise_std_mps2: float | None = 0.07, body: Body | None = None) -> SensorArray:
-    """One triaxial accelerometer (paper 004's free-flight sensor)."""
+    """One triaxial accelerometer (McGinnis, Perkins & King 2012's free-flight sensor)."""
     return SensorArray((Accelerometer("a1", np.asarray(position_m, float), noise_std_mps2=noise_std_mps2),), "single-triad", body=body)
 
 
 def paper001_array(
     m_m: float = 0.5, n_m: float = 0.25, noise_std_mps2: float | None = 0.07, lever_arm_m: float | None = None
 ) -> SensorArray:
-    """Best layout of paper 001: three 2-axis accelerometers, gyro, inclinometer.
+    """Best layout of Lu, Tsai & Lin 2010: three 2-axis accelerometers, gyro, inclinometer.
 
     ``m_m`` and ``n_m`` are the entries m and n of the paper's gain matrix
     (eq. 9). Inverting that matrix gives the layout (derivation in

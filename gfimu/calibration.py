@@ -1,6 +1,6 @@
 """Static multi-position calibration of an accelerometer array against gravity.
 
-Paper 000 §V calibrates the misalignment of each triad by rotating the
+Ho & Lin 2009 §V calibrates the misalignment of each triad by rotating the
 array through known orientations and fitting by least squares. Here the
 orientations need not be known: the array is held still in several
 orientations, and every accelerometer's bias and full 3x3 gain (scale,

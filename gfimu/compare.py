@@ -5,7 +5,7 @@ reference), scores each estimate with :func:`gfimu.evaluation.evaluate`, puts
 the Cramér–Rao bound and the smoother's own bound beside the errors, and
 returns one :class:`ComparisonResult` table: RMSE per axis and of the norm for
 linear acceleration (or specific force), angular acceleration and angular
-velocity in the layout of paper 002, Table 1; paper 004's relative RMS error
+velocity in the layout of Lin et al. 2011, Table 1; McGinnis, Perkins & King 2012's relative RMS error
 (eq. 7); the share of samples with a wrong sign of ω; and each method's run
 time. A method that is missing, not applicable or fails is a row with its
 reason, never an exception.
@@ -431,7 +431,7 @@ def _present(rows, columns) -> bool:
 
 
 def format_markdown(result: ComparisonResult) -> str:
-    """Markdown tables: RMSE (paper 002, Table 1 layout), relative errors and signs, bounds, and methods not run."""
+    """Markdown tables: RMSE (Lin et al. 2011, Table 1 layout), relative errors and signs, bounds, and methods not run."""
     ok = [r for r in result.rows if r["status"] == STATUS_OK]
     ran = [r for r in ok if r["kind"] == "method"]
     quantities = [(k, label, unit) for k, label, unit in TABLE_QUANTITIES.values()
@@ -440,7 +440,7 @@ def format_markdown(result: ComparisonResult) -> str:
     if not ok:
         lines.append("No method produced an estimate.")
     else:
-        lines.append("RMSE per axis and of the error norm (layout of paper 002, Table 1); bounds are √(mean variance) along the truth.")
+        lines.append("RMSE per axis and of the error norm (layout of Lin et al. 2011, Table 1); bounds are √(mean variance) along the truth.")
         if any(r["kind"] == "bound" and r["method"].startswith("CRB") for r in ok):
             lines.append("The per-sample CRB uses one sample's readings only; without a gyro its bound on ω grows "
                          "without limit as ω → 0 (∂q/∂ω = 0), so slow stretches dominate its mean.")
@@ -458,7 +458,7 @@ def format_markdown(result: ComparisonResult) -> str:
         methods_ok = [r for r in ok if r["kind"] == "method"]
         rel_q = [(k, unit) for k, _, unit in quantities if _present(methods_ok, [f"{k}_rel_rms_{a}" for a in AXES])]
         if methods_ok and (rel_q or _present(methods_ok, ["w_axis_sign_off_share"])):
-            lines += ["", "Relative RMS error per axis (paper 004, eq. 7) in %, and shares of samples where ω has the wrong sign (ω_est · ω_true < 0), a component with the other sign, or is > 5 rad/s off.", ""]
+            lines += ["", "Relative RMS error per axis (McGinnis, Perkins & King 2012, eq. 7) in %, and shares of samples where ω has the wrong sign (ω_est · ω_true < 0), a component with the other sign, or is > 5 rad/s off.", ""]
             head = ["method"] + [f"{SYMBOLS[k]}{a} rel. [%]" for k, _ in rel_q for a in AXES] + ["ω wrong sign [%]", "ω axis sign off [%]", "ω > 5 rad/s off [%]"]
             lines.append("| " + " | ".join(head) + " |")
             lines.append("|" + "---|" * len(head))
@@ -487,7 +487,7 @@ def format_markdown(result: ComparisonResult) -> str:
 # --- studies -----------------------------------------------------------------------
 
 def condition_vs_scale(array, half_edges: np.ndarray, reference_half_edge: float | None = None) -> np.ndarray:
-    """Condition number of the structure matrix with the layout scaled (paper 000, §III).
+    """Condition number of the structure matrix with the layout scaled (Ho & Lin 2009, §III).
 
     Positions are scaled by ``half_edge / reference_half_edge``, where the
     reference is the array's largest absolute coordinate by default.
@@ -506,7 +506,7 @@ def condition_vs_scale(array, half_edges: np.ndarray, reference_half_edge: float
 
 
 def omega_rmse_sum(estimate: Motion, reference: Motion, valid: np.ndarray | None = None) -> float:
-    """Sum over x, y, z of the RMSE of ω (the quantity of paper 002, Fig. 7)."""
+    """Sum over x, y, z of the RMSE of ω (the quantity of Lin et al. 2011, Fig. 7)."""
     err = estimate.omega_b_radps - reference.omega_b_radps
     if valid is not None:
         err = err[np.asarray(valid, dtype=bool)]
@@ -514,7 +514,7 @@ def omega_rmse_sum(estimate: Motion, reference: Motion, valid: np.ndarray | None
 
 
 def t2_sweep(log: Log, t2_values: Sequence[float], imm_options: Mapping[str, Any] | None = None) -> np.ndarray:
-    """Summed RMSE of ω of the ``imm`` method at each T2 (paper 002, §4.1, Fig. 7)."""
+    """Summed RMSE of ω of the ``imm`` method at each T2 (Lin et al. 2011, §4.1, Fig. 7)."""
 
     reference, _, valid = reference_of(log)
     out = []
@@ -525,7 +525,7 @@ def t2_sweep(log: Log, t2_values: Sequence[float], imm_options: Mapping[str, Any
 
 
 def t2_band(t2_values: Sequence[float], rmse: np.ndarray, tolerance: float = 0.2) -> tuple[float, float, float]:
-    """T2 min and the range of T2 whose RMSE stays within ``tolerance`` of the best (paper 002, Fig. 8)."""
+    """T2 min and the range of T2 whose RMSE stays within ``tolerance`` of the best (Lin et al. 2011, Fig. 8)."""
     t2 = np.asarray(t2_values, dtype=float)
     rmse = np.asarray(rmse, dtype=float)
     best = int(np.nanargmin(rmse))
@@ -539,7 +539,7 @@ def t2_band(t2_values: Sequence[float], rmse: np.ndarray, tolerance: float = 0.2
 
 
 def motion_level(log: Log) -> float:
-    """Mean of a + b + c, the three quadratic sums (paper 002, Fig. 8), from the per-sample inversion.
+    """Mean of a + b + c, the three quadratic sums (Lin et al. 2011, Fig. 8), from the per-sample inversion.
 
     As in the paper this uses only the accelerometers (S⁻¹ times the readings,
     eq. 7), so it needs an invertible array.

@@ -5,7 +5,7 @@ and Cramér–Rao bound", IEEE TSP 2016. Per sample the readings are
 
     y = S [f, ω̇, q(ω)] + e,        e ~ N(0, Σ),  Σ = diag(σ_i²)
 
-(paper 000's linear model, :func:`gfimu.rigid_body.structure_matrix`), plus
+(Ho & Lin 2009's linear model, :func:`gfimu.rigid_body.structure_matrix`), plus
 optionally a gyro ``y_g = ω + e_g`` with ``e_g ~ N(0, σ_g² I)``. With
 θ = (f, ω̇, ω) the Fisher information is
 

@@ -6,7 +6,7 @@ kept (matching timestamps, valid, finite):
 - ``rmse`` per axis: sqrt(mean_i e_ij²) with e = estimate − truth;
 - ``rmse_norm``: RMS of the error vector's norm, sqrt(mean_i ‖e_i‖²);
 - ``median_norm``: median of ‖e_i‖;
-- ``relative_rms`` per axis, paper 004 eq. (7):
+- ``relative_rms`` per axis, McGinnis, Perkins & King 2012, eq. (7):
   ε_j = sqrt(mean_i e_ij²) / sqrt(mean_i ‖t_i‖²), the component's RMS error
   normalised by the RMS magnitude of the true vector t (the paper's
   "theoretical root mean square angular velocity magnitude"); applied to
@@ -251,7 +251,7 @@ class EvaluationResult:
             lines += ["", "σ calibration: the share of rows whose error is within the estimate's one-sigma value "
                           "(a Gaussian error of that σ: 68.3 %) and within 2σ (95.4 %) per axis; mean NEES "
                           f"Σ_j (e_j/σ_j)² over the axes ({len(AXES)} when σ is right)."]
-        lines += ["", f"{self.summary()}. Relative RMS: paper 004 eq. (7). Wrong sign: samples whose ω points the "
+        lines += ["", f"{self.summary()}. Relative RMS: McGinnis, Perkins & King 2012, eq. (7). Wrong sign: samples whose ω points the "
                       f"other way, ω_est · ω_true < 0 where ‖ω_true‖ > {self.sign_threshold_radps:g} rad/s; axis sign off: "
                       f"samples with some component of |ω| > {self.sign_threshold_radps:g} rad/s estimated with the other "
                       "sign (small components of a right ω count too)."]

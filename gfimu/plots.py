@@ -126,7 +126,7 @@ def plot_time_series(
     bands: bool = True,
     time_origin_ns: int | None = None,
 ):
-    """Estimates against the reference over time, one column per axis (papers 000–002, Figs. 4–5, 10–11).
+    """Estimates against the reference over time, one column per axis (Ho & Lin 2009; Lu, Tsai & Lin 2010; Lin et al. 2011, Figs. 4–5, 10–11).
 
     For each quantity one row of values and, with ``errors``, one row of errors
     (estimate − reference). The reference is a wide pale black line underneath; each
@@ -220,7 +220,7 @@ def plot_time_series(
 
 
 def plot_condition_number(sizes: np.ndarray, condition: Mapping[str, np.ndarray], unit: str = "m", marks=None):
-    """Condition number of the structure matrix against layout size (paper 000, §III).
+    """Condition number of the structure matrix against layout size (Ho & Lin 2009, §III).
 
     ``condition`` maps a layout label to condition numbers at ``sizes``;
     ``marks`` is an optional list of (size, value, text) points from the paper.
@@ -241,7 +241,7 @@ def plot_condition_number(sizes: np.ndarray, condition: Mapping[str, np.ndarray]
 
 
 def plot_t2_rmse(t2_values: np.ndarray, rmse_radps: Mapping[str, np.ndarray], tolerance: float = 0.2):
-    """RMSE of ω against the IMM threshold T2 (paper 002, Fig. 7).
+    """RMSE of ω against the IMM threshold T2 (Lin et al. 2011, Fig. 7).
 
     ``rmse_radps`` maps a trial label to the summed per-axis RMSE at each T2;
     the band shows where the RMSE stays within ``tolerance`` of its minimum.
@@ -265,7 +265,7 @@ def plot_t2_rmse(t2_values: np.ndarray, rmse_radps: Mapping[str, np.ndarray], to
 
 
 def plot_t2_trend(motion_level: np.ndarray, t2_min: np.ndarray, t2_band: np.ndarray | None = None):
-    """Best T2 against the motion level a + b + c with its linear trend line (paper 002, Fig. 8).
+    """Best T2 against the motion level a + b + c with its linear trend line (Lin et al. 2011, Fig. 8).
 
     ``t2_band`` (n, 2) gives, per trial, the T2 range whose RMSE is within the tolerance.
     """
@@ -300,7 +300,7 @@ def _ellipsoid(semi_axes, n: int = 28):
 
 
 def polhode_constants(omega_b_radps: np.ndarray, principal_inertia_kgm2) -> tuple[float, float]:
-    """Twice the kinetic energy 2T and H² (paper 004, eqs. 2–3) at the first sample of ω."""
+    """Twice the kinetic energy 2T and H² (McGinnis, Perkins & King 2012, eqs. 2–3) at the first sample of ω."""
     inertia = np.asarray(principal_inertia_kgm2, dtype=float)
     w0 = np.asarray(omega_b_radps, dtype=float)[0]
     return float(np.sum(inertia * w0**2)), float(np.sum((inertia * w0) ** 2))
@@ -311,7 +311,7 @@ def plot_polhode(
     principal_inertia_kgm2,
     constants_from: str | None = None,
 ):
-    """Polhode: kinetic-energy and momentum ellipsoids with ω paths (paper 004, Fig. 5, eqs. 5–6).
+    """Polhode: kinetic-energy and momentum ellipsoids with ω paths (McGinnis, Perkins & King 2012, Fig. 5, eqs. 5–6).
 
     The ellipsoids use 2T and H² from the first sample of the path
     ``constants_from`` (default: the first one given). Left: 3-D view; right:
@@ -351,12 +351,12 @@ def plot_polhode(
         ax.set_ylabel(f"ω{j + 1} [rad/s]", fontsize=8)
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Polhode (paper 004): 2T = {two_t:.4g} J, H² = {h2:.4g} (kg m²/s)²")
+    fig.suptitle(f"Polhode (McGinnis, Perkins & King 2012): 2T = {two_t:.4g} J, H² = {h2:.4g} (kg m²/s)²")
     return fig
 
 
 def plot_step_size(step_s: np.ndarray, errors: Mapping[str, np.ndarray], ylabel: str, title: str | None = None):
-    """Error against integration step size (paper 003, Fig. 5), one line per propagation."""
+    """Error against integration step size (Li et al. 2021, Fig. 5), one line per propagation."""
     fig = _figure(6.5, 4.5)
     ax = fig.add_subplot(1, 1, 1)
     h = np.asarray(step_s, dtype=float) * 1e3

@@ -22,7 +22,7 @@ value there and the rest of the log is untouched:
 
 Clipped and stuck readings come in runs longer than the median window; they are
 replaced by the rigid-body prediction of the other axes at the same sample (the
-least-squares fit of the 12 unknowns [f, ω̇, q(ω)], paper 000 eq. 6) when the
+least-squares fit of the 12 unknowns [f, ω̇, q(ω)], Ho & Lin 2009, eq. 6) when the
 remaining axes determine it, else by a straight line between the channel's good
 readings on either side.
 """

@@ -1,10 +1,10 @@
-"""Rigid-body acceleration field (paper 000, eqs. 1-7).
+"""Rigid-body acceleration field (Ho & Lin 2009, eqs. 1-7).
 
 A point at lever arm r on a rigid body has acceleration
 ``a_p = a_o + ω̇ × r + ω × (ω × r)``; an accelerometer there reads the specific
 force ``f_p = f + ω̇ × r + ω × (ω × r)`` with ``f = a_o - g`` (all in B).
 Writing ``ω × (ω × r) = (ω ωᵀ - |ω|² I) r`` makes the reading linear in the
-twelve unknowns ``x = [f, ω̇, q(ω)]`` with the six quadratic terms of paper 000,
+twelve unknowns ``x = [f, ω̇, q(ω)]`` with the six quadratic terms of Ho & Lin 2009,
 eq. 2, ordered ``q = [ωx²+ωy², ωx²+ωz², ωy²+ωz², ωxωy, ωxωz, ωyωz]``.
 """
 
@@ -17,7 +17,7 @@ QUADRATIC_NAMES = ("wx2+wy2", "wx2+wz2", "wy2+wz2", "wxwy", "wxwz", "wywz")
 
 
 def quadratic_terms(omega_b: np.ndarray) -> np.ndarray:
-    """The six quadratic terms q(ω) of paper 000, eq. 2; (..., 3) -> (..., 6)."""
+    """The six quadratic terms q(ω) of Ho & Lin 2009, eq. 2; (..., 3) -> (..., 6)."""
     w = np.asarray(omega_b, dtype=float)
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
     return np.stack([x * x + y * y, x * x + z * z, y * y + z * z, x * y, x * z, y * z], axis=-1)
@@ -51,7 +51,7 @@ def centripetal_matrix(position_m: np.ndarray) -> np.ndarray:
 
 
 def structure_matrix(directions_b: np.ndarray, positions_m: np.ndarray) -> np.ndarray:
-    """Structure matrix S (n × 12) of paper 000, eq. 6, for n single-axis sensors.
+    """Structure matrix S (n × 12) of Ho & Lin 2009, eq. 6, for n single-axis sensors.
 
     Row j maps ``x = [f, ω̇, q(ω)]`` to the reading along unit direction ``s_j``
     (in B) of a sensor at ``r_j``: ``s_jᵀ f + (r_j × s_j)ᵀ ω̇ + s_jᵀ C(r_j) q``.
@@ -79,7 +79,7 @@ def point_specific_force(
 
 
 def omega_from_quadratic_terms(q: np.ndarray) -> np.ndarray:
-    """Magnitudes |ωx|, |ωy|, |ωz| from q (paper 000, §IV); (..., 6) -> (..., 3).
+    """Magnitudes |ωx|, |ωy|, |ωz| from q (Ho & Lin 2009, §IV); (..., 6) -> (..., 3).
 
     ``ωx² = (q1 + q2 - q3) / 2`` etc.; negative values (noise) are clipped to 0.
     The signs are not observable from q alone.

@@ -17,7 +17,7 @@ def mimu4444_dir() -> Path:
 
 @pytest.fixture(scope="session")
 def turntable_5cm_smoother():
-    """Paper 001's 1 Hz turntable, 6 s at 500 Hz (seed 1), on a 5 cm cube at 0.07 m/s², and the default batch
+    """Lu, Tsai & Lin 2010's 1 Hz turntable, 6 s at 500 Hz (seed 1), on a 5 cm cube at 0.07 m/s², and the default batch
     smoother's estimate of it, computed once for the tests that check it: (log, report, motion) of the run."""
     from gfimu.array import cube_array
     from gfimu.simulate import simulate

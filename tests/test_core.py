@@ -1,4 +1,4 @@
-"""Core geometry and rigid-body model (paper 000, eqs. 1-7)."""
+"""Core geometry and rigid-body model (Ho & Lin 2009, eqs. 1-7)."""
 
 import numpy as np
 import pytest
@@ -46,7 +46,7 @@ def test_cube_condition_number_paper000(half_edge, expected):
 
 
 def test_determinant_identity_paper000():
-    """|det S| = |2 det R|³ with R the edges from sensor 1 to sensors 2-4 (paper 000)."""
+    """|det S| = |2 det R|³ with R the edges from sensor 1 to sensors 2-4 (Ho & Lin 2009)."""
     rng = np.random.default_rng(3)
     for _ in range(20):
         pos = rng.normal(size=(4, 3))

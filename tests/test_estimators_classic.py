@@ -1,4 +1,4 @@
-"""Per-sample estimators: integration, pure integration and the context-based IMM (papers 000, 002)."""
+"""Per-sample estimators: integration, pure integration and the context-based IMM (Ho & Lin 2009; Lin et al. 2011)."""
 
 import numpy as np
 import pytest
@@ -137,7 +137,7 @@ def test_error_grows_linearly_with_noise(method):
     assert rms[1, 2] < 0.05
 
 
-# --- IMM: contexts and the four cases (paper 002 §3.2) ---------------------
+# --- IMM: contexts and the four cases (Lin et al. 2011 §3.2) ---------------------
 
 T1, T2 = 0.1, 4.0
 
@@ -253,7 +253,7 @@ def test_bad_readings_are_named():
 
 
 def test_sign_tracking_beats_inversion_through_zero_crossings_with_noise():
-    """Each component crosses zero many times; the cube's noise level of paper 000 (0.07 m/s²)."""
+    """Each component crosses zero many times; the cube's noise level of Ho & Lin 2009 (0.07 m/s²)."""
     log = analytic_log(cube_array(noise_std_mps2=0.07), sines(amp=(3.0, 2.5, 3.5), freq=(0.55, 0.75, 0.95)),
                        duration_s=10.0, noise_std=0.07, seed=1)
     w0 = tuple(log.truth.omega_b_radps[0])

@@ -34,7 +34,7 @@ def test_omega_metrics_by_hand():
     assert m.rmse == pytest.approx((math.sqrt(4.01 / 4), math.sqrt(0.25 / 4), 3.0), rel=1e-15)
     assert m.rmse_norm == pytest.approx(math.sqrt((4 + 0.25 + 0 + 36.01) / 4), rel=1e-15)
     assert m.median_norm == pytest.approx(1.25, rel=1e-15)
-    truth_rms = math.sqrt((1 + 4 + 9 + 2.0025) / 4)  # paper 004 eq. (7) denominator
+    truth_rms = math.sqrt((1 + 4 + 9 + 2.0025) / 4)  # McGinnis, Perkins & King 2012, eq. (7) denominator
     assert m.relative_rms == pytest.approx(tuple(v / truth_rms for v in m.rmse), rel=1e-15)
     # eligible (|true| > 0.1): x of row 0; y of rows 1, 3; z of rows 2, 3. Only row 0's x is wrong.
     assert m.axis_sign_off_share_axis == (1.0, 0.0, 0.0)

@@ -87,7 +87,7 @@ def test_tuner_and_bound_use_the_group(spinning):
 
 @pytest.fixture(scope="module")
 def with_gyro():
-    """Paper 001's array (gyroscope and accelerometers) turning at π rad/s; the prior holds ω at 0 over
+    """Lu, Tsai & Lin 2010's array (gyroscope and accelerometers) turning at π rad/s; the prior holds ω at 0 over
     samples 150-174 (50 ms), where the gyroscope and the accelerometers say it spins."""
     log = simulate("turntable-constant", paper001_array(), rate_hz=500.0, duration_s=0.6, seed=2)
     t = log.timestamps_ns

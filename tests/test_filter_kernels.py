@@ -168,7 +168,7 @@ def test_a_whole_stream_through_the_kernels_is_the_numpy_stream(monkeypatch, sce
 
 
 def test_the_kernels_readings_are_the_arrays_rigid_body_equation():
-    """h(x) of the compiled update is paper 000's eq. 6 through the array's structure matrix, S [f, ω̇, q(ω)],
+    """h(x) of the compiled update is Ho & Lin 2009's eq. 6 through the array's structure matrix, S [f, ω̇, q(ω)],
     and its Jacobian the derivative of that (central differences)."""
     from gfimu.rigid_body import quadratic_terms
 

@@ -149,7 +149,7 @@ def test_sign_carried_through_zero_crossings_when_starting_spinning():
 
 
 def test_gyroscope_is_used():
-    """paper 001's 9-axis array with a gyro: ω follows the gyro (noise 0.01 rad/s) closely."""
+    """Lu, Tsai & Lin 2010's 9-axis array with a gyro: ω follows the gyro (noise 0.01 rad/s) closely."""
     arr = paper001_array()
     log = simulate("random3d", arr, rate_hz=RATE_HZ, duration_s=1.5, seed=2)
     assert log.gyro_b_radps is not None

@@ -1,4 +1,4 @@
-"""Free-flight ω from one triaxial accelerometer (paper 004, eqs. 11-14)."""
+"""Free-flight ω from one triaxial accelerometer (McGinnis, Perkins & King 2012, eqs. 11-14)."""
 
 import numpy as np
 import pytest
@@ -18,7 +18,7 @@ CASES = ["freeflight-major", "freeflight-intermediate", "freeflight-minor"]
 
 
 def relative_rms_error(estimate, truth):
-    """Paper 004, eq. 7: per-component RMS error over the RMS of |ω_truth|."""
+    """McGinnis, Perkins & King 2012, eq. 7: per-component RMS error over the RMS of |ω_truth|."""
     return np.sqrt(np.mean((estimate - truth) ** 2, axis=0) / np.mean(np.sum(truth**2, axis=1)))
 
 
@@ -51,7 +51,7 @@ def test_noise_free_recovery(case):
 
 @pytest.mark.parametrize("case", CASES)
 def test_paper004_accuracy_with_realistic_sensor_errors(case):
-    """< 2 % relative RMS error per component (paper 004, eq. 7 and Table 3).
+    """< 2 % relative RMS error per component (McGinnis, Perkins & King 2012, eq. 7 and Table 3).
 
     Sensor errors of the paper's accelerometer (0.1 mg/√Hz over 400 Hz ≈ 0.02
     m/s²) plus a calibrated sensor's residual bias, scale and misalignment.
@@ -138,7 +138,7 @@ def test_applicability_and_bad_options():
 
 @pytest.mark.parametrize("case", CASES)
 def test_auto_sign_with_noise(case):
-    """Paper 004's noise: the time asymmetry of Euler's equations picks the sign of either spin."""
+    """McGinnis, Perkins & King 2012's noise: the time asymmetry of Euler's equations picks the sign of either spin."""
     for spin_radps in (27.4, -27.4):
         log = simulate(case, duration_s=0.5, seed=4, spin_radps=spin_radps)
         m = FreeFlightEstimator(omega_sign="auto").estimate(log).motion

@@ -1,4 +1,4 @@
-"""Closed-form torque-free motion (paper 004, Table 1) and the free-flight scenarios."""
+"""Closed-form torque-free motion (McGinnis, Perkins & King 2012, Table 1) and the free-flight scenarios."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Gravity compensation (paper 001 eqs. 12-13) and attitude propagation (paper 003 eqs. 9-10)."""
+"""Gravity compensation (Lu, Tsai & Lin 2010, eqs. 12-13) and attitude propagation (Li et al. 2021, eqs. 9-10)."""
 
 import functools
 

@@ -84,6 +84,19 @@ def test_kalibr_extrinsics_without_pyyaml(tmp_path, monkeypatch, capsys):
     assert not (tmp_path / "log").exists() or not any((tmp_path / "log").iterdir())
 
 
+def test_a_ros2_bag_without_pyyaml_names_the_rosbag_extra(work, monkeypatch, capsys):
+    """rosbags reads YAML with ruamel; gfimu reads the bag's metadata.yaml with pyyaml, which the rosbag extra
+    installs too."""
+    bag = work / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: 5\n")
+    hide(monkeypatch, "yaml")
+    refused(["convert", "rosbag", str(bag), "--array", str(work / "log" / "array.toml"), "--out", str(work / "out")],
+            capsys, f"{bag / 'metadata.yaml'}: reading YAML needs pyyaml, which is not installed: "
+                    "pip install 'gfimu[rosbag]'")
+    assert not (work / "out").exists()
+
+
 def test_live_serial_source_without_pyserial(work, monkeypatch, capsys):
     hide(monkeypatch, "serial")
     source = "serial:///dev/null?baud=115200"

@@ -125,7 +125,7 @@ def test_dominant_frequency():
 
 
 def test_tuner_finds_the_turntable_frequency_and_beats_20_mrad(turntable_5cm_smoother):
-    """Paper 001's 1 Hz turntable on a 5 cm cube: z oscillates at 1 Hz, x and y do not move."""
+    """Lu, Tsai & Lin 2010's 1 Hz turntable on a 5 cm cube: z oscillates at 1 Hz, x and y do not move."""
     log, report, m = turntable_5cm_smoother
     t = report.tunings[0]
     assert t.axis_frequencies_hz[:2] == (0.0, 0.0), t

@@ -17,7 +17,7 @@ from gfimu.simulate import simulate  # noqa: E402
 
 @pytest.fixture(scope="module")
 def log():
-    # paper 001's array: 2-axis accelerometers, a gyroscope and an inclinometer, so every reading column
+    # Lu, Tsai & Lin 2010's array: 2-axis accelerometers, a gyroscope and an inclinometer, so every reading column
     return simulate("turntable", array=paper001_array(), duration_s=0.2, seed=2)
 
 

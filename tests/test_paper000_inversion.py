@@ -1,4 +1,4 @@
-"""Structure-matrix inversion (paper 000, eq. 7): exact recovery, covariance, signs."""
+"""Structure-matrix inversion (Ho & Lin 2009, eq. 7): exact recovery, covariance, signs."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Gyro-aided inversion and the best-layout gain matrix of paper 001 (eqs. 8-9)."""
+"""Gyro-aided inversion and the best-layout gain matrix of Lu, Tsai & Lin 2010 (eqs. 8-9)."""
 
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from gfimu.estimators.gyro_aided import gyro_aided_matrices, gyro_aided_solve, p
 
 from test_estimators_classic import analytic_log, sines
 
-# paper 001 eq. 9 as printed, m = 0.5, n = 0.25
+# Lu, Tsai & Lin 2010, eq. 9 as printed, m = 0.5, n = 0.25
 PRINTED_G = np.array([
     [0.5, 0, 0, 0.5, 0, 0],
     [0, 0.5, 0, 0, 0.5, 0],

@@ -116,7 +116,7 @@ def test_graph_path_equals_fast_path_with_attitude_and_inclinometer():
 
 
 def test_attitude_with_inclinometer():
-    """Paper 001's array: tilt from the inclinometer, gravity-free acceleration from f + Rᵀ g."""
+    """Lu, Tsai & Lin 2010's array: tilt from the inclinometer, gravity-free acceleration from f + Rᵀ g."""
     from gfimu.array import paper001_array
     from gfimu.rotations import matrix_from_quaternion
 
@@ -290,14 +290,14 @@ def test_not_applicable_reasons():
 
 
 def relative_rms_error(motion, truth):
-    """Paper 004, eq. 7: RMS of the ω error norm over RMS of the true ω norm."""
+    """McGinnis, Perkins & King 2012, eq. 7: RMS of the ω error norm over RMS of the true ω norm."""
     e = motion.omega_b_radps - truth.omega_b_radps
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1)) / np.mean(np.sum(truth.omega_b_radps**2, axis=1))))
 
 
 @pytest.mark.parametrize("scenario", ["freeflight-intermediate", "freeflight-minor"])
 def test_free_flight_beats_per_sample_free_flight(scenario):
-    """Paper 004's block (one triad, 1 kHz) spun in free flight."""
+    """McGinnis, Perkins & King 2012's block (one triad, 1 kHz) spun in free flight."""
     log = simulate(scenario, seed=1, duration_s=0.6)
     assert log.array.n_axes == 3 and log.rate_hz == pytest.approx(1000.0)
     m = BatchSmootherEstimator(free_flight=True).estimate(log).motion
@@ -308,7 +308,7 @@ def test_free_flight_beats_per_sample_free_flight(scenario):
 
 
 def test_gyro_array_smoother_beats_raw_gyro():
-    """Paper 001's nine-axis array with its gyroscope: accelerometers and gyro fused."""
+    """Lu, Tsai & Lin 2010's nine-axis array with its gyroscope: accelerometers and gyro fused."""
     from gfimu.array import paper001_array
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=5.0, seed=1)

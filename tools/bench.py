@@ -13,8 +13,8 @@ fixed-lag update latency (median, 99th percentile) from
     python3 tools/bench.py [--quick] [--durations 10 30 100] [--repeats 3] [--json bench.json]
 
 Arrays: the 5 cm cube of four triads (0.07 m/s²) at 500 Hz for the
-accelerometer-only methods, paper 001's nine-axis array with a gyro for
-``gyro-aided``, paper 004's single triad in free flight (1 kHz) for ``free-flight``.
+accelerometer-only methods, Lu, Tsai & Lin 2010's nine-axis array with a gyro for
+``gyro-aided``, McGinnis, Perkins & King 2012's single triad in free flight (1 kHz) for ``free-flight``.
 """
 
 from __future__ import annotations

@@ -64,7 +64,7 @@ SECTIONS = (
         "smoother-accuracy", "Accuracy on simulations, per method", "smoother_accuracy.py",
         "ω RMSE (norm, rad/s) of the best per-sample method and of the batch smoother on simulated logs: "
         "the 5 cm cube of four triads (0.07 m/s² per axis, 500 Hz) on three motions, five randomly placed and "
-        "rotated triads, the near-planar MIMU4444 layout, and paper 004's single triad in free flight (1 kHz). "
+        "rotated triads, the near-planar MIMU4444 layout, and [McGinnis, Perkins & King 2012](references.md)'s single triad in free flight (1 kHz). "
         "\"RMSE / bound\" is the smoother's error over the bound of its own graph (1: efficient); the last "
         "columns are the process noise the smoother chose from the data.",
         quick=("--duration-s", "3")),

@@ -197,7 +197,7 @@ def still_then_motion(times_s, rng, array, *, still_s=60.0, omega_rms_radps=1.5)
 
 
 def turntable(times_s, rng, array, *, rate_deg_s=180.0, spin_up_s=0.5, tilt_deg=12.0, axis_offset_m=0.03):
-    """gfimu's turntable (paper 001's bench: axis tilted ``tilt_deg``, origin ``axis_offset_m`` off
+    """gfimu's turntable (Lu, Tsai & Lin 2010's bench: axis tilted ``tilt_deg``, origin ``axis_offset_m`` off
     it) started from rest: the rate rises to ``rate_deg_s`` over ``spin_up_s`` (a quintic step), then
     stays constant. Without the spin-up the sign of a constant ω about one axis is not observable
     from accelerometers (q(ω) = q(-ω), ω̇ = 0), and no estimator could be judged on it."""

@@ -3,7 +3,7 @@
 
 Cube array of half edge 0.025 m (5 cm edge), 0.07 m/s² per axis, 500 Hz;
 an arbitrary array (five triads at random positions within ±3 cm, each
-rotated at random); the near-planar MIMU4444 layout; paper 004's block in
+rotated at random); the near-planar MIMU4444 layout; McGinnis, Perkins & King 2012's block in
 free flight (one triad, 1 kHz). Prints ω RMSE (norm), share of sign errors
 (|ω| > 0.1 rad/s), the gain over the best per-sample method, and the
 smoother's efficiency (RMSE / bound of its own graph, with the process noise it
@@ -52,7 +52,7 @@ def band_limited_wiener_bound(array: SensorArray, omega_b_radps: np.ndarray, rat
     """ω RMSE (per axis, norm) of the Wiener smoother that knows the motion's spectrum: each ω
     component a stationary process with a flat spectrum over ``band_hz`` (random3d draws its sines
     uniformly there) and the RMS of ``omega_b_radps``; measurements of ω and ω̇ per sample with the
-    time-averaged Fisher information of the array (paper 000's model, f known to the estimator and
+    time-averaged Fisher information of the array (Ho & Lin 2009's model, f known to the estimator and
     the other axes too: optimistic). MSE = ∫ S N / (S + N) df with the noise spectrum of ω
     ``N(f) = h / (I_ω + I_ω̇ (2π f)²)``. No estimator that uses only that knowledge does better."""
     from gfimu.crb import axis_noise_std, fisher_information

@@ -11,11 +11,11 @@ Writes into the folder:
   error, wrong signs of ω, run time, Cramér–Rao and smoother bounds);
 - ``summary.md``: RMSE of ‖ω‖, ‖ω̇‖ and ‖f‖ of every method on every case, and
   the figures below;
-- ``figures/``: estimates against truth (papers 000–002, Figs. 4–5, 10–11);
-  RMSE against T2 and best T2 against a + b + c (paper 002, Figs. 7–8);
-  polhodes of the free-flight scenarios (paper 004, Fig. 5); error against
-  step size with and without gyro (paper 003, Fig. 5); condition number
-  against layout size (paper 000, §III).
+- ``figures/``: estimates against truth (Ho & Lin 2009; Lu, Tsai & Lin 2010; Lin et al. 2011, Figs. 4–5, 10–11);
+  RMSE against T2 and best T2 against a + b + c (Lin et al. 2011, Figs. 7–8);
+  polhodes of the free-flight scenarios (McGinnis, Perkins & King 2012, Fig. 5); error against
+  step size with and without gyro (Li et al. 2021, Fig. 5); condition number
+  against layout size (Ho & Lin 2009, §III).
 
 Every simulation has a fixed seed, so the study is reproducible.
 """
@@ -67,7 +67,7 @@ def comparison_tables(out: Path, scenarios, layouts, duration_s: float | None, m
     (out / "tables").mkdir(parents=True, exist_ok=True)
     cases = []
     for scenario in scenarios:
-        layout_names = ["single-triad (paper 004)"] if scenario in FREE_FLIGHT else layouts
+        layout_names = ["single-triad (McGinnis, Perkins & King 2012)"] if scenario in FREE_FLIGHT else layouts
         for layout in layout_names:
             array = None if scenario in FREE_FLIGHT else LAYOUTS[layout]()
             sc_duration = duration_s
@@ -138,7 +138,7 @@ def time_series_figure(out: Path, cases: list[dict], window_s: float = 3.0) -> l
     return files
 
 
-# --- paper 002, Figs. 7-8 -----------------------------------------------------------
+# --- Lin et al. 2011, Figs. 7-8 -----------------------------------------------------------
 
 def t2_study(out: Path, quick: bool, seed: int) -> tuple[list[str], str]:
     """IMM RMSE against T2 on random3d logs of increasing amplitude; best T2 against a + b + c."""
@@ -167,7 +167,7 @@ def t2_study(out: Path, quick: bool, seed: int) -> tuple[list[str], str]:
     return ["figures/imm_rmse_vs_t2.png", "figures/imm_best_t2_vs_motion.png"], "\n".join(lines) + "\n"
 
 
-# --- paper 004, Fig. 5 ---------------------------------------------------------------
+# --- McGinnis, Perkins & King 2012, Fig. 5 ---------------------------------------------------------------
 
 def polhode_figures(out: Path, cases: list[dict]) -> list[str]:
     files = []
@@ -186,7 +186,7 @@ def polhode_figures(out: Path, cases: list[dict]) -> list[str]:
     return files
 
 
-# --- paper 003, Fig. 5 ---------------------------------------------------------------
+# --- Li et al. 2021, Fig. 5 ---------------------------------------------------------------
 
 def step_size_study(out: Path, quick: bool, seed: int) -> tuple[list[str], str]:
     """Attitude propagated with the gyro or with ω integrated from ω̇ ('pure-integration'), against the step (noise-free)."""
@@ -195,11 +195,11 @@ def step_size_study(out: Path, quick: bool, seed: int) -> tuple[list[str], str]:
     steps_ms = [1, 3, 5, 7, 9] if quick else [1, 2, 3, 4, 5, 6, 7, 8, 9]
     duration = 4.0 if quick else 10.0
     array = _with_gyro(cube_array(0.05, 0.07))
-    tilt = {"gyro (paper 003 'Gyro')": [], "ω from integrated ω̇ (paper 003 'Non-gyro')": []}
+    tilt = {"gyro (Li et al. 2021 'Gyro')": [], "ω from integrated ω̇ (Li et al. 2021 'Non-gyro')": []}
     accel = {k: [] for k in tilt}
     for h in steps_ms:
         log = simulate("random3d", array, rate_hz=1000.0 / h, duration_s=duration, noise=SensorErrors.none(), seed=seed)
-        # paper 003 starts from a known initial state (eq. 8): give the integration the true ω(0)
+        # Li et al. 2021 starts from a known initial state (eq. 8): give the integration the true ω(0)
         w0 = tuple(float(v) for v in log.truth.omega_b_radps[0])
         motion = make_estimator("pure-integration", initial_omega=w0).estimate(log).motion
         for label, source in zip(tilt, ("gyro", "estimate")):
@@ -222,17 +222,17 @@ def step_size_study(out: Path, quick: bool, seed: int) -> tuple[list[str], str]:
     return ["figures/step_size_tilt.png", "figures/step_size_accel.png"], "\n".join(lines) + "\n"
 
 
-# --- paper 000, §III -----------------------------------------------------------------
+# --- Ho & Lin 2009, §III -----------------------------------------------------------------
 
 def condition_figure(out: Path) -> tuple[list[str], str]:
     sizes = np.logspace(-2, 2, 81)
-    curves = {"cube, 4 triads (paper 000)": condition_vs_scale(cube_array(), sizes),
+    curves = {"cube, 4 triads (Ho & Lin 2009)": condition_vs_scale(cube_array(), sizes),
               "MIMU4444 board, 8 triads": condition_vs_scale(mimu4444_array(), sizes)}
     marks = [(1.0, math.sqrt(2), "√2 at 1"), (10.0, 10 * math.sqrt(2), "10√2 at 10"), (0.1, 10.0, "10 at 0.1")]
     plots.save_figure(plots.plot_condition_number(sizes, curves, marks=marks), out / "figures/condition_number.png")
     cube = condition_vs_scale(cube_array(), np.array([0.1, 1.0, 10.0]))
     text = (f"Cube condition number at half edge 0.1, 1, 10 (length unit of S): "
-            f"{cube[0]:.4g}, {cube[1]:.4g}, {cube[2]:.4g} (paper 000: 10, √2 = 1.414, 10√2 = 14.14).\n")
+            f"{cube[0]:.4g}, {cube[1]:.4g}, {cube[2]:.4g} (Ho & Lin 2009: 10, √2 = 1.414, 10√2 = 14.14).\n")
     return ["figures/condition_number.png"], text
 
 
@@ -272,12 +272,12 @@ def main(argv=None) -> int:
            + " ".join(argv if argv is not None else sys.argv[1:]) + "`.", "",
            "## All methods on every case", "", summary_tables(cases),
            "## Estimates against truth", ""] + [f"![]({f})" for f in figures if "time_" in f] + [
-           "", "## Condition number against layout size (paper 000, §III)", "", cond_text] + [
+           "", "## Condition number against layout size (Ho & Lin 2009, §III)", "", cond_text] + [
            f"![]({f})" for f in cond_files] + [
-           "", "## IMM threshold T2 (paper 002, Figs. 7–8)", "", t2_text] + [f"![]({f})" for f in t2_files] + [
-           "", "## Step size, with and without gyro (paper 003, Fig. 5)", "", step_text] + [
+           "", "## IMM threshold T2 (Lin et al. 2011, Figs. 7–8)", "", t2_text] + [f"![]({f})" for f in t2_files] + [
+           "", "## Step size, with and without gyro (Li et al. 2021, Fig. 5)", "", step_text] + [
            f"![]({f})" for f in step_files] + [
-           "", "## Free-flight polhodes (paper 004, Fig. 5)", ""] + [f"![]({f})" for f in figures if "polhode" in f]
+           "", "## Free-flight polhodes (McGinnis, Perkins & King 2012, Fig. 5)", ""] + [f"![]({f})" for f in figures if "polhode" in f]
     (out / "summary.md").write_text("\n".join(doc) + "\n", encoding="utf-8")
     _say(f"study written to {out}/summary.md in {time.perf_counter() - t_start:.0f} s")
     return 0

@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="run several methods on a log and tabulate their errors against truth or reference",
         description="Run every applicable method (or those given) on a log that has truth.csv or reference.csv "
         "and write one table: RMSE per axis and of the norm for linear acceleration, angular acceleration "
-        "and angular velocity (paper 002, Table 1), relative RMS error (paper 004, eq. 7), share of wrong "
+        "and angular velocity (Lin et al. 2011, Table 1), relative RMS error (McGinnis, Perkins & King 2012, eq. 7), share of wrong "
         "signs of ω, run time, and the Cramér–Rao / smoother bounds with the ratio RMSE / bound.",
     )
     p.add_argument("log", help="log directory (array.toml + imu.csv + truth.csv or reference.csv)")

@@ -35,8 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma", action="store_true", help="also write one-sigma uncertainties where the method gives them")
     p.add_argument("--calibration", default=None, help="calibration.toml to apply to the readings first")
     p.add_argument("--orientation", choices=["none", "inclinometer", "gyro", "estimate"], default="none",
-                   help="add gravity-free acceleration and orientation: from the inclinometer (paper 001) or "
-                        "by propagating the gyro or the estimated ω (paper 003); default: none")
+                   help="add gravity-free acceleration and orientation: from the inclinometer (Lu, Tsai & Lin 2010) or "
+                        "by propagating the gyro or the estimated ω (Li et al. 2021); default: none")
     p.add_argument("--tum", default=None, metavar="FILE",
                    help="also write the estimated orientation as a TUM trajectory (timestamp [s], tx ty tz [m] "
                         "= 0, qx qy qz qw of the body→world rotation), as evo reads it (`evo_traj tum FILE`; "

@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="errors of an estimate against truth or a reference (RMSE, relative RMS, sign errors)",
         description="Compare an estimate CSV with a truth or reference CSV (or a log folder's truth.csv, else "
                     "reference.csv): RMSE per axis and of the norm, median error norm, relative RMS error "
-                    "(paper 004 eq. 7) for every quantity both files have; for ω also the share of samples on the "
+                    "(McGinnis, Perkins & King 2012, eq. 7) for every quantity both files have; for ω also the share of samples on the "
                     "wrong sign (ω_est · ω_ref < 0), of samples with a component of the other sign, and of errors "
                     "over 5 rad/s; when the estimate has σ columns (gfimu estimate --sigma), per axis the share of rows within "
                     "1σ and 2σ and the mean NEES. Rows marked invalid in the reference (valid = 0) are left out.",

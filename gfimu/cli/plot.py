@@ -20,9 +20,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "plot",
         help="plot estimates against the log's truth or reference (needs the 'plot' extra)",
         description="Figures (PNG, SVG or PDF by the --out suffix). 'time': ω, ω̇ and linear acceleration of each "
-        "estimate against truth/reference over time with error panels (papers 000-002). 'polhode': the "
-        "estimated ω path on the kinetic-energy and momentum ellipsoids (paper 004; the array needs [body]). "
-        "'condition': condition number of the log's array scaled over layout sizes (paper 000, §III).",
+        "estimate against truth/reference over time with error panels (Ho & Lin 2009; Lu, Tsai & Lin 2010; Lin et al. 2011). 'polhode': the "
+        "estimated ω path on the kinetic-energy and momentum ellipsoids (McGinnis, Perkins & King 2012; the array needs [body]). "
+        "'condition': condition number of the log's array scaled over layout sizes (Ho & Lin 2009, §III).",
     )
     p.add_argument("log", help="log directory (array.toml + imu.csv, truth.csv or reference.csv)")
     p.add_argument("estimates", nargs="*",

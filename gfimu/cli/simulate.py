@@ -65,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="length [s] (default: the scenario's; at most 2e7 samples with the rate)")
     p.add_argument("--noise-std-mps2", type=non_negative("m/s^2"), default=None,
                    help="white accelerometer noise per axis [m/s^2] (default: the array's noise_std_mps2, "
-                        f"{defaults.ACCEL_NOISE_STD_MPS2:g} for the cube; the ADXL330 figures of paper 000 for an "
+                        f"{defaults.ACCEL_NOISE_STD_MPS2:g} for the cube; the ADXL330 figures of Ho & Lin 2009 for an "
                         "array.toml without one)")
     p.add_argument("--no-noise", action="store_true", help="exact readings (no sensor errors at all)")
     p.add_argument("--seed", type=integer(0), default=defaults.SEED,

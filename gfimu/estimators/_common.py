@@ -79,13 +79,13 @@ def weighted_least_squares(S: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, 
 def omega_from_quadratic_terms_signed(q: np.ndarray) -> np.ndarray:
     """ω from q up to one global sign, (N, 6) -> (N, 3).
 
-    The magnitudes come from the three quadratic sums (paper 000 §IV:
+    The magnitudes come from the three quadratic sums (Ho & Lin 2009 §IV:
     ``ωx² = (q1 + q2 - q3)/2`` …). The cross terms ``ωxωy, ωxωz, ωyωz`` fix the
     relative signs: the largest-magnitude component is taken positive and each
     other component gets the sign of its cross term with that one (the cross
     term with the largest component has the best signal-to-noise ratio). A zero
     cross term counts as positive. The true ω is either the result or its
-    negative (paper 002 eqs. 18-19: two candidates).
+    negative (Lin et al. 2011, eqs. 18-19: two candidates).
     """
     q = np.asarray(q, dtype=float).reshape(-1, 6)
     mag = omega_from_quadratic_terms(q)
@@ -116,7 +116,7 @@ def continuity_signs(v: np.ndarray) -> np.ndarray:
 
 
 def trapezoid_increments(omega_dot_b_radps2: np.ndarray, timestamps_ns: np.ndarray) -> np.ndarray:
-    """``h/2 (ω̇_{j-1} + ω̇_j)`` for j = 1..N-1 (paper 000 eq. 10, paper 002 eq. 8), (N-1, 3)."""
+    """``h/2 (ω̇_{j-1} + ω̇_j)`` for j = 1..N-1 (Ho & Lin 2009, eq. 10, Lin et al. 2011, eq. 8), (N-1, 3)."""
     dt = np.diff(np.asarray(timestamps_ns, dtype=np.int64)) * 1e-9
     w = np.asarray(omega_dot_b_radps2, dtype=float)
     return 0.5 * dt[:, None] * (w[1:] + w[:-1])

@@ -1,6 +1,6 @@
-"""Angular velocity in free flight from one triaxial accelerometer (paper 004).
+"""Angular velocity in free flight from one triaxial accelerometer (McGinnis, Perkins & King 2012).
 
-A torque-free body in free fall (paper 004, eqs. 8-11): the centre of mass
+A torque-free body in free fall (McGinnis, Perkins & King 2012, eqs. 8-11): the centre of mass
 falls with g, so the specific force at the origin of B (the centre of mass,
 axes along the principal axes) is zero and an accelerometer at r reads
 
@@ -11,7 +11,7 @@ matrix, y = S_ω̇ ω̇(ω) + S_q q(ω), so any sensor rotation and any number o
 sensors on the body are handled). Two constants hold along the motion:
 2T = Σ I_i ω_i² and H² = Σ I_i² ω_i² (eqs. 2-3).
 
-1. Start (paper 004: the five unknowns [ω(0), 2T, H²] from the first
+1. Start (McGinnis, Perkins & King 2012: the five unknowns [ω(0), 2T, H²] from the first
    readings). Eq. 13 alone at the first sample has several roots besides
    ±ω; they are found by multi-start least squares, and the root from which
    Euler's equations (integrated by RK4) best predict the first
@@ -19,7 +19,7 @@ sensors on the body are handled). Two constants hold along the motion:
    2T and H² are then fitted jointly with ω at those ``init_samples``
    samples (scipy ``least_squares``, trust-region reflective).
 2. Every sample: the least-squares solution of eq. 13 with eqs. 2-3, with
-   paper 004's eq. 14 weighting (acceleration residual over the mean |a_s|,
+   McGinnis, Perkins & King 2012's eq. 14 weighting (acceleration residual over the mean |a_s|,
    constants relative), by ``scipy.optimize.least_squares(method="trf")``
    from the previous sample's ω.
 
@@ -55,7 +55,7 @@ OMEGA_SIGNS = ("positive", "negative", "auto")
 
 
 def euler_omega_dot(inertia_kgm2: np.ndarray, omega_b_radps: np.ndarray) -> np.ndarray:
-    """Torque-free Euler equations (paper 004, eq. 1): ``ω̇ = -I⁻¹ (ω × I ω)``, (..., 3)."""
+    """Torque-free Euler equations (McGinnis, Perkins & King 2012, eq. 1): ``ω̇ = -I⁻¹ (ω × I ω)``, (..., 3)."""
     i = np.asarray(inertia_kgm2, dtype=float)
     w = np.asarray(omega_b_radps, dtype=float)
     return -np.cross(w, i * w) / i
@@ -91,7 +91,7 @@ def _propagate(inertia_kgm2: np.ndarray, omega0_b_radps: np.ndarray, times_s: np
 
 
 class _FreeFlightModel:
-    """Readings of the array as a function of ω alone (paper 004, eq. 13)."""
+    """Readings of the array as a function of ω alone (McGinnis, Perkins & King 2012, eq. 13)."""
 
     def __init__(self, array: SensorArray):
         S = array.structure_matrix()
@@ -121,7 +121,7 @@ class _FreeFlightModel:
         return self.S_dw @ d_dw + self.S_q @ rigid_body.quadratic_terms_jacobian(w)
 
     def constants(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """2T and H² (paper 004, eqs. 2-3), per row of ω."""
+        """2T and H² (McGinnis, Perkins & King 2012, eqs. 2-3), per row of ω."""
         i = self.inertia
         return np.sum(i * w * w, axis=-1), np.sum(i * i * w * w, axis=-1)
 
@@ -151,7 +151,7 @@ class _FreeFlightModel:
 
 @dataclass
 class FreeFlightEstimator(PerSampleEstimator):
-    """ω of a torque-free body in free fall from its accelerometer(s) (paper 004, eqs. 11-14).
+    """ω of a torque-free body in free fall from its accelerometer(s) (McGinnis, Perkins & King 2012, eqs. 11-14).
 
     Options: ``gfimu estimate --method free-flight --list-options``. The whole log is taken as one free-flight phase (cut the throw and the
     catch first). Returns ω and ω̇ (from Euler's equations); the specific
@@ -299,7 +299,7 @@ class FreeFlightEstimator(PerSampleEstimator):
 
     @staticmethod
     def _solve_sample(model, y_i, w_start, two_t, h2, accel_scale):
-        """Paper 004, eq. 14 at one sample, from ``w_start``."""
+        """McGinnis, Perkins & King 2012, eq. 14 at one sample, from ``w_start``."""
         i_ = model.inertia
 
         def residuals(w):

@@ -1,10 +1,10 @@
-"""Gravity compensation and orientation (papers 001 eqs. 12-13 and 003 eqs. 9-10).
+"""Gravity compensation and orientation (Lu, Tsai & Lin 2010, eqs. 12-13 and Li et al. 2021, eqs. 9-10).
 
 Accelerometers read the specific force ``f = a − g``; the acceleration of
 the body origin is ``a = f + g_B`` with ``g_B = R_wbᵀ (0, 0, −9.80665)``.
-Gravity in B comes either from a two-axis inclinometer (paper 001: the
+Gravity in B comes either from a two-axis inclinometer (Lu, Tsai & Lin 2010: the
 direction cosines of the body axes with the vertical) or from an attitude
-propagated with ω (paper 003: improved-Euler quaternion update), driven by
+propagated with ω (Li et al. 2021: improved-Euler quaternion update), driven by
 a gyroscope or by the accelerometer-derived ω.
 
 Yaw convention: the heading about the vertical is not observable from
@@ -27,14 +27,14 @@ STANDARD_GRAVITY_MPS2 = 9.80665
 GRAVITY_W_MPS2 = np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2])
 
 # coefficient of ω_{N-1} × ω_N in the vector part of the quaternion increment
-# (paper 003 eq. 10). The text prints r²/8; the second-order Magnus expansion
+# (Li et al. 2021, eq. 10). The text prints r²/8; the second-order Magnus expansion
 # for ω varying linearly over the step gives r²/24, which is used here. The
 # term is O(r³) either way, so the update is second order in r with both.
 CONING_COEFFICIENT = 1.0 / 24.0
 
 
 def up_b_from_tilt(tilt_rad: np.ndarray) -> np.ndarray:
-    """Unit upward vertical in B from inclinometer tilts (paper 001, Fig. 2), (N, 2) -> (N, 3).
+    """Unit upward vertical in B from inclinometer tilts (Lu, Tsai & Lin 2010, Fig. 2), (N, 2) -> (N, 3).
 
     ``tilt_x`` (``tilt_y``) is the angle between the body x (y) axis and the
     upward vertical, so the up vector's body components are the direction
@@ -61,7 +61,7 @@ def up_b_from_tilt(tilt_rad: np.ndarray) -> np.ndarray:
 
 
 def gravity_b_from_tilt(tilt_rad: np.ndarray) -> np.ndarray:
-    """Gravity in B, ``−g (cos θx, cos θy, cos θz)`` (paper 001 eq. 12), (N, 2) -> (N, 3) m/s²."""
+    """Gravity in B, ``−g (cos θx, cos θy, cos θz)`` (Lu, Tsai & Lin 2010, eq. 12), (N, 2) -> (N, 3) m/s²."""
     return -STANDARD_GRAVITY_MPS2 * up_b_from_tilt(tilt_rad)
 
 
@@ -85,11 +85,11 @@ def quaternion_from_up_b(up_b: np.ndarray) -> np.ndarray:
 
 
 def improved_euler_increments(omega_b_radps: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
-    """Quaternion increments Δq_N (N-1, 4) of paper 003 eq. 10, from body rates at consecutive samples.
+    """Quaternion increments Δq_N (N-1, 4) of Li et al. 2021, eq. 10, from body rates at consecutive samples.
 
     ``Δq = [1 − r²/8 ω_{N-1}·ω_N,  r/4 (ω_{N-1} + ω_N) + c r² ω_{N-1} × ω_N]``,
     normalised, with r the step and c = :data:`CONING_COEFFICIENT`; the update
-    is ``q_N = q_{N-1} ⊗ Δq_N`` (paper 003's ``Φ⁺_{N-1}`` multiplication, for
+    is ``q_N = q_{N-1} ⊗ Δq_N`` (Li et al. 2021's ``Φ⁺_{N-1}`` multiplication, for
     scalar-first quaternions and ω in B).
     """
     w = np.asarray(omega_b_radps, dtype=float)
@@ -102,7 +102,7 @@ def improved_euler_increments(omega_b_radps: np.ndarray, dt_s: np.ndarray) -> np
 
 
 def propagate_quaternion(q0_wb: np.ndarray, omega_b_radps: np.ndarray, timestamps_ns: np.ndarray) -> np.ndarray:
-    """Attitudes q_wb (N, 4) from q0 at the first sample and body rates (N, 3) (paper 003 eq. 10).
+    """Attitudes q_wb (N, 4) from q0 at the first sample and body rates (N, 3) (Li et al. 2021, eq. 10).
 
     The chain ``q_N = q_{N-1} ⊗ Δq_N`` is a product of increments, evaluated as
     a vectorised prefix product (log₂ N passes) instead of a Python loop.
@@ -157,11 +157,11 @@ def add_orientation(log: Log, motion: Motion, source: str = "inclinometer",
     ``source``:
 
     - ``"inclinometer"``: gravity in B from the tilt angles at every sample
-      (paper 001 eqs. 12-13); the attitude has roll and pitch from the tilts
+      (Lu, Tsai & Lin 2010, eqs. 12-13); the attitude has roll and pitch from the tilts
       and zero yaw (heading is not observable from an inclinometer).
     - ``"gyro"`` / ``"estimate"``: the attitude is propagated with the
       gyroscope readings / the estimate's ω by the improved Euler update of
-      paper 003 (eq. 10), restarting at each gap-free segment from an initial
+      Li et al. 2021 (eq. 10), restarting at each gap-free segment from an initial
       attitude with zero yaw whose vertical is the mean over the segment's
       first ``initial_window_s`` seconds of the inclinometer (if the log has
       one) or of the estimated specific force (the body must then be still).

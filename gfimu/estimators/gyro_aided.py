@@ -1,10 +1,10 @@
-"""Gyro-aided inversion (paper 001, eq. 8): x = S⁻¹ (a_m − W ω_m).
+"""Gyro-aided inversion (Lu, Tsai & Lin 2010, eq. 8): x = S⁻¹ (a_m − W ω_m).
 
 With a gyroscope the quadratic part of the rigid-body model is known from
 the measured ω, ``W q(ω_m)``, and moves to the left-hand side; the six
 unknowns [f, ω̇] follow from the six (or more) accelerometer axes by
 (weighted) least squares. Any array whose first six structure-matrix
-columns have full rank qualifies: six axes suffice (paper 001's three
+columns have full rank qualifies: six axes suffice (Lu, Tsai & Lin 2010's three
 2-axis accelerometers).
 """
 
@@ -25,7 +25,7 @@ from .inversion import check_log_for_inversion
 
 
 def paper001_layout(lever_arm: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Sensing directions and positions (6, 3) of paper 001's best layout, sensor order a1..a6.
+    """Sensing directions and positions (6, 3) of Lu, Tsai & Lin 2010's best layout, sensor order a1..a6.
 
     Derived in :func:`paper001_gain_matrix`: a1 (x) and a2 (y) at
     ``L(-1, -1, -1)``, a3 (z) and a4 (x) at ``L(-1, 1, 1)``, a5 (y) and a6 (z)
@@ -38,7 +38,7 @@ def paper001_layout(lever_arm: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def paper001_gain_matrix(m: float = 0.5, n: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
-    """The matrices of paper 001 eq. 9: ``[f; ω̇] = G a_m − P q(ω_m)``; returns (G, P).
+    """The matrices of Lu, Tsai & Lin 2010, eq. 9: ``[f; ω̇] = G a_m − P q(ω_m)``; returns (G, P).
 
     G is printed in full (m = 0.5, n = 0.25)::
 
@@ -72,7 +72,7 @@ def paper001_gain_matrix(m: float = 0.5, n: float = 0.25) -> tuple[np.ndarray, n
        relation is ``x = G a_m − (G W) q(ω_m)``, i.e. eq. 8 with "−".
     4. Scale: the pair averages fix m = 1/2 for any size; scaling every
        position by L divides the ω̇ rows by L, so n = 1/(4L). The printed
-       n = 0.25 means L = 1 in the paper's length unit (as paper 000 chooses
+       n = 0.25 means L = 1 in the paper's length unit (as Ho & Lin 2009 chooses
        its unit to make the cube's half edge 1).
 
     For general (m, n) this returns G with those entries and ``P = G W`` for
@@ -80,9 +80,9 @@ def paper001_gain_matrix(m: float = 0.5, n: float = 0.25) -> tuple[np.ndarray, n
     another value).
     """
     if not np.isclose(m, 0.5):
-        raise InputError(f"paper 001 eq. 9: m is the average of two opposite sensors and must be 0.5, got {m!r}")
+        raise InputError(f"Lu, Tsai & Lin 2010, eq. 9: m is the average of two opposite sensors and must be 0.5, got {m!r}")
     if not (np.isfinite(n) and n > 0):
-        raise InputError(f"paper 001 eq. 9: n = 1/(4 × lever arm) must be positive, got {n!r}")
+        raise InputError(f"Lu, Tsai & Lin 2010, eq. 9: n = 1/(4 × lever arm) must be positive, got {n!r}")
     G = np.array(
         [
             [m, 0, 0, m, 0, 0],
@@ -124,7 +124,7 @@ def gyro_aided_matrices(array: SensorArray) -> tuple[np.ndarray, np.ndarray, np.
 
 
 def gyro_aided_solve(array: SensorArray, accel_mps2: np.ndarray, gyro_b_radps: np.ndarray) -> np.ndarray:
-    """Paper 001 eq. 8 for every sample: (N, n_axes), (N, 3) -> [f, ω̇] (N, 6)."""
+    """Lu, Tsai & Lin 2010, eq. 8 for every sample: (N, n_axes), (N, 3) -> [f, ω̇] (N, 6)."""
     a = np.atleast_2d(np.asarray(accel_mps2, dtype=float))
     g = np.atleast_2d(np.asarray(gyro_b_radps, dtype=float))
     if a.shape[1] != array.n_axes or g.shape != (a.shape[0], 3):
@@ -138,7 +138,7 @@ def gyro_aided_solve(array: SensorArray, accel_mps2: np.ndarray, gyro_b_radps: n
 
 @dataclass
 class GyroAidedEstimator(PerSampleEstimator):
-    """Accelerometers plus gyroscope (paper 001, eq. 8).
+    """Accelerometers plus gyroscope (Lu, Tsai & Lin 2010, eq. 8).
 
     f and ω̇ by least squares from ``a_m − W q(ω_m)``; ω is the gyroscope
     reading itself (no blending: the gyro measures ω directly, and the

@@ -1,6 +1,6 @@
-"""Context-based interacting multiple models for ω (paper 002 §3.2, §4.1).
+"""Context-based interacting multiple models for ω (Lin et al. 2011 §3.2, §4.1).
 
-Three models estimate ω from one inverted sample (paper 000 eq. 7):
+Three models estimate ω from one inverted sample (Ho & Lin 2009, eq. 7):
 
 - zero model: ω = 0;
 - integration model: ``ω_int,j = ω_{j-1} + h/2 (ω̇_{j-1} + ω̇_j)`` (eq. 8, from
@@ -10,7 +10,7 @@ Three models estimate ω from one inverted sample (paper 000 eq. 7):
 
 Contexts: each quadratic sum ``a = ωx²+ωy², b = ωx²+ωz², c = ωy²+ωz²`` lies
 below T1 (zero), between T1 and T2 (integration) or above T2 (quadratic).
-Of the 27 combinations, paper 002 treats four cases (eqs. 12-15; the
+Of the 27 combinations, Lin et al. 2011 treats four cases (eqs. 12-15; the
 printed equations are lost, they are rebuilt here from the text):
 
 1. a, b, c ≥ T2: ω = ω_qua.
@@ -34,7 +34,7 @@ exactly to the hard cases when h1 = h2 = 0. Per axis the result is
 ``ω_k = α_k ω_int,k + β_k sign(ω_int,k) |ω_k|`` with α, β depending on a, b, c
 only, so they are computed vectorised and only the scalar recursion loops.
 
-T2 (paper 002 §4.1): unless given, it comes from the trend line of the best
+T2 (Lin et al. 2011 §4.1): unless given, it comes from the trend line of the best
 T2 against the level of motion ``a + b + c`` averaged over the log:
 ``T2 = t2_intercept + t2_slope · mean(a + b + c)``, fixed for the whole log.
 The paper's fitted coefficients are only in its Fig. 8 (not legible in the
@@ -67,7 +67,7 @@ OTHER_AXIS = (2, 1, 0)
 
 
 def case_rule(labels: tuple[int, int, int]) -> tuple[tuple[int, int, int], int]:
-    """Hard rule of paper 002 §3.2: model per axis and case number (0 = fall-back).
+    """Hard rule of Lin et al. 2011 §3.2: model per axis and case number (0 = fall-back).
 
     ``labels`` are the contexts (ZERO, INTEGRATION, QUADRATIC) of a, b, c.
     """
@@ -95,7 +95,7 @@ def context_memberships(s: np.ndarray, t1: float, t2: float, h1: float, h2: floa
     """Membership of quadratic sums in (zero, integration, quadratic), (...,) -> (..., 3).
 
     Linear ramps of half-width ``h1 Δ`` around T1 and ``h2 Δ`` around T2
-    (``Δ = T2 - T1``, paper 002 eqs. 16-17); hard thresholds when h = 0
+    (``Δ = T2 - T1``, Lin et al. 2011, eqs. 16-17); hard thresholds when h = 0
     (a sum equal to a threshold belongs to the upper model).
     """
     s = np.asarray(s, dtype=float)
@@ -150,16 +150,16 @@ def imm_case(q: np.ndarray, t1: float, t2: float) -> np.ndarray:
 
 
 def t2_from_trend(q: np.ndarray, intercept: float, slope: float) -> float:
-    """T2 from the paper 002 §4.1 trend line: ``intercept + slope · mean(a + b + c)``."""
+    """T2 from the Lin et al. 2011 §4.1 trend line: ``intercept + slope · mean(a + b + c)``."""
     level = float(np.mean(np.clip(np.asarray(q)[:, :3], 0.0, None).sum(axis=1))) if len(q) else 0.0
     return intercept + slope * level
 
 
 @dataclass
 class IMMEstimator(PerSampleEstimator):
-    """Context-based IMM of paper 002 §3.2 (zero / integration / quadratic models).
+    """Context-based IMM of Lin et al. 2011 §3.2 (zero / integration / quadratic models).
 
-    Options (paper 002 values where it gives them): ``gfimu estimate --method imm --list-options``.
+    Options (Lin et al. 2011 values where it gives them): ``gfimu estimate --method imm --list-options``.
     """
 
     method = "imm"

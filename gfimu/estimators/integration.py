@@ -1,11 +1,11 @@
-"""ω from the quadratic terms with the sign of the integrated ω̇ (papers 000 §IV, 002 §3.1).
+"""ω from the quadratic terms with the sign of the integrated ω̇ (Ho & Lin 2009 §IV; Lin et al. 2011 §3.1).
 
-Both estimators first invert every sample (paper 000 eq. 7) for f, ω̇ and
+Both estimators first invert every sample (Ho & Lin 2009, eq. 7) for f, ω̇ and
 q(ω). Then, sample by sample within each gap-free segment:
 
-- ``PureIntegrationEstimator`` (paper 002 eq. 8, "integration method"):
+- ``PureIntegrationEstimator`` (Lin et al. 2011, eq. 8, "integration method"):
   ``ω_j = ω_{j-1} + h/2 (ω̇_{j-1} + ω̇_j)``. Drifts without bound.
-- ``IntegrationEstimator`` (paper 000 eqs. 9-10; paper 002 eqs. 8-11,
+- ``IntegrationEstimator`` (Ho & Lin 2009, eqs. 9-10; Lin et al. 2011, eqs. 8-11,
   "quadratic method"): the prediction ``ω_int,j`` of eq. 8 from the previous
   *estimate* selects one of the eight candidates ``(±|ωx|, ±|ωy|, ±|ωz|)`` whose
   magnitudes come from the quadratic sums a, b, c (eq. 10), by the least L2
@@ -39,7 +39,7 @@ InitialOmega = Union[str, tuple[float, float, float]]
 
 
 def select_candidate(omega_abs: np.ndarray, omega_int: np.ndarray) -> np.ndarray:
-    """Paper 002 eq. 11: the candidate ``s ⊙ |ω|`` (8 sign patterns) nearest to ω_int.
+    """Lin et al. 2011, eq. 11: the candidate ``s ⊙ |ω|`` (8 sign patterns) nearest to ω_int.
 
     Vectorised over leading axes: (..., 3), (..., 3) -> (..., 3). Ties go to
     the first pattern in ``SIGN_CANDIDATES`` (positive signs first).
@@ -57,7 +57,7 @@ def sign_tracking_loop(mag: list[float], inc: list[float], w0: float, alpha=None
 
     ``p = ω_{j-1} + inc_{j-1}`` (the trapezoid prediction) and
     ``ω_j = α_j p + β_j sign(p) |ω_j|`` — with α = 0, β = 1 the quadratic
-    method of paper 002 eqs. 10-11, otherwise the soft-switched mixture of the
+    method of Lin et al. 2011, eqs. 10-11, otherwise the soft-switched mixture of the
     IMM (:mod:`gfimu.estimators.imm`). ``mag``, ``alpha`` and ``beta`` hold the
     values at samples 0..n-1; ``w0`` is the prediction for sample 0.
     """
@@ -85,7 +85,7 @@ class _IntegratingEstimator(PerSampleEstimator):
     """Options shared by the two integrating methods."""
 
     initial_omega: InitialOmega = option("zero", help=(
-        "ω at the start of each gap-free segment: 'zero' (body at rest, paper 000 footnote 3; the first sample "
+        "ω at the start of each gap-free segment: 'zero' (body at rest, Ho & Lin 2009 footnote 3; the first sample "
         "then takes positive signs), 'quadratic' (magnitudes from the first sample's quadratic sums, relative "
         "signs from its cross terms, largest component positive) or three numbers in rad/s (first segment; "
         "later segments use 'quadratic')"))
@@ -100,7 +100,7 @@ class _IntegratingEstimator(PerSampleEstimator):
 
 @dataclass
 class PureIntegrationEstimator(_IntegratingEstimator):
-    """Trapezoid integration of the inverted ω̇ (paper 002 eq. 8); f and ω̇ by inversion.
+    """Trapezoid integration of the inverted ω̇ (Lin et al. 2011, eq. 8); f and ω̇ by inversion.
 
     Options (``initial_omega``, ``compute_sigma``): ``gfimu estimate --method pure-integration --list-options``.
     """
@@ -123,7 +123,7 @@ class PureIntegrationEstimator(_IntegratingEstimator):
 
 @dataclass
 class IntegrationEstimator(_IntegratingEstimator):
-    """Quadratic-term magnitudes with the sign of the integrated prediction (papers 000, 002).
+    """Quadratic-term magnitudes with the sign of the integrated prediction (Ho & Lin 2009; Lin et al. 2011).
 
     f and ω̇ come from the inversion; |ω| per axis from the quadratic sums
     (``ωx² = (a + b - c)/2`` …, clipped at zero); the sign of each component

@@ -1,4 +1,4 @@
-"""Direct inversion of the structure matrix (paper 000, eq. 7).
+"""Direct inversion of the structure matrix (Ho & Lin 2009, eq. 7).
 
 Every sample is solved on its own: ``x = [f, ω̇, q(ω)] = S⁺ a`` (a weighted
 least-squares solution when the array has more than twelve axes or unequal
@@ -38,7 +38,7 @@ def inversion_matrix(array: SensorArray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def invert(array: SensorArray, accel_mps2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-sample inversion (paper 000, eq. 7): readings (N, n_axes) -> x (N, 12), cov (12, 12).
+    """Per-sample inversion (Ho & Lin 2009, eq. 7): readings (N, n_axes) -> x (N, 12), cov (12, 12).
 
     ``accel_mps2`` holds each axis's reading in its sensor's own frame, in the
     order of ``array.accel_columns``; x = [f (m/s²), ω̇ (rad/s²), q(ω)
@@ -86,7 +86,7 @@ def check_log_for_inversion(log: Log) -> None:
 
 @dataclass
 class InversionEstimator(PerSampleEstimator):
-    """Paper 000 eq. 7 applied sample by sample; ω by magnitudes and cross-term signs.
+    """Ho & Lin 2009, eq. 7 applied sample by sample; ω by magnitudes and cross-term signs.
 
     ω: magnitudes from the quadratic sums, relative signs from the cross terms
     (largest component positive, see

@@ -5,7 +5,7 @@ likelihood, and Cramér–Rao bound", IEEE TSP 2016. Per sample the readings are
 
     y = H [f, ω̇] + S_q q(ω) + e,   e ~ N(0, Σ),   Σ = diag(σ_i²)
 
-(paper 000's model split into its linear part H = S[:, :6] and its quadratic
+(Ho & Lin 2009's model split into its linear part H = S[:, :6] and its quadratic
 part S_q = S[:, 6:]). For a given ω the likelihood is maximised in closed
 form by ``[f, ω̇] = H_w⁺ (y_w - S_q,w q(ω))`` (subscript w: whitened by
 Σ^(-1/2)), so the ML problem reduces to the separable least squares in ω
@@ -37,7 +37,7 @@ up to its sign. Starting points and signs:
    these starts reaches it;
 3. the signs along each gap-free segment are chosen by a two-state Viterbi
    pass that makes ω most consistent with the trapezoidal integral of the
-   estimated ω̇ (paper 000 resolves the sign by integrating ω̇ the same way),
+   estimated ω̇ (Ho & Lin 2009 resolves the sign by integrating ω̇ the same way),
    over the samples whose |ω| exceeds three times its bound, the integral
    bridging the stretches of small |ω| in between (``_resolve_signs``).
    ω̇ does not depend on the sign of ω, so this fixes the sign wherever ω

@@ -1,4 +1,4 @@
-"""Accelerometer equation (paper 000, eqs. 1-6).
+"""Accelerometer equation (Ho & Lin 2009, eqs. 1-6).
 
 An axis with unit direction s (in B) at lever arm r reads the specific force
 of its point, ``y = sᵀ (f + ω̇ × r + ω × (ω × r))``; with self-calibration the
@@ -34,14 +34,14 @@ def array_geometry(array) -> list[tuple[np.ndarray, np.ndarray, slice]]:
 
 
 def axis_rows(directions_b: np.ndarray, positions_m: np.ndarray) -> np.ndarray:
-    """Rows of the structure matrix (n, 12) for the given axes (paper 000, eq. 6)."""
+    """Rows of the structure matrix (n, 12) for the given axes (Ho & Lin 2009, eq. 6)."""
     return rigid_body.structure_matrix(directions_b, positions_m)
 
 
 def rigid_body_readings(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, specific_force_b_mps2: np.ndarray,
                         rows: np.ndarray, directions_b: np.ndarray, positions_m: np.ndarray):
     """(N, n) readings ``S [f, ω̇, q(ω)]`` of axes with structure-matrix rows ``rows`` (n, 12),
-    sensing directions s and positions r (n, 3) (paper 000, eq. 6), the centripetal part written
+    sensing directions s and positions r (n, 3) (Ho & Lin 2009, eq. 6), the centripetal part written
     ``sᵀ (ω × (ω × r)) = (sᵀω)(rᵀω) - (sᵀr)|ω|²``; and those products ``(sᵀω, rᵀω, sᵀr)`` for
     :func:`omega_jacobian`."""
     w = omega_b_radps
@@ -107,7 +107,7 @@ def accelerometer_residual(
 def accelerometer_prediction(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, specific_force_b_mps2: np.ndarray,
                              rows: np.ndarray) -> np.ndarray:
     """(N, n) rigid-body readings ``S [f, ω̇, q(ω)]`` of axes with structure-matrix rows ``rows`` (n, 12)
-    (paper 000, eq. 6): the residual of :func:`accelerometer_residual` without its Jacobians."""
+    (Ho & Lin 2009, eq. 6): the residual of :func:`accelerometer_residual` without its Jacobians."""
     return (specific_force_b_mps2 @ rows[:, 0:3].T + omega_dot_b_radps2 @ rows[:, 3:6].T
             + rigid_body.quadratic_terms(omega_b_radps) @ rows[:, 6:12].T)
 

@@ -1,4 +1,4 @@
-"""Euler's torque-free equation (paper 004, eq. 1): ``I ω̇ + ω × (I ω) = 0``.
+"""Euler's torque-free equation (McGinnis, Perkins & King 2012, eq. 1): ``I ω̇ + ω × (I ω) = 0``.
 
 With I the principal inertia (diagonal in B). The residual is the torque
 [N m] that the state would need; a free-flight segment gives it a small

@@ -1,4 +1,4 @@
-"""Free fall (paper 004): in flight the body origin (centre of mass) moves
+"""Free fall (McGinnis, Perkins & King 2012): in flight the body origin (centre of mass) moves
 under gravity alone, ``a = g``, so its specific force ``f = a - g`` is zero.
 """
 

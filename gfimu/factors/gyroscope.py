@@ -1,4 +1,4 @@
-"""Gyroscope (paper 001): reads ω in B, plus an optional bias, ``ω + b_g``."""
+"""Gyroscope (Lu, Tsai & Lin 2010): reads ω in B, plus an optional bias, ``ω + b_g``."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Inclinometer (paper 001, direction cosines of gravity).
+"""Inclinometer (Lu, Tsai & Lin 2010, direction cosines of gravity).
 
 ``tilt_x`` is the angle between the body x axis and the upward vertical, so
 ``cos(tilt_x) = (Rᵀ e_z)_x`` (log format: a still accelerometer aligned with

@@ -1,8 +1,8 @@
 """Kinematics between consecutive samples.
 
-- angular velocity (trapezoid, as paper 000's sign recovery and paper 003's
+- angular velocity (trapezoid, as Ho & Lin 2009's sign recovery and Li et al. 2021's
   improved Euler step): ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})``;
-- attitude (paper 003, eq. 10 on SO(3)): ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``.
+- attitude (Li et al. 2021, eq. 10 on SO(3)): ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``.
 
 With ω̇ a random walk of density q (white angular jerk), the trapezoid
 residual has variance ``q² h³ / 12`` and is independent of the ω̇ increment,

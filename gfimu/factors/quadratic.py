@@ -1,4 +1,4 @@
-"""Quadratic ω terms against their per-sample inversion (paper 000, eq. 2; paper 002).
+"""Quadratic ω terms against their per-sample inversion (Ho & Lin 2009, eq. 2; Lin et al. 2011).
 
 The papers invert the structure matrix per sample, ``x̂ = S⁺ y``, and read
 ω from the six quadratic terms ``q(ω) = [ωx²+ωy², ωx²+ωz², ωy²+ωz², ωxωy,
@@ -40,7 +40,7 @@ def make_quadratic_factor(key_omega: int, q_measured, noise_model):
 
 
 def inversion_residual(omega_b_radps, omega_dot_b_radps2, specific_force_b_mps2, x_measured):
-    """All twelve unknowns against the per-sample inversion ``x̂ = [f̂, ω̇̂, q̂]`` (paper 000, eq. 7).
+    """All twelve unknowns against the per-sample inversion ``x̂ = [f̂, ω̇̂, q̂]`` (Ho & Lin 2009, eq. 7).
 
     Residual ``[f - f̂, ω̇ - ω̇̂, q(ω) - q̂]`` (N, 12); Jacobians on 'w', 'd', 'f'
     (N, 12, 3). With the inversion's full covariance this carries the same

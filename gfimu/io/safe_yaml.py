@@ -23,11 +23,11 @@ class OpenCVMatrix(dict):
     line: int = 0
 
 
-def _yaml_module(path: Path):
+def _yaml_module(path: Path, extra: str = "kalibr"):
     try:
         import yaml
     except ImportError:
-        raise MissingExtraError(f"{path}: reading YAML", "pyyaml", "kalibr") from None
+        raise MissingExtraError(f"{path}: reading YAML", "pyyaml", extra) from None
     return yaml
 
 
@@ -107,10 +107,11 @@ def _safe_loader(yaml, path: Path):
     return Loader
 
 
-def load_yaml(path: Path, what: str = "a Kalibr YAML file"):
+def load_yaml(path: Path, what: str = "a Kalibr YAML file", extra: str = "kalibr"):
     """(document, text) of a YAML file (an OpenCV one too); its depth and aliases bounded first. LogFormatError
-    naming the file (and line) for anything wrong; ``what`` names the file expected in messages."""
-    yaml = _yaml_module(path)
+    naming the file (and line) for anything wrong; ``what`` names the file expected in messages, ``extra`` the
+    extra that installs pyyaml for it (MissingExtraError without pyyaml)."""
+    yaml = _yaml_module(path, extra)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -6,7 +6,7 @@
 ['omega_b_radps', 'omega_dot_b_radps2', 'accel_b_mps2', 'specific_force_b_mps2', 'quaternion_wb']
 
 Each accelerometer axis reads the exact specific force at its position,
-``f + ω̇ × r + ω × (ω × r)`` (paper 000, eq. 1), along its own axis, plus the
+``f + ω̇ × r + ω × (ω × r)`` (Ho & Lin 2009, eq. 1), along its own axis, plus the
 errors of :class:`SensorErrors`. The ``euroc`` and ``kitti`` scenarios replay
 real recorded motions (shipped with GTSAM) through any array: real motion,
 synthetic readings.
@@ -92,7 +92,7 @@ def simulate(
     """Simulate ``scenario`` seen by ``array``; returns a :class:`Log` with ``truth``.
 
     ``array`` defaults to the scenario's (the 5 cm cube of four triads, or
-    paper 004's single triad on the block for the free-flight scenarios, which
+    McGinnis, Perkins & King 2012's single triad on the block for the free-flight scenarios, which
     also give the log's array the block's :class:`~gfimu.array.Body`).
     ``rate_hz`` and ``duration_s`` default to the scenario's (500 Hz and 10 s
     for random3d and reversal; see :data:`SCENARIOS`). ``noise=None`` applies

@@ -1,6 +1,6 @@
-"""Torque-free rotation of a rigid body in closed form (paper 004, Table 1).
+"""Torque-free rotation of a rigid body in closed form (McGinnis, Perkins & King 2012, Table 1).
 
-Euler's equations without torque, ``I ω̇ + ω × I ω = 0`` (paper 004, eq. 1),
+Euler's equations without torque, ``I ω̇ + ω × I ω = 0`` (McGinnis, Perkins & King 2012, eq. 1),
 keep the rotational kinetic energy ``2T = Σ I_i ω_i²`` and the squared angular
 momentum ``H² = Σ I_i² ω_i²`` constant (eqs. 2-3). With the principal moments
 relabelled ``I_a > I_b > I_c`` (major, intermediate, minor) the solution is a
@@ -22,7 +22,7 @@ set of Jacobi elliptic functions of ``τ = p t + τ0``:
   ``p² = (I_b − I_c)(2T I_a − H²) / (I_a I_b I_c)``,
   ``k² = (I_a − I_b)(H² − 2T I_c) / ((I_b − I_c)(2T I_a − H²))``.
 
-In both cases ``p² = z1 − z2`` or ``z3 − z2`` with paper 004's eq. 4. Putting
+In both cases ``p² = z1 − z2`` or ``z3 − z2`` with McGinnis, Perkins & King 2012's eq. 4. Putting
 the solution into Euler's equations (``sn' = cn dn``, ``cn' = −sn dn``,
 ``dn' = −k² sn cn``) fixes the signs: ``σ_a σ_b σ_c = −1`` when (a, b, c) is
 a cyclic order of the body axes (x, y, z), +1 otherwise. The sign of the
@@ -56,7 +56,7 @@ def box_principal_inertia(size_m=DELRIN_BLOCK_SIZE_M, mass_kg: float = DELRIN_BL
     """Principal moments of a uniform box about axes along its edges, (3,).
 
     ``I_x = m (b² + c²) / 12`` etc. for edge lengths ``(a, b, c)`` along x, y, z.
-    Paper 004's Delrin block (0.201 × 0.147 × 0.102 m, 4.36 kg) gives about
+    McGinnis, Perkins & King 2012's Delrin block (0.201 × 0.147 × 0.102 m, 4.36 kg) gives about
     (0.0116, 0.0185, 0.0225) kg m²: x is its minor axis, z its major axis.
     """
     a, b, c = (float(v) for v in size_m)
@@ -66,7 +66,7 @@ def box_principal_inertia(size_m=DELRIN_BLOCK_SIZE_M, mass_kg: float = DELRIN_BL
 
 
 def energy_and_momentum(inertia_kgm2, omega_b_radps) -> tuple[np.ndarray, np.ndarray]:
-    """``2T = Σ I_i ω_i²`` and ``H² = Σ I_i² ω_i²`` (paper 004, eqs. 2-3), per row."""
+    """``2T = Σ I_i ω_i²`` and ``H² = Σ I_i² ω_i²`` (McGinnis, Perkins & King 2012, eqs. 2-3), per row."""
     i = np.asarray(inertia_kgm2, dtype=float)
     w = np.asarray(omega_b_radps, dtype=float)
     return np.sum(i * w * w, axis=-1), np.sum(i * i * w * w, axis=-1)
@@ -82,7 +82,7 @@ def euler_rhs(inertia_kgm2, omega_b_radps) -> np.ndarray:
 def small_oscillation_frequency_radps(inertia_kgm2, spin_axis: int, spin_radps: float) -> float:
     """Angular frequency of the off-axis components for a spin near a stable axis.
 
-    Linearised Euler equations about ``ω = Ω e_s`` (paper 004, footnote 2, with
+    Linearised Euler equations about ``ω = Ω e_s`` (McGinnis, Perkins & King 2012, footnote 2, with
     the signs re-derived): ``ω_n = Ω √((I_s − I_j)(I_s − I_k) / (I_j I_k))``,
     real when ``I_s`` is the largest or the smallest moment. Raises for the
     intermediate axis, whose motion is unstable (no oscillation).
@@ -97,7 +97,7 @@ def small_oscillation_frequency_radps(inertia_kgm2, spin_axis: int, spin_radps: 
 
 @dataclass(frozen=True)
 class TorqueFreeMotion:
-    """Closed-form ω(t) of a torque-free rigid body (paper 004, Table 1).
+    """Closed-form ω(t) of a torque-free rigid body (McGinnis, Perkins & King 2012, Table 1).
 
     Build with :meth:`from_initial`; call :meth:`omega` and :meth:`omega_dot`
     with times in seconds (relative to the initial condition).
@@ -117,7 +117,7 @@ class TorqueFreeMotion:
 
     @classmethod
     def from_initial(cls, inertia_kgm2, omega0_b_radps) -> "TorqueFreeMotion":
-        """Constants, case, signs and phase from ω(0) (paper 004, Table 1 and eq. 4)."""
+        """Constants, case, signs and phase from ω(0) (McGinnis, Perkins & King 2012, Table 1 and eq. 4)."""
         inertia = np.asarray(inertia_kgm2, dtype=float).reshape(-1)
         w0 = np.asarray(omega0_b_radps, dtype=float).reshape(-1)
         if inertia.shape != (3,) or np.any(inertia <= 0) or not np.all(np.isfinite(inertia)):

@@ -8,12 +8,12 @@ expressed in B.
 
 Scenarios
 ---------
-turntable               paper 001 bench: axis tilted 12°, ±23.5° at 1 Hz, origin 30 mm off the axis
+turntable               Lu, Tsai & Lin 2010 bench: axis tilted 12°, ±23.5° at 1 Hz, origin 30 mm off the axis
 turntable-constant      same bench turning at a constant 180 °/s
-random3d                band-limited random 3-D rotation and translation (paper 002's hand-held test)
+random3d                band-limited random 3-D rotation and translation (Lin et al. 2011's hand-held test)
 slow3d                  the same, slow: |ω| below 1 rad/s (a hovering drone, a slow hand)
 reversal                ω_i = A_i sin(2π f_i t + φ_i): every axis crosses zero about every second
-freeflight-major        paper 004's Delrin block spun near its major axis (closed-form Euler solution)
+freeflight-major        McGinnis, Perkins & King 2012's Delrin block spun near its major axis (closed-form Euler solution)
 freeflight-intermediate ... near its intermediate axis (unstable: the block flips)
 freeflight-minor        ... near its minor axis
 euroc                   real motion of EuRoC V1_01_easy (shipped with GTSAM), synthetic array readings
@@ -45,10 +45,10 @@ from .. import rotations
 from ..datasets.gtsam_recordings import RECORDINGS
 from .defaults import DURATION_S, RATE_HZ, default_cube
 
-# paper 004: the accelerometer sits at a corner of the block's +z face,
+# McGinnis, Perkins & King 2012: the accelerometer sits at a corner of the block's +z face,
 # about 15 mm in from both edges and 7 mm above the face (IMU in its casing).
 FREE_FLIGHT_SENSOR_POSITION_M = (0.201 / 2 - 0.015, 0.147 / 2 - 0.015, 0.102 / 2 + 0.007)
-FREE_FLIGHT_SPIN_RADPS = np.deg2rad(1570.0)  # paper 004, Fig. 3 (≈ 27.4 rad/s)
+FREE_FLIGHT_SPIN_RADPS = np.deg2rad(1570.0)  # McGinnis, Perkins & King 2012, Fig. 3 (≈ 27.4 rad/s)
 
 
 @dataclass(frozen=True)
@@ -68,13 +68,13 @@ class Scenario:
         return {k: p.default for k, p in sig.parameters.items() if p.kind is inspect.Parameter.KEYWORD_ONLY}
 
 
-# --- turntable (paper 001, §III) ------------------------------------------------
+# --- turntable (Lu, Tsai & Lin 2010, §III) ------------------------------------------------
 
 def _turntable(times_s, theta, theta_dot, theta_ddot, array, tilt_deg, axis_offset_m):
     """Body turning about its z axis, which is tilted by ``tilt_deg`` about world x.
 
     ``R_wb(t) = R_x(tilt) R_z(θ(t))`` so ``ω_b = (0, 0, θ̇)``. The origin is
-    ``axis_offset_m`` from the axis along body −y (paper 001: the centre of
+    ``axis_offset_m`` from the axis along body −y (Lu, Tsai & Lin 2010: the centre of
     mass 30 mm from the axis along minus y), so its acceleration in B is
     ``ω̇ × d + ω × (ω × d)`` with ``d = (0, −offset, 0)``.
     """
@@ -94,7 +94,7 @@ def _turntable(times_s, theta, theta_dot, theta_ddot, array, tilt_deg, axis_offs
 
 def turntable(times_s, rng, array, *, tilt_deg: float = 12.0, amplitude_deg: float = 23.5,
               frequency_hz: float = 1.0, axis_offset_m: float = 0.030):
-    """Sinusoidal turntable of paper 001: ``θ = A sin(2π f t)``, A = 23.5°, f = 1 Hz."""
+    """Sinusoidal turntable of Lu, Tsai & Lin 2010: ``θ = A sin(2π f t)``, A = 23.5°, f = 1 Hz."""
     a = np.deg2rad(amplitude_deg)
     w = 2.0 * np.pi * frequency_hz
     return _turntable(times_s, a * np.sin(w * times_s), a * w * np.cos(w * times_s),
@@ -103,7 +103,7 @@ def turntable(times_s, rng, array, *, tilt_deg: float = 12.0, amplitude_deg: flo
 
 def turntable_constant(times_s, rng, array, *, tilt_deg: float = 12.0, rate_deg_s: float = 180.0,
                        axis_offset_m: float = 0.030):
-    """Turntable of paper 001 turning at a constant rate (180 °/s)."""
+    """Turntable of Lu, Tsai & Lin 2010 turning at a constant rate (180 °/s)."""
     w = np.deg2rad(rate_deg_s)
     return _turntable(times_s, w * times_s, np.full(times_s.size, w), np.zeros(times_s.size),
                       array, tilt_deg, axis_offset_m)
@@ -140,7 +140,7 @@ def _random_sines(rng, n_components, max_frequency_hz, rms, min_frequency_hz=0.1
 
 def random3d(times_s, rng, array, *, omega_rms_radps: float = 1.5, max_frequency_hz: float = 2.0,
              position_rms_m: float = 0.1, max_position_frequency_hz: float = 1.5, n_components: int = 6):
-    """Smooth arbitrary 3-D rotation and translation (paper 002's random motion test).
+    """Smooth arbitrary 3-D rotation and translation (Lin et al. 2011's random motion test).
 
     Each ω component (in B) is a sum of ``n_components`` sines with random
     frequencies in [0.1, max_frequency_hz] and phases, scaled to
@@ -183,10 +183,10 @@ def reversal(times_s, rng, array, *, amplitude_radps=(2.0, 2.5, 3.0), frequency_
     return _sines_motion(times_s, omega_sines, position_sines, array)
 
 
-# --- free flight (paper 004) -------------------------------------------------------
+# --- free flight (McGinnis, Perkins & King 2012) -------------------------------------------------------
 
 def free_flight_array(noise_std_mps2: float | None = 0.02) -> SensorArray:
-    """Paper 004's set-up: one triaxial accelerometer near a corner of the Delrin block.
+    """McGinnis, Perkins & King 2012's set-up: one triaxial accelerometer near a corner of the Delrin block.
 
     The paper locates the sensor at a corner of the block's surface without
     printing the vector; :data:`FREE_FLIGHT_SENSOR_POSITION_M` is that corner
@@ -319,21 +319,21 @@ def _cube():
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
-        Scenario("turntable", "paper 001 bench: axis tilted 12°, ±23.5° at 1 Hz, origin 30 mm off the axis",
+        Scenario("turntable", "Lu, Tsai & Lin 2010 bench: axis tilted 12°, ±23.5° at 1 Hz, origin 30 mm off the axis",
                  1000.0, 10.0, turntable, _cube),
-        Scenario("turntable-constant", "paper 001 bench turning at a constant 180 °/s", 1000.0, 10.0,
+        Scenario("turntable-constant", "Lu, Tsai & Lin 2010 bench turning at a constant 180 °/s", 1000.0, 10.0,
                  turntable_constant, _cube),
-        Scenario("random3d", "band-limited random 3-D rotation and translation (paper 002)", RATE_HZ, DURATION_S,
+        Scenario("random3d", "band-limited random 3-D rotation and translation (Lin et al. 2011)", RATE_HZ, DURATION_S,
                  random3d, _cube),
         Scenario("slow3d", "slow random 3-D rotation and translation, |ω| below 1 rad/s", RATE_HZ, 20.0,
                  slow3d, _cube),
         Scenario("reversal", "ω_i = A_i sin(2π f_i t + φ_i): zero crossings on every axis", RATE_HZ, DURATION_S,
                  reversal, _cube),
-        Scenario("freeflight-major", "paper 004 block in free flight, spun near its major axis", 1000.0, 2.0,
+        Scenario("freeflight-major", "McGinnis, Perkins & King 2012 block in free flight, spun near its major axis", 1000.0, 2.0,
                  freeflight_major, free_flight_array),
-        Scenario("freeflight-intermediate", "paper 004 block in free flight, spun near its intermediate axis",
+        Scenario("freeflight-intermediate", "McGinnis, Perkins & King 2012 block in free flight, spun near its intermediate axis",
                  1000.0, 2.0, freeflight_intermediate, free_flight_array),
-        Scenario("freeflight-minor", "paper 004 block in free flight, spun near its minor axis", 1000.0, 2.0,
+        Scenario("freeflight-minor", "McGinnis, Perkins & King 2012 block in free flight, spun near its minor axis", 1000.0, 2.0,
                  freeflight_minor, free_flight_array),
         Scenario("euroc", "real EuRoC V1_01_easy motion (GTSAM data), synthetic array readings", 200.0, None,
                  euroc, _cube),

@@ -12,13 +12,13 @@ to the LSB and saturation at the range. The gyroscope reads ``ω + b + n``
 
 Defaults (``SensorErrors()``): white noise only, everything else zero. The
 accelerometer noise std is the array's ``noise_std_mps2`` where array.toml
-gives one, otherwise the ADXL330 chip figures measured in paper 000 (§V):
+gives one, otherwise the ADXL330 chip figures measured in Ho & Lin 2009 (§V):
 0.0742 m/s² on the sensor's x and y axes, 0.1039 m/s² on z. Gyro and
 inclinometer noise come from the array's ``[gyroscope]`` and
 ``[inclinometer]`` tables, else 0.01 rad/s and 0.002 rad.
 :meth:`SensorErrors.none` is exactly noise-free; :meth:`SensorErrors.adxl330`
 adds the bias, scale, misalignment, 16-bit quantisation and ±3 g range of the
-benches of papers 000-002.
+benches of Ho & Lin 2009; Lu, Tsai & Lin 2010; Lin et al. 2011.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ class SensorErrors:
 
     @classmethod
     def adxl330(cls) -> "SensorErrors":
-        """ADXL330 benches (papers 000-002): chip noise, ±3 g, 16-bit ADC over ±10 V at 300 mV/g.
+        """ADXL330 benches (Ho & Lin 2009; Lu, Tsai & Lin 2010; Lin et al. 2011): chip noise, ±3 g, 16-bit ADC over ±10 V at 300 mV/g.
 
         Bias 0.05 m/s², scale 1 %, misalignment 5 mrad (one sigma) stand for
         an uncalibrated module; ADXRS610 gyro ±300 °/s.

@@ -53,7 +53,7 @@ def tilt_angles_rad(quaternion_wb: np.ndarray) -> np.ndarray:
     """Inclinometer angles (tilt_x, tilt_y) of the log format, (N, 2).
 
     The angle between body x (y) and the upward vertical: ``cos tilt_x`` is
-    the z component in W of the body x axis, ``R[2, 0]`` (paper 001, eq. 12).
+    the z component in W of the body x axis, ``R[2, 0]`` (Lu, Tsai & Lin 2010, eq. 12).
     """
     r = rotations.matrix_from_quaternion(quaternion_wb)
     return np.arccos(np.clip(r[:, 2, :2], -1.0, 1.0))
@@ -126,7 +126,7 @@ def integrate_attitude(
 ) -> np.ndarray:
     """Attitudes W←B at ``times_s`` from ``q̇ = ½ q ⊗ (0, ω(t))``, ω in B.
 
-    Fourth-order Magnus step with two Gauss–Legendre nodes ``t±`` (paper 003
+    Fourth-order Magnus step with two Gauss–Legendre nodes ``t±`` (Li et al. 2021
     uses the improved Euler step instead; this one is exact to round-off at
     the step sizes used): ``q ← q ⊗ exp(h/2 (ω₋ + ω₊) + √3/12 h² ω₋ × ω₊)``.
     Each sample interval is split into sub-steps so that no sub-step turns

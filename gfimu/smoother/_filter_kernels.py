@@ -10,7 +10,7 @@ them where a kernel does not apply (gyroscope rows, factor groups' rows).
 - :func:`solve` is :meth:`WindowFilter._solve <gfimu.smoother._fixed_lag_filter.WindowFilter._solve>`
   for the accelerometer readings alone: Gauss-Newton (iterated Kalman) on
   ``J(x) = ||y - h(x)||²_R + ||x - x̂||²_P`` with ``h(x) = S_ω̇ ω̇ + S_f f + S_q q(ω)``
-  (paper 000, eq. 6), the accelerometer variances at ``x`` (motion-dependent, robust);
+  (Ho & Lin 2009, eq. 6), the accelerometer variances at ``x`` (motion-dependent, robust);
 - :func:`search` is the branch search of :meth:`WindowFilter.measure`: Gauss-Newton from the
   prediction and from the other three branches of its minimum (ω flipped, mirrored through the
   array's plane, both: :func:`gfimu.smoother.restarts.branch`), keeping the lowest J;

@@ -10,7 +10,7 @@ model of the state ``x = [ω, ω̇, f]`` (9 values, body frame):
   (the change of variables has unit Jacobian, so the density of the factor graph
   and of this model are the same); f is a random walk; with
   ``process_axis_frequencies_hz`` the exact oscillator step (Φ, its covariance);
-- measurement (paper 000, eq. 6): ``y = S_f f + S_ω̇ ω̇ + S_q q(ω) + v``, and the
+- measurement (Ho & Lin 2009, eq. 6): ``y = S_f f + S_ω̇ ω̇ + S_q q(ω) + v``, and the
   gyroscope ``ω + v_g``; priors on the first state of a segment; the whitened rows
   of the factor groups given in the options (:meth:`ArrayModel.sample_terms`:
   "readings" 0 with unit noise).

@@ -10,7 +10,7 @@ The key conventions of :mod:`gfimu.factors`: variables ``w``/``d``/``f`` of samp
   evaluated by their own vectorised residual and Jacobian on the two samples (:class:`StreamView`)
   with their own noise levels; the gtsam engine adds the rows as one factor
   (:meth:`ArrayModel.add_process`), the numpy engine predicts with the transition they define;
-- the accelerometer equation of every sensor (paper 000, eq. 6), with the structure matrix
+- the accelerometer equation of every sensor (Ho & Lin 2009, eq. 6), with the structure matrix
   (``S [f, ω̇, q(ω)] - y``; :func:`gfimu.factors.accelerometer.make_accelerometer_factor` per sensor
   without ``fast_measurement``), the gyroscope on ω, and the per-sample groups given in the options
   (``FactorGroup.per_sample``), each evaluated on the sample alone (:meth:`ArrayModel.sample_terms`);
@@ -391,7 +391,7 @@ class ArrayModel:
         return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(rows), [kw, kd, kf], error)
 
     def _fast_accelerometer_factor(self, kw: int, kd: int, kf: int, y: np.ndarray) -> gtsam.CustomFactor:
-        """All axes at once: ``S_f f + S_ω̇ ω̇ + S_q q(ω) - y`` (paper 000, eq. 6)."""
+        """All axes at once: ``S_f f + S_ω̇ ω̇ + S_q q(ω) - y`` (Ho & Lin 2009, eq. 6)."""
         S_q, S_f, S_dw = self.S_q, self.S_f, self.S_dw
 
         def error(this, values, jacobians):

@@ -12,7 +12,7 @@ too smooth motion model, and the smoother settles on the wrong sign branch of
 
 :func:`check_model` asks the data which case holds, before any smoothing, from
 the per-sample maximum-likelihood fit (:class:`gfimu.estimators.ml.MLEstimator`),
-whose residual ``r_k = y_k - S x̂_k`` (paper 000, eq. 6) sees the readings'
+whose residual ``r_k = y_k - S x̂_k`` (Ho & Lin 2009, eq. 6) sees the readings'
 disagreement with a rigid body, sample by sample:
 
 - **noise ratio**: the robust scale (1.4826 × median absolute value) of ``r``,
@@ -157,7 +157,7 @@ def resolution_floor(accel_mps2: np.ndarray) -> float:
 
 def rigid_body_residual(log: Log, omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray,
                         specific_force_b_mps2: np.ndarray) -> np.ndarray:
-    """(N, n_axes) readings minus the rigid-body prediction ``S [f, ω̇, q(ω)]`` (paper 000, eq. 6) [m/s²]."""
+    """(N, n_axes) readings minus the rigid-body prediction ``S [f, ω̇, q(ω)]`` (Ho & Lin 2009, eq. 6) [m/s²]."""
     S = log.array.structure_matrix()
     x = np.hstack([specific_force_b_mps2, omega_dot_b_radps2, quadratic_terms(omega_b_radps)])
     return log.accel_mps2 - x @ S.T
@@ -274,7 +274,7 @@ def misfit_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptio
 
 def estimate_noise_variances(array, check: ModelCheck, omega_b_radps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) variances of the per-sample ω̇ and f estimates by the linear rigid-body model with all
-    12 unknowns (paper 000, eq. 6), ``diag((SᵀS)⁻¹) σ_k²`` with the measured noise
+    12 unknowns (Ho & Lin 2009, eq. 6), ``diag((SᵀS)⁻¹) σ_k²`` with the measured noise
     ``σ_k² = σ₀² + (s |ω_k|)²``: what the per-sample estimate's own noise puts into its steps."""
     S = array.structure_matrix()
     c = np.diag(np.linalg.pinv(S.T @ S))

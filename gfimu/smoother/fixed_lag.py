@@ -3,7 +3,7 @@
 The states of each sample k are ω_k, ω̇_k and f_k (all in B). They are tied
 together by
 
-- the array measurement (paper 000, eq. 6): ``y_k = S [f_k, ω̇_k, q(ω_k)] + v``;
+- the array measurement (Ho & Lin 2009, eq. 6): ``y_k = S [f_k, ω̇_k, q(ω_k)] + v``;
 - a white-jerk process model: ``ω_{k+1} = ω_k + h (ω̇_k + ω̇_{k+1}) / 2``
   (trapezoidal integration) and random walks on ω̇ and f;
 - weak priors on the first state of every segment, and an optional gyroscope;

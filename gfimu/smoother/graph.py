@@ -7,12 +7,12 @@ accelerometer bias and scale-factor error, gyroscope bias).
 
 The model is the list of factor groups of :mod:`gfimu.smoother.groups` that apply to the options
 (:data:`gfimu.smoother.groups.BUILT_IN`, then ``SmootherOptions.factor_groups``): the accelerometer
-equation of every sensor (paper 000, eq. 6) or the per-sample inversion; the motion model
+equation of every sensor (Ho & Lin 2009, eq. 6) or the per-sample inversion; the motion model
 (trapezoid kinematics and the ω̇ random walk, i.e. white angular jerk of density
 ``omega_dot_random_walk_radps2_per_sqrt_s``, or per body axis the driven oscillator
 ``ω̈ = -Ω² ω + white jerk``, or with ``motion_model='snap'`` the exact white-snap step of
 [ω, ω̇, ω̈]); the random walk of the specific force, or with the attitude its kinematics and the
-random walk of the gravity-free acceleration; the gyroscope, free flight (paper 004, eq. 1), the
+random walk of the gravity-free acceleration; the gyroscope, free flight (McGinnis, Perkins & King 2012, eq. 1), the
 inclinometer; weak priors on the first state and priors on the calibration variables so that
 nothing in the graph is unobserved. Each group sets its noise on the problem when it is built.
 

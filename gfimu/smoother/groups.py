@@ -13,10 +13,10 @@ A group gives, for a :class:`gfimu.smoother.graph.SmootherProblem`,
 so the batch solver, the noise tuner, the bound and the GTSAM graph read one definition. The
 model (:data:`BUILT_IN`, in the order the problem adds them): the accelerometer measurement (paper
 000, eq. 6) or the per-sample inversion ('quadratic'), the first-state prior, the specific-force
-random walk or, with the attitude, the attitude kinematics (paper 003, eqs. 9-10 on SO(3)), the
+random walk or, with the attitude, the attitude kinematics (Li et al. 2021, eqs. 9-10 on SO(3)), the
 random walk of the gravity-free acceleration and the attitude prior; the motion model (white jerk:
 trapezoid kinematics and the ω̇ random walk, the driven oscillator, or white snap), the gyroscope
-(paper 001), free flight (paper 004, eq. 1), the inclinometer (paper 001) and the calibration
+(Lu, Tsai & Lin 2010), free flight (McGinnis, Perkins & King 2012, eq. 1), the inclinometer (Lu, Tsai & Lin 2010) and the calibration
 priors. Further groups are given with ``SmootherOptions.factor_groups`` and reach every consumer
 without changing any of them; those whose terms are per sample (``per_sample``) or tie two
 consecutive samples (``steps``) also reach the fixed-lag smoother (:mod:`gfimu.smoother.fixed_lag`),
@@ -223,7 +223,7 @@ class _ArrayMeasurementGroup(FactorGroup):
 
 
 class AccelerometerGroup(_ArrayMeasurementGroup):
-    """The accelerometer equation of every sensor at every sample (paper 000, eq. 6), with the
+    """The accelerometer equation of every sensor at every sample (Ho & Lin 2009, eq. 6), with the
     per-axis biases and scale-factor errors when self-calibrating. Noise: ``problem.accel_sigma``
     (array.toml, :mod:`gfimu.noise`), or ``problem.accel_sigma_per_sample`` when set (motion-dependent
     noise, robust re-weighting)."""
@@ -364,7 +364,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
 
 
 class InversionGroup(_ArrayMeasurementGroup):
-    """``measurement='quadratic'``: the per-sample inversion ``[f, ω̇, q(ω)]`` (paper 000, eq. 7) with
+    """``measurement='quadratic'``: the per-sample inversion ``[f, ω̇, q(ω)]`` (Ho & Lin 2009, eq. 7) with
     its covariance ``problem.x_cov`` (whitening ``problem.x_whiten``)."""
 
     name = "per-sample inversion"
@@ -447,7 +447,7 @@ class SpecificForceWalkGroup(FactorGroup):
 
 class AttitudeGroup(FactorGroup):
     """With the attitude R_k (W←B) in the state: its kinematics ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``
-    (paper 003, eqs. 9-10 on SO(3); ``problem.attitude_step_sigma``), the gravity-free acceleration
+    (Li et al. 2021, eqs. 9-10 on SO(3); ``problem.attitude_step_sigma``), the gravity-free acceleration
     ``f + Rᵀ g`` as a random walk (``problem.accel_step_sigma``) and a weak prior on the first attitude
     (``problem.attitude_prior_wb``, stds ``problem.attitude_prior_sigma``: tilt free, yaw
     ``initial_yaw_std_rad``)."""
@@ -702,7 +702,7 @@ class MotionModelGroup(FactorGroup):
 
 
 class GyroscopeGroup(FactorGroup):
-    """``ω_k + b_g - ω_meas,k`` with the gyroscope's noise (paper 001), bias when self-calibrating."""
+    """``ω_k + b_g - ω_meas,k`` with the gyroscope's noise (Lu, Tsai & Lin 2010), bias when self-calibrating."""
 
     name = "gyroscope"
     per_sample = False
@@ -736,7 +736,7 @@ class GyroscopeGroup(FactorGroup):
 
 
 class FreeFlightGroup(FactorGroup):
-    """Free flight (paper 004, eq. 1): Euler's torque-free equation ``I ω̇ + ω × I ω = 0`` (torque
+    """Free flight (McGinnis, Perkins & King 2012, eq. 1): Euler's torque-free equation ``I ω̇ + ω × I ω = 0`` (torque
     noise ``torque_noise_std_nm``) and zero specific force (``free_fall_std_mps2``)."""
 
     name = "free flight"
@@ -772,7 +772,7 @@ class FreeFlightGroup(FactorGroup):
 
 class InclinometerGroup(FactorGroup):
     """The inclinometer's two tilt angles against the attitude's direction cosines of gravity
-    (paper 001, eqs. 12-13), when the attitude is estimated with ``use_inclinometer``."""
+    (Lu, Tsai & Lin 2010, eqs. 12-13), when the attitude is estimated with ``use_inclinometer``."""
 
     name = "inclinometer"
 

@@ -4,7 +4,7 @@ maximum-likelihood estimate, find it, say it, and (by default) use the per-sampl
 A smoother trades fit for smoothness: its states follow the motion model, so they leave a larger
 rigid-body residual than the per-sample fit (:class:`gfimu.estimators.ml.MLEstimator`), which
 minimises each sample's residual alone. How much larger is bounded by the model. Take the
-residual ``r_k = y_k - S [f_k, ω̇_k, q(ω_k)]`` (paper 000, eq. 6; :func:`gfimu.smoother.auto.rigid_body_residual`)
+residual ``r_k = y_k - S [f_k, ω̇_k, q(ω_k)]`` (Ho & Lin 2009, eq. 6; :func:`gfimu.smoother.auto.rigid_body_residual`)
 whitened by the noise of the model check, ``σ_k² = σ₀² + (s |ω_k|)²`` (floor and slope of
 :class:`gfimu.smoother.auto.ModelCheck`), and the excess of the smoother's whitened squared
 residual over the per-sample one,

@@ -1,7 +1,7 @@
 """Initial states for the smoothers, in the right basin even when ω crosses zero.
 
 1. Linear smoothing of the lifted per-sample unknowns ``z = [f, ω̇, q(ω)]``
-   (paper 000's linear model ``y = S z``) with random-walk priors: the
+   (Ho & Lin 2009's linear model ``y = S z``) with random-walk priors: the
    per-sample inversion when S is well conditioned, a regularised version of
    it for near-planar arrays (e.g. MIMU4444) where S alone fails. One banded
    solve, linear in length.
@@ -13,7 +13,7 @@
    wherever ω̇ varies within the window (a constant ω has an unobservable
    sign from accelerometers alone: ``q(ω) = q(-ω)``; then continuity with
    the previous window decides).
-3. With a gyroscope ω comes from it; in free flight (paper 004) ω is tracked
+3. With a gyroscope ω comes from it; in free flight (McGinnis, Perkins & King 2012) ω is tracked
    sample by sample through the accelerometer model with Euler's equations,
    and the global sign (unobservable per sample) is chosen so that the
    integral of ω̇ agrees with ω.
@@ -238,7 +238,7 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
                robust_scale_radps: float | str | None = "data") -> np.ndarray:
     """Signs s_k = ±1 (N,) minimising ``Σ_k ρ(||s_{k+1} ω_{k+1} - s_k ω_k - h_k/2 (ω̇_k + ω̇_{k+1})||)``.
 
-    The accelerometers fix ω only up to its sign per sample (the quadratic terms, paper 000, eq. 6)
+    The accelerometers fix ω only up to its sign per sample (the quadratic terms, Ho & Lin 2009, eq. 6)
     while ω̇ is sign-free: the sign sequence that best follows the trapezoid of ω̇ is found exactly
     by dynamic programming (Viterbi, two states per sample, linear in N). It keeps a rotation that
     slows through zero and reverses (ω̇ keeps its sign) apart from one that bounces back.
@@ -277,7 +277,7 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
 
 
 def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
-    """Track ω through the single-sensor free-flight model (paper 004, eqs. 1, 13).
+    """Track ω through the single-sensor free-flight model (McGinnis, Perkins & King 2012, eqs. 1, 13).
 
     Per sample, Gauss-Newton on ``y = S_axes [0, Ψ(ω), q(ω)]`` with
     ``Ψ(ω) = -I⁻¹ (ω × I ω)``, started from the previous sample (the first
@@ -386,7 +386,7 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
         return x0
     gyro = arr.gyroscope is not None and options.use_gyro and log.gyro_b_radps is not None
     if gyro and arr.n_axes < 12:
-        # f and ω̇ from the accelerometers given ω (paper 001's gyro-aided model), smoothed lightly
+        # f and ω̇ from the accelerometers given ω (Lu, Tsai & Lin 2010's gyro-aided model), smoothed lightly
         S = arr.structure_matrix()
         y = log.accel_mps2 - rigid_body.quadratic_terms(log.gyro_b_radps) @ S[:, 6:12].T
         lin = np.linalg.lstsq(S[:, :6], y.T, rcond=1e-8)[0].T
@@ -444,7 +444,7 @@ def initial_attitude(log: Log, omega_b_radps: np.ndarray, specific_force_b_mps2:
                      start_wb: np.ndarray | None = None, use_inclinometer: bool = False) -> np.ndarray:
     """Attitudes (N, 3, 3): the first from ``start_wb``, else levelled from the inclinometer or the
     mean specific force of the first 0.2 s (zero yaw); then propagated with
-    ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)`` (paper 003, eq. 10)."""
+    ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)`` (Li et al. 2021, eq. 10)."""
     n = len(log)
     if start_wb is not None:
         R0 = np.asarray(start_wb, dtype=float)

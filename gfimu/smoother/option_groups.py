@@ -61,7 +61,8 @@ class ModelOptions:
         "white jerk"))
     factor_groups: tuple = option((), help=(
         "further factor groups (gfimu.smoother.groups.FactorGroup, from Python) added to the model of every "
-        "solve; the fixed-lag smoother takes those that are per sample"))
+        "solve; the fixed-lag smoother takes those whose rows each tie one sample (per_sample) or two "
+        "consecutive samples (steps)"))
     compute_sigma: bool = option(False, help=(
         "also output one-sigma marginal uncertainties of the estimates (sigma_ columns)"))
     max_iterations: int = option(30, help=(
@@ -93,7 +94,7 @@ class BatchModelOptions:
         "'quadratic': the per-sample inversion [f, ω̇, q(ω)] with its covariance (an invertible array, no "
         "self-calibration; batch smoother only)"))
     use_inclinometer: bool = option(False, help=(
-        "use the inclinometer's tilt angles (paper 001); implies estimate_attitude (batch smoother only)"))
+        "use the inclinometer's tilt angles (Lu, Tsai & Lin 2010); implies estimate_attitude (batch smoother only)"))
     estimate_attitude: bool = option(False, help=(
         "carry the attitude R_k (W←B) in the state and output orientation and gravity-free acceleration; tilt "
         "is observed through the inclinometer or the random walk of the gravity-free acceleration, yaw only "
@@ -115,7 +116,7 @@ class BatchModelOptions:
     scale_prior_std: float = option(0.01, help=(
         "prior std of each accelerometer scale-factor error (a fraction, around 0) with self_calibrate_scale"))
     free_flight: bool = option(False, help=(
-        "treat the whole log as torque-free free flight (paper 004): needs [body] in array.toml (batch "
+        "treat the whole log as torque-free free flight (McGinnis, Perkins & King 2012): needs [body] in array.toml (batch "
         "smoother only)"))
     torque_noise_std_nm: float = option(1e-4, "N m", "std of the unmodelled torque in the Euler factor")
     free_fall_std_mps2: float = option(0.05, "m/s²", "std of the specific force at the centre of mass in free flight")

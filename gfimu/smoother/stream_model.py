@@ -150,7 +150,7 @@ def is_still(part: Log, ml_motion, check: ModelCheck) -> bool:
     """Whether ``part`` shows the body at rest (or turning too slowly for its readings to tell): no
     motion of ω̇ above the noise (:func:`has_motion`) and |ω| within :data:`STILL_OMEGA_NOISE` times
     the |ω| of noise alone, ``√σ_q`` with ``σ_q`` the std the floor puts on the quadratic terms
-    (paper 000, eq. 6)."""
+    (Ho & Lin 2009, eq. 6)."""
     if has_motion(part, ml_motion, check):
         return False
     S = part.array.structure_matrix()
@@ -174,7 +174,7 @@ nothing about the motion."""
 
 class LocalDensity:
     """The local motion density of a stream, causally: the step power of the per-sample inversion's
-    ω̇ (paper 000, eq. 7: linear in the readings) above what its own noise gives, averaged over the
+    ω̇ (Ho & Lin 2009, eq. 7: linear in the readings) above what its own noise gives, averaged over the
     last ``period_s`` — the trailing form of :func:`gfimu.smoother.auto.local_density_factors`.
 
     :meth:`push` takes each sample's readings and the |ω| expected there (which sets the noise of a

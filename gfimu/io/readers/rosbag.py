@@ -185,7 +185,7 @@ def _check_metadata(path: Path) -> None:
     bounded depth and aliases (:mod:`gfimu.io.safe_yaml`), then the keys rosbags reads checked for their types."""
     from ..safe_yaml import load_yaml
 
-    doc, _ = load_yaml(path, "the metadata.yaml of a ROS 2 bag")
+    doc, _ = load_yaml(path, "the metadata.yaml of a ROS 2 bag", extra="rosbag")
     top = "rosbag2_bagfile_information"
 
     def bad(key: str, expected: str, value) -> LogFormatError:
