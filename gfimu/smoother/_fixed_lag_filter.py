@@ -590,20 +590,6 @@ class WindowFilter:
             prior = 0.0
         return x, H, Z, float(np.sum(r * r / R)) + prior
 
-    def _search(self, y, xp, P, x0, branches: bool):
-        """(x, H, Z, J) of :func:`kernels.search <gfimu.smoother._filter_kernels.search>` on the readings
-        ``y`` alone: Gauss-Newton from ``x0``, then, with ``branches``, from the other branches of that
-        minimum (J is 0 without)."""
-        R0, S_q, S_dw, S_f, slope, c_robust, loss = self._kernel_model
-        iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
-        x, H, Z, J, ok = kernels.search(np.ascontiguousarray(y, dtype=float), xp, np.ascontiguousarray(P),
-                                        np.array(x0, dtype=float), R0, S_q, S_dw, S_f, slope, c_robust, loss,
-                                        iterations, self.step_tolerance_radps, bool(branches), self._normal,
-                                        BRANCH_PRIOR_MARGIN)
-        if not ok:
-            raise FilterFailure("singular innovation covariance")
-        return x, H, Z, float(J)
-
     def _measure_compiled(self, y, xp, P, x0, from_prediction: bool) -> None:
         """:meth:`measure` on the readings alone through :func:`kernels.measure_update
         <gfimu.smoother._filter_kernels.measure_update>` (the branches and the robust step only from the
@@ -643,15 +629,11 @@ class WindowFilter:
         if gyro is not None:
             y = np.concatenate([y, gyro])
         x0 = xp if start is None else np.asarray(start, dtype=float)
-        compiled = self.compiled and gyro is None and extra is None
-        if compiled:  # the whole update in one compiled call
+        if self.compiled and gyro is None and extra is None:  # the whole update in one compiled call
             self._measure_compiled(y, xp, P, x0, start is None)
             return
-        if compiled:
-            best = self._search(y, xp, P, x0, self.branches and start is None)
-        else:
-            best = self._solve(y, gyro, xp, P, x0, extra)
-        if self.branches and start is None and gyro is None and not compiled:
+        best = self._solve(y, gyro, xp, P, x0, extra)
+        if self.branches and start is None and gyro is None:
             try:
                 P_inv = np.linalg.inv(P)
             except np.linalg.LinAlgError:
@@ -683,10 +665,7 @@ class WindowFilter:
                 self._P = P
                 self._cross[hi - 1] = P
                 self._var[hi - 1] = np.diagonal(P)
-                if compiled:
-                    best = self._search(y, xp, P, best[0], False)
-                else:
-                    best = self._solve(y, gyro, xp, P, best[0], extra)
+                best = self._solve(y, gyro, xp, P, best[0], extra)
         _, H, Z, _ = best
         self._update(H, Z, P)  # the last linearisation moves the whole window
 
