@@ -565,10 +565,15 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
             pass
     failure = source.failure
     if crash:
+        from .errors import DataError, InputError
+
         exc = crash[0]
-        ended = "stopped by an error"
-        failure = (f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename
-                   else f"{type(exc).__name__}: {exc}")
+        if isinstance(exc, (InputError, DataError)):  # the stream's own data refused, as estimate refuses a log's
+            ended, failure = "input refused", str(exc)
+        else:
+            ended = "stopped by an error"
+            failure = (f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename
+                       else f"{type(exc).__name__}: {exc}")
     elif ended is None:
         ended = source.ended
         if fatal:

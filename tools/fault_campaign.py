@@ -446,7 +446,7 @@ def containment_cases() -> list[Case]:
     add("live-guard-replace", live + ["--source", "-", "-O", "guard=replace"], None, {2}, "-O guard=replace")
     add("live-udp-no-port", live + ["--source", "udp://127.0.0.1"], None, {2}, "give the port")
     add("live-serial-baud-negative", live + ["--source", "serial:///dev/null?baud=-5"], None, {2}, "baud=-5")
-    add("live-1ns-steps", live + ["--source", "-"], _live_1ns, {1}, "beyond any IMU")
+    add("live-1ns-steps", live + ["--source", "-"], _live_1ns, {2}, "beyond any IMU")
     add("live-rate-1e9", live + ["--source", "-", "--rate-hz", "1e9"], None, {2}, "--rate-hz")
     est = ["estimate", "{w}/log", "--method", "inversion", *EST]
     add("array-400-digit-position", est, lambda w: _edit(w / "log" / "array.toml", lambda t: t.replace(
