@@ -153,7 +153,7 @@ def test_chain_step_is_the_numpy_chain(n_branches):
         np.testing.assert_allclose(got[3], want[3], rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("scenario, noise", [("random3d", 0.07), ("reversal", 0.02)])
+@pytest.mark.parametrize("scenario, noise", [pytest.param("random3d", 0.07, marks=pytest.mark.slow), ("reversal", 0.02)])
 def test_a_whole_stream_through_the_kernels_is_the_numpy_stream(monkeypatch, scenario, noise):
     log = simulate(scenario, array=cube_array(0.025, noise_std_mps2=noise), rate_hz=500.0, duration_s=6.0, seed=4)
     estimator = FixedLagEstimator(tune_window_s=2.0)

@@ -95,6 +95,7 @@ def test_the_example_runs_on_a_log_folder(log, tmp_path, capsys):
     assert {p.name: p.read_bytes() for p in (tmp_path / "log").iterdir()} == before
 
 
+@pytest.mark.slow
 def test_the_documented_command_writes_its_log_and_prints_the_documented_figure(tmp_path, capsys):
     """docs/gtsam.md's command: `python examples/gtsam_isam2.py sim --simulate --keyframe 10` writes the log it
     solves (no file the repository does not ship) and prints the figure the page gives; a folder that exists is

@@ -44,6 +44,7 @@ def log_dir(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow  # the fault campaign's case live-g-header runs the same in the default set
 def test_readings_in_m_per_s2_under_a_g_header_are_named_with_the_factor(log_dir, tmp_path):
     """The rows of the log with every accelerometer unit written [g]: live warns on the first rows with the check
     and words gfimu estimate uses (|f| ≈ 9.81 × gravity, the unit read named); with the right header, no warning."""
