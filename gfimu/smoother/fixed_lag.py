@@ -588,6 +588,10 @@ class FixedLagSmoother:
             engine.commit()
         except FilterFailure:
             return
+        self._go_on_with(engine)
+
+    def _go_on_with(self, engine) -> None:
+        """The window solved again (``engine``) replaces the stream's: the sign chain starts again from it."""
         self._smoother = engine
         self._signs.reset()
         self._remember_newest()
@@ -1046,9 +1050,7 @@ class FixedLagSmoother:
             engine.commit()
         except FilterFailure:
             return
-        self._smoother = engine
-        self._signs.reset()
-        self._remember_newest()
+        self._go_on_with(engine)
 
 
 @dataclass(frozen=True)
