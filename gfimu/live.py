@@ -350,6 +350,10 @@ def _on_rate_change(session: "_Session", watch: _RateWatch, r: Reading, array, e
     emit(_rerate(session, array, estimator, new), timed=False)
 
 
+OUTPUT_CLOSED = "output closed by its reader"
+""":attr:`LiveResult.ended` when writing a row met a broken pipe (the reader of standard output went away)."""
+
+
 def _check_rate(rate_hz: float, source: Source) -> None:
     """A rate beyond any IMU's (timestamps 1 ns apart) would size the smoother's window at hundreds of millions
     of samples: refused (the session ends with the message) instead of running out of memory."""
@@ -401,6 +405,7 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     source.keep_gross_errors = bool(getattr(estimator, "screen_readings", False))
     q: queue.Queue = queue.Queue(maxsize=max(int(queue_size), 1))
     fatal: list[BaseException] = []
+    closed = False
     overrun = [0]
     caught: list[str] = []
 
@@ -548,8 +553,8 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
                 emit(session.flush(), timed=False)
                 if session.screen is not None and session.screen.count:
                     say(f"warning: {session.screen.describe()}")
-        except BrokenPipeError:  # standard output closed by its reader: the caller's to handle
-            raise
+        except BrokenPipeError:  # the output (standard output) closed by its reader: the session ends there
+            closed = True
         except Exception as exc:  # noqa: BLE001 - the estimator or the output failed: end with the counts
             crash.append(exc)
         ended = caught[0] if caught else None
@@ -564,7 +569,9 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
         except OSError:
             pass
     failure = source.failure
-    if crash:
+    if closed:
+        ended, failure = OUTPUT_CLOSED, "the output was closed by its reader (a broken pipe); the session ended there"
+    elif crash:
         from .errors import DataError, InputError
 
         exc = crash[0]

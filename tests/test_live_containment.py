@@ -223,6 +223,36 @@ def test_live_says_when_its_reader_goes_away(log_dir, tmp_path):
     assert "Traceback" not in err and len(_errors(err)) == 1 and "closed by its reader" in err
 
 
+def test_live_whose_reader_goes_away_mid_stream_ends_with_its_summary(log_dir):
+    """The reader of --out - reads the first rows, then goes away: exit 1, one line saying so, then the
+    session's summary (ended: output closed by its reader), no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "gfimu", "live", "--array", str(log_dir / "array.toml"),
+                             "--source", "-", "--out", "-", "--quiet", "-O", "auto_model=False",
+                             "-O", "tune_process_noise=False", "-O", "hold_max_s=0"], env=_env(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    import threading
+
+    watchdog = threading.Timer(120.0, proc.kill)  # a hung session fails the test instead of hanging the run
+    watchdog.start()
+    rows = (log_dir / "imu.csv").read_bytes().splitlines(keepends=True)
+    proc.stdin.write(b"".join(rows[:400]))
+    proc.stdin.flush()
+    for _ in range(5):  # the header and a few rows
+        assert proc.stdout.readline()
+    proc.stdout.close()
+    try:
+        proc.stdin.write(b"".join(rows[400:]))
+        proc.stdin.close()
+    except BrokenPipeError:
+        pass
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=120)
+    watchdog.cancel()
+    assert proc.returncode == 1, err
+    assert "Traceback" not in err and len(_errors(err)) == 1 and "closed by its reader" in err
+    assert "samples in," in err and "ended: output closed by its reader" in err
+
+
 @pytest.mark.parametrize("command", [["estimate", "{log}", "--method", "inversion", "--out", "-"],
                                      ["live", "--array", "{log}/array.toml", "--source", "-", "--out", "-"]])
 def test_standard_output_on_a_full_disk_is_named(log_dir, command):

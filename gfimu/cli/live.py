@@ -79,7 +79,7 @@ def run(args) -> int:
 
 def _session(args, source, estimator, out_path, rate_hz, declared_rate_hz) -> int:
     from ..live import EstimateSink
-    from ..live import run as run_live
+    from ..live import OUTPUT_CLOSED, run as run_live
 
     def report(message: str) -> None:
         try:
@@ -96,10 +96,10 @@ def _session(args, source, estimator, out_path, rate_hz, declared_rate_hz) -> in
             result = run_live(source, estimator, EstimateSink(out, sigma=estimator.compute_sigma), rate_hz=rate_hz,
                               queue_size=args.queue, report=report,
                               status_s=None if getattr(args, "quiet", False) else args.status_s)
-        except BrokenPipeError:  # standard output closed by its reader: the session cannot go on
+        except BrokenPipeError:  # standard output closed by its reader before the session began (its header)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to flush into it
-            report(f"error: --out {args.out}: the output was closed by its reader (a broken pipe); the session "
-                   "ended there")
+            report(f"error: --out {args.out}: the output was closed by its reader (a broken pipe) before the "
+                   "first row; nothing was estimated")
             return EXIT_FAILURE
         except OSError as exc:
             if out_path is not None or exc.errno is None:
@@ -107,7 +107,10 @@ def _session(args, source, estimator, out_path, rate_hz, declared_rate_hz) -> in
             from ..io.atomic import resource_error  # standard output on a full disk: named as the output
 
             raise resource_error(exc, "standard output (--out -)") from None
-    if result.failure:
+    if result.ended == OUTPUT_CLOSED:  # standard output closed by its reader: nothing more to flush into it
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        report(f"error: --out {args.out}: {result.failure}")
+    elif result.failure:
         report(f"error: {result.failure}")
     report(result.summary())
     if result.signal_exit is not None:
