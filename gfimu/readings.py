@@ -486,10 +486,14 @@ def stream_delay_samples(rate_hz: float | None) -> int:
     return SCALE_HALF_WIDTH + 1 + MEDIAN_HALF_WIDTH
 
 
+def stream_block_samples(rate_hz: float | None) -> int:
+    """Samples the stream screening decides at once: :data:`STREAM_BLOCK_S` at ``rate_hz``, at least one."""
+    return max(1, round(STREAM_BLOCK_S * rate_hz)) if rate_hz and np.isfinite(rate_hz) else 1
+
+
 def stream_wait_s(rate_hz: float) -> float:
     """The longest a reading waits in the stream screening [s]: its delay and one block."""
-    block = max(1, round(STREAM_BLOCK_S * rate_hz))
-    return (stream_delay_samples(rate_hz) + block) / rate_hz
+    return (stream_delay_samples(rate_hz) + stream_block_samples(rate_hz)) / rate_hz
 
 
 class StreamScreen:
@@ -521,7 +525,7 @@ class StreamScreen:
         self.rate_hz = rate_hz
         self.delay = stream_delay_samples(rate_hz)
         """Samples a reading waits for before it is decided."""
-        self.block = max(1, round(STREAM_BLOCK_S * rate_hz)) if rate_hz and np.isfinite(rate_hz) else 1
+        self.block = stream_block_samples(rate_hz)
         # rows kept behind the first undecided one: the spike rule's reach, and a stuck run's shortest length
         self._history = max(self.delay, stuck_min_samples(rate_hz)) + MEDIAN_HALF_WIDTH
         self._times: list[int] = []
