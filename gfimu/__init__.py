@@ -25,7 +25,7 @@ _LAZY = {
     "MissingExtraError": "errors",
     "read_log": "io", "write_log": "io", "simulate": "simulate",
     "METHODS": "methods", "UnknownMethodError": "methods", "make_estimator": "methods",
-    "FixedLagSmoother": "smoother.fixed_lag", "evaluate": "evaluation",
+    "FixedLagSmoother": "smoother.stream.fixed_lag", "evaluate": "evaluation",
     "estimate_log": "pipeline", "EstimateRun": "pipeline",
 }
 

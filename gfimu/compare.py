@@ -36,9 +36,9 @@ from .io import write_motion_csv
 from .log import Log
 from .methods import METHODS, UnknownMethodError, make_estimator
 from .motion import Motion
-from .smoother.bound import smoother_bound
-from .smoother.graph import SmootherOptions
-from .smoother.presets import expand_preset
+from .smoother.batch.bound import smoother_bound
+from .smoother.model.problem import SmootherOptions
+from .smoother.model.presets import expand_preset
 
 # Quantities in table order: field -> (short key, label for headers, unit)
 TABLE_QUANTITIES: dict[str, tuple[str, str, str]] = {

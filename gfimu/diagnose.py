@@ -4,7 +4,7 @@
 (:class:`gfimu.estimators.ml.MLEstimator`) once and reads from it, and from the raw readings:
 
 - **rigid-body consistency**: the model check of the batch smoother
-  (:func:`gfimu.smoother.auto.check_model`), and its residual per sensor and per |ω| band
+  (:func:`gfimu.smoother.tuning.model_choice.check_model`), and its residual per sensor and per |ω| band
   (robust scale, 1.4826 × median absolute value, corrected for the 9 unknowns fitted per sample);
 - **noise floor**: σ₀ of that check against the noise stated in ``array.toml``;
 - **timing**: rate, jitter, gaps, repeated and backward timestamps (:func:`timing_of`);
@@ -41,7 +41,7 @@ from .io.units import STANDARD_GRAVITY_MPS2
 from .log import Log
 from .readings import clipped_readings, dead_channels, describe_dead_channels, runs_of, screen_log, stuck_runs
 from .rigid_body import quadratic_terms_jacobian
-from .smoother.auto import NOISE_RATIO_LIMIT, check_model, rigid_body_residual
+from .smoother.tuning.model_choice import NOISE_RATIO_LIMIT, check_model, rigid_body_residual
 
 DEG_PER_RAD = 180.0 / np.pi
 BANDS_RADPS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, np.inf)
@@ -134,7 +134,7 @@ class Diagnosis:
     axes: int
     timing: Timing
     model: dict
-    """The smoother's model check (:meth:`gfimu.smoother.auto.ModelCheck.as_dict`)."""
+    """The smoother's model check (:meth:`gfimu.smoother.tuning.model_choice.ModelCheck.as_dict`)."""
     noise_floor_mps2: float
     stated_noise_mps2: float
     per_sensor: tuple[SensorReport, ...]
@@ -601,7 +601,7 @@ def smoother_guard(log: Log, options: dict | None = None) -> dict:
     mode (:meth:`gfimu.smoother.guard.GuardResult.as_dict`, with the spans in a few words as ``message``);
     ``note`` says why when the smoother cannot run on the log."""
     from .errors import GfimuError
-    from .smoother.batch import BatchSmootherEstimator
+    from .smoother.batch.engine import BatchSmootherEstimator
 
     estimator = BatchSmootherEstimator(**{**(options or {}), "use_gyro": False, "guard": "warn"})
     reason = estimator.applicable(log.array)

@@ -29,8 +29,8 @@ class Report:
     ``timings``: seconds per step, in the order run (``{"estimate": 0.8}`` for a per-sample method;
     the pipeline adds its own steps, :func:`gfimu.pipeline.estimate_log`). The rest applies to the
     methods that have it and is empty otherwise: ``model_check`` (the batch smoother's check of the
-    readings against a rigid body, :class:`gfimu.smoother.auto.ModelCheck`), ``tunings`` (the noise
-    chosen from the data, per solve window, :class:`gfimu.smoother.tuning.Tuning`), ``calibration``
+    readings against a rigid body, :class:`gfimu.smoother.tuning.model_choice.ModelCheck`), ``tunings`` (the noise
+    chosen from the data, per solve window, :class:`gfimu.smoother.tuning.evidence.Tuning`), ``calibration``
     (calibration variables estimated, per solve window), ``iterations`` and ``cost`` (solver
     iterations and final cost, summed over the windows), ``windows`` (solve windows; 0 for a stream),
     ``guard`` (the smoothers' comparison with the per-sample estimate,

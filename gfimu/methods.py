@@ -34,8 +34,8 @@ METHODS: dict[str, str] = {
     "ml": "gfimu.estimators.ml:MLEstimator",
     "gyro-aided": "gfimu.estimators.gyro_aided:GyroAidedEstimator",
     "free-flight": "gfimu.estimators.free_flight:FreeFlightEstimator",
-    "smoother": "gfimu.smoother.batch:BatchSmootherEstimator",
-    "fixed-lag": "gfimu.smoother.fixed_lag:FixedLagEstimator",
+    "smoother": "gfimu.smoother.batch.engine:BatchSmootherEstimator",
+    "fixed-lag": "gfimu.smoother.stream.fixed_lag:FixedLagEstimator",
 }
 """Method name -> ``module:class`` of its estimator."""
 
@@ -67,11 +67,11 @@ def make_estimator(name: str, **options: Any):
     """Instantiate the estimator ``name`` with keyword options (checked by name).
 
     ``preset=NAME`` (method "smoother"): start from the named settings of
-    :data:`gfimu.smoother.presets.PRESETS`; the other options given win over it.
+    :data:`gfimu.smoother.model.presets.PRESETS`; the other options given win over it.
     """
     cls = estimator_class(name)
     if "preset" in options:
-        from .smoother.presets import expand_preset  # on first use: `gfimu --help` loads no numpy
+        from .smoother.model.presets import expand_preset  # on first use: `gfimu --help` loads no numpy
 
         options = expand_preset(name, options)
     if dataclasses.is_dataclass(cls):

@@ -12,7 +12,7 @@ missing std here, the same way everywhere:
 Estimators that only report a one-sigma (inversion, gyro-aided, free flight) do not invent one:
 they leave it out where the array states no noise. The smoothers' noise tuner rescales the
 accelerometer noise from the data when asked (``tune_accel_noise``), and the model check
-(:mod:`gfimu.smoother.auto`) measures it, so a default only has to be of the right order.
+(:mod:`gfimu.smoother.tuning.model_choice`) measures it, so a default only has to be of the right order.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ def turntable_5cm_smoother():
     smoother's estimate of it, computed once for the tests that check it: (log, report, motion) of the run."""
     from gfimu.array import cube_array
     from gfimu.simulate import simulate
-    from gfimu.smoother.batch import BatchSmootherEstimator
+    from gfimu.smoother.batch.engine import BatchSmootherEstimator
 
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=500.0, duration_s=6.0, seed=1)
     estimate = BatchSmootherEstimator().estimate(log)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from gfimu.smoother.tuning import log_normaliser
+from gfimu.smoother.tuning.evidence import log_normaliser
 
 
 def dense_log_evidence(problem, x: np.ndarray) -> float:

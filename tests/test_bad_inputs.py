@@ -442,7 +442,7 @@ def test_fixed_lag_refuses_a_one_row_log(work, capsys):
 
 def test_fixed_lag_solver_failure_is_named_not_leaked(work, capsys, monkeypatch):
     """A gtsam failure while reading the state (as IndeterminantLinearSystem does) becomes one message with the time."""
-    from gfimu.smoother import fixed_lag
+    from gfimu.smoother.stream import fixed_lag
 
     real_new = fixed_lag.FixedLagSmoother._new_smoother
 

@@ -7,7 +7,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
-from gfimu.smoother.banded import (
+from gfimu.smoother.solve.banded import (
     band_structure,
     factorise,
     marginal_covariances,
@@ -15,9 +15,9 @@ from gfimu.smoother.banded import (
     solve_step,
     to_lower_banded,
 )
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.initialise import initial_states
-from gfimu.smoother.layout import StateLayout
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.solve.initialise import initial_states
+from gfimu.smoother.model.layout import StateLayout
 
 CUBE = cube_array(0.05, noise_std_mps2=0.07)
 
@@ -126,7 +126,7 @@ def test_white_jerk_band_is_narrowed_to_m_plus_one(log):
 
 # --- the tuner's process basis ----------------------------------------------
 
-from gfimu.smoother.tuning import ProcessBasis, linearised_log_evidence, make_problem, measurement_normal_equations, tune  # noqa: E402
+from gfimu.smoother.tuning.evidence import ProcessBasis, linearised_log_evidence, make_problem, measurement_normal_equations, tune  # noqa: E402
 
 
 @pytest.mark.parametrize("name", ["jerk"])
@@ -195,7 +195,7 @@ def test_tuner_with_the_process_basis_on_a_turntable_reaches_the_same_evidence()
 # --- the initialisation's window sign resolution ------------------------------
 
 from gfimu import rigid_body  # noqa: E402
-from gfimu.smoother.initialise import _SIGNS, sign_resolved_omega, trapezoid_integral, window_initial_omega  # noqa: E402
+from gfimu.smoother.solve.initialise import _SIGNS, sign_resolved_omega, trapezoid_integral, window_initial_omega  # noqa: E402
 
 
 def window_initial_omega_by_samples(q_meas, integral, previous=None, continuity_std_radps=0.5, iterations=8):

@@ -13,8 +13,8 @@ import pytest
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
-from gfimu.smoother.batch import BatchSmootherEstimator, window_workers
-from gfimu.smoother.initialise import initial_estimate
+from gfimu.smoother.batch.engine import BatchSmootherEstimator, window_workers
+from gfimu.smoother.solve.initialise import initial_estimate
 
 
 @pytest.fixture(scope="module")

@@ -56,7 +56,7 @@ def test_the_fixed_lag_smoother_with_the_numpy_engine_does_not_load_gtsam():
         "import numpy as np\n"
         "from gfimu.array import cube_array\n"
         "from gfimu.simulate import simulate\n"
-        "from gfimu.smoother.fixed_lag import FixedLagEstimator\n"
+        "from gfimu.smoother.stream.fixed_lag import FixedLagEstimator\n"
         "log = simulate('random3d', cube_array(0.05, 0.07), rate_hz=200.0, duration_s=0.5, seed=0)\n"
         "FixedLagEstimator(tune_process_noise=False).estimate(log).motion\n"))
     assert "gtsam" not in mods and "matplotlib" not in mods and "pandas" not in mods

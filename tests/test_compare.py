@@ -228,9 +228,9 @@ def test_motion_level_and_t2_sweep():
 
 
 def test_smoother_bound_uses_the_process_noise_the_smoother_chose():
-    from gfimu.smoother.batch import BatchSmootherEstimator
-    from gfimu.smoother.bound import smoother_bound
-    from gfimu.smoother.graph import SmootherOptions
+    from gfimu.smoother.batch.engine import BatchSmootherEstimator
+    from gfimu.smoother.batch.bound import smoother_bound
+    from gfimu.smoother.model.problem import SmootherOptions
 
     log = simulate("turntable", array=cube_array(0.025, noise_std_mps2=0.07), rate_hz=500.0, duration_s=3.0, seed=2)
     result = compare(log, methods=["smoother"], bounds=["smoother_bound"])

@@ -173,7 +173,7 @@ def test_the_kinds(work):
     from gfimu.io.errors import LogFormatError, OutputError
     from gfimu.io.sources import SourceError
     from gfimu.methods import UnknownMethodError, make_estimator
-    from gfimu.smoother.fixed_lag import FixedLagSmootherClosed, FixedLagSmootherError
+    from gfimu.smoother.stream.fixed_lag import FixedLagSmootherClosed, FixedLagSmootherError
 
     for cls in (LogFormatError, ArrayModelError, OptionError, CLIError, SourceError, UnknownMethodError,
                 CalibrationFileError, OutputError, FixedLagSmootherClosed):

@@ -99,7 +99,7 @@ def test_pipeline_times_its_steps_around_the_methods(log_dir, tmp_path):
 
 def test_command_builds_the_estimator_once_and_prints_the_report(log_dir, tmp_path, capsys, monkeypatch):
     import gfimu.methods
-    from gfimu.smoother import batch
+    from gfimu.smoother.batch import engine as batch
 
     calls = []
     real_make = gfimu.methods.make_estimator

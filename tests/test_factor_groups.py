@@ -13,11 +13,11 @@ from gfimu.array import paper001_array
 from gfimu.factors import diagonal_noise, omega_key, process
 from gfimu.methods import make_estimator
 from gfimu.simulate import simulate
-from gfimu.smoother.bound import smoother_bound
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.groups import FactorGroup, Term
-from gfimu.smoother.layout import OMEGA
-from gfimu.smoother.tuning import log_normaliser
+from gfimu.smoother.batch.bound import smoother_bound
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.model.groups import FactorGroup, Term
+from gfimu.smoother.model.layout import OMEGA
+from gfimu.smoother.tuning.evidence import log_normaliser
 
 
 class ZeroRatePrior(FactorGroup):

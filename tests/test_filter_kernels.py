@@ -5,12 +5,12 @@ import pytest
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
-from gfimu.smoother import _filter_kernels as kernels
-from gfimu.smoother import _fixed_lag_filter as flf
-from gfimu.smoother import _fixed_lag_model as model
-from gfimu.smoother.fixed_lag import FixedLagEstimator
-from gfimu.smoother.graph import SmootherOptions
-from gfimu.smoother.restarts import branch
+from gfimu.smoother.stream import kernels
+from gfimu.smoother.stream import window_filter as flf
+from gfimu.smoother.stream import array_model as model
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
+from gfimu.smoother.model.problem import SmootherOptions
+from gfimu.smoother.solve.restarts import branch
 
 
 def _random_spd(rng, n, scale):
@@ -197,8 +197,8 @@ def test_the_kernels_readings_are_the_arrays_rigid_body_equation():
 def test_a_robust_stream_through_the_kernels_is_the_numpy_stream(monkeypatch):
     """The robust model (Cauchy loss on the readings and on the motion model's steps, noise growing with |ω|)
     through the compiled update and through the numpy one: the same estimates to rounding."""
-    from gfimu.smoother._fixed_lag_filter import WindowFilter
-    from gfimu.smoother.fixed_lag import FixedLagSmoother
+    from gfimu.smoother.stream.window_filter import WindowFilter
+    from gfimu.smoother.stream.fixed_lag import FixedLagSmoother
 
     log = simulate("random3d", array=cube_array(0.025, noise_std_mps2=0.05), rate_hz=400.0, duration_s=3.0, seed=8)
     y = log.accel_mps2.copy()
@@ -206,7 +206,7 @@ def test_a_robust_stream_through_the_kernels_is_the_numpy_stream(monkeypatch):
 
     def run():
         sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.1, rate_hz=400.0)
-        # the values the stream's robust model sets (smoother/stream_model.py), set here on its model directly
+        # the values the stream's robust model sets (smoother/stream/model_choice.py), set here on its model directly
         sm.model.robust_loss = "cauchy"
         sm.model.accel_robust_threshold = sm.model.process_robust_threshold = 2.0
         sm.model.accel_noise_slope_mps2_per_radps = 0.01

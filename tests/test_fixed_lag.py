@@ -11,9 +11,9 @@ from gfimu.methods import make_estimator
 from gfimu.factors import accelerometer, kinematics, process
 from gfimu.log import Log
 from gfimu.simulate import SensorErrors, simulate
-from gfimu.smoother import _fixed_lag_model as model
-from gfimu.smoother.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError, fixed_lag_reason
-from gfimu.smoother.graph import SmootherOptions
+from gfimu.smoother.stream import array_model as model
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError, fixed_lag_reason
+from gfimu.smoother.model.problem import SmootherOptions
 
 RATE_HZ = 500.0
 
@@ -355,7 +355,7 @@ def test_cli_estimate_fixed_lag_on_a_log_folder(tmp_path, capsys):
 def test_the_screenings_wait_is_taken_from_the_lag_where_it_fits(rate_hz, lag_s, screen, expected_s):
     """lag_s is the delay of an estimate after its sample arrives: the stream screening's wait comes out of
     the smoother's own lag where it is at most half of it."""
-    from gfimu.smoother.fixed_lag import FixedLagEstimator
+    from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
 
     estimator = FixedLagEstimator(lag_s=lag_s, screen_readings=screen)
     assert estimator.window_lag_s(rate_hz) == pytest.approx(expected_s, rel=1e-12)

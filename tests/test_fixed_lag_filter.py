@@ -6,10 +6,10 @@ import pytest
 from gfimu.array import cube_array, paper001_array
 from gfimu.factors import kinematics, process
 from gfimu.simulate import simulate
-from gfimu.smoother import _fixed_lag_model as model
-from gfimu.smoother._fixed_lag_filter import FilterFailure, WindowFilter
-from gfimu.smoother.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError
-from gfimu.smoother.graph import SmootherOptions
+from gfimu.smoother.stream import array_model as model
+from gfimu.smoother.stream.window_filter import FilterFailure, WindowFilter
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError
+from gfimu.smoother.model.problem import SmootherOptions
 
 RATE_HZ = 500.0
 

@@ -9,14 +9,14 @@ import pytest
 
 from gfimu.array import mimu4444_array
 from gfimu.simulate import simulate
-from gfimu.smoother._fixed_lag_filter import (
+from gfimu.smoother.stream.window_filter import (
     OUTLYING_STEP2,
     SETTLE_FALSE_ALARM,
     WindowFilter,
 )
-from gfimu.smoother._fixed_lag_model import ArrayModel
-from gfimu.smoother.graph import SmootherOptions
-from gfimu.smoother.restarts import branch
+from gfimu.smoother.stream.array_model import ArrayModel
+from gfimu.smoother.model.problem import SmootherOptions
+from gfimu.smoother.solve.restarts import branch
 
 RATE_HZ = 62.5
 
@@ -118,8 +118,8 @@ def test_a_window_filtered_with_an_outgrown_model_is_solved_again_with_the_new_o
     from dataclasses import replace
 
     from gfimu.array import cube_array
-    from gfimu.smoother.fixed_lag import FixedLagSmoother
-    from gfimu.smoother.stream_model import StreamModel
+    from gfimu.smoother.stream.fixed_lag import FixedLagSmoother
+    from gfimu.smoother.stream.model_choice import StreamModel
 
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=200, duration_s=3.0, seed=5, omega_rms_radps=4.0)
     slow = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=0.5)  # far below the motion's

@@ -1,12 +1,12 @@
 """The fixed-lag smoother's start waits for evidence: the first rows of a segment are held until the
-data decide ω, then come out re-solved (gfimu.smoother.fixed_lag, FixedLagSmoother._release_start)."""
+data decide ω, then come out re-solved (gfimu.smoother.stream.fixed_lag, FixedLagSmoother._release_start)."""
 
 import numpy as np
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.fixed_lag import FixedLagEstimator
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
 
 
 def _rmse(est, truth, rows=slice(None)):

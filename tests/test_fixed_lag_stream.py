@@ -8,8 +8,8 @@ import pytest
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
-from gfimu.smoother.fixed_lag import ClockResetWarning, FixedLagSmoother, FixedLagSmootherClosed
-from gfimu.smoother.graph import SmootherOptions
+from gfimu.smoother.stream.fixed_lag import ClockResetWarning, FixedLagSmoother, FixedLagSmootherClosed
+from gfimu.smoother.model.problem import SmootherOptions
 
 RATE_HZ = 200.0
 OPTS = SmootherOptions(tune_process_noise=False)

@@ -6,10 +6,10 @@ import pytest
 from gfimu.array import cube_array
 from gfimu.factors import kinematics, process
 from gfimu.simulate import simulate
-from gfimu.smoother import _fixed_lag_model as model
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.fixed_lag import FixedLagEstimator, FixedLagSmoother, explicit_process_noise, tunes_process_noise
-from gfimu.smoother.graph import SmootherOptions
+from gfimu.smoother.stream import array_model as model
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, explicit_process_noise, tunes_process_noise
+from gfimu.smoother.model.problem import SmootherOptions
 
 RATE_HZ = 500.0
 CUBE_5CM = cube_array(0.025, 0.07)

@@ -5,7 +5,7 @@ import pytest
 
 from gfimu.array import cube_array
 from gfimu.simulate import SensorErrors, simulate
-from gfimu.smoother.gravity_sign import gravity_sign_score, steady_rotation
+from gfimu.smoother.solve.gravity_sign import gravity_sign_score, steady_rotation
 
 
 def test_score_is_minus_one_for_pure_gravity_and_right_sign():

@@ -11,9 +11,9 @@ import pytest
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
-from gfimu.smoother.banded import normal_equations
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.groups import AccelerometerGroup, MotionModelGroup, SpecificForceWalkGroup
+from gfimu.smoother.solve.banded import normal_equations
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.model.groups import AccelerometerGroup, MotionModelGroup, SpecificForceWalkGroup
 
 
 def _uneven(log):

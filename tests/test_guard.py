@@ -20,8 +20,8 @@ from gfimu.log import Log
 from gfimu.motion import Motion
 from gfimu.rigid_body import quadratic_terms
 from gfimu.smoother import guard
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.fixed_lag import FixedLagEstimator
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
 
 RATE_HZ, BURST = 250.0, slice(350, 400)
 STIFF = dict(auto_model=False, tune_process_noise=False, omega_dot_random_walk_radps2_per_sqrt_s=5.0)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from gfimu.simulate import simulate
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.layout import StateLayout
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.model.layout import StateLayout
 
 
 @pytest.mark.parametrize("snap, attitude, size", [(False, False, 9), (True, False, 12), (False, True, 12), (True, True, 15)])

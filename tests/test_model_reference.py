@@ -1,4 +1,4 @@
-"""The smoother's model as one list of factor groups (gfimu.smoother.groups) gives the numbers of the
+"""The smoother's model as one list of factor groups (gfimu.smoother.model.groups) gives the numbers of the
 model written out in SmootherProblem before it: cost, log-normaliser and a Levenberg-Marquardt solve
 on short simulated logs for every motion model, measurement and optional group, to 1e-9. The
 reference values were computed by that earlier code. Each group's Jacobian is also checked against
@@ -14,10 +14,10 @@ from gfimu.array import cube_array, paper001_array
 from gfimu.factors import so3 as _so3
 from gfimu.rotations import matrix_from_quaternion
 from gfimu.simulate import simulate
-from gfimu.smoother import groups
-from gfimu.smoother.banded import solve
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.tuning import log_normaliser
+from gfimu.smoother.model import groups
+from gfimu.smoother.solve.banded import solve
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.tuning.evidence import log_normaliser
 
 REFERENCE = {  # cost at the test states, Σ log σ, cost and iterations of the solve, ω at the middle sample
     "jerk": [809793.0275842558, -2506.875049544373, 58.18048768428306, 4.0, -1.5883261407558473, -0.4907107319125135, 0.34736386538685776],
@@ -126,7 +126,7 @@ def test_the_fixed_lag_stream_is_the_batch_model(options, fast):
     the error of the batch model's groups on the same three samples."""
     import gtsam
 
-    from gfimu.smoother import _fixed_lag_model as model
+    from gfimu.smoother.stream import array_model as model
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.1, seed=3).select(slice(10, 13))
     problem = SmootherProblem(log, options)

@@ -13,7 +13,7 @@ from gfimu.cli import main
 from gfimu.cli.options import OptionError, check_method_options, describe_options, parse_options
 from gfimu.methods import estimator_class, make_estimator
 from gfimu.simulate import simulate
-from gfimu.smoother.option_groups import GROUPS
+from gfimu.smoother.model.option_groups import GROUPS
 
 
 @pytest.mark.parametrize("method, groups", [("smoother", ("model", "batch_model", "batch", "tuning", "guard")),

@@ -1,4 +1,4 @@
-"""The smoothers' options: declared once in their group dataclasses (gfimu.smoother.option_groups) with unit,
+"""The smoothers' options: declared once in their group dataclasses (gfimu.smoother.model.option_groups) with unit,
 default and help; the flat classes assembled from the groups keep every flat name and give the groups back."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import pytest
 
 from gfimu.errors import InputError
 from gfimu.methods import make_estimator
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.fixed_lag import FixedLagEstimator
-from gfimu.smoother.graph import SmootherOptions
-from gfimu.smoother.option_groups import (GROUP_CLASSES, GROUPS, BatchOptions, ModelOptions, StreamOptions,
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
+from gfimu.smoother.model.problem import SmootherOptions
+from gfimu.smoother.model.option_groups import (GROUP_CLASSES, GROUPS, BatchOptions, ModelOptions, StreamOptions,
                                           TuningOptions, assemble, groups_of)
 
 

@@ -11,12 +11,12 @@ from gfimu import factors as F
 from gfimu.array import cube_array
 from gfimu.factors import process
 from gfimu.simulate import simulate
-from gfimu.smoother import batch
-from gfimu.smoother._fixed_lag_model import ArrayModel
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.initialise import initial_states
-from gfimu.smoother.tuning import Tuning, dominant_frequency_hz, linearised_log_evidence
+from gfimu.smoother.batch import engine as batch
+from gfimu.smoother.stream.array_model import ArrayModel
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.solve.initialise import initial_states
+from gfimu.smoother.tuning.evidence import Tuning, dominant_frequency_hz, linearised_log_evidence
 
 CUBE_5CM = cube_array(0.025, noise_std_mps2=0.07)  # 5 cm edge
 RNG = np.random.default_rng(11)
@@ -176,7 +176,7 @@ def test_fixed_lag_model_adds_the_oscillator_step(fast):
     graph = gtsam.NonlinearFactorGraph()
     model.add_process(graph, 0, 1, 0.002)
     assert graph.size() == 1  # oscillator step and specific-force random walk, one factor of the step's rows
-    from gfimu.smoother._fixed_lag_model import keys
+    from gfimu.smoother.stream.array_model import keys
 
     values = gtsam.Values()
     states = [RNG.normal(size=(3, 3)) for _ in range(2)]

@@ -1,4 +1,4 @@
-"""Named smoother settings (gfimu.smoother.presets): values, precedence, errors, CLI and the real recording."""
+"""Named smoother settings (gfimu.smoother.model.presets): values, precedence, errors, CLI and the real recording."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from gfimu.array import mimu4444_array
 from gfimu.cli import main
 from gfimu.methods import make_estimator
 from gfimu.simulate import simulate
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.presets import PRESETS, apply_preset, expand_preset
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.model.presets import PRESETS, apply_preset, expand_preset
 
 HAND_HELD = {"initialisation": "ml", "ml_sign_chain": True, "tune_process_noise": False,
              "omega_dot_random_walk_radps2_per_sqrt_s": 3000.0, "specific_force_random_walk_mps2_per_sqrt_s": 300.0,
@@ -157,10 +157,10 @@ def _study():
 
 
 def test_study_bound_at_the_reference_is_the_smoother_bound_plus_the_noise_slope():
-    """tools/mimu4444_study.py --bound: with no slope it is gfimu.smoother.bound at the same trajectory;
+    """tools/mimu4444_study.py --bound: with no slope it is gfimu.smoother.batch.bound at the same trajectory;
     the preset's noise slope raises it."""
-    from gfimu.smoother.bound import smoother_bound
-    from gfimu.smoother.graph import SmootherOptions
+    from gfimu.smoother.batch.bound import smoother_bound
+    from gfimu.smoother.model.problem import SmootherOptions
 
     study = _study()
     log = simulate("reversal", array=mimu4444_array(), rate_hz=62.5, duration_s=4.0, seed=2)
@@ -178,7 +178,7 @@ def test_study_bound_at_the_reference_is_the_smoother_bound_plus_the_noise_slope
 def test_study_start_at_reference_changes_only_the_initial_omega():
     """--start-at-reference: the smoother's initial ω is the reference's (at valid samples), ω̇ and f
     those of its own initialisation, given to the smoother as its ``initial`` (nothing patched)."""
-    from gfimu.smoother.initialise import initial_estimate
+    from gfimu.smoother.solve.initialise import initial_estimate
 
     study = _study()
     log = simulate("reversal", array=mimu4444_array(), rate_hz=62.5, duration_s=2.0, seed=4)
@@ -196,12 +196,12 @@ def test_study_start_at_reference_changes_only_the_initial_omega():
 
 
 def test_preset_sign_chain_is_not_thrown_by_one_glitched_sample():
-    """The preset's sign chain (gfimu.smoother.initialise.sign_chain, Cauchy steps): humps of |ω| between
+    """The preset's sign chain (gfimu.smoother.solve.initialise.sign_chain, Cauchy steps): humps of |ω| between
     5 and 40 rad/s at 62.5 Hz, per-sample signs 30 % flipped, noise 1 rad/s on ω and 50 rad/s² on ω̇, and
     at three peaks one sample with the reading spike seen on MIMU4444 exp_3 (ω̇ off by ~4700 rad/s² there
     and ~1600 at the next sample, ω in a wrong direction). The plain squares flip the run after each
     spike onto the wrong branch; the robust chain keeps every other sample on the right one."""
-    from gfimu.smoother.initialise import sign_chain
+    from gfimu.smoother.solve.initialise import sign_chain
 
     h = 0.016
     t = np.arange(200) * h

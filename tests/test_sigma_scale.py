@@ -1,4 +1,4 @@
-"""σ scaled by the readings' own misfit (gfimu.smoother.sigma_scale) and its check by gfimu evaluate."""
+"""σ scaled by the readings' own misfit (gfimu.smoother.solve.sigma_scale) and its check by gfimu evaluate."""
 
 import math
 
@@ -11,7 +11,7 @@ from gfimu.cli import main
 from gfimu.evaluation import evaluate, sigma_metrics
 from gfimu.motion import Motion
 from gfimu.rigid_body import quadratic_terms
-from gfimu.smoother import sigma_scale as ss
+from gfimu.smoother.solve import sigma_scale as ss
 
 ARRAY = cube_array(0.05, 0.01)
 
@@ -113,7 +113,8 @@ def _ar1(rng, shape, std, corr):
 
 
 def _coverage(log, estimator, white, monkeypatch):
-    from gfimu.smoother import batch, fixed_lag
+    from gfimu.smoother.batch import engine as batch
+    from gfimu.smoother.stream import fixed_lag
 
     with monkeypatch.context() as mp:
         if white:  # the model's σ alone, as before the scaling

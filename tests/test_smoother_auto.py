@@ -1,4 +1,4 @@
-"""The smoother's model chosen from the log (gfimu.smoother.auto)."""
+"""The smoother's model chosen from the log (gfimu.smoother.tuning.model_choice)."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from gfimu.array import cube_array, random_array
 from gfimu.estimators.ml import MLEstimator
 from gfimu.simulate import simulate
-from gfimu.smoother import auto
+from gfimu.smoother.tuning import model_choice as auto
 
 
 def _with_extra_noise(log, slope, seed=1):
@@ -70,7 +70,7 @@ def test_motion_densities_of_a_random_walk_that_rests_half_the_time():
 
 def test_misfit_options_and_describe():
     check = auto.ModelCheck(False, 100, 5.0, 0.1, 0.2, 0.03, 20.0, 0.05, ("x",))
-    from gfimu.smoother.graph import SmootherOptions
+    from gfimu.smoother.model.problem import SmootherOptions
 
     opt = auto.misfit_options(SmootherOptions(), check)
     assert opt.initialisation == "ml" and opt.ml_sign_chain and opt.robust
@@ -97,7 +97,7 @@ def test_local_density_factors_rest_and_motion():
 def test_residual_only_cost_equals_the_cost_of_the_terms():
     """The cost evaluated from the residuals alone equals half the squared whitened residuals of every
     factor (with constant and with motion-dependent accelerometer noise)."""
-    from gfimu.smoother.graph import SmootherOptions, SmootherProblem
+    from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 
     log = simulate("random3d", cube_array(), rate_hz=500.0, duration_s=1.0, seed=2)
     problem = SmootherProblem(log, SmootherOptions())
@@ -116,7 +116,7 @@ def test_residual_only_cost_equals_the_cost_of_the_terms():
 def test_noise_chosen_on_the_middle_of_the_window_keeps_the_accuracy():
     """40 s of random motion at 500 Hz (two solve windows): the process noise chosen on the middle
     10 s of each window gives the ω RMSE of the choice on the whole window within 10 %."""
-    from gfimu.smoother.batch import BatchSmootherEstimator
+    from gfimu.smoother.batch.engine import BatchSmootherEstimator
 
     log = simulate("random3d", cube_array(0.025), rate_hz=500.0, duration_s=40.0, seed=3)
 

@@ -6,11 +6,11 @@ import pytest
 from gfimu.array import cube_array, mimu4444_array, random_array, single_triad
 from gfimu.methods import make_estimator
 from gfimu.simulate import simulate
-from gfimu.smoother import batch
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.bound import efficiency, smoother_bound
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.initialise import initial_states, window_initial_omega, trapezoid_integral
+from gfimu.smoother.batch import engine as batch
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.batch.bound import efficiency, smoother_bound
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.solve.initialise import initial_states, window_initial_omega, trapezoid_integral
 from gfimu import rigid_body
 
 CUBE = cube_array(0.05, noise_std_mps2=0.07)  # half edge 0.05 m (10 cm edge)
@@ -98,7 +98,7 @@ def test_graph_path_equals_fast_path(small_log, options):
 def test_graph_path_equals_fast_path_with_attitude_and_inclinometer():
     from gfimu.array import paper001_array
     from gfimu.factors import so3 as _so3
-    from gfimu.smoother.initialise import initial_attitude
+    from gfimu.smoother.solve.initialise import initial_attitude
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.2, seed=3)
     options = SmootherOptions(use_inclinometer=True, relative_tolerance=1e-16, max_iterations=50)

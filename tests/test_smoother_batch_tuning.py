@@ -8,11 +8,11 @@ from gfimu.array import cube_array
 from gfimu.log import Log
 from gfimu.motion import Motion
 from gfimu.simulate import simulate
-from gfimu.smoother import batch
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.initialise import initial_states
-from gfimu.smoother.tuning import linearised_log_evidence, make_problem, tune
+from gfimu.smoother.batch import engine as batch
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.solve.initialise import initial_states
+from gfimu.smoother.tuning.evidence import linearised_log_evidence, make_problem, tune
 
 CUBE = cube_array(0.05, noise_std_mps2=0.07)
 CUBE_5CM = cube_array(0.025, noise_std_mps2=0.07)  # 5 cm edge
@@ -220,8 +220,8 @@ def test_minimum_of_a_stiff_setting_keeps_its_precision():
 
     from dense_evidence import dense_minimum
 
-    from gfimu.smoother.banded import factorise, normal_equations, solve, solve_step
-    from gfimu.smoother.tuning import linearised_half_cost
+    from gfimu.smoother.solve.banded import factorise, normal_equations, solve, solve_step
+    from gfimu.smoother.tuning.evidence import linearised_half_cost
 
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=0.6, seed=2)
     plain = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5)
@@ -249,7 +249,7 @@ def test_search_follows_the_evidence_only_for_a_nat_or_more():
     """The 1-D search extends its grid past an edge only while the edge beats its inner neighbour by
     more than a nat: a ridge rising by 0.1 nat a step keeps the start, a slope of 3 nats a step is
     followed to its peak (found by the parabola)."""
-    from gfimu.smoother.tuning import EXTEND_MIN_GAIN_NATS, _maximise_1d
+    from gfimu.smoother.tuning.evidence import EXTEND_MIN_GAIN_NATS, _maximise_1d
 
     assert EXTEND_MIN_GAIN_NATS == 1.0
     ridge = lambda x: -0.1 * x  # noqa: E731 (rises slowly toward small x without end)

@@ -4,7 +4,7 @@ chosen on exp_1, checked on the busiest 40 s of the unseen exp_2 and exp_3."""
 import numpy as np
 import pytest
 
-from gfimu.smoother.batch import BatchSmootherEstimator
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
 
 REAL_SETTINGS = dict(initialisation="ml", tune_process_noise=False, omega_dot_random_walk_radps2_per_sqrt_s=3000.0,
                      specific_force_random_walk_mps2_per_sqrt_s=300.0, accel_noise_slope_mps2_per_radps=0.03)
@@ -121,7 +121,7 @@ def test_default_model_on_whole_recordings(mimu4444_dir, exp):
 @pytest.mark.parametrize("exp", [2, 3])
 def test_branch_restarts_on_unseen_recordings(busiest, default_estimate, exp):
     """Busiest 40 s: the default smoother's local restarts of short runs on the other branches of ω
-    (gfimu.smoother.restarts) do not raise the ω RMSE nor the wrong-sign share."""
+    (gfimu.smoother.solve.restarts) do not raise the ω RMSE nor the wrong-sign share."""
     part, mask = busiest(exp)
     without = scores(BatchSmootherEstimator(branch_restarts=False).estimate(part).motion, part, mask)
     with_ = scores(default_estimate(exp)[0], part, mask)

@@ -1,4 +1,4 @@
-"""Local restarts of the robust smoother's solution on the other branches of ω (gfimu.smoother.restarts)."""
+"""Local restarts of the robust smoother's solution on the other branches of ω (gfimu.smoother.solve.restarts)."""
 
 from dataclasses import replace
 
@@ -6,10 +6,10 @@ import numpy as np
 
 from gfimu.array import mimu4444_array
 from gfimu.simulate import simulate
-from gfimu.smoother import restarts
-from gfimu.smoother.banded import solve_reweighted
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
-from gfimu.smoother.layout import OMEGA, OMEGA_DOT
+from gfimu.smoother.solve import restarts
+from gfimu.smoother.solve.banded import solve_reweighted
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.model.layout import OMEGA, OMEGA_DOT
 
 ROBUST = SmootherOptions(robust_loss="cauchy", accel_robust_threshold=2.0, process_robust_threshold=2.0,
                          omega_dot_random_walk_radps2_per_sqrt_s=300.0, window_s=None)

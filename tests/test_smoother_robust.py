@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from gfimu.smoother.batch import BatchSmootherEstimator
-from gfimu.smoother.graph import SmootherOptions, SmootherProblem
+from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 
 from test_smoother_batch_tuning import CUBE, omega_rmse, process_model_log
 
@@ -85,7 +85,7 @@ def test_sign_chain_recovers_a_reversal_through_zero():
     """ω slowing through zero and reversing at 62.5 Hz, given as per-sample estimates whose sign was
     chosen to bounce back (ω·e > 0 always) and with random flips, plus noise of 1 rad/s on ω and
     50 rad/s² on ω̇: the dynamic programme returns the true signs everywhere |ω| > 2 rad/s."""
-    from gfimu.smoother.initialise import sign_chain
+    from gfimu.smoother.solve.initialise import sign_chain
 
     rng = np.random.default_rng(7)
     h = 0.016

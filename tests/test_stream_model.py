@@ -1,4 +1,4 @@
-"""The fixed-lag smoother's model chosen from the stream (gfimu.smoother.stream_model): the branch
+"""The fixed-lag smoother's model chosen from the stream (gfimu.smoother.stream.model_choice): the branch
 group, the streaming branch chain on a constructed stream, a window moved onto another branch, the
 local density and the stillness test."""
 
@@ -10,11 +10,11 @@ import pytest
 from gfimu.array import cube_array
 from gfimu.estimators.ml import MLEstimator
 from gfimu.simulate import simulate
-from gfimu.smoother._fixed_lag_filter import WindowFilter
-from gfimu.smoother._fixed_lag_model import ArrayModel
-from gfimu.smoother.auto import check_model
-from gfimu.smoother.graph import SmootherOptions
-from gfimu.smoother.stream_model import LocalDensity, StreamSignChain, branch, is_still
+from gfimu.smoother.stream.window_filter import WindowFilter
+from gfimu.smoother.stream.array_model import ArrayModel
+from gfimu.smoother.tuning.model_choice import check_model
+from gfimu.smoother.model.problem import SmootherOptions
+from gfimu.smoother.stream.model_choice import LocalDensity, StreamSignChain, branch, is_still
 
 NORMAL = np.array([0.0, 0.0, 1.0])
 
@@ -122,7 +122,7 @@ def test_a_still_stretch_and_a_slow_turntable():
 def test_the_lazy_window_gives_the_eager_numbers(monkeypatch):
     """The older states brought up to date every LAZY_STEPS updates (T, u, W) give every state's mean
     and one-sigma of the update-by-update window to rounding."""
-    import gfimu.smoother._fixed_lag_filter as flt
+    import gfimu.smoother.stream.window_filter as flt
 
     log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=500, duration_s=0.6, seed=4)
     out = {}

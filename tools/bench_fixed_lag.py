@@ -43,8 +43,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gfimu.array import cube_array  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
-from gfimu.smoother.batch import BatchSmootherEstimator  # noqa: E402
-from gfimu.smoother.fixed_lag import FixedLagEstimator  # noqa: E402
+from gfimu.smoother.batch.engine import BatchSmootherEstimator  # noqa: E402
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator  # noqa: E402
 
 
 def rss_mb() -> float:

@@ -79,7 +79,7 @@ def commands(log: Path, out: Path) -> dict[str, list[str]]:
         "batch-serial": [py, "-m", "gfimu", "estimate", str(log), "-O", "workers=1", "--out", str(out / "batch-serial.csv")],
         "help": helps,
         "import": [py, "-c", "import gfimu.cli"],
-        "estimate-import": [py, "-c", "import gfimu.cli, gfimu.cli.estimate, gfimu.pipeline, gfimu.smoother.batch, "
+        "estimate-import": [py, "-c", "import gfimu.cli, gfimu.cli.estimate, gfimu.pipeline, gfimu.smoother.batch.engine, "
                             "gfimu.smoother.guard, gfimu.estimators.ml, gfimu.io.outputs"],
         "pass": [py, "-c", "pass"],
     }

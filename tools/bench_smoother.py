@@ -43,7 +43,7 @@ sys.path.insert(0, str(REPO))
 from bench_env import command_env  # noqa: E402
 from gfimu.array import cube_array  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
-from gfimu.smoother.batch import BatchSmootherEstimator  # noqa: E402
+from gfimu.smoother.batch.engine import BatchSmootherEstimator  # noqa: E402
 
 
 def in_process(log, est, repeats: int) -> dict:

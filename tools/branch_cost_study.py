@@ -5,13 +5,13 @@ started from the gyro reference, on real MIMU4444 recordings.
 For each recording (``data.bin``): convert and calibrate it as the plain flow does
 (``gfimu convert mimu4444``, ``gfimu calibrate``, in a temporary folder), screen and calibrate the
 readings as ``gfimu estimate`` does, and build the default batch smoother's model exactly as
-:func:`gfimu.smoother.batch.smooth` builds it for an inconsistent log (the model check of
-:mod:`gfimu.smoother.auto`, the per-window problem of ``moment_problem``: the same windows, noise
+:func:`gfimu.smoother.batch.engine.smooth` builds it for an inconsistent log (the model check of
+:mod:`gfimu.smoother.tuning.model_choice`, the per-window problem of ``moment_problem``: the same windows, noise
 floor and slope, Cauchy thresholds, process densities and local density factors). Per solve window:
 
-- **default**: the production window solve (:func:`gfimu.smoother.banded.solve_reweighted`) from
+- **default**: the production window solve (:func:`gfimu.smoother.solve.banded.solve_reweighted`) from
   the production start (the per-sample ML estimate with its sign chain), before the branch restarts
-  (:mod:`gfimu.smoother.restarts`; ``--restarts runs`` adds them as a third solution);
+  (:mod:`gfimu.smoother.solve.restarts`; ``--restarts runs`` adds them as a third solution);
 - **reference start**: the same model, ω started at the gyro reference (where it is valid; at
   saturated samples the default start's ω turned to the reference's side), ω̇ and f from the default
   start, solved by the re-weighted Levenberg-Marquardt straight away (the plain first iterations of
@@ -62,12 +62,12 @@ from gfimu import io as gio  # noqa: E402
 from gfimu.calibration import apply_calibration, read_calibration  # noqa: E402
 from gfimu.factors import accelerometer  # noqa: E402
 from gfimu.readings import screen_log  # noqa: E402
-from gfimu.smoother.banded import reweighting, solve, solve_reweighted  # noqa: E402
-from gfimu.smoother.graph import robust_loss  # noqa: E402
-from gfimu.smoother.batch import BatchSmootherEstimator, chosen_model, moment_problem, window_slices  # noqa: E402
-from gfimu.smoother.groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: E402
-from gfimu.smoother.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE  # noqa: E402
-from gfimu.smoother.restarts import BRANCHES, branch_restarts, plane_normal  # noqa: E402
+from gfimu.smoother.solve.banded import reweighting, solve, solve_reweighted  # noqa: E402
+from gfimu.smoother.model.problem import robust_loss  # noqa: E402
+from gfimu.smoother.batch.engine import BatchSmootherEstimator, chosen_model, moment_problem, window_slices  # noqa: E402
+from gfimu.smoother.model.groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: E402
+from gfimu.smoother.model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE  # noqa: E402
+from gfimu.smoother.solve.restarts import BRANCHES, branch_restarts, plane_normal  # noqa: E402
 
 MOVING_RADPS = 2.0
 
@@ -173,7 +173,7 @@ def reference_start(x0: np.ndarray, part) -> np.ndarray:
 def segment_restarts(model: FrozenModel, X: np.ndarray, normal: np.ndarray, width: int) -> tuple[np.ndarray, int, int]:
     """Local restarts on other branches: for every stretch of ``width`` samples whose own |ω| is
     above the moving threshold (from the solution, not the reference), move ω there to each branch
-    (:data:`gfimu.smoother.restarts.BRANCHES`: sign flipped; mirrored through the array's plane), re-solve
+    (:data:`gfimu.smoother.solve.restarts.BRANCHES`: sign flipped; mirrored through the array's plane), re-solve
     the window under the frozen model and keep the result only when J falls. Returns (states,
     restarts tried, restarts kept)."""
     best = model.cost(X)
@@ -341,7 +341,7 @@ def main(argv=None) -> int:
                     help="also try local restarts of the default's solution on the other branches (ω sign-flipped, "
                          "ω mirrored through the array's plane), kept when J falls: 'segments' every moving segment with "
                          "a window re-solve (slow), 'runs' the short runs between outlying motion-model steps with a "
-                         "local re-solve (gfimu.smoother.restarts, as the default smoother does)")
+                         "local re-solve (gfimu.smoother.solve.restarts, as the default smoother does)")
     ap.add_argument("--save-arrays", type=Path, default=None,
                     help="folder for one .npz per recording: ω of every solution, the reference, the moving mask and "
                          "the per-sample parts of J")

@@ -33,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from gfimu.array import cube_array  # noqa: E402
 from gfimu.evaluation import evaluate  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
-from gfimu.smoother.batch import BatchSmootherEstimator  # noqa: E402
-from gfimu.smoother.fixed_lag import FixedLagEstimator  # noqa: E402
+from gfimu.smoother.batch.engine import BatchSmootherEstimator  # noqa: E402
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator  # noqa: E402
 
 
 def rmse(est_b_radps: np.ndarray, true_b_radps: np.ndarray) -> float:

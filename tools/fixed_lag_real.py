@@ -62,7 +62,7 @@ BATCH_FACTOR = 1.25  # target at BATCH_LAG_S
 
 def default_lag_s() -> float:
     """The fixed-lag smoother's default lag (what ``gfimu live`` and ``--method fixed-lag`` run)."""
-    from gfimu.smoother.fixed_lag import FixedLagEstimator
+    from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
 
     return float({f.name: f.default for f in dataclasses.fields(FixedLagEstimator)}["lag_s"])
 

@@ -22,7 +22,7 @@ Examples::
     python3 tools/mimu4444_study.py --residual --methods  # residual study only
 
 The smoother set up for these recordings is the preset ``hand-held-low-rate``
-(:mod:`gfimu.smoother.presets`; settings chosen on exp_1): per-sample ML initialisation with its
+(:mod:`gfimu.smoother.model.presets`; settings chosen on exp_1): per-sample ML initialisation with its
 sign chain (a fast rotation slowing through zero and reversing is otherwise taken as a bounce),
 fixed jerk density 3000 rad/s²/√s and specific-force density 300 m/s²/√s for hand motion at
 62.5 Hz, accelerometer noise growing by 0.03 m/s² per rad/s, and a Cauchy loss at 2 σ on the
@@ -30,7 +30,7 @@ accelerometer axes and on the motion-model steps (heavy-tailed rigid-body residu
 jerks), re-weighted over 5 solves; ``--option smoother:KEY=VALUE`` overrides single settings,
 ``--breakdown`` prints where the remaining error sits, ``--start-at-reference`` starts the
 smoother's ω at the gyro reference (other states from the ML initialisation) and ``--bound``
-adds the smoother's own bound at the reference trajectory (:mod:`gfimu.smoother.bound`, with the
+adds the smoother's own bound at the reference trajectory (:mod:`gfimu.smoother.batch.bound`, with the
 noise slope, without the robust weights)::
 
     python3 tools/mimu4444_study.py --experiments 1 2 3 --methods smoother --calibration within cross \
@@ -41,7 +41,7 @@ noise slope, without the robust weights)::
 Measured (shifted reference, within calibration, moving valid samples; RMSE of the ω error norm /
 median / share with ω·ω_ref < 0), with the preset: exp_1 3.13 / 1.90 / 1.57 %, exp_2 3.61 / 1.99 /
 0.31 %, exp_3 4.03 / 2.11 / 1.25 %. With the sign chain's plain squared steps (before its Cauchy
-loss, :func:`gfimu.smoother.initialise.sign_chain`): 3.15 / 1.91 / 2.01 %, 4.58 / 2.01 / 0.73 %,
+loss, :func:`gfimu.smoother.solve.initialise.sign_chain`): 3.15 / 1.91 / 2.01 %, 4.58 / 2.01 / 0.73 %,
 5.54 / 2.13 / 1.68 %, the largest 1 % of the errors carrying 53 % (exp_2) and 64 % (exp_3) of the
 squared error: runs of 4-5 samples on the wrong sign branch after a single sample with a reading
 spike (per-sample ω̇ off by thousands of rad/s²) at the fastest rotations; now 29 % and 38 %.
@@ -69,7 +69,7 @@ sys.path.insert(0, str(REPO))
 from gfimu import calibration as calib  # noqa: E402
 from gfimu.io.readers.mimu4444 import read_mimu4444, shift_reference  # noqa: E402
 from gfimu.methods import METHODS, make_estimator  # noqa: E402
-from gfimu.smoother.initialise import initial_estimate  # noqa: E402
+from gfimu.smoother.solve.initialise import initial_estimate  # noqa: E402
 from gfimu.evaluation import evaluate  # noqa: E402
 from gfimu.array import mimu4444_array  # noqa: E402
 from gfimu.rotations import skew  # noqa: E402
@@ -126,7 +126,7 @@ def started_at_reference(part, opt):
 
 
 def reference_bound(log, options: dict, mask) -> dict:
-    """The smoother's own bound (:mod:`gfimu.smoother.bound`: its graph linearised, here at the
+    """The smoother's own bound (:mod:`gfimu.smoother.batch.bound`: its graph linearised, here at the
     reference trajectory) with the accelerometer noise the options model, including the noise
     growing with |ω| of the reference (``accel_noise_slope_mps2_per_radps``); the robust weights,
     which depend on the residuals of a solution, are left out. RMS of the norm of the one-sigma ω
@@ -134,10 +134,10 @@ def reference_bound(log, options: dict, mask) -> dict:
     from dataclasses import fields
 
     from gfimu.rigid_body import quadratic_terms
-    from gfimu.smoother.banded import factorise, marginal_covariances, normal_equations
-    from gfimu.smoother.batch import window_slices
-    from gfimu.smoother.graph import SmootherOptions
-    from gfimu.smoother.tuning import make_problem
+    from gfimu.smoother.solve.banded import factorise, marginal_covariances, normal_equations
+    from gfimu.smoother.batch.engine import window_slices
+    from gfimu.smoother.model.problem import SmootherOptions
+    from gfimu.smoother.tuning.evidence import make_problem
 
     opt = SmootherOptions(**{k: v for k, v in options.items() if k in {f.name for f in fields(SmootherOptions)}})
     if opt.tune_process_noise or opt.motion_model != "jerk" or opt.measurement != "accelerometer":
@@ -471,7 +471,7 @@ def print_residual(r: dict) -> None:
 
 
 def parse_method_options(items: list[str]) -> dict:
-    from gfimu.cli.estimate import parse_options
+    from gfimu.cli.options import parse_options
 
     out: dict = {}
     for item in items:
@@ -499,7 +499,7 @@ def main(argv=None) -> int:
                    help="accelerometer noise std (m/s²) written into the array model (default: the layout's 0.05)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE", help="method option, repeatable")
     p.add_argument("--preset", default=None, metavar="NAME",
-                   help="named smoother settings (gfimu.smoother.presets); --option smoother:KEY=VALUE wins over it")
+                   help="named smoother settings (gfimu.smoother.model.presets); --option smoother:KEY=VALUE wins over it")
     p.add_argument("--start-at-reference", action="store_true",
                    help="start the smoother's ω at the gyro reference (other states from its initialisation)")
     p.add_argument("--bound", action="store_true",
@@ -512,7 +512,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     args.options = parse_method_options(args.option)
     if args.preset is not None:
-        from gfimu.smoother.presets import apply_preset
+        from gfimu.smoother.model.presets import apply_preset
 
         try:
             args.options["smoother"] = apply_preset(args.preset, args.options.get("smoother", {}))

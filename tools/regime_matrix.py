@@ -12,7 +12,7 @@ Rule (per smoother, a cell PASSes when both smoothers do):
 - wrong-sign share ≤ that best per-sample method's + :data:`SIGN_MARGIN` (share of the samples
   with |ω_true| > 0.1 rad/s whose estimate points against the truth, ω̂ · ω < 0);
 - a consistent log (rigid body, white noise, stated or not, noise-free included) keeps the batch
-  smoother's Gaussian model (:mod:`gfimu.smoother.auto`);
+  smoother's Gaussian model (:mod:`gfimu.smoother.tuning.model_choice`);
 - time linear in the samples: CPU time (the estimator's process and the workers it forks; wall time
   on a shared machine measures the neighbours) at most :data:`TIME_BASE_S` + :data:`TIME_PER_SAMPLE_S`
   × samples (6,000 samples: 14 s); a method still running (wall time) at the cell's limit
@@ -426,7 +426,7 @@ def _cpu_seconds() -> float:
 
 def _model_of(log, est) -> tuple[str, str]:
     """(model, the check's description) the batch smoother takes on ``log`` (its model check alone)."""
-    from gfimu.smoother.batch import chosen_model
+    from gfimu.smoother.batch.engine import chosen_model
 
     if not est.auto_model:
         return "n/a", ""
@@ -435,7 +435,7 @@ def _model_of(log, est) -> tuple[str, str]:
         check = None if auto is None else auto[0]
     except Exception:  # the options that follow the check failed (the run will say so): the check alone
         from gfimu.estimators.ml import MLEstimator
-        from gfimu.smoother.auto import check_model
+        from gfimu.smoother.tuning.model_choice import check_model
 
         check = check_model(log, MLEstimator().estimate_motion(log))
     if check is None:

@@ -6,7 +6,7 @@ with the model in ways array.toml does not state: noise above the stated level, 
 error per axis as a real array's misalignment and scale errors give), the batch smoother and the
 fixed-lag smoother run with σ, and the table gives per axis the share of samples with |error| < 1σ
 (Gaussian: 68.3 %) and < 2σ (95.4 %), and the mean NEES (3 when σ is right), for the σ the smoothers
-report ("scaled": by the readings' own misfit, :mod:`gfimu.smoother.sigma_scale`) and for the white-noise
+report ("scaled": by the readings' own misfit, :mod:`gfimu.smoother.solve.sigma_scale`) and for the white-noise
 σ before that scaling ("white", the earlier behaviour). The target: < 1σ within 60-76 %, < 2σ within
 90-98 % on every axis.
 
@@ -99,7 +99,8 @@ def coverage(log, omega_true: np.ndarray, method: str, white: bool, valid: np.nd
     """σ metrics of ``method``'s ω on ``log`` (screened) against ``omega_true`` over the rows ``valid``;
     ``white``: without the scaling."""
     from gfimu.methods import make_estimator
-    from gfimu.smoother import batch, fixed_lag
+    from gfimu.smoother.batch import engine as batch
+    from gfimu.smoother.stream import fixed_lag
 
     saved = batch._calibrates_sigma, fixed_lag.calibrates_stream
     if white:

@@ -29,9 +29,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from gfimu.array import SensorArray, cube_array, mimu4444_array, random_array  # noqa: E402
 from gfimu.methods import make_estimator  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
-from gfimu.smoother.batch import BatchSmootherEstimator  # noqa: E402
-from gfimu.smoother.bound import efficiency, smoother_bound  # noqa: E402
-from gfimu.smoother.initialise import initial_states  # noqa: E402
+from gfimu.smoother.batch.engine import BatchSmootherEstimator  # noqa: E402
+from gfimu.smoother.batch.bound import efficiency, smoother_bound  # noqa: E402
+from gfimu.smoother.solve.initialise import initial_states  # noqa: E402
 
 PER_SAMPLE = ("inversion", "integration", "imm", "ml", "free-flight")
 

@@ -4,7 +4,7 @@
 Builds the cell's log (``tools/regime_matrix.py``: 50 Hz, 0.3 m cube, slow yaw) and prints:
 
 - the whole log with the default batch smoother, with and without the sign taken across windows
-  (``gfimu.smoother.batch._align_signs``): ω RMSE and wrong-sign share against the truth, and the
+  (``gfimu.smoother.batch.engine._align_signs``): ω RMSE and wrong-sign share against the truth, and the
   windows that are solved again;
 - for each window still holding samples on the wrong sign, and for the window of ``--window-at``: its
   cost and wrong samples solved from its own initial states, and solved from them turned to the
@@ -30,9 +30,9 @@ import regime_matrix  # noqa: E402
 
 from gfimu import io as gio  # noqa: E402
 from gfimu.methods import make_estimator  # noqa: E402
-from gfimu.smoother import batch  # noqa: E402
-from gfimu.smoother.layout import OMEGA  # noqa: E402
-from gfimu.smoother.tuning import tuned_problem  # noqa: E402
+from gfimu.smoother.batch import engine as batch  # noqa: E402
+from gfimu.smoother.model.layout import OMEGA  # noqa: E402
+from gfimu.smoother.tuning.evidence import tuned_problem  # noqa: E402
 
 CELL = "vehicle-50Hz-30min"
 MOVING_RADPS = 0.1

@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="option of one method, repeatable, e.g. -O imm.t2=4.0")
     p.add_argument("--preset", default=None, metavar="NAME",
                    help="named settings of the smoother (-O smoother.KEY=VALUE wins over it), e.g. hand-held-low-rate "
-                        "(gfimu.smoother.presets)")
+                        "(gfimu.smoother.model.presets)")
     p.add_argument("--no-bounds", action="store_true", help="leave out the Cramér–Rao and smoother bounds")
     p.add_argument("--gyro-noise", type=non_negative("rad/s"), default=None, metavar="RAD_PER_S",
                    help="gyro noise std for the 'CRB (with gyro)' row when the array has no gyroscope")
@@ -67,7 +67,7 @@ def run(args) -> int:
     if getattr(args, "preset", None) is not None:
         if methods is not None and "smoother" not in methods:
             raise CLIError(f"--preset sets the smoother's options, but smoother is not among --methods {','.join(methods)}")
-        from ..smoother.presets import apply_preset
+        from ..smoother.model.presets import apply_preset
 
         apply_preset(args.preset)  # an unknown name stops here, before the log is read
         options.setdefault("smoother", {})["preset"] = args.preset

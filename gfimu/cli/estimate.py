@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="method option, repeatable (see the method's documentation)")
     p.add_argument("--preset", default=None, metavar="NAME",
                    help="named smoother settings (method smoother; -O options win over it), e.g. hand-held-low-rate: "
-                        "fast hand-held motion at 50–100 Hz on real sensors (gfimu.smoother.presets)")
+                        "fast hand-held motion at 50–100 Hz on real sensors (gfimu.smoother.model.presets)")
     p.add_argument("--solver", choices=["numpy", "gtsam"], default=None,
                    help="batch smoother solver (method smoother; default: numpy, the vectorised banded "
                         "Levenberg-Marquardt, linear in the length; gtsam: the same problem as a GTSAM graph, "

@@ -213,10 +213,10 @@ the smoother's own tuned densities (1e-40 made its normal equations singular).""
 
 def _unknown_option(method: str, fields: dict, key: str, value, flag: str, prefix: str) -> str:
     """The one-line error for ``key``, which ``method`` has not: an option of the other smoother's own group
-    (:mod:`gfimu.smoother.option_groups`) is named as that; else the method's options are listed."""
+    (:mod:`gfimu.smoother.model.option_groups`) is named as that; else the method's options are listed."""
     groups = {f.metadata.get("group") for f in fields.values()} - {None}
     if groups:
-        from ..smoother.option_groups import GROUP_METHODS, GROUP_OF
+        from ..smoother.model.option_groups import GROUP_METHODS, GROUP_OF
 
         group = GROUP_OF.get(key)
         if group in GROUP_METHODS and group not in groups:
@@ -289,7 +289,7 @@ def method_options(method: str, pairs: list[str] | None, preset: str | None = No
     if preset is not None:  # checked before the log is read
         if method != "smoother":
             raise OptionError(f"--preset applies to --method smoother only, not {method!r}")
-        from ..smoother.presets import apply_preset
+        from ..smoother.model.presets import apply_preset
 
         apply_preset(preset)
         options["preset"] = preset
@@ -311,7 +311,7 @@ def method_options(method: str, pairs: list[str] | None, preset: str | None = No
 def describe_options(method: str) -> str:
     """Every ``-O`` option of ``method``: name, default, unit and help, one block each, from the option's
     declaration (:func:`gfimu.option.option`: the field's metadata); the smoothers' options under their
-    group (model, batch_model, batch, stream, tuning, guard: :mod:`gfimu.smoother.option_groups`)."""
+    group (model, batch_model, batch, stream, tuning, guard: :mod:`gfimu.smoother.model.option_groups`)."""
     from ..methods import estimator_class
 
     cls = estimator_class(method)
@@ -321,7 +321,7 @@ def describe_options(method: str) -> str:
     fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
     sections = [("", fields)]
     if any("group" in f.metadata for f in fields):
-        from ..smoother.option_groups import GROUPS
+        from ..smoother.model.option_groups import GROUPS
 
         sections = [(group, [f for f in fields if f.metadata.get("group") == group]) for group in GROUPS]
         sections.append(("other", [f for f in fields if "group" not in f.metadata]))

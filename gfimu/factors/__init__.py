@@ -4,7 +4,7 @@ Every module offers
 
 - a pure, vectorised numpy function ``<equation>_residual(...)`` returning the
   residuals of N instances at once and their analytic Jacobians (used by the
-  banded batch engine of :mod:`gfimu.smoother.batch`), and
+  banded batch engine of :mod:`gfimu.smoother.batch.engine`), and
 - a constructor ``make_<equation>_factor(keys..., measurement..., noise_model)``
   returning a ``gtsam.CustomFactor`` whose error function calls the same
   numpy function for one instance (used by the GTSAM graph path and the

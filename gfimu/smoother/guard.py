@@ -4,9 +4,9 @@ maximum-likelihood estimate, find it, say it, and (by default) use the per-sampl
 A smoother trades fit for smoothness: its states follow the motion model, so they leave a larger
 rigid-body residual than the per-sample fit (:class:`gfimu.estimators.ml.MLEstimator`), which
 minimises each sample's residual alone. How much larger is bounded by the model. Take the
-residual ``r_k = y_k - S [f_k, ω̇_k, q(ω_k)]`` (Ho & Lin 2009, eq. 6; :func:`gfimu.smoother.auto.rigid_body_residual`)
+residual ``r_k = y_k - S [f_k, ω̇_k, q(ω_k)]`` (Ho & Lin 2009, eq. 6; :func:`gfimu.smoother.tuning.model_choice.rigid_body_residual`)
 whitened by the noise of the model check, ``σ_k² = σ₀² + (s |ω_k|)²`` (floor and slope of
-:class:`gfimu.smoother.auto.ModelCheck`), and the excess of the smoother's whitened squared
+:class:`gfimu.smoother.tuning.model_choice.ModelCheck`), and the excess of the smoother's whitened squared
 residual over the per-sample one,
 
     Δ_k = |r_k(smoother)|² / σ_k² - |r_k(per sample)|² / σ_k².
@@ -31,7 +31,7 @@ answer is right.
 The readings fix ω only up to its sign (q(ω) = q(-ω)): a smoother whose ω has the wrong sign fits
 them exactly as well, and no residual can see it. The guard therefore never judges the sign; when
 it replaces a span, the per-sample ω takes the signs that best follow the trapezoid of ω̇ from the
-smoother's neighbouring samples (:func:`gfimu.smoother.initialise.sign_chain`), so that the
+smoother's neighbouring samples (:func:`gfimu.smoother.solve.initialise.sign_chain`), so that the
 replacement does not flip the sign the smoother chose around it.
 
 Pure computation: no I/O.
@@ -48,8 +48,8 @@ from .. import rigid_body
 from ..crb import crb_per_sample
 from ..log import Log
 from ..motion import Motion
-from .auto import ModelCheck, rigid_body_residual
-from .initialise import sign_chain, sign_chain_scale
+from .tuning.model_choice import ModelCheck, rigid_body_residual
+from .solve.initialise import sign_chain, sign_chain_scale
 
 GUARD_MODES = ("replace", "warn", "off")
 """Values of the smoothers' ``guard`` option."""
@@ -66,7 +66,7 @@ OUTLIER_FALSE_ALARM = 1e-3
 """A per-sample fit is an outlier when its whitened residual exceeds the χ²_ν quantile at this probability."""
 DETERMINED_FACTOR = 3.0
 """A per-sample fit is well determined where its |ω| is at least this many times the std of its ω (three
-sigma from zero: the factor :data:`gfimu.smoother.stream_model.STILL_OMEGA_NOISE` tells rest from turning by)."""
+sigma from zero: the factor :data:`gfimu.smoother.stream.model_choice.STILL_OMEGA_NOISE` tells rest from turning by)."""
 MERGE_GAP_S = 0.05
 """Marked samples closer than this [s] belong to one span."""
 MIN_SAMPLES = 3
@@ -280,7 +280,7 @@ def check(log: Log, smoothed: Motion, per_sample: Motion, model_check: ModelChec
 def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult) -> Motion:
     """``smoothed`` with the per-sample ω, ω̇ and f over ``result``'s spans (the gravity-free
     acceleration, where present, moved by the same change of f; the attitude kept; σ unknown there:
-    NaN). ω takes the signs of :func:`gfimu.smoother.initialise.sign_chain` over the span and the
+    NaN). ω takes the signs of :func:`gfimu.smoother.solve.initialise.sign_chain` over the span and the
     smoother's samples next to it, the chain as a whole oriented to agree most with the smoother's ω
     there (Σ ω_chain · ω_smoother over the span and its two neighbours: where the motion starts or
     stops next to the span, the neighbours turn too slowly to tell the sign, the span's own samples do).

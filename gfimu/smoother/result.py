@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, fields
 from ..errors import InputError
 from ..estimate import Estimate, Report
 from ..motion import Motion
-from .option_groups import assemble
+from .model.option_groups import assemble
 
 
 @dataclass(frozen=True)
@@ -22,7 +22,7 @@ class SmootherResult:
 
     motion: Motion
     tunings: tuple = ()
-    """Per solve window: the process noise chosen from the data (:class:`gfimu.smoother.tuning.Tuning`)."""
+    """Per solve window: the process noise chosen from the data (:class:`gfimu.smoother.tuning.evidence.Tuning`)."""
     calibration: tuple = ()
     """Per solve window: calibration variable name -> estimate."""
     iterations: int = 0
@@ -34,7 +34,7 @@ class SmootherResult:
     warnings: tuple = ()
     """Plain-text notes on anything that went less well than planned (e.g. a window that did not converge)."""
     model_check: object | None = None
-    """The batch smoother's check of the readings against a rigid body (:class:`gfimu.smoother.auto.ModelCheck`),
+    """The batch smoother's check of the readings against a rigid body (:class:`gfimu.smoother.tuning.model_choice.ModelCheck`),
     None when it did not run."""
     timings: Mapping[str, float] = field(default_factory=dict)
     """Seconds per step of the run (empty: not timed by step)."""
@@ -59,9 +59,9 @@ class SmootherResult:
 @assemble("guard")
 class SmootherEstimator:
     """What the batch and fixed-lag estimators share: their options as plain
-    :class:`gfimu.smoother.graph.SmootherOptions` (:meth:`options`), the ``guard`` option, and :meth:`estimate`
+    :class:`gfimu.smoother.model.problem.SmootherOptions` (:meth:`options`), the ``guard`` option, and :meth:`estimate`
     returning the motion with the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing
-    of it). A subclass is a dataclass of option groups (:mod:`gfimu.smoother.option_groups`) that defines
+    of it). A subclass is a dataclass of option groups (:mod:`gfimu.smoother.model.option_groups`) that defines
     ``method`` (its name in :data:`gfimu.methods.METHODS`) and ``result(log, progress)`` (the
     :class:`SmootherResult`)."""
 
@@ -78,7 +78,7 @@ class SmootherEstimator:
             parent.__post_init__()
 
     def options(self):
-        from .graph import SmootherOptions
+        from .model.problem import SmootherOptions
 
         own = {f.name for f in fields(self)}
         return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions) if f.name in own})
@@ -107,7 +107,7 @@ def guarded(log, res: SmootherResult, mode: str, options):
     the accelerometers the per-sample fit sees (a gyroscope, an inclinometer, self-calibration): the result
     says why."""
     from ..estimators.ml import MLEstimator
-    from .auto import check_model
+    from .tuning.model_choice import check_model
     from .guard import GuardResult, check, replaced
 
     why = None

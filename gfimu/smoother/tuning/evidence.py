@@ -33,16 +33,16 @@ from typing import Callable
 
 import numpy as np
 
-from ..log import Log
-from .banded import (Factorisation, NormalEquations, add_normal_equations, band_structure_of, factorise, factorise_blocks,
+from ...log import Log
+from ..solve.banded import (Factorisation, NormalEquations, add_normal_equations, band_structure_of, factorise, factorise_blocks,
                      normal_equations, solve, solve_step)
-from .graph import SmootherOptions, SmootherProblem
-from .groups import Term
-from .initialise import initial_estimate
-from .layout import OMEGA, OMEGA_DOT, StateLayout
+from ..model.problem import SmootherOptions, SmootherProblem
+from ..model.groups import Term
+from ..solve.initialise import initial_estimate
+from ..model.layout import OMEGA, OMEGA_DOT, StateLayout
 
 InitialStates = Callable[[Log, SmootherOptions], np.ndarray]
-"""``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.initialise.initial_estimate`."""
+"""``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.solve.initialise.initial_estimate`."""
 
 DENSITY_FIELD = {"jerk": "omega_dot_random_walk_radps2_per_sqrt_s", "snap": "omega_ddot_random_walk_radps3_per_sqrt_s"}
 DENSITY_LIMITS = (1e-3, 1e8)
@@ -319,7 +319,7 @@ class ProcessBasis:
 @dataclass
 class BandedSum:
     """The measurement's normal equations plus the weighted sum of :class:`ProcessBasis`, factored
-    (:func:`gfimu.smoother.banded.factorise`), with the measurement's and each part's entries gathered
+    (:func:`gfimu.smoother.solve.banded.factorise`), with the measurement's and each part's entries gathered
     into the band order once: a setting adds the parts' few nonzero band entries, weighted, to the
     measurement's and factors the result (the evidence of the factors evaluated per setting, to
     rounding: ``tests/test_banded_fast.py``)."""
@@ -327,7 +327,7 @@ class BandedSum:
     structure: object
     measurement: NormalEquations
     blocks: np.ndarray
-    """(kd + 1, N, m) the measurement's band entries (:meth:`gfimu.smoother.banded.BandStructure.blocks`)."""
+    """(kd + 1, N, m) the measurement's band entries (:meth:`gfimu.smoother.solve.banded.BandStructure.blocks`)."""
     parts: dict
     """key -> (band rows, band columns, values (k, N), gradient columns, gradient values (N, j), cost)."""
     rows: int
@@ -669,7 +669,7 @@ def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = No
     """Problem and initial states of one solve window, with the process noise chosen from the data
     (:func:`tune`) when ``options.tune_process_noise``; the choice is appended to ``tunings``.
 
-    ``initial``: how the initial states are made (default :func:`gfimu.smoother.initialise.initial_estimate`);
+    ``initial``: how the initial states are made (default :func:`gfimu.smoother.solve.initialise.initial_estimate`);
     ``span_s``: choose on at most this much of the window [s] (None: the whole window): the stretch
     where the initial estimate's ω̇ moves most (the middle one among equals), so that a window that
     rests in its middle is not tuned on its rest alone."""

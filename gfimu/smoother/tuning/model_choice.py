@@ -6,7 +6,7 @@ built rigs). Real arrays often do not: their rigid-body residual exceeds the
 datasheet noise several times, grows with the rotation rate and has heavy
 tails (sample-time skew, filter differences, alignment and position errors;
 see docs/rigid-body-residual.md). The marginal-likelihood tuner
-(:mod:`gfimu.smoother.tuning`) then trusts a wrong noise model, chooses a far
+(:mod:`gfimu.smoother.tuning.evidence`) then trusts a wrong noise model, chooses a far
 too smooth motion model, and the smoother settles on the wrong sign branch of
 ω at fast rotations.
 
@@ -47,12 +47,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..log import Log
-from ..rigid_body import quadratic_terms
-from .graph import SmootherOptions
+from ...log import Log
+from ...rigid_body import quadratic_terms
+from ..model.problem import SmootherOptions
 
 CHECK_SAMPLES = 5000
-"""The model check (:func:`gfimu.smoother.auto.check_model`) reads at most about this many samples,
+"""The model check (:func:`gfimu.smoother.tuning.model_choice.check_model`) reads at most about this many samples,
 evenly spread over the log or the stream's recent past (120,000 residuals of an 8-triad array)."""
 NOISE_RATIO_LIMIT = 2.0
 """Largest robust residual scale over the stated noise std of a consistent log."""

@@ -1,6 +1,6 @@
 """Batch smoother (method "smoother"): the whole log at once, linear in its length.
 
-The factors of :class:`gfimu.smoother.graph.SmootherProblem` are evaluated
+The factors of :class:`gfimu.smoother.model.problem.SmootherProblem` are evaluated
 vectorised over all samples; their Gauss-Newton normal equations are
 block-tridiagonal in the per-sample states (plus a dense border for the
 calibration variables), solved by a banded Cholesky factorisation and a
@@ -12,7 +12,7 @@ overlapping windows.
 Per window, the process noise (jerk density per body axis, specific-force
 density; optionally the accelerometer noise scale and the motion model) is
 chosen by maximising the marginal likelihood of the readings
-(:mod:`gfimu.smoother.tuning`, on by default here); with
+(:mod:`gfimu.smoother.tuning.evidence`, on by default here); with
 ``accel_noise_slope_mps2_per_radps`` the accelerometer noise grows with |ω|
 and is re-weighted from each solution (iteratively re-weighted least squares).
 """
@@ -24,16 +24,16 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from ..array import SensorArray
-from ..errors import DataError, InputError
-from ..estimators.ml import MLEstimator
-from ..factors import GRAVITY_W_MPS2, so3 as _so3
-from ..log import Log
-from ..parallel import check_workers, fork_workers, forked_map
-from ..motion import Motion
-from ..progress import progress as progress_bar
-from ..rotations import quaternion_from_matrix
-from .auto import (
+from ...array import SensorArray
+from ...errors import DataError, InputError
+from ...estimators.ml import MLEstimator
+from ...factors import GRAVITY_W_MPS2, so3 as _so3
+from ...log import Log
+from ...parallel import check_workers, fork_workers, forked_map
+from ...motion import Motion
+from ...progress import progress as progress_bar
+from ...rotations import quaternion_from_matrix
+from ..tuning.model_choice import (
     CHECK_SAMPLES,
     check_model,
     estimate_noise_variances,
@@ -43,7 +43,7 @@ from .auto import (
     motion_densities,
     with_densities,
 )
-from .banded import (  # noqa: F401  (the banded core, also importable from here)
+from ..solve.banded import (  # noqa: F401  (the banded core, also importable from here)
     REWEIGHTED_TOLERANCE,
     Factorisation,
     NormalEquations,
@@ -59,14 +59,14 @@ from .banded import (  # noqa: F401  (the banded core, also importable from here
     solve_step,
     to_lower_banded,
 )
-from .graph import SmootherOptions, SmootherProblem, options_reason
-from .option_groups import assemble
-from .initialise import initial_attitude, initial_states, sign_chain
-from .layout import OMEGA, SPECIFIC_FORCE, StateLayout
-from .restarts import branch_restarts
-from .result import SmootherEstimator, SmootherResult
-from .sigma_scale import calibrated_sigma
-from .tuning import InitialStates, Tuning, make_problem, tuned_problem
+from ..model.problem import SmootherOptions, SmootherProblem, options_reason
+from ..model.option_groups import assemble
+from ..solve.initialise import initial_attitude, initial_states, sign_chain
+from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
+from ..solve.restarts import branch_restarts
+from ..result import SmootherEstimator, SmootherResult
+from ..solve.sigma_scale import calibrated_sigma
+from ..tuning.evidence import InitialStates, Tuning, make_problem, tuned_problem
 
 SOLVERS = ("numpy", "gtsam")
 """Solvers of the batch smoother: the vectorised banded Levenberg-Marquardt (default: linear in the
@@ -122,7 +122,7 @@ def window_slices(n: int, rate_hz: float, window_s: float | None, overlap_s: flo
 def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None,
                   compute_sigma: bool = False, solver: str = "numpy", reweight=None,
                   max_iterations: int | None = None) -> SolveResult:
-    """:func:`gfimu.smoother.banded.solve` with the banded numpy solver or the GTSAM graph (:data:`SOLVERS`)."""
+    """:func:`gfimu.smoother.solve.banded.solve` with the banded numpy solver or the GTSAM graph (:data:`SOLVERS`)."""
     if solver == "numpy":
         return solve(problem, states, params, compute_sigma=compute_sigma, reweight=reweight, max_iterations=max_iterations)
     if solver != "gtsam":
@@ -139,7 +139,7 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
 
 def solve_window(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions, params: np.ndarray | None = None,
                  compute_sigma: bool | None = None, solver: str = "numpy") -> SolveResult:
-    """:func:`gfimu.smoother.banded.solve_reweighted` (motion-dependent noise and robust losses of
+    """:func:`gfimu.smoother.solve.banded.solve_reweighted` (motion-dependent noise and robust losses of
     ``options``) with either solver."""
     if solver == "numpy":
         return solve_reweighted(problem, states, options, params, compute_sigma)
@@ -158,7 +158,7 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     from the data when ``options.tune_process_noise``.
 
     ``initial``: how each window's initial states are made (default
-    :func:`gfimu.smoother.initialise.initial_estimate`); ``solver`` (one of :data:`SOLVERS`),
+    :func:`gfimu.smoother.solve.initialise.initial_estimate`); ``solver`` (one of :data:`SOLVERS`),
     ``auto_model``, ``tune_span_s``: the options' unless given; ``workers``: here 1, in this process,
     unless asked (:class:`BatchSmootherEstimator` passes its option)."""
     opt = options
@@ -386,7 +386,7 @@ def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: In
 
 
 def _calibrates_sigma(log: Log, opt: SmootherOptions) -> bool:
-    """Whether σ is scaled by the readings' misfit (:mod:`gfimu.smoother.sigma_scale`): the accelerometers
+    """Whether σ is scaled by the readings' misfit (:mod:`gfimu.smoother.solve.sigma_scale`): the accelerometers
     alone, as they are (no gyroscope, inclinometer or calibration variables the residual would leave out)."""
     return (opt.measurement == "accelerometer" and not (opt.self_calibrate_bias or opt.self_calibrate_scale)
             and not (opt.use_gyro and log.array.gyroscope is not None and log.gyro_b_radps is not None)
@@ -394,7 +394,7 @@ def _calibrates_sigma(log: Log, opt: SmootherOptions) -> bool:
 
 
 def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
-    """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.auto`; the ML motion is the
+    """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.tuning.model_choice`; the ML motion is the
     whole log's (:class:`MLEstimator` with its defaults) where the check computed it, else None."""
     if (attitude or opt.free_flight or opt.measurement != "accelerometer"
             or opt.self_calibrate_bias or opt.self_calibrate_scale):
@@ -424,7 +424,7 @@ def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
 
 
 def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions) -> SolveResult:
-    """``res`` with the local restarts of :func:`gfimu.smoother.restarts.branch_restarts`: short runs
+    """``res`` with the local restarts of :func:`gfimu.smoother.solve.restarts.branch_restarts`: short runs
     on another branch of ω kept where the robust objective falls; the cost is the re-weighted cost at
     the result."""
     problem = res.problem or problem
@@ -444,7 +444,7 @@ def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions)
 def moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
     """Problem and initial states of one window of an inconsistent log: ML initialisation with its
     sign chain, the measured noise floor and slope, the process densities chosen for the log, and
-    the jerk density lowered where the body rests (:func:`gfimu.smoother.auto.local_density_factors`)."""
+    the jerk density lowered where the body rests (:func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
     check, motion = auto
     omega = motion.omega_b_radps[solve_sl]
     omega_dot = motion.omega_dot_b_radps2[solve_sl]
@@ -494,15 +494,15 @@ def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: sl
 class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     """Factor-graph smoother over the whole log (method "smoother").
 
-    Options: those of :class:`gfimu.smoother.graph.SmootherOptions` (groups model, batch, tuning) and
-    ``guard`` (:mod:`gfimu.smoother.option_groups`; no fixed-lag option). Returns ω, ω̇
+    Options: those of :class:`gfimu.smoother.model.problem.SmootherOptions` (groups model, batch, tuning) and
+    ``guard`` (:mod:`gfimu.smoother.model.option_groups`; no fixed-lag option). Returns ω, ω̇
     and the specific force at the body origin for every sample, with
     one-sigma marginal uncertainties when ``compute_sigma``; :meth:`result`
     returns everything the run produced (:class:`SmootherResult`).
 
     Unlike :class:`SmootherOptions`, ``tune_process_noise`` is on by default: the
     jerk density per body axis and the specific-force density are chosen per solve
-    window by the marginal likelihood of the data (:mod:`gfimu.smoother.tuning`);
+    window by the marginal likelihood of the data (:mod:`gfimu.smoother.tuning.evidence`);
     ``tune_process_noise=False`` uses the fixed densities.
     """
 
@@ -541,7 +541,7 @@ def gtsam_levenberg_marquardt(problem: SmootherProblem, states: np.ndarray, para
                               iterations: int = 10, tolerance: float = 1e-12,
                               reweight=None) -> tuple[np.ndarray, np.ndarray, int, bool]:
     """The graph path: :meth:`SmootherProblem.gtsam_graph`, solved by the Levenberg-Marquardt schedule
-    of :func:`gfimu.smoother.banded.solve`, driven here on a Python-owned Values: linearise, eliminate
+    of :func:`gfimu.smoother.solve.banded.solve`, driven here on a Python-owned Values: linearise, eliminate
     with the states in time order (then the calibration variables), retract. The time ordering keeps
     the elimination a chain, linear in the length. Each iteration first tries the undamped
     Gauss-Newton step; Marquardt damping ``λ (diag(JᵀJ) + 10⁻⁹)`` is switched on and raised tenfold

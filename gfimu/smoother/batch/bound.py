@@ -16,15 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..factors import so3 as _so3
-from ..log import Log
-from ..motion import Motion
-from ..rotations import matrix_from_quaternion
-from .banded import factorise, marginal_covariances, normal_equations
-from .batch import window_slices
-from .graph import SmootherOptions, SmootherProblem
-from .layout import OMEGA_DOT, QUANTITIES
+from ...errors import InputError
+from ...factors import so3 as _so3
+from ...log import Log
+from ...motion import Motion
+from ...rotations import matrix_from_quaternion
+from ..solve.banded import factorise, marginal_covariances, normal_equations
+from .engine import window_slices
+from ..model.problem import SmootherOptions, SmootherProblem
+from ..model.layout import OMEGA_DOT, QUANTITIES
 
 QUANTITY_SLICES = QUANTITIES
 

@@ -24,16 +24,16 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from .. import noise, rigid_body
-from ..errors import InputError
-from ..estimators.ml import MLEstimator
-from ..factors import so3 as _so3
-from ..log import Log
-from ..rigid_body import quadratic_terms
-from ..rotations import skew
+from ... import noise, rigid_body
+from ...errors import InputError
+from ...estimators.ml import MLEstimator
+from ...factors import so3 as _so3
+from ...log import Log
+from ...rigid_body import quadratic_terms
+from ...rotations import skew
 from .banded import band_structure
-from .graph import STATE_SIZE, SmootherOptions
-from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
+from ..model.problem import STATE_SIZE, SmootherOptions
+from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
 
 LIFTED = 12
@@ -350,7 +350,7 @@ def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
 
 
 def initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
-    """Initial states for :class:`gfimu.smoother.graph.SmootherProblem`: ``[ω, ω̇, f]`` (N, 9),
+    """Initial states for :class:`gfimu.smoother.model.problem.SmootherProblem`: ``[ω, ω̇, f]`` (N, 9),
     with ω̈ = 0 appended (N, 12) for the 'snap' motion model."""
     x0 = _initial_states(log, options)
     if options.motion_model == "snap":
@@ -413,7 +413,7 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
 
 STEADY_OMEGA_CHANGE_SIGMA_RADPS = 0.03
 """Noise of ω̇ integrated over an initialisation window, below which (times five) a window's
-change of ω does not decide the sign of ω (see :func:`gfimu.smoother.gravity_sign.steady_rotation`)."""
+change of ω does not decide the sign of ω (see :func:`gfimu.smoother.solve.gravity_sign.steady_rotation`)."""
 
 
 def steady_rotation_sign(omega_b_radps: np.ndarray, specific_force_b_mps2: np.ndarray, dt_s: np.ndarray,
@@ -422,7 +422,7 @@ def steady_rotation_sign(omega_b_radps: np.ndarray, specific_force_b_mps2: np.nd
 
     A steady rotation's sign is unobservable from the lever-arm terms (``q(ω) = q(-ω)``) and ω̇
     carries none; gravity seen from the body turns as ``ḟ ≈ -ω × f``, which decides it
-    (:mod:`gfimu.smoother.gravity_sign`). Returns +1 unless that evidence is clear.
+    (:mod:`gfimu.smoother.solve.gravity_sign`). Returns +1 unless that evidence is clear.
     """
     if not steady_rotation(omega_b_radps, STEADY_OMEGA_CHANGE_SIGMA_RADPS, window):
         return 1.0

@@ -1,4 +1,4 @@
-"""Compiled kernels of the fixed-lag window filter's update (:mod:`gfimu.smoother._fixed_lag_filter`).
+"""Compiled kernels of the fixed-lag window filter's update (:mod:`gfimu.smoother.stream.window_filter`).
 
 The per-sample work of the numpy engine is a few dozen products of 9×9 and m×9 matrices: in numpy
 each costs a call (microseconds of dispatch for nanoseconds of arithmetic), so the update is
@@ -7,16 +7,16 @@ expression it replaces, term for term; the numpy expressions stay in the filter 
 tests compare these kernels with (``tests/test_filter_kernels.py``), and the filter falls back to
 them where a kernel does not apply (gyroscope rows, factor groups' rows).
 
-- :func:`solve` is :meth:`WindowFilter._solve <gfimu.smoother._fixed_lag_filter.WindowFilter._solve>`
+- :func:`solve` is :meth:`WindowFilter._solve <gfimu.smoother.stream.window_filter.WindowFilter._solve>`
   for the accelerometer readings alone: Gauss-Newton (iterated Kalman) on
   ``J(x) = ||y - h(x)||²_R + ||x - x̂||²_P`` with ``h(x) = S_ω̇ ω̇ + S_f f + S_q q(ω)``
   (Ho & Lin 2009, eq. 6), the accelerometer variances at ``x`` (motion-dependent, robust);
 - :func:`search` is the branch search of :meth:`WindowFilter.measure`: Gauss-Newton from the
   prediction and from the other three branches of its minimum (ω flipped, mirrored through the
-  array's plane, both: :func:`gfimu.smoother.restarts.branch`), keeping the lowest J;
+  array's plane, both: :func:`gfimu.smoother.solve.restarts.branch`), keeping the lowest J;
 - :func:`update_window` is :meth:`WindowFilter._update`: one update of the newest state moving
   every state of the window (means, marginal variances, cross-covariances);
-- :func:`chain_step` is one step of :class:`gfimu.smoother.stream_model.StreamSignChain`.
+- :func:`chain_step` is one step of :class:`gfimu.smoother.stream.model_choice.StreamSignChain`.
 
 Compiled on first use and cached on disk (numba's ``cache=True``: beside this file, or in the user's
 cache folder where that is not writable), so only the first run on a machine pays the compilation.
@@ -31,7 +31,7 @@ LOSS_NONE, LOSS_CAUCHY, LOSS_HUBER = 0, 1, 2
 
 
 def loss_code(c: float, loss: str) -> int:
-    """The kernels' code of a robust loss of threshold ``c`` (:func:`gfimu.smoother.graph.robust_loss`)."""
+    """The kernels' code of a robust loss of threshold ``c`` (:func:`gfimu.smoother.model.problem.robust_loss`)."""
     if c <= 0:
         return LOSS_NONE
     return LOSS_CAUCHY if loss == "cauchy" else LOSS_HUBER
@@ -39,7 +39,7 @@ def loss_code(c: float, loss: str) -> int:
 
 @njit(cache=True, inline="always")
 def _weight(e: float, c: float, loss: int) -> float:
-    """:func:`gfimu.smoother.graph.robust_weight` of one whitened residual."""
+    """:func:`gfimu.smoother.model.problem.robust_weight` of one whitened residual."""
     e = abs(e)
     if loss == LOSS_CAUCHY:
         return 1.0 / (1.0 + (e / c) ** 2)
@@ -193,7 +193,7 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
 
 @njit(cache=True)
 def branch_state(kind, x, normal):
-    """x (9,) with its ω, ω̇ on branch ``kind`` (:func:`gfimu.smoother.restarts.branch`)."""
+    """x (9,) with its ω, ω̇ on branch ``kind`` (:func:`gfimu.smoother.solve.restarts.branch`)."""
     out = x.copy()
     if kind & 2:
         wn = x[0] * normal[0] + x[1] * normal[1] + x[2] * normal[2]
@@ -388,7 +388,7 @@ def step_residual2(F, Q, x0, x1):
 @njit(cache=True)
 def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
                    prior_margin, c_process, process_loss, Q, robust_step, T, u, W, mean, var, cross):
-    """:meth:`WindowFilter.measure <gfimu.smoother._fixed_lag_filter.WindowFilter.measure>` on the readings
+    """:meth:`WindowFilter.measure <gfimu.smoother.stream.window_filter.WindowFilter.measure>` on the readings
     alone, in one call: the update's minimum (:func:`search`), then with ``robust_step`` the robust loss of
     the motion-model step (threshold ``c_process``): where the step's whitened residual ``(x - x̂)ᵀ P⁻¹ (x - x̂)
     / 9`` gives an IRLS weight w < 1, the prediction's covariance widened by ``(1/w - 1) Q`` and the minimum

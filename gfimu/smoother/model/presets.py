@@ -1,7 +1,7 @@
 """Named settings of the batch smoother (method "smoother") for recurring situations.
 
 A preset is a one-line description and a dict of
-:class:`gfimu.smoother.graph.SmootherOptions` (and ``BatchSmootherEstimator``)
+:class:`gfimu.smoother.model.problem.SmootherOptions` (and ``BatchSmootherEstimator``)
 overrides. Options given explicitly win over the preset::
 
     make_estimator("smoother", preset="hand-held-low-rate")
@@ -10,7 +10,7 @@ overrides. Options given explicitly win over the preset::
 
 Presets are named starting points, never required: the default smoother checks each
 log's rigid-body residual and chooses a robust model for real sensors by itself
-(:mod:`gfimu.smoother.auto`), which matches this preset on the MIMU4444 recordings.
+(:mod:`gfimu.smoother.tuning.model_choice`), which matches this preset on the MIMU4444 recordings.
 
 ``hand-held-low-rate`` holds the settings chosen on the first real MIMU4444
 recording (``tools/mimu4444_study.py``): the per-sample maximum-likelihood
@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ..errors import InputError
+from ...errors import InputError
 
 PRESETS: dict[str, tuple[str, dict[str, Any]]] = {
     "hand-held-low-rate": (

@@ -4,7 +4,7 @@ Accelerometers see ω through its quadratic terms, ``q(ω) = q(-ω)``, and a nea
 also confuses ω with its mirror image through the array's plane (the out-of-plane readings see
 ω_x ω_n, ω_y ω_n only mixed with ω̇; see docs/rigid-body-residual.md). Where the readings alone
 cannot tell the branches apart, the motion model does. But with the robust (Cauchy) loss on the
-motion-model steps of the robust model (:mod:`gfimu.smoother.auto`), a short run of samples on
+motion-model steps of the robust model (:mod:`gfimu.smoother.tuning.model_choice`), a short run of samples on
 another branch costs only the logarithm of the two large steps at its ends: Levenberg-Marquardt,
 a local method, keeps such a run once it has it (a local minimum of the smoother's objective).
 
@@ -24,10 +24,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..factors import accelerometer
-from .graph import SmootherProblem, robust_loss
-from .groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term
-from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
+from ...factors import accelerometer
+from ..model.problem import SmootherProblem, robust_loss
+from ..model.groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term
+from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 
 RUN_SAMPLES = 6
 """Longest run of samples between two outlying motion-model steps that is tried on another branch."""

@@ -8,19 +8,19 @@ together by
   (trapezoidal integration) and random walks on ω̇ and f;
 - weak priors on the first state of every segment, and an optional gyroscope;
 - the factor groups given in ``SmootherOptions.factor_groups`` whose rows each
-  depend on one sample's state (:attr:`gfimu.smoother.groups.FactorGroup.per_sample`),
+  depend on one sample's state (:attr:`gfimu.smoother.model.groups.FactorGroup.per_sample`),
   evaluated by their own vectorised residual and Jacobian on each sample as it
-  comes (:meth:`gfimu.smoother._fixed_lag_model.ArrayModel.sample_terms`);
+  comes (:meth:`gfimu.smoother.stream.array_model.ArrayModel.sample_terms`);
 
-the same factors and options (:class:`~gfimu.smoother.graph.SmootherOptions`)
+the same factors and options (:class:`~gfimu.smoother.model.problem.SmootherOptions`)
 as the batch smoother (method ``"smoother"``). The first states of a segment
 (``warmup_s`` of data) are initialised by the batch smoother's sign-resolving
-initialiser (:mod:`gfimu.smoother.initialise`); every later state starts from
+initialiser (:mod:`gfimu.smoother.solve.initialise`); every later state starts from
 the previous filtered one (``ω + h ω̇``, then ``[f, ω̇]`` from the readings
 given that ω), so the sign of ω is carried through zero crossings.
 
 :class:`FixedLagSmoother` solves the window of these factors with one of two
-engines: ``numpy`` (default; :mod:`gfimu.smoother._fixed_lag_filter`, a Kalman
+engines: ``numpy`` (default; :mod:`gfimu.smoother.stream.window_filter`, a Kalman
 filter on the state augmented with the window, keeping the cross-covariances
 of the window with the newest state: the same least-squares minimum for the
 linear parts, each reading linearised once by a Gauss-Newton update; about
@@ -43,9 +43,9 @@ Time gaps (a step longer than ``gap_factor`` times the nominal step, as
 starts with a fresh initialisation.
 
 The model chosen from the data (``auto_model``, on in :class:`FixedLagEstimator`):
-the batch smoother's model check and noise choice (:mod:`gfimu.smoother.auto`) made on
+the batch smoother's model check and noise choice (:mod:`gfimu.smoother.tuning.model_choice`) made on
 the stream's own recent past and made again as the motion changes
-(:mod:`gfimu.smoother.stream_model`; ``docs/fixed-lag.md``). The first
+(:mod:`gfimu.smoother.stream.model_choice`; ``docs/fixed-lag.md``). The first
 ``tune_window_s`` of data are buffered and the model is chosen on them; for a
 consistent stretch whose process noise is tuned, the states of the stretch that come
 out then are the batch solution of the stretch and the stream continues from the
@@ -84,27 +84,27 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..array import SensorArray
-from ..errors import DataError, InputError
-from ..log import Log
-from ..motion import Motion
-from ..progress import progress as progress_bar
-from . import _fixed_lag_model as model
-from ._fixed_lag_filter import FilterFailure, WindowFilter
-from ._fixed_lag_gtsam import GtsamWindow
-from .banded import solve
-from .graph import SmootherOptions, options_reason
-from .option_groups import GROUPS, assemble
-from .initialise import initial_estimate
-from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
-from .result import SmootherEstimator, SmootherResult
-from . import stream_model
-from .auto import measured_noise_options
-from .restarts import branch, plane_normal
-from .stream_model import LocalDensity, StreamModel, StreamSignChain
-from .sigma_scale import RunningSigmaScale, calibrates_stream
-from .tuning import make_problem, tuned_problem
-from ..estimators.ml import MLEstimator
+from ...array import SensorArray
+from ...errors import DataError, InputError
+from ...log import Log
+from ...motion import Motion
+from ...progress import progress as progress_bar
+from . import array_model as model
+from .window_filter import FilterFailure, WindowFilter
+from .gtsam_window import GtsamWindow
+from ..solve.banded import solve
+from ..model.problem import SmootherOptions, options_reason
+from ..model.option_groups import GROUPS, assemble
+from ..solve.initialise import initial_estimate
+from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
+from ..result import SmootherEstimator, SmootherResult
+from . import model_choice as stream_model
+from ..tuning.model_choice import measured_noise_options
+from ..solve.restarts import branch, plane_normal
+from .model_choice import LocalDensity, StreamModel, StreamSignChain
+from ..solve.sigma_scale import RunningSigmaScale, calibrates_stream
+from ..tuning.evidence import make_problem, tuned_problem
+from ...estimators.ml import MLEstimator
 
 OUTGROWN_FACTOR = 2.0
 """The model is chosen again at once (at most once a second) when the local motion density exceeds
@@ -186,7 +186,7 @@ class FixedLagUpdate:
 
 
 ENGINES = ("numpy", "gtsam")
-"""Window solvers: ``numpy`` (:mod:`gfimu.smoother._fixed_lag_filter`, the default) and ``gtsam``
+"""Window solvers: ``numpy`` (:mod:`gfimu.smoother.stream.window_filter`, the default) and ``gtsam``
 (``IncrementalFixedLagSmoother``, iSAM2)."""
 
 PROCESS_NOISE_OPTIONS = ("omega_dot_random_walk_radps2_per_sqrt_s", "specific_force_random_walk_mps2_per_sqrt_s",
@@ -320,13 +320,13 @@ class FixedLagSmoother:
         self.engine = engine
         self.factorization = "QR"
         self.model = model.ArrayModel(array, options, fast_measurement)
-        self.tuning = None  # gfimu.smoother.tuning.Tuning once chosen from the data
+        self.tuning = None  # gfimu.smoother.tuning.evidence.Tuning once chosen from the data
         self._user_options = options
         self._tune = tunes_process_noise(options)
         self._auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
         self._tune_pending = self._tune or self._auto
         self.stream_model: StreamModel | None = None
-        """The model in use (:mod:`gfimu.smoother.stream_model`), once chosen."""
+        """The model in use (:mod:`gfimu.smoother.stream.model_choice`), once chosen."""
         self.models: list[StreamModel] = []
         """Every model chosen so far, oldest first."""
         self._history: deque = deque(maxlen=max(2, int(round(max(model_window_s, tune_window_s) * self.rate_hz))))
@@ -455,7 +455,7 @@ class FixedLagSmoother:
         return FixedLagUpdate(self._scaled(smoothed), None if self._smoother is None else self._read(self._window[-1]))
 
     def _scaled(self, states) -> tuple[StateEstimate, ...]:
-        """``states`` with σ scaled by the misfit of the readings emitted so far (:mod:`gfimu.smoother.sigma_scale`)."""
+        """``states`` with σ scaled by the misfit of the readings emitted so far (:mod:`gfimu.smoother.solve.sigma_scale`)."""
         if self._sigma_scale is None:
             return tuple(states)
         out = []
@@ -522,7 +522,7 @@ class FixedLagSmoother:
 
     def _choose(self, samples, first: bool = False, outgrown: bool = False):
         """Choose the model on ``samples`` ((t_ns, accel, gyro, ...) tuples, oldest first) and go on with
-        it (:mod:`gfimu.smoother.stream_model`). The first choice of a consistent stretch whose process
+        it (:mod:`gfimu.smoother.stream.model_choice`). The first choice of a consistent stretch whose process
         noise is tuned also returns the batch smoother's states of the stretch (else None).
 
         A consistent stretch keeps the Gaussian model in use when that was chosen on motion and the
@@ -645,7 +645,7 @@ class FixedLagSmoother:
 
     def tune(self, samples) -> tuple:
         """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
-        (:class:`gfimu.smoother.tuning.Tuning`, options carrying it)."""
+        (:class:`gfimu.smoother.tuning.evidence.Tuning`, options carrying it)."""
         tuning, problem, _ = self._tuned(self._stretch_log(samples))
         return tuning, tuning.for_stream(replace(problem.options, tune_process_noise=False))
 
@@ -915,8 +915,8 @@ class FixedLagSmoother:
     def _start_evidence(self):
         """The held rows and the window solved as the batch smoother solves a stretch (the stream's model,
         Levenberg-Marquardt on the whole stretch), from the filtered states, from the batch smoother's own
-        initial states of the stretch (:func:`~gfimu.smoother.initialise.initial_estimate`) and from the
-        filtered states moved onto each other branch of ω (:func:`~gfimu.smoother.restarts.branch`: flipped, mirrored through the array's
+        initial states of the stretch (:func:`~gfimu.smoother.solve.initialise.initial_estimate`) and from the
+        filtered states moved onto each other branch of ω (:func:`~gfimu.smoother.solve.restarts.branch`: flipped, mirrored through the array's
         plane, both). Returns (problem, best solution, the best other minimum's solution or None,
         log-likelihood ratio of the best over it [nats]: the difference of their costs, each the negative
         log-likelihood of the stretch up to one constant; inf when every start ends in the best minimum)."""
@@ -1058,7 +1058,7 @@ class FixedLagSmoother:
 class FixedLagEstimator(SmootherEstimator):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
-    Options: the groups model, stream, tuning and guard of :mod:`gfimu.smoother.option_groups`
+    Options: the groups model, stream, tuning and guard of :mod:`gfimu.smoother.model.option_groups`
     (``gfimu estimate --method fixed-lag --list-options``); the batch smoother's group (``window_s``,
     ``overlap_s``, ``reweight_iterations``, ...) is not among them, so such an option is refused where the
     options are read. Each sample's estimate is its
@@ -1101,7 +1101,7 @@ class FixedLagEstimator(SmootherEstimator):
         smoother keeps ``lag_s`` and an estimate leaves ``lag_s`` plus the wait after its sample."""
         if not self.screen_readings:
             return self.lag_s
-        from ..readings import stream_wait_s
+        from ...readings import stream_wait_s
 
         wait = stream_wait_s(rate_hz)
         return self.lag_s - wait if wait <= 0.5 * self.lag_s else self.lag_s
@@ -1123,7 +1123,7 @@ class FixedLagEstimator(SmootherEstimator):
         """(``log`` screened as a stream of its rows, :class:`~gfimu.readings.Screening`): the readings
         :meth:`result` is given by ``gfimu estimate`` are those ``gfimu live`` gives the smoother
         (:func:`gfimu.readings.screen_stream`); with ``screen_readings=False``, the log as it is."""
-        from ..readings import OUT_OF_ANY_RANGE_MPS2, Screening, screen_stream
+        from ...readings import OUT_OF_ANY_RANGE_MPS2, Screening, screen_stream
 
         if self.screen_readings:
             return screen_stream(log)

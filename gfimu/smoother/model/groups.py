@@ -1,9 +1,9 @@
 """Factor groups: the smoother's model as one list of equations, each written once for every consumer.
 
-A group gives, for a :class:`gfimu.smoother.graph.SmootherProblem`,
+A group gives, for a :class:`gfimu.smoother.model.problem.SmootherProblem`,
 
 - :meth:`FactorGroup.noise`: its noise levels from the options and the log, gathered by the problem
-  into one frozen value (:mod:`gfimu.smoother.noise_levels`; read back as ``problem.trapezoid_sigma``
+  into one frozen value (:mod:`gfimu.smoother.model.noise_levels`; read back as ``problem.trapezoid_sigma``
   etc., re-weighted by making a new problem),
 - :meth:`FactorGroup.terms`: its whitened residuals and analytic Jacobians over all samples at
   once (vectorised; the batch solver and the tuner's normal equations),
@@ -19,7 +19,7 @@ trapezoid kinematics and the ω̇ random walk, the driven oscillator, or white s
 (Lu, Tsai & Lin 2010), free flight (McGinnis, Perkins & King 2012, eq. 1), the inclinometer (Lu, Tsai & Lin 2010) and the calibration
 priors. Further groups are given with ``SmootherOptions.factor_groups`` and reach every consumer
 without changing any of them; those whose terms are per sample (``per_sample``) or tie two
-consecutive samples (``steps``) also reach the fixed-lag smoother (:mod:`gfimu.smoother.fixed_lag`),
+consecutive samples (``steps``) also reach the fixed-lag smoother (:mod:`gfimu.smoother.stream.fixed_lag`),
 which evaluates them on each sample alone or on the two samples of each step, as it does the
 built-in motion model and specific-force walk.
 """
@@ -30,9 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import noise
-from ..errors import DataError, InputError
-from ..factors import (
+from ... import noise
+from ...errors import DataError, InputError
+from ...factors import (
     accelerometer,
     attitude_key,
     diagonal_noise,
@@ -86,20 +86,20 @@ class FactorGroup:
     steps = False
     """Whether each of its rows ties two consecutive samples at most (binary terms of samples k, k+1, no
     calibration variables): the fixed-lag smoother then takes it into every step, evaluating it on
-    the two samples (:meth:`gfimu.smoother._fixed_lag_model.ArrayModel.step`)."""
+    the two samples (:meth:`gfimu.smoother.stream.array_model.ArrayModel.step`)."""
     linear = False
     """Whether its rows are affine in the states with Jacobians that depend on the step length and its
     noise only (the fixed-lag smoother then keeps its step per step length)."""
     motion = False
     """Whether its rows are the motion model's, whose stds the local motion density scales
-    (:meth:`gfimu.smoother.graph.SmootherProblem.with_process_factors`; the fixed-lag smoother's steps)."""
+    (:meth:`gfimu.smoother.model.problem.SmootherProblem.with_process_factors`; the fixed-lag smoother's steps)."""
 
     def applies(self, problem) -> bool:
         return True
 
     def noise(self, problem) -> dict:
         """Its noise levels, name -> value, computed from the options and the log (once, when the problem
-        is built; :class:`gfimu.smoother.noise_levels.NoiseLevels`); its terms read them back as
+        is built; :class:`gfimu.smoother.model.noise_levels.NoiseLevels`); its terms read them back as
         ``problem.NAME``. None by default."""
         return {}
 

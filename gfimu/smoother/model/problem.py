@@ -5,8 +5,8 @@ State of sample k: ``x_k = [ω_k, ω̇_k, f_k]`` (9 numbers, body frame B; the
 global calibration variables when self-calibration is on (per-axis
 accelerometer bias and scale-factor error, gyroscope bias).
 
-The model is the list of factor groups of :mod:`gfimu.smoother.groups` that apply to the options
-(:data:`gfimu.smoother.groups.BUILT_IN`, then ``SmootherOptions.factor_groups``): the accelerometer
+The model is the list of factor groups of :mod:`gfimu.smoother.model.groups` that apply to the options
+(:data:`gfimu.smoother.model.groups.BUILT_IN`, then ``SmootherOptions.factor_groups``): the accelerometer
 equation of every sensor (Ho & Lin 2009, eq. 6) or the per-sample inversion; the motion model
 (trapezoid kinematics and the ω̇ random walk, i.e. white angular jerk of density
 ``omega_dot_random_walk_radps2_per_sqrt_s``, or per body axis the driven oscillator
@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..array import SensorArray
-from ..errors import DataError, InputError
-from ..factors import (
+from ...array import SensorArray
+from ...errors import DataError, InputError
+from ...factors import (
     so3 as _so3,
     accelerometer,
     attitude_key,
@@ -41,15 +41,15 @@ from ..factors import (
     scale_key,
     specific_force_key,
 )
-from ..log import Log
-from ..parallel import check_workers
+from ...log import Log
+from ...parallel import check_workers
 from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term, group_noise  # noqa: F401  (Term: also importable from here)
 from .noise_levels import NoiseLevels, ReadsNoiseLevels
 from .option_groups import assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
-"""State size of the default white-jerk model; white snap appends ω̈ (12); see :mod:`gfimu.smoother.layout`."""
+"""State size of the default white-jerk model; white snap appends ω̈ (12); see :mod:`gfimu.smoother.model.layout`."""
 W, D, F, A = OMEGA, OMEGA_DOT, SPECIFIC_FORCE, OMEGA_DDOT
 
 
@@ -57,10 +57,10 @@ W, D, F, A = OMEGA, OMEGA_DOT, SPECIFIC_FORCE, OMEGA_DDOT
 @assemble("model", "batch_model", "batch", "tuning")
 class SmootherOptions:
     """Options of the batch smoother's problem and solves: the groups ``model``, ``batch`` and ``tuning`` of
-    :mod:`gfimu.smoother.option_groups`, where each option is declared with its unit, default and help
+    :mod:`gfimu.smoother.model.option_groups`, where each option is declared with its unit, default and help
     (``options.model``, ``options.batch``, ``options.tuning``: the groups' values). Defaults suit
     100 Hz-1 kHz logs. The fixed-lag smoother is given these options with the batch group at its defaults
-    (:meth:`gfimu.smoother.fixed_lag.FixedLagEstimator.options`)."""
+    (:meth:`gfimu.smoother.stream.fixed_lag.FixedLagEstimator.options`)."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -123,7 +123,7 @@ class SmootherOptions:
         groups = self.factor_groups
         if not (isinstance(groups, (tuple, list)) and all(isinstance(g, FactorGroup) for g in groups)):
             raise InputError(f"smoother option factor_groups must be a tuple of FactorGroup objects "
-                             f"(gfimu.smoother.groups), got {groups!r}")
+                             f"(gfimu.smoother.model.groups), got {groups!r}")
 
     @property
     def robust(self) -> bool:
@@ -192,7 +192,7 @@ def robust_loss(e2: np.ndarray, c: float, loss: str) -> np.ndarray:
 class SmootherProblem(ReadsNoiseLevels):
     """The smoothing problem of one contiguous log (fast path and graph path): the log, the options,
     the model's groups and their noise levels (:attr:`noise`, a frozen
-    :class:`~gfimu.smoother.noise_levels.NoiseLevels`; read as ``problem.NAME`` too).
+    :class:`~gfimu.smoother.model.noise_levels.NoiseLevels`; read as ``problem.NAME`` too).
 
     Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
     around new noise levels (:meth:`with_noise`, :meth:`with_motion_dependent_noise`,
@@ -277,7 +277,7 @@ class SmootherProblem(ReadsNoiseLevels):
 
     def with_process_factors(self, factors: np.ndarray) -> SmootherProblem:
         """The white-jerk steps' stds times ``factors`` (N-1,) (the local motion density of
-        :func:`gfimu.smoother.auto.local_density_factors`)."""
+        :func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
         return self.with_noise(trapezoid_sigma=self.trapezoid_sigma * factors,
                                omega_dot_step_sigma=self.omega_dot_step_sigma * factors)
 

@@ -1,5 +1,5 @@
 """The fixed-lag smoother's model, chosen from the stream's own recent past as the batch smoother
-chooses it for a whole log (:mod:`gfimu.smoother.auto`).
+chooses it for a whole log (:mod:`gfimu.smoother.tuning.model_choice`).
 
 A stream cannot see its future, and its first seconds are often still (a sensor is switched on
 at rest), so a model chosen once at the start is chosen on the wrong data. The fixed-lag
@@ -8,14 +8,14 @@ every ``retune_every_s``, and at once when the motion outgrows the model in use
 (:class:`LocalDensity`). Each choice is the batch smoother's, on that stretch:
 
 1. the per-sample maximum-likelihood fit (:class:`gfimu.estimators.ml.MLEstimator`) and the
-   model check (:func:`gfimu.smoother.auto.check_model`): do the readings follow the rigid-body
+   model check (:func:`gfimu.smoother.tuning.model_choice.check_model`): do the readings follow the rigid-body
    model up to white noise, and with which noise floor and growth with |ω|;
 2. a consistent stretch: the process noise by marginal likelihood
-   (:func:`gfimu.smoother.tuning.tuned_problem`);
-3. an inconsistent stretch: the robust model (:func:`gfimu.smoother.auto.misfit_options`: the
+   (:func:`gfimu.smoother.tuning.evidence.tuned_problem`);
+3. an inconsistent stretch: the robust model (:func:`gfimu.smoother.tuning.model_choice.misfit_options`: the
    measured noise floor and slope, Cauchy weights on the accelerometer axes, per-sample ML
    initialisation with its sign chain) and the process densities of the motion seen so far
-   (:func:`gfimu.smoother.auto.motion_densities`), never lower than those of earlier choices
+   (:func:`gfimu.smoother.tuning.model_choice.motion_densities`), never lower than those of earlier choices
    (a still stretch keeps the densities of the motion seen before).
 
 Options the user set away from their defaults are kept, as in the batch smoother.
@@ -29,13 +29,13 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from ..log import Log
-from .auto import (CHECK_SAMPLES, ModelCheck, check_model, estimate_noise_variances, misfit_options, motion_densities,
+from ...log import Log
+from ..tuning.model_choice import (CHECK_SAMPLES, ModelCheck, check_model, estimate_noise_variances, misfit_options, motion_densities,
                    with_densities)
-from .graph import SmootherOptions
-from .initialise import sign_chain_scale
-from .restarts import branch
-from .tuning import Tuning, tuned_problem
+from ..model.problem import SmootherOptions
+from ..solve.initialise import sign_chain_scale
+from ..solve.restarts import branch
+from ..tuning.evidence import Tuning, tuned_problem
 
 
 
@@ -58,7 +58,7 @@ class StreamModel:
     moving: bool = True
     """Whether the process densities are those of motion (False: of the noise, on a still stretch)."""
     sign_scale_radps: float | None = None
-    """Cauchy scale of the sign chain's steps (:func:`gfimu.smoother.initialise.sign_chain_scale` of the
+    """Cauchy scale of the sign chain's steps (:func:`gfimu.smoother.solve.initialise.sign_chain_scale` of the
     stretch's per-sample estimate; None: no sign chain)."""
 
     @property
@@ -131,7 +131,7 @@ def robust(part: Log, options: SmootherOptions, check: ModelCheck, ml_motion, tu
 
 def has_motion(part: Log, ml_motion, check: ModelCheck | None) -> bool:
     """Whether the per-sample ML estimate of ``part`` shows motion above its own noise
-    (:func:`gfimu.smoother.auto.motion_densities`); True when it cannot tell (no ML estimate)."""
+    (:func:`gfimu.smoother.tuning.model_choice.motion_densities`); True when it cannot tell (no ML estimate)."""
     if ml_motion is None or check is None:
         return True
     x = np.hstack([ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2])
@@ -175,7 +175,7 @@ nothing about the motion."""
 class LocalDensity:
     """The local motion density of a stream, causally: the step power of the per-sample inversion's
     ω̇ (Ho & Lin 2009, eq. 7: linear in the readings) above what its own noise gives, averaged over the
-    last ``period_s`` — the trailing form of :func:`gfimu.smoother.auto.local_density_factors`.
+    last ``period_s`` — the trailing form of :func:`gfimu.smoother.tuning.model_choice.local_density_factors`.
 
     :meth:`push` takes each sample's readings and the |ω| expected there (which sets the noise of a
     robust model) and returns the local jerk density [rad/s²/√s], or None until two samples came.
@@ -231,7 +231,7 @@ class LocalDensity:
 
 
 class StreamSignChain:
-    """The sign chain of :func:`gfimu.smoother.initialise.sign_chain` over a stream, fixed-lag, over the
+    """The sign chain of :func:`gfimu.smoother.solve.initialise.sign_chain` over a stream, fixed-lag, over the
     four branches of the readings' ambiguity (:func:`branch`: ω flipped, mirrored through a planar
     array's plane, both).
 
@@ -268,7 +268,7 @@ class StreamSignChain:
 
     def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
              oldest_k: int) -> tuple[int, int] | None:
-        from ._filter_kernels import chain_step
+        from .kernels import chain_step
 
         w, dw = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
         if self._prev is None:

@@ -1,6 +1,6 @@
 """Fixed-lag smoothing of the window in numpy: a Kalman filter that carries cross-covariances.
 
-The factors of :mod:`gfimu.smoother._fixed_lag_model` written as a state-space
+The factors of :mod:`gfimu.smoother.stream.array_model` written as a state-space
 model of the state ``x = [ω, ω̇, f]`` (9 values, body frame):
 
 - process: the trapezoid ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1}) + n_int`` and the
@@ -40,11 +40,11 @@ import math
 
 import numpy as np
 
-from ..rigid_body import quadratic_terms, quadratic_terms_jacobian
-from . import _filter_kernels as kernels
-from ._fixed_lag_model import ArrayModel, Step
-from .graph import robust_loss, robust_weight
-from .restarts import branch, plane_normal
+from ...rigid_body import quadratic_terms, quadratic_terms_jacobian
+from . import kernels
+from .array_model import ArrayModel, Step
+from ..model.problem import robust_loss, robust_weight
+from ..solve.restarts import branch, plane_normal
 
 
 LAZY_STEPS = 32
@@ -102,7 +102,7 @@ class WindowFilter:
 
     compiled = True
     """Updates of the accelerometer readings alone through the compiled kernels
-    (:mod:`gfimu.smoother._filter_kernels`); False: the numpy expressions they replace (the tests' oracle)."""
+    (:mod:`gfimu.smoother.stream.kernels`); False: the numpy expressions they replace (the tests' oracle)."""
 
     def __init__(self, model: ArrayModel, capacity: int = 256, iterations: int = 4,
                  step_tolerance_radps: float = 1e-6, branches: bool = False) -> None:
@@ -246,7 +246,7 @@ class WindowFilter:
 
     def move_branch(self, k_first: int, kind: int, k_stop: int | None = None) -> None:
         """The states from ``k_first`` to the newest (or to ``k_stop``, excluded) onto branch ``kind`` of
-        the readings' ambiguity (:func:`gfimu.smoother.restarts.branch`: bit 1 ω flipped, bit 2 mirrored
+        the readings' ambiguity (:func:`gfimu.smoother.solve.restarts.branch`: bit 1 ω flipped, bit 2 mirrored
         through the array's plane): their means, and the covariances by the linear part
         ``D = diag(A, I, I)`` (A = -I, the mirror I - 2nnᵀ, or both) on each moved state."""
         self._flush()
@@ -273,7 +273,7 @@ class WindowFilter:
     def _step_costs(self, X: np.ndarray, steps: list) -> np.ndarray:
         """(4, 4, n - 1) costs of the motion-model steps between the n states ``X`` (ω, ω̇ columns
         first; ``steps``: (F, Q) of each step), from branch a of state j to branch b of state j + 1: the
-        model's loss (:func:`gfimu.smoother.graph.robust_loss`, the Cauchy loss of the robust model at
+        model's loss (:func:`gfimu.smoother.model.problem.robust_loss`, the Cauchy loss of the robust model at
         its threshold) of the RMS over the six ω, ω̇ rows of the step's whitened residual, times six."""
         n = len(X)
         W = np.empty((4, n, 6))
@@ -315,7 +315,7 @@ class WindowFilter:
         (fast motion between samples leads the prediction, and so each update's minimum, onto it) and
         came back is a local minimum a Gaussian update cannot leave, and one that the lag's data on
         both sides of the run tell apart: the batch smoother's restarts
-        (:mod:`gfimu.smoother.restarts`) over a window that ends at the newest state.
+        (:mod:`gfimu.smoother.solve.restarts`) over a window that ends at the newest state.
 
         ``readings``: the accelerometer readings of the window's i-th state (0: the oldest),
         ``readings(i)``. Nothing is done with :attr:`branches` off, when the segment's updates used a
@@ -438,7 +438,7 @@ class WindowFilter:
                 break
         self._mean[lo:lo + m] = X
 
-    # --- the window interface both engines share (gfimu.smoother._fixed_lag_gtsam.GtsamWindow) ----
+    # --- the window interface both engines share (gfimu.smoother.stream.gtsam_window.GtsamWindow) ----
     def begin(self, k: int, t_ns: int, y, gyro=None, start=None, extra=None) -> None:
         """The first state of a segment, index ``k``: the weak priors, then its readings (linearised
         from ``start``)."""
@@ -486,7 +486,7 @@ class WindowFilter:
         self._hi = 1
 
     def predict(self, k: int, step: Step | float) -> None:
-        """Append state ``k`` one ``step`` after the newest (:class:`~gfimu.smoother._fixed_lag_model.Step`:
+        """Append state ``k`` one ``step`` after the newest (:class:`~gfimu.smoother.stream.array_model.Step`:
         the step groups' rows as the transition ``x1 = F x0 + c + n``, n ~ N(0, Q), and their rows on the
         newest state alone, applied to it first; a float: :meth:`ArrayModel.step` of that many seconds)."""
         if k != self._base + self._hi:
@@ -523,7 +523,7 @@ class WindowFilter:
 
     def _branch_starts(self, x: np.ndarray) -> list[np.ndarray]:
         """x on the other branches: ω flipped, ω mirrored through the array's plane (ω̇ moved so that a
-        planar array's readings stay fitted), both (:func:`gfimu.smoother.restarts.branch`)."""
+        planar array's readings stay fitted), both (:func:`gfimu.smoother.solve.restarts.branch`)."""
         out = []
         for kind in (1, 2, 3):
             y = x.copy()
@@ -592,7 +592,7 @@ class WindowFilter:
 
     def _measure_compiled(self, y, xp, P, x0, from_prediction: bool) -> None:
         """:meth:`measure` on the readings alone through :func:`kernels.measure_update
-        <gfimu.smoother._filter_kernels.measure_update>` (the branches and the robust step only from the
+        <gfimu.smoother.stream.kernels.measure_update>` (the branches and the robust step only from the
         prediction, as :meth:`measure` tries them)."""
         R0, S_q, S_dw, S_f, slope, c_robust, loss = self._kernel_model
         iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
@@ -616,7 +616,7 @@ class WindowFilter:
         The update is the minimum of ``J(x) = ||y - h(x)||²_R + ||x - x̂||²_P`` (the readings and the
         prediction x̂): Gauss-Newton from the prediction (or ``start``), and, with :attr:`branches`,
         from the other branches of that minimum too (ω sign-flipped, ω mirrored through the array's
-        plane, both: :mod:`gfimu.smoother.restarts`), keeping the lowest J. The readings see ω only
+        plane, both: :mod:`gfimu.smoother.solve.restarts`), keeping the lowest J. The readings see ω only
         through q(ω), and a planar array confuses ω with its mirror image; a prediction far from the
         truth (fast motion between samples) otherwise leads Gauss-Newton onto such a branch.
 

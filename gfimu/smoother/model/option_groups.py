@@ -10,7 +10,7 @@
 
 Each field is made by :func:`gfimu.option.option`, whose metadata (``unit``, ``help``) ``gfimu estimate --list-options``
 prints. The flat option classes are assembled from the groups by :func:`assemble`:
-:class:`gfimu.smoother.graph.SmootherOptions` (model, batch_model, batch, tuning) and the estimators of
+:class:`gfimu.smoother.model.problem.SmootherOptions` (model, batch_model, batch, tuning) and the estimators of
 the methods 'smoother' (those and guard) and 'fixed-lag' (model, stream, tuning, guard). They keep every
 option under its flat name (``-O name=value``, the presets, ``SmootherOptions(window_s=10)``), add the
 group's name to each field's metadata, and give each group's values back as a frozen group dataclass
@@ -26,8 +26,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from ..noise import DEFAULT_ACCEL_NOISE_STD_MPS2
-from ..option import option
+from ...noise import DEFAULT_ACCEL_NOISE_STD_MPS2
+from ...option import option
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ class ModelOptions:
         "driven oscillator ω̈ = -(2π f)² ω + white jerk (turntables, shakers, pendulums, gait), 0 the plain "
         "white jerk"))
     factor_groups: tuple = option((), help=(
-        "further factor groups (gfimu.smoother.groups.FactorGroup, from Python) added to the model of every "
+        "further factor groups (gfimu.smoother.model.groups.FactorGroup, from Python) added to the model of every "
         "solve; the fixed-lag smoother takes those whose rows each tie one sample (per_sample) or two "
         "consecutive samples (steps)"))
     compute_sigma: bool = option(False, help=(
@@ -70,7 +70,7 @@ class ModelOptions:
         "its tuning stretch)"))
     relative_tolerance: float = option(1e-10, help="stop a solve when the cost decreases by less than this fraction")
     initialisation: str = option("sign-resolving", help=(
-        "initial states: 'sign-resolving' (gfimu.smoother.initialise) or 'ml' (the per-sample "
+        "initial states: 'sign-resolving' (gfimu.smoother.solve.initialise) or 'ml' (the per-sample "
         "maximum-likelihood estimate with its sign choice; slower, more robust on real recordings with large "
         "model residuals and fast motion at low rates)"))
     init_window_s: float = option(0.4, "s", "window of the sign-resolving initialisation")
@@ -85,7 +85,7 @@ class BatchModelOptions:
     """The parts of the model only the batch smoother (method 'smoother') has: the white-snap density, the
     per-sample inversion as measurement, the attitude and the inclinometer, self-calibration, free flight,
     and the motion-dependent noise and robust losses it re-weights over whole solutions (the fixed-lag
-    smoother chooses its own from the stream, :mod:`gfimu.smoother.stream_model`)."""
+    smoother chooses its own from the stream, :mod:`gfimu.smoother.stream.model_choice`)."""
 
     omega_ddot_random_walk_radps3_per_sqrt_s: float = option(300.0, "rad/s³/√s", (
         "white angular snap density ('snap' model): how fast ω̈ may change"))
@@ -209,7 +209,7 @@ class TuningOptions:
     """The model and the noise chosen from the data, by both smoothers."""
 
     auto_model: bool = option(True, help=(
-        "choose the model from the log (gfimu.smoother.auto): readings that follow the rigid-body equation up to "
+        "choose the model from the log (gfimu.smoother.tuning.model_choice): readings that follow the rigid-body equation up to "
         "their stated noise keep the options; larger, heavy-tailed or |ω|-growing residuals (real arrays) get "
         "the ML initialisation with its sign chain, the measured noise floor and slope, Cauchy losses and "
         "moment-estimated process noise; options set away from their defaults are kept either way (the "

@@ -1,12 +1,12 @@
 """The noise levels of one smoothing problem, as a frozen value.
 
 Each factor group computes its own noise from the options and the log
-(:meth:`gfimu.smoother.groups.FactorGroup.noise`: the accelerometers' std, the motion model's step
+(:meth:`gfimu.smoother.model.groups.FactorGroup.noise`: the accelerometers' std, the motion model's step
 stds, the priors' stds, ...); the problem gathers them into one :class:`NoiseLevels` when it is
 built. Nothing changes it afterwards: the re-weightings (motion-dependent accelerometer noise,
 robust losses, the local motion density, the tuner's accelerometer scale) make a new value with
 :meth:`NoiseLevels.replace`, and a new problem around it
-(:meth:`gfimu.smoother.graph.SmootherProblem.with_noise`). Its arrays are read-only.
+(:meth:`gfimu.smoother.model.problem.SmootherProblem.with_noise`). Its arrays are read-only.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ A state row of sample k holds ``[ω_k, ω̇_k, f_k]`` (body frame B), then ω̈_
 'snap' motion model, then the attitude's rotation vector ``log(R_k)`` (W←B) when the
 attitude is estimated; the calibration variables (biases, scale-factor errors, gyroscope
 bias) are one vector beside the states, named by :attr:`SmootherProblem.global_blocks
-<gfimu.smoother.graph.SmootherProblem>`.
+<gfimu.smoother.model.problem.SmootherProblem>`.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ class StateLayout:
 
     @classmethod
     def from_options(cls, options) -> StateLayout:
-        """The layout of :class:`gfimu.smoother.graph.SmootherOptions` ``options``."""
+        """The layout of :class:`gfimu.smoother.model.problem.SmootherOptions` ``options``."""
         return cls(options.motion_model == "snap", bool(options.estimate_attitude or options.use_inclinometer))
 
     omega = OMEGA

@@ -1,6 +1,6 @@
 """Banded Gauss-Newton / Levenberg-Marquardt core of the batch smoother, linear in the length.
 
-The factors of a :class:`gfimu.smoother.graph.SmootherProblem` are evaluated
+The factors of a :class:`gfimu.smoother.model.problem.SmootherProblem` are evaluated
 vectorised over all samples; their Gauss-Newton normal equations are
 block-tridiagonal in the per-sample states (plus a dense border for the
 calibration variables), solved by a banded Cholesky factorisation and a
@@ -10,8 +10,8 @@ the length.
 
 Also the re-weighting schedule of the motion-dependent accelerometer noise and the robust
 losses (:func:`solve_reweighted`). This module holds the solver only; the batch estimator
-(:mod:`gfimu.smoother.batch`), the noise tuner (:mod:`gfimu.smoother.tuning`)
-and the initialisation (:mod:`gfimu.smoother.initialise`) build on it.
+(:mod:`gfimu.smoother.batch.engine`), the noise tuner (:mod:`gfimu.smoother.tuning.evidence`)
+and the initialisation (:mod:`gfimu.smoother.solve.initialise`) build on it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from .graph import SmootherOptions, SmootherProblem
+from ..model.problem import SmootherOptions, SmootherProblem
 
 
 @dataclass
@@ -43,7 +43,7 @@ class NormalEquations:
     """Number of whitened residual rows."""
     terms: list | None = None
     """The terms summed, when every row came from one (None when a group added its products in
-    closed form, :meth:`gfimu.smoother.groups.FactorGroup.accumulate`)."""
+    closed form, :meth:`gfimu.smoother.model.groups.FactorGroup.accumulate`)."""
 
 
 def normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray, terms=None) -> NormalEquations:

@@ -6,7 +6,7 @@ The key conventions of :mod:`gfimu.factors`: variables ``w``/``d``/``f`` of samp
 - the step from the newest state to the new one (:meth:`ArrayModel.step`, a :class:`Step`): the
   terms of the groups that tie consecutive samples (``FactorGroup.steps``: the motion model, white
   jerk or driven oscillator, and the specific-force random walk of
-  :mod:`gfimu.smoother.groups`, and such groups given in ``SmootherOptions.factor_groups``),
+  :mod:`gfimu.smoother.model.groups`, and such groups given in ``SmootherOptions.factor_groups``),
   evaluated by their own vectorised residual and Jacobian on the two samples (:class:`StreamView`)
   with their own noise levels; the gtsam engine adds the rows as one factor
   (:meth:`ArrayModel.add_process`), the numpy engine predicts with the transition they define;
@@ -17,7 +17,7 @@ The key conventions of :mod:`gfimu.factors`: variables ``w``/``d``/``f`` of samp
 - weak priors on the first state of a segment (the first-state prior group's stds).
 
 The accelerometer noise std of every axis can be scaled by ``accel_noise_scale`` (the factor chosen
-by :func:`gfimu.smoother.tuning.tune` with ``tune_accel_noise``).
+by :func:`gfimu.smoother.tuning.evidence.tune` with ``tune_accel_noise``).
 """
 
 from __future__ import annotations
@@ -26,15 +26,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import noise, rigid_body
-from ..array import SensorArray
-from ..errors import InputError
-from ..factors import accelerometer
-from ..log import Log
-from .graph import SmootherOptions
-from .groups import BUILT_IN, FirstStatePriorGroup, group_noise
-from .noise_levels import ReadsNoiseLevels
-from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
+from ... import noise, rigid_body
+from ...array import SensorArray
+from ...errors import InputError
+from ...factors import accelerometer
+from ...log import Log
+from ..model.problem import SmootherOptions
+from ..model.groups import BUILT_IN, FirstStatePriorGroup, group_noise
+from ..model.noise_levels import ReadsNoiseLevels
+from ..model.layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 
 class _LazyGtsam:
@@ -80,9 +80,9 @@ def _linear_factor(noise_model, factor_keys: list[int], residual, jacobians: tup
 class StreamView(ReadsNoiseLevels):
     """Samples of a stream seen as a problem of one sample (a per-sample group's terms) or of the two
     samples of a step (a step group's terms): what a factor group reads of a
-    :class:`gfimu.smoother.graph.SmootherProblem` (``log``, ``options``, ``n``, ``dt_s``, ``layout``,
+    :class:`gfimu.smoother.model.problem.SmootherProblem` (``log``, ``options``, ``n``, ``dt_s``, ``layout``,
     ``state_size``, its noise levels as attributes, no calibration variables), each group's noise
-    levels computed by its own :meth:`~gfimu.smoother.groups.FactorGroup.noise` on the view."""
+    levels computed by its own :meth:`~gfimu.smoother.model.groups.FactorGroup.noise` on the view."""
 
     def __init__(self, array: SensorArray, options: SmootherOptions, timestamps_ns, accel=None, gyro=None,
                  dt_s: np.ndarray | None = None) -> None:
@@ -111,7 +111,7 @@ class StreamView(ReadsNoiseLevels):
         return self._log
 
     def with_levels(self, groups) -> StreamView:
-        """The view with the noise levels of ``groups`` (:func:`gfimu.smoother.groups.group_noise`)."""
+        """The view with the noise levels of ``groups`` (:func:`gfimu.smoother.model.groups.group_noise`)."""
         self.noise = group_noise(groups, self)
         return self
 
@@ -214,10 +214,10 @@ class ArrayModel:
         self._other_steps = tuple(g for g in self.step_groups if g not in self._fixed_steps)
         self._step_cache: dict = {}
         self.first_sigma = FirstStatePriorGroup().noise(StreamView(array, options, [0]))["first_sigma"]
-        """The first-state prior's stds, as the batch smoother's :class:`~gfimu.smoother.groups.FirstStatePriorGroup`."""
-        # the robust model of an inconsistent log (gfimu.smoother.auto): the noise grows with |ω| and
+        """The first-state prior's stds, as the batch smoother's :class:`~gfimu.smoother.model.groups.FirstStatePriorGroup`."""
+        # the robust model of an inconsistent log (gfimu.smoother.tuning.model_choice): the noise grows with |ω| and
         # each axis may be weighted by the robust loss of its whitened residual (the stream's model
-        # leaves that off: see gfimu.smoother.stream_model)
+        # leaves that off: see gfimu.smoother.stream.model_choice)
         self.accel_noise_slope_mps2_per_radps = float(options.accel_noise_slope_mps2_per_radps)
         self.accel_robust_threshold = float(options.accel_robust_threshold) if options.measurement == "accelerometer" else 0.0
         self.robust_loss = options.robust_loss
@@ -226,7 +226,7 @@ class ArrayModel:
     def sample_terms(self, t_ns: int, y: np.ndarray, gyro=None):
         """The per-sample factor groups of the options at one sample: None when none applies there, else a
         function ``x -> (r, J)`` of the state ``[ω, ω̇, f]`` giving their whitened residual rows (R,) and
-        Jacobian (R, 9), from each group's :meth:`~gfimu.smoother.groups.FactorGroup.terms` on that sample
+        Jacobian (R, 9), from each group's :meth:`~gfimu.smoother.model.groups.FactorGroup.terms` on that sample
         alone."""
         if not self.groups:
             return None
@@ -257,7 +257,7 @@ class ArrayModel:
     def _step_rows(groups, view: StreamView, x0: np.ndarray, x1: np.ndarray, motion_factor: float = 1.0):
         """(J0, J1, r0, motion) of ``groups``' terms on the two-sample ``view`` linearised at (x0, x1): rows
         ``r0 + J0 x0 + J1 x1``, the motion model's rows (``motion``, a mask) divided by ``motion_factor``
-        (its stds times it, as :meth:`gfimu.smoother.graph.SmootherProblem.with_process_factors`)."""
+        (its stds times it, as :meth:`gfimu.smoother.model.problem.SmootherProblem.with_process_factors`)."""
         X = np.vstack([x0, x1])
         J0s, J1s, rs, motion = [], [], [], []
         for group in groups:
@@ -291,7 +291,7 @@ class ArrayModel:
         specific-force random walk) kept per step length; the others (given in the options) evaluated
         on the samples at ``t_ns`` (their timestamps) with ``readings`` ((accel0, gyro0), (accel1, gyro1)),
         linearised at the newest state ``x0`` and its prediction. ``motion_factor``: the local motion
-        density's factor on the motion model's stds (:func:`gfimu.smoother.auto.local_density_factors`)."""
+        density's factor on the motion model's stds (:func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
         key = round(h * 1e9)
         fixed = self._step_cache.get(key)
         if fixed is None:

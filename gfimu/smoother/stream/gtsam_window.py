@@ -1,12 +1,12 @@
 """The fixed-lag smoother's ``gtsam`` engine: gtsam's ``IncrementalFixedLagSmoother`` (iSAM2)
-behind the same window interface as the numpy engine (:class:`gfimu.smoother._fixed_lag_filter.WindowFilter`),
-so that :class:`gfimu.smoother.fixed_lag.FixedLagSmoother` streams through either without asking
+behind the same window interface as the numpy engine (:class:`gfimu.smoother.stream.window_filter.WindowFilter`),
+so that :class:`gfimu.smoother.stream.fixed_lag.FixedLagSmoother` streams through either without asking
 which: :meth:`begin` (the first state of a segment), :meth:`advance` (the next state), :meth:`commit`
 (solve what was added), :meth:`mean`, :meth:`sigma`, :meth:`drop_oldest`, :attr:`n_keys`,
 :attr:`n_slots`, :meth:`set_model`, :meth:`move_branch`. A failed update raises
-:class:`gfimu.smoother._fixed_lag_filter.FilterFailure`, as the numpy engine does.
+:class:`gfimu.smoother.stream.window_filter.FilterFailure`, as the numpy engine does.
 
-The factors are those of :class:`gfimu.smoother._fixed_lag_model.ArrayModel`; keys carry the start
+The factors are those of :class:`gfimu.smoother.stream.array_model.ArrayModel`; keys carry the start
 time of their marginalisation block (``stamp``), so gtsam marginalises one block of states at a
 time rather than re-eliminating the window at every update.
 """
@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _fixed_lag_model as model
-from ._fixed_lag_filter import FilterFailure
-from ._fixed_lag_model import gtsam
-from .layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
+from . import array_model as model
+from .window_filter import FilterFailure
+from .array_model import gtsam
+from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 
 
 class GtsamWindow:

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rigid_body import quadratic_terms, quadratic_terms_jacobian
+from ...rigid_body import quadratic_terms, quadratic_terms_jacobian
 
 MAX_LAG = 64
 """Longest lag [samples] of the residual's autocorrelation, and longest span L taken."""
@@ -57,7 +57,7 @@ def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np
     residual, the rank of the whitened Jacobian and the variance of each state from that sample alone
     (module docstring). ``robust``: (loss, threshold) of the smoother's robust re-weighting of the
     accelerometer axes, or None: each axis' std is then the one the re-weighting gives at the estimate,
-    ``std / √w(r/std)`` (:func:`gfimu.smoother.graph.robust_weight`), the noise the smoother's σ assumed."""
+    ``std / √w(r/std)`` (:func:`gfimu.smoother.model.problem.robust_weight`), the noise the smoother's σ assumed."""
     S_f, S_dw, S_q = _geometry(array) if geometry is None else geometry
     X = np.asarray(states, dtype=float)
     w, dw, f = X[:, 0:3], X[:, 3:6], X[:, 6:9]
@@ -65,7 +65,7 @@ def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np
     inv = 1.0 / np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), y.shape)
     z = (y - f @ S_f.T - dw @ S_dw.T - quadratic_terms(w) @ S_q.T) * inv
     if robust is not None and robust[1] > 0:
-        from .graph import robust_weight
+        from ..model.problem import robust_weight
 
         weight = np.sqrt(robust_weight(z, float(robust[1]), robust[0]))
         z, inv = z * weight, inv * weight
@@ -145,7 +145,7 @@ class RunningSigmaScale:
         inv = 1.0 / std
         z = (y - S_f @ x[6:9] - S_dw @ x[3:6] - S_q @ quadratic_terms(w)) * inv
         if self.robust is not None and self.robust[1] > 0:
-            from .graph import robust_weight
+            from ..model.problem import robust_weight
 
             weight = np.sqrt(robust_weight(z, float(self.robust[1]), self.robust[0]))
             z, inv = z * weight, inv * weight
