@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .io.sources import BadRow, Reading, Source
+from .io.sources import BadRow, Reading, Source, SourceNote
 from .io.tables import motion_csv_chunks
 from .motion import Motion
 from .readings import StreamScreen
@@ -510,7 +510,9 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
                     break
                 if item is not False:
                     thing, arrived = item
-                    if isinstance(thing, BadRow):
+                    if isinstance(thing, SourceNote):
+                        say(f"warning: {thing.message}")
+                    elif isinstance(thing, BadRow):
                         bad += 1
                         if len(reasons) < REASONS_KEPT:
                             reasons.append(f"{thing.where}: {thing.reason}")

@@ -302,3 +302,25 @@ def test_live_on_a_whole_real_recording_gives_the_estimate_file_byte_for_byte(mi
     assert "39301 samples in, 39301 estimates out" in proc.stderr and "8 readings replaced by the screening" in proc.stderr
     assert "row 24199 imu6_z" in proc.stderr
     assert live.read_bytes() == batch.read_bytes()
+
+
+def test_random_mimu_counters_over_tcp_are_named(tmp_path):
+    """A MIMU4444 stream whose packet counter does not count: one warning naming the source and the
+    counter, and the session goes on (exit 0, every decoded row estimated)."""
+    from gfimu.array import mimu4444_array
+
+    gio.write_array_toml(mimu4444_array(), tmp_path / "array.toml")
+    raw = np.zeros((8, 6), dtype=np.int16)
+    raw[:, 2] = 2048
+    counters = np.random.default_rng(3).permutation(65536)[:250]  # distinct, in no order
+    data = b"".join(_packet(int(c), k * 1_024_000, raw) for k, c in enumerate(counters))
+    out = tmp_path / "tcp.csv"
+    with OneShotServer(data) as server:
+        port = server.port
+        proc = subprocess.run(_live("--array", tmp_path / "array.toml", "--rate-hz", "62.5", "--source",
+                                    f"tcp://127.0.0.1:{port}", "--out", out, "-O", "tune_process_noise=False"),
+                              env=_env(), capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    said = [line for line in proc.stderr.splitlines() if "packet counter does not count" in line]
+    assert len(said) == 1 and said[0].startswith(f"gfimu live: warning: tcp://127.0.0.1:{port}: the packet counter"), proc.stderr
+    assert "Traceback" not in proc.stderr

@@ -214,3 +214,31 @@ def test_convert_cli_reference_shift(tmp_path, capsys):
     wx = np.deg2rad(16 * (k - 1.5 / 16) ** 2 / 16.4) / 2  # mean of upright (x) and flipped (−y) sensors
     assert np.allclose(log.reference.omega_b_radps[1:, 0], wx[1:], atol=1e-9)
     assert log.invalid_reference.tolist() == [True] + [False] * 11
+
+
+def _stream(counters) -> list:
+    """The streaming decoder fed one packet per chunk with the given counters (ticks follow them)."""
+    decoder = m.StreamDecoder()
+    said = []
+    for k, c in enumerate(counters):
+        decoder.feed(make_packet(int(c), int(c) * 1_024_000, raw_for(k)))
+        message = decoder.disorder()
+        if message is not None:
+            said.append((k, message))
+    return decoder, said
+
+
+def test_stream_decoder_names_a_counter_that_does_not_count_once():
+    rng = np.random.default_rng(7)
+    decoder, said = _stream(rng.integers(0, 65536, 300))
+    assert len(said) == 1  # said once, at the first packet it may be judged on
+    k, message = said[0]
+    assert k == m.STREAM_DISORDER_PACKETS - 1
+    assert message.startswith("the packet counter does not count:")
+    assert decoder.packets == 300 and decoder.duplicates + decoder.counter_gaps > 0.9 * 299
+
+
+def test_stream_decoder_quiet_on_a_counting_stream_with_a_few_losses():
+    counters = [c for c in range(400) if c not in (5, 6, 50, 300)]  # four packets lost, two gaps
+    decoder, said = _stream(counters)
+    assert said == [] and decoder.counter_gaps == 3 and decoder.duplicates == 0 and decoder.packets == 396

@@ -71,6 +71,13 @@ class BadRow:
     reason: str
 
 
+@dataclass(frozen=True)
+class SourceNote:
+    """Something the source saw that the user should hear of (the stream goes on): ``message``."""
+
+    message: str
+
+
 def default_header(array) -> str:
     """The imu.csv header of ``array`` (the column order of rows that come without a header, e.g. UDP)."""
     return ",".join([TIMESTAMP_HEADER] + [f"{name} [{UNITS[kind][0]}]" for name, kind in imu_columns(array)])
@@ -130,8 +137,8 @@ class RowParser:
 
 
 class Source:
-    """A stream of readings; :meth:`items` yields :class:`Reading` and :class:`BadRow` until the stream
-    ends or ``stop`` is set. After it: :attr:`ended` says why, :attr:`failure` is a message when the
+    """A stream of readings; :meth:`items` yields :class:`Reading`, :class:`BadRow` and :class:`SourceNote`
+    until the stream ends or ``stop`` is set. After it: :attr:`ended` says why, :attr:`failure` is a message when the
     stream broke (a connection reset) and None otherwise."""
 
     name = "source"
@@ -146,7 +153,7 @@ class Source:
         """True: a text row whose readings are not finite or beyond any sensor's range is passed on, for the
         screening downstream to replace (:class:`gfimu.readings.StreamScreen`); False: it is a bad row."""
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
         raise NotImplementedError
 
     def close(self) -> None:
@@ -224,7 +231,7 @@ class StdinSource(Source):
             yield chunk
         self.ended = "stopped"
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
         rows = _TextRows()
         parser = None
 
@@ -275,7 +282,7 @@ class UdpSource(Source):
             raise SourceError(f"--source {name}: cannot bind: {exc.strerror or exc}") from None
         self.sock.settimeout(POLL_S)
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
         parser = None
         count = 0
         while not stop.is_set():
@@ -352,7 +359,7 @@ class MimuSource(Source):
         except socket.timeout:
             return b""
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow]:
+    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
         from .readers.mimu4444 import StreamDecoder
 
         decoder = StreamDecoder()
@@ -369,6 +376,9 @@ class MimuSource(Source):
                 return
             for t_ns, accel in decoder.feed(chunk):
                 yield Reading(t_ns, accel, None)
+            disorder = decoder.disorder()
+            if disorder is not None:
+                yield SourceNote(f"{self.name}: {disorder}")
             received += len(chunk)
             if decoder.skipped_bytes > skipped:  # bytes that are no packet: a bad row per stretch of them
                 yield BadRow(f"byte {received}", f"{decoder.skipped_bytes - skipped} byte(s) that are no MIMU4444 "

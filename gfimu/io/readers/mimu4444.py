@@ -294,6 +294,13 @@ def decode(data: bytes | np.ndarray, gap_factor: float = 1.5) -> Recording:
 COUNTER_DISORDER = 0.1
 """Share of packets out of order or after a counter gap beyond which the counters are said not to count."""
 
+DISORDER_MIN_PACKETS = 10
+"""Fewest packets of a file on which its counter is judged."""
+
+STREAM_DISORDER_PACKETS = 100
+"""Fewest packets of a stream on which its counter is judged (about 1.6 s at 62.5 Hz): a few lost
+packets at the start of a link are not yet a counter that does not count."""
+
 
 def _check_counters(report: DecodeReport) -> None:
     """A warning when the packet counter does not count: more than :data:`COUNTER_DISORDER` of the packets
@@ -304,7 +311,7 @@ def _check_counters(report: DecodeReport) -> None:
 
     packets = report.n_packets + report.duplicates_removed
     disorder = report.duplicates_removed + report.counter_gaps
-    if packets >= 10 and disorder > COUNTER_DISORDER * packets:
+    if packets >= DISORDER_MIN_PACKETS and disorder > COUNTER_DISORDER * packets:
         warnings.warn(f"the packet counter does not count: {report.duplicates_removed} of {packets} packets repeated or "
                       f"out of order and {report.counter_gaps} counter gap(s) ({report.dropped_packets} packets "
                       "missing by the counter); the times made from it are not to be trusted (a damaged or "
@@ -350,6 +357,25 @@ class StreamDecoder:
         self._raw_ticks = 0
         self.duplicates = 0
         self.skipped_bytes = 0
+        self.packets = 0
+        """Packets decoded, repeated and out-of-order ones included."""
+        self.counter_gaps = 0
+        """Steps of the counter by more than one (packets lost, or a counter that does not count)."""
+        self._disorder_said = False
+
+    def disorder(self) -> str | None:
+        """Once, when the counter is seen not to count (the rule of the file reader: more than
+        :data:`COUNTER_DISORDER` of the packets repeated, out of order or after a gap, judged from
+        :data:`STREAM_DISORDER_PACKETS` packets on): the warning's words; None otherwise and after it was said."""
+        if self._disorder_said or self.packets < STREAM_DISORDER_PACKETS:
+            return None
+        disorder = self.duplicates + self.counter_gaps
+        if disorder <= COUNTER_DISORDER * self.packets:
+            return None
+        self._disorder_said = True
+        return (f"the packet counter does not count: {self.duplicates} of the first {self.packets} packets repeated "
+                f"or out of order and {self.counter_gaps} counter gap(s); the times made from it are not to be "
+                "trusted (a damaged link or another device?)")
 
     def feed(self, chunk: bytes) -> list[tuple[int, np.ndarray]]:
         data = self._buffer + bytes(chunk)
@@ -361,6 +387,7 @@ class StreamDecoder:
             acc, _ = board_frame(pk.raw)
             for i in range(starts.size):
                 c, t = int(pk.counter[i]), int(pk.ticks[i])
+                self.packets += 1
                 if self._counter is None:
                     self._counter, self._ticks = c, t
                 else:
@@ -368,6 +395,7 @@ class StreamDecoder:
                     if step == 0 or step >= COUNTER_MODULUS // 2:
                         self.duplicates += 1
                         continue
+                    self.counter_gaps += step > 1
                     dt = (t - self._raw_ticks) % TICK_MODULUS
                     dt += int(round((step * NOMINAL_TICKS_PER_PACKET - dt) / TICK_MODULUS)) * TICK_MODULUS
                     self._counter += step
