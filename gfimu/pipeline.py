@@ -191,12 +191,8 @@ def _check_stream_rate(log, est) -> None:
 
 
 def _check_noise(log, log_dir) -> None:
-    """A stated noise beyond :data:`gfimu.io.array_toml.MAX_NOISE_STD` (warned of when read) gives the readings
-    no weight and overflows the estimators' weights: refused before estimating, naming the sensor."""
-    from .errors import DataError
-    from .io.array_toml import MAX_NOISE_STD
+    """A stated noise beyond :data:`gfimu.io.array_toml.MAX_NOISE_STD` refused before estimating
+    (:func:`gfimu.io.array_toml.check_noise_weights`)."""
+    from .io.array_toml import check_noise_weights
 
-    for a in log.array.accelerometers:
-        if a.noise_std_mps2 is not None and a.noise_std_mps2 > MAX_NOISE_STD:
-            raise DataError(f"{log_dir}/array.toml: accelerometer {a.name!r}: noise_std_mps2 = {a.noise_std_mps2:g} "
-                            f"leaves its readings no weight (at most {MAX_NOISE_STD:g} m/s²); give the noise in m/s²")
+    check_noise_weights(log.array, f"{log_dir}/array.toml")

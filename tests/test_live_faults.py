@@ -324,3 +324,28 @@ def test_random_mimu_counters_over_tcp_are_named(tmp_path):
     said = [line for line in proc.stderr.splitlines() if "packet counter does not count" in line]
     assert len(said) == 1 and said[0].startswith(f"gfimu live: warning: tcp://127.0.0.1:{port}: the packet counter"), proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("command", ["live", "estimate"])
+def test_a_noise_that_leaves_the_readings_no_weight_is_refused_by_live_as_by_estimate(tmp_path, command):
+    """array.toml states 5000 m/s² for one accelerometer: warned of when read, then refused before any
+    row is read or written (exit 2, one error line naming the file and the sensor)."""
+    from gfimu.array import cube_array
+
+    log = simulate("random3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=200, duration_s=0.5, seed=1)
+    gio.write_log(log, tmp_path / "log")
+    toml = tmp_path / "log" / "array.toml"
+    text = toml.read_text()
+    toml.write_text(text.replace("noise_std_mps2 = 0.07", "noise_std_mps2 = 5000.0", 1))
+    imu = (tmp_path / "log" / "imu.csv").read_bytes()
+    out = tmp_path / "out.csv"
+    if command == "live":
+        args = _live("--array", toml, "--rate-hz", "200", "--source", "-", "--out", out)
+    else:
+        args = [sys.executable, "-m", "gfimu", "estimate", str(tmp_path / "log"), "--out", str(out)]
+    proc = subprocess.run(args, input=imu, env=_env(), capture_output=True, timeout=120)
+    err = proc.stderr.decode()
+    assert proc.returncode == 2, err
+    errors = [line for line in err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and f"{toml}: accelerometer " in errors[0] and "noise_std_mps2 = 5000" in errors[0], err
+    assert not out.exists() and "Traceback" not in err

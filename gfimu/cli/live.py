@@ -52,6 +52,7 @@ def run(args) -> int:
     from ..io.atomic import output_lock
     from ..io.outputs import check_output
     from ..io.sources import SourceError, open_source
+    from ..io.array_toml import check_noise_weights
     from ..methods import make_estimator
     from .options import method_options
 
@@ -59,6 +60,7 @@ def run(args) -> int:
     _refuse_unapplied(options)
     estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
+    check_noise_weights(array, str(args.array))
     rate_hz = args.rate_hz or declared_rate_hz
     _refuse_rate(rate_hz, "--rate-hz" if args.rate_hz else f"{args.array}: rate_hz")
     out_path = check_output(args.out, [args.array], "--out", stdout=True)

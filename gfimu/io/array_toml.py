@@ -132,6 +132,20 @@ MAX_NOISE_STD = 1e3
 """The largest noise standard deviation a sensor of array.toml states without a warning (m/s², rad/s or rad):
 beyond it the readings carry no information (1e300 is a unit or a typing mistake)."""
 
+
+
+def check_noise_weights(array, where: str) -> None:
+    """A stated accelerometer noise beyond :data:`MAX_NOISE_STD` (warned of when read) gives the readings
+    no weight and overflows the estimators' weights: a :class:`~gfimu.errors.DataError` naming the file
+    (``where``) and the sensor, raised before anything is estimated (``estimate`` and ``live`` alike)."""
+    from ..errors import DataError
+
+    for a in array.accelerometers:
+        if a.noise_std_mps2 is not None and a.noise_std_mps2 > MAX_NOISE_STD:
+            raise DataError(f"{where}: accelerometer {a.name!r}: noise_std_mps2 = {a.noise_std_mps2:g} "
+                            f"leaves its readings no weight (at most {MAX_NOISE_STD:g} m/s²); give the noise in m/s²")
+
+
 MIN_RANGE_MPS2 = 1.0
 """The smallest full scale an accelerometer may state [m/s²]: one that cannot read a tenth of gravity is a unit
 mistake (the smallest ranges sold are ±2 g, 19.6 m/s²)."""
