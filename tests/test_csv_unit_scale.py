@@ -96,3 +96,44 @@ def test_acceleration_without_gravity_is_not_taken_for_a_unit_misread(tmp_path):
     src = phyphox_export(tmp_path / "export", linear=True)
     rc, out, err = run(str(src), "--map", "phyphox", "--out", str(tmp_path / "log"))
     assert rc == 0 and err == ""
+
+
+def _spun(array, omega_z_radps: float, n: int = 400, rate_hz: float = 200.0):
+    """Readings of ``array`` turning at a constant rate about the body z axis through its origin, upright
+    (specific force at the origin: gravity's reaction along +z), noise-free."""
+    from gfimu.log import Log
+    from gfimu.rigid_body import quadratic_terms
+
+    x = np.concatenate([[0.0, 0.0, G], [0.0, 0.0, 0.0], quadratic_terms(np.array([0.0, 0.0, omega_z_radps]))])
+    y = np.tile(array.structure_matrix() @ x, (n, 1))
+    return Log(array, (np.arange(n) * (1e9 / rate_hz)).astype(np.int64), y, source="spun")
+
+
+def test_a_fast_spin_of_sensors_off_the_axis_is_no_unit_error():
+    """Four triads 0.2 m off a spin axis through the body origin at 20 rad/s: each reads about 8 g of
+    centripetal force (their mean too), which a unit check on the raw readings takes for m/s² under [g].
+    With the rotation taken out by the per-sample inversion, the origin's |f| is gravity: no warning."""
+    from dataclasses import replace
+
+    from gfimu.array import SensorArray
+    from gfimu.io.plausibility import check_gravity
+
+    cube = cube_array(0.05)
+    off = SensorArray(tuple(replace(a, position_m=np.asarray(a.position_m) + [0.2, 0.0, 0.0])
+                            for a in cube.accelerometers), "off-axis cube")
+    log = _spun(off, 20.0)
+    common = np.linalg.norm(log.accel_mps2.reshape(len(log), 4, 3).mean(axis=1), axis=1)
+    assert 8.0 <= np.median(common) / G <= 12.0  # the mean of the raw readings falls in the unit band
+    assert median_specific_force(log) == pytest.approx(G, rel=1e-9)
+    assert check_gravity(log, "spun") == []
+
+
+def test_a_single_triad_spun_fast_is_warned_with_both_causes():
+    """One triad cannot take its rotation out: 8 g of centripetal force is warned of as a likely unit
+    error, and the spin is named as the other cause."""
+    from gfimu.array import single_triad
+    from gfimu.io.plausibility import check_gravity
+
+    said = check_gravity(_spun(single_triad((0.2, 0.0, 0.0)), 20.0), "spun")
+    assert len(said) == 1 and "likely m/s² taken for g" in said[0]
+    assert "or the sensors spin fast off the rotation axis" in said[0]

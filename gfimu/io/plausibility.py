@@ -137,10 +137,36 @@ def _still_specific_force_of(log: Log) -> float | None:
     return float(np.median(np.median(nw[still], axis=1))) if still.any() else None
 
 
+def _origin_force_rows(array) -> np.ndarray | None:
+    """The rows ``P`` (3, n_axes) that give the specific force at the body origin from one sample's readings,
+    rotation removed (``f = P y``, the first three rows of the inverse of the structure matrix, Ho & Lin 2009
+    eq. 7), for an array whose 12 unknowns are resolved (rank 12, condition below 1e6); None otherwise."""
+    if array.n_axes < 12:
+        return None
+    S = array.structure_matrix()
+    sv = np.linalg.svd(S, compute_uv=False)
+    if sv[-1] <= 1e-6 * sv[0]:
+        return None
+    return np.linalg.pinv(S)[0:3]
+
+
 def median_specific_force(log: Log) -> float | None:
-    """Median over the log of |f| of the array's common mode [m/s², as read]: the mean over the three-axis
-    accelerometers of their readings turned into B (one triad: its |f|); None without a triad."""
+    """Median over the log of |f| [m/s², as read] with the rotation taken out where the array resolves it:
+    the specific force at the origin from the per-sample inversion (an array with 12 resolved unknowns: a
+    fast spin of sensors off its axis reads centripetal force, which is no unit error), else the array's
+    common mode, the mean over the three-axis accelerometers of their readings turned into B (one triad:
+    its |f|); None without a triad."""
     arr = log.array
+    P = _origin_force_rows(arr)
+    if P is not None and len(log) >= 2:
+        norms = []
+        with np.errstate(all="ignore"):
+            for start in range(0, len(log), _BLOCK_ROWS):
+                rows = slice(start, min(start + _BLOCK_ROWS, len(log)))
+                norms.append(np.linalg.norm(log.accel_mps2[rows] @ P.T, axis=1))
+        norm = np.concatenate(norms)
+        norm = norm[np.isfinite(norm)]
+        return float(np.median(norm)) if norm.size else None
     triads, col = [], 0
     for a in arr.accelerometers:
         if tuple(a.axes) == ("x", "y", "z"):
@@ -194,6 +220,15 @@ def suggested_factor(ratio: float, read_unit: str = "m s^-2") -> str:
     return text
 
 
+def _spin_caveat(array, ratio: float) -> str:
+    """For |f| above gravity read by an array that cannot take its rotation out (fewer than 12 resolved
+    unknowns): the other cause, a fast spin of sensors off its axis, named; "" otherwise."""
+    if ratio < 1.0 or _origin_force_rows(array) is not None:
+        return ""
+    return (" (or the sensors spin fast off the rotation axis: centripetal force, which this array cannot tell "
+            "apart from a unit error)")
+
+
 def check_specific_force_scale(log: Log, where: str, gravity_included: bool = True,
                                read_unit: str = "m s^-2") -> list[str]:
     """The median |f| of the array's common mode over the whole log, far from 9.81 m/s² by a factor of
@@ -215,8 +250,8 @@ def check_specific_force_scale(log: Log, where: str, gravity_included: bool = Tr
     if ratio >= MOVING_HIGH or ratio <= MOVING_LOW:
         return [f"{where}: over the whole log the accelerometers read a median |f| = {m:.4g} m/s², {ratio:.3g} × "
                 f"gravity, where a moving body's specific force stays near {STANDARD_GRAVITY_MPS2:g}: "
-                f"{suggested_factor(ratio, read_unit)}" + ("" if ratio >= MOVING_HIGH else
-                                                " (or the array was in free fall the whole time)")
+                f"{suggested_factor(ratio, read_unit)}" + (_spin_caveat(log.array, ratio) if ratio >= MOVING_HIGH else
+                                                           " (or the array was in free fall the whole time)")
                 + "; check the unit of the values (in the header or the map)"]
     return []
 
@@ -234,13 +269,14 @@ def check_gravity(log: Log, imu_name: str, accel_units: str = "m s^-2") -> list[
                      "mg taken for m/s² (1000 times too large)")
             return [f"{imu_name}: no still stretch, but over the whole log the accelerometers read a median |f| = "
                     f"{m:.4g} m/s² (under [{accel_units}]), {ratio:.3g} × gravity, where a moving body's specific "
-                    f"force stays near {STANDARD_GRAVITY_MPS2:g}: likely {cause} when the log was written; check "
-                    "the unit of the recording it came from"]
+                    f"force stays near {STANDARD_GRAVITY_MPS2:g}: likely {cause} when the log was written"
+                    + _spin_caveat(log.array, ratio) + "; check the unit of the recording it came from"]
         if ratio is not None and 0 < ratio and (ratio >= MOVING_HIGH or ratio <= MOVING_LOW):
             return [f"{imu_name}: no still stretch, but over the whole log the accelerometers read a median |f| = "
                     f"{m:.4g} m/s² (under [{accel_units}]), {ratio:.3g} × gravity, where a moving body's specific "
                     f"force stays near {STANDARD_GRAVITY_MPS2:g}: {suggested_factor(ratio, accel_units)}"
-                    + ("" if ratio >= MOVING_HIGH else " (or the array was in free fall the whole time)")
+                    + (_spin_caveat(log.array, ratio) if ratio >= MOVING_HIGH else
+                       " (or the array was in free fall the whole time)")
                     + "; check the unit of the recording it came from"]
         return []
     ratio = g0 / STANDARD_GRAVITY_MPS2
