@@ -48,6 +48,7 @@ def test_a_clean_log_reports_no_fault(clean):
     assert "0 span(s) where the smoother fits the readings worse than its model allows" in clean.to_text()
 
 
+@pytest.mark.slow
 def test_readings_in_g_are_found_with_their_factor(base):
     d = diagnose(base.replace(accel_mps2=base.accel_mps2 / G))
     assert d.accel_unit_suspect == "g" and d.accel_scale_to_mps2 == pytest.approx(G)
@@ -66,6 +67,7 @@ def test_readings_in_mg_of_a_still_array_found_from_the_still_stretch():
     assert d.accel_unit_suspect == "mg" and d.accel_scale_to_mps2 == pytest.approx(G / 1000)
 
 
+@pytest.mark.slow
 def test_positions_in_mm_found_and_the_residual_does_not_depend_on_a_common_scale(base, clean):
     arr = base.array.with_accelerometers([Accelerometer(a.name, a.position_m * 1000, a.rotation_body_sensor, a.axes,
                                                         a.noise_std_mps2) for a in base.array.accelerometers])
@@ -121,6 +123,7 @@ def test_a_sensor_with_a_time_skew_is_found_and_sized():
     assert len(skew_warnings) == 1 and skew_warnings[0].startswith("a2 reads +")
 
 
+@pytest.mark.slow
 def test_a_gyroscope_in_deg_per_s_is_found():
     from gfimu.array import cube_array
 
@@ -195,6 +198,7 @@ def test_real_recording(mimu4444_dir, tmp_path):
     assert not d.model["consistent"]  # the board's residual is several times its datasheet noise
 
 
+@pytest.mark.slow
 def test_positions_in_cm_of_a_small_array_found_by_the_gyroscope():
     """Sizes that look plausible (35 cm) but are in cm: the accelerometers' ω is √100 times too small."""
     from gfimu.array import SensorArray, cube_array

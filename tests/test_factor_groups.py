@@ -60,6 +60,7 @@ def spinning():
     return log, group
 
 
+@pytest.mark.slow
 def test_batch_and_gtsam_solvers_both_use_the_group(spinning):
     log, group = spinning
     inside = slice(100, 150)

@@ -194,6 +194,7 @@ def test_the_kernels_readings_are_the_arrays_rigid_body_equation():
             np.testing.assert_allclose(H[:, j], (hi - lo) / (2 * step), rtol=0, atol=1e-9 * np.abs(want).max() / step)
 
 
+@pytest.mark.slow
 def test_a_robust_stream_through_the_kernels_is_the_numpy_stream(monkeypatch):
     """The robust model (Cauchy loss on the readings and on the motion model's steps, noise growing with |ω|)
     through the compiled update and through the numpy one: the same estimates to rounding."""

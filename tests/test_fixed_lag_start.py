@@ -2,6 +2,7 @@
 data decide ω, then come out re-solved (gfimu.smoother.stream.fixed_lag, FixedLagSmoother._release_start)."""
 
 import numpy as np
+import pytest
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
@@ -13,6 +14,7 @@ def _rmse(est, truth, rows=slice(None)):
     return float(np.sqrt(np.mean(np.sum((est[rows] - truth[rows]) ** 2, axis=1))))
 
 
+@pytest.mark.slow
 def test_slow_motion_start_is_held_and_the_log_stays_within_twice_the_batch_smoother():
     """Slow rotation (|ω| at most 1 rad/s), a 10 cm cube of four triads, 0.07 m/s², 500 Hz, 6 s: the
     readings see ω through q(ω) ~ |ω|², and a stream that commits at once starts 0.17 rad/s off over its

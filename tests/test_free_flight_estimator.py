@@ -73,6 +73,7 @@ def test_stable_spins_tolerate_ten_times_the_noise(case):
     assert np.all(err < 0.02), err
 
 
+@pytest.mark.slow
 def test_sign_options():
     log = simulate("freeflight-minor", duration_s=0.5, noise=SensorErrors.none())
     truth = log.truth.omega_b_radps

@@ -101,6 +101,7 @@ def test_sigterm_flushes_and_summarises(log_dir, tmp_path):
     assert len(gio.read_motion_csv(out)) == 400
 
 
+@pytest.mark.slow
 def test_mimu4444_packets_over_tcp(mimu4444_dir, tmp_path):
     """Real MIMU4444 bytes over TCP, in odd-sized chunks: the rows decoded live are those of
     gfimu convert mimu4444 (timestamps exactly), and every one is estimated."""

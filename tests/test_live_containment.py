@@ -66,6 +66,7 @@ def test_readings_in_m_per_s2_under_a_g_header_are_named_with_the_factor(log_dir
     assert _digest(log_dir) == before
 
 
+@pytest.mark.slow
 def test_a_map_unit_off_by_any_factor_is_caught_by_convert_estimate_and_diagnose(tmp_path):
     """m/s² values under a map's unit "mg" (readings 102 times too small, no ratio the old list knew): convert,
     estimate and diagnose each name it, with the factor that brings them to gravity."""

@@ -54,6 +54,7 @@ def _wait_for(proc, text: str, timeout_s: float = 120.0) -> list[str]:
     raise AssertionError(f"{text!r} never came: {''.join(seen)}")
 
 
+@pytest.mark.slow
 def test_stdin_without_rate_gives_the_estimate_file_byte_for_byte(log_dir, tmp_path):
     """array.toml without rate_hz and no --rate-hz: the rate comes from the first timestamps (said on
     standard error) and the file is gfimu estimate --method fixed-lag's, to the last byte."""

@@ -211,6 +211,7 @@ def test_real_recording_settings_beat_the_per_sample_ml(mimu4444_dir):
     assert s_opp < m_opp, (s_opp, m_opp)
 
 
+@pytest.mark.slow
 def test_minimum_of_a_stiff_setting_keeps_its_precision():
     """An axis made stiff (factor 10⁻⁵, an oscillator on it) while the states come from the plain
     model: the process cost at the linearisation point is about 10⁸ times the minimum, and
