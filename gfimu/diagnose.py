@@ -125,20 +125,21 @@ class ChannelFault:
 
 
 @dataclass(frozen=True)
-class Diagnosis:
-    """What :func:`diagnose` found; :meth:`to_text` for people, :meth:`as_dict` for JSON."""
+class Consistency:
+    """How well the readings fit a rigid body (the per-sample ML fit's residual)."""
 
-    source: str
-    array_name: str
-    sensors: int
-    axes: int
-    timing: Timing
     model: dict
     """The smoother's model check (:meth:`gfimu.smoother.tuning.model_choice.ModelCheck.as_dict`)."""
     noise_floor_mps2: float
     stated_noise_mps2: float
     per_sensor: tuple[SensorReport, ...]
     bands: tuple[BandReport, ...]
+
+
+@dataclass(frozen=True)
+class UnitsAndSizes:
+    """What the readings say of their units and of the array's sizes."""
+
     still_specific_force_mps2: float | None
     """Median |f| of the still stretches, as read [m/s²] (None: no still stretch)."""
     median_specific_force_mps2: float
@@ -155,8 +156,20 @@ class Diagnosis:
     """Factor to apply to position_m when the sizes (or the gyro) say they are not in metres; else None."""
     array_extent_m: float
     array_max_distance_m: float
+
+
+@dataclass(frozen=True)
+class Channels:
+    """Channels found at fault (stuck, clipped, dead) and the readings the screening replaced."""
+
     faults: tuple[ChannelFault, ...]
     screened_readings: int
+
+
+@dataclass(frozen=True)
+class ExpectedAccuracy:
+    """The per-sample Cramér-Rao bound at the fitted ω, and how often ω and its sign are told."""
+
     crb_omega_radps: float
     """Median per-sample bound on |ω| error over the log, with the stated noise [rad/s]."""
     crb_omega_measured_radps: float
@@ -169,6 +182,42 @@ class Diagnosis:
     """Share of samples whose |ω| exceeds 3 × its bound (magnitude of ω known)."""
     sign_window_share: float
     """Share of 1 s windows whose change of ω tells its sign (:func:`sign_resolution`)."""
+
+
+class _Part:
+    """A value of one of the diagnosis's parts, read by its flat name (the name it has in :meth:`Diagnosis.as_dict`)."""
+
+    def __init__(self, part: str):
+        self.part = part
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        return self if obj is None else getattr(getattr(obj, self.part), self.name)
+
+
+_PARTS = ("consistency", "units", "channels", "accuracy")
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What :func:`diagnose` found; :meth:`to_text` for people, :meth:`as_dict` for JSON.
+
+    The log named (``source``, ``array_name``, ``sensors``, ``axes``), its ``timing``, four parts
+    (``consistency``, ``units``, ``channels``, ``accuracy``), the ``warnings`` (``fix_first``: those that make
+    every estimate wrong until fixed), the ``verdict`` and the smoother's ``guard``. A part's values read
+    by their flat names too (``d.gyro_ratio`` is ``d.units.gyro_ratio``), as :meth:`as_dict` writes them."""
+
+    source: str
+    array_name: str
+    sensors: int
+    axes: int
+    timing: Timing
+    consistency: Consistency
+    units: UnitsAndSizes
+    channels: Channels
+    accuracy: ExpectedAccuracy
     warnings: tuple[str, ...]
     fix_first: tuple[str, ...]
     """The warnings that make every estimate wrong until fixed (units, positions, timestamps)."""
@@ -178,9 +227,39 @@ class Diagnosis:
     ``spans`` with ``start_s``, ``end_s``, samples and excess; ``note`` when it did not run)."""
     figure_data: dict = field(default_factory=dict, repr=False, compare=False)
 
+    model = _Part("consistency")
+    noise_floor_mps2 = _Part("consistency")
+    stated_noise_mps2 = _Part("consistency")
+    per_sensor = _Part("consistency")
+    bands = _Part("consistency")
+    still_specific_force_mps2 = _Part("units")
+    median_specific_force_mps2 = _Part("units")
+    accel_unit_suspect = _Part("units")
+    accel_scale_to_mps2 = _Part("units")
+    gyro_ratio = _Part("units")
+    gyro_unit_suspect = _Part("units")
+    position_scale_suspect = _Part("units")
+    array_extent_m = _Part("units")
+    array_max_distance_m = _Part("units")
+    faults = _Part("channels")
+    screened_readings = _Part("channels")
+    crb_omega_radps = _Part("accuracy")
+    crb_omega_measured_radps = _Part("accuracy")
+    crb_omega_dot_radps2 = _Part("accuracy")
+    omega_p50_radps = _Part("accuracy")
+    omega_p90_radps = _Part("accuracy")
+    resolved_share = _Part("accuracy")
+    sign_window_share = _Part("accuracy")
+
     def as_dict(self) -> dict:
-        out = asdict(self)
-        out.pop("figure_data")
+        """One flat JSON object: the log, its timing, each part's values in turn, the warnings, the verdict,
+        the guard (the figure's data left out)."""
+        out = {}
+        for name, value in asdict(self).items():
+            if name in _PARTS:
+                out.update(value)
+            elif name != "figure_data":
+                out[name] = value
         return _json_clean(out)
 
     def to_text(self) -> str:
@@ -586,13 +665,14 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
     figure = {"times_s": clean.times_s, "omega_norm_radps": wn, "bound_radps": so_norm * max(factor, 1.0),
               "residual_norm_mps2": np.sqrt(np.mean(residual**2, axis=1)), "dt_s": np.diff(log.timestamps_ns) * 1e-9,
               "sign_snr": sign_snr}
-    return Diagnosis(
-        log.source, array.name, len(array.accelerometers), n_axes, timing, check.as_dict(), float(check.noise_floor_mps2),
-        float(check.stated_noise_mps2), tuple(sensors), tuple(bands), g0, f_median, unit, unit_scale, gyro_ratio, gyro_unit,
-        pos_scale, extent, far, tuple(faults), int(screening.count), crb_stated, crb_stated * factor,
-        float(np.median(np.sqrt(np.sum(sd**2, axis=1)))) * factor, float(np.median(wn)), float(np.quantile(wn, 0.9)),
-        float(np.mean(resolved)), share_sign, all_warnings, tuple(fix), verdict, guard=_json_clean(guard),
-        figure_data=figure)
+    consistency = Consistency(check.as_dict(), float(check.noise_floor_mps2), float(check.stated_noise_mps2),
+                              tuple(sensors), tuple(bands))
+    units = UnitsAndSizes(g0, f_median, unit, unit_scale, gyro_ratio, gyro_unit, pos_scale, extent, far)
+    accuracy = ExpectedAccuracy(crb_stated, crb_stated * factor, float(np.median(np.sqrt(np.sum(sd**2, axis=1)))) * factor,
+                                float(np.median(wn)), float(np.quantile(wn, 0.9)), float(np.mean(resolved)), share_sign)
+    return Diagnosis(log.source, array.name, len(array.accelerometers), n_axes, timing, consistency, units,
+                     Channels(tuple(faults), int(screening.count)), accuracy, all_warnings, tuple(fix), verdict,
+                     guard=_json_clean(guard), figure_data=figure)
 
 
 def smoother_guard(log: Log, options: dict | None = None) -> dict:

@@ -34,8 +34,11 @@ class Report:
     (calibration variables estimated, per solve window), ``iterations`` and ``cost`` (solver
     iterations and final cost, summed over the windows), ``windows`` (solve windows; 0 for a stream),
     ``guard`` (the smoothers' comparison with the per-sample estimate,
-    :class:`gfimu.smoother.guard.GuardResult`: the spans where the smoother fits the readings worse)
-    and ``warnings``: plain-text notes on anything that went less well than planned."""
+    :class:`gfimu.smoother.guard.GuardResult`: the spans where the smoother fits the readings worse),
+    ``warnings``: plain-text notes on anything that went less well than planned, and ``per_sample``:
+    the per-sample ML estimate of the whole log when the run made one (the batch smoother's model check
+    of an inconsistent log; the guard reuses it). The estimate's one-sigma uncertainties, when asked
+    for, are the motion's (``Estimate.motion.sigma``)."""
 
     method: str
     options: Mapping[str, Any] = field(default_factory=dict)
@@ -48,6 +51,7 @@ class Report:
     cost: float | None = None
     windows: int | None = None
     guard: Any = None
+    per_sample: Motion | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", _frozen_mapping(self.options))

@@ -30,6 +30,33 @@ def clean(base):
     return diagnose(base)
 
 
+FLAT_KEYS = ["source", "array_name", "sensors", "axes", "timing", "model", "noise_floor_mps2", "stated_noise_mps2",
+             "per_sensor", "bands", "still_specific_force_mps2", "median_specific_force_mps2", "accel_unit_suspect",
+             "accel_scale_to_mps2", "gyro_ratio", "gyro_unit_suspect", "position_scale_suspect", "array_extent_m",
+             "array_max_distance_m", "faults", "screened_readings", "crb_omega_radps", "crb_omega_measured_radps",
+             "crb_omega_dot_radps2", "omega_p50_radps", "omega_p90_radps", "resolved_share", "sign_window_share",
+             "warnings", "fix_first", "verdict", "guard"]
+
+
+def test_the_json_is_one_flat_object_whatever_the_parts(clean):
+    """The diagnosis is held in parts (consistency, units, channels, accuracy); its JSON is the one flat object
+    of these keys in this order, each the value read by that name, byte for byte."""
+    from dataclasses import asdict, fields, is_dataclass
+
+    from gfimu.diagnose import _json_clean
+
+    doc = clean.as_dict()
+    assert list(doc) == FLAT_KEYS
+    flat = {}
+    for k in FLAT_KEYS:
+        v = getattr(clean, k)
+        flat[k] = asdict(v) if is_dataclass(v) else ([asdict(x) for x in v] if k in ("per_sensor", "bands", "faults")
+                                                     else v)
+    assert json.dumps(doc, indent=2) == json.dumps(_json_clean(flat), indent=2)
+    assert clean.gyro_ratio is clean.units.gyro_ratio and clean.bands is clean.consistency.bands
+    assert clean.omega_p90_radps == clean.accuracy.omega_p90_radps > clean.omega_p50_radps > 0
+    assert len(fields(clean)) < 15
+
 def test_a_clean_log_reports_no_fault(clean):
     assert clean.warnings == () and clean.fix_first == () and clean.faults == ()
     assert clean.verdict.startswith("CLEAN")

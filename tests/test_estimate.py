@@ -111,9 +111,9 @@ def test_command_builds_the_estimator_once_and_prints_the_report(log_dir, tmp_pa
     real_smooth = batch.smooth
 
     def smooth_with_a_note(*args, **kwargs):
-        res = real_smooth(*args, **kwargs)
-        return dataclasses.replace(res, warnings=("solve window 1 of 1 (samples 0..199) stopped after 50 iterations "
-                                                  "without converging",))
+        run = real_smooth(*args, **kwargs)
+        note = "solve window 1 of 1 (samples 0..199) stopped after 50 iterations without converging"
+        return dataclasses.replace(run, report=dataclasses.replace(run.report, warnings=(note,)))
 
     monkeypatch.setattr(gfimu.methods, "make_estimator", counting)
     monkeypatch.setattr(batch, "smooth", smooth_with_a_note)

@@ -25,9 +25,8 @@ def test_slow_motion_start_is_held_and_the_log_stays_within_twice_the_batch_smoo
     log = simulate("slow3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=500.0, duration_s=6.0, seed=0)
     truth = log.truth.omega_b_radps
     first = log.times_s - log.times_s[0] < 2.0
-    batch = BatchSmootherEstimator().result(log).motion.omega_b_radps
-    fixed = FixedLagEstimator()
-    fl = fixed.result(log).motion.omega_b_radps
+    batch = BatchSmootherEstimator().estimate(log).motion.omega_b_radps
+    fl = FixedLagEstimator().estimate(log).motion.omega_b_radps
     assert _rmse(fl, truth) <= 2.0 * _rmse(batch, truth)
     assert _rmse(fl, truth, first) <= 2.5 * _rmse(batch, truth, first)
     moving = np.linalg.norm(truth, axis=1) > 0.1

@@ -216,3 +216,15 @@ def test_the_checks_catch_a_cycle_and_an_upward_import():
             "gfimu.smoother.batch.engine": {"gfimu.estimators.ml"}, "gfimu.estimators.ml": set()}
     assert find_cycle(folder_graph(shim)) == ["gfimu.estimators", "gfimu.methods", "gfimu.estimators"]
     assert layer_of("gfimu.methods")[1] > layer_of("gfimu.estimators")[1]
+
+
+def test_io_readers_sit_above_the_rest_of_io():
+    """The readers (gfimu/io/readers) use io's tables, units and errors; nothing else in io imports a reader
+    (a live byte stream decodes MIMU4444 packets with gfimu.io.mimu4444_packets), so the two do not loop."""
+    edges = graph()
+    up = sorted(f"{src} -> {dst}" for src, targets in edges.items() for dst in targets
+                if src.startswith("gfimu.io") and not src.startswith("gfimu.io.readers")
+                and dst.startswith("gfimu.io.readers"))
+    assert up == []
+    assert "gfimu.io.mimu4444_packets" in edges["gfimu.io.readers.mimu4444"]
+    assert "gfimu.io.mimu4444_packets" in edges["gfimu.io.sources"]

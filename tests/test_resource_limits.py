@@ -71,7 +71,7 @@ def test_a_zip_bomb_is_refused_at_once_with_bounded_memory(tmp_path):
 def test_a_member_inflating_far_beyond_its_size_stops_at_the_limit(tmp_path, monkeypatch):
     """The limit holds while inflating, whatever size the archive's directory claims (checked in-process with
     small limits)."""
-    from gfimu.io.readers import csv as reader
+    from gfimu.io.readers.csv import files as reader
 
     monkeypatch.setattr(reader, "ZIP_BOMB_BYTES", 1 << 20)
     zipped = _bomb(tmp_path / "export.zip", inflated=8 << 20)

@@ -18,7 +18,7 @@ names and unit conversions) and the timestamp rule of imu.csv
   imu.csv for the array (:func:`default_header`), or a header datagram
   (starting with ``#``) first; a datagram ``EOF`` ends the stream.
 
-Binary sources read MIMU4444 packets (:class:`gfimu.io.readers.mimu4444.StreamDecoder`):
+Binary sources read MIMU4444 packets (:class:`gfimu.io.mimu4444_packets.StreamDecoder`):
 
 - ``tcp://HOST:PORT``: connecting to the board's server;
 - ``serial:///dev/ttyUSB0?baud=N``: a serial port (needs pyserial).
@@ -360,7 +360,7 @@ class MimuSource(Source):
             return b""
 
     def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
-        from .readers.mimu4444 import StreamDecoder
+        from .mimu4444_packets import StreamDecoder
 
         decoder = StreamDecoder()
         skipped = received = 0

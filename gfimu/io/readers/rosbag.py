@@ -407,56 +407,9 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
         listed = ", ".join(f"{t} [{m}]" for t, m in sorted(topics.items())) or "none"
         raise LogFormatError(f"no {IMU_TYPE} topic in this {kind} (topics: {listed})", path)
     imu_topics = ", ".join(sorted(records))
-    streams: list[ImuStream] = []
-    notes: list[list[str]] = []  # per accelerometer: messages and topics left out
-    for i, acc in enumerate(array.accelerometers):
-        if acc.topic is not None:
-            if acc.topic not in topics:
-                raise LogFormatError(f"accelerometers[{i}].topic: {acc.topic!r} (accelerometer {acc.name!r}) is not "
-                                     f"in {path} (its Imu topics: {imu_topics})", array_path)
-            if acc.topic not in records:
-                raise LogFormatError(f"accelerometers[{i}].topic: {acc.topic!r} (accelerometer {acc.name!r}) holds "
-                                     f"{topics[acc.topic]} in {path}, not {IMU_TYPE} (its Imu topics: {imu_topics})",
-                                     array_path)
-            m = records[acc.topic]
-            if not len(m):
-                raise LogFormatError(f"topic {acc.topic!r} (accelerometer {acc.name!r}) holds no message", path)
-            given = m.accel_given()
-            if not given.any():
-                raise LogFormatError(f"topic {acc.topic!r} (accelerometer {acc.name!r}, accelerometers[{i}].topic of "
-                                     f"{array_path}) is not an accelerometer: {_not_given(len(m))} (message 0 is "
-                                     "the first)", path)
-            notes.append(_dropped(acc.topic, m, given))
-            notes[-1] += _not_finite(acc.topic, m, given)
-            streams.append(_stream(f"topic {acc.topic}", [acc.topic], [(m, given & m.accel_finite())]))
-        else:
-            hits = [(t, records[t].frame(acc.name)) for t in sorted(records)]
-            hits = [(t, sel) for t, sel in hits if sel.any()]
-            if not hits:
-                frames = sorted({f for m in records.values() for f in m.frame_ids})
-                raise LogFormatError(
-                    f"no Imu message has header.frame_id {acc.name!r}, the name of accelerometer {acc.name!r} of "
-                    f"{array_path}, which gives no topic (frame_ids in the bag: "
-                    f"{', '.join(repr(f) for f in frames) or 'none'}; Imu topics: {imu_topics})", path)
-            no_accel = [(t, sel) for t, sel in hits if not (sel & records[t].accel_given()).any()]
-            hits = [(t, sel & records[t].accel_given()) for t, sel in hits if t not in {u for u, _ in no_accel}]
-            if not hits:
-                t, sel = no_accel[0]
-                raise LogFormatError(
-                    f"the Imu messages with header.frame_id {acc.name!r} (accelerometer {acc.name!r} of {array_path}) "
-                    f"are no accelerometer's: on {', '.join(t for t, _ in no_accel)}, "
-                    f"{_not_given(int(np.count_nonzero(sel)))} (message {int(np.argmax(sel))} of {t} is the first)",
-                    path)
-            on = [t for t, _ in hits]
-            note = [f"topic {t}: its {int(np.count_nonzero(sel))} message(s) with header.frame_id {acc.name!r} leave "
-                    "linear_acceleration out (linear_acceleration_covariance[0] = -1): not read as an accelerometer"
-                    for t, sel in no_accel]
-            for t, sel in hits:
-                note += _dropped(t, records[t], sel | ~records[t].frame(acc.name))
-                note += _not_finite(t, records[t], sel)
-            notes.append(note)
-            streams.append(_stream(f"frame_id {acc.name!r} on {', '.join(on)}", on,
-                                   [(records[t], sel & records[t].accel_finite()) for t, sel in hits]))
+    found = [_accelerometer_stream(i, acc, topics, records, path, array_path) for i, acc in enumerate(array.accelerometers)]
+    streams = [s for s, _ in found]
+    notes = [n for _, n in found]  # per accelerometer: messages and topics left out
     for acc, s in zip(array.accelerometers, streams):
         if s.stamps_ns.size < 2:
             raise LogFormatError(f"accelerometer {acc.name!r} ({s.source}): {s.stamps_ns.size} message(s) with "
@@ -482,70 +435,16 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
     if al.timestamps_ns.size < 2:
         raise LogFormatError("fewer than 2 samples are left on the common time base", path)
     accel = np.hstack([v[:, :len(a.axes)] for a, v in zip(array.accelerometers, al.values)])
-    gyro = None
     lines = [f"{path}: {kind}, {len(records)} Imu topic(s) ({imu_topics}) of {len(topics)} topic(s)"]
-    t_start = al.timestamps_ns[0]
-
-    def at(t_ns: int) -> str:
-        return f"{(int(t_ns) - int(t_start)) * 1e-9:.3f} s"
-
     new_accs = []
     for acc, s, note in zip(array.accelerometers, streams, notes):
-        g = stream_gaps(s.stamps_ns)
-        rate = 1e9 / g.period_ns if g.period_ns else float("nan")
-        line = (f"{acc.name}: {s.source} (frame_id {', '.join(repr(f) for f in s.frame_ids)}), {s.stamps_ns.size} "
-                f"message(s) at {rate:.2f} Hz; {g.start_ns.size} gap(s), {g.n_missing} message(s) missing")
-        if g.start_ns.size:
-            shown = ", ".join(f"{g.missing[j]} at {at(g.start_ns[j])}" for j in range(min(5, g.start_ns.size)))
-            line += f" ({shown}{', ...' if g.start_ns.size > 5 else ''})"
-        line += f"; {s.duplicates} duplicate stamp(s) dropped; {s.out_of_order} out of order (sorted)"
-        if s.stamps_from_bag:
-            line += "; header stamps all zero: the bag's record times are used"
-        lines.append(line)
-        lines += [f"{acc.name}: {n}" for n in note]
-        var = np.nanmedian(s.accel_var_mps2, axis=0) if np.any(np.isfinite(s.accel_var_mps2)) else None
-        if var is not None:
-            cols = ["xyz".index(a) for a in acc.axes]
-            std = float(math.sqrt(float(np.mean(var[cols]))))
-            if acc.noise_std_mps2 is None:
-                acc = replace(acc, noise_std_mps2=std)
-                lines.append(f"{acc.name}: noise_std_mps2 {std:.6g} from linear_acceleration_covariance")
-            elif not math.isclose(acc.noise_std_mps2, std, rel_tol=1e-6):
-                lines.append(f"{acc.name}: noise_std_mps2 {acc.noise_std_mps2:.6g} kept from {array_path} "
-                             f"(linear_acceleration_covariance says {std:.6g})")
+        acc, acc_lines = _described_accelerometer(acc, s, note, al.timestamps_ns[0], array_path)
         new_accs.append(acc)
-    gyroscope = array.gyroscope
-    if with_gyro:
-        from ...array import Gyroscope
-
-        gyro = np.mean([al.values[k][:, len(array.accelerometers[k].axes):] for k in gyro_streams], axis=0)
-        gvar = [np.nanmedian(streams[k].gyro_var_radps, axis=0) for k in gyro_streams
-                if np.any(np.isfinite(streams[k].gyro_var_radps))]
-        gstd = (float(math.sqrt(float(np.mean(gvar)) / len(gyro_streams)))
-                if len(gvar) == len(gyro_streams) else None)
-        if gyroscope is None or gyroscope.noise_std_radps is None:
-            gyroscope = Gyroscope(gstd)
-        names = [array.accelerometers[k].name for k in gyro_streams]
-        lines.append(f"gyro: mean angular velocity in B of {len(names)} stream(s) ({', '.join(names)}) as w_x, w_y, w_z"
-                     + (f"; noise_std_radps {gstd:.6g} from angular_velocity_covariance" if gstd is not None else ""))
-        left = [a.name for k, a in enumerate(array.accelerometers) if not streams[k].gyro_given.all()]
-        if left:
-            lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1, or not finite) by "
-                         f"{', '.join(left)}; a stream is used only when all its messages provide it")
-    elif array.gyroscope is not None:
-        gyroscope = None
-        lines.append(f"gyro: the [gyroscope] of {array_path} is left out of the log (no --with-gyro)")
+        lines += acc_lines
+    gyro, gyroscope, gyro_lines = _log_gyro(array, streams, gyro_streams, al, with_gyro, array_path)
+    lines += gyro_lines
     out_array = replace(array, accelerometers=tuple(new_accs), gyroscope=gyroscope)
-    a, b = al.overlap_ns
-    lines.append(f"time base: {1e9 / al.period_ns:.2f} Hz (median of the median periods), over the overlap of all "
-                 f"streams ({(b - a) * 1e-9:.3f} s): {al.timestamps_ns.size} sample(s); linear interpolation on header "
-                 f"stamps, a grid time at most {al.max_offset_ns * 1e-6:.3f} ms from a stamp")
-    if al.long_gaps:
-        shown = ", ".join(f"{at(g0)} to {at(g1)} ({n} sample(s))" for g0, g1, n in al.long_gaps[:5])
-        lines.append(f"gaps over {max_gap_periods:g} periods: {len(al.long_gaps)}, left out as time gaps of the log: "
-                     f"{shown}{', ...' if len(al.long_gaps) > 5 else ''}")
-    else:
-        lines.append(f"gaps over {max_gap_periods:g} periods: none")
+    lines += _time_base_lines(al, max_gap_periods)
     reference = invalid = None
     if ref_topic is not None:
         reference, invalid, ref_lines = _gyro_reference(ref_topic, records[ref_topic], array, al.timestamps_ns,
@@ -554,6 +453,139 @@ def read_bag(path: str | Path, array_path: str | Path, with_gyro: bool = False,
     log = Log(out_array, al.timestamps_ns, accel, gyro_b_radps=gyro, reference=reference, invalid_reference=invalid,
               source=str(path))
     return Conversion(log, tuple(lines))
+
+
+def _accelerometer_stream(i: int, acc, topics: dict[str, str], records: dict[str, TopicMessages], path: Path,
+                          array_path: Path) -> tuple[ImuStream, list[str]]:
+    """The stream of accelerometer ``i`` of the array (its ``topic``, or the messages whose header.frame_id
+    is its name) and the notes on the messages left out."""
+    imu_topics = ", ".join(sorted(records))
+    if acc.topic is None:
+        return _frame_stream(acc, records, path, array_path)
+    if acc.topic not in topics:
+        raise LogFormatError(f"accelerometers[{i}].topic: {acc.topic!r} (accelerometer {acc.name!r}) is not "
+                             f"in {path} (its Imu topics: {imu_topics})", array_path)
+    if acc.topic not in records:
+        raise LogFormatError(f"accelerometers[{i}].topic: {acc.topic!r} (accelerometer {acc.name!r}) holds "
+                             f"{topics[acc.topic]} in {path}, not {IMU_TYPE} (its Imu topics: {imu_topics})",
+                             array_path)
+    m = records[acc.topic]
+    if not len(m):
+        raise LogFormatError(f"topic {acc.topic!r} (accelerometer {acc.name!r}) holds no message", path)
+    given = m.accel_given()
+    if not given.any():
+        raise LogFormatError(f"topic {acc.topic!r} (accelerometer {acc.name!r}, accelerometers[{i}].topic of "
+                             f"{array_path}) is not an accelerometer: {_not_given(len(m))} (message 0 is "
+                             "the first)", path)
+    note = _dropped(acc.topic, m, given) + _not_finite(acc.topic, m, given)
+    return _stream(f"topic {acc.topic}", [acc.topic], [(m, given & m.accel_finite())]), note
+
+
+def _frame_stream(acc, records: dict[str, TopicMessages], path: Path, array_path: Path) -> tuple[ImuStream, list[str]]:
+    """The stream of an accelerometer that names no topic: the messages, on any Imu topic, whose
+    header.frame_id is its name; and the notes on those left out."""
+    imu_topics = ", ".join(sorted(records))
+    hits = [(t, records[t].frame(acc.name)) for t in sorted(records)]
+    hits = [(t, sel) for t, sel in hits if sel.any()]
+    if not hits:
+        frames = sorted({f for m in records.values() for f in m.frame_ids})
+        raise LogFormatError(
+            f"no Imu message has header.frame_id {acc.name!r}, the name of accelerometer {acc.name!r} of "
+            f"{array_path}, which gives no topic (frame_ids in the bag: "
+            f"{', '.join(repr(f) for f in frames) or 'none'}; Imu topics: {imu_topics})", path)
+    no_accel = [(t, sel) for t, sel in hits if not (sel & records[t].accel_given()).any()]
+    hits = [(t, sel & records[t].accel_given()) for t, sel in hits if t not in {u for u, _ in no_accel}]
+    if not hits:
+        t, sel = no_accel[0]
+        raise LogFormatError(
+            f"the Imu messages with header.frame_id {acc.name!r} (accelerometer {acc.name!r} of {array_path}) "
+            f"are no accelerometer's: on {', '.join(t for t, _ in no_accel)}, "
+            f"{_not_given(int(np.count_nonzero(sel)))} (message {int(np.argmax(sel))} of {t} is the first)",
+            path)
+    on = [t for t, _ in hits]
+    note = [f"topic {t}: its {int(np.count_nonzero(sel))} message(s) with header.frame_id {acc.name!r} leave "
+            "linear_acceleration out (linear_acceleration_covariance[0] = -1): not read as an accelerometer"
+            for t, sel in no_accel]
+    for t, sel in hits:
+        note += _dropped(t, records[t], sel | ~records[t].frame(acc.name))
+        note += _not_finite(t, records[t], sel)
+    stream = _stream(f"frame_id {acc.name!r} on {', '.join(on)}", on,
+                     [(records[t], sel & records[t].accel_finite()) for t, sel in hits])
+    return stream, note
+
+
+def _since(t_ns: int, t_start: int) -> str:
+    return f"{(int(t_ns) - int(t_start)) * 1e-9:.3f} s"
+
+
+def _described_accelerometer(acc, s: ImuStream, note: list[str], t_start: int, array_path: Path):
+    """(the accelerometer, with its noise from the messages' covariance unless the array gives it; the
+    report's lines on its stream: rate, gaps, duplicates, what was left out, the noise)."""
+    g = stream_gaps(s.stamps_ns)
+    rate = 1e9 / g.period_ns if g.period_ns else float("nan")
+    line = (f"{acc.name}: {s.source} (frame_id {', '.join(repr(f) for f in s.frame_ids)}), {s.stamps_ns.size} "
+            f"message(s) at {rate:.2f} Hz; {g.start_ns.size} gap(s), {g.n_missing} message(s) missing")
+    if g.start_ns.size:
+        shown = ", ".join(f"{g.missing[j]} at {_since(g.start_ns[j], t_start)}" for j in range(min(5, g.start_ns.size)))
+        line += f" ({shown}{', ...' if g.start_ns.size > 5 else ''})"
+    line += f"; {s.duplicates} duplicate stamp(s) dropped; {s.out_of_order} out of order (sorted)"
+    if s.stamps_from_bag:
+        line += "; header stamps all zero: the bag's record times are used"
+    lines = [line] + [f"{acc.name}: {n}" for n in note]
+    var = np.nanmedian(s.accel_var_mps2, axis=0) if np.any(np.isfinite(s.accel_var_mps2)) else None
+    if var is not None:
+        cols = ["xyz".index(a) for a in acc.axes]
+        std = float(math.sqrt(float(np.mean(var[cols]))))
+        if acc.noise_std_mps2 is None:
+            acc = replace(acc, noise_std_mps2=std)
+            lines.append(f"{acc.name}: noise_std_mps2 {std:.6g} from linear_acceleration_covariance")
+        elif not math.isclose(acc.noise_std_mps2, std, rel_tol=1e-6):
+            lines.append(f"{acc.name}: noise_std_mps2 {acc.noise_std_mps2:.6g} kept from {array_path} "
+                         f"(linear_acceleration_covariance says {std:.6g})")
+    return acc, lines
+
+
+def _log_gyro(array, streams: list[ImuStream], gyro_streams: list[int], al, with_gyro: bool, array_path: Path):
+    """(the log's gyroscope readings in B, the mean of the streams that give it, or None; the array's
+    gyroscope; the report's lines on it)."""
+    gyroscope = array.gyroscope
+    if not with_gyro:
+        if array.gyroscope is None:
+            return None, gyroscope, []
+        return None, None, [f"gyro: the [gyroscope] of {array_path} is left out of the log (no --with-gyro)"]
+    from ...array import Gyroscope
+
+    gyro = np.mean([al.values[k][:, len(array.accelerometers[k].axes):] for k in gyro_streams], axis=0)
+    gvar = [np.nanmedian(streams[k].gyro_var_radps, axis=0) for k in gyro_streams
+            if np.any(np.isfinite(streams[k].gyro_var_radps))]
+    gstd = (float(math.sqrt(float(np.mean(gvar)) / len(gyro_streams)))
+            if len(gvar) == len(gyro_streams) else None)
+    if gyroscope is None or gyroscope.noise_std_radps is None:
+        gyroscope = Gyroscope(gstd)
+    names = [array.accelerometers[k].name for k in gyro_streams]
+    lines = [f"gyro: mean angular velocity in B of {len(names)} stream(s) ({', '.join(names)}) as w_x, w_y, w_z"
+             + (f"; noise_std_radps {gstd:.6g} from angular_velocity_covariance" if gstd is not None else "")]
+    left = [a.name for k, a in enumerate(array.accelerometers) if not streams[k].gyro_given.all()]
+    if left:
+        lines.append(f"gyro: not provided (angular_velocity_covariance[0] = -1, or not finite) by "
+                     f"{', '.join(left)}; a stream is used only when all its messages provide it")
+    return gyro, gyroscope, lines
+
+
+def _time_base_lines(al, max_gap_periods: float) -> list[str]:
+    """The report's lines on the common time base and the gaps left out of it."""
+    t_start = al.timestamps_ns[0]
+    a, b = al.overlap_ns
+    lines = [f"time base: {1e9 / al.period_ns:.2f} Hz (median of the median periods), over the overlap of all "
+             f"streams ({(b - a) * 1e-9:.3f} s): {al.timestamps_ns.size} sample(s); linear interpolation on header "
+             f"stamps, a grid time at most {al.max_offset_ns * 1e-6:.3f} ms from a stamp"]
+    if al.long_gaps:
+        shown = ", ".join(f"{_since(g0, t_start)} to {_since(g1, t_start)} ({n} sample(s))" for g0, g1, n in al.long_gaps[:5])
+        lines.append(f"gaps over {max_gap_periods:g} periods: {len(al.long_gaps)}, left out as time gaps of the log: "
+                     f"{shown}{', ...' if len(al.long_gaps) > 5 else ''}")
+    else:
+        lines.append(f"gaps over {max_gap_periods:g} periods: none")
+    return lines
 
 
 def _reference_topic(topic: str, records: dict[str, TopicMessages], path: Path) -> str:

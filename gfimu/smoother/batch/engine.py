@@ -26,6 +26,7 @@ import numpy as np
 
 from ...array import SensorArray
 from ...errors import DataError, InputError
+from ...estimate import Estimate, Report, options_of
 from ...estimators.ml import MLEstimator
 from ...factors import GRAVITY_W_MPS2, so3 as _so3
 from ...log import Log
@@ -64,7 +65,7 @@ from ..model.option_groups import assemble
 from ..solve.initialise import initial_attitude, initial_states, sign_chain
 from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from ..solve.restarts import branch_restarts
-from ..result import SmootherEstimator, SmootherResult
+from ..result import SmootherEstimator
 from ..solve.sigma_scale import calibrated_sigma
 from ..tuning.evidence import InitialStates, Tuning, make_problem, tuned_problem
 
@@ -153,14 +154,16 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, options: Smoother
 
 def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: InitialStates | None = None,
            solver: str | None = None, auto_model: bool | None = None, tune_span_s: float | None = ...,
-           workers: int = 1) -> SmootherResult:
+           workers: int = 1) -> Estimate:
     """The batch smoother on a whole log: overlapping solve windows, each with its process noise chosen
     from the data when ``options.tune_process_noise``.
 
     ``initial``: how each window's initial states are made (default
     :func:`gfimu.smoother.solve.initialise.initial_estimate`); ``solver`` (one of :data:`SOLVERS`),
     ``auto_model``, ``tune_span_s``: the options' unless given; ``workers``: here 1, in this process,
-    unless asked (:class:`BatchSmootherEstimator` passes its option)."""
+    unless asked (:class:`BatchSmootherEstimator` passes its option). The report (method "smoother",
+    ``options``) carries the noise tuned and the calibration per window, the solver's iterations and cost,
+    the model check and, when the check made it, the per-sample estimate; no guard."""
     opt = options
     solver = opt.solver if solver is None else solver
     auto_model = opt.auto_model if auto_model is None else auto_model
@@ -192,8 +195,9 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         auto = None
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
         motion = MLEstimator().estimate_motion(log)
-        return SmootherResult(motion, (), (), 0, 0.0, 0, (f"{log.source}: {auto[0].describe()}; the per-sample "
-                                                          "estimate is returned",), auto[0], timings, per_sample=motion)
+        note = f"{log.source}: {auto[0].describe()}; the per-sample estimate is returned"
+        return Estimate(motion, Report.of("smoother", options, timings=timings, warnings=(note,), model_check=auto[0],
+                                          iterations=0, cost=0.0, windows=0, per_sample=motion))
     t0 = time.perf_counter()
     if attitude:  # each window starts from the attitude of the one before: in turn
         outcomes = _attitude_windows(log, opt, windows, initial, solver, progress)
@@ -225,8 +229,10 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         extra["quaternion_wb"] = quaternion_from_matrix(R)
         extra["accel_b_mps2"] = states[:, layout.specific_force] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
     motion = Motion(log.timestamps_ns, sigma=sigma, **layout.quantities(states), **extra)
-    return SmootherResult(motion, tuple(tunings), tuple(calibration), iterations, cost, len(windows), tuple(notes),
-                          auto[0] if auto else None, timings, per_sample=auto[1] if auto else None)
+    return Estimate(motion, Report.of("smoother", options, timings=timings, warnings=notes,
+                                      model_check=auto[0] if auto else None, tunings=tunings, calibration=calibration,
+                                      iterations=iterations, cost=cost, windows=len(windows),
+                                      per_sample=auto[1] if auto else None))
 
 
 @dataclass
@@ -497,8 +503,8 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     Options: those of :class:`gfimu.smoother.model.problem.SmootherOptions` (groups model, batch, tuning) and
     ``guard`` (:mod:`gfimu.smoother.model.option_groups`; no fixed-lag option). Returns ω, ω̇
     and the specific force at the body origin for every sample, with
-    one-sigma marginal uncertainties when ``compute_sigma``; :meth:`result`
-    returns everything the run produced (:class:`SmootherResult`).
+    one-sigma marginal uncertainties when ``compute_sigma``; the report of :meth:`estimate`
+    carries everything the run produced (:class:`~gfimu.estimate.Report`).
 
     Unlike :class:`SmootherOptions`, ``tune_process_noise`` is on by default: the
     jerk density per body axis and the specific-force density are chosen per solve
@@ -516,10 +522,12 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     def applicable(self, array: SensorArray) -> str | None:
         return options_reason(array, self.options(), attitude_supported=True)
 
-    def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> SmootherResult:
-        """The smoother on ``log`` (:func:`smooth`), with everything it produced."""
-        return smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver,
-                      auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers)
+    def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> Estimate:
+        """The smoother on ``log`` (:func:`smooth`) before the guard, its report with this estimator's
+        options (:meth:`estimate` is the entry: the run, then the guard)."""
+        run = smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver,
+                     auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers)
+        return Estimate(run.motion, replace(run.report, options=options_of(self)))
 
 
 def _hessian_diagonal(linear: gtsam.GaussianFactorGraph, dims: dict[int, int]) -> dict[int, np.ndarray]:

@@ -86,6 +86,7 @@ import numpy as np
 
 from ...array import SensorArray
 from ...errors import DataError, InputError
+from ...estimate import Estimate, Report
 from ...log import Log
 from ...motion import Motion
 from ...progress import progress as progress_bar
@@ -97,7 +98,7 @@ from ..model.problem import SmootherOptions, options_reason
 from ..model.option_groups import GROUPS, assemble
 from ..solve.initialise import initial_estimate
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
-from ..result import SmootherEstimator, SmootherResult
+from ..result import SmootherEstimator
 from . import model_choice as stream_model
 from ..tuning.model_choice import measured_noise_options
 from ..solve.restarts import branch, plane_normal
@@ -1137,8 +1138,8 @@ class FixedLagEstimator(SmootherEstimator):
                             "readings are used as they are (True, the default, replaces such readings)")
         return log, Screening(np.zeros(log.accel_mps2.shape, bool), 0, 0, 0)
 
-    def result(self, log: Log, progress: bool = False) -> SmootherResult:
-        """The fixed-lag smoother over ``log`` sample by sample, with what it chose (:class:`SmootherResult`)."""
+    def result(self, log: Log, progress: bool = False) -> Estimate:
+        """The fixed-lag smoother over ``log`` sample by sample, before the guard (:meth:`estimate` is the entry)."""
         n = len(log)
         if n < 2:
             raise DataError(f"{log.source}: the log has {n} sample(s); the fixed-lag smoother needs at least 2 "
@@ -1179,5 +1180,5 @@ class FixedLagEstimator(SmootherEstimator):
         for m in smoother.models:
             if m.tuning is not None and all(m.tuning is not t for t in tunings):
                 tunings.append(m.tuning)
-        return SmootherResult(motion, tuple(tunings), windows=0,
-                              model_check=None if smoother.stream_model is None else smoother.stream_model.check)
+        return Estimate(motion, Report.of(self.method, self, tunings=tunings, iterations=0, cost=float("nan"), windows=0,
+                                          model_check=None if smoother.stream_model is None else smoother.stream_model.check))

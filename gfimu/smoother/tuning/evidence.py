@@ -506,147 +506,174 @@ def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndar
     solution that the winner was linearised at (a better start than ``states`` for a stiff model).
     ``basis``: evaluate the process factors once per linearisation point and weight them per
     setting (:class:`ProcessBasis`; False: evaluate them for every setting, the same numbers slower)."""
-    models = models or (options.motion_model,)
     best = None
-    for model in models:
-        field = DENSITY_FIELD[model]
-        p0 = params
-        X = StateLayout.from_options(replace(options, motion_model=model)).resize(states)
-        current = {"density": np.log(getattr(options, field)), "axis": np.log(np.asarray(options.process_axis_factors, float)),
-                   "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0,
-                   "freq": np.array(options.process_axis_frequencies_hz if model == "jerk" else (0.0, 0.0, 0.0), dtype=float),
-                   "freq_std": np.zeros(3), "amp": np.zeros(3)}
-
-        def settings_options(c):
-            return replace(options, motion_model=model, **{field: float(np.exp(c["density"]))},
-                           process_axis_factors=tuple(float(v) for v in np.exp(c["axis"])),
-                           process_axis_frequencies_hz=tuple(float(v) for v in c["freq"]),
-                           specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
-
-        def copy_settings(c):
-            return {k: (np.array(v, copy=True) if isinstance(v, np.ndarray) else v) for k, v in c.items()}
-
-        cache = {}
-        bases = {}
-        summed = {}
-        known = {}  # evidence per setting at this linearisation: a search starts where the last one ended
-
-        def evidence(c, X):
-            key = (version, float(c["scale"]), float(c["density"]), tuple(np.asarray(c["axis"], float).tolist()),
-                   float(c["force"]), tuple(np.asarray(c["freq"], float).tolist()))
-            if key not in known:
-                known[key] = evidence_at(c, X)
-            return known[key]
-
-        def evidence_at(c, X):
-            try:
-                problem = make_problem(log, settings_options(c), float(np.exp(c["scale"])), X[:, OMEGA])
-                key = (version, float(c["scale"]))
-                if key not in cache:
-                    cache.clear()
-                    cache[key] = measurement_normal_equations(problem, X, p0)
-                if basis and not np.any(c["freq"] > 0):
-                    if version not in bases:
-                        bases.clear()
-                        bases[version] = ProcessBasis.of(log, settings_options(c), field, X,
-                                                         np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA])
-                    if bases[version] is not None:
-                        if key not in summed:
-                            summed.clear()
-                            summed[key] = bases[version].banded(cache[key])
-                        setting = (float(np.exp(c["density"])), np.exp(c["axis"]), float(np.exp(c["force"])))
-                        total, fac = summed[key].system(*setting)
-                        return linearised_log_evidence(problem, X, p0, total=total, factorisation=fac,
-                                                       minimum=lambda dx, dp: summed[key].half_cost(dx, dp, *setting))
-                return linearised_log_evidence(problem, X, p0, cache[key])
-            except np.linalg.LinAlgError:
-                return -np.inf
-
-        version = 0
-
-        def search(name, lo, hi, axis=None, step=np.log(10.0)):
-
-            def f(v):
-                c = copy_settings(current)
-                if axis is None:
-                    c[name] = v
-                else:
-                    c[name][axis] = v
-                return evidence(c, X)
-
-            start = current[name] if axis is None else current[name][axis]
-            v, value, _ = _maximise_1d(f, float(start), step, np.log(lo), np.log(hi))
-            if axis is None:
-                current[name] = v
-            else:
-                current[name][axis] = v
-            return value
-
-        def search_frequencies(value):
-            """Per body axis whose solved ω has one dominant spectral line (80 % of its power): the
-            oscillator at that frequency, refined with the axis density by coordinate ascent; kept where
-            the evidence rises by more than 10 nats."""
-            rate = float(log.rate_hz)
-            t = log.times_s
-            span_s = float(t[-1] - t[0])
-            uniform_t = t[0] + np.arange(int(span_s * rate) + 1) / rate  # the periodogram over gaps too
-            for a in range(3):
-                if current["freq"][a] > 0:
-                    continue
-                f0 = dominant_frequency_hz(np.interp(uniform_t, t, X[:, a]), rate, 1.5 / max(span_s, 1e-9), min(0.05 * rate, 50.0), min_share=0.8)
-                if f0 is None:
-                    continue
-                saved = copy_settings(current)
-                current["freq"][a] = f0
-                trial = value
-                for step, reach in ((np.log(1.02), np.log(1.3)), (np.log(1.002), np.log(1.03))):
-                    start = np.log(current["freq"][a])
-
-                    def g(v):
-                        c = copy_settings(current)
-                        c["freq"][a] = float(np.exp(v))
-                        return evidence(c, X)
-
-                    v, trial, _ = _maximise_1d(g, start, step, start - reach, start + reach)
-                    current["freq"][a] = float(np.exp(v))
-                    trial = search("axis", 1e-6, 1e2, axis=a)
-                if trial > value + 10.0:
-                    value = trial
-                    # frequency std from the evidence's curvature in log f; amplitude of the oscillation
-                    step = np.log(1.002)
-                    v = np.log(current["freq"][a])
-                    up, down = g(v + step), g(v - step)
-                    curv = (up - 2.0 * trial + down) / step**2
-                    current["freq_std"][a] = current["freq"][a] / np.sqrt(-curv) if curv < 0 else current["freq"][a] * 0.01
-                    current["amp"][a] = np.sqrt(2.0) * float(np.std(X[:, a]))
-                else:
-                    current.clear()
-                    current.update(saved)
-            return value
-
-        if accel_noise:
-            search("scale", 1e-2, 1e3)
-        value = search("density", *DENSITY_LIMITS, step=np.log(4.0))
-        res = solve(make_problem(log, settings_options(current), float(np.exp(current["scale"])), X[:, OMEGA]), X, p0)
-        X, version = res.states, 1
-        if accel_noise:
-            search("scale", 1e-2, 1e3, step=np.log(2.0))
-        for a in range(3):
-            value = search("axis", 1e-5, 1e2, axis=a)
-        value = search("force", 1e-3, 1e4)
-        if model == "jerk" and options.tune_axis_frequencies:
-            value = search_frequencies(value)
-        if accel_noise:
-            value = search("scale", 1e-2, 1e3, step=np.log(1.5))
-        tuning = Tuning(model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value), len(known),
-                        tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])),
-                        tuple(float(v) for v in current["freq"]), tuple(float(v) for v in current["freq_std"]),
-                        tuple(float(v) for v in current["amp"]))
+    for model in models or (options.motion_model,):
+        search = _NoiseSearch(log, options, model, states, params, basis)
+        tuning = search.run(accel_noise)
         if best is None or tuning.log_evidence > best[0].log_evidence:
-            best = (tuning, settings_options(current), X)
+            best = (tuning, search.settings_options(search.current), search.X)
     if states_out is not None:
         states_out.append(best[2])
     return best[:2]
+
+
+def _copy_settings(c: dict) -> dict:
+    return {k: (np.array(v, copy=True) if isinstance(v, np.ndarray) else v) for k, v in c.items()}
+
+
+class _NoiseSearch:
+    """The search of one motion model's process noise for :func:`tune`: the settings in log space
+    (``current``: density, per-axis factors, specific-force density, accelerometer noise scale, and the
+    per-axis oscillators' frequency, its std and amplitude), the linearisation point ``X`` (``version``
+    0: the starting estimate, 1: the smoother's solution with the density found), and the evidence of
+    each setting tried there (``known``), with the normal equations and process bases it reuses."""
+
+    def __init__(self, log: Log, options: SmootherOptions, model: str, states: np.ndarray,
+                 params: np.ndarray | None, basis: bool):
+        self.log, self.options, self.model, self.basis = log, options, model, basis
+        self.field = DENSITY_FIELD[model]
+        self.p0 = params
+        self.X = StateLayout.from_options(replace(options, motion_model=model)).resize(states)
+        self.current = {"density": np.log(getattr(options, self.field)),
+                        "axis": np.log(np.asarray(options.process_axis_factors, float)),
+                        "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0,
+                        "freq": np.array(options.process_axis_frequencies_hz if model == "jerk" else (0.0, 0.0, 0.0),
+                                         dtype=float),
+                        "freq_std": np.zeros(3), "amp": np.zeros(3)}
+        self.cache: dict = {}
+        self.bases: dict = {}
+        self.summed: dict = {}
+        self.known: dict = {}  # evidence per setting at this linearisation: a search starts where the last one ended
+        self.version = 0
+
+    def settings_options(self, c: dict) -> SmootherOptions:
+        return replace(self.options, motion_model=self.model, **{self.field: float(np.exp(c["density"]))},
+                       process_axis_factors=tuple(float(v) for v in np.exp(c["axis"])),
+                       process_axis_frequencies_hz=tuple(float(v) for v in c["freq"]),
+                       specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
+
+    def run(self, accel_noise: bool) -> Tuning:
+        """(1) the density linearised at the start, the smoother solved with it; (2) linearised at that
+        solution, each axis factor, the specific-force density, the oscillators; the noise scale around
+        them with ``accel_noise``. The :class:`Tuning` found."""
+        log, current = self.log, self.current
+        if accel_noise:
+            self.search("scale", 1e-2, 1e3)
+        value = self.search("density", *DENSITY_LIMITS, step=np.log(4.0))
+        problem = make_problem(log, self.settings_options(current), float(np.exp(current["scale"])), self.X[:, OMEGA])
+        self.X, self.version = solve(problem, self.X, self.p0).states, 1
+        if accel_noise:
+            self.search("scale", 1e-2, 1e3, step=np.log(2.0))
+        for a in range(3):
+            value = self.search("axis", 1e-5, 1e2, axis=a)
+        value = self.search("force", 1e-3, 1e4)
+        if self.model == "jerk" and self.options.tune_axis_frequencies:
+            value = self.search_frequencies(value)
+        if accel_noise:
+            value = self.search("scale", 1e-2, 1e3, step=np.log(1.5))
+        return Tuning(self.model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value),
+                      len(self.known), tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])),
+                      tuple(float(v) for v in current["freq"]), tuple(float(v) for v in current["freq_std"]),
+                      tuple(float(v) for v in current["amp"]))
+
+    def evidence(self, c: dict) -> float:
+        """The linearised log-evidence of setting ``c`` at ``X`` (each setting computed once)."""
+        key = (self.version, float(c["scale"]), float(c["density"]), tuple(np.asarray(c["axis"], float).tolist()),
+               float(c["force"]), tuple(np.asarray(c["freq"], float).tolist()))
+        if key not in self.known:
+            self.known[key] = self._evidence_at(c)
+        return self.known[key]
+
+    def _evidence_at(self, c: dict) -> float:
+        log, X, p0, version = self.log, self.X, self.p0, self.version
+        cache, bases, summed = self.cache, self.bases, self.summed
+        try:
+            problem = make_problem(log, self.settings_options(c), float(np.exp(c["scale"])), X[:, OMEGA])
+            key = (version, float(c["scale"]))
+            if key not in cache:
+                cache.clear()
+                cache[key] = measurement_normal_equations(problem, X, p0)
+            if self.basis and not np.any(c["freq"] > 0):
+                if version not in bases:
+                    bases.clear()
+                    bases[version] = ProcessBasis.of(log, self.settings_options(c), self.field, X,
+                                                     np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA])
+                if bases[version] is not None:
+                    if key not in summed:
+                        summed.clear()
+                        summed[key] = bases[version].banded(cache[key])
+                    setting = (float(np.exp(c["density"])), np.exp(c["axis"]), float(np.exp(c["force"])))
+                    total, fac = summed[key].system(*setting)
+                    return linearised_log_evidence(problem, X, p0, total=total, factorisation=fac,
+                                                   minimum=lambda dx, dp: summed[key].half_cost(dx, dp, *setting))
+            return linearised_log_evidence(problem, X, p0, cache[key])
+        except np.linalg.LinAlgError:
+            return -np.inf
+
+    def search(self, name: str, lo: float, hi: float, axis: int | None = None, step: float = np.log(10.0)) -> float:
+        """One setting (``axis``: one component of it) to its evidence's maximum in [lo, hi], kept in
+        ``current``; the evidence there."""
+        current = self.current
+
+        def f(v):
+            c = _copy_settings(current)
+            if axis is None:
+                c[name] = v
+            else:
+                c[name][axis] = v
+            return self.evidence(c)
+
+        start = current[name] if axis is None else current[name][axis]
+        v, value, _ = _maximise_1d(f, float(start), step, np.log(lo), np.log(hi))
+        if axis is None:
+            current[name] = v
+        else:
+            current[name][axis] = v
+        return value
+
+    def _frequency_evidence(self, a: int, log_f: float) -> float:
+        c = _copy_settings(self.current)
+        c["freq"][a] = float(np.exp(log_f))
+        return self.evidence(c)
+
+    def search_frequencies(self, value: float) -> float:
+        """Per body axis whose solved ω has one dominant spectral line (80 % of its power): the
+        oscillator at that frequency, refined with the axis density by coordinate ascent; kept where
+        the evidence rises by more than 10 nats."""
+        log, X, current = self.log, self.X, self.current
+        rate = float(log.rate_hz)
+        t = log.times_s
+        span_s = float(t[-1] - t[0])
+        uniform_t = t[0] + np.arange(int(span_s * rate) + 1) / rate  # the periodogram over gaps too
+        for a in range(3):
+            if current["freq"][a] > 0:
+                continue
+            f0 = dominant_frequency_hz(np.interp(uniform_t, t, X[:, a]), rate, 1.5 / max(span_s, 1e-9),
+                                       min(0.05 * rate, 50.0), min_share=0.8)
+            if f0 is None:
+                continue
+            saved = _copy_settings(current)
+            current["freq"][a] = f0
+            trial = value
+            for step, reach in ((np.log(1.02), np.log(1.3)), (np.log(1.002), np.log(1.03))):
+                start = np.log(current["freq"][a])
+                v, trial, _ = _maximise_1d(lambda v: self._frequency_evidence(a, v), start, step,
+                                           start - reach, start + reach)
+                current["freq"][a] = float(np.exp(v))
+                trial = self.search("axis", 1e-6, 1e2, axis=a)
+            if trial > value + 10.0:
+                value = trial
+                # frequency std from the evidence's curvature in log f; amplitude of the oscillation
+                step = np.log(1.002)
+                v = np.log(current["freq"][a])
+                up, down = self._frequency_evidence(a, v + step), self._frequency_evidence(a, v - step)
+                curv = (up - 2.0 * trial + down) / step**2
+                current["freq_std"][a] = current["freq"][a] / np.sqrt(-curv) if curv < 0 else current["freq"][a] * 0.01
+                current["amp"][a] = np.sqrt(2.0) * float(np.std(X[:, a]))
+            else:
+                current.clear()
+                current.update(saved)
+        return value
 
 
 def most_moving_span(omega_dot: np.ndarray, width: int) -> tuple[int, int]:
