@@ -285,7 +285,7 @@ def test_not_applicable_reasons():
     assert est.applicable(CUBE) is None
     with pytest.raises(ValueError, match="window_s"):
         BatchSmootherEstimator(window_s=1.0, overlap_s=1.0)
-    with pytest.raises(ValueError, match="positive"):
+    with pytest.raises(ValueError, match=r"omega_dot_random_walk_radps2_per_sqrt_s must be a number > 0"):
         BatchSmootherEstimator(omega_dot_random_walk_radps2_per_sqrt_s=-1.0)
 
 

@@ -43,10 +43,9 @@ from ...factors import (
     specific_force_key,
 )
 from ...log import Log
-from ...parallel import check_workers
 from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
 from .noise_levels import NoiseLevels
-from .option_groups import assemble
+from .option_groups import MotionModel, assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -64,67 +63,13 @@ class SmootherOptions:
     (:meth:`gfimu.smoother.stream.fixed_lag.FixedLagEstimator.options`)."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "omega_dot_random_walk_radps2_per_sqrt_s",
-            "omega_ddot_random_walk_radps3_per_sqrt_s",
-            "specific_force_random_walk_mps2_per_sqrt_s",
-            "default_accel_noise_std_mps2",
-            "bias_prior_std_mps2",
-            "gyro_bias_prior_std_radps",
-            "scale_prior_std",
-            "torque_noise_std_nm",
-            "free_fall_std_mps2",
-            "initial_omega_std_radps",
-            "initial_omega_dot_std_radps2",
-            "initial_specific_force_std_mps2",
-            "init_window_s",
-            "accel_random_walk_mps2_per_sqrt_s",
-            "attitude_random_walk_rad_per_sqrt_s",
-            "initial_yaw_std_rad",
-        ):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise InputError(f"smoother option {name} must be a positive number, got {v!r}")
-        span = self.tune_span_s
-        if span is not None and not (isinstance(span, (int, float)) and np.isfinite(span) and span > 0):
-            raise InputError(f"smoother option tune_span_s must be a positive number [s] or None, got {span!r}")
-        check_workers(self.workers)
+        """The rules that tie two options (each option's own range is checked by its declaration,
+        :mod:`gfimu.smoother.model.option_groups`)."""
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
             raise InputError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
-        if self.motion_model not in ("jerk", "snap"):
-            raise InputError(f"smoother option motion_model must be 'jerk' or 'snap', got {self.motion_model!r}")
-        if self.measurement not in ("accelerometer", "quadratic"):
-            raise InputError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
-        if not (np.isfinite(self.accel_noise_slope_mps2_per_radps) and self.accel_noise_slope_mps2_per_radps >= 0):
-            raise InputError(f"smoother option accel_noise_slope_mps2_per_radps must be >= 0, got {self.accel_noise_slope_mps2_per_radps!r}")
-        if self.initialisation not in ("sign-resolving", "ml"):
-            raise InputError(f"smoother option initialisation must be 'sign-resolving' or 'ml', got {self.initialisation!r}")
-        if int(self.reweight_iterations) < 1:
-            raise InputError("smoother option reweight_iterations must be >= 1")
-        f = np.asarray(self.process_axis_factors, dtype=float)
-        if f.shape != (3,) or not np.all(np.isfinite(f) & (f > 0)):
-            raise InputError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")
-        fr = np.asarray(self.process_axis_frequencies_hz, dtype=float)
-        if fr.shape != (3,) or not np.all(np.isfinite(fr) & (fr >= 0)):
-            raise InputError("smoother option process_axis_frequencies_hz must be 3 numbers >= 0, "
-                             f"got {self.process_axis_frequencies_hz!r}")
-        if np.any(fr > 1e4):  # beyond any array's Nyquist frequency: ω = 2πf overflows the oscillator's step
-            raise InputError("smoother option process_axis_frequencies_hz must be at most 1e4 Hz (a natural frequency "
-                             f"of the motion, below half the sample rate), got {self.process_axis_frequencies_hz!r}")
-        if np.any(fr > 0) and self.motion_model != "jerk":
+        frequencies = np.asarray(self.process_axis_frequencies_hz, dtype=float)
+        if np.any(frequencies > 0) and self.motion_model != MotionModel.JERK:
             raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
-        if int(self.max_iterations) < 1:
-            raise InputError("smoother option max_iterations must be >= 1")
-        if self.robust_loss not in ("huber", "cauchy"):
-            raise InputError(f"smoother option robust_loss must be 'huber' or 'cauchy', got {self.robust_loss!r}")
-        for name in ("accel_robust_threshold", "process_robust_threshold"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
-                raise InputError(f"smoother option {name} must be >= 0 (0: off), got {v!r}")
-        groups = self.factor_groups
-        if not (isinstance(groups, (tuple, list)) and all(isinstance(g, FactorGroup) for g in groups)):
-            raise InputError(f"smoother option factor_groups must be a tuple of FactorGroup objects "
-                             f"(gfimu.smoother.model.groups), got {groups!r}")
 
     @property
     def robust(self) -> bool:
