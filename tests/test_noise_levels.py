@@ -1,6 +1,7 @@
 """The typed noise levels (gfimu.smoother.model.noise_levels): what a factor group reads of a problem, the same for the
 batch problem and the stream's view; the accelerometer noise given with ``-O default_accel_noise_std_mps2`` reaches
-every group that whitens with it, the tuner, the restarts and the fixed-lag smoother's model as one value."""
+every group that whitens with it, the tuner, the restarts and the fixed-lag smoother's model as one value (and
+the gyroscope's and the first-state prior's the same way)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from gfimu.array import cube_array
+from gfimu.array import Gyroscope, cube_array
 from gfimu.cli.options import method_options
 from gfimu.methods import make_estimator
+from gfimu.noise import DEFAULT_GYRO_NOISE_STD_RADPS
 from gfimu.simulate import simulate
 from gfimu.smoother.model.groups import AccelerometerGroup, FactorGroup, MotionModelGroup
 from gfimu.smoother.model.layout import OMEGA_DOT, SPECIFIC_FORCE
@@ -79,6 +81,11 @@ def test_the_fixed_lag_smoother_takes_the_same_value(log):
     np.testing.assert_array_equal(ArrayModel(mixed.array, options).accel_sigma_mps2, batch)
     np.testing.assert_array_equal(ArrayModel(mixed.array, options).first_sigma,
                                   SmootherProblem(mixed, options).noise.first_state.sigma)
+    # the gyroscope's noise too, from the same group
+    gyro = simulate("reversal", array=dataclasses.replace(log.array, gyroscope=Gyroscope(noise_std_radps=0.004)),
+                    rate_hz=200.0, duration_s=0.2, seed=3)
+    assert ArrayModel(gyro.array, options).gyro_sigma_radps == SmootherProblem(gyro, options).noise.gyro.sigma == 0.004
+    assert ArrayModel(log.array, options).gyro_sigma_radps == DEFAULT_GYRO_NOISE_STD_RADPS  # none stated
 
 
 def test_the_batch_problem_and_the_stream_view_are_both_what_a_group_reads(log):

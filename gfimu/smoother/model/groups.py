@@ -715,10 +715,11 @@ class GyroscopeGroup(FactorGroup):
         return bool(problem.use_gyro)
 
     def noise(self, problem: ModelView) -> GyroNoise:
-        if not np.all(np.isfinite(problem.log.gyro_b_radps)):
-            row = int(np.argwhere(~np.isfinite(problem.log.gyro_b_radps))[0, 0])
+        gyro = problem.log.gyro_b_radps
+        if gyro is not None and not np.all(np.isfinite(gyro)):
+            row = int(np.argwhere(~np.isfinite(gyro))[0, 0])
             raise DataError(f"{problem.log.source}: gyroscope reading is not finite at sample {row}")
-        return GyroNoise(noise.gyro_noise_std(problem.log.array))
+        return GyroNoise(noise.gyro_noise_std(problem.array))
 
     def terms(self, problem, states, params):
         n, s = problem.n, problem.noise.gyro.sigma

@@ -56,7 +56,8 @@ class _Levels:
         raise NotImplementedError
 
 
-def _placed(levels: NoiseLevels, name: str, value) -> None:
+def _placed(levels: NoiseLevels, name: str) -> None:
+    """Refuse a second value for the field ``name``."""
     if getattr(levels, name) is not None:
         raise ValueError(f"two factor groups give the {name} noise levels")
 
@@ -73,7 +74,7 @@ class AccelNoise(_Levels):
     base: np.ndarray | None = None
 
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "accel", self)
+        _placed(levels, "accel")
         return replace(levels, accel=self)
 
     def stds(self) -> np.ndarray:
@@ -133,7 +134,7 @@ class FirstStateNoise(_Levels):
     sigma: np.ndarray
 
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "first_state", self)
+        _placed(levels, "first_state")
         return replace(levels, first_state=self)
 
 
@@ -144,7 +145,7 @@ class ForceWalkNoise(_Levels):
     step_sigma: np.ndarray
 
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "force_walk", self)
+        _placed(levels, "force_walk")
         return replace(levels, force_walk=self)
 
 
@@ -159,7 +160,7 @@ class AttitudeNoise(_Levels):
     accel_step_sigma: np.ndarray
 
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "attitude", self)
+        _placed(levels, "attitude")
         return replace(levels, attitude=self)
 
     def with_prior(self, rotation_wb: np.ndarray) -> AttitudeNoise:
@@ -187,7 +188,7 @@ class MotionNoise(_Levels):
     base: tuple | None = None
 
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "motion", self)
+        _placed(levels, "motion")
         return replace(levels, motion=self)
 
     def oscillator_weight(self) -> np.ndarray:
@@ -243,7 +244,7 @@ class GyroNoise(_Levels):
     sigma: float
 
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "gyro", self)
+        _placed(levels, "gyro")
         return replace(levels, gyro=self)
 
 
@@ -254,7 +255,7 @@ class TiltNoise(_Levels):
     sigma: float
 
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "tilt", self)
+        _placed(levels, "tilt")
         return replace(levels, tilt=self)
 
 

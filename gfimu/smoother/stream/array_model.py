@@ -26,13 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ... import noise, rigid_body
+from ... import rigid_body
 from ...array import SensorArray
 from ...errors import InputError
 from ...factors import accelerometer
 from ...log import Log
 from ..model.problem import SmootherOptions
-from ..model.groups import BUILT_IN, AccelerometerGroup, FirstStatePriorGroup
+from ..model.groups import BUILT_IN, AccelerometerGroup, FirstStatePriorGroup, GyroscopeGroup
 from ..model.noise_levels import NoiseLevels
 from ..model.layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
@@ -195,8 +195,9 @@ class ArrayModel:
         self.S_q = np.ascontiguousarray(S[:, 6:])
         self.S_f = np.ascontiguousarray(S[:, :3])
         self.S_dw = np.ascontiguousarray(S[:, 3:6])
-        # the accelerometer and first-state noise of the batch smoother's groups, given on a view of the array
-        levels = StreamView(array, options, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup())).noise
+        # the accelerometer, gyroscope and first-state noise of the batch smoother's groups, on a view of the array
+        levels = StreamView(array, options, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
+                                                              GyroscopeGroup())).noise
         sigma = levels.accel.scaled(self.accel_noise_scale).sigma
         self.accel_sigma_mps2 = sigma
         """The accelerometers' std per axis: :attr:`NoiseLevels.accel` (the option ``default_accel_noise_std_mps2``
@@ -208,7 +209,7 @@ class ArrayModel:
         self.linear_part_observable = np.linalg.matrix_rank(wL) == 6
         self._zero3 = np.zeros(3)
         self._eye3 = np.eye(3)
-        self.gyro_sigma_radps = float(noise.gyro_noise_std(array))  # as the batch smoother
+        self.gyro_sigma_radps = levels.gyro.sigma  # the batch smoother's GyroscopeGroup's
         self.groups = tuple(g for g in options.factor_groups if g.per_sample)
         """The per-sample groups of the options (:meth:`sample_terms`)."""
         self.step_groups = tuple(g for g in BUILT_IN + tuple(options.factor_groups) if g.steps)
