@@ -277,12 +277,13 @@ def test_out_of_range_options_name_the_option(work, capsys, argv, message):
 
 @pytest.mark.parametrize("argv, message", [
     (["estimate", "{log}", "--method", "smoother", "-O", "default_accel_noise_std_mps2=abc"],
-     "-O default_accel_noise_std_mps2='abc': expected a number (option of method 'smoother'"),
-    (["estimate", "{log}", "--method", "smoother", "-O", "use_gyro=3"], "-O use_gyro=3: expected True or False"),
+     "-O default_accel_noise_std_mps2='abc': expected a number > 0 [m/s²] (option of method 'smoother', default 0.07)"),
+    (["estimate", "{log}", "--method", "smoother", "-O", "use_gyro=3"], "-O use_gyro=3: expected true or false"),
     (["estimate", "{log}", "--method", "smoother", "-O", "no_such_option=1"], "has no option 'no_such_option'"),
     (["estimate", "{log}", "--method", "smoother", "-O", "noequals"], "-O 'noequals': expected KEY=VALUE"),
     (["estimate", "{log}", "--method", "fixed-lag", "-O", "lag_s=nan"], "-O lag_s=nan: expected a finite number"),
-    (["estimate", "{log}", "--method", "smoother", "-O", "default_accel_noise_std_mps2=-1"], "must be"),
+    (["estimate", "{log}", "--method", "smoother", "-O", "default_accel_noise_std_mps2=-1"],
+     "-O default_accel_noise_std_mps2=-1: expected a number > 0 [m/s²]"),
     (["compare", "{log}", "--methods", "imm", "-O", "imm.t2=abc"], "-O imm.t2='abc': expected a number"),
     (["compare", "{log}", "--methods", "imm", "-O", "imm=3"], "expected METHOD.KEY=VALUE"),
     (["compare", "{log}", "--methods", "imm", "-O", "ml.x=3"], "method 'ml' is not among --methods imm"),

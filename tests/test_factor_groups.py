@@ -147,10 +147,10 @@ class ZeroRatePriorWithSetup(ZeroRatePrior):
     """The same prior with its noise level given by :meth:`noise`, as the model's groups do."""
 
     def noise(self, problem):
-        return {"zero_rate_sigma": self.sigma}
+        return self.sigma  # read back as problem.noise.of(self)
 
     def terms(self, problem, states, params):
-        assert problem.zero_rate_sigma == self.sigma
+        assert problem.noise.of(self) == self.sigma
         return super().terms(problem, states, params)
 
 
@@ -186,11 +186,11 @@ class DeltaAngle(FactorGroup):
         return self._steps(problem)[0].size > 0
 
     def noise(self, problem):
-        return {"delta_angle_sigma": self.sigma}
+        return self.sigma
 
     def terms(self, problem, states, params):
         k, i = self._steps(problem)
-        n, m, s = problem.n, problem.state_size, problem.delta_angle_sigma
+        n, m, s = problem.n, problem.state_size, problem.noise.of(self)
         r = np.zeros((n - 1, 3))
         J0, J1 = np.zeros((n - 1, 3, m)), np.zeros((n - 1, 3, m))
         h = problem.dt_s[k][:, None]

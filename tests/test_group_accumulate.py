@@ -38,7 +38,7 @@ def test_closed_form_normal_equations_match_the_jacobians(robust):
         problem = problem.reweighted(states, params)
     closed = [g for g in problem.groups if isinstance(g, (AccelerometerGroup, MotionModelGroup, SpecificForceWalkGroup))]
     assert len(closed) == 3
-    assert (problem.accel_sigma_per_sample is not None) == robust  # per-sample whitening, or one for all
+    assert (problem.noise.accel.per_sample is not None) == robust  # per-sample whitening, or one for all
     m = problem.state_size
     for group in closed:
         diag, lower, grad = np.zeros((len(log), m, m)), np.zeros((len(log) - 1, m, m)), np.zeros((len(log), m))

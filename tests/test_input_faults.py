@@ -337,12 +337,13 @@ def test_live_replaces_a_reading_beyond_any_range_as_estimate_does(log, tmp_path
                                 "grid), got 0"),
     ("ml", "grid_magnitudes=-1", "ml option grid_magnitudes must be a whole number >= 1"),
     ("ml", "max_omega_radps=0", "ml option max_omega_radps must be a number > 0 [rad/s]"),
-    ("fixed-lag", "tune_window_s=0", "fixed-lag smoother: tune_window_s must be a positive number, got 0"),
+    ("fixed-lag", "tune_window_s=0", "-O tune_window_s=0: expected a number > 0 [s] (option of method 'fixed-lag', "
+                                     "default 3.0)"),
     ("smoother", "window_s=1e308", "-O window_s=1e+308: expected 0 or a number of magnitude 1e-100 to 1e+12 (option "
                                    "of method 'smoother', default 30.0)"),
     ("smoother", "specific_force_random_walk_mps2_per_sqrt_s=1e-40",
-     "-O specific_force_random_walk_mps2_per_sqrt_s=1e-40: a noise density below 1e-09 [m/s²/√s] leaves the normal "
-     "equations singular"),
+     "-O specific_force_random_walk_mps2_per_sqrt_s=1e-40: expected a number >= 1e-09 [m/s²/√s] (a smaller noise "
+     "density leaves the normal equations singular)"),
     ("fixed-lag", "initial_omega_std_radps=1e-320", "-O initial_omega_std_radps=1e-320: expected 0 or a number of "
                                                     "magnitude 1e-100 to 1e+12"),
 ])

@@ -35,7 +35,7 @@ def test_flat_options_keep_working():
         "window_s": None, "tune_span_s": None}
     assert check_method_options("fixed-lag", parse_options(["marginalise_every_s=None"])) == {
         "marginalise_every_s": None}
-    with pytest.raises(OptionError, match=r"^-O lag_s=None: expected a number \(option of method 'fixed-lag', "):
+    with pytest.raises(OptionError, match=r"^-O lag_s=None: expected a number > 0 \[s\] \(option of method 'fixed-lag', "):
         check_method_options("fixed-lag", parse_options(["lag_s=None"]))
     est = make_estimator("smoother", window_s=10.0, solver="gtsam", tune_span_s=None)
     assert est.window_s == 10.0 and est.solver == "gtsam" and est.tune_span_s is None

@@ -9,6 +9,7 @@ import pytest
 
 from gfimu.errors import InputError
 from gfimu.methods import make_estimator
+from gfimu.option import Check
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
 from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
 from gfimu.smoother.model.problem import SmootherOptions
@@ -20,13 +21,15 @@ def _names(*groups):
     return sorted(n for g in groups for n in GROUPS[g])
 
 
-def test_every_declaration_carries_a_one_line_help_and_a_unit():
+def test_every_declaration_carries_a_one_line_help_a_unit_and_its_check():
     seen = set()
     for group, cls in GROUP_CLASSES.items():
         for f in fields(cls):
             assert f.name not in seen, f.name  # each option in one group only
             seen.add(f.name)
-            assert set(f.metadata) == {"unit", "help"}, f.name
+            assert set(f.metadata) == {"unit", "help", "check"}, f.name
+            assert isinstance(f.metadata["check"], Check), f.name  # and the default passes it
+            assert f.metadata["check"].check(f.default, f.metadata["unit"]) == f.default, f.name
             assert f.metadata["help"] and "\n" not in f.metadata["help"], f.name
     f = {f.name: f for f in fields(ModelOptions)}["omega_dot_random_walk_radps2_per_sqrt_s"]
     assert (f.default, f.metadata["unit"]) == (30.0, "rad/s²/√s")
@@ -89,14 +92,15 @@ def test_the_estimators_give_their_groups_back():
 
 
 def test_the_fixed_lag_estimator_checks_its_model_options_when_made():
-    with pytest.raises(InputError, match="omega_dot_random_walk_radps2_per_sqrt_s must be a positive number"):
+    with pytest.raises(InputError, match=r"^fixed-lag option omega_dot_random_walk_radps2_per_sqrt_s must be a number > 0 "
+                                         r"\[rad/s²/√s\], got -1.0$"):
         FixedLagEstimator(omega_dot_random_walk_radps2_per_sqrt_s=-1.0)
-    with pytest.raises(InputError, match="guard must be one of"):
+    with pytest.raises(InputError, match="^fixed-lag option guard must be one of 'replace', 'warn', 'off', got 'sometimes'$"):
         FixedLagEstimator(guard="sometimes")
     # the batch group's options joined SmootherOptions from the batch estimator, and are checked there too
-    with pytest.raises(InputError, match=r"tune_span_s must be a positive number \[s\] or None, got -1.0"):
+    with pytest.raises(InputError, match=r"^smoother option tune_span_s must be a number > 0 \[s\] or None, got -1.0$"):
         SmootherOptions(tune_span_s=-1.0)
-    with pytest.raises(InputError, match="workers must be 0"):
+    with pytest.raises(InputError, match=r"workers must be an integer >= 0 \[processes\], got -1"):
         SmootherOptions(workers=-1)
 
 

@@ -105,7 +105,7 @@ def test_graph_path_equals_fast_path_with_attitude_and_inclinometer():
     problem = SmootherProblem(log, options)
     base = initial_states(log, SmootherOptions())
     R = initial_attitude(log, base[:, 0:3], base[:, 6:9], None, True)
-    problem = problem.with_noise(attitude_prior_wb=R[0])
+    problem = problem.with_attitude_prior(R[0])
     x0 = np.hstack([base, _so3.log(R)])
     fast = batch.solve(problem, x0, method="gn")
     states, _ = batch.solve_with_gtsam(problem, x0, iterations=30, tolerance=0.0)
@@ -285,7 +285,7 @@ def test_not_applicable_reasons():
     assert est.applicable(CUBE) is None
     with pytest.raises(ValueError, match="window_s"):
         BatchSmootherEstimator(window_s=1.0, overlap_s=1.0)
-    with pytest.raises(ValueError, match="positive"):
+    with pytest.raises(ValueError, match=r"omega_dot_random_walk_radps2_per_sqrt_s must be a number > 0"):
         BatchSmootherEstimator(omega_dot_random_walk_radps2_per_sqrt_s=-1.0)
 
 

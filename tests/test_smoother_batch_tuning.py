@@ -50,8 +50,9 @@ def test_evidence_equals_dense_gaussian_integral():
     dense = dense_log_evidence(problem, x)
     assert linearised_log_evidence(problem, x) == pytest.approx(dense, abs=1e-6 * abs(dense))
     # the row normaliser: the whitening weights of the process rows are 1/σ
-    sigma_rows = np.concatenate([problem.trapezoid_sigma[:, None] * problem.axis_factors,
-                                 problem.omega_dot_step_sigma[:, None] * problem.axis_factors], axis=1)
+    motion = problem.noise.motion
+    sigma_rows = np.concatenate([motion.trapezoid_sigma[:, None] * motion.axis_factors,
+                                 motion.omega_dot_step_sigma[:, None] * motion.axis_factors], axis=1)
     w = problem.terms(x, np.zeros(0))[-1].jac["x1"][:, np.arange(6), np.r_[0:3, 3:6]]  # diagonal entries: ω rows on ω, ω̇ rows on ω̇
     np.testing.assert_allclose(w, 1.0 / sigma_rows, rtol=1e-12)
 
@@ -96,7 +97,7 @@ def test_accel_noise_scale_is_recovered():
     m = run.motion
     assert run.report.tunings[0].accel_noise_scale == pytest.approx(3.0, rel=0.1)
     problem = make_problem(noisy, SmootherOptions(), 3.0)
-    np.testing.assert_allclose(problem.accel_sigma, 0.21)
+    np.testing.assert_allclose(problem.noise.accel.sigma, 0.21)
     assert omega_rmse(m, noisy.truth) < omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(noisy).motion, noisy.truth)
 
 
@@ -128,7 +129,7 @@ def test_motion_dependent_noise_and_ml_initialisation():
     weighted = est.estimate(noisy).motion
     assert omega_rmse(weighted, noisy.truth) < 0.9 * constant, (omega_rmse(weighted, noisy.truth), constant)
     problem = make_problem(noisy, SmootherOptions(accel_noise_slope_mps2_per_radps=0.2), 1.0, noisy.truth.omega_b_radps)
-    np.testing.assert_allclose(problem.accel_sigma_per_sample[:, 0], np.sqrt(0.07**2 + (0.2 * wn) ** 2))
+    np.testing.assert_allclose(problem.noise.accel.per_sample[:, 0], np.sqrt(0.07**2 + (0.2 * wn) ** 2))
     from_ml = BatchSmootherEstimator(accel_noise_slope_mps2_per_radps=0.2, initialisation="ml",
                                      auto_model=False).estimate(noisy).motion
     assert omega_rmse(from_ml, noisy.truth) < 1.1 * omega_rmse(weighted, noisy.truth)

@@ -21,12 +21,12 @@ def test_huber_and_cauchy_weights_of_accelerometer_axes():
     for loss, expected in (("huber", 2.0 / 10.0), ("cauchy", 1.0 / (1.0 + 25.0))):
         p = SmootherProblem(log, SmootherOptions(robust_loss=loss, accel_robust_threshold=2.0))
         p = p.reweighted(states)
-        ratio = (p.accel_sigma[None, :] / p.accel_sigma_per_sample) ** 2  # = weight
+        ratio = (p.noise.accel.sigma[None, :] / p.noise.accel.per_sample) ** 2  # = weight
         assert ratio[7, 4] == pytest.approx(expected, rel=1e-9)
         ratio[7, 4] = 1.0
         assert np.allclose(ratio, 1.0, atol=1e-12)
         p = p.reweighted(states)  # idempotent: weights come from the base noise
-        assert (p.accel_sigma[4] / p.accel_sigma_per_sample[7, 4]) ** 2 == pytest.approx(expected, rel=1e-9)
+        assert (p.noise.accel.sigma[4] / p.noise.accel.per_sample[7, 4]) ** 2 == pytest.approx(expected, rel=1e-9)
 
 
 def test_process_weights_follow_the_step_residual():
@@ -36,17 +36,17 @@ def test_process_weights_follow_the_step_residual():
     t = log.truth
     states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
     p = SmootherProblem(log, SmootherOptions(process_robust_threshold=3.0))
-    s0 = p.trapezoid_sigma.copy()
+    s0 = p.noise.motion.trapezoid_sigma.copy()
     states[20:, 0] += 50.0 * s0[19]  # ω_x jumps between samples 19 and 20
     p = p.reweighted(states)
-    w = (s0 / p.trapezoid_sigma) ** 2
+    w = (s0 / p.noise.motion.trapezoid_sigma) ** 2
     big = np.abs(w - 1.0) > 1e-12
     assert np.nonzero(big)[0].tolist() == [19]
     # the jump dominates its step: whitened rms over the 6 rows ≈ 50 / sqrt(6)
     assert w[19] == pytest.approx(3.0 / (50.0 / np.sqrt(6.0)), rel=0.05)
-    assert np.allclose((s0 / p.trapezoid_sigma) ** 2, (p.base_noise()[2] / p.omega_dot_step_sigma) ** 2)
+    assert np.allclose((s0 / p.noise.motion.trapezoid_sigma) ** 2, (p.base_noise()[2] / p.noise.motion.omega_dot_step_sigma) ** 2)
     p = p.reweighted(np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2]))
-    assert np.all((s0 / p.trapezoid_sigma) ** 2 > 0.99)
+    assert np.all((s0 / p.noise.motion.trapezoid_sigma) ** 2 > 0.99)
 
 
 def test_robust_accelerometer_loss_rejects_gross_outliers():
@@ -112,15 +112,17 @@ def test_a_problem_is_frozen_and_reweighting_makes_a_new_one():
     states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
     states[20:, 0] += 1.0  # one outlying step
     p = SmootherProblem(log, SmootherOptions(process_robust_threshold=3.0))
-    before = p.trapezoid_sigma.copy()
+    before = p.noise.motion.trapezoid_sigma.copy()
     q = p.reweighted(states)
     assert q is not p and q.log is p.log and q.groups is p.groups
-    np.testing.assert_array_equal(p.trapezoid_sigma, before)
-    assert q.trapezoid_sigma[19] > 2 * before[19] and np.array_equal(np.delete(q.trapezoid_sigma, 19), np.delete(before, 19))
+    np.testing.assert_array_equal(p.noise.motion.trapezoid_sigma, before)
+    assert q.noise.motion.trapezoid_sigma[19] > 2 * before[19] and np.array_equal(np.delete(q.noise.motion.trapezoid_sigma, 19), np.delete(before, 19))
     with pytest.raises(AttributeError, match="frozen"):
-        p.trapezoid_sigma = before
+        p.noise = q.noise
+    with pytest.raises(AttributeError):
+        p.noise.motion.trapezoid_sigma = before
     with pytest.raises(AttributeError, match="frozen"):
         p.new_attribute = 1
     with pytest.raises(ValueError):
-        p.trapezoid_sigma[0] = 1.0  # read-only
-    assert p.with_noise(accel_sigma=2 * p.accel_sigma).accel_sigma[0] == 2 * p.accel_sigma[0]
+        p.noise.motion.trapezoid_sigma[0] = 1.0  # read-only
+    assert p.with_accel_noise_scale(2.0).noise.accel.sigma[0] == 2 * p.noise.accel.sigma[0]

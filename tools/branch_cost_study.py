@@ -95,8 +95,8 @@ class FrozenModel:
         opt = problem.options
         self.slope = opt.accel_noise_slope_mps2_per_radps
         wn = np.linalg.norm(omega_b_radps, axis=1)
-        self.sigma = np.sqrt(problem.accel_sigma[None, :] ** 2 + (self.slope * wn[:, None]) ** 2)
-        self.base = (problem.trapezoid_sigma.copy(), problem.omega_dot_step_sigma.copy())
+        self.sigma = np.sqrt(problem.noise.accel.sigma[None, :] ** 2 + (self.slope * wn[:, None]) ** 2)
+        self.base = (problem.noise.motion.trapezoid_sigma.copy(), problem.noise.motion.omega_dot_step_sigma.copy())
         self.rows = problem.all_rows
 
     def parts(self, X: np.ndarray) -> dict:

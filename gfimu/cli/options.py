@@ -206,11 +206,6 @@ OPTION_MAGNITUDE = (1e-100, 1e12)
 beyond (1e308 overflowed a window's sample count, 1e20 s a lag's, 1e-320 a noise's inverse)."""
 
 
-MIN_DENSITY = 1e-9
-"""The smallest noise density (an option whose name ends in ``_per_sqrt_s``) a method is given: the floor of
-the smoother's own tuned densities (1e-40 made its normal equations singular)."""
-
-
 def _unknown_option(method: str, fields: dict, key: str, value, flag: str, prefix: str) -> str:
     """The one-line error for ``key``, which ``method`` has not: an option of the other smoother's own group
     (:mod:`gfimu.smoother.model.option_groups`) is named as that; else the method's options are listed."""
@@ -228,14 +223,18 @@ def _unknown_option(method: str, fields: dict, key: str, value, flag: str, prefi
 
 
 def check_method_options(method: str, options: dict, flag: str = "-O", prefix: str = "") -> dict:
-    """Check the type of each option of ``method`` against its documented default; returns the options.
+    """Check each option of ``method``; returns the options, each as its declaration reads it.
 
-    A number where a number is expected (an integer is a valid float), True or
-    False for a switch, text for text, ``None`` where the default is
-    ``None``, numbers (``1,2,3`` or ``[1,2,3]``, made a tuple in ``options``) where
-    the type is a tuple of numbers; an unknown name lists the known ones. Ranges are
-    checked by the method itself (its errors name the option too).
+    An option declared with its check (:func:`gfimu.option.option`: a range, a switch taking ``true``/``false``,
+    a choice) is read by that check (:meth:`gfimu.option.Check.parse`): the one-line error names the option
+    and what it accepts. The others by their type and default: a number where a number is expected (an
+    integer is a valid float), True or False for a switch, text for text, ``None`` where the default is
+    ``None``; numbers (``1,2,3`` or ``[1,2,3]``, made a tuple in ``options``) where the type is a tuple of
+    numbers. Every number is 0 or of a magnitude in :data:`OPTION_MAGNITUDE`; an unknown name lists the
+    known ones.
     """
+    from ..option import Rejected
+
     from ..methods import estimator_class
 
     cls = estimator_class(method)
@@ -250,9 +249,18 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
             raise OptionError(_unknown_option(method, fields, key, value, flag, prefix))
         default = f.default if f.default is not dataclasses.MISSING else None
         shape = _sequence_shape(cls, key)
+        if shape is not None and value is not None:
+            value = options[key] = _check_sequence(method, key, value, shape, flag, prefix)
+        declared = f.metadata.get("check")
+        if declared is not None:
+            _check_magnitude(method, key, value, default, flag, prefix)
+            try:
+                options[key] = declared.parse(value, f.metadata.get("unit", ""))
+            except Rejected as exc:
+                raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected {exc} (option of method "
+                                  f"{method!r}, default {default!r})") from None
+            continue
         if shape is not None:
-            if value is not None:
-                options[key] = _check_sequence(method, key, value, shape, flag, prefix)
             continue
         kind = _kind_of(f.type, default)
         if kind is None or (value is None and (default is None or _takes_none(f.type))):
@@ -264,20 +272,23 @@ def check_method_options(method: str, options: dict, flag: str = "-O", prefix: s
         if ok and kind == "float" and not math.isfinite(float(value)):
             raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected a finite number (option of method "
                               f"{method!r})")
-        if ok and kind == "float" and key.endswith("_per_sqrt_s") and 0 < abs(float(value)) < MIN_DENSITY:
-            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: a noise density below {MIN_DENSITY:g} "
-                              f"[{f.metadata.get('unit', '')}] leaves the normal equations singular (option of method {method!r}, "
-                              f"default {default!r}; the smoother's tuned densities are floored at {MIN_DENSITY:g} "
-                              "too)")
-        if ok and kind == "float" and value != 0 and not OPTION_MAGNITUDE[0] <= abs(float(value)) <= OPTION_MAGNITUDE[1]:
-            raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected 0 or a number of magnitude "
-                              f"{OPTION_MAGNITUDE[0]:g} to {OPTION_MAGNITUDE[1]:g} (option of method {method!r}, "
-                              f"default {default!r})")
+        if ok and kind == "float":
+            _check_magnitude(method, key, value, default, flag, prefix)
         if not ok:
             expected = {"bool": "True or False", "int": "an integer", "float": "a number", "str": "text"}[kind]
             raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected {expected} (option of method "
                               f"{method!r}, default {default!r})")
     return options
+
+
+def _check_magnitude(method: str, key: str, value, default, flag: str, prefix: str) -> None:
+    """A finite number given must be 0 or of a magnitude in :data:`OPTION_MAGNITUDE`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return
+    if value != 0 and not OPTION_MAGNITUDE[0] <= abs(float(value)) <= OPTION_MAGNITUDE[1]:
+        raise OptionError(f"{flag} {prefix}{key}={shown(value)}: expected 0 or a number of magnitude "
+                          f"{OPTION_MAGNITUDE[0]:g} to {OPTION_MAGNITUDE[1]:g} (option of method {method!r}, "
+                          f"default {default!r})")
 
 
 def method_options(method: str, pairs: list[str] | None, preset: str | None = None, solver: str | None = None,
@@ -309,15 +320,17 @@ def method_options(method: str, pairs: list[str] | None, preset: str | None = No
 
 
 def describe_options(method: str) -> str:
-    """Every ``-O`` option of ``method``: name, default, unit and help, one block each, from the option's
-    declaration (:func:`gfimu.option.option`: the field's metadata); the smoothers' options under their
-    group (model, batch_model, batch, stream, tuning, guard: :mod:`gfimu.smoother.model.option_groups`)."""
+    """Every ``-O`` option of ``method``: name, default, unit, help and the values it accepts, one block each,
+    from the option's declaration (:func:`gfimu.option.option`: the field's metadata); the smoothers' options
+    under their group (model, batch_model, batch, stream, tuning, guard:
+    :mod:`gfimu.smoother.model.option_groups`)."""
     from ..methods import estimator_class
 
     cls = estimator_class(method)
     if not dataclasses.is_dataclass(cls):
         return f"method {method!r} has no options"
-    lines = [f"options of method {method!r} (-O NAME=VALUE; values are JSON or plain text):", ""]
+    lines = [f"options of method {method!r} (-O NAME=VALUE: a number as 0.5 or 1e-3, a switch as true or false, "
+             "a choice by its name, three numbers as 1,2,3 or [1,2,3], None where a value may be None):", ""]
     fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
     sections = [("", fields)]
     if any("group" in f.metadata for f in fields):
@@ -336,6 +349,9 @@ def describe_options(method: str) -> str:
             unit = f.metadata.get("unit", "")
             lines.append(f"{f.name} = {default!r}" + (f" [{unit}]" if unit else ""))
             lines.append(f"    {f.metadata.get('help') or '(no description)'}")
+            check = f.metadata.get("check")
+            if check is not None:
+                lines.append(f"    accepts: {check.describe(unit, given=True)}")
         if group:
             lines.append("")
     return "\n".join(lines).rstrip("\n") + "\n"

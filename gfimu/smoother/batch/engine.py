@@ -490,7 +490,7 @@ def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: sl
         start = prev_R[solve_sl.start - prev_sl.start]
     R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start, opt.use_inclinometer)
     problem = make_problem(part, opt, t.accel_noise_scale) if t is not None else SmootherProblem(part, opt)
-    problem = problem.with_noise(attitude_prior_wb=R[0])
+    problem = problem.with_attitude_prior(R[0])
     x0 = np.hstack([first.states, _so3.log(R)])
     return solve_problem(problem, x0, first.params if first.params.size else None, opt.compute_sigma, solver), problem
 

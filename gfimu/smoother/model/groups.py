@@ -2,17 +2,18 @@
 
 A group gives, for a :class:`gfimu.smoother.model.problem.SmootherProblem`,
 
-- :meth:`FactorGroup.noise`: its noise levels from the options and the log, gathered by the problem
-  into one frozen value (:mod:`gfimu.smoother.model.noise_levels`; read back as ``problem.trapezoid_sigma``
-  etc., re-weighted by making a new problem),
+- :meth:`FactorGroup.noise`: its noise levels from the options and the log, a typed frozen value
+  (:mod:`gfimu.smoother.model.noise_levels`: :class:`AccelNoise`, :class:`MotionNoise`, ...) gathered by the
+  problem into one :class:`NoiseLevels` and read back under its field (``problem.noise.accel.sigma``,
+  ``problem.noise.motion.trapezoid_sigma``); re-weighted by making a new problem,
 - :meth:`FactorGroup.terms`: its whitened residuals and analytic Jacobians over all samples at
   once (vectorised; the batch solver and the tuner's normal equations),
 - :meth:`FactorGroup.gtsam_factors`: the same residuals as GTSAM factors (the graph path),
 - :meth:`FactorGroup.log_normaliser`: ``Σ log σ`` over its rows (the tuner's evidence),
 
 so the batch solver, the noise tuner, the bound and the GTSAM graph read one definition. The
-model (:data:`BUILT_IN`, in the order the problem adds them): the accelerometer measurement (paper
-000, eq. 6) or the per-sample inversion ('quadratic'), the first-state prior, the specific-force
+model (:data:`BUILT_IN`, in the order the problem adds them): the accelerometer measurement (Ho &
+Lin 2009, eq. 6) or the per-sample inversion ('quadratic'), the first-state prior, the specific-force
 random walk or, with the attitude, the attitude kinematics (Li et al. 2021, eqs. 9-10 on SO(3)), the
 random walk of the gravity-free acceleration and the attitude prior; the motion model (white jerk:
 trapezoid kinematics and the ω̇ random walk, the driven oscillator, or white snap), the gyroscope
@@ -21,7 +22,8 @@ priors. Further groups are given with ``SmootherOptions.factor_groups`` and reac
 without changing any of them; those whose terms are per sample (``per_sample``) or tie two
 consecutive samples (``steps``) also reach the fixed-lag smoother (:mod:`gfimu.smoother.stream.fixed_lag`),
 which evaluates them on each sample alone or on the two samples of each step, as it does the
-built-in motion model and specific-force walk.
+built-in motion model and specific-force walk. What a group may read of the problem it is given is
+:class:`gfimu.smoother.model.noise_levels.ModelView`.
 """
 
 from __future__ import annotations
@@ -51,6 +53,17 @@ from ...factors import (
     specific_force_key,
 )
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
+from .noise_levels import (
+    AccelNoise,
+    AttitudeNoise,
+    FirstStateNoise,
+    ForceWalkNoise,
+    GyroNoise,
+    InversionNoise,
+    ModelView,
+    MotionNoise,
+    TiltNoise,
+)
 
 
 @dataclass
@@ -97,11 +110,13 @@ class FactorGroup:
     def applies(self, problem) -> bool:
         return True
 
-    def noise(self, problem) -> dict:
-        """Its noise levels, name -> value, computed from the options and the log (once, when the problem
-        is built; :class:`gfimu.smoother.model.noise_levels.NoiseLevels`); its terms read them back as
-        ``problem.NAME``. None by default."""
-        return {}
+    def noise(self, problem: ModelView):
+        """Its noise levels, computed from the options and the log (once, when the problem is built;
+        :meth:`gfimu.smoother.model.noise_levels.NoiseLevels.gather`): a built-in group's typed value
+        (:class:`~gfimu.smoother.model.noise_levels.AccelNoise`, ...), read back under its field
+        (``problem.noise.accel``); any other value (a group given in the options), read back with
+        ``problem.noise.of(self)``. None by default."""
+        return None
 
     def log_normaliser_parts(self, problem) -> list[float]:
         """:meth:`log_normaliser` as the parts it sums (kept apart so that the sum's rounding does not
@@ -129,24 +144,6 @@ class FactorGroup:
         raise NotImplementedError
 
 
-def group_noise(groups, problem) -> dict:
-    """The noise levels of ``groups`` on ``problem`` (each group's :meth:`FactorGroup.noise`), merged; a
-    name given by two groups, or a group that still sets attributes with ``setup``, is an error."""
-    out: dict = {}
-    owner: dict = {}
-    for group in groups:
-        if callable(getattr(group, "setup", None)):
-            raise InputError(f"factor group {group.name!r}: give its noise levels with noise(problem) -> dict, "
-                             "not setup(problem) (a problem is frozen once built)")
-        levels = group.noise(problem)
-        for name in levels:
-            if name in out:
-                raise InputError(f"factor groups {owner[name]!r} and {group.name!r} both give the noise level {name!r}")
-            owner[name] = group.name
-        out.update(levels)
-    return out
-
-
 def unary_jacobian(problem, blocks: list[tuple[slice, np.ndarray]], rows: int, n: int) -> np.ndarray:
     """(n, rows, state size) Jacobian with the given (n, rows, 3) blocks at their state columns."""
     J = np.zeros((n, rows, problem.state_size))
@@ -157,34 +154,36 @@ def unary_jacobian(problem, blocks: list[tuple[slice, np.ndarray]], rows: int, n
 
 class FirstStatePriorGroup(FactorGroup):
     """Weak zero-mean priors on the first sample's motion states ``[ω, ω̇, f(, ω̈)]`` (stds
-    ``problem.first_sigma``), keeping the normal equations definite."""
+    ``problem.noise.first_state.sigma``), keeping the normal equations definite."""
 
     name = "first-state prior"
     first = True
     per_sample = False
 
-    def noise(self, problem) -> dict:
+    def noise(self, problem: ModelView) -> FirstStateNoise:
         opt = problem.options
         first = np.repeat([opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3)
         if problem.snap:
             first = np.concatenate([first, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
-        return {"first_sigma": first}
+        return FirstStateNoise(first)
 
     def terms(self, problem, states, params):
         mk = problem.layout.motion_size
         r, _ = process.prior_residual(states[:1, :mk], np.zeros(mk))
         J = np.zeros((1, mk, problem.state_size))
-        J[0, :, :mk] = np.diag(1.0 / problem.first_sigma)
-        return [Term("unary", r / problem.first_sigma, {"x": J}, None, first=0)]
+        sigma = problem.noise.first_state.sigma
+        J[0, :, :mk] = np.diag(1.0 / sigma)
+        return [Term("unary", r / sigma, {"x": J}, None, first=0)]
 
     def gtsam_factors(self, problem):
         pairs = [(omega_key(0), OMEGA), (omega_dot_key(0), OMEGA_DOT), (specific_force_key(0), SPECIFIC_FORCE)]
         if problem.snap:
             pairs.append((omega_ddot_key(0), OMEGA_DDOT))
-        return [process.make_prior_factor(key, np.zeros(3), diagonal_noise(problem.first_sigma[sl])) for key, sl in pairs]
+        sigma = problem.noise.first_state.sigma
+        return [process.make_prior_factor(key, np.zeros(3), diagonal_noise(sigma[sl])) for key, sl in pairs]
 
     def log_normaliser(self, problem):
-        return float(np.sum(np.log(problem.first_sigma)))
+        return float(np.sum(np.log(problem.noise.first_state.sigma)))
 
 
 def _columns(columns: slice) -> np.ndarray:
@@ -208,7 +207,8 @@ def _binary(problem, rows: int, pairs: list[tuple[slice, np.ndarray, np.ndarray]
 
 class _ArrayMeasurementGroup(FactorGroup):
     """The array's measurement in the form ``options.measurement`` names (``formulation``), over every
-    sample, with the accelerometers' noise ``problem.accel_sigma`` (array.toml, :mod:`gfimu.noise`)."""
+    sample, with the accelerometers' noise ``problem.noise.accel`` (array.toml, or the option
+    ``default_accel_noise_std_mps2``: :func:`gfimu.noise.accel_noise_std`)."""
 
     formulation = ""
     measurement = True
@@ -217,16 +217,16 @@ class _ArrayMeasurementGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return problem.options.measurement == self.formulation
 
-    def noise(self, problem) -> dict:
-        return {"accel_sigma": noise.accel_noise_std(problem.log.array, problem.options.default_accel_noise_std_mps2),
-                "accel_sigma_per_sample": None, "accel_base": None}
+    def noise(self, problem: ModelView) -> AccelNoise:
+        return AccelNoise(noise.accel_noise_std(problem.array, problem.options.default_accel_noise_std_mps2))
 
 
 class AccelerometerGroup(_ArrayMeasurementGroup):
     """The accelerometer equation of every sensor at every sample (Ho & Lin 2009, eq. 6), with the
-    per-axis biases and scale-factor errors when self-calibrating. Noise: ``problem.accel_sigma``
-    (array.toml, :mod:`gfimu.noise`), or ``problem.accel_sigma_per_sample`` when set (motion-dependent
-    noise, robust re-weighting)."""
+    per-axis biases and scale-factor errors when self-calibrating. Noise: ``problem.noise.accel``
+    (:class:`~gfimu.smoother.model.noise_levels.AccelNoise`: ``sigma`` from array.toml or the option
+    ``default_accel_noise_std_mps2``, or ``per_sample`` when set: motion-dependent noise, robust
+    re-weighting)."""
 
     name = "accelerometer"
     formulation = "accelerometer"
@@ -266,9 +266,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
 
     @staticmethod
     def _whitening(problem, shape) -> np.ndarray:
-        if problem.accel_sigma_per_sample is None:
-            return np.broadcast_to(1.0 / problem.accel_sigma, shape)
-        return 1.0 / problem.accel_sigma_per_sample  # motion-dependent noise / robust re-weighting
+        return problem.noise.accel.whitening(shape)
 
     def _all_axes(self, problem, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
         """Every axis at once, without per-sensor calibration: the whitened residual (N, axes), the
@@ -312,7 +310,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         linear = slice(OMEGA_DOT.start, SPECIFIC_FORCE.stop)  # (the layout keeps ω, ω̇, f side by side)
         jwt = np.swapaxes(jw, 1, 2)
         diag[:, OMEGA, OMEGA] += jwt @ jw
-        if problem.accel_sigma_per_sample is None:  # one whitening for every sample
+        if problem.noise.accel.per_sample is None:  # one whitening for every sample
             wc = white[0][:, None] * c
             cross = (np.ascontiguousarray(jwt).reshape(n * 3, axes) @ wc).reshape(n, 3, 6)
             diag[:, linear, linear] += wc.T @ wc
@@ -339,14 +337,13 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         X = states
         r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
                                                    problem.all_rows) - problem.log.accel_mps2
-        sigma = problem.accel_sigma if problem.accel_sigma_per_sample is None else problem.accel_sigma_per_sample
-        r = r / sigma
+        r = r / problem.noise.accel.stds()
         return float(np.sum(r * r))
 
     def gtsam_factors(self, problem):
         y = problem.log.accel_mps2
-        sigma = (np.broadcast_to(problem.accel_sigma, y.shape) if problem.accel_sigma_per_sample is None
-                 else problem.accel_sigma_per_sample)
+        accel = problem.noise.accel
+        sigma = np.broadcast_to(accel.sigma, y.shape) if accel.per_sample is None else accel.per_sample
         out = []
         for k in range(problem.n):
             for i, (d, p, cols) in enumerate(problem.sensors):
@@ -358,40 +355,52 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         return out
 
     def log_normaliser(self, problem):
-        if problem.accel_sigma_per_sample is None:
-            return problem.n * float(np.sum(np.log(problem.accel_sigma)))
-        return float(np.sum(np.log(problem.accel_sigma_per_sample)))
+        accel = problem.noise.accel
+        if accel.per_sample is None:
+            return problem.n * float(np.sum(np.log(accel.sigma)))
+        return float(np.sum(np.log(accel.per_sample)))
+
+    def reweighted(self, problem, states: np.ndarray, params: np.ndarray, weight) -> AccelNoise:
+        """The robust re-weighting's accelerometer noise at ``states``: each axis's std from
+        :meth:`AccelNoise.start` divided by ``sqrt(weight(e))`` of its whitened residual e under that std."""
+        accel = problem.noise.accel
+        base = accel.start(problem.n)
+        plain = problem.with_noise(accel=accel.with_per_sample(np.array(base)))  # whiten with the base noise
+        r = self.whitened_residual(plain, states, params)
+        return accel.with_per_sample(base / np.sqrt(weight(r)))
 
 
 class InversionGroup(_ArrayMeasurementGroup):
     """``measurement='quadratic'``: the per-sample inversion ``[f, ω̇, q(ω)]`` (Ho & Lin 2009, eq. 7) with
-    its covariance ``problem.x_cov`` (whitening ``problem.x_whiten``)."""
+    its covariance (:class:`~gfimu.smoother.model.noise_levels.InversionNoise`, ``problem.noise.inversion``)."""
 
     name = "per-sample inversion"
     formulation = "quadratic"
 
-    def noise(self, problem) -> dict:
+    def noise(self, problem: ModelView) -> InversionNoise:
+        sigma = super().noise(problem).sigma
         x_hat, x_cov = quadratic.inversion(problem.log.array, problem.log.accel_mps2)
-        return {**super().noise(problem), "x_hat": x_hat, "x_cov": x_cov,
-                "x_whiten": np.linalg.inv(np.linalg.cholesky(x_cov))}  # L⁻¹ with cov = L Lᵀ
+        return InversionNoise(sigma, x_hat=x_hat, x_cov=x_cov,
+                              x_whiten=np.linalg.inv(np.linalg.cholesky(x_cov)))  # L⁻¹ with cov = L Lᵀ
 
     def terms(self, problem, states, params):
-        X = states
-        r, j = quadratic.inversion_residual(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], problem.x_hat)
+        X, inv = states, problem.noise.inversion
+        r, j = quadratic.inversion_residual(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], inv.x_hat)
         J = _padded([j["w"], j["d"], j["f"]], problem.state_size)
-        return [Term("unary", r @ problem.x_whiten.T, {"x": problem.x_whiten @ J})]
+        return [Term("unary", r @ inv.x_whiten.T, {"x": inv.x_whiten @ J})]
 
     def gtsam_factors(self, problem):
+        inv = problem.noise.inversion
         return [quadratic.make_inversion_factor(omega_key(k), omega_dot_key(k), specific_force_key(k),
-                                                problem.x_hat[k], gaussian_noise(problem.x_cov)) for k in range(problem.n)]
+                                                inv.x_hat[k], gaussian_noise(inv.x_cov)) for k in range(problem.n)]
 
     def log_normaliser(self, problem):
-        return -problem.n * float(np.sum(np.log(np.diag(problem.x_whiten))))
+        return -problem.n * float(np.sum(np.log(np.diag(problem.noise.inversion.x_whiten))))
 
 
 class SpecificForceWalkGroup(FactorGroup):
     """The specific force as a random walk (``specific_force_random_walk_mps2_per_sqrt_s``;
-    step std ``problem.force_step_sigma``), without the attitude."""
+    step std ``problem.noise.force_walk.step_sigma``), without the attitude."""
 
     name = "specific-force random walk"
     per_sample = False
@@ -401,21 +410,21 @@ class SpecificForceWalkGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return not problem.attitude
 
-    def noise(self, problem) -> dict:
-        return {"force_step_sigma": process.random_walk_sigma(problem.options.specific_force_random_walk_mps2_per_sqrt_s,
-                                                              problem.dt_s)}
+    def noise(self, problem: ModelView) -> ForceWalkNoise:
+        return ForceWalkNoise(process.random_walk_sigma(problem.options.specific_force_random_walk_mps2_per_sqrt_s,
+                                                        problem.dt_s))
 
     def terms(self, problem, states, params):
         X = states
         rf, _ = process.random_walk_residual(X[:-1, SPECIFIC_FORCE], X[1:, SPECIFIC_FORCE])
-        wf = 1.0 / problem.force_step_sigma[:, None]
+        wf = 1.0 / problem.noise.force_walk.step_sigma[:, None]
         Jf0, Jf1 = _binary(problem, 3, [(SPECIFIC_FORCE, -np.eye(3), np.eye(3))])
         return [Term("binary", rf * wf, {"x0": Jf0 * wf[:, :, None], "x1": Jf1 * wf[:, :, None]})]
 
     @staticmethod
     def _whitened_steps(problem, states: np.ndarray) -> np.ndarray:
         """(N-1, 3) the residual of :meth:`terms`, ``(f1 - f0) / σ``, without its Jacobians."""
-        return (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * (1.0 / problem.force_step_sigma[:, None])
+        return (states[1:, SPECIFIC_FORCE] - states[:-1, SPECIFIC_FORCE]) * (1.0 / problem.noise.force_walk.step_sigma[:, None])
 
     def squared_norm(self, problem, states, params):
         r = self._whitened_steps(problem, states)
@@ -424,7 +433,7 @@ class SpecificForceWalkGroup(FactorGroup):
     def accumulate(self, problem, states, params, diag, lower, grad):
         """Per axis the step ``u (f1 - f0)`` (u = 1/σ): ``JᵀJ`` adds u² to both diagonals and -u² to
         the coupling, ``Jᵀr`` is ``∓u e``."""
-        u = 1.0 / problem.force_step_sigma
+        u = 1.0 / problem.noise.force_walk.step_sigma
         e = self._whitened_steps(problem, states)
         u2 = (u * u)[:, None]
         f = _columns(SPECIFIC_FORCE)
@@ -438,19 +447,18 @@ class SpecificForceWalkGroup(FactorGroup):
 
     def gtsam_factors(self, problem):
         return [process.make_random_walk_factor(specific_force_key(k), specific_force_key(k + 1),
-                                                diagonal_noise(np.full(3, problem.force_step_sigma[k])))
+                                                diagonal_noise(np.full(3, problem.noise.force_walk.step_sigma[k])))
                 for k in range(problem.n - 1)]
 
     def log_normaliser(self, problem):
-        return 3 * float(np.sum(np.log(problem.force_step_sigma)))
+        return 3 * float(np.sum(np.log(problem.noise.force_walk.step_sigma)))
 
 
 class AttitudeGroup(FactorGroup):
     """With the attitude R_k (W←B) in the state: its kinematics ``R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)``
-    (Li et al. 2021, eqs. 9-10 on SO(3); ``problem.attitude_step_sigma``), the gravity-free acceleration
-    ``f + Rᵀ g`` as a random walk (``problem.accel_step_sigma``) and a weak prior on the first attitude
-    (``problem.attitude_prior_wb``, stds ``problem.attitude_prior_sigma``: tilt free, yaw
-    ``initial_yaw_std_rad``)."""
+    (Li et al. 2021, eqs. 9-10 on SO(3)), the gravity-free acceleration ``f + Rᵀ g`` as a random walk and a
+    weak prior on the first attitude (tilt free, yaw ``initial_yaw_std_rad``); their noise
+    ``problem.noise.attitude`` (:class:`~gfimu.smoother.model.noise_levels.AttitudeNoise`)."""
 
     name = "attitude"
     per_sample = False
@@ -458,11 +466,11 @@ class AttitudeGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return bool(problem.attitude)
 
-    def noise(self, problem) -> dict:
+    def noise(self, problem: ModelView) -> AttitudeNoise:
         opt = problem.options
-        return {"attitude_prior_wb": np.eye(3), "attitude_prior_sigma": np.array([10.0, 10.0, opt.initial_yaw_std_rad]),
-                "attitude_step_sigma": process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, problem.dt_s),
-                "accel_step_sigma": process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, problem.dt_s)}
+        return AttitudeNoise(prior_wb=np.eye(3), prior_sigma=np.array([10.0, 10.0, opt.initial_yaw_std_rad]),
+                             step_sigma=process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, problem.dt_s),
+                             accel_step_sigma=process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, problem.dt_s))
 
     def terms(self, problem, states, params):
         X, AT = states, problem.layout.rotation
@@ -470,67 +478,52 @@ class AttitudeGroup(FactorGroup):
         out = []
         # attitude kinematics R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)
         r, j = kinematics.attitude_residual(R[:-1], R[1:], X[:-1, OMEGA], X[1:, OMEGA], problem.dt_s)
-        w = 1.0 / problem.attitude_step_sigma[:, None]
+        w = 1.0 / problem.noise.attitude.step_sigma[:, None]
         J0, J1 = _binary(problem, 3, [(AT, j["r0"], j["r1"]), (OMEGA, j["w0"], j["w1"])])
         out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
         # gravity-free acceleration a = f + Rᵀ g as a random walk
         r, j = gravity.accel_random_walk_residual(X[:-1, SPECIFIC_FORCE], X[1:, SPECIFIC_FORCE], R[:-1], R[1:])
-        w = 1.0 / problem.accel_step_sigma[:, None]
+        w = 1.0 / problem.noise.attitude.accel_step_sigma[:, None]
         J0, J1 = _binary(problem, 3, [(SPECIFIC_FORCE, j["f0"], j["f1"]), (AT, j["r0"], j["r1"])])
         out.append(Term("binary", r * w, {"x0": J0 * w[:, :, None], "x1": J1 * w[:, :, None]}))
         # weak prior on the first attitude (fixes yaw)
-        r, j = process.attitude_prior_residual(R[:1], problem.attitude_prior_wb)
-        w = 1.0 / problem.attitude_prior_sigma
+        r, j = process.attitude_prior_residual(R[:1], problem.noise.attitude.prior_wb)
+        w = 1.0 / problem.noise.attitude.prior_sigma
         Jp = np.zeros((1, 3, problem.state_size))
         Jp[:, :, AT] = j["r"] * w[:, None]
         out.append(Term("unary", r * w, {"x": Jp}, None, first=0))
         return out
 
     def gtsam_factors(self, problem):
-        out = [process.make_attitude_prior_factor(attitude_key(0), problem.attitude_prior_wb,
-                                                  diagonal_noise(problem.attitude_prior_sigma))]
+        out = [process.make_attitude_prior_factor(attitude_key(0), problem.noise.attitude.prior_wb,
+                                                  diagonal_noise(problem.noise.attitude.prior_sigma))]
         for k in range(problem.n - 1):
             out.append(kinematics.make_attitude_factor(attitude_key(k), attitude_key(k + 1), omega_key(k), omega_key(k + 1),
                                                        float(problem.dt_s[k]),
-                                                       diagonal_noise(np.full(3, problem.attitude_step_sigma[k]))))
+                                                       diagonal_noise(np.full(3, problem.noise.attitude.step_sigma[k]))))
             out.append(gravity.make_accel_random_walk_factor(specific_force_key(k), specific_force_key(k + 1), attitude_key(k),
                                                              attitude_key(k + 1),
-                                                             diagonal_noise(np.full(3, problem.accel_step_sigma[k]))))
+                                                             diagonal_noise(np.full(3, problem.noise.attitude.accel_step_sigma[k]))))
         return out
 
     def log_normaliser(self, problem):
         return float(sum(self.log_normaliser_parts(problem)))
 
     def log_normaliser_parts(self, problem):
-        return [3 * float(np.sum(np.log(problem.attitude_step_sigma)) + np.sum(np.log(problem.accel_step_sigma))),
-                float(np.sum(np.log(problem.attitude_prior_sigma)))]
-
-
-def oscillator_weight(problem) -> np.ndarray:
-    """(N-1,) factor on the oscillator steps' std: 1, or the re-weighting's (which scales
-    ``omega_dot_step_sigma``)."""
-    return problem.omega_dot_step_sigma / problem.oscillator_unit_sigma
-
-
-def oscillator_whiten(problem) -> np.ndarray:
-    """(N-1, 6, 6) whitening of the oscillator steps (inverse Cholesky factor of their covariance)."""
-    return problem.oscillator_unit_whiten / oscillator_weight(problem)[:, None, None]
-
-
-def oscillator_covariance(problem) -> np.ndarray:
-    """(N-1, 6, 6) covariance of the oscillator steps."""
-    return problem.oscillator_unit_cov * (oscillator_weight(problem) ** 2)[:, None, None]
+        return [3 * float(np.sum(np.log(problem.noise.attitude.step_sigma)) + np.sum(np.log(problem.noise.attitude.accel_step_sigma))),
+                float(np.sum(np.log(problem.noise.attitude.prior_sigma)))]
 
 
 class MotionModelGroup(FactorGroup):
     """The angular motion model, one step per pair of samples:
 
     - 'jerk': trapezoid kinematics ``ω_{k+1} = ω_k + h/2 (ω̇_k + ω̇_{k+1})`` and the random walk of ω̇
-      (white angular jerk; stds ``problem.trapezoid_sigma``, ``problem.omega_dot_step_sigma``, per body
-      axis times ``problem.axis_factors``), stacked as one 6-row step;
+      (white angular jerk), stacked as one 6-row step;
     - with ``process_axis_frequencies_hz``: the exact step of the driven oscillator per axis
-      (``oscillator_whiten(problem)``, :func:`gfimu.factors.process.oscillator_residual`);
-    - 'snap': the exact white-snap step of ``[ω, ω̇, ω̈]`` (``problem.snap_whiten``, ``problem.snap_cov``).
+      (:func:`gfimu.factors.process.oscillator_residual`);
+    - 'snap': the exact white-snap step of ``[ω, ω̇, ω̈]``.
+
+    Its noise: ``problem.noise.motion`` (:class:`~gfimu.smoother.model.noise_levels.MotionNoise`).
     """
 
     motion = True
@@ -540,27 +533,34 @@ class MotionModelGroup(FactorGroup):
     steps = True
     linear = True
 
-    def noise(self, problem) -> dict:
+    def noise(self, problem: ModelView) -> MotionNoise:
         opt = problem.options
-        out = {"snap_cov": None, "snap_whiten": None, "oscillator_unit_cov": None, "oscillator_unit_whiten": None,
-               "oscillator_unit_sigma": None, "process_base": None}
+        snap_cov = snap_whiten = None
         if opt.motion_model == "snap":
             cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, problem.dt_s)
             axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)
-            out["snap_cov"] = cov * axis[:, None] * axis[None, :]
-            out["snap_whiten"] = np.linalg.inv(np.linalg.cholesky(cov)) / axis
+            snap_cov = cov * axis[:, None] * axis[None, :]
+            snap_whiten = np.linalg.inv(np.linalg.cholesky(cov)) / axis
         q = opt.omega_dot_random_walk_radps2_per_sqrt_s
-        out["trapezoid_sigma"] = kinematics.trapezoid_sigma(q, problem.dt_s)
-        out["omega_dot_step_sigma"] = process.random_walk_sigma(q, problem.dt_s)
-        out["axis_factors"] = axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
-        out["natural_frequency_radps"] = omega_n = 2.0 * np.pi * np.asarray(opt.process_axis_frequencies_hz, dtype=float)
-        out["oscillator"] = bool(np.any(omega_n > 0))
-        if out["oscillator"]:
-            cov = process.oscillator_step_covariance(q, problem.dt_s, omega_n, axis_factors)
-            out["oscillator_unit_cov"] = cov
-            out["oscillator_unit_whiten"] = np.linalg.inv(np.linalg.cholesky(cov))
-            out["oscillator_unit_sigma"] = out["omega_dot_step_sigma"]
-        return out
+        step_sigma = process.random_walk_sigma(q, problem.dt_s)
+        axis_factors = np.asarray(opt.process_axis_factors, dtype=float)
+        omega_n = 2.0 * np.pi * np.asarray(opt.process_axis_frequencies_hz, dtype=float)
+        oscillator = bool(np.any(omega_n > 0))
+        unit_cov = unit_whiten = None
+        if oscillator:
+            unit_cov = process.oscillator_step_covariance(q, problem.dt_s, omega_n, axis_factors)
+            unit_whiten = np.linalg.inv(np.linalg.cholesky(unit_cov))
+        return MotionNoise(kinematics.trapezoid_sigma(q, problem.dt_s), step_sigma, axis_factors, omega_n,
+                           oscillator=oscillator, oscillator_unit_cov=unit_cov, oscillator_unit_whiten=unit_whiten,
+                           oscillator_unit_sigma=step_sigma if oscillator else None, snap_cov=snap_cov,
+                           snap_whiten=snap_whiten)
+
+    def reweighted(self, problem, states: np.ndarray, weight) -> MotionNoise:
+        """The robust re-weighting's motion-model noise at ``states``: the stds each step starts from
+        (:meth:`MotionNoise.start`) divided by ``sqrt(weight(e))`` of its whitened residual norm / √rows."""
+        plain = problem.noise.motion.from_start(problem.snap)
+        r = self.step_residual(problem.with_noise(motion=plain), states)
+        return plain.weighted(weight(np.sqrt(np.mean(r**2, axis=1))), problem.snap)
 
     def step_residual(self, problem, X: np.ndarray, noise: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """(N-1, rows) whitened residual of every step (what the robust re-weighting weighs); ``noise``:
@@ -569,16 +569,17 @@ class MotionModelGroup(FactorGroup):
         if problem.snap:
             ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D],
                                                        X[:-1, OMEGA_DDOT], X[1:, OMEGA_DDOT], problem.dt_s)
-            return np.einsum("nij,nj->ni", problem.snap_whiten, ra)
-        if problem.oscillator:
+            return np.einsum("nij,nj->ni", problem.noise.motion.snap_whiten, ra)
+        if problem.noise.motion.oscillator:
             ro, _ = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s,
-                                                problem.natural_frequency_radps)
-            return np.einsum("nij,nj->ni", oscillator_whiten(problem), ro)
+                                                problem.noise.motion.natural_frequency_radps)
+            return np.einsum("nij,nj->ni", problem.noise.motion.oscillator_whiten(), ro)
         rk, _ = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
         rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
-        trapezoid, step = (problem.trapezoid_sigma, problem.omega_dot_step_sigma) if noise is None else noise
-        return np.concatenate([rk / (trapezoid[:, None] * problem.axis_factors),
-                               rd / (step[:, None] * problem.axis_factors)], axis=1)
+        motion = problem.noise.motion
+        trapezoid, step = (motion.trapezoid_sigma, motion.omega_dot_step_sigma) if noise is None else noise
+        return np.concatenate([rk / (trapezoid[:, None] * motion.axis_factors),
+                               rd / (step[:, None] * motion.axis_factors)], axis=1)
 
     def terms(self, problem, states, params):
         X, W, D, A = states, OMEGA, OMEGA_DOT, OMEGA_DDOT
@@ -587,14 +588,14 @@ class MotionModelGroup(FactorGroup):
             ra, ja = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A],
                                                         problem.dt_s)
             J0, J1 = _binary(problem, 9, [(W, ja["w0"], ja["w1"]), (D, ja["d0"], ja["d1"]), (A, ja["j0"], ja["j1"])])
-            Wn = problem.snap_whiten
+            Wn = problem.noise.motion.snap_whiten
             return [Term("binary", np.einsum("nij,nj->ni", Wn, ra), {"x0": Wn @ J0, "x1": Wn @ J1})]
-        if problem.oscillator:
+        if problem.noise.motion.oscillator:
             # exact step of the driven oscillator per axis (6 rows, 2×2 blocks of covariance)
             ro, jo = process.oscillator_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s,
-                                                 problem.natural_frequency_radps)
+                                                 problem.noise.motion.natural_frequency_radps)
             J0, J1 = _binary(problem, 6, [(W, jo["w0"], jo["w1"]), (D, jo["d0"], jo["d1"])])
-            Wn = oscillator_whiten(problem)
+            Wn = problem.noise.motion.oscillator_whiten()
             return [Term("binary", np.einsum("nij,nj->ni", Wn, ro), {"x0": Wn @ J0, "x1": Wn @ J1})]
         # trapezoid kinematics + ω̇ random walk, stacked as one binary term (6 rows)
         rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
@@ -611,8 +612,9 @@ class MotionModelGroup(FactorGroup):
     @staticmethod
     def _white_jerk_weights(problem) -> np.ndarray:
         """(N-1, 6) whitening of the trapezoid and ω̇ random-walk rows."""
-        return 1.0 / np.concatenate([problem.trapezoid_sigma[:, None] * problem.axis_factors,
-                                     problem.omega_dot_step_sigma[:, None] * problem.axis_factors], axis=1)
+        motion = problem.noise.motion
+        return 1.0 / np.concatenate([motion.trapezoid_sigma[:, None] * motion.axis_factors,
+                                     motion.omega_dot_step_sigma[:, None] * motion.axis_factors], axis=1)
 
     def accumulate(self, problem, states, params, diag, lower, grad):
         """White jerk, per body axis with ``w = ω_a``, ``d = ω̇_a``, step h and row weights t (trapezoid),
@@ -623,7 +625,7 @@ class MotionModelGroup(FactorGroup):
             J0ᵀr = [-t e1, -t h/2 e1 - u e2]                 J1ᵀr = [t e1, -t h/2 e1 + u e2]
 
         (the same sums as :meth:`terms`' Jacobians to rounding). None for the other motion models."""
-        if problem.snap or problem.oscillator:
+        if problem.snap or problem.noise.motion.oscillator:
             return None
         W, D = OMEGA, OMEGA_DOT
         wb = self._white_jerk_weights(problem)
@@ -663,42 +665,44 @@ class MotionModelGroup(FactorGroup):
 
     def squared_norm(self, problem, states, params):
         """The same residuals as :meth:`terms` (white jerk: without building its Jacobians)."""
-        if problem.snap or problem.oscillator:
+        if problem.snap or problem.noise.motion.oscillator:
             return super().squared_norm(problem, states, params)
         r = np.concatenate(self._white_jerk_rows(problem, states, self._white_jerk_weights(problem)), axis=1)
         return float(np.sum(r * r))
 
     def gtsam_factors(self, problem):
         out = []
-        oscillator_cov = oscillator_covariance(problem) if problem.oscillator and not problem.snap else None
+        motion = problem.noise.motion
+        oscillator_cov = motion.oscillator_covariance() if motion.oscillator and not problem.snap else None
         for k in range(problem.n - 1):
             w0, w1, d0, d1 = omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1)
             h = float(problem.dt_s[k])
             if problem.snap:
                 out.append(kinematics.make_angular_motion_factor(w0, w1, d0, d1, omega_ddot_key(k), omega_ddot_key(k + 1), h,
-                                                                 gaussian_noise(problem.snap_cov[k])))
-            elif problem.oscillator:
-                out.append(process.make_oscillator_factor(w0, w1, d0, d1, h, problem.natural_frequency_radps,
+                                                                 gaussian_noise(motion.snap_cov[k])))
+            elif motion.oscillator:
+                out.append(process.make_oscillator_factor(w0, w1, d0, d1, h, motion.natural_frequency_radps,
                                                           gaussian_noise(oscillator_cov[k])))
             else:
                 out.append(kinematics.make_angular_velocity_factor(w0, w1, d0, d1, h, diagonal_noise(
-                    problem.trapezoid_sigma[k] * problem.axis_factors)))
+                    motion.trapezoid_sigma[k] * motion.axis_factors)))
                 out.append(process.make_random_walk_factor(d0, d1, diagonal_noise(
-                    problem.omega_dot_step_sigma[k] * problem.axis_factors)))
+                    motion.omega_dot_step_sigma[k] * motion.axis_factors)))
         return out
 
     def log_normaliser(self, problem):
         if problem.snap:
-            return 0.5 * float(np.sum(np.linalg.slogdet(problem.snap_cov)[1]))
-        if problem.oscillator:
-            return 0.5 * float(np.sum(np.linalg.slogdet(oscillator_covariance(problem))[1]))
+            return 0.5 * float(np.sum(np.linalg.slogdet(problem.noise.motion.snap_cov)[1]))
+        if problem.noise.motion.oscillator:
+            return 0.5 * float(np.sum(np.linalg.slogdet(problem.noise.motion.oscillator_covariance())[1]))
         return float(sum(self.log_normaliser_parts(problem)))
 
     def log_normaliser_parts(self, problem):
-        if problem.snap or problem.oscillator:
+        if problem.snap or problem.noise.motion.oscillator:
             return [self.log_normaliser(problem)]
-        return [3 * float(np.sum(np.log(problem.trapezoid_sigma)) + np.sum(np.log(problem.omega_dot_step_sigma))),
-                2 * (problem.n - 1) * float(np.sum(np.log(problem.axis_factors)))]
+        motion = problem.noise.motion
+        return [3 * float(np.sum(np.log(motion.trapezoid_sigma)) + np.sum(np.log(motion.omega_dot_step_sigma))),
+                2 * (problem.n - 1) * float(np.sum(np.log(motion.axis_factors)))]
 
 
 class GyroscopeGroup(FactorGroup):
@@ -710,14 +714,15 @@ class GyroscopeGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return bool(problem.use_gyro)
 
-    def noise(self, problem) -> dict:
-        if not np.all(np.isfinite(problem.log.gyro_b_radps)):
-            row = int(np.argwhere(~np.isfinite(problem.log.gyro_b_radps))[0, 0])
+    def noise(self, problem: ModelView) -> GyroNoise:
+        gyro = problem.log.gyro_b_radps
+        if gyro is not None and not np.all(np.isfinite(gyro)):
+            row = int(np.argwhere(~np.isfinite(gyro))[0, 0])
             raise DataError(f"{problem.log.source}: gyroscope reading is not finite at sample {row}")
-        return {"gyro_sigma": noise.gyro_noise_std(problem.log.array)}
+        return GyroNoise(noise.gyro_noise_std(problem.array))
 
     def terms(self, problem, states, params):
-        n, s = problem.n, problem.gyro_sigma
+        n, s = problem.n, problem.noise.gyro.sigma
         gb = problem.global_part(params, "gyro_bias")
         r, j = gyroscope.gyroscope_residual(states[:, OMEGA], problem.log.gyro_b_radps, gb)
         jg = None
@@ -728,11 +733,11 @@ class GyroscopeGroup(FactorGroup):
 
     def gtsam_factors(self, problem):
         kg = problem.global_blocks["gyro_bias"][1] if "gyro_bias" in problem.global_blocks else None
-        noise = diagonal_noise(np.full(3, problem.gyro_sigma))
+        noise = diagonal_noise(np.full(3, problem.noise.gyro.sigma))
         return [gyroscope.make_gyroscope_factor(omega_key(k), problem.log.gyro_b_radps[k], noise, kg) for k in range(problem.n)]
 
     def log_normaliser(self, problem):
-        return 3 * problem.n * float(np.log(problem.gyro_sigma))
+        return 3 * problem.n * float(np.log(problem.noise.gyro.sigma))
 
 
 class FreeFlightGroup(FactorGroup):
@@ -779,24 +784,24 @@ class InclinometerGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return bool(problem.attitude and problem.use_inclinometer)
 
-    def noise(self, problem) -> dict:
+    def noise(self, problem: ModelView) -> TiltNoise:
         if not np.all(np.isfinite(problem.log.tilt_rad)):
             row = int(np.argwhere(~np.isfinite(problem.log.tilt_rad))[0, 0])
             raise DataError(f"{problem.log.source}: inclinometer reading is not finite at sample {row}")
-        return {"tilt_sigma": noise.tilt_noise_std(problem.log.array)}
+        return TiltNoise(noise.tilt_noise_std(problem.log.array))
 
     def terms(self, problem, states, params):
-        s = problem.tilt_sigma
+        s = problem.noise.tilt.sigma
         r, j = inclinometer.inclinometer_residual(problem.rotations(states), problem.log.tilt_rad)
         J = unary_jacobian(problem, [(problem.layout.rotation, j["r"])], 2, problem.n) / s
         return [Term("unary", r / s, {"x": J})]
 
     def gtsam_factors(self, problem):
-        noise = diagonal_noise(np.full(2, problem.tilt_sigma))
+        noise = diagonal_noise(np.full(2, problem.noise.tilt.sigma))
         return [inclinometer.make_inclinometer_factor(attitude_key(k), problem.log.tilt_rad[k], noise) for k in range(problem.n)]
 
     def log_normaliser(self, problem):
-        return 2 * problem.n * float(np.log(problem.tilt_sigma))
+        return 2 * problem.n * float(np.log(problem.noise.tilt.sigma))
 
 
 class CalibrationPriorGroup(FactorGroup):

@@ -18,16 +18,84 @@ group's name to each field's metadata, and give each group's values back as a fr
 makes the flat options from group values. A method has no option of a group it does not carry: the
 fixed-lag smoother has no ``window_s`` nor ``estimate_attitude``, the batch smoother no ``lag_s``.
 
-Values are checked by the flat classes (the group dataclasses only hold them).
+Each declaration carries its check (:mod:`gfimu.option`: a range, a switch, one of the values of the
+:class:`enum.StrEnum` below for the seven choices); the assembled classes check every value when they are made
+(:func:`gfimu.option.check_declared`), and ``-O NAME=VALUE`` is read by the same check. Only the rules that tie
+two options (``window_s`` and ``overlap_s``, the oscillator and the motion model) are written apart
+(:class:`gfimu.smoother.model.problem.SmootherOptions`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from enum import StrEnum
 
 from ...noise import DEFAULT_ACCEL_NOISE_STD_MPS2
-from ...option import option
+from ...option import Choice, Number, Numbers, Satisfies, check_declared, option
+
+
+class MotionModel(StrEnum):
+    """``motion_model``: white angular jerk, or white angular snap (batch smoother only)."""
+    JERK = "jerk"
+    SNAP = "snap"
+
+
+class Measurement(StrEnum):
+    """``measurement``: the raw accelerometer readings, or the per-sample inversion (batch smoother only)."""
+    ACCELEROMETER = "accelerometer"
+    QUADRATIC = "quadratic"
+
+
+class Initialisation(StrEnum):
+    """``initialisation``: the initial states of each solve."""
+    SIGN_RESOLVING = "sign-resolving"
+    ML = "ml"
+
+
+class RobustLoss(StrEnum):
+    """``robust_loss``: the loss of the robust re-weighting."""
+    HUBER = "huber"
+    CAUCHY = "cauchy"
+
+
+class Solver(StrEnum):
+    """``solver``: the batch smoother's solver."""
+    NUMPY = "numpy"
+    GTSAM = "gtsam"
+
+
+class Engine(StrEnum):
+    """``engine``: the fixed-lag smoother's window solver."""
+    NUMPY = "numpy"
+    GTSAM = "gtsam"
+
+
+class Guard(StrEnum):
+    """``guard``: what the comparison with the per-sample estimate does (:mod:`gfimu.smoother.guard`)."""
+    REPLACE = "replace"
+    WARN = "warn"
+    OFF = "off"
+
+
+MIN_DENSITY = 1e-9
+"""The smallest noise density (``..._per_sqrt_s``) given on a command line: the floor of the smoother's own tuned
+densities (1e-40 made its normal equations singular)."""
+
+POSITIVE = Number(0.0, low_open=True)
+"""A number > 0 (a std, a length of time)."""
+AT_LEAST_ZERO = Number(0.0)
+"""A number >= 0 (0: off)."""
+DENSITY = Number(0.0, low_open=True, least_given=MIN_DENSITY)
+"""A noise density: > 0, and at least :data:`MIN_DENSITY` on a command line."""
+COUNT = Number(1, integer=True)
+"""An integer >= 1."""
+
+
+def _factor_groups(value) -> bool:
+    from .groups import FactorGroup
+
+    return isinstance(value, (tuple, list)) and all(isinstance(g, FactorGroup) for g in value)
 
 
 @dataclass(frozen=True)
@@ -37,43 +105,48 @@ class ModelOptions:
 
     motion_model: str = option("jerk", help=(
         "'jerk': ω̇ is a random walk (white angular jerk, state [ω, ω̇, f]); 'snap': ω̈ is a random walk (white "
-        "angular snap, state [ω, ω̇, f, ω̈]), smoother for slow, smooth motion (batch smoother only)"))
+        "angular snap, state [ω, ω̇, f, ω̈]), smoother for slow, smooth motion (batch smoother only)"),
+        check=Choice(MotionModel))
     omega_dot_random_walk_radps2_per_sqrt_s: float = option(30.0, "rad/s²/√s", (
         "white angular jerk density ('jerk' model): how fast ω̇ may change; larger follows faster motion, "
-        "smooths less"))
+        "smooths less"), check=DENSITY)
     specific_force_random_walk_mps2_per_sqrt_s: float = option(30.0, "m/s²/√s", (
-        "random walk density of the specific force: how fast it may change"))
+        "random walk density of the specific force: how fast it may change"), check=DENSITY)
     default_accel_noise_std_mps2: float = option(DEFAULT_ACCEL_NOISE_STD_MPS2, "m/s²", (
         "accelerometer white-noise std when no axis of array.toml gives one (an axis without one among axes "
-        "with one takes their mean)"))
+        "with one takes their mean)"), check=POSITIVE)
     use_gyro: bool = option(True, help="use the gyroscope when the array has one")
-    initial_omega_std_radps: float = option(100.0, "rad/s", "weak prior std of the first sample's ω (zero mean)")
+    initial_omega_std_radps: float = option(100.0, "rad/s", "weak prior std of the first sample's ω (zero mean)",
+        check=POSITIVE)
     initial_omega_dot_std_radps2: float = option(1000.0, "rad/s²", (
-        "weak prior std of the first sample's ω̇ (zero mean)"))
+        "weak prior std of the first sample's ω̇ (zero mean)"), check=POSITIVE)
     initial_specific_force_std_mps2: float = option(1000.0, "m/s²", (
-        "weak prior std of the first sample's specific force (zero mean), keeping the normal equations definite"))
+        "weak prior std of the first sample's specific force (zero mean), keeping the normal equations definite"),
+        check=POSITIVE)
     process_axis_factors: tuple[float, float, float] = option((1.0, 1.0, 1.0), help=(
         "factor on the jerk (or snap) density per body axis x, y, z: motion about one body axis (turntable, "
-        "pendulum) is far smoother about the others"))
+        "pendulum) is far smoother about the others"), check=Numbers(3, 0.0, low_open=True))
     process_axis_frequencies_hz: tuple[float, float, float] = option((0.0, 0.0, 0.0), "Hz", (
         "'jerk' model: natural frequency per body axis x, y, z; f > 0 makes the motion about that axis a "
         "driven oscillator ω̈ = -(2π f)² ω + white jerk (turntables, shakers, pendulums, gait), 0 the plain "
-        "white jerk"))
+        "white jerk"), check=Numbers(3, 0.0, 1e4))
     factor_groups: tuple = option((), help=(
         "further factor groups (gfimu.smoother.model.groups.FactorGroup, from Python) added to the model of every "
         "solve; the fixed-lag smoother takes those whose rows each tie one sample (per_sample) or two "
-        "consecutive samples (steps)"))
+        "consecutive samples (steps)"),
+        check=Satisfies(_factor_groups, "a tuple of FactorGroup objects (gfimu.smoother.model.groups)"))
     compute_sigma: bool = option(False, help=(
         "also output one-sigma marginal uncertainties of the estimates (sigma_ columns)"))
     max_iterations: int = option(30, help=(
         "largest number of Levenberg-Marquardt iterations per solve (the fixed-lag smoother: of the solves of "
-        "its tuning stretch)"))
-    relative_tolerance: float = option(1e-10, help="stop a solve when the cost decreases by less than this fraction")
+        "its tuning stretch)"), check=COUNT)
+    relative_tolerance: float = option(1e-10, help="stop a solve when the cost decreases by less than this fraction",
+        check=AT_LEAST_ZERO)
     initialisation: str = option("sign-resolving", help=(
         "initial states: 'sign-resolving' (gfimu.smoother.solve.initialise) or 'ml' (the per-sample "
         "maximum-likelihood estimate with its sign choice; slower, more robust on real recordings with large "
-        "model residuals and fast motion at low rates)"))
-    init_window_s: float = option(0.4, "s", "window of the sign-resolving initialisation")
+        "model residuals and fast motion at low rates)"), check=Choice(Initialisation))
+    init_window_s: float = option(0.4, "s", "window of the sign-resolving initialisation", check=POSITIVE)
     ml_sign_chain: bool = option(False, help=(
         "with initialisation='ml': re-choose the sign of each sample's ML ω so that consecutive samples follow "
         "the trapezoid of ML's ω̇ (dynamic programming), fixing the per-sample sign choice where a fast "
@@ -88,11 +161,11 @@ class BatchModelOptions:
     smoother chooses its own from the stream, :mod:`gfimu.smoother.stream.model_choice`)."""
 
     omega_ddot_random_walk_radps3_per_sqrt_s: float = option(300.0, "rad/s³/√s", (
-        "white angular snap density ('snap' model): how fast ω̈ may change"))
+        "white angular snap density ('snap' model): how fast ω̈ may change"), check=DENSITY)
     measurement: str = option("accelerometer", help=(
         "'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible); "
         "'quadratic': the per-sample inversion [f, ω̇, q(ω)] with its covariance (an invertible array, no "
-        "self-calibration; batch smoother only)"))
+        "self-calibration; batch smoother only)"), check=Choice(Measurement))
     use_inclinometer: bool = option(False, help=(
         "use the inclinometer's tilt angles (Lu, Tsai & Lin 2010); implies estimate_attitude (batch smoother only)"))
     estimate_attitude: bool = option(False, help=(
@@ -101,39 +174,43 @@ class BatchModelOptions:
         "through a weak prior (initial_yaw_std_rad; batch smoother only)"))
     accel_random_walk_mps2_per_sqrt_s: float = option(30.0, "m/s²/√s", (
         "with the attitude: random walk density of the gravity-free acceleration (replaces the specific-force "
-        "one)"))
+        "one)"), check=DENSITY)
     attitude_random_walk_rad_per_sqrt_s: float = option(1e-3, "rad/√s", (
-        "with the attitude: process noise of R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)"))
+        "with the attitude: process noise of R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)"), check=DENSITY)
     initial_yaw_std_rad: float = option(1.0, "rad", (
-        "with the attitude: prior std of the first sample's yaw (the tilt prior, 10 rad, leaves it free)"))
+        "with the attitude: prior std of the first sample's yaw (the tilt prior, 10 rad, leaves it free)"),
+        check=POSITIVE)
     self_calibrate_bias: bool = option(False, help=(
         "estimate a constant bias per accelerometer axis and the gyro bias (batch smoother only)"))
-    bias_prior_std_mps2: float = option(0.1, "m/s²", "prior std of each accelerometer bias (around 0)")
+    bias_prior_std_mps2: float = option(0.1, "m/s²", "prior std of each accelerometer bias (around 0)", check=POSITIVE)
     gyro_bias_prior_std_radps: float = option(0.05, "rad/s", (
-        "prior std of the gyro bias (around 0) with self_calibrate_bias"))
+        "prior std of the gyro bias (around 0) with self_calibrate_bias"), check=POSITIVE)
     self_calibrate_scale: bool = option(False, help=(
         "estimate a constant scale-factor error per accelerometer axis (batch smoother only)"))
     scale_prior_std: float = option(0.01, help=(
-        "prior std of each accelerometer scale-factor error (a fraction, around 0) with self_calibrate_scale"))
+        "prior std of each accelerometer scale-factor error (a fraction, around 0) with self_calibrate_scale"),
+        check=POSITIVE)
     free_flight: bool = option(False, help=(
         "treat the whole log as torque-free free flight (McGinnis, Perkins & King 2012): needs [body] in array.toml (batch "
         "smoother only)"))
-    torque_noise_std_nm: float = option(1e-4, "N m", "std of the unmodelled torque in the Euler factor")
-    free_fall_std_mps2: float = option(0.05, "m/s²", "std of the specific force at the centre of mass in free flight")
+    torque_noise_std_nm: float = option(1e-4, "N m", "std of the unmodelled torque in the Euler factor", check=POSITIVE)
+    free_fall_std_mps2: float = option(0.05, "m/s²", "std of the specific force at the centre of mass in free flight",
+        check=POSITIVE)
     accel_noise_slope_mps2_per_radps: float = option(0.0, "m/s² per rad/s", (
         "accelerometer noise std growing with the rotation rate, sqrt(σ² + (slope |ω|)²) per sample, "
         "re-weighted from the current ω over reweight_iterations solves (MIMU4444: about 0.047); 0 keeps the "
-        "noise of array.toml (the fixed-lag smoother's model sets it itself)"))
+        "noise of array.toml (the fixed-lag smoother's model sets it itself)"), check=AT_LEAST_ZERO)
     robust_loss: str = option("huber", help=(
         "loss of the robust re-weighting, 'huber' or 'cauchy' (iteratively re-weighted least squares, one "
-        "re-weighting per solve of reweight_iterations; the fixed-lag smoother's model sets it itself)"))
+        "re-weighting per solve of reweight_iterations; the fixed-lag smoother's model sets it itself)"),
+        check=Choice(RobustLoss))
     accel_robust_threshold: float = option(0.0, "σ", (
         "robust loss on each accelerometer axis, threshold on its whitened residual; 0 keeps the Gaussian loss "
-        "(the fixed-lag smoother's model sets it itself)"))
+        "(the fixed-lag smoother's model sets it itself)"), check=AT_LEAST_ZERO)
     process_robust_threshold: float = option(0.0, "σ", (
         "robust loss on each motion-model step, threshold on its whitened residual norm / sqrt(rows); 0 keeps "
         "the Gaussian loss; lets sudden jerks through unsmoothed (the fixed-lag smoother's model sets it "
-        "itself)"))
+        "itself)"), check=AT_LEAST_ZERO)
 
 
 @dataclass(frozen=True)
@@ -142,11 +219,13 @@ class BatchOptions:
 
     window_s: float | None = option(30.0, "s", (
         "solve logs longer than this in overlapping windows of at most this length, stretched by up to a "
-        "quarter when that saves a short last window (None: the whole log at once)"))
-    overlap_s: float = option(2.0, "s", "overlap of consecutive windows; each half of it is taken from the nearer window")
+        "quarter when that saves a short last window (None: the whole log at once)"),
+        check=Number(0.0, low_open=True, none=True))
+    overlap_s: float = option(2.0, "s", "overlap of consecutive windows; each half of it is taken from the nearer window",
+        check=AT_LEAST_ZERO)
     reweight_iterations: int = option(3, help=(
         "solves with the noise re-weighted from the previous solution when accel_noise_slope_mps2_per_radps or a "
-        "robust threshold is set"))
+        "robust threshold is set"), check=COUNT)
     branch_restarts: bool = option(True, help=(
         "robust model of an inconsistent log: after each window's solve, move the short runs of samples "
         "between outlying motion-model steps to the other branches of ω (sign-flipped, mirrored through the "
@@ -154,14 +233,14 @@ class BatchOptions:
     tune_span_s: float | None = option(10.0, "s", (
         "with tune_process_noise: choose the process noise on at most this much of each solve window, its "
         "middle (10 s of readings fix a handful of noise levels well, and the choice then costs no more as "
-        "the window grows; None: the whole window)"))
+        "the window grows; None: the whole window)"), check=Number(0.0, low_open=True, none=True))
     workers: int = option(0, "processes", (
         "processes solving the solve windows at once (the same numbers): 0 = one per CPU, at most one per "
         "window; 1 = all in this process (attitude windows, which start from the one before, and the gtsam "
-        "solver always run in this process)"))
+        "solver always run in this process)"), check=Number(0, integer=True))
     solver: str = option("numpy", help=(
         "batch solver: 'numpy' (vectorised banded Levenberg-Marquardt, linear in the length) or 'gtsam' (the "
-        "same problem as a GTSAM graph, eliminated in time order: a cross-check)"))
+        "same problem as a GTSAM graph, eliminated in time order: a cross-check)"), check=Choice(Solver))
 
 
 @dataclass(frozen=True)
@@ -170,32 +249,38 @@ class StreamOptions:
 
     lag_s: float = option(0.2, "s", "the delay of each estimate after its sample arrives (a live stream's output "
                           "delay): the seconds of future data behind it, less the screening's look-ahead where that is "
-                          "at most half of it (28 samples and a 0.02 s block: 0.076 s at 500 Hz), else plus it")
+                          "at most half of it (28 samples and a 0.02 s block: 0.076 s at 500 Hz), else plus it",
+                          check=POSITIVE)
     relinearize_threshold: float = option(0.1, "rad/s", (
-        "engine 'gtsam': iSAM2 relinearises ω when its update exceeds this (ω̇ and f enter linearly)"))
-    relinearize_skip: int = option(10, help="engine 'gtsam': iSAM2 checks for relinearisation every this many updates")
+        "engine 'gtsam': iSAM2 relinearises ω when its update exceeds this (ω̇ and f enter linearly)"), check=POSITIVE)
+    relinearize_skip: int = option(10, help="engine 'gtsam': iSAM2 checks for relinearisation every this many updates",
+        check=COUNT)
     marginalise_every_s: float | None = option(None, "s", (
         "engine 'gtsam': old states are marginalised in blocks of this length (the window holds lag_s to "
-        "lag_s + twice this); None: 125 samples, at most 0.25 s"))
-    warmup_s: float = option(0.2, "s", "data gathered at the start of each segment for its initialisation")
+        "lag_s + twice this); None: 125 samples, at most 0.25 s"), check=Number(0.0, low_open=True, none=True))
+    warmup_s: float = option(0.2, "s", "data gathered at the start of each segment for its initialisation",
+        check=AT_LEAST_ZERO)
     hold_max_s: float = option(4.0, "s", (
         "engine 'numpy': the first rows of each segment are held until the data decide the sign of ω (a "
         "log-likelihood ratio of 6.9 nats between its branches), then come out re-solved; at most this long "
-        "(0: no hold)"))
+        "(0: no hold)"), check=AT_LEAST_ZERO)
     gap_factor: float = option(1.5, help=(
-        "a step longer than this times the nominal step is a gap: the smoother restarts after it"))
+        "a step longer than this times the nominal step is a gap: the smoother restarts after it"),
+        check=Number(1.0, low_open=True))
     fast_measurement: bool = option(True, help=(
         "one factor for all accelerometer axes and a preallocated trapezoid factor (the same residuals, "
         "cheaper); False: the per-sensor factors of gfimu.factors (engine 'gtsam' only)"))
     engine: str = option("numpy", help=(
         "window solver: 'numpy' (a Kalman filter carrying the window's cross-covariances) or 'gtsam' (iSAM2's "
-        "IncrementalFixedLagSmoother, the reference)"))
+        "IncrementalFixedLagSmoother, the reference)"), check=Choice(Engine))
     tune_window_s: float = option(3.0, "s", (
-        "length of the stretch of data the model is first chosen on (the stream's one-time start-up delay)"))
+        "length of the stretch of data the model is first chosen on (the stream's one-time start-up delay)"),
+        check=POSITIVE)
     retune_every_s: float = option(10.0, "s", (
         "with auto_model: choose the model again on the recent past this often (and at once when the motion "
-        "outgrows it)"))
-    model_window_s: float = option(30.0, "s", "with auto_model: length of the recent past the model is chosen on")
+        "outgrows it)"), check=POSITIVE)
+    model_window_s: float = option(30.0, "s", "with auto_model: length of the recent past the model is chosen on",
+        check=POSITIVE)
     screen_readings: bool = option(True, help=(
         "screen the readings for gross errors as they come, by the rule gfimu estimate applies to a whole log "
         "(gfimu.readings.StreamScreen): each reading waits max(28 samples, 0.2 s) plus at most 0.05 s for its "
@@ -237,7 +322,7 @@ class GuardOptions:
         "compare the answer with the per-sample ML estimate where that is well determined: 'replace' uses the "
         "per-sample answer, its sign following the smoother's around it, over spans where the smoother fits the "
         "readings worse than its model allows, and warns; 'warn' keeps the smoother's answer and warns; 'off' "
-        "skips the comparison"))
+        "skips the comparison"), check=Choice(Guard))
 
 
 GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "batch_model": BatchModelOptions, "batch": BatchOptions,
@@ -291,6 +376,26 @@ def _from_groups(cls, *parts, **changes):
     return cls(**{**values, **changes})
 
 
+def _checked_post_init(cls):
+    """``__post_init__`` of an assembled class: every option checked by its declaration
+    (:func:`gfimu.option.check_declared`; once, by the class the object is made of), then the class's own
+    ``__post_init__`` (or its base's)."""
+    own = cls.__dict__.get("__post_init__")
+
+    def __post_init__(self) -> None:
+        if type(self).__post_init__ is __post_init__:
+            check_declared(self, getattr(self, "method", "") or "smoother")
+        if own is not None:
+            own(self)
+        else:
+            parent = super(cls, self)
+            if hasattr(parent, "__post_init__"):
+                parent.__post_init__()
+
+    __post_init__.__doc__ = own.__doc__ if own is not None else _checked_post_init.__doc__
+    return __post_init__
+
+
 def assemble(*groups: str, **defaults):
     """Class decorator, under ``@dataclass``: the class gets the fields of the option ``groups`` (their
     defaults, types and metadata, with the group's name added to the metadata), a property per group
@@ -324,6 +429,7 @@ def assemble(*groups: str, **defaults):
             if group != "guard":
                 setattr(cls, group, _group_property(group))
         cls.from_groups = classmethod(_from_groups)
+        cls.__post_init__ = _checked_post_init(cls)
         return cls
 
     return wrap

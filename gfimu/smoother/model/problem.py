@@ -14,7 +14,8 @@ equation of every sensor (Ho & Lin 2009, eq. 6) or the per-sample inversion; the
 [ω, ω̇, ω̈]); the random walk of the specific force, or with the attitude its kinematics and the
 random walk of the gravity-free acceleration; the gyroscope, free flight (McGinnis, Perkins & King 2012, eq. 1), the
 inclinometer; weak priors on the first state and priors on the calibration variables so that
-nothing in the graph is unobserved. Each group sets its noise on the problem when it is built.
+nothing in the graph is unobserved. Each group gives its noise levels when the problem is built
+(:class:`gfimu.smoother.model.noise_levels.NoiseLevels`, ``problem.noise``).
 
 :class:`SmootherProblem` assembles the groups: their terms vectorised over the samples (the fast
 path), and the same problem as a GTSAM ``NonlinearFactorGraph`` of their factors (the graph path).
@@ -42,10 +43,9 @@ from ...factors import (
     specific_force_key,
 )
 from ...log import Log
-from ...parallel import check_workers
-from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term, group_noise  # noqa: F401  (Term: also importable from here)
-from .noise_levels import NoiseLevels, ReadsNoiseLevels
-from .option_groups import assemble
+from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
+from .noise_levels import NoiseLevels
+from .option_groups import MotionModel, assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -63,67 +63,13 @@ class SmootherOptions:
     (:meth:`gfimu.smoother.stream.fixed_lag.FixedLagEstimator.options`)."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "omega_dot_random_walk_radps2_per_sqrt_s",
-            "omega_ddot_random_walk_radps3_per_sqrt_s",
-            "specific_force_random_walk_mps2_per_sqrt_s",
-            "default_accel_noise_std_mps2",
-            "bias_prior_std_mps2",
-            "gyro_bias_prior_std_radps",
-            "scale_prior_std",
-            "torque_noise_std_nm",
-            "free_fall_std_mps2",
-            "initial_omega_std_radps",
-            "initial_omega_dot_std_radps2",
-            "initial_specific_force_std_mps2",
-            "init_window_s",
-            "accel_random_walk_mps2_per_sqrt_s",
-            "attitude_random_walk_rad_per_sqrt_s",
-            "initial_yaw_std_rad",
-        ):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise InputError(f"smoother option {name} must be a positive number, got {v!r}")
-        span = self.tune_span_s
-        if span is not None and not (isinstance(span, (int, float)) and np.isfinite(span) and span > 0):
-            raise InputError(f"smoother option tune_span_s must be a positive number [s] or None, got {span!r}")
-        check_workers(self.workers)
+        """The rules that tie two options (each option's own range is checked by its declaration,
+        :mod:`gfimu.smoother.model.option_groups`)."""
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
             raise InputError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
-        if self.motion_model not in ("jerk", "snap"):
-            raise InputError(f"smoother option motion_model must be 'jerk' or 'snap', got {self.motion_model!r}")
-        if self.measurement not in ("accelerometer", "quadratic"):
-            raise InputError(f"smoother option measurement must be 'accelerometer' or 'quadratic', got {self.measurement!r}")
-        if not (np.isfinite(self.accel_noise_slope_mps2_per_radps) and self.accel_noise_slope_mps2_per_radps >= 0):
-            raise InputError(f"smoother option accel_noise_slope_mps2_per_radps must be >= 0, got {self.accel_noise_slope_mps2_per_radps!r}")
-        if self.initialisation not in ("sign-resolving", "ml"):
-            raise InputError(f"smoother option initialisation must be 'sign-resolving' or 'ml', got {self.initialisation!r}")
-        if int(self.reweight_iterations) < 1:
-            raise InputError("smoother option reweight_iterations must be >= 1")
-        f = np.asarray(self.process_axis_factors, dtype=float)
-        if f.shape != (3,) or not np.all(np.isfinite(f) & (f > 0)):
-            raise InputError(f"smoother option process_axis_factors must be 3 positive numbers, got {self.process_axis_factors!r}")
-        fr = np.asarray(self.process_axis_frequencies_hz, dtype=float)
-        if fr.shape != (3,) or not np.all(np.isfinite(fr) & (fr >= 0)):
-            raise InputError("smoother option process_axis_frequencies_hz must be 3 numbers >= 0, "
-                             f"got {self.process_axis_frequencies_hz!r}")
-        if np.any(fr > 1e4):  # beyond any array's Nyquist frequency: ω = 2πf overflows the oscillator's step
-            raise InputError("smoother option process_axis_frequencies_hz must be at most 1e4 Hz (a natural frequency "
-                             f"of the motion, below half the sample rate), got {self.process_axis_frequencies_hz!r}")
-        if np.any(fr > 0) and self.motion_model != "jerk":
+        frequencies = np.asarray(self.process_axis_frequencies_hz, dtype=float)
+        if np.any(frequencies > 0) and self.motion_model != MotionModel.JERK:
             raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
-        if int(self.max_iterations) < 1:
-            raise InputError("smoother option max_iterations must be >= 1")
-        if self.robust_loss not in ("huber", "cauchy"):
-            raise InputError(f"smoother option robust_loss must be 'huber' or 'cauchy', got {self.robust_loss!r}")
-        for name in ("accel_robust_threshold", "process_robust_threshold"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
-                raise InputError(f"smoother option {name} must be >= 0 (0: off), got {v!r}")
-        groups = self.factor_groups
-        if not (isinstance(groups, (tuple, list)) and all(isinstance(g, FactorGroup) for g in groups)):
-            raise InputError(f"smoother option factor_groups must be a tuple of FactorGroup objects "
-                             f"(gfimu.smoother.model.groups), got {groups!r}")
 
     @property
     def robust(self) -> bool:
@@ -189,10 +135,11 @@ def robust_loss(e2: np.ndarray, c: float, loss: str) -> np.ndarray:
 
 
 @dataclass(eq=False)
-class SmootherProblem(ReadsNoiseLevels):
+class SmootherProblem:
     """The smoothing problem of one contiguous log (fast path and graph path): the log, the options,
     the model's groups and their noise levels (:attr:`noise`, a frozen
-    :class:`~gfimu.smoother.model.noise_levels.NoiseLevels`; read as ``problem.NAME`` too).
+    :class:`~gfimu.smoother.model.noise_levels.NoiseLevels`: ``problem.noise.accel.sigma``, ...). What its
+    groups read of it is :class:`~gfimu.smoother.model.noise_levels.ModelView`.
 
     Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
     around new noise levels (:meth:`with_noise`, :meth:`with_motion_dependent_noise`,
@@ -252,7 +199,7 @@ class SmootherProblem(ReadsNoiseLevels):
         # (the first-state prior), then the rest in order; each gives its own noise levels
         groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
         self.groups = tuple(sorted(groups, key=lambda g: 0 if g.measurement else 1 if g.first else 2))
-        self.noise = NoiseLevels(group_noise(self.groups, self))
+        self.noise = NoiseLevels.gather(self.groups, self)
         object.__setattr__(self, "_built", True)
 
     def __setattr__(self, name: str, value) -> None:
@@ -261,8 +208,14 @@ class SmootherProblem(ReadsNoiseLevels):
                                  "make a new one with with_noise(...)")
         object.__setattr__(self, name, value)
 
+    @property
+    def array(self):
+        """The log's sensor array."""
+        return self.log.array
+
     def with_noise(self, **changes) -> SmootherProblem:
-        """The same problem with these noise levels changed (:meth:`NoiseLevels.replace`)."""
+        """The same problem with these fields of its noise levels changed (:meth:`NoiseLevels.replace`:
+        ``problem.with_noise(accel=problem.noise.accel.scaled(2.0))``)."""
         new = copy.copy(self)
         object.__setattr__(new, "noise", self.noise.replace(**changes))
         return new
@@ -271,70 +224,55 @@ class SmootherProblem(ReadsNoiseLevels):
         """Noise std per sample ``sqrt(σ² + (slope |ω_k|)²)`` from an estimate of ω: the rigid-body
         residual of real arrays grows with the rotation rate (sensor positions, alignment and
         dynamic errors). Re-evaluated from each new estimate (iteratively re-weighted least squares)."""
-        wn = np.linalg.norm(np.asarray(omega_b_radps, dtype=float), axis=1)
-        sigma = np.sqrt(self.accel_sigma[None, :] ** 2 + (slope_mps2_per_radps * wn[:, None]) ** 2)
-        return self.with_noise(accel_sigma_per_sample=sigma, accel_base=sigma)
+        return self.with_noise(accel=self.noise.accel.motion_dependent(omega_b_radps, slope_mps2_per_radps))
 
     def with_process_factors(self, factors: np.ndarray) -> SmootherProblem:
         """The white-jerk steps' stds times ``factors`` (N-1,) (the local motion density of
         :func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
-        return self.with_noise(trapezoid_sigma=self.trapezoid_sigma * factors,
-                               omega_dot_step_sigma=self.omega_dot_step_sigma * factors)
+        return self.with_noise(motion=self.noise.motion.scaled_steps(factors))
+
+    def with_accel_noise_scale(self, scale: float) -> SmootherProblem:
+        """Every accelerometer noise std (and the per-sample inversion's) times ``scale``."""
+        return self.with_noise(accel=self.noise.accel.scaled(scale))
+
+    def with_attitude_prior(self, rotation_wb: np.ndarray) -> SmootherProblem:
+        """The first attitude's prior centred on ``rotation_wb`` (3, 3)."""
+        return self.with_noise(attitude=self.noise.attitude.with_prior(rotation_wb))
 
     def base_noise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The noise the robust re-weighting starts from: accelerometer std (N, axes) (the
         motion-dependent one when set), trapezoid and ω̇-step std of the motion-model steps (N-1,)."""
-        accel = self.accel_base
-        if accel is None:
-            accel = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
-        process = (self.trapezoid_sigma, self.omega_dot_step_sigma) if self.process_base is None else self.process_base
+        accel = self.noise.accel.start(self.n)
+        process = self.noise.motion.start()
         return np.array(accel), np.array(process[0]), np.array(process[1])
 
     def with_base_noise(self, accel_sigma: np.ndarray, trapezoid_sigma: np.ndarray,
                         omega_dot_step_sigma: np.ndarray) -> SmootherProblem:
         """These (as :meth:`base_noise` returns them) as the current noise and the one the robust
         re-weighting starts from (the white-jerk motion model)."""
-        accel = np.array(accel_sigma, dtype=float)
-        return self.with_noise(accel_sigma_per_sample=accel, accel_base=accel,
-                               trapezoid_sigma=np.array(trapezoid_sigma, dtype=float),
-                               omega_dot_step_sigma=np.array(omega_dot_step_sigma, dtype=float), process_base=None)
+        return self.with_noise(accel=self.noise.accel.with_base(accel_sigma),
+                               motion=self.noise.motion.with_steps(trapezoid_sigma, omega_dot_step_sigma))
 
     def reweighted(self, states: np.ndarray, params: np.ndarray | None = None) -> SmootherProblem:
         """The robust (Huber or Cauchy) re-weighting at ``states`` (iteratively re-weighted least squares).
 
-        Each accelerometer axis (``accel_robust_threshold``) and each motion-model step
-        (``process_robust_threshold``) gets the IRLS weight ``w(e)`` of its whitened residual e
-        (for a step: its norm / sqrt(rows)); the weight divides the factor's variance. Weights are
-        computed against the un-reweighted noise (the motion-dependent one when set), so re-weighting
-        a re-weighted problem does not compound.
+        Each accelerometer axis (``accel_robust_threshold``, :meth:`AccelerometerGroup.reweighted`) and each
+        motion-model step (``process_robust_threshold``, :meth:`MotionModelGroup.reweighted`) gets the IRLS
+        weight ``w(e)`` of its whitened residual e (for a step: its norm / sqrt(rows)); the weight divides
+        the factor's variance. Weights are computed against the un-reweighted noise (the motion-dependent
+        one when set), so re-weighting a re-weighted problem does not compound.
         """
         opt = self.options
         P = np.zeros(self.n_global) if params is None else params
         out = self
-
-        def weight(e, c):
-            return robust_weight(e, c, opt.robust_loss)
-
         if opt.accel_robust_threshold > 0 and opt.measurement == "accelerometer":
-            base = self.accel_base
-            if base is None:
-                base = np.broadcast_to(self.accel_sigma, (self.n, len(self.accel_sigma)))
-            plain = out.with_noise(accel_sigma_per_sample=np.array(base))  # whiten with the base noise
-            r = self.group(AccelerometerGroup).whitened_residual(plain, states, P)
-            out = out.with_noise(accel_sigma_per_sample=base / np.sqrt(weight(r, opt.accel_robust_threshold)))
+            accel = self.group(AccelerometerGroup).reweighted(
+                self, states, P, lambda e: robust_weight(e, opt.accel_robust_threshold, opt.robust_loss))
+            out = out.with_noise(accel=accel)
         if opt.process_robust_threshold > 0:
-            base = self.process_base
-            if base is None:
-                base = (self.trapezoid_sigma, self.omega_dot_step_sigma, self.snap_whiten if self.snap else None)
-            plain = out.with_noise(trapezoid_sigma=base[0], omega_dot_step_sigma=base[1], process_base=base,
-                                   **({"snap_whiten": base[2], "snap_cov": None} if self.snap else {}))
-            r = self.group(MotionModelGroup).step_residual(plain, states)
-            w = weight(np.sqrt(np.mean(r**2, axis=1)), opt.process_robust_threshold)
-            changes = {"trapezoid_sigma": base[0] / np.sqrt(w), "omega_dot_step_sigma": base[1] / np.sqrt(w)}
-            if self.snap:
-                whiten = base[2] * np.sqrt(w)[:, None, None]
-                changes.update(snap_whiten=whiten, snap_cov=np.linalg.inv(np.swapaxes(whiten, 1, 2) @ whiten))
-            out = plain.with_noise(**changes)
+            motion = self.group(MotionModelGroup).reweighted(
+                out, states, lambda e: robust_weight(e, opt.process_robust_threshold, opt.robust_loss))
+            out = out.with_noise(motion=motion)
         return out
 
     # --- calibration variables -------------------------------------------

@@ -48,7 +48,7 @@ def applies(problem: SmootherProblem) -> bool:
     motion model's steps, no attitude, no calibration variables."""
     opt = problem.options
     return (opt.measurement == "accelerometer" and opt.process_robust_threshold > 0 and not problem.snap
-            and not problem.attitude and not getattr(problem, "oscillator", False) and problem.n_global == 0
+            and not problem.attitude and not problem.noise.motion.oscillator and problem.n_global == 0
             and problem.n > 2 * MARGIN_SAMPLES + RUN_SAMPLES)
 
 

@@ -26,14 +26,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ... import noise, rigid_body
+from ... import rigid_body
 from ...array import SensorArray
 from ...errors import InputError
 from ...factors import accelerometer
 from ...log import Log
 from ..model.problem import SmootherOptions
-from ..model.groups import BUILT_IN, FirstStatePriorGroup, group_noise
-from ..model.noise_levels import ReadsNoiseLevels
+from ..model.groups import BUILT_IN, AccelerometerGroup, FirstStatePriorGroup, GyroscopeGroup
+from ..model.noise_levels import NoiseLevels
 from ..model.layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 
@@ -77,12 +77,13 @@ def _linear_factor(noise_model, factor_keys: list[int], residual, jacobians: tup
     return gtsam.CustomFactor(noise_model, factor_keys, error)
 
 
-class StreamView(ReadsNoiseLevels):
+class StreamView:
     """Samples of a stream seen as a problem of one sample (a per-sample group's terms) or of the two
-    samples of a step (a step group's terms): what a factor group reads of a
-    :class:`gfimu.smoother.model.problem.SmootherProblem` (``log``, ``options``, ``n``, ``dt_s``, ``layout``,
-    ``state_size``, its noise levels as attributes, no calibration variables), each group's noise
-    levels computed by its own :meth:`~gfimu.smoother.model.groups.FactorGroup.noise` on the view."""
+    samples of a step (a step group's terms): a :class:`gfimu.smoother.model.noise_levels.ModelView`, as the
+    batch smoother's :class:`gfimu.smoother.model.problem.SmootherProblem` is (``array``, ``log``, ``options``,
+    ``n``, ``dt_s``, ``layout``, ``state_size``, its :attr:`noise` levels, no calibration variables), each
+    group's noise levels computed by its own :meth:`~gfimu.smoother.model.groups.FactorGroup.noise` on the view
+    (:meth:`with_levels`)."""
 
     def __init__(self, array: SensorArray, options: SmootherOptions, timestamps_ns, accel=None, gyro=None,
                  dt_s: np.ndarray | None = None) -> None:
@@ -98,7 +99,7 @@ class StreamView(ReadsNoiseLevels):
         self.use_gyro = self.use_inclinometer = False
         self.n_global = 0
         self.global_blocks: dict = {}
-        self.noise: dict = {}
+        self.noise = NoiseLevels()
 
     @property
     def log(self) -> Log:
@@ -111,8 +112,8 @@ class StreamView(ReadsNoiseLevels):
         return self._log
 
     def with_levels(self, groups) -> StreamView:
-        """The view with the noise levels of ``groups`` (:func:`gfimu.smoother.model.groups.group_noise`)."""
-        self.noise = group_noise(groups, self)
+        """The view with the noise levels of ``groups`` (:meth:`NoiseLevels.gather`)."""
+        self.noise = NoiseLevels.gather(groups, self)
         return self
 
     def global_part(self, params: np.ndarray, name: str) -> None:
@@ -194,9 +195,13 @@ class ArrayModel:
         self.S_q = np.ascontiguousarray(S[:, 6:])
         self.S_f = np.ascontiguousarray(S[:, :3])
         self.S_dw = np.ascontiguousarray(S[:, 3:6])
-        sigma = noise.accel_noise_std(array, options.default_accel_noise_std_mps2)
-        sigma = sigma * self.accel_noise_scale
+        # the accelerometer, gyroscope and first-state noise of the batch smoother's groups, on a view of the array
+        levels = StreamView(array, options, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
+                                                              GyroscopeGroup())).noise
+        sigma = levels.accel.scaled(self.accel_noise_scale).sigma
         self.accel_sigma_mps2 = sigma
+        """The accelerometers' std per axis: :attr:`NoiseLevels.accel` (the option ``default_accel_noise_std_mps2``
+        where array.toml gives none) times ``accel_noise_scale``."""
         self._geometry = accelerometer.array_geometry(array)  # (directions, positions, column slice)
         self._gtsam_noise: dict = {}
         wL = self.S_lin / sigma[:, None]
@@ -204,7 +209,7 @@ class ArrayModel:
         self.linear_part_observable = np.linalg.matrix_rank(wL) == 6
         self._zero3 = np.zeros(3)
         self._eye3 = np.eye(3)
-        self.gyro_sigma_radps = float(noise.gyro_noise_std(array))  # as the batch smoother
+        self.gyro_sigma_radps = levels.gyro.sigma  # the batch smoother's GyroscopeGroup's
         self.groups = tuple(g for g in options.factor_groups if g.per_sample)
         """The per-sample groups of the options (:meth:`sample_terms`)."""
         self.step_groups = tuple(g for g in BUILT_IN + tuple(options.factor_groups) if g.steps)
@@ -213,7 +218,7 @@ class ArrayModel:
         self._fixed_steps = tuple(g for g in self.step_groups if g.linear and g in BUILT_IN)
         self._other_steps = tuple(g for g in self.step_groups if g not in self._fixed_steps)
         self._step_cache: dict = {}
-        self.first_sigma = FirstStatePriorGroup().noise(StreamView(array, options, [0]))["first_sigma"]
+        self.first_sigma = levels.first_state.sigma
         """The first-state prior's stds, as the batch smoother's :class:`~gfimu.smoother.model.groups.FirstStatePriorGroup`."""
         # the robust model of an inconsistent log (gfimu.smoother.tuning.model_choice): the noise grows with |ω| and
         # each axis may be weighted by the robust loss of its whitened residual (the stream's model

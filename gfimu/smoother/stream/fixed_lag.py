@@ -95,7 +95,8 @@ from .window_filter import FilterFailure, WindowFilter
 from .gtsam_window import GtsamWindow
 from ..solve.banded import solve
 from ..model.problem import SmootherOptions, options_reason
-from ..model.option_groups import GROUPS, assemble
+from ...option import check_declared
+from ..model.option_groups import GROUPS, Engine, StreamOptions, assemble
 from ..solve.initialise import initial_estimate
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from ..result import SmootherEstimator
@@ -186,7 +187,7 @@ class FixedLagUpdate:
     dropped: str | None = None
 
 
-ENGINES = ("numpy", "gtsam")
+ENGINES = tuple(engine.value for engine in Engine)
 """Window solvers: ``numpy`` (:mod:`gfimu.smoother.stream.window_filter`, the default) and ``gtsam``
 (``IncrementalFixedLagSmoother``, iSAM2)."""
 
@@ -284,31 +285,22 @@ class FixedLagSmoother:
                  clock_reset_s: float = 1.0, auto_model: bool = False, retune_every_s: float = 10.0,
                  model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0) -> None:
         options = options or SmootherOptions()
-        if engine not in ENGINES:
-            raise InputError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+        if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+            raise InputError(f"fixed-lag smoother: rate_hz must be a positive number, got {rate_hz!r}")
+        if marginalise_every_s is None:  # about 125 updates per block, at most 0.25 s
+            marginalise_every_s = min(0.25, 125.0 / rate_hz)
+        # the stream options, each checked by its declaration (gfimu.smoother.model.option_groups.StreamOptions)
+        check_declared(StreamOptions(lag_s=lag_s, relinearize_threshold=relinearize_threshold,
+                                     relinearize_skip=relinearize_skip, marginalise_every_s=marginalise_every_s,
+                                     warmup_s=warmup_s, hold_max_s=hold_max_s, gap_factor=gap_factor,
+                                     fast_measurement=fast_measurement, engine=engine, tune_window_s=tune_window_s,
+                                     retune_every_s=retune_every_s, model_window_s=model_window_s),
+                       "fixed-lag smoother")
+        if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
+            raise InputError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
         reason = fixed_lag_reason(array, options)
         if reason:
             raise InputError(reason)
-        if marginalise_every_s is None:  # about 125 updates per block, at most 0.25 s
-            marginalise_every_s = min(0.25, 125.0 / rate_hz) if rate_hz > 0 else 0.25
-        for name, v in (("lag_s", lag_s), ("rate_hz", rate_hz), ("relinearize_threshold", relinearize_threshold),
-                        ("marginalise_every_s", marginalise_every_s)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
-        if not (isinstance(warmup_s, (int, float)) and math.isfinite(warmup_s) and warmup_s >= 0):
-            raise InputError(f"fixed-lag smoother: warmup_s must be >= 0, got {warmup_s!r}")
-        if not gap_factor > 1.0:
-            raise InputError(f"fixed-lag smoother: gap_factor must exceed 1, got {gap_factor!r}")
-        if int(relinearize_skip) < 1:
-            raise InputError(f"fixed-lag smoother: relinearize_skip must be >= 1, got {relinearize_skip!r}")
-        if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
-            raise InputError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
-        for name, v in (("tune_window_s", tune_window_s), ("retune_every_s", retune_every_s),
-                        ("model_window_s", model_window_s)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
-        if not (isinstance(hold_max_s, (int, float)) and math.isfinite(hold_max_s) and hold_max_s >= 0):
-            raise InputError(f"fixed-lag smoother: hold_max_s must be >= 0, got {hold_max_s!r}")
         self.array = array
         self.options = options
         self.lag_s = float(lag_s)

@@ -112,10 +112,7 @@ def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 
     and, when ``options.accel_noise_slope_mps2_per_radps`` is set, growing with |ω| of ``omega_b_radps``."""
     problem = SmootherProblem(log, options)
     if accel_noise_scale != 1.0:
-        problem = problem.with_noise(accel_sigma=problem.accel_sigma * accel_noise_scale)
-        if options.measurement == "quadratic":
-            problem = problem.with_noise(x_cov=problem.x_cov * accel_noise_scale**2,
-                                         x_whiten=problem.x_whiten / accel_noise_scale)
+        problem = problem.with_accel_noise_scale(accel_noise_scale)  # the inversion's too ('quadratic')
     if options.accel_noise_slope_mps2_per_radps > 0 and omega_b_radps is not None and options.measurement == "accelerometer":
         problem = problem.with_motion_dependent_noise(omega_b_radps, options.accel_noise_slope_mps2_per_radps)
     return problem
