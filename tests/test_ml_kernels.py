@@ -4,9 +4,24 @@ import numpy as np
 import pytest
 
 from gfimu.array import cube_array, mimu4444_array
-from gfimu.estimators import ml
+from gfimu.estimators import ml, ml_kernels
 from gfimu.estimators.ml import MLEstimator, _ProjectedModel
 from gfimu.simulate import simulate
+
+
+@pytest.fixture(autouse=True)
+def _counted_kernel(monkeypatch):
+    """Count the compiled kernel's calls (numba is loaded by this module's import of the kernels, so the
+    estimator takes the compiled path)."""
+    calls = []
+    kernel = ml_kernels.iterate
+
+    def counted(*args):
+        calls.append(len(args[2]))
+        return kernel(*args)
+
+    monkeypatch.setattr(ml_kernels, "iterate", counted)
+    return calls
 
 
 def _problem(array, n, seed, noise):
@@ -26,13 +41,15 @@ def _problem(array, n, seed, noise):
 
 
 @pytest.mark.parametrize("array_name, noise", [("cube", 0.05), ("cube", 2.0), ("mimu", 0.05)])
-def test_compiled_iterations_are_the_numpy_iterations(monkeypatch, array_name, noise):
+def test_compiled_iterations_are_the_numpy_iterations(monkeypatch, _counted_kernel, array_name, noise):
     array = cube_array(0.05, noise_std_mps2=0.05) if array_name == "cube" else mimu4444_array()
     model, b, c, starts, _ = _problem(array, 400, 7, noise)
     est = MLEstimator()
     got = est._iterate(model, b, c, starts, None, None)
+    assert _counted_kernel == [400]  # the compiled path ran
     monkeypatch.setattr(MLEstimator, "compiled", False)
     want = est._iterate(model, b, c, starts, None, None)
+    assert _counted_kernel == [400]  # and the oracle did not
     # the same iterations, each product summed in another order: each sample's minimum to rounding (its
     # Levenberg–Marquardt stops at a step of 1e-12 rad/s, or where the cost settles to rounding)
     cost_got = ml._cost(model, b, got, None, None)
