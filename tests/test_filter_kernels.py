@@ -54,7 +54,9 @@ def test_solve_is_the_numpy_gauss_newton(slope, robust):
         scale = np.abs(want[0]).max() + 1.0
         np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-9 * scale)
         np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-9 * scale)
-        np.testing.assert_allclose(got[2], want[2], rtol=1e-7, atol=1e-9 * np.abs(want[2]).max())
+        # Hᵀ S⁻¹ [H, ν] of the numpy update (its S⁻¹ [H, ν] an m × m solve; the kernel's a 9 × 9 one)
+        want_AG = want[1].T @ want[2]
+        np.testing.assert_allclose(got[2], want_AG, rtol=0, atol=1e-8 * np.abs(want_AG).max())
         assert got[3] == pytest.approx(want[3], rel=1e-7, abs=1e-9)
 
 
@@ -111,14 +113,14 @@ def test_update_window_is_the_numpy_update():
     want_P = P - P @ A @ P
     want_P = 0.5 * (want_P + want_P.T)
     got_mean, got_var, got_cross = mean.copy(), var.copy(), cross.copy()
-    T2, u2, W2, P2, ok = kernels.update_window(H, Z, P, T, u, W, got_mean, got_var, got_cross)
+    T2, u2, W2, P2, ok = kernels.update_window(H.T @ Z, P, T, u, W, got_mean, got_var, got_cross)
     assert ok
     for got, want in ((T2, want_T), (u2, want_u), (W2, want_W), (P2, want_P), (got_mean, want_mean),
                       (got_var, want_var), (got_cross, want_cross)):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * (np.abs(want).max() + 1.0))
     Z[0, 0] = np.nan
     before = got_mean.copy()
-    assert not kernels.update_window(H, Z, P, T, u, W, got_mean, got_var, got_cross)[4]
+    assert not kernels.update_window(H.T @ Z, P, T, u, W, got_mean, got_var, got_cross)[4]
     np.testing.assert_array_equal(got_mean, before)  # nothing moved
 
 

@@ -51,6 +51,7 @@ and the sign is fixed by the gyro.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,6 +147,12 @@ class MLEstimator(PerSampleEstimator):
     """
 
     method = "ml"
+
+    compiled = True
+    """The Levenberg–Marquardt iterations through the compiled kernel (:mod:`gfimu.estimators.ml_kernels`)
+    in a process that has loaded numba already (the fixed-lag smoother's: its own kernels are compiled);
+    False, or without numba loaded: the numpy expressions it replaces (the tests' oracle). The two agree
+    to rounding."""
 
     use_gyro: bool = option(False, help=(
         "add the array's gyro as a measurement of ω (needs a gyro in the log and its noise_std_radps)"))
@@ -388,14 +395,28 @@ class MLEstimator(PerSampleEstimator):
     def _iterate(self, model, b, c, w, gyro, gyro_var):
         """Levenberg–Marquardt on ω for all samples at once. The 3 × 3 matrices are symmetric and kept
         as their six entries (:data:`_SYMMETRIC`), the systems solved in closed form
-        (:func:`_solve_symmetric_3x3`)."""
-        w = w.copy()
-        lam = np.full(len(w), 1e-3)
-        cost = _cost(model, b, w, gyro, gyro_var)
+        (:func:`_solve_symmetric_3x3`). With :attr:`compiled` (the default) and numba loaded the same
+        iterations run sample by sample in :func:`gfimu.estimators.ml_kernels.iterate`; the numpy
+        expressions below are its oracle."""
         gram = _jacobian_gram(model.M)[:, _SYMMETRIC_FLAT]
         qm = _MONOMIAL_TO_Q @ model.M  # q(ω) M from the monomials of ω
         curvature = _Q_HESSIAN_FLAT[:, _SYMMETRIC_FLAT]
         tol2 = self.tolerance_radps**2
+        if self.compiled and len(w) and "numba" in sys.modules:
+            # the same iterations sample by sample, compiled (gfimu.estimators.ml_kernels), where numba is
+            # already loaded (the fixed-lag smoother's process): a command that loads it for nothing else
+            # would pay more for its import than the compiled iterations save
+            from .ml_kernels import iterate
+
+            g = np.zeros((len(w), 3)) if gyro is None else np.ascontiguousarray(gyro, dtype=float)
+            return iterate(np.ascontiguousarray(b, dtype=float), np.ascontiguousarray(c, dtype=float),
+                           np.ascontiguousarray(w, dtype=float), np.ascontiguousarray(model.R, dtype=float),
+                           np.ascontiguousarray(qm), np.ascontiguousarray(gram), np.ascontiguousarray(curvature), g,
+                           1.0 if gyro_var is None else float(gyro_var), gyro is not None, int(self.max_iterations),
+                           float(tol2))
+        w = w.copy()
+        lam = np.full(len(w), 1e-3)
+        cost = _cost(model, b, w, gyro, gyro_var)
         active = np.ones(len(w), bool)
         for _ in range(self.max_iterations):
             idx = np.nonzero(active)[0]

@@ -187,16 +187,12 @@ class BandStructure:
         below the diagonal in column p of sample k (``diag`` (N, m, m), ``lower`` (N-1, m, m));
         :meth:`scaled` turns it into LAPACK band storage in place."""
         n, m = diag.shape[0], self.m
-        out = np.zeros((self.bandwidth + 1, n, m))
-        d_flat, l_flat = diag.reshape(n, m * m), lower.reshape(n - 1, m * m)
-        for d in range(self.bandwidth + 1):
-            for p in range(m):
-                i = int(self.index[d, p])
-                if i < m * m:
-                    out[d, :, p] = d_flat[:, i]
-                elif i < 2 * m * m:
-                    out[d, : n - 1, p] = l_flat[:, i - m * m]
-        return out
+        # each sample's [diag (m²), lower (m²), 0] in one row (the last sample has no lower block), the
+        # band gathered from it by the flat indices of one sample at once
+        flat = np.zeros((n, 2 * m * m + 1))
+        flat[:, : m * m] = diag.reshape(n, m * m)
+        flat[: n - 1, m * m: 2 * m * m] = lower.reshape(n - 1, m * m)
+        return np.ascontiguousarray(np.moveaxis(flat[:, self.index], 0, 1))
 
     def scaled(self, blocks: np.ndarray, scale: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
         """Lower band storage (kd + 1, N m) of ``S A S`` from :meth:`blocks` (scaled in place), with
@@ -267,15 +263,23 @@ class Factorisation:
         return s * self.structure.from_band_order(x, n)
 
 
-def factorise(ne: NormalEquations, damping: float = 0.0) -> Factorisation:
+def factorise(ne: NormalEquations, damping: float = 0.0, band: tuple | None = None) -> Factorisation:
     """Factor A (+ Marquardt damping) after symmetric Jacobi scaling, which keeps the
     factorisation accurate when the states have very different scales (e.g. ω̈); the band is
-    narrowed by reordering the state within each sample (:class:`BandStructure`)."""
+    narrowed by reordering the state within each sample (:class:`BandStructure`). ``band``:
+    :func:`band_of` ``ne`` when already made (the damping changes only the diagonal: Levenberg-Marquardt's
+    retries of one step gather the band once)."""
     d = np.einsum("nii->ni", ne.diag)
     if damping:
         d = d + damping * (d + 1e-9)
+    structure, blocks = band_of(ne) if band is None else (band[0], band[1].copy())
+    return factorise_blocks(structure, blocks, d[:, structure.order], ne, damping)
+
+
+def band_of(ne: NormalEquations) -> tuple:
+    """(:class:`BandStructure`, :meth:`BandStructure.blocks`) of the normal equations ``ne``."""
     structure = band_structure(ne.lower)
-    return factorise_blocks(structure, structure.blocks(ne.diag, ne.lower), d[:, structure.order], ne, damping)
+    return structure, structure.blocks(ne.diag, ne.lower)
 
 
 def factorise_blocks(structure: BandStructure, blocks: np.ndarray, diagonal: np.ndarray, ne: NormalEquations,
@@ -390,9 +394,10 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     it = 0
     limit = int(opt.max_iterations if max_iterations is None else max_iterations)
     for it in range(1, limit + 1):
+        band = band_of(ne)
         while True:
             try:
-                fac = factorise(ne, lam)
+                fac = factorise(ne, lam, band)
             except np.linalg.LinAlgError:  # numerically indefinite (very stiff process noise): damp more
                 if lam > 1e10:
                     raise

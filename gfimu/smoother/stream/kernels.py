@@ -10,7 +10,9 @@ them where a kernel does not apply (gyroscope rows, factor groups' rows).
 - :func:`solve` is :meth:`WindowFilter._solve <gfimu.smoother.stream.window_filter.WindowFilter._solve>`
   for the accelerometer readings alone: Gauss-Newton (iterated Kalman) on
   ``J(x) = ||y - h(x)||²_R + ||x - x̂||²_P`` with ``h(x) = S_ω̇ ω̇ + S_f f + S_q q(ω)``
-  (Ho & Lin 2009, eq. 6), the accelerometer variances at ``x`` (motion-dependent, robust);
+  (Ho & Lin 2009, eq. 6), the accelerometer variances at ``x`` (motion-dependent, robust), each step
+  solved in the state's nine dimensions (information form) rather than the m readings' (the same
+  update to rounding, a 9 × 9 system instead of an m × m one);
 - :func:`search` is the branch search of :meth:`WindowFilter.measure`: Gauss-Newton from the
   prediction and from the other three branches of its minimum (ω flipped, mirrored through the
   array's plane, both: :func:`gfimu.smoother.solve.restarts.branch`), keeping the lowest J;
@@ -124,16 +126,23 @@ def _predict_readings(x, S_q, S_dw, S_f, pred, H):
 
 @njit(cache=True)
 def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost):
-    """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, Z, J, ok)``, ``Z = S⁻¹ [H, ν]``
-    at the last linearisation, J at x (0 unless ``with_cost``), ``ok`` False where the innovation
-    covariance is singular (the filter's ``FilterFailure``)."""
+    """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, AG, J, ok)``, ``AG = Hᵀ S⁻¹ [H, ν]``
+    (9 × 10: ``A = Hᵀ S⁻¹ H`` and ``g = Hᵀ S⁻¹ ν``) at the last linearisation, J at x (0 unless
+    ``with_cost``), ``ok`` False where the update's system is singular or a reading's variance is not positive
+(the filter's ``FilterFailure``).
+
+    The update is solved in the state's nine dimensions rather than the m readings': with ``G = Hᵀ R⁻¹ H``
+    and ``b = Hᵀ R⁻¹ ν`` (R diagonal), ``Hᵀ S⁻¹ = (I + G P)⁻¹ Hᵀ R⁻¹`` (since ``Hᵀ R⁻¹ S = (G P + I) Hᵀ``
+    for ``S = H P Hᵀ + R``), so ``[A, g] = (I + G P)⁻¹ [G, b]``, one 9 × 9 system whatever the number of
+    axes, and the new state is ``x̂ + P g``: the numpy expression's ``S⁻¹ [H, ν]`` (an m × m system) to
+    rounding."""
     m = y.shape[0]
     R = R0.copy()
     H = np.zeros((m, 9))
     pred = np.empty(m)
-    Z = np.zeros((m, 10))
-    PHt = np.empty((9, m))
-    S = np.empty((m, m))
+    nu = np.empty(m)
+    AG = np.zeros((9, 10))
+    M = np.empty((9, 9))
     x = x.copy()
     x_new = np.empty(9)
     adaptive = slope > 0.0 or c_robust > 0.0
@@ -147,40 +156,45 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
                 for i in range(m):
                     R[i] = R[i] / _weight((y[i] - pred[i]) / np.sqrt(R[i]), c_robust, loss)
         _predict_readings(x, S_q, S_dw, S_f, pred, H)
-        for i in range(m):  # [H, ν], ν the innovation of the linearisation at x
+        for i in range(m):
+            if not R[i] > 0.0:  # a reading without noise: the information form does not apply
+                return x, H, AG, 0.0, False
+        for i in range(m):  # ν, the innovation of the linearisation at x
             s = 0.0
             for j in range(9):
-                Z[i, j] = H[i, j]
                 s += H[i, j] * (x[j] - xp[j])
-            Z[i, 9] = y[i] - pred[i] + s
-        for a in range(9):  # P Hᵀ
+            nu[i] = y[i] - pred[i] + s
+        for a in range(9):  # [G, b] = Hᵀ R⁻¹ [H, ν]
+            for b in range(a, 9):
+                s = 0.0
+                for i in range(m):
+                    s += H[i, a] * H[i, b] / R[i]
+                AG[a, b] = s
+                AG[b, a] = s
+            s = 0.0
             for i in range(m):
+                s += H[i, a] * nu[i] / R[i]
+            AG[a, 9] = s
+        for a in range(9):  # I + G P
+            for b in range(9):
                 s = 0.0
-                for b in range(9):
-                    s += P[a, b] * H[i, b]
-                PHt[a, i] = s
-        for i in range(m):  # S = H P Hᵀ + R
-            for k in range(i, m):
-                s = 0.0
-                for a in range(9):
-                    s += H[i, a] * PHt[a, k]
-                S[i, k] = s
-                S[k, i] = s
-            S[i, i] += R[i]
-        if not _lu_solve(S, Z):  # Z ← S⁻¹ [H, ν]
-            return x, H, Z, 0.0, False
-        step = 0.0
+                for k in range(9):
+                    s += AG[a, k] * P[k, b]
+                M[a, b] = s
+            M[a, a] += 1.0
+        if not _lu_solve(M, AG):  # AG ← (I + G P)⁻¹ [G, b] = Hᵀ S⁻¹ [H, ν]
+            return x, H, AG, 0.0, False
         for a in range(9):
             s = xp[a]
-            for i in range(m):
-                s += PHt[a, i] * Z[i, 9]
+            for b in range(9):
+                s += P[a, b] * AG[b, 9]
             x_new[a] = s
         step = abs(x_new[0] - x[0]) + abs(x_new[1] - x[1]) + abs(x_new[2] - x[2])
         x[:] = x_new
         if step < tolerance and (c_robust <= 0.0 or it > 0):
             break
     if not with_cost:
-        return x, H, Z, 0.0, True
+        return x, H, AG, 0.0, True
     H_last = H.copy()
     _predict_readings(x, S_q, S_dw, S_f, pred, H)
     cost = 0.0
@@ -188,7 +202,7 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
         r = y[i] - pred[i]
         cost += r * r / R[i]
     prior = _quadratic_form_inverse(P, x - xp)
-    return x, H_last, Z, cost + max(prior, 0.0), True
+    return x, H_last, AG, cost + max(prior, 0.0), True
 
 
 @njit(cache=True)
@@ -217,28 +231,28 @@ def search(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iteration
     """The update's minimum: Gauss-Newton from ``start``, then (``branches``) from the other three branches
     of that minimum, each tried only when the prediction does not rule it out by more than
     ``prior_margin`` (squared, in P) beyond the minimum's cost; two steps tell a branch that loses, one
-    that may win is solved to the end. ``(x, H, Z, J, ok)`` of the lowest J."""
-    x, H, Z, J, ok = solve(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
+    that may win is solved to the end. ``(x, H, AG, J, ok)`` of the lowest J."""
+    x, H, AG, J, ok = solve(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
                            branches)
     if not ok or not branches:
-        return x, H, Z, J, ok
+        return x, H, AG, J, ok
     x_first = x.copy()  # the branches of the first minimum are tried
     for kind in range(1, 4):
         b = branch_state(kind, x_first, normal)
         distance = _quadratic_form_inverse(P, b - xp)
         if distance > J + prior_margin:  # (P singular: -1, tried)
             continue
-        cx, cH, cZ, cJ, cok = solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, 2, tolerance, True)
+        cx, cH, cAG, cJ, cok = solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, 2, tolerance, True)
         if not cok:
-            return cx, cH, cZ, cJ, cok
+            return cx, cH, cAG, cJ, cok
         if cJ < J:
-            cx, cH, cZ, cJ, cok = solve(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
+            cx, cH, cAG, cJ, cok = solve(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
                                         tolerance, True)
             if not cok:
-                return cx, cH, cZ, cJ, cok
+                return cx, cH, cAG, cJ, cok
         if cJ < J:
-            x, H, Z, J = cx, cH, cZ, cJ
-    return x, H, Z, J, True
+            x, H, AG, J = cx, cH, cAG, cJ
+    return x, H, AG, J, True
 
 
 @njit(cache=True)
@@ -257,23 +271,17 @@ def _mm(A, B):
 
 
 @njit(cache=True)
-def update_window(H, Z, P, T, u, W, mean, var, cross):
-    """The update ``S⁻¹ [H, ν]`` (Z) of the newest state (covariance P before it) on the window: the
-    recent states ``mean``, ``var``, ``cross`` (n, ...) in place, the old ones' factors ``(T, u, W)``
-    returned new, with the newest state's covariance after it; ``ok`` False on non-finite values."""
-    m = H.shape[0]
-    g = np.zeros(9)
-    A = np.zeros((9, 9))
+def update_window(AG, P, T, u, W, mean, var, cross):
+    """The update ``AG = Hᵀ S⁻¹ [H, ν]`` (9 × 10: ``A = Hᵀ S⁻¹ H``, ``g = Hᵀ S⁻¹ ν``) of the newest state
+    (covariance P before it) on the window: the recent states ``mean``, ``var``, ``cross`` (n, ...) in
+    place, the old ones' factors ``(T, u, W)`` returned new, with the newest state's covariance after it;
+    ``ok`` False on non-finite values."""
+    g = np.empty(9)
+    A = np.empty((9, 9))
     for i in range(9):
-        s = 0.0
-        for r in range(m):
-            s += H[r, i] * Z[r, 9]
-        g[i] = s
+        g[i] = AG[i, 9]
         for j in range(9):
-            s = 0.0
-            for r in range(m):
-                s += H[r, i] * Z[r, j]
-            A[i, j] = s
+            A[i, j] = AG[i, j]
     for i in range(9):
         if not np.isfinite(g[i]):
             return T, u, W, P, False
@@ -392,10 +400,10 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
     alone, in one call: the update's minimum (:func:`search`), then with ``robust_step`` the robust loss of
     the motion-model step (threshold ``c_process``): where the step's whitened residual ``(x - x̂)ᵀ P⁻¹ (x - x̂)
     / 9`` gives an IRLS weight w < 1, the prediction's covariance widened by ``(1/w - 1) Q`` and the minimum
-    solved again from where it is; then :func:`update_window` with the last linearisation. Returns
+    solved again from where it is; then :func:`update_window` with the last linearisation (its ``Hᵀ S⁻¹ [H, ν]``). Returns
     ``(T, u, W, P_after, P_before, ok)``: ``P_before`` the newest state's covariance the update started from
     (widened or not), ``ok`` False on a singular innovation covariance or non-finite values (nothing moved)."""
-    x, H, Z, J, ok = search(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches,
+    x, H, AG, J, ok = search(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches,
                             normal, prior_margin)
     if not ok:
         return T, u, W, P, P, False
@@ -411,11 +419,11 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
                 var[last, i] = P[i, i]
                 for j in range(9):
                     cross[last, i, j] = P[i, j]
-            x, H, Z, J, ok = search(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
+            x, H, AG, J, ok = search(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
                                     False, normal, prior_margin)
             if not ok:
                 return T, u, W, P, P, False
-    T2, u2, W2, P_after, ok = update_window(H, Z, P, T, u, W, mean, var, cross)
+    T2, u2, W2, P_after, ok = update_window(AG, P, T, u, W, mean, var, cross)
     return T2, u2, W2, P_after, P, ok
 
 

@@ -230,6 +230,10 @@ class LocalDensity:
         return math.sqrt(excess / 3.0)
 
 
+_chain_step = None
+""":func:`gfimu.smoother.stream.kernels.chain_step`, once imported."""
+
+
 class StreamSignChain:
     """The sign chain of :func:`gfimu.smoother.solve.initialise.sign_chain` over a stream, fixed-lag, over the
     four branches of the readings' ambiguity (:func:`branch`: ω flipped, mirrored through a planar
@@ -268,26 +272,34 @@ class StreamSignChain:
 
     def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
              oldest_k: int) -> tuple[int, int] | None:
-        from .kernels import chain_step
+        global _chain_step
+        if _chain_step is None:  # the compiled step, imported on first use
+            from .kernels import chain_step as _chain_step
 
-        w, dw = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
         if self._prev is None:
+            w, dw = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
             cur = np.stack([np.concatenate(branch(b, w, dw, self.normal)) for b in range(self.branches)])
             self._prev = (k, t_ns, cur[:, 0:3].copy(), cur[:, 3:6].copy())
             return None
         prev = self._prev
         n = self.branches
         c2 = scale_radps * scale_radps
+        if not (type(omega) is np.ndarray and omega.dtype == np.float64 and type(omega_dot) is np.ndarray
+                and omega_dot.dtype == np.float64):
+            omega, omega_dot = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
         # from branch a (at k-1) to branch b (at k): the Cauchy loss of the trapezoid's misfit, the lowest
-        # total kept per b (only the differences matter, and they stay bounded)
-        cur_w, cur_dw, back, self._cost = chain_step(prev[2], prev[3], w, dw, self.normal, (t_ns - prev[1]) * 1e-9,
-                                                     c2, self._cost)
+        # total kept per b (only the differences matter, and they stay bounded); the kernel reads ω and ω̇
+        # and keeps nothing of them
+        cur_w, cur_dw, back, cost = _chain_step(prev[2], prev[3], omega, omega_dot, self.normal,
+                                                (t_ns - prev[1]) * 1e-9, c2, self._cost)
+        self._cost = cost
         self._prev = (k, t_ns, cur_w, cur_dw)
-        self._back.append((k, back))
-        while len(self._back) > self.window or (self._back and self._back[0][0] <= oldest_k):
-            self._back.popleft()
-        best = int(np.argmin(self._cost))
-        if best == 0 or not self._cost[best] + self.margin * c2 < self._cost[0]:
+        backs = self._back
+        backs.append((k, back))
+        while len(backs) > self.window or (backs and backs[0][0] <= oldest_k):
+            backs.popleft()
+        best = int(cost.argmin())
+        if best == 0 or not float(cost[best]) + self.margin * c2 < float(cost[0]):
             return None
         # the best path's last run on branch `best` (within the window) moves onto it
         first = k

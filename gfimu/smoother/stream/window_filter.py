@@ -687,9 +687,8 @@ class WindowFilter:
         hi = self._hi
         if self.compiled:
             lo = self._split
-            T, u, W, P_new, ok = kernels.update_window(np.ascontiguousarray(H, dtype=float),
-                                                       np.ascontiguousarray(Z, dtype=float), P, self._T, self._u,
-                                                       self._W, self._mean[lo:hi], self._var[lo:hi],
+            T, u, W, P_new, ok = kernels.update_window(np.ascontiguousarray(H.T @ Z, dtype=float), P, self._T,
+                                                       self._u, self._W, self._mean[lo:hi], self._var[lo:hi],
                                                        self._cross[lo:hi])
             if not ok:
                 raise FilterFailure("non-finite values in the update")
