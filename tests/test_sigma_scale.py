@@ -70,9 +70,11 @@ def test_running_scale_ends_on_the_whole_logs_factor():
     run = ss.RunningSigmaScale(ARRAY)
     for i in range(n):
         run.scaled(y[i], X[i], sd[i], np.full(12, 0.01))
-    # the running sums: s² of the newest LOCAL_WINDOW samples, ρ of all, as computed here from the residuals
+    # the running sums: s² of the newest local_window(3) samples (12 axes, rank 9: 3 degrees of freedom a
+    # sample, 342 samples for 1024 of them: here all 300), ρ of all, as computed here from the residuals
     p, rank, single = ss.parity(ARRAY, y, X, np.full(12, 0.01))
-    W = ss.LOCAL_WINDOW
+    W = ss.local_window(3)
+    assert W == 342
     assert run.variance_factor == pytest.approx(np.sum(p[-W:] ** 2) / np.sum(12 - rank[-W:]), rel=1e-9)
     rho = np.array([np.sum(p[k:] * p[:n - k]) for k in range(1, ss.MAX_LAG + 1)]) / np.sum(p * p)
     assert run.tau() == pytest.approx(ss.long_run_factors(rho), rel=1e-9)
@@ -80,7 +82,7 @@ def test_running_scale_ends_on_the_whole_logs_factor():
     # the batch smoother's factor at a row: s² of the window centred on it, the same ρ
     whole = ss.calibrated_sigma(ARRAY, y, X, sd, np.full(12, 0.01))
     i = n // 2
-    rows = slice(i - W // 2, i + W - W // 2)
+    rows = slice(max(0, i - W // 2), min(n, i + W - W // 2))
     s2 = np.sum(p[rows] ** 2) / np.sum(12 - rank[rows])
     assert whole[i] == pytest.approx(sd[i] * ss.scale_factors(sd[i:i + 1], single[i:i + 1], s2, run.tau())[0], rel=1e-9)
     # causal: the first rows' factor does not know the later ones
@@ -185,7 +187,7 @@ def test_factor_is_a_function_of_the_residuals_only_and_follows_them_in_time():
     """The same misfit on another motion gives the same factor where the span is the same; k times the
     misfit gives k times the factor; a misfit in the second half only leaves the first half's σ alone."""
     rng = np.random.default_rng(7)
-    n, W = 2000, ss.LOCAL_WINDOW
+    n, W = 3000, ss.local_window(3)
     X = random_states(rng, n)
     sd = np.full((n, 9), 1e-6)  # a span of 0: τ(0) = 1, the factor is √s²
     e = rng.normal(0, 0.01, (n, 12))
@@ -205,10 +207,10 @@ def test_factor_is_a_function_of_the_residuals_only_and_follows_them_in_time():
 
 def test_running_factor_is_causal_and_local():
     rng = np.random.default_rng(9)
-    n, W = 600, ss.LOCAL_WINDOW
+    n, W = 1400, ss.local_window(3)
     X = random_states(rng, n)
     e = rng.normal(0, 0.01, (n, 12))
-    e[300:] *= 5.0
+    e[700:] *= 5.0
     y = readings(X, e)
     run = ss.RunningSigmaScale(ARRAY)
     s2 = []
@@ -217,5 +219,5 @@ def test_running_factor_is_causal_and_local():
         s2.append(run.variance_factor)
     s2 = np.array(s2)
     tol = 4 * math.sqrt(2 / (3 * W))  # relative std of s² over W samples' white residuals: √(2/ν), ν = 3 W
-    assert np.all(np.abs(s2[W:300] - 1.0) < tol)  # before the change: unaffected by what comes later
-    assert np.all(np.abs(s2[300 + W:] / 25.0 - 1.0) < tol)  # W samples after it: the new level alone
+    assert np.all(np.abs(s2[W:700] - 1.0) < tol)  # before the change: unaffected by what comes later
+    assert np.all(np.abs(s2[700 + W:] / 25.0 - 1.0) < tol)  # W samples after it: the new level alone

@@ -13,8 +13,9 @@ them:
   To first order p_i = (I − J_i J_i⁺) W_i e_i, the reading error alone: whatever the smoother made of the
   states, this part of the residual cannot be fitted by them. Under the model it has
   E|p_i|² = m − rank J_i (m: accelerometer axes).
-- **Variance factor** s_i² = Σ_k |p_k|² / Σ_k (m − rank_k) over the :data:`LOCAL_WINDOW` samples k around
-  sample i (the batch smoother: centred on i; the fixed-lag smoother: the newest ones, i included): the
+- **Variance factor** s_i² = Σ_k |p_k|² / Σ_k (m − rank_k) over the samples k of a window around
+  sample i (:func:`local_window`: :data:`LOCAL_WINDOW` samples at least, :data:`LOCAL_DOF` degrees of
+  freedom at least) (the batch smoother: centred on i; the fixed-lag smoother: the newest ones, i included): the
   realised misfit against the assumed noise (1 when the noise is as stated). Local, not one number for
   the log: a real array's misfit grows and shrinks with the motion (lever-arm, scale and alignment errors
   scale with ω̇, ω² and f; vibration comes and goes), and a factor of the whole log would give the fast
@@ -45,9 +46,19 @@ from ...rigid_body import quadratic_terms, quadratic_terms_jacobian
 MAX_LAG = 64
 """Longest lag [samples] of the residual's autocorrelation, and longest span L taken."""
 LOCAL_WINDOW = 2 * MAX_LAG
-"""Samples whose parity residuals give one sample's variance factor s_i²: twice the longest span a state
-draws on, so that s_i² covers the readings the state averaged; with at least 3 degrees of freedom a sample
-(4 triads: 12 axes, rank 9) the factor of white residuals scatters by √(2 / 384) ≈ 7 % at most."""
+"""Fewest samples whose parity residuals give one sample's variance factor s_i²: twice the longest span a
+state draws on, so that s_i² covers the readings the state averaged."""
+LOCAL_DOF = 1024
+"""... and at least this many degrees of freedom (m − rank a sample: 3 for four triads, 15 for eight): the
+factor √s_i² of white residuals then scatters by √(1 / (2 · 1024)) ≈ 2.2 % about 1."""
+
+
+def local_window(dof_per_sample: float) -> int:
+    """Samples of the window of s_i² for residuals of ``dof_per_sample`` degrees of freedom each:
+    :data:`LOCAL_WINDOW` at least, more until they hold :data:`LOCAL_DOF`."""
+    if not dof_per_sample > 0:
+        return LOCAL_WINDOW
+    return max(LOCAL_WINDOW, int(np.ceil(LOCAL_DOF / dof_per_sample)))
 TAU_FLOOR = 1.0 / MAX_LAG
 """Least long-run factor τ(L): the variance of a mean of :data:`MAX_LAG` samples cannot be told, from lags
 up to :data:`MAX_LAG`, to be smaller than that of one sample over :data:`MAX_LAG`."""
@@ -113,7 +124,7 @@ def long_run_factors(rho: np.ndarray) -> np.ndarray:
     return np.maximum(out, TAU_FLOOR)
 
 
-def local_sums(values: np.ndarray, window: int = LOCAL_WINDOW) -> np.ndarray:
+def local_sums(values: np.ndarray, window: int) -> np.ndarray:
     """Sums of ``values`` (N,) over the ``window`` samples centred on each (fewer at the ends)."""
     c = np.concatenate([[0.0], np.cumsum(np.asarray(values, dtype=float))])
     i = np.arange(len(values))
@@ -136,7 +147,7 @@ class RunningSigmaScale:
     takes one emitted state with its reading, adds its parity residual to the running sums and returns
     its σ scaled by the factor of those sums (s² of the newest ``window`` samples, ρ of all)."""
 
-    def __init__(self, array, max_lag: int = MAX_LAG, window: int = LOCAL_WINDOW):
+    def __init__(self, array, max_lag: int = MAX_LAG, window: int | None = None):
         self.array = array
         self._geometry = _geometry(array)
         self.robust = None
@@ -148,8 +159,9 @@ class RunningSigmaScale:
         self._dof = 0.0
         self._lagged = np.zeros(self.max_lag)
         self.samples = 0
-        self.window = int(window)
-        self._recent = np.zeros((self.window, 2))  # |p|², m − rank of the newest samples, row i % window of sample i
+        self.window = None if window is None else int(window)
+        """Samples of s²'s window (:func:`local_window` of the first sample's degrees of freedom when None)."""
+        self._recent: np.ndarray | None = None  # |p|², m − rank of the newest samples, row i % window of sample i
 
     def reset(self) -> None:
         """A new segment: the lagged products do not reach across it (the sums so far are kept)."""
@@ -158,6 +170,8 @@ class RunningSigmaScale:
     @property
     def variance_factor(self) -> float:
         """s² over the newest :attr:`window` samples (1 before :data:`MIN_SAMPLES`)."""
+        if self._recent is None:
+            return 1.0
         power, dof = self._recent.sum(axis=0)
         return power / dof if dof > 0 and self.samples >= MIN_SAMPLES else 1.0
 
@@ -207,16 +221,20 @@ class RunningSigmaScale:
                 self._lagged[:held] += self._ring[rows] @ p
             self._ring[self._held % K] = p
             self._held += 1
+            if self._recent is None:
+                if self.window is None:
+                    self.window = local_window(len(p) - rank)
+                self._recent = np.zeros((self.window, 2))
             self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank))
             self.samples += 1
         return sd * scale_factors(sd, single, self.variance_factor, self.tau())
 
 
 def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
-                     robust=None, max_lag: int = MAX_LAG, window: int = LOCAL_WINDOW) -> np.ndarray:
+                     robust=None, max_lag: int = MAX_LAG, window: int | None = None) -> np.ndarray:
     """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the log's residuals
-    (the batch smoother's; module docstring): s² over the ``window`` samples centred on each row, ρ over the
-    whole log. Rows with a non-finite residual do not count."""
+    (the batch smoother's; module docstring): s² over the ``window`` samples centred on each row
+    (:func:`local_window` of the median degrees of freedom when None), ρ over the whole log. Rows with a non-finite residual do not count."""
     n = len(states)
     noise = np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), np.shape(accel_mps2))
     geometry = _geometry(array)
@@ -235,6 +253,8 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     lags = min(max_lag, n - 1)
     lagged = np.array([float(np.sum(q[k:] * q[:n - k])) for k in range(1, lags + 1)])
     tau = long_run_factors(lagged / power)
+    if window is None:
+        window = local_window(float(np.median((p.shape[1] - rank)[ok])))
     local_dof = local_sums(np.where(ok, p.shape[1] - rank, 0), window)
     with np.errstate(divide="ignore", invalid="ignore"):
         s2 = np.where(local_dof > 0, local_sums(np.sum(q * q, axis=1), window) / local_dof, power / dof)
