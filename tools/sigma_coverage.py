@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Does σ mean what it says? The smoothers' ω σ against the truth, per regime.
 
-For each cell (the regime matrix's cells of tools/regime_matrix.py, and cells whose readings disagree
-with the model in ways array.toml does not state: noise above the stated level, a slowly varying
-error per axis as a real array's misalignment and scale errors give), the batch smoother and the
+For each cell (every cell of the regime matrix, tools/regime_matrix.py, with noise, and cells whose
+readings disagree with the model in ways array.toml does not state, built from the physics: noise above
+the stated level, a slowly varying error per axis, sensor positions off, per-axis gains off, each sensor
+shaken by its own mount, a MIMU-like mix of them), the batch smoother and the
 fixed-lag smoother run with σ, and the table gives per axis the share of samples with |error| < 1σ
 (Gaussian: 68.3 %) and < 2σ (95.4 %), and the mean NEES (3 when σ is right), for the σ the smoothers
 report ("scaled": by the readings' own misfit, :mod:`gfimu.smoother.solve.sigma_scale`) and for the white-noise
