@@ -51,7 +51,13 @@ def test_variance_factor_is_one_for_white_noise_of_the_stated_level_and_its_squa
 def test_long_run_factor_of_full_and_no_correlation():
     assert ss.long_run_factors(np.ones(10)) == pytest.approx(np.r_[1.0, 1.0, np.arange(2, 11)], rel=1e-12)
     assert np.all(ss.long_run_factors(np.zeros(10)) == 1.0)
-    assert np.all(ss.long_run_factors(-np.ones(10)) == 1.0)  # never below white noise
+    # a misfit that alternates from one sample to the next (a vibration at half the rate) averages out
+    # faster than white noise: τ(L) = 1 + 2 Σ_{k<L} (1 - k/L) (-1)^k, 0 for even L, 1/L for odd L
+    rho = (-1.0) ** np.arange(1, 11)
+    L = np.arange(2, 11)
+    expected = np.where(L % 2 == 0, 0.0, 1.0 / L)
+    assert ss.long_run_factors(rho)[2:] == pytest.approx(np.maximum(expected, ss.TAU_FLOOR), rel=1e-12)
+    assert np.all(ss.long_run_factors(-np.ones(10))[2:] == ss.TAU_FLOOR)  # the floor, never 0
 
 
 def test_running_scale_ends_on_the_whole_logs_factor():
@@ -61,13 +67,24 @@ def test_running_scale_ends_on_the_whole_logs_factor():
     e = np.cumsum(rng.normal(0, 0.01, (n, 12)), axis=0) * 0.3  # correlated in time
     y = readings(X, e)
     sd = np.full((n, 9), 0.01)
-    whole = ss.calibrated_sigma(ARRAY, y, X, sd, np.full(12, 0.01))
     run = ss.RunningSigmaScale(ARRAY)
-    last = None
     for i in range(n):
-        last = run.scaled(y[i], X[i], sd[i], np.full(12, 0.01))
-    assert last == pytest.approx(whole[-1], rel=1e-9)
+        run.scaled(y[i], X[i], sd[i], np.full(12, 0.01))
+    # the running sums: s² of the newest local_window(3) samples (12 axes, rank 9: 3 degrees of freedom a
+    # sample, 342 samples for 1024 of them: here all 300), ρ of all, as computed here from the residuals
+    p, rank, single = ss.parity(ARRAY, y, X, np.full(12, 0.01))
+    W = ss.local_window(3)
+    assert W == 342
+    assert run.variance_factor == pytest.approx(np.sum(p[-W:] ** 2) / np.sum(12 - rank[-W:]), rel=1e-9)
+    rho = np.array([np.sum(p[k:] * p[:n - k]) for k in range(1, ss.MAX_LAG + 1)]) / np.sum(p * p)
+    assert run.tau() == pytest.approx(ss.long_run_factors(rho), rel=1e-9)
     assert run.variance_factor > 4  # the misfit is well above the stated 0.01
+    # the batch smoother's factor at a row: s² of the window centred on it, the same ρ
+    whole = ss.calibrated_sigma(ARRAY, y, X, sd, np.full(12, 0.01))
+    i = n // 2
+    rows = slice(max(0, i - W // 2), min(n, i + W - W // 2))
+    s2 = np.sum(p[rows] ** 2) / np.sum(12 - rank[rows])
+    assert whole[i] == pytest.approx(sd[i] * ss.scale_factors(sd[i:i + 1], single[i:i + 1], s2, run.tau())[0], rel=1e-9)
     # causal: the first rows' factor does not know the later ones
     early = ss.RunningSigmaScale(ARRAY)
     firsts = [early.scaled(y[i], X[i], sd[i], np.full(12, 0.01)) for i in range(ss.MIN_SAMPLES - 1)]
@@ -164,3 +181,43 @@ def test_sigma_covers_an_unstated_correlated_misfit_and_stays_where_the_model_is
     ratio = m_right.sigma["omega_b_radps"] / m_plain.sigma["omega_b_radps"]
     assert 0.97 < np.median(ratio) < 1.03
     assert np.allclose(right["coverage_1sigma"], plain["coverage_1sigma"], atol=0.03)
+
+
+def test_factor_is_a_function_of_the_residuals_only_and_follows_them_in_time():
+    """The same misfit on another motion gives the same factor where the span is the same; k times the
+    misfit gives k times the factor; a misfit in the second half only leaves the first half's σ alone."""
+    rng = np.random.default_rng(7)
+    n, W = 3000, ss.local_window(3)
+    X = random_states(rng, n)
+    sd = np.full((n, 9), 1e-6)  # a span of 0: τ(0) = 1, the factor is √s²
+    e = rng.normal(0, 0.01, (n, 12))
+    e[n // 2:] *= 4.0  # 4 times the stated level from the middle on
+    f1 = ss.calibrated_sigma(ARRAY, readings(X, e), X, sd, np.full(12, 0.01)) / sd
+    f3 = ss.calibrated_sigma(ARRAY, readings(X, 3 * e), X, sd, np.full(12, 0.01)) / sd
+    assert f3 == pytest.approx(3 * f1, rel=1e-9)
+    # s² of W samples' white residuals (ν = 3 W degrees of freedom): relative std of √s² is √(1/(2ν)) = 3.6 %
+    tol = 4 * math.sqrt(1 / (6 * W))
+    first, second = f1[: n // 2 - W], f1[n // 2 + W:]
+    assert np.all(np.abs(first - 1.0) < tol) and np.all(np.abs(second - 4.0) < 4 * tol)
+    # the same residuals about another motion: parity residuals differ only through the Jacobian's span
+    Y = random_states(np.random.default_rng(8), n)
+    g = ss.calibrated_sigma(ARRAY, readings(Y, e), Y, sd, np.full(12, 0.01)) / sd
+    assert np.all(np.abs(g[: n // 2 - W] - 1.0) < tol) and np.all(np.abs(g[n // 2 + W:] - 4.0) < 4 * tol)
+
+
+def test_running_factor_is_causal_and_local():
+    rng = np.random.default_rng(9)
+    n, W = 1400, ss.local_window(3)
+    X = random_states(rng, n)
+    e = rng.normal(0, 0.01, (n, 12))
+    e[700:] *= 5.0
+    y = readings(X, e)
+    run = ss.RunningSigmaScale(ARRAY)
+    s2 = []
+    for i in range(n):
+        run.scaled(y[i], X[i], np.full(9, 1e-6), np.full(12, 0.01))
+        s2.append(run.variance_factor)
+    s2 = np.array(s2)
+    tol = 4 * math.sqrt(2 / (3 * W))  # relative std of s² over W samples' white residuals: √(2/ν), ν = 3 W
+    assert np.all(np.abs(s2[W:700] - 1.0) < tol)  # before the change: unaffected by what comes later
+    assert np.all(np.abs(s2[700 + W:] / 25.0 - 1.0) < tol)  # W samples after it: the new level alone

@@ -219,8 +219,10 @@ def test_efficiency_and_sigma_consistency():
     eff = efficiency(m, log.truth, bound)
     assert 0.7 < eff.ratio["omega_b_radps"] < 1.1, eff.to_markdown()
     assert 0.8 < eff.ratio["specific_force_b_mps2"] < 1.2, eff.to_markdown()
-    # the estimate's own sigma is close to the bound, and covers the error
-    np.testing.assert_allclose(m.sigma["omega_b_radps"], bound.sigma["omega_b_radps"], rtol=0.15)
+    # the estimate's own sigma is close to the bound, and covers the error: the model's σ lies within 15 %
+    # of it (0.855-0.94 of it here), and the scaling by the log's own residuals (sigma_scale) adds the
+    # scatter of its local level, √(1 / (2 · LOCAL_DOF)) ≈ 2.2 % per standard deviation
+    np.testing.assert_allclose(m.sigma["omega_b_radps"], bound.sigma["omega_b_radps"], rtol=0.15 + 2 * 0.022)
     z = np.abs(m.omega_b_radps - log.truth.omega_b_radps) / m.sigma["omega_b_radps"]
     assert 0.93 < np.mean(z < 2.0) <= 1.0
 

@@ -13,19 +13,28 @@ them:
   To first order p_i = (I − J_i J_i⁺) W_i e_i, the reading error alone: whatever the smoother made of the
   states, this part of the residual cannot be fitted by them. Under the model it has
   E|p_i|² = m − rank J_i (m: accelerometer axes).
-- **Variance factor** s² = Σ_i |p_i|² / Σ_i (m − rank J_i): the realised misfit against the assumed
-  noise (1 when the noise is as stated).
-- **Correlation in time.** ρ_k = Σ_i p_i · p_{i−k} / Σ_i |p_i|², k = 1 … :data:`MAX_LAG`. A state the
-  smoother estimates from L samples' worth of readings has, under an error of this correlation, the
-  variance of white noise times τ(L) = 1 + 2 Σ_{k<L} (1 − k/L) ρ_k (the mean of L correlated samples
-  against that of L independent ones; linear between whole L), taken at least 1.
+- **Variance factor** s_i² = Σ_k |p_k|² / Σ_k (m − rank_k) over the samples k of a window around
+  sample i (:func:`local_window`: :data:`LOCAL_WINDOW` samples at least, :data:`LOCAL_DOF` degrees of
+  freedom at least) (the batch smoother: centred on i; the fixed-lag smoother: the newest ones, i included): the
+  realised misfit against the assumed noise (1 when the noise is as stated). Local, not one number for
+  the log: a real array's misfit grows and shrinks with the motion (lever-arm, scale and alignment errors
+  scale with ω̇, ω² and f; vibration comes and goes), and a factor of the whole log would give the fast
+  stretches σ too small (the short tails of the error) and the quiet ones σ too large.
+- **Correlation in time.** ρ_k = Σ_i p_i · p_{i−k} / Σ_i |p_i|², k = 1 … :data:`MAX_LAG` (whole log, or the
+  samples emitted so far). A state the smoother estimates from L samples' worth of readings has, under an
+  error of this correlation, the variance of white noise times τ(L) = 1 + 2 Σ_{k<L} (1 − k/L) ρ_k (the
+  mean of L correlated samples against that of L independent ones; linear between whole L), taken at
+  least :data:`TAU_FLOOR`: below 1 where the misfit alternates faster than the state changes (a
+  vibration, which the motion model averages away), above 1 where it drifts (a slowly varying error the
+  smoother cannot tell from the motion).
 - **Span.** L_ij = σ²_single,ij / σ²_ij: the variance of state j from sample i's readings alone
   ((J_iᵀ J_i)⁺, infinite along directions one sample does not see, such as ω at rest) over the
   smoother's; at most :data:`MAX_LAG`.
 
-The reported σ_ij becomes σ_ij √(s² τ(L_ij)). The batch smoother takes s² and ρ over the whole log
-(:func:`calibrated_sigma`); the fixed-lag smoother, which writes σ as it goes, over the samples emitted
-so far (:class:`RunningSigmaScale`: causal). The estimates themselves are not touched.
+The reported σ_ij becomes σ_ij √(s_i² τ(L_ij)): a function of the log's own residuals only, nothing
+fitted to a recording. The batch smoother takes s_i² over the window around each sample and ρ over the
+whole log (:func:`calibrated_sigma`); the fixed-lag smoother, which writes σ as it goes, over the samples
+emitted so far (:class:`RunningSigmaScale`: causal). The estimates themselves are not touched.
 """
 
 from __future__ import annotations
@@ -36,6 +45,23 @@ from ...rigid_body import quadratic_terms, quadratic_terms_jacobian
 
 MAX_LAG = 64
 """Longest lag [samples] of the residual's autocorrelation, and longest span L taken."""
+LOCAL_WINDOW = 2 * MAX_LAG
+"""Fewest samples whose parity residuals give one sample's variance factor s_i²: twice the longest span a
+state draws on, so that s_i² covers the readings the state averaged."""
+LOCAL_DOF = 1024
+"""... and at least this many degrees of freedom (m − rank a sample: 3 for four triads, 15 for eight): the
+factor √s_i² of white residuals then scatters by √(1 / (2 · 1024)) ≈ 2.2 % about 1."""
+
+
+def local_window(dof_per_sample: float) -> int:
+    """Samples of the window of s_i² for residuals of ``dof_per_sample`` degrees of freedom each:
+    :data:`LOCAL_WINDOW` at least, more until they hold :data:`LOCAL_DOF`."""
+    if not dof_per_sample > 0:
+        return LOCAL_WINDOW
+    return max(LOCAL_WINDOW, int(np.ceil(LOCAL_DOF / dof_per_sample)))
+TAU_FLOOR = 1.0 / MAX_LAG
+"""Least long-run factor τ(L): the variance of a mean of :data:`MAX_LAG` samples cannot be told, from lags
+up to :data:`MAX_LAG`, to be smaller than that of one sample over :data:`MAX_LAG`."""
 RANK_TOLERANCE = 1e-6
 """A direction of the whitened Jacobian counts (rank, single-sample variance) when its singular value
 exceeds this times the largest."""
@@ -85,7 +111,8 @@ def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np
 
 
 def long_run_factors(rho: np.ndarray) -> np.ndarray:
-    """τ(L) for L = 0 … len(rho) (``rho[k-1]``: the autocorrelation at lag k), each at least 1."""
+    """τ(L) for L = 0 … len(rho) (``rho[k-1]``: the autocorrelation at lag k), each at least :data:`TAU_FLOOR`
+    (τ(0) = τ(1) = 1)."""
     rho = np.asarray(rho, dtype=float)
     K = len(rho)
     out = np.ones(K + 1)
@@ -94,12 +121,20 @@ def long_run_factors(rho: np.ndarray) -> np.ndarray:
         c2 = np.cumsum(np.arange(1, K + 1) * rho)[:K - 1]  # Σ_{k<L} k ρ_k
         L = np.arange(2, K + 1)
         out[2:] = 1.0 + 2.0 * (c1 - c2 / L)
-    return np.maximum(out, 1.0)
+    return np.maximum(out, TAU_FLOOR)
 
 
-def scale_factors(sd: np.ndarray, single: np.ndarray, variance_factor: float, tau: np.ndarray) -> np.ndarray:
+def local_sums(values: np.ndarray, window: int) -> np.ndarray:
+    """Sums of ``values`` (N,) over the ``window`` samples centred on each (fewer at the ends)."""
+    c = np.concatenate([[0.0], np.cumsum(np.asarray(values, dtype=float))])
+    i = np.arange(len(values))
+    half = int(window) // 2
+    return c[np.minimum(len(values), i + window - half)] - c[np.maximum(0, i - half)]
+
+
+def scale_factors(sd: np.ndarray, single: np.ndarray, variance_factor, tau: np.ndarray) -> np.ndarray:
     """(N, 9) factors on σ: √(s² τ(L_ij)), L_ij = single_ij / sd_ij² within 0 … len(tau) − 1 (τ linear
-    between whole spans)."""
+    between whole spans); ``variance_factor`` s² one number or one per row (N, 1)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         span = single / (sd * sd)
     top = len(tau) - 1
@@ -110,9 +145,9 @@ def scale_factors(sd: np.ndarray, single: np.ndarray, variance_factor: float, ta
 class RunningSigmaScale:
     """The factor on σ from the residuals seen so far (the fixed-lag smoother's, causal): :meth:`scaled`
     takes one emitted state with its reading, adds its parity residual to the running sums and returns
-    its σ scaled by the factor of those sums."""
+    its σ scaled by the factor of those sums (s² of the newest ``window`` samples, ρ of all)."""
 
-    def __init__(self, array, max_lag: int = MAX_LAG):
+    def __init__(self, array, max_lag: int = MAX_LAG, window: int | None = None):
         self.array = array
         self._geometry = _geometry(array)
         self.robust = None
@@ -124,6 +159,9 @@ class RunningSigmaScale:
         self._dof = 0.0
         self._lagged = np.zeros(self.max_lag)
         self.samples = 0
+        self.window = None if window is None else int(window)
+        """Samples of s²'s window (:func:`local_window` of the first sample's degrees of freedom when None)."""
+        self._recent: np.ndarray | None = None  # |p|², m − rank of the newest samples, row i % window of sample i
 
     def reset(self) -> None:
         """A new segment: the lagged products do not reach across it (the sums so far are kept)."""
@@ -131,7 +169,11 @@ class RunningSigmaScale:
 
     @property
     def variance_factor(self) -> float:
-        return self._power / self._dof if self._dof > 0 and self.samples >= MIN_SAMPLES else 1.0
+        """s² over the newest :attr:`window` samples (1 before :data:`MIN_SAMPLES`)."""
+        if self._recent is None:
+            return 1.0
+        power, dof = self._recent.sum(axis=0)
+        return power / dof if dof > 0 and self.samples >= MIN_SAMPLES else 1.0
 
     def tau(self) -> np.ndarray:
         if self.samples < MIN_SAMPLES or self._power <= 0:
@@ -179,14 +221,20 @@ class RunningSigmaScale:
                 self._lagged[:held] += self._ring[rows] @ p
             self._ring[self._held % K] = p
             self._held += 1
+            if self._recent is None:
+                if self.window is None:
+                    self.window = local_window(len(p) - rank)
+                self._recent = np.zeros((self.window, 2))
+            self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank))
             self.samples += 1
         return sd * scale_factors(sd, single, self.variance_factor, self.tau())
 
 
 def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
-                     robust=None, max_lag: int = MAX_LAG) -> np.ndarray:
-    """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the whole log's
-    residuals (the batch smoother's; module docstring). Rows with a non-finite residual do not count."""
+                     robust=None, max_lag: int = MAX_LAG, window: int | None = None) -> np.ndarray:
+    """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the log's residuals
+    (the batch smoother's; module docstring): s² over the ``window`` samples centred on each row
+    (:func:`local_window` of the median degrees of freedom when None), ρ over the whole log. Rows with a non-finite residual do not count."""
     n = len(states)
     noise = np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), np.shape(accel_mps2))
     geometry = _geometry(array)
@@ -205,7 +253,12 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     lags = min(max_lag, n - 1)
     lagged = np.array([float(np.sum(q[k:] * q[:n - k])) for k in range(1, lags + 1)])
     tau = long_run_factors(lagged / power)
-    out[:, :9] = out[:, :9] * scale_factors(out[:, :9], single, power / dof, tau)
+    if window is None:
+        window = local_window(float(np.median((p.shape[1] - rank)[ok])))
+    local_dof = local_sums(np.where(ok, p.shape[1] - rank, 0), window)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s2 = np.where(local_dof > 0, local_sums(np.sum(q * q, axis=1), window) / local_dof, power / dof)
+    out[:, :9] = out[:, :9] * scale_factors(out[:, :9], single, s2[:, None], tau)
     return out
 
 

@@ -1,0 +1,80 @@
+"""tools/sigma_coverage.py: σ's coverage on simulated cells with a misfit built from physics, known truth."""
+
+import importlib.util
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+TOOLS = Path(__file__).resolve().parents[1] / "tools"
+
+
+def _load(name: str):
+    if name in sys.modules:
+        return sys.modules[name]
+    if str(TOOLS) not in sys.path:
+        sys.path.insert(0, str(TOOLS))
+    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+sc = _load("sigma_coverage")
+
+
+def test_spread_is_the_binomial_std_for_independent_samples_and_grows_with_correlation():
+    rng = np.random.default_rng(0)
+    n = 20000
+    err = rng.standard_normal((n, 1))
+    sigma = np.ones((n, 1))
+    c = np.mean(np.abs(err) < 1)
+    # independent samples: τ = 1 up to the first negative lag (a few 1/√n at most)
+    assert sc.spread(err, sigma) == pytest.approx(np.sqrt(c * (1 - c) / n), rel=0.1)
+    # each error repeated 10 times: 10 times fewer independent samples, √10 times the spread
+    slow = np.repeat(err[: n // 10], 10, axis=0)
+    c10 = np.mean(np.abs(slow) < 1)
+    # the indicator correlated 1 - k/10 at lag k < 10: τ = 1 + 2 Σ_{k<10} (1 - k/10) = 10
+    assert sc.spread(slow, sigma) == pytest.approx(np.sqrt(c10 * (1 - c10) * 10 / n), rel=0.15)
+
+
+def test_in_target_bounds():
+    m = {"coverage_1sigma": (0.6, 0.7, 0.76), "coverage_2sigma": (0.9, 0.95, 0.98)}
+    assert sc.in_target(m)
+    m["coverage_1sigma"] = (0.59, 0.7, 0.7)
+    assert not sc.in_target(m) and sc.in_target(m, 0.02)
+
+
+def _cell(name):
+    return next(c for c in sc.CELLS if c.name == name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, white_wide", [("scale-1pc-200Hz", False), ("vibration-37Hz-200Hz", True)])
+@pytest.mark.parametrize("method", ["smoother", "fixed-lag"])
+def test_scaled_sigma_covers_a_physical_misfit_within_the_binomial_spread(tmp_path, name, white_wide, method):
+    from gfimu import io as gio
+    from gfimu.readings import screen_log
+
+    path, omega = sc.build(_cell(name), tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log, _ = screen_log(gio.read_log(path, truth=False))
+    motion, white = sc.run_both(log, method)
+    err = motion.omega_b_radps - omega
+    scaled = motion.sigma["omega_b_radps"]
+    m_white = sc.sigma_metrics(err, white)
+    m = sc.sigma_metrics(err, scaled)
+    if white_wide:  # vibration: the robust model's white σ far too wide (nearly every error within it)
+        assert min(m_white["coverage_1sigma"]) > 0.9
+    else:  # 1 % gain errors: the white σ several times too small
+        assert max(m_white["coverage_1sigma"]) < 0.35
+    # the target band widened by 3 binomial stds of the count of independent samples (errors correlated
+    # over a fraction of a second: a few dozen independent samples in 10 s)
+    sp = sc.spread(err, scaled)
+    assert 0.0 < sp < 0.15
+    assert sc.in_target(m, 3 * sp), (m, sp)
+    assert 1.5 < m["mean_nees"] < 6.0
