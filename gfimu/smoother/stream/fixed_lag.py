@@ -132,6 +132,53 @@ SAME_BRANCH = 0.5
 difference is below this fraction of the RMS of ω: the branches of ω differ by about 2 |ω|."""
 
 
+CHOICE_DELAY_S = 0.5
+"""A model chosen again on the stream (every ``retune_every_s``, or when the motion outgrows the model) is
+computed off the stream, on a copy of the history, while the samples go on with the model in use; it
+replaces that model this long (of samples, at the nominal rate) after the sample that asked for it. The
+sample at which it changes is fixed by the data, never by the clock, so that a log and a live stream of it
+give the same rows (:class:`PendingChoice`)."""
+
+
+class PendingChoice:
+    """A model being chosen in a worker thread (:meth:`FixedLagSmoother._choose`): ``compute()`` (returning
+    the chosen :class:`~gfimu.smoother.stream.model_choice.StreamModel`) runs at once in a daemon thread;
+    :meth:`result` waits for it (the seconds waited are added to ``waited_s``) and gives its model, or
+    raises what it raised. ``swap_at``: the count of samples at which the model is to be used."""
+
+    def __init__(self, compute, swap_at: int, outgrown: bool):
+        import threading
+
+        self.swap_at = int(swap_at)
+        self.outgrown = bool(outgrown)
+        self.waited_s = 0.0
+        self._value = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(compute,), name="gfimu-model-choice", daemon=True)
+        self._thread.start()
+
+    def _run(self, compute) -> None:
+        try:
+            self._value = compute()
+        except BaseException as exc:  # noqa: BLE001 - raised again where the model is used
+            self._error = exc
+
+    @property
+    def done(self) -> bool:
+        return not self._thread.is_alive()
+
+    def result(self):
+        if self._thread.is_alive():
+            import time
+
+            t0 = time.perf_counter()
+            self._thread.join()
+            self.waited_s = time.perf_counter() - t0
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
 def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | None:
     """Why the fixed-lag smoother cannot check its model on the data (None if it can): the check
     needs the per-sample ML fit of the accelerometers."""
@@ -281,7 +328,8 @@ class FixedLagSmoother:
                  marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
                  fast_measurement: bool = True, tune_window_s: float = 3.0, engine: str = "numpy",
                  clock_reset_s: float = 1.0, auto_model: bool = False, retune_every_s: float = 10.0,
-                 model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0) -> None:
+                 model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0,
+                 choice_delay_s: float = CHOICE_DELAY_S) -> None:
         options = options or SmootherOptions()
         if engine not in ENGINES:
             raise InputError(f"fixed-lag smoother: engine must be one of {', '.join(ENGINES)}, got {engine!r}")
@@ -303,7 +351,7 @@ class FixedLagSmoother:
         if not (isinstance(clock_reset_s, (int, float)) and math.isfinite(clock_reset_s) and clock_reset_s >= 0):
             raise InputError(f"fixed-lag smoother: clock_reset_s must be >= 0, got {clock_reset_s!r}")
         for name, v in (("tune_window_s", tune_window_s), ("retune_every_s", retune_every_s),
-                        ("model_window_s", model_window_s)):
+                        ("model_window_s", model_window_s), ("choice_delay_s", choice_delay_s)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"fixed-lag smoother: {name} must be a positive number, got {v!r}")
         if not (isinstance(hold_max_s, (int, float)) and math.isfinite(hold_max_s) and hold_max_s >= 0):
@@ -341,6 +389,11 @@ class FixedLagSmoother:
         # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
         self._tune_min_n = min(self._tune_n, max(2, int(round(1.0 * self.rate_hz))))
         self._tune_buffer: list = []
+        self._pending: PendingChoice | None = None  # a model being chosen off the stream
+        self._n_accepted = 0  # samples taken in (not dropped): the clock the pending choice is used by
+        self._choice_delay_n = max(1, int(math.ceil(choice_delay_s * self.rate_hz)))
+        self.choice_waits: list[float] = []
+        """Seconds the stream waited for a model chosen off the stream that was not ready at its sample."""
         self._nominal_dt_ns = 1e9 / self.rate_hz
         self._warmup_n = max(2, int(round(warmup_s * self.rate_hz)))
         self._block_s = max(float(marginalise_every_s), 2.0 / self.rate_hz)
@@ -435,13 +488,17 @@ class FixedLagSmoother:
                 warnings.warn(f"fixed-lag smoother: the clock went back by {-dt_ns * 1e-9:.6f} s (from {self._last_t_ns} "
                               f"to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
                               "flushed and a new segment starts", ClockResetWarning, stacklevel=2)
+                self._settle_choice()
                 smoothed.extend(self._end_segment())
                 self._origin_ns = t_ns
             elif dt_ns > self.gap_factor * self._nominal_dt_ns:
+                self._settle_choice()
                 smoothed.extend(self._end_segment())
         else:
             self._origin_ns = t_ns
         self._last_t_ns = t_ns
+        self._n_accepted += 1
+        self._swap_choice()
         sample = (t_ns, y, gyro)
         if self._sigma_scale is not None:
             self._readings[t_ns] = y
@@ -522,8 +579,48 @@ class FixedLagSmoother:
 
     def _choose(self, samples, first: bool = False, outgrown: bool = False):
         """Choose the model on ``samples`` ((t_ns, accel, gyro, ...) tuples, oldest first) and go on with
-        it (:mod:`gfimu.smoother.stream.model_choice`). The first choice of a consistent stretch whose process
-        noise is tuned also returns the batch smoother's states of the stretch (else None).
+        it (:mod:`gfimu.smoother.stream.model_choice`). The first choice of a segment's stretch is made at
+        once and, for a consistent stretch whose process noise is tuned, also returns the batch smoother's
+        states of the stretch (else None). A later choice is made off the stream (:class:`PendingChoice`,
+        on ``samples``, a copy of the history) and used :data:`CHOICE_DELAY_S` of samples later
+        (:meth:`_swap_choice`); one asked for while another is pending is not made."""
+        if first:
+            self._settle_choice()
+            chosen, batch = self._chosen_model(samples, self.stream_model, first=True, outgrown=outgrown)
+            self._use(chosen)
+            if outgrown:
+                self._replay_window()
+            return batch
+        if self._pending is not None:
+            return None
+        previous = self.stream_model
+        self._pending = PendingChoice(lambda: self._chosen_model(samples, previous, outgrown=outgrown)[0],
+                                      self._n_accepted + self._choice_delay_n, outgrown)
+        return None
+
+    def _swap_choice(self, final: bool = False) -> None:
+        """The pending choice's model put in use when its sample has come (waiting for it when it is not
+        ready: the wait is counted in :attr:`choice_waits`); ``final``: at the end of a segment, whatever the
+        sample (the window is flushed: not solved again)."""
+        pending = self._pending
+        if pending is None or not (final or self._n_accepted >= pending.swap_at):
+            return
+        self._pending = None
+        late = not pending.done
+        chosen = pending.result()
+        if late:
+            self.choice_waits.append(pending.waited_s)
+        self._use(chosen)
+        if pending.outgrown and not final:
+            self._replay_window()
+
+    def _settle_choice(self) -> None:
+        """A pending choice put in use now (the segment ends, or a first choice is made)."""
+        self._swap_choice(final=True)
+
+    def _chosen_model(self, samples, previous, first: bool = False, outgrown: bool = False):
+        """(the model chosen on ``samples`` after ``previous``, the batch states of the stretch or None): the
+        choice itself, reading nothing of the stream that changes while it runs.
 
         A consistent stretch keeps the Gaussian model in use when that was chosen on motion and the
         motion has not outgrown it (the tuner is the costly part of a choice); otherwise the tuner
@@ -533,7 +630,6 @@ class FixedLagSmoother:
         check = stream_model.check_of(part, ml)
         batch = None
         base = self._user_options if check is None else measured_noise_options(self._user_options, check)
-        previous = self.stream_model
         t_end = int(part.timestamps_ns[-1])
         if check is not None and not check.consistent:
             chosen = stream_model.robust(part, self._user_options, check, ml, self._tune, previous)
@@ -558,10 +654,7 @@ class FixedLagSmoother:
                 batch = self._batch_states(span, problem, x0)
         if chosen.sign_scale_radps is None and ml is not None:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
-        self._use(chosen)
-        if outgrown:
-            self._replay_window()
-        return batch
+        return chosen, batch
 
     def _replay_window(self) -> None:
         """The window solved again from its raw samples with the model just chosen because the motion
@@ -686,6 +779,7 @@ class FixedLagSmoother:
         """
         if self.closed:
             raise FixedLagSmootherClosed("fixed-lag smoother: flush after close()")
+        self._settle_choice()
         out = self._scaled(self._end_segment())
         self._last_t_ns = None
         if self._sigma_scale is not None:
@@ -707,6 +801,7 @@ class FixedLagSmoother:
     def __exit__(self, *exc) -> None:
         if not self.closed:
             self.closed = True
+            self._pending = None  # a choice still being made is not used
             self._start_segment()
 
     def _end_segment(self) -> tuple[StateEstimate, ...]:
@@ -1146,8 +1241,10 @@ class FixedLagEstimator(SmootherEstimator):
         reason = self.applicable(log.array)
         if reason:
             raise InputError(f"{log.source}: {reason}")
-        rate_hz = log.rate_hz
-        smoother = self.smoother(log.array, rate_hz)
+        from .session import StreamSession
+
+        # the log's readings are screened already (screen(), the same rule as the stream's): not again here
+        session = StreamSession(log.array, self, log.rate_hz, screen=False, name=str(log.source or "log"))
         out = np.full((n, 9), np.nan)
         sig = np.full((n, 9), np.nan) if self.compute_sigma else None
         gyro = log.gyro_b_radps if (self.use_gyro and log.array.gyroscope is not None) else None
@@ -1156,7 +1253,7 @@ class FixedLagEstimator(SmootherEstimator):
         def store(states) -> None:
             nonlocal cursor
             for s in states:
-                if log.timestamps_ns[cursor] != s.timestamp_ns:
+                if cursor >= n or log.timestamps_ns[cursor] != s.timestamp_ns:
                     raise FixedLagSmootherError(f"{log.source}: internal ordering error at sample {cursor}")
                 out[cursor] = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
                 if sig is not None and s.sigma_omega_b_radps is not None:
@@ -1165,9 +1262,11 @@ class FixedLagEstimator(SmootherEstimator):
                 cursor += 1
 
         for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):
-            upd = smoother.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i])
-            store(upd.smoothed)
-        store(smoother.flush())
+            store(session.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i]))
+        store(session.finish())
+        for note in session.take_notes():
+            if note.startswith("warning: "):
+                warnings.warn(f"{log.source}: {note[len('warning: '):]}", RuntimeWarning, stacklevel=2)
         if cursor != n:
             raise FixedLagSmootherError(f"{log.source}: {n - cursor} samples were not estimated")
         sigma = {}
@@ -1176,8 +1275,8 @@ class FixedLagEstimator(SmootherEstimator):
         motion = Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
                         specific_force_b_mps2=out[:, 6:], sigma=sigma)
         tunings = []
-        for m in smoother.models:
+        for m in session.models:
             if m.tuning is not None and all(m.tuning is not t for t in tunings):
                 tunings.append(m.tuning)
         return SmootherResult(motion, tuple(tunings), windows=0,
-                              model_check=None if smoother.stream_model is None else smoother.stream_model.check)
+                              model_check=None if session.stream_model is None else session.stream_model.check)
