@@ -98,12 +98,12 @@ def test_a_choice_pending_at_the_end_is_used_before_the_window_is_flushed(log):
     out = []
     for i in range(len(log)):
         out += smoother.push(log.timestamps_ns[i], np.nan_to_num(log.accel_mps2[i], nan=0.0)).smoothed
-        if smoother._pending is not None and i > 3 * RATE_HZ:
+        if smoother._choice.pending is not None and i > 3 * RATE_HZ:
             break
-    assert smoother._pending is not None
+    assert smoother._choice.pending is not None
     n_models = len(smoother.models)
     out += smoother.flush()
-    assert smoother._pending is None and len(smoother.models) == n_models + 1
+    assert smoother._choice.pending is None and len(smoother.models) == n_models + 1
     t = [s.timestamp_ns for s in out]
     assert t == list(log.timestamps_ns[:i + 1])
 
