@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import queue
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -40,6 +41,11 @@ STEADY_AFTER_S = 10.0
 where the first seconds are held while the process noise is chosen on them."""
 
 _SIGNAL_EXIT = {"SIGINT": 130, "SIGTERM": 143}
+
+SWITCH_INTERVAL_S = 0.001
+"""Python's thread switch interval during a session (5 ms by default): a model being chosen in its worker
+thread (:class:`gfimu.smoother.stream.fixed_lag.PendingChoice`) gives the interpreter up to the stream's
+thread and the source's reader within this, so the rows keep leaving at the lag while it runs."""
 
 
 @dataclass(frozen=True)
@@ -399,7 +405,8 @@ class _Live:
         return LiveResult(
             rows_in=self.rows_in, rows_out=self.rows.out, bad_rows=self.bad, bad_reasons=tuple(self.reasons),
             late_or_repeated=c.late_or_repeated, clock_resets=c.clock_resets, missing=c.missing,
-            overrun_dropped=overrun, processing_ms=_stats(np.asarray(session.processing_s) * 1e3), latency_ms=latency, steady_latency_ms=steady, rate_hz=session.rate_hz,
+            overrun_dropped=overrun, processing_ms=_stats(np.asarray(session.processing_s) * 1e3),
+            latency_ms=latency, steady_latency_ms=steady, rate_hz=session.rate_hz,
             rate_from=session.rate_from, ended=ended, failure=failure, replaced_readings=c.replaced_readings,
             screening_ms=_stats(np.asarray(session.screening_s) * 1e3), choice_waits=c.choice_waits,
             choice_wait_ms=1e3 * c.choice_wait_s)
@@ -449,6 +456,8 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     handlers = _Signals(stop, signals)
     closed, crash = False, []
     live = _Live(source, estimator, sink, rate_hz, say, status_s)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
     try:
         sink.start()  # an output that fails here (its header) fails the call
         reader.thread.start()
@@ -460,6 +469,7 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
             crash.append(exc)
     finally:
         stop.set()
+        sys.setswitchinterval(switch)
         handlers.restore()
         reader.join()
         try:
