@@ -118,3 +118,14 @@ def test_the_summary_says_the_waits():
     text = r.summary()
     assert "latency arrival -> estimate written p50 201.0 ms, p99 240.5 ms, max 250.0 ms" in text
     assert text.endswith("; waited 2 time(s) for a model chosen off the stream, 35.2 ms in all; ended: end of input")
+
+
+def test_a_choice_that_fails_in_its_worker_raises_where_its_model_is_used():
+    """The worker's exception is not lost in its thread: it is raised by result(), on the stream's thread."""
+    from gfimu.smoother.stream.fixed_lag import PendingChoice
+
+    failing = PendingChoice(lambda: 1 / 0, swap_at=5, outgrown=False)
+    with pytest.raises(ZeroDivisionError):
+        failing.result()
+    slow = PendingChoice(lambda: time.sleep(0.2) or "model", swap_at=5, outgrown=True)
+    assert slow.result() == "model" and slow.done and 0.1 < slow.waited_s < 5.0
