@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import queue
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -30,11 +31,7 @@ import numpy as np
 from .io.sources import BadRow, Reading, Source, SourceNote
 from .io.tables import motion_csv_chunks
 from .motion import Motion
-from .readings import StreamScreen
-
-RATE_ROWS = 64
-"""Samples from whose timestamps the rate is taken when neither array.toml nor the caller gives it
-(the median period, as :attr:`gfimu.log.Log.rate_hz` takes it over a whole log)."""
+from .smoother.stream.session import RATE_ROWS, StreamSession, rate_from_timestamps  # noqa: F401 - re-exported
 
 REASONS_KEPT = 5
 """Bad rows whose reason is kept (and reported as it happens); the others are only counted."""
@@ -44,6 +41,11 @@ STEADY_AFTER_S = 10.0
 where the first seconds are held while the process noise is chosen on them."""
 
 _SIGNAL_EXIT = {"SIGINT": 130, "SIGTERM": 143}
+
+SWITCH_INTERVAL_S = 0.001
+"""Python's thread switch interval during a session (5 ms by default): a model being chosen in its worker
+thread (:class:`gfimu.smoother.stream.fixed_lag.PendingChoice`) gives the interpreter up to the stream's
+thread and the source's reader within this, so the rows keep leaving at the lag while it runs."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,11 @@ class LiveResult:
     """Accelerometer readings the screening replaced (gross errors, :class:`gfimu.readings.StreamScreen`)."""
     screening_ms: tuple[float, float, float] | None = None
     """(p50, p99, max) of the screening's time per block of samples it decides (None without screening)."""
+    choice_waits: int = 0
+    """Times the stream waited for a model chosen off it that was not ready at its sample
+    (:data:`gfimu.smoother.stream.fixed_lag.CHOICE_DELAY_S`: the machine was too busy)."""
+    choice_wait_ms: float = 0.0
+    """Their total wait [ms]."""
 
     @property
     def signal_exit(self) -> int | None:
@@ -106,6 +113,9 @@ class LiveResult:
         if self.steady_latency_ms is not None:
             text += "; after the first {:g} s: p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms".format(
                 STEADY_AFTER_S, *self.steady_latency_ms)
+        if self.choice_waits:
+            text += (f"; waited {self.choice_waits} time(s) for a model chosen off the stream, "
+                     f"{self.choice_wait_ms:.1f} ms in all")
         return text + f"; ended: {self.ended}"
 
 
@@ -150,90 +160,6 @@ class EstimateSink:
         for chunk in chunks:
             self.stream.write(chunk)
         self.stream.flush()
-
-
-class _Session:
-    """The fixed-lag smoother on one stream: samples in, screened (:class:`gfimu.readings.StreamScreen`, unless
-    the estimator's ``screen_readings`` is off), states out, counts kept."""
-
-    def __init__(self, array, estimator, rate_hz: float):
-        self.rate_hz = float(rate_hz)
-        self.array = array
-        self.smoother = estimator.smoother(array, self.rate_hz)
-        self.use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
-        self.screen = StreamScreen(array, self.rate_hz) if getattr(estimator, "screen_readings", False) else None
-        self.replaced = 0
-        """Readings the screening replaced (in screens ended by a clock reset and the current one)."""
-        self.last_t: int | None = None
-        self.late = 0  # samples late or repeated, dropped before the screening
-        self.missing = 0
-        self.processing: list[float] = []  # the smoother's update per sample [s]
-        self.screening: list[float] = []  # the screening's decision per block [s]
-
-    def push(self, r: Reading) -> list:
-        t = int(r.timestamp_ns)
-        row = (t, np.asarray(r.accel, dtype=float), r.gyro if self.use_gyro else None)
-        if self.last_t is not None and t <= self.last_t:
-            if self.last_t - t <= self.smoother.clock_reset_s * 1e9:
-                if self.screen is None:  # the smoother drops and counts it
-                    return list(self.smoother.push(*row).smoothed)
-                self.late += 1  # the rows before it are still in the screening: dropped here
-                return []
-            if self.screen is not None:  # a clock reset: the rows held go first, then a new screening
-                states = self._smooth(self.screen.flush())
-                self._new_screen()
-                states += self._smooth(self._screened(row))
-                self.last_t = t
-                return states
-        states = self._smooth(self._screened(row) if self.screen is not None else [row])
-        if self.last_t is not None and t > self.last_t:
-            steps = (t - self.last_t) * 1e-9 * self.rate_hz
-            if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
-                self.missing += int(round(steps)) - 1
-        self.last_t = t
-        return states
-
-    def _new_screen(self) -> None:
-        self.replaced += self.screen.count
-        self.screen = StreamScreen(self.array, self.rate_hz)
-
-    def _screened(self, row) -> list:
-        """The rows the screening decides on ``row``'s arrival (a block, or none), its time kept per block."""
-        t0 = time.perf_counter()
-        rows = self.screen.push(*row)
-        if rows:
-            _keep(self.screening, time.perf_counter() - t0)
-        return rows
-
-    def _smooth(self, rows) -> list:
-        """The smoother's update on each row, its time kept per row (not for a row it drops)."""
-        states = []
-        for row in rows:
-            t0 = time.perf_counter()
-            update = self.smoother.push(*row)
-            if update.dropped is None:
-                _keep(self.processing, time.perf_counter() - t0)
-            states.extend(update.smoothed)
-        return states
-
-    def flush(self) -> list:
-        """The rows still held by the screening, then the window: every state left."""
-        states = self._smooth(self.screen.flush()) if self.screen is not None else []
-        return states + list(self.smoother.flush())
-
-    @property
-    def replaced_readings(self) -> int:
-        return self.replaced + (self.screen.count if self.screen is not None else 0)
-
-    def counts(self) -> tuple[int, int]:
-        c = self.smoother.counts
-        return self.late + c["duplicates"] + c["out_of_order"], c["clock_resets"]
-
-
-def _keep(times: list, value: float) -> None:
-    times.append(value)
-    if len(times) > 200_000:  # bounded memory on long streams
-        del times[:100_000]
 
 
 UNIT_CHECK_S = 3.0
@@ -285,96 +211,8 @@ class _FirstRowsCheck:
             self.t, self.accel = [], []
 
 
-RATE_WATCH_STEPS = 32
-"""Consecutive steps forward at one steady period, away from the nominal one, after which the rate is measured
-again from them (:class:`_RateWatch`)."""
-
-
-class _RateWatch:
-    """Tells when a stream's rate has changed: the last :data:`RATE_WATCH_STEPS` steps forward all within 10 %
-    of their median, and that median more than 1.5 times longer or shorter than the nominal step (every step a
-    gap, or two samples per step). Returns the new rate once, then watches against it."""
-
-    def __init__(self, rate_hz: float):
-        self.rate_hz = float(rate_hz)
-        self.steps: list[int] = []
-        self.last: int | None = None
-
-    def step(self, t_ns: int) -> float | None:
-        t = int(t_ns)
-        if self.last is None or t <= self.last:
-            self.last = t if self.last is None or t < self.last - int(1e9) else self.last
-            return None
-        self.steps.append(t - self.last)
-        self.last = t
-        if len(self.steps) > RATE_WATCH_STEPS:
-            del self.steps[0]
-        if len(self.steps) < RATE_WATCH_STEPS:
-            return None
-        steps = np.asarray(self.steps, dtype=float)
-        median = float(np.median(steps))
-        if median <= 0 or np.max(np.abs(steps - median)) > 0.1 * median:
-            return None
-        ratio = median * 1e-9 * self.rate_hz
-        if 1 / 1.5 <= ratio <= 1.5:
-            return None
-        self.rate_hz = 1e9 / median
-        self.steps.clear()
-        return self.rate_hz
-
-
-def _rerate(session: "_Session", array, estimator, rate_hz: float) -> list:
-    """``session`` on at ``rate_hz``: the states still held at the old rate (its screening, its window), then a
-    new smoother and screening at the new rate; the counts so far are kept."""
-    states = session.flush()
-    old = session.smoother.counts
-    session.late += old["duplicates"] + old["out_of_order"]
-    if session.screen is not None:
-        session.replaced += session.screen.count
-    session.rate_hz = float(rate_hz)
-    session.smoother = estimator.smoother(array, session.rate_hz)
-    if session.screen is not None:
-        session.screen = StreamScreen(array, session.rate_hz)
-    return states
-
-
-def _on_rate_change(session: "_Session", watch: _RateWatch, r: Reading, array, estimator,
-                    say: Callable[[str], None], emit: Callable) -> None:
-    """After each sample: when ``watch`` finds the stream's rate changed, say so and go on at the new rate."""
-    old = watch.rate_hz
-    new = watch.step(r.timestamp_ns)
-    if new is None:
-        return
-    say(f"warning: the stream's rate changed: {RATE_WATCH_STEPS} steps in a row of {1e3 / new:.4g} ms where "
-        f"{old:.6g} Hz was taken; the rate is measured again, {new:.6g} Hz, and the window restarts once at it")
-    emit(_rerate(session, array, estimator, new), timed=False)
-
-
 OUTPUT_CLOSED = "output closed by its reader"
 """:attr:`LiveResult.ended` when writing a row met a broken pipe (the reader of standard output went away)."""
-
-
-def _check_rate(rate_hz: float, source: Source) -> None:
-    """A rate beyond any IMU's (timestamps 1 ns apart) would size the smoother's window at hundreds of millions
-    of samples: refused (the session ends with the message) instead of running out of memory."""
-    from .errors import DataError
-    from .io.plausibility import MAX_RATE_HZ
-
-    if rate_hz > MAX_RATE_HZ:
-        raise DataError(f"{getattr(source, 'name', 'source')}: a rate of {rate_hz:.4g} Hz (steps of "
-                        f"{1e9 / rate_hz:.4g} ns), beyond any IMU's ({MAX_RATE_HZ:g} Hz at most): check the unit of "
-                        "the timestamps (or --rate-hz)")
-
-
-def rate_from_timestamps(timestamps_ns) -> float | None:
-    """The rate [Hz] of the median step between increasing timestamps (None with fewer than two steps
-    forward): the rule of :attr:`gfimu.log.Log.rate_hz`."""
-    t = np.asarray(timestamps_ns, dtype=np.int64)
-    dt = np.diff(t) * 1e-9
-    dt = dt[dt > 0]
-    if dt.size < 1:
-        return None
-    return 1.0 / float(np.median(dt))
 
 
 def _stats(values_ms) -> tuple[float, float, float] | None:
@@ -382,6 +220,220 @@ def _stats(values_ms) -> tuple[float, float, float] | None:
         return None
     p = np.asarray(values_ms, dtype=float)
     return float(np.percentile(p, 50)), float(np.percentile(p, 99)), float(p.max())
+
+
+
+
+class _Reader:
+    """The source read in its own thread: (reading or bad row, arrival time) items on a queue of at most
+    ``size``, None at its end; when the queue is full the oldest waiting item is dropped and counted."""
+
+    def __init__(self, source: Source, stop: threading.Event, size: int):
+        self.source, self.stop = source, stop
+        self.queue: queue.Queue = queue.Queue(maxsize=max(int(size), 1))
+        self.fatal: list[BaseException] = []
+        self.overrun = 0
+        self.thread = threading.Thread(target=self._read, name="gfimu-live-source", daemon=True)
+
+    def _read(self) -> None:
+        try:
+            for item in self.source.items(self.stop):
+                self._put((item, time.perf_counter()))
+                if self.stop.is_set():
+                    break
+        except BaseException as exc:  # noqa: BLE001 - handed to the main thread
+            self.fatal.append(exc)
+        finally:
+            self._put(None)
+
+    def _put(self, item) -> None:
+        while True:
+            try:
+                self.queue.put_nowait(item)
+                return
+            except queue.Full:  # the smoother falls behind: drop the oldest waiting sample
+                try:
+                    if self.queue.get_nowait() is not None:
+                        self.overrun += 1
+                except queue.Empty:
+                    pass
+
+    def get(self):
+        """The next item; False when none came within 0.2 s; None at the end (or, once stopped, when the
+        queue is empty: what already arrived is still estimated)."""
+        if self.stop.is_set():
+            try:
+                return self.queue.get_nowait()
+            except queue.Empty:
+                return None
+        try:
+            return self.queue.get(timeout=0.2)
+        except queue.Empty:
+            return False
+
+    def join(self) -> None:
+        if self.thread.ident is not None:  # started (the output may fail before: its header is written first)
+            self.thread.join(timeout=2 * 0.2 + 0.5)
+
+
+class _Signals:
+    """SIGINT and SIGTERM set ``stop`` (the first one's name kept in ``caught``) while installed (with
+    ``enabled``, from the main thread); the previous handlers come back on :meth:`restore`."""
+
+    def __init__(self, stop: threading.Event, enabled: bool):
+        self.stop = stop
+        self.caught: list[str] = []
+        self.previous = {}
+        if enabled and threading.current_thread() is threading.main_thread():
+            self.previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def _on_signal(self, signum, frame) -> None:  # noqa: ARG002
+        if not self.caught:
+            self.caught.append(signal.Signals(signum).name)
+        self.stop.set()
+
+    def restore(self) -> None:
+        for s, h in self.previous.items():
+            signal.signal(s, h)
+
+
+class _Rows:
+    """The states written to the sink, with each one's latency (its sample's arrival → written)."""
+
+    def __init__(self, sink: EstimateSink):
+        self.sink = sink
+        self.out = 0
+        self.arrival: dict[int, float] = {}
+        self.latency: list[tuple[float, float]] = []
+
+    def arrived(self, t_ns: int, at: float) -> None:
+        self.arrival[t_ns] = at
+
+    def write(self, states, timed: bool = True) -> None:
+        if not states:
+            return
+        self.sink.write(states)
+        self.out += len(states)
+        if not timed:  # the window flushed at the end: their wait is the stream's end, not the lag
+            return
+        now = time.perf_counter()
+        for s in states:  # arrival of a sample -> its estimate written
+            t = self.arrival.pop(int(s.timestamp_ns), None)
+            if t is not None:
+                self.latency.append((t, now - t))
+        if len(self.arrival) > 100_000:  # samples that never left (dropped): forget the oldest
+            for key in list(self.arrival)[:50_000]:
+                del self.arrival[key]
+        if len(self.latency) > 200_000:
+            del self.latency[:100_000]
+
+    def stats(self):
+        """(latency (p50, p99, max) [ms], the same after the first :data:`STEADY_AFTER_S` s), None for none."""
+        if not self.latency:
+            return None, None
+        pairs = np.asarray(self.latency)
+        later = pairs[pairs[:, 0] > pairs[0, 0] + STEADY_AFTER_S, 1]
+        return _stats(pairs[:, 1] * 1e3), _stats(later * 1e3)
+
+
+class _Live:
+    """One live run: the source's items into the :class:`StreamSession`, its states to the sink, what it
+    says through ``say``."""
+
+    def __init__(self, source: Source, estimator, sink: EstimateSink, rate_hz, say, status_s):
+        self.source, self.estimator, self.rate_hz, self.say, self.status_s = source, estimator, rate_hz, say, status_s
+        self.session: StreamSession | None = None
+        self.rows = _Rows(sink)
+        self.units = _FirstRowsCheck(source.array, source, say)
+        self.rows_in = self.bad = 0
+        self.reasons: list[str] = []
+
+    def loop(self, reader: _Reader) -> None:
+        """Items until the source ends or the run is stopped, then every state left."""
+        self.session = StreamSession(self.source.array, self.estimator, self.rate_hz,
+                                     name=getattr(self.source, "name", "source"))  # a rate beyond any IMU's refused
+        last_status = time.monotonic()
+        while True:
+            item = reader.get()
+            if item is None:
+                break
+            if item is not False:
+                self.take(*item)
+            if self.status_s and time.monotonic() - last_status >= self.status_s:
+                last_status = time.monotonic()
+                self.status(reader.overrun)
+        self.units.finish()
+        self.rows.write(self.session.finish(), timed=False)
+        self.tell()
+
+    def take(self, thing, arrived: float) -> None:
+        if isinstance(thing, SourceNote):  # something the source saw (the stream goes on)
+            self.say(f"warning: {thing.message}")
+            return
+        if isinstance(thing, BadRow):
+            self.bad_row(thing)
+            return
+        self.rows_in += 1
+        self.units.add(thing)
+        self.rows.arrived(int(thing.timestamp_ns), arrived)
+        self.rows.write(self.session.push(thing.timestamp_ns, thing.accel, thing.gyro))
+        self.tell()
+
+    def tell(self) -> None:
+        for note in self.session.take_notes():
+            self.say(note)
+
+    def bad_row(self, row: BadRow) -> None:
+        self.bad += 1
+        if len(self.reasons) < REASONS_KEPT:
+            self.reasons.append(f"{row.where}: {row.reason}")
+            self.say(f"warning: {row.where} skipped: {row.reason}")
+            if len(self.reasons) == REASONS_KEPT:
+                self.say("warning: further bad rows are counted, not shown")
+
+    def status(self, overrun: int) -> None:
+        p = _stats(np.asarray(self.session.processing_s) * 1e3)
+        nan = float("nan")
+        self.say(f"{self.rows_in} in, {self.rows.out} out, processing p50 {p[0] if p else nan:.2f} ms "
+                 f"p99 {p[1] if p else nan:.2f} ms, {overrun} dropped, {self.session.counts.late_or_repeated} late, "
+                 f"{self.bad} bad")
+
+    def result(self, ended: str, failure: str | None, overrun: int) -> LiveResult:
+        session = self.session
+        if session is None:  # refused before the first reading
+            session = StreamSession(self.source.array, self.estimator, None)
+            session.rate_hz, session.rate_from = self.rate_hz, "given" if self.rate_hz is not None else "stream"
+        c = session.counts
+        latency, steady = self.rows.stats()
+        return LiveResult(
+            rows_in=self.rows_in, rows_out=self.rows.out, bad_rows=self.bad, bad_reasons=tuple(self.reasons),
+            late_or_repeated=c.late_or_repeated, clock_resets=c.clock_resets, missing=c.missing,
+            overrun_dropped=overrun, processing_ms=_stats(np.asarray(session.processing_s) * 1e3),
+            latency_ms=latency, steady_latency_ms=steady, rate_hz=session.rate_hz,
+            rate_from=session.rate_from, ended=ended, failure=failure, replaced_readings=c.replaced_readings,
+            screening_ms=_stats(np.asarray(session.screening_s) * 1e3), choice_waits=c.choice_waits,
+            choice_wait_ms=1e3 * c.choice_wait_s)
+
+
+def _ending(source: Source, reader: _Reader, caught: list[str], closed: bool, crash: list[Exception]):
+    """(``ended``, ``failure``) of a run: the output closed, the session failed, a signal, or the source's."""
+    failure = source.failure
+    if closed:
+        return OUTPUT_CLOSED, "the output was closed by its reader (a broken pipe); the session ended there"
+    if crash:
+        from .errors import DataError, InputError
+
+        exc = crash[0]
+        if isinstance(exc, (InputError, DataError)):  # the stream's own data refused, as estimate refuses a log's
+            return "input refused", str(exc)
+        return "stopped by an error", (f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename
+                                       else f"{type(exc).__name__}: {exc}")
+    if caught:
+        return caught[0], failure
+    if reader.fatal:
+        exc = reader.fatal[0]
+        return ("input refused" if isinstance(exc, ValueError) else "source failed"), str(exc) or type(exc).__name__
+    return source.ended, failure
 
 
 def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None = None, queue_size: int = 5000,
@@ -396,213 +448,39 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     counted. ``report`` receives one-line messages (the first bad rows, the rate taken, status lines
     every ``status_s`` seconds when given). The source is closed at the end. A header that cannot be
     read ends the session: ``ended`` is ``"input refused"`` and ``failure`` names the source and line;
-    a source that fails otherwise gives ``"source failed"``.
+    a source that fails otherwise gives ``"source failed"``. The readings go through a
+    :class:`~gfimu.smoother.stream.session.StreamSession`, as ``gfimu estimate --method fixed-lag`` sends a log's.
     """
     say = report or (lambda message: None)
     stop = stop or threading.Event()
-    array = source.array
     # readings that are not finite or beyond any range: replaced by the screening, or bad rows without it
     source.keep_gross_errors = bool(getattr(estimator, "screen_readings", False))
-    q: queue.Queue = queue.Queue(maxsize=max(int(queue_size), 1))
-    fatal: list[BaseException] = []
-    closed = False
-    overrun = [0]
-    caught: list[str] = []
-
-    def reader():
-        try:
-            for item in source.items(stop):
-                _put((item, time.perf_counter()))
-                if stop.is_set():
-                    break
-        except BaseException as exc:  # noqa: BLE001 - handed to the main thread
-            fatal.append(exc)
-        finally:
-            _put(None)
-
-    def _put(item):
-        while True:
-            try:
-                q.put_nowait(item)
-                return
-            except queue.Full:  # the smoother falls behind: drop the oldest waiting sample
-                try:
-                    dropped = q.get_nowait()
-                    if dropped is not None:
-                        overrun[0] += 1
-                except queue.Empty:
-                    pass
-
-    def on_signal(signum, frame):  # noqa: ARG001
-        if not caught:
-            caught.append(signal.Signals(signum).name)
-        stop.set()
-
-    previous = {}
-    if signals and threading.current_thread() is threading.main_thread():
-        previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-
-    session: _Session | None = None
-    pending: list[tuple[Reading, float]] = []  # samples held until the rate is known
-    rate_from = "given" if rate_hz is not None else "stream"
-    rows_in = bad = 0
-    reasons: list[str] = []
-    arrival: dict[int, float] = {}
-    latency: list[tuple[float, float]] = []
-    rows_out = 0
-
-    def emit(states, timed: bool = True) -> None:
-        nonlocal rows_out
-        if not states:
-            return
-        sink.write(states)
-        rows_out += len(states)
-        if not timed:  # the window flushed at the end: their wait is the stream's end, not the lag
-            return
-        now = time.perf_counter()
-        for s in states:  # arrival of a sample -> its estimate written
-            t = arrival.pop(int(s.timestamp_ns), None)
-            if t is not None:
-                latency.append((t, now - t))
-        if len(arrival) > 100_000:  # samples that never left (dropped): forget the oldest
-            for key in list(arrival)[:50_000]:
-                del arrival[key]
-        if len(latency) > 200_000:
-            del latency[:100_000]
-
-    units = _FirstRowsCheck(array, source, say)
-    watch: list[_RateWatch] = []
-
-    def start_session(rate: float) -> None:
-        nonlocal session
-        _check_rate(rate, source)
-        session = _Session(array, estimator, rate)
-        watch[:] = [_RateWatch(rate)]
-        for r, arrived in pending:
-            feed(r, arrived)
-        pending.clear()
-
-    def feed(r: Reading, arrived: float) -> None:
-        arrival[int(r.timestamp_ns)] = arrived
-        emit(session.push(r))
-        _on_rate_change(session, watch[0], r, array, estimator, say, emit)
-
-    thread = threading.Thread(target=reader, name="gfimu-live-source", daemon=True)
-    ended = None
-    crash: list[Exception] = []
+    reader = _Reader(source, stop, queue_size)
+    handlers = _Signals(stop, signals)
+    closed, crash = False, []
+    live = _Live(source, estimator, sink, rate_hz, say, status_s)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
     try:
-        sink.start()
-        thread.start()
+        sink.start()  # an output that fails here (its header) fails the call
+        reader.thread.start()
         try:
-            last_status = time.monotonic()
-            while True:
-                if stop.is_set():  # a signal or the caller: what already arrived is still estimated
-                    try:
-                        item = q.get_nowait()
-                    except queue.Empty:
-                        break
-                else:
-                    try:
-                        item = q.get(timeout=0.2)
-                    except queue.Empty:
-                        item = False
-                if item is None:
-                    break
-                if item is not False:
-                    thing, arrived = item
-                    if isinstance(thing, SourceNote):
-                        say(f"warning: {thing.message}")
-                    elif isinstance(thing, BadRow):
-                        bad += 1
-                        if len(reasons) < REASONS_KEPT:
-                            reasons.append(f"{thing.where}: {thing.reason}")
-                            say(f"warning: {thing.where} skipped: {thing.reason}")
-                            if len(reasons) == REASONS_KEPT:
-                                say("warning: further bad rows are counted, not shown")
-                    else:
-                        rows_in += 1
-                        units.add(thing)
-                        if session is not None:
-                            feed(thing, arrived)
-                        else:
-                            pending.append((thing, arrived))
-                            if len(pending) >= RATE_ROWS:
-                                rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
-                                if rate is not None:
-                                    say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} "
-                                        f"samples (array.toml states no rate_hz; --rate-hz sets it)")
-                                    start_session(rate)
-                                else:
-                                    pending.pop(0)
-                if session is None and rate_hz is not None:
-                    start_session(rate_hz)
-                if status_s and time.monotonic() - last_status >= status_s:
-                    last_status = time.monotonic()
-                    p = _stats(np.asarray(session.processing) * 1e3) if session else None
-                    late = session.counts()[0] if session else 0
-                    say(f"{rows_in} in, {rows_out} out, processing p50 {p[0] if p else float('nan'):.2f} ms "
-                        f"p99 {p[1] if p else float('nan'):.2f} ms, {overrun[0]} dropped, {late} late, {bad} bad")
-            units.finish()
-            if session is None and pending:  # the stream ended before RATE_ROWS samples
-                rate = rate_from_timestamps([r.timestamp_ns for r, _ in pending])
-                if rate is None:
-                    say(f"{len(pending)} sample(s) with no step forward in time: no rate, nothing estimated "
-                        "(--rate-hz sets the rate)")
-                else:
-                    say(f"rate {rate:.6g} Hz, from the median period of the first {len(pending)} samples")
-                    start_session(rate)
-            if session is not None:
-                emit(session.flush(), timed=False)
-                if session.screen is not None and session.screen.count:
-                    say(f"warning: {session.screen.describe()}")
+            live.loop(reader)
         except BrokenPipeError:  # the output (standard output) closed by its reader: the session ends there
             closed = True
         except Exception as exc:  # noqa: BLE001 - the estimator or the output failed: end with the counts
             crash.append(exc)
-        ended = caught[0] if caught else None
     finally:
         stop.set()
-        for s, h in previous.items():
-            signal.signal(s, h)
-        if thread.ident is not None:  # started (the output may fail before: its header is written first)
-            thread.join(timeout=2 * 0.2 + 0.5)
+        sys.setswitchinterval(switch)
+        handlers.restore()
+        reader.join()
         try:
             source.close()
         except OSError:
             pass
-    failure = source.failure
-    if closed:
-        ended, failure = OUTPUT_CLOSED, "the output was closed by its reader (a broken pipe); the session ended there"
-    elif crash:
-        from .errors import DataError, InputError
-
-        exc = crash[0]
-        if isinstance(exc, (InputError, DataError)):  # the stream's own data refused, as estimate refuses a log's
-            ended, failure = "input refused", str(exc)
-        else:
-            ended = "stopped by an error"
-            failure = (f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename
-                       else f"{type(exc).__name__}: {exc}")
-    elif ended is None:
-        ended = source.ended
-        if fatal:
-            exc = fatal[0]
-            ended = "input refused" if isinstance(exc, ValueError) else "source failed"
-            failure = str(exc) or type(exc).__name__
-    late, resets = session.counts() if session else (0, 0)
-    steady = None
-    if latency:
-        pairs = np.asarray(latency)
-        later = pairs[pairs[:, 0] > pairs[0, 0] + STEADY_AFTER_S, 1]
-        steady = _stats(later * 1e3)
-    result = LiveResult(
-        rows_in=rows_in, rows_out=rows_out, bad_rows=bad, bad_reasons=tuple(reasons), late_or_repeated=late,
-        clock_resets=resets, missing=session.missing if session else 0, overrun_dropped=overrun[0],
-        processing_ms=_stats(np.asarray(session.processing) * 1e3) if session else None,
-        latency_ms=_stats(np.asarray([d for _, d in latency]) * 1e3) if latency else None,
-        steady_latency_ms=steady, rate_hz=session.rate_hz if session else rate_hz, rate_from=rate_from,
-        ended=ended, failure=failure, replaced_readings=session.replaced_readings if session else 0,
-        screening_ms=_stats(np.asarray(session.screening) * 1e3) if session and session.screening else None)
-    if fatal and not isinstance(fatal[0], Exception):
-        raise fatal[0]
+    ended, failure = _ending(source, reader, handlers.caught, closed, crash)
+    result = live.result(ended, failure, reader.overrun)
+    if reader.fatal and not isinstance(reader.fatal[0], Exception):
+        raise reader.fatal[0]
     return result

@@ -122,6 +122,14 @@ SECTIONS = (
         "along a long stream generated on the fly.",
         quick=("--duration-s", "30", "--e2e-duration-s", "10", "--memory-duration-s", "0")),
     Section(
+        "live-latency", "gfimu live: latency from a datagram to its row", "replay_udp.py",
+        "A simulated 500 Hz log (random motion, four triads) sent at its own rate, one imu.csv row per UDP "
+        "datagram on localhost, into `gfimu live --out -` (lag 0.2 s, the defaults); each row's latency runs from "
+        "its sample's datagram being sent to the row being read from the command's standard output, over the "
+        "whole replay and past its first 10 s (the first rows wait for the first 3 s of the stream, on which the "
+        "process noise is chosen); the last line is `gfimu live`'s own summary (arrival to row written).",
+        full=("--simulate", "40"), quick=("--simulate", "12"), json=False),
+    Section(
         "batch-throughput", "Batch smoother: throughput and memory", "bench_smoother.py",
         "The whole command `gfimu estimate LOG --method smoother` (start-up, reading and writing included) "
         "on simulated random motion, 10 cm cube of four triads, 500 Hz, for several log lengths: median wall "

@@ -88,7 +88,7 @@ def main(argv=None) -> int:
                 cell = replace(cell, duration_s=args.duration_s)
             log_dir, _ = regime_matrix.build_log(cell, tmp)
         elif args.log:
-            log_dir = Path(args.log)
+            log_dir = Path(args.log).resolve()
         else:
             from gfimu.simulate import simulate
 
@@ -108,7 +108,8 @@ def main(argv=None) -> int:
         proc = subprocess.Popen([sys.executable, "-m", "gfimu", "live", "--array", str(log_dir / "array.toml"),
                                  "--rate-hz", f"{rate_hz:.6f}", "--source", f"udp://127.0.0.1:{port}",
                                  "--out", "-", "--lag-s", str(args.lag_s), "--quiet", *options],
-                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+                                env=env, cwd=str(REPO),  # this checkout's gfimu, whatever the caller's folder
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
         sent_at: dict[int, float] = {}
         seen: list[tuple[int, float]] = []
 

@@ -50,7 +50,9 @@ the stream's own recent past and made again as the motion changes
 consistent stretch whose process noise is tuned, the states of the stretch that come
 out then are the batch solution of the stretch and the stream continues from the
 fixed-lag smoother run over it. Every ``retune_every_s`` the choice is made again on
-the last ``model_window_s``, and at once when a model chosen at rest is outgrown.
+the last ``model_window_s``, and at once when a model chosen at rest is outgrown: in a worker
+thread, on a copy of the history, the new model used :data:`CHOICE_DELAY_S` of samples after the
+sample that asked for it (a sample fixed by the data: a log and a live stream of it give the same rows).
 Without ``auto_model`` (the class's default), ``tune_process_noise`` chooses the
 process noise once on the first ``tune_window_s``, as the batch tuner would on that
 stretch alone. Densities given explicitly (any of
@@ -80,7 +82,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -132,6 +134,53 @@ first linearisation fades over seconds) the stream would carry the start's error
 SAME_BRANCH = 0.5
 """Two solutions of the held stretch are one minimum (not two branches) when the RMS of their ω
 difference is below this fraction of the RMS of ω: the branches of ω differ by about 2 |ω|."""
+
+
+CHOICE_DELAY_S = 0.5
+"""A model chosen again on the stream (every ``retune_every_s``, or when the motion outgrows the model) is
+computed off the stream, on a copy of the history, while the samples go on with the model in use; it
+replaces that model this long (of samples, at the nominal rate) after the sample that asked for it. The
+sample at which it changes is fixed by the data, never by the clock, so that a log and a live stream of it
+give the same rows (:class:`PendingChoice`)."""
+
+
+class PendingChoice:
+    """A model being chosen in a worker thread (:meth:`FixedLagSmoother._choose`): ``compute()`` (returning
+    the chosen :class:`~gfimu.smoother.stream.model_choice.StreamModel`) runs at once in a daemon thread;
+    :meth:`result` waits for it (the seconds waited in ``waited_s``) and gives its model, or
+    raises what it raised. ``swap_at``: the count of samples at which the model is to be used."""
+
+    def __init__(self, compute, swap_at: int, outgrown: bool):
+        import threading
+
+        self.swap_at = int(swap_at)
+        self.outgrown = bool(outgrown)
+        self.waited_s = 0.0
+        self._value = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(compute,), name="gfimu-model-choice", daemon=True)
+        self._thread.start()
+
+    def _run(self, compute) -> None:
+        try:
+            self._value = compute()
+        except BaseException as exc:  # noqa: BLE001 - raised again where the model is used
+            self._error = exc
+
+    @property
+    def done(self) -> bool:
+        return not self._thread.is_alive()
+
+    def result(self):
+        if self._thread.is_alive():
+            import time
+
+            t0 = time.perf_counter()
+            self._thread.join()
+            self.waited_s = time.perf_counter() - t0
+        if self._error is not None:
+            raise self._error
+        return self._value
 
 
 def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | None:
@@ -248,6 +297,57 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
     return options_reason(array, options)
 
 
+@dataclass(frozen=True)
+class GtsamSettings:
+    """The gtsam engine's settings: ``relinearize_threshold`` [rad/s] and ``relinearize_skip`` (iSAM2),
+    ``block_s`` (the marginalisation blocks), ``factorization``."""
+
+    relinearize_threshold: float
+    relinearize_skip: int
+    block_s: float
+    factorization: str = "QR"
+
+
+@dataclass
+class StreamClock:
+    """The stream's time as :class:`FixedLagSmoother` sees it: the last timestamp taken (``last_ns``), the
+    segment's origin, the samples dropped as repeated or out of order, the clock resets (time going back by
+    more than ``reset_s``)."""
+
+    reset_s: float
+    last_ns: int | None = None
+    origin_ns: int | None = None
+    duplicates: int = 0
+    out_of_order: int = 0
+    clock_resets: int = 0
+
+
+@dataclass
+class ChoiceState:
+    """What :class:`FixedLagSmoother` keeps to choose its model on the stream: the options as given
+    (``user_options``), whether it tunes the process noise (``tune``) and checks the model (``auto``),
+    whether the first choice is still to be made (``first_pending``, on ``buffer``, the first ``tune_n``
+    samples; a stretch cut short is tuned on from ``tune_min_n``), the ``history`` later choices are made
+    on, every ``retune_ns`` or when the ``local`` motion density outgrows the model; the choice being made
+    off the stream (``pending``, used when ``accepted``, the samples taken in, reaches its sample,
+    ``delay_n`` after the one that asked) and the waits for late ones."""
+
+    user_options: SmootherOptions
+    tune: bool
+    auto: bool
+    first_pending: bool
+    history: deque
+    retune_ns: int
+    tune_n: int
+    tune_min_n: int
+    delay_n: int
+    local: LocalDensity
+    buffer: list = field(default_factory=list)
+    pending: PendingChoice | None = None
+    accepted: int = 0
+    waits: list = field(default_factory=list)
+
+
 class FixedLagSmoother:
     """Streaming fixed-lag smoother.
 
@@ -283,7 +383,8 @@ class FixedLagSmoother:
                  marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
                  fast_measurement: bool = True, tune_window_s: float = 3.0, engine: str = "numpy",
                  clock_reset_s: float = 1.0, auto_model: bool = False, retune_every_s: float = 10.0,
-                 model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0) -> None:
+                 model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0,
+                 choice_delay_s: float = CHOICE_DELAY_S) -> None:
         options = options or SmootherOptions()
         if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
             raise InputError(f"fixed-lag smoother: rate_hz must be a positive number, got {rate_hz!r}")
@@ -301,51 +402,42 @@ class FixedLagSmoother:
         reason = fixed_lag_reason(array, options)
         if reason:
             raise InputError(reason)
+        if not (isinstance(choice_delay_s, (int, float)) and math.isfinite(choice_delay_s) and choice_delay_s > 0):
+            raise InputError(f"fixed-lag smoother: choice_delay_s must be a positive number, got {choice_delay_s!r}")
         self.array = array
         self.options = options
         self.lag_s = float(lag_s)
         self.rate_hz = float(rate_hz)
         self.compute_sigma = bool(options.compute_sigma)
-        self.relinearize_threshold = float(relinearize_threshold)
-        self.relinearize_skip = int(relinearize_skip)
         self.gap_factor = float(gap_factor)
         self.fast_measurement = bool(fast_measurement)
         self.engine = engine
-        self.factorization = "QR"
         self.model = model.ArrayModel(array, options, fast_measurement)
         self.tuning = None  # gfimu.smoother.tuning.evidence.Tuning once chosen from the data
-        self._user_options = options
-        self._tune = tunes_process_noise(options)
-        self._auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
-        self._tune_pending = self._tune or self._auto
+        tune = tunes_process_noise(options)
+        auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
+        tune_n = max(2, int(round(tune_window_s * self.rate_hz)))
+        self._choice = ChoiceState(
+            options, tune, auto, tune or auto,
+            deque(maxlen=max(2, int(round(max(model_window_s, tune_window_s) * self.rate_hz)))),
+            int(round(retune_every_s * 1e9)), tune_n,
+            # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
+            min(tune_n, max(2, int(round(1.0 * self.rate_hz)))),
+            max(1, int(math.ceil(choice_delay_s * self.rate_hz))), LocalDensity(array))
         self.stream_model: StreamModel | None = None
         """The model in use (:mod:`gfimu.smoother.stream.model_choice`), once chosen."""
         self.models: list[StreamModel] = []
         """Every model chosen so far, oldest first."""
-        self._history: deque = deque(maxlen=max(2, int(round(max(model_window_s, tune_window_s) * self.rate_hz))))
-        self._retune_ns = int(round(retune_every_s * 1e9))
-        self._local = LocalDensity(array)
         self._jerk_factor = 1.0
-        self._ml = MLEstimator(workers=1) if self._auto else None
+        self._ml = MLEstimator(workers=1) if auto else None
         self._branches = bool(branches)
         self._signs = StreamSignChain(int(math.ceil(self.lag_s * self.rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
-        self._tune_n = max(2, int(round(tune_window_s * self.rate_hz)))
-        # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
-        self._tune_min_n = min(self._tune_n, max(2, int(round(1.0 * self.rate_hz))))
-        self._tune_buffer: list = []
         self._nominal_dt_ns = 1e9 / self.rate_hz
         self._warmup_n = max(2, int(round(warmup_s * self.rate_hz)))
-        self._block_s = max(float(marginalise_every_s), 2.0 / self.rate_hz)
-        self._last_t_ns: int | None = None
-        self._origin_ns: int | None = None
-        self.clock_reset_s = float(clock_reset_s)
-        self.n_duplicates = 0
-        """Samples dropped because their timestamp equals the previous one."""
-        self.n_out_of_order = 0
-        """Samples dropped because they are earlier than the previous one (by at most ``clock_reset_s``)."""
-        self.n_clock_resets = 0
-        """Times the clock went back by more than ``clock_reset_s`` (each restarted the window)."""
+        self._gtsam = GtsamSettings(float(relinearize_threshold), int(relinearize_skip),
+                                    max(float(marginalise_every_s), 2.0 / self.rate_hz))
+        self._clock = StreamClock(float(clock_reset_s))
         self.closed = False
         self._sigma_scale = RunningSigmaScale(array) if self.compute_sigma and calibrates_stream(array, options) else None
         self._readings: dict = {}  # t_ns -> accel of the samples not yet emitted (σ's running scale)
@@ -377,10 +469,35 @@ class FixedLagSmoother:
         return len(self._window) + len(self._warmup)
 
     @property
+    def choice_waits(self) -> list[float]:
+        """Seconds the stream waited for a model chosen off the stream that was not ready at its sample."""
+        return self._choice.waits
+
+    @property
     def counts(self) -> dict:
         """Dropped samples and clock resets so far: ``{"duplicates", "out_of_order", "clock_resets"}``."""
-        return {"duplicates": self.n_duplicates, "out_of_order": self.n_out_of_order,
-                "clock_resets": self.n_clock_resets}
+        c = self._clock
+        return {"duplicates": c.duplicates, "out_of_order": c.out_of_order, "clock_resets": c.clock_resets}
+
+    @property
+    def n_duplicates(self) -> int:
+        """Samples dropped because their timestamp equals the previous one."""
+        return self._clock.duplicates
+
+    @property
+    def n_out_of_order(self) -> int:
+        """Samples dropped because they are earlier than the previous one (by at most ``clock_reset_s``)."""
+        return self._clock.out_of_order
+
+    @property
+    def n_clock_resets(self) -> int:
+        """Times the clock went back by more than ``clock_reset_s`` (each restarted the window)."""
+        return self._clock.clock_resets
+
+    @property
+    def clock_reset_s(self) -> float:
+        """Time going back by more than this [s] restarts the window (less: the sample is dropped)."""
+        return self._clock.reset_s
 
     def push(self, timestamp_ns: int, accel_row, gyro_row=None, tilt_row=None) -> FixedLagUpdate:
         """Add one sample; return the states that reached the lag and the newest one.
@@ -415,32 +532,36 @@ class FixedLagSmoother:
             if not np.all(np.isfinite(gyro)):
                 gyro = None  # a missing gyro sample: the accelerometers alone carry on
         smoothed: list[StateEstimate] = []
-        if self._last_t_ns is not None:
-            dt_ns = t_ns - self._last_t_ns
+        if self._clock.last_ns is not None:
+            dt_ns = t_ns - self._clock.last_ns
             if dt_ns == 0:
-                self.n_duplicates += 1
+                self._clock.duplicates += 1
                 return FixedLagUpdate((), None, "duplicate")
-            if 0 > dt_ns >= -self.clock_reset_s * 1e9:
-                self.n_out_of_order += 1
+            if 0 > dt_ns >= -self._clock.reset_s * 1e9:
+                self._clock.out_of_order += 1
                 return FixedLagUpdate((), None, "out-of-order")
             if dt_ns < 0:
-                self.n_clock_resets += 1
-                warnings.warn(f"fixed-lag smoother: the clock went back by {-dt_ns * 1e-9:.6f} s (from {self._last_t_ns} "
-                              f"to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
+                self._clock.clock_resets += 1
+                warnings.warn(f"fixed-lag smoother: the clock went back by {-dt_ns * 1e-9:.6f} s (from "
+                              f"{self._clock.last_ns} to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
                               "flushed and a new segment starts", ClockResetWarning, stacklevel=2)
+                self._settle_choice()
                 smoothed.extend(self._end_segment())
-                self._origin_ns = t_ns
+                self._clock.origin_ns = t_ns
             elif dt_ns > self.gap_factor * self._nominal_dt_ns:
+                self._settle_choice()
                 smoothed.extend(self._end_segment())
         else:
-            self._origin_ns = t_ns
-        self._last_t_ns = t_ns
+            self._clock.origin_ns = t_ns
+        self._clock.last_ns = t_ns
+        self._choice.accepted += 1
+        self._swap_choice()
         sample = (t_ns, y, gyro)
         if self._sigma_scale is not None:
             self._readings[t_ns] = y
-        if self._tune_pending:
-            self._tune_buffer.append(sample)
-            if len(self._tune_buffer) < self._tune_n:
+        if self._choice.first_pending:
+            self._choice.buffer.append(sample)
+            if len(self._choice.buffer) < self._choice.tune_n:
                 return FixedLagUpdate(self._scaled(smoothed), None)
             smoothed.extend(self._tune_and_replay())
         else:
@@ -491,11 +612,11 @@ class FixedLagSmoother:
         tuned on only if it holds at least ``min(tune_window_s, 1 s)`` of samples,
         otherwise it is smoothed with the given densities and the tuning waits
         for the next segment."""
-        samples, self._tune_buffer = self._tune_buffer, []
+        samples, self._choice.buffer = self._choice.buffer, []
         batch = None
-        if not final or len(samples) >= self._tune_min_n:
+        if not final or len(samples) >= self._choice.tune_min_n:
             batch = self._choose(samples, first=True)
-            self._tune_pending = False
+            self._choice.first_pending = False
         if batch is not None and final:  # the segment ends here: the batch solution is all there is to say
             return batch
         out = []
@@ -515,22 +636,61 @@ class FixedLagSmoother:
 
     def _choose(self, samples, first: bool = False, outgrown: bool = False):
         """Choose the model on ``samples`` ((t_ns, accel, gyro, ...) tuples, oldest first) and go on with
-        it (:mod:`gfimu.smoother.stream.model_choice`). The first choice of a consistent stretch whose process
-        noise is tuned also returns the batch smoother's states of the stretch (else None).
+        it (:mod:`gfimu.smoother.stream.model_choice`). The first choice of a segment's stretch is made at
+        once and, for a consistent stretch whose process noise is tuned, also returns the batch smoother's
+        states of the stretch (else None). A later choice is made off the stream (:class:`PendingChoice`,
+        on ``samples``, a copy of the history) and used :data:`CHOICE_DELAY_S` of samples later
+        (:meth:`_swap_choice`); one asked for while another is pending is not made."""
+        if first:
+            self._settle_choice()
+            chosen, batch = self._chosen_model(samples, self.stream_model, first=True, outgrown=outgrown)
+            self._use(chosen)
+            if outgrown:
+                self._replay_window()
+            return batch
+        if self._choice.pending is not None:
+            return None
+        previous = self.stream_model
+        self._choice.pending = PendingChoice(lambda: self._chosen_model(samples, previous, outgrown=outgrown)[0],
+                                      self._choice.accepted + self._choice.delay_n, outgrown)
+        return None
+
+    def _swap_choice(self, final: bool = False) -> None:
+        """The pending choice's model put in use when its sample has come (waiting for it when it is not
+        ready: the wait is counted in :attr:`choice_waits`); ``final``: at the end of a segment, whatever the
+        sample (the window is flushed: not solved again)."""
+        pending = self._choice.pending
+        if pending is None or not (final or self._choice.accepted >= pending.swap_at):
+            return
+        self._choice.pending = None
+        late = not pending.done
+        chosen = pending.result()
+        if late:
+            self._choice.waits.append(pending.waited_s)
+        self._use(chosen)
+        if pending.outgrown and not final:
+            self._replay_window()
+
+    def _settle_choice(self) -> None:
+        """A pending choice put in use now (the segment ends, or a first choice is made)."""
+        self._swap_choice(final=True)
+
+    def _chosen_model(self, samples, previous, first: bool = False, outgrown: bool = False):
+        """(the model chosen on ``samples`` after ``previous``, the batch states of the stretch or None): the
+        choice itself, reading nothing of the stream that changes while it runs.
 
         A consistent stretch keeps the Gaussian model in use when that was chosen on motion and the
         motion has not outgrown it (the tuner is the costly part of a choice); otherwise the tuner
         runs on the newest ``tune_window_s`` of the stretch."""
         part = self._stretch_log(samples)
-        ml = self._ml_motion(samples, part) if self._auto else None
+        ml = self._ml_motion(samples, part) if self._choice.auto else None
         check = stream_model.check_of(part, ml)
         batch = None
-        base = self._user_options if check is None else measured_noise_options(self._user_options, check)
-        previous = self.stream_model
+        base = self._choice.user_options if check is None else measured_noise_options(self._choice.user_options, check)
         t_end = int(part.timestamps_ns[-1])
         if check is not None and not check.consistent:
-            chosen = stream_model.robust(part, self._user_options, check, ml, self._tune, previous)
-        elif not self._tune or (check is not None and check.constant):
+            chosen = stream_model.robust(part, self._choice.user_options, check, ml, self._choice.tune, previous)
+        elif not self._choice.tune or (check is not None and check.constant):
             chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part))
         elif (not first and not outgrown and previous is not None and not previous.robust and previous.moving
               and previous.tuning is not None):
@@ -543,7 +703,8 @@ class FixedLagSmoother:
             else:
                 chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part), moving=False)
         else:
-            span = part if len(part) <= self._tune_n else part.select(slice(len(part) - self._tune_n, None))
+            n = self._choice.tune_n
+            span = part if len(part) <= n else part.select(slice(len(part) - n, None))
             tuning, problem, x0 = self._tuned(span, base)
             chosen = stream_model.from_tuning(tuning, problem.options, check, span)
             chosen = replace(chosen, chosen_at_ns=t_end, moving=True)
@@ -551,10 +712,7 @@ class FixedLagSmoother:
                 batch = self._batch_states(span, problem, x0)
         if chosen.sign_scale_radps is None and ml is not None:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
-        self._use(chosen)
-        if outgrown:
-            self._replay_window()
-        return batch
+        return chosen, batch
 
     def _replay_window(self) -> None:
         """The window solved again from its raw samples with the model just chosen because the motion
@@ -591,9 +749,9 @@ class FixedLagSmoother:
 
     def _newest(self, part: Log, ml):
         """The newest ``tune_window_s`` of ``part`` and of its ML estimate ``ml``."""
-        if len(part) <= self._tune_n:
+        if len(part) <= self._choice.tune_n:
             return part, ml
-        sl = slice(len(part) - self._tune_n, None)
+        sl = slice(len(part) - self._choice.tune_n, None)
         return part.select(sl), ml.select(sl)
 
     def _use(self, chosen: StreamModel) -> None:
@@ -624,7 +782,8 @@ class FixedLagSmoother:
     def _tuned(self, part: Log, options: SmootherOptions | None = None):
         """The batch smoother's process-noise selection on ``part``: (Tuning, problem, initial states)."""
         tunings: list = []
-        problem, x0 = tuned_problem(part, replace(options or self._user_options, tune_process_noise=True), tunings)
+        options = replace(options or self._choice.user_options, tune_process_noise=True)
+        problem, x0 = tuned_problem(part, options, tunings)
         return tunings[-1], problem, x0
 
     def _batch_states(self, part: Log, problem, x0) -> list[StateEstimate]:
@@ -645,10 +804,10 @@ class FixedLagSmoother:
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
         choose again when due (every ``retune_every_s``) or when the motion outgrows the model."""
-        if not (self._auto or self._tune) or self.stream_model is None:
+        if not (self._choice.auto or self._choice.tune) or self.stream_model is None:
             return
         entry = [sample[0], sample[1], sample[2], None]
-        self._history.append(entry)
+        self._choice.history.append(entry)
         chosen = self.stream_model
         o = chosen.options
         q = o.omega_dot_random_walk_radps2_per_sqrt_s
@@ -658,17 +817,17 @@ class FixedLagSmoother:
             var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
         else:
             var = float(np.mean(self.model.accel_sigma_mps2 ** 2))
-        local = self._local.push(sample[0], sample[1], var)
+        local = self._choice.local.push(sample[0], sample[1], var)
         self._jerk_factor = 1.0
         if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
             self._jerk_factor = min(1.0, local / q)
-        due = sample[0] - chosen.chosen_at_ns >= self._retune_ns
+        due = sample[0] - chosen.chosen_at_ns >= self._choice.retune_ns
         # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
         # again at once (at most once a second), on the history that now holds the motion
-        outgrown = (local is not None and self._local.resolved and local > OUTGROWN_FACTOR * q
+        outgrown = (local is not None and self._choice.local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
-        if (due or outgrown) and len(self._history) >= self._tune_min_n:
-            self._choose(list(self._history), outgrown=outgrown)
+        if (due or outgrown) and len(self._choice.history) >= self._choice.tune_min_n:
+            self._choose(list(self._choice.history), outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
@@ -679,8 +838,9 @@ class FixedLagSmoother:
         """
         if self.closed:
             raise FixedLagSmootherClosed("fixed-lag smoother: flush after close()")
+        self._settle_choice()
         out = self._scaled(self._end_segment())
-        self._last_t_ns = None
+        self._clock.last_ns = None
         if self._sigma_scale is not None:
             self._sigma_scale.reset()
         return out
@@ -691,7 +851,7 @@ class FixedLagSmoother:
             return ()
         out = self.flush()
         self.closed = True
-        self._tune_buffer = []
+        self._choice.buffer = []
         return out
 
     def __enter__(self) -> FixedLagSmoother:
@@ -700,11 +860,12 @@ class FixedLagSmoother:
     def __exit__(self, *exc) -> None:
         if not self.closed:
             self.closed = True
+            self._choice.pending = None  # a choice still being made is not used
             self._start_segment()
 
     def _end_segment(self) -> tuple[StateEstimate, ...]:
         """Every state of the current segment (and of a pending tuning stretch), and a fresh segment."""
-        replayed = self._tune_and_replay(final=True) if self._tune_buffer else []
+        replayed = self._tune_and_replay(final=True) if self._choice.buffer else []
         if self._smoother is None and self._warmup:
             self._initialise()
         if self._deciding and self._smoother is not None and self._held:
@@ -739,15 +900,17 @@ class FixedLagSmoother:
         # state must be read at t + lag before its block goes: gtsam's lag is the
         # requested lag plus one block plus the longest step that is not a gap.
         margin_s = (self.gap_factor + 0.5) / self.rate_hz
-        return GtsamWindow(self.model, self.lag_s + self._block_s + margin_s, self._stamp, self.relinearize_threshold,
-                           self.relinearize_skip, self.factorization)
+        g = self._gtsam
+        return GtsamWindow(self.model, self.lag_s + g.block_s + margin_s, self._stamp, g.relinearize_threshold,
+                           g.relinearize_skip, g.factorization)
 
     def _time_s(self, t_ns: int) -> float:
-        return (t_ns - self._origin_ns) * 1e-9
+        return (t_ns - self._clock.origin_ns) * 1e-9
 
     def _stamp(self, t_ns: int) -> float:
         """Timestamp given to gtsam: the start of the sample's marginalisation block."""
-        return math.floor(self._time_s(t_ns) / self._block_s) * self._block_s
+        block_s = self._gtsam.block_s
+        return math.floor(self._time_s(t_ns) / block_s) * block_s
 
     def _initialise(self, omega_hint=None) -> None:
         """First states of a segment, from the batch smoother's sign-resolving initialiser.
@@ -1139,8 +1302,10 @@ class FixedLagEstimator(SmootherEstimator):
         reason = self.applicable(log.array)
         if reason:
             raise InputError(f"{log.source}: {reason}")
-        rate_hz = log.rate_hz
-        smoother = self.smoother(log.array, rate_hz)
+        from .session import StreamSession
+
+        # the log's readings are screened already (screen(), the same rule as the stream's): not again here
+        session = StreamSession(log.array, self, log.rate_hz, screen=False, name=str(log.source or "log"))
         out = np.full((n, 9), np.nan)
         sig = np.full((n, 9), np.nan) if self.compute_sigma else None
         gyro = log.gyro_b_radps if (self.use_gyro and log.array.gyroscope is not None) else None
@@ -1149,7 +1314,7 @@ class FixedLagEstimator(SmootherEstimator):
         def store(states) -> None:
             nonlocal cursor
             for s in states:
-                if log.timestamps_ns[cursor] != s.timestamp_ns:
+                if cursor >= n or log.timestamps_ns[cursor] != s.timestamp_ns:
                     raise FixedLagSmootherError(f"{log.source}: internal ordering error at sample {cursor}")
                 out[cursor] = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
                 if sig is not None and s.sigma_omega_b_radps is not None:
@@ -1158,9 +1323,11 @@ class FixedLagEstimator(SmootherEstimator):
                 cursor += 1
 
         for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):
-            upd = smoother.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i])
-            store(upd.smoothed)
-        store(smoother.flush())
+            store(session.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i]))
+        store(session.finish())
+        for note in session.take_notes():
+            if note.startswith("warning: "):
+                warnings.warn(f"{log.source}: {note[len('warning: '):]}", RuntimeWarning, stacklevel=2)
         if cursor != n:
             raise FixedLagSmootherError(f"{log.source}: {n - cursor} samples were not estimated")
         sigma = {}
@@ -1169,8 +1336,8 @@ class FixedLagEstimator(SmootherEstimator):
         motion = Motion(log.timestamps_ns, omega_b_radps=out[:, :3], omega_dot_b_radps2=out[:, 3:6],
                         specific_force_b_mps2=out[:, 6:], sigma=sigma)
         tunings = []
-        for m in smoother.models:
+        for m in session.models:
             if m.tuning is not None and all(m.tuning is not t for t in tunings):
                 tunings.append(m.tuning)
         return Estimate(motion, Report.of(self.method, self, tunings=tunings, iterations=0, cost=float("nan"), windows=0,
-                                          model_check=None if smoother.stream_model is None else smoother.stream_model.check))
+                                          model_check=None if session.stream_model is None else session.stream_model.check))

@@ -1,0 +1,315 @@
+"""One stream through the fixed-lag smoother: readings in, finished states out.
+
+:class:`StreamSession` is the whole streaming path of ``gfimu estimate --method fixed-lag``
+(:meth:`gfimu.smoother.stream.fixed_lag.FixedLagEstimator.result`) and of ``gfimu live``
+(:func:`gfimu.live.run`): the rate (given, or measured on the first :data:`RATE_ROWS` timestamps), the
+screening of the readings (:class:`gfimu.readings.StreamScreen`), the smoother (:class:`FixedLagSmoother`),
+late, repeated and missing samples, clock resets, a rate that changes mid-stream, and the counts of all
+of it. It does no input or output: what it has to say is kept in :meth:`StreamSession.take_notes`, the
+caller reads the readings and writes the states. The same readings in the same order give the same states,
+whatever their timing.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...errors import DataError
+
+RATE_ROWS = 64
+"""Samples from whose timestamps the rate is taken when neither array.toml nor the caller gives it
+(the median period, as :attr:`gfimu.log.Log.rate_hz` takes it over a whole log)."""
+
+RATE_WATCH_STEPS = 32
+"""Consecutive steps forward at one steady period, away from the nominal one, after which the rate is
+measured again from them (:class:`RateWatch`)."""
+
+TIMES_KEPT = 200_000
+"""At most this many per-sample times are kept for the summary (the oldest half dropped beyond)."""
+
+
+def rate_from_timestamps(timestamps_ns) -> float | None:
+    """The rate [Hz] of the median step between increasing timestamps (None with fewer than two steps
+    forward): the rule of :attr:`gfimu.log.Log.rate_hz`."""
+    t = np.asarray(timestamps_ns, dtype=np.int64)
+    dt = np.diff(t) * 1e-9
+    dt = dt[dt > 0]
+    if dt.size < 1:
+        return None
+    return 1.0 / float(np.median(dt))
+
+
+def check_rate(rate_hz: float, name: str = "source") -> None:
+    """A rate beyond any IMU's (timestamps 1 ns apart) would size the smoother's window at hundreds of
+    millions of samples: refused (:class:`gfimu.errors.DataError` naming ``name``)."""
+    from ...io.plausibility import MAX_RATE_HZ
+
+    if rate_hz > MAX_RATE_HZ:
+        raise DataError(f"{name}: a rate of {rate_hz:.4g} Hz (steps of {1e9 / rate_hz:.4g} ns), beyond any IMU's "
+                        f"({MAX_RATE_HZ:g} Hz at most): check the unit of the timestamps (or --rate-hz)")
+
+
+class RateWatch:
+    """Tells when a stream's rate has changed: the last :data:`RATE_WATCH_STEPS` steps forward all within
+    10 % of their median, and that median more than 1.5 times longer or shorter than the nominal step
+    (every step a gap, or two samples per step). Returns the new rate once, then watches against it."""
+
+    def __init__(self, rate_hz: float):
+        self.rate_hz = float(rate_hz)
+        self.steps: list[int] = []
+        self.last: int | None = None
+
+    def step(self, t_ns: int) -> float | None:
+        t = int(t_ns)
+        if self.last is None or t <= self.last:
+            self.last = t if self.last is None or t < self.last - int(1e9) else self.last
+            return None
+        self.steps.append(t - self.last)
+        self.last = t
+        if len(self.steps) > RATE_WATCH_STEPS:
+            del self.steps[0]
+        if len(self.steps) < RATE_WATCH_STEPS:
+            return None
+        steps = np.asarray(self.steps, dtype=float)
+        median = float(np.median(steps))
+        if median <= 0 or np.max(np.abs(steps - median)) > 0.1 * median:
+            return None
+        ratio = median * 1e-9 * self.rate_hz
+        if 1 / 1.5 <= ratio <= 1.5:
+            return None
+        self.rate_hz = 1e9 / median
+        self.steps.clear()
+        return self.rate_hz
+
+
+def keep(times: list, value: float) -> None:
+    """``value`` appended to ``times``, whose length stays bounded on long streams."""
+    times.append(value)
+    if len(times) > TIMES_KEPT:
+        del times[:TIMES_KEPT // 2]
+
+
+@dataclass(frozen=True)
+class SessionCounts:
+    """What a stream's samples did: ``late_or_repeated`` (dropped), ``clock_resets`` (window restarts),
+    ``missing`` (samples that never came: gaps of more than 1.5 nominal steps), ``replaced_readings``
+    (by the screening), ``choice_waits`` (times the stream waited for a model chosen off it that was not
+    ready at its sample) and ``choice_wait_s`` (their total)."""
+
+    late_or_repeated: int
+    clock_resets: int
+    missing: int
+    replaced_readings: int
+    choice_waits: int
+    choice_wait_s: float
+
+
+class StreamSession:
+    """The fixed-lag ``estimator``'s smoother on one stream of ``array``'s readings.
+
+    ``rate_hz``: the nominal rate; None takes it from the first :data:`RATE_ROWS` timestamps (the readings
+    are held until then; a note says so). ``screen``: screen the readings as they come
+    (:class:`gfimu.readings.StreamScreen`; default: the estimator's ``screen_readings``; False for readings
+    already screened, as ``gfimu estimate`` screens a log with the same rule). ``follow_rate``: measure the
+    rate again when it changes mid-stream (:class:`RateWatch`; a note says so), the window restarting once
+    at the new rate. ``name`` names the stream in errors.
+
+    :meth:`push` each reading, :meth:`finish` at the end; both return the states that are final, oldest
+    first (:class:`~gfimu.smoother.stream.fixed_lag.StateEstimate`). :meth:`take_notes` gives the messages
+    (one line each) since the last call; :attr:`counts`, :attr:`processing_s` (the smoother's time per
+    sample), :attr:`screening_s` (the screening's time per block) and :attr:`models` (every model chosen)
+    say what happened.
+    """
+
+    def __init__(self, array, estimator, rate_hz: float | None = None, *, screen: bool | None = None,
+                 follow_rate: bool = True, name: str = "source"):
+        self.array, self.estimator, self.name = array, estimator, name
+        self.screening = bool(getattr(estimator, "screen_readings", False) if screen is None else screen)
+        self.use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
+        self.follow_rate = bool(follow_rate)
+        self.rate_hz: float | None = None
+        self.rate_from = "given" if rate_hz is not None else "stream"
+        self.smoother = None
+        self.screen = None
+        self.watch: RateWatch | None = None
+        self._pending: list[tuple] = []  # readings held until the rate is known
+        self._notes: list[str] = []
+        self._last_t: int | None = None
+        self._late = self._resets = self._missing = self._replaced = 0
+        self._retired_models: list = []  # the models of the smoothers at the rates before the current one
+        self._retired_waits: list[float] = []
+        self.processing_s: list[float] = []
+        self.screening_s: list[float] = []
+        if rate_hz is not None:
+            self._start(float(rate_hz))
+
+    # --- the readings in --------------------------------------------------------------------------
+    def push(self, timestamp_ns: int, accel, gyro=None) -> list:
+        """One reading; the states it makes final."""
+        row = (int(timestamp_ns), np.asarray(accel, dtype=float), gyro if self.use_gyro else None)
+        if self.smoother is None:
+            self._pending.append(row)
+            if len(self._pending) < RATE_ROWS:
+                return []
+            rate = rate_from_timestamps([r[0] for r in self._pending])
+            if rate is None:
+                self._pending.pop(0)
+                return []
+            self._notes.append(f"rate {rate:.6g} Hz, from the median period of the first {len(self._pending)} "
+                               "samples (array.toml states no rate_hz; --rate-hz sets it)")
+            return self._start(rate)
+        return self._push(row)
+
+    def finish(self) -> list:
+        """Every state still held (the readings waiting for the rate, the screening's, the window's)."""
+        if self.smoother is None:
+            if not self._pending:
+                return []
+            rate = rate_from_timestamps([r[0] for r in self._pending])
+            if rate is None:
+                self._notes.append(f"{len(self._pending)} sample(s) with no step forward in time: no rate, nothing "
+                                   "estimated (--rate-hz sets the rate)")
+                self._pending = []
+                return []
+            self._notes.append(f"rate {rate:.6g} Hz, from the median period of the first {len(self._pending)} samples")
+            states = self._start(rate)
+        else:
+            states = []
+        states += self._flush()
+        if self.screen is not None and self.screen.count:
+            self._notes.append(f"warning: {self.screen.describe()}")
+        return states
+
+    def take_notes(self) -> list[str]:
+        """The messages since the last call (the rate taken or measured again, the readings replaced)."""
+        notes, self._notes = self._notes, []
+        return notes
+
+    # --- what happened ------------------------------------------------------------------------------
+    @property
+    def started(self) -> bool:
+        """Whether the rate is known (the smoother runs)."""
+        return self.smoother is not None
+
+    @property
+    def counts(self) -> SessionCounts:
+        late, resets, waits = self._late, self._resets, list(self._retired_waits)
+        if self.smoother is not None:
+            c = self.smoother.counts
+            late += c["duplicates"] + c["out_of_order"]
+            resets += c["clock_resets"]
+            waits += self.smoother.choice_waits
+        replaced = self._replaced + (self.screen.count if self.screen is not None else 0)
+        return SessionCounts(late, resets, self._missing, replaced, len(waits), float(sum(waits)))
+
+    @property
+    def models(self) -> list:
+        """Every model chosen on the stream, oldest first (over every rate it had)."""
+        return self._retired_models + (list(self.smoother.models) if self.smoother is not None else [])
+
+    @property
+    def stream_model(self):
+        """The model in use (None before one is chosen)."""
+        return None if self.smoother is None else self.smoother.stream_model
+
+    # --- internals -----------------------------------------------------------------------------------
+    def _start(self, rate_hz: float) -> list:
+        """The smoother (and screening) at ``rate_hz``; the readings held meanwhile go in."""
+        check_rate(rate_hz, self.name)
+        self.rate_hz = float(rate_hz)
+        self.smoother = self.estimator.smoother(self.array, self.rate_hz)
+        self.screen = self._new_screen()
+        self.watch = RateWatch(self.rate_hz) if self.follow_rate else None
+        held, self._pending = self._pending, []
+        states = []
+        for row in held:
+            states += self._push(row)
+        return states
+
+    def _new_screen(self):
+        if not self.screening:
+            return None
+        from ...readings import StreamScreen
+
+        return StreamScreen(self.array, self.rate_hz)
+
+    def _push(self, row) -> list:
+        states = self._take(row)
+        if self.watch is not None:
+            old = self.watch.rate_hz
+            new = self.watch.step(row[0])
+            if new is not None:
+                self._notes.append(
+                    f"warning: the stream's rate changed: {RATE_WATCH_STEPS} steps in a row of {1e3 / new:.4g} ms "
+                    f"where {old:.6g} Hz was taken; the rate is measured again, {new:.6g} Hz, and the window "
+                    "restarts once at it")
+                states += self._rerate(new)
+        return states
+
+    def _take(self, row) -> list:
+        """``row`` through the screening and the smoother, time order checked."""
+        t = row[0]
+        last = self._last_t
+        if last is not None and t <= last:
+            if last - t <= self.smoother.clock_reset_s * 1e9:
+                if self.screen is None:  # the smoother drops and counts it
+                    return list(self.smoother.push(*row).smoothed)
+                self._late += 1  # the rows before it are still in the screening: dropped here
+                return []
+            if self.screen is not None:  # a clock reset: the rows held go first, then a new screening
+                states = self._smooth(self.screen.flush())
+                self._replaced += self.screen.count
+                self.screen = self._new_screen()
+                states += self._smooth(self._screened(row))
+                self._last_t = t
+                return states
+        states = self._smooth(self._screened(row) if self.screen is not None else [row])
+        if last is not None and t > last:
+            steps = (t - last) * 1e-9 * self.rate_hz
+            if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
+                self._missing += int(round(steps)) - 1
+        self._last_t = t
+        return states
+
+    def _screened(self, row) -> list:
+        """The rows the screening decides on ``row``'s arrival (a block, or none), its time kept per block."""
+        t0 = time.perf_counter()
+        rows = self.screen.push(*row)
+        if rows:
+            keep(self.screening_s, time.perf_counter() - t0)
+        return rows
+
+    def _smooth(self, rows) -> list:
+        """The smoother's update on each row, its time kept per row (not for a row it drops)."""
+        states = []
+        for row in rows:
+            t0 = time.perf_counter()
+            update = self.smoother.push(*row)
+            if update.dropped is None:
+                keep(self.processing_s, time.perf_counter() - t0)
+            states.extend(update.smoothed)
+        return states
+
+    def _flush(self) -> list:
+        """The rows still held by the screening, then the window: every state left."""
+        states = self._smooth(self.screen.flush()) if self.screen is not None else []
+        return states + list(self.smoother.flush())
+
+    def _rerate(self, rate_hz: float) -> list:
+        """On at ``rate_hz``: the states still held at the old rate, then a new smoother and screening."""
+        states = self._flush()
+        if self.screen is not None:
+            self._replaced += self.screen.count
+        old = self.smoother
+        c = old.counts
+        self._late += c["duplicates"] + c["out_of_order"]
+        self._resets += c["clock_resets"]
+        self._retired_models += old.models
+        self._retired_waits += old.choice_waits
+        self.rate_hz = float(rate_hz)
+        self.smoother = self.estimator.smoother(self.array, self.rate_hz)
+        self.screen = self._new_screen()
+        return states

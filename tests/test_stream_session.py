@@ -1,0 +1,131 @@
+"""One streaming session (gfimu.smoother.stream.session.StreamSession) for gfimu estimate --method fixed-lag and
+gfimu live: the same rows from a log and from its readings as they come, and a model chosen off the stream
+used at a sample fixed by the data, however late its worker is."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from gfimu.simulate import simulate
+from gfimu.smoother.stream import fixed_lag
+from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
+from gfimu.smoother.stream.session import RATE_ROWS, StreamSession
+
+RATE_HZ = 200.0
+
+
+@pytest.fixture(scope="module")
+def log():
+    """6 s of random motion at 200 Hz with two gross errors the screening replaces."""
+    log = simulate("random3d", rate_hz=RATE_HZ, duration_s=6.0, seed=3)
+    accel = log.accel_mps2.copy()
+    accel[300, 2] += 400.0  # a spike
+    accel[700, 5] = np.nan  # a reading lost
+    return log.replace(accel_mps2=accel)
+
+
+def _estimator(**options):
+    # the model chosen on the first second, then again every second: several choices made off the stream
+    return FixedLagEstimator(tune_window_s=1.0, retune_every_s=1.0, model_window_s=2.0, **options)
+
+
+def _rows(states) -> np.ndarray:
+    return np.array([np.concatenate([[s.timestamp_ns], s.omega_b_radps, s.omega_dot_b_radps2,
+                                     s.specific_force_b_mps2]) for s in states])
+
+
+def _stream(est, log, rate_hz=RATE_HZ):
+    """The log's readings one by one through a session, as gfimu live sends them: (rows, session)."""
+    session = StreamSession(log.array, est, rate_hz)
+    states = []
+    for i in range(len(log)):
+        states += session.push(log.timestamps_ns[i], log.accel_mps2[i])
+    states += session.finish()
+    return _rows(states), session
+
+
+def test_a_log_and_its_readings_as_they_come_give_the_same_rows(log):
+    """estimate's path (the log screened whole by estimator.screen, then result()) and live's (readings
+    screened and smoothed one by one, the rate measured on the first 64 timestamps) give the same numbers,
+    to the last bit, through several models chosen off the stream; both replace the same 2 readings."""
+    est = _estimator()
+    screened, screening = est.screen(log)
+    assert screening.count == 2
+    whole = est.result(screened)
+    m = whole.motion
+    expected = np.column_stack([m.timestamps_ns, m.omega_b_radps, m.omega_dot_b_radps2, m.specific_force_b_mps2])
+    got, session = _stream(est, log, rate_hz=None)
+    assert session.rate_from == "stream" and session.rate_hz == pytest.approx(RATE_HZ, rel=1e-9)
+    assert session.take_notes()[0] == (f"rate 200 Hz, from the median period of the first {RATE_ROWS} samples "
+                                       "(array.toml states no rate_hz; --rate-hz sets it)")
+    assert len(session.models) >= 4  # the first choice and at least three made off the stream
+    assert session.counts.replaced_readings == 2 and session.counts.late_or_repeated == 0
+    np.testing.assert_array_equal(got, expected)
+    assert [t.density for t in whole.tunings] == [t.density for t in dict.fromkeys(
+        m.tuning for m in session.models if m.tuning is not None)]
+
+
+def test_the_model_changes_at_a_sample_fixed_by_the_data_not_by_the_clock(log, monkeypatch):
+    """A choice whose worker takes 0.3 s longer (a busy machine): the stream waits for it at its sample,
+    counts the wait, and gives the same rows to the last bit as when the worker is quick."""
+    est = _estimator()
+    quick, session = _stream(est, log)
+    assert session.counts.choice_waits == 0 or session.counts.choice_wait_s < 5.0
+    n_models = len(session.models)
+    chosen_model = fixed_lag.FixedLagSmoother._chosen_model
+
+    def slow(self, *args, **kwargs):
+        if not kwargs.get("first"):
+            time.sleep(0.3)
+        return chosen_model(self, *args, **kwargs)
+
+    monkeypatch.setattr(fixed_lag.FixedLagSmoother, "_chosen_model", slow)
+    late, session = _stream(est, log)
+    assert len(session.models) == n_models >= 4
+    c = session.counts
+    assert c.choice_waits >= 1 and 0.0 < c.choice_wait_s <= 0.3 * c.choice_waits + 1.0
+    np.testing.assert_array_equal(late, quick)
+
+
+def test_a_choice_pending_at_the_end_is_used_before_the_window_is_flushed(log):
+    """The stream ends 0.1 s after a choice was asked (before its sample): the choice is used at the end, the
+    rows all come out, once each, in time order."""
+    est = _estimator()
+    smoother = est.smoother(log.array, RATE_HZ)
+    out = []
+    for i in range(len(log)):
+        out += smoother.push(log.timestamps_ns[i], np.nan_to_num(log.accel_mps2[i], nan=0.0)).smoothed
+        if smoother._choice.pending is not None and i > 3 * RATE_HZ:
+            break
+    assert smoother._choice.pending is not None
+    n_models = len(smoother.models)
+    out += smoother.flush()
+    assert smoother._choice.pending is None and len(smoother.models) == n_models + 1
+    t = [s.timestamp_ns for s in out]
+    assert t == list(log.timestamps_ns[:i + 1])
+
+
+def test_the_summary_says_the_waits():
+    from gfimu.live import LiveResult
+
+    r = LiveResult(rows_in=10, rows_out=10, bad_rows=0, bad_reasons=(), late_or_repeated=0, clock_resets=0,
+                   missing=0, overrun_dropped=0, processing_ms=None, latency_ms=(201.0, 240.5, 250.0),
+                   steady_latency_ms=None, rate_hz=500.0, rate_from="given", ended="end of input", choice_waits=2,
+                   choice_wait_ms=35.25)
+    text = r.summary()
+    assert "latency arrival -> estimate written p50 201.0 ms, p99 240.5 ms, max 250.0 ms" in text
+    assert text.endswith("; waited 2 time(s) for a model chosen off the stream, 35.2 ms in all; ended: end of input")
+
+
+def test_a_choice_that_fails_in_its_worker_raises_where_its_model_is_used():
+    """The worker's exception is not lost in its thread: it is raised by result(), on the stream's thread."""
+    from gfimu.smoother.stream.fixed_lag import PendingChoice
+
+    failing = PendingChoice(lambda: 1 / 0, swap_at=5, outgrown=False)
+    with pytest.raises(ZeroDivisionError):
+        failing.result()
+    slow = PendingChoice(lambda: time.sleep(0.2) or "model", swap_at=5, outgrown=True)
+    assert slow.result() == "model" and slow.done and 0.1 < slow.waited_s < 5.0
