@@ -64,7 +64,7 @@ def test_a_log_and_its_readings_as_they_come_give_the_same_rows(log):
     assert len(session.models) >= 4  # the first choice and at least three made off the stream
     assert session.counts.replaced_readings == 2 and session.counts.late_or_repeated == 0
     np.testing.assert_array_equal(got, expected)
-    assert [t.density for t in whole.tunings] == [t.density for t in dict.fromkeys(
+    assert [t.density for t in whole.report.tunings] == [t.density for t in dict.fromkeys(
         m.tuning for m in session.models if m.tuning is not None)]
 
 
