@@ -252,7 +252,9 @@ def refused(folder: Path, name: str, capsys, *parts: str) -> str:
     for part in parts:
         assert part in err, err
     assert snapshot(folder) == before and not (folder / "log").exists()
-    assert elapsed < 1.0, elapsed
+    # refused before any expansion: the full expansion (9^9 nodes) takes far longer than this on any machine,
+    # loaded or not, so a bound this loose still tells the two apart
+    assert elapsed < 30.0, elapsed
     return err
 
 
