@@ -130,6 +130,13 @@ SECTIONS = (
         "process noise is chosen); the last line is `gfimu live`'s own summary (arrival to row written).",
         full=("--simulate", "40"), quick=("--simulate", "12"), json=False),
     Section(
+        "live-20khz", "gfimu live at 20 kHz: the impact cell in real time", "replay_udp.py",
+        "The regime matrix's 20 kHz cell (four triads, impacts; tools/regime_matrix.py) sent at its own rate, one "
+        "row per UDP datagram on localhost, into `gfimu live --out -` with the defaults: how many rows came out, "
+        "how long after the last datagram the last row came (how far from real time the stream runs), the "
+        "latencies, and `gfimu live`'s own summary (rows dropped when the input outran the smoother).",
+        full=("--cell", "impacts-20kHz"), quick=("--cell", "impacts-20kHz", "--duration-s", "0.2"), json=False),
+    Section(
         "batch-throughput", "Batch smoother: throughput and memory", "bench_smoother.py",
         "The whole command `gfimu estimate LOG --method smoother` (start-up, reading and writing included) "
         "on simulated random motion, 10 cm cube of four triads, 500 Hz, for several log lengths: median wall "

@@ -69,6 +69,8 @@ def main(argv=None) -> int:
     ap.add_argument("--speed", type=float, default=1.0, help="replay speed (1: the recorded rate)")
     ap.add_argument("--cell", default=None, help="replay the log of this regime-matrix cell (e.g. impacts-20kHz)")
     ap.add_argument("--duration-s", type=float, default=None, help="with --cell: its length [s] (default: the cell's)")
+    ap.add_argument("--queue", type=int, default=None, metavar="N",
+                    help="gfimu live --queue N: samples that may wait while the smoother is busy (default: live's)")
     ap.add_argument("-O", dest="options", action="append", default=[], metavar="KEY=VALUE",
                     help="an option of gfimu live (-O key=value), repeatable")
     args = ap.parse_args(argv)
@@ -104,7 +106,7 @@ def main(argv=None) -> int:
             probe.bind(("127.0.0.1", 0))
             port = probe.getsockname()[1]
         env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-        options = [a for o in args.options for a in ("-O", o)]
+        options = [a for o in args.options for a in ("-O", o)] + (["--queue", str(args.queue)] if args.queue else [])
         proc = subprocess.Popen([sys.executable, "-m", "gfimu", "live", "--array", str(log_dir / "array.toml"),
                                  "--rate-hz", f"{rate_hz:.6f}", "--source", f"udp://127.0.0.1:{port}",
                                  "--out", "-", "--lag-s", str(args.lag_s), "--quiet", *options],
