@@ -456,3 +456,34 @@ def flush_window(T, u, W, mean, var, cross):
                 row[j] = s
             for j in range(9):
                 C[i, j] = row[j]
+
+
+@njit(cache=True)
+def advance_update(F, Q, c, P, T, u, W, mean, var, cross, split, hi, y, R0, S_q, S_dw, S_f, slope, c_robust, loss,
+                   iterations, tolerance, branches, normal, prior_margin, c_process, process_loss):
+    """One sample in one call (:meth:`WindowFilter.advance <gfimu.smoother.stream.window_filter.WindowFilter.advance>`
+    on the readings alone, from the prediction): :func:`predict_window` from the newest state (slot ``hi - 1``
+    of the window's arrays; the recent states are the slots ``[split, hi)``, the older ones brought up to date
+    through ``T, u, W``), the new state written into slot ``hi``, then :func:`measure_update` on it with the
+    robust loss of the step (``c_process`` > 0). Returns ``(T, u, W, P_after, ok)``; the window's arrays are
+    updated in place."""
+    newest = hi - 1
+    x_newest = mean[newest].copy()
+    if newest < split:  # a lazy state: its mean given the updates since the last flush
+        for i in range(9):
+            s = 0.0
+            for j in range(9):
+                s += cross[newest, i, j] * u[j]
+            x_newest[i] += s
+    x, P_new, T = predict_window(F, Q, c, P, x_newest, T, cross[split:hi])
+    for i in range(9):
+        mean[hi, i] = x[i]
+        var[hi, i] = P_new[i, i]
+        for j in range(9):
+            cross[hi, i, j] = P_new[i, j]
+    robust_step = c_process > 0.0
+    T2, u2, W2, P_after, P_before, ok = measure_update(
+        y, x, P_new, x.copy(), R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
+        prior_margin, c_process, process_loss, Q if robust_step else P_new, robust_step, T, u, W,
+        mean[split:hi + 1], var[split:hi + 1], cross[split:hi + 1])
+    return T2, u2, W2, P_after, ok

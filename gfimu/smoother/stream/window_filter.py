@@ -449,11 +449,44 @@ class WindowFilter:
         """State ``k``, one ``step`` (:meth:`ArrayModel.step`) after the newest: predict, then its readings
         (linearised from ``start``, else from the prediction and the other branches of the update's
         minimum)."""
+        if not isinstance(step, Step):
+            step = self.model.step(float(step))
+        if step.c is not None or step.H0 is not None:
+            self._unsettled = True  # rows of given step groups, which the branch decision does not evaluate
+        if self.compiled and gyro is None and extra is None and start is None and step.H0 is None:
+            self._advance_compiled(k, step, y)  # the prediction and the update in one compiled call
+            self._steps[k] = (self._F, self._Q)
+            return
         self.predict(k, step)
         self._steps[k] = (self._F, self._Q)
-        if isinstance(step, Step) and (step.c is not None or step.H0 is not None):
-            self._unsettled = True  # rows of given step groups, which the branch decision does not evaluate
         self.measure(y, gyro, start=start, extra=extra)
+
+    def _advance_compiled(self, k: int, step: Step, y) -> None:
+        """:meth:`predict` then :meth:`measure` from the prediction, on the readings alone, through
+        :func:`kernels.advance_update <gfimu.smoother.stream.kernels.advance_update>`: the same numbers as the
+        two compiled calls it fuses, without their Python in between."""
+        if k != self._base + self._hi:
+            raise ValueError(f"state {k} does not follow the window's newest state")
+        self._make_room()
+        R0, S_q, S_dw, S_f, slope, c_robust, loss = self._kernel_model
+        iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
+        c_process = float(self.model.process_robust_threshold)
+        F, Q = step.F, step.Q
+        hi = self._hi
+        T, u, W, P_after, ok = kernels.advance_update(
+            F if F.flags.c_contiguous else np.ascontiguousarray(F, dtype=float),
+            Q if Q.flags.c_contiguous else np.ascontiguousarray(Q, dtype=float),
+            _ZERO9 if step.c is None else np.asarray(step.c, dtype=float), self._P, self._T, self._u, self._W,
+            self._mean, self._var, self._cross, self._split, hi, np.ascontiguousarray(y, dtype=float), R0, S_q, S_dw,
+            S_f, slope, c_robust, loss, iterations, self.step_tolerance_radps, self.branches, self._normal,
+            BRANCH_PRIOR_MARGIN, c_process, kernels.loss_code(c_process, self.model.robust_loss))
+        self._T, self._Q, self._F = T, Q, F
+        self._hi = hi + 1
+        if not ok:
+            self._P = P_after
+            raise FilterFailure("singular innovation covariance or non-finite values in the update")
+        self._u, self._W = u, W
+        self._updated(P_after)
 
     def commit(self) -> None:
         """Nothing to do: every update is already solved."""
