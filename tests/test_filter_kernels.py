@@ -297,3 +297,22 @@ def test_the_fused_advance_is_the_numpy_predict_and_measure(monkeypatch, noise, 
     assert fused._base > 0 and fused.n_updates == oracle.n_updates == len(log)
     if noise == 0:  # noise-free readings: the filter on the true ω
         np.testing.assert_allclose(fused.mean(len(log) - 1)[:3], log.truth.omega_b_radps[-1], atol=1e-2)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_non_finite_update_is_a_filter_failure_on_both_paths(compiled):
+    """A reading that makes the update non-finite: FilterFailure from the fused kernel as from the numpy path,
+    and the window still answers for the states before it."""
+    f, m = _filter()
+    f.compiled = compiled
+    log = simulate("random3d", array=cube_array(0.05, noise_std_mps2=0.05), rate_hz=500.0, duration_s=0.1, seed=2)
+    f.start(0)
+    f.measure(log.accel_mps2[0])
+    for i in range(1, 10):
+        f.advance(i, m.step(0.002), 0, log.accel_mps2[i])
+    before = f.mean(5).copy()
+    y = log.accel_mps2[10].copy()
+    y[3] = np.inf
+    with pytest.raises(flf.FilterFailure):
+        f.advance(10, m.step(0.002), 0, y)
+    np.testing.assert_array_equal(f.mean(5), before)
