@@ -5,6 +5,7 @@ import pytest
 
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
+from gfimu.simulate.sensor_errors import SensorErrors
 from gfimu.smoother.stream import kernels
 from gfimu.smoother.stream import window_filter as flf
 from gfimu.smoother.stream import array_model as model
@@ -237,3 +238,81 @@ def test_flush_window_is_the_numpy_flush():
     kernels.flush_window(T, u, W, mean, var, cross)
     for got, want in ((mean, want_mean), (var, want_var), (cross, want_cross)):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * (np.abs(want).max() + 1.0))
+
+
+def _window_states(f):
+    """Means and marginal variances of every state of the window (the lazy ones brought up to date)."""
+    ks = range(f._base + f._lo, f._base + f._hi)
+    return np.array([f.mean(k) for k in ks]), np.array([f.sigma(k) for k in ks])
+
+
+@pytest.mark.parametrize("noise, robust", [(0.0, 0.0), (0.07, 0.0), (0.07, 2.0)])
+def test_the_fused_advance_is_the_numpy_predict_and_measure(monkeypatch, noise, robust):
+    """One sample in one compiled call (prediction, update, window) against the numpy prediction and update it
+    fuses, state by state over a stream long enough to compact and flush the window: the same means of every
+    state of the window to 1e-9 relative (1e-8 in the first 0.1 s) and variances to 1e-8, on a noise-free and
+    a noisy stream."""
+    array = cube_array(0.05, noise_std_mps2=max(noise, 0.01))
+    log = simulate("random3d", array=array, rate_hz=500.0, duration_s=1.2, seed=11,
+                   noise=None if noise > 0 else SensorErrors.none())
+    filters = []
+    for compiled in (True, False):
+        m = model.ArrayModel(array, SmootherOptions())
+        if robust:
+            m.robust_loss = "cauchy"
+            m.accel_robust_threshold = m.process_robust_threshold = robust
+        f = flf.WindowFilter(m, capacity=64, branches=True)
+        f.compiled = compiled
+        filters.append(f)
+    fused, oracle = filters
+    lag = 40
+    calls = []
+    real = kernels.advance_update
+    h = 1.0 / 500.0
+    for i, (t, y) in enumerate(zip(log.timestamps_ns, log.accel_mps2)):
+        for f in filters:
+            if i == 0:  # the same first state for both (its weak priors make its update ill-conditioned: the
+                # m × m and 9 × 9 forms of it differ by 1e-7), then each sample through either path
+                f.start(0)
+                f.compiled = True
+                f.measure(y)
+                f.compiled = f is fused
+            else:
+                f.advance(i, f.model.step(h), int(t), y)
+            if len(f) > lag:
+                f.drop_oldest()
+        if i == 1:  # the fused kernel is what the compiled filter runs
+            monkeypatch.setattr(kernels, "advance_update", lambda *a: calls.append(1) or real(*a))
+        if i == 2:
+            monkeypatch.setattr(kernels, "advance_update", real)
+        m1, v1 = _window_states(fused)
+        m0, v0 = _window_states(oracle)
+        scale = np.abs(m0).max(axis=0) + 1e-3
+        # the two forms of the update (an m × m system, a 9 × 9 one) agree to rounding scaled by its
+        # condition: poor while the weak priors of the first state still weigh (the first 0.1 s), then 1e-9
+        tol = 1e-8 if i < 50 else 1e-9
+        np.testing.assert_allclose(m1 / scale, m0 / scale, rtol=0, atol=tol)
+        np.testing.assert_allclose(v1, v0, rtol=1e-8, atol=0)
+    assert calls == [1]
+    assert fused._base > 0 and fused.n_updates == oracle.n_updates == len(log)
+    if noise == 0:  # noise-free readings: the filter on the true ω
+        np.testing.assert_allclose(fused.mean(len(log) - 1)[:3], log.truth.omega_b_radps[-1], atol=1e-2)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_non_finite_update_is_a_filter_failure_on_both_paths(compiled):
+    """A reading that makes the update non-finite: FilterFailure from the fused kernel as from the numpy path,
+    and the window still answers for the states before it."""
+    f, m = _filter()
+    f.compiled = compiled
+    log = simulate("random3d", array=cube_array(0.05, noise_std_mps2=0.05), rate_hz=500.0, duration_s=0.1, seed=2)
+    f.start(0)
+    f.measure(log.accel_mps2[0])
+    for i in range(1, 10):
+        f.advance(i, m.step(0.002), 0, log.accel_mps2[i])
+    before = f.mean(5).copy()
+    y = log.accel_mps2[10].copy()
+    y[3] = np.inf
+    with pytest.raises(flf.FilterFailure):
+        f.advance(10, m.step(0.002), 0, y)
+    np.testing.assert_array_equal(f.mean(5), before)

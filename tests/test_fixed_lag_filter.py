@@ -146,7 +146,7 @@ def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatc
     out = []
     for i in range(300):
         out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
-    real = WindowFilter.measure
+    real = WindowFilter.advance  # (a sample's update: one compiled call, or the prediction then measure())
     calls = {"n": 0}
 
     def fail_once(self, *a, **k):
@@ -155,7 +155,7 @@ def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatc
             raise FilterFailure("singular innovation covariance")
         return real(self, *a, **k)
 
-    monkeypatch.setattr(WindowFilter, "measure", fail_once)
+    monkeypatch.setattr(WindowFilter, "advance", fail_once)
     with pytest.warns(RuntimeWarning, match=r"t = 0\.600000 s.*singular.*re-initialising"):
         out.extend(sm.push(log.timestamps_ns[300], log.accel_mps2[300]).smoothed)
     for i in range(301, len(log)):
@@ -172,6 +172,7 @@ def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatc
     for i in range(50):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
     monkeypatch.setattr(WindowFilter, "measure", always_fail)
+    monkeypatch.setattr(WindowFilter, "advance", always_fail)
     with pytest.warns(RuntimeWarning), pytest.raises(FixedLagSmootherError,
                                                      match=r"failed at t = 0\.000000 s.*singular"):  # the rebuild's first
         sm.push(log.timestamps_ns[50], log.accel_mps2[50])

@@ -1025,7 +1025,11 @@ class FixedLagSmoother:
         if self._prev is not None and k == self._k:
             w, dw, f = self._prev[1], self._prev[2], self._prev[3]
         else:
-            w, dw, f = self._values_of(k, t_ns)
+            try:
+                x = np.array(self._smoother.mean(k), dtype=float)  # one copy, its three parts views of it
+            except FilterFailure as err:
+                raise self._failure(t_ns, err, "could not solve the state") from err
+            w, dw, f = x[0:3], x[3:6], x[6:9]
         sig = (None, None, None)
         if with_sigma:
             try:
@@ -1037,19 +1041,23 @@ class FixedLagSmoother:
 
     def _emit_due(self) -> list[StateEstimate]:
         """States at or before newest - lag: final now, marginalised at the next update."""
-        newest_ns = self._window[-1][1]
+        window, raw, engine = self._window, self._raw, self._smoother
+        newest_ns = window[-1][1]
         cutoff_ns = newest_ns - int(round(self.lag_s * 1e9)) + 1000  # 1 µs tolerance
         out = []
-        while self._window and self._window[0][1] <= cutoff_ns and len(self._window) > 1:
-            self._smoother.settle(lambda i: self._raw[i][1])
+        if len(window) < 2 or window[0][1] > cutoff_ns:
+            return self._hold_start(newest_ns) if self._deciding else out
+        readings = lambda i: raw[i][1]  # noqa: E731 (the window's readings, for the branch decision)
+        while len(window) > 1 and window[0][1] <= cutoff_ns:
+            engine.settle(readings)
             if self._deciding:  # held: its filtered value is kept as the start of the re-solve
-                k, t_ns = self._window.popleft()
-                self._held.append((t_ns, self._raw.popleft(), self._smoother.mean(k).copy()))
-                self._smoother.drop_oldest()
+                k, t_ns = window.popleft()
+                self._held.append((t_ns, raw.popleft(), engine.mean(k).copy()))
+                engine.drop_oldest()
                 continue
-            out.append(self._read(self._window.popleft(), with_sigma=self.compute_sigma))
-            self._raw.popleft()
-            self._smoother.drop_oldest()
+            out.append(self._read(window.popleft(), with_sigma=self.compute_sigma))
+            raw.popleft()
+            engine.drop_oldest()
         if self._deciding:
             return self._hold_start(newest_ns)
         return out

@@ -366,13 +366,23 @@ def predict_window(F, Q, c, P, x_newest, T, cross):
     FP = _mm(F, P)
     P_new = _mm(FP, F.T) + Q
     P_new = 0.5 * (P_new + P_new.T)
+    # F's nonzero entries by row (a motion model's transition is mostly zeros): skipping the zero terms of
+    # each sum leaves it the same number (x + 0 = x), at a fraction of the products
+    nnz = np.zeros(9, dtype=np.int64)
+    cols = np.empty((9, 9), dtype=np.int64)
+    for j in range(9):
+        for k in range(9):
+            if F[j, k] != 0.0:
+                cols[j, nnz[j]] = k
+                nnz[j] += 1
     row = np.empty(9)
     for l in range(cross.shape[0]):
         C = cross[l]
         for i in range(9):
             for j in range(9):
                 s = 0.0
-                for k in range(9):
+                for t in range(nnz[j]):
+                    k = cols[j, t]
                     s += C[i, k] * F[j, k]
                 row[j] = s
             for j in range(9):
@@ -456,3 +466,68 @@ def flush_window(T, u, W, mean, var, cross):
                 row[j] = s
             for j in range(9):
                 C[i, j] = row[j]
+
+
+@njit(cache=True)
+def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_steps, y, R0, S_q, S_dw, S_f, slope,
+                   c_robust, loss, iterations, tolerance, branches, normal, prior_margin, c_process, process_loss):
+    """One sample in one call (:meth:`WindowFilter.advance <gfimu.smoother.stream.window_filter.WindowFilter.advance>`
+    on the readings alone, from the prediction): :func:`predict_window` from the newest state (slot ``hi - 1``
+    of the window's arrays, whose states are the slots ``[lo, hi)``: the recent ones ``[split, hi)``, the older
+    ones brought up to date through ``T, u, W``), the new state written into slot ``hi``, :func:`measure_update`
+    on it with the robust loss of the step (``c_process`` > 0), its covariance after the update written into
+    the window, and the older states brought up to date (:func:`flush_window`) once ``lazy_steps`` recent ones
+    have gathered. Returns ``(T, u, W, P_after, split, ok)``; the window's arrays are updated in place. Where
+    ``ok`` is False (a singular innovation covariance, non-finite values) the prediction is made, the update
+    not (``P_after`` is the covariance it started from)."""
+    newest = hi - 1
+    x_newest = mean[newest].copy()
+    if newest < split:  # a lazy state: its mean given the updates since the last flush
+        for i in range(9):
+            s = 0.0
+            for j in range(9):
+                s += cross[newest, i, j] * u[j]
+            x_newest[i] += s
+    x, P_new, T = predict_window(F, Q, c, P, x_newest, T, cross[split:hi])
+    for i in range(9):
+        mean[hi, i] = x[i]
+        var[hi, i] = P_new[i, i]
+        for j in range(9):
+            cross[hi, i, j] = P_new[i, j]
+    robust_step = c_process > 0.0
+    T2, u2, W2, P_after, P_before, ok = measure_update(
+        y, x, P_new, x.copy(), R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
+        prior_margin, c_process, process_loss, Q if robust_step else P_new, robust_step, T, u, W,
+        mean[split:hi + 1], var[split:hi + 1], cross[split:hi + 1])
+    if not ok:
+        return T2, u2, W2, P_after, split, False
+    for i in range(9):  # the newest state's covariance after the update (symmetrised)
+        var[hi, i] = P_after[i, i]
+        for j in range(9):
+            cross[hi, i, j] = P_after[i, j]
+    if hi + 1 - split >= lazy_steps:
+        if split > lo:
+            flush_window(T2, u2, W2, mean[lo:split], var[lo:split], cross[lo:split])
+        T2 = np.eye(9)
+        u2 = np.zeros(9)
+        W2 = np.zeros((9, 9))
+        split = hi + 1
+    return T2, u2, W2, P_after, split, True
+
+
+@njit(cache=True)
+def window_step_residual2(F, Q, mean, cross, u, split, s0):
+    """:func:`step_residual2` of the step from the window's state in slot ``s0`` to the next, their means taken
+    from the window's arrays (a slot before ``split`` given the updates since the last flush, ``m + C u``)."""
+    x = np.empty((2, 9))
+    for a in range(2):
+        s = s0 + a
+        for i in range(9):
+            v = mean[s, i]
+            if s < split:
+                t = 0.0
+                for j in range(9):
+                    t += cross[s, i, j] * u[j]
+                v += t
+            x[a, i] = v
+    return step_residual2(F, Q, x[0], x[1])

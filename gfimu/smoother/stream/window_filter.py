@@ -108,8 +108,7 @@ class WindowFilter:
                  step_tolerance_radps: float = 1e-6, branches: bool = False) -> None:
         self.iterations = int(iterations)
         self.step_tolerance_radps = float(step_tolerance_radps)
-        self.branches = bool(branches)
-        """Try the other branches of each update's minimum (see :meth:`measure`)."""
+        self._branches = bool(branches)
         self._normal = plane_normal(np.concatenate([np.atleast_2d(pos) for _, pos, _ in model._geometry]))
         self.set_model(model)
         self._cap = max(int(capacity), 8)
@@ -141,6 +140,16 @@ class WindowFilter:
         self._diag = (np.arange(m), np.arange(m))
         self._diag_g = (np.arange(m + 3), np.arange(m + 3))
 
+    @property
+    def branches(self) -> bool:
+        """Try the other branches of each update's minimum (see :meth:`measure`)."""
+        return self._branches
+
+    @branches.setter
+    def branches(self, value: bool) -> None:
+        self._branches = bool(value)
+        self.set_model(self.model)
+
     def set_model(self, model: ArrayModel) -> None:
         """Go on with the noise levels of ``model`` (the same array): the steps and readings to come
         are weighted by it, the window keeps what it has."""
@@ -154,6 +163,10 @@ class WindowFilter:
                               np.ascontiguousarray(model.S_dw, dtype=float), np.ascontiguousarray(model.S_f, dtype=float),
                               float(model.accel_noise_slope_mps2_per_radps), float(model.accel_robust_threshold),
                               kernels.loss_code(model.accel_robust_threshold, model.robust_loss))
+        c_process = float(model.process_robust_threshold)
+        self._kernel_options = (max(self.iterations, 1) + (1 if model.accel_robust_threshold > 0 else 0),
+                                self.step_tolerance_radps, self.branches, self._normal, BRANCH_PRIOR_MARGIN, c_process,
+                                kernels.loss_code(c_process, model.robust_loss))
 
     # --- window -------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -170,10 +183,13 @@ class WindowFilter:
         return s
 
     def mean(self, k: int) -> np.ndarray:
-        s = self._slot(k)
+        s = k - self._base
         if s >= self._split:
-            return self._mean[s]
-        return self._mean[s] + self._cross[s] @ self._u
+            if s < self._hi:
+                return self._mean[s]
+        elif s >= self._lo:
+            return self._mean[s] + self._cross[s] @ self._u
+        raise KeyError(f"state {k} is not in the window")
 
     def sigma(self, k: int) -> np.ndarray:
         s = self._slot(k)
@@ -331,7 +347,7 @@ class WindowFilter:
             return 0
         F, Q = step
         if self.compiled:
-            e2 = kernels.step_residual2(F, Q, self.mean(k0), self.mean(k0 + 1))
+            e2 = kernels.window_step_residual2(F, Q, self._mean, self._cross, self._u, self._split, lo)
             if e2 < 0:  # singular
                 return 0
         else:
@@ -449,11 +465,41 @@ class WindowFilter:
         """State ``k``, one ``step`` (:meth:`ArrayModel.step`) after the newest: predict, then its readings
         (linearised from ``start``, else from the prediction and the other branches of the update's
         minimum)."""
+        if not isinstance(step, Step):
+            step = self.model.step(float(step))
+        if step.c is not None or step.H0 is not None:
+            self._unsettled = True  # rows of given step groups, which the branch decision does not evaluate
+        if self.compiled and gyro is None and extra is None and start is None and step.H0 is None:
+            self._advance_compiled(k, step, y)  # the prediction and the update in one compiled call
+            self._steps[k] = (self._F, self._Q)
+            return
         self.predict(k, step)
         self._steps[k] = (self._F, self._Q)
-        if isinstance(step, Step) and (step.c is not None or step.H0 is not None):
-            self._unsettled = True  # rows of given step groups, which the branch decision does not evaluate
         self.measure(y, gyro, start=start, extra=extra)
+
+    def _advance_compiled(self, k: int, step: Step, y) -> None:
+        """:meth:`predict` then :meth:`measure` from the prediction, on the readings alone, through
+        :func:`kernels.advance_update <gfimu.smoother.stream.kernels.advance_update>`: the same numbers as the
+        two compiled calls it fuses, without their Python in between."""
+        if k != self._base + self._hi:
+            raise ValueError(f"state {k} does not follow the window's newest state")
+        if self._hi >= self._cap:
+            self._make_room()
+        F, Q = step.F, step.Q
+        hi = self._hi
+        T, u, W, P_after, split, ok = kernels.advance_update(
+            F if F.flags.c_contiguous else np.ascontiguousarray(F, dtype=float),
+            Q if Q.flags.c_contiguous else np.ascontiguousarray(Q, dtype=float),
+            _ZERO9 if step.c is None else np.asarray(step.c, dtype=float), self._P, self._T, self._u, self._W,
+            self._mean, self._var, self._cross, self._lo, self._split, hi, LAZY_STEPS,
+            np.ascontiguousarray(y, dtype=float), *self._kernel_model, *self._kernel_options)
+        self._T, self._u, self._W, self._P, self._Q, self._F = T, u, W, P_after, Q, F
+        self._hi = hi + 1
+        if not ok:
+            raise FilterFailure("singular innovation covariance or non-finite values in the update")
+        self._split = split
+        self.n_updates += 1  # (the update's covariance written into the window, the lazy states flushed when due:
+        # :meth:`_updated` in the kernel)
 
     def commit(self) -> None:
         """Nothing to do: every update is already solved."""
