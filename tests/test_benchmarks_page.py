@@ -70,3 +70,20 @@ def test_only_replaces_its_section_and_keeps_the_others(tmp_path):
     assert "old figures" not in text and f"was found at `{tmp_path / 'none'}`" in text
     assert "This section alone was run again on" in text
     assert sorted(p.name for p in tmp_path.iterdir()) == ["benchmarks.md"]  # no temporary file left
+
+
+def test_only_names_every_section_of_the_page_in_the_header(tmp_path):
+    """A header whose list of sections is stale: after --only, it links every section the page holds, in the
+    page's order, and its other lines stay as they were."""
+    sections = [bench.MARK.format("header") + "\n# Benchmarks\nMade on an earlier day.\n\nSections: [old](#old).\n"
+                + bench.END.format("header"),
+                bench.MARK.format("smoother-accuracy") + "\n| old table |\n" + bench.END.format("smoother-accuracy"),
+                bench.MARK.format("startup") + "\n| startup |\n" + bench.END.format("startup")]
+    page = tmp_path / "benchmarks.md"
+    page.write_text("\n\n".join(sections) + "\n", encoding="utf-8")
+    done = run("--out", str(page), "--only", "real-flow", "--recordings", str(tmp_path / "none"))
+    assert done.returncode == 0, done.stderr
+    header = page.read_text(encoding="utf-8").split(bench.END.format("header"))[0]
+    names = ["smoother-accuracy", "real-flow", "startup"]
+    assert bench.section_list(names) in header and "[old](#old)" not in header
+    assert "Made on an earlier day." in header

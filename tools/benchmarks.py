@@ -311,9 +311,13 @@ def header(when: str, quick: bool, argv: list[str], names: list[str]) -> str:
         lines += ["**Quick run** (`--quick`): short logs, few repeats, one recording and no memory run of the "
                   "fixed-lag smoother, to show that every command runs. Its figures are not the accuracy and speed "
                   "a full run measures (`python3 tools/benchmarks.py --out docs/benchmarks.md`).", ""]
-    lines += ["Sections: " + ", ".join(f"[{BY_NAME[n].title.lower()}](#{anchor(BY_NAME[n].title)})" for n in names) + ".",
-              END.format("header")]
+    lines += [section_list(names), END.format("header")]
     return "\n".join(lines)
+
+
+def section_list(names: list[str]) -> str:
+    """The header's line of links to the sections ``names``."""
+    return "Sections: " + ", ".join(f"[{BY_NAME[n].title.lower()}](#{anchor(BY_NAME[n].title)})" for n in names) + "."
 
 
 def anchor(title: str) -> str:
@@ -396,6 +400,10 @@ def main(argv=None) -> int:
             continue
         parts[s.name], good = run_section(s, args.quick, args.recordings, note)
         ok &= good
+    if only:  # the header's list of links names every section the page now holds
+        present = [n for n in BY_NAME if n in parts]
+        parts["header"] = re.sub(r"^Sections: .*$", lambda _: section_list(present), parts["header"], count=1,
+                                 flags=re.M)
     page = "\n\n".join(parts[n] for n in ["header", *BY_NAME] if n in parts) + "\n"
     write_atomic(args.out, page)
     print(f"benchmarks: written {args.out}" + ("" if ok else " (with failed sections)"), file=sys.stderr)
