@@ -189,6 +189,7 @@ def _pre_impact(row) -> np.ndarray:
     return t < fs.Config.impact_time_s
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["inversion", "ml"])
 def test_foreign_per_sample_recovers_pre_impact_omega(run, method):
     """|ω| = 8.7 rad/s; readings in g of 9.8 m/s² read as g of 9.80665 scale ω by √1.00068: 0.0029 rad/s."""

@@ -347,6 +347,7 @@ def test_attitude_windows_are_continuous():
     assert np.degrees(np.max(np.linalg.norm(_so3.log(np.swapaxes(Ra, 1, 2) @ Rb), axis=1))) < 0.01
 
 
+@pytest.mark.slow
 def test_a_window_that_starts_on_the_other_sign_takes_the_sign_of_the_window_before(monkeypatch):
     """Solve windows of a long log are solved apart; a window whose start has no past of its own can settle on
     the other sign of ω (the readings see ω ωᵀ). When its overlap with the window before has the other sign there,

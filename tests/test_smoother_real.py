@@ -69,6 +69,7 @@ def default_estimate(busiest):
     return get
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("exp, max_rmse", [(2, 3.4), (3, 4.3)])  # measured 3.14, 4.06 (sign chain with Cauchy steps)
 def test_robust_settings_on_unseen_recordings(busiest, exp, max_rmse):
     """Busiest 40 s (own calibration, shifted reference): the robust settings lower the ω RMSE and
@@ -84,6 +85,7 @@ def test_robust_settings_on_unseen_recordings(busiest, exp, max_rmse):
     assert robust[1] < 0.01 and robust[1] < plain[1], (robust, plain)  # opposite-sign share
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("exp", [2, 3])
 def test_default_model_matches_the_hand_chosen_settings(busiest, default_estimate, exp):
     """Busiest 40 s: the default smoother, with nothing set, finds the readings inconsistent with a

@@ -82,6 +82,7 @@ def test_unknown_solver_is_refused_by_name():
         make_estimator("smoother", solver="cholmod")
 
 
+@pytest.mark.slow
 def test_cli_solver_option(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     sim = subprocess.run([sys.executable, "-m", "gfimu", "simulate", "turntable", "--duration-s", "0.15",
