@@ -129,3 +129,32 @@ def test_a_choice_that_fails_in_its_worker_raises_where_its_model_is_used():
         failing.result()
     slow = PendingChoice(lambda: time.sleep(0.2) or "model", swap_at=5, outgrown=True)
     assert slow.result() == "model" and slow.done and 0.1 < slow.waited_s < 5.0
+
+
+def test_the_rate_watch_shortcut_says_what_the_full_rule_says():
+    """RateWatch skips the median when the newest step rules a change out; on streams whose rate jumps,
+    jitters and drifts, it returns what the rule computed in full at every step would."""
+    from gfimu.smoother.stream.session import RATE_WATCH_STEPS, RateWatch
+
+    def full_rule(rate_hz, steps):
+        s = np.asarray(steps, dtype=float)
+        median = float(np.median(s))
+        if median <= 0 or np.max(np.abs(s - median)) > 0.1 * median:
+            return None
+        ratio = median * 1e-9 * rate_hz
+        return None if 1 / 1.5 <= ratio <= 1.5 else 1e9 / median
+
+    rng = np.random.default_rng(11)
+    nominal = 2_000_000  # 500 Hz
+    factors = np.concatenate([np.full(300, 1.0), np.full(300, 2.0), rng.uniform(0.6, 1.6, 400),
+                              np.full(200, 0.5), np.full(200, 1.36), np.full(200, 0.73)])
+    steps = (nominal * factors * rng.uniform(0.97, 1.03, factors.size)).astype(np.int64)
+    watch, t, said = RateWatch(500.0), 0, 0
+    for step in steps:
+        t += int(step)
+        before, window = watch.rate_hz, (watch.steps + [int(step)])[-RATE_WATCH_STEPS:]
+        got = watch.step(t)
+        want = full_rule(before, window) if len(window) == RATE_WATCH_STEPS and watch.last is not None else None
+        assert got == want
+        said += got is not None
+    assert said >= 3  # the watch did see the jumps

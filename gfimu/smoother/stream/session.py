@@ -73,6 +73,11 @@ class RateWatch:
             del self.steps[0]
         if len(self.steps) < RATE_WATCH_STEPS:
             return None
+        # a changed rate puts every step, the newest too, within 10 % of a median outside [1/1.5, 1.5] nominal
+        # steps: a newest step inside [1.1/1.5, 0.9 × 1.5] rules it out without the median (the steady case)
+        newest = self.steps[-1] * 1e-9 * self.rate_hz
+        if 1.1 / 1.5 <= newest <= 0.9 * 1.5:
+            return None
         steps = np.asarray(self.steps, dtype=float)
         median = float(np.median(steps))
         if median <= 0 or np.max(np.abs(steps - median)) > 0.1 * median:
