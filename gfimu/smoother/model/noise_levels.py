@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -51,15 +51,14 @@ class _Levels:
         for f in dataclasses.fields(self):  # type: ignore[arg-type]
             object.__setattr__(self, f.name, _frozen(getattr(self, f.name)))
 
+    slot: ClassVar[str]
+    """The field of :class:`NoiseLevels` these levels fill."""
+
     def into(self, levels: NoiseLevels) -> NoiseLevels:
-        """``levels`` with these in their field (a field given twice is an error)."""
-        raise NotImplementedError
-
-
-def _placed(levels: NoiseLevels, name: str) -> None:
-    """Refuse a second value for the field ``name``."""
-    if getattr(levels, name) is not None:
-        raise ValueError(f"two factor groups give the {name} noise levels")
+        """``levels`` with these in their field :attr:`slot` (a field given twice is an error)."""
+        if getattr(levels, self.slot) is not None:
+            raise ValueError(f"two factor groups give the {self.slot} noise levels")
+        return replace(levels, **{self.slot: self})
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,13 +68,11 @@ class AccelNoise(_Levels):
     ``per_sample`` (N, axes) when the std varies per sample (motion-dependent noise, robust re-weighting),
     ``base`` (N, axes) the per-sample std the robust re-weighting starts from (None: ``sigma``)."""
 
+    slot: ClassVar[str] = "accel"
+
     sigma: np.ndarray
     per_sample: np.ndarray | None = None
     base: np.ndarray | None = None
-
-    def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "accel")
-        return replace(levels, accel=self)
 
     def stds(self) -> np.ndarray:
         """The std each residual is divided by: ``per_sample`` (N, axes), else ``sigma`` (axes,)."""
@@ -131,22 +128,18 @@ class InversionNoise(AccelNoise):
 class FirstStateNoise(_Levels):
     """Stds (9,) or (12,) of the weak prior on the first sample's ``[ω, ω̇, f(, ω̈)]``."""
 
-    sigma: np.ndarray
+    slot: ClassVar[str] = "first_state"
 
-    def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "first_state")
-        return replace(levels, first_state=self)
+    sigma: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
 class ForceWalkNoise(_Levels):
     """Std (N-1,) of each step of the specific force's random walk."""
 
-    step_sigma: np.ndarray
+    slot: ClassVar[str] = "force_walk"
 
-    def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "force_walk")
-        return replace(levels, force_walk=self)
+    step_sigma: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,14 +147,12 @@ class AttitudeNoise(_Levels):
     """With the attitude: the first attitude's prior (mean ``prior_wb``, stds ``prior_sigma``), the std of each
     kinematics step ``step_sigma`` and of each step of the gravity-free acceleration ``accel_step_sigma``."""
 
+    slot: ClassVar[str] = "attitude"
+
     prior_wb: np.ndarray
     prior_sigma: np.ndarray
     step_sigma: np.ndarray
     accel_step_sigma: np.ndarray
-
-    def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "attitude")
-        return replace(levels, attitude=self)
 
     def with_prior(self, rotation_wb: np.ndarray) -> AttitudeNoise:
         """The first attitude's prior centred on ``rotation_wb``."""
@@ -175,6 +166,8 @@ class MotionNoise(_Levels):
     (natural frequencies ``natural_frequency_radps``); white snap's ``snap_cov``, ``snap_whiten``; ``base``:
     the (trapezoid, ω̇-step, snap whitening) the robust re-weighting starts from (None: the current)."""
 
+    slot: ClassVar[str] = "motion"
+
     trapezoid_sigma: np.ndarray
     omega_dot_step_sigma: np.ndarray
     axis_factors: np.ndarray
@@ -186,10 +179,6 @@ class MotionNoise(_Levels):
     snap_cov: np.ndarray | None = None
     snap_whiten: np.ndarray | None = None
     base: tuple | None = None
-
-    def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "motion")
-        return replace(levels, motion=self)
 
     def oscillator_weight(self) -> np.ndarray:
         """(N-1,) factor on the oscillator steps' std: 1, or the re-weighting's (which scales
@@ -241,22 +230,18 @@ class MotionNoise(_Levels):
 class GyroNoise(_Levels):
     """The gyroscope's white-noise std [rad/s] (array.toml, :func:`gfimu.noise.gyro_noise_std`)."""
 
-    sigma: float
+    slot: ClassVar[str] = "gyro"
 
-    def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "gyro")
-        return replace(levels, gyro=self)
+    sigma: float
 
 
 @dataclass(frozen=True, eq=False)
 class TiltNoise(_Levels):
     """The inclinometer's tilt-angle std [rad] (array.toml, :func:`gfimu.noise.tilt_noise_std`)."""
 
-    sigma: float
+    slot: ClassVar[str] = "tilt"
 
-    def into(self, levels: NoiseLevels) -> NoiseLevels:
-        _placed(levels, "tilt")
-        return replace(levels, tilt=self)
+    sigma: float
 
 
 @dataclass(frozen=True, eq=False)
