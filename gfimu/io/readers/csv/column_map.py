@@ -15,7 +15,7 @@ import tomllib
 import numpy as np
 
 from ....array import Gyroscope, SensorArray
-from ...array_toml import TomlContext as _TomlContext, parse_array_toml, read_array_toml
+from ...array_toml import TomlContext, parse_array_toml, read_array_toml
 from ...errors import LogFormatError, toml_nested_too_deep
 
 
@@ -68,7 +68,7 @@ class Layout:
 class ColumnMap:
     path: str
     text: str
-    ctx: _TomlContext
+    ctx: TomlContext
     layout: Layout
     file: str | None
     accelerometers: tuple[Sensor, ...]
@@ -82,7 +82,7 @@ def is_int(v) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
-def _column(ctx: _TomlContext, value, table: str, index: int, key: str, default_unit: str | None) -> Column:
+def _column(ctx: TomlContext, value, table: str, index: int, key: str, default_unit: str | None) -> Column:
     unit, sign = default_unit, 1.0
     if isinstance(value, dict):
         unknown = sorted(set(value) - {"column", "unit", "sign"})
@@ -117,7 +117,7 @@ def _column(ctx: _TomlContext, value, table: str, index: int, key: str, default_
     return Column(value, unit, float(sign), table, index, key)
 
 
-def _sensor(ctx: _TomlContext, doc: dict, table: str, index: int, name: str, default_time: Column | None,
+def _sensor(ctx: TomlContext, doc: dict, table: str, index: int, name: str, default_time: Column | None,
             kind: str) -> Sensor:
     file = doc.get("file")
     if isinstance(file, list) and file and all(isinstance(f, str) and f.strip() for f in file):
@@ -149,7 +149,7 @@ def parse_map(text: str, path: str) -> ColumnMap:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise LogFormatError(f"not valid TOML: {exc}", path) from None
-    ctx = _TomlContext(Path(path), text)
+    ctx = TomlContext(Path(path), text)
     if doc.get("format") != MAP_FORMAT:
         raise ctx.error(f"expected format = \"{MAP_FORMAT}\" (a column map), got {doc.get('format')!r}", key="format")
     csv = doc.get("csv", {})
