@@ -68,6 +68,7 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
     (nothing here needs them; :func:`score` does)."""
     from . import io as gio
     from .readings import screen_log
+    from .io.array_toml import check_noise_weights
 
     if isinstance(method, str):
         from .methods import make_estimator
@@ -83,7 +84,7 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
     _warn_dead(log)
     t1 = time.perf_counter()
     _check_stream_rate(log, est)
-    _check_noise(log, log_dir)
+    check_noise_weights(log.array, f"{log_dir}/array.toml")  # before estimating, naming the sensor
     # the fixed-lag smoother screens as gfimu live does, row by row (gfimu.readings.StreamScreen)
     log, screening = getattr(est, "screen", screen_log)(log)
     _warn_replaced(log, screening)
@@ -188,11 +189,3 @@ def _check_stream_rate(log, est) -> None:
         raise DataError(f"{log.source}/imu.csv: the timestamps step by a median {1e9 / rate:.4g} ns, a rate of "
                         f"{rate:.4g} Hz, beyond any IMU's ({MAX_RATE_HZ:g} Hz at most); the fixed-lag smoother sizes "
                         "its window from the rate: check the unit of the timestamps")
-
-
-def _check_noise(log, log_dir) -> None:
-    """A stated noise beyond :data:`gfimu.io.array_toml.MAX_NOISE_STD` refused before estimating
-    (:func:`gfimu.io.array_toml.check_noise_weights`)."""
-    from .io.array_toml import check_noise_weights
-
-    check_noise_weights(log.array, f"{log_dir}/array.toml")
