@@ -119,6 +119,44 @@ def test_a_still_stretch_and_a_slow_turntable():
     assert is_still(still, ml, check_model(still, ml))
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_older_states_brought_up_only_when_read_give_the_flushed_numbers(compiled):
+    """A long window (600 states, a lag of 1.2 s at 500 Hz) whose older states wait for their epochs and are
+    brought up to date only where they are read (:meth:`WindowFilter._boundary`): the states leaving the
+    window one by one, and every state of the window at the end, have the means and one-sigma of a window
+    flushed at every epoch's end, to rounding (the products are grouped differently: relative 1e-9), also
+    where ω is flipped on lazy states (moved as stored) rather than after a flush."""
+    log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=500, duration_s=2.0, seed=5)
+    runs = {}
+    for deferred in (True, False):
+        filt = WindowFilter(ArrayModel(log.array, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0)),
+                            capacity=4096)
+        filt.compiled, filt.deferred = compiled, deferred
+        filt.start(0)
+        filt.measure(log.accel_mps2[0], start=np.r_[log.truth.omega_b_radps[0], np.zeros(6)])
+        left = []
+        for k in range(1, len(log)):
+            filt.predict(k, 0.002)
+            filt.measure(log.accel_mps2[k])
+            if k == 700:  # ω flipped from a lazy state to the newest, then a run in the middle
+                filt.move_branch(k - 300, 1)
+            if k == 900:
+                filt.move_branch(k - 450, 1, k - 350)
+            if len(filt) > 600:
+                oldest = k - len(filt) + 1
+                left.append(np.r_[filt.mean(oldest), filt.sigma(oldest)])
+                filt.drop_oldest()
+        ks = range(len(log) - len(filt), len(log))
+        window = np.array([np.r_[filt.mean(k), filt.sigma(k)] for k in ks])
+        runs[deferred] = (np.array(left), window)
+        if deferred:
+            assert filt._n_epochs > 10  # the epochs were kept, not flushed at each end
+    for got, want in zip(runs[True], runs[False]):
+        assert got.shape == want.shape and len(got) > 300
+        scale = np.abs(want).max(axis=0)  # each column's own scale
+        np.testing.assert_allclose(got / scale, want / scale, rtol=0, atol=1e-9)
+
+
 def test_the_lazy_window_gives_the_eager_numbers(monkeypatch):
     """The older states brought up to date every LAZY_STEPS updates (T, u, W) give every state's mean
     and one-sigma of the update-by-update window to rounding."""

@@ -469,6 +469,31 @@ def flush_window(T, u, W, mean, var, cross):
 
 
 @njit(cache=True)
+def compose_epochs(Ts, us, Ws, first):
+    """The updates of epochs ``first, first + 1, …`` of ``(Ts, us, Ws)`` (each an epoch's factors ``(T, u, W)``,
+    :meth:`WindowFilter._boundary <gfimu.smoother.stream.window_filter.WindowFilter._boundary>`) as one: applying
+    ``(T₁, u₁, W₁)`` then ``(T₂, u₂, W₂)`` to a state (``m += C u``, ``v -= diag(C W Cᵀ)``, ``C ← C T``) is
+    applying ``(T₁ T₂, u₁ + T₁ u₂, W₁ + T₁ W₂ T₁ᵀ)``."""
+    T = Ts[first].copy()
+    u = us[first].copy()
+    W = Ws[first].copy()
+    for e in range(first + 1, Ts.shape[0]):
+        TW = _mm(T, Ws[e])
+        for i in range(9):
+            s = 0.0
+            for j in range(9):
+                s += T[i, j] * us[e, j]
+            u[i] += s
+            for j in range(9):
+                s = 0.0
+                for k in range(9):
+                    s += TW[i, k] * T[j, k]
+                W[i, j] += s
+        T = _mm(T, Ts[e])
+    return T, u, W
+
+
+@njit(cache=True)
 def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_steps, y, R0, S_q, S_dw, S_f, slope,
                    c_robust, loss, iterations, tolerance, branches, normal, prior_margin, c_process, process_loss):
     """One sample in one call (:meth:`WindowFilter.advance <gfimu.smoother.stream.window_filter.WindowFilter.advance>`

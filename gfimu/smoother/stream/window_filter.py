@@ -37,6 +37,7 @@ arrays are compacted when the new end reaches their capacity.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -48,7 +49,7 @@ from ..solve.restarts import branch, plane_normal
 
 
 LAZY_STEPS = 32
-"""Updates gathered before the window's older states are brought up to date (:meth:`WindowFilter._flush`)."""
+"""Updates gathered into one epoch of the window's older states (:meth:`WindowFilter._boundary`)."""
 
 SETTLE_FALSE_ALARM = 1e-3
 """A motion-model step is outlying when its whitened residual over the six ω, ω̇ rows (χ²₆ under the
@@ -87,6 +88,7 @@ readings, which fit both branches alike, cannot make up for it."""
 
 
 _ZERO9 = np.zeros(9)
+_NEVER = 1 << 62  # the fused kernel's own flush, not used: the epochs are kept here (WindowFilter._boundary)
 
 
 class FilterFailure(RuntimeError):
@@ -103,6 +105,10 @@ class WindowFilter:
     compiled = True
     """Updates of the accelerometer readings alone through the compiled kernels
     (:mod:`gfimu.smoother.stream.kernels`); False: the numpy expressions they replace (the tests' oracle)."""
+
+    deferred = True
+    """The older states brought up to date only when read (:meth:`_boundary`); False: all of them at every
+    epoch's end (the tests' oracle)."""
 
     def __init__(self, model: ArrayModel, capacity: int = 256, iterations: int = 4,
                  step_tolerance_radps: float = 1e-6, branches: bool = False) -> None:
@@ -121,6 +127,7 @@ class WindowFilter:
         self._T = np.eye(9)  # the old states' cross-covariances since the last flush: C_i T
         self._u = np.zeros(9)  # ... their means: m_i + C_i u
         self._W = np.zeros((9, 9))  # ... their variances: v_i - diag(C_i W C_iᵀ)
+        self._reset_epochs()
         self._base = 0  # index k of slot 0
         self._P = np.zeros((9, 9))  # covariance of the newest state
         self._Q = None  # process noise of the newest step
@@ -188,6 +195,8 @@ class WindowFilter:
             if s < self._hi:
                 return self._mean[s]
         elif s >= self._lo:
+            if self._stale and self._stale[0][0] <= k < self._stale[-1][1]:
+                self._bring_up(k + 1)
             return self._mean[s] + self._cross[s] @ self._u
         raise KeyError(f"state {k} is not in the window")
 
@@ -195,6 +204,9 @@ class WindowFilter:
         s = self._slot(k)
         var = self._var[s]
         if s < self._split:
+            if self._stale and self._stale[0][0] <= k < self._stale[-1][1]:
+                self._bring_up(k + 1)
+                var = self._var[s]
             C = self._cross[s]
             var = var - np.einsum("ij,jk,ik->i", C, self._W, C)
         return np.sqrt(np.clip(var, 0.0, None))
@@ -204,13 +216,108 @@ class WindowFilter:
             self._steps.pop(self._base + self._lo, None)
             self._lo += 1
             self._split = max(self._split, self._lo)
+            stale, k_lo = self._stale, self._base + self._lo
+            while stale and stale[0][1] <= k_lo:
+                stale.popleft()
+
+    # --- the older states: brought up to date when read ----------------------------------
+    def _reset_epochs(self) -> None:
+        """No epoch kept, no state behind one."""
+        self._epoch_T = np.empty((16, 9, 9))  # each epoch's factors (T, u, W), oldest kept first
+        self._epoch_u = np.empty((16, 9))
+        self._epoch_W = np.empty((16, 9, 9))
+        self._n_epochs = 0
+        self._epoch0 = 0  # the number of the epoch in row 0
+        self._stale: deque = deque()  # [k_first, k_stop, epoch]: states up to date as of the start of epoch
+
+    def _boundary(self) -> None:
+        """:data:`LAZY_STEPS` updates gathered in T, u, W: the end of an epoch.
+
+        Bringing every older state up to date at each epoch's end (:meth:`_flush`) costs O(window) per
+        epoch, O(window / LAZY_STEPS) per update: at 20 kHz a 0.2 s lag holds 4,000 states and that is
+        most of an update. The states are read only where they leave the window (or where the branch
+        decision looks, or a move flushes all), so the epoch's factors are kept instead and the lazy
+        states marked as up to date as of its start; a state read later is brought up to date through
+        the epochs since (:meth:`_bring_up`, their factors composed: :func:`kernels.compose_epochs
+        <gfimu.smoother.stream.kernels.compose_epochs>`). That costs O(window / LAZY_STEPS) per block
+        of LAZY_STEPS states read, O(window / LAZY_STEPS²) per update: the same numbers to rounding."""
+        if not self.deferred:
+            self._flush()
+            return
+        k_lo, k_split = self._base + self._lo, self._base + self._split
+        if k_split > k_lo:
+            epoch = self._epoch0 + self._n_epochs
+            self._keep_epoch()
+            stale = self._stale
+            if not stale:
+                stale.append([k_lo, k_split, epoch])
+            else:  # the states up to date (before and after the stale ones) now wait for this epoch
+                if k_lo < stale[0][0]:
+                    stale.appendleft([k_lo, stale[0][0], epoch])
+                if stale[-1][1] < k_split:
+                    stale.append([stale[-1][1], k_split, epoch])
+        self._T = np.eye(9)
+        self._u = np.zeros(9)
+        self._W = np.zeros((9, 9))
+        self._split = self._hi
+
+    def _keep_epoch(self) -> None:
+        """Store the epoch's factors (T, u, W), dropping those no stale state needs any more."""
+        n = self._n_epochs
+        if n == len(self._epoch_T):
+            need = min((c[2] for c in self._stale), default=self._epoch0 + n) - self._epoch0
+            if need > 0:
+                for arr in (self._epoch_T, self._epoch_u, self._epoch_W):
+                    arr[:n - need] = arr[need:n]
+                self._epoch0 += need
+                n -= need
+            if n == len(self._epoch_T):
+                grow = lambda a: np.concatenate([a, np.empty_like(a)])  # noqa: E731
+                self._epoch_T, self._epoch_u, self._epoch_W = (grow(self._epoch_T), grow(self._epoch_u),
+                                                                grow(self._epoch_W))
+        self._epoch_T[n], self._epoch_u[n], self._epoch_W[n] = self._T, self._u, self._W
+        self._n_epochs = n + 1
+
+    def _bring_up(self, k_stop: float) -> None:
+        """The stale states before ``k_stop`` (and at least :data:`LAZY_STEPS` of a run) brought up to date
+        as of the current epoch's start: each run's epochs since composed into one ``(T, u, W)`` and applied."""
+        stale, base, n = self._stale, self._base, self._n_epochs
+        k_lo = base + self._lo
+        while stale and stale[0][0] < k_stop:
+            k0, k1, epoch = stale.popleft()
+            k0 = max(k0, k_lo)
+            if k1 <= k0:
+                continue
+            cut = max(k_stop, k0 + LAZY_STEPS)  # a long run: its first states only, the rest waits
+            if cut < k1:
+                stale.appendleft([int(cut), k1, epoch])
+                k1 = int(cut)
+            first = epoch - self._epoch0
+            Ts, us, Ws = self._epoch_T[:n], self._epoch_u[:n], self._epoch_W[:n]
+            a, b = k0 - base, k1 - base
+            if self.compiled:
+                T, u, W = kernels.compose_epochs(Ts, us, Ws, first)
+                kernels.flush_window(T, u, W, self._mean[a:b], self._var[a:b], self._cross[a:b])
+                continue
+            T, u, W = Ts[first].copy(), us[first].copy(), Ws[first].copy()
+            for e in range(first + 1, n):
+                u = u + T @ us[e]
+                W = W + T @ Ws[e] @ T.T
+                T = T @ Ts[e]
+            C = self._cross[a:b]
+            self._mean[a:b] += np.einsum("lij,j->li", C, u)
+            self._var[a:b] -= np.einsum("lij,jk,lik->li", C, W, C)
+            self._cross[a:b] = C @ T
 
     def _flush(self) -> None:
         """Bring the old states up to date: every update moves each state of the window by products
         with 9×9 matrices common to all of them (``C_i ← C_i M``, ``m_i += C_i g``, ``v_i -= diag(C_i A
         C_iᵀ)``), so the old states' share of :data:`LAZY_STEPS` updates is gathered in T, u and W and
         applied to them at once: O(window / LAZY_STEPS + LAZY_STEPS) per update instead of O(window),
-        the same numbers to rounding (what keeps a 0.2 s lag at 20 kHz, 4,000 states, affordable)."""
+        the same numbers to rounding. The stale states are brought up to date first (:meth:`_bring_up`)."""
+        self._bring_up(math.inf)
+        self._epoch0 += self._n_epochs
+        self._n_epochs = 0
         lo, split = self._lo, self._split
         if split > lo and self.compiled:
             kernels.flush_window(self._T, self._u, self._W, self._mean[lo:split], self._var[lo:split],
@@ -264,7 +371,16 @@ class WindowFilter:
         """The states from ``k_first`` to the newest (or to ``k_stop``, excluded) onto branch ``kind`` of
         the readings' ambiguity (:func:`gfimu.smoother.solve.restarts.branch`: bit 1 ω flipped, bit 2 mirrored
         through the array's plane): their means, and the covariances by the linear part
-        ``D = diag(A, I, I)`` (A = -I, the mirror I - 2nnᵀ, or both) on each moved state."""
+        ``D = diag(A, I, I)`` (A = -I, the mirror I - 2nnᵀ, or both) on each moved state.
+
+        A flip (``kind`` 1) is linear in the state, ``x' = D x`` with D diagonal (±1), so it moves the
+        stored means and cross-covariances of the lazy states as it moves their values (``D m + D C u =
+        D (m + C u)``; ``diag(D C W Cᵀ D) = diag(C W Cᵀ)``), and a moved newest state moves the factors
+        still to come (T ← T Dᵀ): nothing is brought up to date first. A mirror moves ω̇ by a product
+        with ω, so the window is brought up to date before it."""
+        if kind == 1 and self.deferred:
+            self._flip(k_first, k_stop)
+            return
         self._flush()
         first = self._slot(k_first)
         lo, hi = self._lo, self._hi
@@ -285,6 +401,31 @@ class WindowFilter:
         if stop == hi:
             self._cross[lo:hi] = self._cross[lo:hi] @ D.T
             self._P = D @ self._P @ D.T
+
+    def _means(self, a: int, b: int) -> np.ndarray:
+        """The means of the states in slots ``[a, b)`` (a copy), the lazy ones given the updates since."""
+        if self._stale and self._stale[0][0] < self._base + b:
+            self._bring_up(self._base + b)
+        X = self._mean[a:b].copy()
+        lazy = min(b, self._split) - a
+        if lazy > 0:
+            X[:lazy] += self._cross[a:a + lazy] @ self._u
+        return X
+
+    def _flip(self, k_first: int, k_stop: int | None) -> None:
+        """:meth:`move_branch` of kind 1 (ω → -ω) on the stored values, lazy or not."""
+        a = self._slot(k_first)
+        hi = self._hi
+        b = hi if k_stop is None else self._slot(k_stop)
+        self._mean[a:b, 0:3] *= -1.0
+        self._cross[a:b, 0:3, :] *= -1.0  # D C
+        if b == hi:  # the newest moved: C_i Dᵀ for every state (the lazy ones through T), P → D P Dᵀ
+            self._cross[self._split:hi, :, 0:3] *= -1.0
+            self._T[:, 0:3] *= -1.0
+            P = self._P.copy()
+            P[0:3, :] *= -1.0
+            P[:, 0:3] *= -1.0
+            self._P = P
 
     def _step_costs(self, X: np.ndarray, steps: list) -> np.ndarray:
         """(4, 4, n - 1) costs of the motion-model steps between the n states ``X`` (ω, ω̇ columns
@@ -346,6 +487,8 @@ class WindowFilter:
         if step is None:
             return 0
         F, Q = step
+        if self._stale and self._stale[0][0] < k0 + 2:
+            self._bring_up(k0 + 2)
         if self.compiled:
             e2 = kernels.window_step_residual2(F, Q, self._mean, self._cross, self._u, self._split, lo)
             if e2 < 0:  # singular
@@ -358,8 +501,7 @@ class WindowFilter:
                 return 0
         if not e2 > OUTLYING_STEP2:
             return 0
-        self._flush()
-        X = self._mean[lo:hi].copy()  # the oldest (held), then the states decided
+        X = self._means(lo, hi)  # the oldest (held), then the states decided
         steps = [self._steps.get(self._base + i) for i in range(lo + 1, hi)]
         if any(s is None for s in steps):
             return 0
@@ -386,6 +528,7 @@ class WindowFilter:
         stop = 1
         while stop < n and path[stop] == kind:
             stop += 1
+        self._flush()  # the re-solve reads and writes the means as stored
         self.move_branch(k0 + 1, kind, k0 + 1 + stop)
         self._resolve_run(min(stop + SETTLE_MARGIN, n - 1), steps, Y)
         self.n_settled += 1
@@ -491,15 +634,16 @@ class WindowFilter:
             F if F.flags.c_contiguous else np.ascontiguousarray(F, dtype=float),
             Q if Q.flags.c_contiguous else np.ascontiguousarray(Q, dtype=float),
             _ZERO9 if step.c is None else np.asarray(step.c, dtype=float), self._P, self._T, self._u, self._W,
-            self._mean, self._var, self._cross, self._lo, self._split, hi, LAZY_STEPS,
+            self._mean, self._var, self._cross, self._lo, self._split, hi, _NEVER,
             np.ascontiguousarray(y, dtype=float), *self._kernel_model, *self._kernel_options)
         self._T, self._u, self._W, self._P, self._Q, self._F = T, u, W, P_after, Q, F
         self._hi = hi + 1
         if not ok:
             raise FilterFailure("singular innovation covariance or non-finite values in the update")
         self._split = split
-        self.n_updates += 1  # (the update's covariance written into the window, the lazy states flushed when due:
-        # :meth:`_updated` in the kernel)
+        self.n_updates += 1  # (the update's covariance written into the window: :meth:`_updated` in the kernel)
+        if self._hi - split >= LAZY_STEPS:
+            self._boundary()
 
     def commit(self) -> None:
         """Nothing to do: every update is already solved."""
@@ -520,6 +664,7 @@ class WindowFilter:
         self._T = np.eye(9)
         self._u = np.zeros(9)
         self._W = np.zeros((9, 9))
+        self._reset_epochs()
         self._base = k
         self._mean[0] = 0.0
         self._var[0] = self._prior_var
@@ -770,4 +915,4 @@ class WindowFilter:
         self._var[hi - 1] = np.diagonal(P_new)
         self.n_updates += 1
         if hi - self._split >= LAZY_STEPS:
-            self._flush()
+            self._boundary()
