@@ -126,3 +126,21 @@ def test_noise_chosen_on_the_middle_of_the_window_keeps_the_accuracy():
     span = rmse(BatchSmootherEstimator().estimate(log).motion)
     whole = rmse(BatchSmootherEstimator(tune_span_s=None).estimate(log).motion)
     assert span < 1.1 * whole, (span, whole)
+
+
+def test_motion_density_of_a_stretch_shorter_than_the_motion_period():
+    """A stretch shorter than MOTION_PERIOD_S (0.3 s at 20 kHz, as the stream's cut first stretch is): the
+    density of a random walk of ω̇ of known density is found from its steps, as on a long stretch."""
+    from gfimu.smoother.tuning.model_choice import MOTION_PERIOD_S, motion_densities
+
+    rate, n, q = 20000.0, 6000, 300.0
+    assert n / rate < MOTION_PERIOD_S
+    rng = np.random.default_rng(2)
+    h = np.full(n - 1, 1.0 / rate)
+    X = np.zeros((n, 9))
+    X[:, 3:6] = np.cumsum(rng.normal(0.0, q * np.sqrt(1.0 / rate), (n, 3)), axis=0)
+    noise = np.full((n, 3), 1e-12)
+    jerk, _, found = motion_densities(X, h, noise, noise, with_motion=True)
+    assert found
+    # the robust scale of n Gaussian steps: relative spread about 1.2 / sqrt(n) per axis
+    np.testing.assert_allclose(jerk, q, rtol=8 * 1.2 / np.sqrt(n))

@@ -144,6 +144,23 @@ sample at which it changes is fixed by the data, never by the clock, so that a l
 give the same rows (:class:`PendingChoice`)."""
 
 
+STRETCH_RATE_HZ = 2000.0
+"""Above this rate the stretches given in seconds that the stream solves as a whole are cut to the samples
+they hold at this rate: the first tuning stretch (``tune_window_s``: 3 s, 6,000 samples), the history the
+model is chosen on (``model_window_s``: 30 s, 60,000 samples) and the held start (``hold_max_s``: 4 s,
+8,000 samples). Each costs its length in samples, not in seconds: at 20 kHz, 3 s of samples took the first
+choice 20 s and kept every row waiting for it, and 30 s of history held 600,000 samples in memory. A few
+thousand samples decide a noise density or a branch of ω as well at any rate (the evidence grows with the
+samples); the span of motion they see is shorter, and a motion that outgrows the model asks for a new
+choice at once (:data:`OUTGROWN_FACTOR`)."""
+
+
+def stretch_samples(seconds: float, rate_hz: float) -> int:
+    """The samples of a stretch of ``seconds`` at ``rate_hz``, at most those it holds at
+    :data:`STRETCH_RATE_HZ` (at least 2)."""
+    return max(2, int(round(seconds * min(rate_hz, STRETCH_RATE_HZ))))
+
+
 class PendingChoice:
     """A model being chosen in a worker thread (:meth:`FixedLagSmoother._choose`): ``compute()`` (returning
     the chosen :class:`~gfimu.smoother.stream.model_choice.StreamModel`) runs at once in a daemon thread;
@@ -416,10 +433,10 @@ class FixedLagSmoother:
         self.tuning = None  # gfimu.smoother.tuning.evidence.Tuning once chosen from the data
         tune = tunes_process_noise(options)
         auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
-        tune_n = max(2, int(round(tune_window_s * self.rate_hz)))
+        tune_n = stretch_samples(tune_window_s, self.rate_hz)  # (cut above STRETCH_RATE_HZ)
         self._choice = ChoiceState(
             options, tune, auto, tune or auto,
-            deque(maxlen=max(2, int(round(max(model_window_s, tune_window_s) * self.rate_hz)))),
+            deque(maxlen=stretch_samples(max(model_window_s, tune_window_s), self.rate_hz)),
             int(round(retune_every_s * 1e9)), tune_n,
             # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
             min(tune_n, max(2, int(round(1.0 * self.rate_hz)))),
@@ -441,7 +458,9 @@ class FixedLagSmoother:
         self.closed = False
         self._sigma_scale = RunningSigmaScale(array) if self.compute_sigma and calibrates_stream(array, options) else None
         self._readings: dict = {}  # t_ns -> accel of the samples not yet emitted (σ's running scale)
-        self.hold_max_s = float(hold_max_s) if engine == "numpy" else 0.0
+        self.hold_max_s = 0.0  # the held start's longest span [s] (cut above STRETCH_RATE_HZ)
+        if engine == "numpy":
+            self.hold_max_s = float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / self.rate_hz)
         self._check_every_ns = int(round(max(self.lag_s, 0.5) * 1e9))
         self.starts: list[dict] = []
         """How the start of each segment was decided (:meth:`_release_start`): ``held_s`` (how long its

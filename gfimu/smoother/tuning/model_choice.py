@@ -310,7 +310,8 @@ def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.nd
         steps = np.diff(states[:, sl], axis=0) / np.sqrt(h)[:, None]
         rest = np.sqrt((v[:-1] + v[1:]) / h[:, None])
         z2 = np.mean((steps / np.maximum(rest, 1e-300)) ** 2, axis=1)
-        width = max(int(round(MOTION_PERIOD_S / max(float(np.median(h)), 1e-12))), 1)
+        # (at most the stretch: a longer kernel would make the "same" convolution longer than the steps)
+        width = min(max(int(round(MOTION_PERIOD_S / max(float(np.median(h)), 1e-12))), 1), len(z2))
         local = np.convolve(z2, np.ones(width) / width, mode="same")
         moving = local > MOTION_STEP_SIGMAS**2
         floor = np.median(rest, axis=0)
