@@ -202,6 +202,8 @@ class ArrayModel:
         self.accel_sigma_mps2 = sigma
         """The accelerometers' std per axis: :attr:`NoiseLevels.accel` (the option ``default_accel_noise_std_mps2``
         where array.toml gives none) times ``accel_noise_scale``."""
+        self.mean_accel_var_mps2 = float(np.mean(sigma ** 2))
+        """The mean over the axes of their variances [(m/s²)²]."""
         self._geometry = accelerometer.array_geometry(array)  # (directions, positions, column slice)
         self._gtsam_noise: dict = {}
         wL = self.S_lin / sigma[:, None]

@@ -422,6 +422,7 @@ class FixedLagSmoother:
         if not (isinstance(choice_delay_s, (int, float)) and math.isfinite(choice_delay_s) and choice_delay_s > 0):
             raise InputError(f"fixed-lag smoother: choice_delay_s must be a positive number, got {choice_delay_s!r}")
         self.array = array
+        self._row_shape = (array.n_axes,)
         self.options = options
         self.lag_s = float(lag_s)
         self.rate_hz = float(rate_hz)
@@ -538,9 +539,9 @@ class FixedLagSmoother:
                                          "another stream")
         t_ns = int(timestamp_ns)
         y = np.asarray(accel_row, dtype=float).reshape(-1)
-        if y.shape != (self.array.n_axes,):
+        if y.shape != self._row_shape:
             raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
-        if not np.all(np.isfinite(y)):
+        if not math.isfinite(y.sum()) and not np.all(np.isfinite(y)):  # (a finite sum: every value finite)
             bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
             raise DataError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
         gyro = None
@@ -835,7 +836,7 @@ class FixedLagSmoother:
             w2 = 0.0 if self._prev is None else float(self._prev[1] @ self._prev[1])
             var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
         else:
-            var = float(np.mean(self.model.accel_sigma_mps2 ** 2))
+            var = self.model.mean_accel_var_mps2
         local = self._choice.local.push(sample[0], sample[1], var)
         self._jerk_factor = 1.0
         if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
