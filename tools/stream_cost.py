@@ -1,0 +1,138 @@
+"""Where the fixed-lag method's time goes, push by push, as ``gfimu estimate --method fixed-lag`` runs it.
+
+Runs the method's own path (its screening, then :class:`gfimu.smoother.stream.session.StreamSession` fed
+row by row) on a log and prints, from the CPU time of the stream's own thread (``time.thread_time``: a
+busy machine stretches wall time, not this):
+
+- the CPU of the whole run (every thread: the model choices made in the worker thread count here);
+- the stream's thread: all pushes, the push that made the first model choice, and the per-push cost over
+  the second half of the log (mean and median: a steady state, between choices);
+- what that means for a live stream: the rate the stream's thread keeps up with in steady state.
+
+``--baseline DIR`` runs another checkout's package on the same log in the same loop, alternating, and
+prints each figure's ratio (this checkout over that one), medians over ``--runs``::
+
+    python3 tools/stream_cost.py LOG
+    python3 tools/stream_cost.py --simulate-s 60 --baseline ../gfimu-before --runs 3
+    python3 tools/stream_cost.py --cell impacts-20kHz --duration-s 6
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def measure(log_dir: str) -> dict:
+    """The figures of one run in this process (the package on ``sys.path``)."""
+    import time
+
+    import numpy as np
+
+    from gfimu.io import read_log
+    from gfimu.methods import make_estimator
+    from gfimu.smoother.stream import session as ss
+
+    log = read_log(log_dir)
+    est = make_estimator("fixed-lag")
+    screened, _ = est.screen(log)
+    times: list[float] = []
+    push = ss.StreamSession.push
+
+    def timed(self, *a, **k):
+        t = time.thread_time()
+        out = push(self, *a, **k)
+        times.append(time.thread_time() - t)
+        return out
+
+    ss.StreamSession.push = timed
+    try:
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        est.result(screened)
+        cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    finally:
+        ss.StreamSession.push = push
+    d = np.array(times)
+    half = d[len(d) // 2:]
+    return {"samples": len(d), "rate_hz": float(log.rate_hz), "cpu_s": cpu, "wall_s": wall,
+            "pushes_s": float(d.sum()), "first_choice_s": float(d.max()),
+            "steady_mean_us": 1e6 * float(half.mean()), "steady_median_us": 1e6 * float(np.median(half))}
+
+
+def run_in(package: Path | None, log_dir: str) -> dict:
+    """:func:`measure` in a fresh process of ``package`` (None: this checkout)."""
+    env = dict(os.environ)
+    root = package if package is not None else HERE.parent
+    env["PYTHONPATH"] = str(root)
+    env["PYTHONSAFEPATH"] = "1"
+    code = f"import json, sys; sys.path.insert(0, {str(HERE)!r}); import stream_cost; print(json.dumps(stream_cost.measure({log_dir!r})))"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("log", nargs="?", help="a log folder (default: a simulated cube, --simulate-s)")
+    ap.add_argument("--simulate-s", type=float, default=60.0, help="simulated cube log length [s] at 500 Hz (default 60)")
+    ap.add_argument("--cell", help="the log of this regime-matrix cell (tools/regime_matrix.py), e.g. impacts-20kHz")
+    ap.add_argument("--duration-s", type=float, help="with --cell: its length [s] (default: the cell's)")
+    ap.add_argument("--baseline", type=Path, help="another gfimu checkout, run in the same loop")
+    ap.add_argument("--runs", type=int, default=1, help="rounds of the loop; medians are shown (default 1)")
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        log_dir = args.log
+        if log_dir is None and args.cell:
+            import dataclasses
+
+            sys.path.insert(0, str(HERE))
+            import regime_matrix as rm
+
+            cell = next(c for c in rm.CELLS if c.name == args.cell)
+            if args.duration_s:
+                cell = dataclasses.replace(cell, duration_s=args.duration_s)
+            log_dir = str(rm.build_log(cell, Path(tmp))[0])
+        elif log_dir is None:
+            log_dir = str(Path(tmp) / "cube")
+            subprocess.run([sys.executable, "-m", "gfimu", "simulate", "random3d", "--out", log_dir, "--duration-s",
+                            f"{args.simulate_s:g}", "--rate-hz", "500", "--seed", "0", "--quiet"], check=True)
+        runs: dict[str, list[dict]] = {"now": [], "baseline": []}
+        for _ in range(max(args.runs, 1)):
+            runs["now"].append(run_in(None, log_dir))
+            if args.baseline:
+                runs["baseline"].append(run_in(args.baseline, log_dir))
+
+    def median(rows: list[dict], key: str) -> float:
+        vals = sorted(r[key] for r in rows)
+        return vals[len(vals) // 2]
+
+    first = runs["now"][0]
+    print(f"{log_dir}: {first['samples']} samples at {first['rate_hz']:g} Hz; medians of {len(runs['now'])} run(s)")
+    rows = [("CPU of the whole run [s]", "cpu_s", 1.0), ("stream thread, all pushes [s]", "pushes_s", 1.0),
+            ("the push that made the first choice [s]", "first_choice_s", 1.0),
+            ("per push, second half, mean [µs]", "steady_mean_us", 1.0),
+            ("per push, second half, median [µs]", "steady_median_us", 1.0)]
+    head = "| figure | now |" + (" baseline | now ÷ baseline |" if args.baseline else "")
+    print(head)
+    print("|---|---|" + ("---|---|" if args.baseline else ""))
+    for label, key, _ in rows:
+        now = median(runs["now"], key)
+        line = f"| {label} | {now:.3g} |"
+        if args.baseline:
+            base = median(runs["baseline"], key)
+            line += f" {base:.3g} | {now / base:.2f} |"
+        print(line)
+    now = median(runs["now"], "steady_mean_us")
+    print(f"steady state: the stream's thread keeps up with {1e6 / now:,.0f} samples/s "
+          f"({1e6 / now / first['rate_hz']:.1f}x this log's rate)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
