@@ -150,7 +150,7 @@ def test_older_states_brought_up_only_when_read_give_the_flushed_numbers(compile
         window = np.array([np.r_[filt.mean(k), filt.sigma(k)] for k in ks])
         runs[deferred] = (np.array(left), window)
         if deferred:
-            assert filt._n_epochs > 10  # the epochs were kept, not flushed at each end
+            assert filt._epochs.n > 10  # the epochs were kept, not flushed at each end
     for got, want in zip(runs[True], runs[False]):
         assert got.shape == want.shape and len(got) > 300
         scale = np.abs(want).max(axis=0)  # each column's own scale

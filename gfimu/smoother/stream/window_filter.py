@@ -91,6 +91,83 @@ _ZERO9 = np.zeros(9)
 _NEVER = 1 << 62  # the fused kernel's own flush, not used: the epochs are kept here (WindowFilter._boundary)
 
 
+class Epochs:
+    """The epochs of the window's older states (:meth:`WindowFilter._boundary`): each epoch's factors
+    ``(T, u, W)`` (its :data:`LAZY_STEPS` updates' share of the older states, ``C ← C T``, ``m += C u``,
+    ``v -= diag(C W Cᵀ)``), kept while a state still waits for them, and the runs of states that wait:
+    ``[k_first, k_stop, epoch]``, states ``k_first … k_stop - 1`` up to date as of the start of ``epoch``
+    (their runs contiguous, oldest first)."""
+
+    def __init__(self) -> None:
+        self.T = np.empty((16, 9, 9))  # each epoch's factors, the oldest kept first
+        self.u = np.empty((16, 9))
+        self.W = np.empty((16, 9, 9))
+        self.n = 0  # epochs kept
+        self.first = 0  # the number of the epoch in row 0
+        self.stale: deque = deque()
+
+    def waits(self, k: int) -> bool:
+        """Whether state ``k`` waits for epochs (is not up to date as of the current epoch's start)."""
+        stale = self.stale
+        return bool(stale) and stale[0][0] <= k < stale[-1][1]
+
+    def close(self, T: np.ndarray, u: np.ndarray, W: np.ndarray, k_lo: int, k_split: int) -> None:
+        """An epoch ends with factors ``(T, u, W)``: the older states ``[k_lo, k_split)`` that were up to date
+        as of its start (the others wait already) now wait for it."""
+        epoch = self.first + self.n
+        self._keep(T, u, W)
+        stale = self.stale
+        if not stale:
+            stale.append([k_lo, k_split, epoch])
+            return
+        if k_lo < stale[0][0]:
+            stale.appendleft([k_lo, stale[0][0], epoch])
+        if stale[-1][1] < k_split:
+            stale.append([stale[-1][1], k_split, epoch])
+
+    def _keep(self, T: np.ndarray, u: np.ndarray, W: np.ndarray) -> None:
+        """Store an epoch's factors, dropping those no waiting state needs any more."""
+        n = self.n
+        if n == len(self.T):
+            need = min((c[2] for c in self.stale), default=self.first + n) - self.first
+            if need > 0:
+                for arr in (self.T, self.u, self.W):
+                    arr[:n - need] = arr[need:n]
+                self.first += need
+                n -= need
+            if n == len(self.T):
+                self.T, self.u, self.W = (np.concatenate([a, np.empty_like(a)]) for a in (self.T, self.u, self.W))
+        self.T[n], self.u[n], self.W[n] = T, u, W
+        self.n = n + 1
+
+    def take(self, k_stop: float, k_lo: int, least: int):
+        """The runs of waiting states before ``k_stop`` (at least ``least`` states of a run; the rest of it goes
+        on waiting), no longer waiting: ``(k_first, k_stop, row)`` each, ``row`` the first of its epochs."""
+        stale = self.stale
+        while stale and stale[0][0] < k_stop:
+            k0, k1, epoch = stale.popleft()
+            k0 = max(k0, k_lo)
+            if k1 <= k0:
+                continue
+            cut = max(k_stop, k0 + least)
+            if cut < k1:
+                stale.appendleft([int(cut), k1, epoch])
+                k1 = int(cut)
+            yield k0, k1, epoch - self.first
+
+    def forget_before(self, k_lo: int) -> None:
+        """States before ``k_lo`` left the window."""
+        stale = self.stale
+        while stale and stale[0][1] <= k_lo:
+            stale.popleft()
+
+    def clear(self) -> None:
+        """No state waits (all brought up to date): no epoch kept."""
+        self.stale.clear()
+        self.first += self.n
+        self.n = 0
+
+
 class FilterFailure(RuntimeError):
     """A numerical failure of an update (a singular innovation covariance, non-finite values)."""
 
@@ -127,7 +204,7 @@ class WindowFilter:
         self._T = np.eye(9)  # the old states' cross-covariances since the last flush: C_i T
         self._u = np.zeros(9)  # ... their means: m_i + C_i u
         self._W = np.zeros((9, 9))  # ... their variances: v_i - diag(C_i W C_iᵀ)
-        self._reset_epochs()
+        self._epochs = Epochs()  # the older states waiting for epochs (_boundary)
         self._base = 0  # index k of slot 0
         self._P = np.zeros((9, 9))  # covariance of the newest state
         self._Q = None  # process noise of the newest step
@@ -195,7 +272,7 @@ class WindowFilter:
             if s < self._hi:
                 return self._mean[s]
         elif s >= self._lo:
-            if self._stale and self._stale[0][0] <= k < self._stale[-1][1]:
+            if self._epochs.waits(k):
                 self._bring_up(k + 1)
             return self._mean[s] + self._cross[s] @ self._u
         raise KeyError(f"state {k} is not in the window")
@@ -204,7 +281,7 @@ class WindowFilter:
         s = self._slot(k)
         var = self._var[s]
         if s < self._split:
-            if self._stale and self._stale[0][0] <= k < self._stale[-1][1]:
+            if self._epochs.waits(k):
                 self._bring_up(k + 1)
                 var = self._var[s]
             C = self._cross[s]
@@ -216,20 +293,9 @@ class WindowFilter:
             self._steps.pop(self._base + self._lo, None)
             self._lo += 1
             self._split = max(self._split, self._lo)
-            stale, k_lo = self._stale, self._base + self._lo
-            while stale and stale[0][1] <= k_lo:
-                stale.popleft()
+            self._epochs.forget_before(self._base + self._lo)
 
     # --- the older states: brought up to date when read ----------------------------------
-    def _reset_epochs(self) -> None:
-        """No epoch kept, no state behind one."""
-        self._epoch_T = np.empty((16, 9, 9))  # each epoch's factors (T, u, W), oldest kept first
-        self._epoch_u = np.empty((16, 9))
-        self._epoch_W = np.empty((16, 9, 9))
-        self._n_epochs = 0
-        self._epoch0 = 0  # the number of the epoch in row 0
-        self._stale: deque = deque()  # [k_first, k_stop, epoch]: states up to date as of the start of epoch
-
     def _boundary(self) -> None:
         """:data:`LAZY_STEPS` updates gathered in T, u, W: the end of an epoch.
 
@@ -244,63 +310,28 @@ class WindowFilter:
         if not self.deferred:
             self._flush()
             return
-        k_lo, k_split = self._base + self._lo, self._base + self._split
-        if k_split > k_lo:
-            epoch = self._epoch0 + self._n_epochs
-            self._keep_epoch()
-            stale = self._stale
-            if not stale:
-                stale.append([k_lo, k_split, epoch])
-            else:  # the states up to date (before and after the stale ones) now wait for this epoch
-                if k_lo < stale[0][0]:
-                    stale.appendleft([k_lo, stale[0][0], epoch])
-                if stale[-1][1] < k_split:
-                    stale.append([stale[-1][1], k_split, epoch])
+        if self._split > self._lo:
+            self._epochs.close(self._T, self._u, self._W, self._base + self._lo, self._base + self._split)
         self._T = np.eye(9)
         self._u = np.zeros(9)
         self._W = np.zeros((9, 9))
         self._split = self._hi
 
-    def _keep_epoch(self) -> None:
-        """Store the epoch's factors (T, u, W), dropping those no stale state needs any more."""
-        n = self._n_epochs
-        if n == len(self._epoch_T):
-            need = min((c[2] for c in self._stale), default=self._epoch0 + n) - self._epoch0
-            if need > 0:
-                for arr in (self._epoch_T, self._epoch_u, self._epoch_W):
-                    arr[:n - need] = arr[need:n]
-                self._epoch0 += need
-                n -= need
-            if n == len(self._epoch_T):
-                grow = lambda a: np.concatenate([a, np.empty_like(a)])  # noqa: E731
-                self._epoch_T, self._epoch_u, self._epoch_W = (grow(self._epoch_T), grow(self._epoch_u),
-                                                                grow(self._epoch_W))
-        self._epoch_T[n], self._epoch_u[n], self._epoch_W[n] = self._T, self._u, self._W
-        self._n_epochs = n + 1
-
     def _bring_up(self, k_stop: float) -> None:
-        """The stale states before ``k_stop`` (and at least :data:`LAZY_STEPS` of a run) brought up to date
+        """The waiting states before ``k_stop`` (and at least :data:`LAZY_STEPS` of a run) brought up to date
         as of the current epoch's start: each run's epochs since composed into one ``(T, u, W)`` and applied."""
-        stale, base, n = self._stale, self._base, self._n_epochs
-        k_lo = base + self._lo
-        while stale and stale[0][0] < k_stop:
-            k0, k1, epoch = stale.popleft()
-            k0 = max(k0, k_lo)
-            if k1 <= k0:
-                continue
-            cut = max(k_stop, k0 + LAZY_STEPS)  # a long run: its first states only, the rest waits
-            if cut < k1:
-                stale.appendleft([int(cut), k1, epoch])
-                k1 = int(cut)
-            first = epoch - self._epoch0
-            Ts, us, Ws = self._epoch_T[:n], self._epoch_u[:n], self._epoch_W[:n]
+        ep, base = self._epochs, self._base
+        if not ep.stale:
+            return
+        Ts, us, Ws = ep.T[:ep.n], ep.u[:ep.n], ep.W[:ep.n]
+        for k0, k1, first in ep.take(k_stop, base + self._lo, LAZY_STEPS):
             a, b = k0 - base, k1 - base
             if self.compiled:
                 T, u, W = kernels.compose_epochs(Ts, us, Ws, first)
                 kernels.flush_window(T, u, W, self._mean[a:b], self._var[a:b], self._cross[a:b])
                 continue
             T, u, W = Ts[first].copy(), us[first].copy(), Ws[first].copy()
-            for e in range(first + 1, n):
+            for e in range(first + 1, len(Ts)):
                 u = u + T @ us[e]
                 W = W + T @ Ws[e] @ T.T
                 T = T @ Ts[e]
@@ -316,8 +347,7 @@ class WindowFilter:
         applied to them at once: O(window / LAZY_STEPS + LAZY_STEPS) per update instead of O(window),
         the same numbers to rounding. The stale states are brought up to date first (:meth:`_bring_up`)."""
         self._bring_up(math.inf)
-        self._epoch0 += self._n_epochs
-        self._n_epochs = 0
+        self._epochs.clear()
         lo, split = self._lo, self._split
         if split > lo and self.compiled:
             kernels.flush_window(self._T, self._u, self._W, self._mean[lo:split], self._var[lo:split],
@@ -404,7 +434,7 @@ class WindowFilter:
 
     def _means(self, a: int, b: int) -> np.ndarray:
         """The means of the states in slots ``[a, b)`` (a copy), the lazy ones given the updates since."""
-        if self._stale and self._stale[0][0] < self._base + b:
+        if self._epochs.stale and self._epochs.stale[0][0] < self._base + b:
             self._bring_up(self._base + b)
         X = self._mean[a:b].copy()
         lazy = min(b, self._split) - a
@@ -487,7 +517,7 @@ class WindowFilter:
         if step is None:
             return 0
         F, Q = step
-        if self._stale and self._stale[0][0] < k0 + 2:
+        if self._epochs.stale and self._epochs.stale[0][0] < k0 + 2:
             self._bring_up(k0 + 2)
         if self.compiled:
             e2 = kernels.window_step_residual2(F, Q, self._mean, self._cross, self._u, self._split, lo)
@@ -664,7 +694,7 @@ class WindowFilter:
         self._T = np.eye(9)
         self._u = np.zeros(9)
         self._W = np.zeros((9, 9))
-        self._reset_epochs()
+        self._epochs = Epochs()
         self._base = k
         self._mean[0] = 0.0
         self._var[0] = self._prior_var
