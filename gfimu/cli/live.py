@@ -53,16 +53,18 @@ def run(args) -> int:
     from ..io.outputs import check_output
     from ..io.sources import SourceError, open_source
     from ..io.array_toml import check_noise_weights
-    from ..methods import make_estimator
+    from ..io.plausibility import MAX_RATE_HZ
     from .options import method_options
 
-    options = method_options("fixed-lag", args.option, lag_s=args.lag_s)
-    _refuse_unapplied(options)
-    estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
+    chosen = method_options("fixed-lag", args.option, lag_s=args.lag_s)
+    _refuse_unapplied(chosen.options)
+    estimator = chosen.estimator()  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
     check_noise_weights(array, str(args.array))
     rate_hz = args.rate_hz or declared_rate_hz
-    _refuse_rate(rate_hz, "--rate-hz" if args.rate_hz else f"{args.array}: rate_hz")
+    if rate_hz is not None and rate_hz > MAX_RATE_HZ:  # it would size the smoother's window at millions of samples
+        what = "--rate-hz" if args.rate_hz else f"{args.array}: rate_hz"
+        raise CLIError(f"{what} {rate_hz:g}: beyond any IMU's rate ({MAX_RATE_HZ:g} Hz at most)")
     out_path = check_output(args.out, [args.array], "--out", stdout=True)
     reason = estimator.applicable(array)
     if reason:
@@ -135,10 +137,3 @@ def _refuse_unapplied(options: dict) -> None:
                        "the lag window and cannot apply it (give -O guard=off, or run gfimu estimate --method "
                        "fixed-lag on the recorded log)")
 
-
-def _refuse_rate(rate_hz: float | None, what: str) -> None:
-    """A rate beyond any IMU's sizes the smoother's window at millions of samples: refused before anything."""
-    from ..io.plausibility import MAX_RATE_HZ
-
-    if rate_hz is not None and rate_hz > MAX_RATE_HZ:
-        raise CLIError(f"{what} {rate_hz:g}: beyond any IMU's rate ({MAX_RATE_HZ:g} Hz at most)")
