@@ -197,8 +197,8 @@ def _read_given(method: str, cls: type, fields: dict[str, dataclasses.Field], gi
     one, the caller checks the names). Returns a new dict, each value as its declaration reads it.
 
     An option declared with its check (:func:`gfimu.option.option`: a range, a switch taking ``true``/``false``, a
-    choice) is read by that check (:meth:`gfimu.option.Check.parse`): the one-line :class:`OptionError` names the option and what it
-    accepts. The others by their type and default: a number where a number is expected (an integer is a valid
+    choice) is read by that check (:meth:`gfimu.option.Check.parse`): the one-line :class:`OptionError` names the
+    option and what it accepts. The others by their type and default: a number where a number is expected (an integer is a valid
     float), True or False for a switch, text for text, ``None`` where the default is ``None``; numbers
     (``1,2,3`` or ``[1,2,3]``, made a tuple) where the type is a tuple of numbers. Every number is 0 or of a
     magnitude in :data:`OPTION_MAGNITUDE`.

@@ -7,7 +7,8 @@ check (:meth:`Check.parse`), and the classes that hold options check every value
 
 The checks: :class:`Number` (a range, None where allowed), :class:`Switch` (true or false), :class:`Choice`
 (the values of an :class:`enum.StrEnum`), :class:`Numbers` (a fixed count of numbers in a range) and
-:class:`Satisfies` (any other rule, with the words that say what it accepts).
+:class:`Satisfies` (any other rule, with the words that say what it accepts). A value given on a command line
+that an option refuses is an :class:`OptionError`, its value quoted by :func:`shown`.
 """
 
 from __future__ import annotations
