@@ -54,7 +54,6 @@ takes the RMS over single axes instead (norm value / √3 for triads).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -412,23 +411,18 @@ def write_calibration(cal: Calibration, path: str | Path) -> None:
 def read_calibration(path: str | Path) -> Calibration:
     """Read a ``calibration.toml`` written by :func:`write_calibration` (or by hand); a bad value is refused
     naming the file, its line and the key."""
-    from .io.array_toml import TomlContext
+    from .io.errors import LogFormatError
+    from .io.toml_input import load_toml
 
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise CalibrationFileError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    from .io.errors import toml_nested_too_deep
-
-    too_deep = toml_nested_too_deep(text)
-    if too_deep:
-        raise CalibrationFileError(f"{path}: {too_deep}")
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CalibrationFileError(f"{path}: not valid TOML: {exc}") from None
-    ctx = TomlContext(path, text)
+        doc, ctx = load_toml(text, path)
+    except LogFormatError as exc:
+        raise CalibrationFileError(str(exc)) from None
 
     def fail(message: str, table: str = "", index: int = 0, key: str | None = None) -> CalibrationFileError:
         return CalibrationFileError(str(ctx.error(message, table, index, key)))

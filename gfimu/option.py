@@ -1,13 +1,14 @@
 """One option of an estimator, declared once: a dataclass field whose metadata holds its unit, help and check.
 
 ``gfimu estimate --method NAME --list-options`` prints each option's name, default, unit, help and the values it
-accepts from these fields (:func:`gfimu.cli.options.describe_options`); ``-O NAME=VALUE`` is read by the option's
+accepts from these fields (:meth:`gfimu.methods.MethodOptions.describe`); ``-O NAME=VALUE`` is read by the option's
 check (:meth:`Check.parse`), and the classes that hold options check every value with it when they are made
 (:func:`check_declared`), so no list of option names repeats a rule.
 
 The checks: :class:`Number` (a range, None where allowed), :class:`Switch` (true or false), :class:`Choice`
 (the values of an :class:`enum.StrEnum`), :class:`Numbers` (a fixed count of numbers in a range) and
-:class:`Satisfies` (any other rule, with the words that say what it accepts).
+:class:`Satisfies` (any other rule, with the words that say what it accepts). A value given on a command line
+that an option refuses is an :class:`OptionError`, its value quoted by :func:`shown`.
 """
 
 from __future__ import annotations
@@ -16,6 +17,27 @@ import dataclasses
 import enum
 import math
 import numbers
+
+from .errors import InputError
+
+SHOWN_CHARS = 80
+"""At most this many characters of a value are quoted in a message."""
+
+
+def shown(value) -> str:
+    """``repr(value)``, or its first :data:`SHOWN_CHARS` characters and the length when longer:
+    ``'abc…' (129,000 characters)``."""
+    text = repr(value)
+    if len(text) <= SHOWN_CHARS:
+        return text
+    if isinstance(value, str):
+        head = repr(value[:SHOWN_CHARS])
+        return f"{head[:-1]}…{head[-1]} ({len(value):,} characters)"
+    return f"{text[:SHOWN_CHARS]}… ({len(text):,} characters)"
+
+
+class OptionError(InputError):
+    """A method option (``-O KEY=VALUE``) is malformed or has a wrong value."""
 
 
 class Rejected(ValueError):
@@ -203,8 +225,6 @@ def check_declared(obj, owner: str) -> None:
     """Check every option of the dataclass ``obj`` that declares a check (:func:`option`), setting the value
     as the check returns it (a tuple for numbers given as a list); an :class:`~gfimu.errors.InputError`
     ``OWNER option NAME must be WHAT IT ACCEPTS, got VALUE`` for the first value it refuses."""
-    from .errors import InputError
-
     for f in dataclasses.fields(obj):
         check = f.metadata.get("check")
         if check is None:
@@ -216,3 +236,4 @@ def check_declared(obj, owner: str) -> None:
             raise InputError(f"{owner} option {f.name} must be {exc}, got {value!r}") from None
         if new is not value and not (type(new) is type(value) and new == value):
             object.__setattr__(obj, f.name, new)
+

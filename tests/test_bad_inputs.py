@@ -562,3 +562,24 @@ def test_signal_while_writing_removes_the_temporary_file(work, sig, status):
     assert not list(work.glob(".e.csv.*"))
     assert out.read_text() == "old estimate\n"
     assert "Traceback" not in err
+
+
+def test_an_output_is_refused_as_a_folder_before_as_an_input_and_a_link_as_the_file_it_names(tmp_path):
+    from gfimu.io.errors import OutputError
+    from gfimu.io.outputs import check_output
+
+    folder = tmp_path / "d"
+    folder.mkdir()
+    with pytest.raises(OutputError, match=rf"^--out {folder}: exists and is a folder; refusing to replace it"):
+        check_output(folder, [folder])
+    data, link, hard = tmp_path / "in.csv", tmp_path / "link.csv", tmp_path / "hard.csv"
+    data.write_text("t\n")
+    os.symlink(data, link)
+    os.link(data, hard)
+    with pytest.raises(OutputError, match=rf"^--out {link}: is an input of this command; refusing to overwrite it"):
+        check_output(link, [data])
+    with pytest.raises(OutputError, match=rf"^--tum {hard}: is an input of this command \({link}, the same file\); "
+                                          r"refusing"):
+        check_output(hard, [link], "--tum")
+    assert check_output(link, [tmp_path / "other.csv"]) == data  # the file a link names is written
+    assert check_output(tmp_path / "new.csv", [data, link]) == tmp_path / "new.csv"

@@ -102,11 +102,11 @@ def test_command_builds_the_estimator_once_and_prints_the_report(log_dir, tmp_pa
     from gfimu.smoother.batch import engine as batch
 
     calls = []
-    real_make = gfimu.methods.make_estimator
+    real_make = gfimu.methods.MethodOptions.estimator
 
-    def counting(name, **options):
-        calls.append(name)
-        return real_make(name, **options)
+    def counting(chosen):
+        calls.append(chosen.method)
+        return real_make(chosen)
 
     real_smooth = batch.smooth
 
@@ -115,7 +115,7 @@ def test_command_builds_the_estimator_once_and_prints_the_report(log_dir, tmp_pa
         note = "solve window 1 of 1 (samples 0..199) stopped after 50 iterations without converging"
         return dataclasses.replace(run, report=dataclasses.replace(run.report, warnings=(note,)))
 
-    monkeypatch.setattr(gfimu.methods, "make_estimator", counting)
+    monkeypatch.setattr(gfimu.methods.MethodOptions, "estimator", counting)
     monkeypatch.setattr(batch, "smooth", smooth_with_a_note)
     snapshot = {p.name: p.read_bytes() for p in log_dir.iterdir()}
     assert main(["estimate", str(log_dir), "--out", str(tmp_path / "e.csv"), "--no-progress"]) == 0

@@ -7,8 +7,7 @@ import inspect
 import pytest
 
 from gfimu.cli import main
-from gfimu.cli.options import describe_options
-from gfimu.methods import METHODS, estimator_class
+from gfimu.methods import METHODS, estimator_class, resolve_options
 
 
 @pytest.mark.parametrize("method", list(METHODS))
@@ -26,7 +25,7 @@ def test_every_option_is_listed_with_its_declared_default_unit_and_help(method, 
 
 
 def test_hand_written_expectations():
-    smoother, fixed_lag = describe_options("smoother"), describe_options("fixed-lag")
+    smoother, fixed_lag = resolve_options("smoother").describe(), resolve_options("fixed-lag").describe()
     for text in (smoother, fixed_lag):
         assert "\nomega_dot_random_walk_radps2_per_sqrt_s = 30.0 [rad/s²/√s]\n    white angular jerk density" in text
         assert "\ntune_process_noise = True\n" in text and "\nauto_model = True\n" in text
@@ -41,19 +40,19 @@ def test_hand_written_expectations():
     assert not [n for n in ("window_s", "overlap_s", "reweight_iterations", "solver") if f"\n{n} = " in fixed_lag]
     assert "\nlag_s = 0.2 [s]\n" in fixed_lag and "\nrelinearize_threshold = 0.1 [rad/s]\n" in fixed_lag
     assert not [n for n in ("lag_s", "relinearize_threshold", "engine", "retune_every_s") if f"\n{n} = " in smoother]
-    assert "\nnoise_std_mps2 = None [m/s²]\n" in describe_options("ml")
-    assert "\nt1 = 0.1 [(rad/s)²]\n" in describe_options("imm")
+    assert "\nnoise_std_mps2 = None [m/s²]\n" in resolve_options("ml").describe()
+    assert "\nt1 = 0.1 [(rad/s)²]\n" in resolve_options("imm").describe()
 
 
 def test_the_list_is_made_without_reading_any_source(monkeypatch):
-    expected = {m: describe_options(m) for m in METHODS}
+    expected = {m: resolve_options(m).describe() for m in METHODS}
 
     def no_source(*args, **kwargs):
         raise OSError("source not available")
 
     monkeypatch.setattr(inspect, "getsource", no_source)
     monkeypatch.setattr(inspect, "getsourcelines", no_source)
-    assert {m: describe_options(m) for m in METHODS} == expected
+    assert {m: resolve_options(m).describe() for m in METHODS} == expected
 
 
 def test_estimate_without_a_log_asks_for_one(capsys):

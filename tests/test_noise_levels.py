@@ -34,9 +34,9 @@ def log():
 
 
 def _options(method: str):
-    options = method_options(method, [f"default_accel_noise_std_mps2={SIGMA}"])
-    assert options == {"default_accel_noise_std_mps2": SIGMA}
-    return make_estimator(method, **options).options()
+    chosen = method_options(method, [f"default_accel_noise_std_mps2={SIGMA}"])
+    assert chosen.options == {"default_accel_noise_std_mps2": SIGMA}
+    return chosen.estimator().options()
 
 
 def test_the_accel_noise_option_reaches_every_group_that_whitens_with_it(log):

@@ -78,13 +78,13 @@ def test_the_checks_read_values_as_documented():
 
 def test_minus_O_values_parse_as_documented():
     opts = method_options("smoother", ["use_gyro=true", "ml_sign_chain=no", "motion_model=snap", "window_s=None",
-                                       "process_axis_factors=1,2,3", "workers=2", "robust_loss=cauchy"])
+                                       "process_axis_factors=1,2,3", "workers=2", "robust_loss=cauchy"]).options
     assert opts == {"use_gyro": True, "ml_sign_chain": False, "motion_model": "snap", "window_s": None,
                     "process_axis_factors": (1.0, 2.0, 3.0), "workers": 2, "robust_loss": "cauchy"}
     assert type(opts["motion_model"]) is str  # the option holds the value's text
     est = make_estimator("smoother", **opts)
     assert est.use_gyro is True and est.motion_model == og.MotionModel.SNAP and est.process_axis_factors == (1.0, 2.0, 3.0)
-    assert method_options("fixed-lag", ["engine=gtsam", "screen_readings=false", "marginalise_every_s=null"]) == {
+    assert method_options("fixed-lag", ["engine=gtsam", "screen_readings=false", "marginalise_every_s=null"]).options == {
         "engine": "gtsam", "screen_readings": False, "marginalise_every_s": None}
 
 

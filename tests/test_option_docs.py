@@ -10,8 +10,8 @@ import pytest
 
 from gfimu import io as gio
 from gfimu.cli import main
-from gfimu.cli.options import OptionError, check_method_options, describe_options, parse_options
-from gfimu.methods import estimator_class, make_estimator
+from gfimu.cli.options import OptionError, parse_options
+from gfimu.methods import estimator_class, make_estimator, resolve_options
 from gfimu.simulate import simulate
 from gfimu.smoother.model.option_groups import GROUPS
 
@@ -21,7 +21,7 @@ from gfimu.smoother.model.option_groups import GROUPS
 def test_every_smoother_option_is_listed_under_its_group(method, groups):
     names = [f.name for f in dataclasses.fields(estimator_class(method)) if f.init]
     assert sorted(names) == sorted(n for g in groups for n in GROUPS[g])
-    text = describe_options(method)
+    text = resolve_options(method).describe()
     assert [line for line in text.splitlines() if line.startswith("[")] == [f"[{g}]" for g in groups]
     for group in groups:
         block = text.split(f"[{group}]\n", 1)[1].split("\n[", 1)[0]
@@ -31,12 +31,12 @@ def test_every_smoother_option_is_listed_under_its_group(method, groups):
 
 def test_flat_options_keep_working():
     # None where the declaration allows it: window_s=None solves the whole log at once
-    assert check_method_options("smoother", parse_options(["window_s=None", "tune_span_s=None"])) == {
+    assert resolve_options("smoother", parse_options(["window_s=None", "tune_span_s=None"])).options == {
         "window_s": None, "tune_span_s": None}
-    assert check_method_options("fixed-lag", parse_options(["marginalise_every_s=None"])) == {
+    assert resolve_options("fixed-lag", parse_options(["marginalise_every_s=None"])).options == {
         "marginalise_every_s": None}
     with pytest.raises(OptionError, match=r"^-O lag_s=None: expected a number > 0 \[s\] \(option of method 'fixed-lag', "):
-        check_method_options("fixed-lag", parse_options(["lag_s=None"]))
+        resolve_options("fixed-lag", parse_options(["lag_s=None"])).options
     est = make_estimator("smoother", window_s=10.0, solver="gtsam", tune_span_s=None)
     assert est.window_s == 10.0 and est.solver == "gtsam" and est.tune_span_s is None
     est = make_estimator("smoother", preset="hand-held-low-rate", window_s=10.0)

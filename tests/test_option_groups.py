@@ -7,6 +7,7 @@ from dataclasses import FrozenInstanceError, dataclass, fields, replace
 
 import pytest
 
+from gfimu.cli.options import method_options
 from gfimu.errors import InputError
 from gfimu.methods import make_estimator
 from gfimu.option import Check
@@ -102,6 +103,18 @@ def test_the_fixed_lag_estimator_checks_its_model_options_when_made():
         SmootherOptions(tune_span_s=-1.0)
     with pytest.raises(InputError, match=r"workers must be an integer >= 0 \[processes\], got -1"):
         SmootherOptions(workers=-1)
+
+
+def test_the_batch_smoother_s_guard_and_solver_are_checked_by_their_declarations_alone():
+    # the declarations (Choice) are the only check of these values: made directly, by name, or from -O
+    with pytest.raises(InputError, match="^smoother option guard must be one of 'replace', 'warn', 'off', got 'sometimes'$"):
+        BatchSmootherEstimator(guard="sometimes")
+    with pytest.raises(InputError, match="^smoother option solver must be 'numpy' or 'gtsam', got 'scipy'$"):
+        make_estimator("smoother", solver="scipy")
+    with pytest.raises(InputError, match=r"^-O guard='sometimes': expected one of 'replace', 'warn', 'off' \(option of "
+                                         r"method 'smoother', default 'replace'\)$"):
+        method_options("smoother", ["guard=sometimes"])
+    assert BatchSmootherEstimator(guard="warn", solver="gtsam").guard == "warn"
 
 
 def test_an_option_is_declared_in_its_group_only():

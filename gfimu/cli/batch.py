@@ -50,11 +50,10 @@ def run(args) -> int:
     from ..io.outputs import check_output, check_output_within
     from .options import method_options
 
-    options = method_options(args.method, args.option, preset=getattr(args, "preset", None),
-                             solver=getattr(args, "solver", None))
-    from ..methods import make_estimator
-
-    make_estimator(args.method, **options)  # the values checked here, before any log; each worker makes its own
+    chosen = method_options(args.method, args.option, preset=getattr(args, "preset", None),
+                            solver=getattr(args, "solver", None))
+    chosen.estimator()  # the values checked here, before any log; each worker makes its own
+    options = chosen.options
     out_dir = Path(args.out)
     if out_dir.exists() and not out_dir.is_dir():
         raise CLIError(f"--out {out_dir}: exists and is not a folder")

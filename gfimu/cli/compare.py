@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from . import CLIError, add_no_progress, info, show_progress
-from .options import check_method_options, non_negative, parse_method_options
+from .options import non_negative, parse_method_options
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from .. import io as gio
     from ..compare import compare
-    from ..methods import METHODS
+    from ..methods import METHODS, resolve_options
 
     methods = None
     if args.methods is not None:
@@ -63,7 +63,7 @@ def run(args) -> int:
     for method, opts in options.items():
         if method not in METHODS:
             raise CLIError(f"-O {method}.…: unknown method {method!r}; choose among: {', '.join(METHODS)}")
-        check_method_options(method, opts, prefix=f"{method}.")
+        options[method] = resolve_options(method, opts, prefix=f"{method}.").options
     if getattr(args, "preset", None) is not None:
         if methods is not None and "smoother" not in methods:
             raise CLIError(f"--preset sets the smoother's options, but smoother is not among --methods {','.join(methods)}")

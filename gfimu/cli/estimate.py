@@ -48,10 +48,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args) -> int:
     """Options -> estimator -> outputs checked -> the estimate of the log (gfimu.pipeline) -> written -> report."""
+    progress = show_progress(args)
+    chosen = method_options(args.method, args.option, preset=args.preset, solver=args.solver, lag_s=args.lag_s,
+                            sigma=args.sigma)
     if args.list_options:
-        from .options import describe_options
-
-        sys.stdout.write(describe_options(args.method))
+        sys.stdout.write(chosen.describe())
         return 0
     if args.log is None or args.out is None:
         raise CLIError("a LOG folder and --out (a file, or - for standard output) are needed "
@@ -61,18 +62,15 @@ def run(args) -> int:
     from .. import io as gio
     from ..io import trajectory
     from ..io.outputs import check_outputs, write_output
-    from ..methods import make_estimator
     from ..pipeline import estimate_log
 
-    options = method_options(args.method, args.option, preset=args.preset, solver=args.solver, lag_s=args.lag_s,
-                             sigma=args.sigma)
-    estimator = make_estimator(args.method, **options)  # option values checked before any log is read
-    if args.tum is not None and args.orientation == "none" and not (options.get("estimate_attitude")
-                                                                     or options.get("use_inclinometer")):
+    estimator = chosen.estimator()  # option values checked before any log is read
+    if args.tum is not None and args.orientation == "none" and not (chosen.options.get("estimate_attitude")
+                                                                     or chosen.options.get("use_inclinometer")):
         raise CLIError("--tum writes the estimated orientation, but none is estimated: add --orientation "
                        "inclinometer, gyro or estimate")
     out, tum = check_outputs({"--out": args.out, "--tum": args.tum}, [args.log, args.calibration], stdout="--out")
-    run_ = estimate_log(args.log, estimator, calibration=args.calibration, progress=show_progress(args),
+    run_ = estimate_log(args.log, estimator, calibration=args.calibration, progress=progress,
                         orientation=args.orientation, truth=False)  # MethodNotApplicable: an InputError, exit 2
     tum_chunks = None
     if tum is not None:

@@ -48,21 +48,25 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
+    """Options -> array -> output checked -> (locked) source opened -> the session (gfimu.live) -> its summary."""
     from .. import io as gio
-    from ..io.atomic import output_lock
-    from ..io.outputs import check_output
-    from ..io.sources import SourceError, open_source
     from ..io.array_toml import check_noise_weights
-    from ..methods import make_estimator
+    from ..io.atomic import output_lock, resource_error
+    from ..io.outputs import check_output
+    from ..io.plausibility import MAX_RATE_HZ
+    from ..io.sources import SourceError, open_source
+    from ..live import OUTPUT_CLOSED, EstimateSink, run as run_live
     from .options import method_options
 
-    options = method_options("fixed-lag", args.option, lag_s=args.lag_s)
-    _refuse_unapplied(options)
-    estimator = make_estimator("fixed-lag", **options)  # the options checked before anything is opened
+    chosen = method_options("fixed-lag", args.option, lag_s=args.lag_s)
+    _refuse_unapplied(chosen.options)
+    estimator = chosen.estimator()  # the options checked before anything is opened
     array, declared_rate_hz = gio.load_array_toml(args.array)
     check_noise_weights(array, str(args.array))
     rate_hz = args.rate_hz or declared_rate_hz
-    _refuse_rate(rate_hz, "--rate-hz" if args.rate_hz else f"{args.array}: rate_hz")
+    if rate_hz is not None and rate_hz > MAX_RATE_HZ:  # it would size the smoother's window at millions of samples
+        what = "--rate-hz" if args.rate_hz else f"{args.array}: rate_hz"
+        raise CLIError(f"{what} {rate_hz:g}: beyond any IMU's rate ({MAX_RATE_HZ:g} Hz at most)")
     out_path = check_output(args.out, [args.array], "--out", stdout=True)
     reason = estimator.applicable(array)
     if reason:
@@ -76,50 +80,43 @@ def run(args) -> int:
             source = open_source(args.source, array)
         except SourceError as exc:
             raise CLIError(str(exc)) from None
-        return _session(args, source, estimator, out_path, rate_hz, declared_rate_hz)
-
-
-def _session(args, source, estimator, out_path, rate_hz, declared_rate_hz) -> int:
-    from ..live import EstimateSink
-    from ..live import OUTPUT_CLOSED, run as run_live
-
-    def report(message: str) -> None:
-        try:
-            print(f"gfimu live: {message}", file=sys.stderr, flush=True)
-        except (OSError, ValueError):
-            pass
-
-    if args.rate_hz and declared_rate_hz and abs(args.rate_hz - declared_rate_hz) > 1e-6 * declared_rate_hz:
-        report(f"--rate-hz {args.rate_hz:g} replaces rate_hz = {declared_rate_hz:g} of {args.array}")
-    with contextlib.ExitStack() as held:
-        out = sys.stdout if out_path is None else held.enter_context(
-            open(Path(out_path), "w", encoding="utf-8", newline=""))
-        try:
-            result = run_live(source, estimator, EstimateSink(out, sigma=estimator.compute_sigma), rate_hz=rate_hz,
-                              queue_size=args.queue, report=report,
-                              status_s=None if getattr(args, "quiet", False) else args.status_s)
-        except BrokenPipeError:  # standard output closed by its reader before the session began (its header)
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to flush into it
-            report(f"error: --out {args.out}: the output was closed by its reader (a broken pipe) before the "
-                   "first row; nothing was estimated")
-            return EXIT_FAILURE
-        except OSError as exc:
-            if out_path is not None or exc.errno is None:
-                raise
-            from ..io.atomic import resource_error  # standard output on a full disk: named as the output
-
-            raise resource_error(exc, "standard output (--out -)") from None
-    if result.ended == OUTPUT_CLOSED:  # standard output closed by its reader: nothing more to flush into it
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        report(f"error: --out {args.out}: {result.failure}")
-    elif result.failure:
-        report(f"error: {result.failure}")
-    report(result.summary())
+        if args.rate_hz and declared_rate_hz and abs(args.rate_hz - declared_rate_hz) > 1e-6 * declared_rate_hz:
+            _report(f"--rate-hz {args.rate_hz:g} replaces rate_hz = {declared_rate_hz:g} of {args.array}")
+        with contextlib.ExitStack() as output:
+            out = sys.stdout if out_path is None else output.enter_context(
+                open(Path(out_path), "w", encoding="utf-8", newline=""))
+            try:
+                result = run_live(source, estimator, EstimateSink(out, sigma=estimator.compute_sigma), rate_hz=rate_hz,
+                                  queue_size=args.queue, report=_report,
+                                  status_s=None if getattr(args, "quiet", False) else args.status_s)
+            except BrokenPipeError:  # standard output closed by its reader before the session began (its header)
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to flush into it
+                _report(f"error: --out {args.out}: the output was closed by its reader (a broken pipe) before the "
+                        "first row; nothing was estimated")
+                return EXIT_FAILURE
+            except OSError as exc:
+                if out_path is not None or exc.errno is None:
+                    raise
+                raise resource_error(exc, "standard output (--out -)") from None  # a full disk, named as the output
+        if result.ended == OUTPUT_CLOSED:  # standard output closed by its reader: nothing more to flush into it
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            _report(f"error: --out {args.out}: {result.failure}")
+        elif result.failure:
+            _report(f"error: {result.failure}")
+        _report(result.summary())
     if result.signal_exit is not None:
         return result.signal_exit
     if result.ended == "input refused":
         return EXIT_USAGE
     return EXIT_FAILURE if result.failure else 0
+
+
+def _report(message: str) -> None:
+    """A line of the session on standard error (none when standard error is gone)."""
+    try:
+        print(f"gfimu live: {message}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
 
 
 UNAPPLIED = {"guard": "off"}
@@ -135,10 +132,3 @@ def _refuse_unapplied(options: dict) -> None:
                        "the lag window and cannot apply it (give -O guard=off, or run gfimu estimate --method "
                        "fixed-lag on the recorded log)")
 
-
-def _refuse_rate(rate_hz: float | None, what: str) -> None:
-    """A rate beyond any IMU's sizes the smoother's window at millions of samples: refused before anything."""
-    from ..io.plausibility import MAX_RATE_HZ
-
-    if rate_hz is not None and rate_hz > MAX_RATE_HZ:
-        raise CLIError(f"{what} {rate_hz:g}: beyond any IMU's rate ({MAX_RATE_HZ:g} Hz at most)")

@@ -1,6 +1,6 @@
 """``array.toml``: the sensor array of a log (format ``gfimu-array/1``), and the TOML writer.
 
-Reading uses :mod:`tomllib`; every problem raises
+Reading goes through :func:`gfimu.io.toml_input.load_toml`; every problem raises
 :class:`~gfimu.io.errors.LogFormatError` naming the key and its line. Unknown
 keys are ignored. ``topic`` (the message topic an accelerometer was recorded
 on) is read and written back, and used only by the recording readers.
@@ -16,10 +16,8 @@ from __future__ import annotations
 import math
 import os
 import re
-import tomllib
 import warnings
 from collections.abc import Mapping
-from pathlib import Path
 
 import numpy as np
 import tomli_w
@@ -27,55 +25,12 @@ import tomli_w
 from ..array import READINGS, Accelerometer, ArrayModelError, Body, Gyroscope, Inclinometer, SensorArray
 from .atomic import atomic_write_text
 from ..errors import InputError
-from .errors import LogFormatError, LogFormatWarning, read_utf8_text, toml_nested_too_deep
+from .errors import LogFormatError, LogFormatWarning, read_utf8_text
+from .toml_input import TomlContext, load_toml
 
 ARRAY_FORMAT = "gfimu-array/1"
 ROTATION_TOLERANCE = 1e-6  # accepted as written
 ROTATION_REPAIR_TOLERANCE = 1e-3  # projected onto the nearest rotation, with a warning
-
-
-def _key_lines(text: str) -> dict[tuple, int]:
-    """Line numbers of keys: (table, index, key) -> line, for error messages.
-
-    ``table`` is ``""`` for top-level keys; ``index`` counts ``[[accelerometers]]``
-    entries (0 for plain tables). Table header lines are stored under key ``None``.
-    """
-    out: dict[tuple, int] = {}
-    table, index = "", 0
-    counts: dict[str, int] = {}
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        s = line.strip()
-        m = re.match(r"^\[\[\s*([A-Za-z0-9_\-]+)\s*\]\]", s)
-        if m:
-            table = m.group(1)
-            index = counts.get(table, 0)
-            counts[table] = index + 1
-            out.setdefault((table, index, None), lineno)
-            continue
-        m = re.match(r"^\[\s*([A-Za-z0-9_\-]+)\s*\]", s)
-        if m:
-            table, index = m.group(1), 0
-            out.setdefault((table, index, None), lineno)
-            continue
-        m = re.match(r"^([A-Za-z0-9_\-]+)\s*=", s)
-        if m:
-            out.setdefault((table, index, m.group(1)), lineno)
-    return out
-
-
-class TomlContext:
-    """A TOML file's path and the line of each of its keys, for errors that name ``file:line`` and the key."""
-
-    def __init__(self, path: Path, text: str):
-        self.path = path
-        self.lines = _key_lines(text)
-
-    def error(self, message: str, table: str = "", index: int = 0, key: str | None = None) -> LogFormatError:
-        line = self.lines.get((table, index, key)) or self.lines.get((table, index, None))
-        where = key if not table else (f"{table}[{index}]" if table == "accelerometers" else table)
-        if table and key:
-            where += f".{key}"
-        return LogFormatError(f"{where}: {message}" if where else message, self.path, line, where)
 
 
 def _is_number(v) -> bool:
@@ -181,34 +136,28 @@ def _rotation(ctx: TomlContext, value, index: int, name: str) -> np.ndarray:
                     f"expected orthonormal rows, determinant +1)", "accelerometers", index, key)
 
 
-def parse_array_toml(text: str, path: str | os.PathLike = "array.toml", *, expected_format: str = ARRAY_FORMAT,
-                     positions_required: bool = True) -> SensorArray:
-    """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line.
-
-    Another document holding the same ``[[accelerometers]]`` keys (a CSV column map) is read with its own
-    ``expected_format``; without ``positions_required`` an accelerometer without ``position_m`` sits at the
-    origin (its place is given elsewhere)."""
-    return _parse(text, path, expected_format, positions_required)[0]
+def parse_array_toml(text: str, path: str | os.PathLike = "array.toml") -> SensorArray:
+    """A :class:`SensorArray` from the text of an ``array.toml``; errors name the key and line."""
+    return _array_toml(text, path)[0]
 
 
-def _parse(text: str, path: str | os.PathLike, expected_format: str = ARRAY_FORMAT,
-           positions_required: bool = True) -> tuple[SensorArray, float | None]:
-    """(array, declared rate_hz or None) from the text of an ``array.toml``."""
-    path = Path(path)
-    too_deep = toml_nested_too_deep(text)
-    if too_deep:
-        raise LogFormatError(too_deep, path)
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise LogFormatError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None) from None
-    ctx = TomlContext(path, text)
+def _array_toml(text: str, path: str | os.PathLike) -> tuple[SensorArray, float | None]:
+    doc, ctx = load_toml(text, path)
     fmt = doc.get("format")
     if fmt is None:
-        raise ctx.error(f"key is missing; the first line should be format = \"{expected_format}\"", key="format")
-    if fmt != expected_format:
-        raise ctx.error(f"unknown format {fmt!r}; this version of gfimu reads {expected_format!r}", key="format")
+        raise ctx.error(f"key is missing; the first line should be format = \"{ARRAY_FORMAT}\"", key="format")
+    if fmt != ARRAY_FORMAT:
+        raise ctx.error(f"unknown format {fmt!r}; this version of gfimu reads {ARRAY_FORMAT!r}", key="format")
+    return array_from_toml(doc, ctx)
+
+
+def array_from_toml(doc: dict, ctx: TomlContext, *, positions_required: bool = True) -> tuple[SensorArray, float | None]:
+    """(array, declared rate_hz or None) from the document of an ``array.toml`` (its format checked), loaded by
+    :func:`~gfimu.io.toml_input.load_toml`.
+
+    Another document holding the same ``[[accelerometers]]`` keys (a CSV column map) is read the same way;
+    without ``positions_required`` an accelerometer without ``position_m`` sits at the origin (its place is
+    given elsewhere)."""
     name = doc.get("name", "array")
     if not isinstance(name, str):
         raise ctx.error(f"expected a string, got {name!r}", key="name")
@@ -307,11 +256,10 @@ def read_array_toml(path: str | os.PathLike) -> SensorArray:
 
 def load_array_toml(path: str | os.PathLike) -> tuple[SensorArray, float | None]:
     """Read ``array.toml``: (array, its optional ``rate_hz``, the nominal sample rate in Hz)."""
-    path = Path(path)
     text = read_utf8_text(path)
     if not text.strip():
         raise LogFormatError(f"file is empty; expected format = \"{ARRAY_FORMAT}\" and [[accelerometers]] tables", path)
-    return _parse(text, path)
+    return _array_toml(text, path)
 
 
 # --- writing -------------------------------------------------------------------------

@@ -80,12 +80,21 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
     return os.path.realpath(a) == os.path.realpath(b)
 
 
-def _refuse_inputs(path: Path, shown: str, inputs: list[Path], what: str) -> None:
+def _input_refusal(path: str | os.PathLike, shown: str, inputs: list[Path], what: str) -> OutputError | None:
+    """The error that refuses an output to ``path`` (``shown`` as given) when it is one of the ``inputs`` (links
+    resolved, hard links compared by inode: the same answer for a link as for the file it names), else None."""
     for inp in inputs:
         if same_file(path, inp):
             same = "" if os.path.realpath(inp) == os.path.realpath(path) else f" ({inp}, the same file)"
-            raise OutputError(f"{what} {shown}: is an input of this command{same}; refusing to overwrite it "
-                              "(write the output elsewhere)")
+            return OutputError(f"{what} {shown}: is an input of this command{same}; refusing to overwrite it "
+                               "(write the output elsewhere)")
+    return None
+
+
+def _refuse_inputs(path: Path, shown: str, inputs: list[Path], what: str) -> None:
+    refused = _input_refusal(path, shown, inputs, what)
+    if refused is not None:
+        raise refused
 
 
 def check_output(path: str | os.PathLike | None, inputs: Iterable[str | os.PathLike | None] = (),
@@ -105,13 +114,15 @@ def check_output(path: str | os.PathLike | None, inputs: Iterable[str | os.PathL
         if sys.stdout is None:
             raise OutputError(STDOUT_CLOSED.replace("--out", what, 1))
         return None
-    shown = str(path)
+    # an input compares the same through a link as the file it names; the destination's own refusal comes first
+    refused = _input_refusal(path, str(path), input_files(inputs), what)
     try:
         target = destination(path)
     except OutputError as exc:
         hint = "; use - for standard output" if stdout and "refusing to replace it" in str(exc) else ""
         raise OutputError(f"{what} {exc}{hint}") from None
-    _refuse_inputs(target, shown, input_files(inputs), what)
+    if refused is not None:
+        raise refused
     return target
 
 

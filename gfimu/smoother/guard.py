@@ -51,8 +51,6 @@ from ..motion import Motion
 from .tuning.model_choice import ModelCheck, rigid_body_residual
 from .solve.initialise import sign_chain, sign_chain_scale
 
-GUARD_MODES = ("replace", "warn", "off")
-"""Values of the smoothers' ``guard`` option."""
 DOF = 9
 """Unknowns of one sample fitted by the per-sample estimate (f, ω̇, ω): the degrees of freedom of Δ_k."""
 WINDOW_S = 0.25

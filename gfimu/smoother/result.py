@@ -11,7 +11,6 @@ import dataclasses
 import time
 from dataclasses import dataclass, fields
 
-from ..errors import InputError
 from ..estimate import Estimate
 from .model.option_groups import assemble
 
@@ -27,16 +26,6 @@ class SmootherEstimator:
     an :class:`~gfimu.estimate.Estimate` before the guard (callers use :meth:`estimate`)."""
 
     method = ""
-
-    def __post_init__(self) -> None:
-        from .guard import GUARD_MODES
-
-        if self.guard not in GUARD_MODES:
-            raise InputError(f"smoother option guard must be one of {', '.join(map(repr, GUARD_MODES))}, "
-                             f"got {self.guard!r}")
-        parent = super()
-        if hasattr(parent, "__post_init__"):
-            parent.__post_init__()
 
     def options(self):
         from .model.problem import SmootherOptions

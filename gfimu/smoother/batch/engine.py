@@ -514,11 +514,6 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
 
     method = "smoother"
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.solver not in SOLVERS:
-            raise InputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
-
     def applicable(self, array: SensorArray) -> str | None:
         return options_reason(array, self.options(), attitude_supported=True)
 

@@ -9,14 +9,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import dataclasses
-from pathlib import Path
-import tomllib
 
 import numpy as np
 
 from ....array import Gyroscope, SensorArray
-from ...array_toml import TomlContext, parse_array_toml, read_array_toml
-from ...errors import LogFormatError, toml_nested_too_deep
+from ...array_toml import array_from_toml, read_array_toml
+from ...errors import LogFormatError
+from ...toml_input import TomlContext, load_toml
 
 
 MAP_FORMAT = "gfimu-csv-map/1"
@@ -67,7 +66,7 @@ class Layout:
 @dataclass(frozen=True)
 class ColumnMap:
     path: str
-    text: str
+    doc: dict
     ctx: TomlContext
     layout: Layout
     file: str | None
@@ -142,23 +141,13 @@ def _sensor(ctx: TomlContext, doc: dict, table: str, index: int, name: str, defa
 
 def parse_map(text: str, path: str) -> ColumnMap:
     """A column map from its TOML text; every problem names the map, the key and its line."""
-    too_deep = toml_nested_too_deep(text)
-    if too_deep:
-        raise LogFormatError(too_deep, path)
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise LogFormatError(f"not valid TOML: {exc}", path) from None
-    ctx = TomlContext(Path(path), text)
+    doc, ctx = load_toml(text, path)
     if doc.get("format") != MAP_FORMAT:
         raise ctx.error(f"expected format = \"{MAP_FORMAT}\" (a column map), got {doc.get('format')!r}", key="format")
     csv = doc.get("csv", {})
     if not isinstance(csv, dict):
         raise ctx.error("expected a table [csv]", key="csv")
-    unknown = sorted(set(csv) - {"delimiter", "comment", "header_row", "skip_rows", "decimal", "file"})
-    if unknown:
-        raise ctx.error(f"unknown key {unknown[0]!r} (known: delimiter, comment, header_row, skip_rows, decimal, "
-                        "file)", "csv", 0, unknown[0])
+    ctx.refuse_unknown(csv, ("delimiter", "comment", "header_row", "skip_rows", "decimal", "file"), "csv")
     delimiter = csv.get("delimiter", "auto")
     if delimiter != "auto" and (not isinstance(delimiter, str) or delimiter not in DELIMITERS):
         raise ctx.error(f"expected \"auto\", \",\", \";\", \"tab\", \"|\" or \"whitespace\", got {delimiter!r}",
@@ -184,9 +173,7 @@ def parse_map(text: str, path: str) -> ColumnMap:
         t = doc["time"]
         if not isinstance(t, dict):
             raise ctx.error("expected a table [time] with column = NAME or INDEX and unit", key="time")
-        unknown = sorted(set(t) - {"column", "unit"})
-        if unknown:
-            raise ctx.error(f"unknown key {unknown[0]!r} (known: column, unit)", "time", 0, unknown[0])
+        ctx.refuse_unknown(t, ("column", "unit"), "time")
         if "column" not in t:
             raise ctx.error("no column (the time column's name or 0-based index)", "time", 0)
         default_time = _column(ctx, t, "time", 0, "column", None)
@@ -224,7 +211,7 @@ def parse_map(text: str, path: str) -> ColumnMap:
                                 f"determinant +1), got {r!r}", "gyroscope", 0, "rotation_body_sensor")
             gyro_rotation = rot
     placed = tuple("position_m" in a or "rotation_body_sensor" in a for a in accs_doc)
-    return ColumnMap(path, text, ctx, layout, None if file is None else file.strip(), tuple(accs), gyro,
+    return ColumnMap(path, doc, ctx, layout, None if file is None else file.strip(), tuple(accs), gyro,
                      gyro_rotation, any(placed), placed)
 
 
@@ -267,9 +254,9 @@ def array_and_order(cmap: ColumnMap, array_path: str | None, with_gyro: bool) ->
         report.append(f"geometry: {array_path}")
         unplaced: tuple[str, ...] = ()
     else:
-        array = parse_array_toml(cmap.text, cmap.path, expected_format=MAP_FORMAT, positions_required=False)
+        array = array_from_toml(cmap.doc, cmap.ctx, positions_required=False)[0]
         accs = []
-        doc = tomllib.loads(cmap.text)["accelerometers"]
+        doc = cmap.doc["accelerometers"]
         for i, acc in enumerate(array.accelerometers):
             if "axes" in doc[i] and tuple(doc[i]["axes"]) != mapped_axes[i] and set(doc[i]["axes"]) != set(
                     mapped_axes[i]):
