@@ -74,6 +74,7 @@ def test_moving_a_window_onto_a_branch_twice_gives_it_back():
     for k in range(1, 30):
         filt.predict(k, 0.005)
         filt.measure(log.accel_mps2[k])
+    filt._flush()  # the older states brought up to date (as a mirror's move does first): stored = current
     mean = filt._mean[filt._lo:filt._hi].copy()
     cross = filt._cross[filt._lo:filt._hi].copy()
     P = filt._P.copy()

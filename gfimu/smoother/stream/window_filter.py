@@ -48,8 +48,18 @@ from ..model.problem import robust_loss, robust_weight
 from ..solve.restarts import branch, plane_normal
 
 
-LAZY_STEPS = 32
-"""Updates gathered into one epoch of the window's older states (:meth:`WindowFilter._boundary`)."""
+LAZY_STEPS = None
+"""Updates gathered into one epoch of the window's older states (:meth:`WindowFilter._boundary`); None: chosen
+from the window's capacity (:func:`lazy_steps`)."""
+
+
+def lazy_steps(capacity: int) -> int:
+    """The epoch's length (updates) for a window of ``capacity`` slots (about four lags of states, L = capacity / 4):
+    an update moves the newest B states at once (9×9 products, about B/2 states on average) and, where a run of
+    B older states is read, composes the L / B epochs since (three 9×9 products each) for them: per update
+    ``c_s B / 2 + c_e L / B²`` with ``c_e ≈ 1.5 c_s``, least at ``B = (6 L)^(1/3)`` (8 at 500 Hz with a 0.2 s lag,
+    30 at 20 kHz), between 4 and 64."""
+    return int(min(max(round((1.5 * capacity) ** (1.0 / 3.0)), 4), 64))
 
 SETTLE_FALSE_ALARM = 1e-3
 """A motion-model step is outlying when its whitened residual over the six ω, ω̇ rows (χ²₆ under the
@@ -93,7 +103,7 @@ _NEVER = 1 << 62  # the fused kernel's own flush, not used: the epochs are kept 
 
 class Epochs:
     """The epochs of the window's older states (:meth:`WindowFilter._boundary`): each epoch's factors
-    ``(T, u, W)`` (its :data:`LAZY_STEPS` updates' share of the older states, ``C ← C T``, ``m += C u``,
+    ``(T, u, W)`` (its :attr:`WindowFilter.lazy_steps` updates' share of the older states, ``C ← C T``, ``m += C u``,
     ``v -= diag(C W Cᵀ)``), kept while a state still waits for them, and the runs of states that wait:
     ``[k_first, k_stop, epoch]``, states ``k_first … k_stop - 1`` up to date as of the start of ``epoch``
     (their runs contiguous, oldest first)."""
@@ -195,6 +205,8 @@ class WindowFilter:
         self._normal = plane_normal(np.concatenate([np.atleast_2d(pos) for _, pos, _ in model._geometry]))
         self.set_model(model)
         self._cap = max(int(capacity), 8)
+        self.lazy_steps = LAZY_STEPS or lazy_steps(self._cap)
+        """Updates gathered into one epoch of the older states (:meth:`_boundary`)."""
         self._mean = np.zeros((self._cap, 9))
         self._var = np.zeros((self._cap, 9))
         self._cross = np.zeros((self._cap, 9, 9))
@@ -297,16 +309,16 @@ class WindowFilter:
 
     # --- the older states: brought up to date when read ----------------------------------
     def _boundary(self) -> None:
-        """:data:`LAZY_STEPS` updates gathered in T, u, W: the end of an epoch.
+        """:attr:`lazy_steps` updates gathered in T, u, W: the end of an epoch.
 
         Bringing every older state up to date at each epoch's end (:meth:`_flush`) costs O(window) per
-        epoch, O(window / LAZY_STEPS) per update: at 20 kHz a 0.2 s lag holds 4,000 states and that is
+        epoch, O(window / lazy_steps) per update: at 20 kHz a 0.2 s lag holds 4,000 states and that is
         most of an update. The states are read only where they leave the window (or where the branch
         decision looks, or a move flushes all), so the epoch's factors are kept instead and the lazy
         states marked as up to date as of its start; a state read later is brought up to date through
         the epochs since (:meth:`_bring_up`, their factors composed: :func:`kernels.compose_epochs
-        <gfimu.smoother.stream.kernels.compose_epochs>`). That costs O(window / LAZY_STEPS) per block
-        of LAZY_STEPS states read, O(window / LAZY_STEPS²) per update: the same numbers to rounding."""
+        <gfimu.smoother.stream.kernels.compose_epochs>`). That costs O(window / lazy_steps) per block
+        of lazy_steps states read, O(window / lazy_steps²) per update: the same numbers to rounding."""
         if not self.deferred:
             self._flush()
             return
@@ -318,13 +330,13 @@ class WindowFilter:
         self._split = self._hi
 
     def _bring_up(self, k_stop: float) -> None:
-        """The waiting states before ``k_stop`` (and at least :data:`LAZY_STEPS` of a run) brought up to date
+        """The waiting states before ``k_stop`` (and at least :attr:`lazy_steps` of a run) brought up to date
         as of the current epoch's start: each run's epochs since composed into one ``(T, u, W)`` and applied."""
         ep, base = self._epochs, self._base
         if not ep.stale:
             return
         Ts, us, Ws = ep.T[:ep.n], ep.u[:ep.n], ep.W[:ep.n]
-        for k0, k1, first in ep.take(k_stop, base + self._lo, LAZY_STEPS):
+        for k0, k1, first in ep.take(k_stop, base + self._lo, self.lazy_steps):
             a, b = k0 - base, k1 - base
             if self.compiled:
                 T, u, W = kernels.compose_epochs(Ts, us, Ws, first)
@@ -343,8 +355,8 @@ class WindowFilter:
     def _flush(self) -> None:
         """Bring the old states up to date: every update moves each state of the window by products
         with 9×9 matrices common to all of them (``C_i ← C_i M``, ``m_i += C_i g``, ``v_i -= diag(C_i A
-        C_iᵀ)``), so the old states' share of :data:`LAZY_STEPS` updates is gathered in T, u and W and
-        applied to them at once: O(window / LAZY_STEPS + LAZY_STEPS) per update instead of O(window),
+        C_iᵀ)``), so the old states' share of :attr:`lazy_steps` updates is gathered in T, u and W and
+        applied to them at once: O(window / lazy_steps + lazy_steps) per update instead of O(window),
         the same numbers to rounding. The stale states are brought up to date first (:meth:`_bring_up`)."""
         self._bring_up(math.inf)
         self._epochs.clear()
@@ -672,7 +684,7 @@ class WindowFilter:
             raise FilterFailure("singular innovation covariance or non-finite values in the update")
         self._split = split
         self.n_updates += 1  # (the update's covariance written into the window: :meth:`_updated` in the kernel)
-        if self._hi - split >= LAZY_STEPS:
+        if self._hi - split >= self.lazy_steps:
             self._boundary()
 
     def commit(self) -> None:
@@ -944,5 +956,5 @@ class WindowFilter:
         self._cross[hi - 1] = P_new
         self._var[hi - 1] = np.diagonal(P_new)
         self.n_updates += 1
-        if hi - self._split >= LAZY_STEPS:
+        if hi - self._split >= self.lazy_steps:
             self._boundary()
