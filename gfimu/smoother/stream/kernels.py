@@ -22,6 +22,9 @@ them where a kernel does not apply (gyroscope rows, factor groups' rows).
 
 Compiled on first use and cached on disk (numba's ``cache=True``: beside this file, or in the user's
 cache folder where that is not writable), so only the first run on a machine pays the compilation.
+They run without Python's global lock (``nogil=True``; each works on arrays no other thread touches): a
+live stream's reader thread takes datagrams in while an update runs, and a model choice in the worker
+thread runs beside the stream.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ def loss_code(c: float, loss: str) -> int:
     return LOSS_CAUCHY if loss == "cauchy" else LOSS_HUBER
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _weight(e: float, c: float, loss: int) -> float:
     """:func:`gfimu.smoother.model.problem.robust_weight` of one whitened residual."""
     e = abs(e)
@@ -50,7 +53,7 @@ def _weight(e: float, c: float, loss: int) -> float:
     return c / max(e, 1e-300)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lu_solve(S, B):
     """``S⁻¹ B`` by Gaussian elimination with partial pivoting (LAPACK's getrf/getrs, unblocked), in place:
     S is overwritten, B becomes the solution; False where a pivot is exactly zero or not finite."""
@@ -88,7 +91,7 @@ def _lu_solve(S, B):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _quadratic_form_inverse(P, d):
     """``dᵀ P⁻¹ d`` (the prior's cost), or -1 where P is singular."""
     n = d.shape[0]
@@ -104,7 +107,7 @@ def _quadratic_form_inverse(P, d):
     return v
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _predict_readings(x, S_q, S_dw, S_f, pred, H):
     """``h(x)`` into ``pred`` and its Jacobian into H (the ω̇ and f columns are set once, here too)."""
     wx, wy, wz = x[0], x[1], x[2]
@@ -124,7 +127,7 @@ def _predict_readings(x, S_q, S_dw, S_f, pred, H):
         pred[i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost):
     """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, AG, J, ok)``, ``AG = Hᵀ S⁻¹ [H, ν]``
     (9 × 10: ``A = Hᵀ S⁻¹ H`` and ``g = Hᵀ S⁻¹ ν``) at the last linearisation, J at x (0 unless
@@ -205,7 +208,7 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
     return x, H_last, AG, cost + max(prior, 0.0), True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def branch_state(kind, x, normal):
     """x (9,) with its ω, ω̇ on branch ``kind`` (:func:`gfimu.smoother.solve.restarts.branch`)."""
     out = x.copy()
@@ -225,7 +228,7 @@ def branch_state(kind, x, normal):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def search(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
            prior_margin):
     """The update's minimum: Gauss-Newton from ``start``, then (``branches``) from the other three branches
@@ -255,7 +258,7 @@ def search(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iteration
     return x, H, AG, J, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _mm(A, B):
     """A B of small matrices."""
     n, k = A.shape
@@ -270,7 +273,7 @@ def _mm(A, B):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def update_window(AG, P, T, u, W, mean, var, cross):
     """The update ``AG = Hᵀ S⁻¹ [H, ν]`` (9 × 10: ``A = Hᵀ S⁻¹ H``, ``g = Hᵀ S⁻¹ ν``) of the newest state
     (covariance P before it) on the window: the recent states ``mean``, ``var``, ``cross`` (n, ...) in
@@ -324,7 +327,7 @@ def update_window(AG, P, T, u, W, mean, var, cross):
     return T, u, W, P_new, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
     """One step of the streaming sign chain: the newest state's (ω, ω̇) on each branch ``(cur_w, cur_dw)``
     (4, 3), the best earlier branch for each later one and the chain's new costs (lowest 0), from the
@@ -357,7 +360,7 @@ def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
     return cur_w, cur_dw, back, new
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def predict_window(F, Q, c, P, x_newest, T, cross):
     """The prediction one step after the newest state (:meth:`WindowFilter.predict`): the new state's mean
     ``F x + c`` and covariance ``F P Fᵀ + Q`` (symmetrised), the recent states' cross-covariances
@@ -390,7 +393,7 @@ def predict_window(F, Q, c, P, x_newest, T, cross):
     return x, P_new, _mm(T, F.T)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def step_residual2(F, Q, x0, x1):
     """``dᵀ Q⁻¹ d`` over the six ω, ω̇ rows of the step from x0 to x1, ``d = x1 - F x0`` (-1 where Q's block
     is singular): the motion-model step's squared whitened residual (:meth:`WindowFilter.settle`)."""
@@ -403,7 +406,7 @@ def step_residual2(F, Q, x0, x1):
     return _quadratic_form_inverse(np.ascontiguousarray(Q[:6, :6]), d)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
                    prior_margin, c_process, process_loss, Q, robust_step, T, u, W, mean, var, cross):
     """:meth:`WindowFilter.measure <gfimu.smoother.stream.window_filter.WindowFilter.measure>` on the readings
@@ -437,7 +440,7 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
     return T2, u2, W2, P_after, P, ok
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def flush_window(T, u, W, mean, var, cross):
     """The lazy states brought up to date (:meth:`WindowFilter._flush`): for each state's cross-covariance C,
     ``m += C u``, ``v -= diag(C W Cᵀ)``, ``C ← C T``, in place."""
@@ -468,7 +471,7 @@ def flush_window(T, u, W, mean, var, cross):
                 C[i, j] = row[j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def compose_epochs(Ts, us, Ws, first):
     """The updates of epochs ``first, first + 1, …`` of ``(Ts, us, Ws)`` (each an epoch's factors ``(T, u, W)``,
     :meth:`WindowFilter._boundary <gfimu.smoother.stream.window_filter.WindowFilter._boundary>`) as one: applying
@@ -493,7 +496,7 @@ def compose_epochs(Ts, us, Ws, first):
     return T, u, W
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_steps, y, R0, S_q, S_dw, S_f, slope,
                    c_robust, loss, iterations, tolerance, branches, normal, prior_margin, c_process, process_loss):
     """One sample in one call (:meth:`WindowFilter.advance <gfimu.smoother.stream.window_filter.WindowFilter.advance>`
@@ -540,7 +543,7 @@ def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_st
     return T2, u2, W2, P_after, split, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def window_step_residual2(F, Q, mean, cross, u, split, s0):
     """:func:`step_residual2` of the step from the window's state in slot ``s0`` to the next, their means taken
     from the window's arrays (a slot before ``split`` given the updates since the last flush, ``m + C u``)."""
