@@ -73,8 +73,9 @@ def main(argv=None) -> int:
         variants.append((f"fixed-lag {lag:g} s", "fixed-lag", {"lag_s": lag}))
         if args.no_still_start:
             variants.append((f"fixed-lag {lag:g} s, no still start", "fixed-lag", {"lag_s": lag, "_no_still": True}))
-    print(f"euroc demo log: {len(log)} samples, {args.rate_hz:g} Hz, {args.duration_s:g} s, seed {args.seed}")
-    print(f"{'variant':36s} {'x':>7s} {'y':>7s} {'z':>7s} {'axes':>7s} {'norm':>7s} {'<2Hz':>6s} {'time':>7s}")
+    print(f"EuRoC demo log: {len(log)} samples, {args.rate_hz:g} Hz, {args.duration_s:g} s, seed {args.seed}; ω RMSE [rad/s]\n")
+    print("| variant | x | y | z | axes | norm | power < 2 Hz | time [s] |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for name, method, opts in variants:
         no_still = opts.pop("_no_still", False)
         t0 = time.perf_counter()
@@ -86,8 +87,8 @@ def main(argv=None) -> int:
             est = make_estimator(method, **opts).estimate(log)
         dt = time.perf_counter() - t0
         s = scores(np.asarray(est.motion.omega_b_radps), truth, args.rate_hz)
-        print(f"{name:36s} {s['x']:7.4f} {s['y']:7.4f} {s['z']:7.4f} {s['axes']:7.4f} {s['norm']:7.4f} "
-              f"{s['slow']:6.1%} {dt:6.1f}s", flush=True)
+        print(f"| {name} | {s['x']:.4f} | {s['y']:.4f} | {s['z']:.4f} | {s['axes']:.4f} | {s['norm']:.4f} | "
+              f"{100 * s['slow']:.1f} % | {dt:.1f} |", flush=True)
     return 0
 
 
