@@ -462,3 +462,58 @@ def initial_attitude(log: Log, omega_b_radps: np.ndarray, specific_force_b_mps2:
     for k in range(n - 1):
         R[k + 1] = R[k] @ steps[k]
     return R
+
+
+STILL_Z = 3.0
+"""Margin of the stillness tests (:func:`still_start`), in standard deviations of their χ² statistic
+(``χ² ≤ dof + STILL_Z √(2 dof)``): a body at rest is called moving in about 1.5 % of stretches (both
+tests; 100 samples of the 10 cm cube at 0.07 m/s²), which then start as a moving one does."""
+
+
+def _within_noise(chi2: float, dof: int) -> bool:
+    return chi2 <= dof + STILL_Z * np.sqrt(2.0 * dof)
+
+
+def still_start(times_s: np.ndarray, accel_mps2: np.ndarray, structure: np.ndarray,
+                sigma_mps2: np.ndarray) -> float | None:
+    """Whether a stretch of readings shows a body at rest, from the readings alone; if so, the std
+    [rad/s] of a prior ω = 0 on its first state, else None.
+
+    ``times_s`` (N,), ``accel_mps2`` (N, m): the stretch; ``structure`` (m, 12): the array's
+    ``S`` (readings = S [f, ω̇, q(ω)]); ``sigma_mps2`` (m,): each reading's white-noise std (the
+    noise the model check measured). The stretch is still when both hold, each as a χ² test
+    against that noise (:data:`STILL_Z`):
+
+    - every reading varies about its mean by the noise alone (χ² with (N - 1) m degrees of
+      freedom): f, ω̇ and q(ω) constant over the stretch, so the body neither turns gravity
+      round nor changes its rotation;
+    - the mean of [ω̇, q(ω)] over the stretch, fitted to the mean readings, is zero within its
+      std (χ² with 9 degrees of freedom): no rotation the quadratic terms can see.
+
+    A body at rest has ω = 0; how well the stretch tells that is the ω its ω̇ could have built up
+    unseen over the stretch, the integral of the fitted ω̇'s noise: ``σ_ω̇ T / √N`` with σ_ω̇ the
+    per-sample std of ω̇ (RMS over the axes) and T the stretch's length. None when the stretch has
+    fewer than two samples or S does not determine all twelve unknowns (no such test then).
+    """
+    y = np.asarray(accel_mps2, dtype=float)
+    t = np.asarray(times_s, dtype=float)
+    n, m = y.shape
+    S = np.asarray(structure, dtype=float)
+    sigma = np.asarray(sigma_mps2, dtype=float)
+    if n < 2 or m < LIFTED or not np.all(np.isfinite(y)) or not np.all(sigma > 0):
+        return None
+    A = S / sigma[:, None]
+    info = A.T @ A
+    s = np.linalg.svd(A, compute_uv=False)
+    if s[-1] <= 1e-9 * s[0]:
+        return None
+    cov = np.linalg.inv(info)  # of one sample's [f, ω̇, q]
+    mean = y.mean(axis=0)
+    if not _within_noise(float(np.sum(((y - mean) / sigma) ** 2)), (n - 1) * m):
+        return None
+    z = cov @ (A.T @ (mean / sigma))  # [f, ω̇, q] of the mean readings, covariance cov / n
+    rest = slice(3, LIFTED)
+    if not _within_noise(float(n * z[rest] @ np.linalg.solve(cov[rest, rest], z[rest])), LIFTED - 3):
+        return None
+    sigma_omega_dot = float(np.sqrt(np.mean(np.diag(cov)[3:6])))
+    return sigma_omega_dot * float(t[-1] - t[0]) / np.sqrt(n)

@@ -99,7 +99,7 @@ from ..solve.banded import solve
 from ..model.problem import SmootherOptions, options_reason
 from ...option import check_declared
 from ..model.option_groups import GROUPS, Engine, StreamOptions, assemble
-from ..solve.initialise import initial_estimate
+from ..solve.initialise import initial_estimate, still_start
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from ..result import SmootherEstimator
 from . import model_choice as stream_model
@@ -468,6 +468,8 @@ class FixedLagSmoother:
         first rows were held), ``evidence_nats`` (the log-likelihood ratio of its branch of ω over the next
         best; inf: no other minimum), ``open`` (True: released at ``hold_max_s`` or at the segment's end
         without reaching :data:`SIGN_DECISION_NATS`)."""
+        self.still_starts: list[float] = []
+        """The std [rad/s] of the prior ω = 0 of each segment that started still (:meth:`_still_start`)."""
         self._held: list = []
         self._start_segment()
 
@@ -908,6 +910,7 @@ class FixedLagSmoother:
         self._held = []  # (t_ns, raw sample, filtered state) of the rows held so far
         self._next_check_ns = None
         self._last_resolve = None  # (timestamps, ω) of the held stretch's re-solve at the previous check
+        self._still_sigma = None  # std [rad/s] of the prior ω = 0 on the first state of a segment that starts still
 
     def _new_smoother(self):
         """The window engine of a new segment (:data:`ENGINES`)."""
@@ -937,6 +940,9 @@ class FixedLagSmoother:
 
         ``omega_hint`` (ω expected at the second-to-last warm-up sample) picks the
         sign of ω when re-initialising after a solver failure.
+
+        A segment whose warm-up shows the body at rest (:meth:`_still_start`) starts from ω = 0 with a
+        prior ω = 0 on its first state; its start is not held (the sign of ω is moot at ω = 0).
         """
         times_ns = np.array([s[0] for s in self._warmup], dtype=np.int64)
         accel = np.vstack([s[1] for s in self._warmup])
@@ -949,6 +955,12 @@ class FixedLagSmoother:
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
+        if omega_hint is None:
+            self._still_sigma = self._still_start(times_ns, accel, gyro)
+            if self._still_sigma is not None:
+                x0[:, OMEGA] = 0.0
+                self._deciding = False
+                self.still_starts.append(self._still_sigma)
         if omega_hint is not None and len(x0) >= 2:
             if np.sum((x0[-2, OMEGA] + omega_hint) ** 2) < np.sum((x0[-2, OMEGA] - omega_hint) ** 2):
                 x0[:, OMEGA] *= -1.0
@@ -961,6 +973,10 @@ class FixedLagSmoother:
                 extra = self.model.sample_terms(t_ns, y, g)
                 if j == 0:
                     engine.begin(self._k, t_ns, y, g, start=x0[j], extra=extra)
+                    if self._still_sigma is not None and omega_hint is None:
+                        H = np.zeros((3, 9))
+                        H[:, OMEGA] = np.eye(3) / self._still_sigma
+                        engine.update_linear(H, np.zeros(3))
                 else:
                     engine.advance(self._k, self._step(self._warmup[j - 1], (t_ns, y, g), x0[j - 1], 1.0), t_ns, y, g,
                                    extra=extra, start=x0[j])
@@ -971,6 +987,22 @@ class FixedLagSmoother:
             raise self._failure(t_ns, err) from err
         self._warmup = []
         self._remember_newest()
+
+    def _still_start(self, times_ns: np.ndarray, accel: np.ndarray, gyro) -> float | None:
+        """The std [rad/s] of a prior ω = 0 on the segment's first state when its warm-up shows the body
+        at rest (:func:`~gfimu.smoother.solve.initialise.still_start`, tested against the noise the model
+        check measured on the stream, :attr:`ModelCheck.noise_floor_mps2`, shared among the axes as the
+        model's noise is), else None: without a model check (nothing measured), on a log
+        the check found inconsistent with a rigid body or constant, with a gyroscope (it measures ω),
+        or with the gtsam engine."""
+        check = None if self.stream_model is None else self.stream_model.check
+        if self.engine != "numpy" or gyro is not None or check is None or not check.consistent or check.constant:
+            return None
+        sigma = np.asarray(self.model.accel_sigma_mps2, dtype=float)
+        rms = math.sqrt(float(np.mean(sigma ** 2)))
+        # the per-axis shape of the model's noise at the level the check measured on the stream
+        sigma = sigma * (check.noise_floor_mps2 / rms) if rms > 0 else np.full(len(sigma), check.noise_floor_mps2)
+        return still_start((times_ns - times_ns[0]) * 1e-9, accel, self.array.structure_matrix(), sigma)
 
     def _failure(self, t_ns: int, err: Exception, what: str = "failed") -> FixedLagSmootherError:
         return FixedLagSmootherError(f"fixed-lag smoother {what} at t = {self._time_s(t_ns):.6f} s after the stream "
