@@ -144,7 +144,22 @@ SECTIONS = (
         "row per UDP datagram on localhost, into `gfimu live --out -` with the defaults: how many rows came out, "
         "how long after the last datagram the last row came (how far from real time the stream runs), the "
         "latencies, and `gfimu live`'s own summary (rows dropped when the input outran the smoother).",
-        full=("--cell", "impacts-20kHz"), quick=("--cell", "impacts-20kHz", "--duration-s", "0.2"), json=False),
+        full=("--cell", "impacts-20kHz", "--duration-s", "10", "--queue", "400000"),
+        quick=("--cell", "impacts-20kHz", "--duration-s", "0.2"), json=False),
+    Section(
+        "stream-cost", "Fixed-lag smoother: CPU push by push", "stream_cost.py",
+        "The fixed-lag method as `gfimu estimate --method fixed-lag` runs it (its screening, then the stream "
+        "session fed row by row), on a simulated 60 s, 500 Hz cube of four triads: the CPU of the whole run (the "
+        "model choices in the worker thread included), of the stream's own thread (`time.thread_time`: a busy "
+        "machine stretches wall time, not this), of the push that made the first choice of the model, and per "
+        "push in steady state (the log's second half); and the rate the stream's thread keeps up with.",
+        full=(), quick=("--simulate-s", "10"), json=False),
+    Section(
+        "stream-cost-20khz", "Fixed-lag smoother at 20 kHz: CPU push by push", "stream_cost.py",
+        "The same on 6 s of the regime matrix's 20 kHz impact cell (four triads, impacts of 20-100 g; "
+        "tools/regime_matrix.py).",
+        full=("--cell", "impacts-20kHz", "--duration-s", "6"), quick=("--cell", "impacts-20kHz", "--duration-s", "0.5"),
+        json=False),
     Section(
         "batch-throughput", "Batch smoother: throughput and memory", "bench_smoother.py",
         "The whole command `gfimu estimate LOG --method smoother` (start-up, reading and writing included) "
