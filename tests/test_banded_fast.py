@@ -155,6 +155,47 @@ def test_process_basis_gives_the_evidence_of_the_factors_evaluated_per_setting(l
         assert total.cost == pytest.approx(normal_equations(problem, x, np.zeros(0)).cost, rel=1e-13)
 
 
+def test_process_basis_at_new_states_keeps_the_split_and_products_and_equals_one_made_afresh(log):
+    """At a second linearisation point the white-jerk and random-walk factors have the same Jacobians
+    (they are linear in the states): the basis made with the first as ``previous`` keeps its JᵀJ (the
+    same arrays) and its band entries, and its gradients, costs and the evidence they give are those of a
+    basis made afresh there, bit for bit (the same products in the same order)."""
+    opt = OPTIONS["jerk"]
+    field = "omega_dot_random_walk_radps2_per_sqrt_s"
+    x = initial_states(log, opt)
+    y = x + np.random.default_rng(3).normal(scale=0.05, size=x.shape)  # another point, e.g. a solver's
+    first = ProcessBasis.of(log, opt, field, x, np.zeros(0))
+    kept = ProcessBasis.of(log, opt, field, y, np.zeros(0), previous=first)
+    fresh = ProcessBasis.of(log, opt, field, y, np.zeros(0))
+    assert kept.parts.keys() == fresh.parts.keys() == first.parts.keys()
+    for key, part in kept.parts.items():
+        assert part.diag is first.parts[key].diag and part.lower is first.parts[key].lower
+        for name in ("diag", "lower", "grad"):
+            for got, want in zip(getattr(part, name), getattr(fresh.parts[key], name)):
+                np.testing.assert_array_equal(got, want)
+        assert part.cost == fresh.parts[key].cost
+    assert not np.array_equal(kept.parts["force"].grad[1], first.parts["force"].grad[1])  # the residuals moved
+    problem = make_problem(log, opt)
+    meas = measurement_normal_equations(problem, y)
+    summed_first = first.banded(measurement_normal_equations(problem, x))
+    summed_kept, summed_fresh = kept.banded(meas, previous=summed_first), fresh.banded(meas)
+    setting = (7.0, (1.0, 0.5, 2.0), 3.0)
+    values = []
+    for summed in (summed_kept, summed_fresh):
+        total, fac = summed.system(*setting)
+        values.append(linearised_log_evidence(problem, y, None, total=total, factorisation=fac,
+                                              minimum=lambda dx, dp: summed.half_cost(dx, dp, *setting)))
+    assert values[0] == values[1]
+    # other terms, or one Jacobian entry off by its last bit: not the same, the basis is made afresh
+    assert first.same_jacobians(first.unit_terms) and not first.same_jacobians(first.unit_terms[:-1])
+    t = first.unit_terms[-1]
+    jac = {k: v.copy() for k, v in t.jac.items()}
+    k = sorted(jac)[0]
+    jac[k].reshape(-1)[np.flatnonzero(jac[k])[0]] *= 1.0 + 2.0**-52
+    moved = first.unit_terms[:-1] + [type(t)(t.kind, t.residual, jac, t.jac_global, t.first)]
+    assert not first.same_jacobians(moved)
+
+
 def test_process_basis_is_not_used_for_the_oscillator_or_white_snap(log):
     opt = OPTIONS["oscillator"]
     assert ProcessBasis.of(log, opt, "omega_dot_random_walk_radps2_per_sqrt_s", initial_states(log, opt), np.zeros(0)) is None
