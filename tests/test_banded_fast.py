@@ -339,3 +339,30 @@ def test_band_blocks_gathered_row_by_row_equal_the_entry_by_entry_gather(m, n):
     got = structure.blocks(diag, lower)
     assert got.flags.c_contiguous
     np.testing.assert_array_equal(got, want)
+
+
+def test_lifted_smoothing_band_written_from_its_parts_equals_the_dense_normal_equations(log):
+    """The lifted initialisation's band (row d < 12: the constant measurement information, row 12: the
+    random walks) against the dense normal equations of the same linear smoother, solved directly: the
+    same z to the rounding of a well-conditioned solve."""
+    from gfimu import noise
+    from gfimu.smoother.solve.initialise import LIFTED, lifted_smoothing
+
+    opt = SmootherOptions()
+    sub = log.select(slice(0, 30))
+    n = len(sub)
+    S = sub.array.structure_matrix()
+    sigma = noise.accel_noise_std(sub.array, opt.default_accel_noise_std_mps2)
+    A = S / sigma[:, None]
+    dens = np.repeat([opt.specific_force_random_walk_mps2_per_sqrt_s, opt.omega_dot_random_walk_radps2_per_sqrt_s, 300.0],
+                     [3, 3, 6])
+    H = np.kron(np.eye(n), A.T @ A + np.eye(LIFTED) / 1e4**2)
+    for k, dt in enumerate(sub.dt_s):
+        D = np.zeros((LIFTED, n * LIFTED))
+        D[:, k * LIFTED:(k + 1) * LIFTED], D[:, (k + 1) * LIFTED:(k + 2) * LIFTED] = -np.eye(LIFTED), np.eye(LIFTED)
+        W = np.diag(1.0 / (dens**2 * dt))
+        H += D.T @ W @ D
+    rhs = ((sub.accel_mps2 / sigma) @ A).reshape(-1)
+    want = np.linalg.solve(H, rhs).reshape(n, LIFTED)
+    got = lifted_smoothing(sub, opt)
+    np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-8 * np.abs(want).max())
