@@ -155,6 +155,47 @@ def test_process_basis_gives_the_evidence_of_the_factors_evaluated_per_setting(l
         assert total.cost == pytest.approx(normal_equations(problem, x, np.zeros(0)).cost, rel=1e-13)
 
 
+def test_process_basis_at_new_states_keeps_the_split_and_products_and_equals_one_made_afresh(log):
+    """At a second linearisation point the white-jerk and random-walk factors have the same Jacobians
+    (they are linear in the states): the basis made with the first as ``previous`` keeps its JᵀJ (the
+    same arrays) and its band entries, and its gradients, costs and the evidence they give are those of a
+    basis made afresh there, bit for bit (the same products in the same order)."""
+    opt = OPTIONS["jerk"]
+    field = "omega_dot_random_walk_radps2_per_sqrt_s"
+    x = initial_states(log, opt)
+    y = x + np.random.default_rng(3).normal(scale=0.05, size=x.shape)  # another point, e.g. a solver's
+    first = ProcessBasis.of(log, opt, field, x, np.zeros(0))
+    kept = ProcessBasis.of(log, opt, field, y, np.zeros(0), previous=first)
+    fresh = ProcessBasis.of(log, opt, field, y, np.zeros(0))
+    assert kept.parts.keys() == fresh.parts.keys() == first.parts.keys()
+    for key, part in kept.parts.items():
+        assert part.diag is first.parts[key].diag and part.lower is first.parts[key].lower
+        for name in ("diag", "lower", "grad"):
+            for got, want in zip(getattr(part, name), getattr(fresh.parts[key], name)):
+                np.testing.assert_array_equal(got, want)
+        assert part.cost == fresh.parts[key].cost
+    assert not np.array_equal(kept.parts["force"].grad[1], first.parts["force"].grad[1])  # the residuals moved
+    problem = make_problem(log, opt)
+    meas = measurement_normal_equations(problem, y)
+    summed_first = first.banded(measurement_normal_equations(problem, x))
+    summed_kept, summed_fresh = kept.banded(meas, previous=summed_first), fresh.banded(meas)
+    setting = (7.0, (1.0, 0.5, 2.0), 3.0)
+    values = []
+    for summed in (summed_kept, summed_fresh):
+        total, fac = summed.system(*setting)
+        values.append(linearised_log_evidence(problem, y, None, total=total, factorisation=fac,
+                                              minimum=lambda dx, dp: summed.half_cost(dx, dp, *setting)))
+    assert values[0] == values[1]
+    # other terms, or one Jacobian entry off by its last bit: not the same, the basis is made afresh
+    assert first.same_jacobians(first.unit_terms) and not first.same_jacobians(first.unit_terms[:-1])
+    t = first.unit_terms[-1]
+    jac = {k: v.copy() for k, v in t.jac.items()}
+    k = sorted(jac)[0]
+    jac[k].reshape(-1)[np.flatnonzero(jac[k])[0]] *= 1.0 + 2.0**-52
+    moved = first.unit_terms[:-1] + [type(t)(t.kind, t.residual, jac, t.jac_global, t.first)]
+    assert not first.same_jacobians(moved)
+
+
 def test_process_basis_is_not_used_for_the_oscillator_or_white_snap(log):
     opt = OPTIONS["oscillator"]
     assert ProcessBasis.of(log, opt, "omega_dot_random_walk_radps2_per_sqrt_s", initial_states(log, opt), np.zeros(0)) is None
@@ -273,9 +314,10 @@ def test_sign_resolved_omega_equals_window_by_window_resolution(scenario):
 
 
 @pytest.mark.parametrize("m, n", [(9, 1), (9, 7), (12, 5)])
-def test_band_blocks_gathered_at_once_equal_the_entry_by_entry_gather(m, n):
-    """:meth:`BandStructure.blocks` (one gather over every sample) against the entry-by-entry loop it
-    replaces: the same numbers, exactly (a copy, no arithmetic)."""
+def test_band_blocks_gathered_row_by_row_equal_the_entry_by_entry_gather(m, n):
+    """:meth:`BandStructure.blocks` (one gather over every sample per band row, straight from the blocks)
+    against the entry-by-entry loop: the same numbers, exactly (a copy, no arithmetic), also for a band
+    row that takes entries from both the diagonal and the lower block and zeros."""
     from gfimu.smoother.solve.banded import BandStructure
 
     rng = np.random.default_rng(m + n)
@@ -283,6 +325,7 @@ def test_band_blocks_gathered_at_once_equal_the_entry_by_entry_gather(m, n):
     pattern[np.arange(m), np.arange(m)] = True
     pattern[0, 3] = pattern[2, m - 1] = True
     structure = BandStructure.of(pattern)
+    assert any(g[0] is not None for g in structure.gathers) and any(g[0] is None for g in structure.gathers)
     diag, lower = rng.normal(size=(n, m, m)), rng.normal(size=(max(n - 1, 0), m, m)) * pattern
     want = np.zeros((structure.bandwidth + 1, n, m))
     d_flat, l_flat = diag.reshape(n, m * m), lower.reshape(n - 1, m * m)
@@ -296,3 +339,30 @@ def test_band_blocks_gathered_at_once_equal_the_entry_by_entry_gather(m, n):
     got = structure.blocks(diag, lower)
     assert got.flags.c_contiguous
     np.testing.assert_array_equal(got, want)
+
+
+def test_lifted_smoothing_band_written_from_its_parts_equals_the_dense_normal_equations(log):
+    """The lifted initialisation's band (row d < 12: the constant measurement information, row 12: the
+    random walks) against the dense normal equations of the same linear smoother, solved directly: the
+    same z to the rounding of a well-conditioned solve."""
+    from gfimu import noise
+    from gfimu.smoother.solve.initialise import LIFTED, lifted_smoothing
+
+    opt = SmootherOptions()
+    sub = log.select(slice(0, 30))
+    n = len(sub)
+    S = sub.array.structure_matrix()
+    sigma = noise.accel_noise_std(sub.array, opt.default_accel_noise_std_mps2)
+    A = S / sigma[:, None]
+    dens = np.repeat([opt.specific_force_random_walk_mps2_per_sqrt_s, opt.omega_dot_random_walk_radps2_per_sqrt_s, 300.0],
+                     [3, 3, 6])
+    H = np.kron(np.eye(n), A.T @ A + np.eye(LIFTED) / 1e4**2)
+    for k, dt in enumerate(sub.dt_s):
+        D = np.zeros((LIFTED, n * LIFTED))
+        D[:, k * LIFTED:(k + 1) * LIFTED], D[:, (k + 1) * LIFTED:(k + 2) * LIFTED] = -np.eye(LIFTED), np.eye(LIFTED)
+        W = np.diag(1.0 / (dens**2 * dt))
+        H += D.T @ W @ D
+    rhs = ((sub.accel_mps2 / sigma) @ A).reshape(-1)
+    want = np.linalg.solve(H, rhs).reshape(n, LIFTED)
+    got = lifted_smoothing(sub, opt)
+    np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-8 * np.abs(want).max())

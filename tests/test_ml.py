@@ -323,3 +323,42 @@ def test_viterbi_signs_minimise_the_transition_cost_over_every_sign_sequence():
         got = _viterbi_signs(u, integral)
         assert set(np.unique(got)) <= {1.0, -1.0}
         assert cost(got) == pytest.approx(cost(best), rel=1e-12, abs=1e-12)
+
+
+def test_grid_start_taken_block_by_block_equals_the_whole_grid_at_once():
+    """``_grid_best`` (blocks of ``_GRID_ROWS`` samples) picks the same grid point, at the same cost, as the
+    minimum over the whole (N, G) cost matrix, also for a length that is not a whole number of blocks."""
+    from gfimu.estimators import ml
+
+    est = MLEstimator()
+    array = cube_array(0.05, noise_std_mps2=0.07)
+    model = ml._ProjectedModel.build(array, np.full(array.n_axes, 0.07))
+    t, w, dw, f = smooth_motion(2 * ml._GRID_ROWS + 37, seed=4)
+    y = make_log(array, t, w, dw, f, noise_std=0.07).accel_mps2
+    _, c = model.readings(y)
+    grid, _ = est._grid()
+    whole = est._grid_cost(model, c, grid)
+    best, cost = est._grid_best(model, c, grid)
+    np.testing.assert_array_equal(best, np.argmin(whole, axis=1))
+    np.testing.assert_array_equal(cost, whole[np.arange(len(c)), best])
+
+
+def test_iterations_on_the_shrinking_active_set_equal_each_sample_iterated_alone():
+    """The numpy iterations keep only the samples still moving; each sample's answer is the one it gets
+    when iterated alone (its arithmetic is its own), up to the rounding of the products, which BLAS may
+    take in another order for one row than for many: a sample stops where its cost is flat to 1e-15 of
+    itself, so a different rounding may stop it up to about √1e-15 ≈ 3e-8 (relative) from the other run."""
+    from gfimu.estimators import ml
+
+    est = MLEstimator()
+    est.compiled = False  # the numpy expressions (the compiled kernel has its own test against them)
+    array = cube_array(0.05, noise_std_mps2=0.07)
+    model = ml._ProjectedModel.build(array, np.full(array.n_axes, 0.07))
+    t, w, dw, f = smooth_motion(60, seed=5)
+    y = make_log(array, t, w, dw, f, noise_std=0.07).accel_mps2
+    b, c = model.readings(y)
+    starts = w + np.random.default_rng(2).normal(scale=0.5, size=w.shape)
+    together = est._iterate(model, b, c, starts, None, None)
+    alone = np.vstack([est._iterate(model, b[k:k + 1], c[k:k + 1], starts[k:k + 1], None, None) for k in range(len(w))])
+    np.testing.assert_allclose(together, alone, rtol=3e-7, atol=1e-8)
+    assert np.sqrt(np.mean((together - w) ** 2)) < 1.0  # and they converge near the truth

@@ -373,13 +373,25 @@ class MLEstimator(PerSampleEstimator):
         out += quad[None, :]
         return out  # cost up to the per-sample constant |b|²
 
+    def _grid_best(self, model, c, grid):
+        """(index (N,), cost (N,)) of the grid point of least :meth:`_grid_cost` per sample: the same
+        numbers, taken :data:`_GRID_ROWS` samples at a time so that the costs of one block stay in the
+        cache between the product, the sum and the minimum."""
+        best = np.empty(len(c), dtype=np.intp)
+        cost = np.empty(len(c))
+        for start in range(0, len(c), _GRID_ROWS):
+            block = self._grid_cost(model, c[start:start + _GRID_ROWS], grid)
+            k = np.argmin(block, axis=1)
+            best[start:start + len(k)] = k
+            cost[start:start + len(k)] = block[np.arange(len(k)), k]
+        return best, cost
+
     def _start(self, array, model, y, c, gyro):
         """Starting ω per sample: gyro, else the best of grid and inversion."""
         if gyro is not None:
             return gyro.copy()
         grid, _ = self._grid()
-        grid_cost = self._grid_cost(model, c, grid)
-        best = np.argmin(grid_cost, axis=1)
+        best, best_cost = self._grid_best(model, c, grid)
         start = grid[best]
         S = array.structure_matrix()
         if S.shape[0] >= 12 and np.linalg.matrix_rank(S) == 12:
@@ -388,7 +400,7 @@ class MLEstimator(PerSampleEstimator):
             inv_w = _omega_from_q(x[:, 6:])
             qi = rigid_body.quadratic_terms(inv_w)
             inv_cost = np.sum(qi * (qi @ model.M - 2 * c), axis=1)
-            better = inv_cost < grid_cost[np.arange(len(best)), best]
+            better = inv_cost < best_cost
             start = np.where(better[:, None], inv_w, start)
         return start
 
@@ -414,17 +426,19 @@ class MLEstimator(PerSampleEstimator):
                            np.ascontiguousarray(qm), np.ascontiguousarray(gram), np.ascontiguousarray(curvature), g,
                            1.0 if gyro_var is None else float(gyro_var), gyro is not None, int(self.max_iterations),
                            float(tol2))
+        # the samples still iterating, compacted: each array holds only their rows, and a sample's
+        # rows leave all of them at once when it stops (the arithmetic of every sample is its own)
         w = w.copy()
+        rows = np.arange(len(w))
+        wi, bi, ci = w.copy(), b, c
+        gi = gyro
         lam = np.full(len(w), 1e-3)
-        cost = _cost(model, b, w, gyro, gyro_var)
-        active = np.ones(len(w), bool)
+        cost = _cost(model, bi, wi, gi, gyro_var)
         for _ in range(self.max_iterations):
-            idx = np.nonzero(active)[0]
-            if idx.size == 0:
+            if rows.size == 0:
                 break
-            wi = w[idx]
             mono = _monomials(wi)
-            g6 = c[idx] - mono @ qm  # Aᵀ r with r = b - A q
+            g6 = ci - mono @ qm  # Aᵀ r with r = b - A q
             grad = _quadratic_terms_jacobian_t(wi, g6)  # -½ ∂cost/∂ω
             JtJ = mono @ gram  # J_qᵀ M J_q
             # exact Hessian: q is quadratic, so the residual curvature term is -Σ_j (Aᵀr)_j ∂²q_j/∂ω²;
@@ -435,24 +449,30 @@ class MLEstimator(PerSampleEstimator):
             pos_def = ((h00 > 1e-12 * tr) & (h00 * h11 - h01 * h01 > 1e-12 * tr**2)
                        & (_det_symmetric_3x3(hess) > 1e-12 * tr**3))  # Sylvester
             JtJ = np.where(pos_def[:, None], hess, JtJ)
-            if gyro is not None:
-                grad = grad + (gyro[idx] - wi) / gyro_var
+            if gi is not None:
+                grad = grad + (gi - wi) / gyro_var
                 JtJ[:, _DIAGONAL] += 1.0 / gyro_var
             diag = JtJ[:, _DIAGONAL]
             scale = np.maximum(diag, 1e-12 * np.max(diag, axis=1, keepdims=True) + 1e-300)
-            JtJ[:, _DIAGONAL] = diag + lam[idx, None] * scale
+            JtJ[:, _DIAGONAL] = diag + lam[:, None] * scale
             step = _solve_symmetric_3x3(JtJ, grad)
             trial = wi + step
-            tcost = _cost(model, b[idx], trial, None if gyro is None else gyro[idx], gyro_var)
-            ok = tcost <= cost[idx]
-            gain = cost[idx] - tcost
-            w[idx[ok]] = trial[ok]
-            cost[idx[ok]] = tcost[ok]
-            lam[idx] = np.where(ok, np.maximum(lam[idx] / 10, 1e-12), lam[idx] * 10)
+            tcost = _cost(model, bi, trial, gi, gyro_var)
+            ok = tcost <= cost
+            gain = cost - tcost
             size = 1.0 + np.sqrt(np.einsum("ij,ij->i", wi, wi))
+            wi = np.where(ok[:, None], trial, wi)
+            cost = np.where(ok, tcost, cost)
+            lam = np.where(ok, np.maximum(lam / 10, 1e-12), lam * 10)
             small = np.einsum("ij,ij->i", step, step) <= tol2 * size * size
             flat = gain <= 1e-15 * (tcost + 1e-300)  # cost settled to rounding (noisy data)
-            active[idx[(ok & (small | flat)) | (lam[idx] > 1e12)]] = False
+            done = (ok & (small | flat)) | (lam > 1e12)
+            if np.any(done):
+                w[rows[done]] = wi[done]
+                keep = ~done
+                rows, wi, bi, ci, lam, cost = rows[keep], wi[keep], bi[keep], ci[keep], lam[keep], cost[keep]
+                gi = None if gi is None else gi[keep]
+        w[rows] = wi
         return w
 
 
@@ -511,6 +531,10 @@ def _solve_symmetric_3x3(m: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         x[bad] = np.linalg.solve(full, rhs[bad][..., None])[..., 0]
     return x
 
+
+_GRID_ROWS = 128
+"""Samples whose starting-grid costs are taken at once (:meth:`MLEstimator._grid_best`): 128 x 1,024 costs,
+1 MB, stay in the cache."""
 
 _CONES = 8
 """Direction cones of the multi-start (see ``MLEstimator._restarts``)."""

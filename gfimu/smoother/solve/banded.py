@@ -17,6 +17,7 @@ and the initialisation (:mod:`gfimu.smoother.solve.initialise`) build on it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
@@ -186,13 +187,38 @@ class BandStructure:
         """(kd + 1, N, m) entries of A in the band order, unscaled: ``[d, k, p]`` is the entry d rows
         below the diagonal in column p of sample k (``diag`` (N, m, m), ``lower`` (N-1, m, m));
         :meth:`scaled` turns it into LAPACK band storage in place."""
-        n, m = diag.shape[0], self.m
-        # each sample's [diag (m²), lower (m²), 0] in one row (the last sample has no lower block), the
-        # band gathered from it by the flat indices of one sample at once
-        flat = np.zeros((n, 2 * m * m + 1))
-        flat[:, : m * m] = diag.reshape(n, m * m)
-        flat[: n - 1, m * m: 2 * m * m] = lower.reshape(n - 1, m * m)
-        return np.ascontiguousarray(np.moveaxis(flat[:, self.index], 0, 1))
+        n, mm = diag.shape[0], self.m * self.m
+        d2, l2 = diag.reshape(n, mm), lower.reshape(n - 1, mm)
+        # one band row at a time, gathered straight from the blocks by the flat indices of one sample
+        # into [diag (m²), lower (m²), 0] (the last sample has no lower block): no copy of both blocks
+        # side by side, no transpose of the whole band
+        out = np.empty((self.bandwidth + 1, n, self.m))
+        for d, (from_diag, cols, from_lower, lower_cols) in enumerate(self.gathers):
+            if from_diag is None:  # the whole band row from the diagonal blocks
+                np.take(d2, cols, axis=1, out=out[d])
+                continue
+            row = out[d]
+            row[...] = 0.0
+            if cols.size:
+                row[:, from_diag] = d2[:, cols]
+            if lower_cols.size:
+                row[: n - 1, from_lower] = l2[:, lower_cols]
+        return out
+
+    @cached_property
+    def gathers(self) -> list:
+        """Per band row d: ``(None, diagonal columns, None, None)`` when every entry of the row comes from the
+        diagonal block, else ``(positions, diagonal columns, positions, lower columns)`` of the entries
+        that come from the diagonal and from the lower block (the rest are zero)."""
+        mm = self.m * self.m
+        out = []
+        for row in self.index:
+            if np.all(row < mm):
+                out.append((None, row.copy(), None, None))
+            else:
+                in_diag, in_lower = np.flatnonzero(row < mm), np.flatnonzero((row >= mm) & (row < 2 * mm))
+                out.append((in_diag, row[in_diag], in_lower, row[in_lower] - mm))
+        return out
 
     def scaled(self, blocks: np.ndarray, scale: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
         """Lower band storage (kd + 1, N m) of ``S A S`` from :meth:`blocks` (scaled in place), with

@@ -31,7 +31,7 @@ from ...factors import so3 as _so3
 from ...log import Log
 from ...rigid_body import quadratic_terms
 from ...rotations import skew
-from .banded import band_structure
+from .banded import band_structure_of
 from ..model.problem import STATE_SIZE, SmootherOptions
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
@@ -58,15 +58,20 @@ def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: floa
                       quadratic_density], [3, 3, 6])
     dt = log.dt_s
     w = 1.0 / (dens[None, :] ** 2 * dt[:, None])  # (N-1, 12) random-walk information
-    diag = np.broadcast_to(info, (n, LIFTED, LIFTED)).copy()
-    idx = np.arange(LIFTED)
-    diag[:-1, idx, idx] += w
-    diag[1:, idx, idx] += w
-    lower = np.zeros((n - 1, LIFTED, LIFTED))
-    lower[:, idx, idx] = -w
-    # each unknown is tied only to itself across samples: a band of 12 sub-diagonals (not 23)
-    structure = band_structure(lower)
-    ab = structure.band(diag, lower, np.ones((n, LIFTED)), np.einsum("nii->ni", diag))
+    # each unknown is tied only to itself across samples: a band of 12 sub-diagonals (not 23), written
+    # straight from its parts (the same numbers as BandStructure.band of the blocks, unscaled): band row
+    # d < 12 holds the constant info[p + d, p] (the diagonal: info + the walks on either side), row 12
+    # the walk -w between a sample and the next
+    diagonal = np.broadcast_to(np.diag(info), (n, LIFTED)).copy()
+    diagonal[:-1] += w
+    diagonal[1:] += w
+    ab = np.zeros((LIFTED + 1, n, LIFTED))
+    ab[0] = diagonal
+    for d in range(1, LIFTED):
+        ab[d, :, : LIFTED - d] = np.diagonal(info, -d)
+    ab[LIFTED, : n - 1] = -w
+    ab = ab.reshape(LIFTED + 1, n * LIFTED)
+    structure = band_structure_of(np.eye(LIFTED, dtype=bool))  # the state order itself
     cb = cholesky_banded(ab, lower=True, check_finite=False)
     rhs = structure.to_band_order((y @ A).reshape(-1), n)
     return structure.from_band_order(cho_solve_banded((cb, True), rhs, check_finite=False), n).reshape(n, LIFTED)

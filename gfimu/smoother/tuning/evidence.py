@@ -28,7 +28,7 @@ the truth.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -196,10 +196,12 @@ class _Part:
     cost: float
 
     @classmethod
-    def of_terms(cls, terms: list, n: int, m: int) -> _Part | None:
+    def of_terms(cls, terms: list, n: int, m: int, hessian: _Part | None = None) -> _Part | None:
         """The normal equations of ``terms`` in this form, each product taken over the columns where its
         Jacobian is nonzero (a row of the motion model touches two or four columns, not 2m);
-        None for terms on the calibration variables."""
+        None for terms on the calibration variables. ``hessian``: a part whose terms had these Jacobians
+        (the same numbers): its ``diag`` and ``lower`` are taken as they are, only the gradient and the
+        cost are made from ``terms``."""
         stores = {"diag": {}, "lower": {}, "grad": {}}
         lengths = {"diag": n, "lower": n - 1, "grad": n}
 
@@ -229,10 +231,11 @@ class _Part:
                 c, Jc = columns(J)
                 cols.append((c, Jc))
                 if c.size:
-                    JcT = np.ascontiguousarray(np.swapaxes(Jc, 1, 2))
-                    put("diag", pairs(c, c), offset, (JcT @ Jc).reshape(len(Jc), -1))
+                    if hessian is None:
+                        JcT = np.ascontiguousarray(np.swapaxes(Jc, 1, 2))
+                        put("diag", pairs(c, c), offset, (JcT @ Jc).reshape(len(Jc), -1))
                     put("grad", c, offset, np.einsum("nr,nrj->nj", r, Jc))
-            if t.kind == "binary" and cols[0][0].size and cols[1][0].size:
+            if hessian is None and t.kind == "binary" and cols[0][0].size and cols[1][0].size:
                 (c0, J0c), (c1, J1c) = cols
                 put("lower", pairs(c1, c0), 0, (np.ascontiguousarray(np.swapaxes(J1c, 1, 2)) @ J0c).reshape(len(J0c), -1))
 
@@ -241,6 +244,8 @@ class _Part:
             values = np.stack([store[f] for f in idx], axis=1) if idx.size else np.zeros((length, 0))
             return idx, values
 
+        if hessian is not None:
+            return cls(hessian.diag, hessian.lower, compact(stores["grad"], n), cost)
         return cls(*(compact(stores[k], lengths[k]) for k in ("diag", "lower", "grad")), cost)
 
 
@@ -263,54 +268,80 @@ class ProcessBasis:
     terms: dict
     """The same keys -> those rows as terms (for the linearised cost, :meth:`BandedSum.half_cost`)."""
 
+    labels: list = field(default_factory=list)
+    """Per process term (in order): the (key, rows) it was split into."""
+    unit_terms: list = field(default_factory=list)
+    """The process terms at unit settings at the states this basis was made at."""
+
     @classmethod
     def of(cls, log: Log, options: SmootherOptions, field: str, states: np.ndarray, params: np.ndarray,
-           omega_b_radps: np.ndarray | None = None) -> ProcessBasis | None:
+           omega_b_radps: np.ndarray | None = None, previous: ProcessBasis | None = None) -> ProcessBasis | None:
+        """The basis at ``states`` (None where it does not apply, see the class). ``previous``: the basis
+        of the same problem at other states; where the process factors' Jacobians there are the same
+        numbers as here (factors linear in the states: the white jerk, the random walks, the priors), its
+        split of the rows and its products ``JᵀJ`` are kept and only the gradients and costs are made
+        here (:meth:`at`): the same numbers as made afresh."""
         if options.motion_model != "jerk" or any(f > 0 for f in options.process_axis_frequencies_hz):
             return None  # (the white-snap system is too stiff for sums that agree to many digits)
         unit = replace(options, **{field: 1.0}, process_axis_factors=(1.0, 1.0, 1.0),
                        specific_force_random_walk_mps2_per_sqrt_s=1.0)
-        fx, fy, fz, ff = PROBE_FACTORS
-        probe = replace(unit, process_axis_factors=(fx, fy, fz), specific_force_random_walk_mps2_per_sqrt_s=ff)
         problem = make_problem(log, unit, 1.0, omega_b_radps)
         terms = problem.process_terms(states, params)
+        if previous is not None and previous.same_jacobians(terms):
+            return previous.at(terms, problem.n, problem.state_size)
+        fx, fy, fz, ff = PROBE_FACTORS
+        probe = replace(unit, process_axis_factors=(fx, fy, fz), specific_force_random_walk_mps2_per_sqrt_s=ff)
         probed = make_problem(log, probe, 1.0, omega_b_radps).process_terms(states, params)
         if len(terms) != len(probed):
             return None
-        labels = {1.0: "const", fx: 0, fy: 1, fz: 2, ff: "force"}
-        split: dict = {key: [] for key in labels.values()}
+        factors = {1.0: "const", fx: 0, fy: 1, fz: 2, ff: "force"}
+        split: dict = {key: [] for key in factors.values()}
+        labels = []
         for t, u in zip(terms, probed):
             if t.kind != u.kind or t.residual.shape != u.residual.shape:
                 return None
-            a, b = _row_entries(t), _row_entries(u)
-            if a.shape != b.shape:
+            row_label = _row_labels(_row_entries(t), _row_entries(u), factors)
+            if row_label is None:
                 return None
-            row_label = []
-            for i in range(a.shape[1]):
-                nz = a[:, i] != 0
-                if not np.array_equal(nz, b[:, i] != 0):
-                    return None
-                ratio = a[:, i][nz] / b[:, i][nz] if np.any(nz) else np.ones(1)
-                for f, key in labels.items():
-                    if np.allclose(ratio, f, rtol=1e-9, atol=0.0):
-                        row_label.append(key)
-                        break
-                else:
-                    return None
-            for key in labels.values():
+            labels.append([])
+            for key in factors.values():
                 rows = [i for i, k in enumerate(row_label) if k == key]
                 if rows:
                     split[key].append(_term_rows(t, rows))
+                    labels[-1].append((key, rows))
         parts = {key: _Part.of_terms(ts, problem.n, problem.state_size) for key, ts in split.items() if ts}
         if any(part is None for part in parts.values()):
             return None  # calibration variables in the process factors: not written for here
         rows = sum(t.residual.size for ts in split.values() for t in ts)
-        return cls(parts, rows, problem.n_global, {key: ts for key, ts in split.items() if ts})
+        return cls(parts, rows, problem.n_global, {key: ts for key, ts in split.items() if ts}, labels, terms)
 
-    def banded(self, measurement: NormalEquations) -> BandedSum:
+    def same_jacobians(self, terms: list) -> bool:
+        """Whether ``terms`` (the process terms at unit settings) have this basis's Jacobians, bit for bit."""
+        if len(terms) != len(self.unit_terms) or len(terms) != len(self.labels):
+            return False
+        for t, u in zip(terms, self.unit_terms):
+            if (t.kind != u.kind or t.first != u.first or t.residual.shape != u.residual.shape
+                    or t.jac_global is not None or u.jac_global is not None or sorted(t.jac) != sorted(u.jac)):
+                return False
+            if not all(np.array_equal(t.jac[k], u.jac[k]) for k in t.jac):
+                return False
+        return True
+
+    def at(self, terms: list, n: int, m: int) -> ProcessBasis:
+        """This basis with the residuals of ``terms`` (the same Jacobians, :meth:`same_jacobians`): the rows
+        split as here, each part's ``JᵀJ`` kept, its gradient and cost from ``terms``."""
+        split: dict = {}
+        for t, labelled in zip(terms, self.labels):
+            for key, rows in labelled:
+                split.setdefault(key, []).append(_term_rows(t, rows))
+        parts = {key: _Part.of_terms(ts, n, m, hessian=self.parts[key]) for key, ts in split.items()}
+        return ProcessBasis(parts, self.rows, self.n_global, split, self.labels, terms)
+
+    def banded(self, measurement: NormalEquations, previous: BandedSum | None = None) -> BandedSum:
         """The same weighted sum kept in the band order of the banded Cholesky factorisation, so that
-        one setting costs a few vector additions and the factorisation (:class:`BandedSum`)."""
-        return BandedSum.of(self, measurement)
+        one setting costs a few vector additions and the factorisation (:class:`BandedSum`); ``previous``:
+        one made before whose parts' band entries may be kept (:meth:`BandedSum.of`)."""
+        return BandedSum.of(self, measurement, previous)
 
 
 @dataclass
@@ -331,7 +362,10 @@ class BandedSum:
     basis: ProcessBasis
 
     @classmethod
-    def of(cls, basis: ProcessBasis, measurement: NormalEquations) -> BandedSum:
+    def of(cls, basis: ProcessBasis, measurement: NormalEquations, previous: BandedSum | None = None) -> BandedSum:
+        """``previous``: a sum made before; the band entries of each of its parts whose ``JᵀJ`` is the one
+        of ``basis`` (the same arrays: :meth:`ProcessBasis.at` keeps them) are kept when the band is the
+        same, only the gradients and costs are taken from ``basis``."""
         if measurement.terms is None:
             raise ValueError("BandedSum needs the measurement's normal equations with their terms "
                              "(measurement_normal_equations)")
@@ -344,6 +378,11 @@ class BandedSum:
         blocks = structure.blocks(measurement.diag, measurement.lower)
         parts = {}
         for key, part in basis.parts.items():
+            kept = None if previous is None or previous.structure is not structure else previous.parts.get(key)
+            old = None if previous is None else previous.basis.parts.get(key)
+            if kept is not None and old is not None and old.diag is part.diag and old.lower is part.lower:
+                parts[key] = kept[:3] + (part.grad[0], part.grad[1], part.cost)
+                continue
             flat = np.zeros((n, 2 * m * m + 1))
             flat[:, part.diag[0]] = part.diag[1]
             flat[: n - 1, m * m + part.lower[0]] = part.lower[1]
@@ -383,6 +422,34 @@ class BandedSum:
         return ne, factorise_blocks(self.structure, blocks, blocks[0].copy(), ne)
 
 
+def _row_labels(a: np.ndarray, b: np.ndarray, factors: dict) -> list | None:
+    """The key of ``factors`` ({factor: key}) of each row of a term whose entries are ``a`` at unit settings
+    and ``b`` probed ((samples, rows, entries), :func:`_row_entries`): the factor that every nonzero entry's
+    ratio a/b equals to 1e-9 (relative; a row without a nonzero entry: factor 1); None where the two have
+    other nonzero entries or a row's ratios match no factor. A ratio is within the tolerance of f for
+    every entry of a row exactly when the row's smallest and largest ratios are."""
+    if a.shape != b.shape:
+        return None
+    nz = a != 0
+    if not np.array_equal(nz, b != 0):
+        return None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = a / np.where(nz, b, 1.0)
+    lo = np.min(np.where(nz, ratio, np.inf), axis=(0, 2))
+    hi = np.max(np.where(nz, ratio, -np.inf), axis=(0, 2))
+    empty = ~np.any(nz, axis=(0, 2))
+    out = []
+    for i in range(a.shape[1]):
+        ends = np.ones(1) if empty[i] else np.array([lo[i], hi[i]])
+        for f, key in factors.items():
+            if np.allclose(ends, f, rtol=1e-9, atol=0.0):
+                out.append(key)
+                break
+        else:
+            return None
+    return out
+
+
 def _row_entries(t: Term) -> np.ndarray:
     """(samples, rows, entries) of a term: residual and Jacobians side by side."""
     parts = [t.residual[:, :, None]] + [t.jac[k] for k in sorted(t.jac)]
@@ -400,8 +467,11 @@ def _term_rows(t: Term, rows: list[int]) -> Term:
 def measurement_normal_equations(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None) -> NormalEquations:
     """Normal equations of the measurement factors alone (accelerometers or the inversion)."""
     P = np.zeros(problem.n_global) if params is None else params
-    terms = problem.terms(states, P)
-    return normal_equations(problem, states, P, terms[:1])
+    for group in problem.groups:  # the first group's first term (the process terms are not needed here)
+        terms = group.terms(problem, states, P)
+        if terms:
+            return normal_equations(problem, states, P, terms[:1])
+    return normal_equations(problem, states, P, [])
 
 
 EXTEND_MIN_GAIN_NATS = 1.0
@@ -591,14 +661,17 @@ class _NoiseSearch:
                 cache.clear()
                 cache[key] = measurement_normal_equations(problem, X, p0)
             if self.basis and not np.any(c["freq"] > 0):
-                if version not in bases:
+                if version not in bases:  # at a new linearisation point: the last one's split and JᵀJ where they hold
+                    before = next(iter(bases.values()), None)
                     bases.clear()
                     bases[version] = ProcessBasis.of(log, self.settings_options(c), self.field, X,
-                                                     np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA])
+                                                     np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA],
+                                                     previous=before)
                 if bases[version] is not None:
                     if key not in summed:
+                        before = next(iter(summed.values()), None)
                         summed.clear()
-                        summed[key] = bases[version].banded(cache[key])
+                        summed[key] = bases[version].banded(cache[key], previous=before)
                     setting = (float(np.exp(c["density"])), np.exp(c["axis"]), float(np.exp(c["force"])))
                     total, fac = summed[key].system(*setting)
                     return linearised_log_evidence(problem, X, p0, total=total, factorisation=fac,
