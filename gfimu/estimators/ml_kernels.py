@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cost(zb, R, w0, w1, w2, gyro, gyro_var, has_gyro):
     """``|z - R q(ω)|² + z₆²`` (+ the gyro term) of one sample: :func:`gfimu.estimators.ml._cost`."""
     q0, q1, q2 = w0 * w0 + w1 * w1, w0 * w0 + w2 * w2, w1 * w1 + w2 * w2
@@ -35,7 +35,7 @@ def _cost(zb, R, w0, w1, w2, gyro, gyro_var, has_gyro):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _solve3(m, r0, r1, r2):
     """:func:`gfimu.estimators.ml._solve_symmetric_3x3` of one system (m: the six entries a, b, c, d, e, f
     of ``[[a, b, c], [b, d, e], [c, e, f]]``), its LU fallback by Gaussian elimination with partial pivoting."""
@@ -76,7 +76,7 @@ def _solve3(m, r0, r1, r2):
     return x0, x1, x2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def iterate(zb, c, w_start, R, qm, gram, curvature, gyro, gyro_var, has_gyro, max_iterations, tol2):
     """:meth:`MLEstimator._iterate <gfimu.estimators.ml.MLEstimator._iterate>` sample by sample: ``zb`` (N, 7)
     the reduced readings, ``c`` (N, 6) ``Aᵀ b``, ``w_start`` (N, 3), ``R`` (6, 6) of the projected model,
