@@ -246,7 +246,8 @@ def check(log: Log, smoothed: Motion, per_sample: Motion, model_check: ModelChec
     m = np.rint(np.convolve(ok.astype(float), kernel, mode="same")).astype(int)
     allowance = np.full(n, np.inf)
     has = m >= MIN_SAMPLES
-    allowance[has] = chdtri(DOF * m[has], FALSE_ALARM)
+    counts, which = np.unique(m[has], return_inverse=True)  # the quantile once per count (a window's m), not per sample
+    allowance[has] = chdtri(DOF * counts, FALSE_ALARM)[which.reshape(-1)]
     beyond = total > allowance
     # the samples of windows beyond their allowance, each window spreading over its own samples
     in_flagged = np.convolve(beyond.astype(float), kernel, mode="same") > 0
