@@ -557,6 +557,16 @@ class FixedLagSmoother:
     batch smoother's tuner, and the push that fills the buffer returns all
     buffered states that have reached the lag. :attr:`tuning` then holds the
     selection and :attr:`options` the options in use.
+
+    Its state, in parts each with one job: ``config`` (:class:`StreamConfig`, fixed: lag, rate, gaps, engine),
+    ``_segment`` (:class:`Segment`: the window engine, its states and raw samples, the newest state; a new one at
+    each gap, clock reset or flush), ``_hold`` (:class:`StartHold`: the rows held at a segment's start and how
+    each start was decided), ``_choice`` (:class:`ChoiceState`: the model in use and how it is chosen on the
+    stream), ``_clock`` (:class:`StreamClock`: the stream's time and the samples dropped), ``_signs`` (the
+    streaming sign chain of ω, :class:`~gfimu.smoother.stream.model_choice.StreamSignChain`) and ``_sigma``
+    (:class:`SigmaRescale`, when σ is scaled by the misfit of the readings). The attributes tests, tools and
+    sessions read (:attr:`lag_s`, :attr:`options`, :attr:`model`, :attr:`models`, :attr:`starts`, ...) are
+    read-only views of these parts.
     """
 
     def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
