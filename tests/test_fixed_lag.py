@@ -297,7 +297,7 @@ def test_gtsam_solver_failure_rebuilds_the_window_once_then_reports_the_time(mon
         out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
     # one failed update of gtsam's smoother (inside the engine): a warning, the window is rebuilt from
     # its raw samples, nothing is lost
-    monkeypatch.setattr(sm._smoother, "_smoother", _FailingSmoother())
+    monkeypatch.setattr(sm._segment.engine, "_smoother", _FailingSmoother())
     with pytest.warns(RuntimeWarning, match=r"t = 0\.600000 s.*Indeterminant.*re-initialising"):
         upd = sm.push(log.timestamps_ns[300], log.accel_mps2[300])
     out.extend(upd.smoothed)
@@ -314,7 +314,7 @@ def test_gtsam_solver_failure_rebuilds_the_window_once_then_reports_the_time(mon
     sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02, engine="gtsam")
     for i in range(50):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
-    monkeypatch.setattr(sm._smoother, "_smoother", _FailingSmoother())
+    monkeypatch.setattr(sm._segment.engine, "_smoother", _FailingSmoother())
     new_engine = sm._new_smoother
 
     def failing_engine():

@@ -126,18 +126,18 @@ def test_a_window_filtered_with_an_outgrown_model_is_solved_again_with_the_new_o
     sm = FixedLagSmoother(log.array, slow, lag_s=1.0, rate_hz=200, hold_max_s=0.0)  # rows come out at the lag
     for k in range(400):
         sm.push(log.timestamps_ns[k], log.accel_mps2[k])
-    ks = [k for k, _ in sm._window]
+    ks = [k for k, _ in sm._segment.window]
     truth = log.truth.omega_b_radps
 
     def window_error():
-        return np.sqrt(np.mean([np.sum((sm._smoother.mean(k)[0:3] - truth[k]) ** 2) for k in ks]))
+        return np.sqrt(np.mean([np.sum((sm._segment.engine.mean(k)[0:3] - truth[k]) ** 2) for k in ks]))
 
     before = window_error()
     fast = replace(slow, omega_dot_random_walk_radps2_per_sqrt_s=30.0)
     sm._use(StreamModel(fast, 1.0, None, None, int(log.timestamps_ns[399]), 400))
     sm._replay_window()
     after = window_error()
-    assert [k for k, _ in sm._window] == ks  # the same states, none emitted
+    assert [k for k, _ in sm._segment.window] == ks  # the same states, none emitted
     assert after < 0.5 * before, (before, after)
     # and the stream goes on from the solved window
     upd = sm.push(log.timestamps_ns[400], log.accel_mps2[400])

@@ -55,3 +55,38 @@ def test_the_hold_is_bounded_and_every_row_comes_out_once_in_order():
     assert first_out is not None and first_out <= int(round((3.0 + 1.0 + 0.2 + 0.5) * 200.0))
     assert len(sm.starts) >= 1 and sm.starts[0]["held_s"] <= 1.0 + 1e-9
     assert set(sm.starts[0]) == {"held_s", "evidence_nats", "agreement_chi2", "moved_chi2", "open"}
+
+
+def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
+    """StartHold's bookkeeping (the held start's part of FixedLagSmoother): the first check ``check_every_ns``
+    after the first row held, the next that long after the newest sample of a check, and at once when the
+    rows span ``max_s``; the change of the re-solve between checks in its covariance; release ends the hold."""
+    from gfimu.smoother.stream.fixed_lag import StartHold
+
+    ms = 1_000_000
+    hold = StartHold(max_s=2.0, check_every_ns=500 * ms)
+    assert hold.deciding and hold.held == [] and hold.held_s == 0.0
+    hold.held = [(t * ms, ("raw", t), None) for t in (100, 110, 120)]
+    assert hold.held_s == pytest.approx(0.02, abs=1e-15)
+    assert not hold.due(599 * ms) and hold.next_check_ns == 600 * ms  # 100 ms + 500 ms
+    assert hold.due(600 * ms) and hold.next_check_ns == 1100 * ms
+    assert not hold.due(1099 * ms) and hold.due(1100 * ms) and hold.next_check_ns == 1600 * ms
+    hold.held.append((2100 * ms, ("raw", 2100), None))  # the rows span 2.0 s = max_s: due before the next check
+    assert hold.due(1200 * ms) and hold.next_check_ns == 1700 * ms
+
+    times = np.array([100, 110, 120]) * ms
+    omega = np.zeros((3, 3))
+    cov = np.stack([np.diag([0.01, 0.04, 0.25])] * 3)
+    assert hold.moved(times, omega, cov) == np.inf  # the first check: nothing to compare with
+    shifted = omega + np.array([0.1, 0.2, 0.5])  # one sigma on each axis: chi2 = 3 on each row
+    assert hold.moved(times, shifted, cov) == pytest.approx(3.0, rel=1e-12)
+    assert hold.moved(times[:2], shifted[:2], cov[:2]) == np.inf  # fewer rows than the last check's
+
+    hold.record(hold.held_s, 7.5, 0.4, 0.2, False)
+    assert hold.release() == [("raw", 100), ("raw", 110), ("raw", 120), ("raw", 2100)]
+    assert not hold.deciding and hold.held == []
+    assert hold.starts == [{"held_s": pytest.approx(2.0), "evidence_nats": 7.5, "agreement_chi2": 0.4,
+                            "moved_chi2": 0.2, "open": False}]
+    hold.begin_segment()  # a new segment: held again, the record of every start kept
+    assert hold.deciding and hold.next_check_ns is None and hold.last_resolve is None and len(hold.starts) == 1
+    assert not StartHold(max_s=0.0, check_every_ns=500 * ms).deciding  # no hold (the gtsam engine)

@@ -128,9 +128,9 @@ def test_internal_containers_stay_bounded_through_drops_resets_and_gaps(log):
                     sm.push(t, log.accel_mps2[i])  # duplicate
                     sm.push(t - 3 * step, log.accel_mps2[i])  # late
                 if i % 50 == 0:
-                    filt = sm._smoother
-                    sizes.append((len(sm._window), len(sm._raw), len(sm._choice.buffer), len(sm._warmup),
-                                  0 if filt is None else filt.capacity, len(sm.model._step_cache)))
+                    seg = sm._segment
+                    sizes.append((len(seg.window), len(seg.raw), len(sm._choice.buffer), len(seg.warmup),
+                                  0 if seg.engine is None else seg.engine.capacity, len(sm.model._step_cache)))
     n_out += len(sm.flush())
     assert n_out == n_in == 10 * len(log)
     assert sm.n_clock_resets == 1

@@ -339,15 +339,133 @@ class StreamClock:
     clock_resets: int = 0
 
 
+@dataclass(frozen=True)
+class StreamConfig:
+    """How :class:`FixedLagSmoother` runs its stream, fixed when it is made: ``lag_s`` [s] (a state is given
+    smoothed this long after its sample), ``rate_hz`` (the nominal rate), ``gap_factor`` (a step longer than this
+    many nominal steps, :attr:`nominal_dt_ns`, ends the segment), ``warmup_n`` (the samples a segment's first
+    states are initialised on), the window ``engine`` (:data:`ENGINES`; with ``gtsam`` its ``gtsam`` settings),
+    ``branches`` (the numpy engine follows the other branches of ω), ``fast_measurement`` and ``compute_sigma``
+    (σ of every state given out)."""
+
+    lag_s: float
+    rate_hz: float
+    gap_factor: float
+    warmup_n: int
+    engine: str
+    gtsam: GtsamSettings
+    branches: bool
+    fast_measurement: bool
+    compute_sigma: bool
+
+    @property
+    def nominal_dt_ns(self) -> float:
+        """The nominal step [ns]."""
+        return 1e9 / self.rate_hz
+
+
+@dataclass
+class Segment:
+    """The stream since its start, its last gap, clock reset or flush: the window ``engine`` (a
+    :class:`WindowFilter` or a :class:`GtsamWindow`; None while ``warmup`` gathers the samples the first states
+    are initialised on), ``window`` ((index, timestamp_ns) of the states not yet given out, oldest first),
+    ``raw`` ((timestamp_ns, accel, gyro) of the same samples, to solve the window again), ``k`` (the index of
+    the newest state), ``prev`` ((timestamp_ns, ω, ω̇, f) of the newest state, filtered) and ``prev_sample``
+    (its sample)."""
+
+    engine: WindowFilter | GtsamWindow | None = None
+    window: deque = field(default_factory=deque)
+    raw: deque = field(default_factory=deque)
+    warmup: list = field(default_factory=list)
+    k: int = -1
+    prev: tuple | None = None
+    prev_sample: tuple | None = None
+
+
+class StartHold:
+    """The first rows of each segment held back past the lag until the data decide the branch of ω (numpy
+    engine; :meth:`FixedLagSmoother._release_start`).
+
+    Settings: ``max_s`` (the longest hold [s]; 0: rows are never held) and ``check_every_ns`` (how often the
+    evidence is weighed). Of the current segment: ``deciding`` (its first rows are being held), ``held``
+    ((timestamp_ns, raw sample, filtered state) of the rows held so far), ``next_check_ns`` (when the evidence
+    is weighed next) and ``last_resolve`` ((timestamps, ω) of the previous check's re-solve). Of every segment
+    so far: ``starts`` (how its start was decided) and ``still_starts`` (the std of the prior ω = 0 of each
+    segment that started still)."""
+
+    def __init__(self, max_s: float, check_every_ns: int) -> None:
+        self.max_s = max_s
+        self.check_every_ns = check_every_ns
+        self.starts: list[dict] = []
+        self.still_starts: list[float] = []
+        self.begin_segment()
+
+    def begin_segment(self) -> None:
+        """A new segment: its first rows are held (when holding at all), nothing held yet."""
+        self.deciding = self.max_s > 0
+        self.held: list = []
+        self.next_check_ns: int | None = None
+        self.last_resolve: tuple | None = None
+
+    @property
+    def held_s(self) -> float:
+        """The span of the rows held [s]."""
+        return (self.held[-1][0] - self.held[0][0]) * 1e-9 if self.held else 0.0
+
+    def due(self, newest_ns: int) -> bool:
+        """Whether the evidence is to be weighed now, the newest sample at ``newest_ns``: every
+        ``check_every_ns`` from the first row held, and once the rows span ``max_s``."""
+        if self.next_check_ns is None:
+            self.next_check_ns = self.held[0][0] + self.check_every_ns
+        if newest_ns < self.next_check_ns and self.held_s < self.max_s:
+            return False
+        self.next_check_ns = newest_ns + self.check_every_ns
+        return True
+
+    def record(self, held_s: float, evidence_nats: float, agreement_chi2: float, moved_chi2: float,
+               open_: bool) -> None:
+        """How the start of the segment was decided, kept in :attr:`starts`."""
+        self.starts.append({"held_s": held_s, "evidence_nats": evidence_nats, "agreement_chi2": agreement_chi2,
+                            "moved_chi2": moved_chi2, "open": open_})
+
+    def release(self) -> list:
+        """The raw samples of the rows held; the hold ends."""
+        held = [h[1] for h in self.held]
+        self.held, self.deciding = [], False
+        return held
+
+    def moved(self, times: np.ndarray, omega: np.ndarray, cov: np.ndarray) -> float:
+        """How far the rows of the previous check's re-solve moved with the data since: the mean over
+        them of the change of ω in the new re-solve's covariance (``cov``, (N, 3, 3)); inf at the first
+        check (or when the rows are not the same). Kept for the next check."""
+        last, self.last_resolve = self.last_resolve, (times, omega.copy())
+        if last is None or len(last[0]) > len(times) or not np.array_equal(last[0], times[:len(last[0])]):
+            return math.inf
+        m = len(last[0])
+        d = omega[:m] - last[1]
+        try:
+            return float(np.mean(np.einsum("ni,ni->n", d, np.linalg.solve(cov[:m], d[..., None])[..., 0])))
+        except np.linalg.LinAlgError:
+            return math.inf
+
+
 @dataclass
 class ChoiceState:
-    """What :class:`FixedLagSmoother` keeps to choose its model on the stream: the options as given
-    (``user_options``), whether it tunes the process noise (``tune``) and checks the model (``auto``),
-    whether the first choice is still to be made (``first_pending``, on ``buffer``, the first ``tune_n``
-    samples; a stretch cut short is tuned on from ``tune_min_n``), the ``history`` later choices are made
-    on, every ``retune_ns`` or when the ``local`` motion density outgrows the model; the choice being made
-    off the stream (``pending``, used when ``accepted``, the samples taken in, reaches its sample,
-    ``delay_n`` after the one that asked) and the waits for late ones."""
+    """The model :class:`FixedLagSmoother` uses and how it chooses it on the stream.
+
+    In use: ``options`` (the options of the model in use), ``model`` (the :class:`~.array_model.ArrayModel`
+    they make), ``stream_model`` (the model chosen, :mod:`gfimu.smoother.stream.model_choice`; None before the
+    first choice), ``models`` (every model chosen so far, oldest first), ``tuning`` (the newest process-noise
+    selection, :class:`gfimu.smoother.tuning.evidence.Tuning`, or None), ``jerk_factor`` (the local motion
+    density's factor on the motion model's stds, robust model).
+
+    To choose: the options as given (``user_options``), whether it tunes the process noise (``tune``) and
+    checks the model (``auto``, with the per-sample ML fit ``ml``), whether the first choice is still to be made
+    (``first_pending``, on ``buffer``, the first ``tune_n`` samples; a stretch cut short is tuned on from
+    ``tune_min_n``), the ``history`` later choices are made on, every ``retune_ns`` or when the ``local``
+    motion density outgrows the model; the choice being made off the stream (``pending``, used when
+    ``accepted``, the samples taken in, reaches its sample, ``delay_n`` after the one that asked) and the waits
+    for late ones."""
 
     user_options: SmootherOptions
     tune: bool
@@ -359,10 +477,56 @@ class ChoiceState:
     tune_min_n: int
     delay_n: int
     local: LocalDensity
+    options: SmootherOptions
+    model: model.ArrayModel
+    ml: MLEstimator | None = None
+    stream_model: StreamModel | None = None
+    models: list = field(default_factory=list)
+    tuning: object = None
+    jerk_factor: float = 1.0
     buffer: list = field(default_factory=list)
     pending: PendingChoice | None = None
     accepted: int = 0
     waits: list = field(default_factory=list)
+
+    def use(self, chosen: StreamModel, array: SensorArray, fast_measurement: bool) -> None:
+        """``chosen`` becomes the model in use."""
+        self.stream_model = chosen
+        self.models.append(chosen)
+        self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
+        self.options = chosen.options
+        self.model = model.ArrayModel(array, chosen.options, fast_measurement, chosen.accel_noise_scale)
+
+
+class SigmaRescale:
+    """σ of the states given out scaled by the misfit of their readings (:mod:`gfimu.smoother.solve.sigma_scale`):
+    the running ``scale`` and the ``readings`` of the samples not yet given out, by timestamp."""
+
+    def __init__(self, array: SensorArray) -> None:
+        self.scale = RunningSigmaScale(array)
+        self.readings: dict = {}
+
+    def scaled(self, states, m) -> tuple[StateEstimate, ...]:
+        """``states`` with σ scaled by the misfit of the readings given out so far, ``m`` the model in use."""
+        out = []
+        for s in states:
+            y = self.readings.pop(s.timestamp_ns, None)
+            if s.sigma_omega_b_radps is None or y is None:
+                out.append(s)
+                continue
+            x = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+            std = np.sqrt(m.accel_sigma_mps2 ** 2 + m.accel_noise_slope_mps2_per_radps ** 2 * float(x[:3] @ x[:3]))
+            self.scale.robust = (m.robust_loss, m.accel_robust_threshold) if m.accel_robust_threshold > 0 else None
+            sd = self.scale.scaled(y, x, np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
+                                                         s.sigma_specific_force_b_mps2]), std)
+            out.append(replace(s, sigma_omega_b_radps=sd[0:3], sigma_omega_dot_b_radps2=sd[3:6],
+                               sigma_specific_force_b_mps2=sd[6:9]))
+        return tuple(out)
+
+
+def _part(part: str, name: str, doc: str) -> property:
+    """A read-only attribute of :class:`FixedLagSmoother` kept in one of its parts."""
+    return property(lambda self: getattr(getattr(self, part), name), doc=doc)
 
 
 class FixedLagSmoother:
@@ -393,6 +557,16 @@ class FixedLagSmoother:
     batch smoother's tuner, and the push that fills the buffer returns all
     buffered states that have reached the lag. :attr:`tuning` then holds the
     selection and :attr:`options` the options in use.
+
+    Its state, in parts each with one job: ``config`` (:class:`StreamConfig`, fixed: lag, rate, gaps, engine),
+    ``_segment`` (:class:`Segment`: the window engine, its states and raw samples, the newest state; a new one at
+    each gap, clock reset or flush), ``_hold`` (:class:`StartHold`: the rows held at a segment's start and how
+    each start was decided), ``_choice`` (:class:`ChoiceState`: the model in use and how it is chosen on the
+    stream), ``_clock`` (:class:`StreamClock`: the stream's time and the samples dropped), ``_signs`` (the
+    streaming sign chain of ω, :class:`~gfimu.smoother.stream.model_choice.StreamSignChain`) and ``_sigma``
+    (:class:`SigmaRescale`, when σ is scaled by the misfit of the readings). The attributes tests, tools and
+    sessions read (:attr:`lag_s`, :attr:`options`, :attr:`model`, :attr:`models`, :attr:`starts`, ...) are
+    read-only views of these parts.
     """
 
     def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
@@ -422,73 +596,72 @@ class FixedLagSmoother:
         if not (isinstance(choice_delay_s, (int, float)) and math.isfinite(choice_delay_s) and choice_delay_s > 0):
             raise InputError(f"fixed-lag smoother: choice_delay_s must be a positive number, got {choice_delay_s!r}")
         self.array = array
-        self._row_shape = (array.n_axes,)
-        self.options = options
-        self.lag_s = float(lag_s)
-        self.rate_hz = float(rate_hz)
-        self.compute_sigma = bool(options.compute_sigma)
-        self.gap_factor = float(gap_factor)
-        self.fast_measurement = bool(fast_measurement)
-        self.engine = engine
-        self.model = model.ArrayModel(array, options, fast_measurement)
-        self.tuning = None  # gfimu.smoother.tuning.evidence.Tuning once chosen from the data
+        rate_hz = float(rate_hz)
+        self.config = StreamConfig(float(lag_s), rate_hz, float(gap_factor), max(2, int(round(warmup_s * rate_hz))),
+                                   engine, GtsamSettings(float(relinearize_threshold), int(relinearize_skip),
+                                                         max(float(marginalise_every_s), 2.0 / rate_hz)),
+                                   bool(branches), bool(fast_measurement), bool(options.compute_sigma))
+        array_model = model.ArrayModel(array, options, fast_measurement)
         tune = tunes_process_noise(options)
         auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
-        tune_n = stretch_samples(tune_window_s, self.rate_hz)  # (cut above STRETCH_RATE_HZ)
+        tune_n = stretch_samples(tune_window_s, rate_hz)  # (cut above STRETCH_RATE_HZ)
         self._choice = ChoiceState(
             options, tune, auto, tune or auto,
-            deque(maxlen=stretch_samples(max(model_window_s, tune_window_s), self.rate_hz)),
+            deque(maxlen=stretch_samples(max(model_window_s, tune_window_s), rate_hz)),
             int(round(retune_every_s * 1e9)), tune_n,
             # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
-            min(tune_n, max(2, int(round(1.0 * self.rate_hz)))),
-            max(1, int(math.ceil(choice_delay_s * self.rate_hz))), LocalDensity(array))
-        self.stream_model: StreamModel | None = None
-        """The model in use (:mod:`gfimu.smoother.stream.model_choice`), once chosen."""
-        self.models: list[StreamModel] = []
-        """Every model chosen so far, oldest first."""
-        self._jerk_factor = 1.0
-        self._ml = MLEstimator(workers=1) if auto else None
-        self._branches = bool(branches)
-        self._signs = StreamSignChain(int(math.ceil(self.lag_s * self.rate_hz)) + 2, plane_normal(np.concatenate(
+            min(tune_n, max(2, int(round(1.0 * rate_hz)))),
+            max(1, int(math.ceil(choice_delay_s * rate_hz))), LocalDensity(array), options, array_model,
+            MLEstimator(workers=1) if auto else None)
+        self._signs = StreamSignChain(int(math.ceil(self.config.lag_s * rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
-        self._nominal_dt_ns = 1e9 / self.rate_hz
-        self._warmup_n = max(2, int(round(warmup_s * self.rate_hz)))
-        self._gtsam = GtsamSettings(float(relinearize_threshold), int(relinearize_skip),
-                                    max(float(marginalise_every_s), 2.0 / self.rate_hz))
         self._clock = StreamClock(float(clock_reset_s))
         self.closed = False
-        self._sigma_scale = RunningSigmaScale(array) if self.compute_sigma and calibrates_stream(array, options) else None
-        self._readings: dict = {}  # t_ns -> accel of the samples not yet emitted (σ's running scale)
-        self.hold_max_s = 0.0  # the held start's longest span [s] (cut above STRETCH_RATE_HZ)
-        if engine == "numpy":
-            self.hold_max_s = float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / self.rate_hz)
-        self._check_every_ns = int(round(max(self.lag_s, 0.5) * 1e9))
-        self.starts: list[dict] = []
-        """How the start of each segment was decided (:meth:`_release_start`): ``held_s`` (how long its
-        first rows were held), ``evidence_nats`` (the log-likelihood ratio of its branch of ω over the next
-        best; inf: no other minimum), ``open`` (True: released at ``hold_max_s`` or at the segment's end
-        without reaching :data:`SIGN_DECISION_NATS`)."""
-        self.still_starts: list[float] = []
-        """The std [rad/s] of the prior ω = 0 of each segment that started still (:meth:`_still_start`)."""
-        self._held: list = []
+        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, options)
+                       else None)
+        # the held start's longest span [s] (cut above STRETCH_RATE_HZ; the numpy engine only)
+        self._hold = StartHold(float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / rate_hz) if engine == "numpy" else 0.0,
+                               int(round(max(self.config.lag_s, 0.5) * 1e9)))
         self._start_segment()
 
     # --- public API ---------------------------------------------------------
+    lag_s = _part("config", "lag_s", "A state is given smoothed this long [s] after its sample.")
+    rate_hz = _part("config", "rate_hz", "The nominal sample rate [Hz].")
+    gap_factor = _part("config", "gap_factor", "A step longer than this many nominal steps ends the segment.")
+    engine = _part("config", "engine", "The window engine (:data:`ENGINES`).")
+    fast_measurement = _part("config", "fast_measurement", "The measurement's fast kernels are used.")
+    compute_sigma = _part("config", "compute_sigma", "Every state given out carries its σ.")
+    options = _part("_choice", "options", "The options of the model in use.")
+    model = _part("_choice", "model", "The model in use (:class:`~gfimu.smoother.stream.array_model.ArrayModel`).")
+    stream_model = _part("_choice", "stream_model", "The model chosen on the stream "
+                         "(:mod:`gfimu.smoother.stream.model_choice`), once chosen.")
+    models = _part("_choice", "models", "Every model chosen so far, oldest first.")
+    tuning = _part("_choice", "tuning", "The newest process-noise selection "
+                   "(:class:`gfimu.smoother.tuning.evidence.Tuning`), once chosen from the data.")
+    hold_max_s = _part("_hold", "max_s", "The held start's longest span [s] (0: rows are never held; cut above "
+                       ":data:`STRETCH_RATE_HZ`).")
+    starts = _part("_hold", "starts", """How the start of each segment was decided (:meth:`_release_start`): ``held_s``
+        (how long its first rows were held), ``evidence_nats`` (the log-likelihood ratio of its branch of ω over the
+        next best; inf: no other minimum), ``agreement_chi2``, ``moved_chi2``, ``open`` (True: released at
+        ``hold_max_s`` or at the segment's end without reaching :data:`SIGN_DECISION_NATS`).""")
+    still_starts = _part("_hold", "still_starts", "The std [rad/s] of the prior ω = 0 of each segment that started "
+                         "still (:meth:`_still_start`).")
+
     @property
     def n_keys(self) -> int:
         """Number of variables currently held by the window solver (three per state)."""
-        return 0 if self._smoother is None else self._smoother.n_keys
+        return 0 if self._segment.engine is None else self._segment.engine.n_keys
 
     @property
     def n_factor_slots(self) -> int:
         """Number of factor slots in gtsam's graph (freed slots are reused); with the numpy
         engine, the number of preallocated window slots."""
-        return 0 if self._smoother is None else self._smoother.n_slots
+        return 0 if self._segment.engine is None else self._segment.engine.n_slots
 
     @property
     def window_length(self) -> int:
         """Number of samples in the current window (Python side)."""
-        return len(self._window) + len(self._warmup)
+        return len(self._segment.window) + len(self._segment.warmup)
 
     @property
     def choice_waits(self) -> list[float]:
@@ -541,7 +714,7 @@ class FixedLagSmoother:
                                          "another stream")
         t_ns = int(timestamp_ns)
         y = np.asarray(accel_row, dtype=float).reshape(-1)
-        if y.shape != self._row_shape:
+        if y.shape != (self.array.n_axes,):
             raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
         if not math.isfinite(y.sum()) and not np.all(np.isfinite(y)):  # (a finite sum: every value finite)
             bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
@@ -570,7 +743,7 @@ class FixedLagSmoother:
                 self._settle_choice()
                 smoothed.extend(self._end_segment())
                 self._clock.origin_ns = t_ns
-            elif dt_ns > self.gap_factor * self._nominal_dt_ns:
+            elif dt_ns > self.config.gap_factor * self.config.nominal_dt_ns:
                 self._settle_choice()
                 smoothed.extend(self._end_segment())
         else:
@@ -579,8 +752,8 @@ class FixedLagSmoother:
         self._choice.accepted += 1
         self._swap_choice()
         sample = (t_ns, y, gyro)
-        if self._sigma_scale is not None:
-            self._readings[t_ns] = y
+        if self._sigma is not None:
+            self._sigma.readings[t_ns] = y
         if self._choice.first_pending:
             self._choice.buffer.append(sample)
             if len(self._choice.buffer) < self._choice.tune_n:
@@ -588,34 +761,20 @@ class FixedLagSmoother:
             smoothed.extend(self._tune_and_replay())
         else:
             smoothed.extend(self._process(sample))
-        return FixedLagUpdate(self._scaled(smoothed), None if self._smoother is None else self._read(self._window[-1]))
+        seg = self._segment
+        return FixedLagUpdate(self._scaled(smoothed), None if seg.engine is None else self._read(seg.window[-1]))
 
     def _scaled(self, states) -> tuple[StateEstimate, ...]:
         """``states`` with σ scaled by the misfit of the readings emitted so far (:mod:`gfimu.smoother.solve.sigma_scale`)."""
-        if self._sigma_scale is None:
-            return tuple(states)
-        out = []
-        for s in states:
-            y = self._readings.pop(s.timestamp_ns, None)
-            if s.sigma_omega_b_radps is None or y is None:
-                out.append(s)
-                continue
-            m = self.model
-            x = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
-            std = np.sqrt(m.accel_sigma_mps2 ** 2 + m.accel_noise_slope_mps2_per_radps ** 2 * float(x[:3] @ x[:3]))
-            self._sigma_scale.robust = (m.robust_loss, m.accel_robust_threshold) if m.accel_robust_threshold > 0 else None
-            sd = self._sigma_scale.scaled(y, x, np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
-                                                                s.sigma_specific_force_b_mps2]), std)
-            out.append(replace(s, sigma_omega_b_radps=sd[0:3], sigma_omega_dot_b_radps2=sd[3:6],
-                               sigma_specific_force_b_mps2=sd[6:9]))
-        return tuple(out)
+        return tuple(states) if self._sigma is None else self._sigma.scaled(states, self.model)
 
     def _process(self, sample) -> list[StateEstimate]:
         """One sample into the current segment (no tuning, no gap check); the states due."""
         self._observe(sample)
-        if self._smoother is None:
-            self._warmup.append(sample)
-            if len(self._warmup) < self._warmup_n:
+        seg = self._segment
+        if seg.engine is None:
+            seg.warmup.append(sample)
+            if len(seg.warmup) < self.config.warmup_n:
                 return []
             self._initialise()
         else:
@@ -744,11 +903,12 @@ class FixedLagSmoother:
         value (so it keeps its branch), the others from the prediction as they came; a window that
         fails to solve again is kept as it was. Where the engine replays (``replays``: the numpy
         engine; gtsam's keeps its states)."""
-        if self._smoother is None or not self._smoother.replays or len(self._window) < 2:
+        seg = self._segment
+        if seg.engine is None or not seg.engine.replays or len(seg.window) < 2:
             return
-        entries, raws = list(self._window), list(self._raw)
+        entries, raws = list(seg.window), list(seg.raw)
         k0 = entries[0][0]
-        start = self._smoother.mean(k0)
+        start = seg.engine.mean(k0)
         engine = self._new_smoother()
         try:
             t, y, g = raws[0]
@@ -756,7 +916,7 @@ class FixedLagSmoother:
             for j in range(1, len(entries)):
                 k, t = entries[j]
                 _, y, g = raws[j]
-                step = self._step(raws[j - 1], raws[j], engine.mean(entries[j - 1][0]), self._jerk_factor)
+                step = self._step(raws[j - 1], raws[j], engine.mean(entries[j - 1][0]), self._choice.jerk_factor)
                 engine.advance(k, step, t, y, g, extra=self.model.sample_terms(t, y, g))
             engine.commit()
         except FilterFailure:
@@ -765,7 +925,7 @@ class FixedLagSmoother:
 
     def _go_on_with(self, engine) -> None:
         """The window solved again (``engine``) replaces the stream's: the sign chain starts again from it."""
-        self._smoother = engine
+        self._segment.engine = engine
         self._signs.reset()
         self._remember_newest()
 
@@ -777,13 +937,9 @@ class FixedLagSmoother:
         return part.select(sl), ml.select(sl)
 
     def _use(self, chosen: StreamModel) -> None:
-        self.stream_model = chosen
-        self.models.append(chosen)
-        self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
-        self.options = chosen.options
-        self.model = model.ArrayModel(self.array, chosen.options, self.fast_measurement, chosen.accel_noise_scale)
-        if self._smoother is not None:
-            self._smoother.set_model(self.model)
+        self._choice.use(chosen, self.array, self.config.fast_measurement)
+        if self._segment.engine is not None:
+            self._segment.engine.set_model(self.model)
 
     def _ml_motion(self, samples, part: Log):
         """The per-sample ML estimate of ``samples``, each computed once: kept in the samples' history
@@ -791,7 +947,7 @@ class FixedLagSmoother:
         rows = [s[3] if len(s) > 3 else None for s in samples]
         todo = [i for i, r in enumerate(rows) if r is None]
         if todo:
-            fresh = self._ml.estimate_motion(part.select(np.asarray(todo)))
+            fresh = self._choice.ml.estimate_motion(part.select(np.asarray(todo)))
             x = np.hstack([fresh.omega_b_radps, fresh.omega_dot_b_radps2, fresh.specific_force_b_mps2])
             for j, i in enumerate(todo):
                 rows[i] = x[j]
@@ -810,9 +966,9 @@ class FixedLagSmoother:
 
     def _batch_states(self, part: Log, problem, x0) -> list[StateEstimate]:
         """The batch smoother's states of ``part`` with ``problem``."""
-        res = solve(problem, x0, None, compute_sigma=self.compute_sigma)
+        res = solve(problem, x0, None, compute_sigma=self.config.compute_sigma)
         X = res.states
-        sd = np.sqrt(np.einsum("nii->ni", res.covariance)) if self.compute_sigma else None
+        sd = np.sqrt(np.einsum("nii->ni", res.covariance)) if self.config.compute_sigma else None
         return [StateEstimate(int(t), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
                               *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
                 for j, t in enumerate(part.timestamps_ns)]
@@ -835,14 +991,14 @@ class FixedLagSmoother:
         q = o.omega_dot_random_walk_radps2_per_sqrt_s
         if chosen.robust:
             c = chosen.check
-            w2 = 0.0 if self._prev is None else float(self._prev[1] @ self._prev[1])
+            w2 = 0.0 if self._segment.prev is None else float(self._segment.prev[1] @ self._segment.prev[1])
             var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
         else:
             var = self.model.mean_accel_var_mps2
         local = self._choice.local.push(sample[0], sample[1], var)
-        self._jerk_factor = 1.0
+        self._choice.jerk_factor = 1.0
         if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
-            self._jerk_factor = min(1.0, local / q)
+            self._choice.jerk_factor = min(1.0, local / q)
         due = sample[0] - chosen.chosen_at_ns >= self._choice.retune_ns
         # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
         # again at once (at most once a second), on the history that now holds the motion
@@ -863,8 +1019,8 @@ class FixedLagSmoother:
         self._settle_choice()
         out = self._scaled(self._end_segment())
         self._clock.last_ns = None
-        if self._sigma_scale is not None:
-            self._sigma_scale.reset()
+        if self._sigma is not None:
+            self._sigma.scale.reset()
         return out
 
     def close(self) -> tuple[StateEstimate, ...]:
@@ -888,43 +1044,34 @@ class FixedLagSmoother:
     def _end_segment(self) -> tuple[StateEstimate, ...]:
         """Every state of the current segment (and of a pending tuning stretch), and a fresh segment."""
         replayed = self._tune_and_replay(final=True) if self._choice.buffer else []
-        if self._smoother is None and self._warmup:
+        if self._segment.engine is None and self._segment.warmup:
             self._initialise()
-        if self._deciding and self._smoother is not None and self._held:
+        if self._hold.deciding and self._segment.engine is not None and self._hold.held:
             replayed = list(replayed) + self._release_start(final=True)
-        out = tuple(replayed) + tuple(self._read(entry, with_sigma=self.compute_sigma) for entry in self._window)
+        sigma = self.config.compute_sigma
+        out = tuple(replayed) + tuple(self._read(entry, with_sigma=sigma) for entry in self._segment.window)
         self._start_segment()
         return out
 
     # --- internals ------------------------------------------------------------
     def _start_segment(self) -> None:
-        self._smoother: WindowFilter | GtsamWindow | None = None  # the window engine of the segment
-        self._window: deque = deque()  # (index, timestamp_ns) of states not yet emitted
-        self._raw: deque = deque()  # (timestamp_ns, accel, gyro) of the same samples, for recovery
-        self._warmup: list = []
-        self._k = -1
-        self._prev = None  # (t_ns, omega, omega_dot, f) of the newest state (filtered)
-        self._prev_sample = None  # (t_ns, accel, gyro) of the newest state
+        self._segment = Segment()
         self._signs.reset()
-        self._deciding = self.hold_max_s > 0  # the segment's first rows are held (_hold_start)
-        self._held = []  # (t_ns, raw sample, filtered state) of the rows held so far
-        self._next_check_ns = None
-        self._last_resolve = None  # (timestamps, ω) of the held stretch's re-solve at the previous check
-        self._still_sigma = None  # std [rad/s] of the prior ω = 0 on the first state of a segment that starts still
+        self._hold.begin_segment()
 
     def _new_smoother(self):
         """The window engine of a new segment (:data:`ENGINES`)."""
-        if self.engine == "numpy":
-            lag_n = int(math.ceil(self.lag_s * self.rate_hz * self.gap_factor)) + 4
-            return WindowFilter(self.model, capacity=4 * lag_n, branches=self._branches)
+        if self.config.engine == "numpy":
+            lag_n = int(math.ceil(self.config.lag_s * self.config.rate_hz * self.config.gap_factor)) + 4
+            return WindowFilter(self.model, capacity=4 * lag_n, branches=self.config.branches)
         # Keys carry block-quantised timestamps, so gtsam marginalises one block of
         # states at a time (one re-elimination of the window per block rather than
         # per sample, which would also relinearise the window's factors). Every
         # state must be read at t + lag before its block goes: gtsam's lag is the
         # requested lag plus one block plus the longest step that is not a gap.
-        margin_s = (self.gap_factor + 0.5) / self.rate_hz
-        g = self._gtsam
-        return GtsamWindow(self.model, self.lag_s + g.block_s + margin_s, self._stamp, g.relinearize_threshold,
+        margin_s = (self.config.gap_factor + 0.5) / self.config.rate_hz
+        g = self.config.gtsam
+        return GtsamWindow(self.model, self.config.lag_s + g.block_s + margin_s, self._stamp, g.relinearize_threshold,
                            g.relinearize_skip, g.factorization)
 
     def _time_s(self, t_ns: int) -> float:
@@ -932,7 +1079,7 @@ class FixedLagSmoother:
 
     def _stamp(self, t_ns: int) -> float:
         """Timestamp given to gtsam: the start of the sample's marginalisation block."""
-        block_s = self._gtsam.block_s
+        block_s = self.config.gtsam.block_s
         return math.floor(self._time_s(t_ns) / block_s) * block_s
 
     def _initialise(self, omega_hint=None) -> None:
@@ -944,48 +1091,49 @@ class FixedLagSmoother:
         A segment whose warm-up shows the body at rest (:meth:`_still_start`) starts from ω = 0 with a
         prior ω = 0 on its first state; its start is not held (the sign of ω is moot at ω = 0).
         """
-        times_ns = np.array([s[0] for s in self._warmup], dtype=np.int64)
-        accel = np.vstack([s[1] for s in self._warmup])
+        seg = self._segment
+        times_ns = np.array([s[0] for s in seg.warmup], dtype=np.int64)
+        accel = np.vstack([s[1] for s in seg.warmup])
         gyro = None
-        if self.array.gyroscope is not None and self.options.use_gyro and all(s[2] is not None for s in self._warmup):
-            gyro = np.vstack([s[2] for s in self._warmup])
+        if self.array.gyroscope is not None and self.options.use_gyro and all(s[2] is not None for s in seg.warmup):
+            gyro = np.vstack([s[2] for s in seg.warmup])
         if len(times_ns) >= 2:
             part = Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag warm-up")
             x0 = initial_estimate(part, self.options)  # 'sign-resolving' or 'ml'
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
+        still_sigma = None  # std [rad/s] of a prior ω = 0 on the first state of a segment that starts still
         if omega_hint is None:
-            self._still_sigma = self._still_start(times_ns, accel, gyro)
-            if self._still_sigma is not None:
+            still_sigma = self._still_start(times_ns, accel, gyro)
+            if still_sigma is not None:
                 x0[:, OMEGA] = 0.0
-                self._deciding = False
-                self.still_starts.append(self._still_sigma)
+                self._hold.deciding = False
+                self._hold.still_starts.append(still_sigma)
         if omega_hint is not None and len(x0) >= 2:
             if np.sum((x0[-2, OMEGA] + omega_hint) ** 2) < np.sum((x0[-2, OMEGA] - omega_hint) ** 2):
                 x0[:, OMEGA] *= -1.0
-        self._smoother = self._new_smoother()
-        engine = self._smoother
-        t_ns = self._warmup[0][0]
+        seg.engine = engine = self._new_smoother()
+        t_ns = seg.warmup[0][0]
         try:
-            for j, (t_ns, y, g) in enumerate(self._warmup):
-                self._k += 1
+            for j, (t_ns, y, g) in enumerate(seg.warmup):
+                seg.k += 1
                 extra = self.model.sample_terms(t_ns, y, g)
                 if j == 0:
-                    engine.begin(self._k, t_ns, y, g, start=x0[j], extra=extra)
-                    if self._still_sigma is not None and omega_hint is None:
+                    engine.begin(seg.k, t_ns, y, g, start=x0[j], extra=extra)
+                    if still_sigma is not None:
                         H = np.zeros((3, 9))
-                        H[:, OMEGA] = np.eye(3) / self._still_sigma
+                        H[:, OMEGA] = np.eye(3) / still_sigma
                         engine.update_linear(H, np.zeros(3))
                 else:
-                    engine.advance(self._k, self._step(self._warmup[j - 1], (t_ns, y, g), x0[j - 1], 1.0), t_ns, y, g,
+                    engine.advance(seg.k, self._step(seg.warmup[j - 1], (t_ns, y, g), x0[j - 1], 1.0), t_ns, y, g,
                                    extra=extra, start=x0[j])
-                self._window.append((self._k, t_ns))
-                self._raw.append((t_ns, y, g))
+                seg.window.append((seg.k, t_ns))
+                seg.raw.append((t_ns, y, g))
             engine.commit()
         except FilterFailure as err:
             raise self._failure(t_ns, err) from err
-        self._warmup = []
+        seg.warmup = []
         self._remember_newest()
 
     def _still_start(self, times_ns: np.ndarray, accel: np.ndarray, gyro) -> float | None:
@@ -996,7 +1144,7 @@ class FixedLagSmoother:
         the check found inconsistent with a rigid body or constant, with a gyroscope (it measures ω),
         or with the gtsam engine."""
         check = None if self.stream_model is None else self.stream_model.check
-        if self.engine != "numpy" or gyro is not None or check is None or not check.consistent or check.constant:
+        if self.config.engine != "numpy" or gyro is not None or check is None or not check.consistent or check.constant:
             return None
         sigma = np.asarray(self.model.accel_sigma_mps2, dtype=float)
         rms = math.sqrt(float(np.mean(sigma ** 2)))
@@ -1010,20 +1158,21 @@ class FixedLagSmoother:
 
     def _add_sample(self, sample) -> None:
         t_ns, y, gyro = sample
-        k_prev = self._k
-        self._k += 1
-        k = self._k
+        seg = self._segment
+        k_prev = seg.k
+        seg.k += 1
+        k = seg.k
         try:
-            step = self._step(self._prev_sample, sample, np.concatenate(self._prev[1:]), self._jerk_factor)
-            self._smoother.advance(k, step, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro), prev=self._prev[1:])
-            self._smoother.commit()
+            step = self._step(seg.prev_sample, sample, np.concatenate(seg.prev[1:]), self._choice.jerk_factor)
+            seg.engine.advance(k, step, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro), prev=seg.prev[1:])
+            seg.engine.commit()
             self._follow_sign(k, t_ns)
         except FilterFailure as err:
-            self._k = k_prev
+            seg.k = k_prev
             self._recover(sample, self._failure(t_ns, err))
             return
-        self._window.append((k, t_ns))
-        self._raw.append(sample)
+        seg.window.append((k, t_ns))
+        seg.raw.append(sample)
         self._remember_newest()
 
     def _step(self, previous, sample, x0: np.ndarray, motion_factor: float):
@@ -1038,10 +1187,11 @@ class FixedLagSmoother:
         scale = None if self.stream_model is None else self.stream_model.sign_scale_radps
         if scale is None:
             return
-        x = self._smoother.mean(k)
-        moved = self._signs.push(k, t_ns, x[0:3], x[3:6], scale, self._window[0][0] if self._window else k)
+        seg = self._segment
+        x = seg.engine.mean(k)
+        moved = self._signs.push(k, t_ns, x[0:3], x[3:6], scale, seg.window[0][0] if seg.window else k)
         if moved is not None:
-            self._smoother.move_branch(*moved)
+            seg.engine.move_branch(*moved)
 
     def _recover(self, sample, err: FixedLagSmootherError) -> None:
         """After a failed update: rebuild the window from its raw samples, once.
@@ -1051,41 +1201,43 @@ class FixedLagSmoother:
         kept from the last filtered state). If that fails too the error is raised.
         """
         warnings.warn(f"{err}; re-initialising the fixed-lag window", RuntimeWarning, stacklevel=3)
-        samples = list(self._raw) + [sample]
-        hint = self._prev[1]
-        held, deciding = self._held, self._deciding
+        samples = list(self._segment.raw) + [sample]
+        hint = self._segment.prev[1]
+        held, deciding = self._hold.held, self._hold.deciding
         self._start_segment()
-        self._held, self._deciding = held, deciding  # the rows held stay held
-        self._warmup = samples
+        self._hold.held, self._hold.deciding = held, deciding  # the rows held stay held
+        self._segment.warmup = samples
         self._initialise(omega_hint=hint)
 
     def _remember_newest(self) -> None:
-        k, t_ns = self._window[-1]
+        seg = self._segment
+        k, t_ns = seg.window[-1]
         w, dw, f = self._values_of(k, t_ns)
-        self._prev = (t_ns, w, dw, f)
-        self._prev_sample = self._raw[-1]
+        seg.prev = (t_ns, w, dw, f)
+        seg.prev_sample = seg.raw[-1]
 
     def _values_of(self, k: int, t_ns: int):
         try:
-            x = self._smoother.mean(k)
+            x = self._segment.engine.mean(k)
         except FilterFailure as err:
             raise self._failure(t_ns, err, "could not solve the state") from err
         return x[0:3].copy(), x[3:6].copy(), x[6:9].copy()
 
     def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
         k, t_ns = entry
-        if self._prev is not None and k == self._k:
-            w, dw, f = self._prev[1], self._prev[2], self._prev[3]
+        seg = self._segment
+        if seg.prev is not None and k == seg.k:
+            w, dw, f = seg.prev[1], seg.prev[2], seg.prev[3]
         else:
             try:
-                x = np.array(self._smoother.mean(k), dtype=float)  # one copy, its three parts views of it
+                x = np.array(seg.engine.mean(k), dtype=float)  # one copy, its three parts views of it
             except FilterFailure as err:
                 raise self._failure(t_ns, err, "could not solve the state") from err
             w, dw, f = x[0:3], x[3:6], x[6:9]
         sig = (None, None, None)
         if with_sigma:
             try:
-                sd = self._smoother.sigma(k)
+                sd = seg.engine.sigma(k)
             except FilterFailure as err:
                 raise self._failure(t_ns, err, "could not compute the uncertainty") from err
             sig = (sd[0:3], sd[3:6], sd[6:9])
@@ -1093,24 +1245,24 @@ class FixedLagSmoother:
 
     def _emit_due(self) -> list[StateEstimate]:
         """States at or before newest - lag: final now, marginalised at the next update."""
-        window, raw, engine = self._window, self._raw, self._smoother
+        window, raw, engine = self._segment.window, self._segment.raw, self._segment.engine
         newest_ns = window[-1][1]
-        cutoff_ns = newest_ns - int(round(self.lag_s * 1e9)) + 1000  # 1 µs tolerance
+        cutoff_ns = newest_ns - int(round(self.config.lag_s * 1e9)) + 1000  # 1 µs tolerance
         out = []
         if len(window) < 2 or window[0][1] > cutoff_ns:
-            return self._hold_start(newest_ns) if self._deciding else out
+            return self._hold_start(newest_ns) if self._hold.deciding else out
         readings = lambda i: raw[i][1]  # noqa: E731 (the window's readings, for the branch decision)
         while len(window) > 1 and window[0][1] <= cutoff_ns:
             engine.settle(readings)
-            if self._deciding:  # held: its filtered value is kept as the start of the re-solve
+            if self._hold.deciding:  # held: its filtered value is kept as the start of the re-solve
                 k, t_ns = window.popleft()
-                self._held.append((t_ns, raw.popleft(), engine.mean(k).copy()))
+                self._hold.held.append((t_ns, raw.popleft(), engine.mean(k).copy()))
                 engine.drop_oldest()
                 continue
-            out.append(self._read(window.popleft(), with_sigma=self.compute_sigma))
+            out.append(self._read(window.popleft(), with_sigma=self.config.compute_sigma))
             raw.popleft()
             engine.drop_oldest()
-        if self._deciding:
+        if self._hold.deciding:
             return self._hold_start(newest_ns)
         return out
 
@@ -1118,14 +1270,8 @@ class FixedLagSmoother:
     def _hold_start(self, newest_ns: int) -> list[StateEstimate]:
         """While the start of the segment is held (its rows past the lag kept back): every
         ``max(lag_s, 0.5 s)`` the evidence for the branch of ω is weighed (:meth:`_release_start`)."""
-        if not self._held:
+        if not self._hold.held or not self._hold.due(newest_ns):
             return []
-        if self._next_check_ns is None:
-            self._next_check_ns = self._held[0][0] + self._check_every_ns
-        held_s = (self._held[-1][0] - self._held[0][0]) * 1e-9
-        if newest_ns < self._next_check_ns and held_s < self.hold_max_s:
-            return []
-        self._next_check_ns = newest_ns + self._check_every_ns
         return self._release_start(final=False)
 
     def _start_evidence(self):
@@ -1136,8 +1282,8 @@ class FixedLagSmoother:
         plane, both). Returns (problem, best solution, the best other minimum's solution or None,
         log-likelihood ratio of the best over it [nats]: the difference of their costs, each the negative
         log-likelihood of the stretch up to one constant; inf when every start ends in the best minimum)."""
-        samples = [h[1] for h in self._held] + list(self._raw)
-        X = np.vstack([h[2] for h in self._held] + [self._smoother.mean(k) for k, _ in self._window])
+        samples = [h[1] for h in self._hold.held] + list(self._segment.raw)
+        X = np.vstack([h[2] for h in self._hold.held] + [self._segment.engine.mean(k) for k, _ in self._segment.window])
         part = self._stretch_log(samples)
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
         problem = make_problem(part, replace(self.options, tune_process_noise=False), scale, X[:, OMEGA])
@@ -1169,47 +1315,44 @@ class FixedLagSmoother:
         ``compute_sigma``) is the solve's, widened by the other branch's share of the posterior, ``p (1 -
         p) (ω - ω')²`` per axis with ``p = 1 / (1 + e^Λ)``: a start released undecided says so in its σ
         (and in :attr:`starts`)."""
-        if not self._held:
+        hold = self._hold
+        if not hold.held:
             return []
         try:
             problem, best, other, evidence = self._start_evidence()
         except (np.linalg.LinAlgError, FloatingPointError, ValueError):  # not solvable: the rows as filtered
-            out = [StateEstimate(int(t), x[0:3].copy(), x[3:6].copy(), x[6:9].copy()) for t, _, x in self._held]
-            self.starts.append({"held_s": (self._held[-1][0] - self._held[0][0]) * 1e-9, "evidence_nats": math.nan,
-                                "agreement_chi2": math.nan, "moved_chi2": math.nan, "open": True})
-            self._held, self._deciding = [], False
+            out = [StateEstimate(int(t), x[0:3].copy(), x[3:6].copy(), x[6:9].copy()) for t, _, x in hold.held]
+            hold.record(hold.held_s, math.nan, math.nan, math.nan, True)
+            hold.release()
             return out
-        held_s = (self._held[-1][0] - self._held[0][0]) * 1e-9 if self._held else 0.0
+        held_s = hold.held_s
         X = best.states
         cov = solve(problem, X, compute_sigma=True, max_iterations=1).covariance
-        j = len(self._held)  # the next row the stream would give, lag_s behind
-        d = self._smoother.mean(self._window[0][0])[0:3] - X[j, OMEGA]
+        j = len(hold.held)  # the next row the stream would give, lag_s behind
+        d = self._segment.engine.mean(self._segment.window[0][0])[0:3] - X[j, OMEGA]
         try:
             chi2 = float(d @ np.linalg.solve(cov[j][OMEGA, OMEGA], d))
         except np.linalg.LinAlgError:
             chi2 = math.inf
-        times = [h[0] for h in self._held] + [t for _, t in self._window]
-        moved = self._moved(np.asarray(times, dtype=np.int64), X[:, OMEGA], cov[:, OMEGA, OMEGA])
+        times = [h[0] for h in hold.held] + [t for _, t in self._segment.window]
+        moved = hold.moved(np.asarray(times, dtype=np.int64), X[:, OMEGA], cov[:, OMEGA, OMEGA])
         decided = evidence >= SIGN_DECISION_NATS and chi2 <= AGREEMENT_CHI2 and moved <= AGREEMENT_CHI2
-        if not (decided or final or held_s >= self.hold_max_s):
+        if not (decided or final or held_s >= hold.max_s):
             return []
         sd = None
-        if self.compute_sigma:
+        if self.config.compute_sigma:
             sd = np.sqrt(np.einsum("nii->ni", cov))
             if other is not None:
                 p = 1.0 / (1.0 + math.exp(min(evidence, 700.0)))
                 sd[:, OMEGA] = np.sqrt(sd[:, OMEGA] ** 2 + p * (1.0 - p) * (X[:, OMEGA] - other.states[:, OMEGA]) ** 2)
-        n_out = len(times) if final else len(self._held)
+        n_out = len(times) if final else len(hold.held)
         out = [StateEstimate(int(times[j]), X[j, OMEGA].copy(), X[j, OMEGA_DOT].copy(), X[j, SPECIFIC_FORCE].copy(),
                              *((None,) * 3 if sd is None else (sd[j, OMEGA], sd[j, OMEGA_DOT], sd[j, SPECIFIC_FORCE])))
                for j in range(n_out)]
-        self.starts.append({"held_s": held_s, "evidence_nats": evidence, "agreement_chi2": chi2, "moved_chi2": moved,
-                            "open": not decided})
-        self._deciding = False
-        held = [h[1] for h in self._held]
-        self._held = []
+        hold.record(held_s, evidence, chi2, moved, not decided)
+        held = hold.release()
         if final:
-            self._window.clear()
+            self._segment.window.clear()
             return out
         self._restart_window(X, held)
         return out
@@ -1218,40 +1361,24 @@ class FixedLagSmoother:
         """The held rows of a tuning stretch whose batch solution ``batch`` comes out (:meth:`_tune_and_replay`):
         the batch smoother has decided them on the whole stretch; the window goes on from its states. Returns
         the number of held rows so released (0 when nothing is held or the rows are not the stretch's)."""
-        n = len(self._held)
-        rows = [h[0] for h in self._held] + [t for _, t in self._window]
-        if not (self._deciding and n) or len(batch) < len(rows) or any(
+        hold = self._hold
+        n = len(hold.held)
+        rows = [h[0] for h in hold.held] + [t for _, t in self._segment.window]
+        if not (hold.deciding and n) or len(batch) < len(rows) or any(
                 batch[j].timestamp_ns != t for j, t in enumerate(rows)):
             return 0
         X = np.array([np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
                       for s in batch[:len(rows)]])
-        self.starts.append({"held_s": (rows[n - 1] - rows[0]) * 1e-9, "evidence_nats": math.nan,
-                            "agreement_chi2": math.nan, "moved_chi2": math.nan, "open": False})
-        held = [h[1] for h in self._held]
-        self._held, self._deciding = [], False
-        self._restart_window(X, held)
+        hold.record(hold.held_s, math.nan, math.nan, math.nan, False)
+        self._restart_window(X, hold.release())
         return n
-
-    def _moved(self, times: np.ndarray, omega: np.ndarray, cov: np.ndarray) -> float:
-        """How far the rows of the previous check's re-solve moved with the data since: the mean over
-        them of the change of ω in the new re-solve's covariance (``cov``, (N, 3, 3)); inf at the first
-        check (or when the rows are not the same). Kept for the next check."""
-        last, self._last_resolve = self._last_resolve, (times, omega.copy())
-        if last is None or len(last[0]) > len(times) or not np.array_equal(last[0], times[:len(last[0])]):
-            return math.inf
-        m = len(last[0])
-        d = omega[:m] - last[1]
-        try:
-            return float(np.mean(np.einsum("ni,ni->n", d, np.linalg.solve(cov[:m], d[..., None])[..., 0])))
-        except np.linalg.LinAlgError:
-            return math.inf
 
     def _restart_window(self, X: np.ndarray, held: list) -> None:
         """The window solved again from the held samples ``held`` and its own, each linearised at its
         re-solved state (rows of ``X``), the held ones then marginalised: the stream goes on from the
         decided branch with what the held rows told. A window that fails to solve again is kept as it was."""
-        raws = held + list(self._raw)
-        k0 = self._window[0][0] - len(held)
+        raws = held + list(self._segment.raw)
+        k0 = self._segment.window[0][0] - len(held)
         engine = self._new_smoother()
         try:
             for j, (t, y, g) in enumerate(raws):
