@@ -178,6 +178,7 @@ def test_timing_counts_jitter_gaps_repeats_and_backward_steps():
     assert timing_of(jittered).jitter_s == pytest.approx(np.sqrt(2) * 200e-6, rel=0.1)  # steps: difference of two
 
 
+@pytest.mark.slow
 def test_cli_text_json_figure_and_refusals(tmp_path, base, capsys):
     env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     folder = tmp_path / "log"

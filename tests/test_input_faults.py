@@ -288,6 +288,7 @@ def test_a_gyroscope_reading_of_1e308_is_read_as_nan_and_named(tmp_path):
     assert np.all(np.isfinite(np.loadtxt(out, delimiter=",", skiprows=1)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("value", ["1e308", "nan"])
 def test_live_replaces_a_reading_beyond_any_range_as_estimate_does(log, tmp_path, value):
     """A reading of 1e308 or NaN in the stream is replaced by the screening, as gfimu estimate replaces it in the

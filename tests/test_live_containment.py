@@ -182,6 +182,7 @@ def test_a_rate_that_halves_mid_stream_is_measured_again(tmp_path):
     assert second < max(3 * first, 0.05), (first, second)
 
 
+@pytest.mark.slow
 def test_a_second_live_session_on_the_same_output_is_refused(log_dir, tmp_path):
     """One session writing l.csv (on an idle pipe); a second one on the same file: exit 2, one line, before any
     work; the first goes on and its file holds its own rows only."""

@@ -137,6 +137,7 @@ def _packet(counter: int, ticks: int, raw: np.ndarray) -> bytes:
     return body + struct.pack(">H", sum(body) % 65536)
 
 
+@pytest.mark.slow
 def test_a_tcp_reset_ends_the_session_with_the_summary(tmp_path):
     """The board's server resets the connection: a line saying so, the summary, exit 1, and the rows
     estimated before it are in the file."""

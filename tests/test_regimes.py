@@ -202,6 +202,7 @@ def test_foreign_per_sample_recovers_pre_impact_omega(run, method):
     assert rmse == pytest.approx(scale_error, rel=0.1)
 
 
+@pytest.mark.slow
 def test_foreign_batch_not_worse(run):
     check(run("foreign-ff-impact-4kHz"), "smoother")
 
