@@ -337,20 +337,28 @@ class WindowFilter:
             return
         Ts, us, Ws = ep.T[:ep.n], ep.u[:ep.n], ep.W[:ep.n]
         for k0, k1, first in ep.take(k_stop, base + self._lo, self.lazy_steps):
-            a, b = k0 - base, k1 - base
             if self.compiled:
                 T, u, W = kernels.compose_epochs(Ts, us, Ws, first)
-                kernels.flush_window(T, u, W, self._mean[a:b], self._var[a:b], self._cross[a:b])
-                continue
-            T, u, W = Ts[first].copy(), us[first].copy(), Ws[first].copy()
-            for e in range(first + 1, len(Ts)):
-                u = u + T @ us[e]
-                W = W + T @ Ws[e] @ T.T
-                T = T @ Ts[e]
-            C = self._cross[a:b]
-            self._mean[a:b] += np.einsum("lij,j->li", C, u)
-            self._var[a:b] -= np.einsum("lij,jk,lik->li", C, W, C)
-            self._cross[a:b] = C @ T
+            else:
+                T, u, W = Ts[first].copy(), us[first].copy(), Ws[first].copy()
+                for e in range(first + 1, len(Ts)):
+                    u = u + T @ us[e]
+                    W = W + T @ Ws[e] @ T.T
+                    T = T @ Ts[e]
+            self._apply(T, u, W, k0 - base, k1 - base)
+
+    def _apply(self, T: np.ndarray, u: np.ndarray, W: np.ndarray, a: int, b: int) -> None:
+        """The factors ``(T, u, W)`` applied to the states in slots ``[a, b)``: ``m += C u``, ``v -= diag(C W Cᵀ)``,
+        ``C ← C T``."""
+        if self.compiled:
+            kernels.flush_window(T, u, W, self._mean[a:b], self._var[a:b], self._cross[a:b])
+            return
+        C = self._cross[a:b]
+        self._mean[a:b] += np.einsum("lij,j->li", C, u)
+        self._var[a:b] -= np.einsum("lij,jk,lik->li", C, W, C)
+        n = b - a
+        tmp = np.matmul(C.reshape(9 * n, 9), T, out=self._tmp[a:b].reshape(9 * n, 9))
+        self._cross[a:b] = tmp.reshape(n, 9, 9)
 
     def _flush(self) -> None:
         """Bring the old states up to date: every update moves each state of the window by products
@@ -360,17 +368,8 @@ class WindowFilter:
         the same numbers to rounding. The stale states are brought up to date first (:meth:`_bring_up`)."""
         self._bring_up(math.inf)
         self._epochs.clear()
-        lo, split = self._lo, self._split
-        if split > lo and self.compiled:
-            kernels.flush_window(self._T, self._u, self._W, self._mean[lo:split], self._var[lo:split],
-                                 self._cross[lo:split])
-        elif split > lo:
-            C = self._cross[lo:split]
-            self._mean[lo:split] += np.einsum("lij,j->li", C, self._u)
-            self._var[lo:split] -= np.einsum("lij,jk,lik->li", C, self._W, C)
-            n = split - lo
-            tmp = np.matmul(C.reshape(9 * n, 9), self._T, out=self._tmp[lo:split].reshape(9 * n, 9))
-            self._cross[lo:split] = tmp.reshape(n, 9, 9)
+        if self._split > self._lo:
+            self._apply(self._T, self._u, self._W, self._lo, self._split)
         self._T = np.eye(9)
         self._u = np.zeros(9)
         self._W = np.zeros((9, 9))
@@ -446,8 +445,7 @@ class WindowFilter:
 
     def _means(self, a: int, b: int) -> np.ndarray:
         """The means of the states in slots ``[a, b)`` (a copy), the lazy ones given the updates since."""
-        if self._epochs.stale and self._epochs.stale[0][0] < self._base + b:
-            self._bring_up(self._base + b)
+        self._bring_up(self._base + b)
         X = self._mean[a:b].copy()
         lazy = min(b, self._split) - a
         if lazy > 0:
@@ -529,8 +527,7 @@ class WindowFilter:
         if step is None:
             return 0
         F, Q = step
-        if self._epochs.stale and self._epochs.stale[0][0] < k0 + 2:
-            self._bring_up(k0 + 2)
+        self._bring_up(k0 + 2)
         if self.compiled:
             e2 = kernels.window_step_residual2(F, Q, self._mean, self._cross, self._u, self._split, lo)
             if e2 < 0:  # singular
