@@ -12,29 +12,15 @@ consistent log.
 from __future__ import annotations
 
 import ast
-import importlib.util
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from tool_modules import TOOLS, load_tool
 
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
-
-
-def _load(name: str):
-    if str(TOOLS) not in sys.path:
-        sys.path.insert(0, str(TOOLS))
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-fs = sys.modules.get("foreign_sim") or _load("foreign_sim")
-rm = _load("regime_matrix")
+fs = load_tool("foreign_sim")
+rm = load_tool("regime_matrix")
 
 Cell = rm.Cell
 CELLS = {c.name: c for c in (

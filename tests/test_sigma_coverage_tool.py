@@ -1,29 +1,12 @@
 """tools/sigma_coverage.py: σ's coverage on simulated cells with a misfit built from physics, known truth."""
 
-import importlib.util
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from tool_modules import load_tool
 
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
-
-
-def _load(name: str):
-    if name in sys.modules:
-        return sys.modules[name]
-    if str(TOOLS) not in sys.path:
-        sys.path.insert(0, str(TOOLS))
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-sc = _load("sigma_coverage")
+sc = load_tool("sigma_coverage")
 
 
 def test_spread_is_the_binomial_std_for_independent_samples_and_grows_with_correlation():

@@ -1,29 +1,11 @@
 """tools/sigma_misfit_study.py: the variance factor and the coverage shares it prints, on known numbers."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from gfimu.array import cube_array
+from tool_modules import load_tool
 
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
-
-
-def _load(name: str):
-    if name in sys.modules:
-        return sys.modules[name]
-    if str(TOOLS) not in sys.path:
-        sys.path.insert(0, str(TOOLS))
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-study = _load("sigma_misfit_study")
+study = load_tool("sigma_misfit_study")
 
 
 def test_variance_factor_of_white_noise_at_the_true_states_is_one_and_a_spike_raises_it_unless_weighted():
