@@ -126,6 +126,29 @@ def build(mc: MisfitCell, folder: Path):
 MOVING_RADPS = 2.0
 
 
+def moving_recording(rec: Path, folder: Path, seconds: float | None = None):
+    """A MIMU4444 recording as σ is measured on it: converted into ``folder`` (its first ``seconds`` when
+    given) and screened as ``gfimu estimate`` screens it; (log, reference, the rows whose reference is valid
+    and turns faster than :data:`MOVING_RADPS`), or the converter's message (a str) where it failed."""
+    from gfimu.readings import screen_log
+
+    out = folder / rec.parent.name
+    done = subprocess.run([sys.executable, "-m", "gfimu", "convert", "mimu4444", str(rec), "--out", str(out)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        return done.stderr.strip()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log = gio.read_log(out)
+        if seconds:
+            log = log.select(slice(0, int(round(seconds * log.rate_hz))))
+        reference, invalid = log.reference, log.invalid_reference
+        log, _ = screen_log(log)
+    valid = np.ones(len(log), bool) if invalid is None else ~np.asarray(invalid, bool)
+    valid &= np.linalg.norm(reference.omega_b_radps, axis=1) > MOVING_RADPS
+    return log, reference, valid
+
+
 def run_both(log, method: str):
     """(motion, white σ of ω (N, 3)) of ``method`` on ``log`` (screened) in one run: the σ the smoother
     reports, and the one it had before the scaling (recorded where the scaling takes it in)."""
@@ -258,19 +281,11 @@ def main(argv=None) -> int:
             rows_for(mc.name, log, omega, methods)
         for rec in args.recordings:
             name = f"{rec.parent.name} (MIMU4444)"
-            out = Path(tmp) / rec.parent.name
-            done = subprocess.run([sys.executable, "-m", "gfimu", "convert", "mimu4444", str(rec), "--out", str(out)],
-                                  capture_output=True, text=True)
-            if done.returncode != 0:
-                print(f"| {name} | | | convert failed: {done.stderr.strip()} ||||||||")
+            got = moving_recording(rec, Path(tmp))
+            if isinstance(got, str):
+                print(f"| {name} | | | convert failed: {got} ||||||||")
                 continue
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                log = gio.read_log(out)
-                reference, invalid = log.reference, log.invalid_reference
-                log, _ = screen_log(log)
-            valid = np.ones(len(log), bool) if invalid is None else ~np.asarray(invalid, bool)
-            valid &= np.linalg.norm(reference.omega_b_radps, axis=1) > MOVING_RADPS
+            log, reference, valid = got
             rows_for(name, log, reference.omega_b_radps, methods, valid, reference)
     print(f"\nShares of samples with |ω error| < 1σ and < 2σ per axis (a Gaussian error of that σ: 68.3 %, 95.4 %); "
           "±: the spread of a 1σ share from the count of independent samples; "

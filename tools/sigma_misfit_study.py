@@ -25,7 +25,6 @@ then the same two fixed-lag rows on a simulated log whose misfit is isotropic an
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
 import tempfile
 import warnings
@@ -101,28 +100,14 @@ def variance_factor(array, accel, states, noise, robust, rows) -> float:
 
 
 def recording(path: Path, seconds: float | None, loss) -> None:
-    from gfimu import io as gio
-    from gfimu.readings import screen_log
-    from sigma_coverage import MOVING_RADPS, aligned
+    from sigma_coverage import aligned, moving_recording
 
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "log"
-        done = subprocess.run([sys.executable, "-m", "gfimu", "convert", "mimu4444", str(path), "--out", str(out)],
-                              capture_output=True, text=True)
-        if done.returncode != 0:
-            print(f"{path}: convert failed: {done.stderr.strip()}")
-            return
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            log = gio.read_log(out)
-    if seconds:
-        log = log.select(slice(0, int(round(seconds * log.rate_hz))))
-    reference, invalid = log.reference, log.invalid_reference
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        log, _ = screen_log(log)
-    rows = np.ones(len(log), bool) if invalid is None else ~np.asarray(invalid, bool)
-    rows &= np.linalg.norm(reference.omega_b_radps, axis=1) > MOVING_RADPS
+        got = moving_recording(path, Path(tmp), seconds)
+    if isinstance(got, str):
+        print(f"{path}: convert failed: {got}")
+        return
+    log, reference, rows = got
     with captured() as seen:
         fixed = motion_of("fixed-lag", log)
         batch = motion_of("smoother", log)
