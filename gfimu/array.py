@@ -7,6 +7,7 @@ Pure maths, no I/O (reading and writing ``array.toml`` lives in
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -141,8 +142,9 @@ class SensorArray:
         object.__setattr__(self, "accelerometers", accs)
 
     # --- geometry -----------------------------------------------------------
-    @property
+    @cached_property
     def n_axes(self) -> int:
+        """Accelerometer axes in all (the array is frozen: counted once, it is read per sample by the streams)."""
         return sum(len(a.axes) for a in self.accelerometers)
 
     @property
