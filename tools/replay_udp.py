@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import resource
 import socket
 import subprocess
 import sys
@@ -58,6 +57,24 @@ def _percentiles(values_s) -> str:
         return "none"
     v = np.asarray(values_s) * 1e3
     return f"p50 {np.percentile(v, 50):.1f} ms, p99 {np.percentile(v, 99):.1f} ms, max {v.max():.1f} ms"
+
+
+def _wait_peak_mib(proc: subprocess.Popen, timeout_s: float) -> float:
+    """Wait for ``proc`` (killed after ``timeout_s``) and give its own peak resident memory [MiB]: the rusage of
+    that child alone (``os.wait4``), not the largest of every child this process had (a simulation's forked
+    workers hold a copy of this process's memory)."""
+    end = time.monotonic() + timeout_s
+    while True:
+        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            break
+        if time.monotonic() > end:
+            proc.kill()
+            _, status, usage = os.wait4(proc.pid, 0)
+            break
+        time.sleep(0.05)
+    proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait for it again
+    return usage.ru_maxrss / 1024
 
 
 def main(argv=None) -> int:
@@ -140,16 +157,11 @@ def main(argv=None) -> int:
         errors: list[str] = []
         err_reader = threading.Thread(target=lambda: errors.append(proc.stderr.read()), daemon=True)
         err_reader.start()
-        try:
-            proc.wait(timeout=600)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        peak_mib = _wait_peak_mib(proc, timeout_s=600.0)
         reader.join(timeout=30)
         err_reader.join(timeout=30)
         err = "".join(errors)
         done_s = (seen[-1][1] - start) if seen else float("nan")
-    peak_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     latency = [(t, now - sent_at[t]) for t, now in seen if t in sent_at]
     steady = [d for t, d in latency if (t - stamps[0]) * 1e-9 >= STEADY_AFTER_S]
     recorded_s = (stamps[-1] - stamps[0]) * 1e-9
