@@ -602,13 +602,19 @@ class StreamScreen:
             return []
         end = upto == self._first + len(self._times)  # flush: the newest row is the stream's last
         n = len(self._times)
+        a, b = self._next - self._first, upto - self._first
+        if self.clean is not None and not self._open and self.clean(self._first, self._first + n):
+            # nothing to replace and no run to close: the rows pass as they came
+            out = [(self._times[k], self._accel[k].copy(), self._gyro[k]) for k in range(a, b)]
+            self._next = upto
+            self._cut(upto)
+            return out
         if self.clean is not None and self.clean(self._first, self._first + n):
             y = self._accel[:n].copy()
             kinds = {kind: np.zeros(y.shape, bool) for kind in KINDS}
         else:
             y, kinds, _ = _screen(self._accel[:n], self.range_mps2, self.sensor_of_axis, self.rate_hz,
                                   self.structure_matrix, ends=(self._first == 0, end))
-        a, b = self._next - self._first, upto - self._first
         out = [(self._times[k], y[k], self._gyro[k]) for k in range(a, b)]
         replaced = np.zeros((b - a, y.shape[1]), bool)
         for kind in KINDS:
@@ -620,13 +626,17 @@ class StreamScreen:
         for k in np.nonzero(replaced.any(axis=1))[0]:
             self._replaced[self._next + int(k)] = replaced[k]
         self._next = upto
+        self._cut(upto)
+        return out
+
+    def _cut(self, upto: int) -> None:
+        """The buffer cut to the history kept behind row ``upto``."""
         cut = max(0, upto - self._history - self._first)
         if cut:
             kept = len(self._times) - cut
             self._accel[:kept] = self._accel[cut:cut + kept]
             del self._times[:cut], self._gyro[:cut]
             self._first += cut
-        return out
 
     def _track_runs(self, kind: str, mask: np.ndarray) -> None:
         """Runs of ``kind`` per column across blocks: those that end within ``mask`` (rows from ``self._next``)
