@@ -1012,7 +1012,8 @@ class FixedLagSmoother:
         # again at once (at most once a second), on the history that now holds the motion
         outgrown = (local is not None and self._choice.local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
-        if (due or outgrown) and len(self._choice.history) >= self._choice.tune_min_n:
+        # (while a choice is pending none is asked for: the history is not copied for nothing)
+        if (due or outgrown) and self._choice.pending is None and len(self._choice.history) >= self._choice.tune_min_n:
             self._choose(list(self._choice.history), outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
