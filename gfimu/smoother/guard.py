@@ -276,10 +276,35 @@ def check(log: Log, smoothed: Motion, per_sample: Motion, model_check: ModelChec
     return GuardResult(mode, tuple(out), int(ok.sum()), n)
 
 
-def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult) -> Motion:
+def per_sample_sigma(array, per_sample: Motion, model_check: ModelCheck, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """The one-sigma values of the per-sample fit at ``rows`` (indices): the Cramér-Rao bound at its ω
+    (:func:`gfimu.crb.crb_per_sample`, unit noise) times the noise of the model check there, σ_k² = σ₀² + (s |ω_k|)²
+    (:func:`noise_variance`, measured on the log's own residual), per axis of ω, ω̇ and f; NaN where the
+    bound is singular (|ω| too small for the readings to fix it: the quadratic terms vanish there)."""
+    rows = np.asarray(rows, dtype=int)
+    out = {k: np.full((rows.size, 3), np.nan) for k in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2")}
+    w = np.asarray(per_sample.omega_b_radps, dtype=float)[rows]
+    good = np.all(np.isfinite(w), axis=1)
+    if not good.any():
+        return out
+    bound = crb_per_sample(array, w[good], noise_std_mps2=1.0)
+    var = noise_variance(model_check, w[good])
+    with np.errstate(invalid="ignore"):
+        sd = np.sqrt(np.diagonal(bound.covariance, axis1=1, axis2=2) * var[:, None])  # (n, 9): f, ω̇, ω
+    sd[bound.singular | ~np.all(np.isfinite(sd), axis=1)] = np.nan
+    out["specific_force_b_mps2"][good] = sd[:, 0:3]
+    out["omega_dot_b_radps2"][good] = sd[:, 3:6]
+    out["omega_b_radps"][good] = sd[:, 6:9]
+    return out
+
+
+def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult, model_check: ModelCheck | None = None,
+             array=None) -> Motion:
     """``smoothed`` with the per-sample ω, ω̇ and f over ``result``'s spans (the gravity-free
-    acceleration, where present, moved by the same change of f; the attitude kept; σ unknown there:
-    NaN). ω takes the signs of :func:`gfimu.smoother.solve.initialise.sign_chain` over the span and the
+    acceleration, where present, moved by the same change of f; the attitude kept). Where ``smoothed``
+    carries σ, the replaced rows carry the per-sample fit's own (:func:`per_sample_sigma`, with the
+    ``model_check`` and ``array`` given; else, and where that bound is singular, NaN: unknown), the
+    gravity-free acceleration's widened by it. ω takes the signs of :func:`gfimu.smoother.solve.initialise.sign_chain` over the span and the
     smoother's samples next to it, the chain as a whole oriented to agree most with the smoother's ω
     there (Σ ω_chain · ω_smoother over the span and its two neighbours: where the motion starts or
     stops next to the span, the neighbours turn too slowly to tell the sign, the span's own samples do).
@@ -309,9 +334,16 @@ def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult) -> Motio
         w[sel] = per_sample.omega_b_radps[sel] * signs[inner][:, None]
         wd[sel] = per_sample.omega_dot_b_radps2[sel]
         f[sel] = per_sample.specific_force_b_mps2[sel]
-        for k in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2", "accel_b_mps2"):
+        if sigma and model_check is not None and array is not None:
+            own = per_sample_sigma(array, per_sample, model_check, sel)
+        else:
+            own = {k: np.full((sel.size, 3), np.nan) for k in ("omega_b_radps", "omega_dot_b_radps2",
+                                                               "specific_force_b_mps2")}
+        if "accel_b_mps2" in sigma:  # the attitude's share kept, the change of f's added
+            sigma["accel_b_mps2"][sel] = np.hypot(sigma["accel_b_mps2"][sel], own["specific_force_b_mps2"])
+        for k, v in own.items():
             if k in sigma:
-                sigma[k][sel] = np.nan
+                sigma[k][sel] = v
     changes = {"omega_b_radps": w, "omega_dot_b_radps2": wd, "specific_force_b_mps2": f, "sigma": sigma}
     if smoothed.accel_b_mps2 is not None:
         changes["accel_b_mps2"] = smoothed.accel_b_mps2 + (f - smoothed.specific_force_b_mps2)

@@ -83,4 +83,6 @@ def guarded(log, run: Estimate, mode: str, options):
     model = (report.model_check if report.model_check is not None and report.windows
              else check_model(log, per_sample))
     outcome = check(log, run.motion, per_sample, model, mode)
-    return (replaced(run.motion, per_sample, outcome) if mode == "replace" else run.motion), outcome
+    if mode != "replace":
+        return run.motion, outcome
+    return replaced(run.motion, per_sample, outcome, model, log.array), outcome
