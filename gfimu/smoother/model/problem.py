@@ -150,6 +150,7 @@ class AxisGeometry:
 
     @classmethod
     def of(cls, array: SensorArray) -> AxisGeometry:
+        """The geometry of ``array``'s accelerometers, in the order of its columns."""
         sensors = accelerometer.array_geometry(array)
         directions = np.concatenate([d for d, _, _ in sensors])
         positions = np.concatenate([p for _, p, _ in sensors])
@@ -242,10 +243,12 @@ class SmootherProblem:
 
     @property
     def all_directions_b(self) -> np.ndarray:
+        """(axes, 3) sensing direction of every axis in the body frame."""
         return self.geometry.directions_b
 
     @property
     def all_positions_m(self) -> np.ndarray:
+        """(axes, 3) position of every axis [m]."""
         return self.geometry.positions_m
 
     @property
