@@ -529,27 +529,72 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
 
         log = apply_calibration(log, calibration)
     array = log.array
-    columns = array.accel_columns
     timing = timing_of(log.timestamps_ns)
-    faults, fault_mask = channel_faults(log.accel_mps2, columns, timing.rate_hz, array.range_per_axis_mps2)
+    faults, fault_mask = channel_faults(log.accel_mps2, array.accel_columns, timing.rate_hz, array.range_per_axis_mps2)
     clean, screening = screen_log(log)
-    stated = array.noise_std_per_axis_mps2
     sigma_axes = noise_policy.accel_noise_std(array)
-    estimator = MLEstimator()
-    reason = estimator.applicable(array)
-    if reason:
-        raise InputError(f"{log.source}: cannot diagnose the readings: {reason}")
-    motion = estimator.estimate_motion(clean, progress=progress)
-    residual = rigid_body_residual(clean, motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2)
-    check = check_model(clean, motion, residual)
-    n_axes = array.n_axes
-    dof = np.sqrt(n_axes / max(n_axes - 9, 1))
-    ok = np.all(np.isfinite(residual), axis=1)
-    scale_axis = _robust_scale(residual[ok], axis=0) * dof
+    fit = _Fit.of(log, clean, progress)
+    sensors, skew_size = _sensor_reports(clean, fit, sigma_axes, ~fault_mask.any(axis=1))
+    bound = _Bound.of(clean, fit, sigma_axes)
+    units = _units_and_sizes(log, fit, bound)
+    dead = dead_channels(log.accel_mps2, array.accel_columns)
+    fix = _fix_first(units, dead, len(array.accel_columns), timing)
+    warn = _warnings(fit, faults, sensors, skew_size, sigma_axes, timing, screening)
+    faults += [ChannelFault(d.column, d.kind, d.samples, d.first_row, len(log) - 1, d.value_mps2) for d in dead]
+    guard = smoother_guard(clean, smoother_options)
+    if guard.get("spans"):
+        warn.append(f"the smoother {guard['message']}")
+    all_warnings = tuple(fix + warn)
+    figure = {"times_s": clean.times_s, "omega_norm_radps": bound.wn, "bound_radps": bound.so_norm * max(bound.factor, 1.0),
+              "residual_norm_mps2": np.sqrt(np.mean(fit.residual**2, axis=1)), "dt_s": np.diff(log.timestamps_ns) * 1e-9,
+              "sign_snr": bound.sign_snr}
+    consistency = Consistency(fit.check.as_dict(), float(fit.check.noise_floor_mps2), float(fit.check.stated_noise_mps2),
+                              tuple(sensors), tuple(_band_reports(fit, bound)))
+    return Diagnosis(log.source, array.name, len(array.accelerometers), array.n_axes, timing, consistency, units,
+                     Channels(tuple(faults), int(screening.count)), bound.accuracy(), all_warnings, tuple(fix),
+                     _verdict(fix, warn, all_warnings, bound), guard=_json_clean(guard), figure_data=figure)
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """The per-sample ML fit of the screened readings the diagnosis reads: its motion, the rigid-body residual
+    (N, axes), the model check, the residual's robust scale per axis and the factor ``dof`` that corrects a
+    scale for the 9 unknowns fitted per sample."""
+
+    motion: object
+    residual: np.ndarray
+    check: object
+    ok: np.ndarray
+    """Samples whose residual is finite."""
+    dof: float
+    scale_axis: np.ndarray
+
+    @classmethod
+    def of(cls, log: Log, clean: Log, progress: bool) -> _Fit:
+        """The fit of ``clean`` (the screened ``log``, which names the log in the error when ML cannot run)."""
+        estimator = MLEstimator()
+        reason = estimator.applicable(log.array)
+        if reason:
+            raise InputError(f"{log.source}: cannot diagnose the readings: {reason}")
+        motion = estimator.estimate_motion(clean, progress=progress)
+        residual = rigid_body_residual(clean, motion.omega_b_radps, motion.omega_dot_b_radps2,
+                                       motion.specific_force_b_mps2)
+        check = check_model(clean, motion, residual)
+        n_axes = log.array.n_axes
+        dof = np.sqrt(n_axes / max(n_axes - 9, 1))
+        ok = np.all(np.isfinite(residual), axis=1)
+        return cls(motion, residual, check, ok, dof, _robust_scale(residual[ok], axis=0) * dof)
+
+
+def _sensor_reports(clean: Log, fit: _Fit, sigma_axes: np.ndarray, use: np.ndarray) -> tuple[list, np.ndarray]:
+    """(a :class:`SensorReport` per accelerometer: residual, stated noise, ratio to the others, time skew; the
+    size of each sensor's projected rate of change, which a skew multiplies) from the samples ``use``."""
+    array = clean.array
     owner = array.axis_owner
-    per_sensor_scale = np.array([np.sqrt(np.mean(scale_axis[owner == i] ** 2)) for i in range(len(array.accelerometers))])
-    skew, skew_err, skew_size = sensor_skews(clean, motion, sigma_axes, residual,
-                                            use=~fault_mask.any(axis=1))
+    stated = array.noise_std_per_axis_mps2
+    per_sensor_scale = np.array([np.sqrt(np.mean(fit.scale_axis[owner == i] ** 2))
+                                 for i in range(len(array.accelerometers))])
+    skew, skew_err, skew_size = sensor_skews(clean, fit.motion, sigma_axes, fit.residual, use=use)
     sensors = []
     for i, acc in enumerate(array.accelerometers):
         others = np.delete(per_sensor_scale, i)
@@ -559,38 +604,82 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
                                     float(np.nanmean(st)) if np.any(np.isfinite(st)) else float("nan"),
                                     float(per_sensor_scale[i] / ref) if ref > 0 else float("nan"),
                                     float(skew[i]), float(skew_err[i])))
-    # bound at the fitted ω: stated noise (the measured floor where none is stated) and measured floor
-    floor = check.noise_floor_mps2 if check.noise_floor_mps2 > 0 else float(np.nanmean(sigma_axes))
-    omega = np.where(np.isfinite(motion.omega_b_radps), motion.omega_b_radps, 0.0)
-    bound_stated = crb_per_sample(array, omega, noise_std_mps2=sigma_axes)
-    factor = floor / float(np.mean(sigma_axes))
-    so = bound_stated.sigma_omega
-    sd = bound_stated.sigma_omega_dot
-    so_norm = np.sqrt(np.sum(so**2, axis=1))
-    wn = np.linalg.norm(omega, axis=1)
+    return sensors, skew_size
+
+
+@dataclass(frozen=True)
+class _Bound:
+    """The per-sample Cramér-Rao bound at the fitted ω: with the stated noise (``so``, ``sd``: σ of ω and ω̇,
+    (N, 3)), and ``factor`` the measured noise floor over the stated noise; ``wn`` |ω| fitted, ``resolved``
+    the samples whose |ω| exceeds 3 × its bound, ``sign_snr`` per window (:func:`sign_resolution`)."""
+
+    so: np.ndarray
+    sd: np.ndarray
+    so_norm: np.ndarray
+    factor: float
+    wn: np.ndarray
+    resolved: np.ndarray
+    sign_snr: np.ndarray
+
+    @classmethod
+    def of(cls, clean: Log, fit: _Fit, sigma_axes: np.ndarray) -> _Bound:
+        """The bound at ``fit``'s ω: stated noise (the measured floor where none is stated) and measured floor."""
+        floor = fit.check.noise_floor_mps2 if fit.check.noise_floor_mps2 > 0 else float(np.nanmean(sigma_axes))
+        omega = np.where(np.isfinite(fit.motion.omega_b_radps), fit.motion.omega_b_radps, 0.0)
+        bound_stated = crb_per_sample(clean.array, omega, noise_std_mps2=sigma_axes)
+        factor = floor / float(np.mean(sigma_axes))
+        so = bound_stated.sigma_omega
+        sd = bound_stated.sigma_omega_dot
+        so_norm = np.sqrt(np.sum(so**2, axis=1))
+        wn = np.linalg.norm(omega, axis=1)
+        resolved = wn > 3 * so_norm * max(factor, 1.0)
+        sign_snr = sign_resolution(omega, so * max(factor, 1.0), sd * max(factor, 1.0), clean.times_s)
+        return cls(so, sd, so_norm, factor, wn, resolved, sign_snr)
+
+    @property
+    def crb_stated(self) -> float:
+        """Median bound on |ω| error with the stated noise [rad/s]."""
+        return float(np.median(self.so_norm))
+
+    def accuracy(self) -> ExpectedAccuracy:
+        """The :class:`ExpectedAccuracy` part of the diagnosis."""
+        share_sign = float(np.mean(self.sign_snr >= SIGN_SNR)) if self.sign_snr.size else 0.0
+        crb_stated = self.crb_stated
+        return ExpectedAccuracy(crb_stated, crb_stated * self.factor,
+                                float(np.median(np.sqrt(np.sum(self.sd**2, axis=1)))) * self.factor,
+                                float(np.median(self.wn)), float(np.quantile(self.wn, 0.9)),
+                                float(np.mean(self.resolved)), share_sign)
+
+
+def _band_reports(fit: _Fit, bound: _Bound) -> list[BandReport]:
+    """The residual and the median bound on |ω| error in each |ω| band of :data:`BANDS_RADPS` holding samples."""
     bands = []
     for lo, hi in zip(BANDS_RADPS[:-1], BANDS_RADPS[1:]):
-        sel = ok & (wn >= lo) & (wn < hi)
+        sel = fit.ok & (bound.wn >= lo) & (bound.wn < hi)
         if not sel.any():
             continue
         bands.append(BandReport(float(lo), float(hi), int(sel.sum()),
-                                float(np.sqrt(np.mean((_robust_scale(residual[sel], axis=0) * dof) ** 2))),
-                                float(np.median(so_norm[sel]))))
-    resolved = wn > 3 * so_norm * max(factor, 1.0)
-    sign_snr = sign_resolution(omega, so * max(factor, 1.0), sd * max(factor, 1.0), clean.times_s)
-    # units and sizes
+                                float(np.sqrt(np.mean((_robust_scale(fit.residual[sel], axis=0) * fit.dof) ** 2))),
+                                float(np.median(bound.so_norm[sel]))))
+    return bands
+
+
+def _units_and_sizes(log: Log, fit: _Fit, bound: _Bound) -> UnitsAndSizes:
+    """What the readings say of their unit (still |f|, or the median fitted |f|), of the gyroscope's unit
+    (its |ω| against the fitted one on resolved samples) and of the positions' unit (sizes, or the gyro)."""
+    array = log.array
     g0 = still_specific_force(log)
-    f_median = float(np.nanmedian(np.linalg.norm(motion.specific_force_b_mps2, axis=1)))
+    f_median = float(np.nanmedian(np.linalg.norm(fit.motion.specific_force_b_mps2, axis=1)))
     unit, unit_scale = (_unit_suspect(g0 if g0 is not None else f_median, still=g0 is not None)
                         if array.readings == "specific_force"
                         else (None, None))  # linear acceleration: no gravity to measure the scale by
     gyro_ratio = gyro_unit = None
     if log.gyro_b_radps is not None:
-        valid = np.all(np.isfinite(log.gyro_b_radps), axis=1) & resolved
+        valid = np.all(np.isfinite(log.gyro_b_radps), axis=1) & bound.resolved
         if log.invalid_reference is not None:
             valid &= ~np.asarray(log.invalid_reference, bool)
         if np.count_nonzero(valid) >= 10:
-            gyro_ratio = float(np.median(np.linalg.norm(log.gyro_b_radps[valid], axis=1) / wn[valid]))
+            gyro_ratio = float(np.median(np.linalg.norm(log.gyro_b_radps[valid], axis=1) / bound.wn[valid]))
             if DEG_PER_RAD / UNIT_TOLERANCE <= gyro_ratio <= DEG_PER_RAD * UNIT_TOLERANCE:
                 gyro_unit = "deg/s"
     pos = np.array([a.position_m for a in array.accelerometers])
@@ -607,29 +696,44 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
         for candidate in (1e3, 1e2):
             if candidate / UNIT_TOLERANCE**2 <= c <= candidate * UNIT_TOLERANCE**2:
                 pos_scale = 1.0 / candidate
-    # warnings
-    fix, warn = [], []
-    if unit:
+    return UnitsAndSizes(g0, f_median, unit, unit_scale, gyro_ratio, gyro_unit, pos_scale, extent, far)
+
+
+def _fix_first(units: UnitsAndSizes, dead: list, n_columns: int, timing: Timing) -> list[str]:
+    """The warnings that make every estimate wrong until fixed: units, positions, ``dead`` channels (of
+    ``n_columns``), timestamps."""
+    u = units
+    fix = []
+    if u.accel_unit_suspect:
+        g0, f_median = u.still_specific_force_mps2, u.median_specific_force_mps2
         what = f"still |f| = {g0:.4g}" if g0 is not None else f"median |f| = {f_median:.4g} (no still stretch)"
-        fix.append(f"{what} read as m/s^2, not {STANDARD_GRAVITY_MPS2:g}: readings likely in {unit} "
-                   f"(multiply by {unit_scale:.6g}; write the column units as [{unit}])" if unit != "unknown scale"
-                   else f"{what} read as m/s^2: {suggested_factor(1.0 / unit_scale)}; check the unit and scale of "
-                        "the readings")
-    if pos_scale is not None:
+        fix.append(f"{what} read as m/s^2, not {STANDARD_GRAVITY_MPS2:g}: readings likely in {u.accel_unit_suspect} "
+                   f"(multiply by {u.accel_scale_to_mps2:.6g}; write the column units as [{u.accel_unit_suspect}])"
+                   if u.accel_unit_suspect != "unknown scale"
+                   else f"{what} read as m/s^2: {suggested_factor(1.0 / u.accel_scale_to_mps2)}; check the unit and "
+                        "scale of the readings")
+    if u.position_scale_suspect is not None:
+        far, extent = u.array_max_distance_m, u.array_extent_m
         why = (f"farthest accelerometer {far:.4g} m from the origin" if far > MAX_POSITION_M else
                f"accelerometers within {extent * 1e3:.3g} mm of each other" if extent < MIN_EXTENT_M else
-               f"gyroscope reads {gyro_ratio:.3g} x the accelerometers' |omega|")
-        fix.append(f"position_m likely not in metres ({why}): multiply the positions by {pos_scale:g}")
-    if gyro_unit:
-        fix.append(f"gyroscope reads {gyro_ratio:.3g} x the accelerometers' |omega|: likely in deg/s (write [deg s^-1])")
-    dead = dead_channels(log.accel_mps2, columns)
-    fix += describe_dead_channels(dead, len(columns))
+               f"gyroscope reads {u.gyro_ratio:.3g} x the accelerometers' |omega|")
+        fix.append(f"position_m likely not in metres ({why}): multiply the positions by {u.position_scale_suspect:g}")
+    if u.gyro_unit_suspect:
+        fix.append(f"gyroscope reads {u.gyro_ratio:.3g} x the accelerometers' |omega|: likely in deg/s (write [deg s^-1])")
+    fix += describe_dead_channels(dead, n_columns)
     if timing.backwards or timing.duplicates:
         fix.append(f"{timing.backwards} backward and {timing.duplicates} repeated timestamp(s)")
+    return fix
+
+
+def _warnings(fit: _Fit, faults: list, sensors: list, skew_size: np.ndarray, sigma_axes: np.ndarray,
+              timing: Timing, screening) -> list[str]:
+    """The other warnings, in order: stuck or clipped channels, time skews, a sensor whose residual stands out,
+    readings no rigid body explains, gaps, timestamp jitter, readings the screening replaced."""
+    warn = []
     for f in faults:
         warn.append(f"{f.column} {f.kind} at {f.value_mps2:.6g} m/s^2 for {f.samples} sample(s) (rows {f.first_row}-"
                     f"{f.last_row})")
-    faults += [ChannelFault(d.column, d.kind, d.samples, d.first_row, len(log) - 1, d.value_mps2) for d in dead]
     for i, s in enumerate(sensors):
         if not np.isfinite(s.skew_s):
             continue
@@ -641,8 +745,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
         if s.ratio_to_others > NOISE_RATIO_LIMIT and not any(w.startswith(s.name + " ") for w in warn):
             warn.append(f"{s.name}: residual {s.ratio_to_others:.1f} x the other sensors' (faulty, misplaced or "
                         "misaligned sensor)")
-    if not check.consistent:
-        warn.append("readings disagree with a rigid body beyond white noise: " + "; ".join(check.reasons))
+    if not fit.check.consistent:
+        warn.append("readings disagree with a rigid body beyond white noise: " + "; ".join(fit.check.reasons))
     if timing.gaps:
         warn.append(f"{timing.gaps} gap(s) in time, largest {timing.largest_gap_s:.4g} s (estimators restart there)")
     if np.isfinite(timing.jitter_s) and timing.rate_hz > 0 and timing.jitter_s * timing.rate_hz > RATE_TOLERANCE:
@@ -650,29 +754,16 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
                     "of the step")
     if screening.count:
         warn.append(f"{screening.count} reading(s) replaced by the screening")
-    guard = smoother_guard(clean, smoother_options)
-    if guard.get("spans"):
-        warn.append(f"the smoother {guard['message']}")
-    share_sign = float(np.mean(sign_snr >= SIGN_SNR)) if sign_snr.size else 0.0
-    all_warnings = tuple(fix + warn)
-    crb_stated = float(np.median(so_norm))
+    return warn
+
+
+def _verdict(fix: list, warn: list, all_warnings: tuple, bound: _Bound) -> str:
+    """The one-line verdict: FIX FIRST, USE WITH CARE or CLEAN (with the median bound on ω)."""
     if fix:
-        verdict = f"FIX FIRST: {fix[0]}" + (f" (and {len(all_warnings) - 1} more warning(s))" if len(all_warnings) > 1 else "")
-    elif warn:
-        verdict = f"USE WITH CARE: {len(warn)} warning(s), first: {warn[0]}"
-    else:
-        verdict = f"CLEAN: no fault found; omega to about {crb_stated * factor:.3g} rad/s per sample (median bound)"
-    figure = {"times_s": clean.times_s, "omega_norm_radps": wn, "bound_radps": so_norm * max(factor, 1.0),
-              "residual_norm_mps2": np.sqrt(np.mean(residual**2, axis=1)), "dt_s": np.diff(log.timestamps_ns) * 1e-9,
-              "sign_snr": sign_snr}
-    consistency = Consistency(check.as_dict(), float(check.noise_floor_mps2), float(check.stated_noise_mps2),
-                              tuple(sensors), tuple(bands))
-    units = UnitsAndSizes(g0, f_median, unit, unit_scale, gyro_ratio, gyro_unit, pos_scale, extent, far)
-    accuracy = ExpectedAccuracy(crb_stated, crb_stated * factor, float(np.median(np.sqrt(np.sum(sd**2, axis=1)))) * factor,
-                                float(np.median(wn)), float(np.quantile(wn, 0.9)), float(np.mean(resolved)), share_sign)
-    return Diagnosis(log.source, array.name, len(array.accelerometers), n_axes, timing, consistency, units,
-                     Channels(tuple(faults), int(screening.count)), accuracy, all_warnings, tuple(fix), verdict,
-                     guard=_json_clean(guard), figure_data=figure)
+        return f"FIX FIRST: {fix[0]}" + (f" (and {len(all_warnings) - 1} more warning(s))" if len(all_warnings) > 1 else "")
+    if warn:
+        return f"USE WITH CARE: {len(warn)} warning(s), first: {warn[0]}"
+    return f"CLEAN: no fault found; omega to about {bound.crb_stated * bound.factor:.3g} rad/s per sample (median bound)"
 
 
 def smoother_guard(log: Log, options: dict | None = None) -> dict:

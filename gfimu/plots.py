@@ -140,6 +140,39 @@ def plot_time_series(
     Samples where ``valid`` is False are greyed out of the error rows. Time is in seconds
     from ``time_origin_ns`` (default: the reference's first sample).
     """
+    quantities = _checked_quantities(reference, estimates, quantities, reference_label)
+    rows_per = 2 if errors else 1
+    n_rows = rows_per * len(quantities)
+    fig = _figure(13.0, 2.1 * n_rows + 1.0)
+    axes = fig.subplots(n_rows, 3, sharex=True, squeeze=False)
+    origin = reference.timestamps_ns[0] if time_origin_ns is None else int(time_origin_ns)
+    t = (reference.timestamps_ns - origin) * 1e-9
+    valid_mask = None if valid is None else np.asarray(valid, dtype=bool)
+    handles: dict[str, object] = {}
+    for qi, name in enumerate(quantities):
+        ref = getattr(reference, name)
+        values = {label: _interp_to(reference, m, name) for label, m in estimates.items() if getattr(m, name) is not None}
+        sigmas = {label: _interp_sigma(reference, estimates[label], name) for label in values} if bands else {}
+        for k in range(len(AXES)):
+            layer = _layers(values, ref[:, k], k, valid_mask)
+            _draw_values(axes[rows_per * qi, k], t, name, k, ref[:, k], estimates, values, sigmas, layer,
+                         reference_label, handles)
+            if errors:
+                _draw_errors(axes[rows_per * qi + 1, k], t, name, k, ref[:, k], estimates, values, sigmas, layer,
+                             valid_mask)
+    for k in range(3):
+        axes[-1, k].set_xlabel("time [s]")
+    order = [reference_label] + [x for label in estimates for x in (label, f"{label} ±1σ") if x in handles]
+    fig.legend([handles[x] for x in order], order, loc="outside lower center", fontsize=9,
+               ncol=min(len(order), 7), frameon=False)
+    fig.suptitle(title or f"Estimates against {reference_label}")
+    return fig
+
+
+def _checked_quantities(reference: Motion, estimates: Mapping[str, Motion], quantities: Sequence[str] | None,
+                        reference_label: str) -> list[str]:
+    """The quantities :func:`plot_time_series` draws (``quantities``, or :func:`default_quantities`), each one
+    checked: known, held by the reference and by at least one estimate (an :class:`InputError` says which not)."""
     if not estimates:
         raise InputError("plot_time_series needs at least one estimate")
     quantities = list(quantities) if quantities is not None else default_quantities(reference, estimates)
@@ -152,71 +185,63 @@ def plot_time_series(
             raise InputError(f"the {reference_label} has no {LABELS[name][0]}")
         if all(getattr(m, name) is None for m in estimates.values()):
             raise InputError(f"no estimate has {LABELS[name][0]} ({', '.join(estimates)})")
-    rows_per = 2 if errors else 1
-    n_rows = rows_per * len(quantities)
-    fig = _figure(13.0, 2.1 * n_rows + 1.0)
+    return quantities
+
+
+def _draw_values(ax, t: np.ndarray, name: str, k: int, ref_k: np.ndarray, estimates: Mapping[str, Motion],
+                 values: Mapping[str, np.ndarray], sigmas: Mapping, layer: dict[str, int], reference_label: str,
+                 handles: dict) -> None:
+    """One value panel of :func:`plot_time_series`: axis ``k`` of quantity ``name``, the reference underneath,
+    each estimate at its layer with its ±1σ band just under it; the legend's handles gathered in ``handles``."""
+    symbol, unit = LABELS[name]
+    (line,) = ax.plot(t, ref_k, label=reference_label, zorder=2, **REFERENCE_STYLE)
+    handles.setdefault(reference_label, line)
+    for mi, label in enumerate(estimates):
+        if label not in values:
+            continue
+        style = estimate_style(mi)
+        top = layer[label]  # each band just under its line
+        v = values[label][:, k]
+        s = sigmas.get(label)
+        if s is not None:
+            band = ax.fill_between(t, v - s[:, k], v + s[:, k], color=style["color"], alpha=BAND_ALPHA,
+                                   lw=0, zorder=top - 1, label=f"{label} ±1σ")
+            handles.setdefault(f"{label} ±1σ", band)
+        (line,) = ax.plot(t, v, lw=1.0, label=label, zorder=top, **style)
+        handles.setdefault(label, line)
+    ax.set_title(f"{symbol} — {AXES[k]}", fontsize=9)
+    ax.set_ylabel(f"{QUANTITIES[name][0]}_{AXES[k]} [{unit}]")
+    ax.grid(alpha=0.3)
+
+
+def _draw_errors(eax, t: np.ndarray, name: str, k: int, ref_k: np.ndarray, estimates: Mapping[str, Motion],
+                 values: Mapping[str, np.ndarray], sigmas: Mapping, layer: dict[str, int],
+                 valid_mask: np.ndarray | None) -> None:
+    """One error panel of :func:`plot_time_series`: each estimate's error on axis ``k`` of ``name`` (NaN where
+    not ``valid_mask``) at its layer, and its ±1σ band around zero drawn over the error lines."""
     from matplotlib.colors import to_rgba
 
-    axes = fig.subplots(n_rows, 3, sharex=True, squeeze=False)
-    origin = reference.timestamps_ns[0] if time_origin_ns is None else int(time_origin_ns)
-    t = (reference.timestamps_ns - origin) * 1e-9
-    valid_mask = None if valid is None else np.asarray(valid, dtype=bool)
-    handles: dict[str, object] = {}
-    for qi, name in enumerate(quantities):
-        symbol, unit = LABELS[name]
-        ref = getattr(reference, name)
-        values = {label: _interp_to(reference, m, name) for label, m in estimates.items() if getattr(m, name) is not None}
-        sigmas = {label: _interp_sigma(reference, estimates[label], name) for label in values} if bands else {}
-        for k, axis in enumerate(AXES):
-            layer = _layers(values, ref[:, k], k, valid_mask)
-            ax = axes[rows_per * qi, k]
-            (line,) = ax.plot(t, ref[:, k], label=reference_label, zorder=2, **REFERENCE_STYLE)
-            handles.setdefault(reference_label, line)
-            for mi, (label, motion) in enumerate(estimates.items()):
-                if label not in values:
-                    continue
-                style = estimate_style(mi)
-                top = layer[label]  # each band just under its line
-                v = values[label][:, k]
-                s = sigmas.get(label)
-                if s is not None:
-                    band = ax.fill_between(t, v - s[:, k], v + s[:, k], color=style["color"], alpha=BAND_ALPHA,
-                                           lw=0, zorder=top - 1, label=f"{label} ±1σ")
-                    handles.setdefault(f"{label} ±1σ", band)
-                (line,) = ax.plot(t, v, lw=1.0, label=label, zorder=top, **style)
-                handles.setdefault(label, line)
-            ax.set_title(f"{symbol} — {axis}", fontsize=9)
-            ax.set_ylabel(f"{QUANTITIES[name][0]}_{axis} [{unit}]")
-            ax.grid(alpha=0.3)
-            if errors:
-                eax = axes[rows_per * qi + 1, k]
-                for mi, (label, motion) in enumerate(estimates.items()):
-                    if label not in values:
-                        continue
-                    style = estimate_style(mi)
-                    top = layer[label]
-                    err = values[label][:, k] - ref[:, k]
-                    s = sigmas.get(label)
-                    if valid_mask is not None:
-                        err = np.where(valid_mask, err, np.nan)
-                    if s is not None:  # over the error lines, so that its edges stay visible on noise
-                        sk = s[:, k] if valid_mask is None else np.where(valid_mask, s[:, k], np.nan)
-                        edge = 0.6 * np.array(to_rgba(style["color"]))  # darker than the line, dashed
-                        edge[3] = 1.0
-                        eax.fill_between(t, -sk, sk, facecolor=to_rgba(style["color"], 0.5 * BAND_ALPHA),
-                                         edgecolor=tuple(edge), lw=1.1, ls=(0, (4, 2)), zorder=50 + top,
-                                         label=f"{label} ±1σ")
-                    eax.plot(t, err, lw=0.9, label=label, zorder=top, **style)
-                eax.axhline(0.0, color="k", lw=0.6)
-                eax.set_ylabel(f"error [{unit}]")
-                eax.grid(alpha=0.3)
-    for k in range(3):
-        axes[-1, k].set_xlabel("time [s]")
-    order = [reference_label] + [x for label in estimates for x in (label, f"{label} ±1σ") if x in handles]
-    fig.legend([handles[x] for x in order], order, loc="outside lower center", fontsize=9,
-               ncol=min(len(order), 7), frameon=False)
-    fig.suptitle(title or f"Estimates against {reference_label}")
-    return fig
+    unit = LABELS[name][1]
+    for mi, label in enumerate(estimates):
+        if label not in values:
+            continue
+        style = estimate_style(mi)
+        top = layer[label]
+        err = values[label][:, k] - ref_k
+        s = sigmas.get(label)
+        if valid_mask is not None:
+            err = np.where(valid_mask, err, np.nan)
+        if s is not None:  # over the error lines, so that its edges stay visible on noise
+            sk = s[:, k] if valid_mask is None else np.where(valid_mask, s[:, k], np.nan)
+            edge = 0.6 * np.array(to_rgba(style["color"]))  # darker than the line, dashed
+            edge[3] = 1.0
+            eax.fill_between(t, -sk, sk, facecolor=to_rgba(style["color"], 0.5 * BAND_ALPHA),
+                             edgecolor=tuple(edge), lw=1.1, ls=(0, (4, 2)), zorder=50 + top,
+                             label=f"{label} ±1σ")
+        eax.plot(t, err, lw=0.9, label=label, zorder=top, **style)
+    eax.axhline(0.0, color="k", lw=0.6)
+    eax.set_ylabel(f"error [{unit}]")
+    eax.grid(alpha=0.3)
 
 
 def plot_condition_number(sizes: np.ndarray, condition: Mapping[str, np.ndarray], unit: str = "m", marks=None):

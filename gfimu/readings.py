@@ -340,7 +340,21 @@ def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, e
     clipped and stuck readings): :func:`screen`'s work. ``ends``: whether the first and the last rows are
     the log's own (a stream's buffer cut from its middle is not: the rows near its cut are not decided)."""
     y = np.array(accel_mps2, dtype=float)
-    n = y.shape[0]
+    bad_value, out_range, clipped = _value_faults(y, range_mps2)
+    stuck, runs = _long_runs(y, rate_hz, bad_value, out_range, clipped)
+    long_bad = clipped | stuck
+    work = np.where(bad_value | out_range | long_bad, np.nan, y)
+    spikes = _spikes(work, sensor_of_axis, ends) if y.shape[0] >= 2 * SCALE_HALF_WIDTH + 1 else np.zeros_like(bad_value)
+    spikes &= ~long_bad
+    short = bad_value | out_range | spikes
+    y = _replaced(y, short, long_bad, structure_matrix)
+    kinds = dict(zip(KINDS, (bad_value, out_range, spikes, clipped, stuck)))
+    return y, kinds, runs
+
+
+def _value_faults(y: np.ndarray, range_mps2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(not finite, out of range, clipped), each (N, n_axes) bool, of the readings ``y`` against
+    :data:`OUT_OF_ANY_RANGE_MPS2` and the stated ``range_mps2`` (None: not stated)."""
     bad_value = ~np.isfinite(y)
     with np.errstate(invalid="ignore"):
         out_range = ~bad_value & (np.abs(y) > OUT_OF_ANY_RANGE_MPS2)
@@ -352,6 +366,13 @@ def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, e
             out_range |= ~bad_value & stated[None, :] & (
                 np.abs(y) > (1 + CLIP_TOLERANCE) * np.where(stated, limit, np.inf)[None, :])
         clipped = clipped_readings(y, limit) & ~out_range
+    return bad_value, out_range, clipped
+
+
+def _long_runs(y: np.ndarray, rate_hz, bad_value: np.ndarray, out_range: np.ndarray,
+               clipped: np.ndarray) -> tuple[np.ndarray, list]:
+    """(stuck readings (N, n_axes) bool, runs): the stuck runs of ``y`` among the readings not already at fault,
+    and (kind, column, first row, last row) of every stuck and clipped run, by first row then column."""
     stuck = np.zeros_like(bad_value)
     runs = []
     for c, a, b in stuck_runs(y, rate_hz, exclude=bad_value | out_range | clipped):
@@ -360,42 +381,51 @@ def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, e
     for c in np.nonzero(clipped.any(axis=0))[0]:
         runs += [("clipped", int(c), a, b - 1) for a, b in runs_of(clipped[:, c])]
     runs.sort(key=lambda r: (r[2], r[1]))
-    long_bad = clipped | stuck
-    work = np.where(bad_value | out_range | long_bad, np.nan, y)
-    spikes = np.zeros_like(bad_value)
-    if n >= 2 * SCALE_HALF_WIDTH + 1:
-        med = _rolling_median(work, MEDIAN_HALF_WIDTH)
-        # the first and last rows have a median window cut short, whose median lags a ramp: there, a
-        # robust line through the 2 h + 1 end rows instead (a spike at an end row still stands out of it)
-        h, m = MEDIAN_HALF_WIDTH, 2 * MEDIAN_HALF_WIDTH + 1
-        if ends[0]:
-            first = _edge_line(work[:m])[:h]
-            med[:h] = np.where(np.isfinite(first), first, med[:h])
-        if ends[1]:
-            last = _edge_line(work[n - m:])[m - h:]
-            med[n - h:] = np.where(np.isfinite(last), last, med[n - h:])
-        dev = np.abs(work - med)
-        # local noise scale from the second differences around the sample, leaving out the three a
-        # spike at k touches (k-1, k, k+1): mean |y[j+1] - 2 y[j] + y[j-1]| = σ √6 √(2/π) for white noise
-        d2 = np.zeros_like(work)
-        d2[1:-1] = np.abs(work[2:] - 2.0 * work[1:-1] + work[:-2])
-        ok = np.isfinite(d2)
-        d2 = np.where(ok, d2, 0.0)
-        total = _centred_sum(d2, SCALE_HALF_WIDTH) - _centred_sum(d2, 1)
-        number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
-        local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
-        # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
-        typical = _nanmedian_last(np.abs(work).reshape(1, -1))[0]
-        floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
-        spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
-        if sensor_of_axis is not None and np.any(spikes):
-            sensors = np.asarray(sensor_of_axis)
-            rows = np.nonzero(spikes.any(axis=1))[0]
-            for r in rows:
-                if np.unique(sensors[spikes[r]]).size > 1:
-                    spikes[r] = False
-    spikes &= ~long_bad
-    short = bad_value | out_range | spikes
+    return stuck, runs
+
+
+def _spikes(work: np.ndarray, sensor_of_axis, ends) -> np.ndarray:
+    """(N, n_axes) bool: the isolated spikes of ``work`` (the readings, NaN where already at fault; at least
+    2 :data:`SCALE_HALF_WIDTH` + 1 rows), a Hampel identifier with a local scale; a spike seen by two or more
+    accelerometers (``sensor_of_axis``) at one sample is an event of the body, not one."""
+    n = work.shape[0]
+    med = _rolling_median(work, MEDIAN_HALF_WIDTH)
+    # the first and last rows have a median window cut short, whose median lags a ramp: there, a
+    # robust line through the 2 h + 1 end rows instead (a spike at an end row still stands out of it)
+    h, m = MEDIAN_HALF_WIDTH, 2 * MEDIAN_HALF_WIDTH + 1
+    if ends[0]:
+        first = _edge_line(work[:m])[:h]
+        med[:h] = np.where(np.isfinite(first), first, med[:h])
+    if ends[1]:
+        last = _edge_line(work[n - m:])[m - h:]
+        med[n - h:] = np.where(np.isfinite(last), last, med[n - h:])
+    dev = np.abs(work - med)
+    # local noise scale from the second differences around the sample, leaving out the three a
+    # spike at k touches (k-1, k, k+1): mean |y[j+1] - 2 y[j] + y[j-1]| = σ √6 √(2/π) for white noise
+    d2 = np.zeros_like(work)
+    d2[1:-1] = np.abs(work[2:] - 2.0 * work[1:-1] + work[:-2])
+    ok = np.isfinite(d2)
+    d2 = np.where(ok, d2, 0.0)
+    total = _centred_sum(d2, SCALE_HALF_WIDTH) - _centred_sum(d2, 1)
+    number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
+    local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
+    # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
+    typical = _nanmedian_last(np.abs(work).reshape(1, -1))[0]
+    floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
+    spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
+    if sensor_of_axis is not None and np.any(spikes):
+        sensors = np.asarray(sensor_of_axis)
+        rows = np.nonzero(spikes.any(axis=1))[0]
+        for r in rows:
+            if np.unique(sensors[spikes[r]]).size > 1:
+                spikes[r] = False
+    return spikes
+
+
+def _replaced(y: np.ndarray, short: np.ndarray, long_bad: np.ndarray, structure_matrix) -> np.ndarray:
+    """``y`` with its faulty readings replaced: the runs (``long_bad``, clipped or stuck) by the rigid-body
+    prediction or a line between good readings, the others (``short``) by the median of their good neighbours
+    (the nearest good reading where a run of them is longer than the median window)."""
     replaced = short | long_bad
     if np.any(long_bad):
         raw = y
@@ -414,8 +444,7 @@ def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, e
                     nearest = good[np.clip(np.searchsorted(good, idx), 0, good.size - 1)]
                     fill[idx, c] = y[nearest, c]
         y = np.where(short, fill, y)
-    kinds = dict(zip(KINDS, (bad_value, out_range, spikes, clipped, stuck)))
-    return y, kinds, runs
+    return y
 
 
 def refuse_unreplaceable(log, accel: np.ndarray | None = None) -> None:

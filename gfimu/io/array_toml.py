@@ -68,7 +68,10 @@ def _vector(ctx: TomlContext, value, n: int, table: str, index: int, key: str) -
     return out
 
 
-def _optional_std(ctx: TomlContext, table_value: dict, table: str, index: int, key: str) -> float | None:
+def _optional_std(ctx: TomlContext, table_value: dict, table: str, index: int, key: str,
+                  stacklevel: int = 2) -> float | None:
+    """The optional noise std ``key`` of a table (None when absent): a finite number >= 0; beyond
+    :data:`MAX_NOISE_STD` a warning at ``stacklevel`` (the frame that reads the array)."""
     if key not in table_value:
         return None
     v = table_value[key]
@@ -79,7 +82,7 @@ def _optional_std(ctx: TomlContext, table_value: dict, table: str, index: int, k
 
         words = (f"{v!r} is no sensor noise (beyond {MAX_NOISE_STD:g}: the readings would count for nothing); the "
                  "unit is m/s², rad/s or rad")
-        warnings.warn(str(ctx.error(words, table, index, key)), LogPlausibilityWarning, stacklevel=2)
+        warnings.warn(str(ctx.error(words, table, index, key)), LogPlausibilityWarning, stacklevel=stacklevel)
     return float(v)
 
 
@@ -106,7 +109,9 @@ MIN_RANGE_MPS2 = 1.0
 mistake (the smallest ranges sold are ±2 g, 19.6 m/s²)."""
 
 
-def _rotation(ctx: TomlContext, value, index: int, name: str) -> np.ndarray:
+def _rotation(ctx: TomlContext, value, index: int, name: str, stacklevel: int = 4) -> np.ndarray:
+    """The ``rotation_body_sensor`` of ``accelerometers[index]``: a rotation as written, or the nearest one
+    (with a warning at ``stacklevel``) when orthonormal only to :data:`ROTATION_REPAIR_TOLERANCE`."""
     key = "rotation_body_sensor"
     if (not isinstance(value, list) or len(value) != 3
             or not all(isinstance(r, list) and len(r) == 3 and all(_is_number(v) for v in r) for r in value)):
@@ -130,7 +135,7 @@ def _rotation(ctx: TomlContext, value, index: int, name: str) -> np.ndarray:
         fixed = u @ vt
         err = ctx.error(f"orthonormal only to {deviation:.2g}; using the nearest rotation matrix (write more digits "
                         "to silence this)", "accelerometers", index, key)
-        warnings.warn(str(err), LogFormatWarning, stacklevel=4)
+        warnings.warn(str(err), LogFormatWarning, stacklevel=stacklevel)
         return fixed
     raise ctx.error(f"{rot.tolist()} is not a rotation matrix (R Rᵀ differs from the identity by {deviation:.3g}; "
                     f"expected orthonormal rows, determinant +1)", "accelerometers", index, key)
@@ -176,77 +181,102 @@ def array_from_toml(doc: dict, ctx: TomlContext, *, positions_required: bool = T
     accs = []
     seen: dict[str, int] = {}
     for i, a in enumerate(accs_doc):
-        t = "accelerometers"
-        acc_name = a.get("name")
-        if not isinstance(acc_name, str) or not acc_name.strip():
-            raise ctx.error(f"expected a non-empty string (the CSV column prefix), got {acc_name!r}", t, i, "name")
-        if acc_name != acc_name.strip() or re.search(r"[,\[\]\"\n\r]", acc_name):
-            raise ctx.error(f"{acc_name!r} cannot be a CSV column prefix (no commas, brackets, quotes, line breaks "
-                            "or surrounding spaces)", t, i, "name")
-        if acc_name in ("w", "tilt", "sigma"):
-            raise ctx.error(f"{acc_name!r} is reserved (its columns would clash with the gyroscope, inclinometer or "
-                            "uncertainty columns)", t, i, "name")
-        if acc_name in seen:
-            raise ctx.error(f"{acc_name!r} is also the name of accelerometers[{seen[acc_name]}]; names must be unique",
-                            t, i, "name")
-        seen[acc_name] = i
-        if "position_m" not in a and not positions_required:
-            position = np.zeros(3)
-        elif "position_m" not in a:
-            raise ctx.error(f"accelerometer {acc_name!r} has no position_m (3 numbers, in metres, in the body frame)",
-                            t, i)
-        else:
-            position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
-            far = float(np.max(np.abs(position)))
-            if far > MAX_POSITION_M / np.sqrt(3.0) and far * np.linalg.norm(position / far) > MAX_POSITION_M:
-                raise ctx.error(f"{position.tolist()} puts the accelerometer {far * np.linalg.norm(position / far):.3g} m "
-                                f"from the body origin; an accelerometer of one rigid body lies within "
-                                f"{MAX_POSITION_M:g} m (position_m is in metres)", t, i, "position_m")
-        rot = _rotation(ctx, a["rotation_body_sensor"], i, acc_name) if "rotation_body_sensor" in a else np.eye(3)
-        axes = a.get("axes", ["x", "y", "z"])
-        if (not isinstance(axes, list) or not axes or not all(isinstance(x, str) for x in axes)
-                or len(set(axes)) != len(axes) or any(x not in ("x", "y", "z") for x in axes)):
-            raise ctx.error(f"expected a list of distinct axes among \"x\", \"y\", \"z\", got {axes!r}", t, i, "axes")
-        noise = _optional_std(ctx, a, t, i, "noise_std_mps2")
-        topic = a.get("topic")
-        if topic is not None and (not isinstance(topic, str) or not topic.strip() or topic != topic.strip()):
-            raise ctx.error(f"expected the message topic as a non-empty string without surrounding spaces, "
-                            f"got {topic!r}", t, i, "topic")
-        full_scale = None
-        if "range_mps2" in a:
-            full_scale = a["range_mps2"]
-            if not _is_number(full_scale) or not _finite(full_scale) or full_scale <= 0:
-                raise ctx.error(f"expected the full scale in m/s², a finite number > 0, got {_shown(full_scale)}", t,
-                                i, "range_mps2")
-            if full_scale < MIN_RANGE_MPS2:
-                raise ctx.error(f"{full_scale!r} m/s² is no accelerometer's full scale (at least {MIN_RANGE_MPS2:g}: "
-                                "±2 g is 19.6); is the unit m/s²?", t, i, "range_mps2")
-            full_scale = float(full_scale)
-        try:
-            accs.append(Accelerometer(acc_name, position, rot, tuple(axes), noise, topic=topic, range_mps2=full_scale))
-        except ArrayModelError as exc:
-            raise ctx.error(str(exc), t, i) from None
-    gyro = inclinometer = body = None
+        accs.append(_accelerometer(ctx, a, i, seen, positions_required))
+    gyro, inclinometer = _other_sensors(ctx, doc)
+    return (SensorArray(tuple(accs), name, gyro, inclinometer, _body(ctx, doc), readings),
+            (None if rate_hz is None else float(rate_hz)))
+
+
+def _accelerometer_name(ctx: TomlContext, a: dict, i: int, seen: dict[str, int]) -> str:
+    """The ``name`` of ``accelerometers[i]``: a non-empty CSV column prefix, not reserved, not in ``seen``
+    (name -> index, updated)."""
+    t = "accelerometers"
+    acc_name = a.get("name")
+    if not isinstance(acc_name, str) or not acc_name.strip():
+        raise ctx.error(f"expected a non-empty string (the CSV column prefix), got {acc_name!r}", t, i, "name")
+    if acc_name != acc_name.strip() or re.search(r"[,\[\]\"\n\r]", acc_name):
+        raise ctx.error(f"{acc_name!r} cannot be a CSV column prefix (no commas, brackets, quotes, line breaks "
+                        "or surrounding spaces)", t, i, "name")
+    if acc_name in ("w", "tilt", "sigma"):
+        raise ctx.error(f"{acc_name!r} is reserved (its columns would clash with the gyroscope, inclinometer or "
+                        "uncertainty columns)", t, i, "name")
+    if acc_name in seen:
+        raise ctx.error(f"{acc_name!r} is also the name of accelerometers[{seen[acc_name]}]; names must be unique",
+                        t, i, "name")
+    seen[acc_name] = i
+    return acc_name
+
+
+def _accelerometer(ctx: TomlContext, a: dict, i: int, seen: dict[str, int], positions_required: bool) -> Accelerometer:
+    """The :class:`Accelerometer` of the table ``accelerometers[i]``, every key checked (errors name it)."""
+    t = "accelerometers"
+    acc_name = _accelerometer_name(ctx, a, i, seen)
+    if "position_m" not in a and not positions_required:
+        position = np.zeros(3)
+    elif "position_m" not in a:
+        raise ctx.error(f"accelerometer {acc_name!r} has no position_m (3 numbers, in metres, in the body frame)",
+                        t, i)
+    else:
+        position = _vector(ctx, a["position_m"], 3, t, i, "position_m")
+        far = float(np.max(np.abs(position)))
+        if far > MAX_POSITION_M / np.sqrt(3.0) and far * np.linalg.norm(position / far) > MAX_POSITION_M:
+            raise ctx.error(f"{position.tolist()} puts the accelerometer {far * np.linalg.norm(position / far):.3g} m "
+                            f"from the body origin; an accelerometer of one rigid body lies within "
+                            f"{MAX_POSITION_M:g} m (position_m is in metres)", t, i, "position_m")
+    rot = (_rotation(ctx, a["rotation_body_sensor"], i, acc_name, stacklevel=5) if "rotation_body_sensor" in a
+           else np.eye(3))
+    axes = a.get("axes", ["x", "y", "z"])
+    if (not isinstance(axes, list) or not axes or not all(isinstance(x, str) for x in axes)
+            or len(set(axes)) != len(axes) or any(x not in ("x", "y", "z") for x in axes)):
+        raise ctx.error(f"expected a list of distinct axes among \"x\", \"y\", \"z\", got {axes!r}", t, i, "axes")
+    noise = _optional_std(ctx, a, t, i, "noise_std_mps2", stacklevel=3)
+    topic = a.get("topic")
+    if topic is not None and (not isinstance(topic, str) or not topic.strip() or topic != topic.strip()):
+        raise ctx.error(f"expected the message topic as a non-empty string without surrounding spaces, "
+                        f"got {topic!r}", t, i, "topic")
+    full_scale = None
+    if "range_mps2" in a:
+        full_scale = a["range_mps2"]
+        if not _is_number(full_scale) or not _finite(full_scale) or full_scale <= 0:
+            raise ctx.error(f"expected the full scale in m/s², a finite number > 0, got {_shown(full_scale)}", t,
+                            i, "range_mps2")
+        if full_scale < MIN_RANGE_MPS2:
+            raise ctx.error(f"{full_scale!r} m/s² is no accelerometer's full scale (at least {MIN_RANGE_MPS2:g}: "
+                            "±2 g is 19.6); is the unit m/s²?", t, i, "range_mps2")
+        full_scale = float(full_scale)
+    try:
+        return Accelerometer(acc_name, position, rot, tuple(axes), noise, topic=topic, range_mps2=full_scale)
+    except ArrayModelError as exc:
+        raise ctx.error(str(exc), t, i) from None
+
+
+def _other_sensors(ctx: TomlContext, doc: dict) -> tuple[Gyroscope | None, Inclinometer | None]:
+    """(gyroscope, inclinometer) of the ``[gyroscope]`` and ``[inclinometer]`` tables, None where absent."""
+    gyro = inclinometer = None
     for table, cls, key in (("gyroscope", Gyroscope, "noise_std_radps"), ("inclinometer", Inclinometer, "noise_std_rad")):
         if table in doc:
             if not isinstance(doc[table], dict):
                 raise ctx.error(f"expected a table [{table}]", key=table)
-            obj = cls(_optional_std(ctx, doc[table], table, 0, key))
+            obj = cls(_optional_std(ctx, doc[table], table, 0, key, stacklevel=3))
             if table == "gyroscope":
                 gyro = obj
             else:
                 inclinometer = obj
-    if "body" in doc:
-        b = doc["body"]
-        if not isinstance(b, dict) or "principal_inertia_kgm2" not in b:
-            raise ctx.error("[body] needs principal_inertia_kgm2 = [I1, I2, I3]", "body", 0)
-        inertia = _vector(ctx, b["principal_inertia_kgm2"], 3, "body", 0, "principal_inertia_kgm2")
-        try:
-            body = Body(tuple(inertia))
-        except ArrayModelError as exc:
-            raise ctx.error(str(exc), "body", 0, "principal_inertia_kgm2") from None
-    return (SensorArray(tuple(accs), name, gyro, inclinometer, body, readings),
-            (None if rate_hz is None else float(rate_hz)))
+    return gyro, inclinometer
+
+
+def _body(ctx: TomlContext, doc: dict) -> Body | None:
+    """The rigid body of the ``[body]`` table (its principal inertia), or None."""
+    if "body" not in doc:
+        return None
+    b = doc["body"]
+    if not isinstance(b, dict) or "principal_inertia_kgm2" not in b:
+        raise ctx.error("[body] needs principal_inertia_kgm2 = [I1, I2, I3]", "body", 0)
+    inertia = _vector(ctx, b["principal_inertia_kgm2"], 3, "body", 0, "principal_inertia_kgm2")
+    try:
+        return Body(tuple(inertia))
+    except ArrayModelError as exc:
+        raise ctx.error(str(exc), "body", 0, "principal_inertia_kgm2") from None
 
 
 def read_array_toml(path: str | os.PathLike) -> SensorArray:

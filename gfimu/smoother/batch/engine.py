@@ -168,24 +168,10 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     solver = opt.solver if solver is None else solver
     auto_model = opt.auto_model if auto_model is None else auto_model
     tune_span_s = opt.tune_span_s if tune_span_s is ... else tune_span_s
-    reason = options_reason(log.array, opt, attitude_supported=True)
-    if reason:
-        raise InputError(f"{log.source}: {reason}")
-    if solver not in SOLVERS:
-        raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
-    n = len(log)
-    if n < 2:
-        raise DataError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
+    _check_smoothable(log, opt, solver)
     layout = StateLayout.from_options(opt)
     attitude = layout.attitude
-    M = layout.size
-    states = np.zeros((n, M))
-    sd = np.zeros((n, M)) if opt.compute_sigma else None
-    windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
-    calibration = []
-    tunings: list[Tuning] = []
-    notes = []
-    iterations, cost = 0, 0.0
+    windows = window_slices(len(log), log.rate_hz, opt.window_s, opt.overlap_s)
     timings = {}
     t0 = time.perf_counter()
     if auto_model:
@@ -206,33 +192,77 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         outcomes = _run_windows(context, window_workers(workers, len(windows), solver), progress)
         _align_signs(context, outcomes)
     timings["solve windows"] = time.perf_counter() - t0
-    for w, ((solve_sl, keep_log, keep_win), out) in enumerate(zip(windows, outcomes)):
-        tunings.extend(out.tunings)
-        iterations += out.iterations
-        if not out.converged:
-            notes.append(f"solve window {w + 1} of {len(windows)} (samples {solve_sl.start}..{solve_sl.stop - 1}) "
-                         f"stopped after {out.iterations} iterations without converging")
-        cost += out.cost
-        m = min(M, out.states.shape[1])
-        states[keep_log, :m] = out.states[:, :m]
-        if sd is not None:
-            sd[keep_log, :m] = out.sd[:, :m]
-        calibration.append(out.calibration)
-    if sd is not None and outcomes and all(out.noise is not None for out in outcomes) and _calibrates_sigma(log, opt):
-        noise_std = np.vstack([out.noise for out in outcomes])
-        sd = calibrated_sigma(log.array, log.accel_mps2, states, sd, noise_std,
-                              (opt.robust_loss, opt.accel_robust_threshold) if opt.accel_robust_threshold > 0 else None)
-    sigma = {} if sd is None else layout.quantities(sd)
-    extra = {}
-    if attitude:
-        R = _so3.exp(states[:, layout.rotation])
-        extra["quaternion_wb"] = quaternion_from_matrix(R)
-        extra["accel_b_mps2"] = states[:, layout.specific_force] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
-    motion = Motion(log.timestamps_ns, sigma=sigma, **layout.quantities(states), **extra)
-    return Estimate(motion, Report.of("smoother", options, timings=timings, warnings=notes,
-                                      model_check=auto[0] if auto else None, tunings=tunings, calibration=calibration,
-                                      iterations=iterations, cost=cost, windows=len(windows),
-                                      per_sample=auto[1] if auto else None))
+    joined = _Joined.of(log, layout, opt, windows, outcomes)
+    return Estimate(joined.motion(log, layout), Report.of(
+        "smoother", options, timings=timings, warnings=joined.notes, model_check=auto[0] if auto else None,
+        tunings=joined.tunings, calibration=joined.calibration, iterations=joined.iterations, cost=joined.cost,
+        windows=len(windows), per_sample=auto[1] if auto else None))
+
+
+def _check_smoothable(log: Log, opt: SmootherOptions, solver: str) -> None:
+    """An :class:`InputError` when the options do not fit the log's array or ``solver`` is unknown, a
+    :class:`DataError` when the log has fewer than 2 samples."""
+    reason = options_reason(log.array, opt, attitude_supported=True)
+    if reason:
+        raise InputError(f"{log.source}: {reason}")
+    if solver not in SOLVERS:
+        raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
+    n = len(log)
+    if n < 2:
+        raise DataError(f"{log.source}: the smoother needs at least 2 samples, got {n}")
+
+
+@dataclass
+class _Joined:
+    """The solve windows' outcomes joined over the whole log: the kept states and σ (None without
+    ``compute_sigma``), and what the report says of them (tunings, calibration, iterations, cost, notes)."""
+
+    states: np.ndarray
+    sd: np.ndarray | None
+    calibration: list
+    tunings: list
+    notes: list
+    iterations: int
+    cost: float
+
+    @classmethod
+    def of(cls, log: Log, layout: StateLayout, opt: SmootherOptions, windows: list,
+           outcomes: list[_WindowOutcome]) -> _Joined:
+        """Each window's kept rows in place, in window order; σ scaled by the readings' misfit where
+        :func:`_calibrates_sigma`."""
+        n, M = len(log), layout.size
+        out = cls(np.zeros((n, M)), np.zeros((n, M)) if opt.compute_sigma else None, [], [], [], 0, 0.0)
+        for w, ((solve_sl, keep_log, keep_win), res) in enumerate(zip(windows, outcomes)):
+            out.tunings.extend(res.tunings)
+            out.iterations += res.iterations
+            if not res.converged:
+                out.notes.append(f"solve window {w + 1} of {len(windows)} (samples {solve_sl.start}..{solve_sl.stop - 1}) "
+                                 f"stopped after {res.iterations} iterations without converging")
+            out.cost += res.cost
+            m = min(M, res.states.shape[1])
+            out.states[keep_log, :m] = res.states[:, :m]
+            if out.sd is not None:
+                out.sd[keep_log, :m] = res.sd[:, :m]
+            out.calibration.append(res.calibration)
+        if (out.sd is not None and outcomes and all(res.noise is not None for res in outcomes)
+                and _calibrates_sigma(log, opt)):
+            noise_std = np.vstack([res.noise for res in outcomes])
+            out.sd = calibrated_sigma(log.array, log.accel_mps2, out.states, out.sd, noise_std,
+                                      (opt.robust_loss, opt.accel_robust_threshold) if opt.accel_robust_threshold > 0
+                                      else None)
+        return out
+
+    def motion(self, log: Log, layout: StateLayout) -> Motion:
+        """The :class:`Motion` of the joined states (with the attitude's quaternion and the gravity-free
+        acceleration when the states hold the attitude) and σ."""
+        states = self.states
+        sigma = {} if self.sd is None else layout.quantities(self.sd)
+        extra = {}
+        if layout.attitude:
+            R = _so3.exp(states[:, layout.rotation])
+            extra["quaternion_wb"] = quaternion_from_matrix(R)
+            extra["accel_b_mps2"] = states[:, layout.specific_force] + np.einsum("nji,j->ni", R, GRAVITY_W_MPS2)
+        return Motion(log.timestamps_ns, sigma=sigma, **layout.quantities(states), **extra)
 
 
 @dataclass

@@ -134,12 +134,70 @@ def robust_loss(e2: np.ndarray, c: float, loss: str) -> np.ndarray:
     return np.where(e <= c, 0.5 * e2, c * e - 0.5 * c * c)
 
 
+@dataclass(frozen=True)
+class AxisGeometry:
+    """Where the array's accelerometer axes point and sit: per accelerometer (directions (k, 3), positions
+    (k, 3), column slice) and every axis at once (one vectorised evaluation when no per-sensor calibration)."""
+
+    sensors: list
+    """(directions, positions, column slice) of each accelerometer (:func:`gfimu.factors.accelerometer.array_geometry`)."""
+    directions_b: np.ndarray
+    """(axes, 3) sensing direction of every axis in the body frame."""
+    positions_m: np.ndarray
+    """(axes, 3) position of every axis [m]."""
+    rows: np.ndarray
+    """(axes, 12) each axis's row of the structure matrix."""
+
+    @classmethod
+    def of(cls, array: SensorArray) -> AxisGeometry:
+        """The geometry of ``array``'s accelerometers, in the order of its columns."""
+        sensors = accelerometer.array_geometry(array)
+        directions = np.concatenate([d for d, _, _ in sensors])
+        positions = np.concatenate([p for _, p, _ in sensors])
+        return cls(sensors, directions, positions, accelerometer.axis_rows(directions, positions))
+
+
+@dataclass(frozen=True)
+class CalibrationBlocks:
+    """The calibration variables, one vector beside the states: each block's name (``bias0``, ``scale0``,
+    ..., ``gyro_bias``) -> (slice of the vector, GTSAM key), and the vector's ``size``."""
+
+    blocks: dict
+    size: int
+
+    @classmethod
+    def of(cls, sensors: list, options: SmootherOptions, use_gyro: bool) -> CalibrationBlocks:
+        """Per-axis accelerometer biases, then scale-factor errors, then the gyroscope bias, as ``options`` ask."""
+        blocks = {}
+        g = 0
+        if options.self_calibrate_bias:
+            for i, (_, _, cols) in enumerate(sensors):
+                size = cols.stop - cols.start
+                blocks[f"bias{i}"] = (slice(g, g + size), bias_key(i))
+                g += size
+        if options.self_calibrate_scale:
+            for i, (_, _, cols) in enumerate(sensors):
+                size = cols.stop - cols.start
+                blocks[f"scale{i}"] = (slice(g, g + size), scale_key(i))
+                g += size
+        if use_gyro and options.self_calibrate_bias:
+            blocks["gyro_bias"] = (slice(g, g + 3), gyro_bias_key())
+            g += 3
+        return cls(blocks, g)
+
+
 @dataclass(eq=False)
 class SmootherProblem:
     """The smoothing problem of one contiguous log (fast path and graph path): the log, the options,
     the model's groups and their noise levels (:attr:`noise`, a frozen
     :class:`~gfimu.smoother.model.noise_levels.NoiseLevels`: ``problem.noise.accel.sigma``, ...). What its
     groups read of it is :class:`~gfimu.smoother.model.noise_levels.ModelView`.
+
+    Besides them it holds the samples (``n``, ``dt_s``), the axes' :attr:`geometry` (:class:`AxisGeometry`;
+    ``sensors``, ``all_directions_b``, ``all_positions_m``, ``all_rows`` read it), the calibration variables
+    (:attr:`calibration`, :class:`CalibrationBlocks`; ``global_blocks``, ``n_global``), the state
+    :attr:`layout` (``state_size``, ``snap``, ``attitude``, ``AT`` read it) and which of the gyroscope and
+    the inclinometer the model uses.
 
     Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
     around new noise levels (:meth:`with_noise`, :meth:`with_motion_dependent_noise`,
@@ -163,44 +221,69 @@ class SmootherProblem:
             row, col = np.argwhere(bad)[0]
             raise DataError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
                             f"({int(bad.sum())} such values); the smoother needs finite readings")
-        self.sensors = accelerometer.array_geometry(arr)  # (directions, positions, column slice)
-        # every axis of the array at once (one vectorised evaluation when no per-sensor calibration)
-        self.all_directions_b = np.concatenate([d for d, _, _ in self.sensors])
-        self.all_positions_m = np.concatenate([p for _, p, _ in self.sensors])
-        self.all_rows = accelerometer.axis_rows(self.all_directions_b, self.all_positions_m)  # (axes, 12)
-        # global variables: biases, scales, gyro bias
-        self.global_blocks = {}  # name -> (slice, gtsam key)
-        g = 0
-        if opt.self_calibrate_bias:
-            for i, (_, _, cols) in enumerate(self.sensors):
-                size = cols.stop - cols.start
-                self.global_blocks[f"bias{i}"] = (slice(g, g + size), bias_key(i))
-                g += size
-        if opt.self_calibrate_scale:
-            for i, (_, _, cols) in enumerate(self.sensors):
-                size = cols.stop - cols.start
-                self.global_blocks[f"scale{i}"] = (slice(g, g + size), scale_key(i))
-                g += size
+        self.geometry = AxisGeometry.of(arr)
         self.use_gyro = arr.gyroscope is not None and opt.use_gyro and self.log.gyro_b_radps is not None
-        if self.use_gyro and opt.self_calibrate_bias:
-            self.global_blocks["gyro_bias"] = (slice(g, g + 3), gyro_bias_key())
-            g += 3
-        self.n_global = g
+        self.calibration = CalibrationBlocks.of(self.geometry.sensors, opt, self.use_gyro)
         self.layout = StateLayout.from_options(opt)
-        self.snap = self.layout.snap
-        self.state_size = self.layout.size
-        self.attitude = self.layout.attitude
         self.use_inclinometer = bool(opt.use_inclinometer and self.log.tilt_rad is not None)
         if opt.use_inclinometer and self.log.tilt_rad is None:
             raise InputError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
-        if self.attitude:
-            self.AT = self.layout.rotation
         # the model: every group that applies, the measurement first, then those placed first
         # (the first-state prior), then the rest in order; each gives its own noise levels
         groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
         self.groups = tuple(sorted(groups, key=lambda g: 0 if g.measurement else 1 if g.first else 2))
         self.noise = NoiseLevels.gather(self.groups, self)
         object.__setattr__(self, "_built", True)
+
+    # --- the parts' values, by the names the groups read -------------------
+    @property
+    def sensors(self) -> list:
+        """(directions, positions, column slice) of each accelerometer."""
+        return self.geometry.sensors
+
+    @property
+    def all_directions_b(self) -> np.ndarray:
+        """(axes, 3) sensing direction of every axis in the body frame."""
+        return self.geometry.directions_b
+
+    @property
+    def all_positions_m(self) -> np.ndarray:
+        """(axes, 3) position of every axis [m]."""
+        return self.geometry.positions_m
+
+    @property
+    def all_rows(self) -> np.ndarray:
+        """(axes, 12) every axis's row of the structure matrix."""
+        return self.geometry.rows
+
+    @property
+    def global_blocks(self) -> dict:
+        """name -> (slice of the calibration vector, GTSAM key)."""
+        return self.calibration.blocks
+
+    @property
+    def n_global(self) -> int:
+        """Size of the calibration vector."""
+        return self.calibration.size
+
+    @property
+    def snap(self) -> bool:
+        return self.layout.snap
+
+    @property
+    def state_size(self) -> int:
+        return self.layout.size
+
+    @property
+    def attitude(self) -> bool:
+        return self.layout.attitude
+
+    @property
+    def AT(self) -> slice:
+        """Columns of the attitude's rotation vector in the state (problems with the attitude only)."""
+        if not self.layout.attitude:
+            raise AttributeError("'SmootherProblem' object has no attribute 'AT' (no attitude in the state)")
+        return self.layout.rotation
 
     def __setattr__(self, name: str, value) -> None:
         if self.__dict__.get("_built"):

@@ -63,19 +63,7 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
                        resample_hz: float | None = None) -> Conversion:
     """Read the file(s) of ``input_path`` with a column map (a TOML file or a preset name)."""
     input_path = Path(input_path)
-    report: list[str] = []
-    without_gravity = False  # the accelerometers read acceleration without gravity (a preset says so)
-    if not Path(map_spec).exists() and map_spec in PRESETS:
-        source = Source(input_path)
-        text, read_path, report, without_gravity = preset_for(map_spec, source)
-        cmap = parse_map(text, f"preset {map_spec}")
-        cmap = dataclasses.replace(cmap, ctx=PresetContext(map_spec, input_path))
-        if read_path != input_path:
-            source = Source(read_path)
-        reader = ColumnReader(cmap, read_path, source)
-    else:
-        cmap = load_map(map_spec)
-        reader = ColumnReader(cmap, input_path)
+    cmap, reader, report, without_gravity, text = _map_and_reader(input_path, map_spec)
     gravity = gravity_map(map_spec, reader.source, text) if without_gravity else None
     gravity_sensor = None if gravity is None else parse_map(gravity[0], f"preset {map_spec}").accelerometers[0]
     gyro = cmap.gyroscope
@@ -89,25 +77,8 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         sensors.append((gyro, AXES, "angular_rate"))
     if gravity_sensor is not None:
         sensors.append((gravity_sensor, AXES, "acceleration"))
-    groups: dict[tuple, tuple[np.ndarray, str]] = {}
-    tables: dict[tuple, Table] = {}
-    linear = without_gravity
-    blocks = []
-    for sensor, axes, kind in sensors:
-        path = reader.existing_file_of(sensor)
-        table = reader.table(path)
-        key = (path, sensor.time.column, sensor.time.unit)
-        if key not in groups:
-            t, unit = reader.timestamps(table, sensor.time)
-            groups[key] = (t, unit)
-            tables[key] = table
-            report.append(f"{path}: {t.size} rows, time from {table.shown(reader.find(table, sensor.time))} "
-                          f"in [{unit}]")
-        values, shown = reader.values(table, sensor, kind, axes)
-        blocks.append((key, values))
-        report.append(f"  {'gravity' if sensor is gravity_sensor else sensor.name}: {', '.join(shown)}")
-        if kind == "acceleration" and sensor is not gravity_sensor:
-            linear |= any("Linear" in sh for sh in shown)
+    groups, tables, blocks, linear = _read_sensors(reader, sensors, gravity_sensor, report)
+    linear |= without_gravity
     base_key = blocks[0][0]
     t_out, columns = align(groups, blocks, base_key, tables, max_gap_periods, resample_hz, report)
     n_acc = len(array.accelerometers)
@@ -133,19 +104,74 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
         raise LogFormatError(f"holds {t_out.size} sample(s); a log needs at least two", base_key[0])
     reference = None
     if gyro_as_reference:
-        if omega is None and cmap.gyroscope is not None:  # optional, and not in the recording
-            where = reader.file_of(cmap.gyroscope)
-            names = ", ".join(" or ".join(map(str, c.column)) if isinstance(c.column, tuple) else str(c.column)
-                              for c in cmap.gyroscope.axes.values())
-            found = (f"its columns ({names}) are not in {where}" if reader.source.exists(where)
-                     else f"{where} is not there")
-            raise LogFormatError(f"--gyro-as-reference: no gyroscope to take as the reference: {found}", input_path)
-        if omega is None:
-            raise LogFormatError("--gyro-as-reference: the map names no gyroscope columns", cmap.path)
-        reference = Motion(t_out, omega_b_radps=omega.copy())
+        reference = Motion(t_out, omega_b_radps=_gyro_reference(cmap, reader, omega, input_path).copy())
     log = Log(array, t_out, accel, gyro_b_radps=omega, reference=reference, source=str(input_path))
+    _warn_plausibility(reader, log, linear)
+    return Conversion(log, tuple(report + geometry_report), unplaced)
+
+
+def _map_and_reader(input_path: Path, map_spec: str):
+    """(column map, :class:`ColumnReader`, report lines, whether the accelerometers read acceleration without
+    gravity (a preset says so), the preset's map text or None) of ``map_spec``: a TOML file or a preset, which
+    picks its files from what ``input_path`` holds."""
+    if not Path(map_spec).exists() and map_spec in PRESETS:
+        source = Source(input_path)
+        text, read_path, report, without_gravity = preset_for(map_spec, source)
+        cmap = parse_map(text, f"preset {map_spec}")
+        cmap = dataclasses.replace(cmap, ctx=PresetContext(map_spec, input_path))
+        if read_path != input_path:
+            source = Source(read_path)
+        return cmap, ColumnReader(cmap, read_path, source), report, without_gravity, text
+    cmap = load_map(map_spec)
+    return cmap, ColumnReader(cmap, input_path), [], False, None
+
+
+def _read_sensors(reader: ColumnReader, sensors: list, gravity_sensor, report: list[str]):
+    """(timestamps and time unit by (file, time column, unit), the table of each, (that key, values) per sensor
+    in order, whether a column's header says the acceleration is linear) of ``sensors`` ((sensor, axes, kind)
+    each); each file's rows and each sensor's columns said in ``report``."""
+    groups: dict[tuple, tuple[np.ndarray, str]] = {}
+    tables: dict[tuple, Table] = {}
+    linear = False
+    blocks = []
+    for sensor, axes, kind in sensors:
+        path = reader.existing_file_of(sensor)
+        table = reader.table(path)
+        key = (path, sensor.time.column, sensor.time.unit)
+        if key not in groups:
+            t, unit = reader.timestamps(table, sensor.time)
+            groups[key] = (t, unit)
+            tables[key] = table
+            report.append(f"{path}: {t.size} rows, time from {table.shown(reader.find(table, sensor.time))} "
+                          f"in [{unit}]")
+        values, shown = reader.values(table, sensor, kind, axes)
+        blocks.append((key, values))
+        report.append(f"  {'gravity' if sensor is gravity_sensor else sensor.name}: {', '.join(shown)}")
+        if kind == "acceleration" and sensor is not gravity_sensor:
+            linear |= any("Linear" in sh for sh in shown)
+    return groups, tables, blocks, linear
+
+
+def _gyro_reference(cmap, reader: ColumnReader, omega: np.ndarray | None, input_path: Path) -> np.ndarray:
+    """The gyroscope's readings ``omega`` for ``--gyro-as-reference``; a :class:`LogFormatError` saying why
+    when there are none (the map names no gyroscope, or its columns or file are not in the recording)."""
+    if omega is None and cmap.gyroscope is not None:  # optional, and not in the recording
+        where = reader.file_of(cmap.gyroscope)
+        names = ", ".join(" or ".join(map(str, c.column)) if isinstance(c.column, tuple) else str(c.column)
+                          for c in cmap.gyroscope.axes.values())
+        found = (f"its columns ({names}) are not in {where}" if reader.source.exists(where)
+                 else f"{where} is not there")
+        raise LogFormatError(f"--gyro-as-reference: no gyroscope to take as the reference: {found}", input_path)
+    if omega is None:
+        raise LogFormatError("--gyro-as-reference: the map names no gyroscope columns", cmap.path)
+    return omega
+
+
+def _warn_plausibility(reader: ColumnReader, log: Log, linear: bool) -> None:
+    """The reader's rate warnings and :func:`check_specific_force_scale`'s, naming the files and the units the
+    accelerometer columns were read in (each attributed to the caller of :func:`read_csv_recording`)."""
     for warning in reader.rate_warnings:
-        warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
+        warnings.warn(warning, LogPlausibilityWarning, stacklevel=3)
     read_as = []
     for path, cols in reader.accel_units.items():
         names = [c for c, _ in cols]
@@ -155,8 +181,7 @@ def read_csv_recording(input_path, map_spec: str, array_path: str | None = None,
     read_units = {u for cols in reader.accel_units.values() for _, u in cols}
     for warning in check_specific_force_scale(log, "; ".join(read_as), gravity_included=not linear,
                                               read_unit=read_units.pop() if len(read_units) == 1 else "m s^-2"):
-        warnings.warn(warning, LogPlausibilityWarning, stacklevel=2)
-    return Conversion(log, tuple(report + geometry_report), unplaced)
+        warnings.warn(warning, LogPlausibilityWarning, stacklevel=3)
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:

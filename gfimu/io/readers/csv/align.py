@@ -35,9 +35,30 @@ def align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_per
         same_file = sum(1 for k in groups if k[0] == key[0]) > 1
         return str(key[0]) + (f" (time column {key[1]!r})" if same_file else "")
 
+    grid, in_span, interpolated = _time_base(groups, base_key, resample_hz, name, report)
+    gaps = {k: find_gaps(groups[k][0], max_gap_periods) for k in groups}
+    keep, found = _gaps_left_out(grid, groups, tables, gaps, interpolated, name)
+    _report_gaps(found, int(grid[0]) if grid.size else 0, max_gap_periods, resample_hz is not None or len(groups) > 1,
+                 report)
+    t_out = grid[keep]
+    if resample_hz is None:
+        _report_base_timing(t_out, gaps[base_key], base_key, len(found), max_gap_periods, report)
+    columns = []
+    for key, values in blocks:
+        if key == base_key and resample_hz is None:
+            columns.append(values[in_span][keep])
+        else:
+            columns.append(interpolate(groups[key][0], values, t_out))
+    return t_out, columns
+
+
+def _time_base(groups: dict, base_key: tuple, resample_hz: float | None, name, report: list[str]):
+    """(the time base over the span all files share, which rows of the base file are in that span (None with
+    ``resample_hz``), the keys of the files interpolated onto it); the report says how it was made."""
     lo = max(int(g[0][0]) for g in groups.values())
     hi = min(int(g[0][-1]) for g in groups.values())
     t_base = groups[base_key][0]
+    in_span = None
     if resample_hz is None:
         in_span = (t_base >= lo) & (t_base <= hi)
         grid = t_base[in_span]
@@ -57,10 +78,14 @@ def align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_per
         report.append(f"aligned: {', '.join(name(k) for k in interpolated)} linearly interpolated onto the "
                       f"timestamps of {base_key[0]}; {int(np.count_nonzero(~in_span))} row(s) of {base_key[0]} "
                       "outside the span all files share left out")
-    t0 = int(grid[0]) if grid.size else 0
+    return grid, in_span, interpolated
+
+
+def _gaps_left_out(grid: np.ndarray, groups: dict, tables: dict, gaps: dict, interpolated: list, name):
+    """(which times of ``grid`` to keep, the gaps that left some out: (start, end, file, its two lines, the
+    file's period, rows left out) each, in time order): the times strictly inside a gap of an interpolated file."""
     keep = np.ones(grid.size, dtype=bool)
-    found = []  # (start, end, file, lines, period, rows left out)
-    gaps = {k: find_gaps(groups[k][0], max_gap_periods) for k in groups}
+    found = []
     for k in interpolated:
         g = gaps[k]
         t = groups[k][0]
@@ -73,6 +98,12 @@ def align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_per
                 lines = (tables[k].lines[i], tables[k].lines[i + 1])
                 found.append((a, b, name(k), lines, g.period_ns, n))
     found.sort()
+    return keep, found
+
+
+def _report_gaps(found: list, t0: int, max_gap_periods: float, interpolating: bool, report: list[str]) -> None:
+    """The gaps of the interpolated files in the report: the first :data:`MAX_SHOWN_GAPS` one by one (times
+    from ``t0``), the others counted; or that there is none (when a file is ``interpolating``)."""
     for a, b, where, (la, lb), p, n in found[:MAX_SHOWN_GAPS]:
         report.append(f"gap: {where} has no row from {(a - t0) * 1e-9:.3f} s to {(b - t0) * 1e-9:.3f} s of the log "
                       f"(lines {la} to {lb}, a step of {(b - a) * 1e-9:.3f} s, over {max_gap_periods:g} of its "
@@ -83,11 +114,15 @@ def align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_per
     if found:
         report.append(f"gaps: {len(found)} step(s) over {max_gap_periods:g} periods in the interpolated files, "
                       f"{sum(f[5] for f in found)} row(s) of the time base left out; the log has a time gap at each")
-    elif resample_hz is not None or len(groups) > 1:
+    elif interpolating:
         report.append(f"gaps: no step over {max_gap_periods:g} periods in the interpolated files")
-    t_out = grid[keep]
-    if resample_hz is None and len(gaps[base_key]):
-        g = gaps[base_key]
+
+
+def _report_base_timing(t_out: np.ndarray, g, base_key: tuple, found: int, max_gap_periods: float,
+                        report: list[str]) -> None:
+    """Without resampling: the gaps ``g`` of the time base's own file kept as time gaps of the log, and the steps
+    of ``t_out`` readers will take for breaks beyond those gaps (and the ``found`` ones of the other files)."""
+    if len(g):
         # only those whose two rows are both in the written log (the others lie in rows left out)
         step = np.searchsorted(t_out, g.start_ns)
         inside = step < t_out.size - 1
@@ -96,19 +131,12 @@ def align(groups: dict, blocks: list, base_key: tuple, tables: dict, max_gap_per
         report.append(f"gaps of the time base {base_key[0]}: {kept} step(s) over {max_gap_periods:g} of its "
                       f"{g.period_ns * 1e-6:.4g} ms periods, kept as time gaps of the log"
                       + (f" ({len(g) - kept} more in rows left out)" if kept < len(g) else ""))
-    if resample_hz is None and t_out.size > 2:
+    if t_out.size > 2:
         dt = np.diff(t_out)
         breaks = int(np.count_nonzero(dt > GAP_FACTOR * float(np.median(dt))))
-        if breaks > len(found) + len(gaps[base_key]):
+        if breaks > found + len(g):
             rate = nominal_rate_hz(t_out)
             report.append(f"timing: {breaks} step(s) of the log's timestamps exceed {GAP_FACTOR:g} of their median "
                           f"{float(np.median(dt)) * 1e-6:.4g} ms (jitter of {base_key[0]}'s times); readers of the "
                           f"log treat each as a break, where estimators restart: --resample-hz {rate:.4g} puts the "
                           "log on a uniform grid")
-    columns = []
-    for key, values in blocks:
-        if key == base_key and resample_hz is None:
-            columns.append(values[in_span][keep])
-        else:
-            columns.append(interpolate(groups[key][0], values, t_out))
-    return t_out, columns
