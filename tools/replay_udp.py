@@ -95,12 +95,20 @@ class Launcher:
 
 
 def _own_peak_mib() -> float:
-    """This process's peak resident memory so far [MiB] (0 where the platform does not say)."""
+    """This process's peak resident memory so far [MiB]: the high-water mark of its own memory (Linux:
+    /proc/self/status VmHWM, what a child it spawns starts with), not ``getrusage``'s, which also counts
+    the image this process replaced (whatever started it); elsewhere ``getrusage``'s, 0 where none."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
     try:
         import resource
     except ImportError:
         return 0.0
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / (1024 if sys.platform.startswith("linux") else 2**20)
 
 
 def _wait_peak_mib(proc: subprocess.Popen, timeout_s: float) -> float:
