@@ -31,7 +31,7 @@ import numpy as np
 from .io.sources import BadRow, Reading, Source, SourceNote
 from .io.tables import motion_csv_chunks
 from .motion import Motion
-from .smoother.stream.session import RATE_ROWS, StreamSession, rate_from_timestamps  # noqa: F401 - re-exported
+from .smoother.stream.session import RATE_ROWS, Kept, StreamSession, rate_from_timestamps  # noqa: F401 - re-exported
 
 REASONS_KEPT = 5
 """Bad rows whose reason is kept (and reported as it happens); the others are only counted."""
@@ -304,7 +304,7 @@ class _Rows:
         self.sink = sink
         self.out = 0
         self.arrival: dict[int, float] = {}
-        self.latency: list[tuple[float, float]] = []
+        self.latency = Kept(width=2)  # (arrival, latency) [s] of the newest TIMES_KEPT rows
 
     def arrived(self, t_ns: int, at: float) -> None:
         self.arrival[t_ns] = at
@@ -324,14 +324,12 @@ class _Rows:
         if len(self.arrival) > 100_000:  # samples that never left (dropped): forget the oldest
             for key in list(self.arrival)[:50_000]:
                 del self.arrival[key]
-        if len(self.latency) > 200_000:
-            del self.latency[:100_000]
 
     def stats(self):
         """(latency (p50, p99, max) [ms], the same after the first :data:`STEADY_AFTER_S` s), None for none."""
-        if not self.latency:
+        if not len(self.latency):
             return None, None
-        pairs = np.asarray(self.latency)
+        pairs = self.latency.values
         later = pairs[pairs[:, 0] > pairs[0, 0] + STEADY_AFTER_S, 1]
         return _stats(pairs[:, 1] * 1e3), _stats(later * 1e3)
 
@@ -392,7 +390,7 @@ class _Live:
                 self.say("warning: further bad rows are counted, not shown")
 
     def status(self, overrun: int) -> None:
-        p = _stats(np.asarray(self.session.processing_s) * 1e3)
+        p = _stats(self.session.processing_s.values * 1e3)
         nan = float("nan")
         self.say(f"{self.rows_in} in, {self.rows.out} out, processing p50 {p[0] if p else nan:.2f} ms "
                  f"p99 {p[1] if p else nan:.2f} ms, {overrun} dropped, {self.session.counts.late_or_repeated} late, "
@@ -408,10 +406,10 @@ class _Live:
         return LiveResult(
             rows_in=self.rows_in, rows_out=self.rows.out, bad_rows=self.bad, bad_reasons=tuple(self.reasons),
             late_or_repeated=c.late_or_repeated, clock_resets=c.clock_resets, missing=c.missing,
-            overrun_dropped=overrun, processing_ms=_stats(np.asarray(session.processing_s) * 1e3),
+            overrun_dropped=overrun, processing_ms=_stats(session.processing_s.values * 1e3),
             latency_ms=latency, steady_latency_ms=steady, rate_hz=session.rate_hz,
             rate_from=session.rate_from, ended=ended, failure=failure, replaced_readings=c.replaced_readings,
-            screening_ms=_stats(np.asarray(session.screening_s) * 1e3), choice_waits=c.choice_waits,
+            screening_ms=_stats(session.screening_s.values * 1e3), choice_waits=c.choice_waits,
             choice_wait_ms=1e3 * c.choice_wait_s)
 
 

@@ -7,7 +7,8 @@ estimate rows from the command's standard output as they are written. Each row's
 from its sample's datagram being sent to the row being read here (the lag, the screening, the smoother's
 processing and the pipe); the tool prints p50/p99/max of it over the whole replay and past its first
 10 s, the rows in and out, how long the replay took against the recording (above real time: the rows
-kept up), the live command's own summary line, and its peak memory.
+kept up), the live command's own summary line, and its peak memory (:class:`Launcher`: its own, not this
+tool's).
 
     python3 tools/replay_udp.py LOG [--seconds 60] [--lag-s 0.2] [--speed 1]
     python3 tools/replay_udp.py --simulate 60            # a simulated 500 Hz random3d log
@@ -17,6 +18,7 @@ kept up), the live command's own summary line, and its peak memory.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import socket
@@ -59,10 +61,61 @@ def _percentiles(values_s) -> str:
     return f"p50 {np.percentile(v, 50):.1f} ms, p99 {np.percentile(v, 99):.1f} ms, max {v.max():.1f} ms"
 
 
+class Launcher:
+    """A lean interpreter started before this tool builds or reads the log, that becomes the measured command
+    (``exec``) when :meth:`start` gives it: the command's peak memory is then its own.
+
+    Linux keeps a process's peak resident set across ``exec``: the peak that ``os.wait4`` reports for a
+    child is the largest of its own and of the image it replaced, and a child spawned by this tool starts as
+    this tool's image (vfork or fork). Spawned straight from here once the log is held (a 600 s simulation
+    and its rows: about 1.4 GiB here), ``gfimu live`` would report this tool's peak as its own. The launcher
+    carries only the peak this tool had when it started (printed beside the figure)."""
+
+    CODE = ("import json, os, sys\n"
+            "line = sys.stdin.readline()\n"
+            "if not line.strip():\n"
+            "    sys.exit(0)\n"  # not started: the tool ended before the command
+            "argv = json.loads(line)\n"
+            "os.dup2(os.open(os.devnull, os.O_RDONLY), 0)\n"
+            "os.execv(argv[0], argv)\n")
+
+    def __init__(self, env=None, cwd=None):
+        self.floor_mib = _own_peak_mib()
+        self.proc = subprocess.Popen([sys.executable, "-I", "-c", self.CODE], env=env, cwd=cwd,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, bufsize=1)
+
+    def start(self, argv) -> subprocess.Popen:
+        """The launcher replaced by ``argv`` (standard input from /dev/null; its output on the pipes made at the
+        start): the Popen of the command (the same process)."""
+        self.proc.stdin.write(json.dumps([str(a) for a in argv]) + "\n")
+        self.proc.stdin.close()
+        self.proc.stdin = None
+        return self.proc
+
+
+def _own_peak_mib() -> float:
+    """This process's peak resident memory so far [MiB]: the high-water mark of its own memory (Linux:
+    /proc/self/status VmHWM, what a child it spawns starts with), not ``getrusage``'s, which also counts
+    the image this process replaced (whatever started it); elsewhere ``getrusage``'s, 0 where none."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    try:
+        import resource
+    except ImportError:
+        return 0.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / (1024 if sys.platform.startswith("linux") else 2**20)
+
+
 def _wait_peak_mib(proc: subprocess.Popen, timeout_s: float) -> float:
-    """Wait for ``proc`` (killed after ``timeout_s``) and give its own peak resident memory [MiB]: the rusage of
+    """Wait for ``proc`` (killed after ``timeout_s``) and give its peak resident memory [MiB]: the rusage of
     that child alone (``os.wait4``), not the largest of every child this process had (a simulation's forked
-    workers hold a copy of this process's memory)."""
+    workers hold a copy of this process's memory). It counts the image the child replaced too: a child
+    started by :class:`Launcher` gives its own."""
     end = time.monotonic() + timeout_s
     while True:
         pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
@@ -91,6 +144,17 @@ def main(argv=None) -> int:
     ap.add_argument("-O", dest="options", action="append", default=[], metavar="KEY=VALUE",
                     help="an option of gfimu live (-O key=value), repeatable")
     args = ap.parse_args(argv)
+    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    launcher = Launcher(env=env, cwd=str(REPO))  # before the log is held: gfimu live's peak is then its own
+    try:
+        return _replay(args, ap, launcher)
+    finally:
+        if launcher.proc.stdin is not None:  # not started (an error before): the launcher ends on its closed input
+            launcher.proc.stdin.close()
+            launcher.proc.wait()
+
+
+def _replay(args, ap, launcher: Launcher) -> int:
     from gfimu import io as gio
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -122,13 +186,11 @@ def main(argv=None) -> int:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
             probe.bind(("127.0.0.1", 0))
             port = probe.getsockname()[1]
-        env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
         options = [a for o in args.options for a in ("-O", o)] + (["--queue", str(args.queue)] if args.queue else [])
-        proc = subprocess.Popen([sys.executable, "-m", "gfimu", "live", "--array", str(log_dir / "array.toml"),
-                                 "--rate-hz", f"{rate_hz:.6f}", "--source", f"udp://127.0.0.1:{port}",
-                                 "--out", "-", "--lag-s", str(args.lag_s), "--quiet", *options],
-                                env=env, cwd=str(REPO),  # this checkout's gfimu, whatever the caller's folder
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+        # this checkout's gfimu (the launcher runs in it), whatever the caller's folder
+        proc = launcher.start([sys.executable, "-m", "gfimu", "live", "--array", str(log_dir / "array.toml"),
+                               "--rate-hz", f"{rate_hz:.6f}", "--source", f"udp://127.0.0.1:{port}",
+                               "--out", "-", "--lag-s", str(args.lag_s), "--quiet", *options])
         sent_at: dict[int, float] = {}
         seen: list[tuple[int, float]] = []
 
@@ -169,7 +231,8 @@ def main(argv=None) -> int:
           f"{rate_hz:.1f} Hz ({recorded_s:.1f} s) sent in {sent_s:.1f} s (speed {args.speed:g}), lag {args.lag_s} s")
     print(f"rows out {len(seen)} of {len(lines)}; last row {done_s - recorded_s / args.speed:+.2f} s after the last "
           f"sample was due; latency datagram -> row on stdout {_percentiles([d for _, d in latency])}; past the first "
-          f"{STEADY_AFTER_S:g} s {_percentiles(steady)}; peak memory of gfimu live {peak_mib:.0f} MiB")
+          f"{STEADY_AFTER_S:g} s {_percentiles(steady)}; peak memory of gfimu live {peak_mib:.0f} MiB (its own; the "
+          f"replay tool's peak {_own_peak_mib():.0f} MiB, {launcher.floor_mib:.0f} MiB when it started the launcher)")
     print(err.strip().splitlines()[-1] if err.strip() else "(no summary from gfimu live)")
     return 0
 

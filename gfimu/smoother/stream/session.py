@@ -28,7 +28,7 @@ RATE_WATCH_STEPS = 32
 measured again from them (:class:`RateWatch`)."""
 
 TIMES_KEPT = 200_000
-"""At most this many per-sample times are kept for the summary (the oldest half dropped beyond)."""
+"""At most this many per-sample times are kept for the summary (the oldest half dropped beyond): :class:`Kept`."""
 
 
 def rate_from_timestamps(timestamps_ns) -> float | None:
@@ -90,11 +90,38 @@ class RateWatch:
         return self.rate_hz
 
 
-def keep(times: list, value: float) -> None:
-    """``value`` appended to ``times``, whose length stays bounded on long streams."""
-    times.append(value)
-    if len(times) > TIMES_KEPT:
-        del times[:TIMES_KEPT // 2]
+class Kept:
+    """The newest values of a quantity counted per sample or per block (times, for a summary): at most
+    :data:`TIMES_KEPT` of them, the oldest half dropped beyond, in one float array made at the start
+    (``width`` values each). Its memory is the same whatever the stream's length: a list of Python floats
+    would grow to 32 bytes a value (6 MB per 200,000, 22 MB as pairs) before its cap, and its summary copy."""
+
+    def __init__(self, width: int = 1):
+        self._rows = np.empty(TIMES_KEPT + 1 if width == 1 else (TIMES_KEPT + 1, int(width)))
+        self._n = 0
+
+    def append(self, value) -> None:
+        self._rows[self._n] = value
+        self._n += 1
+        if self._n > TIMES_KEPT:
+            drop = TIMES_KEPT // 2
+            self._rows[:self._n - drop] = self._rows[drop:self._n]
+            self._n -= drop
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def values(self) -> np.ndarray:
+        """The values kept, oldest first (a view: read it before the next :meth:`append`)."""
+        return self._rows[:self._n]
+
+
+def _own(rows: list) -> list:
+    """The screening's rows with readings of their own: a block it decided hands out rows of one scratch array
+    of its whole buffer (about 14 times the block's rows at 500 Hz), which the smoother's history (the samples
+    the model is chosen on, 30 s) would otherwise keep alive, ~19 MB of them rather than 1.4 MB."""
+    return [(t, a.copy() if a.base is not None else a, *rest) for t, a, *rest in rows]
 
 
 @dataclass(frozen=True)
@@ -125,8 +152,8 @@ class StreamSession:
     :meth:`push` each reading, :meth:`finish` at the end; both return the states that are final, oldest
     first (:class:`~gfimu.smoother.stream.fixed_lag.StateEstimate`). :meth:`take_notes` gives the messages
     (one line each) since the last call; :attr:`counts`, :attr:`processing_s` (the smoother's time per
-    sample), :attr:`screening_s` (the screening's time per block) and :attr:`models` (every model chosen)
-    say what happened.
+    sample [s], :class:`Kept`), :attr:`screening_s` (the screening's time per block) and :attr:`models`
+    (every model chosen) say what happened.
     """
 
     def __init__(self, array, estimator, rate_hz: float | None = None, *, screen: bool | None = None,
@@ -146,8 +173,8 @@ class StreamSession:
         self._late = self._resets = self._missing = self._replaced = 0
         self._retired_models: list = []  # the models of the smoothers at the rates before the current one
         self._retired_waits: list[float] = []
-        self.processing_s: list[float] = []
-        self.screening_s: list[float] = []
+        self.processing_s = Kept()
+        self.screening_s = Kept()
         if rate_hz is not None:
             self._start(float(rate_hz))
 
@@ -265,7 +292,7 @@ class StreamSession:
                 self._late += 1  # the rows before it are still in the screening: dropped here
                 return []
             if self.screen is not None:  # a clock reset: the rows held go first, then a new screening
-                states = self._smooth(self.screen.flush())
+                states = self._smooth(_own(self.screen.flush()))
                 self._replaced += self.screen.count
                 self.screen = self._new_screen()
                 states += self._smooth(self._screened(row))
@@ -284,8 +311,8 @@ class StreamSession:
         t0 = time.perf_counter()
         rows = self.screen.push(*row)
         if rows:
-            keep(self.screening_s, time.perf_counter() - t0)
-        return rows
+            self.screening_s.append(time.perf_counter() - t0)
+        return _own(rows)
 
     def _smooth(self, rows) -> list:
         """The smoother's update on each row, its time kept per row (not for a row it drops)."""
@@ -294,13 +321,13 @@ class StreamSession:
             t0 = time.perf_counter()
             update = self.smoother.push(*row)
             if update.dropped is None:
-                keep(self.processing_s, time.perf_counter() - t0)
+                self.processing_s.append(time.perf_counter() - t0)
             states.extend(update.smoothed)
         return states
 
     def _flush(self) -> list:
         """The rows still held by the screening, then the window: every state left."""
-        states = self._smooth(self.screen.flush()) if self.screen is not None else []
+        states = self._smooth(_own(self.screen.flush())) if self.screen is not None else []
         return states + list(self.smoother.flush())
 
     def _rerate(self, rate_hz: float) -> list:
