@@ -179,8 +179,98 @@ class Step:
         return cls(J0, J1, r0, F, np.ascontiguousarray(F.T), Q, c, H0, z0)
 
 
+_ZERO3 = np.zeros(3)
+
+
+@dataclass(frozen=True, eq=False, slots=True)
+class Structure:
+    """The array's geometry as the readings see it: the structure matrix ``S = [S_f, S_ω̇, S_q]`` (Ho & Lin
+    2009, eq. 6) by blocks, the weighted pseudo-inverse of its linear part, and every sensor's
+    (directions, positions, column slice)."""
+
+    S_lin: np.ndarray  # [f, ω̇] columns
+    S_q: np.ndarray
+    S_f: np.ndarray
+    S_dw: np.ndarray
+    pinv_lin_w: np.ndarray  # [f, ω̇] given q(ω), weighted by the accelerometers' noise
+    linear_part_observable: bool
+    geometry: list  # (directions, positions, column slice) of every accelerometer
+
+
+@dataclass(frozen=True, eq=False, slots=True)
+class Noise:
+    """The noise levels of the batch smoother's accelerometer, gyroscope and first-state prior groups on the
+    array (the accelerometers' scaled by ``accel_noise_scale``)."""
+
+    accel_sigma_mps2: np.ndarray
+    mean_accel_var_mps2: float
+    gyro_sigma_radps: float
+    first_sigma: np.ndarray
+
+
+@dataclass(eq=False, slots=True)
+class Robust:
+    """The robust model of an inconsistent log (:mod:`gfimu.smoother.tuning.model_choice`): the accelerometer
+    noise's growth with |ω|, the robust loss's thresholds (0: off) and its name (settable: a window engine
+    takes the values it is given, :meth:`WindowFilter.set_model`)."""
+
+    accel_noise_slope_mps2_per_radps: float
+    accel_robust_threshold: float
+    robust_loss: str
+    process_robust_threshold: float
+
+
+@dataclass(frozen=True, eq=False, slots=True)
+class FactorSets:
+    """The factor groups by what they tie: one sample (``per_sample``, the options' own) or consecutive
+    samples (``steps``, built-in and given; ``fixed_steps`` the built-in linear ones, cached per step
+    length, ``other_steps`` the rest, evaluated at every step)."""
+
+    per_sample: tuple
+    steps: tuple
+    fixed_steps: tuple
+    other_steps: tuple
+
+
+class Caches:
+    """What :class:`ArrayModel` builds on first use: the gtsam noise models (``gtsam_noise``, by name) and the
+    built-in step rows per step length in ns (``steps``)."""
+
+    __slots__ = ("gtsam_noise", "steps")
+
+    def __init__(self) -> None:
+        self.gtsam_noise: dict = {}
+        self.steps: dict = {}
+
+
+def _delegate(part: str, name: str, doc: str, settable: bool = False) -> property:
+    """An attribute of :class:`ArrayModel` kept in one of its parts (read-only unless ``settable``)."""
+
+    def get(self):
+        return getattr(getattr(self, part), name)
+
+    def set_(self, value) -> None:
+        setattr(getattr(self, part), name, value)
+
+    return property(get, set_ if settable else None, doc=doc)
+
+
 class ArrayModel:
-    """Precomputed geometry and noise models of one array under ``SmootherOptions``."""
+    """Precomputed geometry and noise models of one array under ``SmootherOptions``.
+
+    Besides ``array``, ``options``, ``fast_measurement`` and ``accel_noise_scale``, what it holds is in
+    four parts (their fields also readable as attributes of the model, e.g. ``model.S_q``):
+
+    - :attr:`structure` (:class:`Structure`): the structure matrix's blocks ``S_lin``, ``S_q``, ``S_f``,
+      ``S_dw``, the weighted pseudo-inverse ``pinv_lin_w`` of the linear part and whether that part is
+      observable, every sensor's geometry;
+    - :attr:`noise` (:class:`Noise`): the accelerometers' stds per axis and their mean variance, the
+      gyroscope's std, the first-state prior's stds;
+    - :attr:`robust` (:class:`Robust`): the motion-dependent noise slope, the robust thresholds of the
+      accelerometers and of the process, the loss;
+    - :attr:`factor_sets` (:class:`FactorSets`): the per-sample and the step groups;
+
+    and :attr:`caches` (:class:`Caches`): the gtsam noise models and the step rows per step length."""
 
     def __init__(self, array: SensorArray, options: SmootherOptions, fast_measurement: bool = True,
                  accel_noise_scale: float = 1.0) -> None:
@@ -191,54 +281,69 @@ class ArrayModel:
         self.fast_measurement = bool(fast_measurement)
         self.accel_noise_scale = float(accel_noise_scale)
         S = array.structure_matrix()
-        self.S_lin = np.ascontiguousarray(S[:, :6])  # [f, ω̇] columns
-        self.S_q = np.ascontiguousarray(S[:, 6:])
-        self.S_f = np.ascontiguousarray(S[:, :3])
-        self.S_dw = np.ascontiguousarray(S[:, 3:6])
+        S_lin = np.ascontiguousarray(S[:, :6])
         # the accelerometer, gyroscope and first-state noise of the batch smoother's groups, on a view of the array
         levels = StreamView(array, options, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
                                                               GyroscopeGroup())).noise
         sigma = levels.accel.scaled(self.accel_noise_scale).sigma
-        self.accel_sigma_mps2 = sigma
-        """The accelerometers' std per axis: :attr:`NoiseLevels.accel` (the option ``default_accel_noise_std_mps2``
-        where array.toml gives none) times ``accel_noise_scale``."""
-        self.mean_accel_var_mps2 = float(np.mean(sigma ** 2))
-        """The mean over the axes of their variances [(m/s²)²]."""
-        self._geometry = accelerometer.array_geometry(array)  # (directions, positions, column slice)
-        self._gtsam_noise: dict = {}
-        wL = self.S_lin / sigma[:, None]
-        self.pinv_lin_w = np.linalg.pinv(wL, rcond=1e-10) / sigma[None, :]  # [f, ω̇] given q(ω)
-        self.linear_part_observable = np.linalg.matrix_rank(wL) == 6
-        self._zero3 = np.zeros(3)
-        self._eye3 = np.eye(3)
-        self.gyro_sigma_radps = levels.gyro.sigma  # the batch smoother's GyroscopeGroup's
-        self.groups = tuple(g for g in options.factor_groups if g.per_sample)
-        """The per-sample groups of the options (:meth:`sample_terms`)."""
-        self.step_groups = tuple(g for g in BUILT_IN + tuple(options.factor_groups) if g.steps)
-        """The groups that tie consecutive samples, built-in (motion model, specific-force walk) and given
-        (:meth:`step`)."""
-        self._fixed_steps = tuple(g for g in self.step_groups if g.linear and g in BUILT_IN)
-        self._other_steps = tuple(g for g in self.step_groups if g not in self._fixed_steps)
-        self._step_cache: dict = {}
-        self.first_sigma = levels.first_state.sigma
-        """The first-state prior's stds, as the batch smoother's :class:`~gfimu.smoother.model.groups.FirstStatePriorGroup`."""
+        wL = S_lin / sigma[:, None]
+        self.structure = Structure(S_lin, np.ascontiguousarray(S[:, 6:]), np.ascontiguousarray(S[:, :3]),
+                                   np.ascontiguousarray(S[:, 3:6]), np.linalg.pinv(wL, rcond=1e-10) / sigma[None, :],
+                                   np.linalg.matrix_rank(wL) == 6, accelerometer.array_geometry(array))
+        self.noise = Noise(sigma, float(np.mean(sigma ** 2)), levels.gyro.sigma, levels.first_state.sigma)
+        step_groups = tuple(g for g in BUILT_IN + tuple(options.factor_groups) if g.steps)
+        fixed_steps = tuple(g for g in step_groups if g.linear and g in BUILT_IN)
+        self.factor_sets = FactorSets(tuple(g for g in options.factor_groups if g.per_sample), step_groups,
+                                      fixed_steps, tuple(g for g in step_groups if g not in fixed_steps))
         # the robust model of an inconsistent log (gfimu.smoother.tuning.model_choice): the noise grows with |ω| and
         # each axis may be weighted by the robust loss of its whitened residual (the stream's model
         # leaves that off: see gfimu.smoother.stream.model_choice)
-        self.accel_noise_slope_mps2_per_radps = float(options.accel_noise_slope_mps2_per_radps)
-        self.accel_robust_threshold = float(options.accel_robust_threshold) if options.measurement == "accelerometer" else 0.0
-        self.robust_loss = options.robust_loss
-        self.process_robust_threshold = float(options.process_robust_threshold)
+        self.robust = Robust(float(options.accel_noise_slope_mps2_per_radps),
+                             float(options.accel_robust_threshold) if options.measurement == "accelerometer" else 0.0,
+                             options.robust_loss, float(options.process_robust_threshold))
+        self.caches = Caches()
+
+    S_lin = _delegate("structure", "S_lin", "The structure matrix's [f, ω̇] columns.")
+    S_q = _delegate("structure", "S_q", "The structure matrix's q(ω) columns.")
+    S_f = _delegate("structure", "S_f", "The structure matrix's f columns.")
+    S_dw = _delegate("structure", "S_dw", "The structure matrix's ω̇ columns.")
+    pinv_lin_w = _delegate("structure", "pinv_lin_w", "[f, ω̇] given q(ω): the weighted pseudo-inverse of S_lin.")
+    linear_part_observable = _delegate("structure", "linear_part_observable", "Whether S_lin has rank 6.")
+    _geometry = _delegate("structure", "geometry", "(directions, positions, column slice) of every accelerometer.")
+    accel_sigma_mps2 = _delegate(
+        "noise", "accel_sigma_mps2",
+        """The accelerometers' std per axis: :attr:`NoiseLevels.accel` (the option ``default_accel_noise_std_mps2``
+        where array.toml gives none) times ``accel_noise_scale``.""")
+    mean_accel_var_mps2 = _delegate("noise", "mean_accel_var_mps2", "The mean over the axes of their variances [(m/s²)²].")
+    gyro_sigma_radps = _delegate("noise", "gyro_sigma_radps", "The batch smoother's GyroscopeGroup's std.")
+    first_sigma = _delegate(
+        "noise", "first_sigma",
+        "The first-state prior's stds, as the batch smoother's :class:`~gfimu.smoother.model.groups.FirstStatePriorGroup`.")
+    accel_noise_slope_mps2_per_radps = _delegate("robust", "accel_noise_slope_mps2_per_radps",
+                                                 "The accelerometer noise's growth with |ω|.", True)
+    accel_robust_threshold = _delegate("robust", "accel_robust_threshold",
+                                       "The accelerometers' robust threshold (0: off; only with the accelerometer measurement).",
+                                       True)
+    robust_loss = _delegate("robust", "robust_loss", "The robust loss's name.", True)
+    process_robust_threshold = _delegate("robust", "process_robust_threshold", "The process's robust threshold (0: off).",
+                                         True)
+    groups = _delegate("factor_sets", "per_sample", "The per-sample groups of the options (:meth:`sample_terms`).")
+    step_groups = _delegate(
+        "factor_sets", "steps",
+        """The groups that tie consecutive samples, built-in (motion model, specific-force walk) and given
+        (:meth:`step`).""")
+    _step_cache = _delegate("caches", "steps", "The built-in step rows per step length in ns (:meth:`step`).")
 
     def sample_terms(self, t_ns: int, y: np.ndarray, gyro=None):
         """The per-sample factor groups of the options at one sample: None when none applies there, else a
         function ``x -> (r, J)`` of the state ``[ω, ω̇, f]`` giving their whitened residual rows (R,) and
         Jacobian (R, 9), from each group's :meth:`~gfimu.smoother.model.groups.FactorGroup.terms` on that sample
         alone."""
-        if not self.groups:
+        per_sample = self.factor_sets.per_sample
+        if not per_sample:
             return None
         view = StreamView(self.array, self.options, [t_ns], y, gyro)
-        groups = [g for g in self.groups if g.applies(view)]
+        groups = [g for g in per_sample if g.applies(view)]
         if not groups:
             return None
         view.with_levels(groups)
@@ -300,22 +405,24 @@ class ArrayModel:
         linearised at the newest state ``x0`` and its prediction. ``motion_factor``: the local motion
         density's factor on the motion model's stds (:func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
         key = round(h * 1e9)
-        fixed = self._step_cache.get(key)
+        cache = self.caches.steps
+        fixed = cache.get(key)
+        sets = self.factor_sets
         if fixed is None:
-            view = StreamView(self.array, self.options, [0, key], dt_s=np.array([h])).with_levels(self._fixed_steps)
+            view = StreamView(self.array, self.options, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
             zero = np.zeros(KINEMATIC_SIZE)
-            fixed = self._step_rows(self._fixed_steps, view, zero, zero)
+            fixed = self._step_rows(sets.fixed_steps, view, zero, zero)
             fixed = {"rows": fixed, 1.0: Step.of(*fixed[:3])}
-            if len(self._step_cache) > 64:  # irregular timestamps: keep the cache bounded
-                self._step_cache.clear()
-            self._step_cache[key] = fixed
+            if len(cache) > 64:  # irregular timestamps: keep the cache bounded
+                cache.clear()
+            cache[key] = fixed
         others = None
-        if self._other_steps and t_ns is not None:
+        if sets.other_steps and t_ns is not None:
             (a0, g0), (a1, g1) = readings if readings is not None else ((None, None), (None, None))
             view = StreamView(self.array, self.options, list(t_ns),
                               None if a0 is None else np.vstack([a0, a1]),
                               None if g0 is None or g1 is None else np.vstack([g0, g1]), dt_s=np.array([h]))
-            groups = [g for g in self._other_steps if g.applies(view)]
+            groups = [g for g in sets.other_steps if g.applies(view)]
             if groups:
                 view.with_levels(groups)
                 x0 = np.zeros(KINEMATIC_SIZE) if x0 is None else np.asarray(x0, dtype=float)
@@ -349,23 +456,26 @@ class ArrayModel:
     # --- gtsam noise models (built on first use) --------------------------------------
     @property
     def accel_noise(self):
-        if "accel" not in self._gtsam_noise:
-            self._gtsam_noise["accel"] = gtsam.noiseModel.Diagonal.Sigmas(self.accel_sigma_mps2)
-        return self._gtsam_noise["accel"]
+        cache = self.caches.gtsam_noise
+        if "accel" not in cache:
+            cache["accel"] = gtsam.noiseModel.Diagonal.Sigmas(self.noise.accel_sigma_mps2)
+        return cache["accel"]
 
     @property
     def sensors(self) -> list:
         """(directions, positions, column slice, gtsam noise model) of every accelerometer."""
-        if "sensors" not in self._gtsam_noise:
-            self._gtsam_noise["sensors"] = [(d, p, cols, gtsam.noiseModel.Diagonal.Sigmas(self.accel_sigma_mps2[cols]))
-                                            for d, p, cols in self._geometry]
-        return self._gtsam_noise["sensors"]
+        cache, sigma = self.caches.gtsam_noise, self.noise.accel_sigma_mps2
+        if "sensors" not in cache:
+            cache["sensors"] = [(d, p, cols, gtsam.noiseModel.Diagonal.Sigmas(sigma[cols]))
+                                for d, p, cols in self.structure.geometry]
+        return cache["sensors"]
 
     @property
     def gyro_noise(self):
-        if "gyro" not in self._gtsam_noise:
-            self._gtsam_noise["gyro"] = gtsam.noiseModel.Isotropic.Sigma(3, self.gyro_sigma_radps)
-        return self._gtsam_noise["gyro"]
+        cache = self.caches.gtsam_noise
+        if "gyro" not in cache:
+            cache["gyro"] = gtsam.noiseModel.Isotropic.Sigma(3, self.noise.gyro_sigma_radps)
+        return cache["gyro"]
 
     # --- factors ----------------------------------------------------------------
     def add_measurement(self, graph: gtsam.NonlinearFactorGraph, k: int, y: np.ndarray, gyro=None, extra=None) -> None:
@@ -399,7 +509,8 @@ class ArrayModel:
 
     def _fast_accelerometer_factor(self, kw: int, kd: int, kf: int, y: np.ndarray) -> gtsam.CustomFactor:
         """All axes at once: ``S_f f + S_ω̇ ω̇ + S_q q(ω) - y`` (Ho & Lin 2009, eq. 6)."""
-        S_q, S_f, S_dw = self.S_q, self.S_f, self.S_dw
+        structure = self.structure
+        S_q, S_f, S_dw = structure.S_q, structure.S_f, structure.S_dw
 
         def error(this, values, jacobians):
             w = values.atVector(kw)
@@ -435,23 +546,26 @@ class ArrayModel:
     def add_priors(self, graph: gtsam.NonlinearFactorGraph, k: int) -> None:
         """Weak zero-mean priors on the first state of a segment (:attr:`first_sigma`, the batch smoother's
         first-state prior)."""
+        first_sigma = self.noise.first_sigma
         for key, sl in zip(keys(k), (OMEGA, OMEGA_DOT, SPECIFIC_FORCE)):
-            graph.add(gtsam.PriorFactorVector(key, self._zero3, gtsam.noiseModel.Diagonal.Sigmas(self.first_sigma[sl])))
+            graph.add(gtsam.PriorFactorVector(key, _ZERO3, gtsam.noiseModel.Diagonal.Sigmas(first_sigma[sl])))
 
     # --- initial values ---------------------------------------------------------
     def predict(self, omega, omega_dot, f, h: float, y: np.ndarray):
         """Initial value of a new state: ω by one step of ω̇, then [f, ω̇] from y given q(ω)."""
         w = omega + h * omega_dot
-        if not self.linear_part_observable:
+        structure = self.structure
+        if not structure.linear_part_observable:
             return w, omega_dot, f
-        x6 = self.pinv_lin_w @ (y - self.S_q @ rigid_body.quadratic_terms(w))
+        x6 = structure.pinv_lin_w @ (y - structure.S_q @ rigid_body.quadratic_terms(w))
         return w, x6[3:], x6[:3]
 
     def predict_step(self, step: Step, x0: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Initial value of the state one ``step`` after ``x0``: ω by the step's transition, then [f, ω̇]
         from y given q(ω)."""
         x = step.F @ x0 if step.c is None else step.F @ x0 + step.c
-        if not self.linear_part_observable:
+        structure = self.structure
+        if not structure.linear_part_observable:
             return x
-        x6 = self.pinv_lin_w @ (y - self.S_q @ rigid_body.quadratic_terms(x[OMEGA]))
+        x6 = structure.pinv_lin_w @ (y - structure.S_q @ rigid_body.quadratic_terms(x[OMEGA]))
         return np.concatenate([x[OMEGA], x6[3:], x6[:3]])

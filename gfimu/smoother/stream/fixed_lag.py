@@ -1002,7 +1002,7 @@ class FixedLagSmoother:
             w2 = 0.0 if self._segment.prev is None else float(self._segment.prev[1] @ self._segment.prev[1])
             var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
         else:
-            var = self.model.mean_accel_var_mps2
+            var = self.model.noise.mean_accel_var_mps2
         local = self._choice.local.push(sample[0], sample[1], var)
         self._choice.jerk_factor = 1.0
         if local is not None and chosen.robust:  # the batch smoother's local density (robust model)

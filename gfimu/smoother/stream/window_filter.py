@@ -182,8 +182,114 @@ class FilterFailure(RuntimeError):
     """A numerical failure of an update (a singular innovation covariance, non-finite values)."""
 
 
+class WindowStore:
+    """The window's storage: each slot's mean, marginal variances and cross-covariance with the newest
+    state (``mean`` (cap, 9), ``var`` (cap, 9), ``cross`` (cap, 9, 9); ``tmp`` scratch of the shape of
+    ``cross``), ``cap`` slots; the states in slots ``[lo, hi)``, those in ``[lo, split)`` updated lazily
+    (:meth:`WindowFilter._flush`), ``[split, hi)`` at once; ``base`` the index k of slot 0."""
+
+    __slots__ = ("mean", "var", "cross", "tmp", "cap", "lo", "hi", "split", "base")
+
+    def __init__(self, capacity: int) -> None:
+        self.cap = capacity
+        self.mean = np.zeros((capacity, 9))
+        self.var = np.zeros((capacity, 9))
+        self.cross = np.zeros((capacity, 9, 9))
+        self.tmp = np.empty((capacity, 9, 9))
+        self.lo = self.hi = self.split = self.base = 0
+
+
+class LazyFactors:
+    """The lazy older states' share of the updates: the open epoch's factors since the last flush
+    (``C_i T`` their cross-covariances, ``m_i + C_i u`` their means, ``v_i - diag(C_i W C_iᵀ)`` their
+    variances) and the closed epochs they still wait for (``epochs``, :class:`Epochs`)."""
+
+    __slots__ = ("T", "u", "W", "epochs")
+
+    def __init__(self) -> None:
+        self.T = np.eye(9)
+        self.u = np.zeros(9)
+        self.W = np.zeros((9, 9))
+        self.epochs = Epochs()
+
+
+class NewestStep:
+    """The newest state's covariance ``P`` and the step into it: its transition ``F`` and process noise
+    ``Q`` (None before the segment's first step)."""
+
+    __slots__ = ("P", "Q", "F")
+
+    def __init__(self) -> None:
+        self.P = np.zeros((9, 9))
+        self.Q = self.F = None
+
+
+class StepRecord:
+    """What the branch decision (:meth:`WindowFilter.settle`) reads of the segment's steps: ``steps``,
+    k -> (F, Q) of the step into each state of the window, and ``unsettled``, whether an update used rows
+    it cannot evaluate (gyroscope, factor groups, given step groups)."""
+
+    __slots__ = ("steps", "unsettled")
+
+    def __init__(self) -> None:
+        self.steps: dict = {}
+        self.unsettled = False
+
+
+class FilterOperands:
+    """The model's numbers as the updates use them: the first-state prior's variances ``prior_var``, the
+    accelerometers' ``R`` and the gyroscope's ``gyro_var`` (``Rg`` both), the compiled kernels' operands
+    (``kernel_model``: R, the structure matrix's blocks, the robust model; ``kernel_options``: iterations,
+    tolerance, branches and their margin, the process's robust loss), and the Jacobian buffers ``H``, ``Hg``
+    (with the gyroscope rows) with the indices of their innovation covariances' diagonals ``diag``,
+    ``diag_g``."""
+
+    __slots__ = ("prior_var", "R", "gyro_var", "Rg", "kernel_model", "kernel_options", "H", "Hg", "diag", "diag_g")
+
+    def __init__(self, model: ArrayModel) -> None:
+        structure = model.structure
+        m = structure.S_q.shape[0]
+        # Jacobian buffers: the ω̇ and f columns are constant; the gyroscope rows select ω
+        self.H = np.zeros((m, 9))
+        self.H[:, 3:6], self.H[:, 6:] = structure.S_dw, structure.S_f
+        self.Hg = np.zeros((m + 3, 9))
+        self.Hg[:m] = self.H
+        self.Hg[m + np.arange(3), np.arange(3)] = 1.0
+        self.diag = (np.arange(m), np.arange(m))
+        self.diag_g = (np.arange(m + 3), np.arange(m + 3))
+        self.prior_var = self.R = self.gyro_var = self.Rg = self.kernel_model = self.kernel_options = None
+
+
+class Counters:
+    """Updates made (``updates``) and runs of states moved onto another branch by :meth:`WindowFilter.settle`
+    (``settled``)."""
+
+    __slots__ = ("updates", "settled")
+
+    def __init__(self) -> None:
+        self.updates = self.settled = 0
+
+
 class WindowFilter:
-    """The window of one segment: means, marginal variances and cross-covariances with the newest state."""
+    """The window of one segment: means, marginal variances and cross-covariances with the newest state.
+
+    Besides its settings (``model``, ``iterations``, ``step_tolerance_radps``, :attr:`branches`, the array's
+    plane normal ``_normal``, ``lazy_steps``), what it holds is in six parts:
+
+    - ``_store`` (:class:`WindowStore`): the window's arrays (means, variances, cross-covariances) and its
+      slots (in use, lazy, the index of slot 0);
+    - ``_lazy`` (:class:`LazyFactors`): the open epoch's factors ``T``, ``u``, ``W`` and the closed
+      :class:`Epochs` the older states wait for;
+    - ``_newest`` (:class:`NewestStep`): the newest state's covariance and the step into it;
+    - ``_record`` (:class:`StepRecord`): the steps into the window's states, and whether the branch
+      decision can evaluate the segment's updates;
+    - ``_ops`` (:class:`FilterOperands`): the model's noise as variances, the compiled kernels' operands,
+      the Jacobian buffers;
+    - ``_counts`` (:class:`Counters`): updates made, runs settled (:attr:`n_updates`, :attr:`n_settled`).
+
+    The hot paths (:meth:`advance`, :meth:`mean`, :meth:`settle`, :meth:`drop_oldest`) read the parts
+    directly; the properties ``_P``, ``_mean``, ``_cross``, ``_lo``, ``_hi``, ``_base``, ``_epochs`` and
+    ``_kernel_model`` give their fields under the names the tests read."""
 
     replays = True
     """Whether the stream may solve the window again from its raw samples (a new window, each state
@@ -202,39 +308,59 @@ class WindowFilter:
         self.iterations = int(iterations)
         self.step_tolerance_radps = float(step_tolerance_radps)
         self._branches = bool(branches)
-        self._normal = plane_normal(np.concatenate([np.atleast_2d(pos) for _, pos, _ in model._geometry]))
+        self._normal = plane_normal(np.concatenate([np.atleast_2d(pos) for _, pos, _ in model.structure.geometry]))
+        self._ops = FilterOperands(model)
         self.set_model(model)
-        self._cap = max(int(capacity), 8)
-        self.lazy_steps = LAZY_STEPS or lazy_steps(self._cap)
+        self._store = WindowStore(max(int(capacity), 8))
+        self.lazy_steps = LAZY_STEPS or lazy_steps(self._store.cap)
         """Updates gathered into one epoch of the older states (:meth:`_boundary`)."""
-        self._mean = np.zeros((self._cap, 9))
-        self._var = np.zeros((self._cap, 9))
-        self._cross = np.zeros((self._cap, 9, 9))
-        self._tmp = np.empty((self._cap, 9, 9))
-        self._lo = self._hi = 0
-        self._split = 0  # states [lo, split) are updated lazily (see _flush), [split, hi) at once
-        self._T = np.eye(9)  # the old states' cross-covariances since the last flush: C_i T
-        self._u = np.zeros(9)  # ... their means: m_i + C_i u
-        self._W = np.zeros((9, 9))  # ... their variances: v_i - diag(C_i W C_iᵀ)
-        self._epochs = Epochs()  # the older states waiting for epochs (_boundary)
-        self._base = 0  # index k of slot 0
-        self._P = np.zeros((9, 9))  # covariance of the newest state
-        self._Q = None  # process noise of the newest step
-        self._F = None  # transition of the newest step
-        self._steps: dict = {}  # k -> (F, Q) of the step into state k (the window's states)
-        self._unsettled = False  # an update used rows the branch decision cannot evaluate (gyroscope, groups)
-        self.n_updates = 0
-        self.n_settled = 0
+        self._lazy = LazyFactors()
+        self._newest = NewestStep()
+        self._record = StepRecord()
+        self._counts = Counters()
+
+    # --- the parts' fields under the names read elsewhere (the tests) ---------------------
+    @property
+    def n_updates(self) -> int:
+        """Updates made."""
+        return self._counts.updates
+
+    @property
+    def n_settled(self) -> int:
         """Runs of states moved onto another branch by :meth:`settle`."""
-        m = model.S_q.shape[0]
-        # Jacobian buffers: the ω̇ and f columns are constant; the gyroscope rows select ω
-        self._H = np.zeros((m, 9))
-        self._H[:, 3:6], self._H[:, 6:] = model.S_dw, model.S_f
-        self._Hg = np.zeros((m + 3, 9))
-        self._Hg[:m] = self._H
-        self._Hg[m + np.arange(3), np.arange(3)] = 1.0
-        self._diag = (np.arange(m), np.arange(m))
-        self._diag_g = (np.arange(m + 3), np.arange(m + 3))
+        return self._counts.settled
+
+    @property
+    def _P(self) -> np.ndarray:
+        return self._newest.P
+
+    @property
+    def _mean(self) -> np.ndarray:
+        return self._store.mean
+
+    @property
+    def _cross(self) -> np.ndarray:
+        return self._store.cross
+
+    @property
+    def _lo(self) -> int:
+        return self._store.lo
+
+    @property
+    def _hi(self) -> int:
+        return self._store.hi
+
+    @property
+    def _base(self) -> int:
+        return self._store.base
+
+    @property
+    def _epochs(self) -> Epochs:
+        return self._lazy.epochs
+
+    @property
+    def _kernel_model(self) -> tuple:
+        return self._ops.kernel_model
 
     @property
     def branches(self) -> bool:
@@ -250,62 +376,73 @@ class WindowFilter:
         """Go on with the noise levels of ``model`` (the same array): the steps and readings to come
         are weighted by it, the window keeps what it has."""
         self.model = model
-        self._prior_var = np.asarray(model.first_sigma[:9], dtype=float) ** 2
-        self._R = model.accel_sigma_mps2 ** 2
-        self._gyro_var = model.gyro_sigma_radps ** 2
-        self._Rg = np.concatenate([self._R, np.full(3, self._gyro_var)])
+        ops, noise, structure, robust = self._ops, model.noise, model.structure, model.robust
+        ops.prior_var = np.asarray(noise.first_sigma[:9], dtype=float) ** 2
+        ops.R = noise.accel_sigma_mps2 ** 2
+        ops.gyro_var = noise.gyro_sigma_radps ** 2
+        ops.Rg = np.concatenate([ops.R, np.full(3, ops.gyro_var)])
         # the kernels' operands: contiguous copies of the structure matrix's blocks, the loss as a code
-        self._kernel_model = (np.ascontiguousarray(self._R, dtype=float), np.ascontiguousarray(model.S_q, dtype=float),
-                              np.ascontiguousarray(model.S_dw, dtype=float), np.ascontiguousarray(model.S_f, dtype=float),
-                              float(model.accel_noise_slope_mps2_per_radps), float(model.accel_robust_threshold),
-                              kernels.loss_code(model.accel_robust_threshold, model.robust_loss))
-        c_process = float(model.process_robust_threshold)
-        self._kernel_options = (max(self.iterations, 1) + (1 if model.accel_robust_threshold > 0 else 0),
-                                self.step_tolerance_radps, self.branches, self._normal, BRANCH_PRIOR_MARGIN, c_process,
-                                kernels.loss_code(c_process, model.robust_loss))
+        ops.kernel_model = (np.ascontiguousarray(ops.R, dtype=float),
+                            np.ascontiguousarray(structure.S_q, dtype=float),
+                            np.ascontiguousarray(structure.S_dw, dtype=float),
+                            np.ascontiguousarray(structure.S_f, dtype=float),
+                            float(robust.accel_noise_slope_mps2_per_radps), float(robust.accel_robust_threshold),
+                            kernels.loss_code(robust.accel_robust_threshold, robust.robust_loss))
+        c_process = float(robust.process_robust_threshold)
+        ops.kernel_options = (max(self.iterations, 1) + (1 if robust.accel_robust_threshold > 0 else 0),
+                              self.step_tolerance_radps, self.branches, self._normal, BRANCH_PRIOR_MARGIN, c_process,
+                              kernels.loss_code(c_process, robust.robust_loss))
 
     # --- window -------------------------------------------------------------------------
     def __len__(self) -> int:
-        return self._hi - self._lo
+        return self._store.hi - self._store.lo
 
     @property
     def capacity(self) -> int:
-        return self._cap
+        return self._store.cap
 
     def _slot(self, k: int) -> int:
-        s = k - self._base
-        if not self._lo <= s < self._hi:
+        store = self._store
+        s = k - store.base
+        if not store.lo <= s < store.hi:
             raise KeyError(f"state {k} is not in the window")
         return s
 
     def mean(self, k: int) -> np.ndarray:
-        s = k - self._base
-        if s >= self._split:
-            if s < self._hi:
-                return self._mean[s]
-        elif s >= self._lo:
-            if self._epochs.waits(k):
+        store = self._store
+        s = k - store.base
+        if s >= store.split:
+            if s < store.hi:
+                return store.mean[s]
+        elif s >= store.lo:
+            lazy = self._lazy
+            if lazy.epochs.waits(k):
                 self._bring_up(k + 1)
-            return self._mean[s] + self._cross[s] @ self._u
+            return store.mean[s] + store.cross[s] @ lazy.u
         raise KeyError(f"state {k} is not in the window")
 
     def sigma(self, k: int) -> np.ndarray:
+        store = self._store
         s = self._slot(k)
-        var = self._var[s]
-        if s < self._split:
-            if self._epochs.waits(k):
+        var = store.var[s]
+        if s < store.split:
+            if self._lazy.epochs.waits(k):
                 self._bring_up(k + 1)
-                var = self._var[s]
-            C = self._cross[s]
-            var = var - np.einsum("ij,jk,ik->i", C, self._W, C)
+                var = store.var[s]
+            C = store.cross[s]
+            var = var - np.einsum("ij,jk,ik->i", C, self._lazy.W, C)
         return np.sqrt(np.clip(var, 0.0, None))
 
     def drop_oldest(self) -> None:
-        if self._hi > self._lo:
-            self._steps.pop(self._base + self._lo, None)
-            self._lo += 1
-            self._split = max(self._split, self._lo)
-            self._epochs.forget_before(self._base + self._lo)
+        store = self._store
+        lo = store.lo
+        if store.hi > lo:
+            self._record.steps.pop(store.base + lo, None)
+            lo += 1
+            store.lo = lo
+            if store.split < lo:
+                store.split = lo
+            self._lazy.epochs.forget_before(store.base + lo)
 
     # --- the older states: brought up to date when read ----------------------------------
     def _boundary(self) -> None:
@@ -322,21 +459,22 @@ class WindowFilter:
         if not self.deferred:
             self._flush()
             return
-        if self._split > self._lo:
-            self._epochs.close(self._T, self._u, self._W, self._base + self._lo, self._base + self._split)
-        self._T = np.eye(9)
-        self._u = np.zeros(9)
-        self._W = np.zeros((9, 9))
-        self._split = self._hi
+        store, lazy = self._store, self._lazy
+        if store.split > store.lo:
+            lazy.epochs.close(lazy.T, lazy.u, lazy.W, store.base + store.lo, store.base + store.split)
+        lazy.T = np.eye(9)
+        lazy.u = np.zeros(9)
+        lazy.W = np.zeros((9, 9))
+        store.split = store.hi
 
     def _bring_up(self, k_stop: float) -> None:
         """The waiting states before ``k_stop`` (and at least :attr:`lazy_steps` of a run) brought up to date
         as of the current epoch's start: each run's epochs since composed into one ``(T, u, W)`` and applied."""
-        ep, base = self._epochs, self._base
+        ep, base = self._lazy.epochs, self._store.base
         if not ep.stale:
             return
         Ts, us, Ws = ep.T[:ep.n], ep.u[:ep.n], ep.W[:ep.n]
-        for k0, k1, first in ep.take(k_stop, base + self._lo, self.lazy_steps):
+        for k0, k1, first in ep.take(k_stop, base + self._store.lo, self.lazy_steps):
             if self.compiled:
                 T, u, W = kernels.compose_epochs(Ts, us, Ws, first)
             else:
@@ -350,15 +488,16 @@ class WindowFilter:
     def _apply(self, T: np.ndarray, u: np.ndarray, W: np.ndarray, a: int, b: int) -> None:
         """The factors ``(T, u, W)`` applied to the states in slots ``[a, b)``: ``m += C u``, ``v -= diag(C W Cᵀ)``,
         ``C ← C T``."""
+        store = self._store
         if self.compiled:
-            kernels.flush_window(T, u, W, self._mean[a:b], self._var[a:b], self._cross[a:b])
+            kernels.flush_window(T, u, W, store.mean[a:b], store.var[a:b], store.cross[a:b])
             return
-        C = self._cross[a:b]
-        self._mean[a:b] += np.einsum("lij,j->li", C, u)
-        self._var[a:b] -= np.einsum("lij,jk,lik->li", C, W, C)
+        C = store.cross[a:b]
+        store.mean[a:b] += np.einsum("lij,j->li", C, u)
+        store.var[a:b] -= np.einsum("lij,jk,lik->li", C, W, C)
         n = b - a
-        tmp = np.matmul(C.reshape(9 * n, 9), T, out=self._tmp[a:b].reshape(9 * n, 9))
-        self._cross[a:b] = tmp.reshape(n, 9, 9)
+        tmp = np.matmul(C.reshape(9 * n, 9), T, out=store.tmp[a:b].reshape(9 * n, 9))
+        store.cross[a:b] = tmp.reshape(n, 9, 9)
 
     def _flush(self) -> None:
         """Bring the old states up to date: every update moves each state of the window by products
@@ -366,44 +505,46 @@ class WindowFilter:
         C_iᵀ)``), so the old states' share of :attr:`lazy_steps` updates is gathered in T, u and W and
         applied to them at once: O(window / lazy_steps + lazy_steps) per update instead of O(window),
         the same numbers to rounding. The stale states are brought up to date first (:meth:`_bring_up`)."""
+        store, lazy = self._store, self._lazy
         self._bring_up(math.inf)
-        self._epochs.clear()
-        if self._split > self._lo:
-            self._apply(self._T, self._u, self._W, self._lo, self._split)
-        self._T = np.eye(9)
-        self._u = np.zeros(9)
-        self._W = np.zeros((9, 9))
-        self._split = self._hi
+        lazy.epochs.clear()
+        if store.split > store.lo:
+            self._apply(lazy.T, lazy.u, lazy.W, store.lo, store.split)
+        lazy.T = np.eye(9)
+        lazy.u = np.zeros(9)
+        lazy.W = np.zeros((9, 9))
+        store.split = store.hi
 
     def _make_room(self) -> None:
-        if self._hi < self._cap:
+        store = self._store
+        if store.hi < store.cap:
             return
         self._flush()
-        n = self._hi - self._lo
-        if n >= self._cap // 2:  # a window longer than expected (irregular steps): grow
-            cap = 2 * self._cap
-            for name in ("_mean", "_var", "_cross"):
-                old = getattr(self, name)
+        n = store.hi - store.lo
+        if n >= store.cap // 2:  # a window longer than expected (irregular steps): grow
+            cap = 2 * store.cap
+            for name in ("mean", "var", "cross"):
+                old = getattr(store, name)
                 new = np.zeros((cap,) + old.shape[1:])
-                new[:n] = old[self._lo:self._hi]
-                setattr(self, name, new)
-            self._tmp = np.empty((cap, 9, 9))
-            self._cap = cap
+                new[:n] = old[store.lo:store.hi]
+                setattr(store, name, new)
+            store.tmp = np.empty((cap, 9, 9))
+            store.cap = cap
         else:
-            for arr in (self._mean, self._var, self._cross):
-                arr[:n] = arr[self._lo:self._hi]
-        self._base += self._lo
-        self._lo, self._hi = 0, n
-        self._split = n
+            for arr in (store.mean, store.var, store.cross):
+                arr[:n] = arr[store.lo:store.hi]
+        store.base += store.lo
+        store.lo, store.hi = 0, n
+        store.split = n
 
     # --- model --------------------------------------------------------------------------
     def _measure(self, x: np.ndarray, gyro):
         """Prediction ``h(x)`` and Jacobian H of the readings (and gyroscope) at ``x``."""
-        m = self.model
-        H = self._H if gyro is None else self._Hg
-        n = m.S_q.shape[0]
-        H[:n, :3] = m.S_q @ quadratic_terms_jacobian(x[:3])
-        pred = H[:n, 3:] @ x[3:] + m.S_q @ quadratic_terms(x[:3])
+        S_q = self.model.structure.S_q
+        H = self._ops.H if gyro is None else self._ops.Hg
+        n = S_q.shape[0]
+        H[:n, :3] = S_q @ quadratic_terms_jacobian(x[:3])
+        pred = H[:n, 3:] @ x[3:] + S_q @ quadratic_terms(x[:3])
         if gyro is None:
             return pred, H
         return np.concatenate([pred, x[:3]]), H
@@ -419,16 +560,17 @@ class WindowFilter:
         D (m + C u)``; ``diag(D C W Cᵀ D) = diag(C W Cᵀ)``), and a moved newest state moves the factors
         still to come (T ← T Dᵀ): nothing is brought up to date first. A mirror moves ω̇ by a product
         with ω, so the window is brought up to date before it."""
+        store = self._store
         if kind == 1 and self.deferred:
             self._flip(k_first, k_stop)
             return
         self._flush()
         first = self._slot(k_first)
-        lo, hi = self._lo, self._hi
+        lo, hi = store.lo, store.hi
         stop = hi if k_stop is None else self._slot(k_stop)
         for i in range(first, stop):
-            w, dw = branch(kind, self._mean[i, 0:3], self._mean[i, 3:6], self._normal)
-            self._mean[i, 0:3], self._mean[i, 3:6] = w, dw
+            w, dw = branch(kind, store.mean[i, 0:3], store.mean[i, 3:6], self._normal)
+            store.mean[i, 0:3], store.mean[i, 3:6] = w, dw
         A = np.eye(3)
         if kind & 2:
             A = A - 2.0 * np.outer(self._normal, self._normal)
@@ -438,34 +580,36 @@ class WindowFilter:
         D[0:3, 0:3] = A
         # C_i = Cov(x_i, x_newest): the moved ones get D on their left; when the newest is moved, every
         # C_i gets Dᵀ on its right too
-        self._cross[first:stop] = D @ self._cross[first:stop]
+        store.cross[first:stop] = D @ store.cross[first:stop]
         if stop == hi:
-            self._cross[lo:hi] = self._cross[lo:hi] @ D.T
-            self._P = D @ self._P @ D.T
+            store.cross[lo:hi] = store.cross[lo:hi] @ D.T
+            self._newest.P = D @ self._newest.P @ D.T
 
     def _means(self, a: int, b: int) -> np.ndarray:
         """The means of the states in slots ``[a, b)`` (a copy), the lazy ones given the updates since."""
-        self._bring_up(self._base + b)
-        X = self._mean[a:b].copy()
-        lazy = min(b, self._split) - a
+        store = self._store
+        self._bring_up(store.base + b)
+        X = store.mean[a:b].copy()
+        lazy = min(b, store.split) - a
         if lazy > 0:
-            X[:lazy] += self._cross[a:a + lazy] @ self._u
+            X[:lazy] += store.cross[a:a + lazy] @ self._lazy.u
         return X
 
     def _flip(self, k_first: int, k_stop: int | None) -> None:
         """:meth:`move_branch` of kind 1 (ω → -ω) on the stored values, lazy or not."""
+        store = self._store
         a = self._slot(k_first)
-        hi = self._hi
+        hi = store.hi
         b = hi if k_stop is None else self._slot(k_stop)
-        self._mean[a:b, 0:3] *= -1.0
-        self._cross[a:b, 0:3, :] *= -1.0  # D C
+        store.mean[a:b, 0:3] *= -1.0
+        store.cross[a:b, 0:3, :] *= -1.0  # D C
         if b == hi:  # the newest moved: C_i Dᵀ for every state (the lazy ones through T), P → D P Dᵀ
-            self._cross[self._split:hi, :, 0:3] *= -1.0
-            self._T[:, 0:3] *= -1.0
-            P = self._P.copy()
+            store.cross[store.split:hi, :, 0:3] *= -1.0
+            self._lazy.T[:, 0:3] *= -1.0
+            P = self._newest.P.copy()
             P[0:3, :] *= -1.0
             P[:, 0:3] *= -1.0
-            self._P = P
+            self._newest.P = P
 
     def _step_costs(self, X: np.ndarray, steps: list) -> np.ndarray:
         """(4, 4, n - 1) costs of the motion-model steps between the n states ``X`` (ω, ω̇ columns
@@ -481,19 +625,20 @@ class WindowFilter:
         pred = np.einsum("jkl,ajl->ajk", F, W[:, :-1])  # F x_j on each branch a
         d = W[None, :, 1:] - pred[:, None]  # (a, b, j, 6)
         e2 = np.einsum("abjk,jkl,abjl->abj", d, Q_inv, d) / 6.0
-        return 6.0 * robust_loss(e2, self.model.process_robust_threshold, self.model.robust_loss)
+        robust = self.model.robust
+        return 6.0 * robust_loss(e2, robust.process_robust_threshold, robust.robust_loss)
 
     def _readings_costs(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
         """(4, n) costs of the readings ``Y`` of the n states ``X`` on each branch: half the squared
         residual over the accelerometer variances at each state's |ω| (the same on every branch: the
         branches keep |ω|). A planar array's readings fit all four alike; the flip always."""
-        m = self.model
-        R = self._R[None, :] + (m.accel_noise_slope_mps2_per_radps ** 2) * np.sum(X[:, 0:3] ** 2, axis=1)[:, None]
+        m, rb = self.model.structure, self.model.robust
+        R = self._ops.R[None, :] + (rb.accel_noise_slope_mps2_per_radps ** 2) * np.sum(X[:, 0:3] ** 2, axis=1)[:, None]
         out = np.empty((4, len(X)))
         for b in range(4):
             w, dw = branch(b, X[:, 0:3], X[:, 3:6], self._normal)
             r = Y - (dw @ m.S_dw.T + X[:, 6:9] @ m.S_f.T + quadratic_terms(w) @ m.S_q.T)
-            out[b] = np.sum(robust_loss(r * r / R, m.accel_robust_threshold, m.robust_loss), axis=1)
+            out[b] = np.sum(robust_loss(r * r / R, rb.accel_robust_threshold, rb.robust_loss), axis=1)
         return out
 
     def settle(self, readings) -> int:
@@ -518,18 +663,19 @@ class WindowFilter:
         ``readings(i)``. Nothing is done with :attr:`branches` off, when the segment's updates used a
         gyroscope or factor groups (rows this decision does not evaluate), or with fewer than three
         states. Returns the number of states moved."""
-        lo, hi = self._lo, self._hi
+        store, record = self._store, self._record
+        lo, hi = store.lo, store.hi
         hi = min(hi, lo + 1 + SETTLE_STATES)
-        if not self.branches or self._unsettled or hi - lo < 3:
+        if not self._branches or record.unsettled or hi - lo < 3:
             return 0
-        k0 = self._base + lo
-        step = self._steps.get(k0 + 1)
+        k0 = store.base + lo
+        step = record.steps.get(k0 + 1)
         if step is None:
             return 0
         F, Q = step
         self._bring_up(k0 + 2)
         if self.compiled:
-            e2 = kernels.window_step_residual2(F, Q, self._mean, self._cross, self._u, self._split, lo)
+            e2 = kernels.window_step_residual2(F, Q, store.mean, store.cross, self._lazy.u, store.split, lo)
             if e2 < 0:  # singular
                 return 0
         else:
@@ -541,7 +687,7 @@ class WindowFilter:
         if not e2 > OUTLYING_STEP2:
             return 0
         X = self._means(lo, hi)  # the oldest (held), then the states decided
-        steps = [self._steps.get(self._base + i) for i in range(lo + 1, hi)]
+        steps = [record.steps.get(store.base + i) for i in range(lo + 1, hi)]
         if any(s is None for s in steps):
             return 0
         step_cost = self._step_costs(X, steps)
@@ -570,7 +716,7 @@ class WindowFilter:
         self._flush()  # the re-solve reads and writes the means as stored
         self.move_branch(k0 + 1, kind, k0 + 1 + stop)
         self._resolve_run(min(stop + SETTLE_MARGIN, n - 1), steps, Y)
-        self.n_settled += 1
+        self._counts.settled += 1
         return stop
 
     def _resolve_run(self, m: int, steps: list, Y: np.ndarray) -> None:
@@ -579,14 +725,15 @@ class WindowFilter:
         the oldest on; ``Y``: the readings of the states after the oldest), the oldest and the state after
         them held: the filter fitted their ω̇ and f to the run's former branch, and the move carries over
         only the part of that fit that the branch map moves."""
+        store = self._store
         if m < 1:
             return
-        lo = self._lo + 1
-        x_prev = self._mean[lo - 1]
-        mdl = self.model
+        lo = store.lo + 1
+        x_prev = store.mean[lo - 1]
+        mdl = self.model.robust
         c_proc, loss = mdl.process_robust_threshold, mdl.robust_loss
-        X = self._mean[lo:lo + m].copy()
-        x_next = self._mean[lo + m]
+        X = store.mean[lo:lo + m].copy()
+        x_next = store.mean[lo + m]
         # whitening of each step (ω, ω̇ and f rows): L with Lᵀ L = Q⁻¹
         Ls = []
         Fs = []
@@ -600,7 +747,7 @@ class WindowFilter:
             g = np.zeros(N)
             for j in range(m):  # readings
                 pred, H = self._measure(X[j], None)
-                R = self._R + (mdl.accel_noise_slope_mps2_per_radps ** 2) * float(X[j, 0:3] @ X[j, 0:3])
+                R = self._ops.R + (mdl.accel_noise_slope_mps2_per_radps ** 2) * float(X[j, 0:3] @ X[j, 0:3])
                 r = Y[j] - pred
                 sl = slice(9 * j, 9 * j + 9)
                 HR = H.T / R
@@ -634,7 +781,7 @@ class WindowFilter:
             X += dx.reshape(m, 9)
             if np.max(np.abs(dx.reshape(m, 9)[:, 0:3])) < 1e-3:
                 break
-        self._mean[lo:lo + m] = X
+        store.mean[lo:lo + m] = X
 
     # --- the window interface both engines share (gfimu.smoother.stream.gtsam_window.GtsamWindow) ----
     def begin(self, k: int, t_ns: int, y, gyro=None, start=None, extra=None) -> None:
@@ -647,41 +794,45 @@ class WindowFilter:
         """State ``k``, one ``step`` (:meth:`ArrayModel.step`) after the newest: predict, then its readings
         (linearised from ``start``, else from the prediction and the other branches of the update's
         minimum)."""
+        record = self._record
         if not isinstance(step, Step):
             step = self.model.step(float(step))
         if step.c is not None or step.H0 is not None:
-            self._unsettled = True  # rows of given step groups, which the branch decision does not evaluate
+            record.unsettled = True  # rows of given step groups, which the branch decision does not evaluate
         if self.compiled and gyro is None and extra is None and start is None and step.H0 is None:
             self._advance_compiled(k, step, y)  # the prediction and the update in one compiled call
-            self._steps[k] = (self._F, self._Q)
+            record.steps[k] = (step.F, step.Q)  # (the newest step's F and Q, as the call stored them)
             return
         self.predict(k, step)
-        self._steps[k] = (self._F, self._Q)
+        record.steps[k] = (step.F, step.Q)
         self.measure(y, gyro, start=start, extra=extra)
 
     def _advance_compiled(self, k: int, step: Step, y) -> None:
         """:meth:`predict` then :meth:`measure` from the prediction, on the readings alone, through
         :func:`kernels.advance_update <gfimu.smoother.stream.kernels.advance_update>`: the same numbers as the
         two compiled calls it fuses, without their Python in between."""
-        if k != self._base + self._hi:
+        store, lazy, newest, ops = self._store, self._lazy, self._newest, self._ops
+        hi = store.hi
+        if k != store.base + hi:
             raise ValueError(f"state {k} does not follow the window's newest state")
-        if self._hi >= self._cap:
+        if hi >= store.cap:
             self._make_room()
+            hi = store.hi
         F, Q = step.F, step.Q
-        hi = self._hi
         T, u, W, P_after, split, ok = kernels.advance_update(
             F if F.flags.c_contiguous else np.ascontiguousarray(F, dtype=float),
             Q if Q.flags.c_contiguous else np.ascontiguousarray(Q, dtype=float),
-            _ZERO9 if step.c is None else np.asarray(step.c, dtype=float), self._P, self._T, self._u, self._W,
-            self._mean, self._var, self._cross, self._lo, self._split, hi, _NEVER,
-            np.ascontiguousarray(y, dtype=float), *self._kernel_model, *self._kernel_options)
-        self._T, self._u, self._W, self._P, self._Q, self._F = T, u, W, P_after, Q, F
-        self._hi = hi + 1
+            _ZERO9 if step.c is None else np.asarray(step.c, dtype=float), newest.P, lazy.T, lazy.u, lazy.W,
+            store.mean, store.var, store.cross, store.lo, store.split, hi, _NEVER,
+            np.ascontiguousarray(y, dtype=float), *ops.kernel_model, *ops.kernel_options)
+        lazy.T, lazy.u, lazy.W, newest.P, newest.Q, newest.F = T, u, W, P_after, Q, F
+        hi += 1
+        store.hi = hi
         if not ok:
             raise FilterFailure("singular innovation covariance or non-finite values in the update")
-        self._split = split
-        self.n_updates += 1  # (the update's covariance written into the window: :meth:`_updated` in the kernel)
-        if self._hi - split >= self.lazy_steps:
+        store.split = split
+        self._counts.updates += 1  # (the update's covariance written into the window: :meth:`_updated` in the kernel)
+        if hi - split >= self.lazy_steps:
             self._boundary()
 
     def commit(self) -> None:
@@ -693,33 +844,35 @@ class WindowFilter:
 
     @property
     def n_slots(self) -> int:
-        return self._cap
+        return self._store.cap
 
     # --- updates ------------------------------------------------------------------------
     def start(self, k: int) -> None:
         """First state of a segment, index ``k``: the weak zero-mean priors."""
-        self._lo = self._hi = 0
-        self._split = 0
-        self._T = np.eye(9)
-        self._u = np.zeros(9)
-        self._W = np.zeros((9, 9))
-        self._epochs = Epochs()
-        self._base = k
-        self._mean[0] = 0.0
-        self._var[0] = self._prior_var
-        self._P = np.diag(self._prior_var)
-        self._Q = None
-        self._F = None
-        self._steps = {}
-        self._unsettled = False
-        self._cross[0] = self._P
-        self._hi = 1
+        store, lazy, newest = self._store, self._lazy, self._newest
+        store.lo = store.hi = 0
+        store.split = 0
+        lazy.T = np.eye(9)
+        lazy.u = np.zeros(9)
+        lazy.W = np.zeros((9, 9))
+        lazy.epochs = Epochs()
+        store.base = k
+        store.mean[0] = 0.0
+        store.var[0] = self._ops.prior_var
+        newest.P = np.diag(self._ops.prior_var)
+        newest.Q = None
+        newest.F = None
+        self._record.steps = {}
+        self._record.unsettled = False
+        store.cross[0] = newest.P
+        store.hi = 1
 
     def predict(self, k: int, step: Step | float) -> None:
         """Append state ``k`` one ``step`` after the newest (:class:`~gfimu.smoother.stream.array_model.Step`:
         the step groups' rows as the transition ``x1 = F x0 + c + n``, n ~ N(0, Q), and their rows on the
         newest state alone, applied to it first; a float: :meth:`ArrayModel.step` of that many seconds)."""
-        if k != self._base + self._hi:
+        store, lazy = self._store, self._lazy
+        if k != store.base + store.hi:
             raise ValueError(f"state {k} does not follow the window's newest state")
         if not isinstance(step, Step):
             step = self.model.step(float(step))
@@ -727,29 +880,31 @@ class WindowFilter:
             self.update_linear(step.H0, step.z0)
         F, FT, Q = step.F, step.FT, step.Q
         self._make_room()
-        lo, hi = self._split, self._hi  # the recent states at once, the old ones through T
+        lo, hi = store.split, store.hi  # the recent states at once, the old ones through T
         if self.compiled:
-            x, P, self._T = kernels.predict_window(np.ascontiguousarray(F, dtype=float), np.ascontiguousarray(Q, dtype=float),
-                                                   _ZERO9 if step.c is None else np.asarray(step.c, dtype=float),
-                                                   self._P, self.mean(self._base + hi - 1), self._T, self._cross[lo:hi])
+            x, P, lazy.T = kernels.predict_window(np.ascontiguousarray(F, dtype=float),
+                                                  np.ascontiguousarray(Q, dtype=float),
+                                                  _ZERO9 if step.c is None else np.asarray(step.c, dtype=float),
+                                                  self._newest.P, self.mean(store.base + hi - 1), lazy.T,
+                                                  store.cross[lo:hi])
         else:
-            x = F @ self.mean(self._base + hi - 1)
+            x = F @ self.mean(store.base + hi - 1)
             if step.c is not None:
                 x = x + step.c
-            P = F @ self._P @ FT + Q
+            P = F @ self._newest.P @ FT + Q
             P = 0.5 * (P + P.T)
             n = hi - lo
             if n:
-                tmp = np.matmul(self._cross[lo:hi].reshape(9 * n, 9), FT, out=self._tmp[lo:hi].reshape(9 * n, 9))
-                self._cross[lo:hi] = tmp.reshape(n, 9, 9)
-            self._T = self._T @ FT
-        self._mean[hi] = x
-        self._var[hi] = np.diagonal(P)
-        self._cross[hi] = P
-        self._P = P
-        self._Q = Q
-        self._F = F
-        self._hi = hi + 1
+                tmp = np.matmul(store.cross[lo:hi].reshape(9 * n, 9), FT, out=store.tmp[lo:hi].reshape(9 * n, 9))
+                store.cross[lo:hi] = tmp.reshape(n, 9, 9)
+            lazy.T = lazy.T @ FT
+        store.mean[hi] = x
+        store.var[hi] = np.diagonal(P)
+        store.cross[hi] = P
+        self._newest.P = P
+        self._newest.Q = Q
+        self._newest.F = F
+        store.hi = hi + 1
 
     def _branch_starts(self, x: np.ndarray) -> list[np.ndarray]:
         """x on the other branches: ω flipped, ω mirrored through the array's plane (ω̇ moved so that a
@@ -765,11 +920,12 @@ class WindowFilter:
                iterations: int | None = None):
         """Gauss-Newton on J from ``x`` (at most ``iterations`` steps; None: :attr:`iterations`): (x, H,
         S⁻¹ [H, ν] at the last linearisation, J at x)."""
-        R = self._Rg if gyro is not None else self._R
-        diag = self._diag_g if gyro is not None else self._diag
-        m = self.model
+        ops = self._ops
+        R = ops.Rg if gyro is not None else ops.R
+        diag = ops.diag_g if gyro is not None else ops.diag
+        m = self.model.robust
         slope, c_robust = m.accel_noise_slope_mps2_per_radps, m.accel_robust_threshold
-        n_acc = m.S_q.shape[0]
+        n_acc = self.model.structure.S_q.shape[0]
         if extra is not None:
             n_extra = extra(x)[0].size
             y = np.concatenate([y, np.zeros(n_extra)])
@@ -782,7 +938,7 @@ class WindowFilter:
             iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
         for it in range(iterations):
             if slope > 0 or c_robust > 0:  # the accelerometer variances at x (motion-dependent, robust)
-                base = self._R if slope <= 0 else self._R + (slope * slope) * float(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+                base = ops.R if slope <= 0 else ops.R + (slope * slope) * float(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
                 R[:n_acc] = base
                 if c_robust > 0 and it > 0:
                     r = y[:n_acc] - self._measure(x, None)[0]
@@ -824,20 +980,21 @@ class WindowFilter:
         """:meth:`measure` on the readings alone through :func:`kernels.measure_update
         <gfimu.smoother.stream.kernels.measure_update>` (the branches and the robust step only from the
         prediction, as :meth:`measure` tries them)."""
-        R0, S_q, S_dw, S_f, slope, c_robust, loss = self._kernel_model
+        R0, S_q, S_dw, S_f, slope, c_robust, loss = self._ops.kernel_model
         iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
-        c_process = float(self.model.process_robust_threshold)
-        robust_step = from_prediction and self._Q is not None and c_process > 0
-        hi, lo = self._hi, self._split
+        robust, store, lazy, Q = self.model.robust, self._store, self._lazy, self._newest.Q
+        c_process = float(robust.process_robust_threshold)
+        robust_step = from_prediction and Q is not None and c_process > 0
+        hi, lo = store.hi, store.split
         T, u, W, P_after, P_before, ok = kernels.measure_update(
             np.ascontiguousarray(y, dtype=float), xp, np.ascontiguousarray(P), np.array(x0, dtype=float), R0, S_q,
             S_dw, S_f, slope, c_robust, loss, iterations, self.step_tolerance_radps, self.branches and from_prediction,
-            self._normal, BRANCH_PRIOR_MARGIN, c_process, kernels.loss_code(c_process, self.model.robust_loss),
-            self._Q if robust_step else P, robust_step, self._T, self._u, self._W, self._mean[lo:hi],
-            self._var[lo:hi], self._cross[lo:hi])
+            self._normal, BRANCH_PRIOR_MARGIN, c_process, kernels.loss_code(c_process, robust.robust_loss),
+            Q if robust_step else P, robust_step, lazy.T, lazy.u, lazy.W, store.mean[lo:hi], store.var[lo:hi],
+            store.cross[lo:hi])
         if not ok:
             raise FilterFailure("singular innovation covariance or non-finite values in the update")
-        self._T, self._u, self._W = T, u, W
+        lazy.T, lazy.u, lazy.W = T, u, W
         self._updated(P_after)
 
     def measure(self, y: np.ndarray, gyro=None, start=None, extra=None) -> None:
@@ -851,11 +1008,12 @@ class WindowFilter:
         truth (fast motion between samples) otherwise leads Gauss-Newton onto such a branch.
 
         ``extra``: the factor groups' rows at this sample (:meth:`ArrayModel.sample_terms`), or None."""
-        hi = self._hi
-        xp = self._mean[hi - 1].copy()
-        P = self._P
+        store = self._store
+        hi = store.hi
+        xp = store.mean[hi - 1].copy()
+        P = self._newest.P
         if gyro is not None or extra is not None:
-            self._unsettled = True
+            self._record.unsettled = True
         if gyro is not None:
             y = np.concatenate([y, gyro])
         x0 = xp if start is None else np.asarray(start, dtype=float)
@@ -879,8 +1037,9 @@ class WindowFilter:
                     candidate = self._solve(y, gyro, xp, P, candidate[0], extra)
                 if candidate[3] < best[3]:
                     best = candidate
-        c = self.model.process_robust_threshold
-        if c > 0 and start is None and self._Q is not None:
+        robust = self.model.robust
+        c = robust.process_robust_threshold
+        if c > 0 and start is None and self._newest.Q is not None:
             # the robust loss of the motion-model step (the batch smoother's IRLS weight of the step's
             # whitened residual, its norm over √rows): a sudden jerk widens this step's process noise
             d = best[0] - xp
@@ -888,21 +1047,21 @@ class WindowFilter:
                 e2 = float(d @ np.linalg.solve(P, d)) / d.size
             except np.linalg.LinAlgError:
                 e2 = 0.0
-            w = float(robust_weight(np.sqrt(e2), c, self.model.robust_loss))
+            w = float(robust_weight(np.sqrt(e2), c, robust.robust_loss))
             if w < 1.0:
-                P = P + (1.0 / w - 1.0) * self._Q
+                P = P + (1.0 / w - 1.0) * self._newest.Q
                 P = 0.5 * (P + P.T)
-                self._P = P
-                self._cross[hi - 1] = P
-                self._var[hi - 1] = np.diagonal(P)
+                self._newest.P = P
+                store.cross[hi - 1] = P
+                store.var[hi - 1] = np.diagonal(P)
                 best = self._solve(y, gyro, xp, P, best[0], extra)
         _, H, Z, _ = best
         self._update(H, Z, P)  # the last linearisation moves the whole window
 
     def update_linear(self, H: np.ndarray, z: np.ndarray) -> None:
         """A linear measurement ``H x = z`` (unit noise) of the newest state, moving the whole window."""
-        P = self._P
-        xp = self.mean(self._base + self._hi - 1)
+        P = self._newest.P
+        xp = self.mean(self._store.base + self._store.hi - 1)
         S = H @ P @ H.T + np.eye(len(z))
         rhs = np.column_stack([H, z - H @ xp])
         try:
@@ -914,33 +1073,34 @@ class WindowFilter:
     def _update(self, H: np.ndarray, Z: np.ndarray, P: np.ndarray) -> None:
         """Move every state of the window by the update ``S⁻¹ [H, ν]`` (``Z``) of the newest state, whose
         covariance before it is ``P``."""
-        hi = self._hi
+        store, lazy = self._store, self._lazy
+        hi = store.hi
         if self.compiled:
-            lo = self._split
-            T, u, W, P_new, ok = kernels.update_window(np.ascontiguousarray(H.T @ Z, dtype=float), P, self._T,
-                                                       self._u, self._W, self._mean[lo:hi], self._var[lo:hi],
-                                                       self._cross[lo:hi])
+            lo = store.split
+            T, u, W, P_new, ok = kernels.update_window(np.ascontiguousarray(H.T @ Z, dtype=float), P, lazy.T,
+                                                       lazy.u, lazy.W, store.mean[lo:hi], store.var[lo:hi],
+                                                       store.cross[lo:hi])
             if not ok:
                 raise FilterFailure("non-finite values in the update")
-            self._T, self._u, self._W = T, u, W
+            lazy.T, lazy.u, lazy.W = T, u, W
             self._updated(P_new)
             return
         g = H.T @ Z[:, -1]  # Hᵀ S⁻¹ ν
         A = H.T @ Z[:, :-1]  # Hᵀ S⁻¹ H
         if not (np.all(np.isfinite(g)) and np.all(np.isfinite(A))):
             raise FilterFailure("non-finite values in the update")
-        lo = self._split  # the recent states at once; the old ones through T, u, W (_flush)
-        self._u = self._u + self._T @ g
-        TA = self._T @ A
-        self._W = self._W + TA @ self._T.T
-        self._T = self._T - TA @ P
+        lo = store.split  # the recent states at once; the old ones through T, u, W (_flush)
+        lazy.u = lazy.u + lazy.T @ g
+        TA = lazy.T @ A
+        lazy.W = lazy.W + TA @ lazy.T.T
+        lazy.T = lazy.T - TA @ P
         n = hi - lo
-        cross = self._cross[lo:hi].reshape(9 * n, 9)  # the stack as one matrix: one BLAS call per product
+        cross = store.cross[lo:hi].reshape(9 * n, 9)  # the stack as one matrix: one BLAS call per product
         # (einsum, not BLAS gemv: OpenBLAS threads a gemv this size, and on a busy machine waiting for its
         # second thread costs milliseconds)
-        self._mean[lo:hi] += np.einsum("lij,j->li", cross.reshape(n, 9, 9), g)
-        CA = np.matmul(cross, A, out=self._tmp[lo:hi].reshape(9 * n, 9))
-        self._var[lo:hi] -= np.einsum("lij,lij->li", CA.reshape(n, 9, 9), cross.reshape(n, 9, 9))
+        store.mean[lo:hi] += np.einsum("lij,j->li", cross.reshape(n, 9, 9), g)
+        CA = np.matmul(cross, A, out=store.tmp[lo:hi].reshape(9 * n, 9))
+        store.var[lo:hi] -= np.einsum("lij,lij->li", CA.reshape(n, 9, 9), cross.reshape(n, 9, 9))
         # C_i (I - A P) = C_i - (C_i A) P
         cross -= CA @ P
         P_new = P - P @ A @ P
@@ -948,10 +1108,11 @@ class WindowFilter:
 
     def _updated(self, P_new: np.ndarray) -> None:
         """The newest state's covariance after an update; the lazy states brought up to date when due."""
-        hi = self._hi
-        self._P = P_new
-        self._cross[hi - 1] = P_new
-        self._var[hi - 1] = np.diagonal(P_new)
-        self.n_updates += 1
-        if hi - self._split >= self.lazy_steps:
+        store = self._store
+        hi = store.hi
+        self._newest.P = P_new
+        store.cross[hi - 1] = P_new
+        store.var[hi - 1] = np.diagonal(P_new)
+        self._counts.updates += 1
+        if hi - store.split >= self.lazy_steps:
             self._boundary()
