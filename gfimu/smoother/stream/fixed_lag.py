@@ -398,8 +398,6 @@ class StartHold:
         self.check_every_ns = check_every_ns
         self.starts: list[dict] = []
         self.still_starts: list[float] = []
-        self.replaying = False
-        """A tuning stretch is being streamed whose batch solution decides its start: no check is made."""
         self.begin_segment()
 
     def begin_segment(self) -> None:
@@ -803,14 +801,8 @@ class FixedLagSmoother:
         if batch is not None and final:  # the segment ends here: the batch solution is all there is to say
             return batch
         out = []
-        # with the stretch's batch solution at hand the held start is decided by it (below): the
-        # evidence is not weighed again on the way
-        self._hold.replaying = batch is not None
-        try:
-            for sample in samples:
-                out.extend(self._process(sample))
-        finally:
-            self._hold.replaying = False
+        for sample in samples:
+            out.extend(self._process(sample))
         if batch is not None:
             out = batch[:len(out) + self._start_from_batch(batch)]
         return out
@@ -1279,7 +1271,7 @@ class FixedLagSmoother:
     def _hold_start(self, newest_ns: int) -> list[StateEstimate]:
         """While the start of the segment is held (its rows past the lag kept back): every
         ``max(lag_s, 0.5 s)`` the evidence for the branch of ω is weighed (:meth:`_release_start`)."""
-        if not self._hold.held or self._hold.replaying or not self._hold.due(newest_ns):
+        if not self._hold.held or not self._hold.due(newest_ns):
             return []
         return self._release_start(final=False)
 
