@@ -43,6 +43,7 @@ from ...factors import (
     specific_force_key,
 )
 from ...log import Log
+from .parts import delegated
 from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
 from .noise_levels import NoiseLevels
 from .option_groups import MotionModel, assemble
@@ -236,47 +237,15 @@ class SmootherProblem:
         object.__setattr__(self, "_built", True)
 
     # --- the parts' values, by the names the groups read -------------------
-    @property
-    def sensors(self) -> list:
-        """(directions, positions, column slice) of each accelerometer."""
-        return self.geometry.sensors
-
-    @property
-    def all_directions_b(self) -> np.ndarray:
-        """(axes, 3) sensing direction of every axis in the body frame."""
-        return self.geometry.directions_b
-
-    @property
-    def all_positions_m(self) -> np.ndarray:
-        """(axes, 3) position of every axis [m]."""
-        return self.geometry.positions_m
-
-    @property
-    def all_rows(self) -> np.ndarray:
-        """(axes, 12) every axis's row of the structure matrix."""
-        return self.geometry.rows
-
-    @property
-    def global_blocks(self) -> dict:
-        """name -> (slice of the calibration vector, GTSAM key)."""
-        return self.calibration.blocks
-
-    @property
-    def n_global(self) -> int:
-        """Size of the calibration vector."""
-        return self.calibration.size
-
-    @property
-    def snap(self) -> bool:
-        return self.layout.snap
-
-    @property
-    def state_size(self) -> int:
-        return self.layout.size
-
-    @property
-    def attitude(self) -> bool:
-        return self.layout.attitude
+    sensors = delegated("geometry", "sensors", "(directions, positions, column slice) of each accelerometer.")
+    all_directions_b = delegated("geometry", "directions_b", "(axes, 3) sensing direction of every axis in the body frame.")
+    all_positions_m = delegated("geometry", "positions_m", "(axes, 3) position of every axis [m].")
+    all_rows = delegated("geometry", "rows", "(axes, 12) every axis's row of the structure matrix.")
+    global_blocks = delegated("calibration", "blocks", "name -> (slice of the calibration vector, GTSAM key).")
+    n_global = delegated("calibration", "size", "Size of the calibration vector.")
+    snap = delegated("layout", "snap", "Whether the state carries the snap (white snap motion model).")
+    state_size = delegated("layout", "size", "Values per sample's state.")
+    attitude = delegated("layout", "attitude", "Whether the state carries the attitude.")
 
     @property
     def AT(self) -> slice:

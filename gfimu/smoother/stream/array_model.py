@@ -31,6 +31,7 @@ from ...array import SensorArray
 from ...errors import InputError
 from ...factors import accelerometer
 from ...log import Log
+from ..model.parts import delegated
 from ..model.problem import SmootherOptions
 from ..model.groups import BUILT_IN, AccelerometerGroup, FirstStatePriorGroup, GyroscopeGroup
 from ..model.noise_levels import NoiseLevels
@@ -243,18 +244,6 @@ class Caches:
         self.steps: dict = {}
 
 
-def _delegate(part: str, name: str, doc: str, settable: bool = False) -> property:
-    """An attribute of :class:`ArrayModel` kept in one of its parts (read-only unless ``settable``)."""
-
-    def get(self):
-        return getattr(getattr(self, part), name)
-
-    def set_(self, value) -> None:
-        setattr(getattr(self, part), name, value)
-
-    return property(get, set_ if settable else None, doc=doc)
-
-
 class ArrayModel:
     """Precomputed geometry and noise models of one array under ``SmootherOptions``.
 
@@ -303,36 +292,36 @@ class ArrayModel:
                              options.robust_loss, float(options.process_robust_threshold))
         self.caches = Caches()
 
-    S_lin = _delegate("structure", "S_lin", "The structure matrix's [f, ω̇] columns.")
-    S_q = _delegate("structure", "S_q", "The structure matrix's q(ω) columns.")
-    S_f = _delegate("structure", "S_f", "The structure matrix's f columns.")
-    S_dw = _delegate("structure", "S_dw", "The structure matrix's ω̇ columns.")
-    pinv_lin_w = _delegate("structure", "pinv_lin_w", "[f, ω̇] given q(ω): the weighted pseudo-inverse of S_lin.")
-    linear_part_observable = _delegate("structure", "linear_part_observable", "Whether S_lin has rank 6.")
-    _geometry = _delegate("structure", "geometry", "(directions, positions, column slice) of every accelerometer.")
-    accel_sigma_mps2 = _delegate(
+    S_lin = delegated("structure", "S_lin", "The structure matrix's [f, ω̇] columns.")
+    S_q = delegated("structure", "S_q", "The structure matrix's q(ω) columns.")
+    S_f = delegated("structure", "S_f", "The structure matrix's f columns.")
+    S_dw = delegated("structure", "S_dw", "The structure matrix's ω̇ columns.")
+    pinv_lin_w = delegated("structure", "pinv_lin_w", "[f, ω̇] given q(ω): the weighted pseudo-inverse of S_lin.")
+    linear_part_observable = delegated("structure", "linear_part_observable", "Whether S_lin has rank 6.")
+    _geometry = delegated("structure", "geometry", "(directions, positions, column slice) of every accelerometer.")
+    accel_sigma_mps2 = delegated(
         "noise", "accel_sigma_mps2",
         """The accelerometers' std per axis: :attr:`NoiseLevels.accel` (the option ``default_accel_noise_std_mps2``
         where array.toml gives none) times ``accel_noise_scale``.""")
-    mean_accel_var_mps2 = _delegate("noise", "mean_accel_var_mps2", "The mean over the axes of their variances [(m/s²)²].")
-    gyro_sigma_radps = _delegate("noise", "gyro_sigma_radps", "The batch smoother's GyroscopeGroup's std.")
-    first_sigma = _delegate(
+    mean_accel_var_mps2 = delegated("noise", "mean_accel_var_mps2", "The mean over the axes of their variances [(m/s²)²].")
+    gyro_sigma_radps = delegated("noise", "gyro_sigma_radps", "The batch smoother's GyroscopeGroup's std.")
+    first_sigma = delegated(
         "noise", "first_sigma",
         "The first-state prior's stds, as the batch smoother's :class:`~gfimu.smoother.model.groups.FirstStatePriorGroup`.")
-    accel_noise_slope_mps2_per_radps = _delegate("robust", "accel_noise_slope_mps2_per_radps",
+    accel_noise_slope_mps2_per_radps = delegated("robust", "accel_noise_slope_mps2_per_radps",
                                                  "The accelerometer noise's growth with |ω|.", True)
-    accel_robust_threshold = _delegate("robust", "accel_robust_threshold",
+    accel_robust_threshold = delegated("robust", "accel_robust_threshold",
                                        "The accelerometers' robust threshold (0: off; only with the accelerometer measurement).",
                                        True)
-    robust_loss = _delegate("robust", "robust_loss", "The robust loss's name.", True)
-    process_robust_threshold = _delegate("robust", "process_robust_threshold", "The process's robust threshold (0: off).",
+    robust_loss = delegated("robust", "robust_loss", "The robust loss's name.", True)
+    process_robust_threshold = delegated("robust", "process_robust_threshold", "The process's robust threshold (0: off).",
                                          True)
-    groups = _delegate("factor_sets", "per_sample", "The per-sample groups of the options (:meth:`sample_terms`).")
-    step_groups = _delegate(
+    groups = delegated("factor_sets", "per_sample", "The per-sample groups of the options (:meth:`sample_terms`).")
+    step_groups = delegated(
         "factor_sets", "steps",
         """The groups that tie consecutive samples, built-in (motion model, specific-force walk) and given
         (:meth:`step`).""")
-    _step_cache = _delegate("caches", "steps", "The built-in step rows per step length in ns (:meth:`step`).")
+    _step_cache = delegated("caches", "steps", "The built-in step rows per step length in ns (:meth:`step`).")
 
     def sample_terms(self, t_ns: int, y: np.ndarray, gyro=None):
         """The per-sample factor groups of the options at one sample: None when none applies there, else a

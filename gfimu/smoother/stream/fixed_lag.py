@@ -96,6 +96,7 @@ from . import array_model as model
 from .window_filter import FilterFailure, WindowFilter
 from .gtsam_window import GtsamWindow
 from ..solve.banded import solve
+from ..model.parts import delegated
 from ..model.problem import SmootherOptions, options_reason
 from ...option import check_declared
 from ..model.option_groups import GROUPS, Engine, StreamOptions, assemble
@@ -524,11 +525,6 @@ class SigmaRescale:
         return tuple(out)
 
 
-def _part(part: str, name: str, doc: str) -> property:
-    """A read-only attribute of :class:`FixedLagSmoother` kept in one of its parts."""
-    return property(lambda self: getattr(getattr(self, part), name), doc=doc)
-
-
 class FixedLagSmoother:
     """Streaming fixed-lag smoother.
 
@@ -625,26 +621,26 @@ class FixedLagSmoother:
         self._start_segment()
 
     # --- public API ---------------------------------------------------------
-    lag_s = _part("config", "lag_s", "A state is given smoothed this long [s] after its sample.")
-    rate_hz = _part("config", "rate_hz", "The nominal sample rate [Hz].")
-    gap_factor = _part("config", "gap_factor", "A step longer than this many nominal steps ends the segment.")
-    engine = _part("config", "engine", "The window engine (:data:`ENGINES`).")
-    fast_measurement = _part("config", "fast_measurement", "The measurement's fast kernels are used.")
-    compute_sigma = _part("config", "compute_sigma", "Every state given out carries its σ.")
-    options = _part("_choice", "options", "The options of the model in use.")
-    model = _part("_choice", "model", "The model in use (:class:`~gfimu.smoother.stream.array_model.ArrayModel`).")
-    stream_model = _part("_choice", "stream_model", "The model chosen on the stream "
+    lag_s = delegated("config", "lag_s", "A state is given smoothed this long [s] after its sample.")
+    rate_hz = delegated("config", "rate_hz", "The nominal sample rate [Hz].")
+    gap_factor = delegated("config", "gap_factor", "A step longer than this many nominal steps ends the segment.")
+    engine = delegated("config", "engine", "The window engine (:data:`ENGINES`).")
+    fast_measurement = delegated("config", "fast_measurement", "The measurement's fast kernels are used.")
+    compute_sigma = delegated("config", "compute_sigma", "Every state given out carries its σ.")
+    options = delegated("_choice", "options", "The options of the model in use.")
+    model = delegated("_choice", "model", "The model in use (:class:`~gfimu.smoother.stream.array_model.ArrayModel`).")
+    stream_model = delegated("_choice", "stream_model", "The model chosen on the stream "
                          "(:mod:`gfimu.smoother.stream.model_choice`), once chosen.")
-    models = _part("_choice", "models", "Every model chosen so far, oldest first.")
-    tuning = _part("_choice", "tuning", "The newest process-noise selection "
+    models = delegated("_choice", "models", "Every model chosen so far, oldest first.")
+    tuning = delegated("_choice", "tuning", "The newest process-noise selection "
                    "(:class:`gfimu.smoother.tuning.evidence.Tuning`), once chosen from the data.")
-    hold_max_s = _part("_hold", "max_s", "The held start's longest span [s] (0: rows are never held; cut above "
+    hold_max_s = delegated("_hold", "max_s", "The held start's longest span [s] (0: rows are never held; cut above "
                        ":data:`STRETCH_RATE_HZ`).")
-    starts = _part("_hold", "starts", """How the start of each segment was decided (:meth:`_release_start`): ``held_s``
+    starts = delegated("_hold", "starts", """How the start of each segment was decided (:meth:`_release_start`): ``held_s``
         (how long its first rows were held), ``evidence_nats`` (the log-likelihood ratio of its branch of ω over the
         next best; inf: no other minimum), ``agreement_chi2``, ``moved_chi2``, ``open`` (True: released at
         ``hold_max_s`` or at the segment's end without reaching :data:`SIGN_DECISION_NATS`).""")
-    still_starts = _part("_hold", "still_starts", "The std [rad/s] of the prior ω = 0 of each segment that started "
+    still_starts = delegated("_hold", "still_starts", "The std [rad/s] of the prior ω = 0 of each segment that started "
                          "still (:meth:`_still_start`).")
 
     @property

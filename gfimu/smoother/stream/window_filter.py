@@ -44,6 +44,7 @@ import numpy as np
 from ...rigid_body import quadratic_terms, quadratic_terms_jacobian
 from . import kernels
 from .array_model import ArrayModel, Step
+from ..model.parts import delegated
 from ..model.problem import robust_loss, robust_weight
 from ..solve.restarts import branch, plane_normal
 
@@ -320,47 +321,18 @@ class WindowFilter:
         self._counts = Counters()
 
     # --- the parts' fields under the names read elsewhere (the tests) ---------------------
-    @property
-    def n_updates(self) -> int:
-        """Updates made."""
-        return self._counts.updates
+    n_updates = delegated("_counts", "updates", "Updates made.")
+    n_settled = delegated("_counts", "settled", "Runs of states moved onto another branch by :meth:`settle`.")
+    _P = delegated("_newest", "P")
+    _mean = delegated("_store", "mean")
+    _cross = delegated("_store", "cross")
+    _lo = delegated("_store", "lo")
+    _hi = delegated("_store", "hi")
+    _base = delegated("_store", "base")
+    _kernel_model = delegated("_ops", "kernel_model")
+    _epochs = delegated("_lazy", "epochs")
 
-    @property
-    def n_settled(self) -> int:
-        """Runs of states moved onto another branch by :meth:`settle`."""
-        return self._counts.settled
-
-    @property
-    def _P(self) -> np.ndarray:
-        return self._newest.P
-
-    @property
-    def _mean(self) -> np.ndarray:
-        return self._store.mean
-
-    @property
-    def _cross(self) -> np.ndarray:
-        return self._store.cross
-
-    @property
-    def _lo(self) -> int:
-        return self._store.lo
-
-    @property
-    def _hi(self) -> int:
-        return self._store.hi
-
-    @property
-    def _base(self) -> int:
-        return self._store.base
-
-    @property
-    def _epochs(self) -> Epochs:
-        return self._lazy.epochs
-
-    @property
-    def _kernel_model(self) -> tuple:
-        return self._ops.kernel_model
+    _kernel_model = delegated("_ops", "kernel_model")
 
     @property
     def branches(self) -> bool:
