@@ -13,11 +13,12 @@ whatever their timing.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ...errors import DataError
+from ..model.parts import delegated
 
 RATE_ROWS = 64
 """Samples from whose timestamps the rate is taken when neither array.toml nor the caller gives it
@@ -139,6 +140,42 @@ class SessionCounts:
     choice_wait_s: float
 
 
+@dataclass(frozen=True)
+class SessionSettings:
+    """How a :class:`StreamSession` takes its stream: ``name`` (in errors), ``screening`` (the readings are
+    screened as they come), ``use_gyro`` (the gyroscope's rows go in), ``follow_rate`` (the rate is measured
+    again when it changes)."""
+
+    name: str
+    screening: bool
+    use_gyro: bool
+    follow_rate: bool
+
+
+@dataclass
+class SessionTally:
+    """What a :class:`StreamSession` counted beside its current smoother: rows dropped as late (``late``),
+    window restarts (``resets``), samples that never came (``missing``), readings the screenings before the
+    current one replaced (``replaced``), and the models and choice waits of the smoothers at the rates
+    before the current one (``retired_models``, ``retired_waits``)."""
+
+    late: int = 0
+    resets: int = 0
+    missing: int = 0
+    replaced: int = 0
+    retired_models: list = field(default_factory=list)
+    retired_waits: list = field(default_factory=list)
+
+
+@dataclass
+class SessionTimings:
+    """The times a :class:`StreamSession` kept: the smoother's per sample (``processing_s``) and the
+    screening's per block (``screening_s``), each [s] in a :class:`Kept`."""
+
+    processing_s: Kept = field(default_factory=lambda: Kept())
+    screening_s: Kept = field(default_factory=lambda: Kept())
+
+
 class StreamSession:
     """The fixed-lag ``estimator``'s smoother on one stream of ``array``'s readings.
 
@@ -158,10 +195,10 @@ class StreamSession:
 
     def __init__(self, array, estimator, rate_hz: float | None = None, *, screen: bool | None = None,
                  follow_rate: bool = True, name: str = "source"):
-        self.array, self.estimator, self.name = array, estimator, name
-        self.screening = bool(getattr(estimator, "screen_readings", False) if screen is None else screen)
-        self.use_gyro = bool(estimator.use_gyro and array.gyroscope is not None)
-        self.follow_rate = bool(follow_rate)
+        self.array, self.estimator = array, estimator
+        self.settings = SessionSettings(
+            name, bool(getattr(estimator, "screen_readings", False) if screen is None else screen),
+            bool(estimator.use_gyro and array.gyroscope is not None), bool(follow_rate))
         self.rate_hz: float | None = None
         self.rate_from = "given" if rate_hz is not None else "stream"
         self.smoother = None
@@ -170,18 +207,22 @@ class StreamSession:
         self._pending: list[tuple] = []  # readings held until the rate is known
         self._notes: list[str] = []
         self._last_t: int | None = None
-        self._late = self._resets = self._missing = self._replaced = 0
-        self._retired_models: list = []  # the models of the smoothers at the rates before the current one
-        self._retired_waits: list[float] = []
-        self.processing_s = Kept()
-        self.screening_s = Kept()
+        self._tally = SessionTally()
+        self._timings = SessionTimings()
         if rate_hz is not None:
             self._start(float(rate_hz))
+
+    name = delegated("settings", "name", "The stream's name in errors.")
+    screening = delegated("settings", "screening", "Whether the readings are screened as they come.")
+    use_gyro = delegated("settings", "use_gyro", "Whether the gyroscope's rows go in.")
+    follow_rate = delegated("settings", "follow_rate", "Whether the rate is measured again when it changes.")
+    processing_s = delegated("_timings", "processing_s", "The smoother's time per sample [s] (:class:`Kept`).")
+    screening_s = delegated("_timings", "screening_s", "The screening's time per block [s] (:class:`Kept`).")
 
     # --- the readings in --------------------------------------------------------------------------
     def push(self, timestamp_ns: int, accel, gyro=None) -> list:
         """One reading; the states it makes final."""
-        row = (int(timestamp_ns), np.asarray(accel, dtype=float), gyro if self.use_gyro else None)
+        row = (int(timestamp_ns), np.asarray(accel, dtype=float), gyro if self.settings.use_gyro else None)
         if self.smoother is None:
             self._pending.append(row)
             if len(self._pending) < RATE_ROWS:
@@ -228,19 +269,20 @@ class StreamSession:
 
     @property
     def counts(self) -> SessionCounts:
-        late, resets, waits = self._late, self._resets, list(self._retired_waits)
+        tally = self._tally
+        late, resets, waits = tally.late, tally.resets, list(tally.retired_waits)
         if self.smoother is not None:
             c = self.smoother.counts
             late += c["duplicates"] + c["out_of_order"]
             resets += c["clock_resets"]
             waits += self.smoother.choice_waits
-        replaced = self._replaced + (self.screen.count if self.screen is not None else 0)
-        return SessionCounts(late, resets, self._missing, replaced, len(waits), float(sum(waits)))
+        replaced = tally.replaced + (self.screen.count if self.screen is not None else 0)
+        return SessionCounts(late, resets, tally.missing, replaced, len(waits), float(sum(waits)))
 
     @property
     def models(self) -> list:
         """Every model chosen on the stream, oldest first (over every rate it had)."""
-        return self._retired_models + (list(self.smoother.models) if self.smoother is not None else [])
+        return self._tally.retired_models + (list(self.smoother.models) if self.smoother is not None else [])
 
     @property
     def stream_model(self):
@@ -289,11 +331,11 @@ class StreamSession:
             if last - t <= self.smoother.clock_reset_s * 1e9:
                 if self.screen is None:  # the smoother drops and counts it
                     return list(self.smoother.push(*row).smoothed)
-                self._late += 1  # the rows before it are still in the screening: dropped here
+                self._tally.late += 1  # the rows before it are still in the screening: dropped here
                 return []
             if self.screen is not None:  # a clock reset: the rows held go first, then a new screening
                 states = self._smooth(_own(self.screen.flush()))
-                self._replaced += self.screen.count
+                self._tally.replaced += self.screen.count
                 self.screen = self._new_screen()
                 states += self._smooth(self._screened(row))
                 self._last_t = t
@@ -302,7 +344,7 @@ class StreamSession:
         if last is not None and t > last:
             steps = (t - last) * 1e-9 * self.rate_hz
             if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
-                self._missing += int(round(steps)) - 1
+                self._tally.missing += int(round(steps)) - 1
         self._last_t = t
         return states
 
@@ -311,17 +353,18 @@ class StreamSession:
         t0 = time.perf_counter()
         rows = self.screen.push(*row)
         if rows:
-            self.screening_s.append(time.perf_counter() - t0)
+            self._timings.screening_s.append(time.perf_counter() - t0)
         return _own(rows)
 
     def _smooth(self, rows) -> list:
         """The smoother's update on each row, its time kept per row (not for a row it drops)."""
         states = []
+        kept, push = self._timings.processing_s, self.smoother.push
         for row in rows:
             t0 = time.perf_counter()
-            update = self.smoother.push(*row)
+            update = push(*row)
             if update.dropped is None:
-                self.processing_s.append(time.perf_counter() - t0)
+                kept.append(time.perf_counter() - t0)
             states.extend(update.smoothed)
         return states
 
@@ -333,14 +376,15 @@ class StreamSession:
     def _rerate(self, rate_hz: float) -> list:
         """On at ``rate_hz``: the states still held at the old rate, then a new smoother and screening."""
         states = self._flush()
+        tally = self._tally
         if self.screen is not None:
-            self._replaced += self.screen.count
+            tally.replaced += self.screen.count
         old = self.smoother
         c = old.counts
-        self._late += c["duplicates"] + c["out_of_order"]
-        self._resets += c["clock_resets"]
-        self._retired_models += old.models
-        self._retired_waits += old.choice_waits
+        tally.late += c["duplicates"] + c["out_of_order"]
+        tally.resets += c["clock_resets"]
+        tally.retired_models += old.models
+        tally.retired_waits += old.choice_waits
         self.rate_hz = float(rate_hz)
         self.smoother = self.estimator.smoother(self.array, self.rate_hz)
         self.screen = self._new_screen()
