@@ -525,6 +525,31 @@ def stream_wait_s(rate_hz: float) -> float:
     return (stream_delay_samples(rate_hz) + stream_block_samples(rate_hz)) / rate_hz
 
 
+@dataclass(frozen=True)
+class ScreenRule:
+    """What :class:`StreamScreen` decides with: the array's accelerometer ``columns``, ``range_mps2`` per axis,
+    ``sensor_of_axis`` and ``structure_matrix``; the ``rate_hz``; the samples a reading waits for before it is
+    decided (``delay``, :func:`stream_delay_samples`), the samples decided at once (``block``,
+    :func:`stream_block_samples`) and the rows kept behind the first undecided one (``history``: the spike
+    rule's reach, and a stuck run's shortest length)."""
+
+    columns: tuple
+    range_mps2: object
+    sensor_of_axis: object
+    structure_matrix: np.ndarray
+    rate_hz: float | None
+    delay: int
+    block: int
+    history: int
+
+    @classmethod
+    def of(cls, array, rate_hz: float | None) -> ScreenRule:
+        delay = stream_delay_samples(rate_hz)
+        return cls(tuple(array.accel_columns), array.range_per_axis_mps2, array.axis_owner, array.structure_matrix(),
+                   rate_hz, delay, stream_block_samples(rate_hz),
+                   max(delay, stuck_min_samples(rate_hz)) + MEDIAN_HALF_WIDTH)
+
+
 class StreamScreen:
     """:func:`screen_log`'s rule on readings as they come: each reading is decided (and replaced when it is a
     gross error) once :func:`stream_delay_samples` later ones have arrived, from a buffer of that many before
@@ -547,20 +572,12 @@ class StreamScreen:
         """None, or ``clean(first, stop)``: True where the rows ``[first, stop)`` (counted from the first pushed)
         are known to hold nothing the rule would replace, so that a block whose buffer lies there is passed
         without running the rule (:func:`screen_stream`: from the whole-log screening)."""
-        self.columns = tuple(array.accel_columns)
-        self.range_mps2 = array.range_per_axis_mps2
-        self.sensor_of_axis = array.axis_owner
-        self.structure_matrix = array.structure_matrix()
-        self.rate_hz = rate_hz
-        self.delay = stream_delay_samples(rate_hz)
-        """Samples a reading waits for before it is decided."""
-        self.block = stream_block_samples(rate_hz)
-        # rows kept behind the first undecided one: the spike rule's reach, and a stuck run's shortest length
-        self._history = max(self.delay, stuck_min_samples(rate_hz)) + MEDIAN_HALF_WIDTH
+        self.rule = ScreenRule.of(array, rate_hz)
+        rule = self.rule
         self._times: list[int] = []
         # the buffer's readings, rows [0, len(self._times)) of an array that grows as needed (one copy of the
         # rows kept per block, not a stack of rows per decision)
-        self._accel = np.empty((2 * (self.delay + self.block) + self._history + 8, len(self.columns)))
+        self._accel = np.empty((2 * (rule.delay + rule.block) + rule.history + 8, len(rule.columns)))
         self._gyro: list = []
         self._first = 0  # stream index of the buffer's first row
         self._next = 0  # stream index of the first undecided row
@@ -591,8 +608,9 @@ class StreamScreen:
                 gyro_row = np.where(huge, np.nan, gyro_row)
         self._gyro.append(gyro_row)
         newest = self._first + len(self._times)
-        ready = newest - self.delay
-        if ready - self._next >= self.block and len(self._times) >= 2 * SCALE_HALF_WIDTH + 1:
+        rule = self.rule
+        ready = newest - rule.delay
+        if ready - self._next >= rule.block and len(self._times) >= 2 * SCALE_HALF_WIDTH + 1:
             return self._decide(ready)
         return []
 
@@ -606,7 +624,7 @@ class StreamScreen:
     def screening(self, n: int | None = None) -> Screening:
         """What was replaced among the first ``n`` rows (default: all decided), as :class:`Screening`."""
         n = self._next if n is None else n
-        replaced = np.zeros((n, len(self.columns)), bool)
+        replaced = np.zeros((n, len(self.rule.columns)), bool)
         for row, mask in self._replaced.items():
             if row < n:
                 replaced[row] = mask
@@ -615,9 +633,9 @@ class StreamScreen:
     def describe(self, limit: int = 5) -> str:
         """:meth:`Screening.describe` of what was replaced so far (rows counted from the first pushed)."""
         rows = sorted(self._replaced)
-        mask = np.array([self._replaced[r] for r in rows]).reshape(len(rows), len(self.columns))
+        mask = np.array([self._replaced[r] for r in rows]).reshape(len(rows), len(self.rule.columns))
         return Screening(mask, *(self._counts[k] for k in KINDS), runs=tuple(self._runs_so_far())).describe(
-            self.columns, limit, row_numbers=rows)
+            self.rule.columns, limit, row_numbers=rows)
 
     def _runs_so_far(self) -> list[tuple[str, int, int, int]]:
         """The runs of clipped and stuck readings decided so far, those still open ending at the last decided
@@ -642,8 +660,9 @@ class StreamScreen:
             y = self._accel[:n].copy()
             kinds = {kind: np.zeros(y.shape, bool) for kind in KINDS}
         else:
-            y, kinds, _ = _screen(self._accel[:n], self.range_mps2, self.sensor_of_axis, self.rate_hz,
-                                  self.structure_matrix, ends=(self._first == 0, end))
+            rule = self.rule
+            y, kinds, _ = _screen(self._accel[:n], rule.range_mps2, rule.sensor_of_axis, rule.rate_hz,
+                                  rule.structure_matrix, ends=(self._first == 0, end))
         out = [(self._times[k], y[k], self._gyro[k]) for k in range(a, b)]
         replaced = np.zeros((b - a, y.shape[1]), bool)
         for kind in KINDS:
@@ -660,7 +679,7 @@ class StreamScreen:
 
     def _cut(self, upto: int) -> None:
         """The buffer cut to the history kept behind row ``upto``."""
-        cut = max(0, upto - self._history - self._first)
+        cut = max(0, upto - self.rule.history - self._first)
         if cut:
             kept = len(self._times) - cut
             self._accel[:kept] = self._accel[cut:cut + kept]
