@@ -332,8 +332,6 @@ class WindowFilter:
     _kernel_model = delegated("_ops", "kernel_model")
     _epochs = delegated("_lazy", "epochs")
 
-    _kernel_model = delegated("_ops", "kernel_model")
-
     @property
     def branches(self) -> bool:
         """Try the other branches of each update's minimum (see :meth:`measure`)."""
