@@ -630,18 +630,18 @@ class FixedLagSmoother:
     options = delegated("_choice", "options", "The options of the model in use.")
     model = delegated("_choice", "model", "The model in use (:class:`~gfimu.smoother.stream.array_model.ArrayModel`).")
     stream_model = delegated("_choice", "stream_model", "The model chosen on the stream "
-                         "(:mod:`gfimu.smoother.stream.model_choice`), once chosen.")
+                             "(:mod:`gfimu.smoother.stream.model_choice`), once chosen.")
     models = delegated("_choice", "models", "Every model chosen so far, oldest first.")
     tuning = delegated("_choice", "tuning", "The newest process-noise selection "
-                   "(:class:`gfimu.smoother.tuning.evidence.Tuning`), once chosen from the data.")
+                       "(:class:`gfimu.smoother.tuning.evidence.Tuning`), once chosen from the data.")
     hold_max_s = delegated("_hold", "max_s", "The held start's longest span [s] (0: rows are never held; cut above "
-                       ":data:`STRETCH_RATE_HZ`).")
+                           ":data:`STRETCH_RATE_HZ`).")
     starts = delegated("_hold", "starts", """How the start of each segment was decided (:meth:`_release_start`): ``held_s``
         (how long its first rows were held), ``evidence_nats`` (the log-likelihood ratio of its branch of ω over the
         next best; inf: no other minimum), ``agreement_chi2``, ``moved_chi2``, ``open`` (True: released at
         ``hold_max_s`` or at the segment's end without reaching :data:`SIGN_DECISION_NATS`).""")
     still_starts = delegated("_hold", "still_starts", "The std [rad/s] of the prior ω = 0 of each segment that started "
-                         "still (:meth:`_still_start`).")
+                             "still (:meth:`_still_start`).")
 
     @property
     def n_keys(self) -> int:
@@ -816,8 +816,8 @@ class FixedLagSmoother:
         it (:mod:`gfimu.smoother.stream.model_choice`). The first choice of a segment's stretch is made at
         once and, for a consistent stretch whose process noise is tuned, also returns the batch smoother's
         states of the stretch (else None). A later choice is made off the stream (:class:`PendingChoice`,
-        on ``samples``, a copy of the history) and used :data:`CHOICE_DELAY_S` of samples later
-        (:meth:`_swap_choice`); one asked for while another is pending is not made."""
+        on a copy of ``samples``, the history) and used :data:`CHOICE_DELAY_S` of samples later
+        (:meth:`_swap_choice`); one asked for while another is pending is not made (nor the copy)."""
         if first:
             self._settle_choice()
             chosen, batch = self._chosen_model(samples, self.stream_model, first=True, outgrown=outgrown)
@@ -827,7 +827,7 @@ class FixedLagSmoother:
             return batch
         if self._choice.pending is not None:
             return None
-        previous = self.stream_model
+        samples, previous = list(samples), self.stream_model
         self._choice.pending = PendingChoice(lambda: self._chosen_model(samples, previous, outgrown=outgrown)[0],
                                       self._choice.accepted + self._choice.delay_n, outgrown)
         return None
@@ -1000,9 +1000,8 @@ class FixedLagSmoother:
         # again at once (at most once a second), on the history that now holds the motion
         outgrown = (local is not None and self._choice.local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
-        # (while a choice is pending none is asked for: the history is not copied for nothing)
-        if (due or outgrown) and self._choice.pending is None and len(self._choice.history) >= self._choice.tune_min_n:
-            self._choose(list(self._choice.history), outgrown=outgrown)
+        if (due or outgrown) and len(self._choice.history) >= self._choice.tune_min_n:
+            self._choose(self._choice.history, outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
