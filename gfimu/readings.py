@@ -559,7 +559,7 @@ class StreamScreen:
     readings the buffer holds, and a stuck run longer than it is judged on the part the buffer holds.
 
     ``push(timestamp_ns, accel_row, gyro_row)`` returns the rows decided by it, oldest first, as
-    ``(timestamp_ns, accel_row, gyro_row)``; :meth:`flush` decides the rest, the last arrived being the
+    ``(timestamp_ns, accel_row, gyro_row)`` (each ``accel_row`` an array of its own); :meth:`flush` decides the rest, the last arrived being the
     stream's end (as a log's last row is). Gyroscope readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` are
     NaN at once. :meth:`screening` is what was replaced, as :class:`Screening`.
 
@@ -663,7 +663,8 @@ class StreamScreen:
             rule = self.rule
             y, kinds, _ = _screen(self._accel[:n], rule.range_mps2, rule.sensor_of_axis, rule.rate_hz,
                                   rule.structure_matrix, ends=(self._first == 0, end))
-        out = [(self._times[k], y[k], self._gyro[k]) for k in range(a, b)]
+        # each reading handed out an array of its own: one kept downstream holds its row, not the buffer
+        out = [(self._times[k], y[k].copy(), self._gyro[k]) for k in range(a, b)]
         replaced = np.zeros((b - a, y.shape[1]), bool)
         for kind in KINDS:
             mask = kinds[kind][a:b]

@@ -196,9 +196,9 @@ def test_what_a_long_stream_keeps_does_not_grow_with_its_length():
 
 
 def test_the_history_holds_the_screened_readings_not_the_screenings_buffers():
-    """A block the screening decides hands out rows of one scratch array of its whole buffer; the rows the
-    smoother keeps (the history the model is chosen on) hold readings of their own: the arrays behind them
-    total the history's readings (38 KB), not 18 times that (710 KB before)."""
+    """The screening decides a block on a scratch array of its whole buffer; the rows the smoother keeps (the
+    history the model is chosen on) hold readings of their own: the arrays behind them total the history's
+    readings (38 KB), not 18 times that (710 KB were the rows views of the scratch array)."""
     long_log = simulate("random3d", rate_hz=RATE_HZ, duration_s=8.0, seed=6)
     est = FixedLagEstimator(tune_window_s=1.0, retune_every_s=60.0, model_window_s=2.0)
     session = StreamSession(long_log.array, est, RATE_HZ)

@@ -118,13 +118,6 @@ class Kept:
         return self._rows[:self._n]
 
 
-def _own(rows: list) -> list:
-    """The screening's rows with readings of their own: a block it decided hands out rows of one scratch array
-    of its whole buffer (about 14 times the block's rows at 500 Hz), which the smoother's history (the samples
-    the model is chosen on, 30 s) would otherwise keep alive, ~19 MB of them rather than 1.4 MB."""
-    return [(t, a.copy() if a.base is not None else a, *rest) for t, a, *rest in rows]
-
-
 @dataclass(frozen=True)
 class SessionCounts:
     """What a stream's samples did: ``late_or_repeated`` (dropped), ``clock_resets`` (window restarts),
@@ -172,8 +165,8 @@ class SessionTimings:
     """The times a :class:`StreamSession` kept: the smoother's per sample (``processing_s``) and the
     screening's per block (``screening_s``), each [s] in a :class:`Kept`."""
 
-    processing_s: Kept = field(default_factory=lambda: Kept())
-    screening_s: Kept = field(default_factory=lambda: Kept())
+    processing_s: Kept = field(default_factory=Kept)
+    screening_s: Kept = field(default_factory=Kept)
 
 
 class StreamSession:
@@ -334,7 +327,7 @@ class StreamSession:
                 self._tally.late += 1  # the rows before it are still in the screening: dropped here
                 return []
             if self.screen is not None:  # a clock reset: the rows held go first, then a new screening
-                states = self._smooth(_own(self.screen.flush()))
+                states = self._smooth(self.screen.flush())
                 self._tally.replaced += self.screen.count
                 self.screen = self._new_screen()
                 states += self._smooth(self._screened(row))
@@ -354,7 +347,7 @@ class StreamSession:
         rows = self.screen.push(*row)
         if rows:
             self._timings.screening_s.append(time.perf_counter() - t0)
-        return _own(rows)
+        return rows
 
     def _smooth(self, rows) -> list:
         """The smoother's update on each row, its time kept per row (not for a row it drops)."""
@@ -370,7 +363,7 @@ class StreamSession:
 
     def _flush(self) -> list:
         """The rows still held by the screening, then the window: every state left."""
-        states = self._smooth(_own(self.screen.flush())) if self.screen is not None else []
+        states = self._smooth(self.screen.flush()) if self.screen is not None else []
         return states + list(self.smoother.flush())
 
     def _rerate(self, rate_hz: float) -> list:
