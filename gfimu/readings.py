@@ -559,8 +559,8 @@ class StreamScreen:
     readings the buffer holds, and a stuck run longer than it is judged on the part the buffer holds.
 
     ``push(timestamp_ns, accel_row, gyro_row)`` returns the rows decided by it, oldest first, as
-    ``(timestamp_ns, accel_row, gyro_row)`` (each ``accel_row`` an array of its own); :meth:`flush` decides the rest, the last arrived being the
-    stream's end (as a log's last row is). Gyroscope readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` are
+    ``(timestamp_ns, accel_row, gyro_row)`` (each ``accel_row`` an array of its own); :meth:`flush` decides
+    the rest, the last arrived being the stream's end (as a log's last row is). Gyroscope readings beyond :data:`GYRO_OUT_OF_RANGE_RADPS` are
     NaN at once. :meth:`screening` is what was replaced, as :class:`Screening`.
 
     The same rows in the same order give the same rows out, whatever their timing: ``gfimu live`` and
@@ -650,13 +650,14 @@ class StreamScreen:
         end = upto == self._first + len(self._times)  # flush: the newest row is the stream's last
         n = len(self._times)
         a, b = self._next - self._first, upto - self._first
-        if self.clean is not None and not self._open and self.clean(self._first, self._first + n):
+        clean = self.clean is not None and self.clean(self._first, self._first + n)
+        if clean and not self._open:
             # nothing to replace and no run to close: the rows pass as they came
             out = [(self._times[k], self._accel[k].copy(), self._gyro[k]) for k in range(a, b)]
             self._next = upto
             self._cut(upto)
             return out
-        if self.clean is not None and self.clean(self._first, self._first + n):
+        if clean:
             y = self._accel[:n].copy()
             kinds = {kind: np.zeros(y.shape, bool) for kind in KINDS}
         else:
