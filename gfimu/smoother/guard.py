@@ -276,13 +276,18 @@ def check(log: Log, smoothed: Motion, per_sample: Motion, model_check: ModelChec
     return GuardResult(mode, tuple(out), int(ok.sum()), n)
 
 
+def _unknown_sigma(n: int) -> dict[str, np.ndarray]:
+    """σ of ω, ω̇ and f unknown (NaN) at ``n`` samples."""
+    return {k: np.full((n, 3), np.nan) for k in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2")}
+
+
 def per_sample_sigma(array, per_sample: Motion, model_check: ModelCheck, rows: np.ndarray) -> dict[str, np.ndarray]:
     """The one-sigma values of the per-sample fit at ``rows`` (indices): the Cramér-Rao bound at its ω
     (:func:`gfimu.crb.crb_per_sample`, unit noise) times the noise of the model check there, σ_k² = σ₀² + (s |ω_k|)²
     (:func:`noise_variance`, measured on the log's own residual), per axis of ω, ω̇ and f; NaN where the
     bound is singular (|ω| too small for the readings to fix it: the quadratic terms vanish there)."""
     rows = np.asarray(rows, dtype=int)
-    out = {k: np.full((rows.size, 3), np.nan) for k in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2")}
+    out = _unknown_sigma(rows.size)
     w = np.asarray(per_sample.omega_b_radps, dtype=float)[rows]
     good = np.all(np.isfinite(w), axis=1)
     if not good.any():
@@ -304,7 +309,8 @@ def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult, model_ch
     acceleration, where present, moved by the same change of f; the attitude kept). Where ``smoothed``
     carries σ, the replaced rows carry the per-sample fit's own (:func:`per_sample_sigma`, with the
     ``model_check`` and ``array`` given; else, and where that bound is singular, NaN: unknown), the
-    gravity-free acceleration's widened by it. ω takes the signs of :func:`gfimu.smoother.solve.initialise.sign_chain` over the span and the
+    gravity-free acceleration's widened by it. ω takes the signs of
+    :func:`gfimu.smoother.solve.initialise.sign_chain` over the span and the
     smoother's samples next to it, the chain as a whole oriented to agree most with the smoother's ω
     there (Σ ω_chain · ω_smoother over the span and its two neighbours: where the motion starts or
     stops next to the span, the neighbours turn too slowly to tell the sign, the span's own samples do).
@@ -337,8 +343,7 @@ def replaced(smoothed: Motion, per_sample: Motion, result: GuardResult, model_ch
         if sigma and model_check is not None and array is not None:
             own = per_sample_sigma(array, per_sample, model_check, sel)
         else:
-            own = {k: np.full((sel.size, 3), np.nan) for k in ("omega_b_radps", "omega_dot_b_radps2",
-                                                               "specific_force_b_mps2")}
+            own = _unknown_sigma(sel.size)
         if "accel_b_mps2" in sigma:  # the attitude's share kept, the change of f's added
             sigma["accel_b_mps2"][sel] = np.hypot(sigma["accel_b_mps2"][sel], own["specific_force_b_mps2"])
         for k, v in own.items():
