@@ -34,6 +34,11 @@ from numba import njit
 
 LOSS_NONE, LOSS_CAUCHY, LOSS_HUBER = 0, 1, 2
 
+_TWO, _TRUE, _FALSE = np.int64(2), np.bool_(True), np.bool_(False)
+"""Constants passed between kernels as typed values: a literal ``2`` or ``True`` in a call would make numba
+compile the callee once more for that literal (one compilation of :func:`solve` per literal, seconds each on
+a machine's first run); these share the callee's one compilation."""
+
 
 def loss_code(c: float, loss: str) -> int:
     """The kernels' code of a robust loss of threshold ``c`` (:func:`gfimu.smoother.model.problem.robust_loss`)."""
@@ -193,7 +198,8 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
                 s += P[a, b] * AG[b, 9]
             x_new[a] = s
         step = abs(x_new[0] - x[0]) + abs(x_new[1] - x[1]) + abs(x_new[2] - x[2])
-        x[:] = x_new
+        for a in range(9):
+            x[a] = x_new[a]
         if step < tolerance and (c_robust <= 0.0 or it > 0):
             break
     if not with_cost:
@@ -245,12 +251,12 @@ def search(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iteration
         distance = _quadratic_form_inverse(P, b - xp)
         if distance > J + prior_margin:  # (P singular: -1, tried)
             continue
-        cx, cH, cAG, cJ, cok = solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, 2, tolerance, True)
+        cx, cH, cAG, cJ, cok = solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, _TWO, tolerance, _TRUE)
         if not cok:
             return cx, cH, cAG, cJ, cok
         if cJ < J:
             cx, cH, cAG, cJ, cok = solve(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
-                                        tolerance, True)
+                                        tolerance, _TRUE)
             if not cok:
                 return cx, cH, cAG, cJ, cok
         if cJ < J:
@@ -274,6 +280,41 @@ def _mm(A, B):
 
 
 @njit(cache=True, nogil=True)
+def _plus(A, B, k):
+    """``A + k B`` of two matrices of one shape, as a loop: the same numbers as the array expression
+    (``k`` = 1 or -1 gives ``A + B`` and ``A - B`` exactly), which costs numba seconds more to compile."""
+    out = np.empty_like(A)
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            out[i, j] = A[i, j] + k * B[i, j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _symmetrised(P):
+    """``0.5 (P + Pᵀ)`` of a square matrix, as a loop (:func:`_plus`)."""
+    out = np.empty_like(P)
+    for i in range(P.shape[0]):
+        for j in range(P.shape[1]):
+            out[i, j] = 0.5 * (P[i, j] + P[j, i])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _mv_plus(u, T, g):
+    """``u + T g`` of a vector and a matrix times a vector, each sum in :func:`_mm`'s order."""
+    out = np.empty(T.shape[0])
+    for i in range(T.shape[0]):
+        s = 0.0
+        for k in range(T.shape[1]):
+            a = T[i, k]
+            if a != 0.0:
+                s += a * g[k]
+        out[i] = u[i] + s
+    return out
+
+
+@njit(cache=True, nogil=True)
 def update_window(AG, P, T, u, W, mean, var, cross):
     """The update ``AG = Hᵀ S⁻¹ [H, ν]`` (9 × 10: ``A = Hᵀ S⁻¹ H``, ``g = Hᵀ S⁻¹ ν``) of the newest state
     (covariance P before it) on the window: the recent states ``mean``, ``var``, ``cross`` (n, ...) in
@@ -291,10 +332,10 @@ def update_window(AG, P, T, u, W, mean, var, cross):
         for j in range(9):
             if not np.isfinite(A[i, j]):
                 return T, u, W, P, False
-    u = u + _mm(T, g.reshape(9, 1)).reshape(9)
+    u = _mv_plus(u, T, g)
     TA = _mm(T, A)
-    W = W + _mm(TA, T.T)
-    T = T - _mm(TA, P)
+    W = _plus(W, _mm(TA, np.ascontiguousarray(T.T)), 1.0)
+    T = _plus(T, _mm(TA, P), -1.0)
     n = mean.shape[0]
     CA = np.empty((9, 9))
     for l in range(n):
@@ -322,8 +363,7 @@ def update_window(AG, P, T, u, W, mean, var, cross):
                 for k in range(9):
                     s += CA[i, k] * P[k, j]
                 C[i, j] -= s
-    P_new = P - _mm(P, _mm(A, P))
-    P_new = 0.5 * (P_new + P_new.T)
+    P_new = _symmetrised(_plus(P, _mm(P, _mm(A, P)), -1.0))
     return T, u, W, P_new, True
 
 
@@ -335,12 +375,14 @@ def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
     scale ``c2`` (c²) of each trapezoid misfit ``ω_b - ω_a - h/2 (ω̇_a + ω̇_b)``."""
     nb = cost.shape[0]
     x = np.zeros(9)
-    x[0:3], x[3:6] = w, dw
+    for j in range(3):  # (loops, not slice assignments: the same numbers, seconds less to compile)
+        x[j], x[3 + j] = w[j], dw[j]
     cur_w = np.empty((nb, 3))
     cur_dw = np.empty((nb, 3))
     for b in range(nb):
         xb = branch_state(b, x, normal)
-        cur_w[b], cur_dw[b] = xb[0:3], xb[3:6]
+        for j in range(3):
+            cur_w[b, j], cur_dw[b, j] = xb[j], xb[3 + j]
     back = np.zeros(nb, dtype=np.int64)
     new = np.empty(nb)
     for b in range(nb):
@@ -365,10 +407,9 @@ def predict_window(F, Q, c, P, x_newest, T, cross):
     """The prediction one step after the newest state (:meth:`WindowFilter.predict`): the new state's mean
     ``F x + c`` and covariance ``F P Fᵀ + Q`` (symmetrised), the recent states' cross-covariances
     ``C_i Fᵀ`` in place and the old ones' factor ``T Fᵀ`` returned."""
-    x = _mm(F, x_newest.reshape(9, 1)).reshape(9) + c
+    x = _mv_plus(c, F, x_newest)
     FP = _mm(F, P)
-    P_new = _mm(FP, F.T) + Q
-    P_new = 0.5 * (P_new + P_new.T)
+    P_new = _symmetrised(_plus(_mm(FP, np.ascontiguousarray(F.T)), Q, 1.0))
     # F's nonzero entries by row (a motion model's transition is mostly zeros): skipping the zero terms of
     # each sum leaves it the same number (x + 0 = x), at a fraction of the products
     nnz = np.zeros(9, dtype=np.int64)
@@ -390,7 +431,7 @@ def predict_window(F, Q, c, P, x_newest, T, cross):
                 row[j] = s
             for j in range(9):
                 C[i, j] = row[j]
-    return x, P_new, _mm(T, F.T)
+    return x, P_new, _mm(T, np.ascontiguousarray(F.T))
 
 
 @njit(cache=True, nogil=True)
@@ -425,15 +466,14 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
         e2 = max(e2, 0.0) / 9.0  # (P singular: 0)
         w = _weight(np.sqrt(e2), c_process, process_loss)
         if w < 1.0:
-            P = P + (1.0 / w - 1.0) * Q
-            P = 0.5 * (P + P.T)
+            P = _symmetrised(_plus(P, Q, 1.0 / w - 1.0))
             last = cross.shape[0] - 1  # the newest state: its covariance is the widened one
             for i in range(9):
                 var[last, i] = P[i, i]
                 for j in range(9):
                     cross[last, i, j] = P[i, j]
             x, H, AG, J, ok = search(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
-                                    False, normal, prior_margin)
+                                    _FALSE, normal, prior_margin)
             if not ok:
                 return T, u, W, P, P, False
     T2, u2, W2, P_after, ok = update_window(AG, P, T, u, W, mean, var, cross)
