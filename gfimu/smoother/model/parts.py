@@ -3,12 +3,13 @@ small named parts (a dataclass each) and keep the names their readers use as pro
 
 from __future__ import annotations
 
+from operator import attrgetter
+
 
 def delegated(part: str, name: str, doc: str = "", settable: bool = False) -> property:
-    """A property reading ``self.<part>.<name>`` (and writing it when ``settable``)."""
-
-    def get(self):
-        return getattr(getattr(self, part), name)
+    """A property reading ``self.<part>.<name>`` (and writing it when ``settable``); the reading is
+    :func:`operator.attrgetter`'s, with no Python frame (the stream reads some of them at every sample)."""
+    get = attrgetter(f"{part}.{name}")
 
     def set_(self, value) -> None:
         setattr(getattr(self, part), name, value)

@@ -441,7 +441,7 @@ class WindowFilter:
         """The waiting states before ``k_stop`` (and at least :attr:`lazy_steps` of a run) brought up to date
         as of the current epoch's start: each run's epochs since composed into one ``(T, u, W)`` and applied."""
         ep, base = self._lazy.epochs, self._store.base
-        if not ep.stale:
+        if not ep.stale or ep.stale[0][0] >= k_stop:  # no state before k_stop waits
             return
         Ts, us, Ws = ep.T[:ep.n], ep.u[:ep.n], ep.W[:ep.n]
         for k0, k1, first in ep.take(k_stop, base + self._store.lo, self.lazy_steps):
