@@ -234,7 +234,6 @@ class StateEstimate:
     sigma_specific_force_b_mps2: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
 class FixedLagUpdate:
     """What one :meth:`FixedLagSmoother.push` gives back.
 
@@ -247,11 +246,25 @@ class FixedLagUpdate:
     ``dropped``: why this sample was not used: ``None`` (it was used),
     ``"duplicate"`` (same timestamp as the previous sample) or ``"out-of-order"``
     (earlier than the previous sample by at most ``clock_reset_s``).
+
+    ``filtered`` is made when it is first read (``newest``: the values it is made of, (timestamp_ns, ω,
+    ω̇, f)): a stream that reads only the smoothed states does not pay for it at every sample.
     """
 
-    smoothed: tuple[StateEstimate, ...]
-    filtered: StateEstimate | None
-    dropped: str | None = None
+    __slots__ = ("smoothed", "dropped", "_filtered", "_newest")
+
+    def __init__(self, smoothed: tuple[StateEstimate, ...], filtered: StateEstimate | None,
+                 dropped: str | None = None, newest: tuple | None = None) -> None:
+        self.smoothed, self.dropped, self._filtered, self._newest = smoothed, dropped, filtered, newest
+
+    @property
+    def filtered(self) -> StateEstimate | None:
+        if self._newest is not None:
+            self._filtered, self._newest = StateEstimate(*self._newest), None
+        return self._filtered
+
+    def __repr__(self) -> str:
+        return f"FixedLagUpdate(smoothed={self.smoothed!r}, filtered={self.filtered!r}, dropped={self.dropped!r})"
 
 
 ENGINES = tuple(engine.value for engine in Engine)
@@ -746,7 +759,8 @@ class FixedLagSmoother:
             self._clock.origin_ns = t_ns
         self._clock.last_ns = t_ns
         self._choice.accepted += 1
-        self._swap_choice()
+        if self._choice.pending is not None:
+            self._swap_choice()
         sample = (t_ns, y, gyro)
         if self._sigma is not None:
             self._sigma.readings[t_ns] = y
@@ -758,7 +772,11 @@ class FixedLagSmoother:
         else:
             smoothed.extend(self._process(sample))
         seg = self._segment
-        return FixedLagUpdate(self._scaled(smoothed), None if seg.engine is None else self._read(seg.window[-1]))
+        if seg.engine is None:
+            return FixedLagUpdate(self._scaled(smoothed), None)
+        if seg.prev is not None and seg.window[-1][0] == seg.k:  # the newest state's values, kept already
+            return FixedLagUpdate(self._scaled(smoothed), None, newest=seg.prev)
+        return FixedLagUpdate(self._scaled(smoothed), self._read(seg.window[-1]))
 
     def _scaled(self, states) -> tuple[StateEstimate, ...]:
         """``states`` with σ scaled by the misfit of the readings emitted so far (:mod:`gfimu.smoother.solve.sigma_scale`)."""
@@ -1217,7 +1235,8 @@ class FixedLagSmoother:
             x = self._segment.engine.mean(k)
         except FilterFailure as err:
             raise self._failure(t_ns, err, "could not solve the state") from err
-        return x[0:3].copy(), x[3:6].copy(), x[6:9].copy()
+        x = np.array(x, dtype=float)  # one copy, its three parts views of it
+        return x[0:3], x[3:6], x[6:9]
 
     def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
         k, t_ns = entry
