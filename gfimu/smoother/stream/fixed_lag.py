@@ -463,9 +463,27 @@ class StartHold:
             return math.inf
 
 
+@dataclass(frozen=True)
+class ChoiceRules:
+    """How :class:`FixedLagSmoother` chooses its model on the stream, fixed when it is made: the options as given
+    (``user_options``), whether it tunes the process noise (``tune``) and checks the model (``auto``, with the
+    per-sample ML fit ``ml``), the first choice's stretch (``tune_n`` samples; a stretch cut short is tuned on
+    from ``tune_min_n``), a later choice every ``retune_ns`` and used ``delay_n`` samples after the one that
+    asked for it."""
+
+    user_options: SmootherOptions
+    tune: bool
+    auto: bool
+    retune_ns: int
+    tune_n: int
+    tune_min_n: int
+    delay_n: int
+    ml: MLEstimator | None = None
+
+
 @dataclass
 class ChoiceState:
-    """The model :class:`FixedLagSmoother` uses and how it chooses it on the stream.
+    """The model :class:`FixedLagSmoother` uses and how it chooses it on the stream (``rules``, :class:`ChoiceRules`).
 
     In use: ``options`` (the options of the model in use), ``model`` (the :class:`~.array_model.ArrayModel`
     they make), ``stream_model`` (the model chosen, :mod:`gfimu.smoother.stream.model_choice`; None before the
@@ -473,27 +491,17 @@ class ChoiceState:
     selection, :class:`gfimu.smoother.tuning.evidence.Tuning`, or None), ``jerk_factor`` (the local motion
     density's factor on the motion model's stds, robust model).
 
-    To choose: the options as given (``user_options``), whether it tunes the process noise (``tune``) and
-    checks the model (``auto``, with the per-sample ML fit ``ml``), whether the first choice is still to be made
-    (``first_pending``, on ``buffer``, the first ``tune_n`` samples; a stretch cut short is tuned on from
-    ``tune_min_n``), the ``history`` later choices are made on, every ``retune_ns`` or when the ``local``
-    motion density outgrows the model; the choice being made off the stream (``pending``, used when
-    ``accepted``, the samples taken in, reaches its sample, ``delay_n`` after the one that asked) and the waits
-    for late ones."""
+    Choosing: whether the first choice is still to be made (``first_pending``, on ``buffer``, the first
+    ``rules.tune_n`` samples), the ``history`` later choices are made on, every ``rules.retune_ns`` or when the
+    ``local`` motion density outgrows the model; the choice being made off the stream (``pending``, used when
+    ``accepted``, the samples taken in, reaches its sample) and the waits for late ones."""
 
-    user_options: SmootherOptions
-    tune: bool
-    auto: bool
+    rules: ChoiceRules
     first_pending: bool
     history: deque
-    retune_ns: int
-    tune_n: int
-    tune_min_n: int
-    delay_n: int
     local: LocalDensity
     options: SmootherOptions
     model: model.ArrayModel
-    ml: MLEstimator | None = None
     stream_model: StreamModel | None = None
     models: list = field(default_factory=list)
     tuning: object = None
@@ -614,14 +622,14 @@ class FixedLagSmoother:
         tune = tunes_process_noise(options)
         auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
         tune_n = stretch_samples(tune_window_s, rate_hz)  # (cut above STRETCH_RATE_HZ)
-        self._choice = ChoiceState(
-            options, tune, auto, tune or auto,
-            deque(maxlen=stretch_samples(max(model_window_s, tune_window_s), rate_hz)),
-            int(round(retune_every_s * 1e9)), tune_n,
+        rules = ChoiceRules(
+            options, tune, auto, int(round(retune_every_s * 1e9)), tune_n,
             # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
             min(tune_n, max(2, int(round(1.0 * rate_hz)))),
-            max(1, int(math.ceil(choice_delay_s * rate_hz))), LocalDensity(array), options, array_model,
-            MLEstimator(workers=1) if auto else None)
+            max(1, int(math.ceil(choice_delay_s * rate_hz))), MLEstimator(workers=1) if auto else None)
+        self._choice = ChoiceState(rules, tune or auto,
+                                   deque(maxlen=stretch_samples(max(model_window_s, tune_window_s), rate_hz)),
+                                   LocalDensity(array), options, array_model)
         self._signs = StreamSignChain(int(math.ceil(self.config.lag_s * rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
         self._clock = StreamClock(float(clock_reset_s))
@@ -766,7 +774,7 @@ class FixedLagSmoother:
             self._sigma.readings[t_ns] = y
         if self._choice.first_pending:
             self._choice.buffer.append(sample)
-            if len(self._choice.buffer) < self._choice.tune_n:
+            if len(self._choice.buffer) < self._choice.rules.tune_n:
                 return FixedLagUpdate(self._scaled(smoothed), None)
             smoothed.extend(self._tune_and_replay())
         else:
@@ -809,7 +817,7 @@ class FixedLagSmoother:
         for the next segment."""
         samples, self._choice.buffer = self._choice.buffer, []
         batch = None
-        if not final or len(samples) >= self._choice.tune_min_n:
+        if not final or len(samples) >= self._choice.rules.tune_min_n:
             batch = self._choose(samples, first=True)
             self._choice.first_pending = False
         if batch is not None and final:  # the segment ends here: the batch solution is all there is to say
@@ -847,7 +855,7 @@ class FixedLagSmoother:
             return None
         samples, previous = list(samples), self.stream_model
         self._choice.pending = PendingChoice(lambda: self._chosen_model(samples, previous, outgrown=outgrown)[0],
-                                      self._choice.accepted + self._choice.delay_n, outgrown)
+                                      self._choice.accepted + self._choice.rules.delay_n, outgrown)
         return None
 
     def _swap_choice(self, final: bool = False) -> None:
@@ -878,14 +886,14 @@ class FixedLagSmoother:
         motion has not outgrown it (the tuner is the costly part of a choice); otherwise the tuner
         runs on the newest ``tune_window_s`` of the stretch."""
         part = self._stretch_log(samples)
-        ml = self._ml_motion(samples, part) if self._choice.auto else None
+        ml = self._ml_motion(samples, part) if self._choice.rules.auto else None
         check = stream_model.check_of(part, ml)
         batch = None
-        base = self._choice.user_options if check is None else measured_noise_options(self._choice.user_options, check)
+        base = self._choice.rules.user_options if check is None else measured_noise_options(self._choice.rules.user_options, check)
         t_end = int(part.timestamps_ns[-1])
         if check is not None and not check.consistent:
-            chosen = stream_model.robust(part, self._choice.user_options, check, ml, self._choice.tune, previous)
-        elif not self._choice.tune or (check is not None and check.constant):
+            chosen = stream_model.robust(part, self._choice.rules.user_options, check, ml, self._choice.rules.tune, previous)
+        elif not self._choice.rules.tune or (check is not None and check.constant):
             chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part))
         elif (not first and not outgrown and previous is not None and not previous.robust and previous.moving
               and previous.tuning is not None):
@@ -898,7 +906,7 @@ class FixedLagSmoother:
             else:
                 chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part), moving=False)
         else:
-            n = self._choice.tune_n
+            n = self._choice.rules.tune_n
             span = part if len(part) <= n else part.select(slice(len(part) - n, None))
             tuning, problem, x0 = self._tuned(span, base)
             chosen = stream_model.from_tuning(tuning, problem.options, check, span)
@@ -945,9 +953,9 @@ class FixedLagSmoother:
 
     def _newest(self, part: Log, ml):
         """The newest ``tune_window_s`` of ``part`` and of its ML estimate ``ml``."""
-        if len(part) <= self._choice.tune_n:
+        if len(part) <= self._choice.rules.tune_n:
             return part, ml
-        sl = slice(len(part) - self._choice.tune_n, None)
+        sl = slice(len(part) - self._choice.rules.tune_n, None)
         return part.select(sl), ml.select(sl)
 
     def _use(self, chosen: StreamModel) -> None:
@@ -961,7 +969,7 @@ class FixedLagSmoother:
         rows = [s[3] if len(s) > 3 else None for s in samples]
         todo = [i for i, r in enumerate(rows) if r is None]
         if todo:
-            fresh = self._choice.ml.estimate_motion(part.select(np.asarray(todo)))
+            fresh = self._choice.rules.ml.estimate_motion(part.select(np.asarray(todo)))
             x = np.hstack([fresh.omega_b_radps, fresh.omega_dot_b_radps2, fresh.specific_force_b_mps2])
             for j, i in enumerate(todo):
                 rows[i] = x[j]
@@ -974,7 +982,7 @@ class FixedLagSmoother:
     def _tuned(self, part: Log, options: SmootherOptions | None = None):
         """The batch smoother's process-noise selection on ``part``: (Tuning, problem, initial states)."""
         tunings: list = []
-        options = replace(options or self._choice.user_options, tune_process_noise=True)
+        options = replace(options or self._choice.rules.user_options, tune_process_noise=True)
         problem, x0 = tuned_problem(part, options, tunings)
         return tunings[-1], problem, x0
 
@@ -996,7 +1004,7 @@ class FixedLagSmoother:
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
         choose again when due (every ``retune_every_s``) or when the motion outgrows the model."""
-        if not (self._choice.auto or self._choice.tune) or self.stream_model is None:
+        if not (self._choice.rules.auto or self._choice.rules.tune) or self.stream_model is None:
             return
         entry = [sample[0], sample[1], sample[2], None]
         self._choice.history.append(entry)
@@ -1013,12 +1021,12 @@ class FixedLagSmoother:
         self._choice.jerk_factor = 1.0
         if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
             self._choice.jerk_factor = min(1.0, local / q)
-        due = sample[0] - chosen.chosen_at_ns >= self._choice.retune_ns
+        due = sample[0] - chosen.chosen_at_ns >= self._choice.rules.retune_ns
         # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
         # again at once (at most once a second), on the history that now holds the motion
         outgrown = (local is not None and self._choice.local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
-        if (due or outgrown) and len(self._choice.history) >= self._choice.tune_min_n:
+        if (due or outgrown) and len(self._choice.history) >= self._choice.rules.tune_min_n:
             self._choose(self._choice.history, outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
