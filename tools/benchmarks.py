@@ -209,6 +209,12 @@ SECTIONS = (
         "Wall time of a few command lines that do no work, each in a fresh process, and which heavy "
         "modules each one imports.",
         quick=("--repeats", "2")),
+    Section(
+        "first-run", "The first fixed-lag run on a machine: compiling the kernels", "bench_first_run.py",
+        "`gfimu estimate LOG --method fixed-lag` on a short simulated log with an empty numba cache (a user's "
+        "first run after installing: the stream's kernels and the ML iterations compiled) and with the cache "
+        "filled (every later run), and each kernel's compilation time as numba reports it.",
+        quick=("--runs", "1"), json=False),
 )
 BY_NAME = {s.name: s for s in SECTIONS}
 
