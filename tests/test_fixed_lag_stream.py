@@ -130,7 +130,7 @@ def test_internal_containers_stay_bounded_through_drops_resets_and_gaps(log):
                 if i % 50 == 0:
                     seg = sm._segment
                     sizes.append((len(seg.window), len(seg.raw), len(sm._choice.buffer), len(seg.warmup),
-                                  0 if seg.engine is None else seg.engine.capacity, len(sm.model._step_cache)))
+                                  0 if seg.engine is None else seg.engine.n_slots, len(sm.model._step_cache)))
     n_out += len(sm.flush())
     assert n_out == n_in == 10 * len(log)
     assert sm.n_clock_resets == 1

@@ -367,10 +367,6 @@ class WindowFilter:
     def __len__(self) -> int:
         return self._store.hi - self._store.lo
 
-    @property
-    def capacity(self) -> int:
-        return self._store.cap
-
     def _slot(self, k: int) -> int:
         store = self._store
         s = k - store.base
@@ -814,6 +810,7 @@ class WindowFilter:
 
     @property
     def n_slots(self) -> int:
+        """The slots the window's arrays hold (they grow when the window outgrows them)."""
         return self._store.cap
 
     # --- updates ------------------------------------------------------------------------
