@@ -641,6 +641,15 @@ class FixedLagSmoother:
                                int(round(max(self.config.lag_s, 0.5) * 1e9)))
         self._start_segment()
 
+    @classmethod
+    def of_groups(cls, array: SensorArray, options: SmootherOptions | None, stream: StreamOptions, rate_hz: float,
+                  **settings) -> FixedLagSmoother:
+        """A smoother of the model ``options`` and the stream group ``stream`` (:class:`StreamOptions`: its
+        lag, window engine, warm-up, hold, gaps and model updates; ``screen_readings`` is the session's, not the
+        smoother's); ``settings`` ( ``lag_s``, ``auto_model``, ``clock_reset_s``, ...) override or add to them."""
+        taken = {name: getattr(stream, name) for name in GROUPS["stream"] if name != "screen_readings"}
+        return cls(array, options, rate_hz=rate_hz, **{**taken, **settings})
+
     # --- public API ---------------------------------------------------------
     lag_s = delegated("config", "lag_s", "A state is given smoothed this long [s] after its sample.")
     rate_hz = delegated("config", "rate_hz", "The nominal sample rate [Hz].")
@@ -1474,13 +1483,8 @@ class FixedLagEstimator(SmootherEstimator):
 
     def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
         """A streaming smoother with these options (its lag :meth:`window_lag_s`)."""
-        return FixedLagSmoother(array, self.options(), lag_s=self.window_lag_s(rate_hz), rate_hz=rate_hz,
-                                relinearize_threshold=self.relinearize_threshold,
-                                relinearize_skip=self.relinearize_skip, marginalise_every_s=self.marginalise_every_s,
-                                warmup_s=self.warmup_s, hold_max_s=self.hold_max_s, gap_factor=self.gap_factor,
-                                fast_measurement=self.fast_measurement, tune_window_s=self.tune_window_s,
-                                engine=self.engine, auto_model=self.auto_model, retune_every_s=self.retune_every_s,
-                                model_window_s=self.model_window_s)
+        return FixedLagSmoother.of_groups(array, self.options(), self.stream, rate_hz, lag_s=self.window_lag_s(rate_hz),
+                                          auto_model=self.auto_model)
 
     def applicable(self, array: SensorArray) -> str | None:
         return fixed_lag_reason(array, self.options())
