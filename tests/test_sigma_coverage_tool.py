@@ -24,6 +24,30 @@ def test_spread_is_the_binomial_std_for_independent_samples_and_grows_with_corre
     assert sc.spread(slow, sigma) == pytest.approx(np.sqrt(c10 * (1 - c10) * 10 / n), rel=0.15)
 
 
+def test_spread_of_independent_draws_pooled_counts_the_samples_of_all_draws():
+    rng = np.random.default_rng(1)
+    n, draws = 5000, 4
+    parts = [(rng.standard_normal((n, 2)), np.ones((n, 2))) for _ in range(draws)]
+    (e0, s0), rest = parts[0], parts[1:]
+    c = np.mean(np.abs(np.vstack([e for e, _ in parts])) < 1, axis=0)
+    # four independent draws of n independent samples: the binomial std of 4 n samples, the larger axis's
+    expected = np.max(np.sqrt(c * (1 - c) / (draws * n)))
+    assert sc.spread(e0, s0, rest) == pytest.approx(expected, rel=0.1)
+    # half the spread of one draw (√4), within the scatter of τ's estimate
+    assert sc.spread(e0, s0, rest) == pytest.approx(sc.spread(e0, s0) / 2, rel=0.15)
+    # an error constant over each draw: one independent sample per draw, however long the draw
+    const = [(np.full((n, 1), v), np.ones((n, 1))) for v in (0.5, 2.0, 0.3, 1.5)]
+    assert sc.spread(const[0][0], const[0][1], const[1:]) == pytest.approx(np.sqrt(0.5 * 0.5 / draws))
+
+
+def test_draws_are_the_cell_with_consecutive_seeds():
+    mc = _cell("20kHz-0.5s")
+    got = sc.draws(mc, 3)
+    assert got[0] == mc
+    assert [d.cell.seed for d in got] == [mc.cell.seed, mc.cell.seed + 1, mc.cell.seed + 2]
+    assert all(d.cell.rate_hz == mc.cell.rate_hz and d.name == mc.name for d in got)
+
+
 def test_in_target_bounds():
     m = {"coverage_1sigma": (0.6, 0.7, 0.76), "coverage_2sigma": (0.9, 0.95, 0.98)}
     assert sc.in_target(m)

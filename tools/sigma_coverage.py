@@ -15,7 +15,7 @@ MIMU4444 recordings given as arguments (``data.bin``) are converted with ``gfimu
 scored as ``gfimu evaluate LOG EST --moving-threshold-radps 2`` scores them: against the mean of the
 board's gyros, on the rows whose reference is valid and turns faster than 2 rad/s.
 
-    python3 tools/sigma_coverage.py [--cells PATTERN] [--methods smoother,fixed-lag] [--no-cells] [--all] [data.bin ...]
+    python3 tools/sigma_coverage.py [--cells PATTERN] [--methods smoother,fixed-lag] [--no-cells] [--all] [--draws N] [data.bin ...]
 
 Noise-free cells are left out (the errors there are rounding, σ ~ 0), and cells over 10,000 samples
 unless ``--all`` (time). Each row's ± is the spread of its 1σ share from the count of independent
@@ -24,7 +24,12 @@ positive), a binomial std √(c (1 − c) / N_eff) of share c, the largest over 
 third row: the scaled σ against the reference lined up in time (the offset that best lines |ω| up, as
 ``gfimu evaluate --estimate-time-offset``: the board's gyros lag its accelerometers by about 1.3 ms, an
 error of the reference, not of the estimate).
-A run that fails prints its error in the table.
+``--draws N`` pools N independent draws of each simulated cell (seeds 1 … N of its motion, noise and
+misfit): a short cell's error is correlated over most of its length (20kHz-0.5s: a few independent
+samples per axis, ± 26 %), so one draw cannot tell a σ that is right from one that is not; N draws hold
+the sum of their independent samples, and ± shrinks as 1/√N. The foreign cells' draws vary the triads'
+layout and the noise only: the motion, and with it the bias of their unstated gain, is the same in every
+draw, which ± does not count. A run that fails prints its error in the table.
 """
 
 from __future__ import annotations
@@ -194,20 +199,21 @@ def aligned(motion, sigma: np.ndarray, reference, valid: np.ndarray):
     return interp(motion.omega_b_radps), interp(sigma), offset
 
 
-def spread(err: np.ndarray, sigma: np.ndarray) -> float:
-    """The largest over the axes of the binomial std of the 1σ share from the effective count of
-    independent samples (module docstring)."""
-    out = 0.0
+def independent_counts(err: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(axes, 2): per axis, the samples with |e| < σ and the effective count of independent samples
+    N / (1 + 2 Σ ρ_k) (module docstring; NaN below 2 samples). An indicator that does not change over the
+    draw shows no time over which it decorrelates: it counts as one independent sample."""
     ok = np.all(np.isfinite(err) & np.isfinite(sigma) & (sigma > 0), axis=1)
+    out = np.full((err.shape[1], 2), np.nan)
     for j in range(err.shape[1]):
         x = (np.abs(err[ok, j]) < sigma[ok, j]).astype(float)
         n = len(x)
         if n < 2:
-            return float("nan")
-        c = x.mean()
-        d = x - c
+            continue
+        d = x - x.mean()
         var = float(d @ d)
         if var == 0:
+            out[j] = (x.sum(), 1.0)
             continue
         tau = 1.0
         for k in range(1, min(n - 1, 2000)):
@@ -215,7 +221,23 @@ def spread(err: np.ndarray, sigma: np.ndarray) -> float:
             if rho <= 0:
                 break
             tau += 2 * rho
-        out = max(out, float(np.sqrt(c * (1 - c) * tau / n)))
+        out[j] = (x.sum(), n / tau)
+    return out
+
+
+def spread(err: np.ndarray, sigma: np.ndarray, more=()) -> float:
+    """The largest over the axes of the binomial std of the 1σ share from the effective count of
+    independent samples (module docstring); ``more``: further independent draws (err, sigma) of the same
+    cell, pooled with the first (shares over all samples, counts of independent samples summed)."""
+    out = 0.0
+    parts = [(err, sigma)] + list(more)
+    counts = np.array([independent_counts(e, s) for e, s in parts])  # (draws, axes, 2)
+    n = np.array([np.all(np.isfinite(e) & np.isfinite(s) & (s > 0), axis=1).sum() for e, s in parts], float)
+    if np.isnan(counts).any():
+        return float("nan")
+    for j in range(counts.shape[1]):
+        c = counts[:, j, 0].sum() / n.sum()
+        out = max(out, float(np.sqrt(c * (1 - c) / counts[:, j, 1].sum())))
     return out
 
 
@@ -225,10 +247,11 @@ def in_target(m: dict, slack: float = 0.0) -> bool:
             and all(0.90 - slack <= v <= 0.98 + slack for v in m["coverage_2sigma"]))
 
 
-def row(name: str, method: str, kind: str, err: np.ndarray, sigma: np.ndarray) -> str:
-    m = sigma_metrics(err, sigma)
+def row(name: str, method: str, kind: str, err: np.ndarray, sigma: np.ndarray, more=()) -> str:
+    """One line of the table; ``more``: further independent draws (err, sigma), pooled (:func:`spread`)."""
+    m = sigma_metrics(np.vstack([err] + [e for e, _ in more]), np.vstack([sigma] + [s for _, s in more]))
     cov = m["coverage_1sigma"] + m["coverage_2sigma"]
-    sp = spread(err, sigma)
+    sp = spread(err, sigma, more)
     verdict = "yes" if in_target(m) else "within ±" if in_target(m, 2 * sp) else "no"
     return (f"| {name} | {method} | {kind} | " + " | ".join(f"{100 * v:.0f} %" for v in cov)
             + f" | ±{100 * sp:.0f} % | {m['mean_nees']:.3g} | {verdict} |")
@@ -252,15 +275,57 @@ def rows_for(name: str, log, omega_true, methods, valid=None, reference=None) ->
             print(f"| {name} | {method} | | error: {type(exc).__name__}: {exc} ||||||||", flush=True)
 
 
-def main(argv=None) -> int:
+def draws(mc: MisfitCell, n: int) -> list[MisfitCell]:
+    """``n`` independent draws of ``mc``: its cell with seeds ``seed`` … ``seed + n − 1`` (the first is ``mc``)."""
+    return [replace(mc, cell=replace(mc.cell, seed=mc.cell.seed + k)) for k in range(int(n))]
+
+
+def read_cell(mc: MisfitCell, folder: Path):
+    """(screened log, true ω) of ``mc`` built in ``folder``."""
     from gfimu.readings import screen_log
 
+    path, omega = build(mc, folder)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log, _ = screen_log(gio.read_log(path, truth=False))
+    return log, omega
+
+
+def pooled_rows_for(mc: MisfitCell, n: int, methods, folder: Path) -> None:
+    """Rows of ``n`` independent draws of ``mc`` pooled (:func:`draws`, :func:`spread`), for each method."""
+    runs = {m: [] for m in methods}  # (err, white, scaled) per draw
+    failed = {}
+    for k, cell in enumerate(draws(mc, n)):
+        sub = folder / f"{mc.name}-draw{k}"
+        sub.mkdir(parents=True, exist_ok=True)
+        log, omega = read_cell(cell, sub)
+        for method in methods:
+            if method in failed:
+                continue
+            try:
+                motion, white = run_both(log, method)
+                runs[method].append((motion.omega_b_radps - omega, white, motion.sigma["omega_b_radps"]))
+            except Exception as exc:  # reported, not fatal to the table
+                failed[method] = f"seed {cell.cell.seed}: {type(exc).__name__}: {exc}"
+        del log
+    name = f"{mc.name} ({n} draws)"
+    for method in methods:
+        if method in failed:
+            print(f"| {name} | {method} | | error: {failed[method]} ||||||||", flush=True)
+            continue
+        (e0, w0, s0), rest = runs[method][0], runs[method][1:]
+        print(row(name, method, "white", e0, w0, [(e, w) for e, w, _ in rest]), flush=True)
+        print(row(name, method, "scaled", e0, s0, [(e, s) for e, _, s in rest]), flush=True)
+
+
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("recordings", nargs="*", type=Path, help="MIMU4444 data.bin files")
     ap.add_argument("--cells", default=None, help="comma-separated names or glob patterns")
     ap.add_argument("--no-cells", action="store_true", help="the recordings only")
     ap.add_argument("--all", action="store_true", help=f"cells over {LONG_SAMPLES} samples too")
     ap.add_argument("--methods", default="smoother,fixed-lag")
+    ap.add_argument("--draws", type=int, default=1, help="independent draws of each simulated cell, pooled")
     args = ap.parse_args(argv)
     methods = args.methods.split(",")
     cells = [] if args.no_cells else [c for c in CELLS if args.all or c.cell.duration_s * c.cell.rate_hz <= LONG_SAMPLES]
@@ -274,10 +339,10 @@ def main(argv=None) -> int:
     print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for mc in cells:
-            path, omega = build(mc, Path(tmp))
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                log, _ = screen_log(gio.read_log(path, truth=False))
+            if args.draws > 1:
+                pooled_rows_for(mc, args.draws, methods, Path(tmp))
+                continue
+            log, omega = read_cell(mc, Path(tmp))
             rows_for(mc.name, log, omega, methods)
         for rec in args.recordings:
             name = f"{rec.parent.name} (MIMU4444)"
@@ -288,7 +353,7 @@ def main(argv=None) -> int:
             log, reference, valid = got
             rows_for(name, log, reference.omega_b_radps, methods, valid, reference)
     print(f"\nShares of samples with |ω error| < 1σ and < 2σ per axis (a Gaussian error of that σ: 68.3 %, 95.4 %); "
-          "±: the spread of a 1σ share from the count of independent samples; "
+          "±: the spread of a 1σ share from the count of independent samples (of all draws, pooled: N draws); "
           "mean NEES Σ_j (e_j/σ_j)² (3 when σ is right); in target: every axis within 60-76 % and 90-98 % (yes), or "
           "within those bounds widened by twice ± (within ±), or not (no). "
           "white: the σ of the white-noise model alone; scaled: the σ the smoothers report, scaled by the "
