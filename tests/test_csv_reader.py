@@ -507,3 +507,54 @@ def test_the_map_unit_stands_where_the_header_holds_no_unit(bad, capsys):
     convert(capsys, str(bad / "f.csv"), "--map", str(bad / "map.toml"), "--out", str(bad / "log"))
     log = gio.read_log(bad / "log", check=False)
     assert log.accel_mps2[:, 0].tolist() == [G * 1e-3, 2 * (G * 1e-3)]
+
+
+# --- the gravity a file counts [g] in ----------------------------------------------------------
+
+G_MAP = '''format = "gfimu-csv-map/1"
+{g}
+[time]
+column = "t"
+unit = "ms"
+[[accelerometers]]
+name = "a"
+x = "ax"
+y = "ay"
+z = {{ column = "az", unit = "mg" }}
+[gyroscope]
+unit = "deg/s"
+x = "gx"
+y = "gy"
+z = "gz"
+'''
+
+
+@pytest.mark.parametrize("g", [9.8, 9.81, 9.7, 9.9])
+def test_a_map_states_the_gravity_its_file_counts_g_in(tmp_path, capsys, g):
+    """A tool that writes accelerations in g of 9.8 m/s² (not the standard 9.80665): ``g_mps2`` in the map
+    converts its [g] and [mg] columns with that g; [m/s²] columns and the gyroscope are left as they are."""
+    write(tmp_path / "f.csv", "t,ax [g],ay [m/s^2],az,gx,gy,gz\n0,1.5,-2,1000,90,0,0\n1,0.25,3,-500,0,90,0\n")
+    write(tmp_path / "map.toml", G_MAP.format(g=f"g_mps2 = {g}"))
+    convert(capsys, str(tmp_path / "f.csv"), "--map", str(tmp_path / "map.toml"), "--out", str(tmp_path / "log"))
+    log = gio.read_log(tmp_path / "log", check=False)
+    # one product of the value and the unit's factor, the factor g / 9.80665 times the standard unit's: a few
+    # ulps of the exact value
+    expected = np.array([[1.5 * g, -2.0, 1000 * 1e-3 * g], [0.25 * g, 3.0, -500 * 1e-3 * g]])
+    np.testing.assert_allclose(log.accel_mps2, expected, rtol=4 * np.finfo(float).eps, atol=0)
+    assert log.accel_mps2[:, 1].tolist() == [-2.0, 3.0]
+    np.testing.assert_allclose(log.gyro_b_radps, [[90 * DEG, 0, 0], [0, 90 * DEG, 0]], rtol=0, atol=1e-15)
+
+
+def test_without_g_mps2_a_file_counts_in_standard_gravity(tmp_path, capsys):
+    write(tmp_path / "f.csv", "t,ax [g],ay [m/s^2],az,gx,gy,gz\n0,1.5,-2,1000,90,0,0\n1,0.25,3,-500,0,90,0\n")
+    write(tmp_path / "map.toml", G_MAP.format(g=""))
+    convert(capsys, str(tmp_path / "f.csv"), "--map", str(tmp_path / "map.toml"), "--out", str(tmp_path / "log"))
+    log = gio.read_log(tmp_path / "log", check=False)
+    assert log.accel_mps2.tolist() == [[1.5 * G, -2.0, 1000 * (G * 1e-3)], [0.25 * G, 3.0, -500 * (G * 1e-3)]]
+
+
+@pytest.mark.parametrize("value", ["98", "9.6", "9.95", "\"9.8\"", "true", "0"])
+def test_a_gravity_off_the_earth_is_refused(bad, capsys, value):
+    err = run_bad(capsys, bad, "g_mps2: expected the gravity the file's [g] values count in",
+                  map_text=G_MAP.format(g=f"g_mps2 = {value}"))
+    assert "map.toml:2:" in err

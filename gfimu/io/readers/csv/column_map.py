@@ -16,9 +16,14 @@ from ....array import Gyroscope, SensorArray
 from ...array_toml import array_from_toml, read_array_toml
 from ...errors import LogFormatError
 from ...toml_input import TomlContext, load_toml
+from ...units import STANDARD_GRAVITY_MPS2
 
 
 MAP_FORMAT = "gfimu-csv-map/1"
+
+G_RANGE_MPS2 = (9.7, 9.9)
+"""The values a map's ``g_mps2`` may take [m/s²]: gravity on the Earth's surface lies within 9.76-9.84, and the
+conventions tools count [g] in (9.8, 9.81, 9.80665) within that."""
 
 
 AXES = ("x", "y", "z")
@@ -75,6 +80,8 @@ class ColumnMap:
     gyro_rotation: np.ndarray | None
     has_geometry: bool
     placed: tuple[bool, ...]
+    g_mps2: float = STANDARD_GRAVITY_MPS2
+    """The gravity the file's [g] and [mg] values count in (the map's ``g_mps2``; standard gravity unless given)."""
 
 
 def is_int(v) -> bool:
@@ -211,8 +218,12 @@ def parse_map(text: str, path: str) -> ColumnMap:
                                 f"determinant +1), got {r!r}", "gyroscope", 0, "rotation_body_sensor")
             gyro_rotation = rot
     placed = tuple("position_m" in a or "rotation_body_sensor" in a for a in accs_doc)
+    g = doc.get("g_mps2", STANDARD_GRAVITY_MPS2)
+    if isinstance(g, bool) or not isinstance(g, (int, float)) or not G_RANGE_MPS2[0] <= g <= G_RANGE_MPS2[1]:
+        raise ctx.error(f"expected the gravity the file's [g] values count in, a number from {G_RANGE_MPS2[0]:g} to "
+                        f"{G_RANGE_MPS2[1]:g} [m/s²] (9.80665, standard gravity, unless given), got {g!r}", key="g_mps2")
     return ColumnMap(path, doc, ctx, layout, None if file is None else file.strip(), tuple(accs), gyro,
-                     gyro_rotation, any(placed), placed)
+                     gyro_rotation, any(placed), placed, float(g))
 
 
 def array_and_order(cmap: ColumnMap, array_path: str | None, with_gyro: bool) -> tuple[SensorArray, list[int],

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import LogFormatError
-from ...units import TimestampError, same_nanosecond, time_unit_ns, timestamps_ns, unit_factor, unit_help
+from ...units import (STANDARD_GRAVITY_MPS2, TimestampError, canonical_unit, same_nanosecond, time_unit_ns,
+                      timestamps_ns, unit_factor, unit_help)
 from .column_map import Column, ColumnMap, Sensor, is_int
 from .files import Source
 from .table import DECIMAL_COMMA, Table, rate_warning, read_table
@@ -93,7 +94,11 @@ class ColumnReader:
 
         def factor(u: str) -> float:
             try:
-                return time_unit_ns(u) if kind == "time" else unit_factor(u, kind)
+                if kind == "time":
+                    return time_unit_ns(u)
+                if kind == "acceleration" and canonical_unit(u) in ("g", "mg"):  # counted in the map's g
+                    return unit_factor(u, kind) * (self.map.g_mps2 / STANDARD_GRAVITY_MPS2)
+                return unit_factor(u, kind)
             except KeyError:
                 expected = "[ns], [us], [ms] or [s]" if kind == "time" else unit_help(kind)
                 raise self.error(f"unit [{u}] of {table.shown(j)} in {table.path} is not understood here; "
