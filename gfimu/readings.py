@@ -145,6 +145,18 @@ def _nanmedian_last(v: np.ndarray) -> np.ndarray:
         return np.where(k > 0, (lo + hi) / 2, np.nan)
 
 
+def _nanmedian_flat(v: np.ndarray) -> float:
+    """``_nanmedian_last`` of all of ``v`` as one row: the same two middle finite values, found by a partition
+    instead of a sort of every value (NaN last in both)."""
+    v = v.reshape(-1)
+    k = int(np.count_nonzero(~np.isnan(v)))
+    if k == 0:
+        return float("nan")
+    lo, hi = (k - 1) // 2, k // 2
+    part = np.partition(v, [lo, hi])
+    return float((part[lo] + part[hi]) / 2)
+
+
 def _edge_line(x: np.ndarray) -> np.ndarray:
     """A robust straight line through the rows of ``x`` (m, cols) per column, at those rows: the median of the
     pairwise slopes and the median intercept (Theil-Sen), NaN readings left out. One gross error among the rows
@@ -410,7 +422,7 @@ def _spikes(work: np.ndarray, sensor_of_axis, ends) -> np.ndarray:
     number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
     local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
     # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
-    typical = _nanmedian_last(np.abs(work).reshape(1, -1))[0]
+    typical = _nanmedian_flat(np.abs(work))
     floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
     spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
     if sensor_of_axis is not None and np.any(spikes):
