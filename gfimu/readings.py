@@ -134,6 +134,22 @@ def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
     return out
 
 
+def _rolling_median_at(x: np.ndarray, half: int, where: np.ndarray) -> np.ndarray:
+    """:func:`_rolling_median` of ``x`` at the entries ``where`` (N, cols) bool, each window's median taken the
+    same way (the same numbers); the other entries are zero."""
+    w = 2 * half + 1
+    pad = np.full((half, x.shape[1]), np.nan)
+    windows = np.lib.stride_tricks.sliding_window_view(np.concatenate([pad, x, pad]), w, axis=0)  # (n, cols, w)
+    rows, cols = np.nonzero(where)
+    v = windows[rows, cols]  # (k, w)
+    missing = np.isnan(v).any(axis=1)
+    values = _median_of_five(*v.T) if w == 5 else np.median(v, axis=1)
+    values[missing] = _nanmedian_last(v[missing])
+    out = np.zeros_like(x)
+    out[rows, cols] = values
+    return out
+
+
 def _nanmedian_last(v: np.ndarray) -> np.ndarray:
     """``np.nanmedian(v, axis=-1)`` (the mean of the middle two finite values, NaN where there is none) by
     one sort, without its warnings and its per-call cost on small arrays."""
@@ -446,7 +462,7 @@ def _replaced(y: np.ndarray, short: np.ndarray, long_bad: np.ndarray, structure_
         _line_fill(y, long_bad & ~done)
         y = np.where(short, raw, y)
     if np.any(short):
-        fill = _rolling_median(np.where(replaced, np.nan, y), MEDIAN_HALF_WIDTH)
+        fill = _rolling_median_at(np.where(replaced, np.nan, y), MEDIAN_HALF_WIDTH, replaced)  # (read only there)
         still_bad = replaced & ~np.isfinite(fill)
         if np.any(still_bad):  # a run of bad readings longer than the median window: nearest good value
             for c in np.nonzero(still_bad.any(axis=0))[0]:
