@@ -108,9 +108,27 @@ def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = Tr
     error or an interruption stops the workers at once. Fewer than ``min_tasks`` tasks run in this
     process: starting and stopping workers costs about 20 ms, and copying their results back more,
     which short work does not repay."""
+    return _forked(func, tasks, workers, ordered, min_tasks, False)
+
+
+def started_map(func: Callable, tasks: Iterable, workers: int, min_tasks: int = 2) -> Iterator:
+    """:func:`forked_map` (results in task order) with its workers forked and every task handed to them
+    before this returns, so that they work while this process does something else; the results are read
+    from the iterator later. In this process (one worker, fewer than ``min_tasks`` tasks, no forking)
+    the tasks run when their results are read, as with :func:`forked_map`. Closing the iterator (or
+    dropping it) stops the workers, their results unread."""
+    results = _forked(func, tasks, workers, True, min_tasks, True)
+    next(results)  # up to the workers' start: the tasks are theirs now
+    return results
+
+
+def _forked(func: Callable, tasks: Iterable, workers: int, ordered: bool, min_tasks: int, announce: bool) -> Iterator:
+    """:func:`forked_map`; with ``announce``, first a None once the tasks are handed out (:func:`started_map`)."""
     tasks = list(tasks)
     n = fork_workers(workers, len(tasks)) if len(tasks) >= min_tasks else 1
     if n <= 1:
+        if announce:
+            yield None
         yield from _here(func, tasks, ordered)
         return
     # SIGINT and SIGTERM wait while the workers are forked and while they are stopped: a signal in the
@@ -124,13 +142,16 @@ def forked_map(func: Callable, tasks: Iterable, workers: int, ordered: bool = Tr
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     if pool is None:
+        if announce:
+            yield None
         yield from _here(func, tasks, ordered)
         return
     try:
-        if ordered:
-            yield from pool.imap(_run_job, tasks)
-        else:
-            yield from pool.imap_unordered(_run_indexed, list(enumerate(tasks)))
+        results = (pool.imap(_run_job, tasks) if ordered
+                   else pool.imap_unordered(_run_indexed, list(enumerate(tasks))))
+        if announce:
+            yield None
+        yield from results
         pool.close()
         pool.join()
     finally:

@@ -134,6 +134,22 @@ def _rolling_median(x: np.ndarray, half: int) -> np.ndarray:
     return out
 
 
+def _rolling_median_at(x: np.ndarray, half: int, where: np.ndarray) -> np.ndarray:
+    """:func:`_rolling_median` of ``x`` at the entries ``where`` (N, cols) bool, each window's median taken the
+    same way (the same numbers); the other entries are zero."""
+    w = 2 * half + 1
+    pad = np.full((half, x.shape[1]), np.nan)
+    windows = np.lib.stride_tricks.sliding_window_view(np.concatenate([pad, x, pad]), w, axis=0)  # (n, cols, w)
+    rows, cols = np.nonzero(where)
+    v = windows[rows, cols]  # (k, w)
+    missing = np.isnan(v).any(axis=1)
+    values = _median_of_five(*v.T) if w == 5 else np.median(v, axis=1)
+    values[missing] = _nanmedian_last(v[missing])
+    out = np.zeros_like(x)
+    out[rows, cols] = values
+    return out
+
+
 def _nanmedian_last(v: np.ndarray) -> np.ndarray:
     """``np.nanmedian(v, axis=-1)`` (the mean of the middle two finite values, NaN where there is none) by
     one sort, without its warnings and its per-call cost on small arrays."""
@@ -143,6 +159,18 @@ def _nanmedian_last(v: np.ndarray) -> np.ndarray:
     hi = np.take_along_axis(s, np.minimum(k // 2, v.shape[-1] - 1)[..., None], axis=-1)[..., 0]
     with np.errstate(invalid="ignore"):
         return np.where(k > 0, (lo + hi) / 2, np.nan)
+
+
+def _nanmedian_flat(v: np.ndarray) -> float:
+    """``_nanmedian_last`` of all of ``v`` as one row: the same two middle finite values, found by a partition
+    instead of a sort of every value (NaN last in both)."""
+    v = v.reshape(-1)
+    k = int(np.count_nonzero(~np.isnan(v)))
+    if k == 0:
+        return float("nan")
+    lo, hi = (k - 1) // 2, k // 2
+    part = np.partition(v, [lo, hi])
+    return float((part[lo] + part[hi]) / 2)
 
 
 def _edge_line(x: np.ndarray) -> np.ndarray:
@@ -410,7 +438,7 @@ def _spikes(work: np.ndarray, sensor_of_axis, ends) -> np.ndarray:
     number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
     local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
     # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
-    typical = _nanmedian_last(np.abs(work).reshape(1, -1))[0]
+    typical = _nanmedian_flat(np.abs(work))
     floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
     spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
     if sensor_of_axis is not None and np.any(spikes):
@@ -434,7 +462,7 @@ def _replaced(y: np.ndarray, short: np.ndarray, long_bad: np.ndarray, structure_
         _line_fill(y, long_bad & ~done)
         y = np.where(short, raw, y)
     if np.any(short):
-        fill = _rolling_median(np.where(replaced, np.nan, y), MEDIAN_HALF_WIDTH)
+        fill = _rolling_median_at(np.where(replaced, np.nan, y), MEDIAN_HALF_WIDTH, replaced)  # (read only there)
         still_bad = replaced & ~np.isfinite(fill)
         if np.any(still_bad):  # a run of bad readings longer than the median window: nearest good value
             for c in np.nonzero(still_bad.any(axis=0))[0]:

@@ -303,3 +303,38 @@ def test_the_sigma_of_a_replaced_span_covers_its_error():
         zz = np.concatenate(parts).ravel()
         assert 0.55 <= np.mean(zz < 1) <= 0.85, estimator
         assert 0.88 <= np.mean(zz < 2) <= 1.0, estimator
+
+
+def test_a_long_clean_log_is_fitted_per_sample_once_beside_the_check(monkeypatch):
+    """On a log long enough that the model check fits a subsample (more than 2 × CHECK_SAMPLES samples), the fit
+    of the whole log the guard needs is made during the check, beside the subsample's (its blocks in worker
+    processes), and the guard takes it: the same answer, the same guard, as with the fit made by the guard."""
+    from gfimu.smoother.batch import engine
+    from gfimu.smoother.tuning.model_choice import CHECK_SAMPLES
+
+    arr = cube_array(0.025, noise_std_mps2=0.07)
+    t = np.arange(2 * CHECK_SAMPLES + 500) / 1000.0
+    w = np.stack([3.0 * np.sin(2 * np.pi * 0.5 * t), 2.5 * np.sin(2 * np.pi * 0.4 * t + 1.0), 2.0 + 0.0 * t], 1)
+    wd = np.stack([3.0 * np.pi * np.cos(2 * np.pi * 0.5 * t), 2.0 * np.pi * np.cos(2 * np.pi * 0.4 * t + 1.0), 0.0 * t], 1)
+    f = np.tile([0.3, -0.2, 9.81], (t.size, 1))
+    y = (np.hstack([f, wd, quadratic_terms(w)]) @ arr.structure_matrix().T
+         + np.random.default_rng(3).normal(0.0, 0.07, (t.size, arr.n_axes)))
+    log = Log(arr, np.round(t * 1e9).astype(np.int64), y, source="long")
+    calls = []
+    real = MLEstimator.started
+
+    def counted(self, lg, *args, **kwargs):
+        calls.append(len(lg))
+        return real(self, lg, *args, **kwargs)
+
+    monkeypatch.setattr(MLEstimator, "started", counted)
+    est = BatchSmootherEstimator(tune_process_noise=False).estimate(log)
+    assert est.report.model_check.consistent and est.report.per_sample is not None
+    assert calls == [len(log), CHECK_SAMPLES + 250]  # the whole log's started, then the subsample's: no third
+    calls.clear()
+    monkeypatch.setattr(engine, "unguarded", lambda *args: "asked not to")  # the guard fits the whole log itself
+    by_guard = BatchSmootherEstimator(tune_process_noise=False).estimate(log)
+    assert by_guard.report.per_sample is None and calls == [CHECK_SAMPLES + 250, len(log)]
+    assert by_guard.report.guard == est.report.guard
+    np.testing.assert_array_equal(by_guard.motion.omega_b_radps, est.motion.omega_b_radps)
+    np.testing.assert_array_equal(by_guard.motion.specific_force_b_mps2, est.motion.specific_force_b_mps2)

@@ -4,6 +4,7 @@ with workers as without."""
 
 import multiprocessing
 import os
+import time
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from gfimu.array import cube_array
 from gfimu.io import tables
 from gfimu.io.errors import LogFormatError
 from gfimu.log import Log
-from gfimu.parallel import can_fork, fork_workers, forked_map
+from gfimu.parallel import can_fork, fork_workers, forked_map, started_map
 
 needs_fork = pytest.mark.skipif(not can_fork(), reason="worker processes cannot be forked here")
 ARRAY = cube_array(0.05, 0.07)
@@ -58,6 +59,28 @@ def test_short_work_stays_in_this_process():
     here = os.getpid()
     assert set(forked_map(lambda k: os.getpid(), range(3), 2, min_tasks=4)) == {here}
     assert here not in set(forked_map(lambda k: os.getpid(), range(4), 2, min_tasks=4))
+
+
+@needs_fork
+def test_started_map_works_before_it_is_read(tmp_path):
+    """The workers take the tasks before started_map returns: the tasks are done while this process does
+    something else (here: waits), and their results come in task order; closed unread, the workers stop."""
+    def task(k):
+        (tmp_path / f"done-{k}").write_text(str(os.getpid()))
+        return k * k
+
+    results = started_map(task, range(4), 2)
+    for _ in range(200):  # at most 20 s, before anything is read
+        if len(list(tmp_path.glob("done-*"))) == 4:
+            break
+        time.sleep(0.1)
+    assert len(list(tmp_path.glob("done-*"))) == 4
+    assert list(results) == [0, 1, 4, 9]
+    assert str(os.getpid()) not in {f.read_text() for f in tmp_path.glob("done-*")}
+    here = os.getpid()
+    assert list(started_map(lambda k: (k, os.getpid()), range(3), 2, min_tasks=4)) == [(k, here) for k in range(3)]
+    dropped = started_map(lambda k: k, range(5), 2)
+    dropped.close()  # the workers stopped, their results unread
 
 
 def test_work_stays_here_when_workers_cannot_start(monkeypatch):

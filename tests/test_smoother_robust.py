@@ -104,6 +104,44 @@ def test_sign_chain_recovers_a_reversal_through_zero():
     assert sign_chain(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros(0)).tolist() == [1.0]
 
 
+def test_sign_chain_choices_are_numpys_argmin():
+    """The sign chain's recursion on plain floats makes the choices of the two-state recursion written with
+    numpy (argmin: the first of equal costs, a NaN before a number): the same signs on random sequences, on
+    sequences with NaN and infinite ω, and on ties (ω constant, ω̇ zero), robust or not."""
+    from gfimu.smoother.solve.initialise import _scale_of_steps, _step_costs, sign_chain
+
+    def with_numpy(omega, omega_dot, dt, scale):
+        step = _step_costs(omega, omega_dot, dt)
+        scale = _scale_of_steps(step) if scale == "data" else scale
+        if scale is not None:
+            step = scale**2 * np.log1p(step / scale**2)
+        cost, back = np.zeros(2), np.zeros((len(omega) - 1, 2), dtype=np.int8)
+        for k in range(len(omega) - 1):
+            total = cost[:, None] + step[k]
+            back[k] = np.argmin(total, axis=0)
+            cost = total[back[k], [0, 1]]
+        state, out = int(np.argmin(cost)), [0] * len(omega)
+        out[-1] = state
+        for k in range(len(omega) - 2, -1, -1):
+            state = int(back[k, state])
+            out[k] = state
+        return np.where(np.array(out) == 0, 1.0, -1.0)
+
+    rng = np.random.default_rng(11)
+    for trial in range(60):
+        n = int(rng.integers(2, 120))
+        omega = rng.normal(size=(n, 3)) * [1e-3, 1.0, 100.0][trial % 3]
+        omega_dot = rng.normal(size=(n, 3)) * [0.0, 1.0, 100.0][trial % 3]
+        if trial % 4 == 1:
+            omega[rng.integers(0, n, 3)] = [np.nan, np.inf, -np.inf][trial % 3]
+        if trial % 5 == 2:
+            omega[:], omega_dot[:] = 1.0, 0.0
+        for scale in ("data", None, 0.5):
+            with np.errstate(invalid="ignore", over="ignore"):
+                np.testing.assert_array_equal(sign_chain(omega, omega_dot, np.full(n - 1, 0.01), scale),
+                                              with_numpy(omega, omega_dot, np.full(n - 1, 0.01), scale))
+
+
 def test_a_problem_is_frozen_and_reweighting_makes_a_new_one():
     """Nothing is set on a problem once built: a re-weighting returns a new problem whose noise levels
     differ where the weights say, the original keeps its own, and the levels' arrays are read-only."""

@@ -63,7 +63,7 @@ from ..array import SensorArray
 from ..errors import DataError, InputError
 from ..log import Log
 from ..motion import Motion
-from ..parallel import check_workers, forked_map
+from ..parallel import check_workers, started_map
 from ..progress import progress as progress_bar
 from ._common import PerSampleEstimator, checked_readings
 
@@ -137,6 +137,26 @@ class _PrepareChunk:
     def __call__(self, sl: slice):
         return self.estimator._prepare_chunk(self.array, self.model, self.y[sl], None if self.gyro is None else self.gyro[sl],
                                              self.gyro_var)
+
+
+class _Started:
+    """An :meth:`MLEstimator.estimate_motion` under way (:meth:`MLEstimator.started`)."""
+
+    def __init__(self, estimator, log, y, gyro, gyro_var, model, chunks, prepared):
+        self._args = (log, y, gyro, gyro_var, model, chunks, prepared)
+        self._estimator, self._prepared = estimator, prepared
+
+    def motion(self, progress: bool = False) -> Motion:
+        """The estimate (once)."""
+        try:
+            return self._estimator._finished(*self._args, progress)
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Drop what is under way (the workers stopped, their results unread)."""
+        self._prepared.close()
+        self._args = None
 
 
 @dataclass
@@ -225,6 +245,12 @@ class MLEstimator(PerSampleEstimator):
 
     # ------------------------------------------------------------------
     def estimate_motion(self, log: Log, progress: bool = False) -> Motion:
+        return self.started(log).motion(progress)
+
+    def started(self, log: Log) -> _Started:
+        """:meth:`estimate_motion` begun: the log checked and the blocks' first part (:meth:`_prepare_chunk`)
+        handed to the worker processes, which work on it while this process does something else;
+        :meth:`_Started.motion` finishes it (the same numbers), :meth:`_Started.close` drops it."""
         array = log.array
         y = checked_readings(self, log, "ml")
         gyro = None
@@ -239,11 +265,16 @@ class MLEstimator(PerSampleEstimator):
         sigma = self._axis_sigma(array)
         model = _ProjectedModel.build(array, sigma)
         n = len(log)
-        omega = np.empty((n, 3))
         chunks = [slice(start, min(start + _CHUNK, n)) for start in range(0, n, _CHUNK)]
         # what each block needs of no other, in worker processes; then the blocks in turn, each
         # continuing from the last sample of the one before
-        prepared = forked_map(_PrepareChunk(self, array, model, y, gyro, gyro_var), chunks, self.workers, min_tasks=4)
+        prepared = started_map(_PrepareChunk(self, array, model, y, gyro, gyro_var), chunks, self.workers, min_tasks=4)
+        return _Started(self, log, y, gyro, gyro_var, model, chunks, prepared)
+
+    def _finished(self, log, y, gyro, gyro_var, model, chunks, prepared, progress) -> Motion:
+        """The rest of :meth:`estimate_motion` from the blocks' first part (``prepared``, in block order)."""
+        n = len(log)
+        omega = np.empty((n, 3))
         previous = None
         for sl, prep in progress_bar(zip(chunks, prepared), total=len(chunks), desc="ml", enable=progress):
             omega[sl] = self._finish_chunk(model, prep, None if gyro is None else gyro[sl], gyro_var, previous)
@@ -256,7 +287,7 @@ class MLEstimator(PerSampleEstimator):
         sig = {}
         if self.compute_sigma:
             bound = crb_module.crb_per_sample(
-                array, omega, noise_std_mps2=self.noise_std_mps2,
+                log.array, omega, noise_std_mps2=self.noise_std_mps2,
                 gyro_noise_std_radps=None if gyro is None else float(np.sqrt(gyro_var)),
             )
             sig = {

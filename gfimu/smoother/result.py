@@ -61,22 +61,7 @@ def guarded(log, run: Estimate, mode: str, options):
     from .guard import GuardResult, check, replaced
 
     report = run.report
-    why = None
-    if options.use_gyro and log.array.gyroscope is not None and getattr(log, "gyro_b_radps", None) is not None:
-        why = "the smoother uses the gyroscope, which the per-sample fit does not"
-    elif (options.estimate_attitude and options.use_inclinometer and log.array.inclinometer is not None
-          and getattr(log, "tilt_rad", None) is not None):
-        why = "the smoother uses the inclinometer, which the per-sample fit does not"
-    elif options.self_calibrate_bias or options.self_calibrate_scale:
-        why = "the smoother calibrates the readings, which the per-sample fit does not"
-    elif options.factor_groups:
-        why = "the smoother uses factor groups (more than the readings), which the per-sample fit does not"
-    elif report.model_check is not None and getattr(report.model_check, "constant", False):
-        why = "the readings are constant"
-    elif len(log) < 2:
-        why = "fewer than 2 samples"
-    else:
-        why = MLEstimator().applicable(log.array)
+    why = unguarded(log, options, report.model_check)
     if why:
         return run.motion, GuardResult(mode, samples=len(log), note=f"not checked: {why}")
     per_sample = report.per_sample if report.per_sample is not None else MLEstimator().estimate_motion(log)
@@ -86,3 +71,24 @@ def guarded(log, run: Estimate, mode: str, options):
     if mode != "replace":
         return run.motion, outcome
     return replaced(run.motion, per_sample, outcome, model, log.array), outcome
+
+
+def unguarded(log, options, model_check=None) -> str | None:
+    """Why the guard does not judge a smoother with ``options`` on ``log`` (its model check ``model_check``,
+    when made), or None when it does (and then needs the per-sample estimate of the whole log)."""
+    from ..estimators.ml import MLEstimator
+
+    if options.use_gyro and log.array.gyroscope is not None and getattr(log, "gyro_b_radps", None) is not None:
+        return "the smoother uses the gyroscope, which the per-sample fit does not"
+    if (options.estimate_attitude and options.use_inclinometer and log.array.inclinometer is not None
+            and getattr(log, "tilt_rad", None) is not None):
+        return "the smoother uses the inclinometer, which the per-sample fit does not"
+    if options.self_calibrate_bias or options.self_calibrate_scale:
+        return "the smoother calibrates the readings, which the per-sample fit does not"
+    if options.factor_groups:
+        return "the smoother uses factor groups (more than the readings), which the per-sample fit does not"
+    if model_check is not None and getattr(model_check, "constant", False):
+        return "the readings are constant"
+    if len(log) < 2:
+        return "fewer than 2 samples"
+    return MLEstimator().applicable(log.array)

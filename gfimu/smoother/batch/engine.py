@@ -65,7 +65,7 @@ from ..model.option_groups import assemble
 from ..solve.initialise import initial_attitude, initial_states, sign_chain
 from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from ..solve.restarts import branch_restarts
-from ..result import SmootherEstimator
+from ..result import SmootherEstimator, unguarded
 from ..solve.sigma_scale import calibrated_sigma
 from ..tuning.evidence import InitialStates, Tuning, make_problem, tuned_problem
 
@@ -154,7 +154,7 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, options: Smoother
 
 def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: InitialStates | None = None,
            solver: str | None = None, auto_model: bool | None = None, tune_span_s: float | None = ...,
-           workers: int = 1) -> Estimate:
+           workers: int = 1, per_sample: bool = False) -> Estimate:
     """The batch smoother on a whole log: overlapping solve windows, each with its process noise chosen
     from the data when ``options.tune_process_noise``.
 
@@ -163,7 +163,9 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     ``auto_model``, ``tune_span_s``: the options' unless given; ``workers``: here 1, in this process,
     unless asked (:class:`BatchSmootherEstimator` passes its option). The report (method "smoother",
     ``options``) carries the noise tuned and the calibration per window, the solver's iterations and cost,
-    the model check and, when the check made it, the per-sample estimate; no guard."""
+    the model check and, when the check made it, the per-sample estimate; no guard. ``per_sample``: the
+    per-sample estimate of the whole log is wanted after the run (the guard's), so the model check makes it
+    whether it needs it or not, started beside its own estimate of a subsample (:func:`chosen_model`)."""
     opt = options
     solver = opt.solver if solver is None else solver
     auto_model = opt.auto_model if auto_model is None else auto_model
@@ -175,12 +177,12 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
     timings = {}
     t0 = time.perf_counter()
     if auto_model:
-        opt, auto = chosen_model(log, opt, attitude)
+        opt, auto = chosen_model(log, opt, attitude, per_sample)
         timings["model check"] = time.perf_counter() - t0
     else:
         auto = None
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
-        motion = MLEstimator().estimate_motion(log)
+        motion = auto[1] if auto[1] is not None else MLEstimator().estimate_motion(log)
         note = f"{log.source}: {auto[0].describe()}; the per-sample estimate is returned"
         return Estimate(motion, Report.of("smoother", options, timings=timings, warnings=(note,), model_check=auto[0],
                                           iterations=0, cost=0.0, windows=0, per_sample=motion))
@@ -429,9 +431,13 @@ def _calibrates_sigma(log: Log, opt: SmootherOptions) -> bool:
             and not (opt.estimate_attitude and opt.use_inclinometer and log.array.inclinometer is not None))
 
 
-def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
+def chosen_model(log: Log, opt: SmootherOptions, attitude: bool, per_sample: bool = False):
     """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.tuning.model_choice`; the ML motion is the
-    whole log's (:class:`MLEstimator` with its defaults) where the check computed it, else None."""
+    whole log's (:class:`MLEstimator` with its defaults) where the check computed it, else None.
+
+    ``per_sample``: the whole log's ML motion is wanted anyway (by the guard after the smoother): it is made
+    whatever the check finds, its blocks started in worker processes while this one estimates the subsample
+    the check reads (the same numbers as one after the other)."""
     if (attitude or opt.free_flight or opt.measurement != "accelerometer"
             or opt.self_calibrate_bias or opt.self_calibrate_scale):
         return opt, None
@@ -440,12 +446,18 @@ def chosen_model(log: Log, opt: SmootherOptions, attitude: bool):
         return opt, None
     step = max(1, len(log) // CHECK_SAMPLES)
     sample = log if step == 1 else log.select(slice(0, None, step))
-    motion = ml.estimate_motion(sample)
-    check = check_model(sample, motion)
-    if check.consistent:  # the ML motion of the whole log is kept for the guard (it would compute it again)
-        return measured_noise_options(opt, check), (check, motion if step == 1 else None)
-    if step > 1:
-        motion = ml.estimate_motion(log)
+    whole = ml.started(log) if per_sample and step > 1 else None
+    try:
+        motion = ml.estimate_motion(sample)
+        check = check_model(sample, motion)
+        if check.consistent:  # the ML motion of the whole log is kept for the guard (it would compute it again)
+            return measured_noise_options(opt, check), (check, motion if step == 1 else
+                                                        whole.motion() if whole is not None else None)
+        if step > 1:
+            motion = whole.motion() if whole is not None else ml.estimate_motion(log)
+    finally:
+        if whole is not None:
+            whole.close()
     chosen = misfit_options(opt, check)
     defaults = {f.name: f.default for f in fields(SmootherOptions)}
     keep = {name: getattr(opt, name) for name in defaults
@@ -550,8 +562,10 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> Estimate:
         """The smoother on ``log`` (:func:`smooth`) before the guard, its report with this estimator's
         options (:meth:`estimate` is the entry: the run, then the guard)."""
-        run = smooth(log, self.options(), progress=progress, initial=initial, solver=self.solver,
-                     auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers)
+        options = self.options()
+        run = smooth(log, options, progress=progress, initial=initial, solver=self.solver,
+                     auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers,
+                     per_sample=self.guard != "off" and unguarded(log, options) is None)
         return Estimate(run.motion, replace(run.report, options=options_of(self)))
 
 

@@ -265,20 +265,31 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
         robust_scale_radps = _scale_of_steps(step)
     if robust_scale_radps is not None:
         step = robust_scale_radps**2 * np.log1p(step / robust_scale_radps**2)
-    signs = np.array([1.0, -1.0])
-    cost = np.zeros(2)
-    back = np.zeros((n - 1, 2), dtype=np.int8)
-    for k in range(n - 1):  # two states: a short loop of 2x2 minima
-        total = cost[:, None] + step[k]
-        back[k] = np.argmin(total, axis=0)
-        cost = total[back[k], [0, 1]]
-    out = np.empty(n)
-    state = int(np.argmin(cost))
-    out[-1] = signs[state]
+    # two states: per sample the two 2-way minima, on plain floats (the sums in the same order, and the
+    # choices of numpy's argmin: the first of equal costs, a NaN before any number)
+    back0, back1 = [], []
+    a0, a1 = 0.0, 0.0
+    for c00, c01, c10, c11 in step.reshape(n - 1, 4).tolist():
+        n0a, n0b, n1a, n1b = a0 + c00, a1 + c10, a0 + c01, a1 + c11
+        if n0a == n0a and not n0b >= n0a:  # the second is smaller, or a NaN after a number
+            back0.append(1)
+            b0 = n0b
+        else:
+            back0.append(0)
+            b0 = n0a
+        if n1a == n1a and not n1b >= n1a:
+            back1.append(1)
+            a1 = n1b
+        else:
+            back1.append(0)
+            a1 = n1a
+        a0 = b0
+    state = 1 if a0 == a0 and not a1 >= a0 else 0
+    path = [state]
     for k in range(n - 2, -1, -1):
-        state = int(back[k, state])
-        out[k] = signs[state]
-    return out
+        state = back1[k] if state else back0[k]
+        path.append(state)
+    return np.where(np.array(path[::-1]) == 0, 1.0, -1.0)
 
 
 def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
