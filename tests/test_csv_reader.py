@@ -558,3 +558,9 @@ def test_a_gravity_off_the_earth_is_refused(bad, capsys, value):
     err = run_bad(capsys, bad, "g_mps2: expected the gravity the file's [g] values count in",
                   map_text=G_MAP.format(g=f"g_mps2 = {value}"))
     assert "map.toml:2:" in err
+
+
+def test_a_misspelt_top_level_key_is_refused_not_passed_over(bad, capsys):
+    """``g_mps`` for ``g_mps2`` would leave every reading off by the ratio of the two g: refused, naming the key."""
+    err = run_bad(capsys, bad, "unknown key 'g_mps'", map_text=G_MAP.format(g="g_mps = 9.8"))
+    assert "map.toml:2:" in err and "g_mps2" in err

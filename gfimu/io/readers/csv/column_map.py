@@ -21,6 +21,11 @@ from ...units import STANDARD_GRAVITY_MPS2
 
 MAP_FORMAT = "gfimu-csv-map/1"
 
+MAP_KEYS = ("format", "name", "g_mps2", "csv", "time", "accelerometers", "gyroscope", "rate_hz", "readings", "body",
+            "inclinometer")
+"""The keys a map may hold at its top: its own and those of array.toml it may carry (a misspelt key is refused,
+not passed over: ``g_mps`` for ``g_mps2`` would leave every reading off by the ratio of the two g)."""
+
 G_RANGE_MPS2 = (9.7, 9.9)
 """The values a map's ``g_mps2`` may take [m/s²]: gravity on the Earth's surface lies within 9.76-9.84, and the
 conventions tools count [g] in (9.8, 9.81, 9.80665) within that."""
@@ -151,6 +156,7 @@ def parse_map(text: str, path: str) -> ColumnMap:
     doc, ctx = load_toml(text, path)
     if doc.get("format") != MAP_FORMAT:
         raise ctx.error(f"expected format = \"{MAP_FORMAT}\" (a column map), got {doc.get('format')!r}", key="format")
+    ctx.refuse_unknown(doc, MAP_KEYS, "")
     csv = doc.get("csv", {})
     if not isinstance(csv, dict):
         raise ctx.error("expected a table [csv]", key="csv")
