@@ -123,3 +123,23 @@ def test_an_option_is_declared_in_its_group_only():
         @assemble("model")
         class Twice:
             window_s: float = 1.0
+
+
+def test_the_fixed_lag_smoother_takes_the_stream_group_as_it_is_given():
+    """``FixedLagSmoother.of_groups``: every setting of the stream group reaches the smoother (its lag, gaps,
+    warm-up, hold, engine and model updates), and a setting given beside it wins; the fixed-lag method hands
+    its own group over, its lag shortened by the screening's wait where that fits in it."""
+    from gfimu.array import cube_array
+    from gfimu.smoother.stream.fixed_lag import FixedLagSmoother
+
+    array = cube_array(0.05)
+    stream = StreamOptions(lag_s=0.5, gap_factor=2.5, warmup_s=0.1, hold_max_s=1.0, tune_window_s=2.0)
+    sm = FixedLagSmoother.of_groups(array, SmootherOptions(), stream, 500.0)
+    assert (sm.lag_s, sm.gap_factor, sm.rate_hz) == (0.5, 2.5, 500.0)
+    assert sm.config.warmup_n == 50  # 0.1 s at 500 Hz
+    assert sm.engine == "numpy"
+    assert FixedLagSmoother.of_groups(array, SmootherOptions(), stream, 500.0, lag_s=0.3).lag_s == 0.3
+    est = FixedLagEstimator(lag_s=0.4)
+    made = est.smoother(array, 500.0)
+    assert made.lag_s == pytest.approx(est.window_lag_s(500.0), abs=0.0)
+    assert made.gap_factor == est.gap_factor
