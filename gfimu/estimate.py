@@ -37,8 +37,8 @@ class Report:
     :class:`gfimu.smoother.guard.GuardResult`: the spans where the smoother fits the readings worse),
     ``warnings``: plain-text notes on anything that went less well than planned, and ``per_sample``:
     the per-sample ML estimate of the whole log when the run made one (the batch smoother's model check
-    of an inconsistent log, or of any log its guard will judge; the guard reuses it). The estimate's one-sigma uncertainties, when asked
-    for, are the motion's (``Estimate.motion.sigma``)."""
+    of an inconsistent log, or of any log its guard will judge; the guard reuses it). The estimate's one-sigma
+    uncertainties, when asked for, are the motion's (``Estimate.motion.sigma``)."""
 
     method: str
     options: Mapping[str, Any] = field(default_factory=dict)

@@ -864,7 +864,7 @@ class FixedLagSmoother:
             return None
         samples, previous = list(samples), self.stream_model
         self._choice.pending = PendingChoice(lambda: self._chosen_model(samples, previous, outgrown=outgrown)[0],
-                                      self._choice.accepted + self._choice.rules.delay_n, outgrown)
+                                             self._choice.accepted + self._choice.rules.delay_n, outgrown)
         return None
 
     def _swap_choice(self, final: bool = False) -> None:
@@ -894,15 +894,16 @@ class FixedLagSmoother:
         A consistent stretch keeps the Gaussian model in use when that was chosen on motion and the
         motion has not outgrown it (the tuner is the costly part of a choice); otherwise the tuner
         runs on the newest ``tune_window_s`` of the stretch."""
+        rules = self._choice.rules
         part = self._stretch_log(samples)
-        ml = self._ml_motion(samples, part) if self._choice.rules.auto else None
+        ml = self._ml_motion(samples, part) if rules.auto else None
         check = stream_model.check_of(part, ml)
         batch = None
-        base = self._choice.rules.user_options if check is None else measured_noise_options(self._choice.rules.user_options, check)
+        base = rules.user_options if check is None else measured_noise_options(rules.user_options, check)
         t_end = int(part.timestamps_ns[-1])
         if check is not None and not check.consistent:
-            chosen = stream_model.robust(part, self._choice.rules.user_options, check, ml, self._choice.rules.tune, previous)
-        elif not self._choice.rules.tune or (check is not None and check.constant):
+            chosen = stream_model.robust(part, rules.user_options, check, ml, rules.tune, previous)
+        elif not rules.tune or (check is not None and check.constant):
             chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part))
         elif (not first and not outgrown and previous is not None and not previous.robust and previous.moving
               and previous.tuning is not None):
@@ -915,7 +916,7 @@ class FixedLagSmoother:
             else:
                 chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part), moving=False)
         else:
-            n = self._choice.rules.tune_n
+            n = rules.tune_n
             span = part if len(part) <= n else part.select(slice(len(part) - n, None))
             tuning, problem, x0 = self._tuned(span, base)
             chosen = stream_model.from_tuning(tuning, problem.options, check, span)

@@ -227,7 +227,8 @@ def parse_map(text: str, path: str) -> ColumnMap:
     g = doc.get("g_mps2", STANDARD_GRAVITY_MPS2)
     if isinstance(g, bool) or not isinstance(g, (int, float)) or not G_RANGE_MPS2[0] <= g <= G_RANGE_MPS2[1]:
         raise ctx.error(f"expected the gravity the file's [g] values count in, a number from {G_RANGE_MPS2[0]:g} to "
-                        f"{G_RANGE_MPS2[1]:g} [m/s²] (9.80665, standard gravity, unless given), got {g!r}", key="g_mps2")
+                        f"{G_RANGE_MPS2[1]:g} [m/s²] (9.80665, standard gravity, unless given), got {g!r}",
+                        key="g_mps2")
     return ColumnMap(path, doc, ctx, layout, None if file is None else file.strip(), tuple(accs), gyro,
                      gyro_rotation, any(placed), placed, float(g))
 
