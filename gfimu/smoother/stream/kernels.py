@@ -409,7 +409,8 @@ def predict_window(F, Q, c, P, x_newest, T, cross):
     ``C_i Fᵀ`` in place and the old ones' factor ``T Fᵀ`` returned."""
     x = _mv_plus(c, F, x_newest)
     FP = _mm(F, P)
-    P_new = _symmetrised(_plus(_mm(FP, np.ascontiguousarray(F.T)), Q, 1.0))
+    Ft = np.ascontiguousarray(F.T)  # (one layout for _mm: one compilation)
+    P_new = _symmetrised(_plus(_mm(FP, Ft), Q, 1.0))
     # F's nonzero entries by row (a motion model's transition is mostly zeros): skipping the zero terms of
     # each sum leaves it the same number (x + 0 = x), at a fraction of the products
     nnz = np.zeros(9, dtype=np.int64)
@@ -431,7 +432,7 @@ def predict_window(F, Q, c, P, x_newest, T, cross):
                 row[j] = s
             for j in range(9):
                 C[i, j] = row[j]
-    return x, P_new, _mm(T, np.ascontiguousarray(F.T))
+    return x, P_new, _mm(T, Ft)
 
 
 @njit(cache=True, nogil=True)
