@@ -642,6 +642,97 @@ class StreamScreen:
             return self._decide(ready)
         return []
 
+    def extend(self, timestamps_ns, accel, gyro=None) -> list[tuple]:
+        """:meth:`push` of the rows of ``accel`` (and of ``gyro``, or None) in turn, made a block at a time: the
+        rows are added up to the next row at which a push would decide, and decided there, so the decisions,
+        rows and counts are those of pushing them one by one (without a Python call per row)."""
+        accel = np.asarray(accel, dtype=float)
+        if gyro is not None:
+            gyro = np.array(gyro, dtype=float)
+            with np.errstate(invalid="ignore"):
+                huge = np.abs(gyro) > GYRO_OUT_OF_RANGE_RADPS
+            if huge.any():
+                self.gyro_out_of_range += int(huge.sum())
+                gyro[huge] = np.nan
+        rule = self.rule
+        out: list[tuple] = []
+        i, total = 0, len(timestamps_ns)
+        while i < total:
+            n = len(self._times)
+            newest = self._first + n
+            if self.clean is not None and not self._open and n >= 2 * SCALE_HALF_WIDTH + 1:
+                k = self._clean_reach(newest, total - i)
+                if k > rule.block:
+                    out.extend(self._pass_clean(timestamps_ns[i:i + k], accel[i:i + k],
+                                                None if gyro is None else gyro[i:i + k]))
+                    i += k
+                    continue
+            # a push decides once ``block`` rows wait past the delay and the buffer holds a scale window
+            j = max(1, self._next + rule.block + rule.delay - newest, 2 * SCALE_HALF_WIDTH + 1 - n)
+            j = min(j, total - i)
+            if n + j > self._accel.shape[0]:
+                grown = np.empty((max(2 * self._accel.shape[0], n + j), self._accel.shape[1]))
+                grown[:n] = self._accel[:n]
+                self._accel = grown
+            self._accel[n:n + j] = accel[i:i + j]
+            self._times.extend(int(t) for t in timestamps_ns[i:i + j])
+            self._gyro.extend([None] * j if gyro is None else list(gyro[i:i + j]))
+            i += j
+            ready = newest + j - rule.delay
+            if ready - self._next >= rule.block and n + j >= 2 * SCALE_HALF_WIDTH + 1:
+                out.extend(self._decide(ready))
+        return out
+
+    def _clean_reach(self, newest: int, most: int) -> int:
+        """The most rows (up to ``most``) that can be added after row ``newest`` with the buffer, from its first
+        row to the last added, known clean (:attr:`clean`: then every decision among them passes its rows)."""
+        if not self.clean(self._first, newest + 1):
+            return 0
+        lo, hi = 0, most  # clean(first, newest + lo) holds; find the largest such lo
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            if self.clean(self._first, newest + mid):
+                lo = mid
+            else:
+                hi = mid - 1
+        return lo
+
+    def _pass_clean(self, times_ns, accel, gyro) -> list[tuple]:
+        """The rows given added where :meth:`_clean_reach` says every decision they bring passes its rows as they
+        are: the decisions a push per row would make (one every ``block`` rows), made at once; the buffer left as
+        those pushes would leave it."""
+        rule = self.rule
+        k = len(times_ns)
+        n = len(self._times)
+        newest = self._first + n
+        steps = (newest + k - rule.delay - self._next) // rule.block
+        upto = self._next + max(steps, 0) * rule.block
+        out = []
+        for g in range(self._next, upto):
+            j = g - self._first
+            if j < n:
+                out.append((self._times[j], self._accel[j].copy(), self._gyro[j]))
+            else:
+                j -= n
+                out.append((int(times_ns[j]), accel[j].copy(), None if gyro is None else gyro[j]))
+        # the buffer: from the first row the history keeps behind ``upto`` to the newest row added
+        first = max(self._first, upto - rule.history)
+        keep_old = max(0, newest - first)
+        new_from = max(0, first - newest)
+        size = keep_old + k - new_from
+        if size > self._accel.shape[0]:
+            grown = np.empty((2 * size, self._accel.shape[1]))
+            grown[:keep_old] = self._accel[n - keep_old:n]
+            self._accel = grown
+        else:
+            self._accel[:keep_old] = self._accel[n - keep_old:n]
+        self._accel[keep_old:size] = accel[new_from:]
+        self._times = self._times[n - keep_old:] + [int(t) for t in times_ns[new_from:]]
+        self._gyro = self._gyro[n - keep_old:] + ([None] * (k - new_from) if gyro is None else list(gyro[new_from:]))
+        self._first = first
+        self._next = max(self._next, upto)
+        return out
+
     def flush(self) -> list[tuple]:
         """The rows still held, decided with the newest as the end of the stream."""
         out = self._decide(self._first + len(self._times))
@@ -750,10 +841,7 @@ def screen_stream(log):
         return bool(flagged[min(stop + reach, len(log))] == flagged[max(first - reach, 0)])
 
     screen_ = StreamScreen(log.array, rate_hz, clean=clean)
-    gyro = log.gyro_b_radps
-    rows = []
-    for i in range(len(log)):
-        rows.extend(screen_.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i]))
+    rows = screen_.extend(log.timestamps_ns, log.accel_mps2, log.gyro_b_radps)
     rows.extend(screen_.flush())
     result = screen_.screening(len(log))
     if screen_.gyro_out_of_range:

@@ -342,6 +342,47 @@ def test_a_logs_stream_screening_passes_clean_blocks_as_the_rule_would(rate_hz):
     np.testing.assert_array_equal(fast.accel_mps2, np.vstack([r[1] for r in rows]))
 
 
+@pytest.mark.parametrize("rate_hz", [62.5, 500.0, 20000.0])
+def test_rows_given_at_once_are_screened_as_rows_pushed_one_by_one(rate_hz):
+    """StreamScreen.extend (the rows of a log at once, as screen_stream gives them) decides at the rows where a push
+    would: the same rows out, in the same batches' order, the same replaced readings and runs, the same gyroscope rows
+    (those beyond range NaN and counted), also when extend and push alternate."""
+    from gfimu.array import random_array
+    from gfimu.readings import GYRO_OUT_OF_RANGE_RADPS, StreamScreen
+
+    array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
+    log = simulate("random3d", array=array, seed=4, rate_hz=rate_hz, duration_s=min(10.0, 6000 / rate_hz))
+    n = len(log)
+    rng = np.random.default_rng(11)
+    y = log.accel_mps2.copy()
+    y[rng.integers(0, n, 8), rng.integers(0, 15, 8)] += 300.0
+    y[n // 3:n // 3 + 40, 5] = y[n // 3, 5]
+    gyro = rng.normal(0.0, 1.0, (n, 3))
+    gyro[rng.integers(0, n, 5), rng.integers(0, 3, 5)] = 2 * GYRO_OUT_OF_RANGE_RADPS
+    t = log.timestamps_ns
+
+    one = StreamScreen(array, rate_hz)
+    pushed = [one.push(t[i], y[i], gyro[i]) for i in range(n)]
+    by_push = [r for rows in pushed for r in rows] + one.flush()
+
+    cuts = sorted(set(rng.integers(1, n - 1, 6).tolist()))
+    many = StreamScreen(array, rate_hz)
+    by_extend, a = [], 0
+    for b in cuts:  # the rows before b at once, row b pushed on its own
+        by_extend += many.extend(t[a:b], y[a:b], gyro[a:b])
+        by_extend += many.push(t[b], y[b], gyro[b])
+        a = b + 1
+    by_extend += many.extend(t[a:], y[a:], gyro[a:])
+    by_extend += many.flush()
+    assert len(by_push) == n
+    assert [r[0] for r in by_extend] == [r[0] for r in by_push]
+    np.testing.assert_array_equal(np.vstack([r[1] for r in by_extend]), np.vstack([r[1] for r in by_push]))
+    np.testing.assert_array_equal(np.vstack([r[2] for r in by_extend]), np.vstack([r[2] for r in by_push]))
+    assert many.gyro_out_of_range == one.gyro_out_of_range == 5
+    np.testing.assert_array_equal(many.screening().replaced, one.screening().replaced)
+    assert many.screening().runs == one.screening().runs and one.count > 0
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("exp, replaced", [(1, 1), (2, 8), (3, 7)])
 def test_the_stream_screening_of_a_real_recording_is_the_whole_log_screening(mimu4444_dir, exp, replaced):
