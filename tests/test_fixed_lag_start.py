@@ -59,8 +59,9 @@ def test_the_hold_is_bounded_and_every_row_comes_out_once_in_order():
 
 def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
     """StartHold's bookkeeping (the held start's part of FixedLagSmoother): the first check ``check_every_ns``
-    after the first row held, the next that long after the newest sample of a check, and at once when the
-    rows span ``max_s``; the change of the re-solve between checks in its covariance; release ends the hold."""
+    after the first row held, the next once the stretch from that row to the newest sample has doubled since
+    the last check, and at once when the rows span ``max_s``; the change of the re-solve between checks in its
+    covariance; release ends the hold."""
     from gfimu.smoother.stream.fixed_lag import StartHold
 
     ms = 1_000_000
@@ -70,9 +71,11 @@ def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
     assert hold.held_s == pytest.approx(0.02, abs=1e-15)
     assert not hold.due(599 * ms) and hold.next_check_ns == 600 * ms  # 100 ms + 500 ms
     assert hold.due(600 * ms) and hold.next_check_ns == 1100 * ms
-    assert not hold.due(1099 * ms) and hold.due(1100 * ms) and hold.next_check_ns == 1600 * ms
+    # the stretch from the first row spans 1 s at the second check: the third when it spans 2 s
+    assert not hold.due(1099 * ms) and hold.due(1100 * ms) and hold.next_check_ns == 2100 * ms
+    assert not hold.due(2099 * ms) and hold.next_check_ns == 2100 * ms
     hold.held.append((2100 * ms, ("raw", 2100), None))  # the rows span 2.0 s = max_s: due before the next check
-    assert hold.due(1200 * ms) and hold.next_check_ns == 1700 * ms
+    assert hold.due(1200 * ms) and hold.next_check_ns == 2300 * ms
 
     times = np.array([100, 110, 120]) * ms
     omega = np.zeros((3, 3))

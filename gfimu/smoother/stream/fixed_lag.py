@@ -400,11 +400,11 @@ class StartHold:
     """The first rows of each segment held back past the lag until the data decide the branch of ω (numpy
     engine; :meth:`FixedLagSmoother._release_start`).
 
-    Settings: ``max_s`` (the longest hold [s]; 0: rows are never held) and ``check_every_ns`` (how often the
-    evidence is weighed). Of the current segment: ``deciding`` (its first rows are being held), ``held``
-    ((timestamp_ns, raw sample, filtered state) of the rows held so far), ``next_check_ns`` (when the evidence
-    is weighed next) and ``last_resolve`` ((timestamps, ω) of the previous check's re-solve). Of every segment
-    so far: ``starts`` (how its start was decided) and ``still_starts`` (the std of the prior ω = 0 of each
+    Settings: ``max_s`` (the longest hold [s]; 0: rows are never held) and ``check_every_ns`` (when the
+    evidence is first weighed; then at doubling spans, :meth:`due`). Of the current segment: ``deciding``
+    (its first rows are being held), ``held`` ((timestamp_ns, raw sample, filtered state) of the rows held
+    so far), ``next_check_ns`` (when the evidence is weighed next) and ``last_resolve`` ((timestamps, ω) of the
+    previous check's re-solve). Of every segment so far: ``starts`` (how its start was decided) and ``still_starts`` (the std of the prior ω = 0 of each
     segment that started still)."""
 
     def __init__(self, max_s: float, check_every_ns: int) -> None:
@@ -427,13 +427,17 @@ class StartHold:
         return (self.held[-1][0] - self.held[0][0]) * 1e-9 if self.held else 0.0
 
     def due(self, newest_ns: int) -> bool:
-        """Whether the evidence is to be weighed now, the newest sample at ``newest_ns``: every
-        ``check_every_ns`` from the first row held, and once the rows span ``max_s``."""
+        """Whether the evidence is to be weighed now, the newest sample at ``newest_ns``: ``check_every_ns``
+        after the first row held, then each time the stretch from that row to the newest sample has doubled
+        since the last check, and once the rows span ``max_s``. Each check solves the whole stretch again,
+        so checks at doubling spans cost at most twice the last one together (at even spacing the cost
+        grows with the square of the hold)."""
+        first = self.held[0][0]
         if self.next_check_ns is None:
-            self.next_check_ns = self.held[0][0] + self.check_every_ns
+            self.next_check_ns = first + self.check_every_ns
         if newest_ns < self.next_check_ns and self.held_s < self.max_s:
             return False
-        self.next_check_ns = newest_ns + self.check_every_ns
+        self.next_check_ns = first + max(2 * (newest_ns - first), self.check_every_ns)
         return True
 
     def record(self, held_s: float, evidence_nats: float, agreement_chi2: float, moved_chi2: float,
@@ -1301,8 +1305,9 @@ class FixedLagSmoother:
 
     # --- the start of a segment, held until the data decide the sign of ω -------------------------
     def _hold_start(self, newest_ns: int) -> list[StateEstimate]:
-        """While the start of the segment is held (its rows past the lag kept back): every
-        ``max(lag_s, 0.5 s)`` the evidence for the branch of ω is weighed (:meth:`_release_start`)."""
+        """While the start of the segment is held (its rows past the lag kept back): ``max(lag_s, 0.5 s)``
+        after the first held row, then at doubling spans (:meth:`StartHold.due`), the evidence for the branch
+        of ω is weighed (:meth:`_release_start`)."""
         if not self._hold.held or not self._hold.due(newest_ns):
             return []
         return self._release_start(final=False)
