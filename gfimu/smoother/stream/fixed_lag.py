@@ -452,10 +452,10 @@ class StartHold:
         self.held, self.deciding = [], False
         return held
 
-    def moved(self, times: np.ndarray, omega: np.ndarray, cov: np.ndarray) -> float:
+    def moved(self, times: np.ndarray, omega: np.ndarray, cov: np.ndarray | None) -> float:
         """How far the rows of the previous check's re-solve moved with the data since: the mean over
-        them of the change of ω in the new re-solve's covariance (``cov``, (N, 3, 3)); inf at the first
-        check (or when the rows are not the same). Kept for the next check."""
+        them of the change of ω in the new re-solve's covariance (``cov``, (N, 3, 3); not read at the
+        first check); inf at the first check (or when the rows are not the same). Kept for the next check."""
         last, self.last_resolve = self.last_resolve, (times, omega.copy())
         if last is None or len(last[0]) > len(times) or not np.array_equal(last[0], times[:len(last[0])]):
             return math.inf
@@ -1365,6 +1365,12 @@ class FixedLagSmoother:
             return out
         held_s = hold.held_s
         X = best.states
+        times = [h[0] for h in hold.held] + [t for _, t in self._segment.window]
+        if hold.last_resolve is None and not (final or held_s >= hold.max_s):
+            # the first check cannot decide (nothing to tell how far its re-solve moves with the data): its
+            # re-solve is kept for the next check, and its covariance not made
+            hold.moved(np.asarray(times, dtype=np.int64), X[:, OMEGA], None)
+            return []
         cov = solve(problem, X, compute_sigma=True, max_iterations=1).covariance
         j = len(hold.held)  # the next row the stream would give, lag_s behind
         d = self._segment.engine.mean(self._segment.window[0][0])[0:3] - X[j, OMEGA]
@@ -1372,7 +1378,6 @@ class FixedLagSmoother:
             chi2 = float(d @ np.linalg.solve(cov[j][OMEGA, OMEGA], d))
         except np.linalg.LinAlgError:
             chi2 = math.inf
-        times = [h[0] for h in hold.held] + [t for _, t in self._segment.window]
         moved = hold.moved(np.asarray(times, dtype=np.int64), X[:, OMEGA], cov[:, OMEGA, OMEGA])
         decided = evidence >= SIGN_DECISION_NATS and chi2 <= AGREEMENT_CHI2 and moved <= AGREEMENT_CHI2
         if not (decided or final or held_s >= hold.max_s):
