@@ -216,6 +216,7 @@ class _EveryStartEveryPass(MLEstimator):
         from gfimu.estimators.ml import _cost
 
         b, c, w, cost, _ = prepared
+        level = self._misfit_level(model, cost)  # the block's level, from its costs before the passes
         w, cost = w.copy(), cost.copy()
         for _ in range(self.neighbour_passes):
             first = w[:1] if previous is None else np.asarray(previous)[None, :]
@@ -231,7 +232,7 @@ class _EveryStartEveryPass(MLEstimator):
                 break
             w[idx[better]] = cand[better]
             cost[idx[better]] = cand_cost[better]
-        return self._take_restarts(w, cost, *self._restarts(model, b, c, self._restart_rows(model, cost)))
+        return self._take_restarts(w, cost, *self._restarts(model, b, c, self._restart_rows(model, cost, level)))
 
 
 def test_neighbour_passes_skip_only_starts_that_cannot_change_the_answer():
@@ -362,3 +363,48 @@ def test_iterations_on_the_shrinking_active_set_equal_each_sample_iterated_alone
     alone = np.vstack([est._iterate(model, b[k:k + 1], c[k:k + 1], starts[k:k + 1], None, None) for k in range(len(w))])
     np.testing.assert_allclose(together, alone, rtol=3e-7, atol=1e-8)
     assert np.sqrt(np.mean((together - w) ** 2)) < 1.0  # and they converge near the truth
+
+
+@pytest.mark.parametrize("noise_factor", [1.0, 5.0])
+def test_restarts_are_called_for_against_the_blocks_own_noise_level(noise_factor):
+    """restart_level 'measured' (default): a sample restarts when its cost is implausible for the noise level its
+    block shows (the median cost over the median of χ² with n_axes - 9 degrees of freedom), never below the stated
+    level. Readings with the stated noise: the level is 1 within the median's scatter and the estimate is the one of
+    'stated'. Readings 5 times noisier than stated (a variance 25 times): the level is 25 within the scatter (up to
+    10 % more: at that noise q(ω) bends within the noise, and the costs are not quite χ²), a few samples restart where every one did against the stated level, and the estimate is as good."""
+    from gfimu.estimators.ml import _cost, _ProjectedModel
+    from gfimu.simulate import SensorErrors, simulate
+
+    array = mimu4444_array(noise_std_mps2=0.05)
+    log = simulate("random3d", array, rate_hz=200.0, duration_s=20.0, seed=4,
+                   noise=SensorErrors(accel_noise_std_mps2=0.05 * noise_factor))
+    est = MLEstimator(workers=1)
+    model = _ProjectedModel.build(array, est._axis_sigma(array))
+    b, c, w, cost, restarts = est._prepare_chunk(array, model, log.accel_mps2[:4096], None, None)
+    level = restarts[0]
+    dof = model.A.shape[0] - 9
+    scatter = 3 * 1.2533 * np.sqrt(2 / dof) / np.sqrt(cost.size)  # 3 std of a median of chi2 / its median
+    # with large noise the cost is not quite the linear model's χ² (q(ω) bends within the noise): up to 10 % more
+    allowance = 1 + scatter if noise_factor == 1.0 else 1.1
+    assert level == est._misfit_level(model, cost) and 1.0 <= level <= noise_factor ** 2 * allowance
+    assert level >= noise_factor ** 2 * (1 - scatter)
+    stated = MLEstimator(workers=1, restart_level="stated")
+    assert stated._misfit_level(model, cost) == 1.0
+    n_measured = est._restart_rows(model, cost, level).size
+    n_stated = est._restart_rows(model, cost).size
+    got = est.estimate_motion(log).omega_b_radps
+    want = stated.estimate_motion(log).omega_b_radps
+    truth = log.truth.omega_b_radps
+    rmse = lambda w_: float(np.sqrt(np.mean(np.sum((w_ - truth) ** 2, axis=1))))  # noqa: E731
+    if noise_factor == 1.0:
+        assert n_measured <= n_stated and np.mean(np.all(got == want, axis=1)) > 0.999
+    else:
+        assert n_stated > 0.9 * cost.size and n_measured < 0.05 * cost.size
+        assert rmse(got) <= 1.01 * rmse(want)
+
+
+def test_an_unknown_restart_level_is_refused():
+    from gfimu.errors import InputError
+
+    with pytest.raises(InputError, match="restart_level"):
+        MLEstimator(restart_level="always")
