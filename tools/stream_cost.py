@@ -9,6 +9,9 @@ busy machine stretches wall time, not this):
   the second half of the log (mean and median: a steady state, between choices);
 - what that means for a live stream: the rate the stream's thread keeps up with in steady state.
 
+Each run is a fresh process with one BLAS thread, as the command line runs (a second BLAS thread spins
+on a core and counts in the CPU of the run).
+
 ``--baseline DIR`` runs another checkout's package on the same log in the same loop, alternating, and
 prints each figure's ratio (this checkout over that one), medians over ``--runs``::
 
@@ -72,6 +75,8 @@ def run_in(package: Path | None, log_dir: str) -> dict:
     root = package if package is not None else HERE.parent
     env["PYTHONPATH"] = str(root)
     env["PYTHONSAFEPATH"] = "1"
+    for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(variable, "1")  # one BLAS thread, as the command line sets it (gfimu/cli/__init__.py)
     code = f"import json, sys; sys.path.insert(0, {str(HERE)!r}); import stream_cost; print(json.dumps(stream_cost.measure({log_dir!r})))"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
