@@ -153,6 +153,8 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
     M = np.empty((9, 9))
     x = x.copy()
     x_new = np.empty(9)
+    inv_r = np.empty(m)
+    hw = np.empty(m)
     adaptive = slope > 0.0 or c_robust > 0.0
     for it in range(iterations):
         if adaptive:
@@ -172,16 +174,20 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
             for j in range(9):
                 s += H[i, j] * (x[j] - xp[j])
             nu[i] = y[i] - pred[i] + s
+        for i in range(m):  # each reading's weight 1/R and its whitened Jacobian row
+            inv_r[i] = 1.0 / R[i]
         for a in range(9):  # [G, b] = Hᵀ R⁻¹ [H, ν]
+            for i in range(m):
+                hw[i] = H[i, a] * inv_r[i]
             for b in range(a, 9):
                 s = 0.0
                 for i in range(m):
-                    s += H[i, a] * H[i, b] / R[i]
+                    s += hw[i] * H[i, b]
                 AG[a, b] = s
                 AG[b, a] = s
             s = 0.0
             for i in range(m):
-                s += H[i, a] * nu[i] / R[i]
+                s += hw[i] * nu[i]
             AG[a, 9] = s
         for a in range(9):  # I + G P
             for b in range(9):
