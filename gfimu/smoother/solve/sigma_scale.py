@@ -228,12 +228,12 @@ def trapezoid_residuals(states: np.ndarray, steps) -> np.ndarray:
 
 
 def trapezoid_level(r2, a, b, variance_factor):
-    """λ = (Σ r̂² − s² Σ b) / Σ a, at least 0: the trapezoid level of the path from the realised whitened trapezoid
+    """λ = (Σ r̂² − s² Σ b) / Σ a within 0 … 1: the trapezoid level of the path from the realised whitened trapezoid
     residuals' sum of squares ``r2`` and the sums of :func:`kinematic_shares`' ``a``, ``b`` over the same
     samples (the readings' part b scaled by their misfit s², ``variance_factor``)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         level = (np.asarray(r2, dtype=float) - variance_factor * np.asarray(b, dtype=float)) / np.asarray(a, dtype=float)
-    return np.where(np.isfinite(level), np.maximum(level, 0.0), 1.0)
+    return np.where(np.isfinite(level), np.clip(level, 0.0, 1.0), 1.0)
 
 
 class RunningSigmaScale:
