@@ -31,7 +31,16 @@ them:
   ((J_iᵀ J_i)⁺, infinite along directions one sample does not see, such as ω at rest) over the
   smoother's; at most :data:`MAX_LAG`.
 
-The reported σ_ij becomes σ_ij √(s_i² τ(L_ij)): a function of the log's own residuals only, nothing
+- **Trapezoid level.** The motion model ties ω_{k+1} to ω_k and the two ω̇ by the trapezoid rule, with the std of
+  a white jerk within the step; half or so of ω's variance under the model comes from those rows
+  (:func:`kinematic_shares`: the share, under a local stationary model of each axis). A path whose jerk is
+  continuous has a trapezoid residual far below that std, and its smoother's error lacks that part (the
+  sandwich P (JᵀR⁻¹J) P + λ P Aᵀ Q⁻¹ A P, λ the path's level). λ is measured from the estimate's own whitened
+  trapezoid residuals r̂ over the window of s_i², less the readings' noise in them (:func:`trapezoid_level`:
+  E r̂² = λ a + s² b), within 0 … 1.
+
+The reported σ_ij becomes σ_ij √(s_i² τ(L_ij)), ω's √(s_i² τ(L_ij) (1 − share) + λ share) where the motion
+model is the white jerk or the driven oscillator: a function of the log's own residuals only, nothing
 fitted to a recording. The batch smoother takes s_i² over the window around each sample and ρ over the
 whole log (:func:`calibrated_sigma`); the fixed-lag smoother, which writes σ as it goes, over the samples
 emitted so far (:class:`RunningSigmaScale`: causal). The estimates themselves are not touched.
