@@ -163,6 +163,19 @@ QUADRATURE_POINTS = 32
 where a weakly observed ω draws on many samples)."""
 
 
+_QUADRATURES: dict = {}
+
+
+def _quadrature(points: int):
+    """(weights, cos θ − 1, 1 + cos θ, sin θ) of the frequency quadrature of :func:`kinematic_shares`:
+    θ = π u³ at the midpoints u of ``points`` equal parts of 0 … 1, weights (1/π) dθ."""
+    if points not in _QUADRATURES:
+        u = (np.arange(points) + 0.5) / points
+        theta = np.pi * u ** 3
+        _QUADRATURES[points] = (3.0 * u ** 2 / points, np.cos(theta) - 1.0, 1.0 + np.cos(theta), np.sin(theta))
+    return _QUADRATURES[points]
+
+
 def kinematic_shares(single: np.ndarray, trapezoid_var: np.ndarray, step_var: np.ndarray, dt_s,
                      points: int = QUADRATURE_POINTS):
     """(share, a, b), each (N, 3), of the white-jerk motion model's trapezoid rows under a local stationary
@@ -186,25 +199,25 @@ def kinematic_shares(single: np.ndarray, trapezoid_var: np.ndarray, step_var: np
     t = np.asarray(trapezoid_var, dtype=float)[..., None]
     s = np.asarray(step_var, dtype=float)[..., None]
     h = np.broadcast_to(np.asarray(dt_s, dtype=float), (len(sw),))[:, None, None]
-    u = (np.arange(points) + 0.5) / points
-    theta = np.pi * u ** 3
-    weight = 3.0 * u ** 2 / points  # (1/π) dθ
-    z = np.exp(1j * theta)
-    u0 = z - 1.0
-    u1 = -0.5 * h * (1.0 + z)
-    H00 = aw + (u0.real ** 2 + u0.imag ** 2) / t
-    H11 = ad + (u1.real ** 2 + u1.imag ** 2) / t + (u0.real ** 2 + u0.imag ** 2) / s
-    H01 = np.conj(u0) * u1 / t
-    det = (H00 * H11).real - (H01.real ** 2 + H01.imag ** 2)
+    weight, cm, cp, sn = _quadrature(int(points))  # cos θ − 1, 1 + cos θ, sin θ
+    # in real arithmetic: u = [cm + i sn, −h/2 (cp + i sn)], |u₀|² = −2 cm, |u₁|² = h²/4 · 2 cp, H₀₁ = i g
+    H00 = aw - 2.0 * cm / t
+    H11 = ad + 0.5 * h * h * cp / t - 2.0 * cm / s
+    g = h * sn / t
+    hh = 0.5 * h
     with np.errstate(divide="ignore", invalid="ignore"):
-        I00, I11, I01 = H11 / det, H00 / det, -H01 / det
-        c0 = I00 * np.conj(u0) + I01 * np.conj(u1)  # H⁻¹ uᴴ
-        c1 = np.conj(I01) * np.conj(u0) + I11 * np.conj(u1)
-        p_w = np.sum(weight * I00, axis=-1)
-        d_w = np.sum(weight * (c0.real ** 2 + c0.imag ** 2) / t, axis=-1)
-        hat = (u0 * c0 + u1 * c1).real / t
+        inv_det = 1.0 / (H00 * H11 - g * g)
+        c0r = (H11 * cm + g * hh * sn) * inv_det  # H⁻¹ uᴴ, ω row
+        c0i = (-H11 * sn + g * hh * cp) * inv_det
+        c1r = (g * sn - H00 * hh * cp) * inv_det  # ... ω̇ row
+        c1i = (g * cm + H00 * hh * sn) * inv_det
+        c0 = c0r * c0r + c0i * c0i
+        c1 = c1r * c1r + c1i * c1i
+        p_w = np.sum(weight * H11 * inv_det, axis=-1)
+        d_w = np.sum(weight * c0 / t, axis=-1)
+        hat = (cm * c0r - sn * c0i - hh * (cp * c1r - sn * c1i)) / t
         a = np.sum(weight * (1.0 - hat) ** 2, axis=-1)
-        b = np.sum(weight * (aw * (c0.real ** 2 + c0.imag ** 2) + ad * (c1.real ** 2 + c1.imag ** 2)) / t, axis=-1)
+        b = np.sum(weight * (aw * c0 + ad * c1) / t, axis=-1)
         share = np.clip(d_w / p_w, 0.0, 1.0)
     bad = ~(np.isfinite(share) & np.isfinite(a) & np.isfinite(b))
     return np.where(bad, 0.0, share), np.where(bad, 1.0, a), np.where(bad, 0.0, b)
@@ -268,6 +281,7 @@ class RunningSigmaScale:
         self._kinematic: np.ndarray | None = None  # |r̂|², Σ a, Σ b of the newest steps, as _recent
         self._steps = 0
         self._previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
+        self._jerk_steps: tuple | None = None  # (step [s], density, Ω) and their jerk_steps, the newest
 
     def reset(self) -> None:
         """A new segment: the lagged products and the trapezoid residuals do not reach across it (the sums so far
@@ -321,8 +335,11 @@ class RunningSigmaScale:
         previous, self._previous = self._previous, (float(t_s), np.array(state[:9], dtype=float))
         if previous is None or not t_s > previous[0]:
             return None
-        h = np.array([float(t_s) - previous[0]])
-        steps = jerk_steps(np.asarray(jerk[0], dtype=float)[None, :], jerk[1], h)
+        h = np.array([round((float(t_s) - previous[0]) * 1e9) * 1e-9])  # whole nanoseconds, as the timestamps
+        key = (float(h[0]), tuple(np.asarray(jerk[0], dtype=float)), tuple(np.asarray(jerk[1], dtype=float)))
+        if self._jerk_steps is None or self._jerk_steps[0] != key:  # the same step and model: the same rows
+            self._jerk_steps = (key, jerk_steps(np.asarray(jerk[0], dtype=float)[None, :], jerk[1], h))
+        steps = self._jerk_steps[1]
         share, a, b = kinematic_shares(single[None, :], steps[0], steps[1], h)
         r = trapezoid_residuals(np.vstack([previous[1], state[:9]]), steps)
         if not np.all(np.isfinite(r)):
