@@ -173,14 +173,19 @@ def test_sigma_covers_an_unstated_correlated_misfit_and_stays_where_the_model_is
     # correlated over a second or so, scatters by about ±0.06 about it)
     one, two = np.mean(scaled["coverage_1sigma"]), np.mean(scaled["coverage_2sigma"])
     assert 0.60 <= one <= 0.76 and 0.90 <= two <= 0.99, scaled
-    assert all(0.6 <= v <= 0.85 for v in scaled["coverage_1sigma"]), scaled
+    assert all(0.55 <= v <= 0.85 for v in scaled["coverage_1sigma"]), scaled  # the band less that scatter
     assert 1.0 < scaled["mean_nees"] < 4.0
-    # a log the model describes: σ stays the model's (within 3 %), the coverage with it
+    # a log with the stated white noise: the model's σ is too wide (the path's trapezoid residual is far below
+    # the white jerk's, and half of ω's variance is that part), the reported σ follows the path's level into
+    # the band (each axis' share scatters by about ±0.06 here, as above)
     right, m_right = _coverage(clean, est, False, monkeypatch)
     plain, m_plain = _coverage(clean, est, True, monkeypatch)
+    assert min(plain["coverage_1sigma"]) > 0.8 and plain["mean_nees"] < 2.0, plain
     ratio = m_right.sigma["omega_b_radps"] / m_plain.sigma["omega_b_radps"]
-    assert 0.97 < np.median(ratio) < 1.03
-    assert np.allclose(right["coverage_1sigma"], plain["coverage_1sigma"], atol=0.03)
+    assert 0.6 < np.median(ratio) < 0.9
+    assert 0.60 <= np.mean(right["coverage_1sigma"]) <= 0.76 and 0.90 <= np.mean(right["coverage_2sigma"]) <= 0.98, right
+    assert all(0.55 <= v <= 0.80 for v in right["coverage_1sigma"]), right
+    assert 2.0 < right["mean_nees"] < 4.0
 
 
 def test_factor_is_a_function_of_the_residuals_only_and_follows_them_in_time():

@@ -168,9 +168,9 @@ def run_both(log, method: str):
         seen.append(np.array(sd[:, :3]))
         return calibrated(array, accel, states, sd, *args, **kwargs)
 
-    def stream_in(self, accel, state, sd, noise):
+    def stream_in(self, accel, state, sd, noise, *args, **kwargs):
         seen.append(np.array(sd[:3])[None, :])
-        return scaled(self, accel, state, sd, noise)
+        return scaled(self, accel, state, sd, noise, *args, **kwargs)
 
     batch.calibrated_sigma, sigma_scale.RunningSigmaScale.scaled = batch_in, stream_in
     try:

@@ -53,9 +53,9 @@ def captured():
         seen["batch"] = (np.array(accel), np.array(states[:, :9]), np.array(noise), robust)
         return calibrated(array, accel, states, sd, noise, robust, **kw)
 
-    def stream_in(self, accel, state, sd, noise):
+    def stream_in(self, accel, state, sd, noise, *args, **kwargs):
         seen["stream"].append((np.array(accel), np.array(state[:9]), np.array(noise)))
-        return scaled(self, accel, state, sd, noise)
+        return scaled(self, accel, state, sd, noise, *args, **kwargs)
 
     with mock.patch.object(batch, "calibrated_sigma", batch_in), mock.patch.object(ss.RunningSigmaScale, "scaled", stream_in):
         yield seen
@@ -68,9 +68,9 @@ def weighted_stream(loss):
 
     scaled = ss.RunningSigmaScale.scaled
 
-    def weighted(self, accel, state, sd, noise):
+    def weighted(self, accel, state, sd, noise, *args, **kwargs):
         self.robust = loss
-        return scaled(self, accel, state, sd, noise)
+        return scaled(self, accel, state, sd, noise, *args, **kwargs)
 
     with mock.patch.object(ss.RunningSigmaScale, "scaled", weighted):
         yield

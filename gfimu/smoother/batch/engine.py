@@ -249,9 +249,13 @@ class _Joined:
         if (out.sd is not None and outcomes and all(res.noise is not None for res in outcomes)
                 and _calibrates_sigma(log, opt)):
             noise_std = np.vstack([res.noise for res in outcomes])
+            process = None
+            if (len(log) > 2 and all(res.process is not None for res in outcomes)
+                    and all(np.array_equal(res.process[1], outcomes[0].process[1]) for res in outcomes)):
+                process = (np.vstack([res.process[0] for res in outcomes])[:-1], outcomes[0].process[1], log.dt_s)
             out.sd = calibrated_sigma(log.array, log.accel_mps2, out.states, out.sd, noise_std,
                                       (opt.robust_loss, opt.accel_robust_threshold) if opt.accel_robust_threshold > 0
-                                      else None)
+                                      else None, process=process)
         return out
 
     def motion(self, log: Log, layout: StateLayout) -> Motion:
@@ -283,6 +287,10 @@ class _WindowOutcome:
     converged: bool
     noise: np.ndarray | None = None
     """The accelerometer noise std the solution assumed on the kept rows before any robust weight (N, axes)."""
+    process: tuple | None = None
+    """(jerk density (N, 3) of the step from each kept row to the next (the last row of the solve window: the step
+    into it) per body axis, the driven oscillator's Ω (3,)) as the solution assumed them, or None (σ not computed,
+    or white snap)."""
 
     @property
     def states(self) -> np.ndarray:
@@ -294,7 +302,19 @@ class _WindowOutcome:
         sd = None if res.covariance is None else np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
         noise = None if sd is None else (res.problem or problem).base_noise()[0][keep_win]
         return cls(res.states, keep_win, sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
-                   tunings, res.iterations, float(res.cost), bool(res.converged), noise)
+                   tunings, res.iterations, float(res.cost), bool(res.converged), noise,
+                   None if sd is None else _jerk_steps(res.problem or problem, keep_win))
+
+
+def _jerk_steps(problem: SmootherProblem, keep: slice) -> tuple | None:
+    """:attr:`_WindowOutcome.process` of the rows ``keep`` of ``problem``'s solution."""
+    motion = problem.noise.motion
+    if motion.snap_cov is not None or problem.n < 2:
+        return None
+    rows = np.minimum(np.arange(problem.n)[keep], problem.n - 2)
+    density = np.asarray(motion.omega_dot_step_sigma, dtype=float) / np.sqrt(problem.dt_s)  # q times any local factor
+    return density[rows, None] * np.asarray(motion.axis_factors, dtype=float), np.asarray(motion.natural_frequency_radps,
+                                                                                            dtype=float)
 
 
 @dataclass

@@ -31,7 +31,16 @@ them:
   ((J_iᵀ J_i)⁺, infinite along directions one sample does not see, such as ω at rest) over the
   smoother's; at most :data:`MAX_LAG`.
 
-The reported σ_ij becomes σ_ij √(s_i² τ(L_ij)): a function of the log's own residuals only, nothing
+- **Trapezoid level.** The motion model ties ω_{k+1} to ω_k and the two ω̇ by the trapezoid rule, with the std of
+  a white jerk within the step; half or so of ω's variance under the model comes from those rows
+  (:func:`kinematic_shares`: the share, under a local stationary model of each axis). A path whose jerk is
+  continuous has a trapezoid residual far below that std, and its smoother's error lacks that part (the
+  sandwich P (JᵀR⁻¹J) P + λ P Aᵀ Q⁻¹ A P, λ the path's level). λ is measured from the estimate's own whitened
+  trapezoid residuals r̂ over the window of s_i², less the readings' noise in them (:func:`trapezoid_level`:
+  E r̂² = λ a + s² b), within 0 … 1.
+
+The reported σ_ij becomes σ_ij √(s_i² τ(L_ij)), ω's √(s_i² τ(L_ij) (1 − share) + λ share) where the motion
+model is the white jerk or the driven oscillator: a function of the log's own residuals only, nothing
 fitted to a recording. The batch smoother takes s_i² over the window around each sample and ρ over the
 whole log (:func:`calibrated_sigma`); the fixed-lag smoother, which writes σ as it goes, over the samples
 emitted so far (:class:`RunningSigmaScale`: causal). The estimates themselves are not touched.
@@ -132,14 +141,121 @@ def local_sums(values: np.ndarray, window: int) -> np.ndarray:
     return c[np.minimum(len(values), i + window - half)] - c[np.maximum(0, i - half)]
 
 
-def scale_factors(sd: np.ndarray, single: np.ndarray, variance_factor, tau: np.ndarray) -> np.ndarray:
+def scale_factors(sd: np.ndarray, single: np.ndarray, variance_factor, tau: np.ndarray, kinematic=None) -> np.ndarray:
     """(N, 9) factors on σ: √(s² τ(L_ij)), L_ij = single_ij / sd_ij² within 0 … len(tau) − 1 (τ linear
-    between whole spans); ``variance_factor`` s² one number or one per row (N, 1)."""
+    between whole spans); ``variance_factor`` s² one number or one per row (N, 1). ``kinematic``: (share,
+    level) (N, 3) of :func:`kinematic_shares` and :func:`trapezoid_level`, or None: ω's factor is then
+    √(s² τ(L) (1 − share) + level share) (module docstring, *trapezoid level*)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         span = single / (sd * sd)
     top = len(tau) - 1
     L = np.where(np.isnan(span), 0.0, np.minimum(span, top))  # nothing known (σ 0 or NaN): no span
-    return np.sqrt(variance_factor * np.interp(L, np.arange(len(tau)), tau))
+    factor = variance_factor * np.interp(L, np.arange(len(tau)), tau)
+    if kinematic is not None:
+        share, level = kinematic
+        factor = np.array(factor, dtype=float)
+        factor[..., 0:3] = factor[..., 0:3] * (1.0 - share) + level * share
+    return np.sqrt(factor)
+
+
+QUADRATURE_POINTS = 32
+"""Points of the quadrature over frequency in :func:`kinematic_shares` (θ = π u³, u uniform: dense near θ = 0,
+where a weakly observed ω draws on many samples)."""
+
+
+_QUADRATURES: dict = {}
+
+
+def _quadrature(points: int):
+    """(weights, cos θ − 1, 1 + cos θ, sin θ) of the frequency quadrature of :func:`kinematic_shares`:
+    θ = π u³ at the midpoints u of ``points`` equal parts of 0 … 1, weights (1/π) dθ."""
+    if points not in _QUADRATURES:
+        u = (np.arange(points) + 0.5) / points
+        theta = np.pi * u ** 3
+        _QUADRATURES[points] = (3.0 * u ** 2 / points, np.cos(theta) - 1.0, 1.0 + np.cos(theta), np.sin(theta))
+    return _QUADRATURES[points]
+
+
+def kinematic_shares(single: np.ndarray, trapezoid_var: np.ndarray, step_var: np.ndarray, dt_s,
+                     points: int = QUADRATURE_POINTS):
+    """(share, a, b), each (N, 3), of the white-jerk motion model's trapezoid rows under a local stationary
+    model of each body axis: ω and ω̇ observed every sample with the variances one sample's readings give
+    them (``single`` (N, ≥6): :func:`parity`), tied by the trapezoid rows (variance ``trapezoid_var``
+    (N, 3)) and the ω̇ steps (``step_var`` (N, 3)) of ``dt_s`` (N,) seconds, over an infinite run of samples.
+    In the frequency domain (x_k = X e^{ikθ}) the information is H(θ) = diag(1/σ²_ω, 1/σ²_ω̇) + uᴴu / t +
+    vᴴv / s with u = [e^{iθ} − 1, −h/2 (1 + e^{iθ})], v = [0, e^{iθ} − 1], and (1/π)∫₀^π dθ of:
+
+    - share: [H⁻¹ uᴴu H⁻¹]_ωω / t over [H⁻¹]_ωω — the part of ω's variance that the trapezoid rows' noise
+      makes (P Aᵀ Q⁻¹ A P over P for the rows A), the part a path whose trapezoid residual is smaller than
+      the model's (any motion whose jerk is continuous, sampled well above its bandwidth) does not have;
+    - a, b: the expected square of a whitened trapezoid residual at the estimate from the rows' own noise,
+      (1 − u H⁻¹ uᴴ / t)², and from the readings' noise, u H⁻¹ D H⁻¹ uᴴ / t (D the readings' information):
+      the realised E r̂² = λ a + b for a path of trapezoid level λ (1: the model's)."""
+    sw = np.asarray(single, dtype=float)[:, 0:3]
+    sdd = np.asarray(single, dtype=float)[:, 3:6]
+    with np.errstate(divide="ignore"):
+        aw = np.where(np.isfinite(sw) & (sw > 0), 1.0 / sw, 0.0)[..., None]
+        ad = np.where(np.isfinite(sdd) & (sdd > 0), 1.0 / sdd, 0.0)[..., None]
+    t = np.asarray(trapezoid_var, dtype=float)[..., None]
+    s = np.asarray(step_var, dtype=float)[..., None]
+    h = np.broadcast_to(np.asarray(dt_s, dtype=float), (len(sw),))[:, None, None]
+    weight, cm, cp, sn = _quadrature(int(points))  # cos θ − 1, 1 + cos θ, sin θ
+    # in real arithmetic: u = [cm + i sn, −h/2 (cp + i sn)], |u₀|² = −2 cm, |u₁|² = h²/4 · 2 cp, H₀₁ = i g
+    H00 = aw - 2.0 * cm / t
+    H11 = ad + 0.5 * h * h * cp / t - 2.0 * cm / s
+    g = h * sn / t
+    hh = 0.5 * h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = 1.0 / (H00 * H11 - g * g)
+        c0r = (H11 * cm + g * hh * sn) * inv_det  # H⁻¹ uᴴ, ω row
+        c0i = (-H11 * sn + g * hh * cp) * inv_det
+        c1r = (g * sn - H00 * hh * cp) * inv_det  # ... ω̇ row
+        c1i = (g * cm + H00 * hh * sn) * inv_det
+        c0 = c0r * c0r + c0i * c0i
+        c1 = c1r * c1r + c1i * c1i
+        p_w = np.sum(weight * H11 * inv_det, axis=-1)
+        d_w = np.sum(weight * c0 / t, axis=-1)
+        hat = (cm * c0r - sn * c0i - hh * (cp * c1r - sn * c1i)) / t
+        a = np.sum(weight * (1.0 - hat) ** 2, axis=-1)
+        b = np.sum(weight * (aw * c0 + ad * c1) / t, axis=-1)
+        share = np.clip(d_w / p_w, 0.0, 1.0)
+    bad = ~(np.isfinite(share) & np.isfinite(a) & np.isfinite(b))
+    return np.where(bad, 0.0, share), np.where(bad, 1.0, a), np.where(bad, 0.0, b)
+
+
+def jerk_steps(density: np.ndarray, natural_frequency_radps, dt_s):
+    """(trapezoid variance, step variance, coefficient, transition) of the motion model's steps: ``density``
+    (K, 3) the white-jerk density of each step per body axis, ``natural_frequency_radps`` (3,) the driven
+    oscillator's Ω per axis (0: the white jerk), ``dt_s`` (K,). The step's noise [e_ω, e_ω̇] per axis has the
+    covariance C of :func:`gfimu.factors.process.oscillator_covariance`; its *trapezoid* part e_ω − (C_ωω̇ / C_ω̇ω̇)
+    e_ω̇ (the white jerk's ω_{k+1} − ω_k − h/2 (ω̇_k + ω̇_{k+1})) has the variance C_ωω − C_ωω̇² / C_ω̇ω̇ (h³/12 q²
+    for the white jerk) and is independent of the ω̇ step's e_ω̇ (variance C_ω̇ω̇); the transition Φ (K, 3, 2, 2)."""
+    from ...factors.process import oscillator_covariance, oscillator_transition
+
+    q = np.asarray(density, dtype=float)
+    dt = np.asarray(dt_s, dtype=float)
+    cov = oscillator_covariance(1.0, dt, natural_frequency_radps) * (q * q)[:, :, None, None]
+    coef = cov[..., 0, 1] / cov[..., 1, 1]
+    return cov[..., 0, 0] - cov[..., 0, 1] * coef, cov[..., 1, 1], coef, oscillator_transition(dt, natural_frequency_radps)
+
+
+def trapezoid_residuals(states: np.ndarray, steps) -> np.ndarray:
+    """(N − 1, 3) whitened trapezoid residuals of ``states`` (N, ≥6) over the steps ``steps`` of :func:`jerk_steps`."""
+    X = np.asarray(states, dtype=float)
+    var, _, coef, phi = steps
+    w0, w1, d0, d1 = X[:-1, 0:3], X[1:, 0:3], X[:-1, 3:6], X[1:, 3:6]
+    e_w = w1 - phi[..., 0, 0] * w0 - phi[..., 0, 1] * d0
+    e_d = d1 - phi[..., 1, 0] * w0 - phi[..., 1, 1] * d0
+    return (e_w - coef * e_d) / np.sqrt(var)
+
+
+def trapezoid_level(r2, a, b, variance_factor):
+    """λ = (Σ r̂² − s² Σ b) / Σ a within 0 … 1: the trapezoid level of the path from the realised whitened trapezoid
+    residuals' sum of squares ``r2`` and the sums of :func:`kinematic_shares`' ``a``, ``b`` over the same
+    samples (the readings' part b scaled by their misfit s², ``variance_factor``)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        level = (np.asarray(r2, dtype=float) - variance_factor * np.asarray(b, dtype=float)) / np.asarray(a, dtype=float)
+    return np.where(np.isfinite(level), np.clip(level, 0.0, 1.0), 1.0)
 
 
 class RunningSigmaScale:
@@ -162,10 +278,16 @@ class RunningSigmaScale:
         self.window = None if window is None else int(window)
         """Samples of s²'s window (:func:`local_window` of the first sample's degrees of freedom when None)."""
         self._recent: np.ndarray | None = None  # |p|², m − rank of the newest samples, row i % window of sample i
+        self._kinematic: np.ndarray | None = None  # |r̂|², Σ a, Σ b of the newest steps, as _recent
+        self._steps = 0
+        self._previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
+        self._jerk_steps: tuple | None = None  # (step [s], density, Ω) and their jerk_steps, the newest
 
     def reset(self) -> None:
-        """A new segment: the lagged products do not reach across it (the sums so far are kept)."""
+        """A new segment: the lagged products and the trapezoid residuals do not reach across it (the sums so far
+        are kept)."""
         self._held = 0
+        self._previous = None
 
     @property
     def variance_factor(self) -> float:
@@ -204,8 +326,39 @@ class RunningSigmaScale:
         single[np.any(Vt[~keep] ** 2 > 1e-12, axis=0)] = np.inf
         return p, int(np.count_nonzero(keep)), single
 
-    def scaled(self, accel_mps2: np.ndarray, state: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray) -> np.ndarray:
-        """``sd`` (9,) of ``state`` (9,: ω, ω̇, f) scaled by the factor with this sample's residual included."""
+    def _trapezoid_level(self, state: np.ndarray, single: np.ndarray, jerk, t_s) -> tuple | None:
+        """(share (3,), level) of :func:`scale_factors` for ``state`` at ``t_s`` [s] under the motion model
+        ``jerk`` (:func:`jerk_density`): its step from the state before it added to the newest steps' sums
+        (the same window as s²), or None (no jerk model, or no earlier state in the segment yet)."""
+        if jerk is None or t_s is None:
+            return None
+        previous, self._previous = self._previous, (float(t_s), np.array(state[:9], dtype=float))
+        if previous is None or not t_s > previous[0]:
+            return None
+        h = np.array([round((float(t_s) - previous[0]) * 1e9) * 1e-9])  # whole nanoseconds, as the timestamps
+        key = (float(h[0]), tuple(np.asarray(jerk[0], dtype=float)), tuple(np.asarray(jerk[1], dtype=float)))
+        if self._jerk_steps is None or self._jerk_steps[0] != key:  # the same step and model: the same rows
+            self._jerk_steps = (key, jerk_steps(np.asarray(jerk[0], dtype=float)[None, :], jerk[1], h))
+        steps = self._jerk_steps[1]
+        share, a, b = kinematic_shares(single[None, :], steps[0], steps[1], h)
+        r = trapezoid_residuals(np.vstack([previous[1], state[:9]]), steps)
+        if not np.all(np.isfinite(r)):
+            return None
+        if self._kinematic is None:
+            self._kinematic = np.zeros((self.window or LOCAL_WINDOW, 3))
+        self._kinematic[self._steps % len(self._kinematic)] = (float(np.sum(r * r)), float(a.sum()), float(b.sum()))
+        self._steps += 1
+        if self._steps < MIN_SAMPLES:
+            return None
+        r2, a_sum, b_sum = self._kinematic.sum(axis=0)
+        return share[0], float(trapezoid_level(r2, a_sum, b_sum, self.variance_factor))
+
+    def scaled(self, accel_mps2: np.ndarray, state: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
+               jerk=None, t_s: float | None = None) -> np.ndarray:
+        """``sd`` (9,) of ``state`` (9,: ω, ω̇, f) scaled by the factor with this sample's residual included;
+        ``jerk``: the motion model's (density (3,), Ω (3,)) (:func:`jerk_density`; None: white snap), ``t_s``
+        the state's time [s]: ω's σ then also follows the path's trapezoid level (:func:`calibrated_sigma`'s
+        ``process``), over the newest steps between the states taken."""
         sd = np.asarray(sd, dtype=float)
         p, rank, single = self._parity(np.asarray(accel_mps2, dtype=float), np.asarray(state, dtype=float)[:9],
                                        np.asarray(noise_std_mps2, dtype=float))
@@ -227,14 +380,18 @@ class RunningSigmaScale:
                 self._recent = np.zeros((self.window, 2))
             self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank))
             self.samples += 1
-        return sd * scale_factors(sd, single, self.variance_factor, self.tau())
+        kinematic = self._trapezoid_level(np.asarray(state, dtype=float), single, jerk, t_s)
+        return sd * scale_factors(sd, single, self.variance_factor, self.tau(), kinematic)
 
 
 def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
-                     robust=None, max_lag: int = MAX_LAG, window: int | None = None) -> np.ndarray:
+                     robust=None, max_lag: int = MAX_LAG, window: int | None = None, process=None) -> np.ndarray:
     """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the log's residuals
     (the batch smoother's; module docstring): s² over the ``window`` samples centred on each row
-    (:func:`local_window` of the median degrees of freedom when None), ρ over the whole log. Rows with a non-finite residual do not count."""
+    (:func:`local_window` of the median degrees of freedom when None), ρ over the whole log. Rows with a non-finite residual do not count.
+    ``process``: (jerk density (N − 1, 3) of each step per body axis, the driven oscillator's Ω (3,), steps [s]
+    (N − 1,)) of the motion model the solution assumed (:func:`jerk_steps`), or None; given, ω's σ also follows
+    the path's own trapezoid level over the same window (:func:`kinematic_shares`, :func:`trapezoid_level`)."""
     n = len(states)
     noise = np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), np.shape(accel_mps2))
     geometry = _geometry(array)
@@ -258,7 +415,20 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     local_dof = local_sums(np.where(ok, p.shape[1] - rank, 0), window)
     with np.errstate(divide="ignore", invalid="ignore"):
         s2 = np.where(local_dof > 0, local_sums(np.sum(q * q, axis=1), window) / local_dof, power / dof)
-    out[:, :9] = out[:, :9] * scale_factors(out[:, :9], single, s2[:, None], tau)
+    kinematic = None
+    if process is not None and n > 2:
+        density, natural, dt = process
+        steps = jerk_steps(density, natural, dt)
+        share, a, b = kinematic_shares(single, np.vstack([steps[0], steps[0][-1:]]), np.vstack([steps[1], steps[1][-1:]]),
+                                       np.append(dt, dt[-1]))
+        r = trapezoid_residuals(states, steps)
+        fine = np.all(np.isfinite(r), axis=1) & ok[:-1] & ok[1:]
+        r2 = np.append(np.where(fine, np.sum(np.where(fine[:, None], r, 0.0) ** 2, axis=1), 0.0), 0.0)
+        use = np.append(fine, False)
+        level = trapezoid_level(local_sums(r2, window), s2 * local_sums(np.where(use, b.sum(axis=1), 0.0), window),
+                                local_sums(np.where(use, a.sum(axis=1), 0.0), window), 1.0)
+        kinematic = (share, level[:, None])
+    out[:, :9] = out[:, :9] * scale_factors(out[:, :9], single, s2[:, None], tau, kinematic)
     return out
 
 
@@ -267,3 +437,12 @@ def calibrates_stream(array, options) -> bool:
     calibration variables the residual would leave out)."""
     return (options.measurement == "accelerometer" and not (options.self_calibrate_bias or options.self_calibrate_scale)
             and not (options.use_gyro and array.gyroscope is not None))
+
+
+def jerk_density(options):
+    """(white-jerk density per body axis (3,) [rad/s²/√s], the driven oscillator's Ω per axis (3,) [rad/s]) of
+    ``options``' motion model (Ω = 0: the white jerk), or None (white snap)."""
+    if options.motion_model != "jerk":
+        return None
+    return (float(options.omega_dot_random_walk_radps2_per_sqrt_s) * np.asarray(options.process_axis_factors, dtype=float),
+            2.0 * np.pi * np.asarray(options.process_axis_frequencies_hz, dtype=float))

@@ -107,7 +107,7 @@ from . import model_choice as stream_model
 from ..tuning.model_choice import measured_noise_options
 from ..solve.restarts import branch, plane_normal
 from .model_choice import LocalDensity, StreamModel, StreamSignChain
-from ..solve.sigma_scale import RunningSigmaScale, calibrates_stream
+from ..solve.sigma_scale import RunningSigmaScale, calibrates_stream, jerk_density
 from ..tuning.evidence import make_problem, tuned_problem
 from ...estimators.ml import MLEstimator
 
@@ -544,7 +544,8 @@ class SigmaRescale:
             std = np.sqrt(m.accel_sigma_mps2 ** 2 + m.accel_noise_slope_mps2_per_radps ** 2 * float(x[:3] @ x[:3]))
             self.scale.robust = (m.robust_loss, m.accel_robust_threshold) if m.accel_robust_threshold > 0 else None
             sd = self.scale.scaled(y, x, np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
-                                                         s.sigma_specific_force_b_mps2]), std)
+                                                         s.sigma_specific_force_b_mps2]), std,
+                                   jerk_density(m.options), s.timestamp_ns * 1e-9)
             out.append(replace(s, sigma_omega_b_radps=sd[0:3], sigma_omega_dot_b_radps2=sd[3:6],
                                sigma_specific_force_b_mps2=sd[6:9]))
         return tuple(out)
