@@ -133,6 +133,28 @@ def _predict_readings(x, S_q, S_dw, S_f, pred, H):
 
 
 @njit(cache=True, nogil=True)
+def _weighted_products(H, nu, R, AG, inv_r, hw):
+    """``AG[:, :10] = Hᵀ R⁻¹ [H, ν]`` (``[G, b]`` of :func:`solve`, R diagonal), each reading's row of H
+    weighed by 1/R once (``inv_r``, ``hw``: work arrays of the readings' length)."""
+    m = H.shape[0]
+    for i in range(m):
+        inv_r[i] = 1.0 / R[i]
+    for a in range(9):
+        for i in range(m):
+            hw[i] = H[i, a] * inv_r[i]
+        for b in range(a, 9):
+            s = 0.0
+            for i in range(m):
+                s += hw[i] * H[i, b]
+            AG[a, b] = s
+            AG[b, a] = s
+        s = 0.0
+        for i in range(m):
+            s += hw[i] * nu[i]
+        AG[a, 9] = s
+
+
+@njit(cache=True, nogil=True)
 def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost):
     """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, AG, J, ok)``, ``AG = Hᵀ S⁻¹ [H, ν]``
     (9 × 10: ``A = Hᵀ S⁻¹ H`` and ``g = Hᵀ S⁻¹ ν``) at the last linearisation, J at x (0 unless
@@ -174,21 +196,7 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
             for j in range(9):
                 s += H[i, j] * (x[j] - xp[j])
             nu[i] = y[i] - pred[i] + s
-        for i in range(m):  # each reading's weight 1/R and its whitened Jacobian row
-            inv_r[i] = 1.0 / R[i]
-        for a in range(9):  # [G, b] = Hᵀ R⁻¹ [H, ν]
-            for i in range(m):
-                hw[i] = H[i, a] * inv_r[i]
-            for b in range(a, 9):
-                s = 0.0
-                for i in range(m):
-                    s += hw[i] * H[i, b]
-                AG[a, b] = s
-                AG[b, a] = s
-            s = 0.0
-            for i in range(m):
-                s += hw[i] * nu[i]
-            AG[a, 9] = s
+        _weighted_products(H, nu, R, AG, inv_r, hw)
         for a in range(9):  # I + G P
             for b in range(9):
                 s = 0.0
