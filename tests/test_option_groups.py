@@ -143,3 +143,56 @@ def test_the_fixed_lag_smoother_takes_the_stream_group_as_it_is_given():
     made = est.smoother(array, 500.0)
     assert made.lag_s == pytest.approx(est.window_lag_s(500.0), abs=0.0)
     assert made.gap_factor == est.gap_factor
+
+
+def test_the_guard_is_given_the_guard_group_and_the_groups_of_the_model_its_smoother_solved(monkeypatch):
+    """The guard (gfimu.smoother.result.guarded) takes the estimator's guard group and what the smoother used beyond
+    the accelerometers: its model group, and its batch model group where it has one (the fixed-lag smoother has
+    none)."""
+    import numpy as np
+
+    from gfimu.estimate import Estimate, Report
+    from gfimu.motion import Motion
+    from gfimu.smoother import result
+    from gfimu.smoother.guard import GuardResult
+    from gfimu.smoother.model.option_groups import BatchModelOptions, GuardOptions
+
+    seen = []
+
+    def guarded(log, run, guard, model, batch_model=None):
+        seen.append((guard, model, batch_model))
+        return run.motion, GuardResult(guard.guard)
+
+    still = Motion(np.arange(3, dtype=np.int64), omega_b_radps=np.zeros((3, 3)), omega_dot_b_radps2=np.zeros((3, 3)),
+                   specific_force_b_mps2=np.zeros((3, 3)))
+    monkeypatch.setattr(result, "guarded", guarded)
+    for cls in (BatchSmootherEstimator, FixedLagEstimator):
+        monkeypatch.setattr(cls, "result", lambda self, log, progress=False: Estimate(still, Report(self.method)))
+    batch = BatchSmootherEstimator(guard="warn", use_gyro=False, self_calibrate_bias=True)
+    assert batch.estimate(None).report.guard.mode == "warn"
+    assert seen[-1] == (GuardOptions("warn"), batch.model, batch.batch_model)
+    assert seen[-1][2] == BatchModelOptions(self_calibrate_bias=True)
+    stream = FixedLagEstimator(factor_groups=())
+    stream.estimate(None)
+    assert seen[-1] == (GuardOptions("replace"), stream.model, None)
+    BatchSmootherEstimator(guard="off").estimate(None)
+    assert len(seen) == 2  # 'off': no guard
+
+
+def test_the_guard_reads_what_the_smoother_used_from_the_model_groups():
+    """``unguarded``: the model group says whether the gyroscope and factor groups were used, the batch model group
+    whether the inclinometer or calibration were; a smoother without a batch model group used neither."""
+    import numpy as np
+
+    from gfimu.array import cube_array
+    from gfimu.log import Log
+    from gfimu.smoother.model.groups import AccelerometerGroup
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+    from gfimu.smoother.result import unguarded
+
+    array = cube_array(0.05)
+    log = Log(array, np.arange(10, dtype=np.int64) * 10_000_000, np.zeros((10, array.structure_matrix().shape[0])))
+    assert unguarded(log, ModelOptions()) is None
+    assert unguarded(log, ModelOptions(), BatchModelOptions()) is None
+    assert "calibrates" in unguarded(log, ModelOptions(), BatchModelOptions(self_calibrate_scale=True))
+    assert "factor groups" in unguarded(log, ModelOptions(factor_groups=(AccelerometerGroup(),)))

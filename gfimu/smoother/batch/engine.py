@@ -585,7 +585,7 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
         options = self.options()
         run = smooth(log, options, progress=progress, initial=initial, solver=self.solver,
                      auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers,
-                     per_sample=self.guard != "off" and unguarded(log, options) is None)
+                     per_sample=self.guard != "off" and unguarded(log, self.model, self.batch_model) is None)
         return Estimate(run.motion, replace(run.report, options=options_of(self)))
 
 
