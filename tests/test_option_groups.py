@@ -196,3 +196,43 @@ def test_the_guard_reads_what_the_smoother_used_from_the_model_groups():
     assert unguarded(log, ModelOptions(), BatchModelOptions()) is None
     assert "calibrates" in unguarded(log, ModelOptions(), BatchModelOptions(self_calibrate_scale=True))
     assert "factor groups" in unguarded(log, ModelOptions(factor_groups=(AccelerometerGroup(),)))
+
+
+def test_the_tuner_takes_the_model_batch_model_and_tuning_groups(monkeypatch):
+    """``tune`` reads the model and batch model it tunes and the tuning group's choices (which motion models,
+    the accelerometer noise scale, the oscillators), and gives the tuned model and batch model back: the jerk
+    density in the model group, the snap density in the batch model group."""
+    from gfimu.array import cube_array
+    from gfimu.simulate import simulate
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+    from gfimu.smoother.solve.initialise import initial_states
+    from gfimu.smoother.tuning import evidence
+
+    runs = []
+    run = evidence._NoiseSearch.run
+
+    def recorded(search, accel_noise):
+        runs.append((search.motion_model, accel_noise, search.frequencies))
+        return run(search, accel_noise)
+
+    monkeypatch.setattr(evidence._NoiseSearch, "run", recorded)
+    log = simulate("random3d", cube_array(0.025, noise_std_mps2=0.07), rate_hz=100.0, duration_s=2.0, seed=1)
+    model, batch_model = ModelOptions(specific_force_random_walk_mps2_per_sqrt_s=20.0), BatchModelOptions()
+    x = initial_states(log, SmootherOptions.from_groups(model, batch_model))
+    tuning, tuned, tuned_batch = evidence.tune(log, model, batch_model, TuningOptions(), x)
+    assert runs == [("jerk", False, True)]
+    assert tuned == replace(model, omega_dot_random_walk_radps2_per_sqrt_s=tuning.density,
+                            process_axis_factors=tuning.axis_factors,
+                            process_axis_frequencies_hz=tuning.axis_frequencies_hz,
+                            specific_force_random_walk_mps2_per_sqrt_s=tuning.specific_force_density)
+    assert tuned_batch == batch_model
+    runs.clear()
+    both = TuningOptions(tune_motion_model=True, tune_accel_noise=True, tune_axis_frequencies=False)
+    tuning, tuned, tuned_batch = evidence.tune(log, model, batch_model, both, x)
+    assert runs == [("jerk", True, False), ("snap", True, False)]
+    assert tuned.motion_model == tuning.motion_model
+    if tuning.motion_model == "snap":
+        assert tuned_batch.omega_ddot_random_walk_radps3_per_sqrt_s == tuning.density
+        assert tuned.omega_dot_random_walk_radps2_per_sqrt_s == model.omega_dot_random_walk_radps2_per_sqrt_s
+    else:
+        assert tuned.omega_dot_random_walk_radps2_per_sqrt_s == tuning.density and tuned_batch == batch_model
