@@ -236,3 +236,36 @@ def test_the_tuner_takes_the_model_batch_model_and_tuning_groups(monkeypatch):
         assert tuned.omega_dot_random_walk_radps2_per_sqrt_s == model.omega_dot_random_walk_radps2_per_sqrt_s
     else:
         assert tuned.omega_dot_random_walk_radps2_per_sqrt_s == tuning.density and tuned_batch == batch_model
+
+
+def test_the_batch_engine_takes_the_model_batch_model_batch_and_tuning_groups(monkeypatch):
+    """``smooth``, the batch smoother's engine, is given the estimator's four groups and cuts its solve windows,
+    picks its solver and workers and chooses the model as they say; the estimator hands its own groups over."""
+    import numpy as np
+
+    from gfimu.array import cube_array
+    from gfimu.simulate import simulate
+    from gfimu.smoother.batch import engine
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+
+    log = simulate("random3d", cube_array(0.025, noise_std_mps2=0.07), rate_hz=100.0, duration_s=3.0, seed=1)
+    model = ModelOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0)
+    batch = BatchOptions(window_s=1.2, overlap_s=0.4, workers=1, branch_restarts=False)
+    tuning = TuningOptions(auto_model=False, tune_process_noise=False)
+    run = engine.smooth(log, model, BatchModelOptions(), batch, tuning)
+    assert run.report.windows == len(engine.window_slices(len(log), log.rate_hz, 1.2, 0.4)) == 3
+    assert run.report.model_check is None and run.report.tunings == ()  # no model choice, no tuning
+    assert run.report.options["omega_dot_random_walk_radps2_per_sqrt_s"] == 20.0
+    assert run.report.options["window_s"] == 1.2
+    whole = engine.smooth(log, model, BatchModelOptions(), replace(batch, window_s=None), tuning)
+    assert whole.report.windows == 1
+    tuned = engine.smooth(log, model, BatchModelOptions(), batch, replace(tuning, tune_process_noise=True))
+    assert len(tuned.report.tunings) == 3  # one per window
+
+    given = []
+    smooth = engine.smooth
+    monkeypatch.setattr(engine, "smooth", lambda log, *groups, **kw: given.append(groups) or smooth(log, *groups, **kw))
+    est = BatchSmootherEstimator.from_groups(model, batch, tuning, guard="off")
+    out = est.estimate(log)
+    assert given == [(est.model, est.batch_model, batch, tuning)]
+    np.testing.assert_array_equal(out.motion.omega_b_radps, run.motion.omega_b_radps)
