@@ -614,7 +614,9 @@ class _NoiseSearch:
                         "freq": np.array(model.process_axis_frequencies_hz if motion_model == "jerk"
                                          else (0.0, 0.0, 0.0), dtype=float),
                         "freq_std": np.zeros(3), "amp": np.zeros(3)}
-        self.X = StateLayout.from_options(self.settings_options(self.current)).resize(states)
+        # the state layout of this motion model with the model given (which it checks: the oscillators need 'jerk')
+        given = SmootherOptions.from_groups(replace(model, motion_model=motion_model), batch_model)
+        self.X = StateLayout.from_options(given).resize(states)
         self.cache: dict = {}
         self.bases: dict = {}
         self.summed: dict = {}
