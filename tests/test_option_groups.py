@@ -269,3 +269,20 @@ def test_the_batch_engine_takes_the_model_batch_model_batch_and_tuning_groups(mo
     out = est.estimate(log)
     assert given == [(est.model, est.batch_model, batch, tuning)]
     np.testing.assert_array_equal(out.motion.omega_b_radps, run.motion.omega_b_radps)
+
+
+def test_the_problem_s_check_reads_the_model_and_batch_model_groups():
+    """``options_reason``: what the batch problem cannot solve on an array, from its model and batch model groups
+    (the batch estimator's ``applicable`` hands its own over)."""
+    from gfimu.array import cube_array
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+    from gfimu.smoother.model.problem import options_reason
+
+    array = cube_array(0.05)
+    assert options_reason(array, ModelOptions(), BatchModelOptions()) is None
+    inclinometer = BatchModelOptions(use_inclinometer=True)
+    assert "need the attitude state" in options_reason(array, ModelOptions(), inclinometer)
+    assert "has no inclinometer" in options_reason(array, ModelOptions(), inclinometer, attitude_supported=True)
+    assert BatchSmootherEstimator(use_inclinometer=True).applicable(array) == options_reason(
+        array, ModelOptions(), inclinometer, attitude_supported=True)
+    assert "[body]" in BatchSmootherEstimator(free_flight=True).applicable(array)

@@ -202,7 +202,7 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
 def _check_smoothable(log: Log, opt: SmootherOptions, solver: str) -> None:
     """An :class:`InputError` when the options do not fit the log's array or ``solver`` is unknown, a
     :class:`DataError` when the log has fewer than 2 samples."""
-    reason = options_reason(log.array, opt, attitude_supported=True)
+    reason = options_reason(log.array, opt.model, opt.batch_model, attitude_supported=True)
     if reason:
         raise InputError(f"{log.source}: {reason}")
     if solver not in SOLVERS:
@@ -575,7 +575,7 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     method = "smoother"
 
     def applicable(self, array: SensorArray) -> str | None:
-        return options_reason(array, self.options(), attitude_supported=True)
+        return options_reason(array, self.model, self.batch_model, attitude_supported=True)
 
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> Estimate:
         """The smoother on ``log`` (:func:`smooth`) before the guard, its report with this estimator's
