@@ -165,20 +165,18 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
     the model check and, when the check made it, the per-sample estimate; no guard. ``per_sample``: the
     per-sample estimate of the whole log is wanted after the run (the guard's), so the model check makes it
     whether it needs it or not, started beside its own estimate of a subsample (:func:`chosen_model`)."""
-    # the windows' problems and solves, the model choice and the tuner's problems still read the options whole
+    # the options whole: the report's, and the model choice's, whose options the windows' problems and solves read
     options = SmootherOptions.from_groups(model, batch_model, batch, tuning)
-    opt = options
-    _check_smoothable(log, opt, batch.solver)
-    layout = StateLayout.from_options(opt)
+    _check_smoothable(log, model, batch_model, batch.solver)
+    layout = StateLayout.from_options(options)
     attitude = layout.attitude
     windows = window_slices(len(log), log.rate_hz, batch.window_s, batch.overlap_s)
     timings = {}
     t0 = time.perf_counter()
+    opt, auto = options, None
     if tuning.auto_model:
-        opt, auto = chosen_model(log, opt, attitude, per_sample)
+        opt, auto = chosen_model(log, options, attitude, per_sample)
         timings["model check"] = time.perf_counter() - t0
-    else:
-        auto = None
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
         motion = auto[1] if auto[1] is not None else MLEstimator().estimate_motion(log)
         note = f"{log.source}: {auto[0].describe()}; the per-sample estimate is returned"
@@ -199,10 +197,10 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
         windows=len(windows), per_sample=auto[1] if auto else None))
 
 
-def _check_smoothable(log: Log, opt: SmootherOptions, solver: str) -> None:
-    """An :class:`InputError` when the options do not fit the log's array or ``solver`` is unknown, a
-    :class:`DataError` when the log has fewer than 2 samples."""
-    reason = options_reason(log.array, opt.model, opt.batch_model, attitude_supported=True)
+def _check_smoothable(log: Log, model: ModelOptions, batch_model: BatchModelOptions, solver: str) -> None:
+    """An :class:`InputError` when the model and batch model do not fit the log's array or ``solver`` is
+    unknown, a :class:`DataError` when the log has fewer than 2 samples."""
+    reason = options_reason(log.array, model, batch_model, attitude_supported=True)
     if reason:
         raise InputError(f"{log.source}: {reason}")
     if solver not in SOLVERS:
