@@ -64,7 +64,7 @@ def test_an_error_in_a_worker_reaches_the_caller(log):
 
     estimator = BatchSmootherEstimator(workers=2, window_s=2.0, overlap_s=0.5)
     with pytest.raises(ValueError, match="refused for a later window"):  # the engine's hook for initial states
-        smooth(log, estimator.options(), initial=failing, workers=estimator.workers)
+        smooth(log, estimator.model, estimator.batch_model, estimator.batch, estimator.tuning, initial=failing)
 
 
 def test_worker_count():

@@ -143,3 +143,146 @@ def test_the_fixed_lag_smoother_takes_the_stream_group_as_it_is_given():
     made = est.smoother(array, 500.0)
     assert made.lag_s == pytest.approx(est.window_lag_s(500.0), abs=0.0)
     assert made.gap_factor == est.gap_factor
+
+
+def test_the_guard_is_given_the_guard_group_and_the_groups_of_the_model_its_smoother_solved(monkeypatch):
+    """The guard (gfimu.smoother.result.guarded) takes the estimator's guard group and what the smoother used beyond
+    the accelerometers: its model group, and its batch model group where it has one (the fixed-lag smoother has
+    none)."""
+    import numpy as np
+
+    from gfimu.estimate import Estimate, Report
+    from gfimu.motion import Motion
+    from gfimu.smoother import result
+    from gfimu.smoother.guard import GuardResult
+    from gfimu.smoother.model.option_groups import BatchModelOptions, GuardOptions
+
+    seen = []
+
+    def guarded(log, run, guard, model, batch_model=None):
+        seen.append((guard, model, batch_model))
+        return run.motion, GuardResult(guard.guard)
+
+    still = Motion(np.arange(3, dtype=np.int64), omega_b_radps=np.zeros((3, 3)), omega_dot_b_radps2=np.zeros((3, 3)),
+                   specific_force_b_mps2=np.zeros((3, 3)))
+    monkeypatch.setattr(result, "guarded", guarded)
+    for cls in (BatchSmootherEstimator, FixedLagEstimator):
+        monkeypatch.setattr(cls, "result", lambda self, log, progress=False: Estimate(still, Report(self.method)))
+    batch = BatchSmootherEstimator(guard="warn", use_gyro=False, self_calibrate_bias=True)
+    assert batch.estimate(None).report.guard.mode == "warn"
+    assert seen[-1] == (GuardOptions("warn"), batch.model, batch.batch_model)
+    assert seen[-1][2] == BatchModelOptions(self_calibrate_bias=True)
+    stream = FixedLagEstimator(factor_groups=())
+    stream.estimate(None)
+    assert seen[-1] == (GuardOptions("replace"), stream.model, None)
+    BatchSmootherEstimator(guard="off").estimate(None)
+    assert len(seen) == 2  # 'off': no guard
+
+
+def test_the_guard_reads_what_the_smoother_used_from_the_model_groups():
+    """``unguarded``: the model group says whether the gyroscope and factor groups were used, the batch model group
+    whether the inclinometer or calibration were; a smoother without a batch model group used neither."""
+    import numpy as np
+
+    from gfimu.array import cube_array
+    from gfimu.log import Log
+    from gfimu.smoother.model.groups import AccelerometerGroup
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+    from gfimu.smoother.result import unguarded
+
+    array = cube_array(0.05)
+    log = Log(array, np.arange(10, dtype=np.int64) * 10_000_000, np.zeros((10, array.structure_matrix().shape[0])))
+    assert unguarded(log, ModelOptions()) is None
+    assert unguarded(log, ModelOptions(), BatchModelOptions()) is None
+    assert "calibrates" in unguarded(log, ModelOptions(), BatchModelOptions(self_calibrate_scale=True))
+    assert "factor groups" in unguarded(log, ModelOptions(factor_groups=(AccelerometerGroup(),)))
+
+
+def test_the_tuner_takes_the_model_batch_model_and_tuning_groups(monkeypatch):
+    """``tune`` reads the model and batch model it tunes and the tuning group's choices (which motion models,
+    the accelerometer noise scale, the oscillators), and gives the tuned model and batch model back: the jerk
+    density in the model group, the snap density in the batch model group."""
+    from gfimu.array import cube_array
+    from gfimu.simulate import simulate
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+    from gfimu.smoother.solve.initialise import initial_states
+    from gfimu.smoother.tuning import evidence
+
+    runs = []
+    run = evidence._NoiseSearch.run
+
+    def recorded(search, accel_noise):
+        runs.append((search.motion_model, accel_noise, search.frequencies))
+        return run(search, accel_noise)
+
+    monkeypatch.setattr(evidence._NoiseSearch, "run", recorded)
+    log = simulate("random3d", cube_array(0.025, noise_std_mps2=0.07), rate_hz=100.0, duration_s=2.0, seed=1)
+    model, batch_model = ModelOptions(specific_force_random_walk_mps2_per_sqrt_s=20.0), BatchModelOptions()
+    x = initial_states(log, SmootherOptions.from_groups(model, batch_model))
+    tuning, tuned, tuned_batch = evidence.tune(log, model, batch_model, TuningOptions(), x)
+    assert runs == [("jerk", False, True)]
+    assert tuned == replace(model, omega_dot_random_walk_radps2_per_sqrt_s=tuning.density,
+                            process_axis_factors=tuning.axis_factors,
+                            process_axis_frequencies_hz=tuning.axis_frequencies_hz,
+                            specific_force_random_walk_mps2_per_sqrt_s=tuning.specific_force_density)
+    assert tuned_batch == batch_model
+    runs.clear()
+    both = TuningOptions(tune_motion_model=True, tune_accel_noise=True, tune_axis_frequencies=False)
+    tuning, tuned, tuned_batch = evidence.tune(log, model, batch_model, both, x)
+    assert runs == [("jerk", True, False), ("snap", True, False)]
+    assert tuned.motion_model == tuning.motion_model
+    if tuning.motion_model == "snap":
+        assert tuned_batch.omega_ddot_random_walk_radps3_per_sqrt_s == tuning.density
+        assert tuned.omega_dot_random_walk_radps2_per_sqrt_s == model.omega_dot_random_walk_radps2_per_sqrt_s
+    else:
+        assert tuned.omega_dot_random_walk_radps2_per_sqrt_s == tuning.density and tuned_batch == batch_model
+
+
+def test_the_batch_engine_takes_the_model_batch_model_batch_and_tuning_groups(monkeypatch):
+    """``smooth``, the batch smoother's engine, is given the estimator's four groups and cuts its solve windows,
+    picks its solver and workers and chooses the model as they say; the estimator hands its own groups over."""
+    import numpy as np
+
+    from gfimu.array import cube_array
+    from gfimu.simulate import simulate
+    from gfimu.smoother.batch import engine
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+
+    log = simulate("random3d", cube_array(0.025, noise_std_mps2=0.07), rate_hz=100.0, duration_s=3.0, seed=1)
+    model = ModelOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0)
+    batch = BatchOptions(window_s=1.2, overlap_s=0.4, workers=1, branch_restarts=False)
+    tuning = TuningOptions(auto_model=False, tune_process_noise=False)
+    run = engine.smooth(log, model, BatchModelOptions(), batch, tuning)
+    assert run.report.windows == len(engine.window_slices(len(log), log.rate_hz, 1.2, 0.4)) == 3
+    assert run.report.model_check is None and run.report.tunings == ()  # no model choice, no tuning
+    assert run.report.options["omega_dot_random_walk_radps2_per_sqrt_s"] == 20.0
+    assert run.report.options["window_s"] == 1.2
+    whole = engine.smooth(log, model, BatchModelOptions(), replace(batch, window_s=None), tuning)
+    assert whole.report.windows == 1
+    tuned = engine.smooth(log, model, BatchModelOptions(), batch, replace(tuning, tune_process_noise=True))
+    assert len(tuned.report.tunings) == 3  # one per window
+
+    given = []
+    smooth = engine.smooth
+    monkeypatch.setattr(engine, "smooth", lambda log, *groups, **kw: given.append(groups) or smooth(log, *groups, **kw))
+    est = BatchSmootherEstimator.from_groups(model, batch, tuning, guard="off")
+    out = est.estimate(log)
+    assert given == [(est.model, est.batch_model, batch, tuning)]
+    np.testing.assert_array_equal(out.motion.omega_b_radps, run.motion.omega_b_radps)
+
+
+def test_the_problem_s_check_reads_the_model_and_batch_model_groups():
+    """``options_reason``: what the batch problem cannot solve on an array, from its model and batch model groups
+    (the batch estimator's ``applicable`` hands its own over)."""
+    from gfimu.array import cube_array
+    from gfimu.smoother.model.option_groups import BatchModelOptions
+    from gfimu.smoother.model.problem import options_reason
+
+    array = cube_array(0.05)
+    assert options_reason(array, ModelOptions(), BatchModelOptions()) is None
+    inclinometer = BatchModelOptions(use_inclinometer=True)
+    assert "need the attitude state" in options_reason(array, ModelOptions(), inclinometer)
+    assert "has no inclinometer" in options_reason(array, ModelOptions(), inclinometer, attitude_supported=True)
+    assert BatchSmootherEstimator(use_inclinometer=True).applicable(array) == options_reason(
+        array, ModelOptions(), inclinometer, attitude_supported=True)
+    assert "[body]" in BatchSmootherEstimator(free_flight=True).applicable(array)

@@ -63,11 +63,11 @@ def test_tuner_recovers_the_density_of_the_process_model():
     q_true = np.array([8.0, 8.0, 2.0])
     log = process_model_log(q_true, 3.0, seed=5)
     opt = SmootherOptions(window_s=None)
-    tuning, tuned = tune(log, opt, initial_states(log, opt))
+    tuning, model, batch_model = tune(log, opt.model, opt.batch_model, opt.tuning, initial_states(log, opt))
     q_axes = tuning.density * np.asarray(tuning.axis_factors)
     assert np.all(q_axes / q_true < 1.5) and np.all(q_true / q_axes < 1.5), (q_axes, tuning)
     assert 1 / 1.5 < tuning.specific_force_density / 3.0 < 1.5, tuning
-    assert tuned.process_axis_factors == tuning.axis_factors
+    assert model.process_axis_factors == tuning.axis_factors and batch_model == opt.batch_model
     # and the tuned smoother is at least as accurate as the default densities on its own model
     tuned_rmse = omega_rmse(BatchSmootherEstimator(window_s=None).estimate(log).motion, log.truth)
     fixed_rmse = omega_rmse(BatchSmootherEstimator(window_s=None, tune_process_noise=False).estimate(log).motion, log.truth)

@@ -61,7 +61,7 @@ from ..solve.banded import (  # noqa: F401  (the banded core, also importable fr
     to_lower_banded,
 )
 from ..model.problem import SmootherOptions, SmootherProblem, options_reason
-from ..model.option_groups import assemble
+from ..model.option_groups import BatchModelOptions, BatchOptions, ModelOptions, TuningOptions, assemble
 from ..solve.initialise import initial_attitude, initial_states, sign_chain
 from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from ..solve.restarts import branch_restarts
@@ -152,35 +152,31 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, options: Smoother
     return solve_problem(problem, first.states, first.params if first.params.size else None, sigma, solver, reweight)
 
 
-def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: InitialStates | None = None,
-           solver: str | None = None, auto_model: bool | None = None, tune_span_s: float | None = ...,
-           workers: int = 1, per_sample: bool = False) -> Estimate:
-    """The batch smoother on a whole log: overlapping solve windows, each with its process noise chosen
-    from the data when ``options.tune_process_noise``.
+def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch: BatchOptions, tuning: TuningOptions,
+           progress: bool = False, initial: InitialStates | None = None, per_sample: bool = False) -> Estimate:
+    """The batch smoother on a whole log: the smoother's ``model`` and ``batch_model`` solved in the overlapping
+    solve windows of ``batch`` (their length and overlap, the solver, the restarts, the re-weighting, the
+    tuning span and the worker processes), the model chosen from the log and the process noise from each
+    window's data as ``tuning`` asks.
 
     ``initial``: how each window's initial states are made (default
-    :func:`gfimu.smoother.solve.initialise.initial_estimate`); ``solver`` (one of :data:`SOLVERS`),
-    ``auto_model``, ``tune_span_s``: the options' unless given; ``workers``: here 1, in this process,
-    unless asked (:class:`BatchSmootherEstimator` passes its option). The report (method "smoother",
-    ``options``) carries the noise tuned and the calibration per window, the solver's iterations and cost,
+    :func:`gfimu.smoother.solve.initialise.initial_estimate`). The report (method "smoother", the options of
+    the four groups) carries the noise tuned and the calibration per window, the solver's iterations and cost,
     the model check and, when the check made it, the per-sample estimate; no guard. ``per_sample``: the
     per-sample estimate of the whole log is wanted after the run (the guard's), so the model check makes it
     whether it needs it or not, started beside its own estimate of a subsample (:func:`chosen_model`)."""
-    opt = options
-    solver = opt.solver if solver is None else solver
-    auto_model = opt.auto_model if auto_model is None else auto_model
-    tune_span_s = opt.tune_span_s if tune_span_s is ... else tune_span_s
-    _check_smoothable(log, opt, solver)
-    layout = StateLayout.from_options(opt)
+    # the options whole: the report's, and the model choice's, whose options the windows' problems and solves read
+    options = SmootherOptions.from_groups(model, batch_model, batch, tuning)
+    _check_smoothable(log, model, batch_model, batch.solver)
+    layout = StateLayout.from_options(options)
     attitude = layout.attitude
-    windows = window_slices(len(log), log.rate_hz, opt.window_s, opt.overlap_s)
+    windows = window_slices(len(log), log.rate_hz, batch.window_s, batch.overlap_s)
     timings = {}
     t0 = time.perf_counter()
-    if auto_model:
-        opt, auto = chosen_model(log, opt, attitude, per_sample)
+    opt, auto = options, None
+    if tuning.auto_model:
+        opt, auto = chosen_model(log, options, attitude, per_sample)
         timings["model check"] = time.perf_counter() - t0
-    else:
-        auto = None
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
         motion = auto[1] if auto[1] is not None else MLEstimator().estimate_motion(log)
         note = f"{log.source}: {auto[0].describe()}; the per-sample estimate is returned"
@@ -188,10 +184,10 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
                                           iterations=0, cost=0.0, windows=0, per_sample=motion))
     t0 = time.perf_counter()
     if attitude:  # each window starts from the attitude of the one before: in turn
-        outcomes = _attitude_windows(log, opt, windows, initial, solver, progress)
+        outcomes = _attitude_windows(log, opt, windows, initial, batch.solver, progress)
     else:
-        context = _WindowContext(log, opt, auto, initial, solver, tune_span_s, windows)
-        outcomes = _run_windows(context, window_workers(workers, len(windows), solver), progress)
+        context = _WindowContext(log, opt, auto, initial, batch.solver, batch.tune_span_s, windows)
+        outcomes = _run_windows(context, window_workers(batch.workers, len(windows), batch.solver), progress)
         _align_signs(context, outcomes)
     timings["solve windows"] = time.perf_counter() - t0
     joined = _Joined.of(log, layout, opt, windows, outcomes)
@@ -201,10 +197,10 @@ def smooth(log: Log, options: SmootherOptions, progress: bool = False, initial: 
         windows=len(windows), per_sample=auto[1] if auto else None))
 
 
-def _check_smoothable(log: Log, opt: SmootherOptions, solver: str) -> None:
-    """An :class:`InputError` when the options do not fit the log's array or ``solver`` is unknown, a
-    :class:`DataError` when the log has fewer than 2 samples."""
-    reason = options_reason(log.array, opt, attitude_supported=True)
+def _check_smoothable(log: Log, model: ModelOptions, batch_model: BatchModelOptions, solver: str) -> None:
+    """An :class:`InputError` when the model and batch model do not fit the log's array or ``solver`` is
+    unknown, a :class:`DataError` when the log has fewer than 2 samples."""
+    reason = options_reason(log.array, model, batch_model, attitude_supported=True)
     if reason:
         raise InputError(f"{log.source}: {reason}")
     if solver not in SOLVERS:
@@ -577,15 +573,13 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     method = "smoother"
 
     def applicable(self, array: SensorArray) -> str | None:
-        return options_reason(array, self.options(), attitude_supported=True)
+        return options_reason(array, self.model, self.batch_model, attitude_supported=True)
 
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> Estimate:
         """The smoother on ``log`` (:func:`smooth`) before the guard, its report with this estimator's
         options (:meth:`estimate` is the entry: the run, then the guard)."""
-        options = self.options()
-        run = smooth(log, options, progress=progress, initial=initial, solver=self.solver,
-                     auto_model=self.auto_model, tune_span_s=self.tune_span_s, workers=self.workers,
-                     per_sample=self.guard != "off" and unguarded(log, options) is None)
+        run = smooth(log, self.model, self.batch_model, self.batch, self.tuning, progress=progress, initial=initial,
+                     per_sample=self.guard != "off" and unguarded(log, self.model, self.batch_model) is None)
         return Estimate(run.motion, replace(run.report, options=options_of(self)))
 
 

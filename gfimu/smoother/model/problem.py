@@ -46,7 +46,7 @@ from ...log import Log
 from .parts import delegated
 from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
 from .noise_levels import NoiseLevels
-from .option_groups import MotionModel, assemble
+from .option_groups import BatchModelOptions, ModelOptions, MotionModel, assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -78,31 +78,32 @@ class SmootherOptions:
         return self.accel_robust_threshold > 0 or self.process_robust_threshold > 0
 
 
-def options_reason(array: SensorArray, options: SmootherOptions, attitude_supported: bool = False) -> str | None:
-    """Why the smoother cannot run on ``array`` with ``options`` (None if it can).
+def options_reason(array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions,
+                   attitude_supported: bool = False) -> str | None:
+    """Why the smoother cannot solve its ``model`` and ``batch_model`` on ``array`` (None if it can).
 
     ``attitude_supported``: the caller carries the attitude state (the batch
     smoother does); otherwise ``use_inclinometer`` and ``estimate_attitude``
     are refused.
     """
-    if (options.use_inclinometer or options.estimate_attitude) and not attitude_supported:
+    if (batch_model.use_inclinometer or batch_model.estimate_attitude) and not attitude_supported:
         return "use_inclinometer / estimate_attitude need the attitude state, which this smoother does not carry"
-    if options.use_inclinometer and array.inclinometer is None:
+    if batch_model.use_inclinometer and array.inclinometer is None:
         return f"use_inclinometer: array {array.name!r} has no inclinometer"
-    if (options.use_inclinometer or options.estimate_attitude) and options.free_flight:
+    if (batch_model.use_inclinometer or batch_model.estimate_attitude) and batch_model.free_flight:
         return "estimate_attitude is not available in free flight (the specific force carries no gravity)"
-    if options.measurement == "quadratic":
-        if options.self_calibrate_bias or options.self_calibrate_scale or options.free_flight:
+    if batch_model.measurement == "quadratic":
+        if batch_model.self_calibrate_bias or batch_model.self_calibrate_scale or batch_model.free_flight:
             return "measurement='quadratic' works on the per-sample inversion: no self-calibration or free flight"
         try:
             array.check_invertible()
         except ValueError as exc:
             return f"measurement='quadratic' needs the per-sample inversion: {exc}"
-    if options.free_flight:
+    if batch_model.free_flight:
         if array.body is None:
             return f"free_flight needs the body's principal inertia ([body] in array.toml); array {array.name!r} has none"
         return None
-    gyro_used = array.gyroscope is not None and options.use_gyro
+    gyro_used = array.gyroscope is not None and model.use_gyro
     if not gyro_used and len(array.accelerometers) > 1 and float(np.ptp(array.axis_positions_m, axis=0).max()) < 1e-6:
         return (f"the accelerometers of array {array.name!r} all sit at one point (position_m spans less than "
                 "1 µm): the rotation is not sensed; check position_m in array.toml (metres, in the body frame)")
@@ -208,7 +209,7 @@ class SmootherProblem:
     options: SmootherOptions = field(default_factory=SmootherOptions)
 
     def __post_init__(self) -> None:
-        reason = options_reason(self.log.array, self.options, attitude_supported=True)
+        reason = options_reason(self.log.array, self.options.model, self.options.batch_model, attitude_supported=True)
         if reason:
             raise InputError(reason)
         arr = self.log.array

@@ -325,7 +325,7 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
     if array.n_axes < 6 and not has_gyro:
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without a gyroscope ω cannot be "
                 "observed (free flight needs method 'smoother' with free_flight=True)")
-    return options_reason(array, options)
+    return options_reason(array, options.model, options.batch_model)
 
 
 @dataclass(frozen=True)

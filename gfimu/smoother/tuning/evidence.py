@@ -37,6 +37,7 @@ from ...log import Log
 from ..solve.banded import (Factorisation, NormalEquations, add_normal_equations, band_structure_of, factorise, factorise_blocks,
                      normal_equations, solve, solve_step)
 from ..model.problem import SmootherOptions, SmootherProblem
+from ..model.option_groups import BatchModelOptions, ModelOptions, TuningOptions
 from ..model.groups import Term
 from ..solve.initialise import initial_estimate
 from ..model.layout import OMEGA, OMEGA_DOT, StateLayout
@@ -557,31 +558,34 @@ def dominant_frequency_hz(signal: np.ndarray, rate_hz: float, min_hz: float, max
     return float(f[i] + shift * (f[1] - f[0]))
 
 
-def tune(log: Log, options: SmootherOptions, states: np.ndarray, params: np.ndarray | None = None,
-         models: tuple[str, ...] | None = None, accel_noise: bool = False,
-         states_out: list | None = None, basis: bool = True) -> tuple[Tuning, SmootherOptions]:
-    """Select the process noise maximising :func:`linearised_log_evidence` from a starting estimate
-    ``states`` (e.g. the initialisation); returns the selection and the options carrying it.
+def tune(log: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions, states: np.ndarray,
+         params: np.ndarray | None = None, states_out: list | None = None,
+         basis: bool = True) -> tuple[Tuning, ModelOptions, BatchModelOptions]:
+    """Select the process noise of the smoother's ``model`` and ``batch_model`` maximising
+    :func:`linearised_log_evidence` from a starting estimate ``states`` (e.g. the initialisation), as
+    ``tuning`` asks; returns the selection and the model and batch model carrying it.
 
-    Per motion model: (1) the common jerk/snap density on a grid of factor 4, linearised at
-    ``states``; the smoother is solved with it; (2) linearised at that solution, coordinate
-    ascent over the factor of each body axis (``process_axis_factors``) and the specific-force
-    density; with ``accel_noise`` the accelerometer noise scale is searched first in (1) and
-    before and after the others in (2). Each 1-D search is a
+    Per motion model (both 'jerk' and 'snap' with ``tuning.tune_motion_model``, else the model's own):
+    (1) the common jerk/snap density on a grid of factor 4, linearised at ``states``; the smoother is
+    solved with it; (2) linearised at that solution, coordinate ascent over the factor of each body axis
+    (``process_axis_factors``) and the specific-force density, and with ``tuning.tune_axis_frequencies``
+    the oscillators; with ``tuning.tune_accel_noise`` the accelerometer noise scale is searched first in
+    (1) and before and after the others in (2). Each 1-D search is a
     grid (factor 4 for the density, 10 for the others) extended while the best point is at an edge, refined by a parabola.
     The model with the larger evidence wins. ``states_out``, if given, receives the smoother's
     solution that the winner was linearised at (a better start than ``states`` for a stiff model).
     ``basis``: evaluate the process factors once per linearisation point and weight them per
     setting (:class:`ProcessBasis`; False: evaluate them for every setting, the same numbers slower)."""
     best = None
-    for model in models or (options.motion_model,):
-        search = _NoiseSearch(log, options, model, states, params, basis)
-        tuning = search.run(accel_noise)
-        if best is None or tuning.log_evidence > best[0].log_evidence:
-            best = (tuning, search.settings_options(search.current), search.X)
+    for motion_model in ("jerk", "snap") if tuning.tune_motion_model else (model.motion_model,):
+        search = _NoiseSearch(log, model, batch_model, tuning.tune_axis_frequencies, motion_model, states, params,
+                              basis)
+        found = search.run(tuning.tune_accel_noise)
+        if best is None or found.log_evidence > best[0].log_evidence:
+            best = (found, *search.settings(search.current), search.X)
     if states_out is not None:
-        states_out.append(best[2])
-    return best[:2]
+        states_out.append(best[3])
+    return best[:3]
 
 
 def _copy_settings(c: dict) -> dict:
@@ -595,29 +599,44 @@ class _NoiseSearch:
     0: the starting estimate, 1: the smoother's solution with the density found), and the evidence of
     each setting tried there (``known``), with the normal equations and process bases it reuses."""
 
-    def __init__(self, log: Log, options: SmootherOptions, model: str, states: np.ndarray,
-                 params: np.ndarray | None, basis: bool):
-        self.log, self.options, self.model, self.basis = log, options, model, basis
-        self.field = DENSITY_FIELD[model]
+    def __init__(self, log: Log, model: ModelOptions, batch_model: BatchModelOptions, frequencies: bool,
+                 motion_model: str, states: np.ndarray, params: np.ndarray | None, basis: bool):
+        self.log, self.model, self.batch_model, self.motion_model = log, model, batch_model, motion_model
+        self.basis = basis
+        self.frequencies = frequencies
+        """Whether the oscillators are tried (``tune_axis_frequencies``)."""
+        self.field = DENSITY_FIELD[motion_model]
         self.p0 = params
-        self.X = StateLayout.from_options(replace(options, motion_model=model)).resize(states)
-        self.current = {"density": np.log(getattr(options, self.field)),
-                        "axis": np.log(np.asarray(options.process_axis_factors, float)),
-                        "force": np.log(options.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0,
-                        "freq": np.array(options.process_axis_frequencies_hz if model == "jerk" else (0.0, 0.0, 0.0),
-                                         dtype=float),
+        density = getattr(model if motion_model == "jerk" else batch_model, self.field)
+        self.current = {"density": np.log(density),
+                        "axis": np.log(np.asarray(model.process_axis_factors, float)),
+                        "force": np.log(model.specific_force_random_walk_mps2_per_sqrt_s), "scale": 0.0,
+                        "freq": np.array(model.process_axis_frequencies_hz if motion_model == "jerk"
+                                         else (0.0, 0.0, 0.0), dtype=float),
                         "freq_std": np.zeros(3), "amp": np.zeros(3)}
+        # the state layout of this motion model with the model given (which it checks: the oscillators need 'jerk')
+        given = SmootherOptions.from_groups(replace(model, motion_model=motion_model), batch_model)
+        self.X = StateLayout.from_options(given).resize(states)
         self.cache: dict = {}
         self.bases: dict = {}
         self.summed: dict = {}
         self.known: dict = {}  # evidence per setting at this linearisation: a search starts where the last one ended
         self.version = 0
 
+    def settings(self, c: dict) -> tuple[ModelOptions, BatchModelOptions]:
+        """The model and batch model of setting ``c`` (the jerk density is the model's, the snap density the
+        batch model's)."""
+        density = {self.field: float(np.exp(c["density"]))}
+        model = replace(self.model, motion_model=self.motion_model, **(density if self.motion_model == "jerk" else {}),
+                        process_axis_factors=tuple(float(v) for v in np.exp(c["axis"])),
+                        process_axis_frequencies_hz=tuple(float(v) for v in c["freq"]),
+                        specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
+        return model, (self.batch_model if self.motion_model == "jerk" else replace(self.batch_model, **density))
+
     def settings_options(self, c: dict) -> SmootherOptions:
-        return replace(self.options, motion_model=self.model, **{self.field: float(np.exp(c["density"]))},
-                       process_axis_factors=tuple(float(v) for v in np.exp(c["axis"])),
-                       process_axis_frequencies_hz=tuple(float(v) for v in c["freq"]),
-                       specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
+        """The options of the problems of setting ``c``: its model and batch model, which are all a problem reads
+        (the solve windows and the tuning are not the problem's)."""
+        return SmootherOptions.from_groups(*self.settings(c))
 
     def run(self, accel_noise: bool) -> Tuning:
         """(1) the density linearised at the start, the smoother solved with it; (2) linearised at that
@@ -634,11 +653,11 @@ class _NoiseSearch:
         for a in range(3):
             value = self.search("axis", 1e-5, 1e2, axis=a)
         value = self.search("force", 1e-3, 1e4)
-        if self.model == "jerk" and self.options.tune_axis_frequencies:
+        if self.motion_model == "jerk" and self.frequencies:
             value = self.search_frequencies(value)
         if accel_noise:
             value = self.search("scale", 1e-2, 1e3, step=np.log(1.5))
-        return Tuning(self.model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value),
+        return Tuning(self.motion_model, float(np.exp(current["density"])), float(np.exp(current["scale"])), float(value),
                       len(self.known), tuple(float(v) for v in np.exp(current["axis"])), float(np.exp(current["force"])),
                       tuple(float(v) for v in current["freq"]), tuple(float(v) for v in current["freq_std"]),
                       tuple(float(v) for v in current["amp"]))
@@ -774,14 +793,14 @@ def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = No
     x0 = initial(part, options)
     if not options.tune_process_noise:
         return make_problem(part, options, 1.0, x0[:, OMEGA]), x0
-    models = ("jerk", "snap") if options.tune_motion_model else None
     solved: list = []
     span = slice(0, len(part))
     if span_s is not None and part.times_s[-1] - part.times_s[0] > span_s:
         width = max(int(round(span_s * part.rate_hz)), 4)
         span = slice(*most_moving_span(x0[:, OMEGA_DOT], width))
-    tuning, tuned = tune(part.select(span), options, x0[span], models=models, accel_noise=options.tune_accel_noise,
-                         states_out=solved)
+    tuning, model, batch_model = tune(part.select(span), options.model, options.batch_model, options.tuning, x0[span],
+                                      states_out=solved)
+    tuned = SmootherOptions.from_groups(model, batch_model, options.batch, options.tuning)
     if tunings is not None:
         tunings.append(tuning)
     if tuned.motion_model != options.motion_model:
