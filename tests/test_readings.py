@@ -317,22 +317,30 @@ def test_the_stream_screening_waits_its_delay_and_no_longer():
     assert decided + len(stream.flush()) == len(log)
 
 
+def _spiky_log(rate_hz: float, samples: int, spikes: int, seed: int, stuck: int):
+    """(array, log, readings, rng): five triads in random motion, ``spikes`` readings off by 300 m/s² and one
+    channel stuck for ``stuck`` samples from a third of the log."""
+    from gfimu.array import random_array
+
+    array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
+    log = simulate("random3d", array=array, seed=4, rate_hz=rate_hz, duration_s=min(10.0, samples / rate_hz))
+    n = len(log)
+    rng = np.random.default_rng(seed)
+    y = log.accel_mps2.copy()
+    y[rng.integers(0, n, spikes), rng.integers(0, 15, spikes)] += 300.0
+    y[n // 3:n // 3 + stuck, 5] = y[n // 3, 5]
+    return array, log, y, rng
+
+
 @pytest.mark.parametrize("rate_hz", [62.5, 500.0])
 def test_a_logs_stream_screening_passes_clean_blocks_as_the_rule_would(rate_hz):
     """screen_stream passes the blocks whose neighbourhood the whole-log rule finds clean without running the rule
     on them; it gives the rows, decisions and runs of pushing the rows one by one through the rule."""
-    from gfimu.array import random_array
     from gfimu.readings import screen_stream
 
-    array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
-    log = simulate("random3d", array=array, seed=4, rate_hz=rate_hz, duration_s=min(10.0, 4000 / rate_hz))
+    array, log, y, _ = _spiky_log(rate_hz, 4000, 6, 9, int(0.5 * rate_hz))
     n = len(log)
-    rng = np.random.default_rng(9)
-    y = log.accel_mps2.copy()
-    y[rng.integers(0, n, 6), rng.integers(0, 15, 6)] += 300.0
     y[n // 2, 3] = np.nan
-    start = n // 3
-    y[start:start + int(0.5 * rate_hz), 5] = y[start, 5]
     log = log.replace(accel_mps2=y)
     fast, fast_result = screen_stream(log)
     rows, slow_result = _stream_screened(array, y, log.timestamps_ns, rate_hz)
@@ -347,16 +355,10 @@ def test_rows_given_at_once_are_screened_as_rows_pushed_one_by_one(rate_hz):
     """StreamScreen.extend (the rows of a log at once, as screen_stream gives them) decides at the rows where a push
     would: the same rows out, in the same batches' order, the same replaced readings and runs, the same gyroscope rows
     (those beyond range NaN and counted), also when extend and push alternate."""
-    from gfimu.array import random_array
     from gfimu.readings import GYRO_OUT_OF_RANGE_RADPS, StreamScreen
 
-    array = random_array(5, 0.05, noise_std_mps2=0.02, seed=3)
-    log = simulate("random3d", array=array, seed=4, rate_hz=rate_hz, duration_s=min(10.0, 6000 / rate_hz))
+    array, log, y, rng = _spiky_log(rate_hz, 6000, 8, 11, 40)
     n = len(log)
-    rng = np.random.default_rng(11)
-    y = log.accel_mps2.copy()
-    y[rng.integers(0, n, 8), rng.integers(0, 15, 8)] += 300.0
-    y[n // 3:n // 3 + 40, 5] = y[n // 3, 5]
     gyro = rng.normal(0.0, 1.0, (n, 3))
     gyro[rng.integers(0, n, 5), rng.integers(0, 3, 5)] = 2 * GYRO_OUT_OF_RANGE_RADPS
     t = log.timestamps_ns
