@@ -623,8 +623,7 @@ class StreamScreen:
 
     def push(self, timestamp_ns: int, accel_row, gyro_row=None) -> list[tuple]:
         n = len(self._times)
-        if n == self._accel.shape[0]:
-            self._accel = np.concatenate([self._accel, np.empty_like(self._accel)])
+        self._room(n + 1, n)
         self._accel[n] = np.asarray(accel_row, dtype=float).reshape(-1)
         self._times.append(int(timestamp_ns))
         if gyro_row is not None:
@@ -670,10 +669,7 @@ class StreamScreen:
             # a push decides once ``block`` rows wait past the delay and the buffer holds a scale window
             j = max(1, self._next + rule.block + rule.delay - newest, 2 * SCALE_HALF_WIDTH + 1 - n)
             j = min(j, total - i)
-            if n + j > self._accel.shape[0]:
-                grown = np.empty((max(2 * self._accel.shape[0], n + j), self._accel.shape[1]))
-                grown[:n] = self._accel[:n]
-                self._accel = grown
+            self._room(n + j, n)
             self._accel[n:n + j] = accel[i:i + j]
             self._times.extend(int(t) for t in timestamps_ns[i:i + j])
             self._gyro.extend([None] * j if gyro is None else list(gyro[i:i + j]))
@@ -682,6 +678,14 @@ class StreamScreen:
             if ready - self._next >= rule.block and n + j >= 2 * SCALE_HALF_WIDTH + 1:
                 out.extend(self._decide(ready))
         return out
+
+    def _room(self, size: int, kept: int) -> None:
+        """The buffer's array made to hold ``size`` rows (at least doubled when it grows), its first ``kept``
+        rows kept."""
+        if size > self._accel.shape[0]:
+            grown = np.empty((max(2 * self._accel.shape[0], size), self._accel.shape[1]))
+            grown[:kept] = self._accel[:kept]
+            self._accel = grown
 
     def _clean_reach(self, newest: int, most: int) -> int:
         """The most rows (up to ``most``) that can be added after row ``newest`` with the buffer, from its first
@@ -720,12 +724,8 @@ class StreamScreen:
         keep_old = max(0, newest - first)
         new_from = max(0, first - newest)
         size = keep_old + k - new_from
-        if size > self._accel.shape[0]:
-            grown = np.empty((2 * size, self._accel.shape[1]))
-            grown[:keep_old] = self._accel[n - keep_old:n]
-            self._accel = grown
-        else:
-            self._accel[:keep_old] = self._accel[n - keep_old:n]
+        self._accel[:keep_old] = self._accel[n - keep_old:n]
+        self._room(size, keep_old)
         self._accel[keep_old:size] = accel[new_from:]
         self._times = self._times[n - keep_old:] + [int(t) for t in times_ns[new_from:]]
         self._gyro = self._gyro[n - keep_old:] + ([None] * (k - new_from) if gyro is None else list(gyro[new_from:]))
