@@ -371,7 +371,8 @@ def test_restarts_are_called_for_against_the_blocks_own_noise_level(noise_factor
     block shows (the median cost over the median of χ² with n_axes - 9 degrees of freedom), never below the stated
     level. Readings with the stated noise: the level is 1 within the median's scatter and the estimate is the one of
     'stated'. Readings 5 times noisier than stated (a variance 25 times): the level is 25 within the scatter (up to
-    10 % more: at that noise q(ω) bends within the noise, and the costs are not quite χ²), a few samples restart where every one did against the stated level, and the estimate is as good."""
+    10 % more: at that noise q(ω) bends within the noise, and the costs are not quite χ²), a few samples restart
+    where every one did against the stated level, and the estimate is as good."""
     from gfimu.estimators.ml import _cost, _ProjectedModel
     from gfimu.simulate import SensorErrors, simulate
 

@@ -388,7 +388,8 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
                      robust=None, max_lag: int = MAX_LAG, window: int | None = None, process=None) -> np.ndarray:
     """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the log's residuals
     (the batch smoother's; module docstring): s² over the ``window`` samples centred on each row
-    (:func:`local_window` of the median degrees of freedom when None), ρ over the whole log. Rows with a non-finite residual do not count.
+    (:func:`local_window` of the median degrees of freedom when None), ρ over the whole log. Rows with a
+    non-finite residual do not count.
     ``process``: (jerk density (N − 1, 3) of each step per body axis, the driven oscillator's Ω (3,), steps [s]
     (N − 1,)) of the motion model the solution assumed (:func:`jerk_steps`), or None; given, ω's σ also follows
     the path's own trapezoid level over the same window (:func:`kinematic_shares`, :func:`trapezoid_level`)."""

@@ -404,8 +404,8 @@ class StartHold:
     evidence is first weighed; then at doubling spans, :meth:`due`). Of the current segment: ``deciding``
     (its first rows are being held), ``held`` ((timestamp_ns, raw sample, filtered state) of the rows held
     so far), ``next_check_ns`` (when the evidence is weighed next) and ``last_resolve`` ((timestamps, ω) of the
-    previous check's re-solve). Of every segment so far: ``starts`` (how its start was decided) and ``still_starts`` (the std of the prior ω = 0 of each
-    segment that started still)."""
+    previous check's re-solve). Of every segment so far: ``starts`` (how its start was decided) and
+    ``still_starts`` (the std of the prior ω = 0 of each segment that started still)."""
 
     def __init__(self, max_s: float, check_every_ns: int) -> None:
         self.max_s = max_s
