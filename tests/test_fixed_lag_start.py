@@ -93,3 +93,34 @@ def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
     hold.begin_segment()  # a new segment: held again, the record of every start kept
     assert hold.deciding and hold.next_check_ns is None and hold.last_resolve is None and len(hold.starts) == 1
     assert not StartHold(max_s=0.0, check_every_ns=500 * ms).deciding  # no hold (the gtsam engine)
+
+
+def test_a_start_released_from_the_stretchs_batch_solution_weighs_no_evidence():
+    """A consistent first stretch whose process noise is tuned comes out as its batch solution, which also
+    releases the rows held while the stretch is streamed: no evidence is weighed meanwhile (each check would
+    solve the held stretch five times for rows the batch solution replaces). The start is recorded as decided
+    from the batch solution (no evidence figure), and the rows are the batch solution's."""
+    from gfimu.smoother.stream import fixed_lag
+
+    log = simulate("random3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=500.0, duration_s=5.0, seed=3)
+    sm = FixedLagEstimator().smoother(log.array, 500.0)
+    checks = []
+    original = fixed_lag.FixedLagSmoother._start_evidence
+
+    def counted(self):
+        checks.append(len(self._hold.held))
+        return original(self)
+
+    fixed_lag.FixedLagSmoother._start_evidence = counted
+    try:
+        out = []
+        for i in range(len(log)):
+            out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
+        out.extend(sm.flush())
+    finally:
+        fixed_lag.FixedLagSmoother._start_evidence = original
+    np.testing.assert_array_equal([s.timestamp_ns for s in out], log.timestamps_ns)
+    assert sm.starts and np.isnan(sm.starts[0]["evidence_nats"]) and not sm.starts[0]["open"]
+    assert checks == []
+    w = np.array([s.omega_b_radps for s in out])
+    assert _rmse(w, log.truth.omega_b_radps) < 0.1

@@ -403,8 +403,9 @@ class StartHold:
     Settings: ``max_s`` (the longest hold [s]; 0: rows are never held) and ``check_every_ns`` (when the
     evidence is first weighed; then at doubling spans, :meth:`due`). Of the current segment: ``deciding``
     (its first rows are being held), ``held`` ((timestamp_ns, raw sample, filtered state) of the rows held
-    so far), ``next_check_ns`` (when the evidence is weighed next) and ``last_resolve`` ((timestamps, ω) of the
-    previous check's re-solve). Of every segment so far: ``starts`` (how its start was decided) and
+    so far), ``next_check_ns`` (when the evidence is weighed next), ``last_resolve`` ((timestamps, ω) of the
+    previous check's re-solve) and ``waiting_for_batch`` (the rows held are to be released from a batch
+    solution of the stretch: no check meanwhile). Of every segment so far: ``starts`` (how its start was decided) and
     ``still_starts`` (the std of the prior ω = 0 of each segment that started still)."""
 
     def __init__(self, max_s: float, check_every_ns: int) -> None:
@@ -416,6 +417,7 @@ class StartHold:
 
     def begin_segment(self) -> None:
         """A new segment: its first rows are held (when holding at all), nothing held yet."""
+        self.waiting_for_batch = False
         self.deciding = self.max_s > 0
         self.held: list = []
         self.next_check_ns: int | None = None
@@ -837,8 +839,14 @@ class FixedLagSmoother:
         if batch is not None and final:  # the segment ends here: the batch solution is all there is to say
             return batch
         out = []
-        for sample in samples:
-            out.extend(self._process(sample))
+        # with the stretch's batch solution, the rows held while it is streamed are released from it
+        # (:meth:`_start_from_batch`: the batch smoother saw the whole stretch): no evidence is weighed meanwhile
+        self._hold.waiting_for_batch = batch is not None
+        try:
+            for sample in samples:
+                out.extend(self._process(sample))
+        finally:
+            self._hold.waiting_for_batch = False
         if batch is not None:
             out = batch[:len(out) + self._start_from_batch(batch)]
         return out
@@ -1309,7 +1317,7 @@ class FixedLagSmoother:
         """While the start of the segment is held (its rows past the lag kept back): ``max(lag_s, 0.5 s)``
         after the first held row, then at doubling spans (:meth:`StartHold.due`), the evidence for the branch
         of ω is weighed (:meth:`_release_start`)."""
-        if not self._hold.held or not self._hold.due(newest_ns):
+        if not self._hold.held or self._hold.waiting_for_batch or not self._hold.due(newest_ns):
             return []
         return self._release_start(final=False)
 
