@@ -226,3 +226,34 @@ def test_running_factor_is_causal_and_local():
     tol = 4 * math.sqrt(2 / (3 * W))  # relative std of s² over W samples' white residuals: √(2/ν), ν = 3 W
     assert np.all(np.abs(s2[W:700] - 1.0) < tol)  # before the change: unaffected by what comes later
     assert np.all(np.abs(s2[700 + W:] / 25.0 - 1.0) < tol)  # W samples after it: the new level alone
+
+
+def test_the_batch_trapezoid_level_is_the_residuals_less_the_readings_part_over_the_rows_own():
+    """calibrated_sigma with the motion model's steps: over each row's window, λ = (Σ r̂² − s² Σ b) / Σ a
+    (trapezoid_level; a the trapezoid rows' own part, b the readings'), and ω's factor √(s² τ (1 − share) + λ share);
+    on a path whose trapezoid residuals lie between the two parts, so that λ is neither 0 nor 1."""
+    rng = np.random.default_rng(11)
+    n, h, q = 1500, 0.01, 30.0
+    dt = np.full(n - 1, h)
+    density = np.full((n - 1, 3), q)
+    steps = ss.jerk_steps(density, np.zeros(3), dt)
+    d = np.cumsum(rng.normal(0.0, math.sqrt(q * q * h), (n, 3)), axis=0)
+    w = np.vstack([np.zeros(3), np.cumsum(0.5 * h * (d[1:] + d[:-1])
+                                          + math.sqrt(0.3 * steps[0][0, 0]) * rng.normal(size=(n - 1, 3)), axis=0)])
+    X = np.hstack([w, d, rng.normal(0, 5, (n, 3))])
+    y = readings(X, rng.normal(0, 0.01, (n, 12)))
+    sd = np.full((n, 9), 1e6)  # far wider than one sample's: a span of 0, τ(0) = 1
+    got = ss.calibrated_sigma(ARRAY, y, X, sd, np.full(12, 0.01), process=(density, np.zeros(3), dt)) / sd
+    p, rank, single = ss.parity(ARRAY, y, X, np.full(12, 0.01))
+    W = ss.local_window(float(np.median(p.shape[1] - rank)))
+    s2 = ss.local_sums(np.sum(p * p, axis=1), W) / ss.local_sums(p.shape[1] - rank, W)
+    share, a, b = ss.kinematic_shares(single, np.vstack([steps[0], steps[0][-1:]]), np.vstack([steps[1], steps[1][-1:]]),
+                                      np.append(dt, h))
+    r = ss.trapezoid_residuals(X, steps)
+    sums = [ss.local_sums(np.append(v, 0.0), W) for v in (np.sum(r * r, axis=1), a[:-1].sum(axis=1), b[:-1].sum(axis=1))]
+    level = np.clip((sums[0] - s2 * sums[2]) / sums[1], 0.0, 1.0)
+    mid = slice(W, n - W)
+    assert 0.05 < np.median(level[mid]) < 0.95  # neither end of the clip: the order of the parts matters
+    want = np.sqrt(s2[:, None] * (1.0 - share) + level[:, None] * share)
+    np.testing.assert_allclose(got[mid, 0:3], want[mid], rtol=1e-9)
+    np.testing.assert_allclose(got[mid, 3:9], np.sqrt(s2)[mid, None] * np.ones(6), rtol=1e-9)

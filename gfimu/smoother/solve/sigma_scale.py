@@ -426,8 +426,8 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
         fine = np.all(np.isfinite(r), axis=1) & ok[:-1] & ok[1:]
         r2 = np.append(np.where(fine, np.sum(np.where(fine[:, None], r, 0.0) ** 2, axis=1), 0.0), 0.0)
         use = np.append(fine, False)
-        level = trapezoid_level(local_sums(r2, window), s2 * local_sums(np.where(use, b.sum(axis=1), 0.0), window),
-                                local_sums(np.where(use, a.sum(axis=1), 0.0), window), 1.0)
+        level = trapezoid_level(local_sums(r2, window), local_sums(np.where(use, a.sum(axis=1), 0.0), window),
+                                local_sums(np.where(use, b.sum(axis=1), 0.0), window), s2)
         kinematic = (share, level[:, None])
     out[:, :9] = out[:, :9] * scale_factors(out[:, :9], single, s2[:, None], tau, kinematic)
     return out
