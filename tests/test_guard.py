@@ -60,6 +60,19 @@ def case():
     return log, MLEstimator().estimate_motion(log), off, on
 
 
+def _logs_given(monkeypatch, method: str) -> list:
+    """The lengths of the logs given to ``MLEstimator.<method>`` from now on (the method still runs)."""
+    calls = []
+    real = getattr(MLEstimator, method)
+
+    def counted(self, lg, *args, **kwargs):
+        calls.append(len(lg))
+        return real(self, lg, *args, **kwargs)
+
+    monkeypatch.setattr(MLEstimator, method, counted)
+    return calls
+
+
 def _error(motion, log, sl=slice(None)):
     return np.linalg.norm(motion.omega_b_radps[sl] - log.truth.omega_b_radps[sl], axis=1)
 
@@ -240,14 +253,7 @@ def test_a_short_clean_log_is_fitted_per_sample_once(monkeypatch, case):
     """On a log short enough that the model check fits every sample (here 750 < 2 × CHECK_SAMPLES), the guard
     takes that fit instead of computing it again, and finds what it finds with a fit of its own."""
     log, ml, _, on = case
-    calls = []
-    real = MLEstimator.estimate_motion
-
-    def counted(self, lg, *args, **kwargs):
-        calls.append(len(lg))
-        return real(self, lg, *args, **kwargs)
-
-    monkeypatch.setattr(MLEstimator, "estimate_motion", counted)
+    calls = _logs_given(monkeypatch, "estimate_motion")
     est = BatchSmootherEstimator().estimate(log)
     assert calls == [len(log)]
     assert est.report.guard == on.report.guard
@@ -320,14 +326,7 @@ def test_a_long_clean_log_is_fitted_per_sample_once_beside_the_check(monkeypatch
     y = (np.hstack([f, wd, quadratic_terms(w)]) @ arr.structure_matrix().T
          + np.random.default_rng(3).normal(0.0, 0.07, (t.size, arr.n_axes)))
     log = Log(arr, np.round(t * 1e9).astype(np.int64), y, source="long")
-    calls = []
-    real = MLEstimator.started
-
-    def counted(self, lg, *args, **kwargs):
-        calls.append(len(lg))
-        return real(self, lg, *args, **kwargs)
-
-    monkeypatch.setattr(MLEstimator, "started", counted)
+    calls = _logs_given(monkeypatch, "started")
     est = BatchSmootherEstimator(tune_process_noise=False).estimate(log)
     assert est.report.model_check.consistent and est.report.per_sample is not None
     assert calls == [len(log), CHECK_SAMPLES + 250]  # the whole log's started, then the subsample's: no third
