@@ -299,10 +299,10 @@ class _WindowOutcome:
         noise = None if sd is None else (res.problem or problem).base_noise()[0][keep_win]
         return cls(res.states, keep_win, sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
                    tunings, res.iterations, float(res.cost), bool(res.converged), noise,
-                   None if sd is None else _jerk_steps(res.problem or problem, keep_win))
+                   None if sd is None else _process_densities(res.problem or problem, keep_win))
 
 
-def _jerk_steps(problem: SmootherProblem, keep: slice) -> tuple | None:
+def _process_densities(problem: SmootherProblem, keep: slice) -> tuple | None:
     """:attr:`_WindowOutcome.process` of the rows ``keep`` of ``problem``'s solution."""
     motion = problem.noise.motion
     if motion.snap_cov is not None or problem.n < 2:
