@@ -154,6 +154,7 @@ def test_chain_step_is_the_numpy_chain(n_branches):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-14)
         np.testing.assert_array_equal(got[2], want[2])
         np.testing.assert_allclose(got[3], want[3], rtol=0, atol=1e-12)
+        assert got[4] == int(np.argmin(got[3])) and got[3][got[4]] == 0.0  # the lowest branch, its cost 0
 
 
 @pytest.mark.parametrize("scenario, noise", [pytest.param("random3d", 0.07, marks=pytest.mark.slow), ("reversal", 0.02)])

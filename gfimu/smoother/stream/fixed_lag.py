@@ -79,6 +79,7 @@ through the smoother and returns one row per sample.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections import deque
@@ -377,6 +378,11 @@ class StreamConfig:
         """The nominal step [ns]."""
         return 1e9 / self.rate_hz
 
+    @functools.cached_property
+    def lag_ns(self) -> int:
+        """The lag [ns], rounded to the nanosecond."""
+        return int(round(self.lag_s * 1e9))
+
 
 @dataclass
 class Segment:
@@ -384,8 +390,8 @@ class Segment:
     :class:`WindowFilter` or a :class:`GtsamWindow`; None while ``warmup`` gathers the samples the first states
     are initialised on), ``window`` ((index, timestamp_ns) of the states not yet given out, oldest first),
     ``raw`` ((timestamp_ns, accel, gyro) of the same samples, to solve the window again), ``k`` (the index of
-    the newest state), ``prev`` ((timestamp_ns, ω, ω̇, f) of the newest state, filtered) and ``prev_sample``
-    (its sample)."""
+    the newest state), ``prev`` ((timestamp_ns, ω, ω̇, f) of the newest state, filtered; ``prev_x`` the
+    one array [ω, ω̇, f] those are views of) and ``prev_sample`` (its sample)."""
 
     engine: WindowFilter | GtsamWindow | None = None
     window: deque = field(default_factory=deque)
@@ -393,6 +399,7 @@ class Segment:
     warmup: list = field(default_factory=list)
     k: int = -1
     prev: tuple | None = None
+    prev_x: np.ndarray | None = None
     prev_sample: tuple | None = None
 
 
@@ -1208,7 +1215,7 @@ class FixedLagSmoother:
         seg.k += 1
         k = seg.k
         try:
-            step = self._step(seg.prev_sample, sample, np.concatenate(seg.prev[1:]), self._choice.jerk_factor)
+            step = self._step(seg.prev_sample, sample, seg.prev_x, self._choice.jerk_factor)
             seg.engine.advance(k, step, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro), prev=seg.prev[1:])
             seg.engine.commit()
             self._follow_sign(k, t_ns)
@@ -1257,8 +1264,9 @@ class FixedLagSmoother:
     def _remember_newest(self) -> None:
         seg = self._segment
         k, t_ns = seg.window[-1]
-        w, dw, f = self._values_of(k, t_ns)
-        seg.prev = (t_ns, w, dw, f)
+        x = self._values_of(k, t_ns)
+        seg.prev = (t_ns, x[0:3], x[3:6], x[6:9])
+        seg.prev_x = x
         seg.prev_sample = seg.raw[-1]
 
     def _values_of(self, k: int, t_ns: int):
@@ -1266,8 +1274,7 @@ class FixedLagSmoother:
             x = self._segment.engine.mean(k)
         except FilterFailure as err:
             raise self._failure(t_ns, err, "could not solve the state") from err
-        x = np.array(x, dtype=float)  # one copy, its three parts views of it
-        return x[0:3], x[3:6], x[6:9]
+        return np.array(x, dtype=float)  # one copy: ω, ω̇ and f are views of it
 
     def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
         k, t_ns = entry
@@ -1293,7 +1300,7 @@ class FixedLagSmoother:
         """States at or before newest - lag: final now, marginalised at the next update."""
         window, raw, engine = self._segment.window, self._segment.raw, self._segment.engine
         newest_ns = window[-1][1]
-        cutoff_ns = newest_ns - int(round(self.config.lag_s * 1e9)) + 1000  # 1 µs tolerance
+        cutoff_ns = newest_ns - self.config.lag_ns + 1000  # 1 µs tolerance
         out = []
         if len(window) < 2 or window[0][1] > cutoff_ns:
             return self._hold_start(newest_ns) if self._hold.deciding else out

@@ -384,7 +384,8 @@ def update_window(AG, P, T, u, W, mean, var, cross):
 @njit(cache=True, nogil=True)
 def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
     """One step of the streaming sign chain: the newest state's (ω, ω̇) on each branch ``(cur_w, cur_dw)``
-    (4, 3), the best earlier branch for each later one and the chain's new costs (lowest 0), from the
+    (4, 3), the best earlier branch for each later one, the chain's new costs (lowest 0) and the branch of the
+    lowest (the first of equals, as ``argmin``), from the
     earlier state's branches ``prev_w``, ``prev_dw`` (4, 3) and costs ``cost`` (4,): the Cauchy loss of
     scale ``c2`` (c²) of each trapezoid misfit ``ω_b - ω_a - h/2 (ω̇_a + ω̇_b)``."""
     nb = cost.shape[0]
@@ -410,10 +411,14 @@ def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
             if total < best:
                 best, arg = total, a
         back[b], new[b] = arg, best
-    low = new.min()
+    lowest = 0
+    for b in range(1, nb):
+        if new[b] < new[lowest]:
+            lowest = b
+    low = new[lowest]
     for b in range(nb):
         new[b] -= low
-    return cur_w, cur_dw, back, new
+    return cur_w, cur_dw, back, new, lowest
 
 
 @njit(cache=True, nogil=True)

@@ -192,7 +192,8 @@ class LocalDensity:
         if self.available:
             self._pinv_dw = np.linalg.pinv(S)[3:6]
             self._c_dw = float(np.sum(np.diag(np.linalg.pinv(S.T @ S))[3:6]))
-        self._steps: deque = deque()  # (t_ns, step power, noise power) of the last period
+        self._period_ns = int(self.period_s * 1e9)
+        self._steps: deque = deque()  # (t_ns, step power, noise power) of the last period (Python floats)
         self._sum_steps = 0.0
         self._sum_noise = 0.0
         self._prev = None  # (t_ns, ω̇, noise variance)
@@ -206,7 +207,7 @@ class LocalDensity:
         if not self.available:
             return None
         dw = self._pinv_dw @ y
-        var = self._c_dw * noise_var_mps2  # summed over the three axes
+        var = self._c_dw * float(noise_var_mps2)  # summed over the three axes
         prev, self._prev = self._prev, (t_ns, dw, var)
         if prev is None:
             return None
@@ -215,16 +216,17 @@ class LocalDensity:
             return None
         d = dw - prev[1]
         step, noise = float(d @ d) / h, (var + prev[2]) / h
-        self._steps.append((t_ns, step, noise))
-        self._sum_steps += step
-        self._sum_noise += noise
-        cutoff = t_ns - int(self.period_s * 1e9)
-        while self._steps and self._steps[0][0] <= cutoff:
-            _, s0, n0 = self._steps.popleft()
-            self._sum_steps -= s0
-            self._sum_noise -= n0
-        n = len(self._steps)
-        mean_steps, mean_noise = max(self._sum_steps, 0.0) / n, max(self._sum_noise, 0.0) / n
+        steps = self._steps
+        steps.append((t_ns, step, noise))
+        sum_steps, sum_noise = self._sum_steps + step, self._sum_noise + noise
+        cutoff = t_ns - self._period_ns
+        while steps and steps[0][0] <= cutoff:
+            _, s0, n0 = steps.popleft()
+            sum_steps -= s0
+            sum_noise -= n0
+        self._sum_steps, self._sum_noise = sum_steps, sum_noise
+        n = len(steps)
+        mean_steps, mean_noise = max(sum_steps, 0.0) / n, max(sum_noise, 0.0) / n
         self.resolved = mean_steps > RESOLVED_FACTOR * mean_noise
         excess = max(mean_steps - mean_noise, mean_noise)
         return math.sqrt(excess / 3.0)
@@ -290,15 +292,14 @@ class StreamSignChain:
         # from branch a (at k-1) to branch b (at k): the Cauchy loss of the trapezoid's misfit, the lowest
         # total kept per b (only the differences matter, and they stay bounded); the kernel reads ω and ω̇
         # and keeps nothing of them
-        cur_w, cur_dw, back, cost = _chain_step(prev[2], prev[3], omega, omega_dot, self.normal,
-                                                (t_ns - prev[1]) * 1e-9, c2, self._cost)
+        cur_w, cur_dw, back, cost, best = _chain_step(prev[2], prev[3], omega, omega_dot, self.normal,
+                                                      (t_ns - prev[1]) * 1e-9, c2, self._cost)
         self._cost = cost
         self._prev = (k, t_ns, cur_w, cur_dw)
         backs = self._back
         backs.append((k, back))
         while len(backs) > self.window or (backs and backs[0][0] <= oldest_k):
             backs.popleft()
-        best = int(cost.argmin())
         if best == 0 or not float(cost[best]) + self.margin * c2 < float(cost[0]):
             return None
         # the best path's last run on branch `best` (within the window) moves onto it
