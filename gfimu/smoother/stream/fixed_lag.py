@@ -81,6 +81,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 import warnings
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -401,6 +402,19 @@ class Segment:
     prev: tuple | None = None
     prev_x: np.ndarray | None = None
     prev_sample: tuple | None = None
+
+
+def _solved_from(problem, starts: list) -> list:
+    """``solve(problem, x0)`` from each start, in threads on the machine's cores (the solves are independent
+    and numpy and LAPACK run without the interpreter's lock on a stretch's arrays): the same solutions as one
+    after the other, in the order of ``starts``."""
+    cores = min(len(starts), os.cpu_count() or 1)
+    if cores < 2:
+        return [solve(problem, x0) for x0 in starts]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(cores, thread_name_prefix="gfimu-start") as pool:
+        return list(pool.map(lambda x0: solve(problem, x0), starts))
 
 
 class StartHold:
@@ -1341,11 +1355,12 @@ class FixedLagSmoother:
         part = self._stretch_log(samples)
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
         problem = make_problem(part, replace(self.options, tune_process_noise=False), scale, X[:, OMEGA])
-        solutions = [solve(problem, X), solve(problem, initial_estimate(part, problem.options))]
+        starts = [X, initial_estimate(part, problem.options)]
         for kind in (1, 2, 3):
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)
-            solutions.append(solve(problem, Xb))
+            starts.append(Xb)
+        solutions = _solved_from(problem, starts)
         order = sorted(range(len(solutions)), key=lambda i: solutions[i].cost)
         best = solutions[order[0]]
         w = best.states[:, OMEGA]
