@@ -90,6 +90,53 @@ def test_the_model_changes_at_a_sample_fixed_by_the_data_not_by_the_clock(log, m
     np.testing.assert_array_equal(late, quick)
 
 
+def test_choices_made_in_a_process_of_their_own_give_the_rows_of_choices_in_a_thread(log, monkeypatch):
+    """The later choices are made in a forked process (where one may be forked): the same models at the same
+    samples, the same rows to the last bit, as when they are made in a thread of the stream's process."""
+    from gfimu.parallel import can_fork
+    from gfimu.smoother.stream import choice_worker
+
+    if not can_fork():
+        pytest.skip("no fork on this platform: the choices are made in a thread")
+    est = _estimator()
+    smoother = est.smoother(log.array, RATE_HZ)
+    in_process = []
+    for i in range(len(log)):
+        in_process += smoother.push(log.timestamps_ns[i], np.nan_to_num(log.accel_mps2[i], nan=0.0)).smoothed
+    process = smoother._worker.process
+    assert process is not None and process._process.is_alive()
+    in_process += smoother.close()
+    assert not process._process.is_alive()  # ended with the smoother
+    monkeypatch.setattr(choice_worker.ChoiceProcess, "start", classmethod(lambda cls, func: None))
+    threaded = est.smoother(log.array, RATE_HZ)
+    in_thread = []
+    for i in range(len(log)):
+        in_thread += threaded.push(log.timestamps_ns[i], np.nan_to_num(log.accel_mps2[i], nan=0.0)).smoothed
+    in_thread += threaded.close()
+    assert threaded._worker.process is None and len(threaded.models) == len(smoother.models) >= 4
+    assert [m.chosen_at_ns for m in threaded.models] == [m.chosen_at_ns for m in smoother.models]
+    np.testing.assert_array_equal(_rows(in_process), _rows(in_thread))
+
+
+def test_the_choice_process_answers_in_order_and_raises_what_a_request_raised():
+    from gfimu.parallel import can_fork
+    from gfimu.smoother.stream.choice_worker import ChoiceProcess
+
+    if not can_fork():
+        pytest.skip("no fork on this platform")
+    process = ChoiceProcess.start(lambda x: 1.0 / x)
+    process.submit(4.0)
+    assert process.result() == 0.25
+    process.submit(0.0)
+    with pytest.raises(ZeroDivisionError):
+        process.result()
+    process.submit(0.0)  # an answer left unread is read before the next request
+    process.submit(2.0)
+    assert process.result() == 0.5
+    process.close()
+    assert not process._process.is_alive()
+
+
 def test_a_choice_pending_at_the_end_is_used_before_the_window_is_flushed(log):
     """The stream ends 0.1 s after a choice was asked (before its sample): the choice is used at the end, the
     rows all come out, once each, in time order."""

@@ -83,6 +83,7 @@ import functools
 import math
 import os
 import warnings
+import weakref
 from collections import deque
 from dataclasses import dataclass, field, replace
 
@@ -95,6 +96,7 @@ from ...log import Log
 from ...motion import Motion
 from ...progress import progress as progress_bar
 from . import array_model as model
+from .choice_worker import ChoiceProcess, ForkedChoice
 from .window_filter import FilterFailure, WindowFilter
 from .gtsam_window import GtsamWindow
 from ..solve.banded import solve
@@ -404,6 +406,28 @@ class Segment:
     prev_sample: tuple | None = None
 
 
+def _history_arrays(samples) -> tuple:
+    """The history entries ``samples`` ([t_ns, accel, gyro, ML row or None]) as arrays to send to the choice's
+    process: timestamps, readings, gyro readings (None when any is missing: the stretch then goes without),
+    the indices of the entries whose ML row is known and those rows."""
+    times_ns = np.fromiter((s[0] for s in samples), dtype=np.int64, count=len(samples))
+    accel = np.vstack([s[1] for s in samples])
+    gyro = None if any(s[2] is None for s in samples) else np.vstack([s[2] for s in samples])
+    known = np.fromiter((i for i, s in enumerate(samples) if s[3] is not None), dtype=np.int64)
+    rows = np.vstack([samples[i][3] for i in known]) if known.size else None
+    return times_ns, accel, gyro, known, rows
+
+
+def _taken_back(answer, samples, previous):
+    """The model of a choice's ``answer`` (:meth:`FixedLagSmoother._chosen_in_process`) as a choice in a thread
+    gives it: its fresh ML rows kept in the history entries ``samples``, and the tuning of ``previous`` itself
+    where the model kept it (one tuning, not a copy of it per choice, in the report)."""
+    chosen, fresh, rows, kept = answer
+    for j, i in enumerate(fresh):
+        samples[i][3] = rows[j]
+    return replace(chosen, tuning=previous.tuning) if kept else chosen
+
+
 def _solved_from(problem, starts: list) -> list:
     """``solve(problem, x0)`` from each start, in threads on the machine's cores (the solves are independent
     and numpy and LAPACK run without the interpreter's lock on a stretch's arrays): the same solutions as one
@@ -415,6 +439,21 @@ def _solved_from(problem, starts: list) -> list:
 
     with ThreadPoolExecutor(cores, thread_name_prefix="gfimu-start") as pool:
         return list(pool.map(lambda x0: solve(problem, x0), starts))
+
+
+@dataclass
+class WorkerSlot:
+    """The process the stream's later model choices are made in (:class:`~.choice_worker.ChoiceProcess`),
+    forked when the first is asked for (``tried``); None where none may be forked. ``finalizer`` ends it
+    (with the smoother, or when the smoother is gone)."""
+
+    tried: bool = False
+    process: ChoiceProcess | None = None
+    finalizer: object = None
+
+    def close(self) -> None:
+        if self.finalizer is not None:
+            self.finalizer()
 
 
 class StartHold:
@@ -661,6 +700,7 @@ class FixedLagSmoother:
         self._signs = StreamSignChain(int(math.ceil(self.config.lag_s * rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
         self._clock = StreamClock(float(clock_reset_s))
+        self._worker = WorkerSlot()
         self.closed = False
         self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, options)
                        else None)
@@ -897,9 +937,40 @@ class FixedLagSmoother:
         if self._choice.pending is not None:
             return None
         samples, previous = list(samples), self.stream_model
+        swap_at = self._choice.accepted + self._choice.rules.delay_n
+        process = self._choice_process()
+        if process is not None:  # in a process of its own (:mod:`.choice_worker`)
+            request = (*_history_arrays(samples), previous, outgrown)
+            self._choice.pending = ForkedChoice(process, request, lambda answer: _taken_back(answer, samples, previous),
+                                                swap_at, outgrown)
+            return None
         self._choice.pending = PendingChoice(lambda: self._chosen_model(samples, previous, outgrown=outgrown)[0],
-                                             self._choice.accepted + self._choice.rules.delay_n, outgrown)
+                                             swap_at, outgrown)
         return None
+
+    def _choice_process(self) -> ChoiceProcess | None:
+        """The process the later choices are made in, forked at the first (None where none may be)."""
+        if self._worker.tried:
+            return self._worker.process
+        self._worker.tried = True
+        self._worker.process = ChoiceProcess.start(self._chosen_in_process)
+        if self._worker.process is not None:
+            self._worker.finalizer = weakref.finalize(self, self._worker.process.close)
+        return self._worker.process
+
+    def _chosen_in_process(self, request):
+        """In the choice's process: :meth:`_chosen_model` on a request of :func:`_history_arrays`; the model,
+        the per-sample ML rows the choice computed for samples that had none (their indices, the rows) and
+        whether the model kept the previous one's tuning."""
+        times_ns, accel, gyro, known, rows, previous, outgrown = request
+        samples = [[int(t), accel[i], None if gyro is None else gyro[i], None] for i, t in enumerate(times_ns)]
+        for j, i in enumerate(known):
+            samples[i][3] = rows[j]
+        chosen = self._chosen_model(samples, previous, outgrown=outgrown)[0]
+        had = set(known.tolist())
+        fresh = [i for i, entry in enumerate(samples) if entry[3] is not None and i not in had]
+        kept = previous is not None and chosen.tuning is not None and chosen.tuning is previous.tuning
+        return chosen, fresh, (np.vstack([samples[i][3] for i in fresh]) if fresh else None), kept
 
     def _swap_choice(self, final: bool = False) -> None:
         """The pending choice's model put in use when its sample has come (waiting for it when it is not
@@ -1096,6 +1167,7 @@ class FixedLagSmoother:
         out = self.flush()
         self.closed = True
         self._choice.buffer = []
+        self._worker.close()
         return out
 
     def __enter__(self) -> FixedLagSmoother:
@@ -1105,6 +1177,7 @@ class FixedLagSmoother:
         if not self.closed:
             self.closed = True
             self._choice.pending = None  # a choice still being made is not used
+            self._worker.close()
             self._start_segment()
 
     def _end_segment(self) -> tuple[StateEstimate, ...]:

@@ -25,6 +25,13 @@ def start() -> None:
         _thread.start()
 
 
+def wait() -> None:
+    """Until the loading started by :func:`start` has ended (at once when none was started): before a fork,
+    so that no lock of numba's is held in the child by a thread that is not there."""
+    if _thread is not None:
+        _thread.join()
+
+
 def _load() -> None:
     try:
         from ...estimators import ml_kernels
