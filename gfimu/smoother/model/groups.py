@@ -144,6 +144,13 @@ class FactorGroup:
         raise NotImplementedError
 
 
+def _contiguous(a: np.ndarray) -> np.ndarray:
+    """``a`` as a writable C-contiguous float array (a copy only where it is not one): the one array type
+    the compiled kernels are compiled for."""
+    a = np.ascontiguousarray(a, dtype=float)
+    return a if a.flags.writeable else a.copy()
+
+
 def unary_jacobian(problem, blocks: list[tuple[slice, np.ndarray]], rows: int, n: int) -> np.ndarray:
     """(n, rows, state size) Jacobian with the given (n, rows, 3) blocks at their state columns."""
     J = np.zeros((n, rows, problem.state_size))
@@ -295,6 +302,11 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         jg = np.zeros(r.shape + (problem.n_global,)) if problem.n_global else None
         return Term("unary", r, {"x": J}, jg)
 
+    compiled = True
+    """:meth:`accumulate` and :meth:`squared_norm` through the compiled kernels
+    (:mod:`gfimu.smoother.model.accel_kernels`: one pass over the samples); False: the numpy expressions
+    they replace (the tests' oracle). The two agree to rounding."""
+
     def accumulate(self, problem, states, params, diag, lower, grad):
         """Without per-sensor calibration: with whitening w_i of axis i, ``J_i = w_i [∂y_i/∂ω, c_i]``
         where ``c_i`` (the structure-matrix row over ``[ω̇, f]``) is constant, so ``JᵀJ`` is the
@@ -302,6 +314,8 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         over all samples) and ``Σ w_i² c_i c_iᵀ`` (constant unless the noise varies per sample)."""
         if self._calibrated(problem):
             return None
+        if self.compiled:
+            return self._accumulate_compiled(problem, states, diag, grad)
         rows = problem.all_rows
         r, white, products = self._all_axes(problem, states)
         n, axes = r.shape
@@ -325,6 +339,20 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         grad[:, OMEGA] += np.einsum("nai,na->ni", jw, r)
         return 0.5 * float(np.sum(r * r)), r.size
 
+    @staticmethod
+    def _accumulate_compiled(problem, states, diag, grad) -> tuple[float, int]:
+        """:meth:`accumulate` by :func:`gfimu.smoother.model.accel_kernels.accumulate`."""
+        from . import accel_kernels
+
+        accel = problem.noise.accel
+        white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
+        y = _contiguous(problem.log.accel_mps2)
+        sq = np.empty(y.shape[0])
+        accel_kernels.accumulate(_contiguous(states), y, _contiguous(problem.all_directions_b),
+                                 _contiguous(problem.all_positions_m), _contiguous(problem.all_rows),
+                                 _contiguous(white), diag, grad, sq)
+        return 0.5 * float(np.sum(sq)), y.size
+
     def whitened_residual(self, problem, states, params) -> np.ndarray:
         """(N, axes) whitened residuals, without the Jacobians."""
         if self._calibrated(problem):
@@ -334,6 +362,15 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
     def squared_norm(self, problem, states, params):
         if problem.n_global:
             return super().squared_norm(problem, states, params)
+        if self.compiled:
+            from . import accel_kernels
+
+            accel = problem.noise.accel
+            stds = accel.sigma[None, :] if accel.per_sample is None else accel.per_sample
+            y = _contiguous(problem.log.accel_mps2)
+            sq = np.empty(y.shape[0])
+            accel_kernels.squared_norm(_contiguous(states), y, _contiguous(problem.all_rows), _contiguous(stds), sq)
+            return float(np.sum(sq))
         X = states
         r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
                                                    problem.all_rows) - problem.log.accel_mps2

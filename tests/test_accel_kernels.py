@@ -1,0 +1,104 @@
+"""The compiled accelerometer rows of the batch smoother (gfimu.smoother.model.accel_kernels) against the
+numpy expressions they replace (``AccelerometerGroup.compiled = False``): the same JᵀJ, Jᵀr, cost and
+row count on random states, with one whitening for every sample and with per-sample noise, on a cube, on
+rotated triads (non-planar) and on the near-planar MIMU4444 board.
+
+Tolerances: each entry is a sum over the axes of products of whitened terms, summed in another order
+by the kernel, so the two differ by a few units of rounding of the largest term summed (relative
+~1e-16 each, times the axes); 1e-12 of the largest magnitude of the accumulated quantity leaves
+room for that and catches any wrong term (which moves entries by their own size)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from gfimu.array import cube_array, mimu4444_array, random_array
+from gfimu.simulate import simulate
+from gfimu.smoother.model.groups import AccelerometerGroup
+from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+
+pytest.importorskip("numba")
+
+REL = 1e-12
+
+
+ARRAYS = {
+    "cube": lambda: cube_array(0.05, 0.07),  # non-planar, axes along the body's
+    "random": lambda: random_array(5, 0.03, 0.07, seed=3),  # non-planar, each triad rotated
+    "mimu4444": lambda: mimu4444_array(0.05),  # (near-)planar: two layers 2 mm apart, as the recordings'
+}
+
+
+def _problem(array, per_sample: bool, attitude: bool = False):
+    log = simulate("random3d", array, rate_hz=400.0, duration_s=0.5, seed=7)
+    options = SmootherOptions()
+    if attitude:
+        options = replace(options, estimate_attitude=True)
+    problem = SmootherProblem(log, options)
+    rng = np.random.default_rng(9)
+    m = problem.state_size
+    states = rng.normal(scale=[4.0] * 3 + [40.0] * 3 + [8.0] * 3 + [0.5] * (m - 9), size=(len(log), m))
+    if per_sample:
+        sigma = problem.noise.accel.sigma * rng.uniform(0.5, 3.0, size=log.accel_mps2.shape)
+        problem = problem.with_noise(accel=problem.noise.accel.with_per_sample(sigma))
+    assert (problem.noise.accel.per_sample is not None) == per_sample
+    return problem, states
+
+
+def _both(group, problem, states):
+    out = {}
+    n, m = problem.n, problem.state_size
+    for compiled in (False, True):
+        g = replace_compiled(group, compiled)
+        diag, lower, grad = np.zeros((n, m, m)), np.zeros((n - 1, m, m)), np.zeros((n, m))
+        diag += 1.0  # added to, not overwritten
+        grad += 1.0
+        half, rows = g.accumulate(problem, states, np.zeros(problem.n_global), diag, lower, grad)
+        out[compiled] = diag, lower, grad, half, rows, g.squared_norm(problem, states, np.zeros(problem.n_global))
+    return out[False], out[True]
+
+
+def replace_compiled(group, compiled):
+    g = type(group)()
+    g.compiled = compiled
+    return g
+
+
+def _bounds(group, problem, states):
+    """Per entry, the magnitude of the terms summed into it: ``Σ_a |J_a,i| |J_a,j|`` for JᵀJ and
+    ``Σ_a |J_a,i| |e_a|`` for Jᵀe (from the numpy Jacobians, :meth:`AccelerometerGroup.terms`)."""
+    (term,) = group.terms(problem, states, np.zeros(problem.n_global))
+    aj, ae = np.abs(term.jac["x"]), np.abs(term.residual)
+    return np.swapaxes(aj, 1, 2) @ aj, np.einsum("nai,na->ni", aj, ae)
+
+
+def _check(problem, states):
+    group = problem.group(AccelerometerGroup)
+    (d0, l0, g0, h0, r0, s0), (d1, l1, g1, h1, r1, s1) = _both(group, problem, states)
+    bound_d, bound_g = _bounds(group, problem, states)
+    assert r1 == r0 == problem.n * problem.log.array.n_axes
+    assert np.all(np.abs(d1 - d0) <= REL * bound_d + 1e-15)  # (+ the 1.0 each entry started from)
+    assert np.all(np.abs(g1 - g0) <= REL * bound_g + 1e-15)
+    np.testing.assert_array_equal(l1, l0)  # (no ties between samples)
+    assert h1 == pytest.approx(h0, rel=REL)
+    assert s1 == pytest.approx(s0, rel=REL)
+    assert s1 == pytest.approx(2 * h1, rel=REL)
+    # only the [ω, ω̇, f] block is touched
+    np.testing.assert_array_equal(d1[:, 9:, :], 1.0)
+    np.testing.assert_array_equal(d1[:, :, 9:], 1.0)
+    np.testing.assert_array_equal(g1[:, 9:], 1.0)
+
+
+@pytest.mark.parametrize("array", sorted(ARRAYS))
+@pytest.mark.parametrize("per_sample", [False, True])
+def test_kernel_matches_numpy(array, per_sample):
+    _check(*_problem(ARRAYS[array](), per_sample))
+
+
+def test_kernel_matches_numpy_with_the_attitude():
+    problem, states = _problem(cube_array(0.05, 0.07), False, attitude=True)
+    assert problem.state_size > 9
+    _check(problem, states)
