@@ -159,3 +159,12 @@ def squared_norm(X, y, rows, stds, sq):
             e = (pred - y[k, a]) / stds[kw, a]
             s2 += e * e
         sq[k] = s2
+
+
+def warm() -> None:
+    """Both kernels loaded (from numba's cache, or compiled where it holds none): each called once on two
+    samples of one axis, with the argument types of every call (C-contiguous float arrays)."""
+    X, y, S, P, rows, white = np.zeros((2, 9)), np.zeros((2, 1)), np.ones((1, 3)), np.ones((1, 3)), np.ones((1, 12)), np.ones((2, 1))
+    sq = np.zeros(2)
+    accumulate(X, y, S, P, rows, white, np.zeros((2, 9, 9)), np.zeros((2, 9)), sq)
+    squared_norm(X, y, rows, white, sq)
