@@ -1,6 +1,6 @@
 """The compiled accelerometer rows of the batch smoother (gfimu.smoother.model.accel_kernels) against the
-numpy expressions they replace (``AccelerometerGroup.compiled = False``): the same JᵀJ, Jᵀr, cost and
-row count on random states, with one whitening for every sample and with per-sample noise, on a cube, on
+numpy expressions they replace (``AccelerometerGroup.compiled = False``): the same JᵀJ, Jᵀr, cost, row
+count and whitened residuals on random states, with one whitening for every sample and with per-sample noise, on a cube, on
 rotated triads (non-planar) and on the near-planar MIMU4444 board.
 
 Tolerances: each entry is a sum over the axes of products of whitened terms, summed in another order
@@ -61,6 +61,10 @@ def _both(group, problem, states):
     return out[False], out[True]
 
 
+def _residuals(group, problem, states):
+    return [replace_compiled(group, c).whitened_residual(problem, states, np.zeros(problem.n_global)) for c in (False, True)]
+
+
 def replace_compiled(group, compiled):
     g = type(group)()
     g.compiled = compiled
@@ -86,6 +90,11 @@ def _check(problem, states):
     assert h1 == pytest.approx(h0, rel=REL)
     assert s1 == pytest.approx(s0, rel=REL)
     assert s1 == pytest.approx(2 * h1, rel=REL)
+    # the whitened residuals w (h - y): rounding of the prediction's terms and the reading, times w
+    r0, r1 = _residuals(group, problem, states)
+    white = problem.noise.accel.whitening(r0.shape)
+    assert np.all(np.abs(r1 - r0) <= REL * (2.0 * white * np.abs(problem.log.accel_mps2) + np.abs(r0)))
+    assert float(np.sum(r1 * r1)) == pytest.approx(s0, rel=REL)
     # only the [ω, ω̇, f] block is touched
     np.testing.assert_array_equal(d1[:, 9:, :], 1.0)
     np.testing.assert_array_equal(d1[:, :, 9:], 1.0)
@@ -102,3 +111,14 @@ def test_kernel_matches_numpy_with_the_attitude():
     problem, states = _problem(cube_array(0.05, 0.07), False, attitude=True)
     assert problem.state_size > 9
     _check(problem, states)
+
+
+def test_preload_loads_the_kernels():
+    from gfimu.smoother.batch import preload
+    from gfimu.smoother.model import accel_kernels
+
+    preload.wait()  # nothing begun: returns at once
+    preload.start()
+    preload.wait()
+    for kernel in (accel_kernels.accumulate, accel_kernels.squared_norm, accel_kernels.whitened_residual):
+        assert len(kernel.signatures) >= 1

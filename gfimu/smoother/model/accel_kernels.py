@@ -13,7 +13,8 @@ as the oracle (``AccelerometerGroup.compiled = False``) that ``tests/test_accel_
 this kernel with; the two agree to rounding (the same products, summed in another order).
 
 :func:`squared_norm` is the whitened residuals' sum of squares alone (the cost the Levenberg-Marquardt
-step is accepted on, :meth:`AccelerometerGroup.squared_norm`).
+step is accepted on, :meth:`AccelerometerGroup.squared_norm`), :func:`whitened_residual` the residuals
+themselves (the robust re-weighting's, :meth:`AccelerometerGroup.whitened_residual`).
 
 Imported only where the batch smoother solves (numba's import is not paid by commands that do not);
 compiled on first use and cached on disk (numba's ``cache=True``).
@@ -161,10 +162,35 @@ def squared_norm(X, y, rows, stds, sq):
         sq[k] = s2
 
 
+@njit(cache=True, nogil=True)
+def whitened_residual(X, S, P, rows, y, white, out):
+    """The whitened residuals ``w (h(x) - y)`` (N, axes) into ``out``, ``h`` as :func:`accumulate` has it
+    (:meth:`AccelerometerGroup._all_axes <gfimu.smoother.model.groups.AccelerometerGroup._all_axes>`'s
+    first value; the arguments as :func:`accumulate`'s)."""
+    n, axes = y.shape
+    per_sample = white.shape[0] != 1 or n == 1
+    sr = np.empty(axes)
+    for a in range(axes):
+        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
+    for k in range(n):
+        w0, w1, w2 = X[k, 0], X[k, 1], X[k, 2]
+        d0, d1, d2 = X[k, 3], X[k, 4], X[k, 5]
+        f0, f1, f2 = X[k, 6], X[k, 7], X[k, 8]
+        ww = w0 * w0 + w1 * w1 + w2 * w2
+        kw = k if per_sample else 0
+        for a in range(axes):
+            ws = S[a, 0] * w0 + S[a, 1] * w1 + S[a, 2] * w2
+            wr = P[a, 0] * w0 + P[a, 1] * w1 + P[a, 2] * w2
+            pred = ((f0 * rows[a, 0] + f1 * rows[a, 1] + f2 * rows[a, 2])
+                    + (d0 * rows[a, 3] + d1 * rows[a, 4] + d2 * rows[a, 5]) + ws * wr - sr[a] * ww)
+            out[k, a] = (pred - y[k, a]) * white[kw, a]
+
+
 def warm() -> None:
-    """Both kernels loaded (from numba's cache, or compiled where it holds none): each called once on two
+    """The kernels loaded (from numba's cache, or compiled where it holds none): each called once on two
     samples of one axis, with the argument types of every call (C-contiguous float arrays)."""
     X, y, S, P, rows, white = np.zeros((2, 9)), np.zeros((2, 1)), np.ones((1, 3)), np.ones((1, 3)), np.ones((1, 12)), np.ones((2, 1))
     sq = np.zeros(2)
     accumulate(X, y, S, P, rows, white, np.zeros((2, 9, 9)), np.zeros((2, 9)), sq)
     squared_norm(X, y, rows, white, sq)
+    whitened_residual(X, S, P, rows, y, white, np.zeros((2, 1)))

@@ -303,7 +303,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         return Term("unary", r, {"x": J}, jg)
 
     compiled = True
-    """:meth:`accumulate` and :meth:`squared_norm` through the compiled kernels
+    """:meth:`accumulate`, :meth:`squared_norm` and :meth:`whitened_residual` through the compiled kernels
     (:mod:`gfimu.smoother.model.accel_kernels`: one pass over the samples); False: the numpy expressions
     they replace (the tests' oracle). The two agree to rounding."""
 
@@ -357,6 +357,17 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         """(N, axes) whitened residuals, without the Jacobians."""
         if self._calibrated(problem):
             return self.term(problem, states, params).residual
+        if self.compiled:
+            from . import accel_kernels
+
+            accel = problem.noise.accel
+            white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
+            y = _contiguous(problem.log.accel_mps2)
+            out = np.empty(y.shape)
+            accel_kernels.whitened_residual(_contiguous(states), _contiguous(problem.all_directions_b),
+                                            _contiguous(problem.all_positions_m), _contiguous(problem.all_rows), y,
+                                            _contiguous(white), out)
+            return out
         return self._all_axes(problem, states)[0]
 
     def squared_norm(self, problem, states, params):
