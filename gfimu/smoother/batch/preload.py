@@ -1,4 +1,4 @@
-"""The batch smoother's compiled kernels (:mod:`gfimu.smoother.model.accel_kernels`) loaded in a background
+"""The batch smoother's compiled kernels (:mod:`gfimu.smoother.model.kernels`) loaded in a background
 thread while the command reads and screens its log.
 
 Loading them costs numba's import and LLVM's start (about half a second, most of it outside Python's lock)
@@ -32,8 +32,8 @@ def wait() -> None:
 
 def _load() -> None:
     try:
-        from ..model import accel_kernels
+        from ..model import kernels
 
-        accel_kernels.warm()
+        kernels.warm()
     except Exception:  # noqa: BLE001 - a preload is an optimisation: the kernels then load when first called
         return

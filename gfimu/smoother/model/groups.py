@@ -304,7 +304,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
 
     compiled = True
     """:meth:`accumulate`, :meth:`squared_norm` and :meth:`whitened_residual` through the compiled kernels
-    (:mod:`gfimu.smoother.model.accel_kernels`: one pass over the samples); False: the numpy expressions
+    (:mod:`gfimu.smoother.model.kernels`: one pass over the samples); False: the numpy expressions
     they replace (the tests' oracle). The two agree to rounding."""
 
     def accumulate(self, problem, states, params, diag, lower, grad):
@@ -341,14 +341,14 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
 
     @staticmethod
     def _accumulate_compiled(problem, states, diag, grad) -> tuple[float, int]:
-        """:meth:`accumulate` by :func:`gfimu.smoother.model.accel_kernels.accumulate`."""
-        from . import accel_kernels
+        """:meth:`accumulate` by :func:`gfimu.smoother.model.kernels.accumulate`."""
+        from . import kernels
 
         accel = problem.noise.accel
         white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
         y = _contiguous(problem.log.accel_mps2)
         sq = np.empty(y.shape[0])
-        accel_kernels.accumulate(_contiguous(states), y, _contiguous(problem.all_directions_b),
+        kernels.accumulate(_contiguous(states), y, _contiguous(problem.all_directions_b),
                                  _contiguous(problem.all_positions_m), _contiguous(problem.all_rows),
                                  _contiguous(white), diag, grad, sq)
         return 0.5 * float(np.sum(sq)), y.size
@@ -358,13 +358,13 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         if self._calibrated(problem):
             return self.term(problem, states, params).residual
         if self.compiled:
-            from . import accel_kernels
+            from . import kernels
 
             accel = problem.noise.accel
             white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
             y = _contiguous(problem.log.accel_mps2)
             out = np.empty(y.shape)
-            accel_kernels.whitened_residual(_contiguous(states), _contiguous(problem.all_directions_b),
+            kernels.whitened_residual(_contiguous(states), _contiguous(problem.all_directions_b),
                                             _contiguous(problem.all_positions_m), _contiguous(problem.all_rows), y,
                                             _contiguous(white), out)
             return out
@@ -374,13 +374,13 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         if problem.n_global:
             return super().squared_norm(problem, states, params)
         if self.compiled:
-            from . import accel_kernels
+            from . import kernels
 
             accel = problem.noise.accel
             stds = accel.sigma[None, :] if accel.per_sample is None else accel.per_sample
             y = _contiguous(problem.log.accel_mps2)
             sq = np.empty(y.shape[0])
-            accel_kernels.squared_norm(_contiguous(states), y, _contiguous(problem.all_rows), _contiguous(stds), sq)
+            kernels.squared_norm(_contiguous(states), y, _contiguous(problem.all_rows), _contiguous(stds), sq)
             return float(np.sum(sq))
         X = states
         r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
@@ -575,6 +575,9 @@ class MotionModelGroup(FactorGroup):
     """
 
     motion = True
+    compiled = True
+    """:meth:`accumulate` (white jerk) through the compiled kernel (:func:`gfimu.smoother.model.kernels.white_jerk`:
+    one pass over the samples); False: the numpy expressions it replaces (the tests' oracle)."""
 
     name = "motion model"
     per_sample = False
@@ -677,6 +680,12 @@ class MotionModelGroup(FactorGroup):
             return None
         W, D = OMEGA, OMEGA_DOT
         wb = self._white_jerk_weights(problem)
+        if self.compiled:
+            from . import kernels
+
+            e1, e2 = np.empty((problem.n - 1, 3)), np.empty((problem.n - 1, 3))
+            kernels.white_jerk(_contiguous(states), _contiguous(problem.dt_s), _contiguous(wb), diag, lower, grad, e1, e2)
+            return 0.5 * float(np.sum(e1 * e1) + np.sum(e2 * e2)), e1.size + e2.size
         t, u = wb[:, 0:3], wb[:, 3:6]
         h = problem.dt_s[:, None]
         e1, e2 = self._white_jerk_rows(problem, states, wb)

@@ -1,4 +1,4 @@
-"""Compiled accelerometer rows of the batch smoother's normal equations (:mod:`gfimu.smoother.solve.banded`).
+"""Compiled rows of the batch smoother's normal equations (:mod:`gfimu.smoother.solve.banded`).
 
 :meth:`AccelerometerGroup.accumulate <gfimu.smoother.model.groups.AccelerometerGroup.accumulate>` without
 per-sensor calibration adds, for every sample k and axis a with whitening w (``1 / σ``), the whitened
@@ -9,12 +9,17 @@ residual ``e = w (h_a(x_k) - y_ka)`` of the accelerometer equation (Ho & Lin 200
 the sample's block ``JᵀJ`` and gradient ``Jᵀe``. In numpy that is a dozen whole-array operations through
 (N, axes, 3) temporaries; :func:`accumulate` makes one pass over the samples instead, each sample's
 9 × 9 block summed over its axes in registers and written once. The numpy expressions stay in the group
-as the oracle (``AccelerometerGroup.compiled = False``) that ``tests/test_accel_kernels.py`` compares
+as the oracle (``AccelerometerGroup.compiled = False``) that ``tests/test_model_kernels.py`` compares
 this kernel with; the two agree to rounding (the same products, summed in another order).
 
 :func:`squared_norm` is the whitened residuals' sum of squares alone (the cost the Levenberg-Marquardt
 step is accepted on, :meth:`AccelerometerGroup.squared_norm`), :func:`whitened_residual` the residuals
 themselves (the robust re-weighting's, :meth:`AccelerometerGroup.whitened_residual`).
+
+:func:`white_jerk` is the white-jerk motion model's rows (:meth:`MotionModelGroup.accumulate
+<gfimu.smoother.model.groups.MotionModelGroup.accumulate>`): the trapezoid and ω̇ random-walk rows of every
+step added into the two samples' blocks and the block between them, without numpy's fancy-indexed
+updates of the whole window, each entry by the same operations in the same order.
 
 Imported only where the batch smoother solves (numba's import is not paid by commands that do not);
 compiled on first use and cached on disk (numba's ``cache=True``).
@@ -186,6 +191,57 @@ def whitened_residual(X, S, P, rows, y, white, out):
             out[k, a] = (pred - y[k, a]) * white[kw, a]
 
 
+@njit(cache=True, nogil=True)
+def white_jerk(X, h, wb, diag, lower, grad, e1, e2):
+    """:meth:`MotionModelGroup.accumulate <gfimu.smoother.model.groups.MotionModelGroup.accumulate>` (white
+    jerk) sample by sample: the whitened rows of every step k (``X`` (N, ≥ 6) the states ``[ω, ω̇, ...]``,
+    ``h`` (N-1,) the steps [s], ``wb`` (N-1, 6) the rows' whitening) into ``e1`` (trapezoid) and ``e2`` (ω̇
+    random walk), each (N-1, 3), and their ``JᵀJ`` and ``Jᵀe`` added into ``diag``, ``lower`` and ``grad``.
+    Each entry gets the same terms by the same operations in the same order as the numpy expressions (the
+    step that starts at the sample, then the one that ends there), so the two agree to the last bit
+    wherever the compiler, like numpy, does not fuse a product and a sum."""
+    n = X.shape[0]
+    for k in range(n - 1):
+        hh = 0.5 * h[k]
+        for a in range(3):
+            e1[k, a] = (X[k + 1, a] - X[k, a] - hh * (X[k, 3 + a] + X[k + 1, 3 + a])) * wb[k, a]
+            e2[k, a] = (X[k + 1, 3 + a] - X[k, 3 + a]) * wb[k, 3 + a]
+    for k in range(n):
+        if k < n - 1:  # the step from sample k: its first sample's blocks, and the block tying k+1 to k
+            hh = 0.5 * h[k]
+            for a in range(3):
+                d = 3 + a
+                t, u = wb[k, a], wb[k, d]
+                t2, u2 = t * t, u * u
+                t2h = hh * t2
+                t2hh = hh * t2h
+                diag[k, a, a] += t2
+                diag[k, a, d] += t2h
+                diag[k, d, a] += t2h
+                diag[k, d, d] += t2hh + u2
+                lower[k, a, a] -= t2
+                lower[k, a, d] -= t2h
+                lower[k, d, a] += t2h
+                lower[k, d, d] += t2hh - u2
+                grad[k, a] -= t * e1[k, a]
+                grad[k, d] -= hh * t * e1[k, a] + u * e2[k, a]
+        if k > 0:  # the step into sample k: its second sample's blocks
+            j = k - 1
+            hh = 0.5 * h[j]
+            for a in range(3):
+                d = 3 + a
+                t, u = wb[j, a], wb[j, d]
+                t2, u2 = t * t, u * u
+                t2h = hh * t2
+                t2hh = hh * t2h
+                diag[k, a, a] += t2
+                diag[k, a, d] -= t2h
+                diag[k, d, a] -= t2h
+                diag[k, d, d] += t2hh + u2
+                grad[k, a] += t * e1[j, a]
+                grad[k, d] += u * e2[j, a] - hh * t * e1[j, a]
+
+
 def warm() -> None:
     """The kernels loaded (from numba's cache, or compiled where it holds none): each called once on two
     samples of one axis, with the argument types of every call (C-contiguous float arrays)."""
@@ -194,3 +250,5 @@ def warm() -> None:
     accumulate(X, y, S, P, rows, white, np.zeros((2, 9, 9)), np.zeros((2, 9)), sq)
     squared_norm(X, y, rows, white, sq)
     whitened_residual(X, S, P, rows, y, white, np.zeros((2, 1)))
+    e = np.zeros((1, 3))
+    white_jerk(X, np.ones(1), np.ones((1, 6)), np.zeros((2, 9, 9)), np.zeros((1, 9, 9)), np.zeros((2, 9)), e, e.copy())
