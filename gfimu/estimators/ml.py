@@ -174,7 +174,8 @@ class MLEstimator(PerSampleEstimator):
 
     compiled = True
     """The Levenberg–Marquardt iterations through the compiled kernel (:mod:`gfimu.estimators.ml_kernels`)
-    in a process that has loaded numba already (the fixed-lag smoother's: its own kernels are compiled);
+    in a process that has loaded numba already (the fixed-lag smoother's and the batch smoother's: their
+    own kernels are compiled);
     False, or without numba loaded: the numpy expressions it replaces (the tests' oracle). The two agree
     to rounding."""
 

@@ -66,6 +66,7 @@ from ..solve.initialise import initial_attitude, initial_states, sign_chain
 from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from ..solve.restarts import branch_restarts
 from ..result import SmootherEstimator, unguarded
+from . import preload
 from ..solve.sigma_scale import calibrated_sigma
 from ..tuning.evidence import InitialStates, Tuning, make_problem, tuned_problem
 
@@ -168,6 +169,7 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
     # the options whole: the report's, and the model choice's, whose options the windows' problems and solves read
     options = SmootherOptions.from_groups(model, batch_model, batch, tuning)
     _check_smoothable(log, model, batch_model, batch.solver)
+    preload.wait()  # (the kernels' loading begun while the log was read is over before anything is forked)
     layout = StateLayout.from_options(options)
     attitude = layout.attitude
     windows = window_slices(len(log), log.rate_hz, batch.window_s, batch.overlap_s)
@@ -574,6 +576,13 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
 
     def applicable(self, array: SensorArray) -> str | None:
         return options_reason(array, self.model, self.batch_model, attitude_supported=True)
+
+    def preload(self) -> None:
+        """Begin loading the compiled kernels of the solve in the background (:mod:`gfimu.smoother.batch.preload`),
+        while the log is read and screened."""
+        from .preload import start
+
+        start()
 
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> Estimate:
         """The smoother on ``log`` (:func:`smooth`) before the guard, its report with this estimator's

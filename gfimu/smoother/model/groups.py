@@ -144,6 +144,13 @@ class FactorGroup:
         raise NotImplementedError
 
 
+def _contiguous(a: np.ndarray) -> np.ndarray:
+    """``a`` as a writable C-contiguous float array (a copy only where it is not one): the one array type
+    the compiled kernels are compiled for."""
+    a = np.ascontiguousarray(a, dtype=float)
+    return a if a.flags.writeable else a.copy()
+
+
 def unary_jacobian(problem, blocks: list[tuple[slice, np.ndarray]], rows: int, n: int) -> np.ndarray:
     """(n, rows, state size) Jacobian with the given (n, rows, 3) blocks at their state columns."""
     J = np.zeros((n, rows, problem.state_size))
@@ -295,6 +302,11 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         jg = np.zeros(r.shape + (problem.n_global,)) if problem.n_global else None
         return Term("unary", r, {"x": J}, jg)
 
+    compiled = True
+    """:meth:`accumulate`, :meth:`squared_norm` and :meth:`whitened_residual` through the compiled kernels
+    (:mod:`gfimu.smoother.model.kernels`: one pass over the samples); False: the numpy expressions
+    they replace (the tests' oracle). The two agree to rounding."""
+
     def accumulate(self, problem, states, params, diag, lower, grad):
         """Without per-sensor calibration: with whitening w_i of axis i, ``J_i = w_i [∂y_i/∂ω, c_i]``
         where ``c_i`` (the structure-matrix row over ``[ω̇, f]``) is constant, so ``JᵀJ`` is the
@@ -302,6 +314,8 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         over all samples) and ``Σ w_i² c_i c_iᵀ`` (constant unless the noise varies per sample)."""
         if self._calibrated(problem):
             return None
+        if self.compiled:
+            return self._accumulate_compiled(problem, states, diag, grad)
         rows = problem.all_rows
         r, white, products = self._all_axes(problem, states)
         n, axes = r.shape
@@ -325,15 +339,49 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         grad[:, OMEGA] += np.einsum("nai,na->ni", jw, r)
         return 0.5 * float(np.sum(r * r)), r.size
 
+    @staticmethod
+    def _accumulate_compiled(problem, states, diag, grad) -> tuple[float, int]:
+        """:meth:`accumulate` by :func:`gfimu.smoother.model.kernels.accumulate`."""
+        from . import kernels
+
+        accel = problem.noise.accel
+        white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
+        y = _contiguous(problem.log.accel_mps2)
+        sq = np.empty(y.shape[0])
+        kernels.accumulate(_contiguous(states), y, _contiguous(problem.all_directions_b),
+                                 _contiguous(problem.all_positions_m), _contiguous(problem.all_rows),
+                                 _contiguous(white), diag, grad, sq)
+        return 0.5 * float(np.sum(sq)), y.size
+
     def whitened_residual(self, problem, states, params) -> np.ndarray:
         """(N, axes) whitened residuals, without the Jacobians."""
         if self._calibrated(problem):
             return self.term(problem, states, params).residual
+        if self.compiled:
+            from . import kernels
+
+            accel = problem.noise.accel
+            white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
+            y = _contiguous(problem.log.accel_mps2)
+            out = np.empty(y.shape)
+            kernels.whitened_residual(_contiguous(states), _contiguous(problem.all_directions_b),
+                                            _contiguous(problem.all_positions_m), _contiguous(problem.all_rows), y,
+                                            _contiguous(white), out)
+            return out
         return self._all_axes(problem, states)[0]
 
     def squared_norm(self, problem, states, params):
         if problem.n_global:
             return super().squared_norm(problem, states, params)
+        if self.compiled:
+            from . import kernels
+
+            accel = problem.noise.accel
+            stds = accel.sigma[None, :] if accel.per_sample is None else accel.per_sample
+            y = _contiguous(problem.log.accel_mps2)
+            sq = np.empty(y.shape[0])
+            kernels.squared_norm(_contiguous(states), y, _contiguous(problem.all_rows), _contiguous(stds), sq)
+            return float(np.sum(sq))
         X = states
         r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
                                                    problem.all_rows) - problem.log.accel_mps2
@@ -527,6 +575,9 @@ class MotionModelGroup(FactorGroup):
     """
 
     motion = True
+    compiled = True
+    """:meth:`accumulate` (white jerk) through the compiled kernel (:func:`gfimu.smoother.model.kernels.white_jerk`:
+    one pass over the samples); False: the numpy expressions it replaces (the tests' oracle)."""
 
     name = "motion model"
     per_sample = False
@@ -629,6 +680,12 @@ class MotionModelGroup(FactorGroup):
             return None
         W, D = OMEGA, OMEGA_DOT
         wb = self._white_jerk_weights(problem)
+        if self.compiled:
+            from . import kernels
+
+            e1, e2 = np.empty((problem.n - 1, 3)), np.empty((problem.n - 1, 3))
+            kernels.white_jerk(_contiguous(states), _contiguous(problem.dt_s), _contiguous(wb), diag, lower, grad, e1, e2)
+            return 0.5 * float(np.sum(e1 * e1) + np.sum(e2 * e2)), e1.size + e2.size
         t, u = wb[:, 0:3], wb[:, 3:6]
         h = problem.dt_s[:, None]
         e1, e2 = self._white_jerk_rows(problem, states, wb)
