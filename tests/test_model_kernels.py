@@ -115,11 +115,11 @@ def test_kernel_matches_numpy_with_the_attitude():
 
 
 def test_preload_loads_the_kernels():
-    from gfimu.smoother.batch import preload
+    from gfimu.smoother import preload
     from gfimu.smoother.model import kernels
 
     preload.wait()  # nothing begun: returns at once
-    preload.start()
+    preload.start("batch")
     preload.wait()
     for kernel in (kernels.accumulate, kernels.squared_norm, kernels.whitened_residual, kernels.white_jerk):
         assert len(kernel.signatures) >= 1

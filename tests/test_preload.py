@@ -1,4 +1,4 @@
-"""The fixed-lag smoother's kernels loaded from numba's cache in the background (gfimu.smoother.stream.preload):
+"""The fixed-lag smoother's kernels loaded from numba's cache in the background (gfimu.smoother.preload):
 only what the cache holds for the source as it is, nothing compiled."""
 
 import subprocess
@@ -22,7 +22,7 @@ LOAD = """
 import sys
 sys.path.insert(0, {folder!r})
 import kern
-from gfimu.smoother.stream.preload import _load_cached
+from gfimu.smoother.preload import _load_cached
 _load_cached(kern.plus)
 print(len(kern.plus.overloads), sum(kern.plus.stats.cache_hits.values()), sum(kern.plus.stats.cache_misses.values()))
 """
@@ -47,14 +47,14 @@ def test_the_preload_starts_once_and_the_stream_runs_beside_it():
     import numpy as np
 
     from gfimu.simulate import simulate
-    from gfimu.smoother.stream import preload
+    from gfimu.smoother import preload
     from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
 
     est = FixedLagEstimator()
     est.preload()
-    first = preload._thread
+    first = preload._threads["stream"]
     est.preload()
-    assert first is not None and preload._thread is first  # one thread per process
+    assert preload._threads["stream"] is first  # one thread per process
     log = simulate("random3d", seed=2, duration_s=2.0, rate_hz=200.0)
     w = est.estimate(log).motion.omega_b_radps  # while the kernels may still be loading
     first.join(timeout=120)

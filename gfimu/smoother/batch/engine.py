@@ -66,7 +66,7 @@ from ..solve.initialise import initial_attitude, initial_states, sign_chain
 from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from ..solve.restarts import branch_restarts
 from ..result import SmootherEstimator, unguarded
-from . import preload
+from .. import preload
 from ..solve.sigma_scale import calibrated_sigma
 from ..tuning.evidence import InitialStates, Tuning, make_problem, tuned_problem
 
@@ -578,11 +578,11 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
         return options_reason(array, self.model, self.batch_model, attitude_supported=True)
 
     def preload(self) -> None:
-        """Begin loading the compiled kernels of the solve in the background (:mod:`gfimu.smoother.batch.preload`),
+        """Begin loading the compiled kernels of the solve in the background (:mod:`gfimu.smoother.preload`),
         while the log is read and screened."""
-        from .preload import start
+        from ..preload import start
 
-        start()
+        start("batch")
 
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> Estimate:
         """The smoother on ``log`` (:func:`smooth`) before the guard, its report with this estimator's

@@ -73,7 +73,7 @@ class ChoiceProcess:
     def start(cls, func: Callable) -> ChoiceProcess | None:
         """A process serving ``func``, or None where none may be forked (or none starts)."""
         from ...parallel import can_fork
-        from . import preload
+        from .. import preload
 
         if not can_fork():
             return None

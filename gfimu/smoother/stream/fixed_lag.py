@@ -1605,11 +1605,11 @@ class FixedLagEstimator(SmootherEstimator):
         return fixed_lag_reason(array, self.options())
 
     def preload(self) -> None:
-        """Begin loading the compiled kernels in the background (:mod:`gfimu.smoother.stream.preload`), while
+        """Begin loading the compiled kernels in the background (:mod:`gfimu.smoother.preload`), while
         the log is read and screened or the stream starts."""
-        from .preload import start
+        from ..preload import start
 
-        start()
+        start("stream")
 
     def screen(self, log: Log):
         """(``log`` screened as a stream of its rows, :class:`~gfimu.readings.Screening`): the readings
