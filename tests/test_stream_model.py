@@ -180,3 +180,43 @@ def test_the_lazy_window_gives_the_eager_numbers(monkeypatch):
         out[steps] = (np.array([filt.mean(k) for k in ks]), np.array([filt.sigma(k) for k in ks]))
     np.testing.assert_allclose(out[32][0], out[1][0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(out[32][1], out[1][1], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("robust", [False, True])
+@pytest.mark.parametrize("planar", [False, True])
+def test_the_compiled_settle_path_is_the_numpy_viterbi(robust, planar):
+    """WindowFilter._settle_path through kernels.settle_path against its numpy expressions (the costs of
+    _step_costs and _readings_costs, then the Viterbi path): the same branch for every state, on windows whose
+    states sit on every branch, for a nearly planar board (four branches fit its readings) and a cube, with and
+    without the robust losses."""
+    from gfimu.array import mimu4444_array
+    from gfimu.smoother.solve.restarts import branch
+
+    array = mimu4444_array(0.05) if planar else cube_array(0.05, noise_std_mps2=0.05)
+    options = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=30.0)
+    if robust:
+        options = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=30.0, robust_loss="cauchy",
+                                  accel_robust_threshold=2.0, process_robust_threshold=3.0)
+    log = simulate("random3d", array, rate_hz=200, duration_s=1.0, seed=9)
+    filt = WindowFilter(ArrayModel(log.array, options), capacity=64)
+    step = filt.model.step(0.005)
+    rng = np.random.default_rng(3)
+    moved = 0
+    for trial in range(40):
+        n = int(rng.integers(3, 14))
+        j0 = int(rng.integers(0, len(log) - n))
+        X = np.column_stack([log.truth.omega_b_radps[j0:j0 + n], log.truth.omega_dot_b_radps2[j0:j0 + n],
+                             log.truth.specific_force_b_mps2[j0:j0 + n]])
+        X = X + rng.normal(scale=0.02, size=X.shape)
+        a, b = sorted(rng.integers(1, n, size=2))
+        kind = int(rng.integers(0, 4))  # a run on another branch
+        X[a:b + 1, 0:3], X[a:b + 1, 3:6] = branch(kind, X[a:b + 1, 0:3], X[a:b + 1, 3:6], filt._normal)
+        Y = log.accel_mps2[j0 + 1:j0 + n]
+        steps = [(step.F, step.Q)] * (n - 1)
+        filt.compiled = True
+        got = filt._settle_path(X, steps, Y)
+        filt.compiled = False
+        want = filt._settle_path(X, steps, Y)
+        np.testing.assert_array_equal(got, want)
+        moved += int(np.any(want != 0))
+    assert moved >= 10  # paths off branch 0 were compared, not only the trivial one

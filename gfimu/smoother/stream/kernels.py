@@ -421,6 +421,108 @@ def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
     return cur_w, cur_dw, back, new, lowest
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _loss(e2: float, c: float, loss: int) -> float:
+    """:func:`gfimu.smoother.model.problem.robust_loss` of one squared whitened residual."""
+    if loss == LOSS_NONE:
+        return 0.5 * e2
+    if loss == LOSS_CAUCHY:
+        return 0.5 * c * c * np.log1p(e2 / (c * c))
+    e = np.sqrt(e2)
+    return 0.5 * e2 if e <= c else c * e - 0.5 * c * c
+
+
+@njit(cache=True, nogil=True)
+def settle_path(X, F, Q_inv, Y, R0, slope, S_q, S_dw, S_f, normal, c_process, process_loss, c_accel, accel_loss):
+    """The branch of each state after the oldest that :meth:`WindowFilter.settle
+    <gfimu.smoother.stream.window_filter.WindowFilter.settle>` decides, in one call: the n states ``X`` (n, 9;
+    the oldest first, held on its branch), the steps between them (``F``, ``Q_inv``: (n - 1, 6, 6), the ω, ω̇
+    block of each step's transition and of its covariance's inverse) and the readings ``Y`` (n - 1, m) of the
+    states after the oldest. The costs are those of :meth:`~gfimu.smoother.stream.window_filter.WindowFilter._step_costs`
+    (the process loss of the RMS over the six rows of the step's whitened residual, times six, between each
+    branch a of a state and b of the next) and :meth:`~gfimu.smoother.stream.window_filter.WindowFilter._readings_costs`
+    (the accelerometer loss of each reading's squared residual over its variance at the state's |ω|, less
+    branch 0's); the path is the Viterbi path from branch 0 of the oldest to branch 0 of the newest. Returns
+    the branch (0-3) of each of the n - 1 states after the oldest."""
+    n = X.shape[0]
+    m = Y.shape[1]
+    W = np.empty((4, n, 6))
+    for b in range(4):
+        for j in range(n):
+            xb = branch_state(b, X[j], normal)
+            for k in range(6):
+                W[b, j, k] = xb[k]
+    # the steps: cost[a, b, j] from branch a of state j to branch b of state j + 1
+    step = np.empty((4, 4, n - 1))
+    pred = np.empty(6)
+    d = np.empty(6)
+    for j in range(n - 1):
+        for a in range(4):
+            for k in range(6):
+                s = 0.0
+                for l in range(6):
+                    s += F[j, k, l] * W[a, j, l]
+                pred[k] = s
+            for b in range(4):
+                for k in range(6):
+                    d[k] = W[b, j + 1, k] - pred[k]
+                e2 = 0.0
+                for k in range(6):
+                    s = 0.0
+                    for l in range(6):
+                        s += Q_inv[j, k, l] * d[l]
+                    e2 += d[k] * s
+                step[a, b, j] = 6.0 * _loss(e2 / 6.0, c_process, process_loss)
+    # the readings of the states after the oldest, on each branch
+    node = np.empty((4, n - 1))
+    R = np.empty(m)
+    for j in range(n - 1):
+        x = X[j + 1]
+        w2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+        for i in range(m):
+            R[i] = R0[i] + (slope * slope) * w2
+        for b in range(4):
+            wx, wy, wz = W[b, j + 1, 0], W[b, j + 1, 1], W[b, j + 1, 2]
+            q0, q1, q2 = wx * wx + wy * wy, wx * wx + wz * wz, wy * wy + wz * wz
+            q3, q4, q5 = wx * wy, wx * wz, wy * wz
+            total = 0.0
+            for i in range(m):
+                h = (W[b, j + 1, 3] * S_dw[i, 0] + W[b, j + 1, 4] * S_dw[i, 1] + W[b, j + 1, 5] * S_dw[i, 2]
+                     + x[6] * S_f[i, 0] + x[7] * S_f[i, 1] + x[8] * S_f[i, 2]
+                     + q0 * S_q[i, 0] + q1 * S_q[i, 1] + q2 * S_q[i, 2] + q3 * S_q[i, 3] + q4 * S_q[i, 4]
+                     + q5 * S_q[i, 5])
+                r = Y[j, i] - h
+                total += _loss(r * r / R[i], c_accel, accel_loss)
+            node[b, j] = total
+        base = node[0, j]
+        for b in range(4):
+            node[b, j] -= base
+    # Viterbi from branch 0 of the oldest to branch 0 of the newest
+    k_n = n - 1
+    cost = np.empty(4)
+    for b in range(4):
+        cost[b] = step[0, b, 0] + node[b, 0]
+    back = np.zeros((k_n, 4), dtype=np.int8)
+    new = np.empty(4)
+    for j in range(1, k_n):
+        for b in range(4):
+            best, arg = cost[0] + step[0, b, j], 0
+            for a in range(1, 4):
+                t = cost[a] + step[a, b, j]
+                if t < best:
+                    best, arg = t, a
+            back[j, b] = arg
+            new[b] = best + node[b, j]
+        for b in range(4):
+            cost[b] = new[b]
+    path = np.zeros(k_n, dtype=np.int8)
+    state = 0
+    for j in range(k_n - 1, 0, -1):
+        state = back[j, state]
+        path[j - 1] = state
+    return path
+
+
 @njit(cache=True, nogil=True)
 def predict_window(F, Q, c, P, x_newest, T, cross):
     """The prediction one step after the newest state (:meth:`WindowFilter.predict`): the new state's mean

@@ -607,6 +607,37 @@ class WindowFilter:
             out[b] = np.sum(robust_loss(r * r / R, rb.accel_robust_threshold, rb.robust_loss), axis=1)
         return out
 
+    def _settle_path(self, X: np.ndarray, steps: list, Y: np.ndarray) -> np.ndarray:
+        """The branch of each of the states ``X[1:]`` that minimises the window's objective over the states
+        ``X`` (the oldest first, held), the steps between them and the readings ``Y`` of ``X[1:]``, the newest on
+        its own branch: dynamic programming (Viterbi) over :meth:`_step_costs` and :meth:`_readings_costs`; in
+        one compiled call (:func:`kernels.settle_path <gfimu.smoother.stream.kernels.settle_path>`) unless
+        :attr:`compiled` is off (these numpy expressions, its oracle)."""
+        F = np.ascontiguousarray(np.stack([f[:6, :6] for f, _ in steps]), dtype=float)
+        if self.compiled:
+            R0, S_q, S_dw, S_f, slope, c_accel, accel_loss = self._ops.kernel_model
+            c_process, process_loss = self._ops.kernel_options[5:7]
+            Q_inv = np.ascontiguousarray(np.linalg.inv(np.stack([q[:6, :6] for _, q in steps])))
+            return kernels.settle_path(np.ascontiguousarray(X, dtype=float), F, Q_inv, Y, R0, slope, S_q, S_dw, S_f,
+                                       self._normal, c_process, process_loss, c_accel, accel_loss)
+        step_cost = self._step_costs(X, steps)
+        node = self._readings_costs(X[1:], Y)
+        node = node - node[0][None, :]  # only the differences between branches count
+        # Viterbi from the oldest (branch 0) to the newest (branch 0)
+        n = len(X) - 1
+        cost = step_cost[0, :, 0] + node[:, 0]
+        back = np.zeros((n, 4), dtype=np.int8)
+        for j in range(1, n):
+            total = cost[:, None] + step_cost[:, :, j]
+            back[j] = np.argmin(total, axis=0)
+            cost = total[back[j], np.arange(4)] + node[:, j]
+        path = np.zeros(n, dtype=np.int8)
+        state = 0
+        for j in range(n - 1, 0, -1):
+            state = int(back[j][state])
+            path[j - 1] = state
+        return path
+
     def settle(self, readings) -> int:
         """Decide again the branch of the state after the oldest, before the oldest leaves the window:
         where the step into it from the oldest is outlying (:data:`SETTLE_FALSE_ALARM`), the branches of
@@ -656,23 +687,9 @@ class WindowFilter:
         steps = [record.steps.get(store.base + i) for i in range(lo + 1, hi)]
         if any(s is None for s in steps):
             return 0
-        step_cost = self._step_costs(X, steps)
         Y = np.vstack([np.asarray(readings(i), dtype=float) for i in range(1, hi - lo)])
-        node = self._readings_costs(X[1:], Y)
-        node = node - node[0][None, :]  # only the differences between branches count
-        # Viterbi from the oldest (branch 0) to the newest (branch 0)
         n = hi - lo - 1
-        cost = step_cost[0, :, 0] + node[:, 0]
-        back = np.zeros((n, 4), dtype=np.int8)
-        for j in range(1, n):
-            total = cost[:, None] + step_cost[:, :, j]
-            back[j] = np.argmin(total, axis=0)
-            cost = total[back[j], np.arange(4)] + node[:, j]
-        path = np.zeros(n, dtype=np.int8)
-        state = 0
-        for j in range(n - 1, 0, -1):
-            state = int(back[j][state])
-            path[j - 1] = state
+        path = self._settle_path(X, steps, Y)
         kind = int(path[0])
         if kind == 0:
             return 0
