@@ -43,9 +43,9 @@ where the first seconds are held while the process noise is chosen on them."""
 _SIGNAL_EXIT = {"SIGINT": 130, "SIGTERM": 143}
 
 SWITCH_INTERVAL_S = 0.001
-"""Python's thread switch interval during a session (5 ms by default): a model being chosen in its worker
-thread (:class:`gfimu.smoother.stream.fixed_lag.PendingChoice`) gives the interpreter up to the stream's
-thread and the source's reader within this, so the rows keep leaving at the lag while it runs."""
+"""Python's thread switch interval during a session (5 ms by default): the source's reader, and a model
+being chosen in a thread where no process may be forked for it (:class:`gfimu.smoother.stream.fixed_lag.PendingChoice`),
+give the interpreter up to the stream's thread within this, so the rows keep leaving at the lag."""
 
 
 @dataclass(frozen=True)

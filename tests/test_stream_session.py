@@ -262,3 +262,23 @@ def test_the_history_holds_the_screened_readings_not_the_screenings_buffers():
     readings = len(history) * long_log.array.n_axes * 8
     assert sum(behind.values()) == readings
     session.finish()
+
+
+def test_a_warning_raised_in_the_choice_process_is_raised_where_its_answer_is_read():
+    import warnings
+
+    from gfimu.parallel import can_fork
+    from gfimu.smoother.stream.choice_worker import ChoiceProcess
+
+    if not can_fork():
+        pytest.skip("no fork on this platform")
+
+    def warns(x):
+        warnings.warn(f"odd stretch {x}", RuntimeWarning)
+        return x
+
+    process = ChoiceProcess.start(warns)
+    process.submit(3)
+    with pytest.warns(RuntimeWarning, match="odd stretch 3"):
+        assert process.result() == 3
+    process.close()

@@ -23,8 +23,12 @@ from collections.abc import Callable
 
 
 def _serve(func: Callable, conn, parent: int) -> None:
-    """The process's loop: each request ``func(request)``, answered ``(True, result)`` or ``(False, error)``,
-    until None or the end of the pipe."""
+    """The process's loop: each request ``func(request)``, answered ``(True, result, warnings)`` or ``(False,
+    error, warnings)``, until None or the end of the pipe. The warnings it raised go back with the answer
+    (each ``(message, category)``), to be raised in the parent where the model is used: the process writes
+    nothing itself (another thread of the parent may have held the output's lock when it was forked)."""
+    import warnings
+
     from ...parallel import _die_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # an interruption is the parent's to handle
@@ -38,14 +42,17 @@ def _serve(func: Callable, conn, parent: int) -> None:
             break
         if request is None:
             break
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                answer = (True, func(request))
+            except BaseException as exc:  # noqa: BLE001 - raised again in the parent, where the model is used
+                answer = (False, exc)
+        raised = [(str(w.message), w.category) for w in caught]
         try:
-            answer = (True, func(request))
-        except BaseException as exc:  # noqa: BLE001 - raised again in the parent, where the model is used
-            answer = (False, exc)
-        try:
-            conn.send(answer)
+            conn.send((*answer, raised))
         except Exception as exc:  # noqa: BLE001 - an answer that does not pickle
-            conn.send((False, RuntimeError(f"the model choice's answer could not be sent: {exc!r}")))
+            conn.send((False, RuntimeError(f"the model choice's answer could not be sent: {exc!r}"), raised))
     conn.close()
     os._exit(0)
 
@@ -98,13 +105,18 @@ class ChoiceProcess:
         return self._conn.poll()
 
     def result(self):
-        """The answer to the last request (waiting for it), or what computing it raised."""
+        """The answer to the last request (waiting for it), or what computing it raised; the warnings it
+        raised are raised here first."""
+        import warnings
+
         try:
-            ok, value = self._conn.recv()
+            ok, value, raised = self._conn.recv()
         except (EOFError, OSError) as exc:
             raise RuntimeError(f"the model choice's process ended without an answer ({exc!r})") from None
         finally:
             self.busy = False
+        for message, category in raised:
+            warnings.warn(message, category, stacklevel=2)
         if not ok:
             raise value
         return value

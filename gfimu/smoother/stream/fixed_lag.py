@@ -50,8 +50,8 @@ the stream's own recent past and made again as the motion changes
 consistent stretch whose process noise is tuned, the states of the stretch that come
 out then are the batch solution of the stretch and the stream continues from the
 fixed-lag smoother run over it. Every ``retune_every_s`` the choice is made again on
-the last ``model_window_s``, and at once when a model chosen at rest is outgrown: in a worker
-thread, on a copy of the history, the new model used :data:`CHOICE_DELAY_S` of samples after the
+the last ``model_window_s``, and at once when a model chosen at rest is outgrown: in a process
+of its own (:mod:`.choice_worker`; a thread where none may be forked), on a copy of the history, the new model used :data:`CHOICE_DELAY_S` of samples after the
 sample that asked for it (a sample fixed by the data: a log and a live stream of it give the same rows).
 Without ``auto_model`` (the class's default), ``tune_process_noise`` chooses the
 process noise once on the first ``tune_window_s``, as the batch tuner would on that
@@ -167,7 +167,8 @@ def stretch_samples(seconds: float, rate_hz: float) -> int:
 
 
 class PendingChoice:
-    """A model being chosen in a worker thread (:meth:`FixedLagSmoother._choose`): ``compute()`` (returning
+    """A model being chosen in a worker thread (:meth:`FixedLagSmoother._choose`, where no process may be forked
+    for it: :class:`~.choice_worker.ForkedChoice`): ``compute()`` (returning
     the chosen :class:`~gfimu.smoother.stream.model_choice.StreamModel`) runs at once in a daemon thread;
     :meth:`result` waits for it (the seconds waited in ``waited_s``) and gives its model, or
     raises what it raised. ``swap_at``: the count of samples at which the model is to be used."""
