@@ -476,22 +476,18 @@ def settle_path(X, F, Q_inv, Y, R0, slope, S_q, S_dw, S_f, normal, c_process, pr
     # the readings of the states after the oldest, on each branch
     node = np.empty((4, n - 1))
     R = np.empty(m)
+    pred = np.empty(m)
+    H = np.empty((m, 9))
     for j in range(n - 1):
         x = X[j + 1]
         w2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
         for i in range(m):
             R[i] = R0[i] + (slope * slope) * w2
         for b in range(4):
-            wx, wy, wz = W[b, j + 1, 0], W[b, j + 1, 1], W[b, j + 1, 2]
-            q0, q1, q2 = wx * wx + wy * wy, wx * wx + wz * wz, wy * wy + wz * wz
-            q3, q4, q5 = wx * wy, wx * wz, wy * wz
+            _predict_readings(branch_state(b, x, normal), S_q, S_dw, S_f, pred, H)  # (the filter's h(x))
             total = 0.0
             for i in range(m):
-                h = (W[b, j + 1, 3] * S_dw[i, 0] + W[b, j + 1, 4] * S_dw[i, 1] + W[b, j + 1, 5] * S_dw[i, 2]
-                     + x[6] * S_f[i, 0] + x[7] * S_f[i, 1] + x[8] * S_f[i, 2]
-                     + q0 * S_q[i, 0] + q1 * S_q[i, 1] + q2 * S_q[i, 2] + q3 * S_q[i, 3] + q4 * S_q[i, 4]
-                     + q5 * S_q[i, 5])
-                r = Y[j, i] - h
+                r = Y[j, i] - pred[i]
                 total += _loss(r * r / R[i], c_accel, accel_loss)
             node[b, j] = total
         base = node[0, j]
