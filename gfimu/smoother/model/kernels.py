@@ -42,28 +42,8 @@ def accumulate(X, y, S, P, rows, white, diag, grad, sq):
     ``Σ_a w_a² c_a c_aᵀ`` is summed once)."""
     n, axes = y.shape
     per_sample = white.shape[0] != 1 or n == 1
-    sr = np.empty(axes)
-    c = np.empty((axes, 6))  # the structure-matrix row over [ω̇, f]
-    for a in range(axes):
-        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
-        for i in range(3):
-            c[a, i] = rows[a, 3 + i]
-            c[a, 3 + i] = rows[a, i]
-    cc = np.empty((axes, 21))  # c_a c_aᵀ, its lower triangle row by row
-    for a in range(axes):
-        p = 0
-        for i in range(6):
-            for j in range(i + 1):
-                cc[a, p] = c[a, i] * c[a, j]
-                p += 1
+    sr, c, cc, lin = _axis_constants(S, P, rows, white, per_sample)
     lin21 = np.zeros(21)  # Σ_a w_a² c_a c_aᵀ of one sample (per-sample whitening)
-    lin = np.zeros((6, 6))  # Σ_a w_a² c_a c_aᵀ (lower triangle), one whitening for every sample
-    if not per_sample:
-        for a in range(axes):
-            w2 = white[0, a] * white[0, a]
-            for i in range(6):
-                for j in range(i + 1):
-                    lin[i, j] += w2 * c[a, i] * c[a, j]
     for k in range(n):
         w0, w1, w2_ = X[k, 0], X[k, 1], X[k, 2]
         d0, d1, d2 = X[k, 3], X[k, 4], X[k, 5]
@@ -121,25 +101,67 @@ def accumulate(X, y, S, P, rows, white, diag, grad, sq):
                 for p in range(21):
                     lin21[p] += w2 * cc[a, p]
         sq[k] = s2
-        D = diag[k]
-        G = grad[k]
-        G[0] += g0; G[1] += g1; G[2] += g2; G[3] += g3; G[4] += g4; G[5] += g5; G[6] += g6; G[7] += g7; G[8] += g8
-        D[0, 0] += h00; D[1, 1] += h11; D[2, 2] += h22
-        D[1, 0] += h10; D[0, 1] += h10; D[2, 0] += h20; D[0, 2] += h20; D[2, 1] += h21; D[1, 2] += h21
-        D[3, 0] += x00; D[3, 1] += x01; D[3, 2] += x02; D[0, 3] += x00; D[1, 3] += x01; D[2, 3] += x02
-        D[4, 0] += x10; D[4, 1] += x11; D[4, 2] += x12; D[0, 4] += x10; D[1, 4] += x11; D[2, 4] += x12
-        D[5, 0] += x20; D[5, 1] += x21; D[5, 2] += x22; D[0, 5] += x20; D[1, 5] += x21; D[2, 5] += x22
-        D[6, 0] += x30; D[6, 1] += x31; D[6, 2] += x32; D[0, 6] += x30; D[1, 6] += x31; D[2, 6] += x32
-        D[7, 0] += x40; D[7, 1] += x41; D[7, 2] += x42; D[0, 7] += x40; D[1, 7] += x41; D[2, 7] += x42
-        D[8, 0] += x50; D[8, 1] += x51; D[8, 2] += x52; D[0, 8] += x50; D[1, 8] += x51; D[2, 8] += x52
+        _add_sample(diag[k], grad[k], (g0, g1, g2, g3, g4, g5, g6, g7, g8), (h00, h10, h11, h20, h21, h22),
+                    ((x00, x01, x02), (x10, x11, x12), (x20, x21, x22), (x30, x31, x32), (x40, x41, x42),
+                     (x50, x51, x52)), lin21, lin, per_sample)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _axis_constants(S, P, rows, white, per_sample):
+    """What :func:`accumulate` reads of each axis and keeps for every sample: ``sᵀr`` (axes,), the
+    structure-matrix row over [ω̇, f] ``c`` (axes, 6), ``c cᵀ``'s lower triangle row by row (axes, 21), and
+    (one whitening for every sample: not ``per_sample``) ``Σ_a w_a² c_a c_aᵀ``'s lower triangle (6, 6)."""
+    axes = S.shape[0]
+    sr = np.empty(axes)
+    c = np.empty((axes, 6))
+    for a in range(axes):
+        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
+        for i in range(3):
+            c[a, i] = rows[a, 3 + i]
+            c[a, 3 + i] = rows[a, i]
+    cc = np.empty((axes, 21))
+    for a in range(axes):
         p = 0
         for i in range(6):
             for j in range(i + 1):
-                v = lin21[p] if per_sample else lin[i, j]
-                D[3 + i, 3 + j] += v
-                if j < i:
-                    D[3 + j, 3 + i] += v
+                cc[a, p] = c[a, i] * c[a, j]
                 p += 1
+    lin = np.zeros((6, 6))
+    if not per_sample:
+        for a in range(axes):
+            w2 = white[0, a] * white[0, a]
+            for i in range(6):
+                for j in range(i + 1):
+                    lin[i, j] += w2 * c[a, i] * c[a, j]
+    return sr, c, cc, lin
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_sample(D, G, g, h, x, lin21, lin, per_sample):
+    """One sample's sums added into its blocks: ``g`` (9) into ``G``; the ω block's lower triangle ``h`` (6,
+    row by row), the [ω̇, f] × ω block ``x`` (6 × 3) and the [ω̇, f] block (its lower triangle: ``lin21``, 21
+    values row by row, with ``per_sample``, else ``lin``, 6 × 6) into ``D`` and its mirror."""
+    for i in range(9):
+        G[i] += g[i]
+    p = 0
+    for i in range(3):
+        for j in range(i + 1):
+            D[i, j] += h[p]
+            if j < i:
+                D[j, i] += h[p]
+            p += 1
+    for i in range(6):
+        for j in range(3):
+            D[3 + i, j] += x[i][j]
+            D[j, 3 + i] += x[i][j]
+    p = 0
+    for i in range(6):
+        for j in range(i + 1):
+            v = lin21[p] if per_sample else lin[i, j]
+            D[3 + i, 3 + j] += v
+            if j < i:
+                D[3 + j, 3 + i] += v
+            p += 1
 
 
 @njit(cache=True, nogil=True)
