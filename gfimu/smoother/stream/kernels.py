@@ -445,14 +445,42 @@ def settle_path(X, F, Q_inv, Y, R0, slope, S_q, S_dw, S_f, normal, c_process, pr
     branch 0's); the path is the Viterbi path from branch 0 of the oldest to branch 0 of the newest. Returns
     the branch (0-3) of each of the n - 1 states after the oldest."""
     n = X.shape[0]
-    m = Y.shape[1]
     W = np.empty((4, n, 6))
     for b in range(4):
         for j in range(n):
             xb = branch_state(b, X[j], normal)
             for k in range(6):
                 W[b, j, k] = xb[k]
-    # the steps: cost[a, b, j] from branch a of state j to branch b of state j + 1
+    step = _branch_step_costs(W, F, Q_inv, c_process, process_loss)
+    node = np.empty((4, n - 1))
+    R = np.empty(Y.shape[1])
+    pred = np.empty(Y.shape[1])
+    H = np.empty((Y.shape[1], 9))
+    for j in range(n - 1):  # the readings of the states after the oldest, on each branch
+        x = X[j + 1]
+        w2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+        for i in range(R.shape[0]):
+            R[i] = R0[i] + (slope * slope) * w2
+        for b in range(4):
+            _predict_readings(branch_state(b, x, normal), S_q, S_dw, S_f, pred, H)  # (the filter's h(x))
+            total = 0.0
+            for i in range(R.shape[0]):
+                r = Y[j, i] - pred[i]
+                total += _loss(r * r / R[i], c_accel, accel_loss)
+            node[b, j] = total
+        base = node[0, j]
+        for b in range(4):
+            node[b, j] -= base
+    return _viterbi(step, node)
+
+
+@njit(cache=True, nogil=True)
+def _branch_step_costs(W, F, Q_inv, c, loss):
+    """(4, 4, n - 1) costs of the steps between the n states whose ω, ω̇ on each branch are ``W`` (4, n, 6),
+    from branch a of state j to branch b of state j + 1: six times the loss of the RMS over the six rows of the
+    step's whitened residual (``F``, ``Q_inv``: each step's ω, ω̇ block of the transition and of its
+    covariance's inverse)."""
+    n = W.shape[1]
     step = np.empty((4, 4, n - 1))
     pred = np.empty(6)
     d = np.empty(6)
@@ -472,35 +500,22 @@ def settle_path(X, F, Q_inv, Y, R0, slope, S_q, S_dw, S_f, normal, c_process, pr
                     for l in range(6):
                         s += Q_inv[j, k, l] * d[l]
                     e2 += d[k] * s
-                step[a, b, j] = 6.0 * _loss(e2 / 6.0, c_process, process_loss)
-    # the readings of the states after the oldest, on each branch
-    node = np.empty((4, n - 1))
-    R = np.empty(m)
-    pred = np.empty(m)
-    H = np.empty((m, 9))
-    for j in range(n - 1):
-        x = X[j + 1]
-        w2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
-        for i in range(m):
-            R[i] = R0[i] + (slope * slope) * w2
-        for b in range(4):
-            _predict_readings(branch_state(b, x, normal), S_q, S_dw, S_f, pred, H)  # (the filter's h(x))
-            total = 0.0
-            for i in range(m):
-                r = Y[j, i] - pred[i]
-                total += _loss(r * r / R[i], c_accel, accel_loss)
-            node[b, j] = total
-        base = node[0, j]
-        for b in range(4):
-            node[b, j] -= base
-    # Viterbi from branch 0 of the oldest to branch 0 of the newest
-    k_n = n - 1
+                step[a, b, j] = 6.0 * _loss(e2 / 6.0, c, loss)
+    return step
+
+
+@njit(cache=True, nogil=True)
+def _viterbi(step, node):
+    """The lowest path through the chain of ``step`` (4, 4, n) transition costs and ``node`` (4, n) state
+    costs, from branch 0 before the first state to branch 0 at the last (the first of equals, as ``argmin``):
+    the branch of each of the n states."""
+    n = node.shape[1]
     cost = np.empty(4)
     for b in range(4):
         cost[b] = step[0, b, 0] + node[b, 0]
-    back = np.zeros((k_n, 4), dtype=np.int8)
+    back = np.zeros((n, 4), dtype=np.int8)
     new = np.empty(4)
-    for j in range(1, k_n):
+    for j in range(1, n):
         for b in range(4):
             best, arg = cost[0] + step[0, b, j], 0
             for a in range(1, 4):
@@ -511,9 +526,9 @@ def settle_path(X, F, Q_inv, Y, R0, slope, S_q, S_dw, S_f, normal, c_process, pr
             new[b] = best + node[b, j]
         for b in range(4):
             cost[b] = new[b]
-    path = np.zeros(k_n, dtype=np.int8)
+    path = np.zeros(n, dtype=np.int8)
     state = 0
-    for j in range(k_n - 1, 0, -1):
+    for j in range(n - 1, 0, -1):
         state = back[j, state]
         path[j - 1] = state
     return path
