@@ -116,6 +116,9 @@ def test_choices_made_in_a_process_of_their_own_give_the_rows_of_choices_in_a_th
     assert threaded._worker.process is None and len(threaded.models) == len(smoother.models) >= 4
     assert [m.chosen_at_ns for m in threaded.models] == [m.chosen_at_ns for m in smoother.models]
     np.testing.assert_array_equal(_rows(in_process), _rows(in_thread))
+    monkeypatch.undo()
+    _, session = _stream(est, log)  # a session ends its smoother's process when the stream ends
+    assert session.smoother._worker.tried and session.smoother._worker.process is None
 
 
 def test_the_choice_process_answers_in_order_and_raises_what_a_request_raised():

@@ -150,7 +150,7 @@ SECTIONS = (
         "stream-cost", "Fixed-lag smoother: CPU push by push", "stream_cost.py",
         "The fixed-lag method as `gfimu estimate --method fixed-lag` runs it (its screening, then the stream "
         "session fed row by row), on a simulated 60 s, 500 Hz cube of four triads: the CPU of the whole run (the "
-        "model choices in the worker thread included), of the stream's own thread (`time.thread_time`: a busy "
+        "model choices made in their own process included), of the stream's own thread (`time.thread_time`: a busy "
         "machine stretches wall time, not this), of the push that made the first choice of the model, and per "
         "push in steady state (the log's second half); and the rate the stream's thread keeps up with.",
         full=(), quick=("--simulate-s", "10"), json=False),

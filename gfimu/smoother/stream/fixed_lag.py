@@ -453,8 +453,10 @@ class WorkerSlot:
     finalizer: object = None
 
     def close(self) -> None:
+        """End the process; a later choice is made in a thread."""
         if self.finalizer is not None:
             self.finalizer()
+        self.process = self.finalizer = None
 
 
 class StartHold:
@@ -1160,6 +1162,12 @@ class FixedLagSmoother:
         if self._sigma is not None:
             self._sigma.scale.reset()
         return out
+
+    def end_choice_process(self) -> None:
+        """End the process the later model choices are made in (:mod:`.choice_worker`), at the end of a
+        stream: a choice after this is made in a thread."""
+        self._settle_choice()
+        self._worker.close()
 
     def close(self) -> tuple[StateEstimate, ...]:
         """:meth:`flush`, then refuse any further push (closing twice returns nothing)."""

@@ -245,6 +245,7 @@ class StreamSession:
         else:
             states = []
         states += self._flush()
+        self.smoother.end_choice_process()
         if self.screen is not None and self.screen.count:
             self._notes.append(f"warning: {self.screen.describe()}")
         return states
@@ -378,6 +379,7 @@ class StreamSession:
         tally.resets += c["clock_resets"]
         tally.retired_models += old.models
         tally.retired_waits += old.choice_waits
+        old.end_choice_process()
         self.rate_hz = float(rate_hz)
         self.smoother = self.estimator.smoother(self.array, self.rate_hz)
         self.screen = self._new_screen()
