@@ -220,3 +220,59 @@ def test_the_compiled_settle_path_is_the_numpy_viterbi(robust, planar):
         np.testing.assert_array_equal(got, want)
         moved += int(np.any(want != 0))
     assert moved >= 10  # paths off branch 0 were compared, not only the trivial one
+
+
+def _local_density_numpy(array, samples, period_s=0.5):
+    """LocalDensity.push as numpy and Python (the oracle of kernels.local_density_push): (density or None,
+    resolved) after each of ``samples`` ((t_ns, readings, noise variance))."""
+    from collections import deque
+
+    S = array.structure_matrix()
+    pinv_dw, c_dw = np.linalg.pinv(S)[3:6], float(np.sum(np.diag(np.linalg.pinv(S.T @ S))[3:6]))
+    steps, sums, prev, resolved, out = deque(), [0.0, 0.0], None, False, []
+    for t_ns, y, noise_var in samples:
+        dw, var = pinv_dw @ y, c_dw * noise_var
+        prev, last = (t_ns, dw, var), prev
+        h = None if last is None else (t_ns - last[0]) * 1e-9
+        if h is None or not h > 0:
+            out.append((None, resolved))
+            continue
+        d = dw - last[1]
+        step, noise = float(d @ d) / h, (var + last[2]) / h
+        steps.append((t_ns, step, noise))
+        sums[0] += step
+        sums[1] += noise
+        while steps and steps[0][0] <= t_ns - int(period_s * 1e9):
+            _, s0, n0 = steps.popleft()
+            sums[0] -= s0
+            sums[1] -= n0
+        mean_steps, mean_noise = max(sums[0], 0.0) / len(steps), max(sums[1], 0.0) / len(steps)
+        resolved = mean_steps > 4.0 * mean_noise
+        out.append((np.sqrt(max(mean_steps - mean_noise, mean_noise) / 3.0), resolved))
+    return out
+
+
+def test_the_compiled_local_density_is_the_numpy_one():
+    """LocalDensity (its ring grown past 256 steps, a repeated timestamp, a pause longer than the period,
+    motion starting) against the numpy oracle: the same densities to rounding, the same verdicts."""
+    array = cube_array(0.05, 0.07)
+    S = array.structure_matrix()
+    rng = np.random.default_rng(5)
+    x = np.zeros(12)
+    x[2] = 9.81
+    samples, t = [], 0
+    for k in range(1500):
+        t += 0 if k == 40 else (2_000_000_000 if k == 900 else 1_000_000)  # 1 kHz: 500 steps in the period
+        if k > 600:
+            x[3:6] += rng.normal(0, 80.0 * np.sqrt(0.001), 3)
+        samples.append((t, S @ x + rng.normal(0, 0.07, S.shape[0]), 0.07**2 * (1 + k % 3)))
+    density = LocalDensity(array, period_s=0.5)
+    got = [(density.push(*s), density.resolved) for s in samples]
+    want = _local_density_numpy(array, samples)
+    assert len(density._t) >= 512  # the ring grew
+    assert [g[0] is None for g in got] == [w[0] is None for w in want]
+    assert sum(g[0] is None for g in got) == 2  # the first sample and the repeated timestamp
+    assert [g[1] for g in got] == [w[1] for w in want] and any(g[1] for g in got) and not all(g[1] for g in got)
+    g = np.array([v[0] for v in got if v[0] is not None])
+    w = np.array([v[0] for v in want if v[0] is not None])
+    np.testing.assert_allclose(g, w, rtol=1e-9)

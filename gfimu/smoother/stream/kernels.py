@@ -535,6 +535,52 @@ def _viterbi(step, node):
 
 
 @njit(cache=True, nogil=True)
+def local_density_push(t_ns, y, noise_var, pinv_dw, c_dw, prev_dw, ring_t, ring_s, state_i, state_f, period_ns,
+                       resolved_factor):
+    """One sample into :class:`gfimu.smoother.stream.model_choice.LocalDensity`: the per-sample inversion's ω̇
+    ``pinv_dw y``, its step power from the previous sample's ω̇ (``prev_dw``) above the noise's, and the mean of
+    both over the last ``period_ns``, kept in a ring (``ring_t`` the steps' times, ``ring_s`` their (step, noise)
+    powers; ``state_i`` = [oldest slot, count, previous sample kept, its time], ``state_f`` = [Σ step, Σ noise,
+    the previous sample's noise variance]), all updated in place. Returns ``(density, resolved, room)``: the
+    local jerk density [rad/s²/√s] (-1: none yet), whether it is resolved, and False where the ring is full
+    (nothing then changed: a larger ring is to be made and the sample given again)."""
+    cap = ring_t.shape[0]
+    if state_i[2] and state_i[1] == cap:
+        return -1.0, False, False
+    dw0 = dw1 = dw2 = 0.0
+    for i in range(y.shape[0]):
+        dw0 += pinv_dw[0, i] * y[i]
+        dw1 += pinv_dw[1, i] * y[i]
+        dw2 += pinv_dw[2, i] * y[i]
+    var = c_dw * noise_var
+    had, prev_t, prev_var = state_i[2], state_i[3], state_f[2]
+    d0, d1, d2 = dw0 - prev_dw[0], dw1 - prev_dw[1], dw2 - prev_dw[2]
+    prev_dw[0], prev_dw[1], prev_dw[2] = dw0, dw1, dw2
+    state_i[2], state_i[3], state_f[2] = 1, t_ns, var
+    if not had:
+        return -1.0, False, True
+    h = (t_ns - prev_t) * 1e-9
+    if not h > 0:
+        return -1.0, False, True
+    step, noise = (d0 * d0 + d1 * d1 + d2 * d2) / h, (var + prev_var) / h
+    tail = (state_i[0] + state_i[1]) % cap
+    ring_t[tail], ring_s[tail, 0], ring_s[tail, 1] = t_ns, step, noise
+    state_i[1] += 1
+    sum_steps, sum_noise = state_f[0] + step, state_f[1] + noise
+    cutoff = t_ns - period_ns
+    while state_i[1] > 0 and ring_t[state_i[0]] <= cutoff:
+        sum_steps -= ring_s[state_i[0], 0]
+        sum_noise -= ring_s[state_i[0], 1]
+        state_i[0] = (state_i[0] + 1) % cap
+        state_i[1] -= 1
+    state_f[0], state_f[1] = sum_steps, sum_noise
+    n = state_i[1]
+    mean_steps, mean_noise = max(sum_steps, 0.0) / n, max(sum_noise, 0.0) / n
+    excess = max(mean_steps - mean_noise, mean_noise)
+    return np.sqrt(excess / 3.0), mean_steps > resolved_factor * mean_noise, True
+
+
+@njit(cache=True, nogil=True)
 def predict_window(F, Q, c, P, x_newest, T, cross):
     """The prediction one step after the newest state (:meth:`WindowFilter.predict`): the new state's mean
     ``F x + c`` and covariance ``F P Fᵀ + Q`` (symmetrised), the recent states' cross-covariances

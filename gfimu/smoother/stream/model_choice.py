@@ -190,46 +190,55 @@ class LocalDensity:
         self.available = S.shape[0] >= 12 and np.linalg.matrix_rank(S) == 12
         self.period_s = float(period_s)
         if self.available:
-            self._pinv_dw = np.linalg.pinv(S)[3:6]
+            self._pinv_dw = np.ascontiguousarray(np.linalg.pinv(S)[3:6])
             self._c_dw = float(np.sum(np.diag(np.linalg.pinv(S.T @ S))[3:6]))
         self._period_ns = int(self.period_s * 1e9)
-        self._steps: deque = deque()  # (t_ns, step power, noise power) of the last period (Python floats)
-        self._sum_steps = 0.0
-        self._sum_noise = 0.0
-        self._prev = None  # (t_ns, ω̇, noise variance)
+        self._ring(256)
+
+    def _ring(self, size: int) -> None:
+        """A ring of ``size`` steps (t_ns; step and noise powers) and the running state
+        (:func:`gfimu.smoother.stream.kernels.local_density_push`), empty."""
+        self._t = np.zeros(size, dtype=np.int64)
+        self._s = np.zeros((size, 2))
+        self._i = np.zeros(4, dtype=np.int64)  # oldest slot, count, previous sample kept, its time
+        self._f = np.zeros(3)  # Σ step, Σ noise, the previous sample's noise variance
+        self._dw = np.zeros(3)  # the previous sample's ω̇
 
     def reset(self) -> None:
-        self._steps.clear()
-        self._sum_steps = self._sum_noise = 0.0
-        self._prev = None
+        self._i[:] = 0
+        self._f[:] = 0.0
+
+    def _grown(self) -> None:
+        """The ring twice as long, its steps kept in order."""
+        n, first = int(self._i[1]), int(self._i[0])
+        order = (first + np.arange(n)) % len(self._t)
+        t, s, i, f, dw = self._t[order], self._s[order], self._i.copy(), self._f.copy(), self._dw.copy()
+        self._ring(2 * len(self._t))
+        self._t[:n], self._s[:n] = t, s
+        self._i[:] = (0, n, i[2], i[3])
+        self._f[:], self._dw[:] = f, dw
 
     def push(self, t_ns: int, y: np.ndarray, noise_var_mps2: float) -> float | None:
         if not self.available:
             return None
-        dw = self._pinv_dw @ y
-        var = self._c_dw * float(noise_var_mps2)  # summed over the three axes
-        prev, self._prev = self._prev, (t_ns, dw, var)
-        if prev is None:
+        global _density_push
+        if _density_push is None:  # the compiled step, imported on first use
+            from .kernels import local_density_push as _density_push
+        while True:
+            density, resolved, room = _density_push(int(t_ns), y, float(noise_var_mps2), self._pinv_dw, self._c_dw,
+                                                    self._dw, self._t, self._s, self._i, self._f, self._period_ns,
+                                                    RESOLVED_FACTOR)
+            if room:
+                break
+            self._grown()
+        if density < 0.0:
             return None
-        h = (t_ns - prev[0]) * 1e-9
-        if not h > 0:
-            return None
-        d = dw - prev[1]
-        step, noise = float(d @ d) / h, (var + prev[2]) / h
-        steps = self._steps
-        steps.append((t_ns, step, noise))
-        sum_steps, sum_noise = self._sum_steps + step, self._sum_noise + noise
-        cutoff = t_ns - self._period_ns
-        while steps and steps[0][0] <= cutoff:
-            _, s0, n0 = steps.popleft()
-            sum_steps -= s0
-            sum_noise -= n0
-        self._sum_steps, self._sum_noise = sum_steps, sum_noise
-        n = len(steps)
-        mean_steps, mean_noise = max(sum_steps, 0.0) / n, max(sum_noise, 0.0) / n
-        self.resolved = mean_steps > RESOLVED_FACTOR * mean_noise
-        excess = max(mean_steps - mean_noise, mean_noise)
-        return math.sqrt(excess / 3.0)
+        self.resolved = resolved
+        return density
+
+
+_density_push = None
+""":func:`gfimu.smoother.stream.kernels.local_density_push`, once imported."""
 
 
 _chain_step = None
