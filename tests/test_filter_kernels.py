@@ -149,12 +149,13 @@ def test_chain_step_is_the_numpy_chain(n_branches):
         w, dw = rng.normal(size=3), rng.normal(size=3) * 10
         cost = np.abs(rng.normal(size=n_branches))
         want = _chain_step_numpy(prev_w, prev_dw, w, dw, normal, 0.002, 0.3, cost)
-        got = kernels.chain_step(prev_w, prev_dw, w, dw, normal, 0.002, 0.3, cost)
-        for a, b in zip(got[:2], want[:2]):
+        back = np.full(n_branches, -1)
+        lowest = kernels.chain_step(prev_w, prev_dw, w, dw, normal, 0.002, 0.3, cost, back)  # (in place)
+        for a, b in zip((prev_w, prev_dw), want[:2]):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-14)
-        np.testing.assert_array_equal(got[2], want[2])
-        np.testing.assert_allclose(got[3], want[3], rtol=0, atol=1e-12)
-        assert got[4] == int(np.argmin(got[3])) and got[3][got[4]] == 0.0  # the lowest branch, its cost 0
+        np.testing.assert_array_equal(back, want[2])
+        np.testing.assert_allclose(cost, want[3], rtol=0, atol=1e-12)
+        assert lowest == int(np.argmin(cost)) and cost[lowest] == 0.0  # the lowest branch, its cost 0
 
 
 @pytest.mark.parametrize("scenario, noise", [pytest.param("random3d", 0.07, marks=pytest.mark.slow), ("reversal", 0.02)])

@@ -382,12 +382,13 @@ def update_window(AG, P, T, u, W, mean, var, cross):
 
 
 @njit(cache=True, nogil=True)
-def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
-    """One step of the streaming sign chain: the newest state's (ω, ω̇) on each branch ``(cur_w, cur_dw)``
-    (4, 3), the best earlier branch for each later one, the chain's new costs (lowest 0) and the branch of the
-    lowest (the first of equals, as ``argmin``), from the
-    earlier state's branches ``prev_w``, ``prev_dw`` (4, 3) and costs ``cost`` (4,): the Cauchy loss of
-    scale ``c2`` (c²) of each trapezoid misfit ``ω_b - ω_a - h/2 (ω̇_a + ω̇_b)``."""
+def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost, back):
+    """One step of the streaming sign chain, in place: from the earlier state's (ω, ω̇) on each branch
+    (``prev_w``, ``prev_dw``: (4, 3)) and the chain's costs ``cost`` (4,), the Cauchy loss of scale ``c2`` (c²)
+    of each trapezoid misfit ``ω_b - ω_a - h/2 (ω̇_a + ω̇_b)`` to the newest state's (ω, ω̇) = (``w``, ``dw``) on
+    each branch b: ``back`` (4,) gets the best earlier branch for each later one, ``cost`` the new costs (lowest
+    0), ``prev_w`` and ``prev_dw`` the newest state's branches. Returns the branch of the lowest cost (the
+    first of equals, as ``argmin``)."""
     nb = cost.shape[0]
     x = np.zeros(9)
     for j in range(3):  # (loops, not slice assignments: the same numbers, seconds less to compile)
@@ -398,7 +399,6 @@ def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
         xb = branch_state(b, x, normal)
         for j in range(3):
             cur_w[b, j], cur_dw[b, j] = xb[j], xb[3 + j]
-    back = np.zeros(nb, dtype=np.int64)
     new = np.empty(nb)
     for b in range(nb):
         best, arg = np.inf, 0
@@ -417,8 +417,10 @@ def chain_step(prev_w, prev_dw, w, dw, normal, h, c2, cost):
             lowest = b
     low = new[lowest]
     for b in range(nb):
-        new[b] -= low
-    return cur_w, cur_dw, back, new, lowest
+        cost[b] = new[b] - low
+        for j in range(3):
+            prev_w[b, j], prev_dw[b, j] = cur_w[b, j], cur_dw[b, j]
+    return lowest
 
 
 @njit(cache=True, nogil=True, inline="always")

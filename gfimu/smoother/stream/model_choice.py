@@ -24,7 +24,6 @@ Options the user set away from their defaults are kept, as in the batch smoother
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -244,6 +243,8 @@ _density_push = None
 _chain_step = None
 """:func:`gfimu.smoother.stream.kernels.chain_step`, once imported."""
 
+_FLOAT = np.dtype(np.float64)
+
 
 class StreamSignChain:
     """The sign chain of :func:`gfimu.smoother.solve.initialise.sign_chain` over a stream, fixed-lag, over the
@@ -277,9 +278,15 @@ class StreamSignChain:
         self.reset()
 
     def reset(self) -> None:
-        self._cost = np.zeros(self.branches)
-        self._back: deque = deque()  # (k of the later state, best earlier branch per later branch)
-        self._prev = None  # (k, t_ns, [(ω, ω̇) per branch])
+        n = self.branches
+        self._cost = np.zeros(n)
+        self._w, self._dw = np.zeros((n, 3)), np.zeros((n, 3))  # the newest state's (ω, ω̇) per branch
+        self._t_ns: int | None = None  # its time (None: no state yet)
+        # the best earlier branch per later branch of the newest ``window`` steps, a ring (oldest at
+        # ``_head``, ``_count`` of them), with the later state's k
+        self._backs = np.zeros((self.window, n), dtype=np.int64)
+        self._ks = np.zeros(self.window, dtype=np.int64)
+        self._head = self._count = 0
 
     def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
              oldest_k: int) -> tuple[int, int] | None:
@@ -287,42 +294,46 @@ class StreamSignChain:
         if _chain_step is None:  # the compiled step, imported on first use
             from .kernels import chain_step as _chain_step
 
-        if self._prev is None:
-            w, dw = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
-            cur = np.stack([np.concatenate(branch(b, w, dw, self.normal)) for b in range(self.branches)])
-            self._prev = (k, t_ns, cur[:, 0:3].copy(), cur[:, 3:6].copy())
-            return None
-        prev = self._prev
-        n = self.branches
-        c2 = scale_radps * scale_radps
-        if not (type(omega) is np.ndarray and omega.dtype == np.float64 and type(omega_dot) is np.ndarray
-                and omega_dot.dtype == np.float64):
+        if not (type(omega) is np.ndarray and omega.dtype is _FLOAT and type(omega_dot) is np.ndarray
+                and omega_dot.dtype is _FLOAT):
             omega, omega_dot = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
+        if self._t_ns is None:
+            for b in range(self.branches):
+                self._w[b], self._dw[b] = branch(b, omega, omega_dot, self.normal)
+            self._t_ns = t_ns
+            return None
+        c2 = scale_radps * scale_radps
+        window = self.window
+        if self._count == window:  # the oldest step beyond the window is dropped
+            self._head = (self._head + 1) % window
+            self._count -= 1
+        slot = (self._head + self._count) % window
+        self._count += 1
+        self._ks[slot] = k
         # from branch a (at k-1) to branch b (at k): the Cauchy loss of the trapezoid's misfit, the lowest
-        # total kept per b (only the differences matter, and they stay bounded); the kernel reads ω and ω̇
-        # and keeps nothing of them
-        cur_w, cur_dw, back, cost, best = _chain_step(prev[2], prev[3], omega, omega_dot, self.normal,
-                                                      (t_ns - prev[1]) * 1e-9, c2, self._cost)
-        self._cost = cost
-        self._prev = (k, t_ns, cur_w, cur_dw)
-        backs = self._back
-        backs.append((k, back))
-        while len(backs) > self.window or (backs and backs[0][0] <= oldest_k):
-            backs.popleft()
+        # total kept per b (only the differences matter, and they stay bounded)
+        best = _chain_step(self._w, self._dw, omega, omega_dot, self.normal, (t_ns - self._t_ns) * 1e-9, c2,
+                           self._cost, self._backs[slot])
+        self._t_ns = t_ns
+        while self._count and self._ks[self._head] <= oldest_k:
+            self._head = (self._head + 1) % window
+            self._count -= 1
+        cost = self._cost
         if best == 0 or not float(cost[best]) + self.margin * c2 < float(cost[0]):
             return None
         # the best path's last run on branch `best` (within the window) moves onto it
         first = k
         state = best
-        for later_k, bp in reversed(self._back):
-            state = int(bp[state])
+        for j in range(self._count - 1, -1, -1):
+            slot = (self._head + j) % window
+            state = int(self._backs[slot, state])
             if state != best:
                 break
-            first = later_k - 1
+            first = int(self._ks[slot]) - 1
         first = max(first, oldest_k)
-        relabel = np.arange(n) ^ best
-        self._cost = self._cost[relabel].copy()
-        self._back.clear()
-        self._prev = (k, t_ns, cur_w[relabel].copy(), cur_dw[relabel].copy())
+        relabel = np.arange(self.branches) ^ best
+        self._cost[:] = cost[relabel]
+        self._w[:], self._dw[:] = self._w[relabel], self._dw[relabel]
+        self._head = self._count = 0
         self.flips += 1
         return first, best
