@@ -93,7 +93,7 @@ COUNT = Number(1, integer=True)
 
 
 def _factor_groups(value) -> bool:
-    from .groups import FactorGroup
+    from .factor_group import FactorGroup
 
     return isinstance(value, (tuple, list)) and all(isinstance(g, FactorGroup) for g in value)
 
