@@ -78,7 +78,7 @@ def test_tuner_and_bound_use_the_group(spinning):
     log, group = spinning
     opt = SmootherOptions()
     with_group = replace(opt, factor_groups=(group,))
-    diff = log_normaliser(SmootherProblem(log, with_group)) - log_normaliser(SmootherProblem(log, opt))
+    diff = log_normaliser(SmootherProblem.of(log, with_group)) - log_normaliser(SmootherProblem.of(log, opt))
     assert diff == pytest.approx(3 * 50 * np.log(1e-4))
     tuned = make_estimator("smoother", factor_groups=(group,), auto_model=False).estimate(log)  # the likelihood tuner
     assert len(tuned.report.tunings) == 1 and np.isfinite(tuned.report.tunings[0].log_evidence)
@@ -251,7 +251,7 @@ def test_a_group_that_ties_two_samples_reaches_every_consumer(delta_angles):
         assert streamed < 0.05 * streamed_plain and streamed < 2 * batch, engine
     opt = SmootherOptions()
     with_group = replace(opt, factor_groups=(group,))
-    diff = log_normaliser(SmootherProblem(log, with_group)) - log_normaliser(SmootherProblem(log, opt))
+    diff = log_normaliser(SmootherProblem.of(log, with_group)) - log_normaliser(SmootherProblem.of(log, opt))
     assert diff == pytest.approx(3 * (len(log) - 1) * np.log(1e-5))
     sd = smoother_bound(log, with_group).sigma["omega_b_radps"]
     sd0 = smoother_bound(log, opt).sigma["omega_b_radps"]

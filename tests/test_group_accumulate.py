@@ -30,7 +30,7 @@ def test_closed_form_normal_equations_match_the_jacobians(robust):
     options = SmootherOptions(process_axis_factors=(1.0, 3.0, 0.2))
     if robust:
         options = replace(options, process_robust_threshold=1.0, accel_robust_threshold=2.0, robust_loss="cauchy")
-    problem = SmootherProblem(log, options)
+    problem = SmootherProblem.of(log, options)
     rng = np.random.default_rng(5)
     states = rng.normal(scale=[3.0] * 3 + [30.0] * 3 + [5.0] * 3, size=(len(log), 9))
     params = np.zeros(problem.n_global)
@@ -63,7 +63,7 @@ def test_closed_form_normal_equations_match_the_jacobians(robust):
 
 def test_calibrated_accelerometers_keep_their_jacobians():
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=500.0, duration_s=0.2, seed=4)
-    problem = SmootherProblem(log, SmootherOptions(self_calibrate_bias=True))
+    problem = SmootherProblem.of(log, SmootherOptions(self_calibrate_bias=True))
     m, n = problem.state_size, len(log)
     out = problem.group(AccelerometerGroup).accumulate(problem, np.zeros((n, m)), np.zeros(problem.n_global), np.zeros((n, m, m)),
                                                        np.zeros((n - 1, m, m)), np.zeros((n, m)))
@@ -73,7 +73,7 @@ def test_calibrated_accelerometers_keep_their_jacobians():
 def test_other_motion_models_keep_their_jacobians():
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=500.0, duration_s=0.2, seed=4)
     for options in (SmootherOptions(motion_model="snap"), SmootherOptions(process_axis_frequencies_hz=(2.0, 0.0, 0.0))):
-        problem = SmootherProblem(log, options)
+        problem = SmootherProblem.of(log, options)
         m = problem.state_size
         states = np.zeros((len(log), m))
         out = problem.group(MotionModelGroup).accumulate(problem, states, np.zeros(0), np.zeros((len(log), m, m)),

@@ -24,7 +24,7 @@ def test_layouts(snap, attitude, size):
 def test_problem_uses_the_layout_of_its_options():
     log = simulate("turntable", duration_s=0.05, seed=0)
     for opt in (SmootherOptions(), SmootherOptions(motion_model="snap"), SmootherOptions(estimate_attitude=True)):
-        problem = SmootherProblem(log, opt)
+        problem = SmootherProblem.of(log, opt)
         assert problem.layout == StateLayout.from_options(opt)
         assert problem.state_size == problem.layout.size
         X = np.zeros((problem.n, problem.state_size))

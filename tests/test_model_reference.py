@@ -62,7 +62,7 @@ test_states.__test__ = False
 @pytest.mark.parametrize("name", list(REFERENCE))
 def test_the_model_of_groups_gives_the_earlier_numbers(name):
     log, opt = case(name)
-    problem = SmootherProblem(log, opt)
+    problem = SmootherProblem.of(log, opt)
     x = test_states(log, problem)
     p = 0.01 * np.ones(problem.n_global)
     got = [problem.cost(x, p), log_normaliser(problem)]
@@ -78,7 +78,7 @@ def test_every_group_jacobian_and_gtsam_factors_agree(name):
     """Each group: analytic Jacobian = central differences of its whitened residual (on the manifold for
     the attitude), and its GTSAM factors' error = half its squared residual norm."""
     log, opt = case(name)
-    problem = SmootherProblem(log.select(slice(0, 6)), opt)
+    problem = SmootherProblem.of(log.select(slice(0, 6)), opt)
     x = test_states(log, problem)[:6]
     p = 0.01 * np.ones(problem.n_global)
     values = problem.gtsam_values(x, p)
@@ -129,7 +129,7 @@ def test_the_fixed_lag_stream_is_the_batch_model(options, fast):
     from gfimu.smoother.stream import array_model as model
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.1, seed=3).select(slice(10, 13))
-    problem = SmootherProblem(log, options)
+    problem = SmootherProblem.of(log, options)
     x = test_states(log, problem)
     am = model.ArrayModel(log.array, options, fast_measurement=fast)
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()

@@ -100,7 +100,7 @@ def test_residual_only_cost_equals_the_cost_of_the_terms():
     from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 
     log = simulate("random3d", cube_array(), rate_hz=500.0, duration_s=1.0, seed=2)
-    problem = SmootherProblem(log, SmootherOptions())
+    problem = SmootherProblem.of(log, SmootherOptions())
     states = np.random.default_rng(0).normal(size=(len(log), 9))
     params = np.zeros(0)
 

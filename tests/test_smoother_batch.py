@@ -50,8 +50,8 @@ def small_log():
 
 def test_marginal_covariances_equal_dense_inverse(small_log):
     log = small_log.select(slice(0, 40))
-    problem = SmootherProblem(log, SmootherOptions(self_calibrate_bias=True, self_calibrate_scale=True))
-    x = initial_states(log, problem.options)
+    problem = SmootherProblem.of(log, SmootherOptions(self_calibrate_bias=True, self_calibrate_scale=True))
+    x = initial_states(log, SmootherOptions.from_groups(problem.model, problem.batch_model))
     p = np.random.default_rng(0).normal(size=problem.n_global) * 0.01
     ne = batch.normal_equations(problem, x, p)
     n, G = problem.n, problem.n_global
@@ -84,7 +84,7 @@ def test_marginal_covariances_equal_dense_inverse(small_log):
 def test_graph_path_equals_fast_path(small_log, options):
     """GTSAM graph of CustomFactors (linearize/optimize/retract) = banded vectorised engine."""
     log = small_log.select(slice(0, 60))
-    problem = SmootherProblem(log, options)
+    problem = SmootherProblem.of(log, options)
     x0 = initial_states(log, options)
     fast = batch.solve(problem, x0, method="gn")
     states, params = batch.solve_with_gtsam(problem, x0, iterations=30, tolerance=0.0)
@@ -102,7 +102,7 @@ def test_graph_path_equals_fast_path_with_attitude_and_inclinometer():
 
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.2, seed=3)
     options = SmootherOptions(use_inclinometer=True, relative_tolerance=1e-16, max_iterations=50)
-    problem = SmootherProblem(log, options)
+    problem = SmootherProblem.of(log, options)
     base = initial_states(log, SmootherOptions())
     R = initial_attitude(log, base[:, 0:3], base[:, 6:9], None, True)
     problem = problem.with_attitude_prior(R[0])
@@ -369,7 +369,7 @@ def test_a_window_that_starts_on_the_other_sign_takes_the_sign_of_the_window_bef
         out = solve(self, w)
         if w == 1:  # the whole window on the other sign: readings fitted, ω̇ against the change of ω
             part = self.log.select(self.windows[w][0])
-            problem, _ = batch.tuned_problem(part, self.options, [], self.initial, self.tune_span_s)
+            problem, _ = self._tuned(part, [])
             X = out.solved.copy()
             X[:, batch.OMEGA] *= -1.0
             costs["right"] = problem.cost(out.solved, None)

@@ -10,6 +10,7 @@ from gfimu.motion import Motion
 from gfimu.simulate import simulate
 from gfimu.smoother.batch import engine as batch
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 from gfimu.smoother.solve.initialise import initial_states
 from gfimu.smoother.tuning.evidence import linearised_log_evidence, make_problem, tune
@@ -44,9 +45,9 @@ def test_evidence_equals_dense_gaussian_integral():
     """The banded log-determinant and the quadratic-model minimum agree with a dense computation of
     log ∫ N(y; h(x̄) + J (x - x̄), R) p(x | q) dx for the model linearised at x̄."""
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=0.08, seed=3)
-    problem = SmootherProblem(log, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=12.0,
+    problem = SmootherProblem.of(log, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=12.0,
                                                    process_axis_factors=(0.5, 1.0, 2.0)))
-    x = initial_states(log, problem.options) + 0.01
+    x = initial_states(log, SmootherOptions.from_groups(problem.model, problem.batch_model)) + 0.01
     dense = dense_log_evidence(problem, x)
     assert linearised_log_evidence(problem, x) == pytest.approx(dense, abs=1e-6 * abs(dense))
     # the row normaliser: the whitening weights of the process rows are 1/σ
@@ -96,15 +97,15 @@ def test_accel_noise_scale_is_recovered():
     run = BatchSmootherEstimator(tune_accel_noise=True, tune_axis_frequencies=False).estimate(noisy)
     m = run.motion
     assert run.report.tunings[0].accel_noise_scale == pytest.approx(3.0, rel=0.1)
-    problem = make_problem(noisy, SmootherOptions(), 3.0)
+    problem = make_problem(noisy, ModelOptions(), BatchModelOptions(), 3.0)
     np.testing.assert_allclose(problem.noise.accel.sigma, 0.21)
     assert omega_rmse(m, noisy.truth) < omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(noisy).motion, noisy.truth)
 
 
 def test_normal_equations_of_a_subset_of_terms_add_up():
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=0.1, seed=3)
-    problem = SmootherProblem(log, SmootherOptions())
-    x = initial_states(log, problem.options)
+    problem = SmootherProblem.of(log, SmootherOptions())
+    x = initial_states(log, SmootherOptions.from_groups(problem.model, problem.batch_model))
     terms = problem.terms(x, np.zeros(0))
     whole = batch.normal_equations(problem, x, np.zeros(0))
     parts = batch.add_normal_equations(batch.normal_equations(problem, x, np.zeros(0), terms[:1]),
@@ -128,7 +129,8 @@ def test_motion_dependent_noise_and_ml_initialisation():
     est = BatchSmootherEstimator(accel_noise_slope_mps2_per_radps=0.2, auto_model=False)
     weighted = est.estimate(noisy).motion
     assert omega_rmse(weighted, noisy.truth) < 0.9 * constant, (omega_rmse(weighted, noisy.truth), constant)
-    problem = make_problem(noisy, SmootherOptions(accel_noise_slope_mps2_per_radps=0.2), 1.0, noisy.truth.omega_b_radps)
+    problem = make_problem(noisy, ModelOptions(), BatchModelOptions(accel_noise_slope_mps2_per_radps=0.2), 1.0,
+                           noisy.truth.omega_b_radps)
     np.testing.assert_allclose(problem.noise.accel.per_sample[:, 0], np.sqrt(0.07**2 + (0.2 * wn) ** 2))
     from_ml = BatchSmootherEstimator(accel_noise_slope_mps2_per_radps=0.2, initialisation="ml",
                                      auto_model=False).estimate(noisy).motion
@@ -227,9 +229,9 @@ def test_minimum_of_a_stiff_setting_keeps_its_precision():
 
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=0.6, seed=2)
     plain = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5)
-    x = solve(make_problem(log, plain), initial_states(log, plain)).states
+    x = solve(make_problem(log, plain.model, plain.batch_model), initial_states(log, plain)).states
     stiff = _replace(plain, process_axis_factors=(0.01, 1e-5, 0.3), process_axis_frequencies_hz=(0.0, 0.865, 0.0))
-    problem = make_problem(log, stiff)
+    problem = make_problem(log, stiff.model, stiff.batch_model)
     ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))
     dx, dp = solve_step(ne, factorise(ne, 0.0))
     truth = dense_minimum(problem, x)
@@ -241,7 +243,7 @@ def test_minimum_of_a_stiff_setting_keeps_its_precision():
     subtracted = ne.cost + 0.5 * float(ne.grad.reshape(-1) @ dx.reshape(-1))
     assert abs(subtracted - truth) > 2.0
     # a factor of 10⁻⁴ (a still stiffer axis than the evidence can tell apart) is exact to 10⁻⁶
-    problem = make_problem(log, _replace(stiff, process_axis_factors=(0.01, 1e-4, 0.3)))
+    problem = make_problem(log, _replace(stiff.model, process_axis_factors=(0.01, 1e-4, 0.3)), stiff.batch_model)
     ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))
     dx, dp = solve_step(ne, factorise(ne, 0.0))
     assert linearised_half_cost(ne.terms, dx, dp) == pytest.approx(dense_minimum(problem, x), rel=1e-6)

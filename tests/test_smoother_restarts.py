@@ -16,8 +16,8 @@ ROBUST = SmootherOptions(robust_loss="cauchy", accel_robust_threshold=2.0, proce
 
 
 def _solved(log, options, start):
-    problem = SmootherProblem(log, options)
-    return problem, solve_reweighted(problem, start, options, warm=True)
+    problem = SmootherProblem.of(log, options)
+    return problem, solve_reweighted(problem, start, options.batch, warm=True)
 
 
 def test_branches_keep_a_planar_arrays_readings():
@@ -25,7 +25,7 @@ def test_branches_keep_a_planar_arrays_readings():
     readings of a planar array as ω itself (MIMU4444: sensors ±1 mm out of the plane, so nearly)."""
     array = mimu4444_array()
     log = simulate("random3d", array, rate_hz=200.0, duration_s=1.0, seed=2)
-    problem = SmootherProblem(log, ROBUST)
+    problem = SmootherProblem.of(log, ROBUST)
     t = log.truth
     X = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
     rows = restarts.FrozenObjective(problem).rows
@@ -74,7 +74,7 @@ def test_a_short_run_on_the_sign_flipped_branch_is_restarted():
 
 def test_restarts_do_not_apply_without_a_robust_motion_model():
     log = simulate("random3d", mimu4444_array(), rate_hz=200.0, duration_s=0.5, seed=1)
-    problem = SmootherProblem(log, replace(ROBUST, process_robust_threshold=0.0))
+    problem = SmootherProblem.of(log, replace(ROBUST, process_robust_threshold=0.0))
     X = np.zeros((len(log), 9))
     out, tried, kept = restarts.branch_restarts(problem, X)
     assert out is X and tried == kept == 0

@@ -19,7 +19,7 @@ def test_huber_and_cauchy_weights_of_accelerometer_axes():
     log = log.replace(accel_mps2=y)
     states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
     for loss, expected in (("huber", 2.0 / 10.0), ("cauchy", 1.0 / (1.0 + 25.0))):
-        p = SmootherProblem(log, SmootherOptions(robust_loss=loss, accel_robust_threshold=2.0))
+        p = SmootherProblem.of(log, SmootherOptions(robust_loss=loss, accel_robust_threshold=2.0))
         p = p.reweighted(states)
         ratio = (p.noise.accel.sigma[None, :] / p.noise.accel.per_sample) ** 2  # = weight
         assert ratio[7, 4] == pytest.approx(expected, rel=1e-9)
@@ -35,7 +35,7 @@ def test_process_weights_follow_the_step_residual():
     log = process_model_log([30.0, 30.0, 30.0], 30.0, duration_s=0.2)
     t = log.truth
     states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
-    p = SmootherProblem(log, SmootherOptions(process_robust_threshold=3.0))
+    p = SmootherProblem.of(log, SmootherOptions(process_robust_threshold=3.0))
     s0 = p.noise.motion.trapezoid_sigma.copy()
     states[20:, 0] += 50.0 * s0[19]  # ω_x jumps between samples 19 and 20
     p = p.reweighted(states)
@@ -149,7 +149,7 @@ def test_a_problem_is_frozen_and_reweighting_makes_a_new_one():
     t = log.truth
     states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
     states[20:, 0] += 1.0  # one outlying step
-    p = SmootherProblem(log, SmootherOptions(process_robust_threshold=3.0))
+    p = SmootherProblem.of(log, SmootherOptions(process_robust_threshold=3.0))
     before = p.noise.motion.trapezoid_sigma.copy()
     q = p.reweighted(states)
     assert q is not p and q.log is p.log and q.groups is p.groups

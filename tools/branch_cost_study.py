@@ -92,7 +92,7 @@ class FrozenModel:
 
     def __init__(self, problem, omega_b_radps: np.ndarray):
         self.problem = problem
-        opt = problem.options
+        opt = problem.batch_model
         self.slope = opt.accel_noise_slope_mps2_per_radps
         wn = np.linalg.norm(omega_b_radps, axis=1)
         self.sigma = np.sqrt(problem.noise.accel.sigma[None, :] ** 2 + (self.slope * wn[:, None]) ** 2)
@@ -101,7 +101,7 @@ class FrozenModel:
 
     def parts(self, X: np.ndarray) -> dict:
         """Per-sample contributions (N,) to J: 'accelerometer', 'motion' (step k -> k+1 on sample k), 'other'."""
-        p, opt = self.problem, self.problem.options
+        p, opt = self.problem, self.problem.batch_model
         n = p.n
         r = (accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], self.rows)
              - p.log.accel_mps2) / self.sigma
@@ -131,7 +131,7 @@ class FrozenModel:
     def resolve(self, X: np.ndarray):
         """Robust re-weighted Levenberg-Marquardt under the frozen noise (each step lowers J), from X."""
         p = self.problem.with_base_noise(self.sigma, *self.base)
-        reweight = reweighting(replace(p.options, accel_noise_slope_mps2_per_radps=0.0))
+        reweight = reweighting(replace(p.batch_model, accel_noise_slope_mps2_per_radps=0.0))
         return solve(p, X, reweight=reweight, max_iterations=100)
 
 
@@ -222,24 +222,24 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
     for solve_sl, keep_log, keep_win in windows:
         part, part_ref = log.select(solve_sl), aligned.select(solve_sl)
         sols = {}
-        problem, x0 = moment_problem(part, opt, auto, solve_sl, [])
+        problem, x0 = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
         t0 = time.perf_counter()
-        sols["default"] = solve_reweighted(problem, x0, problem.options, compute_sigma=False)
+        sols["default"] = solve_reweighted(problem, x0, opt.batch, compute_sigma=False)
         seconds["default"] += time.perf_counter() - t0
-        problem_r, _ = moment_problem(part, opt, auto, solve_sl, [])
+        problem_r, _ = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
         t0 = time.perf_counter()
-        sols["reference"] = solve_reweighted(problem_r, reference_start(x0, part_ref), problem_r.options,
+        sols["reference"] = solve_reweighted(problem_r, reference_start(x0, part_ref), opt.batch,
                                              compute_sigma=False, warm=True)
         seconds["reference"] += time.perf_counter() - t0
         frozen_at = sols["default" if sigma_from == "default" else "reference"].states[:, OMEGA]
         for k in names:
             if k == "pinned":  # ω held at the reference, ω̇ and f the model's best under the frozen noise
-                fresh, _ = moment_problem(part_ref, pinned_opt, auto, solve_sl, [])
+                fresh, _ = moment_problem(part_ref, pinned_opt.model, pinned_opt.batch_model, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 res = model.resolve(reference_start(x0, part_ref))
                 X = res.states
             elif k == "restarted":  # the default's frozen solution with local restarts on the other branches
-                fresh, _ = moment_problem(part, opt, auto, solve_sl, [])
+                fresh, _ = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 if restarts == "runs":  # the library's restarts (what the default smoother now does)
                     model.resolve(default_states)  # the frozen noise and base weights on the problem
@@ -250,7 +250,7 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
                 restart_counts[1] += kept
             else:
                 production[k] += float(sols[k].cost)
-                fresh, _ = moment_problem(part, opt, auto, solve_sl, [])
+                fresh, _ = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 X = model.resolve(sols[k].states).states if resolve else sols[k].states
             if k == "default":

@@ -154,7 +154,7 @@ def reference_bound(log, options: dict, mask) -> dict:
     sd = np.zeros((len(log), 3))
     for solve_sl, keep_log, keep_win in window_slices(len(log), log.rate_hz, opt.window_s, opt.overlap_s):
         part = log.select(solve_sl)
-        problem = make_problem(part, opt, 1.0, omega[solve_sl])
+        problem = make_problem(part, opt.model, opt.batch_model, 1.0, omega[solve_sl])
         ne = normal_equations(problem, states[solve_sl], np.zeros(problem.n_global))
         cov, _ = marginal_covariances(ne, factorise(ne, 0.0))
         sd[keep_log] = np.sqrt(np.einsum("nii->ni", cov[:, 0:3, 0:3]))[keep_win]

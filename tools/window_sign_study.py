@@ -68,12 +68,12 @@ def one_window(log, sl: slice) -> str:
     opt = make_estimator("smoother").options()
     part = log.select(sl)
     truth = log.truth.omega_b_radps[sl]
-    problem, x0 = tuned_problem(part, opt, [], None, opt.tune_span_s)
-    own = batch.solve_window(problem, x0, opt)
+    problem, x0 = tuned_problem(part, opt.model, opt.batch_model, opt.tuning, [], None, opt.tune_span_s)
+    own = batch.solve_window(problem, x0, opt.batch)
     turned = x0.copy()
     sign = np.where(np.sum(turned[:, OMEGA] * truth, axis=1) < 0, -1.0, 1.0)
     turned[:, OMEGA] *= sign[:, None]
-    right = batch.solve_window(problem, turned, opt)
+    right = batch.solve_window(problem, turned, opt.batch)
     return (f"samples {sl.start}..{sl.stop - 1} ({sl.start / log.rate_hz:.1f}-{sl.stop / log.rate_hz:.1f} s): "
             f"from its own start cost {own.cost:.6g}, {int(wrong(own.states[:, OMEGA], truth).sum())} wrong; "
             f"from the truth's sign cost {right.cost:.6g}, {int(wrong(right.states[:, OMEGA], truth).sum())} wrong")

@@ -62,7 +62,7 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
     if window_options is not None and len(window_options) != len(windows):
         raise InputError(f"window_options has {len(window_options)} entries for {len(windows)} solve windows")
     for i, (solve_sl, keep_log, keep_win) in enumerate(windows):
-        problem = SmootherProblem(log.select(solve_sl), opt if window_options is None else window_options[i])
+        problem = SmootherProblem.of(log.select(solve_sl), opt if window_options is None else window_options[i])
         if problem.attitude:
             problem = problem.with_attitude_prior(_so3.exp(states[solve_sl.start, -3:]))
         params = np.zeros(problem.n_global) if true_params is None else true_params

@@ -129,9 +129,9 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
         return solve(problem, states, params, compute_sigma=compute_sigma, reweight=reweight, max_iterations=max_iterations)
     if solver != "gtsam":
         raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
-    limit = int(problem.options.max_iterations if max_iterations is None else max_iterations)
+    limit = int(problem.model.max_iterations if max_iterations is None else max_iterations)
     X, P, iterations, converged, problem = gtsam_levenberg_marquardt(problem, states, params, limit,
-                                                                     problem.options.relative_tolerance, reweight)
+                                                                     problem.model.relative_tolerance, reweight)
     ne = normal_equations(problem, X, P)
     result = SolveResult(X, P, ne.cost, iterations, converged, problem=problem)
     if compute_sigma:
@@ -139,17 +139,17 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
     return result
 
 
-def solve_window(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions, params: np.ndarray | None = None,
+def solve_window(problem: SmootherProblem, states: np.ndarray, batch: BatchOptions, params: np.ndarray | None = None,
                  compute_sigma: bool | None = None, solver: str = "numpy") -> SolveResult:
-    """:func:`gfimu.smoother.solve.banded.solve_reweighted` (motion-dependent noise and robust losses of
-    ``options``) with either solver."""
+    """:func:`gfimu.smoother.solve.banded.solve_reweighted` (motion-dependent noise and robust losses of the
+    problem's batch model, ``batch.reweight_iterations``) with either solver."""
     if solver == "numpy":
-        return solve_reweighted(problem, states, options, params, compute_sigma)
-    sigma = options.compute_sigma if compute_sigma is None else compute_sigma
-    reweight = reweighting(options)
+        return solve_reweighted(problem, states, batch, params, compute_sigma)
+    sigma = problem.model.compute_sigma if compute_sigma is None else compute_sigma
+    reweight = reweighting(problem.batch_model)
     if reweight is None:
         return solve_problem(problem, states, params, sigma, solver)
-    first = solve_problem(problem, states, params, False, solver, max_iterations=max(1, int(options.reweight_iterations) - 1))
+    first = solve_problem(problem, states, params, False, solver, max_iterations=max(1, int(batch.reweight_iterations) - 1))
     return solve_problem(problem, first.states, first.params if first.params.size else None, sigma, solver, reweight)
 
 
@@ -186,9 +186,9 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
                                           iterations=0, cost=0.0, windows=0, per_sample=motion))
     t0 = time.perf_counter()
     if attitude:  # each window starts from the attitude of the one before: in turn
-        outcomes = _attitude_windows(log, opt, windows, initial, batch.solver, progress)
+        outcomes = _attitude_windows(log, opt.model, opt.batch_model, opt.tuning, windows, initial, batch.solver, progress)
     else:
-        context = _WindowContext(log, opt, auto, initial, batch.solver, batch.tune_span_s, windows)
+        context = _WindowContext(log, opt.model, opt.batch_model, batch, opt.tuning, auto, initial, windows)
         outcomes = _run_windows(context, window_workers(batch.workers, len(windows), batch.solver), progress)
         _align_signs(context, outcomes)
     timings["solve windows"] = time.perf_counter() - t0
@@ -321,26 +321,31 @@ class _WindowContext:
     processes, which inherit it when they start)."""
 
     log: Log
-    options: SmootherOptions
+    model: ModelOptions
+    batch_model: BatchModelOptions
+    batch: BatchOptions
+    tuning: TuningOptions
     auto: tuple | None
     initial: InitialStates | None
-    solver: str
-    tune_span_s: float | None
     windows: list
 
     def solve(self, w: int) -> _WindowOutcome:
         solve_sl, _, keep_win = self.windows[w]
         part = self.log.select(solve_sl)
-        opt, tunings = self.options, []
+        batch, tunings = self.batch, []
         if self.auto is not None and not self.auto[0].consistent:
-            problem, x0 = moment_problem(part, opt, self.auto, solve_sl, tunings)
-            res = solve_window(problem, x0, problem.options, solver=self.solver)
-            if opt.branch_restarts:
-                res = _restarted(problem, res, opt)
+            problem, x0 = moment_problem(part, self.model, self.batch_model, self.auto, solve_sl, tunings)
+            res = solve_window(problem, x0, batch, solver=batch.solver)
+            if batch.branch_restarts:
+                res = _restarted(problem, res)
         else:
-            problem, x0 = tuned_problem(part, opt, tunings, self.initial, self.tune_span_s)
-            res = solve_window(problem, x0, opt, solver=self.solver)
+            problem, x0 = self._tuned(part, tunings)
+            res = solve_window(problem, x0, batch, solver=batch.solver)
         return _WindowOutcome.of(res, problem, keep_win, tunings)
+
+    def _tuned(self, part: Log, tunings: list):
+        """:func:`gfimu.smoother.tuning.evidence.tuned_problem` of a window ``part``."""
+        return tuned_problem(part, self.model, self.batch_model, self.tuning, tunings, self.initial, self.batch.tune_span_s)
 
     def aligned(self, w: int, outcome: _WindowOutcome, earlier_omega_b_radps: np.ndarray) -> _WindowOutcome | None:
         """Window ``w`` solved again with the sign of ω the window before found over their overlap
@@ -354,7 +359,7 @@ class _WindowContext:
         solve_sl, _, keep_win = self.windows[w]
         part = self.log.select(solve_sl)
         tunings: list = []
-        problem, _ = tuned_problem(part, self.options, tunings, self.initial, self.tune_span_s)
+        problem, _ = self._tuned(part, tunings)
         if problem.n_global:  # calibration variables: their values are not kept to compare costs at
             return None
         X = outcome.solved
@@ -367,7 +372,7 @@ class _WindowContext:
             c = problem.cost(Y, None)
             if c < best_cost:
                 best, best_cost = Y, c
-        res = solve_window(problem, best, self.options, solver=self.solver)
+        res = solve_window(problem, best, self.batch, solver=self.batch.solver)
         agrees = np.sum(res.states[:start, OMEGA] * earlier_omega_b_radps) > 0
         if not (agrees and res.cost < outcome.cost - ALIGN_MIN_GAIN):
             return None
@@ -428,14 +433,15 @@ def _align_signs(context: _WindowContext, outcomes: list[_WindowOutcome]) -> lis
     return aligned
 
 
-def _attitude_windows(log: Log, opt: SmootherOptions, windows: list, initial: InitialStates | None, solver: str,
-                      progress: bool) -> list[_WindowOutcome]:
+def _attitude_windows(log: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions, windows: list,
+                      initial: InitialStates | None, solver: str, progress: bool) -> list[_WindowOutcome]:
     out = []
     previous = None  # (solve slice, attitudes) of the window before
     for solve_sl, _, keep_win in progress_bar(windows, total=len(windows), desc="smoother",
                                               enable=progress and len(windows) > 1):
         tunings: list = []
-        res, problem = _solve_with_attitude(log.select(solve_sl), opt, previous, solve_sl, tunings, initial, solver)
+        res, problem = _solve_with_attitude(log.select(solve_sl), model, batch_model, tuning, previous, solve_sl, tunings,
+                                            initial, solver)
         previous = (solve_sl, problem.rotations(res.states))
         out.append(_WindowOutcome.of(res, problem, keep_win, tunings))
     return out
@@ -489,7 +495,7 @@ def chosen_model(log: Log, opt: SmootherOptions, attitude: bool, per_sample: boo
     return chosen, (check, motion)
 
 
-def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions) -> SolveResult:
+def _restarted(problem: SmootherProblem, res: SolveResult) -> SolveResult:
     """``res`` with the local restarts of :func:`gfimu.smoother.solve.restarts.branch_restarts`: short runs
     on another branch of ω kept where the robust objective falls; the cost is the re-weighted cost at
     the result."""
@@ -497,7 +503,7 @@ def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions)
     states, tried, kept = branch_restarts(problem, res.states)
     if not kept:
         return res
-    reweight = reweighting(opt)
+    reweight = reweighting(problem.batch_model)
     if reweight is not None:
         problem = reweight(problem, states, res.params)
     out = replace(res, states=states, cost=problem.cost(states, res.params), problem=problem)
@@ -507,13 +513,14 @@ def _restarted(problem: SmootherProblem, res: SolveResult, opt: SmootherOptions)
     return out
 
 
-def moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunings: list):
+def moment_problem(part: Log, model: ModelOptions, batch_model: BatchModelOptions, auto, solve_sl: slice, tunings: list):
     """Problem and initial states of one window of an inconsistent log: ML initialisation with its
     sign chain, the measured noise floor and slope, the process densities chosen for the log, and
     the jerk density lowered where the body rests (:func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
     check, motion = auto
     omega = motion.omega_b_radps[solve_sl]
     omega_dot = motion.omega_dot_b_radps2[solve_sl]
+    opt = model
     if opt.ml_sign_chain:
         omega = omega * sign_chain(omega, omega_dot, part.dt_s)[:, None]
     x0 = np.hstack([omega, omega_dot, motion.specific_force_b_mps2[solve_sl]])
@@ -522,37 +529,42 @@ def moment_problem(part: Log, opt: SmootherOptions, auto, solve_sl: slice, tunin
         scale = check.noise_floor_mps2 / check.stated_noise_mps2
     tunings.append(Tuning("jerk", opt.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
                           tuple(opt.process_axis_factors), opt.specific_force_random_walk_mps2_per_sqrt_s))
-    problem = make_problem(part, opt, scale, x0[:, OMEGA])
+    problem = make_problem(part, model, batch_model, scale, x0[:, OMEGA])
     factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
                                     opt.omega_dot_random_walk_radps2_per_sqrt_s)
     return problem.with_process_factors(factors), x0
 
 
-def _solve_with_attitude(part: Log, opt: SmootherOptions, previous, solve_sl: slice, tunings: list,
-                         initial: InitialStates | None, solver: str):
+def _solve_with_attitude(part: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions,
+                         previous, solve_sl: slice, tunings: list, initial: InitialStates | None, solver: str):
     """Two stages: the smoother without attitude, then the attitude propagated from its ω
     (starting from the previous window's attitude, which also anchors the yaw) and the full solve."""
-    base = replace(opt, estimate_attitude=False, use_inclinometer=False, compute_sigma=False)
+    base_model = replace(model, compute_sigma=False)
+    base_batch_model = replace(batch_model, estimate_attitude=False, use_inclinometer=False)
     t = None
-    if opt.tune_process_noise:  # the process noise of ω, ω̇ chosen without the attitude, kept with it
+    if tuning.tune_process_noise:  # the process noise of ω, ω̇ chosen without the attitude, kept with it
         before = len(tunings)
-        problem0, x0 = tuned_problem(part, replace(base, tune_motion_model=False), tunings, initial)
+        problem0, x0 = tuned_problem(part, base_model, base_batch_model, replace(tuning, tune_motion_model=False), tunings,
+                                     initial)
         first = solve_problem(problem0, x0, None, False, solver)
         t = tunings[-1] if len(tunings) > before else None
-        opt = replace(opt, omega_dot_random_walk_radps2_per_sqrt_s=problem0.options.omega_dot_random_walk_radps2_per_sqrt_s,
-                      process_axis_factors=problem0.options.process_axis_factors,
-                      process_axis_frequencies_hz=problem0.options.process_axis_frequencies_hz)
+        model = replace(model, omega_dot_random_walk_radps2_per_sqrt_s=problem0.model.omega_dot_random_walk_radps2_per_sqrt_s,
+                        process_axis_factors=problem0.model.process_axis_factors,
+                        process_axis_frequencies_hz=problem0.model.process_axis_frequencies_hz)
     else:
-        first = solve_problem(SmootherProblem(part, base), (initial or initial_states)(part, base), None, False, solver)
+        first = solve_problem(SmootherProblem(part, base_model, base_batch_model),
+                              (initial or initial_states)(part, SmootherOptions.from_groups(base_model, base_batch_model)),
+                              None, False, solver)
     start = None
     if previous is not None:
         prev_sl, prev_R = previous
         start = prev_R[solve_sl.start - prev_sl.start]
-    R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start, opt.use_inclinometer)
-    problem = make_problem(part, opt, t.accel_noise_scale) if t is not None else SmootherProblem(part, opt)
+    R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start, batch_model.use_inclinometer)
+    problem = (make_problem(part, model, batch_model, t.accel_noise_scale) if t is not None
+               else SmootherProblem(part, model, batch_model))
     problem = problem.with_attitude_prior(R[0])
     x0 = np.hstack([first.states, _so3.log(R)])
-    return solve_problem(problem, x0, first.params if first.params.size else None, opt.compute_sigma, solver), problem
+    return solve_problem(problem, x0, first.params if first.params.size else None, model.compute_sigma, solver), problem
 
 
 @dataclass(frozen=True)

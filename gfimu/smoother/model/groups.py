@@ -55,8 +55,10 @@ from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
 from .noise_levels import (
     AccelNoise,
     AttitudeNoise,
+    CalibrationNoise,
     FirstStateNoise,
     ForceWalkNoise,
+    FreeFlightNoise,
     GyroNoise,
     InversionNoise,
     ModelView,
@@ -89,10 +91,11 @@ class FirstStatePriorGroup(FactorGroup):
     per_sample = False
 
     def noise(self, problem: ModelView) -> FirstStateNoise:
-        opt = problem.options
-        first = np.repeat([opt.initial_omega_std_radps, opt.initial_omega_dot_std_radps2, opt.initial_specific_force_std_mps2], 3)
+        model = problem.model
+        first = np.repeat([model.initial_omega_std_radps, model.initial_omega_dot_std_radps2,
+                           model.initial_specific_force_std_mps2], 3)
         if problem.snap:
-            first = np.concatenate([first, np.full(3, 100.0 * opt.initial_omega_dot_std_radps2)])
+            first = np.concatenate([first, np.full(3, 100.0 * model.initial_omega_dot_std_radps2)])
         return FirstStateNoise(first)
 
     def terms(self, problem, states, params):
@@ -134,7 +137,7 @@ def _binary(problem, rows: int, pairs: list[tuple[slice, np.ndarray, np.ndarray]
 
 
 class _ArrayMeasurementGroup(FactorGroup):
-    """The array's measurement in the form ``options.measurement`` names (``formulation``), over every
+    """The array's measurement in the form ``batch_model.measurement`` names (``formulation``), over every
     sample, with the accelerometers' noise ``problem.noise.accel`` (array.toml, or the option
     ``default_accel_noise_std_mps2``: :func:`gfimu.noise.accel_noise_std`)."""
 
@@ -143,10 +146,10 @@ class _ArrayMeasurementGroup(FactorGroup):
     per_sample = False
 
     def applies(self, problem) -> bool:
-        return problem.options.measurement == self.formulation
+        return problem.batch_model.measurement == self.formulation
 
     def noise(self, problem: ModelView) -> AccelNoise:
-        return AccelNoise(noise.accel_noise_std(problem.array, problem.options.default_accel_noise_std_mps2))
+        return AccelNoise(noise.accel_noise_std(problem.array, problem.model.default_accel_noise_std_mps2))
 
 
 class AccelerometerGroup(_ArrayMeasurementGroup):
@@ -380,7 +383,7 @@ class SpecificForceWalkGroup(FactorGroup):
         return not problem.attitude
 
     def noise(self, problem: ModelView) -> ForceWalkNoise:
-        return ForceWalkNoise(process.random_walk_sigma(problem.options.specific_force_random_walk_mps2_per_sqrt_s,
+        return ForceWalkNoise(process.random_walk_sigma(problem.model.specific_force_random_walk_mps2_per_sqrt_s,
                                                         problem.dt_s))
 
     def terms(self, problem, states, params):
@@ -436,7 +439,7 @@ class AttitudeGroup(FactorGroup):
         return bool(problem.attitude)
 
     def noise(self, problem: ModelView) -> AttitudeNoise:
-        opt = problem.options
+        opt = problem.batch_model
         return AttitudeNoise(prior_wb=np.eye(3), prior_sigma=np.array([10.0, 10.0, opt.initial_yaw_std_rad]),
                              step_sigma=process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, problem.dt_s),
                              accel_step_sigma=process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, problem.dt_s))
@@ -506,10 +509,11 @@ class MotionModelGroup(FactorGroup):
     linear = True
 
     def noise(self, problem: ModelView) -> MotionNoise:
-        opt = problem.options
+        opt = problem.model
         snap_cov = snap_whiten = None
         if opt.motion_model == "snap":
-            cov = kinematics.angular_motion_covariance(opt.omega_ddot_random_walk_radps3_per_sqrt_s, problem.dt_s)
+            cov = kinematics.angular_motion_covariance(problem.batch_model.omega_ddot_random_walk_radps3_per_sqrt_s,
+                                                       problem.dt_s)
             axis = np.tile(np.asarray(opt.process_axis_factors, dtype=float), 3)
             snap_cov = cov * axis[:, None] * axis[None, :]
             snap_whiten = np.linalg.inv(np.linalg.cholesky(cov)) / axis
@@ -720,28 +724,32 @@ class GyroscopeGroup(FactorGroup):
 
 class FreeFlightGroup(FactorGroup):
     """Free flight (McGinnis, Perkins & King 2012, eq. 1): Euler's torque-free equation ``I ω̇ + ω × I ω = 0`` (torque
-    noise ``torque_noise_std_nm``) and zero specific force (``free_fall_std_mps2``)."""
+    noise ``torque_noise_std_nm``) and zero specific force (``free_fall_std_mps2``), read as
+    ``problem.noise.free_flight``."""
 
     name = "free flight"
 
     def applies(self, problem) -> bool:
-        return bool(problem.options.free_flight)
+        return bool(problem.batch_model.free_flight)
+
+    def noise(self, problem: ModelView) -> FreeFlightNoise:
+        return FreeFlightNoise(problem.batch_model.torque_noise_std_nm, problem.batch_model.free_fall_std_mps2)
 
     def terms(self, problem, states, params):
-        n, opt = problem.n, problem.options
+        n, levels = problem.n, problem.noise.free_flight
         r, j = euler.euler_residual(states[:, OMEGA], states[:, OMEGA_DOT], problem.log.array.body.principal_inertia_kgm2)
-        s = opt.torque_noise_std_nm
+        s = levels.torque_sigma
         out = [Term("unary", r / s, {"x": unary_jacobian(problem, [(OMEGA, j["w"]), (OMEGA_DOT, j["d"])], 3, n) / s})]
         r, j = free_fall.free_fall_residual(states[:, SPECIFIC_FORCE])
-        s = opt.free_fall_std_mps2
+        s = levels.fall_sigma
         out.append(Term("unary", r / s, {"x": unary_jacobian(problem, [(SPECIFIC_FORCE, j["f"])], 3, n) / s}))
         return out
 
     def gtsam_factors(self, problem):
-        opt = problem.options
+        levels = problem.noise.free_flight
         inertia = problem.log.array.body.principal_inertia_kgm2
-        torque = diagonal_noise(np.full(3, opt.torque_noise_std_nm))
-        fall = diagonal_noise(np.full(3, opt.free_fall_std_mps2))
+        torque = diagonal_noise(np.full(3, levels.torque_sigma))
+        fall = diagonal_noise(np.full(3, levels.fall_sigma))
         out = []
         for k in range(problem.n):
             out.append(euler.make_euler_factor(omega_key(k), omega_dot_key(k), inertia, torque))
@@ -749,8 +757,8 @@ class FreeFlightGroup(FactorGroup):
         return out
 
     def log_normaliser(self, problem):
-        opt = problem.options
-        return 3 * problem.n * float(np.log(opt.torque_noise_std_nm) + np.log(opt.free_fall_std_mps2))
+        levels = problem.noise.free_flight
+        return 3 * problem.n * float(np.log(levels.torque_sigma) + np.log(levels.fall_sigma))
 
 
 class InclinometerGroup(FactorGroup):
@@ -792,17 +800,31 @@ class CalibrationPriorGroup(FactorGroup):
     def applies(self, problem) -> bool:
         return problem.n_global > 0
 
+    def noise(self, problem: ModelView) -> CalibrationNoise:
+        """Each block's prior std from the batch model: ``bias_prior_std_mps2`` (``bias*``), ``scale_prior_std``
+        (``scale*``), ``gyro_bias_prior_std_radps`` (the gyroscope bias)."""
+        opt = problem.batch_model
+        s = np.zeros(problem.n_global)
+        for name, (sl, _) in problem.global_blocks.items():
+            if name.startswith("bias"):
+                s[sl] = opt.bias_prior_std_mps2
+            elif name.startswith("scale"):
+                s[sl] = opt.scale_prior_std
+            else:
+                s[sl] = opt.gyro_bias_prior_std_radps
+        return CalibrationNoise(s)
+
     def terms(self, problem, states, params):
-        s = problem.global_prior_sigma()
+        s = problem.noise.calibration.prior_sigma
         return [Term("global", (params / s)[None], {}, np.diag(1.0 / s)[None])]
 
     def gtsam_factors(self, problem):
-        s = problem.global_prior_sigma()
+        s = problem.noise.calibration.prior_sigma
         return [process.make_prior_factor(key, np.zeros(sl.stop - sl.start), diagonal_noise(s[sl]))
                 for sl, key in problem.global_blocks.values()]
 
     def log_normaliser(self, problem):
-        return float(np.sum(np.log(problem.global_prior_sigma())))
+        return float(np.sum(np.log(problem.noise.calibration.prior_sigma)))
 
 
 BUILT_IN = (AccelerometerGroup(), InversionGroup(), FirstStatePriorGroup(), SpecificForceWalkGroup(), AttitudeGroup(),

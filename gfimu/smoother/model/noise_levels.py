@@ -9,7 +9,9 @@ named field:
   ``default_accel_noise_std_mps2`` where array.toml gives none, :func:`gfimu.noise.accel_noise_std`), and
   the per-sample std of the re-weightings; an :class:`InversionNoise` with ``measurement='quadratic'``;
 - :attr:`NoiseLevels.first_state`, :attr:`NoiseLevels.force_walk`, :attr:`NoiseLevels.attitude`,
-  :attr:`NoiseLevels.motion`, :attr:`NoiseLevels.gyro`, :attr:`NoiseLevels.tilt`: the other groups';
+  :attr:`NoiseLevels.motion`, :attr:`NoiseLevels.gyro`, :attr:`NoiseLevels.tilt`, :attr:`NoiseLevels.free_flight`,
+  :attr:`NoiseLevels.calibration`:
+  the other groups';
 - a group given in ``SmootherOptions.factor_groups`` keeps whatever its ``noise`` gives, read back with
   :meth:`NoiseLevels.of`.
 
@@ -20,7 +22,12 @@ the local motion density, the tuner's accelerometer scale) make new values (:met
 
 :class:`ModelView` is what a factor group may read of the problem it is given: the batch smoother's
 :class:`gfimu.smoother.model.problem.SmootherProblem` and the fixed-lag smoother's view of one or two
-samples of a stream (:class:`gfimu.smoother.stream.array_model.StreamView`) both are one.
+samples of a stream (:class:`gfimu.smoother.stream.array_model.StreamView`) both are one. The options it reads
+are two typed groups, ``model`` (:class:`gfimu.smoother.model.option_groups.ModelOptions`) and ``batch_model``
+(:class:`gfimu.smoother.model.option_groups.BatchModelOptions`), each option under its own name: ``-O
+default_accel_noise_std_mps2=…`` is ``ModelOptions.default_accel_noise_std_mps2``, read by the accelerometer
+groups' ``noise`` as ``problem.model.default_accel_noise_std_mps2`` into :attr:`AccelNoise.sigma`, which every
+later use reads as ``problem.noise.accel``.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ if TYPE_CHECKING:
     from ...array import SensorArray
     from ...log import Log
     from .layout import StateLayout
+    from .option_groups import BatchModelOptions, ModelOptions
 
 
 def _frozen(value):
@@ -245,6 +253,29 @@ class TiltNoise(_Levels):
 
 
 @dataclass(frozen=True, eq=False)
+class FreeFlightNoise(_Levels):
+    """Free flight's stds: the unmodelled torque in Euler's equation ``torque_sigma`` [N m]
+    (``torque_noise_std_nm``) and the specific force at the centre of mass ``fall_sigma`` [m/s²]
+    (``free_fall_std_mps2``)."""
+
+    slot: ClassVar[str] = "free_flight"
+
+    torque_sigma: float
+    fall_sigma: float
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationNoise(_Levels):
+    """The prior std of every calibration variable (G,), in the order of the problem's calibration vector: each
+    accelerometer bias ``bias_prior_std_mps2``, scale-factor error ``scale_prior_std``, the gyroscope bias
+    ``gyro_bias_prior_std_radps``."""
+
+    slot: ClassVar[str] = "calibration"
+
+    prior_sigma: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class NoiseLevels:
     """The noise levels of a problem's groups, each under its own typed field (None where no group gives
     it), and those of the groups given in the options (:meth:`of`). Immutable: :meth:`replace`."""
@@ -256,6 +287,8 @@ class NoiseLevels:
     motion: MotionNoise | None = None
     gyro: GyroNoise | None = None
     tilt: TiltNoise | None = None
+    free_flight: FreeFlightNoise | None = None
+    calibration: CalibrationNoise | None = None
     own: tuple[tuple[Any, Any], ...] = ()
     """(group, what its ``noise`` gave) of every group whose levels are not a built-in kind."""
 
@@ -300,12 +333,14 @@ class NoiseLevels:
 @runtime_checkable
 class ModelView(Protocol):
     """What a factor group reads of the problem it is given (:class:`gfimu.smoother.model.problem.SmootherProblem`,
-    :class:`gfimu.smoother.stream.array_model.StreamView`): the array and the samples, the options, the state
-    layout and the noise levels; the calibration variables (none in a stream)."""
+    :class:`gfimu.smoother.stream.array_model.StreamView`): the array and the samples, the model's option groups
+    (``model``, ``batch_model``), the state layout and the noise levels; the calibration variables (none in a
+    stream)."""
 
     array: SensorArray
     log: Log
-    options: Any
+    model: ModelOptions
+    batch_model: BatchModelOptions
     n: int
     dt_s: np.ndarray
     layout: StateLayout

@@ -212,6 +212,11 @@ class BatchModelOptions:
         "the Gaussian loss; lets sudden jerks through unsmoothed (the fixed-lag smoother's model sets it "
         "itself)"), check=AT_LEAST_ZERO)
 
+    @property
+    def robust(self) -> bool:
+        """Whether any robust re-weighting is on."""
+        return self.accel_robust_threshold > 0 or self.process_robust_threshold > 0
+
 
 @dataclass(frozen=True)
 class BatchOptions:
@@ -374,6 +379,15 @@ def _from_groups(cls, *parts, **changes):
     if unknown:
         raise TypeError(f"{cls.__name__} has no option {', '.join(unknown)}")
     return cls(**{**values, **changes})
+
+
+def with_groups(options, *parts):
+    """The flat ``options`` with the values of the group values ``parts`` (a tuned model and batch model, say),
+    its other options kept."""
+    values = {}
+    for part in parts:
+        values.update({f.name: getattr(part, f.name) for f in dataclasses.fields(part)})
+    return dataclasses.replace(options, **values)
 
 
 def _checked_post_init(cls):

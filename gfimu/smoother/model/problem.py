@@ -168,21 +168,21 @@ class CalibrationBlocks:
     size: int
 
     @classmethod
-    def of(cls, sensors: list, options: SmootherOptions, use_gyro: bool) -> CalibrationBlocks:
-        """Per-axis accelerometer biases, then scale-factor errors, then the gyroscope bias, as ``options`` ask."""
+    def of(cls, sensors: list, batch_model: BatchModelOptions, use_gyro: bool) -> CalibrationBlocks:
+        """Per-axis accelerometer biases, then scale-factor errors, then the gyroscope bias, as the batch model asks."""
         blocks = {}
         g = 0
-        if options.self_calibrate_bias:
+        if batch_model.self_calibrate_bias:
             for i, (_, _, cols) in enumerate(sensors):
                 size = cols.stop - cols.start
                 blocks[f"bias{i}"] = (slice(g, g + size), bias_key(i))
                 g += size
-        if options.self_calibrate_scale:
+        if batch_model.self_calibrate_scale:
             for i, (_, _, cols) in enumerate(sensors):
                 size = cols.stop - cols.start
                 blocks[f"scale{i}"] = (slice(g, g + size), scale_key(i))
                 g += size
-        if use_gyro and options.self_calibrate_bias:
+        if use_gyro and batch_model.self_calibrate_bias:
             blocks["gyro_bias"] = (slice(g, g + 3), gyro_bias_key())
             g += 3
         return cls(blocks, g)
@@ -190,7 +190,9 @@ class CalibrationBlocks:
 
 @dataclass(eq=False)
 class SmootherProblem:
-    """The smoothing problem of one contiguous log (fast path and graph path): the log, the options,
+    """The smoothing problem of one contiguous log (fast path and graph path): the log, the option groups it is
+    built from (:attr:`model`, a :class:`~gfimu.smoother.model.option_groups.ModelOptions`, and :attr:`batch_model`,
+    a :class:`~gfimu.smoother.model.option_groups.BatchModelOptions`; :meth:`of` takes them from flat options),
     the model's groups and their noise levels (:attr:`noise`, a frozen
     :class:`~gfimu.smoother.model.noise_levels.NoiseLevels`: ``problem.noise.accel.sigma``, ...). What its
     groups read of it is :class:`~gfimu.smoother.model.noise_levels.ModelView`.
@@ -206,14 +208,15 @@ class SmootherProblem:
     :meth:`with_base_noise`, :meth:`reweighted`, :meth:`with_process_factors`), sharing the rest."""
 
     log: Log
-    options: SmootherOptions = field(default_factory=SmootherOptions)
+    model: ModelOptions = field(default_factory=ModelOptions)
+    batch_model: BatchModelOptions = field(default_factory=BatchModelOptions)
 
     def __post_init__(self) -> None:
-        reason = options_reason(self.log.array, self.options.model, self.options.batch_model, attitude_supported=True)
+        reason = options_reason(self.log.array, self.model, self.batch_model, attitude_supported=True)
         if reason:
             raise InputError(reason)
         arr = self.log.array
-        opt = self.options
+        model, batch_model = self.model, self.batch_model
         self.n = len(self.log)
         if self.n < 2:
             raise DataError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
@@ -224,18 +227,24 @@ class SmootherProblem:
             raise DataError(f"{self.log.source}: accelerometer reading {arr.accel_columns[col]} is not finite at sample {row} "
                             f"({int(bad.sum())} such values); the smoother needs finite readings")
         self.geometry = AxisGeometry.of(arr)
-        self.use_gyro = arr.gyroscope is not None and opt.use_gyro and self.log.gyro_b_radps is not None
-        self.calibration = CalibrationBlocks.of(self.geometry.sensors, opt, self.use_gyro)
-        self.layout = StateLayout.from_options(opt)
-        self.use_inclinometer = bool(opt.use_inclinometer and self.log.tilt_rad is not None)
-        if opt.use_inclinometer and self.log.tilt_rad is None:
+        self.use_gyro = arr.gyroscope is not None and model.use_gyro and self.log.gyro_b_radps is not None
+        self.calibration = CalibrationBlocks.of(self.geometry.sensors, batch_model, self.use_gyro)
+        self.layout = StateLayout.of(model, batch_model)
+        self.use_inclinometer = bool(batch_model.use_inclinometer and self.log.tilt_rad is not None)
+        if batch_model.use_inclinometer and self.log.tilt_rad is None:
             raise InputError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
         # the model: every group that applies, the measurement first, then those placed first
         # (the first-state prior), then the rest in order; each gives its own noise levels
-        groups = [g for g in BUILT_IN + tuple(opt.factor_groups) if g.applies(self)]
+        groups = [g for g in BUILT_IN + tuple(model.factor_groups) if g.applies(self)]
         self.groups = tuple(sorted(groups, key=lambda g: 0 if g.measurement else 1 if g.first else 2))
         self.noise = NoiseLevels.gather(self.groups, self)
         object.__setattr__(self, "_built", True)
+
+    @classmethod
+    def of(cls, log: Log, options) -> SmootherProblem:
+        """The problem of ``log`` under the model and batch model of the flat ``options`` (a
+        :class:`SmootherOptions`, or any options carrying those two groups)."""
+        return cls(log, options.model, options.batch_model)
 
     # --- the parts' values, by the names the groups read -------------------
     sensors = delegated("geometry", "sensors", "(directions, positions, column slice) of each accelerometer.")
@@ -315,7 +324,7 @@ class SmootherProblem:
         the factor's variance. Weights are computed against the un-reweighted noise (the motion-dependent
         one when set), so re-weighting a re-weighted problem does not compound.
         """
-        opt = self.options
+        opt = self.batch_model
         P = np.zeros(self.n_global) if params is None else params
         out = self
         if opt.accel_robust_threshold > 0 and opt.measurement == "accelerometer":
@@ -332,17 +341,6 @@ class SmootherProblem:
     def global_part(self, params: np.ndarray, name: str) -> np.ndarray | None:
         block = self.global_blocks.get(name)
         return None if block is None else params[block[0]]
-
-    def global_prior_sigma(self) -> np.ndarray:
-        s = np.zeros(self.n_global)
-        for name, (sl, _) in self.global_blocks.items():
-            if name.startswith("bias"):
-                s[sl] = self.options.bias_prior_std_mps2
-            elif name.startswith("scale"):
-                s[sl] = self.options.scale_prior_std
-            else:
-                s[sl] = self.options.gyro_bias_prior_std_radps
-        return s
 
     def group(self, kind: type) -> FactorGroup:
         """The model's group of class ``kind`` (KeyError if it does not apply to this problem)."""
@@ -373,7 +371,7 @@ class SmootherProblem:
 
     def cost(self, states: np.ndarray, params: np.ndarray) -> float:
         """Half the sum of squared whitened residuals (GTSAM's graph error)."""
-        if self.options.measurement == "quadratic" or self.n_global:
+        if self.batch_model.measurement == "quadratic" or self.n_global:
             return 0.5 * sum(float(np.sum(t.residual**2)) for t in self.terms(states, params))
         measured = sum(g.squared_norm(self, states, params) for g in self.groups if g.measurement)
         return 0.5 * (measured + sum(g.squared_norm(self, states, params) for g in self.groups if not g.measurement))

@@ -22,7 +22,8 @@ from functools import cached_property
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from ..model.problem import SmootherOptions, SmootherProblem
+from ..model.option_groups import BatchModelOptions, BatchOptions
+from ..model.problem import SmootherProblem
 
 
 @dataclass
@@ -409,7 +410,7 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     :data:`REWEIGHTED_TOLERANCE` of its statistical spread (or after ``max_iterations``, default
     the options').
     """
-    opt = problem.options
+    opt = problem.model
     X = np.array(states, dtype=float)
     P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
     if reweight is not None:
@@ -462,36 +463,37 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     return result
 
 
-def reweighting(options: SmootherOptions):
+def reweighting(batch_model: BatchModelOptions):
     """The re-weighting of :func:`solve` for the motion-dependent accelerometer noise and the robust
-    losses of ``options``: ``reweight(problem, states, params) -> problem`` (a new problem), or None
+    losses of ``batch_model``: ``reweight(problem, states, params) -> problem`` (a new problem), or None
     when neither is on."""
-    slope = options.accel_noise_slope_mps2_per_radps > 0 and options.measurement == "accelerometer"
-    if not (slope or options.robust):
+    slope = batch_model.accel_noise_slope_mps2_per_radps > 0 and batch_model.measurement == "accelerometer"
+    if not (slope or batch_model.robust):
         return None
 
     def reweight(problem: SmootherProblem, states: np.ndarray, params: np.ndarray) -> SmootherProblem:
         if slope:
-            problem = problem.with_motion_dependent_noise(states[:, 0:3], options.accel_noise_slope_mps2_per_radps)
-        if options.robust:
+            problem = problem.with_motion_dependent_noise(states[:, 0:3], batch_model.accel_noise_slope_mps2_per_radps)
+        if batch_model.robust:
             problem = problem.reweighted(states, params)
         return problem
 
     return reweight
 
 
-def solve_reweighted(problem: SmootherProblem, states: np.ndarray, options: SmootherOptions,
+def solve_reweighted(problem: SmootherProblem, states: np.ndarray, batch: BatchOptions,
                      params: np.ndarray | None = None, compute_sigma: bool | None = None,
                      warm: bool = False) -> SolveResult:
-    """Solve with the motion-dependent noise and robust losses of ``options``: first
-    ``reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
-    iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`)."""
-    sigma = options.compute_sigma if compute_sigma is None else compute_sigma
-    reweight = reweighting(options)
+    """Solve with the motion-dependent noise and robust losses of the problem's batch model: first
+    ``batch.reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
+    iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`); σ as the problem's model asks
+    (``compute_sigma``) unless ``compute_sigma`` is given."""
+    sigma = problem.model.compute_sigma if compute_sigma is None else compute_sigma
+    reweight = reweighting(problem.batch_model)
     if reweight is None:
         return solve(problem, states, params, compute_sigma=sigma)
     if warm:  # ``states`` is already a re-weighted solution
         return solve(problem, states, params, compute_sigma=sigma, reweight=reweight)
-    first = solve(problem, states, params, max_iterations=max(1, int(options.reweight_iterations) - 1))
+    first = solve(problem, states, params, max_iterations=max(1, int(batch.reweight_iterations) - 1))
     return solve(problem, first.states, first.params if first.params.size else None,
                  compute_sigma=sigma, reweight=reweight)

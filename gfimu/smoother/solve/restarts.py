@@ -46,7 +46,7 @@ MARGIN_SAMPLES = 8
 def applies(problem: SmootherProblem) -> bool:
     """Whether the restarts apply: the accelerometer equation with a robust loss on the white-jerk
     motion model's steps, no attitude, no calibration variables."""
-    opt = problem.options
+    opt = problem.batch_model
     return (opt.measurement == "accelerometer" and opt.process_robust_threshold > 0 and not problem.snap
             and not problem.attitude and not problem.noise.motion.oscillator and problem.n_global == 0
             and problem.n > 2 * MARGIN_SAMPLES + RUN_SAMPLES)
@@ -71,7 +71,7 @@ class FrozenObjective:
     def __call__(self, X: np.ndarray) -> float:
         """J: Σ ρ over the accelerometer axes, Σ rows · ρ over the motion-model steps (on the step's
         norm / √rows, as the re-weighting), ½ Σ of the other whitened rows squared."""
-        p, opt = self.problem, self.problem.options
+        p, opt = self.problem, self.problem.batch_model
         r = (accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], self.rows)
              - p.log.accel_mps2) / self.accel_sigma
         total = float(np.sum(robust_loss(r * r, opt.accel_robust_threshold, opt.robust_loss)))
@@ -151,7 +151,7 @@ def outlier_runs(objective: FrozenObjective, X: np.ndarray, longest: int = RUN_S
     """Runs [a, b) of samples between two motion-model steps beyond :data:`OUTLYING` robust
     thresholds, at most ``longest`` samples long, shortest first."""
     e, _ = objective.step_norms(X)
-    steps = np.nonzero(e > OUTLYING * objective.problem.options.process_robust_threshold)[0]
+    steps = np.nonzero(e > OUTLYING * objective.problem.batch_model.process_robust_threshold)[0]
     runs = []
     for i, k1 in enumerate(steps):
         for k2 in steps[i + 1:]:
@@ -170,11 +170,10 @@ def local_resolve(objective: FrozenObjective, X: np.ndarray, a: int, b: int, mar
     p = objective.problem
     lo, hi = max(a - margin, 0), min(b + margin, p.n)
     held = [i for i in (lo, lo + 1) if lo > 0] + [i for i in (hi - 2, hi - 1) if hi < p.n]
-    opt = replace(p.options, factor_groups=tuple(p.options.factor_groups)
-                  + (_HeldStates([i - lo for i in held], X[held]),))
-    sub = SmootherProblem(p.log.select(slice(lo, hi)), opt).with_base_noise(
+    model = replace(p.model, factor_groups=tuple(p.model.factor_groups) + (_HeldStates([i - lo for i in held], X[held]),))
+    sub = SmootherProblem(p.log.select(slice(lo, hi)), model, p.batch_model).with_base_noise(
         objective.accel_sigma[lo:hi], objective.trapezoid_sigma[lo:hi - 1], objective.omega_dot_step_sigma[lo:hi - 1])
-    reweight = reweighting(replace(opt, accel_noise_slope_mps2_per_radps=0.0))
+    reweight = reweighting(replace(p.batch_model, accel_noise_slope_mps2_per_radps=0.0))
     Y = X.copy()
     Y[lo:hi] = solve(sub, X[lo:hi], reweight=reweight, max_iterations=max_iterations).states
     return Y

@@ -35,6 +35,7 @@ from ..model.parts import delegated
 from ..model.problem import SmootherOptions
 from ..model.groups import BUILT_IN, AccelerometerGroup, FirstStatePriorGroup, GyroscopeGroup
 from ..model.noise_levels import NoiseLevels
+from ..model.option_groups import BatchModelOptions, ModelOptions
 from ..model.layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 
@@ -81,15 +82,15 @@ def _linear_factor(noise_model, factor_keys: list[int], residual, jacobians: tup
 class StreamView:
     """Samples of a stream seen as a problem of one sample (a per-sample group's terms) or of the two
     samples of a step (a step group's terms): a :class:`gfimu.smoother.model.noise_levels.ModelView`, as the
-    batch smoother's :class:`gfimu.smoother.model.problem.SmootherProblem` is (``array``, ``log``, ``options``,
-    ``n``, ``dt_s``, ``layout``, ``state_size``, its :attr:`noise` levels, no calibration variables), each
+    batch smoother's :class:`gfimu.smoother.model.problem.SmootherProblem` is (``array``, ``log``, ``model``,
+    ``batch_model``, ``n``, ``dt_s``, ``layout``, ``state_size``, its :attr:`noise` levels, no calibration variables), each
     group's noise levels computed by its own :meth:`~gfimu.smoother.model.groups.FactorGroup.noise` on the view
     (:meth:`with_levels`)."""
 
-    def __init__(self, array: SensorArray, options: SmootherOptions, timestamps_ns, accel=None, gyro=None,
-                 dt_s: np.ndarray | None = None) -> None:
+    def __init__(self, array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions, timestamps_ns, accel=None,
+                 gyro=None, dt_s: np.ndarray | None = None) -> None:
         self.array = array
-        self.options = options
+        self.model, self.batch_model = model, batch_model
         self.timestamps_ns = np.asarray(timestamps_ns, dtype=np.int64)
         self.n = len(self.timestamps_ns)
         self.dt_s = np.diff(self.timestamps_ns) * 1e-9 if dt_s is None else np.asarray(dt_s, dtype=float)
@@ -267,12 +268,14 @@ class ArrayModel:
             raise InputError(f"accel_noise_scale must be a positive number, got {accel_noise_scale!r}")
         self.array = array
         self.options = options
+        self.option_groups = (options.model, options.batch_model)
+        """The model and batch model of ``options``, what the factor groups read (:class:`StreamView`)."""
         self.fast_measurement = bool(fast_measurement)
         self.accel_noise_scale = float(accel_noise_scale)
         S = array.structure_matrix()
         S_lin = np.ascontiguousarray(S[:, :6])
         # the accelerometer, gyroscope and first-state noise of the batch smoother's groups, on a view of the array
-        levels = StreamView(array, options, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
+        levels = StreamView(array, *self.option_groups, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
                                                               GyroscopeGroup())).noise
         sigma = levels.accel.scaled(self.accel_noise_scale).sigma
         wL = S_lin / sigma[:, None]
@@ -331,7 +334,7 @@ class ArrayModel:
         per_sample = self.factor_sets.per_sample
         if not per_sample:
             return None
-        view = StreamView(self.array, self.options, [t_ns], y, gyro)
+        view = StreamView(self.array, *self.option_groups, [t_ns], y, gyro)
         groups = [g for g in per_sample if g.applies(view)]
         if not groups:
             return None
@@ -398,7 +401,7 @@ class ArrayModel:
         fixed = cache.get(key)
         sets = self.factor_sets
         if fixed is None:
-            view = StreamView(self.array, self.options, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
+            view = StreamView(self.array, *self.option_groups, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
             zero = np.zeros(KINEMATIC_SIZE)
             fixed = self._step_rows(sets.fixed_steps, view, zero, zero)
             fixed = {"rows": fixed, 1.0: Step.of(*fixed[:3])}
@@ -408,7 +411,7 @@ class ArrayModel:
         others = None
         if sets.other_steps and t_ns is not None:
             (a0, g0), (a1, g1) = readings if readings is not None else ((None, None), (None, None))
-            view = StreamView(self.array, self.options, list(t_ns),
+            view = StreamView(self.array, *self.option_groups, list(t_ns),
                               None if a0 is None else np.vstack([a0, a1]),
                               None if g0 is None or g1 is None else np.vstack([g0, g1]), dt_s=np.array([h]))
             groups = [g for g in sets.other_steps if g.applies(view)]

@@ -103,7 +103,7 @@ from ..solve.banded import solve
 from ..model.parts import delegated
 from ..model.problem import SmootherOptions, options_reason
 from ...option import check_declared
-from ..model.option_groups import GROUPS, Engine, StreamOptions, assemble
+from ..model.option_groups import GROUPS, Engine, StreamOptions, assemble, with_groups
 from ..solve.initialise import initial_estimate, still_start
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from ..result import SmootherEstimator
@@ -1027,7 +1027,7 @@ class FixedLagSmoother:
             n = rules.tune_n
             span = part if len(part) <= n else part.select(slice(len(part) - n, None))
             tuning, problem, x0 = self._tuned(span, base)
-            chosen = stream_model.from_tuning(tuning, problem.options, check, span)
+            chosen = stream_model.from_tuning(tuning, with_groups(base, problem.model, problem.batch_model), check, span)
             chosen = replace(chosen, chosen_at_ns=t_end, moving=True)
             if first:
                 batch = self._batch_states(span, problem, x0)
@@ -1101,7 +1101,7 @@ class FixedLagSmoother:
         """The batch smoother's process-noise selection on ``part``: (Tuning, problem, initial states)."""
         tunings: list = []
         options = replace(options or self._choice.rules.user_options, tune_process_noise=True)
-        problem, x0 = tuned_problem(part, options, tunings)
+        problem, x0 = tuned_problem(part, options.model, options.batch_model, options.tuning, tunings)
         return tunings[-1], problem, x0
 
     def _batch_states(self, part: Log, problem, x0) -> list[StateEstimate]:
@@ -1117,7 +1117,8 @@ class FixedLagSmoother:
         """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
         (:class:`gfimu.smoother.tuning.evidence.Tuning`, options carrying it)."""
         tuning, problem, _ = self._tuned(self._stretch_log(samples))
-        return tuning, tuning.for_stream(replace(problem.options, tune_process_noise=False))
+        options = with_groups(self._choice.rules.user_options, problem.model, problem.batch_model)
+        return tuning, tuning.for_stream(replace(options, tune_process_noise=False))
 
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
@@ -1436,8 +1437,8 @@ class FixedLagSmoother:
         X = np.vstack([h[2] for h in self._hold.held] + [self._segment.engine.mean(k) for k, _ in self._segment.window])
         part = self._stretch_log(samples)
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
-        problem = make_problem(part, replace(self.options, tune_process_noise=False), scale, X[:, OMEGA])
-        starts = [X, initial_estimate(part, problem.options)]
+        problem = make_problem(part, self.options.model, self.options.batch_model, scale, X[:, OMEGA])
+        starts = [X, initial_estimate(part, self.options)]
         for kind in (1, 2, 3):
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)

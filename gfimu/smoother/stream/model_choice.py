@@ -31,6 +31,7 @@ import numpy as np
 from ...log import Log
 from ..tuning.model_choice import (CHECK_SAMPLES, ModelCheck, check_model, estimate_noise_variances, misfit_options, motion_densities,
                    with_densities)
+from ..model.option_groups import with_groups
 from ..model.problem import SmootherOptions
 from ..solve.initialise import sign_chain_scale
 from ..solve.restarts import branch
@@ -88,8 +89,9 @@ def check_of(part: Log, ml_motion) -> ModelCheck | None:
 def gaussian(part: Log, options: SmootherOptions, check: ModelCheck | None) -> StreamModel:
     """The Gaussian model of a consistent stretch: the process noise by marginal likelihood."""
     tunings: list = []
-    problem, _ = tuned_problem(part, replace(options, tune_process_noise=True), tunings)
-    return from_tuning(tunings[-1], problem.options, check, part)
+    problem, _ = tuned_problem(part, options.model, options.batch_model, replace(options.tuning, tune_process_noise=True),
+                               tunings)
+    return from_tuning(tunings[-1], with_groups(options, problem.model, problem.batch_model), check, part)
 
 
 def from_tuning(tuning: Tuning, options: SmootherOptions, check: ModelCheck | None, part: Log) -> StreamModel:

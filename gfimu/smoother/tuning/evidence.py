@@ -43,7 +43,9 @@ from ..solve.initialise import initial_estimate
 from ..model.layout import OMEGA, OMEGA_DOT, StateLayout
 
 InitialStates = Callable[[Log, SmootherOptions], np.ndarray]
-"""``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.solve.initialise.initial_estimate`."""
+"""``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.solve.initialise.initial_estimate`;
+given flat options that carry the model and batch model of the window (:func:`tuned_problem`), the others at their
+defaults."""
 
 DENSITY_FIELD = {"jerk": "omega_dot_random_walk_radps2_per_sqrt_s", "snap": "omega_ddot_random_walk_radps3_per_sqrt_s"}
 DENSITY_LIMITS = (1e-3, 1e8)
@@ -107,15 +109,17 @@ class Tuning:
                 "evaluations": self.evaluations}
 
 
-def make_problem(log: Log, options: SmootherOptions, accel_noise_scale: float = 1.0,
+def make_problem(log: Log, model: ModelOptions, batch_model: BatchModelOptions, accel_noise_scale: float = 1.0,
                  omega_b_radps: np.ndarray | None = None) -> SmootherProblem:
-    """:class:`SmootherProblem` with every accelerometer noise std multiplied by ``accel_noise_scale``
-    and, when ``options.accel_noise_slope_mps2_per_radps`` is set, growing with |ω| of ``omega_b_radps``."""
-    problem = SmootherProblem(log, options)
+    """:class:`SmootherProblem` of ``model`` and ``batch_model`` with every accelerometer noise std multiplied by
+    ``accel_noise_scale`` and, when ``batch_model.accel_noise_slope_mps2_per_radps`` is set, growing with |ω| of
+    ``omega_b_radps``."""
+    problem = SmootherProblem(log, model, batch_model)
     if accel_noise_scale != 1.0:
         problem = problem.with_accel_noise_scale(accel_noise_scale)  # the inversion's too ('quadratic')
-    if options.accel_noise_slope_mps2_per_radps > 0 and omega_b_radps is not None and options.measurement == "accelerometer":
-        problem = problem.with_motion_dependent_noise(omega_b_radps, options.accel_noise_slope_mps2_per_radps)
+    slope = batch_model.accel_noise_slope_mps2_per_radps
+    if slope > 0 and omega_b_radps is not None and batch_model.measurement == "accelerometer":
+        problem = problem.with_motion_dependent_noise(omega_b_radps, slope)
     return problem
 
 
@@ -275,24 +279,25 @@ class ProcessBasis:
     """The process terms at unit settings at the states this basis was made at."""
 
     @classmethod
-    def of(cls, log: Log, options: SmootherOptions, field: str, states: np.ndarray, params: np.ndarray,
-           omega_b_radps: np.ndarray | None = None, previous: ProcessBasis | None = None) -> ProcessBasis | None:
+    def of(cls, log: Log, model: ModelOptions, batch_model: BatchModelOptions, field: str, states: np.ndarray,
+           params: np.ndarray, omega_b_radps: np.ndarray | None = None,
+           previous: ProcessBasis | None = None) -> ProcessBasis | None:
         """The basis at ``states`` (None where it does not apply, see the class). ``previous``: the basis
         of the same problem at other states; where the process factors' Jacobians there are the same
         numbers as here (factors linear in the states: the white jerk, the random walks, the priors), its
         split of the rows and its products ``JᵀJ`` are kept and only the gradients and costs are made
         here (:meth:`at`): the same numbers as made afresh."""
-        if options.motion_model != "jerk" or any(f > 0 for f in options.process_axis_frequencies_hz):
+        if model.motion_model != "jerk" or any(f > 0 for f in model.process_axis_frequencies_hz):
             return None  # (the white-snap system is too stiff for sums that agree to many digits)
-        unit = replace(options, **{field: 1.0}, process_axis_factors=(1.0, 1.0, 1.0),
+        unit = replace(model, **{field: 1.0}, process_axis_factors=(1.0, 1.0, 1.0),
                        specific_force_random_walk_mps2_per_sqrt_s=1.0)
-        problem = make_problem(log, unit, 1.0, omega_b_radps)
+        problem = make_problem(log, unit, batch_model, 1.0, omega_b_radps)
         terms = problem.process_terms(states, params)
         if previous is not None and previous.same_jacobians(terms):
             return previous.at(terms, problem.n, problem.state_size)
         fx, fy, fz, ff = PROBE_FACTORS
         probe = replace(unit, process_axis_factors=(fx, fy, fz), specific_force_random_walk_mps2_per_sqrt_s=ff)
-        probed = make_problem(log, probe, 1.0, omega_b_radps).process_terms(states, params)
+        probed = make_problem(log, probe, batch_model, 1.0, omega_b_radps).process_terms(states, params)
         if len(terms) != len(probed):
             return None
         factors = {1.0: "const", fx: 0, fy: 1, fz: 2, ff: "force"}
@@ -633,11 +638,6 @@ class _NoiseSearch:
                         specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
         return model, (self.batch_model if self.motion_model == "jerk" else replace(self.batch_model, **density))
 
-    def settings_options(self, c: dict) -> SmootherOptions:
-        """The options of the problems of setting ``c``: its model and batch model, which are all a problem reads
-        (the solve windows and the tuning are not the problem's)."""
-        return SmootherOptions.from_groups(*self.settings(c))
-
     def run(self, accel_noise: bool) -> Tuning:
         """(1) the density linearised at the start, the smoother solved with it; (2) linearised at that
         solution, each axis factor, the specific-force density, the oscillators; the noise scale around
@@ -646,7 +646,7 @@ class _NoiseSearch:
         if accel_noise:
             self.search("scale", 1e-2, 1e3)
         value = self.search("density", *DENSITY_LIMITS, step=np.log(4.0))
-        problem = make_problem(log, self.settings_options(current), float(np.exp(current["scale"])), self.X[:, OMEGA])
+        problem = make_problem(log, *self.settings(current), float(np.exp(current["scale"])), self.X[:, OMEGA])
         self.X, self.version = solve(problem, self.X, self.p0).states, 1
         if accel_noise:
             self.search("scale", 1e-2, 1e3, step=np.log(2.0))
@@ -674,7 +674,7 @@ class _NoiseSearch:
         log, X, p0, version = self.log, self.X, self.p0, self.version
         cache, bases, summed = self.cache, self.bases, self.summed
         try:
-            problem = make_problem(log, self.settings_options(c), float(np.exp(c["scale"])), X[:, OMEGA])
+            problem = make_problem(log, *self.settings(c), float(np.exp(c["scale"])), X[:, OMEGA])
             key = (version, float(c["scale"]))
             if key not in cache:
                 cache.clear()
@@ -683,7 +683,7 @@ class _NoiseSearch:
                 if version not in bases:  # at a new linearisation point: the last one's split and JᵀJ where they hold
                     before = next(iter(bases.values()), None)
                     bases.clear()
-                    bases[version] = ProcessBasis.of(log, self.settings_options(c), self.field, X,
+                    bases[version] = ProcessBasis.of(log, *self.settings(c), self.field, X,
                                                      np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA],
                                                      previous=before)
                 if bases[version] is not None:
@@ -780,35 +780,36 @@ def most_moving_span(omega_dot: np.ndarray, width: int) -> tuple[int, int]:
     return start, start + width
 
 
-def tuned_problem(part: Log, options: SmootherOptions, tunings: list | None = None,
-                  initial: InitialStates | None = None, span_s: float | None = None) -> tuple[SmootherProblem, np.ndarray]:
-    """Problem and initial states of one solve window, with the process noise chosen from the data
-    (:func:`tune`) when ``options.tune_process_noise``; the choice is appended to ``tunings``.
+def tuned_problem(part: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions,
+                  tunings: list | None = None, initial: InitialStates | None = None,
+                  span_s: float | None = None) -> tuple[SmootherProblem, np.ndarray]:
+    """Problem and initial states of one solve window of ``model`` and ``batch_model``, with the process noise
+    chosen from the data (:func:`tune`) when ``tuning.tune_process_noise``; the choice is appended to ``tunings``
+    and the problem carries the tuned model and batch model (``problem.model``, ``problem.batch_model``).
 
-    ``initial``: how the initial states are made (default :func:`gfimu.smoother.solve.initialise.initial_estimate`);
+    ``initial``: how the initial states are made (default :func:`gfimu.smoother.solve.initialise.initial_estimate`),
+    given flat options of the model and batch model;
     ``span_s``: choose on at most this much of the window [s] (None: the whole window): the stretch
     where the initial estimate's ω̇ moves most (the middle one among equals), so that a window that
     rests in its middle is not tuned on its rest alone."""
     initial = initial or initial_estimate
-    x0 = initial(part, options)
-    if not options.tune_process_noise:
-        return make_problem(part, options, 1.0, x0[:, OMEGA]), x0
+    x0 = initial(part, SmootherOptions.from_groups(model, batch_model))
+    if not tuning.tune_process_noise:
+        return make_problem(part, model, batch_model, 1.0, x0[:, OMEGA]), x0
     solved: list = []
     span = slice(0, len(part))
     if span_s is not None and part.times_s[-1] - part.times_s[0] > span_s:
         width = max(int(round(span_s * part.rate_hz)), 4)
         span = slice(*most_moving_span(x0[:, OMEGA_DOT], width))
-    tuning, model, batch_model = tune(part.select(span), options.model, options.batch_model, options.tuning, x0[span],
-                                      states_out=solved)
-    tuned = SmootherOptions.from_groups(model, batch_model, options.batch, options.tuning)
+    chosen, tuned, tuned_batch = tune(part.select(span), model, batch_model, tuning, x0[span], states_out=solved)
     if tunings is not None:
-        tunings.append(tuning)
-    if tuned.motion_model != options.motion_model:
-        x0 = initial(part, tuned)
-    elif any(f > 0 for f in tuning.axis_frequencies_hz):
+        tunings.append(chosen)
+    if tuned.motion_model != model.motion_model:
+        x0 = initial(part, SmootherOptions.from_groups(tuned, tuned_batch))
+    elif any(f > 0 for f in chosen.axis_frequencies_hz):
         if span == slice(0, len(part)):
             x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
         else:  # ... or from the white-jerk solution of the whole window with the chosen densities
             plain = replace(tuned, process_axis_frequencies_hz=(0.0, 0.0, 0.0))
-            x0 = solve(make_problem(part, plain, tuning.accel_noise_scale, x0[:, OMEGA]), x0).states
-    return make_problem(part, tuned, tuning.accel_noise_scale, x0[:, OMEGA]), x0
+            x0 = solve(make_problem(part, plain, tuned_batch, chosen.accel_noise_scale, x0[:, OMEGA]), x0).states
+    return make_problem(part, tuned, tuned_batch, chosen.accel_noise_scale, x0[:, OMEGA]), x0
