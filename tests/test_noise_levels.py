@@ -91,7 +91,7 @@ def test_the_fixed_lag_smoother_takes_the_same_value(log):
 
 def test_the_batch_problem_and_the_stream_view_are_both_what_a_group_reads(log):
     problem = SmootherProblem.of(log, SmootherOptions())
-    view = StreamView(log.array, ModelOptions(), BatchModelOptions(), log.timestamps_ns[:2]).with_levels((MotionModelGroup(),))
+    view = StreamView.of(log.array, ModelOptions(), BatchModelOptions(), log.timestamps_ns[:2]).with_levels((MotionModelGroup(),))
     assert isinstance(problem, ModelView) and isinstance(view, ModelView)
     assert isinstance(problem.noise.motion, MotionNoise) and isinstance(view.noise.motion, MotionNoise)
     np.testing.assert_array_equal(view.noise.motion.trapezoid_sigma, problem.noise.motion.trapezoid_sigma[:1])

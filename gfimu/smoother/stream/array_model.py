@@ -22,7 +22,10 @@ by :func:`gfimu.smoother.tuning.evidence.tune` with ``tune_accel_noise``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
+from types import MappingProxyType
+from typing import ClassVar, Mapping
 
 import numpy as np
 
@@ -79,44 +82,60 @@ def _linear_factor(noise_model, factor_keys: list[int], residual, jacobians: tup
     return gtsam.CustomFactor(noise_model, factor_keys, error)
 
 
+@dataclass(frozen=True, eq=False)
 class StreamView:
     """Samples of a stream seen as a problem of one sample (a per-sample group's terms) or of the two
     samples of a step (a step group's terms): a :class:`gfimu.smoother.model.noise_levels.ModelView`, as the
-    batch smoother's :class:`gfimu.smoother.model.problem.SmootherProblem` is (``array``, ``log``, ``model``,
-    ``batch_model``, ``n``, ``dt_s``, ``layout``, ``state_size``, its :attr:`noise` levels, no calibration variables), each
-    group's noise levels computed by its own :meth:`~gfimu.smoother.model.groups.FactorGroup.noise` on the view
-    (:meth:`with_levels`)."""
+    batch smoother's :class:`gfimu.smoother.model.problem.SmootherProblem` is, and nothing else. It holds the
+    array, the model's option groups, the step lengths, the samples (their :attr:`log`, made when a group asks
+    for it) and the noise levels that the groups' own :meth:`~gfimu.smoother.model.factor_group.FactorGroup.noise`
+    give on it (:meth:`with_levels`); the stream's model is fixed (white jerk or the driven oscillator: the state
+    ``[ω, ω̇, f]``, no attitude, no calibration variables; the gyroscope is the window engines' own)."""
 
-    def __init__(self, array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions, timestamps_ns, accel=None,
-                 gyro=None, dt_s: np.ndarray | None = None) -> None:
-        self.array = array
-        self.model, self.batch_model = model, batch_model
-        self.timestamps_ns = np.asarray(timestamps_ns, dtype=np.int64)
-        self.n = len(self.timestamps_ns)
-        self.dt_s = np.diff(self.timestamps_ns) * 1e-9 if dt_s is None else np.asarray(dt_s, dtype=float)
-        self._accel, self._gyro, self._log = accel, gyro, None
-        self.layout = StateLayout()
-        self.state_size = self.layout.size
-        self.snap = self.attitude = False
-        self.use_gyro = self.use_inclinometer = False
-        self.n_global = 0
-        self.global_blocks: dict = {}
-        self.noise = NoiseLevels()
+    array: SensorArray
+    model: ModelOptions
+    batch_model: BatchModelOptions
+    dt_s: np.ndarray
+    """(n - 1,) step lengths [s]: none for a view of one sample, one for a step."""
+    samples: tuple
+    """(timestamps [ns] (n,), accelerometer readings or None, gyroscope readings or None) of the samples."""
+    noise: NoiseLevels = NoiseLevels()
+
+    layout: ClassVar[StateLayout] = StateLayout()
+    state_size: ClassVar[int] = KINEMATIC_SIZE
+    snap: ClassVar[bool] = False
+    attitude: ClassVar[bool] = False
+    use_gyro: ClassVar[bool] = False
+    use_inclinometer: ClassVar[bool] = False
+    n_global: ClassVar[int] = 0
+    global_blocks: ClassVar[Mapping] = MappingProxyType({})
+
+    @classmethod
+    def of(cls, array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions, timestamps_ns, accel=None,
+           gyro=None, dt_s: np.ndarray | None = None) -> StreamView:
+        """The view of the samples at ``timestamps_ns`` (one or two) with these readings (None: zeros, no
+        gyroscope); ``dt_s``: their step length (default: from the timestamps)."""
+        timestamps_ns = np.asarray(timestamps_ns, dtype=np.int64)
+        dt_s = np.diff(timestamps_ns) * 1e-9 if dt_s is None else np.asarray(dt_s, dtype=float)
+        return cls(array, model, batch_model, dt_s, (timestamps_ns, accel, gyro))
 
     @property
+    def n(self) -> int:
+        """Samples in the view (1 or 2)."""
+        return len(self.dt_s) + 1
+
+    @cached_property
     def log(self) -> Log:
-        """The view's samples as a log (built when a group asks for it)."""
-        if self._log is None:
-            m = len(self.array.accel_columns)
-            accel = np.zeros((self.n, m)) if self._accel is None else np.asarray(self._accel, dtype=float).reshape(self.n, -1)
-            gyro = None if self._gyro is None else np.asarray(self._gyro, dtype=float).reshape(self.n, 3)
-            self._log = Log(self.array, self.timestamps_ns, accel, gyro_b_radps=gyro, source="fixed-lag stream")
-        return self._log
+        """The view's samples as a log (made when a group asks for it)."""
+        timestamps_ns, accel, gyro = self.samples
+        n, m = self.n, len(self.array.accel_columns)
+        accel = np.zeros((n, m)) if accel is None else np.asarray(accel, dtype=float).reshape(n, -1)
+        gyro = None if gyro is None else np.asarray(gyro, dtype=float).reshape(n, 3)
+        return Log(self.array, timestamps_ns, accel, gyro_b_radps=gyro, source="fixed-lag stream")
 
     def with_levels(self, groups) -> StreamView:
-        """The view with the noise levels of ``groups`` (:meth:`NoiseLevels.gather`)."""
-        self.noise = NoiseLevels.gather(groups, self)
-        return self
+        """The view with the noise levels of ``groups`` (:meth:`NoiseLevels.gather` on this view)."""
+        return replace(self, noise=NoiseLevels.gather(groups, self))
 
     def global_part(self, params: np.ndarray, name: str) -> None:
         return None
@@ -275,7 +294,7 @@ class ArrayModel:
         S = array.structure_matrix()
         S_lin = np.ascontiguousarray(S[:, :6])
         # the accelerometer, gyroscope and first-state noise of the batch smoother's groups, on a view of the array
-        levels = StreamView(array, *self.option_groups, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
+        levels = StreamView.of(array, *self.option_groups, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
                                                               GyroscopeGroup())).noise
         sigma = levels.accel.scaled(self.accel_noise_scale).sigma
         wL = S_lin / sigma[:, None]
@@ -334,11 +353,11 @@ class ArrayModel:
         per_sample = self.factor_sets.per_sample
         if not per_sample:
             return None
-        view = StreamView(self.array, *self.option_groups, [t_ns], y, gyro)
+        view = StreamView.of(self.array, *self.option_groups, [t_ns], y, gyro)
         groups = [g for g in per_sample if g.applies(view)]
         if not groups:
             return None
-        view.with_levels(groups)
+        view = view.with_levels(groups)
         none = np.zeros(0)
 
         def terms(x: np.ndarray):
@@ -401,7 +420,7 @@ class ArrayModel:
         fixed = cache.get(key)
         sets = self.factor_sets
         if fixed is None:
-            view = StreamView(self.array, *self.option_groups, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
+            view = StreamView.of(self.array, *self.option_groups, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
             zero = np.zeros(KINEMATIC_SIZE)
             fixed = self._step_rows(sets.fixed_steps, view, zero, zero)
             fixed = {"rows": fixed, 1.0: Step.of(*fixed[:3])}
@@ -411,12 +430,12 @@ class ArrayModel:
         others = None
         if sets.other_steps and t_ns is not None:
             (a0, g0), (a1, g1) = readings if readings is not None else ((None, None), (None, None))
-            view = StreamView(self.array, *self.option_groups, list(t_ns),
+            view = StreamView.of(self.array, *self.option_groups, list(t_ns),
                               None if a0 is None else np.vstack([a0, a1]),
                               None if g0 is None or g1 is None else np.vstack([g0, g1]), dt_s=np.array([h]))
             groups = [g for g in sets.other_steps if g.applies(view)]
             if groups:
-                view.with_levels(groups)
+                view = view.with_levels(groups)
                 x0 = np.zeros(KINEMATIC_SIZE) if x0 is None else np.asarray(x0, dtype=float)
                 base = fixed[1.0] if motion_factor == 1.0 else Step.of(*self._scaled(fixed["rows"], motion_factor))
                 x1 = base.F @ x0 + (0.0 if base.c is None else base.c)
