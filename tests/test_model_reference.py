@@ -67,7 +67,7 @@ def test_the_model_of_groups_gives_the_earlier_numbers(name):
     p = 0.01 * np.ones(problem.n_global)
     got = [problem.cost(x, p), log_normaliser(problem)]
     if name != "free flight":
-        problem = problem.with_motion_dependent_noise(x[:, :3], 0.05)
+        problem = problem.with_noise(accel=problem.noise.accel.motion_dependent(x[:, :3], 0.05))
     res = solve(problem, x, p)
     got += [res.cost, float(res.iterations), *res.states[len(log) // 2, :3]]
     np.testing.assert_allclose(got, REFERENCE[name], rtol=1e-9, atol=1e-12)

@@ -20,6 +20,7 @@ from gfimu.smoother.model.layout import OMEGA_DOT, SPECIFIC_FORCE
 from gfimu.smoother.model.noise_levels import AccelNoise, ModelView, MotionNoise, NoiseLevels
 from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.solve.banded import robust_reweighted
 from gfimu.smoother.solve.restarts import FrozenObjective
 from gfimu.smoother.stream.array_model import ArrayModel, StreamView
 from gfimu.smoother.tuning.evidence import make_problem
@@ -56,13 +57,14 @@ def test_the_accel_noise_option_reaches_every_group_that_whitens_with_it(log):
     assert group.log_normaliser(problem) == pytest.approx(len(log) * log.array.n_axes * np.log(SIGMA), rel=1e-14)
     # the motion-dependent noise, the tuner's scale, the restarts' objective start from it
     slope = 0.2
-    moving = problem.with_motion_dependent_noise(t.omega_b_radps, slope)
+    moving = problem.with_noise(accel=problem.noise.accel.motion_dependent(t.omega_b_radps, slope))
     wn = np.linalg.norm(t.omega_b_radps, axis=1)
     np.testing.assert_allclose(moving.noise.accel.per_sample[:, 0], np.sqrt(SIGMA**2 + (slope * wn) ** 2), rtol=1e-15)
     np.testing.assert_allclose(make_problem(log, problem.model, problem.batch_model, 2.0).noise.accel.sigma, 2 * SIGMA, rtol=1e-15)
     np.testing.assert_array_equal(FrozenObjective(problem).accel_sigma, SIGMA)
     # re-weighted: the robust weights divide the same σ
-    robust = SmootherProblem(log, problem.model, dataclasses.replace(problem.batch_model, accel_robust_threshold=2.0)).reweighted(states)
+    robust = robust_reweighted(SmootherProblem(log, problem.model, dataclasses.replace(problem.batch_model,
+                                                                                      accel_robust_threshold=2.0)), states)
     assert np.all(robust.noise.accel.per_sample >= SIGMA) and robust.noise.accel.base is None
 
 
@@ -107,7 +109,7 @@ def test_levels_are_frozen_and_replaced_whole(log):
         levels.accel = AccelNoise(np.ones(3))
     with pytest.raises(ValueError):
         levels.accel.sigma[0] = 1.0
-    scaled = problem.with_accel_noise_scale(2.0)
+    scaled = problem.with_noise(accel=problem.noise.accel.scaled(2.0))
     assert scaled.noise.motion is levels.motion and scaled.noise.accel is not levels.accel
     np.testing.assert_array_equal(problem.noise.accel.sigma * 2.0, scaled.noise.accel.sigma)
 

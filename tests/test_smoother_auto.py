@@ -108,7 +108,7 @@ def test_residual_only_cost_equals_the_cost_of_the_terms():
         return 0.5 * sum(float(np.sum(t.residual**2)) for t in problem.terms(states, params))
 
     np.testing.assert_allclose(problem.cost(states, params), from_terms(), rtol=1e-12)
-    problem = problem.with_motion_dependent_noise(states[:, 0:3], 0.03)
+    problem = problem.with_noise(accel=problem.noise.accel.motion_dependent(states[:, 0:3], 0.03))
     np.testing.assert_allclose(problem.cost(states, params), from_terms(), rtol=1e-12)
 
 

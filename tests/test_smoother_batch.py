@@ -105,7 +105,7 @@ def test_graph_path_equals_fast_path_with_attitude_and_inclinometer():
     problem = SmootherProblem.of(log, options)
     base = initial_states(log, SmootherOptions())
     R = initial_attitude(log, base[:, 0:3], base[:, 6:9], None, True)
-    problem = problem.with_attitude_prior(R[0])
+    problem = problem.with_noise(attitude=problem.noise.attitude.with_prior(R[0]))
     x0 = np.hstack([base, _so3.log(R)])
     fast = batch.solve(problem, x0, method="gn")
     states, _ = batch.solve_with_gtsam(problem, x0, iterations=30, tolerance=0.0)

@@ -5,6 +5,7 @@ import pytest
 
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.solve.banded import robust_reweighted
 
 from test_smoother_batch_tuning import CUBE, omega_rmse, process_model_log
 
@@ -20,12 +21,12 @@ def test_huber_and_cauchy_weights_of_accelerometer_axes():
     states = np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2])
     for loss, expected in (("huber", 2.0 / 10.0), ("cauchy", 1.0 / (1.0 + 25.0))):
         p = SmootherProblem.of(log, SmootherOptions(robust_loss=loss, accel_robust_threshold=2.0))
-        p = p.reweighted(states)
+        p = robust_reweighted(p, states)
         ratio = (p.noise.accel.sigma[None, :] / p.noise.accel.per_sample) ** 2  # = weight
         assert ratio[7, 4] == pytest.approx(expected, rel=1e-9)
         ratio[7, 4] = 1.0
         assert np.allclose(ratio, 1.0, atol=1e-12)
-        p = p.reweighted(states)  # idempotent: weights come from the base noise
+        p = robust_reweighted(p, states)  # idempotent: weights come from the base noise
         assert (p.noise.accel.sigma[4] / p.noise.accel.per_sample[7, 4]) ** 2 == pytest.approx(expected, rel=1e-9)
 
 
@@ -38,14 +39,14 @@ def test_process_weights_follow_the_step_residual():
     p = SmootherProblem.of(log, SmootherOptions(process_robust_threshold=3.0))
     s0 = p.noise.motion.trapezoid_sigma.copy()
     states[20:, 0] += 50.0 * s0[19]  # ω_x jumps between samples 19 and 20
-    p = p.reweighted(states)
+    p = robust_reweighted(p, states)
     w = (s0 / p.noise.motion.trapezoid_sigma) ** 2
     big = np.abs(w - 1.0) > 1e-12
     assert np.nonzero(big)[0].tolist() == [19]
     # the jump dominates its step: whitened rms over the 6 rows ≈ 50 / sqrt(6)
     assert w[19] == pytest.approx(3.0 / (50.0 / np.sqrt(6.0)), rel=0.05)
-    assert np.allclose((s0 / p.noise.motion.trapezoid_sigma) ** 2, (p.base_noise()[2] / p.noise.motion.omega_dot_step_sigma) ** 2)
-    p = p.reweighted(np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2]))
+    assert np.allclose((s0 / p.noise.motion.trapezoid_sigma) ** 2, (p.noise.motion.start()[1] / p.noise.motion.omega_dot_step_sigma) ** 2)
+    p = robust_reweighted(p, np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2]))
     assert np.all((s0 / p.noise.motion.trapezoid_sigma) ** 2 > 0.99)
 
 
@@ -151,7 +152,7 @@ def test_a_problem_is_frozen_and_reweighting_makes_a_new_one():
     states[20:, 0] += 1.0  # one outlying step
     p = SmootherProblem.of(log, SmootherOptions(process_robust_threshold=3.0))
     before = p.noise.motion.trapezoid_sigma.copy()
-    q = p.reweighted(states)
+    q = robust_reweighted(p, states)
     assert q is not p and q.log is p.log and q.groups is p.groups
     np.testing.assert_array_equal(p.noise.motion.trapezoid_sigma, before)
     assert q.noise.motion.trapezoid_sigma[19] > 2 * before[19] and np.array_equal(np.delete(q.noise.motion.trapezoid_sigma, 19), np.delete(before, 19))
@@ -163,4 +164,4 @@ def test_a_problem_is_frozen_and_reweighting_makes_a_new_one():
         p.new_attribute = 1
     with pytest.raises(ValueError):
         p.noise.motion.trapezoid_sigma[0] = 1.0  # read-only
-    assert p.with_accel_noise_scale(2.0).noise.accel.sigma[0] == 2 * p.noise.accel.sigma[0]
+    assert p.with_noise(accel=p.noise.accel.scaled(2.0)).noise.accel.sigma[0] == 2 * p.noise.accel.sigma[0]

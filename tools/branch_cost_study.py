@@ -130,7 +130,8 @@ class FrozenModel:
 
     def resolve(self, X: np.ndarray):
         """Robust re-weighted Levenberg-Marquardt under the frozen noise (each step lowers J), from X."""
-        p = self.problem.with_base_noise(self.sigma, *self.base)
+        p = self.problem.with_noise(accel=self.problem.noise.accel.with_base(self.sigma),
+                                    motion=self.problem.noise.motion.with_steps(*self.base))
         reweight = reweighting(replace(p.batch_model, accel_noise_slope_mps2_per_radps=0.0))
         return solve(p, X, reweight=reweight, max_iterations=100)
 

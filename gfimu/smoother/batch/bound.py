@@ -64,7 +64,7 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
     for i, (solve_sl, keep_log, keep_win) in enumerate(windows):
         problem = SmootherProblem.of(log.select(solve_sl), opt if window_options is None else window_options[i])
         if problem.attitude:
-            problem = problem.with_attitude_prior(_so3.exp(states[solve_sl.start, -3:]))
+            problem = problem.with_noise(attitude=problem.noise.attitude.with_prior(_so3.exp(states[solve_sl.start, -3:])))
         params = np.zeros(problem.n_global) if true_params is None else true_params
         ne = normal_equations(problem, states[solve_sl], params)
         cov, _ = marginal_covariances(ne, factorise(ne, 0.0))

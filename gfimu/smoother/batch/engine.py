@@ -298,7 +298,8 @@ class _WindowOutcome:
     @classmethod
     def of(cls, res: SolveResult, problem: SmootherProblem, keep_win: slice, tunings: list) -> _WindowOutcome:
         sd = None if res.covariance is None else np.sqrt(np.einsum("nii->ni", res.covariance))[keep_win]
-        noise = None if sd is None else (res.problem or problem).base_noise()[0][keep_win]
+        solved = res.problem or problem
+        noise = None if sd is None else np.array(solved.noise.accel.start(solved.n))[keep_win]
         return cls(res.states, keep_win, sd, {name: res.params[sl] for name, (sl, _) in problem.global_blocks.items()},
                    tunings, res.iterations, float(res.cost), bool(res.converged), noise,
                    None if sd is None else _process_densities(res.problem or problem, keep_win))
@@ -532,7 +533,7 @@ def moment_problem(part: Log, model: ModelOptions, batch_model: BatchModelOption
     problem = make_problem(part, model, batch_model, scale, x0[:, OMEGA])
     factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
                                     opt.omega_dot_random_walk_radps2_per_sqrt_s)
-    return problem.with_process_factors(factors), x0
+    return problem.with_noise(motion=problem.noise.motion.scaled_steps(factors)), x0
 
 
 def _solve_with_attitude(part: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions,
@@ -562,7 +563,7 @@ def _solve_with_attitude(part: Log, model: ModelOptions, batch_model: BatchModel
     R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start, batch_model.use_inclinometer)
     problem = (make_problem(part, model, batch_model, t.accel_noise_scale) if t is not None
                else SmootherProblem(part, model, batch_model))
-    problem = problem.with_attitude_prior(R[0])
+    problem = problem.with_noise(attitude=problem.noise.attitude.with_prior(R[0]))
     x0 = np.hstack([first.states, _so3.log(R)])
     return solve_problem(problem, x0, first.params if first.params.size else None, model.compute_sigma, solver), problem
 

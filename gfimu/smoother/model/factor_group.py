@@ -52,7 +52,7 @@ class FactorGroup:
     noise only (the fixed-lag smoother then keeps its step per step length)."""
     motion = False
     """Whether its rows are the motion model's, whose stds the local motion density scales
-    (:meth:`gfimu.smoother.model.problem.SmootherProblem.with_process_factors`; the fixed-lag smoother's steps)."""
+    (:meth:`gfimu.smoother.model.noise_levels.MotionNoise.scaled_steps`; the fixed-lag smoother's steps)."""
 
     def applies(self, problem) -> bool:
         return True

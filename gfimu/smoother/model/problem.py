@@ -44,7 +44,7 @@ from ...factors import (
 )
 from ...log import Log
 from .parts import delegated
-from .groups import BUILT_IN, AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: F401  (Term: also importable from here)
+from .groups import BUILT_IN, FactorGroup, Term  # noqa: F401  (Term: also importable from here)
 from .noise_levels import NoiseLevels
 from .option_groups import BatchModelOptions, ModelOptions, MotionModel, assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
@@ -204,8 +204,10 @@ class SmootherProblem:
     the inclinometer the model uses.
 
     Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
-    around new noise levels (:meth:`with_noise`, :meth:`with_motion_dependent_noise`,
-    :meth:`with_base_noise`, :meth:`reweighted`, :meth:`with_process_factors`), sharing the rest."""
+    around new noise levels (:meth:`with_noise`, given the new value of a level, made by that level's own
+    methods: ``problem.with_noise(accel=problem.noise.accel.motion_dependent(omega, slope))``; the robust
+    re-weighting: :func:`gfimu.smoother.solve.banded.robust_reweighted`), sharing the rest. Its methods name
+    no group's noise levels: the groups and the re-weightings do."""
 
     log: Log
     model: ModelOptions = field(default_factory=ModelOptions)
@@ -281,61 +283,6 @@ class SmootherProblem:
         new = copy.copy(self)
         object.__setattr__(new, "noise", self.noise.replace(**changes))
         return new
-
-    def with_motion_dependent_noise(self, omega_b_radps: np.ndarray, slope_mps2_per_radps: float) -> SmootherProblem:
-        """Noise std per sample ``sqrt(σ² + (slope |ω_k|)²)`` from an estimate of ω: the rigid-body
-        residual of real arrays grows with the rotation rate (sensor positions, alignment and
-        dynamic errors). Re-evaluated from each new estimate (iteratively re-weighted least squares)."""
-        return self.with_noise(accel=self.noise.accel.motion_dependent(omega_b_radps, slope_mps2_per_radps))
-
-    def with_process_factors(self, factors: np.ndarray) -> SmootherProblem:
-        """The white-jerk steps' stds times ``factors`` (N-1,) (the local motion density of
-        :func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
-        return self.with_noise(motion=self.noise.motion.scaled_steps(factors))
-
-    def with_accel_noise_scale(self, scale: float) -> SmootherProblem:
-        """Every accelerometer noise std (and the per-sample inversion's) times ``scale``."""
-        return self.with_noise(accel=self.noise.accel.scaled(scale))
-
-    def with_attitude_prior(self, rotation_wb: np.ndarray) -> SmootherProblem:
-        """The first attitude's prior centred on ``rotation_wb`` (3, 3)."""
-        return self.with_noise(attitude=self.noise.attitude.with_prior(rotation_wb))
-
-    def base_noise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The noise the robust re-weighting starts from: accelerometer std (N, axes) (the
-        motion-dependent one when set), trapezoid and ω̇-step std of the motion-model steps (N-1,)."""
-        accel = self.noise.accel.start(self.n)
-        process = self.noise.motion.start()
-        return np.array(accel), np.array(process[0]), np.array(process[1])
-
-    def with_base_noise(self, accel_sigma: np.ndarray, trapezoid_sigma: np.ndarray,
-                        omega_dot_step_sigma: np.ndarray) -> SmootherProblem:
-        """These (as :meth:`base_noise` returns them) as the current noise and the one the robust
-        re-weighting starts from (the white-jerk motion model)."""
-        return self.with_noise(accel=self.noise.accel.with_base(accel_sigma),
-                               motion=self.noise.motion.with_steps(trapezoid_sigma, omega_dot_step_sigma))
-
-    def reweighted(self, states: np.ndarray, params: np.ndarray | None = None) -> SmootherProblem:
-        """The robust (Huber or Cauchy) re-weighting at ``states`` (iteratively re-weighted least squares).
-
-        Each accelerometer axis (``accel_robust_threshold``, :meth:`AccelerometerGroup.reweighted`) and each
-        motion-model step (``process_robust_threshold``, :meth:`MotionModelGroup.reweighted`) gets the IRLS
-        weight ``w(e)`` of its whitened residual e (for a step: its norm / sqrt(rows)); the weight divides
-        the factor's variance. Weights are computed against the un-reweighted noise (the motion-dependent
-        one when set), so re-weighting a re-weighted problem does not compound.
-        """
-        opt = self.batch_model
-        P = np.zeros(self.n_global) if params is None else params
-        out = self
-        if opt.accel_robust_threshold > 0 and opt.measurement == "accelerometer":
-            accel = self.group(AccelerometerGroup).reweighted(
-                self, states, P, lambda e: robust_weight(e, opt.accel_robust_threshold, opt.robust_loss))
-            out = out.with_noise(accel=accel)
-        if opt.process_robust_threshold > 0:
-            motion = self.group(MotionModelGroup).reweighted(
-                out, states, lambda e: robust_weight(e, opt.process_robust_threshold, opt.robust_loss))
-            out = out.with_noise(motion=motion)
-        return out
 
     # --- calibration variables -------------------------------------------
     def global_part(self, params: np.ndarray, name: str) -> np.ndarray | None:

@@ -23,7 +23,8 @@ import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from ..model.option_groups import BatchModelOptions, BatchOptions
-from ..model.problem import SmootherProblem
+from ..model.groups import AccelerometerGroup, MotionModelGroup
+from ..model.problem import SmootherProblem, robust_weight
 
 
 @dataclass
@@ -473,12 +474,37 @@ def reweighting(batch_model: BatchModelOptions):
 
     def reweight(problem: SmootherProblem, states: np.ndarray, params: np.ndarray) -> SmootherProblem:
         if slope:
-            problem = problem.with_motion_dependent_noise(states[:, 0:3], batch_model.accel_noise_slope_mps2_per_radps)
+            problem = problem.with_noise(accel=problem.noise.accel.motion_dependent(
+                states[:, 0:3], batch_model.accel_noise_slope_mps2_per_radps))
         if batch_model.robust:
-            problem = problem.reweighted(states, params)
+            problem = robust_reweighted(problem, states, params)
         return problem
 
     return reweight
+
+
+def robust_reweighted(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | None = None) -> SmootherProblem:
+    """The robust (Huber or Cauchy) re-weighting of ``problem`` at ``states`` (iteratively re-weighted least
+    squares), as its batch model asks.
+
+    Each accelerometer axis (``accel_robust_threshold``, :meth:`AccelerometerGroup.reweighted`) and each
+    motion-model step (``process_robust_threshold``, :meth:`MotionModelGroup.reweighted`) gets the IRLS
+    weight ``w(e)`` of its whitened residual e (for a step: its norm / sqrt(rows)); the weight divides
+    the factor's variance. Weights are computed against the un-reweighted noise (the motion-dependent
+    one when set), so re-weighting a re-weighted problem does not compound.
+    """
+    opt = problem.batch_model
+    P = np.zeros(problem.n_global) if params is None else params
+    out = problem
+    if opt.accel_robust_threshold > 0 and opt.measurement == "accelerometer":
+        accel = problem.group(AccelerometerGroup).reweighted(
+            problem, states, P, lambda e: robust_weight(e, opt.accel_robust_threshold, opt.robust_loss))
+        out = out.with_noise(accel=accel)
+    if opt.process_robust_threshold > 0:
+        motion = problem.group(MotionModelGroup).reweighted(
+            out, states, lambda e: robust_weight(e, opt.process_robust_threshold, opt.robust_loss))
+        out = out.with_noise(motion=motion)
+    return out
 
 
 def solve_reweighted(problem: SmootherProblem, states: np.ndarray, batch: BatchOptions,

@@ -55,11 +55,13 @@ def applies(problem: SmootherProblem) -> bool:
 class FrozenObjective:
     """The robust objective of a solved problem with its noise as the re-weighting left it: the
     accelerometer noise at the solution's |ω| (un-reweighted), the motion-model steps' base noise
-    (:meth:`SmootherProblem.base_noise`)."""
+    (:meth:`AccelNoise.start`, :meth:`MotionNoise.start` of the problem's noise levels)."""
 
     def __init__(self, problem: SmootherProblem):
         self.problem = problem
-        self.accel_sigma, self.trapezoid_sigma, self.omega_dot_step_sigma = problem.base_noise()
+        trapezoid, omega_dot_step, _ = problem.noise.motion.start()
+        self.accel_sigma = np.array(problem.noise.accel.start(problem.n))
+        self.trapezoid_sigma, self.omega_dot_step_sigma = np.array(trapezoid), np.array(omega_dot_step)
         self.rows = problem.all_rows
 
     def step_norms(self, X: np.ndarray) -> tuple[np.ndarray, int]:
@@ -171,8 +173,10 @@ def local_resolve(objective: FrozenObjective, X: np.ndarray, a: int, b: int, mar
     lo, hi = max(a - margin, 0), min(b + margin, p.n)
     held = [i for i in (lo, lo + 1) if lo > 0] + [i for i in (hi - 2, hi - 1) if hi < p.n]
     model = replace(p.model, factor_groups=tuple(p.model.factor_groups) + (_HeldStates([i - lo for i in held], X[held]),))
-    sub = SmootherProblem(p.log.select(slice(lo, hi)), model, p.batch_model).with_base_noise(
-        objective.accel_sigma[lo:hi], objective.trapezoid_sigma[lo:hi - 1], objective.omega_dot_step_sigma[lo:hi - 1])
+    sub = SmootherProblem(p.log.select(slice(lo, hi)), model, p.batch_model)
+    sub = sub.with_noise(accel=sub.noise.accel.with_base(objective.accel_sigma[lo:hi]),
+                         motion=sub.noise.motion.with_steps(objective.trapezoid_sigma[lo:hi - 1],
+                                                            objective.omega_dot_step_sigma[lo:hi - 1]))
     reweight = reweighting(replace(p.batch_model, accel_noise_slope_mps2_per_radps=0.0))
     Y = X.copy()
     Y[lo:hi] = solve(sub, X[lo:hi], reweight=reweight, max_iterations=max_iterations).states

@@ -380,7 +380,7 @@ class ArrayModel:
     def _step_rows(groups, view: StreamView, x0: np.ndarray, x1: np.ndarray, motion_factor: float = 1.0):
         """(J0, J1, r0, motion) of ``groups``' terms on the two-sample ``view`` linearised at (x0, x1): rows
         ``r0 + J0 x0 + J1 x1``, the motion model's rows (``motion``, a mask) divided by ``motion_factor``
-        (its stds times it, as :meth:`gfimu.smoother.model.problem.SmootherProblem.with_process_factors`)."""
+        (its stds times it, as :meth:`gfimu.smoother.model.noise_levels.MotionNoise.scaled_steps` in the batch smoother)."""
         X = np.vstack([x0, x1])
         J0s, J1s, rs, motion = [], [], [], []
         for group in groups:

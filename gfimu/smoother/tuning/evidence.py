@@ -116,10 +116,10 @@ def make_problem(log: Log, model: ModelOptions, batch_model: BatchModelOptions, 
     ``omega_b_radps``."""
     problem = SmootherProblem(log, model, batch_model)
     if accel_noise_scale != 1.0:
-        problem = problem.with_accel_noise_scale(accel_noise_scale)  # the inversion's too ('quadratic')
+        problem = problem.with_noise(accel=problem.noise.accel.scaled(accel_noise_scale))  # the inversion's too ('quadratic')
     slope = batch_model.accel_noise_slope_mps2_per_radps
     if slope > 0 and omega_b_radps is not None and batch_model.measurement == "accelerometer":
-        problem = problem.with_motion_dependent_noise(omega_b_radps, slope)
+        problem = problem.with_noise(accel=problem.noise.accel.motion_dependent(omega_b_radps, slope))
     return problem
 
 
