@@ -170,7 +170,7 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
     options = SmootherOptions.from_groups(model, batch_model, batch, tuning)
     _check_smoothable(log, model, batch_model, batch.solver)
     preload.wait()  # (the kernels' loading begun while the log was read is over before anything is forked)
-    layout = StateLayout.from_options(options)
+    layout = StateLayout.of(model, batch_model)
     attitude = layout.attitude
     windows = window_slices(len(log), log.rate_hz, batch.window_s, batch.overlap_s)
     timings = {}
@@ -192,7 +192,7 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
         outcomes = _run_windows(context, window_workers(batch.workers, len(windows), batch.solver), progress)
         _align_signs(context, outcomes)
     timings["solve windows"] = time.perf_counter() - t0
-    joined = _Joined.of(log, layout, opt, windows, outcomes)
+    joined = _Joined.of(log, layout, opt.model, opt.batch_model, windows, outcomes)
     return Estimate(joined.motion(log, layout), Report.of(
         "smoother", options, timings=timings, warnings=joined.notes, model_check=auto[0] if auto else None,
         tunings=joined.tunings, calibration=joined.calibration, iterations=joined.iterations, cost=joined.cost,
@@ -226,12 +226,12 @@ class _Joined:
     cost: float
 
     @classmethod
-    def of(cls, log: Log, layout: StateLayout, opt: SmootherOptions, windows: list,
+    def of(cls, log: Log, layout: StateLayout, model: ModelOptions, batch_model: BatchModelOptions, windows: list,
            outcomes: list[_WindowOutcome]) -> _Joined:
         """Each window's kept rows in place, in window order; σ scaled by the readings' misfit where
         :func:`_calibrates_sigma`."""
         n, M = len(log), layout.size
-        out = cls(np.zeros((n, M)), np.zeros((n, M)) if opt.compute_sigma else None, [], [], [], 0, 0.0)
+        out = cls(np.zeros((n, M)), np.zeros((n, M)) if model.compute_sigma else None, [], [], [], 0, 0.0)
         for w, ((solve_sl, keep_log, keep_win), res) in enumerate(zip(windows, outcomes)):
             out.tunings.extend(res.tunings)
             out.iterations += res.iterations
@@ -245,15 +245,15 @@ class _Joined:
                 out.sd[keep_log, :m] = res.sd[:, :m]
             out.calibration.append(res.calibration)
         if (out.sd is not None and outcomes and all(res.noise is not None for res in outcomes)
-                and _calibrates_sigma(log, opt)):
+                and _calibrates_sigma(log, model, batch_model)):
             noise_std = np.vstack([res.noise for res in outcomes])
             process = None
             if (len(log) > 2 and all(res.process is not None for res in outcomes)
                     and all(np.array_equal(res.process[1], outcomes[0].process[1]) for res in outcomes)):
                 process = (np.vstack([res.process[0] for res in outcomes])[:-1], outcomes[0].process[1], log.dt_s)
             out.sd = calibrated_sigma(log.array, log.accel_mps2, out.states, out.sd, noise_std,
-                                      (opt.robust_loss, opt.accel_robust_threshold) if opt.accel_robust_threshold > 0
-                                      else None, process=process)
+                                      (batch_model.robust_loss, batch_model.accel_robust_threshold)
+                                      if batch_model.accel_robust_threshold > 0 else None, process=process)
         return out
 
     def motion(self, log: Log, layout: StateLayout) -> Motion:
@@ -448,11 +448,12 @@ def _attitude_windows(log: Log, model: ModelOptions, batch_model: BatchModelOpti
     return out
 
 
-def _calibrates_sigma(log: Log, opt: SmootherOptions) -> bool:
+def _calibrates_sigma(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> bool:
     """Whether σ is scaled by the readings' misfit (:mod:`gfimu.smoother.solve.sigma_scale`): the accelerometers
     alone, as they are (no gyroscope, inclinometer or calibration variables the residual would leave out)."""
+    opt = batch_model
     return (opt.measurement == "accelerometer" and not (opt.self_calibrate_bias or opt.self_calibrate_scale)
-            and not (opt.use_gyro and log.array.gyroscope is not None and log.gyro_b_radps is not None)
+            and not (model.use_gyro and log.array.gyroscope is not None and log.gyro_b_radps is not None)
             and not (opt.estimate_attitude and opt.use_inclinometer and log.array.inclinometer is not None))
 
 
@@ -521,18 +522,17 @@ def moment_problem(part: Log, model: ModelOptions, batch_model: BatchModelOption
     check, motion = auto
     omega = motion.omega_b_radps[solve_sl]
     omega_dot = motion.omega_dot_b_radps2[solve_sl]
-    opt = model
-    if opt.ml_sign_chain:
+    if model.ml_sign_chain:
         omega = omega * sign_chain(omega, omega_dot, part.dt_s)[:, None]
     x0 = np.hstack([omega, omega_dot, motion.specific_force_b_mps2[solve_sl]])
     scale = 1.0
     if np.isfinite(check.stated_noise_mps2) and check.stated_noise_mps2 > 0:
         scale = check.noise_floor_mps2 / check.stated_noise_mps2
-    tunings.append(Tuning("jerk", opt.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
-                          tuple(opt.process_axis_factors), opt.specific_force_random_walk_mps2_per_sqrt_s))
+    tunings.append(Tuning("jerk", model.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
+                          tuple(model.process_axis_factors), model.specific_force_random_walk_mps2_per_sqrt_s))
     problem = make_problem(part, model, batch_model, scale, x0[:, OMEGA])
     factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
-                                    opt.omega_dot_random_walk_radps2_per_sqrt_s)
+                                    model.omega_dot_random_walk_radps2_per_sqrt_s)
     return problem.with_noise(motion=problem.noise.motion.scaled_steps(factors)), x0
 
 
