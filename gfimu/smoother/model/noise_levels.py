@@ -10,8 +10,7 @@ named field:
   the per-sample std of the re-weightings; an :class:`InversionNoise` with ``measurement='quadratic'``;
 - :attr:`NoiseLevels.first_state`, :attr:`NoiseLevels.force_walk`, :attr:`NoiseLevels.attitude`,
   :attr:`NoiseLevels.motion`, :attr:`NoiseLevels.gyro`, :attr:`NoiseLevels.tilt`, :attr:`NoiseLevels.free_flight`,
-  :attr:`NoiseLevels.calibration`:
-  the other groups';
+  :attr:`NoiseLevels.calibration`: the other groups';
 - a group given in ``SmootherOptions.factor_groups`` keeps whatever its ``noise`` gives, read back with
   :meth:`NoiseLevels.of`.
 
