@@ -214,6 +214,9 @@ class SmootherProblem:
     batch_model: BatchModelOptions = field(default_factory=BatchModelOptions)
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.model, ModelOptions) and isinstance(self.batch_model, BatchModelOptions)):
+            raise TypeError("SmootherProblem(log, model, batch_model) takes the option groups ModelOptions and "
+                            "BatchModelOptions; SmootherProblem.of(log, options) takes flat options")
         reason = options_reason(self.log.array, self.model, self.batch_model, attitude_supported=True)
         if reason:
             raise InputError(reason)
