@@ -41,7 +41,7 @@ def log():
 def system(log, name, damping=0.0):
     opt = OPTIONS[name]
     problem = SmootherProblem.of(log, opt)
-    x = StateLayout.from_options(opt).resize(initial_states(log, opt))
+    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model, opt.batch_model))
     if problem.attitude:
         x[:, problem.AT] = 0.01 * np.random.default_rng(1).normal(size=(problem.n, 3))
     p = 0.01 * np.random.default_rng(2).normal(size=problem.n_global)
@@ -132,7 +132,7 @@ from gfimu.smoother.tuning.evidence import ProcessBasis, linearised_log_evidence
 @pytest.mark.parametrize("name", ["jerk"])
 def test_process_basis_gives_the_evidence_of_the_factors_evaluated_per_setting(log, name):
     opt = OPTIONS[name]
-    x = StateLayout.from_options(opt).resize(initial_states(log, opt))
+    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model, opt.batch_model))
     field = "omega_ddot_random_walk_radps3_per_sqrt_s" if name == "snap" else "omega_dot_random_walk_radps2_per_sqrt_s"
     basis = ProcessBasis.of(log, opt.model, opt.batch_model, field, x, np.zeros(0))
     assert basis is not None
@@ -162,7 +162,7 @@ def test_process_basis_at_new_states_keeps_the_split_and_products_and_equals_one
     basis made afresh there, bit for bit (the same products in the same order)."""
     opt = OPTIONS["jerk"]
     field = "omega_dot_random_walk_radps2_per_sqrt_s"
-    x = initial_states(log, opt)
+    x = initial_states(log, opt.model, opt.batch_model)
     y = x + np.random.default_rng(3).normal(scale=0.05, size=x.shape)  # another point, e.g. a solver's
     first = ProcessBasis.of(log, opt.model, opt.batch_model, field, x, np.zeros(0))
     kept = ProcessBasis.of(log, opt.model, opt.batch_model, field, y, np.zeros(0), previous=first)
@@ -198,16 +198,16 @@ def test_process_basis_at_new_states_keeps_the_split_and_products_and_equals_one
 
 def test_process_basis_is_not_used_for_the_oscillator_or_white_snap(log):
     opt = OPTIONS["oscillator"]
-    assert ProcessBasis.of(log, opt.model, opt.batch_model, "omega_dot_random_walk_radps2_per_sqrt_s", initial_states(log, opt), np.zeros(0)) is None
+    assert ProcessBasis.of(log, opt.model, opt.batch_model, "omega_dot_random_walk_radps2_per_sqrt_s", initial_states(log, opt.model, opt.batch_model), np.zeros(0)) is None
     opt = OPTIONS["snap"]
-    x = StateLayout.from_options(opt).resize(initial_states(log, opt))
+    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model, opt.batch_model))
     assert ProcessBasis.of(log, opt.model, opt.batch_model, "omega_ddot_random_walk_radps3_per_sqrt_s", x, np.zeros(0)) is None
 
 
 def test_tuner_with_the_process_basis_chooses_what_it_chose_without():
     log = simulate("random3d", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=3.0, seed=2)
     opt = SmootherOptions()
-    x = initial_states(log, opt)
+    x = initial_states(log, opt.model, opt.batch_model)
     fast, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x)
     plain, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x, basis=False)
     assert fast.evaluations == plain.evaluations
@@ -224,7 +224,7 @@ def test_tuner_with_the_process_basis_on_a_turntable_reaches_the_same_evidence()
     ten thousand); the density and the oscillator are the same."""
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=3.0, seed=2)
     opt = SmootherOptions()
-    x = initial_states(log, opt)
+    x = initial_states(log, opt.model, opt.batch_model)
     fast, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x)
     plain, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x, basis=False)
     assert fast.log_evidence == pytest.approx(plain.log_evidence, abs=2.0)
@@ -364,5 +364,5 @@ def test_lifted_smoothing_band_written_from_its_parts_equals_the_dense_normal_eq
         H += D.T @ W @ D
     rhs = ((sub.accel_mps2 / sigma) @ A).reshape(-1)
     want = np.linalg.solve(H, rhs).reshape(n, LIFTED)
-    got = lifted_smoothing(sub, opt)
+    got = lifted_smoothing(sub, opt.model)
     np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-8 * np.abs(want).max())

@@ -218,7 +218,7 @@ def test_the_tuner_takes_the_model_batch_model_and_tuning_groups(monkeypatch):
     monkeypatch.setattr(evidence._NoiseSearch, "run", recorded)
     log = simulate("random3d", cube_array(0.025, noise_std_mps2=0.07), rate_hz=100.0, duration_s=2.0, seed=1)
     model, batch_model = ModelOptions(specific_force_random_walk_mps2_per_sqrt_s=20.0), BatchModelOptions()
-    x = initial_states(log, SmootherOptions.from_groups(model, batch_model))
+    x = initial_states(log, model, batch_model)
     tuning, tuned, tuned_batch = evidence.tune(log, model, batch_model, TuningOptions(), x)
     assert runs == [("jerk", False, True)]
     assert tuned == replace(model, omega_dot_random_walk_radps2_per_sqrt_s=tuning.density,

@@ -94,7 +94,7 @@ def test_graph_path_equals_fast_path_with_the_oscillator(turntable_log):
     opt = SmootherOptions(process_axis_frequencies_hz=(0.0, 0.8, 1.0), process_axis_factors=(1.0, 0.1, 0.01),
                           relative_tolerance=1e-16, max_iterations=50)
     problem = SmootherProblem.of(log, opt)
-    x0 = initial_states(log, opt)
+    x0 = initial_states(log, opt.model, opt.batch_model)
     fast = batch.solve(problem, x0, method="gn")
     states, _ = batch.solve_with_gtsam(problem, x0, iterations=30, tolerance=0.0)
     np.testing.assert_allclose(states, fast.states, atol=5e-8)
@@ -106,7 +106,7 @@ def test_evidence_with_the_oscillator_equals_the_dense_gaussian_integral():
     log = simulate("reversal", CUBE_5CM, rate_hz=500.0, duration_s=0.06, seed=3)
     problem = SmootherProblem.of(log, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=12.0, process_axis_factors=(0.5, 1.0, 2.0),
                                                    process_axis_frequencies_hz=(0.55, 0.0, 3.0)))
-    x = initial_states(log, SmootherOptions.from_groups(problem.model, problem.batch_model)) + 0.01
+    x = initial_states(log, problem.model, problem.batch_model) + 0.01
     dense = dense_log_evidence(problem, x)
     assert linearised_log_evidence(problem, x) == pytest.approx(dense, abs=1e-6 * abs(dense))
 

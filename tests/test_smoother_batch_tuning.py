@@ -47,7 +47,7 @@ def test_evidence_equals_dense_gaussian_integral():
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=0.08, seed=3)
     problem = SmootherProblem.of(log, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=12.0,
                                                    process_axis_factors=(0.5, 1.0, 2.0)))
-    x = initial_states(log, SmootherOptions.from_groups(problem.model, problem.batch_model)) + 0.01
+    x = initial_states(log, problem.model, problem.batch_model) + 0.01
     dense = dense_log_evidence(problem, x)
     assert linearised_log_evidence(problem, x) == pytest.approx(dense, abs=1e-6 * abs(dense))
     # the row normaliser: the whitening weights of the process rows are 1/σ
@@ -64,7 +64,7 @@ def test_tuner_recovers_the_density_of_the_process_model():
     q_true = np.array([8.0, 8.0, 2.0])
     log = process_model_log(q_true, 3.0, seed=5)
     opt = SmootherOptions(window_s=None)
-    tuning, model, batch_model = tune(log, opt.model, opt.batch_model, opt.tuning, initial_states(log, opt))
+    tuning, model, batch_model = tune(log, opt.model, opt.batch_model, opt.tuning, initial_states(log, opt.model, opt.batch_model))
     q_axes = tuning.density * np.asarray(tuning.axis_factors)
     assert np.all(q_axes / q_true < 1.5) and np.all(q_true / q_axes < 1.5), (q_axes, tuning)
     assert 1 / 1.5 < tuning.specific_force_density / 3.0 < 1.5, tuning
@@ -105,7 +105,7 @@ def test_accel_noise_scale_is_recovered():
 def test_normal_equations_of_a_subset_of_terms_add_up():
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=0.1, seed=3)
     problem = SmootherProblem.of(log, SmootherOptions())
-    x = initial_states(log, SmootherOptions.from_groups(problem.model, problem.batch_model))
+    x = initial_states(log, problem.model, problem.batch_model)
     terms = problem.terms(x, np.zeros(0))
     whole = batch.normal_equations(problem, x, np.zeros(0))
     parts = batch.add_normal_equations(batch.normal_equations(problem, x, np.zeros(0), terms[:1]),
@@ -229,7 +229,7 @@ def test_minimum_of_a_stiff_setting_keeps_its_precision():
 
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=0.6, seed=2)
     plain = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5)
-    x = solve(make_problem(log, plain.model, plain.batch_model), initial_states(log, plain)).states
+    x = solve(make_problem(log, plain.model, plain.batch_model), initial_states(log, plain.model, plain.batch_model)).states
     stiff = _replace(plain, process_axis_factors=(0.01, 1e-5, 0.3), process_axis_frequencies_hz=(0.0, 0.865, 0.0))
     problem = make_problem(log, stiff.model, stiff.batch_model)
     ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))

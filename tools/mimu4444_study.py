@@ -110,12 +110,12 @@ def run_method(name: str, log, options: dict, progress: bool, start_at_reference
     return motion, None, time.perf_counter() - t0
 
 
-def started_at_reference(part, opt):
+def started_at_reference(part, model, batch_model):
     """Initial states of a batch-smoother window from ω of the log's reference (where the reference
     is valid; at saturated-gyro samples from the own initialisation's ω, turned to the reference's
     side), its other states from its own initialisation: how far the accelerometer-only solution
     stands from the gyro's when started on the right sign branch."""
-    x = initial_estimate(part, opt)
+    x = initial_estimate(part, model, batch_model)
     ref = part.reference.omega_b_radps
     ok = ~part.invalid_reference if part.invalid_reference is not None else np.ones(len(part), bool)
     w = x[:, 0:3].copy()

@@ -554,7 +554,7 @@ def _solve_with_attitude(part: Log, model: ModelOptions, batch_model: BatchModel
                         process_axis_frequencies_hz=problem0.model.process_axis_frequencies_hz)
     else:
         first = solve_problem(SmootherProblem(part, base_model, base_batch_model),
-                              (initial or initial_states)(part, SmootherOptions.from_groups(base_model, base_batch_model)),
+                              (initial or initial_states)(part, base_model, base_batch_model),
                               None, False, solver)
     start = None
     if previous is not None:

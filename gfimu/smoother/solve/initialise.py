@@ -32,29 +32,30 @@ from ...log import Log
 from ...rigid_body import quadratic_terms
 from ...rotations import skew
 from .banded import band_structure_of
-from ..model.problem import STATE_SIZE, SmootherOptions
+from ..model.option_groups import BatchModelOptions, ModelOptions
+from ..model.problem import STATE_SIZE
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
 
 LIFTED = 12
 
 
-def lifted_smoothing(log: Log, options: SmootherOptions, quadratic_density: float = 300.0,
+def lifted_smoothing(log: Log, model: ModelOptions, quadratic_density: float = 300.0,
                      prior_std: float = 1e4) -> np.ndarray:
     """Linear smoother of ``z = [f, ω̇, q]`` (N, 12) from the accelerometers alone.
 
     Measurement ``S z_k = y_k`` (per-axis noise), random walks of densities
-    (specific force, ω̇, ``quadratic_density`` [rad²/s²/√s]) and a weak zero
+    (specific force, ω̇ of ``model``, ``quadratic_density`` [rad²/s²/√s]) and a weak zero
     prior of std ``prior_std`` on every unknown.
     """
     arr = log.array
     S = arr.structure_matrix()
-    sigma = noise.accel_noise_std(arr, options.default_accel_noise_std_mps2)
+    sigma = noise.accel_noise_std(arr, model.default_accel_noise_std_mps2)
     A = S / sigma[:, None]
     n = len(log)
     y = log.accel_mps2 / sigma
     info = A.T @ A + np.eye(LIFTED) / prior_std**2
-    dens = np.repeat([options.specific_force_random_walk_mps2_per_sqrt_s, options.omega_dot_random_walk_radps2_per_sqrt_s,
+    dens = np.repeat([model.specific_force_random_walk_mps2_per_sqrt_s, model.omega_dot_random_walk_radps2_per_sqrt_s,
                       quadratic_density], [3, 3, 6])
     dt = log.dt_s
     w = 1.0 / (dens[None, :] ** 2 * dt[:, None])  # (N-1, 12) random-walk information
@@ -292,7 +293,7 @@ def sign_chain(omega_b_radps: np.ndarray, omega_dot_b_radps2: np.ndarray, dt_s: 
     return np.where(np.array(path[::-1]) == 0, 1.0, -1.0)
 
 
-def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
+def free_flight_omega(log: Log) -> np.ndarray:
     """Track ω through the single-sensor free-flight model (McGinnis, Perkins & King 2012, eqs. 1, 13).
 
     Per sample, Gauss-Newton on ``y = S_axes [0, Ψ(ω), q(ω)]`` with
@@ -365,42 +366,43 @@ def free_flight_omega(log: Log, options: SmootherOptions) -> np.ndarray:
     return out if np.sum(dw * integ) >= 0 else -out
 
 
-def initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
-    """Initial states for :class:`gfimu.smoother.model.problem.SmootherProblem`: ``[ω, ω̇, f]`` (N, 9),
-    with ω̈ = 0 appended (N, 12) for the 'snap' motion model."""
-    x0 = _initial_states(log, options)
-    if options.motion_model == "snap":
+def initial_states(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> np.ndarray:
+    """Initial states for :class:`gfimu.smoother.model.problem.SmootherProblem` of ``model`` and ``batch_model``:
+    ``[ω, ω̇, f]`` (N, 9), with ω̈ = 0 appended (N, 12) for the 'snap' motion model."""
+    x0 = _initial_states(log, model, batch_model)
+    if model.motion_model == "snap":
         x0 = np.hstack([x0, np.zeros((len(log), 3))])
     return x0
 
 
-def initial_estimate(log: Log, options: SmootherOptions) -> np.ndarray:
-    """Initial states of one solve window as ``options.initialisation`` asks: the sign-resolving
+def initial_estimate(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> np.ndarray:
+    """Initial states of one solve window as ``model.initialisation`` asks: the sign-resolving
     initialisation (:func:`initial_states`) or the per-sample ML estimate (``'ml'``, its ω signs
-    chained over time when ``ml_sign_chain``); free flight always uses its own initialisation."""
-    if options.initialisation != "ml" or options.free_flight:
-        return initial_states(log, options)
+    chained over time when ``ml_sign_chain``); free flight (``batch_model.free_flight``) always uses its own
+    initialisation."""
+    if model.initialisation != "ml" or batch_model.free_flight:
+        return initial_states(log, model, batch_model)
     m = MLEstimator().estimate_motion(log)
     omega = m.omega_b_radps
-    if options.ml_sign_chain:
+    if model.ml_sign_chain:
         omega = omega * sign_chain(omega, m.omega_dot_b_radps2, log.dt_s)[:, None]
     x = np.hstack([omega, m.omega_dot_b_radps2, m.specific_force_b_mps2])
-    if options.motion_model == "snap":
+    if model.motion_model == "snap":
         x = np.hstack([x, np.gradient(m.omega_dot_b_radps2, log.times_s, axis=0)])
     return x
 
 
-def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
+def _initial_states(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> np.ndarray:
     n = len(log)
     x0 = np.zeros((n, STATE_SIZE))
     arr = log.array
-    if options.free_flight:
-        w = free_flight_omega(log, options)
+    if batch_model.free_flight:
+        w = free_flight_omega(log)
         inertia = np.asarray(arr.body.principal_inertia_kgm2)
         x0[:, OMEGA] = w
         x0[:, OMEGA_DOT] = -np.cross(w, w * inertia) / inertia
         return x0
-    gyro = arr.gyroscope is not None and options.use_gyro and log.gyro_b_radps is not None
+    gyro = arr.gyroscope is not None and model.use_gyro and log.gyro_b_radps is not None
     if gyro and arr.n_axes < 12:
         # f and ω̇ from the accelerometers given ω (Lu, Tsai & Lin 2010's gyro-aided model), smoothed lightly
         S = arr.structure_matrix()
@@ -410,13 +412,13 @@ def _initial_states(log: Log, options: SmootherOptions) -> np.ndarray:
         x0[:, OMEGA_DOT] = lin[:, 3:6]
         x0[:, SPECIFIC_FORCE] = lin[:, 0:3]
         return x0
-    z = lifted_smoothing(log, options)
+    z = lifted_smoothing(log, model)
     x0[:, SPECIFIC_FORCE] = z[:, 0:3]
     x0[:, OMEGA_DOT] = z[:, 3:6]
     if gyro:
         x0[:, OMEGA] = log.gyro_b_radps
         return x0
-    window = max(int(round(options.init_window_s * log.rate_hz)), 8)
+    window = max(int(round(model.init_window_s * log.rate_hz)), 8)
     for seg in log.segments():
         idx = np.arange(seg.start, seg.stop)
         if idx.size < 2:

@@ -1248,7 +1248,7 @@ class FixedLagSmoother:
             gyro = np.vstack([s[2] for s in seg.warmup])
         if len(times_ns) >= 2:
             part = Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag warm-up")
-            x0 = initial_estimate(part, self.options)  # 'sign-resolving' or 'ml'
+            x0 = initial_estimate(part, self.options.model, self.options.batch_model)  # 'sign-resolving' or 'ml'
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
@@ -1438,7 +1438,7 @@ class FixedLagSmoother:
         part = self._stretch_log(samples)
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
         problem = make_problem(part, self.options.model, self.options.batch_model, scale, X[:, OMEGA])
-        starts = [X, initial_estimate(part, self.options)]
+        starts = [X, initial_estimate(part, self.options.model, self.options.batch_model)]
         for kind in (1, 2, 3):
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)

@@ -42,10 +42,9 @@ from ..model.groups import Term
 from ..solve.initialise import initial_estimate
 from ..model.layout import OMEGA, OMEGA_DOT, StateLayout
 
-InitialStates = Callable[[Log, SmootherOptions], np.ndarray]
-"""``(window log, options) -> initial states (N, state size)``, e.g. :func:`gfimu.smoother.solve.initialise.initial_estimate`;
-given flat options that carry the model and batch model of the window (:func:`tuned_problem`), the others at their
-defaults."""
+InitialStates = Callable[[Log, ModelOptions, BatchModelOptions], np.ndarray]
+"""``(window log, model, batch model) -> initial states (N, state size)``, e.g.
+:func:`gfimu.smoother.solve.initialise.initial_estimate`."""
 
 DENSITY_FIELD = {"jerk": "omega_dot_random_walk_radps2_per_sqrt_s", "snap": "omega_ddot_random_walk_radps3_per_sqrt_s"}
 DENSITY_LIMITS = (1e-3, 1e8)
@@ -787,13 +786,12 @@ def tuned_problem(part: Log, model: ModelOptions, batch_model: BatchModelOptions
     chosen from the data (:func:`tune`) when ``tuning.tune_process_noise``; the choice is appended to ``tunings``
     and the problem carries the tuned model and batch model (``problem.model``, ``problem.batch_model``).
 
-    ``initial``: how the initial states are made (default :func:`gfimu.smoother.solve.initialise.initial_estimate`),
-    given flat options of the model and batch model;
+    ``initial``: how the initial states are made (default :func:`gfimu.smoother.solve.initialise.initial_estimate`);
     ``span_s``: choose on at most this much of the window [s] (None: the whole window): the stretch
     where the initial estimate's ω̇ moves most (the middle one among equals), so that a window that
     rests in its middle is not tuned on its rest alone."""
     initial = initial or initial_estimate
-    x0 = initial(part, SmootherOptions.from_groups(model, batch_model))
+    x0 = initial(part, model, batch_model)
     if not tuning.tune_process_noise:
         return make_problem(part, model, batch_model, 1.0, x0[:, OMEGA]), x0
     solved: list = []
@@ -805,7 +803,7 @@ def tuned_problem(part: Log, model: ModelOptions, batch_model: BatchModelOptions
     if tunings is not None:
         tunings.append(chosen)
     if tuned.motion_model != model.motion_model:
-        x0 = initial(part, SmootherOptions.from_groups(tuned, tuned_batch))
+        x0 = initial(part, tuned, tuned_batch)
     elif any(f > 0 for f in chosen.axis_frequencies_hz):
         if span == slice(0, len(part)):
             x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
