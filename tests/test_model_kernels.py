@@ -20,6 +20,7 @@ from gfimu.array import cube_array, mimu4444_array, random_array
 from gfimu.simulate import simulate
 from gfimu.smoother.model.groups import AccelerometerGroup, MotionModelGroup
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
+from gfimu.smoother.solve.banded import robust_reweighted
 
 pytest.importorskip("numba")
 
@@ -38,7 +39,7 @@ def _problem(array, per_sample: bool, attitude: bool = False):
     options = SmootherOptions()
     if attitude:
         options = replace(options, estimate_attitude=True)
-    problem = SmootherProblem(log, options)
+    problem = SmootherProblem.of(log, options)
     rng = np.random.default_rng(9)
     m = problem.state_size
     states = rng.normal(scale=[4.0] * 3 + [40.0] * 3 + [8.0] * 3 + [0.5] * (m - 9), size=(len(log), m))
@@ -139,10 +140,10 @@ def test_white_jerk_kernel_matches_numpy(robust):
     options = SmootherOptions(process_axis_factors=(1.0, 3.0, 0.2))
     if robust:
         options = replace(options, process_robust_threshold=1.0, robust_loss="cauchy")
-    problem = SmootherProblem(log, options)
+    problem = SmootherProblem.of(log, options)
     states = rng.normal(scale=[3.0] * 3 + [30.0] * 3 + [5.0] * 3, size=(len(log), 9))
     if robust:
-        problem = problem.reweighted(states, np.zeros(0))
+        problem = robust_reweighted(problem, states, np.zeros(0))
     group = problem.group(MotionModelGroup)
     n, m = problem.n, problem.state_size
     out = {}
