@@ -61,11 +61,11 @@ def _start_worker(func: Callable, parent: int | None = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _JOB = func
-    _die_with_parent(parent)
+    die_with_parent(parent)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
-def _die_with_parent(parent: int | None) -> None:
+def die_with_parent(parent: int | None) -> None:
     """SIGTERM (its default action: the end, without a word) to this process when its parent dies (Linux's
     ``PR_SET_PDEATHSIG``); a parent already gone ends it at once. Elsewhere nothing."""
     if parent is None:

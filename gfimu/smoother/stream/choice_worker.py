@@ -10,7 +10,7 @@ The process is forked once, when the first later choice is asked for, and serves
 smoother that forked it: what the choice reads of the smoother is fixed when the stream starts (its rules,
 array and options), and what changes (the model in use, the history) is sent with each request. It ends
 with the smoother (:meth:`ChoiceProcess.close`), and with its parent however the parent ends
-(:func:`gfimu.parallel._die_with_parent`). Where no process may be forked (:func:`gfimu.parallel.can_fork`)
+(:func:`gfimu.parallel.die_with_parent`). Where no process may be forked (:func:`gfimu.parallel.can_fork`)
 there is none and the choices run in a thread, with the same numbers.
 """
 
@@ -29,11 +29,11 @@ def _serve(func: Callable, conn, parent: int) -> None:
     nothing itself (another thread of the parent may have held the output's lock when it was forked)."""
     import warnings
 
-    from ...parallel import _die_with_parent
+    from ...parallel import die_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # an interruption is the parent's to handle
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    _die_with_parent(parent)
+    die_with_parent(parent)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})  # (blocked while forked)
     while True:
         try:
