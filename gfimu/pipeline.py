@@ -58,6 +58,14 @@ class EstimateRun:
         return len(self.estimate.motion)
 
 
+def _readings_bytes(log_dir) -> int | None:
+    """The size of ``log_dir``'s readings file (None where there is none to measure)."""
+    try:
+        return (Path(log_dir) / "imu.csv").stat().st_size
+    except OSError:
+        return None
+
+
 def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | None = None,
                  calibration: str | Path | None = None, progress: bool = False,
                  orientation: str = "none", truth: bool = True) -> EstimateRun:
@@ -78,7 +86,8 @@ def estimate_log(log_dir: str | Path, method: Any = "smoother", options: dict | 
         raise InputError("estimate_log: options go with a method name, not with an estimator already made")
     else:
         est = method
-    getattr(est, "preload", lambda: None)()  # (the fixed-lag smoother's compiled kernels, while the log is read)
+    if hasattr(est, "preload"):  # (the smoothers' compiled kernels, while the log is read)
+        est.preload(_readings_bytes(log_dir))
     timings = {}
     t0 = time.perf_counter()
     log = gio.read_log(log_dir, truth=truth)

@@ -169,3 +169,36 @@ def test_white_jerk_kernel_matches_numpy(robust):
     assert np.all(np.abs(g1 - g0) <= tol * (bound_g + 1.0))
     assert h1 == pytest.approx(h0, rel=tol) and r1 == r0 == 6 * (n - 1)
     assert np.any(d0 != 1.0)  # (it added something)
+
+
+def test_the_batch_preload_waits_for_a_log_large_enough_to_repay_numba(monkeypatch):
+    """BatchSmootherEstimator.preload starts the loading for a log of PRELOAD_MIN_BYTES or more (or of an
+    unknown size), not for a smaller one, which the numpy expressions solve."""
+    from gfimu.smoother import preload
+    from gfimu.smoother.batch.engine import PRELOAD_MIN_BYTES, BatchSmootherEstimator
+
+    started = []
+    monkeypatch.setattr(preload, "start", lambda kind: started.append(kind))
+    est = BatchSmootherEstimator()
+    est.preload(PRELOAD_MIN_BYTES - 1)
+    assert started == []
+    est.preload(PRELOAD_MIN_BYTES)
+    est.preload(None)
+    assert started == ["batch", "batch"]
+
+
+def test_without_numba_loaded_the_groups_use_the_numpy_expressions():
+    """In a process that has not loaded numba, the batch smoother does not load it: its accelerometer and
+    motion-model rows come from the numpy expressions (the same numbers to rounding)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np\n"
+            "from gfimu.simulate import simulate\n"
+            "from gfimu.smoother.batch.engine import BatchSmootherEstimator\n"
+            "log = simulate('random3d', rate_hz=200.0, duration_s=3.0, seed=1)\n"
+            "w = BatchSmootherEstimator(workers=1).estimate(log).motion.omega_b_radps\n"
+            "e = np.sqrt(np.mean(np.sum((w - log.truth.omega_b_radps) ** 2, axis=1)))\n"
+            "print('numba' in sys.modules, e < 0.1)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "True"]

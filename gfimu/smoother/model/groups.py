@@ -28,6 +28,8 @@ built-in motion model and specific-force walk. What a group may read of the prob
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from ... import noise
@@ -52,6 +54,9 @@ from ...factors import (
 )
 from .factor_group import FactorGroup, Term  # noqa: F401  (both also importable from here)
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
+
+_NUMBA = "numba"
+"""The compiled kernels run in a process that has loaded this module (``compiled`` of the groups)."""
 from .noise_levels import (
     AccelNoise,
     AttitudeNoise,
@@ -228,8 +233,10 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
 
     compiled = True
     """:meth:`accumulate`, :meth:`squared_norm` and :meth:`whitened_residual` through the compiled kernels
-    (:mod:`gfimu.smoother.model.kernels`: one pass over the samples); False: the numpy expressions
-    they replace (the tests' oracle). The two agree to rounding."""
+    (:mod:`gfimu.smoother.model.kernels`: one pass over the samples) in a process that has loaded numba
+    (:mod:`gfimu.smoother.preload`: the fixed-lag smoother's, and the batch smoother's on a log large enough
+    to repay numba's start); False, or without numba loaded: the numpy expressions they replace (the tests'
+    oracle). The two agree to rounding."""
 
     def accumulate(self, problem, states, params, diag, lower, grad):
         """Without per-sensor calibration: with whitening w_i of axis i, ``J_i = w_i [∂y_i/∂ω, c_i]``
@@ -238,7 +245,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         over all samples) and ``Σ w_i² c_i c_iᵀ`` (constant unless the noise varies per sample)."""
         if self._calibrated(problem):
             return None
-        if self.compiled:
+        if self.compiled and _NUMBA in sys.modules:
             return self._accumulate_compiled(problem, states, diag, grad)
         rows = problem.all_rows
         r, white, products = self._all_axes(problem, states)
@@ -281,7 +288,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         """(N, axes) whitened residuals, without the Jacobians."""
         if self._calibrated(problem):
             return self.term(problem, states, params).residual
-        if self.compiled:
+        if self.compiled and _NUMBA in sys.modules:
             from . import kernels
 
             accel = problem.noise.accel
@@ -297,7 +304,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
     def squared_norm(self, problem, states, params):
         if problem.n_global:
             return super().squared_norm(problem, states, params)
-        if self.compiled:
+        if self.compiled and _NUMBA in sys.modules:
             from . import kernels
 
             accel = problem.noise.accel
@@ -605,7 +612,7 @@ class MotionModelGroup(FactorGroup):
             return None
         W, D = OMEGA, OMEGA_DOT
         wb = self._white_jerk_weights(problem)
-        if self.compiled:
+        if self.compiled and _NUMBA in sys.modules:
             from . import kernels
 
             e1, e2 = np.empty((problem.n - 1, 3)), np.empty((problem.n - 1, 3))

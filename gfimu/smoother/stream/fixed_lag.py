@@ -1614,9 +1614,10 @@ class FixedLagEstimator(SmootherEstimator):
     def applicable(self, array: SensorArray) -> str | None:
         return fixed_lag_reason(array, self.options())
 
-    def preload(self) -> None:
+    def preload(self, size_bytes: int | None = None) -> None:
         """Begin loading the compiled kernels in the background (:mod:`gfimu.smoother.preload`), while
-        the log is read and screened or the stream starts."""
+        the log is read and screened or the stream starts (whatever the log's ``size_bytes``: the stream's
+        kernels run on every log)."""
         from ..preload import start
 
         start("stream")
