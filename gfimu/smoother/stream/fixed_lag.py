@@ -51,7 +51,8 @@ consistent stretch whose process noise is tuned, the states of the stretch that 
 out then are the batch solution of the stretch and the stream continues from the
 fixed-lag smoother run over it. Every ``retune_every_s`` the choice is made again on
 the last ``model_window_s``, and at once when a model chosen at rest is outgrown: in a process
-of its own (:mod:`.choice_worker`; a thread where none may be forked), on a copy of the history, the new model used :data:`CHOICE_DELAY_S` of samples after the
+of its own (:mod:`.choice_worker`; a thread where none may be forked), on a copy of the history,
+the new model used :data:`CHOICE_DELAY_S` of samples after the
 sample that asked for it (a sample fixed by the data: a log and a live stream of it give the same rows).
 Without ``auto_model`` (the class's default), ``tune_process_noise`` chooses the
 process noise once on the first ``tune_window_s``, as the batch tuner would on that
@@ -81,7 +82,6 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 import warnings
 import weakref
 from collections import deque
@@ -93,6 +93,7 @@ from ...array import SensorArray
 from ...errors import DataError, InputError
 from ...estimate import Estimate, Report
 from ...log import Log
+from ...parallel import cpu_count
 from ...motion import Motion
 from ...progress import progress as progress_bar
 from . import array_model as model
@@ -433,7 +434,7 @@ def _solved_from(problem, starts: list) -> list:
     """``solve(problem, x0)`` from each start, in threads on the machine's cores (the solves are independent
     and numpy and LAPACK run without the interpreter's lock on a stretch's arrays): the same solutions as one
     after the other, in the order of ``starts``."""
-    cores = min(len(starts), os.cpu_count() or 1)
+    cores = min(len(starts), cpu_count())
     if cores < 2:
         return [solve(problem, x0) for x0 in starts]
     from concurrent.futures import ThreadPoolExecutor
