@@ -55,8 +55,17 @@ from ...factors import (
 from .factor_group import FactorGroup, Term  # noqa: F401  (both also importable from here)
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE
 
-_NUMBA = "numba"
-"""The compiled kernels run in a process that has loaded this module (``compiled`` of the groups)."""
+def _kernels_here(group) -> bool:
+    """Whether ``group`` runs its compiled kernels (:mod:`gfimu.smoother.model.kernels`): its ``compiled`` on,
+    in a process that has loaded numba."""
+    return group.compiled and "numba" in sys.modules
+
+
+def _kernel_whitening(problem) -> np.ndarray:
+    """The accelerometer whitening ``1 / σ`` as the kernels take it: (1, axes) for every sample, or (N,
+    axes) per sample."""
+    accel = problem.noise.accel
+    return (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
 from .noise_levels import (
     AccelNoise,
     AttitudeNoise,
@@ -245,7 +254,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         over all samples) and ``Σ w_i² c_i c_iᵀ`` (constant unless the noise varies per sample)."""
         if self._calibrated(problem):
             return None
-        if self.compiled and _NUMBA in sys.modules:
+        if _kernels_here(self):
             return self._accumulate_compiled(problem, states, diag, grad)
         rows = problem.all_rows
         r, white, products = self._all_axes(problem, states)
@@ -275,8 +284,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         """:meth:`accumulate` by :func:`gfimu.smoother.model.kernels.accumulate`."""
         from . import kernels
 
-        accel = problem.noise.accel
-        white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
+        white = _kernel_whitening(problem)
         y = _contiguous(problem.log.accel_mps2)
         sq = np.empty(y.shape[0])
         kernels.accumulate(_contiguous(states), y, _contiguous(problem.all_directions_b),
@@ -288,11 +296,10 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         """(N, axes) whitened residuals, without the Jacobians."""
         if self._calibrated(problem):
             return self.term(problem, states, params).residual
-        if self.compiled and _NUMBA in sys.modules:
+        if _kernels_here(self):
             from . import kernels
 
-            accel = problem.noise.accel
-            white = (1.0 / accel.sigma)[None, :] if accel.per_sample is None else 1.0 / accel.per_sample
+            white = _kernel_whitening(problem)
             y = _contiguous(problem.log.accel_mps2)
             out = np.empty(y.shape)
             kernels.whitened_residual(_contiguous(states), _contiguous(problem.all_directions_b),
@@ -304,7 +311,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
     def squared_norm(self, problem, states, params):
         if problem.n_global:
             return super().squared_norm(problem, states, params)
-        if self.compiled and _NUMBA in sys.modules:
+        if _kernels_here(self):
             from . import kernels
 
             accel = problem.noise.accel
@@ -612,7 +619,7 @@ class MotionModelGroup(FactorGroup):
             return None
         W, D = OMEGA, OMEGA_DOT
         wb = self._white_jerk_weights(problem)
-        if self.compiled and _NUMBA in sys.modules:
+        if _kernels_here(self):
             from . import kernels
 
             e1, e2 = np.empty((problem.n - 1, 3)), np.empty((problem.n - 1, 3))

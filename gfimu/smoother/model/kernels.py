@@ -46,8 +46,6 @@ def accumulate(X, y, S, P, rows, white, diag, grad, sq):
     lin21 = np.zeros(21)  # Σ_a w_a² c_a c_aᵀ of one sample (per-sample whitening)
     for k in range(n):
         w0, w1, w2_ = X[k, 0], X[k, 1], X[k, 2]
-        d0, d1, d2 = X[k, 3], X[k, 4], X[k, 5]
-        f0, f1, f2 = X[k, 6], X[k, 7], X[k, 8]
         ww = w0 * w0 + w1 * w1 + w2_ * w2_
         kw = k if per_sample else 0
         # the sample's sums over its axes: Jᵀe (g), the ω block (h, lower triangle), the [ω̇, f] × ω
@@ -61,10 +59,7 @@ def accumulate(X, y, S, P, rows, white, diag, grad, sq):
                 lin21[p] = 0.0
         s2 = 0.0
         for a in range(axes):
-            ws = S[a, 0] * w0 + S[a, 1] * w1 + S[a, 2] * w2_
-            wr = P[a, 0] * w0 + P[a, 1] * w1 + P[a, 2] * w2_
-            pred = ((f0 * rows[a, 0] + f1 * rows[a, 1] + f2 * rows[a, 2])
-                    + (d0 * rows[a, 3] + d1 * rows[a, 4] + d2 * rows[a, 5]) + ws * wr - sr[a] * ww)
+            pred, ws, wr = _reading(X, k, a, S, P, rows, sr, ww)
             wt = white[kw, a]
             e = (pred - y[k, a]) * wt
             s2 += e * e
@@ -104,6 +99,18 @@ def accumulate(X, y, S, P, rows, white, diag, grad, sq):
         _add_sample(diag[k], grad[k], (g0, g1, g2, g3, g4, g5, g6, g7, g8), (h00, h10, h11, h20, h21, h22),
                     ((x00, x01, x02), (x10, x11, x12), (x20, x21, x22), (x30, x31, x32), (x40, x41, x42),
                      (x50, x51, x52)), lin21, lin, per_sample)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _reading(X, k, a, S, P, rows, sr, ww):
+    """Axis a's predicted reading at sample k, ``c_aᵀ [ω̇, f] + (sᵀω)(rᵀω) - (sᵀr)|ω|²`` (``sr`` = sᵀr,
+    ``ww`` = |ω|²), with the products ``sᵀω`` and ``rᵀω`` its ω Jacobian reads."""
+    w0, w1, w2 = X[k, 0], X[k, 1], X[k, 2]
+    ws = S[a, 0] * w0 + S[a, 1] * w1 + S[a, 2] * w2
+    wr = P[a, 0] * w0 + P[a, 1] * w1 + P[a, 2] * w2
+    pred = ((X[k, 6] * rows[a, 0] + X[k, 7] * rows[a, 1] + X[k, 8] * rows[a, 2])
+            + (X[k, 3] * rows[a, 3] + X[k, 4] * rows[a, 4] + X[k, 5] * rows[a, 5]) + ws * wr - sr[a] * ww)
+    return pred, ws, wr
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -201,16 +208,10 @@ def whitened_residual(X, S, P, rows, y, white, out):
         sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
     for k in range(n):
         w0, w1, w2 = X[k, 0], X[k, 1], X[k, 2]
-        d0, d1, d2 = X[k, 3], X[k, 4], X[k, 5]
-        f0, f1, f2 = X[k, 6], X[k, 7], X[k, 8]
         ww = w0 * w0 + w1 * w1 + w2 * w2
         kw = k if per_sample else 0
         for a in range(axes):
-            ws = S[a, 0] * w0 + S[a, 1] * w1 + S[a, 2] * w2
-            wr = P[a, 0] * w0 + P[a, 1] * w1 + P[a, 2] * w2
-            pred = ((f0 * rows[a, 0] + f1 * rows[a, 1] + f2 * rows[a, 2])
-                    + (d0 * rows[a, 3] + d1 * rows[a, 4] + d2 * rows[a, 5]) + ws * wr - sr[a] * ww)
-            out[k, a] = (pred - y[k, a]) * white[kw, a]
+            out[k, a] = (_reading(X, k, a, S, P, rows, sr, ww)[0] - y[k, a]) * white[kw, a]
 
 
 @njit(cache=True, nogil=True)
