@@ -577,17 +577,16 @@ class WindowFilter:
             P[:, 0:3] *= -1.0
             self._newest.P = P
 
-    def _step_costs(self, X: np.ndarray, steps: list) -> np.ndarray:
+    def _step_costs(self, X: np.ndarray, F: np.ndarray, Q_inv: np.ndarray) -> np.ndarray:
         """(4, 4, n - 1) costs of the motion-model steps between the n states ``X`` (ω, ω̇ columns
-        first; ``steps``: (F, Q) of each step), from branch a of state j to branch b of state j + 1: the
+        first; ``F``, ``Q_inv``: the ω, ω̇ block of each step's transition and of its covariance's inverse,
+        (n - 1, 6, 6)), from branch a of state j to branch b of state j + 1: the
         model's loss (:func:`gfimu.smoother.model.problem.robust_loss`, the Cauchy loss of the robust model at
         its threshold) of the RMS over the six ω, ω̇ rows of the step's whitened residual, times six."""
         n = len(X)
         W = np.empty((4, n, 6))
         for b in range(4):
             W[b, :, 0:3], W[b, :, 3:6] = branch(b, X[:, 0:3], X[:, 3:6], self._normal)
-        F = np.stack([f[:6, :6] for f, _ in steps])
-        Q_inv = np.linalg.inv(np.stack([q[:6, :6] for _, q in steps]))
         pred = np.einsum("jkl,ajl->ajk", F, W[:, :-1])  # F x_j on each branch a
         d = W[None, :, 1:] - pred[:, None]  # (a, b, j, 6)
         e2 = np.einsum("abjk,jkl,abjl->abj", d, Q_inv, d) / 6.0
@@ -614,13 +613,13 @@ class WindowFilter:
         one compiled call (:func:`kernels.settle_path <gfimu.smoother.stream.kernels.settle_path>`) unless
         :attr:`compiled` is off (these numpy expressions, its oracle)."""
         F = np.ascontiguousarray(np.stack([f[:6, :6] for f, _ in steps]), dtype=float)
+        Q_inv = np.ascontiguousarray(np.linalg.inv(np.stack([q[:6, :6] for _, q in steps])))
         if self.compiled:
             R0, S_q, S_dw, S_f, slope, c_accel, accel_loss = self._ops.kernel_model
             c_process, process_loss = self._ops.kernel_options[5:7]
-            Q_inv = np.ascontiguousarray(np.linalg.inv(np.stack([q[:6, :6] for _, q in steps])))
             return kernels.settle_path(np.ascontiguousarray(X, dtype=float), F, Q_inv, Y, R0, slope, S_q, S_dw, S_f,
                                        self._normal, c_process, process_loss, c_accel, accel_loss)
-        step_cost = self._step_costs(X, steps)
+        step_cost = self._step_costs(X, F, Q_inv)
         node = self._readings_costs(X[1:], Y)
         node = node - node[0][None, :]  # only the differences between branches count
         # Viterbi from the oldest (branch 0) to the newest (branch 0)
