@@ -62,7 +62,19 @@ def _start_worker(func: Callable, parent: int | None = None) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _JOB = func
     die_with_parent(parent)
+    one_blas_thread()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+
+
+def one_blas_thread() -> None:
+    """In a forked worker: its BLAS and OpenMP pools cut to one thread. A worker is one of several processes
+    that share the CPUs already; pools of the parent's size in each (numpy's OpenBLAS starts one thread per
+    CPU unless ``OPENBLAS_NUM_THREADS`` says otherwise: the command line sets 1, a Python session need not)
+    spin against each other and against the parent: on 2 CPUs a stream's later model choices took several times
+    the CPU so. One thread also gives the worker the numbers the command line's processes give."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
 
 
 def die_with_parent(parent: int | None) -> None:

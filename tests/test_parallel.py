@@ -172,3 +172,33 @@ def test_writing_with_workers_gives_the_same_text(monkeypatch):
         two = "".join(tables._csv_chunks(["#timestamp [ns]", "a", "b", "c", "d"], t, values, fmt, flags, workers=2))
         assert one == two
         assert one.count("\n") == 101 and ",nan," in one
+
+
+def _blas_threads(_task=None) -> int:
+    from threadpoolctl import threadpool_info
+
+    return max((pool["num_threads"] for pool in threadpool_info()), default=1)
+
+
+@needs_fork
+def test_a_worker_runs_one_blas_thread_whatever_the_parent_has():
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(2):  # a Python session without OPENBLAS_NUM_THREADS: a pool per CPU
+        counts = list(forked_map(_blas_threads, range(4), 2, min_tasks=1))
+    assert set(counts) == {1}
+
+
+@needs_fork
+def test_the_model_choice_process_runs_one_blas_thread():
+    from threadpoolctl import threadpool_limits
+
+    from gfimu.smoother.stream.choice_worker import ChoiceProcess
+
+    with threadpool_limits(2):
+        process = ChoiceProcess.start(_blas_threads)
+        try:
+            process.submit(0)
+            assert process.result() == 1
+        finally:
+            process.close()

@@ -29,11 +29,12 @@ def _serve(func: Callable, conn, parent: int) -> None:
     nothing itself (another thread of the parent may have held the output's lock when it was forked)."""
     import warnings
 
-    from ...parallel import die_with_parent
+    from ...parallel import die_with_parent, one_blas_thread
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # an interruption is the parent's to handle
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     die_with_parent(parent)
+    one_blas_thread()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})  # (blocked while forked)
     while True:
         try:
