@@ -246,24 +246,23 @@ def test_what_a_long_stream_keeps_does_not_grow_with_its_length():
 
 
 def test_the_history_holds_the_screened_readings_not_the_screenings_buffers():
-    """The screening decides a block on a scratch array of its whole buffer; the rows the smoother keeps (the
-    history the model is chosen on) hold readings of their own: the arrays behind them total the history's
-    readings (38 KB), not 18 times that (710 KB were the rows views of the scratch array)."""
+    """The screening decides a block on a scratch array of its whole buffer; the history the model is chosen
+    on copies the readings into a ring of its own (38 KB for 2 s here), not views that keep the scratch arrays
+    alive (710 KB were the rows views of the scratch array once), and holds the newest readings in order."""
     long_log = simulate("random3d", rate_hz=RATE_HZ, duration_s=8.0, seed=6)
     est = FixedLagEstimator(tune_window_s=1.0, retune_every_s=60.0, model_window_s=2.0)
     session = StreamSession(long_log.array, est, RATE_HZ)
     for i in range(len(long_log)):
         session.push(long_log.timestamps_ns[i], long_log.accel_mps2[i])
     history = session.smoother._choice.history
-    assert len(history) == int(2.0 * RATE_HZ)
-    behind = {}
-    for entry in history:
-        y = entry[1]
-        while y.base is not None:
-            y = y.base
-        behind[id(y)] = y.nbytes
-    readings = len(history) * long_log.array.n_axes * 8
-    assert sum(behind.values()) == readings
+    n = int(2.0 * RATE_HZ)
+    assert len(history) == n
+    assert history.accel.base is None and history.accel.nbytes == n * long_log.array.n_axes * 8
+    stretch = history.stretch()
+    first = int(np.searchsorted(long_log.timestamps_ns, stretch.times_ns[0]))  # (the screening holds the newest back)
+    assert first + n > len(long_log) - RATE_HZ
+    np.testing.assert_array_equal(stretch.times_ns, long_log.timestamps_ns[first:first + n])
+    np.testing.assert_allclose(stretch.accel, long_log.accel_mps2[first:first + n], rtol=0, atol=1e-12)
     session.finish()
 
 

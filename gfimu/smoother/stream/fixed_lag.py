@@ -98,6 +98,7 @@ from ...motion import Motion
 from ...progress import progress as progress_bar
 from . import array_model as model
 from .choice_worker import ChoiceProcess, ForkedChoice
+from .history import History, Stretch
 from .window_filter import FilterFailure, WindowFilter
 from .gtsam_window import GtsamWindow
 from ..solve.banded import solve
@@ -174,9 +175,10 @@ class PendingChoice:
     :meth:`result` waits for it (the seconds waited in ``waited_s``) and gives its model, or
     raises what it raised. ``swap_at``: the count of samples at which the model is to be used."""
 
-    def __init__(self, compute, swap_at: int, outgrown: bool):
+    def __init__(self, compute, swap_at: int, outgrown: bool, finish=None):
         import threading
 
+        self._finish = finish
         self.swap_at = int(swap_at)
         self.outgrown = bool(outgrown)
         self.waited_s = 0.0
@@ -204,7 +206,7 @@ class PendingChoice:
             self.waited_s = time.perf_counter() - t0
         if self._error is not None:
             raise self._error
-        return self._value
+        return self._value if self._finish is None else self._finish(self._value)
 
 
 def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | None:
@@ -408,25 +410,11 @@ class Segment:
     prev_sample: tuple | None = None
 
 
-def _history_arrays(samples) -> tuple:
-    """The history entries ``samples`` ([t_ns, accel, gyro, ML row or None]) as arrays to send to the choice's
-    process: timestamps, readings, gyro readings (None when any is missing: the stretch then goes without),
-    the indices of the entries whose ML row is known and those rows."""
-    times_ns = np.fromiter((s[0] for s in samples), dtype=np.int64, count=len(samples))
-    accel = np.vstack([s[1] for s in samples])
-    gyro = None if any(s[2] is None for s in samples) else np.vstack([s[2] for s in samples])
-    known = np.fromiter((i for i, s in enumerate(samples) if s[3] is not None), dtype=np.int64)
-    rows = np.vstack([samples[i][3] for i in known]) if known.size else None
-    return times_ns, accel, gyro, known, rows
-
-
-def _taken_back(answer, samples, previous):
+def _taken_back(answer, previous):
     """The model of a choice's ``answer`` (:meth:`FixedLagSmoother._chosen_in_process`) as a choice in a thread
-    gives it: its fresh ML rows kept in the history entries ``samples``, and the tuning of ``previous`` itself
-    where the model kept it (one tuning, not a copy of it per choice, in the report)."""
-    chosen, fresh, rows, kept = answer
-    for j, i in enumerate(fresh):
-        samples[i][3] = rows[j]
+    gives it: the tuning of ``previous`` itself where the model kept it (one tuning, not a copy of it per
+    choice, in the report)."""
+    chosen, kept = answer
     return replace(chosen, tuning=previous.tuning) if kept else chosen
 
 
@@ -562,13 +550,13 @@ class ChoiceState:
     density's factor on the motion model's stds, robust model).
 
     Choosing: whether the first choice is still to be made (``first_pending``, on ``buffer``, the first
-    ``rules.tune_n`` samples), the ``history`` later choices are made on, every ``rules.retune_ns`` or when the
-    ``local`` motion density outgrows the model; the choice being made off the stream (``pending``, used when
+    ``rules.tune_n`` samples), the ``history`` later choices are made on (:class:`~.history.History`), every
+    ``rules.retune_ns`` or when the ``local`` motion density outgrows the model; the choice being made off the stream (``pending``, used when
     ``accepted``, the samples taken in, reaches its sample) and the waits for late ones."""
 
     rules: ChoiceRules
     first_pending: bool
-    history: deque
+    history: History
     local: LocalDensity
     options: SmootherOptions
     model: model.ArrayModel
@@ -699,7 +687,7 @@ class FixedLagSmoother:
             min(tune_n, max(2, int(round(1.0 * rate_hz)))),
             max(1, int(math.ceil(choice_delay_s * rate_hz))), MLEstimator(workers=1) if auto else None)
         self._choice = ChoiceState(rules, tune or auto,
-                                   deque(maxlen=stretch_samples(max(model_window_s, tune_window_s), rate_hz)),
+                                   History(stretch_samples(max(model_window_s, tune_window_s), rate_hz), array.n_axes),
                                    LocalDensity(array), options, array_model)
         self._signs = StreamSignChain(int(math.ceil(self.config.lag_s * rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
@@ -916,40 +904,46 @@ class FixedLagSmoother:
             out = batch[:len(out) + self._start_from_batch(batch)]
         return out
 
-    def _stretch_log(self, samples) -> Log:
-        times_ns = np.array([s[0] for s in samples], dtype=np.int64)
-        accel = np.vstack([s[1] for s in samples])
-        gyro = None
-        if self.array.gyroscope is not None and self.options.use_gyro and all(s[2] is not None for s in samples):
-            gyro = np.vstack([s[2] for s in samples])
-        return Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag tuning stretch")
+    def _stretch_log(self, stretch: Stretch) -> Log:
+        """The samples of ``stretch`` as a log (with its gyro readings where every sample has one and the
+        options use them)."""
+        gyro = stretch.gyro if self.array.gyroscope is not None and self.options.use_gyro else None
+        return Log(self.array, stretch.times_ns, stretch.accel, gyro_b_radps=gyro, source="fixed-lag tuning stretch")
 
-    def _choose(self, samples, first: bool = False, outgrown: bool = False):
-        """Choose the model on ``samples`` ((t_ns, accel, gyro, ...) tuples, oldest first) and go on with
-        it (:mod:`gfimu.smoother.stream.model_choice`). The first choice of a segment's stretch is made at
-        once and, for a consistent stretch whose process noise is tuned, also returns the batch smoother's
-        states of the stretch (else None). A later choice is made off the stream (:class:`PendingChoice`,
-        on a copy of ``samples``, the history) and used :data:`CHOICE_DELAY_S` of samples later
-        (:meth:`_swap_choice`); one asked for while another is pending is not made (nor the copy)."""
+    def _choose(self, samples=None, first: bool = False, outgrown: bool = False):
+        """Choose the model and go on with it (:mod:`gfimu.smoother.stream.model_choice`). The ``first``
+        choice of a segment is made at once on ``samples`` ((t_ns, accel, gyro) tuples, oldest first, the
+        first stretch) and, for a consistent stretch whose process noise is tuned, also returns the batch
+        smoother's states of the stretch (else None). A later choice is made on the history, off the stream
+        (in a process of its own, :class:`~.choice_worker.ForkedChoice`, else in a thread on a copy of it,
+        :class:`PendingChoice`) and used :data:`CHOICE_DELAY_S` of samples later (:meth:`_swap_choice`); one
+        asked for while another is pending is not made."""
         if first:
             self._settle_choice()
-            chosen, batch = self._chosen_model(samples, self.stream_model, first=True, outgrown=outgrown)
+            chosen, batch = self._chosen_model(Stretch.of_samples(samples), self.stream_model, first=True,
+                                               outgrown=outgrown)
             self._use(chosen)
             if outgrown:
                 self._replay_window()
             return batch
         if self._choice.pending is not None:
             return None
-        samples, previous = list(samples), self.stream_model
+        history, previous = self._choice.history, self.stream_model
         swap_at = self._choice.accepted + self._choice.rules.delay_n
         process = self._choice_process()
-        if process is not None:  # in a process of its own (:mod:`.choice_worker`)
-            request = (*_history_arrays(samples), previous, outgrown)
-            self._choice.pending = ForkedChoice(process, request, lambda answer: _taken_back(answer, samples, previous),
+        if process is not None:  # in a process of its own (:mod:`.choice_worker`), which keeps a history of its own
+            request = (history.since(), previous, outgrown)
+            self._choice.pending = ForkedChoice(process, request, lambda answer: _taken_back(answer, previous),
                                                 swap_at, outgrown)
             return None
-        self._choice.pending = PendingChoice(lambda: self._chosen_model(samples, previous, outgrown=outgrown)[0],
-                                             swap_at, outgrown)
+        stretch = history.stretch()
+
+        def kept(chosen):  # (in the stream's thread: the rows the choice computed kept for the next)
+            history.keep_rows(stretch)
+            return chosen
+
+        self._choice.pending = PendingChoice(lambda: self._chosen_model(stretch, previous, outgrown=outgrown)[0],
+                                             swap_at, outgrown, kept)
         return None
 
     def _choice_process(self) -> ChoiceProcess | None:
@@ -963,18 +957,17 @@ class FixedLagSmoother:
         return self._worker.process
 
     def _chosen_in_process(self, request):
-        """In the choice's process: :meth:`_chosen_model` on a request of :func:`_history_arrays`; the model,
-        the per-sample ML rows the choice computed for samples that had none (their indices, the rows) and
-        whether the model kept the previous one's tuning."""
-        times_ns, accel, gyro, known, rows, previous, outgrown = request
-        samples = [[int(t), accel[i], None if gyro is None else gyro[i], None] for i, t in enumerate(times_ns)]
-        for j, i in enumerate(known):
-            samples[i][3] = rows[j]
-        chosen = self._chosen_model(samples, previous, outgrown=outgrown)[0]
-        had = set(known.tolist())
-        fresh = [i for i, entry in enumerate(samples) if entry[3] is not None and i not in had]
+        """In the choice's process: the samples since the last request (:meth:`~.history.History.since`) taken
+        into the process's own history (its copy of the stream's, as it was forked, kept up since), then
+        :meth:`_chosen_model` on it; the model and whether it kept the previous one's tuning."""
+        since, previous, outgrown = request
+        history = self._choice.history
+        history.extend(*since)
+        stretch = history.stretch()
+        chosen = self._chosen_model(stretch, previous, outgrown=outgrown)[0]
+        history.keep_rows(stretch)
         kept = previous is not None and chosen.tuning is not None and chosen.tuning is previous.tuning
-        return chosen, fresh, (np.vstack([samples[i][3] for i in fresh]) if fresh else None), kept
+        return chosen, kept
 
     def _swap_choice(self, final: bool = False) -> None:
         """The pending choice's model put in use when its sample has come (waiting for it when it is not
@@ -996,16 +989,17 @@ class FixedLagSmoother:
         """A pending choice put in use now (the segment ends, or a first choice is made)."""
         self._swap_choice(final=True)
 
-    def _chosen_model(self, samples, previous, first: bool = False, outgrown: bool = False):
-        """(the model chosen on ``samples`` after ``previous``, the batch states of the stretch or None): the
-        choice itself, reading nothing of the stream that changes while it runs.
+    def _chosen_model(self, stretch: Stretch, previous, first: bool = False, outgrown: bool = False):
+        """(the model chosen on ``stretch`` after ``previous``, the batch states of the stretch or None): the
+        choice itself, reading nothing of the stream that changes while it runs (the ML rows it computes
+        are written into ``stretch``).
 
         A consistent stretch keeps the Gaussian model in use when that was chosen on motion and the
         motion has not outgrown it (the tuner is the costly part of a choice); otherwise the tuner
         runs on the newest ``tune_window_s`` of the stretch."""
         rules = self._choice.rules
-        part = self._stretch_log(samples)
-        ml = self._ml_motion(samples, part) if rules.auto else None
+        part = self._stretch_log(stretch)
+        ml = self._ml_motion(stretch, part) if rules.auto else None
         check = stream_model.check_of(part, ml)
         batch = None
         base = rules.user_options if check is None else measured_noise_options(rules.user_options, check)
@@ -1082,19 +1076,16 @@ class FixedLagSmoother:
         if self._segment.engine is not None:
             self._segment.engine.set_model(self.model)
 
-    def _ml_motion(self, samples, part: Log):
-        """The per-sample ML estimate of ``samples``, each computed once: kept in the samples' history
-        entries (their fourth item) and computed here for those that have none yet."""
-        rows = [s[3] if len(s) > 3 else None for s in samples]
-        todo = [i for i, r in enumerate(rows) if r is None]
-        if todo:
-            fresh = self._choice.rules.ml.estimate_motion(part.select(np.asarray(todo)))
-            x = np.hstack([fresh.omega_b_radps, fresh.omega_dot_b_radps2, fresh.specific_force_b_mps2])
-            for j, i in enumerate(todo):
-                rows[i] = x[j]
-                if len(samples[i]) > 3:
-                    samples[i][3] = x[j]
-        x = np.vstack(rows)
+    def _ml_motion(self, stretch: Stretch, part: Log):
+        """The per-sample ML estimate of ``stretch`` (``part`` its log), each sample's computed once: the
+        rows it has already, the others computed here and written into it (kept in the history:
+        :meth:`~.history.History.keep_rows`)."""
+        todo = np.nonzero(~stretch.has_row)[0]
+        if todo.size:
+            fresh = self._choice.rules.ml.estimate_motion(part.select(todo))
+            stretch.rows[todo] = np.hstack([fresh.omega_b_radps, fresh.omega_dot_b_radps2, fresh.specific_force_b_mps2])
+            stretch.has_row[todo] = True
+        x = stretch.rows
         return Motion(part.timestamps_ns, omega_b_radps=x[:, 0:3], omega_dot_b_radps2=x[:, 3:6],
                       specific_force_b_mps2=x[:, 6:9])
 
@@ -1117,7 +1108,7 @@ class FixedLagSmoother:
     def tune(self, samples) -> tuple:
         """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
         (:class:`gfimu.smoother.tuning.evidence.Tuning`, options carrying it)."""
-        tuning, problem, _ = self._tuned(self._stretch_log(samples))
+        tuning, problem, _ = self._tuned(self._stretch_log(Stretch.of_samples(samples)))
         options = with_groups(self._choice.rules.user_options, problem.model, problem.batch_model)
         return tuning, tuning.for_stream(replace(options, tune_process_noise=False))
 
@@ -1126,8 +1117,7 @@ class FixedLagSmoother:
         choose again when due (every ``retune_every_s``) or when the motion outgrows the model."""
         if not (self._choice.rules.auto or self._choice.rules.tune) or self.stream_model is None:
             return
-        entry = [sample[0], sample[1], sample[2], None]
-        self._choice.history.append(entry)
+        self._choice.history.append(sample[0], sample[1], sample[2])
         chosen = self.stream_model
         o = chosen.options
         q = o.omega_dot_random_walk_radps2_per_sqrt_s
@@ -1147,7 +1137,7 @@ class FixedLagSmoother:
         outgrown = (local is not None and self._choice.local.resolved and local > OUTGROWN_FACTOR * q
                     and sample[0] - chosen.chosen_at_ns >= 1e9)
         if (due or outgrown) and len(self._choice.history) >= self._choice.rules.tune_min_n:
-            self._choose(self._choice.history, outgrown=outgrown)
+            self._choose(outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
@@ -1436,7 +1426,7 @@ class FixedLagSmoother:
         log-likelihood of the stretch up to one constant; inf when every start ends in the best minimum)."""
         samples = [h[1] for h in self._hold.held] + list(self._segment.raw)
         X = np.vstack([h[2] for h in self._hold.held] + [self._segment.engine.mean(k) for k, _ in self._segment.window])
-        part = self._stretch_log(samples)
+        part = self._stretch_log(Stretch.of_samples(samples))
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
         problem = make_problem(part, self.options.model, self.options.batch_model, scale, X[:, OMEGA])
         starts = [X, initial_estimate(part, self.options.model, self.options.batch_model)]
