@@ -51,7 +51,7 @@ consistent stretch whose process noise is tuned, the states of the stretch that 
 out then are the batch solution of the stretch and the stream continues from the
 fixed-lag smoother run over it. Every ``retune_every_s`` the choice is made again on
 the last ``model_window_s``, and at once when a model chosen at rest is outgrown: in a process
-of its own (:mod:`.choice_worker`; a thread where none may be forked), on a copy of the history,
+of its own (:mod:`.choice_worker`; a thread where none may be forked), on the history (:mod:`.history`),
 the new model used :data:`CHOICE_DELAY_S` of samples after the
 sample that asked for it (a sample fixed by the data: a log and a live stream of it give the same rows).
 Without ``auto_model`` (the class's default), ``tune_process_noise`` chooses the
@@ -145,7 +145,7 @@ difference is below this fraction of the RMS of ω: the branches of ω differ by
 
 CHOICE_DELAY_S = 0.5
 """A model chosen again on the stream (every ``retune_every_s``, or when the motion outgrows the model) is
-computed off the stream, on a copy of the history, while the samples go on with the model in use; it
+computed off the stream, on the history (:mod:`.history`), while the samples go on with the model in use; it
 replaces that model this long (of samples, at the nominal rate) after the sample that asked for it. The
 sample at which it changes is fixed by the data, never by the clock, so that a log and a live stream of it
 give the same rows (:class:`PendingChoice`)."""
