@@ -551,8 +551,9 @@ class ChoiceState:
 
     Choosing: whether the first choice is still to be made (``first_pending``, on ``buffer``, the first
     ``rules.tune_n`` samples), the ``history`` later choices are made on (:class:`~.history.History`), every
-    ``rules.retune_ns`` or when the ``local`` motion density outgrows the model; the choice being made off the stream (``pending``, used when
-    ``accepted``, the samples taken in, reaches its sample) and the waits for late ones."""
+    ``rules.retune_ns`` or when the ``local`` motion density outgrows the model; the choice being made off the
+    stream (``pending``, used when ``accepted``, the samples taken in, reaches its sample) and the waits for late
+    ones."""
 
     rules: ChoiceRules
     first_pending: bool
