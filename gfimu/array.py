@@ -183,8 +183,15 @@ class SensorArray:
 
     # --- linear model (Ho & Lin 2009, eqs. 6-7) -------------------------------
     def structure_matrix(self) -> np.ndarray:
-        """(n_axes, 12) structure matrix S: readings = S @ [f, ω̇, q(ω)]."""
-        return rigid_body.structure_matrix(self.axis_directions_b, self.axis_positions_m)
+        """(n_axes, 12) structure matrix S: readings = S @ [f, ω̇, q(ω)]. Computed once (the array is frozen)
+        and read-only: the model checks and every choice a stream makes read it again."""
+        return self._structure
+
+    @cached_property
+    def _structure(self) -> np.ndarray:
+        S = rigid_body.structure_matrix(self.axis_directions_b, self.axis_positions_m)
+        S.setflags(write=False)
+        return S
 
     def rank(self, tol: float = 1e-9) -> int:
         s = np.linalg.svd(self.structure_matrix(), compute_uv=False)
