@@ -11,12 +11,14 @@ level can see, with the figures behind docs/uncertainty.md.
    (B_i δ̂ with B_i = (Σ_k J_kᵀ J_k)⁻¹ Σ_k J_kᵀ G_k over the 64 samples around i: the information-weighted
    mean of each sample's own bias), its correlation with the true error per axis, and the coverage of three
    candidate σ: today's (scaled), today's with that bias added in quadrature, and the level of the cleaned
-   parity residual plus that bias. None of them is right on every cell (docs/uncertainty.md).
+   parity residual plus that bias; then the smoother's own bias: its estimate less the one on the log with the
+   fitted errors taken out (:func:`corrected_log`). None of the σ is right on every cell (docs/uncertainty.md).
+   MIMU4444 recordings given as arguments: the same on their moving rows, against the board's gyros.
 2. **The fixed-lag smoother's hand-over** (``--only handover``; turntable-0.3m-unstated): the states of the
    first tuning stretch are the batch smoother's on it; at ``tune_window_s`` − lag the stream's own window
    takes over. Printed for three ``tune_window_s``: the largest step of the x error, where it sits, and σ_x.
 
-    python3 tools/sigma_cause_study.py [--only calibration|handover] [--cells NAME,...]
+    python3 tools/sigma_cause_study.py [--only calibration|handover] [--cells NAME,...] [data.bin ...]
 """
 
 from __future__ import annotations
@@ -141,13 +143,36 @@ def implied_bias(fit: dict, span: int = SPAN) -> np.ndarray:
     return np.einsum("nip,p->ni", B, fit["errors"])[:, 0:3]
 
 
-def calibration(name: str, folder: Path) -> None:
-    log, omega = sc.read_cell(_cell(name), folder)
+def corrected_log(log, fit: dict):
+    """``log`` with the fitted errors of :func:`calibration_fit` taken out: the triads moved by the fitted position
+    errors, each axis' readings divided by 1 + its fitted gain error."""
+    from dataclasses import replace
+
+    d, triads = fit["errors"], fit["triads"]
+    moved = d[:3 * triads].reshape(-1, 3)
+    array = log.array.with_accelerometers(replace(a, position_m=np.asarray(a.position_m) + moved[i])
+                                          for i, a in enumerate(log.array.accelerometers))
+    return replace(log, array=array, accel_mps2=log.accel_mps2 / (1.0 + d[3 * triads:]))
+
+
+def calibration(name: str, folder: Path, recording: Path | None = None) -> None:
+    """The figures of item 1 for the cell ``name``, or for ``recording`` (a MIMU4444 ``data.bin``: its moving rows
+    against the board's gyros, as tools/sigma_coverage.py scores it)."""
+    if recording is None:
+        log, omega = sc.read_cell(_cell(name), folder)
+        rows = np.ones(len(log), bool)
+    else:
+        got = sc.moving_recording(recording, folder)
+        if isinstance(got, str):
+            print(f"\n## {name}: convert failed: {got}")
+            return
+        log, reference, rows = got
+        omega = reference.omega_b_radps
     c = _captured(log)
     fit = calibration_fit(log.array, log.accel_mps2, c["states"], c["noise"], c["robust"])
     d, triads = fit["errors"], fit["triads"]
-    bias = implied_bias(fit)
-    e, sd = c["states"][:, 0:3] - omega, c["scaled"]
+    bias = implied_bias(fit)[rows]
+    e, sd = (c["states"][:, 0:3] - omega)[rows], c["scaled"][rows]
     print(f"\n## {name}: parity level s² {fit['level']:.2f}, {100 * fit['explained']:.0f} % of its power fitted by constant "
           f"position and gain errors (rank {fit['rank']} of {len(d)}), the rest's level {fit['cleaned']:.2f}")
     print(f"position errors [mm]: {np.array2string(d[:3 * triads].reshape(-1, 3) * 1e3, precision=2)}")
@@ -158,6 +183,15 @@ def calibration(name: str, folder: Path) -> None:
     print(f"σ today: {_shares(e, sd)}")
     print(f"σ today, bias added: {_shares(e, np.sqrt(sd ** 2 + bias ** 2))}")
     print(f"σ at the cleaned level, bias added: {_shares(e, np.sqrt(sd ** 2 * fit['cleaned'] / fit['level'] + bias ** 2))}")
+    from gfimu.methods import make_estimator
+
+    b = e - (make_estimator("smoother").estimate(corrected_log(log, fit)).motion.omega_b_radps - omega)[rows]
+    print(f"the smoother's own bias (its estimate less the one with the fitted errors taken out of the log): RMS "
+          f"{np.round(np.sqrt(np.mean(b ** 2, axis=0)) * 1e3, 2)} mrad/s, correlation with the error "
+          f"{np.round([np.corrcoef(e[:, j], b[:, j])[0, 1] for j in range(3)], 2)}, the error less it "
+          f"{np.round(np.sqrt(np.mean((e - b) ** 2, axis=0)) * 1e3, 2)} mrad/s RMS; σ today, that bias added: "
+          f"{_shares(e, np.sqrt(sd ** 2 + b ** 2))}; the error less it against σ at the cleaned level: "
+          f"{_shares(e - b, sd * np.sqrt(fit['cleaned'] / fit['level']))}")
 
 
 def handover(folder: Path) -> None:
@@ -178,12 +212,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", choices=("calibration", "handover"), default=None)
     ap.add_argument("--cells", default=",".join(CALIBRATION_CELLS))
+    ap.add_argument("recordings", nargs="*", type=Path, help="MIMU4444 data.bin files (item 1 on their moving rows)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if args.only in (None, "calibration"):
             for name in args.cells.split(","):
                 calibration(name.strip(), Path(tmp))
+            for rec in args.recordings:
+                calibration(f"{rec.parent.name} (MIMU4444, moving rows against the board's gyros)", Path(tmp), rec)
         if args.only in (None, "handover"):
             handover(Path(tmp))
     return 0
