@@ -253,7 +253,8 @@ class _Joined:
                 process = (np.vstack([res.process[0] for res in outcomes])[:-1], outcomes[0].process[1], log.dt_s)
             out.sd = calibrated_sigma(log.array, log.accel_mps2, out.states, out.sd, noise_std,
                                       (batch_model.robust_loss, batch_model.accel_robust_threshold)
-                                      if batch_model.accel_robust_threshold > 0 else None, process=process)
+                                      if batch_model.accel_robust_threshold > 0 else None, process=process,
+                                      dt_s=log.dt_s)
         return out
 
     def motion(self, log: Log, layout: StateLayout) -> Motion:

@@ -39,6 +39,18 @@ them:
   trapezoid residuals r̂ over the window of s_i², less the readings' noise in them (:func:`trapezoid_level`:
   E r̂² = λ a + s² b), within 0 … 1.
 
+- **Common gain.** A gain k common to every accelerometer axis (readings in a g other than the one the
+  converter assumed, an array calibrated against another gravity) is a change of the states, not a misfit:
+  ω → √k ω, ω̇ → k ω̇, f → k f explain the readings exactly, and no residual sees it. Gravity is the one
+  absolute scale a log holds: on stretches where f̂ is constant in the world (ḟ + ω × f ≈ 0: gravity
+  alone, told from a steady linear acceleration by the body turning across it) and within 1 % of the
+  standard gravity, |f̂| = k g (:func:`gravity_windows`). The gain's variance is
+  (k̂ − 1)² less the scatter of k̂ itself (:func:`common_gain_variance`), k̂ = the mean |f̂| of those
+  stretches over the standard gravity: the readings' scale is known to no better than they read gravity
+  (which also differs from the standard one by up to 0.3 % with the place); ω's variance gains
+  var_k ω² / 4, ω̇'s var_k ω̇², f's var_k f² (:func:`common_gain_sd`). None without such a stretch, and
+  none for linear acceleration (no gravity in the readings).
+
 The reported σ_ij becomes σ_ij √(s_i² τ(L_ij)), ω's √(s_i² τ(L_ij) (1 − share) + λ share) where the motion
 model is the white jerk or the driven oscillator: a function of the log's own residuals only, nothing
 fitted to a recording. The batch smoother takes s_i² over the window around each sample and ρ over the
@@ -47,6 +59,8 @@ emitted so far (:class:`RunningSigmaScale`: causal). The estimates themselves ar
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -258,6 +272,89 @@ def trapezoid_level(r2, a, b, variance_factor):
     return np.where(np.isfinite(level), np.clip(level, 0.0, 1.0), 1.0)
 
 
+GRAVITY_WINDOW_S = 0.25
+"""Length of the stretches tested for gravity alone [s] (as :data:`gfimu.io.plausibility.STILL_WINDOW_S`)."""
+GRAVITY_DRIFT = 0.03
+"""A stretch holds gravity alone when f̂, carried into the world by ω̂, moves by less than this share of |f̂|
+over it (as :data:`gfimu.io.plausibility.STILL_TIME_SPREAD`, the still stretches' 3 %)."""
+GRAVITY_BAND = 0.01
+"""... and its mean |f̂| lies within this share of the standard gravity: the Earth's gravity lies within 0.3 % of
+it everywhere, so a stretch further off carries a steady linear acceleration (a vehicle's) rather than a gain,
+and one within it can add at most (0.5 %)² of ω² to ω's variance."""
+
+
+def gravity_steps(states: np.ndarray, dt_s: np.ndarray):
+    """(|f̂| (N − 1,), change (N − 1, 3), turn (N − 1,)) over the steps of ``states`` (N, ≥9: ω, ω̇, f), ``dt_s``
+    (N − 1,) [s]: the specific force's size over the step (the mean of its ends'), its change in the world frame
+    over the step, in body axes, f_{k+1} − f_k + h ω̄ × f̄ (bars: the ends' mean; 0 for gravity alone, to
+    O(h³ |ω|³ |f|)), and the angle [rad] the body turns about axes across f̄, h |ω̄ × f̄| / |f̄| (how far a
+    vector fixed in the world turns in the body, and one fixed in the body in the world)."""
+    X = np.asarray(states, dtype=float)
+    h = np.asarray(dt_s, dtype=float)
+    size = np.linalg.norm(X[:, 6:9], axis=1)
+    f = 0.5 * (X[1:, 6:9] + X[:-1, 6:9])
+    w = 0.5 * (X[1:, 0:3] + X[:-1, 0:3])
+    spin = h[:, None] * np.cross(w, f)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        turn = np.linalg.norm(spin, axis=1) / np.linalg.norm(f, axis=1)
+    return 0.5 * (size[1:] + size[:-1]), (X[1:, 6:9] - X[:-1, 6:9]) + spin, turn
+
+
+def gravity_windows(norm: np.ndarray, change: np.ndarray, turn: np.ndarray, steps: int) -> np.ndarray:
+    """(K, 2): per whole stretch of ``steps`` consecutive steps of ``norm``, ``change``, ``turn``
+    (:func:`gravity_steps`) that holds gravity alone, the mean |f̂| and the variance of that mean (the steps'
+    variance over their count). Gravity alone: f̂ carried into the world moves from where it was at the
+    stretch's start by less than :data:`GRAVITY_DRIFT` of its mean size anywhere in it, while the body turns
+    across f̂ by at least twice that angle in all (so that a specific force fixed in the body, a steady
+    linear acceleration at rest, would have moved by more), its mean size lies within :data:`GRAVITY_BAND` of
+    the standard gravity, every value finite. A trailing part shorter than ``steps`` is not a stretch."""
+    from ...io.units import STANDARD_GRAVITY_MPS2
+
+    steps = int(steps)
+    K = len(norm) // steps if steps > 0 else 0
+    if K == 0:
+        return np.zeros((0, 2))
+    n = np.asarray(norm, dtype=float)[:K * steps].reshape(K, steps)
+    c = np.asarray(change, dtype=float)[:K * steps].reshape(K, steps, 3)
+    a = np.asarray(turn, dtype=float)[:K * steps].reshape(K, steps)
+    finite = np.all(np.isfinite(n) & np.isfinite(a), axis=1) & np.all(np.isfinite(c), axis=(1, 2))
+    with np.errstate(invalid="ignore", over="ignore"):
+        level = n.mean(axis=1)
+        moved = np.max(np.linalg.norm(np.cumsum(c, axis=1), axis=2), axis=1)
+        ok = (finite & (level > 0) & (moved <= GRAVITY_DRIFT * level) & (a.sum(axis=1) >= 2.0 * GRAVITY_DRIFT)
+              & (np.abs(level / STANDARD_GRAVITY_MPS2 - 1.0) <= GRAVITY_BAND))
+    return np.column_stack([level[ok], n[ok].var(axis=1) / steps])
+
+
+def common_gain_variance(windows: np.ndarray) -> float:
+    """var_k = (k̂ − 1)² less the variance of k̂ (at least 0) from the stretches ``windows`` (K, 2) of
+    :func:`gravity_windows`: k̂ their mean |f̂| over the standard gravity, its variance the larger of their
+    scatter over K and their own mean variance over K; 0 without a stretch."""
+    from ...io.units import STANDARD_GRAVITY_MPS2
+
+    W = np.asarray(windows, dtype=float).reshape(-1, 2)
+    K = len(W)
+    if K == 0:
+        return 0.0
+    k = float(W[:, 0].mean()) / STANDARD_GRAVITY_MPS2
+    spread = max(float(W[:, 0].var(ddof=1)) / K if K > 1 else 0.0, float(W[:, 1].mean()) / K)
+    return max(0.0, (k - 1.0) ** 2 - spread / STANDARD_GRAVITY_MPS2 ** 2)
+
+
+def common_gain_sd(states: np.ndarray, variance: float) -> np.ndarray:
+    """(N, 9) σ of ω, ω̇, f from a common gain of variance ``variance`` (:func:`common_gain_variance`) at
+    ``states`` (N, ≥9): |ω| √var / 2, |ω̇| √var, |f| √var per component."""
+    X = np.atleast_2d(np.asarray(states, dtype=float))[:, :9]
+    sd = np.sqrt(max(float(variance), 0.0))
+    return np.abs(X) * np.concatenate([np.full(3, 0.5 * sd), np.full(6, sd)])
+
+
+def _gravity_window_steps(dt_s) -> int:
+    """Steps per stretch of :data:`GRAVITY_WINDOW_S` at the median step ``dt_s`` (at least 4)."""
+    h = float(np.median(dt_s)) if np.size(dt_s) else 0.0
+    return max(4, int(round(GRAVITY_WINDOW_S / h))) if h > 0 else 4
+
+
 class RunningSigmaScale:
     """The factor on σ from the residuals seen so far (the fixed-lag smoother's, causal): :meth:`scaled`
     takes one emitted state with its reading, adds its parity residual to the running sums and returns
@@ -282,12 +379,20 @@ class RunningSigmaScale:
         self._steps = 0
         self._previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
         self._jerk_steps: tuple | None = None  # (step [s], density, Ω) and their jerk_steps, the newest
+        self._gravity_previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
+        self._gravity_block: list = []  # (|f̂|, change (3), turn) of the current stretch's steps
+        self._gravity_steps: int | None = None  # steps of a stretch (:func:`_gravity_window_steps` of the first step)
+        self._gravity_windows: list = []  # (mean |f̂|, its variance) of the stretches of gravity alone so far
+        self.gain_variance = 0.0
+        """The common gain's variance from the stretches of gravity alone so far (:func:`common_gain_variance`)."""
 
     def reset(self) -> None:
         """A new segment: the lagged products and the trapezoid residuals do not reach across it (the sums so far
         are kept)."""
         self._held = 0
         self._previous = None
+        self._gravity_previous = None
+        self._gravity_block = []
 
     @property
     def variance_factor(self) -> float:
@@ -381,18 +486,55 @@ class RunningSigmaScale:
             self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank))
             self.samples += 1
         kinematic = self._trapezoid_level(np.asarray(state, dtype=float), single, jerk, t_s)
-        return sd * scale_factors(sd, single, self.variance_factor, self.tau(), kinematic)
+        out = sd * scale_factors(sd, single, self.variance_factor, self.tau(), kinematic)
+        self._gravity(np.asarray(state, dtype=float)[:9], t_s)
+        if self.gain_variance > 0:
+            out = np.sqrt(out ** 2 + common_gain_sd(np.asarray(state, dtype=float)[None, :9], self.gain_variance)[0] ** 2)
+        return out
+
+    def _gravity(self, state: np.ndarray, t_s) -> None:
+        """The step from the state before to ``state`` at ``t_s`` [s] into the current stretch; a whole stretch
+        tested for gravity alone (:func:`gravity_windows`) and :attr:`gain_variance` updated (causal: the
+        stretches of the states taken so far)."""
+        if t_s is None or getattr(self.array, "readings", "specific_force") != "specific_force":
+            return
+        previous, self._gravity_previous = self._gravity_previous, (float(t_s), np.array(state, dtype=float))
+        if previous is None or not t_s > previous[0]:
+            return
+        h = round((float(t_s) - previous[0]) * 1e9) * 1e-9
+        f0, f1 = previous[1][6:9].tolist(), state[6:9].tolist()  # gravity_steps of the two states, in scalars
+        w = [0.5 * (a + b) for a, b in zip(previous[1][0:3].tolist(), state[0:3].tolist())]
+        f = [0.5 * (a + b) for a, b in zip(f0, f1)]
+        size = 0.5 * (math.sqrt(f0[0] * f0[0] + f0[1] * f0[1] + f0[2] * f0[2])
+                      + math.sqrt(f1[0] * f1[0] + f1[1] * f1[1] + f1[2] * f1[2]))
+        if self._gravity_steps is None:
+            self._gravity_steps = _gravity_window_steps(np.array([h]))
+        spin = (h * (w[1] * f[2] - w[2] * f[1]), h * (w[2] * f[0] - w[0] * f[2]), h * (w[0] * f[1] - w[1] * f[0]))
+        across = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        turn = math.sqrt(spin[0] * spin[0] + spin[1] * spin[1] + spin[2] * spin[2]) / across if across > 0 else math.nan
+        self._gravity_block.append((size, f1[0] - f0[0] + spin[0], f1[1] - f0[1] + spin[1], f1[2] - f0[2] + spin[2],
+                                    turn))
+        if len(self._gravity_block) < self._gravity_steps:
+            return
+        block, self._gravity_block = np.array(self._gravity_block), []
+        found = gravity_windows(block[:, 0], block[:, 1:4], block[:, 4], len(block))
+        if len(found):
+            self._gravity_windows.append(found[0])
+            self.gain_variance = common_gain_variance(np.array(self._gravity_windows))
 
 
 def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
-                     robust=None, max_lag: int = MAX_LAG, window: int | None = None, process=None) -> np.ndarray:
+                     robust=None, max_lag: int = MAX_LAG, window: int | None = None, process=None,
+                     dt_s: np.ndarray | None = None) -> np.ndarray:
     """``sd`` (N, ≥9) with its first nine columns (ω, ω̇, f) scaled by the factors of the log's residuals
     (the batch smoother's; module docstring): s² over the ``window`` samples centred on each row
     (:func:`local_window` of the median degrees of freedom when None), ρ over the whole log. Rows with a
     non-finite residual do not count.
     ``process``: (jerk density (N − 1, 3) of each step per body axis, the driven oscillator's Ω (3,), steps [s]
     (N − 1,)) of the motion model the solution assumed (:func:`jerk_steps`), or None; given, ω's σ also follows
-    the path's own trapezoid level over the same window (:func:`kinematic_shares`, :func:`trapezoid_level`)."""
+    the path's own trapezoid level over the same window (:func:`kinematic_shares`, :func:`trapezoid_level`).
+    ``dt_s``: the steps [s] (N − 1,), or None: given, and the readings specific force, σ also carries the
+    common gain the log's stretches of gravity alone show (:func:`common_gain_variance`, over the whole log)."""
     n = len(states)
     noise = np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), np.shape(accel_mps2))
     geometry = _geometry(array)
@@ -430,6 +572,10 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
                                 local_sums(np.where(use, b.sum(axis=1), 0.0), window), s2)
         kinematic = (share, level[:, None])
     out[:, :9] = out[:, :9] * scale_factors(out[:, :9], single, s2[:, None], tau, kinematic)
+    if dt_s is not None and n > 2 and getattr(array, "readings", "specific_force") == "specific_force":
+        gain = common_gain_variance(gravity_windows(*gravity_steps(states, dt_s), _gravity_window_steps(dt_s)))
+        if gain > 0:
+            out[:, :9] = np.sqrt(out[:, :9] ** 2 + common_gain_sd(states, gain) ** 2)
     return out
 
 
