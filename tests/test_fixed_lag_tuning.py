@@ -73,8 +73,10 @@ def test_tuned_densities_equal_the_batch_tuner_on_the_stretch(turntable_log):
 
 def test_the_stream_after_the_stretch_is_the_fixed_lag_smoother_with_those_densities(turntable_log):
     """Streaming with the tuned densities given explicitly (no tuning) gives the same states after the stretch,
-    up to the solves each starts its window from: the batch solution of the tuning stretch, and the re-solve
-    of the held start (each converged to the solver's relative tolerance; ω agrees within 1e-8 rad/s)."""
+    up to the states each starts its window from: the batch solution of the tuning stretch, and the re-solve
+    of the held start. Each window is filtered again once linearised at them, so the two differ by the second
+    order of their difference (both within the estimate's error of the truth): ω within 1 % of that error
+    (measured 8.7e-5 rad/s against an RMSE of 0.029 rad/s), the difference fading as the stream goes on."""
     log = turntable_log
     n = int(1.0 * RATE_HZ)
     est = FixedLagEstimator(tune_window_s=1.0).estimate(log)
@@ -85,8 +87,12 @@ def test_the_stream_after_the_stretch_is_the_fixed_lag_smoother_with_those_densi
     run = explicit.estimate(log)
     given = run.motion
     assert run.report.tunings == ()
-    np.testing.assert_allclose(tuned.omega_b_radps[n:], given.omega_b_radps[n:], atol=1e-7)
-    np.testing.assert_allclose(tuned.omega_dot_b_radps2[n:], given.omega_dot_b_radps2[n:], atol=1e-5)
+    error = omega_rmse(tuned.omega_b_radps[n:], log.truth.omega_b_radps[n:])
+    gap = np.abs(tuned.omega_b_radps[n:] - given.omega_b_radps[n:])
+    assert gap.max() < 0.01 * error
+    assert gap[-1].max() < 0.5 * gap.max()  # (a quarter of it after 1 s, measured)
+    assert np.abs(tuned.omega_dot_b_radps2[n:] - given.omega_dot_b_radps2[n:]).max() < 0.01 * omega_rmse(
+        tuned.omega_dot_b_radps2[n:], log.truth.omega_dot_b_radps2[n:])
 
 
 def test_per_axis_factors_and_noise_scale_enter_the_factors():

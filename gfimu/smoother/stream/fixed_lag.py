@@ -1523,9 +1523,10 @@ class FixedLagSmoother:
         return n
 
     def _restart_window(self, X: np.ndarray, held: list) -> None:
-        """The window solved again from the held samples ``held`` and its own, each linearised at its
-        re-solved state (rows of ``X``), the held ones then marginalised: the stream goes on from the
-        decided branch with what the held rows told. A window that fails to solve again is kept as it was."""
+        """The window solved again from the held samples ``held`` and its own, each linearised once at its
+        re-solved state (rows of ``X``; not iterated from it: :meth:`WindowFilter.measure`'s ``once``), the
+        held ones then marginalised: the stream goes on from the decided branch with what the held rows
+        told. A window that fails to solve again is kept as it was."""
         raws = held + list(self._segment.raw)
         k0 = self._segment.window[0][0] - len(held)
         engine = self._new_smoother()
@@ -1533,10 +1534,10 @@ class FixedLagSmoother:
             for j, (t, y, g) in enumerate(raws):
                 extra = self.model.sample_terms(t, y, g)
                 if j == 0:
-                    engine.begin(k0, t, y, g, start=X[0], extra=extra)
+                    engine.begin(k0, t, y, g, start=X[0], extra=extra, once=True)
                     continue
                 engine.advance(k0 + j, self._step(raws[j - 1], raws[j], X[j - 1], 1.0), t, y, g, extra=extra,
-                               start=X[j])
+                               start=X[j], once=True)
                 if j <= len(held):
                     engine.drop_oldest()
             engine.commit()

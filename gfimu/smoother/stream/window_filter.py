@@ -766,16 +766,17 @@ class WindowFilter:
         store.mean[lo:lo + m] = X
 
     # --- the window interface both engines share (gfimu.smoother.stream.gtsam_window.GtsamWindow) ----
-    def begin(self, k: int, t_ns: int, y, gyro=None, start=None, extra=None) -> None:
+    def begin(self, k: int, t_ns: int, y, gyro=None, start=None, extra=None, once: bool = False) -> None:
         """The first state of a segment, index ``k``: the weak priors, then its readings (linearised
-        from ``start``)."""
+        from ``start``; ``once``: at ``start`` alone, :meth:`measure`)."""
         self.start(k)
-        self.measure(y, gyro, start=start, extra=extra)
+        self.measure(y, gyro, start=start, extra=extra, once=once)
 
-    def advance(self, k: int, step: Step, t_ns: int, y, gyro=None, extra=None, start=None, prev=None) -> None:
+    def advance(self, k: int, step: Step, t_ns: int, y, gyro=None, extra=None, start=None, prev=None,
+                once: bool = False) -> None:
         """State ``k``, one ``step`` (:meth:`ArrayModel.step`) after the newest: predict, then its readings
         (linearised from ``start``, else from the prediction and the other branches of the update's
-        minimum)."""
+        minimum; ``once``: at ``start`` alone, :meth:`measure`)."""
         record = self._record
         if not isinstance(step, Step):
             step = self.model.step(float(step))
@@ -787,7 +788,7 @@ class WindowFilter:
             return
         self.predict(k, step)
         record.steps[k] = (step.F, step.Q)
-        self.measure(y, gyro, start=start, extra=extra)
+        self.measure(y, gyro, start=start, extra=extra, once=once)
 
     def _advance_compiled(self, k: int, step: Step, y) -> None:
         """:meth:`predict` then :meth:`measure` from the prediction, on the readings alone, through
@@ -959,12 +960,13 @@ class WindowFilter:
             prior = 0.0
         return x, H, Z, float(np.sum(r * r / R)) + prior
 
-    def _measure_compiled(self, y, xp, P, x0, from_prediction: bool) -> None:
+    def _measure_compiled(self, y, xp, P, x0, from_prediction: bool, iterations: int | None = None) -> None:
         """:meth:`measure` on the readings alone through :func:`kernels.measure_update
         <gfimu.smoother.stream.kernels.measure_update>` (the branches and the robust step only from the
-        prediction, as :meth:`measure` tries them)."""
+        prediction, as :meth:`measure` tries them; at most ``iterations``, None: :attr:`iterations`)."""
         R0, S_q, S_dw, S_f, slope, c_robust, loss = self._ops.kernel_model
-        iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
+        if iterations is None:
+            iterations = max(self.iterations, 1) + (1 if c_robust > 0 else 0)
         robust, store, lazy, Q = self.model.robust, self._store, self._lazy, self._newest.Q
         c_process = float(robust.process_robust_threshold)
         robust_step = from_prediction and Q is not None and c_process > 0
@@ -980,7 +982,7 @@ class WindowFilter:
         lazy.T, lazy.u, lazy.W = T, u, W
         self._updated(P_after)
 
-    def measure(self, y: np.ndarray, gyro=None, start=None, extra=None) -> None:
+    def measure(self, y: np.ndarray, gyro=None, start=None, extra=None, once: bool = False) -> None:
         """Gauss-Newton update of the newest state with its readings, moving every state of the window.
 
         The update is the minimum of ``J(x) = ||y - h(x)||²_R + ||x - x̂||²_P`` (the readings and the
@@ -990,7 +992,13 @@ class WindowFilter:
         through q(ω), and a planar array confuses ω with its mirror image; a prediction far from the
         truth (fast motion between samples) otherwise leads Gauss-Newton onto such a branch.
 
-        ``extra``: the factor groups' rows at this sample (:meth:`ArrayModel.sample_terms`), or None."""
+        ``extra``: the factor groups' rows at this sample (:meth:`ArrayModel.sample_terms`), or None.
+
+        ``once``: the update linearised at ``start`` alone, not iterated from it: a stretch whose states are
+        decided already (re-solved whole), filtered again to carry its information on. Iterated, each update
+        goes to the filter's own minimum of that sample, which early in the stretch (the weak priors, ω seen
+        through q(ω) alone, ill-posed near rest) can lie far from the decided state, and the error is carried
+        on for seconds."""
         store = self._store
         hi = store.hi
         xp = store.mean[hi - 1].copy()
@@ -1000,10 +1008,11 @@ class WindowFilter:
         if gyro is not None:
             y = np.concatenate([y, gyro])
         x0 = xp if start is None else np.asarray(start, dtype=float)
+        once = once and start is not None
         if self.compiled and gyro is None and extra is None:  # the whole update in one compiled call
-            self._measure_compiled(y, xp, P, x0, start is None)
+            self._measure_compiled(y, xp, P, x0, start is None, 1 if once else None)
             return
-        best = self._solve(y, gyro, xp, P, x0, extra)
+        best = self._solve(y, gyro, xp, P, x0, extra, iterations=1 if once else None)
         if self.branches and start is None and gyro is None:
             try:
                 P_inv = np.linalg.inv(P)
