@@ -200,8 +200,8 @@ class SmootherProblem:
     Besides them it holds the samples (``n``, ``dt_s``), the axes' :attr:`geometry` (:class:`AxisGeometry`;
     ``sensors``, ``all_directions_b``, ``all_positions_m``, ``all_rows`` read it), the calibration variables
     (:attr:`calibration`, :class:`CalibrationBlocks`; ``global_blocks``, ``n_global``), the state
-    :attr:`layout` (``state_size``, ``snap``, ``attitude``, ``AT`` read it) and which of the gyroscope and
-    the inclinometer the model uses.
+    :attr:`layout` (the solvers' ``state_size``, ``snap``, ``attitude``, ``AT`` read it; a group reads the
+    layout itself) and which of the gyroscope and the inclinometer the model uses.
 
     Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
     around new noise levels (:meth:`with_noise`, given the new value of a level, made by that level's own
@@ -258,6 +258,7 @@ class SmootherProblem:
     all_rows = delegated("geometry", "rows", "(axes, 12) every axis's row of the structure matrix.")
     global_blocks = delegated("calibration", "blocks", "name -> (slice of the calibration vector, GTSAM key).")
     n_global = delegated("calibration", "size", "Size of the calibration vector.")
+    # the layout's values by the solvers' short names (a factor group reads them as ``problem.layout``, :class:`ModelView`)
     snap = delegated("layout", "snap", "Whether the state carries the snap (white snap motion model).")
     state_size = delegated("layout", "size", "Values per sample's state.")
     attitude = delegated("layout", "attitude", "Whether the state carries the attitude.")

@@ -102,9 +102,6 @@ class StreamView:
     noise: NoiseLevels = NoiseLevels()
 
     layout: ClassVar[StateLayout] = StateLayout()
-    state_size: ClassVar[int] = KINEMATIC_SIZE
-    snap: ClassVar[bool] = False
-    attitude: ClassVar[bool] = False
     use_gyro: ClassVar[bool] = False
     use_inclinometer: ClassVar[bool] = False
     n_global: ClassVar[int] = 0
