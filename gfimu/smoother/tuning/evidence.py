@@ -75,30 +75,33 @@ class Tuning:
     axis_amplitude_radps: tuple = (0.0, 0.0, 0.0)
     """Amplitude of the oscillation, √2 × RMS of the estimated ω about the axis [rad/s]."""
 
-    def for_stream(self, options: SmootherOptions, memory_s: float = 1.0) -> SmootherOptions:
-        """``options`` (carrying this selection) for a stream that goes on past the tuning data:
+    def for_stream(self, model: ModelOptions, memory_s: float = 1.0) -> ModelOptions:
+        """The ``model`` (carrying this selection) for a stream that goes on past the tuning data:
         on each oscillator axis the jerk density is raised, if needed, to ``√(2 τ) A Ω δΩ`` (τ =
         ``memory_s``, A the amplitude, δΩ the frequency's std), the density whose phase diffusion
         over τ covers the phase drift ``δΩ τ`` that the frequency's error causes. Without it the
         model, tuned stiff on a short stretch, drifts away from a long oscillation."""
-        factors = np.array(options.process_axis_factors, dtype=float)
-        q = options.omega_dot_random_walk_radps2_per_sqrt_s
+        factors = np.array(model.process_axis_factors, dtype=float)
+        q = model.omega_dot_random_walk_radps2_per_sqrt_s
         for a in range(3):
             f, sf, amp = self.axis_frequencies_hz[a], self.axis_frequency_std_hz[a], self.axis_amplitude_radps[a]
             if f > 0:
                 floor = np.sqrt(2.0 * memory_s) * amp * (2 * np.pi * f) * (2 * np.pi * sf)
                 factors[a] = max(factors[a], floor / q)
-        return replace(options, process_axis_factors=tuple(float(v) for v in factors))
+        return replace(model, process_axis_factors=tuple(float(v) for v in factors))
 
-    def apply(self, options: SmootherOptions) -> SmootherOptions:
-        """``options`` with this selection (except the accelerometer noise scale, see :func:`make_problem`)."""
-        changes = {DENSITY_FIELD[self.motion_model]: self.density, "process_axis_factors": tuple(self.axis_factors),
-                   "motion_model": self.motion_model}
+    def apply(self, model: ModelOptions, batch_model: BatchModelOptions) -> tuple[ModelOptions, BatchModelOptions]:
+        """The ``model`` and ``batch_model`` with this selection (the jerk density is the model's, the snap density
+        the batch model's; the accelerometer noise scale is not an option, see :func:`make_problem`)."""
+        changes = {"process_axis_factors": tuple(self.axis_factors), "motion_model": self.motion_model}
         if self.motion_model == "jerk":
+            changes[DENSITY_FIELD["jerk"]] = self.density
             changes["process_axis_frequencies_hz"] = tuple(float(v) for v in self.axis_frequencies_hz)
+        else:
+            batch_model = replace(batch_model, **{DENSITY_FIELD["snap"]: self.density})
         if np.isfinite(self.specific_force_density):
             changes["specific_force_random_walk_mps2_per_sqrt_s"] = self.specific_force_density
-        return replace(options, **changes)
+        return replace(model, **changes), batch_model
 
     def as_dict(self) -> dict:
         return {"motion_model": self.motion_model, "density": self.density, "axis_factors": list(self.axis_factors),
