@@ -9,7 +9,7 @@ from gfimu.simulate import simulate
 from gfimu.smoother.stream import array_model as model
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
 from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, explicit_process_noise, tunes_process_noise
-from gfimu.smoother.model.option_groups import ModelGroups
+from gfimu.smoother.model.option_groups import ModelGroups, ModelOptions, TuningOptions
 from gfimu.smoother.model.problem import SmootherOptions
 
 RATE_HZ = 500.0
@@ -107,12 +107,12 @@ def test_per_axis_factors_and_noise_scale_enter_the_factors():
 # --- explicit densities, short streams, streaming API ---------------------------------------
 
 def test_explicit_densities_disable_the_tuning(turntable_log):
-    assert explicit_process_noise(SmootherOptions()) == []
-    assert tunes_process_noise(SmootherOptions(tune_process_noise=True))
+    assert explicit_process_noise(ModelOptions()) == []
+    assert tunes_process_noise(ModelOptions(), TuningOptions(tune_process_noise=True))
     for changes in ({"omega_dot_random_walk_radps2_per_sqrt_s": 12.0}, {"process_axis_factors": (1.0, 1.0, 0.5)},
                     {"specific_force_random_walk_mps2_per_sqrt_s": 3.0}, {"tune_process_noise": False}):
         est = FixedLagEstimator(tune_window_s=1.0, auto_model=False, **changes)
-        assert not tunes_process_noise(est.options())
+        assert not tunes_process_noise(est.model, est.tuning)
         sm = est.smoother(CUBE_5CM, RATE_HZ)
         log = turntable_log
         outs = [sm.push(log.timestamps_ns[i], log.accel_mps2[i]) for i in range(150)]
@@ -123,7 +123,7 @@ def test_explicit_densities_disable_the_tuning(turntable_log):
         for i in range(int(1.5 * RATE_HZ)):
             sm.push(log.timestamps_ns[i], log.accel_mps2[i])
         assert sm.tuning is None and sm.stream_model is not None and sm.stream_model.check.consistent
-        for name in explicit_process_noise(est.options()):
+        for name in explicit_process_noise(est.model):
             assert getattr(sm.options.model, name) == getattr(est.options(), name)
 
 

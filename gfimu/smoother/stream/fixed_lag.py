@@ -105,7 +105,8 @@ from ..solve.banded import solve
 from ..model.parts import delegated
 from ..model.problem import SmootherOptions, options_reason
 from ...option import check_declared
-from ..model.option_groups import GROUPS, Engine, ModelGroups, StreamOptions, assemble
+from ..model.option_groups import (GROUPS, BatchModelOptions, Engine, ModelGroups, ModelOptions, StreamOptions,
+                                   TuningOptions, assemble)
 from ..solve.initialise import initial_estimate, still_start
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from ..result import SmootherEstimator
@@ -209,10 +210,10 @@ class PendingChoice:
         return self._value if self._finish is None else self._finish(self._value)
 
 
-def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | None:
+def auto_model_reason(array: SensorArray, batch_model: BatchModelOptions) -> str | None:
     """Why the fixed-lag smoother cannot check its model on the data (None if it can): the check
     needs the per-sample ML fit of the accelerometers."""
-    if options.measurement != "accelerometer":
+    if batch_model.measurement != "accelerometer":
         return "measurement is not 'accelerometer'"
     return MLEstimator().applicable(array)
 
@@ -285,15 +286,15 @@ PROCESS_NOISE_OPTIONS = ("omega_dot_random_walk_radps2_per_sqrt_s", "specific_fo
 _DEFAULTS = SmootherOptions()
 
 
-def explicit_process_noise(options: SmootherOptions) -> list[str]:
-    """Names of the process-noise options of ``options`` that differ from their defaults."""
+def explicit_process_noise(model: ModelOptions) -> list[str]:
+    """Names of the process-noise options of the ``model`` that differ from their defaults."""
     return [name for name in PROCESS_NOISE_OPTIONS
-            if tuple(np.atleast_1d(getattr(options, name))) != tuple(np.atleast_1d(getattr(_DEFAULTS, name)))]
+            if tuple(np.atleast_1d(getattr(model, name))) != tuple(np.atleast_1d(getattr(_DEFAULTS, name)))]
 
 
-def tunes_process_noise(options: SmootherOptions) -> bool:
-    """Whether the fixed-lag smoother chooses the process noise from the data with ``options``."""
-    return bool(options.tune_process_noise) and not explicit_process_noise(options)
+def tunes_process_noise(model: ModelOptions, tuning: TuningOptions) -> bool:
+    """Whether the fixed-lag smoother chooses the process noise of the ``model`` from the data as ``tuning`` asks."""
+    return bool(tuning.tune_process_noise) and not explicit_process_noise(model)
 
 
 def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None:
@@ -680,11 +681,11 @@ class FixedLagSmoother:
                                    engine, GtsamSettings(float(relinearize_threshold), int(relinearize_skip),
                                                          max(float(marginalise_every_s), 2.0 / rate_hz)),
                                    bool(branches), bool(fast_measurement), bool(options.compute_sigma))
-        array_model = model.ArrayModel(array, options.model, options.batch_model, fast_measurement)
-        tune = tunes_process_noise(options)
-        auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
+        given = ModelGroups.of(options)  # (the options' batch group is checked above: at its defaults)
+        array_model = model.ArrayModel(array, given.model, given.batch_model, fast_measurement)
+        tune = tunes_process_noise(given.model, given.tuning)
+        auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, given.batch_model) is None
         tune_n = stretch_samples(tune_window_s, rate_hz)  # (cut above STRETCH_RATE_HZ)
-        given = ModelGroups.of(options)
         rules = ChoiceRules(
             given, tune, auto, int(round(retune_every_s * 1e9)), tune_n,
             # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
@@ -698,7 +699,8 @@ class FixedLagSmoother:
         self._clock = StreamClock(float(clock_reset_s))
         self._worker = WorkerSlot()
         self.closed = False
-        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, options)
+        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, given.model,
+                                                                                             given.batch_model)
                        else None)
         # the held start's longest span [s] (cut above STRETCH_RATE_HZ; the numpy engine only)
         self._hold = StartHold(float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / rate_hz) if engine == "numpy" else 0.0,
