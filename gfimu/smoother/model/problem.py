@@ -68,14 +68,20 @@ class SmootherOptions:
         :mod:`gfimu.smoother.model.option_groups`)."""
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
             raise InputError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
-        frequencies = np.asarray(self.process_axis_frequencies_hz, dtype=float)
-        if np.any(frequencies > 0) and self.motion_model != MotionModel.JERK:
-            raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
+        check_oscillators(self)
 
     @property
     def robust(self) -> bool:
         """Whether any robust re-weighting is on."""
         return self.accel_robust_threshold > 0 or self.process_robust_threshold > 0
+
+
+def check_oscillators(model: ModelOptions) -> None:
+    """An :class:`InputError` when the ``model`` (option group) asks for the driven oscillator
+    (``process_axis_frequencies_hz``) on another motion model than white jerk."""
+    frequencies = np.asarray(model.process_axis_frequencies_hz, dtype=float)
+    if np.any(frequencies > 0) and model.motion_model != MotionModel.JERK:
+        raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
 
 
 def options_reason(array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions,

@@ -36,7 +36,7 @@ import numpy as np
 from ...log import Log
 from ..solve.banded import (Factorisation, NormalEquations, add_normal_equations, band_structure_of, factorise, factorise_blocks,
                      normal_equations, solve, solve_step)
-from ..model.problem import SmootherOptions, SmootherProblem
+from ..model.problem import SmootherProblem, check_oscillators
 from ..model.option_groups import BatchModelOptions, ModelOptions, TuningOptions
 from ..model.groups import Term
 from ..solve.initialise import initial_estimate
@@ -621,9 +621,10 @@ class _NoiseSearch:
                         "freq": np.array(model.process_axis_frequencies_hz if motion_model == "jerk"
                                          else (0.0, 0.0, 0.0), dtype=float),
                         "freq_std": np.zeros(3), "amp": np.zeros(3)}
-        # the state layout of this motion model with the model given (which it checks: the oscillators need 'jerk')
-        given = SmootherOptions.from_groups(replace(model, motion_model=motion_model), batch_model)
-        self.X = StateLayout.from_options(given).resize(states)
+        # the state layout of this motion model with the model given (the oscillators need 'jerk')
+        given = replace(model, motion_model=motion_model)
+        check_oscillators(given)
+        self.X = StateLayout.of(given, batch_model).resize(states)
         self.cache: dict = {}
         self.bases: dict = {}
         self.summed: dict = {}
