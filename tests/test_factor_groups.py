@@ -38,7 +38,7 @@ class ZeroRatePrior(FactorGroup):
 
     def terms(self, problem, states, params):
         k0, k1 = self._span(problem)
-        J = np.zeros((k1 - k0, 3, problem.state_size))
+        J = np.zeros((k1 - k0, 3, problem.layout.size))
         J[:, :, OMEGA] = np.eye(3) / self.sigma
         return [Term("unary", states[k0:k1, OMEGA] / self.sigma, {"x": J}, None, first=k0)]
 
@@ -190,7 +190,7 @@ class DeltaAngle(FactorGroup):
 
     def terms(self, problem, states, params):
         k, i = self._steps(problem)
-        n, m, s = problem.n, problem.state_size, problem.noise.of(self)
+        n, m, s = problem.n, problem.layout.size, problem.noise.of(self)
         r = np.zeros((n - 1, 3))
         J0, J1 = np.zeros((n - 1, 3, m)), np.zeros((n - 1, 3, m))
         h = problem.dt_s[k][:, None]

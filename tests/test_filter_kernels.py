@@ -6,6 +6,7 @@ import pytest
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
 from gfimu.simulate.sensor_errors import SensorErrors
+from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream import kernels
 from gfimu.smoother.stream import window_filter as flf
 from gfimu.smoother.stream import array_model as model
@@ -22,7 +23,7 @@ def _random_spd(rng, n, scale):
 def _filter(slope=0.0, robust=0.0, branches=True):
     array = cube_array(0.05, noise_std_mps2=0.05)
     options = SmootherOptions()
-    m = model.ArrayModel(array, options)
+    m = model.ArrayModel(array, options.model, options.batch_model)
     f = flf.WindowFilter(m, branches=branches)
     if slope or robust:
         m.accel_noise_slope_mps2_per_radps = slope
@@ -259,7 +260,7 @@ def test_the_fused_advance_is_the_numpy_predict_and_measure(monkeypatch, noise, 
                    noise=None if noise > 0 else SensorErrors.none())
     filters = []
     for compiled in (True, False):
-        m = model.ArrayModel(array, SmootherOptions())
+        m = model.ArrayModel(array, ModelOptions(), BatchModelOptions())
         if robust:
             m.robust_loss = "cauchy"
             m.accel_robust_threshold = m.process_robust_threshold = robust

@@ -21,7 +21,7 @@ def omega_rmse(a, b):
 def dense_map(m: model.ArrayModel, times_s, Y, x_init, iterations=20):
     """Minimum of the segment's whitened residuals (priors, process factors, readings) by dense Gauss-Newton,
     written from the factor-graph form (trapezoid + random walks, or the oscillator step)."""
-    o = m.options
+    o = m.model
     n = len(times_s)
     prior_sd = np.repeat([o.initial_omega_std_radps, o.initial_omega_dot_std_radps2,
                           o.initial_specific_force_std_mps2], 3)
@@ -92,7 +92,7 @@ def test_window_equals_the_dense_least_squares_minimum(frequencies_hz, noise_mps
     log = simulate("random3d", arr, rate_hz=RATE_HZ, duration_s=0.12, seed=21)
     opts = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=40.0, process_axis_frequencies_hz=frequencies_hz,
                            process_axis_factors=(1.0, 0.5, 2.0))
-    m = model.ArrayModel(arr, opts)
+    m = model.ArrayModel(arr, opts.model, opts.batch_model)
     times = log.timestamps_ns * 1e-9
     truth = np.hstack([log.truth.omega_b_radps, log.truth.omega_dot_b_radps2, log.truth.specific_force_b_mps2])
     filt = WindowFilter(m, capacity=16)  # grows and compacts on the way

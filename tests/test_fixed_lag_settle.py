@@ -9,6 +9,7 @@ import pytest
 
 from gfimu.array import mimu4444_array
 from gfimu.simulate import simulate
+from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream.window_filter import (
     OUTLYING_STEP2,
     SETTLE_FALSE_ALARM,
@@ -30,7 +31,8 @@ def _stream(seed: int = 1, gyro: bool = False):
 
 def _window(log, n: int, gyro: bool = False) -> WindowFilter:
     """A window of the first ``n`` samples, solved state by state as the stream solves them."""
-    filt = WindowFilter(ArrayModel(log.array, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=200.0)),
+    filt = WindowFilter(ArrayModel(log.array, ModelOptions(omega_dot_random_walk_radps2_per_sqrt_s=200.0),
+                                   BatchModelOptions()),
                         capacity=256, branches=True)
     g = log.gyro_b_radps if gyro else None
     start = np.r_[log.truth.omega_b_radps[0], np.zeros(6)]
@@ -119,6 +121,7 @@ def test_a_window_filtered_with_an_outgrown_model_is_solved_again_with_the_new_o
 
     from gfimu.array import cube_array
     from gfimu.smoother.stream.fixed_lag import FixedLagSmoother
+    from gfimu.smoother.model.option_groups import ModelGroups
     from gfimu.smoother.stream.model_choice import StreamModel
 
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=200, duration_s=3.0, seed=5, omega_rms_radps=4.0)
@@ -134,7 +137,7 @@ def test_a_window_filtered_with_an_outgrown_model_is_solved_again_with_the_new_o
 
     before = window_error()
     fast = replace(slow, omega_dot_random_walk_radps2_per_sqrt_s=30.0)
-    sm._use(StreamModel(fast, 1.0, None, None, int(log.timestamps_ns[399]), 400))
+    sm._use(StreamModel(ModelGroups.of(fast), 1.0, None, None, int(log.timestamps_ns[399]), 400))
     sm._replay_window()
     after = window_error()
     assert [k for k, _ in sm._segment.window] == ks  # the same states, none emitted

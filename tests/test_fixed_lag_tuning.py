@@ -9,6 +9,7 @@ from gfimu.simulate import simulate
 from gfimu.smoother.stream import array_model as model
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
 from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, explicit_process_noise, tunes_process_noise
+from gfimu.smoother.model.option_groups import ModelGroups, ModelOptions, TuningOptions
 from gfimu.smoother.model.problem import SmootherOptions
 
 RATE_HZ = 500.0
@@ -98,7 +99,7 @@ def test_the_stream_after_the_stretch_is_the_fixed_lag_smoother_with_those_densi
 def test_per_axis_factors_and_noise_scale_enter_the_factors():
     opt = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5, process_axis_factors=(1e-3, 0.2, 1.0),
                           specific_force_random_walk_mps2_per_sqrt_s=0.4)
-    m = model.ArrayModel(CUBE_5CM, opt, accel_noise_scale=2.5)
+    m = model.ArrayModel(CUBE_5CM, opt.model, opt.batch_model, accel_noise_scale=2.5)
     h = 0.002
     Q = m.step(h).Q
     axis = np.array([1e-3, 0.2, 1.0])
@@ -112,24 +113,24 @@ def test_per_axis_factors_and_noise_scale_enter_the_factors():
 # --- explicit densities, short streams, streaming API ---------------------------------------
 
 def test_explicit_densities_disable_the_tuning(turntable_log):
-    assert explicit_process_noise(SmootherOptions()) == []
-    assert tunes_process_noise(SmootherOptions(tune_process_noise=True))
+    assert explicit_process_noise(ModelOptions()) == []
+    assert tunes_process_noise(ModelOptions(), TuningOptions(tune_process_noise=True))
     for changes in ({"omega_dot_random_walk_radps2_per_sqrt_s": 12.0}, {"process_axis_factors": (1.0, 1.0, 0.5)},
                     {"specific_force_random_walk_mps2_per_sqrt_s": 3.0}, {"tune_process_noise": False}):
         est = FixedLagEstimator(tune_window_s=1.0, auto_model=False, **changes)
-        assert not tunes_process_noise(est.options())
+        assert not tunes_process_noise(est.model, est.tuning)
         sm = est.smoother(CUBE_5CM, RATE_HZ)
         log = turntable_log
         outs = [sm.push(log.timestamps_ns[i], log.accel_mps2[i]) for i in range(150)]
         assert outs[-1].filtered is not None and sm.tuning is None  # streaming from the start, as given
-        assert sm.options == est.options()
+        assert sm.options == ModelGroups.of(est.options())
         # with the model check (the default) the given densities are kept once the readings are checked
         sm = FixedLagEstimator(tune_window_s=1.0, **changes).smoother(CUBE_5CM, RATE_HZ)
         for i in range(int(1.5 * RATE_HZ)):
             sm.push(log.timestamps_ns[i], log.accel_mps2[i])
         assert sm.tuning is None and sm.stream_model is not None and sm.stream_model.check.consistent
-        for name in explicit_process_noise(est.options()):
-            assert getattr(sm.options, name) == getattr(est.options(), name)
+        for name in explicit_process_noise(est.model):
+            assert getattr(sm.options.model, name) == getattr(est.options(), name)
 
 
 def test_stream_waits_for_the_stretch_then_catches_up(turntable_log):
@@ -144,8 +145,8 @@ def test_stream_waits_for_the_stretch_then_catches_up(turntable_log):
         assert upd.smoothed == () and upd.filtered is None
     assert sm.tuning is None
     upd = sm.push(log.timestamps_ns[n - 1], log.accel_mps2[n - 1])
-    assert sm.tuning is not None and sm.options.process_axis_factors == sm.tuning.axis_factors
-    assert sm.options.omega_dot_random_walk_radps2_per_sqrt_s == sm.tuning.density
+    assert sm.tuning is not None and sm.options.model.process_axis_factors == sm.tuning.axis_factors
+    assert sm.options.model.omega_dot_random_walk_radps2_per_sqrt_s == sm.tuning.density
     np.testing.assert_array_equal([s.timestamp_ns for s in upd.smoothed], log.timestamps_ns[:n - lag_n])
     assert upd.filtered.timestamp_ns == log.timestamps_ns[n - 1]
     upd = sm.push(log.timestamps_ns[n], log.accel_mps2[n])  # then one state per sample, lag_s behind

@@ -131,7 +131,7 @@ def test_the_fixed_lag_stream_is_the_batch_model(options, fast):
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.1, seed=3).select(slice(10, 13))
     problem = SmootherProblem.of(log, options)
     x = test_states(log, problem)
-    am = model.ArrayModel(log.array, options, fast_measurement=fast)
+    am = model.ArrayModel(log.array, options.model, options.batch_model, fast_measurement=fast)
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     am.add_priors(graph, 0)
     for k in range(3):

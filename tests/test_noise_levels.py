@@ -70,9 +70,9 @@ def test_the_accel_noise_option_reaches_every_group_that_whitens_with_it(log):
 
 def test_the_fixed_lag_smoother_takes_the_same_value(log):
     options = _options("fixed-lag")
-    model = ArrayModel(log.array, options)
+    model = ArrayModel(log.array, options.model, options.batch_model)
     np.testing.assert_array_equal(model.accel_sigma_mps2, np.full(log.array.n_axes, SIGMA))
-    np.testing.assert_allclose(ArrayModel(log.array, options, accel_noise_scale=2.0).accel_sigma_mps2, 2 * SIGMA,
+    np.testing.assert_allclose(ArrayModel(log.array, options.model, options.batch_model, accel_noise_scale=2.0).accel_sigma_mps2, 2 * SIGMA,
                                rtol=1e-15)
     # an array stating some axes' noise: the stream's value is the batch problem's, to the bit
     accs = list(log.array.accelerometers)
@@ -81,14 +81,14 @@ def test_the_fixed_lag_smoother_takes_the_same_value(log):
     mixed = log.replace(array=dataclasses.replace(log.array, accelerometers=tuple(accs)))
     batch = SmootherProblem.of(mixed, options).noise.accel.sigma
     assert len(set(batch.tolist())) == 3
-    np.testing.assert_array_equal(ArrayModel(mixed.array, options).accel_sigma_mps2, batch)
-    np.testing.assert_array_equal(ArrayModel(mixed.array, options).first_sigma,
+    np.testing.assert_array_equal(ArrayModel(mixed.array, options.model, options.batch_model).accel_sigma_mps2, batch)
+    np.testing.assert_array_equal(ArrayModel(mixed.array, options.model, options.batch_model).first_sigma,
                                   SmootherProblem.of(mixed, options).noise.first_state.sigma)
     # the gyroscope's noise too, from the same group
     gyro = simulate("reversal", array=dataclasses.replace(log.array, gyroscope=Gyroscope(noise_std_radps=0.004)),
                     rate_hz=200.0, duration_s=0.2, seed=3)
-    assert ArrayModel(gyro.array, options).gyro_sigma_radps == SmootherProblem.of(gyro, options).noise.gyro.sigma == 0.004
-    assert ArrayModel(log.array, options).gyro_sigma_radps == DEFAULT_GYRO_NOISE_STD_RADPS  # none stated
+    assert ArrayModel(gyro.array, options.model, options.batch_model).gyro_sigma_radps == SmootherProblem.of(gyro, options).noise.gyro.sigma == 0.004
+    assert ArrayModel(log.array, options.model, options.batch_model).gyro_sigma_radps == DEFAULT_GYRO_NOISE_STD_RADPS  # none stated
 
 
 def test_the_batch_problem_and_the_stream_view_are_both_what_a_group_reads(log):

@@ -14,6 +14,7 @@ from gfimu.simulate import simulate
 from gfimu.smoother.batch import engine as batch
 from gfimu.smoother.stream.array_model import ArrayModel
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
+from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 from gfimu.smoother.solve.initialise import initial_states
 from gfimu.smoother.tuning.evidence import Tuning, dominant_frequency_hz, linearised_log_evidence
@@ -161,8 +162,8 @@ def test_random_motion_keeps_the_white_jerk():
 def test_stream_density_floor():
     """``for_stream`` raises an oscillator axis's density to √(2τ) A Ω δΩ, leaves the others."""
     t = Tuning("jerk", 2.0, 1.0, 0.0, 1, (1e-4, 0.5, 1e-5), 0.3, (0.0, 0.0, 1.0), (0.0, 0.0, 1e-3), (0.0, 0.0, 2.5))
-    opt = t.apply(SmootherOptions())
-    out = t.for_stream(opt)
+    model, _ = t.apply(ModelOptions(), BatchModelOptions())
+    out = t.for_stream(model)
     floor = np.sqrt(2.0) * 2.5 * (2 * np.pi) * (2 * np.pi * 1e-3)
     assert out.process_axis_factors[:2] == (1e-4, 0.5)
     assert out.process_axis_factors[2] * 2.0 == pytest.approx(floor, rel=1e-12)
@@ -172,7 +173,7 @@ def test_stream_density_floor():
 @pytest.mark.parametrize("fast", [True, False])
 def test_fixed_lag_model_adds_the_oscillator_step(fast):
     opt = SmootherOptions(process_axis_frequencies_hz=(0.0, 2.0, 0.5), process_axis_factors=(1.0, 0.1, 0.01))
-    model = ArrayModel(CUBE_5CM, opt, fast_measurement=fast)
+    model = ArrayModel(CUBE_5CM, opt.model, opt.batch_model, fast_measurement=fast)
     graph = gtsam.NonlinearFactorGraph()
     model.add_process(graph, 0, 1, 0.002)
     assert graph.size() == 1  # oscillator step and specific-force random walk, one factor of the step's rows

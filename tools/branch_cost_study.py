@@ -65,6 +65,7 @@ from gfimu.readings import screen_log  # noqa: E402
 from gfimu.smoother.solve.banded import reweighting, solve, solve_reweighted  # noqa: E402
 from gfimu.smoother.model.problem import robust_loss  # noqa: E402
 from gfimu.smoother.batch.engine import BatchSmootherEstimator, chosen_model, moment_problem, window_slices  # noqa: E402
+from gfimu.smoother.model.option_groups import ModelGroups, with_groups  # noqa: E402
 from gfimu.smoother.model.groups import AccelerometerGroup, FactorGroup, MotionModelGroup, Term  # noqa: E402
 from gfimu.smoother.model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE  # noqa: E402
 from gfimu.smoother.solve.restarts import BRANCHES, branch_restarts, plane_normal  # noqa: E402
@@ -200,7 +201,9 @@ def segment_restarts(model: FrozenModel, X: np.ndarray, normal: np.ndarray, widt
 def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: bool,
           reference_shift_ms: float = 0.0, restarts: str | None = None) -> dict:
     est = BatchSmootherEstimator()
-    opt, auto = chosen_model(log, est.options(), False)
+    given = est.options()
+    chosen, auto = chosen_model(log, ModelGroups.of(given), False)
+    opt = with_groups(given, *chosen)
     if auto is None or auto[0].consistent:
         raise SystemExit(f"{log.source}: the model check finds the log consistent; this study is about the robust model")
     aligned = log

@@ -427,11 +427,12 @@ def _cpu_seconds() -> float:
 def _model_of(log, est) -> tuple[str, str]:
     """(model, the check's description) the batch smoother takes on ``log`` (its model check alone)."""
     from gfimu.smoother.batch.engine import chosen_model
+    from gfimu.smoother.model.option_groups import ModelGroups
 
     if not est.auto_model:
         return "n/a", ""
     try:
-        _, auto = chosen_model(log, est.options(), attitude=False)
+        _, auto = chosen_model(log, ModelGroups.of(est), attitude=False)
         check = None if auto is None else auto[0]
     except Exception:  # the options that follow the check failed (the run will say so): the check alone
         from gfimu.estimators.ml import MLEstimator

@@ -31,6 +31,7 @@ from gfimu.methods import make_estimator  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
 from gfimu.smoother.batch.engine import BatchSmootherEstimator  # noqa: E402
 from gfimu.smoother.batch.bound import efficiency, smoother_bound  # noqa: E402
+from gfimu.smoother.model.option_groups import with_groups  # noqa: E402
 from gfimu.smoother.solve.initialise import initial_states  # noqa: E402
 
 PER_SAMPLE = ("inversion", "integration", "imm", "ml", "free-flight")
@@ -120,7 +121,9 @@ def main(argv=None) -> int:
         m, tunings = run.motion, run.report.tunings
         err = omega_errors(m, log.truth)
         tuning = tunings[0] if tunings else None
-        bound_options = tuning.apply(smoother.options()) if tuning else smoother.options()
+        bound_options = smoother.options()
+        if tuning:
+            bound_options = with_groups(bound_options, *tuning.apply(smoother.model, smoother.batch_model))
         eff = efficiency(m, log.truth, smoother_bound(log, bound_options)).ratio["omega_b_radps"]
         q = (bound_options.omega_dot_random_walk_radps2_per_sqrt_s * np.asarray(bound_options.process_axis_factors)
              if bound_options.motion_model == "jerk" else None)

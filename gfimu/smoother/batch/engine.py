@@ -20,7 +20,7 @@ and is re-weighted from each solution (iteratively re-weighted least squares).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -34,16 +34,7 @@ from ...parallel import check_workers, fork_workers, forked_map
 from ...motion import Motion
 from ...progress import progress as progress_bar
 from ...rotations import quaternion_from_matrix
-from ..tuning.model_choice import (
-    CHECK_SAMPLES,
-    check_model,
-    estimate_noise_variances,
-    measured_noise_options,
-    local_density_factors,
-    misfit_options,
-    motion_densities,
-    with_densities,
-)
+from ..tuning.model_choice import CHECK_SAMPLES, check_model, chosen_options, estimate_noise_variances, local_density_factors
 from ..solve.banded import (  # noqa: F401  (the banded core, also importable from here)
     REWEIGHTED_TOLERANCE,
     Factorisation,
@@ -61,7 +52,7 @@ from ..solve.banded import (  # noqa: F401  (the banded core, also importable fr
     to_lower_banded,
 )
 from ..model.problem import SmootherOptions, SmootherProblem, options_reason
-from ..model.option_groups import BatchModelOptions, BatchOptions, ModelOptions, TuningOptions, assemble
+from ..model.option_groups import BatchModelOptions, BatchOptions, ModelGroups, ModelOptions, TuningOptions, assemble
 from ..solve.initialise import initial_attitude, initial_states, sign_chain
 from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from ..solve.restarts import branch_restarts
@@ -166,7 +157,7 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
     the model check and, when the check made it, the per-sample estimate; no guard. ``per_sample``: the
     per-sample estimate of the whole log is wanted after the run (the guard's), so the model check makes it
     whether it needs it or not, started beside its own estimate of a subsample (:func:`chosen_model`)."""
-    # the options whole: the report's, and the model choice's, whose options the windows' problems and solves read
+    # the options whole, as the report gives them
     options = SmootherOptions.from_groups(model, batch_model, batch, tuning)
     _check_smoothable(log, model, batch_model, batch.solver)
     preload.wait()  # (the kernels' loading begun while the log was read is over before anything is forked)
@@ -175,9 +166,9 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
     windows = window_slices(len(log), log.rate_hz, batch.window_s, batch.overlap_s)
     timings = {}
     t0 = time.perf_counter()
-    opt, auto = options, None
+    chosen, auto = ModelGroups(model, batch_model, tuning), None
     if tuning.auto_model:
-        opt, auto = chosen_model(log, options, attitude, per_sample)
+        chosen, auto = chosen_model(log, chosen, attitude, per_sample)
         timings["model check"] = time.perf_counter() - t0
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
         motion = auto[1] if auto[1] is not None else MLEstimator().estimate_motion(log)
@@ -186,13 +177,14 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
                                           iterations=0, cost=0.0, windows=0, per_sample=motion))
     t0 = time.perf_counter()
     if attitude:  # each window starts from the attitude of the one before: in turn
-        outcomes = _attitude_windows(log, opt.model, opt.batch_model, opt.tuning, windows, initial, batch.solver, progress)
+        outcomes = _attitude_windows(log, chosen.model, chosen.batch_model, chosen.tuning, windows, initial, batch.solver,
+                                     progress)
     else:
-        context = _WindowContext(log, opt.model, opt.batch_model, batch, opt.tuning, auto, initial, windows)
+        context = _WindowContext(log, chosen.model, chosen.batch_model, batch, chosen.tuning, auto, initial, windows)
         outcomes = _run_windows(context, window_workers(batch.workers, len(windows), batch.solver), progress)
         _align_signs(context, outcomes)
     timings["solve windows"] = time.perf_counter() - t0
-    joined = _Joined.of(log, layout, opt.model, opt.batch_model, windows, outcomes)
+    joined = _Joined.of(log, layout, chosen.model, chosen.batch_model, windows, outcomes)
     return Estimate(joined.motion(log, layout), Report.of(
         "smoother", options, timings=timings, warnings=joined.notes, model_check=auto[0] if auto else None,
         tunings=joined.tunings, calibration=joined.calibration, iterations=joined.iterations, cost=joined.cost,
@@ -458,19 +450,21 @@ def _calibrates_sigma(log: Log, model: ModelOptions, batch_model: BatchModelOpti
             and not (opt.estimate_attitude and opt.use_inclinometer and log.array.inclinometer is not None))
 
 
-def chosen_model(log: Log, opt: SmootherOptions, attitude: bool, per_sample: bool = False):
-    """(options, (ModelCheck, ML motion or None) or None) of :mod:`gfimu.smoother.tuning.model_choice`; the ML motion is the
-    whole log's (:class:`MLEstimator` with its defaults) where the check computed it, else None.
+def chosen_model(log: Log, given: ModelGroups, attitude: bool, per_sample: bool = False):
+    """(the model, batch model and tuning chosen from those ``given``, (ModelCheck, ML motion or None) or None) of
+    :mod:`gfimu.smoother.tuning.model_choice`; the ML motion is the whole log's (:class:`MLEstimator` with its
+    defaults) where the check computed it, else None.
 
     ``per_sample``: the whole log's ML motion is wanted anyway (by the guard after the smoother): it is made
     whatever the check finds, its blocks started in worker processes while this one estimates the subsample
     the check reads (the same numbers as one after the other)."""
-    if (attitude or opt.free_flight or opt.measurement != "accelerometer"
-            or opt.self_calibrate_bias or opt.self_calibrate_scale):
-        return opt, None
+    batch_model = given.batch_model
+    if (attitude or batch_model.free_flight or batch_model.measurement != "accelerometer"
+            or batch_model.self_calibrate_bias or batch_model.self_calibrate_scale):
+        return given, None
     ml = MLEstimator()
     if ml.applicable(log.array) is not None or not np.all(np.isfinite(log.accel_mps2)):
-        return opt, None
+        return given, None
     step = max(1, len(log) // CHECK_SAMPLES)
     sample = log if step == 1 else log.select(slice(0, None, step))
     whole = ml.started(log) if per_sample and step > 1 else None
@@ -478,24 +472,13 @@ def chosen_model(log: Log, opt: SmootherOptions, attitude: bool, per_sample: boo
         motion = ml.estimate_motion(sample)
         check = check_model(sample, motion)
         if check.consistent:  # the ML motion of the whole log is kept for the guard (it would compute it again)
-            return measured_noise_options(opt, check), (check, motion if step == 1 else
-                                                        whole.motion() if whole is not None else None)
-        if step > 1:
+            motion = motion if step == 1 else whole.motion() if whole is not None else None
+        elif step > 1:
             motion = whole.motion() if whole is not None else ml.estimate_motion(log)
     finally:
         if whole is not None:
             whole.close()
-    chosen = misfit_options(opt, check)
-    defaults = {f.name: f.default for f in fields(SmootherOptions)}
-    keep = {name: getattr(opt, name) for name in defaults
-            if name != "tune_process_noise" and getattr(opt, name) != defaults[name]
-            and getattr(chosen, name) != getattr(opt, name)}
-    if opt.tune_process_noise:  # the process noise of the log's motion (else the fixed densities)
-        x = np.hstack([motion.omega_b_radps, motion.omega_dot_b_radps2, motion.specific_force_b_mps2])
-        chosen = with_densities(chosen, *motion_densities(x, log.dt_s, *estimate_noise_variances(
-            log.array, check, motion.omega_b_radps)))
-    chosen = replace(chosen, **keep)
-    return chosen, (check, motion)
+    return chosen_options(given, check, log, motion), (check, motion)
 
 
 def _restarted(problem: SmootherProblem, res: SolveResult) -> SolveResult:

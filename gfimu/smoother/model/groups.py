@@ -90,7 +90,7 @@ def _contiguous(a: np.ndarray) -> np.ndarray:
 
 def unary_jacobian(problem, blocks: list[tuple[slice, np.ndarray]], rows: int, n: int) -> np.ndarray:
     """(n, rows, state size) Jacobian with the given (n, rows, 3) blocks at their state columns."""
-    J = np.zeros((n, rows, problem.state_size))
+    J = np.zeros((n, rows, problem.layout.size))
     for sl, block in blocks:
         J[:, :, sl] = block
     return J
@@ -108,21 +108,21 @@ class FirstStatePriorGroup(FactorGroup):
         model = problem.model
         first = np.repeat([model.initial_omega_std_radps, model.initial_omega_dot_std_radps2,
                            model.initial_specific_force_std_mps2], 3)
-        if problem.snap:
+        if problem.layout.snap:
             first = np.concatenate([first, np.full(3, 100.0 * model.initial_omega_dot_std_radps2)])
         return FirstStateNoise(first)
 
     def terms(self, problem, states, params):
         mk = problem.layout.motion_size
         r, _ = process.prior_residual(states[:1, :mk], np.zeros(mk))
-        J = np.zeros((1, mk, problem.state_size))
+        J = np.zeros((1, mk, problem.layout.size))
         sigma = problem.noise.first_state.sigma
         J[0, :, :mk] = np.diag(1.0 / sigma)
         return [Term("unary", r / sigma, {"x": J}, None, first=0)]
 
     def gtsam_factors(self, problem):
         pairs = [(omega_key(0), OMEGA), (omega_dot_key(0), OMEGA_DOT), (specific_force_key(0), SPECIFIC_FORCE)]
-        if problem.snap:
+        if problem.layout.snap:
             pairs.append((omega_ddot_key(0), OMEGA_DDOT))
         sigma = problem.noise.first_state.sigma
         return [process.make_prior_factor(key, np.zeros(3), diagonal_noise(sigma[sl])) for key, sl in pairs]
@@ -143,8 +143,8 @@ def _padded(blocks: list[np.ndarray], state_size: int) -> np.ndarray:
 
 def _binary(problem, rows: int, pairs: list[tuple[slice, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
     """(N-1, rows, state size) Jacobians of a step on samples k and k+1, blocks ``(columns, d/dx_k, d/dx_k+1)``."""
-    J0 = np.zeros((problem.n - 1, rows, problem.state_size))
-    J1 = np.zeros((problem.n - 1, rows, problem.state_size))
+    J0 = np.zeros((problem.n - 1, rows, problem.layout.size))
+    J1 = np.zeros((problem.n - 1, rows, problem.layout.size))
     for sl, j0, j1 in pairs:
         J0[:, :, sl], J1[:, :, sl] = j0, j1
     return J0, J1
@@ -189,7 +189,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
             return self._term_all_axes(problem, X)
         rows = []
         jx = []
-        m = problem.state_size
+        m = problem.layout.size
         jg = np.zeros((problem.n, problem.log.array.n_axes, problem.n_global))
         for i, (d, p, cols) in enumerate(problem.sensors):
             bias = problem.global_part(params, f"bias{i}")
@@ -233,7 +233,7 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
         :func:`gfimu.factors.accelerometer.accelerometer_residual`)."""
         rows = problem.all_rows
         r, white, products = self._all_axes(problem, X)
-        J = np.zeros(r.shape + (problem.state_size,))
+        J = np.zeros(r.shape + (problem.layout.size,))
         J[:, :, OMEGA] = self._omega_jacobian(problem, X, products, white)
         J[:, :, OMEGA_DOT] = rows[:, 3:6] * white[:, :, None]
         J[:, :, SPECIFIC_FORCE] = rows[:, 0:3] * white[:, :, None]
@@ -372,7 +372,7 @@ class InversionGroup(_ArrayMeasurementGroup):
     def terms(self, problem, states, params):
         X, inv = states, problem.noise.inversion
         r, j = quadratic.inversion_residual(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE], inv.x_hat)
-        J = _padded([j["w"], j["d"], j["f"]], problem.state_size)
+        J = _padded([j["w"], j["d"], j["f"]], problem.layout.size)
         return [Term("unary", r @ inv.x_whiten.T, {"x": inv.x_whiten @ J})]
 
     def gtsam_factors(self, problem):
@@ -394,7 +394,7 @@ class SpecificForceWalkGroup(FactorGroup):
     linear = True
 
     def applies(self, problem) -> bool:
-        return not problem.attitude
+        return not problem.layout.attitude
 
     def noise(self, problem: ModelView) -> ForceWalkNoise:
         return ForceWalkNoise(process.random_walk_sigma(problem.model.specific_force_random_walk_mps2_per_sqrt_s,
@@ -450,7 +450,7 @@ class AttitudeGroup(FactorGroup):
     per_sample = False
 
     def applies(self, problem) -> bool:
-        return bool(problem.attitude)
+        return bool(problem.layout.attitude)
 
     def noise(self, problem: ModelView) -> AttitudeNoise:
         opt = problem.batch_model
@@ -475,7 +475,7 @@ class AttitudeGroup(FactorGroup):
         # weak prior on the first attitude (fixes yaw)
         r, j = process.attitude_prior_residual(R[:1], problem.noise.attitude.prior_wb)
         w = 1.0 / problem.noise.attitude.prior_sigma
-        Jp = np.zeros((1, 3, problem.state_size))
+        Jp = np.zeros((1, 3, problem.layout.size))
         Jp[:, :, AT] = j["r"] * w[:, None]
         out.append(Term("unary", r * w, {"x": Jp}, None, first=0))
         return out
@@ -548,15 +548,15 @@ class MotionModelGroup(FactorGroup):
     def reweighted(self, problem, states: np.ndarray, weight) -> MotionNoise:
         """The robust re-weighting's motion-model noise at ``states``: the stds each step starts from
         (:meth:`MotionNoise.start`) divided by ``sqrt(weight(e))`` of its whitened residual norm / √rows."""
-        plain = problem.noise.motion.from_start(problem.snap)
+        plain = problem.noise.motion.from_start(problem.layout.snap)
         r = self.step_residual(problem.with_noise(motion=plain), states)
-        return plain.weighted(weight(np.sqrt(np.mean(r**2, axis=1))), problem.snap)
+        return plain.weighted(weight(np.sqrt(np.mean(r**2, axis=1))), problem.layout.snap)
 
     def step_residual(self, problem, X: np.ndarray, noise: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """(N-1, rows) whitened residual of every step (what the robust re-weighting weighs); ``noise``:
         the (trapezoid, ω̇-step) std of the white-jerk steps to whiten with instead of the problem's."""
         W, D = OMEGA, OMEGA_DOT
-        if problem.snap:
+        if problem.layout.snap:
             ra, _ = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D],
                                                        X[:-1, OMEGA_DDOT], X[1:, OMEGA_DDOT], problem.dt_s)
             return np.einsum("nij,nj->ni", problem.noise.motion.snap_whiten, ra)
@@ -573,7 +573,7 @@ class MotionModelGroup(FactorGroup):
 
     def terms(self, problem, states, params):
         X, W, D, A = states, OMEGA, OMEGA_DOT, OMEGA_DDOT
-        if problem.snap:
+        if problem.layout.snap:
             # white snap: exact triple-integrator step of [ω, ω̇, ω̈] (9 rows, full covariance)
             ra, ja = kinematics.angular_motion_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], X[:-1, A], X[1:, A],
                                                         problem.dt_s)
@@ -590,7 +590,7 @@ class MotionModelGroup(FactorGroup):
         # trapezoid kinematics + ω̇ random walk, stacked as one binary term (6 rows)
         rk, jk = kinematics.angular_velocity_residual(X[:-1, W], X[1:, W], X[:-1, D], X[1:, D], problem.dt_s)
         rd, _ = process.random_walk_residual(X[:-1, D], X[1:, D])
-        steps, m = problem.n - 1, problem.state_size
+        steps, m = problem.n - 1, problem.layout.size
         J0 = np.zeros((steps, 6, m))
         J1 = np.zeros((steps, 6, m))
         J0[:, 0:3, W], J1[:, 0:3, W] = jk["w0"], jk["w1"]
@@ -615,7 +615,7 @@ class MotionModelGroup(FactorGroup):
             J0ᵀr = [-t e1, -t h/2 e1 - u e2]                 J1ᵀr = [t e1, -t h/2 e1 + u e2]
 
         (the same sums as :meth:`terms`' Jacobians to rounding). None for the other motion models."""
-        if problem.snap or problem.noise.motion.oscillator:
+        if problem.layout.snap or problem.noise.motion.oscillator:
             return None
         W, D = OMEGA, OMEGA_DOT
         wb = self._white_jerk_weights(problem)
@@ -661,7 +661,7 @@ class MotionModelGroup(FactorGroup):
 
     def squared_norm(self, problem, states, params):
         """The same residuals as :meth:`terms` (white jerk: without building its Jacobians)."""
-        if problem.snap or problem.noise.motion.oscillator:
+        if problem.layout.snap or problem.noise.motion.oscillator:
             return super().squared_norm(problem, states, params)
         r = np.concatenate(self._white_jerk_rows(problem, states, self._white_jerk_weights(problem)), axis=1)
         return float(np.sum(r * r))
@@ -669,11 +669,11 @@ class MotionModelGroup(FactorGroup):
     def gtsam_factors(self, problem):
         out = []
         motion = problem.noise.motion
-        oscillator_cov = motion.oscillator_covariance() if motion.oscillator and not problem.snap else None
+        oscillator_cov = motion.oscillator_covariance() if motion.oscillator and not problem.layout.snap else None
         for k in range(problem.n - 1):
             w0, w1, d0, d1 = omega_key(k), omega_key(k + 1), omega_dot_key(k), omega_dot_key(k + 1)
             h = float(problem.dt_s[k])
-            if problem.snap:
+            if problem.layout.snap:
                 out.append(kinematics.make_angular_motion_factor(w0, w1, d0, d1, omega_ddot_key(k), omega_ddot_key(k + 1), h,
                                                                  gaussian_noise(motion.snap_cov[k])))
             elif motion.oscillator:
@@ -687,14 +687,14 @@ class MotionModelGroup(FactorGroup):
         return out
 
     def log_normaliser(self, problem):
-        if problem.snap:
+        if problem.layout.snap:
             return 0.5 * float(np.sum(np.linalg.slogdet(problem.noise.motion.snap_cov)[1]))
         if problem.noise.motion.oscillator:
             return 0.5 * float(np.sum(np.linalg.slogdet(problem.noise.motion.oscillator_covariance())[1]))
         return float(sum(self.log_normaliser_parts(problem)))
 
     def log_normaliser_parts(self, problem):
-        if problem.snap or problem.noise.motion.oscillator:
+        if problem.layout.snap or problem.noise.motion.oscillator:
             return [self.log_normaliser(problem)]
         motion = problem.noise.motion
         return [3 * float(np.sum(np.log(motion.trapezoid_sigma)) + np.sum(np.log(motion.omega_dot_step_sigma))),
@@ -782,7 +782,7 @@ class InclinometerGroup(FactorGroup):
     name = "inclinometer"
 
     def applies(self, problem) -> bool:
-        return bool(problem.attitude and problem.use_inclinometer)
+        return bool(problem.layout.attitude and problem.use_inclinometer)
 
     def noise(self, problem: ModelView) -> TiltNoise:
         if not np.all(np.isfinite(problem.log.tilt_rad)):

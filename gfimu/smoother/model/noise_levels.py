@@ -334,7 +334,11 @@ class ModelView(Protocol):
     """What a factor group reads of the problem it is given (:class:`gfimu.smoother.model.problem.SmootherProblem`,
     :class:`gfimu.smoother.stream.array_model.StreamView`): the array and the samples, the model's option groups
     (``model``, ``batch_model``), the state layout and the noise levels; the calibration variables (none in a
-    stream)."""
+    stream).
+
+    The state's columns are read in one place, :attr:`layout` (a :class:`gfimu.smoother.model.layout.StateLayout`):
+    its ``size``, whether it carries the snap (``snap``) and the attitude (``attitude``, its ``rotation``
+    columns); a group reads no other name for them."""
 
     array: SensorArray
     log: Log
@@ -343,9 +347,6 @@ class ModelView(Protocol):
     n: int
     dt_s: np.ndarray
     layout: StateLayout
-    state_size: int
-    snap: bool
-    attitude: bool
     use_gyro: bool
     use_inclinometer: bool
     n_global: int

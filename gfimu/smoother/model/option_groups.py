@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import NamedTuple
 
 from ...noise import DEFAULT_ACCEL_NOISE_STD_MPS2
 from ...option import Choice, Number, Numbers, Satisfies, check_declared, option
@@ -328,6 +329,22 @@ class GuardOptions:
         "per-sample answer, its sign following the smoother's around it, over spans where the smoother fits the "
         "readings worse than its model allows, and warns; 'warn' keeps the smoother's answer and warns; 'off' "
         "skips the comparison"), check=Choice(Guard))
+
+
+class ModelGroups(NamedTuple):
+    """The three groups a choice of the model reads and gives: the model, the batch model and the tuning
+    (:func:`gfimu.smoother.tuning.model_choice.misfit_options`, the batch smoother's
+    :func:`gfimu.smoother.batch.engine.chosen_model`, the fixed-lag smoother's
+    :mod:`gfimu.smoother.stream.model_choice`)."""
+
+    model: ModelOptions
+    batch_model: BatchModelOptions
+    tuning: TuningOptions
+
+    @classmethod
+    def of(cls, options) -> ModelGroups:
+        """The three groups of flat ``options`` (an assembled class carrying them)."""
+        return cls(options.model, options.batch_model, options.tuning)
 
 
 GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "batch_model": BatchModelOptions, "batch": BatchOptions,

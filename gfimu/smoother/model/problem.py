@@ -68,14 +68,20 @@ class SmootherOptions:
         :mod:`gfimu.smoother.model.option_groups`)."""
         if self.window_s is not None and not (self.window_s > 2 * self.overlap_s > 0):
             raise InputError(f"smoother option window_s ({self.window_s}) must exceed twice overlap_s ({self.overlap_s}) > 0")
-        frequencies = np.asarray(self.process_axis_frequencies_hz, dtype=float)
-        if np.any(frequencies > 0) and self.motion_model != MotionModel.JERK:
-            raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
+        check_oscillators(self)
 
     @property
     def robust(self) -> bool:
         """Whether any robust re-weighting is on."""
         return self.accel_robust_threshold > 0 or self.process_robust_threshold > 0
+
+
+def check_oscillators(model: ModelOptions) -> None:
+    """An :class:`InputError` when the ``model`` (option group) asks for the driven oscillator
+    (``process_axis_frequencies_hz``) on another motion model than white jerk."""
+    frequencies = np.asarray(model.process_axis_frequencies_hz, dtype=float)
+    if np.any(frequencies > 0) and model.motion_model != MotionModel.JERK:
+        raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
 
 
 def options_reason(array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions,
@@ -200,8 +206,8 @@ class SmootherProblem:
     Besides them it holds the samples (``n``, ``dt_s``), the axes' :attr:`geometry` (:class:`AxisGeometry`;
     ``sensors``, ``all_directions_b``, ``all_positions_m``, ``all_rows`` read it), the calibration variables
     (:attr:`calibration`, :class:`CalibrationBlocks`; ``global_blocks``, ``n_global``), the state
-    :attr:`layout` (``state_size``, ``snap``, ``attitude``, ``AT`` read it) and which of the gyroscope and
-    the inclinometer the model uses.
+    :attr:`layout` (the solvers' ``state_size``, ``snap``, ``attitude``, ``AT`` read it; a group reads the
+    layout itself) and which of the gyroscope and the inclinometer the model uses.
 
     Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
     around new noise levels (:meth:`with_noise`, given the new value of a level, made by that level's own
@@ -258,6 +264,7 @@ class SmootherProblem:
     all_rows = delegated("geometry", "rows", "(axes, 12) every axis's row of the structure matrix.")
     global_blocks = delegated("calibration", "blocks", "name -> (slice of the calibration vector, GTSAM key).")
     n_global = delegated("calibration", "size", "Size of the calibration vector.")
+    # the layout's values by the solvers' short names (a factor group reads them as ``problem.layout``, :class:`ModelView`)
     snap = delegated("layout", "snap", "Whether the state carries the snap (white snap motion model).")
     state_size = delegated("layout", "size", "Values per sample's state.")
     attitude = delegated("layout", "attitude", "Whether the state carries the attitude.")

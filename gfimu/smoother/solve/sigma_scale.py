@@ -579,17 +579,18 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     return out
 
 
-def calibrates_stream(array, options) -> bool:
-    """Whether the fixed-lag smoother scales σ (the accelerometers alone as they are: no gyroscope or
-    calibration variables the residual would leave out)."""
-    return (options.measurement == "accelerometer" and not (options.self_calibrate_bias or options.self_calibrate_scale)
-            and not (options.use_gyro and array.gyroscope is not None))
+def calibrates_stream(array, model, batch_model) -> bool:
+    """Whether the fixed-lag smoother scales σ under its ``model`` and ``batch_model`` (option groups): the
+    accelerometers alone as they are, no gyroscope or calibration variables the residual would leave out."""
+    return (batch_model.measurement == "accelerometer"
+            and not (batch_model.self_calibrate_bias or batch_model.self_calibrate_scale)
+            and not (model.use_gyro and array.gyroscope is not None))
 
 
-def jerk_density(options):
+def jerk_density(model):
     """(white-jerk density per body axis (3,) [rad/s²/√s], the driven oscillator's Ω per axis (3,) [rad/s]) of
-    ``options``' motion model (Ω = 0: the white jerk), or None (white snap)."""
-    if options.motion_model != "jerk":
+    the ``model``'s (option group) motion model (Ω = 0: the white jerk), or None (white snap)."""
+    if model.motion_model != "jerk":
         return None
-    return (float(options.omega_dot_random_walk_radps2_per_sqrt_s) * np.asarray(options.process_axis_factors, dtype=float),
-            2.0 * np.pi * np.asarray(options.process_axis_frequencies_hz, dtype=float))
+    return (float(model.omega_dot_random_walk_radps2_per_sqrt_s) * np.asarray(model.process_axis_factors, dtype=float),
+            2.0 * np.pi * np.asarray(model.process_axis_frequencies_hz, dtype=float))

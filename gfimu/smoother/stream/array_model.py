@@ -6,7 +6,7 @@ The key conventions of :mod:`gfimu.factors`: variables ``w``/``d``/``f`` of samp
 - the step from the newest state to the new one (:meth:`ArrayModel.step`, a :class:`Step`): the
   terms of the groups that tie consecutive samples (``FactorGroup.steps``: the motion model, white
   jerk or driven oscillator, and the specific-force random walk of
-  :mod:`gfimu.smoother.model.groups`, and such groups given in ``SmootherOptions.factor_groups``),
+  :mod:`gfimu.smoother.model.groups`, and such groups given in ``ModelOptions.factor_groups``),
   evaluated by their own vectorised residual and Jacobian on the two samples (:class:`StreamView`)
   with their own noise levels; the gtsam engine adds the rows as one factor
   (:meth:`ArrayModel.add_process`), the numpy engine predicts with the transition they define;
@@ -35,7 +35,6 @@ from ...errors import InputError
 from ...factors import accelerometer
 from ...log import Log
 from ..model.parts import delegated
-from ..model.problem import SmootherOptions
 from ..model.groups import BUILT_IN, AccelerometerGroup, FirstStatePriorGroup, GyroscopeGroup
 from ..model.noise_levels import NoiseLevels
 from ..model.option_groups import BatchModelOptions, ModelOptions
@@ -102,9 +101,6 @@ class StreamView:
     noise: NoiseLevels = NoiseLevels()
 
     layout: ClassVar[StateLayout] = StateLayout()
-    state_size: ClassVar[int] = KINEMATIC_SIZE
-    snap: ClassVar[bool] = False
-    attitude: ClassVar[bool] = False
     use_gyro: ClassVar[bool] = False
     use_inclinometer: ClassVar[bool] = False
     n_global: ClassVar[int] = 0
@@ -265,9 +261,12 @@ class Caches:
 
 
 class ArrayModel:
-    """Precomputed geometry and noise models of one array under ``SmootherOptions``.
+    """Precomputed geometry and noise models of one array under the option groups ``model``
+    (:class:`~gfimu.smoother.model.option_groups.ModelOptions`) and ``batch_model``
+    (:class:`~gfimu.smoother.model.option_groups.BatchModelOptions`: the robust model's noise slope, thresholds
+    and loss, and the measurement).
 
-    Besides ``array``, ``options``, ``fast_measurement`` and ``accel_noise_scale``, what it holds is in
+    Besides ``array``, ``model``, ``batch_model``, ``fast_measurement`` and ``accel_noise_scale``, what it holds is in
     four parts (their fields also readable as attributes of the model, e.g. ``model.S_q``):
 
     - :attr:`structure` (:class:`Structure`): the structure matrix's blocks ``S_lin``, ``S_q``, ``S_f``,
@@ -281,14 +280,18 @@ class ArrayModel:
 
     and :attr:`caches` (:class:`Caches`): the gtsam noise models and the step rows per step length."""
 
-    def __init__(self, array: SensorArray, options: SmootherOptions, fast_measurement: bool = True,
-                 accel_noise_scale: float = 1.0) -> None:
+    def __init__(self, array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions,
+                 fast_measurement: bool = True, accel_noise_scale: float = 1.0) -> None:
+        if not (isinstance(model, ModelOptions) and isinstance(batch_model, BatchModelOptions)):
+            raise TypeError("ArrayModel(array, model, batch_model, ...) takes the option groups ModelOptions and "
+                            "BatchModelOptions")
         if not (np.isfinite(accel_noise_scale) and accel_noise_scale > 0):
             raise InputError(f"accel_noise_scale must be a positive number, got {accel_noise_scale!r}")
         self.array = array
-        self.options = options
-        self.option_groups = (options.model, options.batch_model)
-        """The model and batch model of ``options``, what the factor groups read (:class:`StreamView`)."""
+        self.model = model
+        self.batch_model = batch_model
+        self.option_groups = (model, batch_model)
+        """The model and batch model, what the factor groups read (:class:`StreamView`)."""
         self.fast_measurement = bool(fast_measurement)
         self.accel_noise_scale = float(accel_noise_scale)
         S = array.structure_matrix()
@@ -302,16 +305,16 @@ class ArrayModel:
                                    np.ascontiguousarray(S[:, 3:6]), np.linalg.pinv(wL, rcond=1e-10) / sigma[None, :],
                                    np.linalg.matrix_rank(wL) == 6, accelerometer.array_geometry(array))
         self.noise = Noise(sigma, float(np.mean(sigma ** 2)), levels.gyro.sigma, levels.first_state.sigma)
-        step_groups = tuple(g for g in BUILT_IN + tuple(options.factor_groups) if g.steps)
+        step_groups = tuple(g for g in BUILT_IN + tuple(model.factor_groups) if g.steps)
         fixed_steps = tuple(g for g in step_groups if g.linear and g in BUILT_IN)
-        self.factor_sets = FactorSets(tuple(g for g in options.factor_groups if g.per_sample), step_groups,
+        self.factor_sets = FactorSets(tuple(g for g in model.factor_groups if g.per_sample), step_groups,
                                       fixed_steps, tuple(g for g in step_groups if g not in fixed_steps))
         # the robust model of an inconsistent log (gfimu.smoother.tuning.model_choice): the noise grows with |ω| and
         # each axis may be weighted by the robust loss of its whitened residual (the stream's model
         # leaves that off: see gfimu.smoother.stream.model_choice)
-        self.robust = Robust(float(options.accel_noise_slope_mps2_per_radps),
-                             float(options.accel_robust_threshold) if options.measurement == "accelerometer" else 0.0,
-                             options.robust_loss, float(options.process_robust_threshold))
+        self.robust = Robust(float(batch_model.accel_noise_slope_mps2_per_radps),
+                             float(batch_model.accel_robust_threshold) if batch_model.measurement == "accelerometer" else 0.0,
+                             batch_model.robust_loss, float(batch_model.process_robust_threshold))
         self.caches = Caches()
 
     S_lin = delegated("structure", "S_lin", "The structure matrix's [f, ω̇] columns.")

@@ -105,7 +105,8 @@ from ..solve.banded import solve
 from ..model.parts import delegated
 from ..model.problem import SmootherOptions, options_reason
 from ...option import check_declared
-from ..model.option_groups import GROUPS, Engine, StreamOptions, assemble, with_groups
+from ..model.option_groups import (GROUPS, BatchModelOptions, Engine, ModelGroups, ModelOptions, StreamOptions,
+                                   TuningOptions, assemble)
 from ..solve.initialise import initial_estimate, still_start
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from ..result import SmootherEstimator
@@ -209,10 +210,10 @@ class PendingChoice:
         return self._value if self._finish is None else self._finish(self._value)
 
 
-def auto_model_reason(array: SensorArray, options: SmootherOptions) -> str | None:
+def auto_model_reason(array: SensorArray, batch_model: BatchModelOptions) -> str | None:
     """Why the fixed-lag smoother cannot check its model on the data (None if it can): the check
     needs the per-sample ML fit of the accelerometers."""
-    if options.measurement != "accelerometer":
+    if batch_model.measurement != "accelerometer":
         return "measurement is not 'accelerometer'"
     return MLEstimator().applicable(array)
 
@@ -285,15 +286,15 @@ PROCESS_NOISE_OPTIONS = ("omega_dot_random_walk_radps2_per_sqrt_s", "specific_fo
 _DEFAULTS = SmootherOptions()
 
 
-def explicit_process_noise(options: SmootherOptions) -> list[str]:
-    """Names of the process-noise options of ``options`` that differ from their defaults."""
+def explicit_process_noise(model: ModelOptions) -> list[str]:
+    """Names of the process-noise options of the ``model`` that differ from their defaults."""
     return [name for name in PROCESS_NOISE_OPTIONS
-            if tuple(np.atleast_1d(getattr(options, name))) != tuple(np.atleast_1d(getattr(_DEFAULTS, name)))]
+            if tuple(np.atleast_1d(getattr(model, name))) != tuple(np.atleast_1d(getattr(_DEFAULTS, name)))]
 
 
-def tunes_process_noise(options: SmootherOptions) -> bool:
-    """Whether the fixed-lag smoother chooses the process noise from the data with ``options``."""
-    return bool(options.tune_process_noise) and not explicit_process_noise(options)
+def tunes_process_noise(model: ModelOptions, tuning: TuningOptions) -> bool:
+    """Whether the fixed-lag smoother chooses the process noise of the ``model`` from the data as ``tuning`` asks."""
+    return bool(tuning.tune_process_noise) and not explicit_process_noise(model)
 
 
 def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None:
@@ -523,13 +524,13 @@ class StartHold:
 
 @dataclass(frozen=True)
 class ChoiceRules:
-    """How :class:`FixedLagSmoother` chooses its model on the stream, fixed when it is made: the options as given
-    (``user_options``), whether it tunes the process noise (``tune``) and checks the model (``auto``, with the
-    per-sample ML fit ``ml``), the first choice's stretch (``tune_n`` samples; a stretch cut short is tuned on
-    from ``tune_min_n``), a later choice every ``retune_ns`` and used ``delay_n`` samples after the one that
-    asked for it."""
+    """How :class:`FixedLagSmoother` chooses its model on the stream, fixed when it is made: the model, batch
+    model and tuning as given (``given``), whether it tunes the process noise (``tune``) and checks the model
+    (``auto``, with the per-sample ML fit ``ml``), the first choice's stretch (``tune_n`` samples; a stretch cut
+    short is tuned on from ``tune_min_n``), a later choice every ``retune_ns`` and used ``delay_n`` samples after
+    the one that asked for it."""
 
-    user_options: SmootherOptions
+    given: ModelGroups
     tune: bool
     auto: bool
     retune_ns: int
@@ -543,11 +544,12 @@ class ChoiceRules:
 class ChoiceState:
     """The model :class:`FixedLagSmoother` uses and how it chooses it on the stream (``rules``, :class:`ChoiceRules`).
 
-    In use: ``options`` (the options of the model in use), ``model`` (the :class:`~.array_model.ArrayModel`
-    they make), ``stream_model`` (the model chosen, :mod:`gfimu.smoother.stream.model_choice`; None before the
-    first choice), ``models`` (every model chosen so far, oldest first), ``tuning`` (the newest process-noise
-    selection, :class:`gfimu.smoother.tuning.evidence.Tuning`, or None), ``jerk_factor`` (the local motion
-    density's factor on the motion model's stds, robust model).
+    In use: ``groups`` (the model, batch model and tuning of the model in use), ``model`` (the
+    :class:`~.array_model.ArrayModel` they make), ``stream_model`` (the model chosen,
+    :mod:`gfimu.smoother.stream.model_choice`; None before the first choice), ``models`` (every model chosen so
+    far, oldest first), ``tuning`` (the newest process-noise selection,
+    :class:`gfimu.smoother.tuning.evidence.Tuning`, or None), ``jerk_factor`` (the local motion density's factor
+    on the motion model's stds, robust model).
 
     Choosing: whether the first choice is still to be made (``first_pending``, on ``buffer``, the first
     ``rules.tune_n`` samples), the ``history`` later choices are made on (:class:`~.history.History`), every
@@ -559,7 +561,7 @@ class ChoiceState:
     first_pending: bool
     history: History
     local: LocalDensity
-    options: SmootherOptions
+    groups: ModelGroups
     model: model.ArrayModel
     stream_model: StreamModel | None = None
     models: list = field(default_factory=list)
@@ -575,8 +577,9 @@ class ChoiceState:
         self.stream_model = chosen
         self.models.append(chosen)
         self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
-        self.options = chosen.options
-        self.model = model.ArrayModel(array, chosen.options, fast_measurement, chosen.accel_noise_scale)
+        self.groups = chosen.groups
+        self.model = model.ArrayModel(array, chosen.groups.model, chosen.groups.batch_model, fast_measurement,
+                                      chosen.accel_noise_scale)
 
 
 class SigmaRescale:
@@ -600,7 +603,7 @@ class SigmaRescale:
             self.scale.robust = (m.robust_loss, m.accel_robust_threshold) if m.accel_robust_threshold > 0 else None
             sd = self.scale.scaled(y, x, np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
                                                          s.sigma_specific_force_b_mps2]), std,
-                                   jerk_density(m.options), s.timestamp_ns * 1e-9)
+                                   jerk_density(m.model), s.timestamp_ns * 1e-9)
             out.append(replace(s, sigma_omega_b_radps=sd[0:3], sigma_omega_dot_b_radps2=sd[3:6],
                                sigma_specific_force_b_mps2=sd[6:9]))
         return tuple(out)
@@ -633,7 +636,7 @@ class FixedLagSmoother:
     returns nothing meanwhile), the process noise is chosen on them by the
     batch smoother's tuner, and the push that fills the buffer returns all
     buffered states that have reached the lag. :attr:`tuning` then holds the
-    selection and :attr:`options` the options in use.
+    selection and :attr:`options` the option groups in use.
 
     Its state, in parts each with one job: ``config`` (:class:`StreamConfig`, fixed: lag, rate, gaps, engine),
     ``_segment`` (:class:`Segment`: the window engine, its states and raw samples, the newest state; a new one at
@@ -678,24 +681,26 @@ class FixedLagSmoother:
                                    engine, GtsamSettings(float(relinearize_threshold), int(relinearize_skip),
                                                          max(float(marginalise_every_s), 2.0 / rate_hz)),
                                    bool(branches), bool(fast_measurement), bool(options.compute_sigma))
-        array_model = model.ArrayModel(array, options, fast_measurement)
-        tune = tunes_process_noise(options)
-        auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, options) is None
+        given = ModelGroups.of(options)  # (the options' batch group is checked above: at its defaults)
+        array_model = model.ArrayModel(array, given.model, given.batch_model, fast_measurement)
+        tune = tunes_process_noise(given.model, given.tuning)
+        auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, given.batch_model) is None
         tune_n = stretch_samples(tune_window_s, rate_hz)  # (cut above STRETCH_RATE_HZ)
         rules = ChoiceRules(
-            options, tune, auto, int(round(retune_every_s * 1e9)), tune_n,
+            given, tune, auto, int(round(retune_every_s * 1e9)), tune_n,
             # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
             min(tune_n, max(2, int(round(1.0 * rate_hz)))),
             max(1, int(math.ceil(choice_delay_s * rate_hz))), MLEstimator(workers=1) if auto else None)
         self._choice = ChoiceState(rules, tune or auto,
                                    History(stretch_samples(max(model_window_s, tune_window_s), rate_hz), array.n_axes),
-                                   LocalDensity(array), options, array_model)
+                                   LocalDensity(array), given, array_model)
         self._signs = StreamSignChain(int(math.ceil(self.config.lag_s * rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
         self._clock = StreamClock(float(clock_reset_s))
         self._worker = WorkerSlot()
         self.closed = False
-        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, options)
+        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, given.model,
+                                                                                             given.batch_model)
                        else None)
         # the held start's longest span [s] (cut above STRETCH_RATE_HZ; the numpy engine only)
         self._hold = StartHold(float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / rate_hz) if engine == "numpy" else 0.0,
@@ -718,7 +723,8 @@ class FixedLagSmoother:
     engine = delegated("config", "engine", "The window engine (:data:`ENGINES`).")
     fast_measurement = delegated("config", "fast_measurement", "The measurement's fast kernels are used.")
     compute_sigma = delegated("config", "compute_sigma", "Every state given out carries its σ.")
-    options = delegated("_choice", "options", "The options of the model in use.")
+    options = delegated("_choice", "groups", "The option groups of the model in use (:class:`ModelGroups`: model, "
+                        "batch model, tuning).")
     model = delegated("_choice", "model", "The model in use (:class:`~gfimu.smoother.stream.array_model.ArrayModel`).")
     stream_model = delegated("_choice", "stream_model", "The model chosen on the stream "
                              "(:mod:`gfimu.smoother.stream.model_choice`), once chosen.")
@@ -807,7 +813,7 @@ class FixedLagSmoother:
             bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
             raise DataError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
         gyro = None
-        if gyro_row is not None and self.array.gyroscope is not None and self.options.use_gyro:
+        if gyro_row is not None and self.array.gyroscope is not None and self.options.model.use_gyro:
             gyro = np.asarray(gyro_row, dtype=float).reshape(-1)
             if gyro.shape != (3,):
                 raise InputError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
@@ -908,7 +914,7 @@ class FixedLagSmoother:
     def _stretch_log(self, stretch: Stretch) -> Log:
         """The samples of ``stretch`` as a log (with its gyro readings where every sample has one and the
         options use them)."""
-        gyro = stretch.gyro if self.array.gyroscope is not None and self.options.use_gyro else None
+        gyro = stretch.gyro if self.array.gyroscope is not None and self.options.model.use_gyro else None
         return Log(self.array, stretch.times_ns, stretch.accel, gyro_b_radps=gyro, source="fixed-lag tuning stretch")
 
     def _choose(self, samples=None, first: bool = False, outgrown: bool = False):
@@ -1003,10 +1009,10 @@ class FixedLagSmoother:
         ml = self._ml_motion(stretch, part) if rules.auto else None
         check = stream_model.check_of(part, ml)
         batch = None
-        base = rules.user_options if check is None else measured_noise_options(rules.user_options, check)
+        base = rules.given if check is None else rules.given._replace(model=measured_noise_options(rules.given.model, check))
         t_end = int(part.timestamps_ns[-1])
         if check is not None and not check.consistent:
-            chosen = stream_model.robust(part, rules.user_options, check, ml, rules.tune, previous)
+            chosen = stream_model.robust(part, rules.given, check, ml, rules.tune, previous)
         elif not rules.tune or (check is not None and check.constant):
             chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part))
         elif (not first and not outgrown and previous is not None and not previous.robust and previous.moving
@@ -1023,7 +1029,8 @@ class FixedLagSmoother:
             n = rules.tune_n
             span = part if len(part) <= n else part.select(slice(len(part) - n, None))
             tuning, problem, x0 = self._tuned(span, base)
-            chosen = stream_model.from_tuning(tuning, with_groups(base, problem.model, problem.batch_model), check, span)
+            chosen = stream_model.from_tuning(tuning, base._replace(model=problem.model, batch_model=problem.batch_model),
+                                              check, span)
             chosen = replace(chosen, chosen_at_ns=t_end, moving=True)
             if first:
                 batch = self._batch_states(span, problem, x0)
@@ -1090,11 +1097,13 @@ class FixedLagSmoother:
         return Motion(part.timestamps_ns, omega_b_radps=x[:, 0:3], omega_dot_b_radps2=x[:, 3:6],
                       specific_force_b_mps2=x[:, 6:9])
 
-    def _tuned(self, part: Log, options: SmootherOptions | None = None):
-        """The batch smoother's process-noise selection on ``part``: (Tuning, problem, initial states)."""
+    def _tuned(self, part: Log, given: ModelGroups | None = None):
+        """The batch smoother's process-noise selection on ``part`` from the model groups ``given`` (default: the
+        smoother's): (Tuning, problem, initial states)."""
         tunings: list = []
-        options = replace(options or self._choice.rules.user_options, tune_process_noise=True)
-        problem, x0 = tuned_problem(part, options.model, options.batch_model, options.tuning, tunings)
+        given = given or self._choice.rules.given
+        problem, x0 = tuned_problem(part, given.model, given.batch_model, replace(given.tuning, tune_process_noise=True),
+                                    tunings)
         return tunings[-1], problem, x0
 
     def _batch_states(self, part: Log, problem, x0) -> list[StateEstimate]:
@@ -1108,10 +1117,11 @@ class FixedLagSmoother:
 
     def tune(self, samples) -> tuple:
         """The batch smoother's process-noise selection on ``samples`` ((t_ns, accel, gyro) tuples):
-        (:class:`gfimu.smoother.tuning.evidence.Tuning`, options carrying it)."""
+        (:class:`gfimu.smoother.tuning.evidence.Tuning`, the model groups carrying it)."""
         tuning, problem, _ = self._tuned(self._stretch_log(Stretch.of_samples(samples)))
-        options = with_groups(self._choice.rules.user_options, problem.model, problem.batch_model)
-        return tuning, tuning.for_stream(replace(options, tune_process_noise=False))
+        given = self._choice.rules.given
+        return tuning, ModelGroups(tuning.for_stream(problem.model), problem.batch_model,
+                                   replace(given.tuning, tune_process_noise=False))
 
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
@@ -1120,8 +1130,7 @@ class FixedLagSmoother:
             return
         self._choice.history.append(sample[0], sample[1], sample[2])
         chosen = self.stream_model
-        o = chosen.options
-        q = o.omega_dot_random_walk_radps2_per_sqrt_s
+        q = chosen.groups.model.omega_dot_random_walk_radps2_per_sqrt_s
         if chosen.robust:
             c = chosen.check
             w2 = 0.0 if self._segment.prev is None else float(self._segment.prev[1] @ self._segment.prev[1])
@@ -1236,7 +1245,7 @@ class FixedLagSmoother:
         times_ns = np.array([s[0] for s in seg.warmup], dtype=np.int64)
         accel = np.vstack([s[1] for s in seg.warmup])
         gyro = None
-        if self.array.gyroscope is not None and self.options.use_gyro and all(s[2] is not None for s in seg.warmup):
+        if self.array.gyroscope is not None and self.options.model.use_gyro and all(s[2] is not None for s in seg.warmup):
             gyro = np.vstack([s[2] for s in seg.warmup])
         if len(times_ns) >= 2:
             part = Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag warm-up")

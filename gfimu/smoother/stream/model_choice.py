@@ -24,15 +24,14 @@ Options the user set away from their defaults are kept, as in the batch smoother
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ...log import Log
 from ..tuning.model_choice import (CHECK_SAMPLES, ModelCheck, check_model, estimate_noise_variances, misfit_options, motion_densities,
-                   with_densities)
-from ..model.option_groups import with_groups
-from ..model.problem import SmootherOptions
+                   user_set, with_densities, with_user_set)
+from ..model.option_groups import ModelGroups
 from ..solve.initialise import sign_chain_scale
 from ..solve.restarts import branch
 from ..tuning.evidence import Tuning, tuned_problem
@@ -43,8 +42,8 @@ from ..tuning.evidence import Tuning, tuned_problem
 class StreamModel:
     """One choice of the fixed-lag smoother's model (frozen; a new choice is a new value)."""
 
-    options: SmootherOptions
-    """The smoother's options with the chosen noise levels and model."""
+    groups: ModelGroups
+    """The smoother's model, batch model and tuning with the chosen noise levels and model."""
     accel_noise_scale: float
     """Factor on the accelerometer noise std of every axis."""
     check: ModelCheck | None
@@ -67,14 +66,6 @@ class StreamModel:
         return self.check is not None and not self.check.consistent
 
 
-def _kept(options: SmootherOptions, chosen: SmootherOptions) -> dict:
-    """The options the user set away from their defaults that the choice would change."""
-    defaults = {f.name: f.default for f in fields(SmootherOptions)}
-    return {name: getattr(options, name) for name in defaults
-            if name != "tune_process_noise" and getattr(options, name) != defaults[name]
-            and getattr(chosen, name) != getattr(options, name)}
-
-
 def check_of(part: Log, ml_motion) -> ModelCheck | None:
     """The model check of the stretch ``part`` from its per-sample ML estimate (None: no check)."""
     if ml_motion is None:
@@ -86,43 +77,44 @@ def check_of(part: Log, ml_motion) -> ModelCheck | None:
     return check_model(part.select(sl), ml_motion.select(sl))
 
 
-def gaussian(part: Log, options: SmootherOptions, check: ModelCheck | None) -> StreamModel:
+def gaussian(part: Log, given: ModelGroups, check: ModelCheck | None) -> StreamModel:
     """The Gaussian model of a consistent stretch: the process noise by marginal likelihood."""
     tunings: list = []
-    problem, _ = tuned_problem(part, options.model, options.batch_model, replace(options.tuning, tune_process_noise=True),
+    problem, _ = tuned_problem(part, given.model, given.batch_model, replace(given.tuning, tune_process_noise=True),
                                tunings)
-    return from_tuning(tunings[-1], with_groups(options, problem.model, problem.batch_model), check, part)
+    return from_tuning(tunings[-1], given._replace(model=problem.model, batch_model=problem.batch_model), check, part)
 
 
-def from_tuning(tuning: Tuning, options: SmootherOptions, check: ModelCheck | None, part: Log) -> StreamModel:
-    """The model that carries ``tuning`` (the options it was chosen with) on a stream."""
-    chosen = tuning.for_stream(replace(options, tune_process_noise=False))
+def from_tuning(tuning: Tuning, groups: ModelGroups, check: ModelCheck | None, part: Log) -> StreamModel:
+    """The model that carries ``tuning`` (the model groups it was chosen with) on a stream."""
+    chosen = groups._replace(model=tuning.for_stream(groups.model),
+                             tuning=replace(groups.tuning, tune_process_noise=False))
     return StreamModel(chosen, float(tuning.accel_noise_scale), check, tuning, int(part.timestamps_ns[-1]), len(part))
 
 
-def robust(part: Log, options: SmootherOptions, check: ModelCheck, ml_motion, tune: bool,
+def robust(part: Log, given: ModelGroups, check: ModelCheck, ml_motion, tune: bool,
            previous: StreamModel | None = None) -> StreamModel:
     """The robust model of an inconsistent stretch (module docstring); ``tune``: its process densities
-    from the motion (else those of ``options``)."""
-    chosen = misfit_options(options, check)
+    from the motion (else those of the model ``given``)."""
+    chosen = misfit_options(given, check)
     moving = True
     if tune:
         x = np.hstack([ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2])
         jerk, force, moving = motion_densities(x, part.dt_s, *estimate_noise_variances(
             part.array, check, ml_motion.omega_b_radps), with_motion=True)
         if not moving and previous is not None and previous.robust and previous.moving:
-            o = previous.options  # a still stretch: the motion seen before still counts
+            o = previous.groups.model  # a still stretch: the motion seen before still counts
             jerk = o.omega_dot_random_walk_radps2_per_sqrt_s * np.asarray(o.process_axis_factors)
             force = o.specific_force_random_walk_mps2_per_sqrt_s
             moving = True
-        chosen = with_densities(chosen, jerk, force)
+        chosen = chosen._replace(model=with_densities(chosen.model, jerk, force))
     # no robust weights on the readings: a recursive update weighs each sample's axes once, at the
     # estimate that sample itself moved, and a poor prediction (fast motion between samples) would
     # have the informative axes weighted down (on the MIMU4444 recordings the Cauchy weights made the
     # stream's error worse, a trial not kept as a script); the measured floor and slope carry the noise level
-    chosen = replace(chosen, accel_robust_threshold=0.0)
-    chosen = replace(chosen, **_kept(options, chosen))
-    chosen = replace(chosen, tune_process_noise=False)
+    chosen = chosen._replace(batch_model=replace(chosen.batch_model, accel_robust_threshold=0.0))
+    chosen = with_user_set(chosen, user_set(given, chosen))
+    chosen = chosen._replace(tuning=replace(chosen.tuning, tune_process_noise=False))
     scale = 1.0
     if math.isfinite(check.stated_noise_mps2) and check.stated_noise_mps2 > 0 and check.noise_floor_mps2 > 0:
         scale = check.noise_floor_mps2 / check.stated_noise_mps2

@@ -36,7 +36,7 @@ import numpy as np
 from ...log import Log
 from ..solve.banded import (Factorisation, NormalEquations, add_normal_equations, band_structure_of, factorise, factorise_blocks,
                      normal_equations, solve, solve_step)
-from ..model.problem import SmootherOptions, SmootherProblem
+from ..model.problem import SmootherProblem, check_oscillators
 from ..model.option_groups import BatchModelOptions, ModelOptions, TuningOptions
 from ..model.groups import Term
 from ..solve.initialise import initial_estimate
@@ -75,30 +75,33 @@ class Tuning:
     axis_amplitude_radps: tuple = (0.0, 0.0, 0.0)
     """Amplitude of the oscillation, √2 × RMS of the estimated ω about the axis [rad/s]."""
 
-    def for_stream(self, options: SmootherOptions, memory_s: float = 1.0) -> SmootherOptions:
-        """``options`` (carrying this selection) for a stream that goes on past the tuning data:
+    def for_stream(self, model: ModelOptions, memory_s: float = 1.0) -> ModelOptions:
+        """The ``model`` (carrying this selection) for a stream that goes on past the tuning data:
         on each oscillator axis the jerk density is raised, if needed, to ``√(2 τ) A Ω δΩ`` (τ =
         ``memory_s``, A the amplitude, δΩ the frequency's std), the density whose phase diffusion
         over τ covers the phase drift ``δΩ τ`` that the frequency's error causes. Without it the
         model, tuned stiff on a short stretch, drifts away from a long oscillation."""
-        factors = np.array(options.process_axis_factors, dtype=float)
-        q = options.omega_dot_random_walk_radps2_per_sqrt_s
+        factors = np.array(model.process_axis_factors, dtype=float)
+        q = model.omega_dot_random_walk_radps2_per_sqrt_s
         for a in range(3):
             f, sf, amp = self.axis_frequencies_hz[a], self.axis_frequency_std_hz[a], self.axis_amplitude_radps[a]
             if f > 0:
                 floor = np.sqrt(2.0 * memory_s) * amp * (2 * np.pi * f) * (2 * np.pi * sf)
                 factors[a] = max(factors[a], floor / q)
-        return replace(options, process_axis_factors=tuple(float(v) for v in factors))
+        return replace(model, process_axis_factors=tuple(float(v) for v in factors))
 
-    def apply(self, options: SmootherOptions) -> SmootherOptions:
-        """``options`` with this selection (except the accelerometer noise scale, see :func:`make_problem`)."""
-        changes = {DENSITY_FIELD[self.motion_model]: self.density, "process_axis_factors": tuple(self.axis_factors),
-                   "motion_model": self.motion_model}
+    def apply(self, model: ModelOptions, batch_model: BatchModelOptions) -> tuple[ModelOptions, BatchModelOptions]:
+        """The ``model`` and ``batch_model`` with this selection (the jerk density is the model's, the snap density
+        the batch model's; the accelerometer noise scale is not an option, see :func:`make_problem`)."""
+        changes = {"process_axis_factors": tuple(self.axis_factors), "motion_model": self.motion_model}
         if self.motion_model == "jerk":
+            changes[DENSITY_FIELD["jerk"]] = self.density
             changes["process_axis_frequencies_hz"] = tuple(float(v) for v in self.axis_frequencies_hz)
+        else:
+            batch_model = replace(batch_model, **{DENSITY_FIELD["snap"]: self.density})
         if np.isfinite(self.specific_force_density):
             changes["specific_force_random_walk_mps2_per_sqrt_s"] = self.specific_force_density
-        return replace(options, **changes)
+        return replace(model, **changes), batch_model
 
     def as_dict(self) -> dict:
         return {"motion_model": self.motion_model, "density": self.density, "axis_factors": list(self.axis_factors),
@@ -618,9 +621,10 @@ class _NoiseSearch:
                         "freq": np.array(model.process_axis_frequencies_hz if motion_model == "jerk"
                                          else (0.0, 0.0, 0.0), dtype=float),
                         "freq_std": np.zeros(3), "amp": np.zeros(3)}
-        # the state layout of this motion model with the model given (which it checks: the oscillators need 'jerk')
-        given = SmootherOptions.from_groups(replace(model, motion_model=motion_model), batch_model)
-        self.X = StateLayout.from_options(given).resize(states)
+        # the state layout of this motion model with the model given (the oscillators need 'jerk')
+        given = replace(model, motion_model=motion_model)
+        check_oscillators(given)
+        self.X = StateLayout.of(given, batch_model).resize(states)
         self.cache: dict = {}
         self.bases: dict = {}
         self.summed: dict = {}

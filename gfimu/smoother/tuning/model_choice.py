@@ -43,13 +43,13 @@ window.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from ...log import Log
 from ...rigid_body import quadratic_terms
-from ..model.problem import SmootherOptions
+from ..model.option_groups import ModelGroups, ModelOptions
 
 CHECK_SAMPLES = 5000
 """The model check (:func:`gfimu.smoother.tuning.model_choice.check_model`) reads at most about this many samples,
@@ -243,33 +243,58 @@ def check_model(log: Log, ml_motion, residual: np.ndarray | None = None) -> Mode
                       resolution, bool(floored), constant)
 
 
-def measured_noise_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptions:
-    """``options`` for a consistent log: where no axis states a noise std above 0 (none stated, or
+def measured_noise_options(model: ModelOptions, check: ModelCheck) -> ModelOptions:
+    """The ``model`` for a consistent log: where no axis states a noise std above 0 (none stated, or
     stated as 0), the measured floor is the accelerometer noise (:func:`gfimu.noise.accel_noise_std`
     then fills every axis with it)."""
-    user_set = options.default_accel_noise_std_mps2 != SmootherOptions.default_accel_noise_std_mps2
+    user_set = model.default_accel_noise_std_mps2 != ModelOptions.default_accel_noise_std_mps2
     if check.stated_noise_mps2 > 0 or user_set or not check.noise_floor_mps2 > 0:
-        return options
-    return replace(options, default_accel_noise_std_mps2=float(check.noise_floor_mps2))
+        return model
+    return replace(model, default_accel_noise_std_mps2=float(check.noise_floor_mps2))
 
 
-def misfit_options(options: SmootherOptions, check: ModelCheck) -> SmootherOptions:
-    """The smoother's options for a log that disagrees with the rigid-body model (see module docstring)."""
-    floor = check.noise_floor_mps2 if check.noise_floor_mps2 > 0 else options.default_accel_noise_std_mps2
-    return replace(
-        options,
-        initialisation="ml",
-        ml_sign_chain=True,
-        tune_process_noise=False,
-        tune_motion_model=False,
-        motion_model="jerk",
-        accel_noise_slope_mps2_per_radps=check.noise_slope_mps2_per_radps,
-        robust_loss="cauchy",
-        accel_robust_threshold=ROBUST_THRESHOLD,
-        process_robust_threshold=ROBUST_THRESHOLD,
-        default_accel_noise_std_mps2=floor,
-    )
+def misfit_options(given: ModelGroups, check: ModelCheck) -> ModelGroups:
+    """The smoother's model, batch model and tuning for a log that disagrees with the rigid-body model (see
+    module docstring), from those ``given``."""
+    model, batch_model, tuning = given
+    floor = check.noise_floor_mps2 if check.noise_floor_mps2 > 0 else model.default_accel_noise_std_mps2
+    return ModelGroups(
+        replace(model, initialisation="ml", ml_sign_chain=True, motion_model="jerk",
+                default_accel_noise_std_mps2=floor),
+        replace(batch_model, accel_noise_slope_mps2_per_radps=check.noise_slope_mps2_per_radps, robust_loss="cauchy",
+                accel_robust_threshold=ROBUST_THRESHOLD, process_robust_threshold=ROBUST_THRESHOLD),
+        replace(tuning, tune_process_noise=False, tune_motion_model=False))
 
+
+def user_set(given: ModelGroups, chosen: ModelGroups) -> tuple[dict, dict, dict]:
+    """Per group of ``given``, the options set away from their defaults (``tune_process_noise`` aside) that
+    ``chosen`` changes: name -> the value given. A choice of the model keeps them (:func:`with_user_set`)."""
+    return tuple({f.name: getattr(mine, f.name) for f in fields(mine)
+                  if f.name != "tune_process_noise" and getattr(mine, f.name) != f.default
+                  and getattr(theirs, f.name) != getattr(mine, f.name)}
+                 for mine, theirs in zip(given, chosen))
+
+
+def with_user_set(chosen: ModelGroups, kept: tuple[dict, dict, dict]) -> ModelGroups:
+    """``chosen`` with the options ``kept`` (:func:`user_set`) back at the values given."""
+    return ModelGroups(*(replace(part, **changes) if changes else part for part, changes in zip(chosen, kept)))
+
+
+def chosen_options(given: ModelGroups, check: ModelCheck, log: Log, ml_motion) -> ModelGroups:
+    """The model, batch model and tuning for ``log`` after its :func:`check_model`, from those ``given``: a
+    consistent log keeps them (with the measured noise floor where none is stated, :func:`measured_noise_options`);
+    an inconsistent one gets the robust model (:func:`misfit_options`) with, when ``given.tuning`` tunes the
+    process noise, the densities of the motion of its per-sample ML estimate ``ml_motion``
+    (:func:`motion_densities`), and the options the user set kept (:func:`user_set`)."""
+    if check.consistent:
+        return given._replace(model=measured_noise_options(given.model, check))
+    chosen = misfit_options(given, check)
+    kept = user_set(given, chosen)
+    if given.tuning.tune_process_noise:  # the process noise of the log's motion (else the fixed densities)
+        x = np.hstack([ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, ml_motion.specific_force_b_mps2])
+        chosen = chosen._replace(model=with_densities(chosen.model, *motion_densities(x, log.dt_s, *estimate_noise_variances(
+            log.array, check, ml_motion.omega_b_radps))))
+    return with_user_set(chosen, kept)
 
 
 def estimate_noise_variances(array, check: ModelCheck, omega_b_radps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -324,13 +349,13 @@ def motion_densities(states: np.ndarray, dt_s: np.ndarray, noise_var_jerk: np.nd
     return (out[0], out[1], found) if with_motion else (out[0], out[1])
 
 
-def with_densities(options: SmootherOptions, jerk: np.ndarray, force: np.ndarray) -> SmootherOptions:
-    """``options`` with per-axis jerk densities (their RMS and per-axis factors) and the RMS of the
+def with_densities(model: ModelOptions, jerk: np.ndarray, force: np.ndarray) -> ModelOptions:
+    """The ``model`` with per-axis jerk densities (their RMS and per-axis factors) and the RMS of the
     per-axis specific-force densities."""
     jerk = np.maximum(np.asarray(jerk, dtype=float), DENSITY_FLOOR)  # readings without any noise or motion
     force = np.maximum(np.asarray(force, dtype=float), DENSITY_FLOOR)
     q = float(np.sqrt(np.mean(jerk**2)))
-    return replace(options, omega_dot_random_walk_radps2_per_sqrt_s=q,
+    return replace(model, omega_dot_random_walk_radps2_per_sqrt_s=q,
                    process_axis_factors=tuple(float(v) for v in jerk / q),
                    specific_force_random_walk_mps2_per_sqrt_s=float(np.sqrt(np.mean(np.asarray(force) ** 2))))
 
