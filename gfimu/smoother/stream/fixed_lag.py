@@ -145,22 +145,11 @@ difference is below this fraction of the RMS of ω: the branches of ω differ by
 
 
 CHOICE_DELAY_S = 0.5
-"""A model chosen again on the stream because the motion outgrew the one in use is computed off the stream,
-on the history (:mod:`.history`), while the samples go on with the model in use; it replaces that model this
-long (of samples, at the nominal rate) after the sample that asked for it. The sample at which it changes is
-fixed by the data, never by the clock, so that a log and a live stream of it give the same rows
-(:class:`PendingChoice`)."""
-RETUNE_DELAY_SHARE = 0.1
-"""A model chosen again on schedule (every ``retune_every_s``) replaces the one in use this share of the
-history's samples after the sample that asked for it (at least :data:`CHOICE_DELAY_S`): 3 s of samples for
-the default 30 s of history up to 2 kHz (:data:`STRETCH_RATE_HZ`), 6,000 samples above. A choice's cost
-grows with the samples of the history it reads (about 7 µs each: 13 ms for 30 s at 62.5 Hz with eight
-triads), a stream's with the samples it takes in (50-100 µs each): given 0.5 s of samples, the stream
-waited for the choice at every rate up to 2 kHz (75 times, 1 s in all, on a 10-minute recording at 62.5 Hz;
-11 times, 0.37 s, on 2 minutes at 500 Hz), given a tenth of the history it has the choice's work to do
-meanwhile. The model it replaces was chosen on the same history less those samples: using the new one
-seconds later changes little. A choice the motion asks for because it outgrew the model is not made to
-wait (:data:`CHOICE_DELAY_S`): it takes the place of a scheduled one still pending."""
+"""A model chosen again on the stream (every ``retune_every_s``, or when the motion outgrows the model) is
+computed off the stream, on the history (:mod:`.history`), while the samples go on with the model in use; it
+replaces that model this long (of samples, at the nominal rate) after the sample that asked for it. The
+sample at which it changes is fixed by the data, never by the clock, so that a log and a live stream of it
+give the same rows (:class:`PendingChoice`)."""
 
 
 STRETCH_RATE_HZ = 2000.0
@@ -538,9 +527,8 @@ class ChoiceRules:
     """How :class:`FixedLagSmoother` chooses its model on the stream, fixed when it is made: the model, batch
     model and tuning as given (``given``), whether it tunes the process noise (``tune``) and checks the model
     (``auto``, with the per-sample ML fit ``ml``), the first choice's stretch (``tune_n`` samples; a stretch cut
-    short is tuned on from ``tune_min_n``), a later choice every ``retune_ns`` and used ``retune_delay_n``
-    samples after the one that asked for it (:data:`RETUNE_DELAY_SHARE`), one the motion asked for ``delay_n``
-    (:data:`CHOICE_DELAY_S`)."""
+    short is tuned on from ``tune_min_n``), a later choice every ``retune_ns`` and used ``delay_n`` samples after
+    the one that asked for it."""
 
     given: ModelGroups
     tune: bool
@@ -549,7 +537,6 @@ class ChoiceRules:
     tune_n: int
     tune_min_n: int
     delay_n: int
-    retune_delay_n: int
     ml: MLEstimator | None = None
 
 
@@ -699,16 +686,13 @@ class FixedLagSmoother:
         tune = tunes_process_noise(given.model, given.tuning)
         auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, given.batch_model) is None
         tune_n = stretch_samples(tune_window_s, rate_hz)  # (cut above STRETCH_RATE_HZ)
-        history_n = stretch_samples(max(model_window_s, tune_window_s), rate_hz)
         rules = ChoiceRules(
             given, tune, auto, int(round(retune_every_s * 1e9)), tune_n,
             # a shorter stretch (before a gap or the end) is tuned on only if it holds this much
             min(tune_n, max(2, int(round(1.0 * rate_hz)))),
-            max(1, int(math.ceil(choice_delay_s * rate_hz))),
-            max(1, int(math.ceil(choice_delay_s * rate_hz)), int(math.ceil(RETUNE_DELAY_SHARE * history_n))),
-            MLEstimator(workers=1) if auto else None)
+            max(1, int(math.ceil(choice_delay_s * rate_hz))), MLEstimator(workers=1) if auto else None)
         self._choice = ChoiceState(rules, tune or auto,
-                                   History(history_n, array.n_axes),
+                                   History(stretch_samples(max(model_window_s, tune_window_s), rate_hz), array.n_axes),
                                    LocalDensity(array), given, array_model)
         self._signs = StreamSignChain(int(math.ceil(self.config.lag_s * rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
@@ -939,11 +923,8 @@ class FixedLagSmoother:
         first stretch) and, for a consistent stretch whose process noise is tuned, also returns the batch
         smoother's states of the stretch (else None). A later choice is made on the history, off the stream
         (in a process of its own, :class:`~.choice_worker.ForkedChoice`, else in a thread on a copy of it,
-        :class:`PendingChoice`) and used some samples later (:meth:`_swap_choice`): one on schedule
-        :data:`RETUNE_DELAY_SHARE` of the history later, one the motion asked for (``outgrown``)
-        :data:`CHOICE_DELAY_S` later. One asked for while another is pending is not made, but for an outgrown
-        one while a scheduled one is pending: that one is dropped (finished first, unused, so that the rows it
-        computed are kept as a process keeps them)."""
+        :class:`PendingChoice`) and used :data:`CHOICE_DELAY_S` of samples later (:meth:`_swap_choice`); one
+        asked for while another is pending is not made."""
         if first:
             self._settle_choice()
             chosen, batch = self._chosen_model(Stretch.of_samples(samples), self.stream_model, first=True,
@@ -952,18 +933,10 @@ class FixedLagSmoother:
             if outgrown:
                 self._replay_window()
             return batch
-        pending = self._choice.pending
-        if pending is not None:
-            if not outgrown or pending.outgrown:
-                return None
-            late = not pending.done
-            pending.result()  # (dropped)
-            if late:
-                self._choice.waits.append(pending.waited_s)
-            self._choice.pending = None
+        if self._choice.pending is not None:
+            return None
         history, previous = self._choice.history, self.stream_model
-        rules = self._choice.rules
-        swap_at = self._choice.accepted + (rules.delay_n if outgrown else rules.retune_delay_n)
+        swap_at = self._choice.accepted + self._choice.rules.delay_n
         process = self._choice_process()
         if process is not None:  # in a process of its own (:mod:`.choice_worker`), which keeps a history of its own
             request = (history.since(), previous, outgrown)
