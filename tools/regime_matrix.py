@@ -483,6 +483,31 @@ def _run_child(conn, log_dir: str, method: str, options: dict, cpu_limit_s: floa
         conn.close()
 
 
+def _compile_kernels() -> None:
+    """In a forked child: the compiled kernels built into numba's cache (the batch smoother's, and the stream's
+    by a fixed-lag run on a 6 s simulated log), so that a first run in a fresh checkout times the cells' work,
+    not the compiling (about 16 s once: ``tools/bench_first_run.py``)."""
+    from gfimu.methods import make_estimator
+    from gfimu.simulate import simulate
+    from gfimu.smoother import preload
+    from gfimu.smoother.model import kernels
+
+    kernels.warm()
+    est = make_estimator("fixed-lag")
+    est.preload()  # (numba loaded, as the command line does: the stream's steps then run compiled)
+    preload.wait()
+    est.estimate(simulate("random3d", rate_hz=500.0, duration_s=6.0, seed=0))  # (past the first 3 s: the stream)
+
+
+def compile_kernels() -> float:
+    """:func:`_compile_kernels` in a child process; its wall time [s]."""
+    t0 = time.perf_counter()
+    proc = multiprocessing.get_context("fork").Process(target=_compile_kernels)
+    proc.start()
+    proc.join()
+    return time.perf_counter() - t0
+
+
 def run_method(log_dir: Path, method: str, timeout_s: float, options: dict | None = None) -> dict:
     """``method`` on the log in a forked child, stopped at ``timeout_s`` of CPU time (its own, and each
     worker's), or at three times that (plus 10 s) of wall time on a busy machine. Returns a dict with
@@ -715,6 +740,8 @@ def main(argv=None) -> int:
           f"{TIME_BASE_S:g} s + {TIME_PER_SAMPLE_S * 1e3:g} ms/sample; limit {args.timeout_base:g} s + "
           f"{args.timeout_per_sample * 1e3:g} ms/sample of CPU time per method. Sign: share of samples with |w| > "
           f"{SIGN_MIN_RADPS} rad/s and w_est.w < 0. Times: CPU seconds of the estimate (wall time in --json).")
+    print(f"kernels compiled or loaded from numba's cache in {compile_kernels():.1f} s (not in the cells' times)",
+          file=sys.stderr, flush=True)
     print(table_header(), flush=True)
     rows = []
     t_all = time.perf_counter()
