@@ -379,8 +379,7 @@ class RunningSigmaScale:
         self._steps = 0
         self._previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
         self._jerk_steps: tuple | None = None  # (step [s], density, Ω) and their jerk_steps, the newest
-        self._gravity_previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
-        self._gravity_block: list = []  # (|f̂|, change (3), turn) of the current stretch's steps
+        self._gravity_block: list = []  # (time [s], state (9,)) of the current stretch, from the one before its first step
         self._gravity_steps: int | None = None  # steps of a stretch (:func:`_gravity_window_steps` of the first step)
         self._gravity_windows: list = []  # (mean |f̂|, its variance) of the stretches of gravity alone so far
         self.gain_variance = 0.0
@@ -391,7 +390,6 @@ class RunningSigmaScale:
         are kept)."""
         self._held = 0
         self._previous = None
-        self._gravity_previous = None
         self._gravity_block = []
 
     @property
@@ -493,31 +491,27 @@ class RunningSigmaScale:
         return out
 
     def _gravity(self, state: np.ndarray, t_s) -> None:
-        """The step from the state before to ``state`` at ``t_s`` [s] into the current stretch; a whole stretch
-        tested for gravity alone (:func:`gravity_windows`) and :attr:`gain_variance` updated (causal: the
-        stretches of the states taken so far)."""
+        """``state`` at ``t_s`` [s] into the current stretch; a whole stretch (the steps from the state before its
+        first) tested for gravity alone (:func:`gravity_steps`, :func:`gravity_windows`) and :attr:`gain_variance`
+        updated (causal: the stretches of the states taken so far)."""
         if t_s is None or getattr(self.array, "readings", "specific_force") != "specific_force":
             return
-        previous, self._gravity_previous = self._gravity_previous, (float(t_s), np.array(state, dtype=float))
-        if previous is None or not t_s > previous[0]:
+        block = self._gravity_block
+        entry = (float(t_s), np.array(state, dtype=float))
+        if block and not entry[0] > block[-1][0]:  # no step: the state taken instead of the one before
+            block[-1] = entry
             return
-        h = round((float(t_s) - previous[0]) * 1e9) * 1e-9
-        f0, f1 = previous[1][6:9].tolist(), state[6:9].tolist()  # gravity_steps of the two states, in scalars
-        w = [0.5 * (a + b) for a, b in zip(previous[1][0:3].tolist(), state[0:3].tolist())]
-        f = [0.5 * (a + b) for a, b in zip(f0, f1)]
-        size = 0.5 * (math.sqrt(f0[0] * f0[0] + f0[1] * f0[1] + f0[2] * f0[2])
-                      + math.sqrt(f1[0] * f1[0] + f1[1] * f1[1] + f1[2] * f1[2]))
+        block.append(entry)
+        if len(block) < 2:
+            return
         if self._gravity_steps is None:
-            self._gravity_steps = _gravity_window_steps(np.array([h]))
-        spin = (h * (w[1] * f[2] - w[2] * f[1]), h * (w[2] * f[0] - w[0] * f[2]), h * (w[0] * f[1] - w[1] * f[0]))
-        across = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
-        turn = math.sqrt(spin[0] * spin[0] + spin[1] * spin[1] + spin[2] * spin[2]) / across if across > 0 else math.nan
-        self._gravity_block.append((size, f1[0] - f0[0] + spin[0], f1[1] - f0[1] + spin[1], f1[2] - f0[2] + spin[2],
-                                    turn))
-        if len(self._gravity_block) < self._gravity_steps:
+            self._gravity_steps = _gravity_window_steps(np.round(np.array([block[1][0] - block[0][0]]) * 1e9) * 1e-9)
+        if len(block) <= self._gravity_steps:
             return
-        block, self._gravity_block = np.array(self._gravity_block), []
-        found = gravity_windows(block[:, 0], block[:, 1:4], block[:, 4], len(block))
+        times = np.array([t for t, _ in block])
+        steps = gravity_steps(np.vstack([x for _, x in block]), np.round(np.diff(times) * 1e9) * 1e-9)
+        self._gravity_block = [block[-1]]
+        found = gravity_windows(*steps, self._gravity_steps)
         if len(found):
             self._gravity_windows.append(found[0])
             self.gain_variance = common_gain_variance(np.array(self._gravity_windows))
