@@ -911,11 +911,11 @@ class FixedLagSmoother:
             out = batch[:len(out) + self._start_from_batch(batch)]
         return out
 
-    def _stretch_log(self, stretch: Stretch) -> Log:
+    def _stretch_log(self, stretch: Stretch, source: str = "fixed-lag tuning stretch") -> Log:
         """The samples of ``stretch`` as a log (with its gyro readings where every sample has one and the
         options use them)."""
         gyro = stretch.gyro if self.array.gyroscope is not None and self.options.model.use_gyro else None
-        return Log(self.array, stretch.times_ns, stretch.accel, gyro_b_radps=gyro, source="fixed-lag tuning stretch")
+        return Log(self.array, stretch.times_ns, stretch.accel, gyro_b_radps=gyro, source=source)
 
     def _choose(self, samples=None, first: bool = False, outgrown: bool = False):
         """Choose the model and go on with it (:mod:`gfimu.smoother.stream.model_choice`). The ``first``
@@ -1242,13 +1242,9 @@ class FixedLagSmoother:
         prior ω = 0 on its first state; its start is not held (the sign of ω is moot at ω = 0).
         """
         seg = self._segment
-        times_ns = np.array([s[0] for s in seg.warmup], dtype=np.int64)
-        accel = np.vstack([s[1] for s in seg.warmup])
-        gyro = None
-        if self.array.gyroscope is not None and self.options.model.use_gyro and all(s[2] is not None for s in seg.warmup):
-            gyro = np.vstack([s[2] for s in seg.warmup])
+        part = self._stretch_log(Stretch.of_samples(seg.warmup), "fixed-lag warm-up")
+        times_ns, accel, gyro = part.timestamps_ns, part.accel_mps2, part.gyro_b_radps
         if len(times_ns) >= 2:
-            part = Log(self.array, times_ns, accel, gyro_b_radps=gyro, source="fixed-lag warm-up")
             x0 = initial_estimate(part, self.options.model, self.options.batch_model)  # 'sign-resolving' or 'ml'
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
