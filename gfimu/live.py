@@ -18,11 +18,11 @@ while the source is waiting for data.
 
 from __future__ import annotations
 
-import queue
 import signal
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -41,6 +41,16 @@ STEADY_AFTER_S = 10.0
 where the first seconds are held while the process noise is chosen on them."""
 
 _SIGNAL_EXIT = {"SIGINT": 130, "SIGTERM": 143}
+
+ROWS_AT_ONCE = 64
+"""When samples wait (the input came in a burst, or faster than the smoother), the rows they finish are written
+in groups of at most this many (a write and a flush per group instead of per row)."""
+
+WRITE_EVERY_S = 0.005
+"""... and at least this often [s] while a burst is worked through."""
+
+ITEMS_AT_ONCE = 1024
+"""At most this many waiting items are taken from the source's queue at once (between status lines)."""
 
 SWITCH_INTERVAL_S = 0.001
 """Python's thread switch interval during a session (5 ms by default): the source's reader, and a model
@@ -225,51 +235,55 @@ def _stats(values_ms) -> tuple[float, float, float] | None:
 
 
 class _Reader:
-    """The source read in its own thread: (reading or bad row, arrival time) items on a queue of at most
-    ``size``, None at its end; when the queue is full the oldest waiting item is dropped and counted."""
+    """The source read in its own thread, a batch per read (:meth:`Source.batches`): (reading or bad row, arrival
+    time) items on a queue of at most ``size``, None at its end; when the queue is full the oldest waiting items
+    are dropped and counted."""
 
     def __init__(self, source: Source, stop: threading.Event, size: int):
         self.source, self.stop = source, stop
-        self.queue: queue.Queue = queue.Queue(maxsize=max(int(size), 1))
+        self.size = max(int(size), 1)
+        self.items: deque = deque()
+        self.ready = threading.Condition()
         self.fatal: list[BaseException] = []
         self.overrun = 0
         self.thread = threading.Thread(target=self._read, name="gfimu-live-source", daemon=True)
 
     def _read(self) -> None:
         try:
-            for item in self.source.items(self.stop):
-                self._put((item, time.perf_counter()))
+            for batch in self.source.batches(self.stop):
+                at = time.perf_counter()
+                self._put([(item, at) for item in batch])
                 if self.stop.is_set():
                     break
         except BaseException as exc:  # noqa: BLE001 - handed to the main thread
             self.fatal.append(exc)
         finally:
-            self._put(None)
+            self._put([None])
 
-    def _put(self, item) -> None:
-        while True:
-            try:
-                self.queue.put_nowait(item)
-                return
-            except queue.Full:  # the smoother falls behind: drop the oldest waiting sample
-                try:
-                    if self.queue.get_nowait() is not None:
-                        self.overrun += 1
-                except queue.Empty:
-                    pass
+    def _put(self, batch: list) -> None:
+        with self.ready:
+            self.items.extend(batch)
+            end = self.items[-1] is None  # (the end's mark takes no sample's place)
+            while len(self.items) - end > self.size:  # the smoother falls behind: drop the oldest waiting samples
+                self.items.popleft()
+                self.overrun += 1
+            self.ready.notify()
 
-    def get(self):
-        """The next item; False when none came within 0.2 s; None at the end (or, once stopped, when the
-        queue is empty: what already arrived is still estimated)."""
-        if self.stop.is_set():
-            try:
-                return self.queue.get_nowait()
-            except queue.Empty:
+    def get(self) -> list | None:
+        """The items waiting (at most :data:`ITEMS_AT_ONCE`); an empty list when none came within 0.2 s; None at the end
+        (or, once stopped, when the queue is empty: what already arrived is still estimated). The end's None
+        comes alone, after every item before it."""
+        with self.ready:
+            if not self.items and not self.stop.is_set():
+                self.ready.wait(timeout=0.2)
+            if not self.items:
+                return None if self.stop.is_set() else []
+            if self.items[0] is None:
                 return None
-        try:
-            return self.queue.get(timeout=0.2)
-        except queue.Empty:
-            return False
+            out = []
+            while self.items and self.items[0] is not None and len(out) < ITEMS_AT_ONCE:
+                out.append(self.items.popleft())
+            return out
 
     def join(self) -> None:
         if self.thread.ident is not None:  # started (the output may fail before: its header is written first)
@@ -353,11 +367,10 @@ class _Live:
                                      name=getattr(self.source, "name", "source"))  # a rate beyond any IMU's refused
         last_status = time.monotonic()
         while True:
-            item = reader.get()
-            if item is None:
+            items = reader.get()
+            if items is None:
                 break
-            if item is not False:
-                self.take(*item)
+            self.take_all(items)
             if self.status_s and time.monotonic() - last_status >= self.status_s:
                 last_status = time.monotonic()
                 self.status(reader.overrun)
@@ -365,18 +378,37 @@ class _Live:
         self.rows.write(self.session.finish(), timed=False)
         self.tell()
 
-    def take(self, thing, arrived: float) -> None:
+    def take_all(self, items: list) -> None:
+        """The items waiting, in turn; the rows they finish written together, at the latest every
+        :data:`ROWS_AT_ONCE` rows or :data:`WRITE_EVERY_S` (when the stream keeps up, one item waits and each
+        row is written as it is made), and before an error is raised."""
+        rows: list = []
+        since = time.perf_counter()
+        try:
+            for thing, arrived in items:
+                rows += self.take(thing, arrived)
+                if rows and (len(rows) >= ROWS_AT_ONCE or time.perf_counter() - since >= WRITE_EVERY_S):
+                    done, rows = rows, []  # (not written twice when writing them fails)
+                    self.rows.write(done)
+                    since = time.perf_counter()
+        finally:
+            done, rows = rows, []
+            self.rows.write(done)
+
+    def take(self, thing, arrived: float) -> list:
+        """One item: the rows it finished (a reading's), to be written."""
         if isinstance(thing, SourceNote):  # something the source saw (the stream goes on)
             self.say(f"warning: {thing.message}")
-            return
+            return []
         if isinstance(thing, BadRow):
             self.bad_row(thing)
-            return
+            return []
         self.rows_in += 1
         self.units.add(thing)
         self.rows.arrived(int(thing.timestamp_ns), arrived)
-        self.rows.write(self.session.push(thing.timestamp_ns, thing.accel, thing.gyro))
+        states = self.session.push(thing.timestamp_ns, thing.accel, thing.gyro)
         self.tell()
+        return states
 
     def tell(self) -> None:
         for note in self.session.take_notes():

@@ -49,6 +49,9 @@ from ..errors import InputError, MissingExtraError
 POLL_S = 0.2
 """How often a waiting source looks at its ``stop`` event [s]."""
 
+DATAGRAMS_AT_ONCE = 1024
+"""At most this many waiting datagrams are read and parsed as one batch (:meth:`UdpSource.batches`)."""
+
 
 class SourceError(InputError):
     """A source that cannot be opened or is not understood (the message names it)."""
@@ -135,6 +138,51 @@ class RowParser:
                              f"(±{limit[k]:g} {'m/s²' if k < self.n_acc else 'rad/s'})")
         return Reading(t, v[:self.n_acc], v[self.n_acc:self.n_acc + 3] if self.gyro else None)
 
+    def parse_many(self, rows: list[tuple[str, str]]) -> list[Reading | BadRow]:
+        """:meth:`parse` of each ``(where, text)`` row, as a :class:`Reading` or a :class:`BadRow` naming ``where``:
+        the same readings (the same numbers, bit for bit) and the same reasons, the numbers of all the rows
+        converted and checked at once. A row that does not read cleanly is handed to :meth:`parse` for its
+        reason."""
+        out: list[Reading | BadRow | None] = [None] * len(rows)
+        good: list[int] = []
+        times: list[int] = []
+        values: list[float] = []
+        index, width, scale = self.index, self.width, self.scale
+        for k, (where, text) in enumerate(rows):
+            cells = text.strip().split(",")
+            try:
+                if len(cells) != width:
+                    raise ValueError
+                tok = cells[0].strip()
+                # up to 18 digits of integer nanoseconds read as they are (exact and within 64 bits, as
+                # timestamp_ns reads them); any other token by its rule
+                t = (int(tok) if scale == 1 and len(tok) <= 18 and tok.isdigit() and tok.isascii()
+                     else timestamp_ns(tok, scale))
+                row = [float(cells[i]) for i in index]
+            except (ValueError, OverflowError):
+                out[k] = _parsed(self, text, where)
+                continue
+            good.append(k)
+            times.append(t)
+            values.extend(row)
+        if good:
+            v = np.array(values, dtype=float).reshape(len(good), len(index)) * self.factor
+            fault = np.zeros(len(good), bool)
+            if not self.keep_gross_errors:
+                from ..readings import GYRO_OUT_OF_RANGE_RADPS, OUT_OF_ANY_RANGE_MPS2
+
+                limit = np.full(len(index), GYRO_OUT_OF_RANGE_RADPS)
+                limit[:self.n_acc] = OUT_OF_ANY_RANGE_MPS2
+                with np.errstate(invalid="ignore"):
+                    fault = ~np.isfinite(v).all(axis=1) | (np.abs(v) > limit).any(axis=1)
+            n_acc, gyro = self.n_acc, self.gyro
+            for j, k in enumerate(good):
+                if fault[j]:
+                    out[k] = _parsed(self, rows[k][1], rows[k][0])
+                else:
+                    out[k] = Reading(times[j], v[j, :n_acc], v[j, n_acc:n_acc + 3] if gyro else None)
+        return out
+
 
 class Source:
     """A stream of readings; :meth:`items` yields :class:`Reading`, :class:`BadRow` and :class:`SourceNote`
@@ -154,6 +202,13 @@ class Source:
         screening downstream to replace (:class:`gfimu.readings.StreamScreen`); False: it is a bad row."""
 
     def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
+        for batch in self.batches(stop):
+            yield from batch
+
+    def batches(self, stop: threading.Event) -> Iterator[list[Reading | BadRow | SourceNote]]:
+        """The items of :meth:`items` in lists, each what came in one read (a chunk of text, the datagrams waiting,
+        the packets of a chunk): read and parsed at once, so that a fast stream costs a Python call per read
+        rather than per sample."""
         raise NotImplementedError
 
     def close(self) -> None:
@@ -231,29 +286,38 @@ class StdinSource(Source):
             yield chunk
         self.ended = "stopped"
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
+    def batches(self, stop: threading.Event) -> Iterator[list[Reading | BadRow | SourceNote]]:
         rows = _TextRows()
         parser = None
 
-        def lines():
+        def chunks():
             for chunk in self._chunks(stop):
-                yield from rows.feed(chunk)
+                yield list(rows.feed(chunk))
             if self.ended == "end of input":
-                yield from rows.tail()
+                yield list(rows.tail())
 
-        for line, raw in lines():
-            where = f"line {line}"
-            if raw is None:
-                yield BadRow(where, TOO_LONG)
-                continue
-            text = _decode(raw)
-            if not text.strip():
-                continue
-            if parser is None:
-                parser = RowParser(self.array, text, self.name, line, self.keep_gross_errors)
-                self.accel_unit = parser.accel_unit
-                continue
-            yield _parsed(parser, text, where)
+        for lines in chunks():
+            batch: list = []
+            waiting: list[tuple[str, str]] = []  # data rows parsed together, in their place among the others
+            for line, raw in lines:
+                where = f"line {line}"
+                if raw is None:
+                    batch += parser.parse_many(waiting) if waiting else []
+                    waiting = []
+                    batch.append(BadRow(where, TOO_LONG))
+                    continue
+                text = _decode(raw)
+                if not text.strip():
+                    continue
+                if parser is None:
+                    parser = RowParser(self.array, text, self.name, line, self.keep_gross_errors)
+                    self.accel_unit = parser.accel_unit
+                    continue
+                waiting.append((where, text))
+            if waiting:
+                batch += parser.parse_many(waiting)
+            if batch:
+                yield batch
 
 
 def _parsed(parser: RowParser, text: str, where: str) -> Reading | BadRow:
@@ -282,35 +346,61 @@ class UdpSource(Source):
             raise SourceError(f"--source {name}: cannot bind: {exc.strerror or exc}") from None
         self.sock.settimeout(POLL_S)
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
+    def _waiting(self) -> list[bytes]:
+        """The datagrams waiting on the socket, up to :data:`DATAGRAMS_AT_ONCE`, without blocking."""
+        out = []
+        self.sock.setblocking(False)
+        try:
+            while len(out) < DATAGRAMS_AT_ONCE:
+                out.append(self.sock.recv(65536))
+        except (BlockingIOError, InterruptedError):
+            pass
+        finally:
+            self.sock.settimeout(POLL_S)
+        return out
+
+    def batches(self, stop: threading.Event) -> Iterator[list[Reading | BadRow | SourceNote]]:
         parser = None
         count = 0
         while not stop.is_set():
             try:
                 data, _ = self.sock.recvfrom(65536)
+                datagrams = [data] + self._waiting()
             except socket.timeout:
                 continue
             except OSError as exc:
                 self.ended, self.failure = "receive failed", f"{self.name}: {exc.strerror or exc}"
                 return
-            count += 1
-            text = _decode(data).strip()
-            if text.strip() == "EOF":  # an explicit end of stream
-                self.ended = "EOF datagram"
-                return
-            where = f"datagram {count}"
-            if parser is None:
-                if text.lstrip().startswith("#"):  # a header that cannot be read ends the session (exit 2)
-                    parser = RowParser(self.array, text, f"{self.name} {where}",
+            batch: list = []
+            waiting: list[tuple[str, str]] = []  # data rows parsed together, in their place among the others
+            for data in datagrams:
+                count += 1
+                text = _decode(data).strip()
+                if text == "EOF":  # an explicit end of stream
+                    batch += parser.parse_many(waiting) if waiting else []
+                    if batch:
+                        yield batch
+                    self.ended = "EOF datagram"
+                    return
+                where = f"datagram {count}"
+                if parser is None:
+                    if text.startswith("#"):  # a header that cannot be read ends the session (exit 2)
+                        parser = RowParser(self.array, text, f"{self.name} {where}",
+                                           keep_gross_errors=self.keep_gross_errors)
+                        self.accel_unit = parser.accel_unit
+                        continue
+                    parser = RowParser(self.array, default_header(self.array), self.name,
                                        keep_gross_errors=self.keep_gross_errors)
-                    self.accel_unit = parser.accel_unit
+                if not text:
+                    batch += parser.parse_many(waiting)
+                    waiting = []
+                    batch.append(BadRow(where, "empty datagram"))
                     continue
-                parser = RowParser(self.array, default_header(self.array), self.name,
-                                   keep_gross_errors=self.keep_gross_errors)
-            if not text.strip():
-                yield BadRow(where, "empty datagram")
-                continue
-            yield _parsed(parser, text, where)
+                waiting.append((where, text))
+            if waiting:
+                batch += parser.parse_many(waiting)
+            if batch:
+                yield batch
         self.ended = "stopped"
 
     def close(self) -> None:
@@ -359,7 +449,7 @@ class MimuSource(Source):
         except socket.timeout:
             return b""
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
+    def batches(self, stop: threading.Event) -> Iterator[list[Reading | BadRow | SourceNote]]:
         from .mimu4444_packets import StreamDecoder
 
         decoder = StreamDecoder()
@@ -374,16 +464,17 @@ class MimuSource(Source):
             if chunk is None:
                 self.ended = "end of stream (closed by the other side)"
                 return
-            for t_ns, accel in decoder.feed(chunk):
-                yield Reading(t_ns, accel, None)
+            batch: list = [Reading(t_ns, accel, None) for t_ns, accel in decoder.feed(chunk)]
             disorder = decoder.disorder()
             if disorder is not None:
-                yield SourceNote(f"{self.name}: {disorder}")
+                batch.append(SourceNote(f"{self.name}: {disorder}"))
             received += len(chunk)
             if decoder.skipped_bytes > skipped:  # bytes that are no packet: a bad row per stretch of them
-                yield BadRow(f"byte {received}", f"{decoder.skipped_bytes - skipped} byte(s) that are no MIMU4444 "
-                                                 "packet")
+                batch.append(BadRow(f"byte {received}", f"{decoder.skipped_bytes - skipped} byte(s) that are no "
+                                                        "MIMU4444 packet"))
                 skipped = decoder.skipped_bytes
+            if batch:
+                yield batch
         self.ended = "stopped"
 
     def close(self) -> None:

@@ -1,0 +1,148 @@
+"""gfimu live reads its source a batch at a time: the rows of a read parsed at once (the same readings and the same
+reasons as row by row), the reader's queue bounded in samples with the oldest dropped and counted, and the rows the
+batch finishes written together, without losing one when the output or the smoother fails half-way."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from gfimu.array import random_array
+from gfimu.io.sources import BadRow, Reading, RowParser, Source, default_header
+
+
+def _rows():
+    """(where, text) rows of every kind a text source meets, for a 3-sensor array with readings in g."""
+    array = random_array(3, 0.05, seed=1)
+    header = "#timestamp [ns]," + ",".join(f"{c} [g]" for c in array.accel_columns)
+    good = ",".join(f"{0.01 * k - 0.03:.6f}" for k in range(9))
+    texts = [
+        f"1000,{good}",
+        f" 2000 , {good.replace(',', ' , ')} ",  # spaces around the fields
+        f"0003000,{good}",  # leading zeros
+        f"99999999999999999999,{good}",  # beyond 64-bit nanoseconds
+        f"9223372036854775807,{good}",  # the largest 64-bit nanosecond: 19 digits, read by the exact rule
+        f"1e3,{good}",  # a timestamp in exponent form
+        f"4000,{good.replace('0.000000', 'abc', 1)}",  # text in a number field
+        f"5000,{good},7",  # a field too many
+        f"6000,{good.replace('0.000000', 'inf', 1)}",  # not finite
+        f"7000,{good.replace('0.000000', '2e6', 1)}",  # beyond any accelerometer's range (2e6 g)
+        f"8000,{good.replace('0.000000', 'nan', 1)}",
+        f"-9000,{good}",  # a negative timestamp (a reading: the smoother judges its order)
+        f"10000,{good.replace('0.000000', '1_0', 1)}",  # an underscore, as float() reads it
+    ]
+    return array, header, [(f"line {k + 2}", t) for k, t in enumerate(texts)]
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, BadRow) or isinstance(b, BadRow):
+        return a == b
+    return (a.timestamp_ns == b.timestamp_ns and np.array_equal(a.accel, b.accel, equal_nan=True)
+            and (a.gyro is None) == (b.gyro is None))
+
+
+@pytest.mark.parametrize("keep_gross_errors", [False, True])
+def test_a_batch_of_rows_reads_as_row_by_row(keep_gross_errors):
+    """RowParser.parse_many gives, row for row, what parse gives (bit-identical readings, the same bad-row reasons), on
+    rows of every kind: spaces, leading zeros, a 19-digit timestamp, text, a field too many, inf, nan, beyond range,
+    a negative timestamp; in g, converted alike."""
+    array, header, rows = _rows()
+    parser = RowParser(array, header, "rows", keep_gross_errors=keep_gross_errors)
+    one = []
+    for where, text in rows:
+        try:
+            one.append(parser.parse(text))
+        except (ValueError, OverflowError) as exc:
+            one.append(BadRow(where, str(exc)))
+    many = parser.parse_many(rows)
+    assert len(many) == len(one)
+    assert all(_same(a, b) for a, b in zip(one, many)), [(a, b) for a, b in zip(one, many) if not _same(a, b)]
+    kinds = [type(r).__name__ for r in many]
+    assert kinds.count("BadRow") == (3 if keep_gross_errors else 6)
+    assert many[4].timestamp_ns == 9223372036854775807 and many[5].timestamp_ns == 1000
+    np.testing.assert_array_equal(many[0].accel, (0.01 * np.arange(9) - 0.03).round(6) * 9.80665)
+
+
+class _Burst(Source):
+    """A source that delivers ``n`` readings in one read, then ends."""
+
+    name = "burst"
+
+    def __init__(self, array, n):
+        super().__init__(array)
+        self.n = n
+
+    def batches(self, stop):
+        yield [Reading(1000 * k, np.zeros(self.array.n_axes)) for k in range(self.n)]
+        self.ended = "end of input"
+
+
+def test_a_burst_larger_than_the_queue_drops_the_oldest_and_counts_them():
+    """25 readings in one read into a queue of 10: the 15 oldest dropped and counted, the newest 10 handed out in
+    order, then the end."""
+    from gfimu.live import _Reader
+
+    array = random_array(3, 0.05, seed=1)
+    reader = _Reader(_Burst(array, 25), threading.Event(), 10)
+    reader.thread.start()
+    reader.thread.join()
+    items = reader.get()
+    assert reader.overrun == 15
+    assert [r.timestamp_ns for r, _ in items] == [1000 * k for k in range(15, 25)]
+    assert reader.get() is None
+
+
+def test_the_rows_of_a_batch_reach_the_output_before_a_failure(tmp_path):
+    """A smoother that fails on the 150th reading of one batch: the rows finished before it are written (none lost
+    in the batch not yet written), and the session ends with the failure."""
+    import io
+
+    from gfimu.live import EstimateSink, run
+    from gfimu.methods import make_estimator
+    from gfimu.simulate import simulate
+
+    array = random_array(4, 0.05, noise_std_mps2=0.01, seed=2)
+    log = simulate("random3d", array=array, seed=3, rate_hz=500.0, duration_s=1.0)
+
+    class Log(Source):
+        name = "log"
+
+        def batches(self, stop):
+            yield [Reading(int(t), a) for t, a in zip(log.timestamps_ns, log.accel_mps2)]
+            self.ended = "end of input"
+
+    estimator = make_estimator("fixed-lag", tune_process_noise=False, auto_model=False, hold_max_s=0.0)
+    from gfimu.smoother.stream import session as ss
+
+    push = ss.StreamSession.push
+    count = [0]
+
+    def failing(self, *a, **k):
+        count[0] += 1
+        if count[0] == 150:
+            raise OSError(5, "Input/output error", "the smoother")
+        return push(self, *a, **k)
+
+    made = []  # the rows the session hands out by each reading, without a failure
+
+    def counted(self, *a, **k):
+        out = push(self, *a, **k)
+        made.append(len(out) + (made[-1] if made else 0))
+        return out
+
+    ss.StreamSession.push = counted
+    try:
+        run(Log(array), estimator, EstimateSink(io.StringIO()), rate_hz=500.0, signals=False)
+    finally:
+        ss.StreamSession.push = push
+    buf = io.StringIO()
+    ss.StreamSession.push = failing
+    try:
+        result = run(Log(array), estimator, EstimateSink(buf), rate_hz=500.0, signals=False)
+    finally:
+        ss.StreamSession.push = push
+    assert result.ended == "stopped by an error" and result.failure == "the smoother: Input/output error"
+    lines = buf.getvalue().splitlines()
+    assert result.rows_out == len(lines) - 1 == made[148] > 0  # every row finished by the 149th reading
