@@ -363,16 +363,33 @@ def screen(accel_mps2: np.ndarray, range_mps2: np.ndarray | None = None,
     return y, Screening(replaced, *(int(kinds[k].sum()) for k in KINDS), runs=tuple(runs))
 
 
-def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, ends=(True, True)):
+SPIKE_REACH = SCALE_HALF_WIDTH + MEDIAN_HALF_WIDTH + 2
+"""Rows on either side of a reading that its spike decision reads (the median window, the local scale's second
+differences, and a margin): a buffer's rows this far from its cut are decided as in the whole log."""
+
+
+def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, ends=(True, True), decide_from=None,
+            known_spikes=None):
     """(readings with gross errors replaced, {kind: (N, n_axes) bool} for each of :data:`KINDS`, runs of
     clipped and stuck readings): :func:`screen`'s work. ``ends``: whether the first and the last rows are
-    the log's own (a stream's buffer cut from its middle is not: the rows near its cut are not decided)."""
+    the log's own (a stream's buffer cut from its middle is not: the rows near its cut are not decided).
+    ``decide_from`` (a stream's buffer, :class:`StreamScreen`): the rows before it are decided already, their
+    spikes given in ``known_spikes`` (N, n_axes) bool; the spike rule then runs on the rows from
+    2 :data:`SPIKE_REACH` before it only (the stuck and clipped runs still on the whole buffer)."""
     y = np.array(accel_mps2, dtype=float)
     bad_value, out_range, clipped = _value_faults(y, range_mps2)
     stuck, runs = _long_runs(y, rate_hz, bad_value, out_range, clipped)
     long_bad = clipped | stuck
     work = np.where(bad_value | out_range | long_bad, np.nan, y)
-    spikes = _spikes(work, sensor_of_axis, ends) if y.shape[0] >= 2 * SCALE_HALF_WIDTH + 1 else np.zeros_like(bad_value)
+    start = 0 if decide_from is None else max(0, decide_from - 2 * SPIKE_REACH)
+    if y.shape[0] < 2 * SCALE_HALF_WIDTH + 1:
+        spikes = np.zeros_like(bad_value)
+    elif start == 0:
+        spikes = _spikes(work, sensor_of_axis, ends)
+    else:  # the rows near the part's cut read from the decisions already taken on them
+        part = _spikes(work[start:], sensor_of_axis, (False, ends[1]), typical=_nanmedian_flat(np.abs(work)))
+        spikes = np.array(known_spikes, dtype=bool)
+        spikes[start + SPIKE_REACH:] = part[SPIKE_REACH:]
     spikes &= ~long_bad
     short = bad_value | out_range | spikes
     y = _replaced(y, short, long_bad, structure_matrix)
@@ -412,10 +429,11 @@ def _long_runs(y: np.ndarray, rate_hz, bad_value: np.ndarray, out_range: np.ndar
     return stuck, runs
 
 
-def _spikes(work: np.ndarray, sensor_of_axis, ends) -> np.ndarray:
+def _spikes(work: np.ndarray, sensor_of_axis, ends, typical: float | None = None) -> np.ndarray:
     """(N, n_axes) bool: the isolated spikes of ``work`` (the readings, NaN where already at fault; at least
     2 :data:`SCALE_HALF_WIDTH` + 1 rows), a Hampel identifier with a local scale; a spike seen by two or more
-    accelerometers (``sensor_of_axis``) at one sample is an event of the body, not one."""
+    accelerometers (``sensor_of_axis``) at one sample is an event of the body, not one. ``typical``: the median
+    |reading| the scale's floor is taken from (default: that of ``work``)."""
     n = work.shape[0]
     med = _rolling_median(work, MEDIAN_HALF_WIDTH)
     # the first and last rows have a median window cut short, whose median lags a ramp: there, a
@@ -438,7 +456,7 @@ def _spikes(work: np.ndarray, sensor_of_axis, ends) -> np.ndarray:
     number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
     local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
     # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
-    typical = _nanmedian_flat(np.abs(work))
+    typical = _nanmedian_flat(np.abs(work)) if typical is None else typical
     floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
     spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
     if sensor_of_axis is not None and np.any(spikes):
@@ -611,6 +629,7 @@ class StreamScreen:
         self._next = 0  # stream index of the first undecided row
         self._counts = dict.fromkeys(KINDS, 0)
         self._replaced: dict[int, np.ndarray] = {}
+        self._spike_rows: dict[int, np.ndarray] = {}  # the spikes decided on rows still in the buffer (stream index)
         self._open: dict[tuple[str, int], int] = {}
         self._runs: list[tuple[str, int, int, int]] = []
         self.gyro_out_of_range = 0
@@ -781,8 +800,14 @@ class StreamScreen:
             kinds = {kind: np.zeros(y.shape, bool) for kind in KINDS}
         else:
             rule = self.rule
+            known = np.zeros((n, len(rule.columns)), bool)
+            for row, mask in self._spike_rows.items():
+                if row >= self._first:
+                    known[row - self._first] = mask
             y, kinds, _ = _screen(self._accel[:n], rule.range_mps2, rule.sensor_of_axis, rule.rate_hz,
-                                  rule.structure_matrix, ends=(self._first == 0, end))
+                                  rule.structure_matrix, ends=(self._first == 0, end), decide_from=a, known_spikes=known)
+            for k in np.nonzero(kinds["spikes"][a:b].any(axis=1))[0]:
+                self._spike_rows[self._next + int(k)] = kinds["spikes"][a + k]
         # each reading handed out an array of its own: one kept downstream holds its row, not the buffer
         out = [(self._times[k], y[k].copy(), self._gyro[k]) for k in range(a, b)]
         replaced = np.zeros((b - a, y.shape[1]), bool)
@@ -806,6 +831,8 @@ class StreamScreen:
             self._accel[:kept] = self._accel[cut:cut + kept]
             del self._times[:cut], self._gyro[:cut]
             self._first += cut
+            for row in [r for r in self._spike_rows if r < self._first]:
+                del self._spike_rows[row]
 
     def _track_runs(self, kind: str, mask: np.ndarray) -> None:
         """Runs of ``kind`` per column across blocks: those that end within ``mask`` (rows from ``self._next``)
