@@ -114,7 +114,35 @@ def test_the_running_scale_reads_the_same_gain_as_the_batch_one():
     seen = []
     for i in range(n):
         running.scaled(y[i], X[i], sd[i], noise, None, i * h)
-        seen.append(running.gain_variance)
-    assert running.gain_variance == pytest.approx(var, rel=1e-9)  # the same stretches, causal: known at the end
+        seen.append(running.gain.variance)
+    assert running.gain.variance == pytest.approx(var, rel=1e-9)  # the same stretches, causal: known at the end
     steps = ss._gravity_window_steps(np.full(1, h))
     assert np.all(np.array(seen[:steps]) == 0.0) and seen[steps] > 0  # nothing before the first stretch ends
+
+
+def test_a_seeded_stretch_gives_its_gain_at_once_and_is_not_counted_twice():
+    """The fixed-lag smoother's first stretch, solved at once (its batch solution), seeds the running gain: its
+    stretches count before any of its rows is given out (the variance the batch rule gives on those states), and
+    when the same rows then pass one by one they are not counted again; the stretches after it are."""
+    h, k, n = 2e-3, 1.001, 1500
+    rng = np.random.default_rng(8)
+    X = turning(n, h, [2.0, 1.0, 1.5], [0.0, 0.0, k * G0])
+    X[:, 6:9] += rng.normal(0.0, 0.003, (n, 3))
+    t = np.arange(n) * h
+    steps = ss._gravity_window_steps(np.full(1, h))
+    first = 3 * steps + 40  # the seeded stretch: three whole stretches and a part
+    gain = ss.RunningGain(ARRAY)
+    gain.seed(t[:first], X[:first])
+    norm, change, turn = ss.gravity_steps(X[:first], np.diff(t[:first]))
+    seeded = ss.common_gain_variance(ss.gravity_windows(norm, change, turn, steps))
+    assert len(gain.windows) == 3 and gain.variance == seeded > 0
+    for i in range(first):
+        gain.take(X[i], t[i])
+    assert len(gain.windows) == 3 and gain.variance == seeded  # the same rows: not counted again
+    for i in range(first, n):
+        gain.take(X[i], t[i])
+    plain = ss.RunningGain(ARRAY)  # no seed: every stretch counted as it passes
+    for i in range(n):
+        plain.take(X[i], t[i])
+    assert len(gain.windows) == len(plain.windows) == (n - 1) // steps
+    assert gain.variance == pytest.approx(plain.variance, rel=1e-12)

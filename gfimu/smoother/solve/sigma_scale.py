@@ -355,6 +355,113 @@ def _gravity_window_steps(dt_s) -> int:
     return max(4, int(round(GRAVITY_WINDOW_S / h))) if h > 0 else 4
 
 
+class RunningGain:
+    """The common gain's variance (:func:`common_gain_variance`) from the stretches of gravity alone among the states
+    taken so far, one after the other (causal, :meth:`take`), and among a stretch of states given at once
+    (:meth:`seed`: the batch solution of a stream's first stretch, available before its rows are given out; those
+    rows, taken again as they are given out, are not counted twice)."""
+
+    def __init__(self, array):
+        self.applies = getattr(array, "readings", "specific_force") == "specific_force"
+        """Only readings of specific force show gravity's size."""
+        self.block: list = []  # (time [s], state (9,)) of the current stretch, from the one before its first step
+        self.steps: int | None = None  # steps of a stretch (:func:`_gravity_window_steps` of the first step)
+        self.windows: list = []  # (mean |f̂|, its variance) of the stretches of gravity alone so far
+        self.counted_until_s = -np.inf  # the stretches up to this time are counted already (a seed's)
+        self.variance = 0.0
+        """The variance from the stretches found so far."""
+
+    def reset(self) -> None:
+        """A new segment: a stretch does not reach across it."""
+        self.block = []
+        self.counted_until_s = -np.inf
+
+    def _found(self, windows: np.ndarray) -> None:
+        if len(windows):
+            self.windows.extend(windows)
+            self.variance = common_gain_variance(np.array(self.windows))
+
+    def seed(self, times_s: np.ndarray, states: np.ndarray) -> None:
+        """The stretches of ``states`` (N, ≥9) at ``times_s`` (N,) [s], the first of a segment, counted at once
+        (cut from its first state, as :meth:`take` cuts them)."""
+        t = np.asarray(times_s, dtype=float)
+        if not self.applies or len(t) < 2:
+            return
+        dt = np.round(np.diff(t) * 1e9) * 1e-9
+        if self.steps is None:
+            self.steps = _gravity_window_steps(dt[:1])
+        self._found(gravity_windows(*gravity_steps(np.asarray(states, dtype=float)[:, :9], dt), self.steps))
+        self.counted_until_s = float(t[-1])
+
+    def take(self, state: np.ndarray, t_s) -> None:
+        """``state`` at ``t_s`` [s] into the current stretch; a whole stretch (the steps from the state before its
+        first) tested for gravity alone (:func:`gravity_steps`, :func:`gravity_windows`) unless a seed counted it."""
+        if t_s is None or not self.applies:
+            return
+        block = self.block
+        entry = (float(t_s), np.array(state, dtype=float))
+        if block and not entry[0] > block[-1][0]:  # no step: the state taken instead of the one before
+            block[-1] = entry
+            return
+        block.append(entry)
+        if len(block) < 2:
+            return
+        if self.steps is None:
+            self.steps = _gravity_window_steps(np.round(np.array([block[1][0] - block[0][0]]) * 1e9) * 1e-9)
+        if len(block) <= self.steps:
+            return
+        times = np.array([t for t, _ in block])
+        self.block = [block[-1]]
+        if times[-1] <= self.counted_until_s:
+            return
+        self._found(gravity_windows(*gravity_steps(np.vstack([x for _, x in block]),
+                                                   np.round(np.diff(times) * 1e9) * 1e-9), self.steps))
+
+
+class RunningTrapezoid:
+    """The path's trapezoid level (:func:`trapezoid_level`) over the newest steps between the states taken one
+    after the other (causal): each step's whitened trapezoid residual under the motion model and the shares
+    of :func:`kinematic_shares`, summed over a ring of the newest steps."""
+
+    def __init__(self):
+        self.ring: np.ndarray | None = None  # |r̂|², Σ a, Σ b of the newest steps, row i % length of step i
+        self.steps = 0
+        self.previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
+        self.jerk_steps: tuple | None = None  # (step [s], density, Ω) and their jerk_steps, the newest
+
+    def reset(self) -> None:
+        """A new segment: no step reaches across it (the sums so far are kept)."""
+        self.previous = None
+
+    def level(self, state: np.ndarray, single: np.ndarray, jerk, t_s, length: int, variance_factor: float):
+        """(share (3,), level) of :func:`scale_factors` for ``state`` at ``t_s`` [s] under the motion model
+        ``jerk`` (:func:`jerk_density`): its step from the state before it added to the newest ``length`` steps'
+        sums, the level at the readings' ``variance_factor``; or None (no jerk model, no earlier state in the
+        segment yet, fewer than :data:`MIN_SAMPLES` steps)."""
+        if jerk is None or t_s is None:
+            return None
+        previous, self.previous = self.previous, (float(t_s), np.array(state[:9], dtype=float))
+        if previous is None or not t_s > previous[0]:
+            return None
+        h = np.array([round((float(t_s) - previous[0]) * 1e9) * 1e-9])  # whole nanoseconds, as the timestamps
+        key = (float(h[0]), tuple(np.asarray(jerk[0], dtype=float)), tuple(np.asarray(jerk[1], dtype=float)))
+        if self.jerk_steps is None or self.jerk_steps[0] != key:  # the same step and model: the same rows
+            self.jerk_steps = (key, jerk_steps(np.asarray(jerk[0], dtype=float)[None, :], jerk[1], h))
+        steps = self.jerk_steps[1]
+        share, a, b = kinematic_shares(single[None, :], steps[0], steps[1], h)
+        r = trapezoid_residuals(np.vstack([previous[1], state[:9]]), steps)
+        if not np.all(np.isfinite(r)):
+            return None
+        if self.ring is None:
+            self.ring = np.zeros((length, 3))
+        self.ring[self.steps % len(self.ring)] = (float(np.sum(r * r)), float(a.sum()), float(b.sum()))
+        self.steps += 1
+        if self.steps < MIN_SAMPLES:
+            return None
+        r2, a_sum, b_sum = self.ring.sum(axis=0)
+        return share[0], float(trapezoid_level(r2, a_sum, b_sum, variance_factor))
+
+
 class RunningSigmaScale:
     """The factor on σ from the residuals seen so far (the fixed-lag smoother's, causal): :meth:`scaled`
     takes one emitted state with its reading, adds its parity residual to the running sums and returns
@@ -375,22 +482,17 @@ class RunningSigmaScale:
         self.window = None if window is None else int(window)
         """Samples of s²'s window (:func:`local_window` of the first sample's degrees of freedom when None)."""
         self._recent: np.ndarray | None = None  # |p|², m − rank of the newest samples, row i % window of sample i
-        self._kinematic: np.ndarray | None = None  # |r̂|², Σ a, Σ b of the newest steps, as _recent
-        self._steps = 0
-        self._previous: tuple | None = None  # (time [s], state (9,)) of the newest state taken
-        self._jerk_steps: tuple | None = None  # (step [s], density, Ω) and their jerk_steps, the newest
-        self._gravity_block: list = []  # (time [s], state (9,)) of the current stretch, from the one before its first step
-        self._gravity_steps: int | None = None  # steps of a stretch (:func:`_gravity_window_steps` of the first step)
-        self._gravity_windows: list = []  # (mean |f̂|, its variance) of the stretches of gravity alone so far
-        self.gain_variance = 0.0
-        """The common gain's variance from the stretches of gravity alone so far (:func:`common_gain_variance`)."""
+        self.trapezoid = RunningTrapezoid()
+        """The path's trapezoid level over the newest steps (the same window as s²)."""
+        self.gain = RunningGain(array)
+        """The common gain the stretches of gravity alone so far show."""
 
     def reset(self) -> None:
         """A new segment: the lagged products and the trapezoid residuals do not reach across it (the sums so far
         are kept)."""
         self._held = 0
-        self._previous = None
-        self._gravity_block = []
+        self.trapezoid.reset()
+        self.gain.reset()
 
     @property
     def variance_factor(self) -> float:
@@ -429,33 +531,6 @@ class RunningSigmaScale:
         single[np.any(Vt[~keep] ** 2 > 1e-12, axis=0)] = np.inf
         return p, int(np.count_nonzero(keep)), single
 
-    def _trapezoid_level(self, state: np.ndarray, single: np.ndarray, jerk, t_s) -> tuple | None:
-        """(share (3,), level) of :func:`scale_factors` for ``state`` at ``t_s`` [s] under the motion model
-        ``jerk`` (:func:`jerk_density`): its step from the state before it added to the newest steps' sums
-        (the same window as s²), or None (no jerk model, or no earlier state in the segment yet)."""
-        if jerk is None or t_s is None:
-            return None
-        previous, self._previous = self._previous, (float(t_s), np.array(state[:9], dtype=float))
-        if previous is None or not t_s > previous[0]:
-            return None
-        h = np.array([round((float(t_s) - previous[0]) * 1e9) * 1e-9])  # whole nanoseconds, as the timestamps
-        key = (float(h[0]), tuple(np.asarray(jerk[0], dtype=float)), tuple(np.asarray(jerk[1], dtype=float)))
-        if self._jerk_steps is None or self._jerk_steps[0] != key:  # the same step and model: the same rows
-            self._jerk_steps = (key, jerk_steps(np.asarray(jerk[0], dtype=float)[None, :], jerk[1], h))
-        steps = self._jerk_steps[1]
-        share, a, b = kinematic_shares(single[None, :], steps[0], steps[1], h)
-        r = trapezoid_residuals(np.vstack([previous[1], state[:9]]), steps)
-        if not np.all(np.isfinite(r)):
-            return None
-        if self._kinematic is None:
-            self._kinematic = np.zeros((self.window or LOCAL_WINDOW, 3))
-        self._kinematic[self._steps % len(self._kinematic)] = (float(np.sum(r * r)), float(a.sum()), float(b.sum()))
-        self._steps += 1
-        if self._steps < MIN_SAMPLES:
-            return None
-        r2, a_sum, b_sum = self._kinematic.sum(axis=0)
-        return share[0], float(trapezoid_level(r2, a_sum, b_sum, self.variance_factor))
-
     def scaled(self, accel_mps2: np.ndarray, state: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
                jerk=None, t_s: float | None = None) -> np.ndarray:
         """``sd`` (9,) of ``state`` (9,: ω, ω̇, f) scaled by the factor with this sample's residual included;
@@ -483,38 +558,13 @@ class RunningSigmaScale:
                 self._recent = np.zeros((self.window, 2))
             self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank))
             self.samples += 1
-        kinematic = self._trapezoid_level(np.asarray(state, dtype=float), single, jerk, t_s)
+        kinematic = self.trapezoid.level(np.asarray(state, dtype=float), single, jerk, t_s, self.window or LOCAL_WINDOW,
+                                         self.variance_factor)
         out = sd * scale_factors(sd, single, self.variance_factor, self.tau(), kinematic)
-        self._gravity(np.asarray(state, dtype=float)[:9], t_s)
-        if self.gain_variance > 0:
-            out = np.sqrt(out ** 2 + common_gain_sd(np.asarray(state, dtype=float)[None, :9], self.gain_variance)[0] ** 2)
+        self.gain.take(np.asarray(state, dtype=float)[:9], t_s)
+        if self.gain.variance > 0:
+            out = np.sqrt(out ** 2 + common_gain_sd(np.asarray(state, dtype=float)[None, :9], self.gain.variance)[0] ** 2)
         return out
-
-    def _gravity(self, state: np.ndarray, t_s) -> None:
-        """``state`` at ``t_s`` [s] into the current stretch; a whole stretch (the steps from the state before its
-        first) tested for gravity alone (:func:`gravity_steps`, :func:`gravity_windows`) and :attr:`gain_variance`
-        updated (causal: the stretches of the states taken so far)."""
-        if t_s is None or getattr(self.array, "readings", "specific_force") != "specific_force":
-            return
-        block = self._gravity_block
-        entry = (float(t_s), np.array(state, dtype=float))
-        if block and not entry[0] > block[-1][0]:  # no step: the state taken instead of the one before
-            block[-1] = entry
-            return
-        block.append(entry)
-        if len(block) < 2:
-            return
-        if self._gravity_steps is None:
-            self._gravity_steps = _gravity_window_steps(np.round(np.array([block[1][0] - block[0][0]]) * 1e9) * 1e-9)
-        if len(block) <= self._gravity_steps:
-            return
-        times = np.array([t for t, _ in block])
-        steps = gravity_steps(np.vstack([x for _, x in block]), np.round(np.diff(times) * 1e9) * 1e-9)
-        self._gravity_block = [block[-1]]
-        found = gravity_windows(*steps, self._gravity_steps)
-        if len(found):
-            self._gravity_windows.append(found[0])
-            self.gain_variance = common_gain_variance(np.array(self._gravity_windows))
 
 
 def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
