@@ -896,6 +896,9 @@ class FixedLagSmoother:
         if not final or len(samples) >= self._choice.rules.tune_min_n:
             batch = self._choose(samples, first=True)
             self._choice.first_pending = False
+        if batch is not None and self._sigma is not None:  # σ's common gain from the stretch's batch solution, at once
+            self._sigma.scale.gain.seed(np.array([b.timestamp_ns for b in batch]) * 1e-9, np.array(
+                [np.concatenate([b.omega_b_radps, b.omega_dot_b_radps2, b.specific_force_b_mps2]) for b in batch]))
         if batch is not None and final:  # the segment ends here: the batch solution is all there is to say
             return batch
         out = []
