@@ -4,7 +4,7 @@ Three parts: a source (:mod:`gfimu.io.sources`: standard input, UDP, TCP,
 a serial port), :func:`run` (the fixed-lag smoother on the stream, with the
 counts of what happened), and a sink (:class:`EstimateSink`: the estimate
 table ``gfimu estimate`` writes, row by row, flushed as each sample leaves the
-window). :func:`run` returns a :class:`LiveResult`.
+window; in groups when samples wait, :data:`ROWS_AT_ONCE`). :func:`run` returns a :class:`LiveResult`.
 
 Faults are contained: a row that cannot be read (text in a number field, a
 timestamp beyond 64-bit nanoseconds or not finite, a line of binary bytes)
@@ -59,48 +59,59 @@ give the interpreter up to the stream's thread within this, so the rows keep lea
 
 
 @dataclass(frozen=True)
-class LiveResult:
-    """What a live session did.
+class LiveCounts:
+    """What a live session counted.
 
-    ``rows_in``: samples read from the source; ``rows_out``: estimate rows written;
-    ``bad_rows``: rows that could not be read (skipped), ``bad_reasons`` the first
-    :data:`REASONS_KEPT` of them (``"line 7: ..."``); ``late_or_repeated``, ``clock_resets``:
-    samples the smoother dropped, window restarts; ``missing``: samples that never came (gaps of
-    more than 1.5 nominal steps); ``overrun_dropped``: samples dropped because the input outran
-    the smoother; ``processing_ms``, ``latency_ms``, ``steady_latency_ms``: (p50, p99, max) of the
-    smoother's time per sample, of arrival → estimate written (samples that left the window while
-    the stream went on; not those flushed at its end), and of the latter after the first
-    :data:`STEADY_AFTER_S` s (None when there is none); ``rate_hz`` and ``rate_from``
-    (``"given"`` or ``"stream"``); ``ended``: how the session ended (``"end of input"``,
-    ``"EOF datagram"``, ``"SIGINT"``, ``"SIGTERM"``, ``"connection lost"``, ``"input refused"``,
-    ``"stopped by an error"`` (the estimator or the output failed), ...); ``failure``: a message when
-    the stream broke, could not be read on, or the session failed (None otherwise).
+    ``rows_in``: samples read from the source; ``rows_out``: estimate rows written; ``bad_rows``: rows that could
+    not be read (skipped), ``bad_reasons`` the first :data:`REASONS_KEPT` of them (``"line 7: ..."``);
+    ``late_or_repeated``, ``clock_resets``: samples the smoother dropped, window restarts; ``missing``: samples that
+    never came (gaps of more than 1.5 nominal steps); ``overrun_dropped``: samples dropped because the input outran
+    the smoother; ``replaced_readings``: accelerometer readings the screening replaced (gross errors,
+    :class:`gfimu.readings.StreamScreen`); ``choice_waits``: times the stream waited for a model chosen off it that
+    was not ready at its sample (:data:`gfimu.smoother.stream.fixed_lag.CHOICE_DELAY_S`: the machine was too busy).
     """
 
-    rows_in: int
-    rows_out: int
-    bad_rows: int
-    bad_reasons: tuple[str, ...]
-    late_or_repeated: int
-    clock_resets: int
-    missing: int
-    overrun_dropped: int
-    processing_ms: tuple[float, float, float] | None
-    latency_ms: tuple[float, float, float] | None
-    steady_latency_ms: tuple[float, float, float] | None
+    rows_in: int = 0
+    rows_out: int = 0
+    bad_rows: int = 0
+    bad_reasons: tuple[str, ...] = ()
+    late_or_repeated: int = 0
+    clock_resets: int = 0
+    missing: int = 0
+    overrun_dropped: int = 0
+    replaced_readings: int = 0
+    choice_waits: int = 0
+
+
+@dataclass(frozen=True)
+class LiveTimes:
+    """How long a live session's work took, each (p50, p99, max) [ms] or None when there was none: ``processing_ms``
+    the smoother's time per sample; ``screening_ms`` the screening's per block of samples it decides; ``latency_ms``
+    a sample's arrival → its estimate written (samples that left the window while the stream went on; not those
+    flushed at its end); ``steady_latency_ms`` the same after the first :data:`STEADY_AFTER_S` s; and
+    ``choice_wait_ms`` [ms] the total of the stream's waits for a model chosen off it."""
+
+    processing_ms: tuple[float, float, float] | None = None
+    screening_ms: tuple[float, float, float] | None = None
+    latency_ms: tuple[float, float, float] | None = None
+    steady_latency_ms: tuple[float, float, float] | None = None
+    choice_wait_ms: float = 0.0
+
+
+@dataclass(frozen=True)
+class LiveResult:
+    """What a live session did: its ``counts`` (:class:`LiveCounts`) and ``times`` (:class:`LiveTimes`); the
+    ``rate_hz`` it ran at and where that came from, ``rate_from`` (``"given"`` or ``"stream"``); ``ended``: how
+    the session ended (``"end of input"``, ``"EOF datagram"``, ``"SIGINT"``, ``"SIGTERM"``, ``"connection lost"``,
+    ``"input refused"``, ``"stopped by an error"`` (the estimator or the output failed), ...); ``failure``: a
+    message when the stream broke, could not be read on, or the session failed (None otherwise)."""
+
+    counts: LiveCounts
+    times: LiveTimes
     rate_hz: float | None
     rate_from: str
     ended: str
     failure: str | None = None
-    replaced_readings: int = 0
-    """Accelerometer readings the screening replaced (gross errors, :class:`gfimu.readings.StreamScreen`)."""
-    screening_ms: tuple[float, float, float] | None = None
-    """(p50, p99, max) of the screening's time per block of samples it decides (None without screening)."""
-    choice_waits: int = 0
-    """Times the stream waited for a model chosen off it that was not ready at its sample
-    (:data:`gfimu.smoother.stream.fixed_lag.CHOICE_DELAY_S`: the machine was too busy)."""
-    choice_wait_ms: float = 0.0
-    """Their total wait [ms]."""
 
     @property
     def signal_exit(self) -> int | None:
@@ -109,23 +120,24 @@ class LiveResult:
 
     def summary(self) -> str:
         """One line: the counts, the times and how it ended."""
-        text = (f"{self.rows_in} samples in, {self.rows_out} estimates out; {self.bad_rows} bad rows, "
-                f"{self.late_or_repeated} late or repeated, {self.missing} missing (gaps), {self.overrun_dropped} "
-                f"dropped (input faster than the smoother), {self.clock_resets} clock resets, "
-                f"{self.replaced_readings} readings replaced by the screening")
-        if self.processing_ms is not None:
-            text += "; processing per sample p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms".format(*self.processing_ms)
-        if self.screening_ms is not None:
-            text += "; screening per block p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms".format(*self.screening_ms)
-        if self.latency_ms is not None:
+        c, t = self.counts, self.times
+        text = (f"{c.rows_in} samples in, {c.rows_out} estimates out; {c.bad_rows} bad rows, "
+                f"{c.late_or_repeated} late or repeated, {c.missing} missing (gaps), {c.overrun_dropped} "
+                f"dropped (input faster than the smoother), {c.clock_resets} clock resets, "
+                f"{c.replaced_readings} readings replaced by the screening")
+        if t.processing_ms is not None:
+            text += "; processing per sample p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms".format(*t.processing_ms)
+        if t.screening_ms is not None:
+            text += "; screening per block p50 {:.3f} ms, p99 {:.3f} ms, max {:.3f} ms".format(*t.screening_ms)
+        if t.latency_ms is not None:
             text += "; latency arrival -> estimate written p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms".format(
-                *self.latency_ms)
-        if self.steady_latency_ms is not None:
+                *t.latency_ms)
+        if t.steady_latency_ms is not None:
             text += "; after the first {:g} s: p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms".format(
-                STEADY_AFTER_S, *self.steady_latency_ms)
-        if self.choice_waits:
-            text += (f"; waited {self.choice_waits} time(s) for a model chosen off the stream, "
-                     f"{self.choice_wait_ms:.1f} ms in all")
+                STEADY_AFTER_S, *t.steady_latency_ms)
+        if c.choice_waits:
+            text += (f"; waited {c.choice_waits} time(s) for a model chosen off the stream, "
+                     f"{t.choice_wait_ms:.1f} ms in all")
         return text + f"; ended: {self.ended}"
 
 
@@ -436,14 +448,15 @@ class _Live:
             session.rate_hz, session.rate_from = self.rate_hz, "given" if self.rate_hz is not None else "stream"
         c = session.counts
         latency, steady = self.rows.stats()
-        return LiveResult(
-            rows_in=self.rows_in, rows_out=self.rows.out, bad_rows=self.bad, bad_reasons=tuple(self.reasons),
-            late_or_repeated=c.late_or_repeated, clock_resets=c.clock_resets, missing=c.missing,
-            overrun_dropped=overrun, processing_ms=_stats(session.processing_s.values * 1e3),
-            latency_ms=latency, steady_latency_ms=steady, rate_hz=session.rate_hz,
-            rate_from=session.rate_from, ended=ended, failure=failure, replaced_readings=c.replaced_readings,
-            screening_ms=_stats(session.screening_s.values * 1e3), choice_waits=c.choice_waits,
-            choice_wait_ms=1e3 * c.choice_wait_s)
+        counts = LiveCounts(rows_in=self.rows_in, rows_out=self.rows.out, bad_rows=self.bad,
+                            bad_reasons=tuple(self.reasons), late_or_repeated=c.late_or_repeated,
+                            clock_resets=c.clock_resets, missing=c.missing, overrun_dropped=overrun,
+                            replaced_readings=c.replaced_readings, choice_waits=c.choice_waits)
+        times = LiveTimes(processing_ms=_stats(session.processing_s.values * 1e3),
+                          screening_ms=_stats(session.screening_s.values * 1e3), latency_ms=latency,
+                          steady_latency_ms=steady, choice_wait_ms=1e3 * c.choice_wait_s)
+        return LiveResult(counts, times, rate_hz=session.rate_hz, rate_from=session.rate_from, ended=ended,
+                          failure=failure)
 
 
 def _ending(source: Source, reader: _Reader, caught: list[str], closed: bool, crash: list[Exception]):

@@ -145,4 +145,4 @@ def test_the_rows_of_a_batch_reach_the_output_before_a_failure(tmp_path):
         ss.StreamSession.push = push
     assert result.ended == "stopped by an error" and result.failure == "the smoother: Input/output error"
     lines = buf.getvalue().splitlines()
-    assert result.rows_out == len(lines) - 1 == made[148] > 0  # every row finished by the 149th reading
+    assert result.counts.rows_out == len(lines) - 1 == made[148] > 0  # every row finished by the 149th reading

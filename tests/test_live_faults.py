@@ -258,8 +258,8 @@ def test_the_three_parts_in_python_and_an_output_that_fails(log_dir):
     data = b"\n".join(lines[:101] + [b"1e25," + lines[5].split(b",", 1)[1]] + lines[101:301]) + b"\n"
     buf = io.StringIO()
     result = run(source_of(data), estimator, EstimateSink(buf), rate_hz=500.0, signals=False)
-    assert (result.rows_in, result.rows_out, result.bad_rows) == (300, 300, 1)
-    assert result.bad_reasons == ("line 102: timestamp '1e25' is out of range for 64-bit nanoseconds",)
+    assert (result.counts.rows_in, result.counts.rows_out, result.counts.bad_rows) == (300, 300, 1)
+    assert result.counts.bad_reasons == ("line 102: timestamp '1e25' is out of range for 64-bit nanoseconds",)
     assert result.ended == "end of input" and result.failure is None and result.signal_exit is None
     assert result.rate_hz == 500.0 and result.rate_from == "given"
     assert buf.getvalue().splitlines()[0] == ("#timestamp [ns],w_x [rad s^-1],w_y [rad s^-1],w_z [rad s^-1],"
@@ -267,7 +267,7 @@ def test_the_three_parts_in_python_and_an_output_that_fails(log_dir):
                                               "f_y [m s^-2],f_z [m s^-2]")
     assert len(buf.getvalue().splitlines()) == 301
     with pytest.raises(dataclasses.FrozenInstanceError):
-        result.rows_in = 0
+        result.counts.rows_in = 0
 
     class Full(io.StringIO):
         def write(self, s):
@@ -278,7 +278,7 @@ def test_the_three_parts_in_python_and_an_output_that_fails(log_dir):
     result = run(source_of(data), estimator, EstimateSink(Full()), rate_hz=500.0, signals=False)
     assert result.ended == "stopped by an error"
     assert result.failure == "est.csv: No space left on device"
-    assert 0 < result.rows_out < 300
+    assert 0 < result.counts.rows_out < 300
 
 
 @pytest.mark.slow

@@ -159,12 +159,11 @@ def test_a_choice_pending_at_the_end_is_used_before_the_window_is_flushed(log):
 
 
 def test_the_summary_says_the_waits():
-    from gfimu.live import LiveResult
+    from gfimu.live import LiveCounts, LiveResult, LiveTimes
 
-    r = LiveResult(rows_in=10, rows_out=10, bad_rows=0, bad_reasons=(), late_or_repeated=0, clock_resets=0,
-                   missing=0, overrun_dropped=0, processing_ms=None, latency_ms=(201.0, 240.5, 250.0),
-                   steady_latency_ms=None, rate_hz=500.0, rate_from="given", ended="end of input", choice_waits=2,
-                   choice_wait_ms=35.25)
+    r = LiveResult(LiveCounts(rows_in=10, rows_out=10, choice_waits=2),
+                   LiveTimes(latency_ms=(201.0, 240.5, 250.0), choice_wait_ms=35.25), rate_hz=500.0, rate_from="given",
+                   ended="end of input")
     text = r.summary()
     assert "latency arrival -> estimate written p50 201.0 ms, p99 240.5 ms, max 250.0 ms" in text
     assert text.endswith("; waited 2 time(s) for a model chosen off the stream, 35.2 ms in all; ended: end of input")
