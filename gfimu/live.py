@@ -49,6 +49,13 @@ in groups of at most this many (a write and a flush per group instead of per row
 WRITE_EVERY_S = 0.005
 """... and at least this often [s] while a burst is worked through."""
 
+QUEUE_S = 10.0
+"""By default the source's queue holds this many seconds of samples at the stream's rate [s] (a start held while
+the data decide the sign of ω, a model chosen, a busy machine: caught up after, not dropped) ..."""
+
+QUEUE_MIN = 5000
+"""... and at least this many samples (the rate unknown yet, or a slow one)."""
+
 ITEMS_AT_ONCE = 1024
 """At most this many waiting items are taken from the source's queue at once (between status lines)."""
 
@@ -254,6 +261,8 @@ class _Reader:
     def __init__(self, source: Source, stop: threading.Event, size: int):
         self.source, self.stop = source, stop
         self.size = max(int(size), 1)
+        self.grows = False
+        """Whether :meth:`fit` may raise :attr:`size` to :data:`QUEUE_S` of samples at the stream's rate."""
         self.items: deque = deque()
         self.ready = threading.Condition()
         self.fatal: list[BaseException] = []
@@ -296,6 +305,11 @@ class _Reader:
             while self.items and self.items[0] is not None and len(out) < ITEMS_AT_ONCE:
                 out.append(self.items.popleft())
             return out
+
+    def fit(self, rate_hz: float | None) -> None:
+        """The queue made to hold :data:`QUEUE_S` of samples at ``rate_hz`` where it :attr:`grows` (never smaller)."""
+        if self.grows and rate_hz:
+            self.size = max(self.size, int(QUEUE_S * rate_hz))
 
     def join(self) -> None:
         if self.thread.ident is not None:  # started (the output may fail before: its header is written first)
@@ -383,6 +397,7 @@ class _Live:
             if items is None:
                 break
             self.take_all(items)
+            reader.fit(self.session.rate_hz)
             if self.status_s and time.monotonic() - last_status >= self.status_s:
                 last_status = time.monotonic()
                 self.status(reader.overrun)
@@ -480,7 +495,7 @@ def _ending(source: Source, reader: _Reader, caught: list[str], closed: bool, cr
     return source.ended, failure
 
 
-def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None = None, queue_size: int = 5000,
+def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None = None, queue_size: int | None = None,
         stop: threading.Event | None = None, signals: bool = True, report: Callable[[str], None] | None = None,
         status_s: float | None = None) -> LiveResult:
     """The fixed-lag ``estimator`` on ``source``'s readings, estimates to ``sink``, until the source ends,
@@ -488,8 +503,8 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
 
     ``rate_hz``: the nominal rate (array.toml's ``rate_hz`` or the caller's); None takes it from the
     timestamps of the first :data:`RATE_ROWS` samples (said through ``report``). At most
-    ``queue_size`` samples wait while the smoother is busy; beyond that the oldest is dropped and
-    counted. ``report`` receives one-line messages (the first bad rows, the rate taken, status lines
+    ``queue_size`` samples wait while the smoother is busy (None: :data:`QUEUE_S` of samples at the stream's rate
+    once it is known, at least :data:`QUEUE_MIN`); beyond that the oldest is dropped and counted. ``report`` receives one-line messages (the first bad rows, the rate taken, status lines
     every ``status_s`` seconds when given). The source is closed at the end. A header that cannot be
     read ends the session: ``ended`` is ``"input refused"`` and ``failure`` names the source and line;
     a source that fails otherwise gives ``"source failed"``. The readings go through a
@@ -499,7 +514,9 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     stop = stop or threading.Event()
     # readings that are not finite or beyond any range: replaced by the screening, or bad rows without it
     source.keep_gross_errors = bool(getattr(estimator, "screen_readings", False))
-    reader = _Reader(source, stop, queue_size)
+    reader = _Reader(source, stop, QUEUE_MIN if queue_size is None else queue_size)
+    reader.grows = queue_size is None
+    reader.fit(rate_hz)
     handlers = _Signals(stop, signals)
     closed, crash = False, []
     live = _Live(source, estimator, sink, rate_hz, say, status_s)

@@ -146,3 +146,35 @@ def test_the_rows_of_a_batch_reach_the_output_before_a_failure(tmp_path):
     assert result.ended == "stopped by an error" and result.failure == "the smoother: Input/output error"
     lines = buf.getvalue().splitlines()
     assert result.counts.rows_out == len(lines) - 1 == made[148] > 0  # every row finished by the 149th reading
+
+
+def test_the_default_queue_holds_ten_seconds_of_the_stream():
+    """By default the source's queue grows to QUEUE_S of samples at the stream's rate once it is known (a start held
+    for ~2 s at 20 kHz is caught up after, not dropped), never below QUEUE_MIN; a --queue given stays as given; the
+    command's help says the same numbers."""
+    from gfimu.live import QUEUE_MIN, QUEUE_S, _Reader
+
+    array = random_array(3, 0.05, seed=1)
+    reader = _Reader(_Burst(array, 1), threading.Event(), QUEUE_MIN)
+    reader.grows = True
+    reader.fit(None)
+    assert reader.size == QUEUE_MIN
+    reader.fit(62.5)
+    assert reader.size == QUEUE_MIN  # 625 samples: the least stays
+    reader.fit(20000.0)
+    assert reader.size == int(QUEUE_S * 20000.0) == 200_000
+    reader.fit(500.0)
+    assert reader.size == 200_000  # never smaller
+    given = _Reader(_Burst(array, 1), threading.Event(), 300)
+    given.fit(20000.0)
+    assert given.size == 300
+    import contextlib
+    import io
+
+    from gfimu.cli import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):
+        main(["live", "--help"])
+    help_text = " ".join(out.getvalue().split())
+    assert f"default: {QUEUE_S:g} s of samples at the stream's rate, at least {QUEUE_MIN}" in help_text

@@ -39,8 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "first 64 samples received)")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="fixed-lag option (gfimu estimate --method fixed-lag --list-options)")
-    p.add_argument("--queue", type=int, default=5000, metavar="N",
-                   help="samples held while the smoother is busy before the oldest are dropped (default 5000)")
+    p.add_argument("--queue", type=int, default=None, metavar="N",
+                   help="samples held while the smoother is busy before the oldest are dropped (default: 10 s "
+                        "of samples at the stream's rate, at least 5000: gfimu.live.QUEUE_S, QUEUE_MIN)")
     p.add_argument("--status-s", type=positive("s"), default=5.0, help="status line every this many s (default 5)")
     p.add_argument("--quiet", "-q", action="store_true", default=argparse.SUPPRESS,
                    help="no status lines; the summary at the end stays (default: off)")
@@ -71,7 +72,7 @@ def run(args) -> int:
     reason = estimator.applicable(array)
     if reason:
         raise CLIError(f"{args.array}: {reason}")
-    if args.queue < 1:
+    if args.queue is not None and args.queue < 1:
         raise CLIError(f"--queue {args.queue}: must be at least 1")
     with contextlib.ExitStack() as held:
         if out_path is not None:  # one writer at a time: a second session on this file is refused, before any work
