@@ -386,6 +386,7 @@ class _Live:
         self.units = _FirstRowsCheck(source.array, source, say)
         self.rows_in = self.bad = 0
         self.reasons: list[str] = []
+        self.warned_behind = False
 
     def loop(self, reader: _Reader) -> None:
         """Items until the source ends or the run is stopped, then every state left."""
@@ -398,9 +399,10 @@ class _Live:
                 break
             self.take_all(items)
             reader.fit(self.session.rate_hz)
+            self.behind(reader)
             if self.status_s and time.monotonic() - last_status >= self.status_s:
                 last_status = time.monotonic()
-                self.status(reader.overrun)
+                self.status(reader)
         self.units.finish()
         self.rows.write(self.session.finish(), timed=False)
         self.tell()
@@ -449,12 +451,27 @@ class _Live:
             if len(self.reasons) == REASONS_KEPT:
                 self.say("warning: further bad rows are counted, not shown")
 
-    def status(self, overrun: int) -> None:
+    def _waiting(self, reader: _Reader) -> str:
+        """The samples waiting in the source's queue, and how far behind the stream that is."""
+        waiting = len(reader.items)
+        waiting -= bool(waiting) and reader.items[-1] is None  # (the end's mark)
+        rate = self.session.rate_hz if self.session is not None else None
+        return f"{waiting} waiting" + (f" ({waiting / rate:.1f} s behind)" if rate else "")
+
+    def behind(self, reader: _Reader) -> None:
+        """Said once: the smoother falls behind the stream, half its queue waiting, samples about to be dropped."""
+        if self.warned_behind or 2 * len(reader.items) < reader.size:
+            return
+        self.warned_behind = True
+        self.say(f"warning: the smoother runs behind the stream: {self._waiting(reader)}; beyond {reader.size} "
+                 "(--queue) the oldest are dropped (a faster machine, a lower rate or fewer sensors keep up)")
+
+    def status(self, reader: _Reader) -> None:
         p = _stats(self.session.processing_s.values * 1e3)
         nan = float("nan")
         self.say(f"{self.rows_in} in, {self.rows.out} out, processing p50 {p[0] if p else nan:.2f} ms "
-                 f"p99 {p[1] if p else nan:.2f} ms, {overrun} dropped, {self.session.counts.late_or_repeated} late, "
-                 f"{self.bad} bad")
+                 f"p99 {p[1] if p else nan:.2f} ms, {reader.overrun} dropped, {self.session.counts.late_or_repeated} "
+                 f"late, {self.bad} bad, {self._waiting(reader)}")
 
     def result(self, ended: str, failure: str | None, overrun: int) -> LiveResult:
         session = self.session

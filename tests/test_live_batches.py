@@ -178,3 +178,30 @@ def test_the_default_queue_holds_ten_seconds_of_the_stream():
         main(["live", "--help"])
     help_text = " ".join(out.getvalue().split())
     assert f"default: {QUEUE_S:g} s of samples at the stream's rate, at least {QUEUE_MIN}" in help_text
+
+
+def test_a_smoother_behind_its_stream_is_said_once_and_in_the_status():
+    """Half the queue waiting: one warning that the smoother runs behind (how many samples, how many seconds at the
+    stream's rate, the queue's bound); the status line says what waits."""
+    import io
+    from collections import deque
+
+    from gfimu.live import EstimateSink, _Live, _Reader
+    from gfimu.methods import make_estimator
+    from gfimu.smoother.stream.session import StreamSession
+
+    array = random_array(3, 0.05, seed=1)
+    said = []
+    live = _Live(_Burst(array, 1), make_estimator("fixed-lag"), EstimateSink(io.StringIO()), 1000.0, said.append, 1.0)
+    live.session = StreamSession(array, live.estimator, 1000.0)
+    reader = _Reader(_Burst(array, 1), threading.Event(), 10)
+    reader.items = deque([object()] * 4)
+    live.behind(reader)
+    assert said == []
+    reader.items = deque([object()] * 5 + [None])
+    live.behind(reader)
+    live.behind(reader)
+    assert said == ["warning: the smoother runs behind the stream: 5 waiting (0.0 s behind); beyond 10 (--queue) the "
+                    "oldest are dropped (a faster machine, a lower rate or fewer sensors keep up)"]
+    live.status(reader)
+    assert said[-1].startswith("0 in, 0 out, processing p50 nan ms") and said[-1].endswith(", 5 waiting (0.0 s behind)")
