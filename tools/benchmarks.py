@@ -143,8 +143,9 @@ SECTIONS = (
         "The regime matrix's 20 kHz cell (four triads, impacts; tools/regime_matrix.py) sent at its own rate, one "
         "row per UDP datagram on localhost, into `gfimu live --out -` with the defaults: how many rows came out, "
         "how long after the last datagram the last row came (how far from real time the stream runs), the "
-        "latencies, and `gfimu live`'s own summary (rows dropped when the input outran the smoother).",
-        full=("--cell", "impacts-20kHz", "--duration-s", "10", "--queue", "400000"),
+        "latencies, and `gfimu live`'s own summary (rows dropped when the input outran the smoother; the default "
+        "queue holds 10 s of samples, 200,000 at 20 kHz).",
+        full=("--cell", "impacts-20kHz", "--duration-s", "10"),
         quick=("--cell", "impacts-20kHz", "--duration-s", "0.2"), json=False),
     Section(
         "stream-cost", "Fixed-lag smoother: CPU push by push", "stream_cost.py",

@@ -297,27 +297,50 @@ class StdinSource(Source):
                 yield list(rows.tail())
 
         for lines in chunks():
-            batch: list = []
-            waiting: list[tuple[str, str]] = []  # data rows parsed together, in their place among the others
+            batch = _Batch(parser)
             for line, raw in lines:
                 where = f"line {line}"
                 if raw is None:
-                    batch += parser.parse_many(waiting) if waiting else []
-                    waiting = []
-                    batch.append(BadRow(where, TOO_LONG))
+                    batch.add(BadRow(where, TOO_LONG))
                     continue
                 text = _decode(raw)
                 if not text.strip():
                     continue
                 if parser is None:
-                    parser = RowParser(self.array, text, self.name, line, self.keep_gross_errors)
+                    parser = batch.parser = RowParser(self.array, text, self.name, line, self.keep_gross_errors)
                     self.accel_unit = parser.accel_unit
                     continue
-                waiting.append((where, text))
-            if waiting:
-                batch += parser.parse_many(waiting)
-            if batch:
-                yield batch
+                batch.row(where, text)
+            items = batch.done()
+            if items:
+                yield items
+
+
+class _Batch:
+    """The items of one read, in order: its data rows gathered and parsed together (:meth:`RowParser.parse_many`)
+    in their place among the other items."""
+
+    def __init__(self, parser: RowParser | None):
+        self.parser = parser
+        self.items: list = []
+        self.rows: list[tuple[str, str]] = []  # (where, text) of the data rows not parsed yet
+
+    def row(self, where: str, text: str) -> None:
+        self.rows.append((where, text))
+
+    def add(self, item) -> None:
+        """An item that is not a data row (a bad row), after the rows before it."""
+        self._parse()
+        self.items.append(item)
+
+    def _parse(self) -> None:
+        if self.rows:
+            self.items += self.parser.parse_many(self.rows)
+            self.rows = []
+
+    def done(self) -> list:
+        self._parse()
+        return self.items
 
 
 def _parsed(parser: RowParser, text: str, where: str) -> Reading | BadRow:
@@ -371,36 +394,32 @@ class UdpSource(Source):
             except OSError as exc:
                 self.ended, self.failure = "receive failed", f"{self.name}: {exc.strerror or exc}"
                 return
-            batch: list = []
-            waiting: list[tuple[str, str]] = []  # data rows parsed together, in their place among the others
+            batch = _Batch(parser)
             for data in datagrams:
                 count += 1
                 text = _decode(data).strip()
                 if text == "EOF":  # an explicit end of stream
-                    batch += parser.parse_many(waiting) if waiting else []
-                    if batch:
-                        yield batch
+                    items = batch.done()
+                    if items:
+                        yield items
                     self.ended = "EOF datagram"
                     return
                 where = f"datagram {count}"
                 if parser is None:
                     if text.startswith("#"):  # a header that cannot be read ends the session (exit 2)
-                        parser = RowParser(self.array, text, f"{self.name} {where}",
-                                           keep_gross_errors=self.keep_gross_errors)
+                        parser = batch.parser = RowParser(self.array, text, f"{self.name} {where}",
+                                                          keep_gross_errors=self.keep_gross_errors)
                         self.accel_unit = parser.accel_unit
                         continue
-                    parser = RowParser(self.array, default_header(self.array), self.name,
-                                       keep_gross_errors=self.keep_gross_errors)
+                    parser = batch.parser = RowParser(self.array, default_header(self.array), self.name,
+                                                      keep_gross_errors=self.keep_gross_errors)
                 if not text:
-                    batch += parser.parse_many(waiting)
-                    waiting = []
-                    batch.append(BadRow(where, "empty datagram"))
+                    batch.add(BadRow(where, "empty datagram"))
                     continue
-                waiting.append((where, text))
-            if waiting:
-                batch += parser.parse_many(waiting)
-            if batch:
-                yield batch
+                batch.row(where, text)
+            items = batch.done()
+            if items:
+                yield items
         self.ended = "stopped"
 
     def close(self) -> None:
