@@ -376,7 +376,7 @@ class UdpSource(Source):
         try:
             while len(out) < DATAGRAMS_AT_ONCE:
                 out.append(self.sock.recv(65536))
-        except (BlockingIOError, InterruptedError):
+        except OSError:  # none waiting (or a failure, which the next blocking read meets and reports)
             pass
         finally:
             self.sock.settimeout(POLL_S)
