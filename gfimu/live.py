@@ -284,7 +284,7 @@ class _Reader:
     def _put(self, batch: list) -> None:
         with self.ready:
             self.items.extend(batch)
-            end = self.items[-1] is None  # (the end's mark takes no sample's place)
+            end = bool(self.items) and self.items[-1] is None  # (the end's mark takes no sample's place)
             while len(self.items) - end > self.size:  # the smoother falls behind: drop the oldest waiting samples
                 self.items.popleft()
                 self.overrun += 1

@@ -205,3 +205,24 @@ def test_a_smoother_behind_its_stream_is_said_once_and_in_the_status():
                     "oldest are dropped (a faster machine, a lower rate or fewer sensors keep up)"]
     live.status(reader)
     assert said[-1].startswith("0 in, 0 out, processing p50 nan ms") and said[-1].endswith(", 5 waiting (0.0 s behind)")
+
+
+def test_an_empty_batch_from_a_source_is_no_item():
+    """A source of its own that yields an empty list between readings: nothing queued for it, the readings after it
+    come through."""
+    from gfimu.live import _Reader
+
+    array = random_array(3, 0.05, seed=1)
+
+    class Gappy(Source):
+        def batches(self, stop):
+            yield []
+            yield [Reading(1000, np.zeros(array.n_axes))]
+            yield []
+            self.ended = "end of input"
+
+    reader = _Reader(Gappy(array), threading.Event(), 10)
+    reader.thread.start()
+    reader.thread.join()
+    assert not reader.fatal and reader.overrun == 0
+    assert [r.timestamp_ns for r, _ in reader.get()] == [1000] and reader.get() is None
