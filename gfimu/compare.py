@@ -94,9 +94,9 @@ def metrics_from_evaluation(result) -> dict[str, float]:
                 out[f"{key}_rel_rms_{a}"] = _num(m.relative_rms[k])
         out[f"{key}_rmse_norm"] = _num(m.rmse_norm)
         if fname == "omega_b_radps":
-            out["w_axis_sign_off_share"] = _num(m.axis_sign_off_share)
-            out["w_flipped_share"] = _num(m.flipped_share)
-            out["w_off_5radps_share"] = _num(m.large_error_share)
+            out["w_axis_sign_off_share"] = _num(m.signs.axis_sign_off_share)
+            out["w_flipped_share"] = _num(m.signs.flipped_share)
+            out["w_off_5radps_share"] = _num(m.signs.large_error_share)
     return out
 
 

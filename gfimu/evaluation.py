@@ -14,11 +14,12 @@ kept (matching timestamps, valid, finite):
 - for ω only: ``flipped_share`` (the share of samples on the wrong sign: the whole
   vector points the other way), ``axis_sign_off_share``, ``axis_sign_off_share_axis``
   (a component's sign differs, which small components of a right vector also do) and
-  ``large_error_share`` (defined in :class:`QuantityMetrics`);
+  ``large_error_share`` (:class:`SignShares`, ``QuantityMetrics.signs``);
 - when the estimate carries one-sigma values (``gfimu estimate --sigma``), the calibration of that σ:
   ``coverage_1sigma`` / ``coverage_2sigma`` per axis, the share of rows with |e_j| < σ_j (resp. 2σ_j;
   0.683 and 0.954 for a Gaussian error of that σ), and ``mean_nees``, the mean over rows of
-  Σ_j (e_j/σ_j)² (the number of axes, 3, when σ is right); over the rows whose σ is finite and positive.
+  Σ_j (e_j/σ_j)² (the number of axes, 3, when σ is right); over the rows whose σ is finite and positive
+  (:class:`SigmaCoverage`, ``QuantityMetrics.sigma``).
 
 Attitude (quaternions): the error is the rotation vector of
 R_trueᵀ R_est, in B, in rad (its norm is the attitude error angle); a
@@ -83,20 +84,45 @@ class TimestampMismatchError(InputError):
 
 
 @dataclass(frozen=True)
+class SignShares:
+    """ω's signs against the truth's (:func:`evaluate`, ω only).
+
+    ``axis_sign_off_share_axis[j]``: among samples with |ω_true_j| above the sign threshold, the share where
+    the estimate's component j has the other sign or is zero (ω_est_j · ω_true_j ≤ 0). ``axis_sign_off_share``:
+    among samples with at least one such component, the share with at least one wrong sign.
+    ``flipped_share``: among samples with ‖ω_true‖ above the sign threshold, the share whose estimate points
+    into the opposite half-space (ω_est · ω_true < 0): the whole vector has the wrong sign.
+    ``large_error_share``: share of samples with ‖ω_est − ω_true‖ above the large-error limit (5 rad/s by
+    default). NaN when no sample qualifies.
+    """
+
+    axis_sign_off_share: float
+    axis_sign_off_share_axis: tuple[float, ...]
+    large_error_share: float
+    flipped_share: float
+
+
+@dataclass(frozen=True)
+class SigmaCoverage:
+    """The calibration of an estimate's one-sigma values against its errors (:func:`sigma_metrics`), over the
+    ``n_sigma`` rows whose σ is finite and positive on every axis (None for the others when there is none)."""
+
+    n_sigma: int
+    coverage_1sigma: tuple[float, ...] | None = None
+    """Per axis, the share of rows with |error| < σ."""
+    coverage_2sigma: tuple[float, ...] | None = None
+    """Per axis, the share of rows with |error| < 2σ."""
+    mean_nees: float | None = None
+    """Mean over rows of Σ_j (error_j / σ_j)² (normalised estimation error squared, diagonal σ)."""
+
+
+@dataclass(frozen=True)
 class QuantityMetrics:
     """Errors of one quantity.
 
-    ``quantity`` is the Motion field name (``omega_b_radps`` ...) or
-    ``attitude_rad`` / ``tilt_rad``; ``label`` is its short name (``omega``).
-    ``axis_sign_off_share_axis[j]``: among samples with |ω_true_j| above the sign
-    threshold, the share where the estimate's component j has the other sign
-    or is zero (ω_est_j · ω_true_j ≤ 0). ``axis_sign_off_share``: among samples
-    with at least one such component, the share with at least one wrong sign.
-    ``flipped_share``: among samples with ‖ω_true‖ above the sign threshold,
-    the share whose estimate points into the opposite half-space
-    (ω_est · ω_true < 0): the whole vector has the wrong sign.
-    ``large_error_share``: share of samples with ‖ω_est − ω_true‖ above the
-    large-error limit (5 rad/s by default). NaN when no sample qualifies.
+    ``quantity`` is the Motion field name (``omega_b_radps`` ...) or ``attitude_rad`` / ``tilt_rad``;
+    ``label`` is its short name (``omega``). ``signs``: ω's signs (:class:`SignShares`; None for the other
+    quantities); ``sigma``: the calibration of the estimate's σ (:class:`SigmaCoverage`; None without σ).
     """
 
     quantity: str
@@ -108,29 +134,23 @@ class QuantityMetrics:
     rmse_norm: float
     median_norm: float
     relative_rms: tuple[float, ...] | None = None
-    axis_sign_off_share: float | None = None
-    axis_sign_off_share_axis: tuple[float, ...] | None = None
-    large_error_share: float | None = None
-    flipped_share: float | None = None
-    coverage_1sigma: tuple[float, ...] | None = None
-    """Per axis, the share of rows with |error| < σ (the estimate's one-sigma value); None without σ."""
-    coverage_2sigma: tuple[float, ...] | None = None
-    """Per axis, the share of rows with |error| < 2σ."""
-    mean_nees: float | None = None
-    """Mean over rows of Σ_j (error_j / σ_j)² (normalised estimation error squared, diagonal σ)."""
-    n_sigma: int | None = None
-    """Rows whose σ is finite and positive on every axis (those the three above are taken over)."""
+    signs: SignShares | None = None
+    sigma: SigmaCoverage | None = None
 
     def row(self, large_error_radps: float = 5.0) -> dict:
         keys = row_keys(large_error_radps)
         r = dict.fromkeys(keys)
         r.update(quantity=self.quantity, unit=self.unit, n_samples=self.n, n_nonfinite=self.n_nonfinite,
-                 rmse_norm=self.rmse_norm, median_norm=self.median_norm, axis_sign_off_share=self.axis_sign_off_share, flipped_share=self.flipped_share,
-                 mean_nees=self.mean_nees, n_sigma=self.n_sigma)
-        r[f"share_off_{large_error_radps:g}radps"] = self.large_error_share
-        for name, values in (("rmse", self.rmse), ("relative_rms", self.relative_rms),
-                             ("axis_sign_off_share", self.axis_sign_off_share_axis),
-                             ("coverage_1sigma", self.coverage_1sigma), ("coverage_2sigma", self.coverage_2sigma)):
+                 rmse_norm=self.rmse_norm, median_norm=self.median_norm)
+        vectors = [("rmse", self.rmse), ("relative_rms", self.relative_rms)]
+        if self.signs is not None:
+            r.update(axis_sign_off_share=self.signs.axis_sign_off_share, flipped_share=self.signs.flipped_share)
+            r[f"share_off_{large_error_radps:g}radps"] = self.signs.large_error_share
+            vectors.append(("axis_sign_off_share", self.signs.axis_sign_off_share_axis))
+        if self.sigma is not None:
+            r.update(mean_nees=self.sigma.mean_nees, n_sigma=self.sigma.n_sigma)
+            vectors += [("coverage_1sigma", self.sigma.coverage_1sigma), ("coverage_2sigma", self.sigma.coverage_2sigma)]
+        for name, values in vectors:
             if values is not None:
                 for a, v in zip(AXES, values):
                     r[f"{name}_{a}"] = v
@@ -238,16 +258,19 @@ class EvaluationResult:
         for m in self.metrics:
             rmse = m.rmse or (None,) * 3
             rel = m.relative_rms or (None,) * 3
+            signs = (None,) * 3 if m.signs is None else (m.signs.flipped_share, m.signs.axis_sign_off_share,
+                                                         m.signs.large_error_share)
             cells = [m.label, m.unit, str(m.n), *map(_fmt, rmse), _fmt(m.rmse_norm), _fmt(m.median_norm),
-                     *map(_pct, rel), _pct(m.flipped_share), _pct(m.axis_sign_off_share), _pct(m.large_error_share)]
+                     *map(_pct, rel), *map(_pct, signs)]
             lines.append("| " + " | ".join(cells) + " |")
-        calibrated = [m for m in self.metrics if m.coverage_1sigma is not None]
+        calibrated = [m for m in self.metrics if m.sigma is not None and m.sigma.coverage_1sigma is not None]
         if calibrated:
             lines += ["", "| quantity | n with σ | < 1σ x | < 1σ y | < 1σ z | < 2σ x | < 2σ y | < 2σ z | mean NEES |",
                       "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
             for m in calibrated:
-                lines.append("| " + " | ".join([m.label, str(m.n_sigma), *map(_pct, m.coverage_1sigma),
-                                                 *map(_pct, m.coverage_2sigma), _fmt(m.mean_nees)]) + " |")
+                c = m.sigma
+                lines.append("| " + " | ".join([m.label, str(c.n_sigma), *map(_pct, c.coverage_1sigma),
+                                                 *map(_pct, c.coverage_2sigma), _fmt(c.mean_nees)]) + " |")
             lines += ["", "σ calibration: the share of rows whose error is within the estimate's one-sigma value "
                           "(a Gaussian error of that σ: 68.3 %) and within 2σ (95.4 %) per axis; mean NEES "
                           f"Σ_j (e_j/σ_j)² over the axes ({len(AXES)} when σ is right)."]
@@ -325,13 +348,13 @@ def _interpolate_truth(truth: Motion, t_ns: np.ndarray, valid: np.ndarray | None
 
 
 def _vector_metrics(ident: str, err: np.ndarray, truth: np.ndarray, n_nonfinite: int, relative: bool = True,
-                    **extra) -> QuantityMetrics:
+                    signs: SignShares | None = None, sigma: SigmaCoverage | None = None) -> QuantityMetrics:
     label, unit, _ = QUANTITY_INFO[ident]
     n = err.shape[0]
     if n == 0:
         nan3 = (math.nan,) * err.shape[1]
         return QuantityMetrics(ident, label, unit, 0, n_nonfinite, nan3, math.nan, math.nan,
-                               nan3 if relative else None, **extra)
+                               nan3 if relative else None, signs, sigma)
     norm = np.linalg.norm(err, axis=1)
     rmse = np.sqrt(np.mean(err**2, axis=0))
     rel = None
@@ -339,10 +362,10 @@ def _vector_metrics(ident: str, err: np.ndarray, truth: np.ndarray, n_nonfinite:
         denom = math.sqrt(float(np.mean(np.sum(truth**2, axis=1))))
         rel = tuple(float(v) for v in (rmse / denom if denom > 0 else np.full(rmse.shape, math.nan)))
     return QuantityMetrics(ident, label, unit, n, n_nonfinite, tuple(float(v) for v in rmse),
-                           float(np.sqrt(np.mean(norm**2))), float(np.median(norm)), rel, **extra)
+                           float(np.sqrt(np.mean(norm**2))), float(np.median(norm)), rel, signs, sigma)
 
 
-def _sign_metrics(est: np.ndarray, true: np.ndarray, threshold: float, large: float) -> dict:
+def _sign_metrics(est: np.ndarray, true: np.ndarray, threshold: float, large: float) -> SignShares:
     eligible = np.abs(true) > threshold
     wrong = eligible & (est * true <= 0)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -352,27 +375,24 @@ def _sign_metrics(est: np.ndarray, true: np.ndarray, threshold: float, large: fl
     norm = np.linalg.norm(est - true, axis=1)
     big = np.linalg.norm(true, axis=1) > threshold
     flipped = np.sum(est * true, axis=1) < 0
-    return {
-        "axis_sign_off_share": float(share),
-        "axis_sign_off_share_axis": tuple(float(v) for v in per_axis),
-        "large_error_share": float(np.mean(norm > large)) if norm.size else math.nan,
-        "flipped_share": float(np.mean(flipped[big])) if np.any(big) else math.nan,
-    }
+    return SignShares(float(share), tuple(float(v) for v in per_axis),
+                      float(np.mean(norm > large)) if norm.size else math.nan,
+                      float(np.mean(flipped[big])) if np.any(big) else math.nan)
 
 
-def sigma_metrics(err: np.ndarray, sigma: np.ndarray) -> dict:
+def sigma_metrics(err: np.ndarray, sigma: np.ndarray) -> SigmaCoverage:
     """The calibration of one-sigma values ``sigma`` (N, k) against the errors ``err`` (N, k), over the rows
-    whose σ is finite and positive on every axis: ``coverage_1sigma``, ``coverage_2sigma`` (per axis, the
-    share with |e| < σ, < 2σ), ``mean_nees`` (mean of Σ_j (e_j/σ_j)²) and ``n_sigma`` (those rows)."""
+    whose σ is finite and positive on every axis (:class:`SigmaCoverage`): ``coverage_1sigma``,
+    ``coverage_2sigma`` (per axis, the share with |e| < σ, < 2σ), ``mean_nees`` (mean of Σ_j (e_j/σ_j)²) and
+    ``n_sigma`` (those rows)."""
     with np.errstate(invalid="ignore"):
         ok = np.all(np.isfinite(sigma) & (sigma > 0), axis=1) & np.all(np.isfinite(err), axis=1)
     n = int(np.count_nonzero(ok))
     if n == 0:
-        return {"n_sigma": 0}
+        return SigmaCoverage(0)
     z = np.abs(err[ok]) / sigma[ok]
-    return {"coverage_1sigma": tuple(float(v) for v in np.mean(z < 1.0, axis=0)),
-            "coverage_2sigma": tuple(float(v) for v in np.mean(z < 2.0, axis=0)),
-            "mean_nees": float(np.mean(np.sum(z * z, axis=1))), "n_sigma": n}
+    return SigmaCoverage(n, tuple(float(v) for v in np.mean(z < 1.0, axis=0)),
+                         tuple(float(v) for v in np.mean(z < 2.0, axis=0)), float(np.mean(np.sum(z * z, axis=1))))
 
 
 def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, sign_threshold_radps: float = 0.1,
@@ -435,11 +455,10 @@ def evaluate(estimate: Motion, truth: Motion, valid: np.ndarray | None = None, s
             metrics.append(QuantityMetrics(m.quantity, m.label, m.unit, m.n, n_nonfinite, None, m.rmse_norm,
                                            m.median_norm))
             continue
-        extra = _sign_metrics(est, tru, sign_threshold_radps, large_error_radps) if name == "omega_b_radps" else {}
+        signs = _sign_metrics(est, tru, sign_threshold_radps, large_error_radps) if name == "omega_b_radps" else None
         sigma = estimate.sigma.get(name)
-        if sigma is not None:
-            extra.update(sigma_metrics(est - tru, np.asarray(sigma, dtype=float)[finite]))
-        metrics.append(_vector_metrics(name, est - tru, tru, n_nonfinite, **extra))
+        coverage = None if sigma is None else sigma_metrics(est - tru, np.asarray(sigma, dtype=float)[finite])
+        metrics.append(_vector_metrics(name, est - tru, tru, n_nonfinite, signs=signs, sigma=coverage))
     return EvaluationResult(tuple(metrics), n_rows, int(np.sum(keep)), n_invalid, n_outside, alignment,
                             float(sign_threshold_radps), float(large_error_radps))
 

@@ -50,8 +50,8 @@ def test_rows_match_evaluate_run_directly(noisy_log, noisy_result):
     assert r["w_rmse_norm"] == w.rmse_norm
     assert [r["dw_rel_rms_x"], r["dw_rel_rms_y"], r["dw_rel_rms_z"]] == list(dw.relative_rms)
     assert r["f_rmse_norm"] == f.rmse_norm
-    assert r["w_axis_sign_off_share"] == w.axis_sign_off_share
-    assert r["w_off_5radps_share"] == w.large_error_share
+    assert r["w_axis_sign_off_share"] == w.signs.axis_sign_off_share
+    assert r["w_off_5radps_share"] == w.signs.large_error_share
     assert r["n_evaluated"] == len(noisy_log)
     # the linear inversion with σ = 0.07 m/s² on every axis: f error ≈ σ/2 per axis (4 triads)
     assert r["f_rmse_x"] == pytest.approx(0.035, rel=0.15)

@@ -37,35 +37,35 @@ def test_omega_metrics_by_hand():
     truth_rms = math.sqrt((1 + 4 + 9 + 2.0025) / 4)  # McGinnis, Perkins & King 2012, eq. (7) denominator
     assert m.relative_rms == pytest.approx(tuple(v / truth_rms for v in m.rmse), rel=1e-15)
     # eligible (|true| > 0.1): x of row 0; y of rows 1, 3; z of rows 2, 3. Only row 0's x is wrong.
-    assert m.axis_sign_off_share_axis == (1.0, 0.0, 0.0)
-    assert m.axis_sign_off_share == 0.25
-    assert m.large_error_share == 0.25  # row 3: |e| = 6.0008 > 5
+    assert m.signs.axis_sign_off_share_axis == (1.0, 0.0, 0.0)
+    assert m.signs.axis_sign_off_share == 0.25
+    assert m.signs.large_error_share == 0.25  # row 3: |e| = 6.0008 > 5
     assert r.n_rows == r.n_compared == 4 and r.n_invalid == 0 and r.alignment == "exact"
 
 
 def test_sign_threshold_and_zero_estimates():
     est, truth = hand_motions()
     m = evaluate(est, truth, sign_threshold_radps=0.01)["omega"]
-    assert m.axis_sign_off_share_axis == (1.0, 0.0, 0.0)  # x of rows 0 and 3 now eligible, both wrong
-    assert m.axis_sign_off_share == 0.5
+    assert m.signs.axis_sign_off_share_axis == (1.0, 0.0, 0.0)  # x of rows 0 and 3 now eligible, both wrong
+    assert m.signs.axis_sign_off_share == 0.5
     zero = Motion(T, omega_b_radps=np.zeros((4, 3)))
     m = evaluate(zero, truth)["omega"]
-    assert m.axis_sign_off_share_axis == (1.0, 1.0, 1.0) and m.axis_sign_off_share == 1.0
+    assert m.signs.axis_sign_off_share_axis == (1.0, 1.0, 1.0) and m.signs.axis_sign_off_share == 1.0
     small = Motion(T, omega_b_radps=np.full((4, 3), 0.05))
     m = evaluate(small, small)["omega"]
-    assert all(math.isnan(v) for v in m.axis_sign_off_share_axis) and math.isnan(m.axis_sign_off_share)
+    assert all(math.isnan(v) for v in m.signs.axis_sign_off_share_axis) and math.isnan(m.signs.axis_sign_off_share)
 
 
 def test_flipped_share_counts_whole_vector_sign_errors():
     # dot products est·true: -1, 5, 9, -0.0025 + 1 + 7 > 0 -> only row 0 flipped
     m = evaluate(*hand_motions())["omega"]
-    assert m.flipped_share == 0.25
+    assert m.signs.flipped_share == 0.25
     est, truth = hand_motions()
     m = evaluate(Motion(T, omega_b_radps=-W_TRUE), truth)["omega"]
-    assert m.flipped_share == 1.0 and m.axis_sign_off_share == 1.0
+    assert m.signs.flipped_share == 1.0 and m.signs.axis_sign_off_share == 1.0
     # a small component with the wrong sign is not a flip
     m = evaluate(Motion(T, omega_b_radps=W_TRUE * [[-1, 1, 1]]), truth)["omega"]
-    assert m.flipped_share == 0.25  # row 0 is pure x; row 3's x is small, its vector keeps its sign
+    assert m.signs.flipped_share == 0.25  # row 0 is pure x; row 3's x is small, its vector keeps its sign
     rows = evaluate(*hand_motions()).rows
     assert rows[0]["flipped_share"] == 0.25
 
@@ -76,7 +76,7 @@ def test_valid_mask_and_nonfinite_rows_are_left_out_and_counted():
     m = r["omega"]
     assert r.n_invalid == 1 and r.n_compared == 3 and m.n == 3
     assert m.rmse == pytest.approx((math.sqrt(4 / 3), math.sqrt(0.25 / 3), 0.0), rel=1e-15)
-    assert m.large_error_share == 0.0
+    assert m.signs.large_error_share == 0.0
     w = W_EST.copy()
     w[1, 2] = np.nan
     m = evaluate(Motion(T, omega_b_radps=w), truth)["omega"]
@@ -103,7 +103,7 @@ def test_every_common_vector_quantity_is_evaluated():
         assert m.rmse_norm == pytest.approx(1.3, rel=1e-12) and m.median_norm == pytest.approx(1.3, rel=1e-12)
         tv = getattr(truth, {"omega_dot": "omega_dot_b_radps2", "specific_force": "specific_force_b_mps2"}[name])
         assert m.relative_rms == pytest.approx(tuple(abs(offset) / np.sqrt(np.mean(np.sum(tv**2, axis=1)))), rel=1e-12)
-        assert m.axis_sign_off_share is None and m.large_error_share is None
+        assert m.signs is None
     assert r["specific_force_b_mps2"] is r["specific_force"] is r["f"]
     assert "dw" in r and "omega" not in r
     with pytest.raises(KeyError, match="no metrics for 'omega'"):

@@ -72,4 +72,4 @@ def test_the_readme_example_runs_from_the_short_imports():
     np.testing.assert_allclose(est.motion.omega_dot_b_radps2, log.truth.omega_dot_b_radps2, atol=1e-8)
     metrics = {m.label: m for m in evaluate(est.motion, log.truth).metrics}
     assert metrics["omega_dot"].n == 200 and metrics["omega_dot"].rmse_norm < 1e-8
-    assert metrics["omega"].flipped_share == 0.0
+    assert metrics["omega"].signs.flipped_share == 0.0

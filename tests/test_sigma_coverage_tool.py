@@ -49,9 +49,11 @@ def test_draws_are_the_cell_with_consecutive_seeds():
 
 
 def test_in_target_bounds():
-    m = {"coverage_1sigma": (0.6, 0.7, 0.76), "coverage_2sigma": (0.9, 0.95, 0.98)}
+    from gfimu.evaluation import SigmaCoverage
+
+    m = SigmaCoverage(100, (0.6, 0.7, 0.76), (0.9, 0.95, 0.98), 3.0)
     assert sc.in_target(m)
-    m["coverage_1sigma"] = (0.59, 0.7, 0.7)
+    m = SigmaCoverage(100, (0.59, 0.7, 0.7), (0.9, 0.95, 0.98), 3.0)
     assert not sc.in_target(m) and sc.in_target(m, 0.02)
 
 
@@ -76,12 +78,12 @@ def test_scaled_sigma_covers_a_physical_misfit_within_the_binomial_spread(tmp_pa
     m_white = sc.sigma_metrics(err, white)
     m = sc.sigma_metrics(err, scaled)
     if white_wide:  # vibration: the robust model's white σ far too wide (nearly every error within it)
-        assert min(m_white["coverage_1sigma"]) > 0.9
+        assert min(m_white.coverage_1sigma) > 0.9
     else:  # 1 % gain errors: the white σ several times too small
-        assert max(m_white["coverage_1sigma"]) < 0.35
+        assert max(m_white.coverage_1sigma) < 0.35
     # the target band widened by 3 binomial stds of the count of independent samples (errors correlated
     # over a fraction of a second: a few dozen independent samples in 10 s)
     sp = sc.spread(err, scaled)
     assert 0.0 < sp < 0.15
     assert sc.in_target(m, 3 * sp), (m, sp)
-    assert 1.5 < m["mean_nees"] < 6.0
+    assert 1.5 < m.mean_nees < 6.0

@@ -95,11 +95,11 @@ def test_sigma_metrics_by_hand():
     err = np.array([[0.5, -1.5, 0.0], [-2.5, 0.2, 1.0], [0.9, 3.0, -0.1], [1.0, 1.0, 1.0]])
     sig = np.ones((4, 3))
     m = sigma_metrics(err, sig)
-    assert m["coverage_1sigma"] == (0.5, 0.25, 0.5)  # |e| < 1 strictly
-    assert m["coverage_2sigma"] == (0.75, 0.75, 1.0)
-    assert m["mean_nees"] == pytest.approx(np.sum(err ** 2) / 4, rel=1e-15) and m["n_sigma"] == 4
+    assert m.coverage_1sigma == (0.5, 0.25, 0.5)  # |e| < 1 strictly
+    assert m.coverage_2sigma == (0.75, 0.75, 1.0)
+    assert m.mean_nees == pytest.approx(np.sum(err ** 2) / 4, rel=1e-15) and m.n_sigma == 4
     sig[1, 2] = np.nan  # a row without σ is left out
-    assert sigma_metrics(err, sig)["n_sigma"] == 3
+    assert sigma_metrics(err, sig).n_sigma == 3
 
 
 def test_evaluate_reports_coverage_from_an_estimate_csv_with_sigma(tmp_path, capsys):
@@ -108,8 +108,8 @@ def test_evaluate_reports_coverage_from_an_estimate_csv_with_sigma(tmp_path, cap
     est = Motion(t, omega_b_radps=np.array([[0.5, 0, 0], [3, 0, 0], [0, 1.5, 0], [0, 0, 0.1]]),
                  sigma={"omega_b_radps": np.ones((4, 3))})
     r = evaluate(est, truth)["omega"]
-    assert r.coverage_1sigma == (0.75, 0.75, 1.0) and r.coverage_2sigma == (0.75, 1.0, 1.0)
-    assert r.mean_nees == pytest.approx((0.25 + 9 + 2.25 + 0.01) / 4, rel=1e-15)
+    assert r.sigma.coverage_1sigma == (0.75, 0.75, 1.0) and r.sigma.coverage_2sigma == (0.75, 1.0, 1.0)
+    assert r.sigma.mean_nees == pytest.approx((0.25 + 9 + 2.25 + 0.01) / 4, rel=1e-15)
     gio.write_motion_csv(est, tmp_path / "est.csv")
     gio.write_motion_csv(truth, tmp_path / "truth.csv")
     assert main(["evaluate", str(tmp_path / "truth.csv"), str(tmp_path / "est.csv"), "--format", "csv"]) == 0
@@ -168,24 +168,24 @@ def test_sigma_covers_an_unstated_correlated_misfit_and_stays_where_the_model_is
     scaled, m_scaled = _coverage(misfit, est, False, monkeypatch)
     assert np.array_equal(m_white.omega_b_radps, m_scaled.omega_b_radps)  # the estimate itself is untouched
     # the white-noise σ is several times too small: a third of the samples within 1σ at most
-    assert max(white["coverage_1sigma"]) < 0.35 and white["mean_nees"] > 20
+    assert max(white.coverage_1sigma) < 0.35 and white.mean_nees > 20
     # scaled: the target band over the three axes together (each axis' share, from 30 s of errors
     # correlated over a second or so, scatters by about ±0.06 about it)
-    one, two = np.mean(scaled["coverage_1sigma"]), np.mean(scaled["coverage_2sigma"])
+    one, two = np.mean(scaled.coverage_1sigma), np.mean(scaled.coverage_2sigma)
     assert 0.60 <= one <= 0.76 and 0.90 <= two <= 0.99, scaled
-    assert all(0.55 <= v <= 0.85 for v in scaled["coverage_1sigma"]), scaled  # the band less that scatter
-    assert 1.0 < scaled["mean_nees"] < 4.0
+    assert all(0.55 <= v <= 0.85 for v in scaled.coverage_1sigma), scaled  # the band less that scatter
+    assert 1.0 < scaled.mean_nees < 4.0
     # a log with the stated white noise: the model's σ is too wide (the path's trapezoid residual is far below
     # the white jerk's, and half of ω's variance is that part), the reported σ follows the path's level into
     # the band (each axis' share scatters by about ±0.06 here, as above)
     right, m_right = _coverage(clean, est, False, monkeypatch)
     plain, m_plain = _coverage(clean, est, True, monkeypatch)
-    assert min(plain["coverage_1sigma"]) > 0.8 and plain["mean_nees"] < 2.0, plain
+    assert min(plain.coverage_1sigma) > 0.8 and plain.mean_nees < 2.0, plain
     ratio = m_right.sigma["omega_b_radps"] / m_plain.sigma["omega_b_radps"]
     assert 0.6 < np.median(ratio) < 0.9
-    assert 0.60 <= np.mean(right["coverage_1sigma"]) <= 0.76 and 0.90 <= np.mean(right["coverage_2sigma"]) <= 0.98, right
-    assert all(0.55 <= v <= 0.80 for v in right["coverage_1sigma"]), right
-    assert 2.0 < right["mean_nees"] < 4.0
+    assert 0.60 <= np.mean(right.coverage_1sigma) <= 0.76 and 0.90 <= np.mean(right.coverage_2sigma) <= 0.98, right
+    assert all(0.55 <= v <= 0.80 for v in right.coverage_1sigma), right
+    assert 2.0 < right.mean_nees < 4.0
 
 
 def test_factor_is_a_function_of_the_residuals_only_and_follows_them_in_time():

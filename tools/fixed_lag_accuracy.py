@@ -81,7 +81,7 @@ def run(scenario: str, args) -> dict:
         "fixed_streamed": rmse(fixed.omega_b_radps[streamed], truth[streamed]),
         "flipped_all": float(np.mean(np.sum(fixed.omega_b_radps * truth, axis=1) < 0)),
         "flipped_all_batch": float(np.mean(np.sum(batch.omega_b_radps * truth, axis=1) < 0)),
-        "flipped_share": evaluate(fixed, log.truth)["omega_b_radps"].flipped_share,
+        "flipped_share": evaluate(fixed, log.truth)["omega_b_radps"].signs.flipped_share,
         "time_batch_s": t_batch, "time_fixed_s": t_fixed,
     }
     if args.causal_points > 0 and fixed_tunings and streamed.stop - streamed.start > 2:

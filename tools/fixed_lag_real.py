@@ -97,7 +97,7 @@ def score(motion, reference, valid: np.ndarray | None, moving_radps: float = MOV
     if not np.any(use):
         return {"moving": 0, "rmse_radps": math.nan, "wrong_sign_share": math.nan}
     omega = evaluate(motion, reference, valid=use, sign_threshold_radps=SIGN_THRESHOLD_RADPS)["omega"]
-    return {"moving": omega.n, "rmse_radps": omega.rmse_norm, "wrong_sign_share": omega.flipped_share}
+    return {"moving": omega.n, "rmse_radps": omega.rmse_norm, "wrong_sign_share": omega.signs.flipped_share}
 
 
 # --- the tables ------------------------------------------------------------------------------------

@@ -244,18 +244,18 @@ def spread(err: np.ndarray, sigma: np.ndarray, more=()) -> float:
 
 def in_target(m: dict, slack: float = 0.0) -> bool:
     """Every axis' 1σ share within 60-76 % and 2σ share within 90-98 %, each bound widened by ``slack``."""
-    return (all(0.60 - slack <= v <= 0.76 + slack for v in m["coverage_1sigma"])
-            and all(0.90 - slack <= v <= 0.98 + slack for v in m["coverage_2sigma"]))
+    return (all(0.60 - slack <= v <= 0.76 + slack for v in m.coverage_1sigma)
+            and all(0.90 - slack <= v <= 0.98 + slack for v in m.coverage_2sigma))
 
 
 def row(name: str, method: str, kind: str, err: np.ndarray, sigma: np.ndarray, more=()) -> str:
     """One line of the table; ``more``: further independent draws (err, sigma), pooled (:func:`spread`)."""
     m = sigma_metrics(np.vstack([err] + [e for e, _ in more]), np.vstack([sigma] + [s for _, s in more]))
-    cov = m["coverage_1sigma"] + m["coverage_2sigma"]
+    cov = m.coverage_1sigma + m.coverage_2sigma
     sp = spread(err, sigma, more)
     verdict = "yes" if in_target(m) else "within ±" if in_target(m, 2 * sp) else "no"
     return (f"| {name} | {method} | {kind} | " + " | ".join(f"{100 * v:.0f} %" for v in cov)
-            + f" | ±{100 * sp:.0f} % | {m['mean_nees']:.3g} | {verdict} |")
+            + f" | ±{100 * sp:.0f} % | {m.mean_nees:.3g} | {verdict} |")
 
 
 def rows_for(name: str, log, omega_true, methods, valid=None, reference=None) -> None:
