@@ -92,6 +92,10 @@ def _check(problem, states):
     assert h1 == pytest.approx(h0, rel=REL)
     assert s1 == pytest.approx(s0, rel=REL)
     assert s1 == pytest.approx(2 * h1, rel=REL)
+    # one rigid-body equation in the kernels: the cost a step is accepted on is, bit for bit, the one its
+    # normal equations were built at, and the sum of the residuals' squares
+    assert s1 == 2 * h1
+    assert s0 == 2 * h0
     # the whitened residuals w (h - y): rounding of the prediction's terms and the reading, times w
     r0, r1 = _residuals(group, problem, states)
     white = problem.noise.accel.whitening(r0.shape)

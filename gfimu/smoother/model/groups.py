@@ -311,19 +311,16 @@ class AccelerometerGroup(_ArrayMeasurementGroup):
     def squared_norm(self, problem, states, params):
         if problem.n_global:
             return super().squared_norm(problem, states, params)
-        if _kernels_here(self):
+        if _kernels_here(self):  # the reading accumulate linearises, by the same operations (kernels.squared_norm)
             from . import kernels
 
-            accel = problem.noise.accel
-            stds = accel.sigma[None, :] if accel.per_sample is None else accel.per_sample
             y = _contiguous(problem.log.accel_mps2)
             sq = np.empty(y.shape[0])
-            kernels.squared_norm(_contiguous(states), y, _contiguous(problem.all_rows), _contiguous(stds), sq)
+            kernels.squared_norm(_contiguous(states), _contiguous(problem.all_directions_b),
+                                 _contiguous(problem.all_positions_m), _contiguous(problem.all_rows), y,
+                                 _contiguous(_kernel_whitening(problem)), sq)
             return float(np.sum(sq))
-        X = states
-        r = accelerometer.accelerometer_prediction(X[:, OMEGA], X[:, OMEGA_DOT], X[:, SPECIFIC_FORCE],
-                                                   problem.all_rows) - problem.log.accel_mps2
-        r = r / problem.noise.accel.stds()
+        r = self._all_axes(problem, states)[0]
         return float(np.sum(r * r))
 
     def gtsam_factors(self, problem):

@@ -14,7 +14,9 @@ this kernel with; the two agree to rounding (the same products, summed in anothe
 
 :func:`squared_norm` is the whitened residuals' sum of squares alone (the cost the Levenberg-Marquardt
 step is accepted on, :meth:`AccelerometerGroup.squared_norm`), :func:`whitened_residual` the residuals
-themselves (the robust re-weighting's, :meth:`AccelerometerGroup.whitened_residual`).
+themselves (the robust re-weighting's, :meth:`AccelerometerGroup.whitened_residual`): all three read the
+rigid-body equation from one function (:func:`_reading`), so the cost, the residuals and the normal
+equations are the same numbers at the same states.
 
 :func:`white_jerk` is the white-jerk motion model's rows (:meth:`MotionModelGroup.accumulate
 <gfimu.smoother.model.groups.MotionModelGroup.accumulate>`): the trapezoid and ω̇ random-walk rows of every
@@ -172,26 +174,23 @@ def _add_sample(D, G, g, h, x, lin21, lin, per_sample):
 
 
 @njit(cache=True, nogil=True)
-def squared_norm(X, y, rows, stds, sq):
-    """Each sample's ``Σ_a e²`` into ``sq`` (N,): the whitened residuals ``e = (h(x) - y) / σ`` with
-    ``h = S [f, ω̇, q(ω)]`` (:func:`gfimu.factors.accelerometer.accelerometer_prediction`); ``stds`` σ
-    (N, axes) per sample or (1, axes) for every sample (the other arguments as :func:`accumulate`'s)."""
+def squared_norm(X, S, P, rows, y, white, sq):
+    """Each sample's ``Σ_a e²`` into ``sq`` (N,): the whitened residuals ``e = w (h(x) - y)`` with ``h`` the
+    rigid-body reading :func:`accumulate` linearises (:func:`_reading`), by the same operations, so that the
+    cost a Levenberg-Marquardt step is accepted on is the one its normal equations were built at (the
+    arguments as :func:`accumulate`'s)."""
     n, axes = y.shape
-    per_sample = stds.shape[0] != 1 or n == 1
+    per_sample = white.shape[0] != 1 or n == 1
+    sr = np.empty(axes)
+    for a in range(axes):
+        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
     for k in range(n):
         w0, w1, w2 = X[k, 0], X[k, 1], X[k, 2]
-        d0, d1, d2 = X[k, 3], X[k, 4], X[k, 5]
-        f0, f1, f2 = X[k, 6], X[k, 7], X[k, 8]
-        q0, q1, q2 = w0 * w0 + w1 * w1, w0 * w0 + w2 * w2, w1 * w1 + w2 * w2
-        q3, q4, q5 = w0 * w1, w0 * w2, w1 * w2
+        ww = w0 * w0 + w1 * w1 + w2 * w2
         kw = k if per_sample else 0
         s2 = 0.0
         for a in range(axes):
-            pred = ((f0 * rows[a, 0] + f1 * rows[a, 1] + f2 * rows[a, 2])
-                    + (d0 * rows[a, 3] + d1 * rows[a, 4] + d2 * rows[a, 5])
-                    + (q0 * rows[a, 6] + q1 * rows[a, 7] + q2 * rows[a, 8] + q3 * rows[a, 9] + q4 * rows[a, 10]
-                       + q5 * rows[a, 11]))
-            e = (pred - y[k, a]) / stds[kw, a]
+            e = (_reading(X, k, a, S, P, rows, sr, ww)[0] - y[k, a]) * white[kw, a]
             s2 += e * e
         sq[k] = s2
 
@@ -271,7 +270,7 @@ def warm() -> None:
     X, y, S, P, rows, white = np.zeros((2, 9)), np.zeros((2, 1)), np.ones((1, 3)), np.ones((1, 3)), np.ones((1, 12)), np.ones((2, 1))
     sq = np.zeros(2)
     accumulate(X, y, S, P, rows, white, np.zeros((2, 9, 9)), np.zeros((2, 9)), sq)
-    squared_norm(X, y, rows, white, sq)
+    squared_norm(X, S, P, rows, y, white, sq)
     whitened_residual(X, S, P, rows, y, white, np.zeros((2, 1)))
     e = np.zeros((1, 3))
     white_jerk(X, np.ones(1), np.ones((1, 6)), np.zeros((2, 9, 9)), np.zeros((1, 9, 9)), np.zeros((2, 9)), e, e.copy())
