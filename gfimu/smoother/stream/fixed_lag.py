@@ -391,6 +391,11 @@ class StreamConfig:
         """The lag [ns], rounded to the nanosecond."""
         return int(round(self.lag_s * 1e9))
 
+    @functools.cached_property
+    def gap_ns(self) -> float:
+        """A step longer than this [ns] ends the segment (``gap_factor`` nominal steps)."""
+        return self.gap_factor * self.nominal_dt_ns
+
 
 @dataclass
 class Segment:
@@ -806,51 +811,57 @@ class FixedLagSmoother:
             raise FixedLagSmootherClosed("fixed-lag smoother: push after close(); create a new smoother to start "
                                          "another stream")
         t_ns = int(timestamp_ns)
-        y = np.asarray(accel_row, dtype=float).reshape(-1)
-        if y.shape != (self.array.n_axes,):
-            raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
-        if not math.isfinite(y.sum()) and not np.all(np.isfinite(y)):  # (a finite sum: every value finite)
-            bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
+        y = np.asarray(accel_row, dtype=float)
+        if y.ndim != 1:
+            y = y.reshape(-1)
+        array = self.array
+        if y.shape != (array.n_axes,):
+            raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {array.n_axes} axes")
+        # a finite sum of squares: every value finite (the cheapest of numpy's reductions on a row)
+        if not math.isfinite(y.dot(y)) and not np.all(np.isfinite(y)):
+            bad = [array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
             raise DataError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
         gyro = None
-        if gyro_row is not None and self.array.gyroscope is not None and self.options.model.use_gyro:
+        if gyro_row is not None and array.gyroscope is not None and self.options.model.use_gyro:
             gyro = np.asarray(gyro_row, dtype=float).reshape(-1)
             if gyro.shape != (3,):
                 raise InputError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
             if not np.all(np.isfinite(gyro)):
                 gyro = None  # a missing gyro sample: the accelerometers alone carry on
         smoothed: list[StateEstimate] = []
-        if self._clock.last_ns is not None:
-            dt_ns = t_ns - self._clock.last_ns
+        clock = self._clock
+        if clock.last_ns is not None:
+            dt_ns = t_ns - clock.last_ns
             if dt_ns == 0:
-                self._clock.duplicates += 1
+                clock.duplicates += 1
                 return FixedLagUpdate((), None, "duplicate")
-            if 0 > dt_ns >= -self._clock.reset_s * 1e9:
-                self._clock.out_of_order += 1
+            if 0 > dt_ns >= -clock.reset_s * 1e9:
+                clock.out_of_order += 1
                 return FixedLagUpdate((), None, "out-of-order")
             if dt_ns < 0:
-                self._clock.clock_resets += 1
+                clock.clock_resets += 1
                 warnings.warn(f"fixed-lag smoother: the clock went back by {-dt_ns * 1e-9:.6f} s (from "
-                              f"{self._clock.last_ns} to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
+                              f"{clock.last_ns} to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
                               "flushed and a new segment starts", ClockResetWarning, stacklevel=2)
                 self._settle_choice()
                 smoothed.extend(self._end_segment())
-                self._clock.origin_ns = t_ns
-            elif dt_ns > self.config.gap_factor * self.config.nominal_dt_ns:
+                clock.origin_ns = t_ns
+            elif dt_ns > self.config.gap_ns:
                 self._settle_choice()
                 smoothed.extend(self._end_segment())
         else:
-            self._clock.origin_ns = t_ns
-        self._clock.last_ns = t_ns
-        self._choice.accepted += 1
-        if self._choice.pending is not None:
+            clock.origin_ns = t_ns
+        clock.last_ns = t_ns
+        choice = self._choice
+        choice.accepted += 1
+        if choice.pending is not None:
             self._swap_choice()
         sample = (t_ns, y, gyro)
         if self._sigma is not None:
             self._sigma.readings[t_ns] = y
-        if self._choice.first_pending:
-            self._choice.buffer.append(sample)
-            if len(self._choice.buffer) < self._choice.rules.tune_n:
+        if choice.first_pending:
+            choice.buffer.append(sample)
+            if len(choice.buffer) < choice.rules.tune_n:
                 return FixedLagUpdate(self._scaled(smoothed), None)
             smoothed.extend(self._tune_and_replay())
         else:
@@ -1126,27 +1137,31 @@ class FixedLagSmoother:
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
         choose again when due (every ``retune_every_s``) or when the motion outgrows the model."""
-        if not (self._choice.rules.auto or self._choice.rules.tune) or self.stream_model is None:
+        choice = self._choice
+        chosen = choice.stream_model
+        if not (choice.rules.auto or choice.rules.tune) or chosen is None:
             return
-        self._choice.history.append(sample[0], sample[1], sample[2])
-        chosen = self.stream_model
+        t_ns, y, gyro = sample
+        choice.history.append(t_ns, y, gyro)
         q = chosen.groups.model.omega_dot_random_walk_radps2_per_sqrt_s
-        if chosen.robust:
+        robust = chosen.robust
+        if robust:
             c = chosen.check
-            w2 = 0.0 if self._segment.prev is None else float(self._segment.prev[1] @ self._segment.prev[1])
+            prev = self._segment.prev
+            w2 = 0.0 if prev is None else float(prev[1] @ prev[1])
             var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
         else:
-            var = self.model.noise.mean_accel_var_mps2
-        local = self._choice.local.push(sample[0], sample[1], var)
-        self._choice.jerk_factor = 1.0
-        if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
-            self._choice.jerk_factor = min(1.0, local / q)
-        due = sample[0] - chosen.chosen_at_ns >= self._choice.rules.retune_ns
+            var = choice.model.noise.mean_accel_var_mps2
+        local = choice.local.push(t_ns, y, var)
+        choice.jerk_factor = 1.0
+        if local is not None and robust:  # the batch smoother's local density (robust model)
+            choice.jerk_factor = min(1.0, local / q)
+        due = t_ns - chosen.chosen_at_ns >= choice.rules.retune_ns
         # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
         # again at once (at most once a second), on the history that now holds the motion
-        outgrown = (local is not None and self._choice.local.resolved and local > OUTGROWN_FACTOR * q
-                    and sample[0] - chosen.chosen_at_ns >= 1e9)
-        if (due or outgrown) and len(self._choice.history) >= self._choice.rules.tune_min_n:
+        outgrown = (local is not None and choice.local.resolved and local > OUTGROWN_FACTOR * q
+                    and t_ns - chosen.chosen_at_ns >= 1e9)
+        if (due or outgrown) and len(choice.history) >= choice.rules.tune_min_n:
             self._choose(outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
