@@ -1327,32 +1327,40 @@ class FixedLagSmoother:
             step = self._step(seg.prev_sample, sample, seg.prev_x, self._choice.jerk_factor)
             seg.engine.advance(k, step, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro), prev=seg.prev[1:])
             seg.engine.commit()
-            self._follow_sign(k, t_ns)
+            x = self._follow_sign(k, t_ns)
         except FilterFailure as err:
             seg.k = k_prev
             self._recover(sample, self._failure(t_ns, err))
             return
         seg.window.append((k, t_ns))
         seg.raw.append(sample)
-        self._remember_newest()
+        self._remember_newest(x)
 
     def _step(self, previous, sample, x0: np.ndarray, motion_factor: float):
         """The step from sample ``previous`` to ``sample`` (each (t_ns, accel, gyro)) as the model's step
         groups give it (:meth:`ArrayModel.step`), linearised at the newest state ``x0``; ``motion_factor``:
         the local motion density's factor on the motion model's stds."""
-        return self.model.step((sample[0] - previous[0]) * 1e-9, motion_factor, (previous[0], sample[0]),
-                               ((previous[1], previous[2]), (sample[1], sample[2])), x0)
+        model = self.model
+        h = (sample[0] - previous[0]) * 1e-9
+        if not model.factor_sets.other_steps:  # the built-in groups alone: nothing read of the samples
+            return model.step(h, motion_factor)
+        return model.step(h, motion_factor, (previous[0], sample[0]),
+                          ((previous[1], previous[2]), (sample[1], sample[2])), x0)
 
-    def _follow_sign(self, k: int, t_ns: int) -> None:
-        """The streaming sign chain on the newest filtered state; flip ω where it says so."""
+    def _follow_sign(self, k: int, t_ns: int) -> np.ndarray | None:
+        """The streaming sign chain on the newest filtered state; flip ω where it says so. Returns the newest
+        state's mean as it stands after (None when there is no chain: nothing read)."""
         scale = None if self.stream_model is None else self.stream_model.sign_scale_radps
         if scale is None:
-            return
+            return None
         seg = self._segment
-        x = seg.engine.mean(k)
+        engine = seg.engine
+        x = engine.mean(k)
         moved = self._signs.push(k, t_ns, x[0:3], x[3:6], scale, seg.window[0][0] if seg.window else k)
         if moved is not None:
-            seg.engine.move_branch(*moved)
+            engine.move_branch(*moved)
+            x = engine.mean(k)
+        return x
 
     def _recover(self, sample, err: FixedLagSmootherError) -> None:
         """After a failed update: rebuild the window from its raw samples, once.
@@ -1370,10 +1378,11 @@ class FixedLagSmoother:
         self._segment.warmup = samples
         self._initialise(omega_hint=hint)
 
-    def _remember_newest(self) -> None:
+    def _remember_newest(self, x: np.ndarray | None = None) -> None:
+        """The newest state's values kept (``x``: its mean as read already, else read here), copied once."""
         seg = self._segment
         k, t_ns = seg.window[-1]
-        x = self._values_of(k, t_ns)
+        x = self._values_of(k, t_ns) if x is None else np.array(x, dtype=float)
         seg.prev = (t_ns, x[0:3], x[3:6], x[6:9])
         seg.prev_x = x
         seg.prev_sample = seg.raw[-1]
