@@ -243,6 +243,17 @@ class StateEstimate:
     sigma_specific_force_b_mps2: np.ndarray | None = None
 
 
+_STATE_FIELDS = tuple(StateEstimate.__dataclass_fields__)
+
+
+def _state(*values) -> StateEstimate:
+    """``StateEstimate(*values)``, made without the frozen dataclass's ``__init__``: that sets each field through
+    ``object.__setattr__``, a call per field, and a stream makes one state per sample (the same object)."""
+    state = object.__new__(StateEstimate)
+    state.__dict__.update(zip(_STATE_FIELDS, values + (None,) * (len(_STATE_FIELDS) - len(values))))
+    return state
+
+
 class FixedLagUpdate:
     """What one :meth:`FixedLagSmoother.push` gives back.
 
@@ -1397,43 +1408,45 @@ class FixedLagSmoother:
     def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
         k, t_ns = entry
         seg = self._segment
-        if seg.prev is not None and k == seg.k:
-            w, dw, f = seg.prev[1], seg.prev[2], seg.prev[3]
+        prev = seg.prev
+        if prev is not None and k == seg.k:
+            w, dw, f = prev[1], prev[2], prev[3]
         else:
             try:
                 x = np.array(seg.engine.mean(k), dtype=float)  # one copy, its three parts views of it
             except FilterFailure as err:
                 raise self._failure(t_ns, err, "could not solve the state") from err
             w, dw, f = x[0:3], x[3:6], x[6:9]
-        sig = (None, None, None)
-        if with_sigma:
-            try:
-                sd = seg.engine.sigma(k)
-            except FilterFailure as err:
-                raise self._failure(t_ns, err, "could not compute the uncertainty") from err
-            sig = (sd[0:3], sd[3:6], sd[6:9])
-        return StateEstimate(t_ns, w, dw, f, *sig)
+        if not with_sigma:
+            return _state(t_ns, w, dw, f)
+        try:
+            sd = seg.engine.sigma(k)
+        except FilterFailure as err:
+            raise self._failure(t_ns, err, "could not compute the uncertainty") from err
+        return _state(t_ns, w, dw, f, sd[0:3], sd[3:6], sd[6:9])
 
     def _emit_due(self) -> list[StateEstimate]:
         """States at or before newest - lag: final now, marginalised at the next update."""
-        window, raw, engine = self._segment.window, self._segment.raw, self._segment.engine
+        seg, hold = self._segment, self._hold
+        window, raw, engine = seg.window, seg.raw, seg.engine
         newest_ns = window[-1][1]
         cutoff_ns = newest_ns - self.config.lag_ns + 1000  # 1 µs tolerance
         out = []
         if len(window) < 2 or window[0][1] > cutoff_ns:
-            return self._hold_start(newest_ns) if self._hold.deciding else out
+            return self._hold_start(newest_ns) if hold.deciding else out
         readings = lambda i: raw[i][1]  # noqa: E731 (the window's readings, for the branch decision)
+        with_sigma = self.config.compute_sigma
         while len(window) > 1 and window[0][1] <= cutoff_ns:
             engine.settle(readings)
-            if self._hold.deciding:  # held: its filtered value is kept as the start of the re-solve
+            if hold.deciding:  # held: its filtered value is kept as the start of the re-solve
                 k, t_ns = window.popleft()
-                self._hold.held.append((t_ns, raw.popleft(), engine.mean(k).copy()))
+                hold.held.append((t_ns, raw.popleft(), engine.mean(k).copy()))
                 engine.drop_oldest()
                 continue
-            out.append(self._read(window.popleft(), with_sigma=self.config.compute_sigma))
+            out.append(self._read(window.popleft(), with_sigma))
             raw.popleft()
             engine.drop_oldest()
-        if self._hold.deciding:
+        if hold.deciding:
             return self._hold_start(newest_ns)
         return out
 
