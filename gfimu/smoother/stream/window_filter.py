@@ -384,7 +384,8 @@ class WindowFilter:
             lazy = self._lazy
             if lazy.epochs.waits(k):
                 self._bring_up(k + 1)
-            return store.mean[s] + store.cross[s] @ lazy.u
+            # (ndarray.dot: the same BLAS product as ``@``, with less of numpy's dispatch around it)
+            return store.mean[s] + store.cross[s].dot(lazy.u)
         raise KeyError(f"state {k} is not in the window")
 
     def sigma(self, k: int) -> np.ndarray:
@@ -408,7 +409,9 @@ class WindowFilter:
             store.lo = lo
             if store.split < lo:
                 store.split = lo
-            self._lazy.epochs.forget_before(store.base + lo)
+            epochs = self._lazy.epochs
+            if epochs.stale:  # (no run waits: nothing to forget)
+                epochs.forget_before(store.base + lo)
 
     # --- the older states: brought up to date when read ----------------------------------
     def _boundary(self) -> None:
