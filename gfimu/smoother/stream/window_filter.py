@@ -805,13 +805,14 @@ class WindowFilter:
             self._make_room()
             hi = store.hi
         F, Q = step.F, step.Q
-        T, u, W, P_after, split, ok = kernels.advance_update(
+        # (the factors T, u, W and the newest covariance P written in place by the call)
+        split, ok = kernels.advance_update(
             F if F.flags.c_contiguous else np.ascontiguousarray(F, dtype=float),
             Q if Q.flags.c_contiguous else np.ascontiguousarray(Q, dtype=float),
             _ZERO9 if step.c is None else np.asarray(step.c, dtype=float), newest.P, lazy.T, lazy.u, lazy.W,
             store.mean, store.var, store.cross, store.lo, store.split, hi, _NEVER,
             np.ascontiguousarray(y, dtype=float), *ops.kernel_model, *ops.kernel_options)
-        lazy.T, lazy.u, lazy.W, newest.P, newest.Q, newest.F = T, u, W, P_after, Q, F
+        newest.Q, newest.F = Q, F
         hi += 1
         store.hi = hi
         if not ok:
