@@ -826,7 +826,7 @@ class FixedLagSmoother:
         if y.ndim != 1:
             y = y.reshape(-1)
         array = self.array
-        if y.shape != (array.n_axes,):
+        if y.shape[0] != array.n_axes:
             raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {array.n_axes} axes")
         # a finite sum of squares: every value finite (the cheapest of numpy's reductions on a row)
         if not math.isfinite(y.dot(y)) and not np.all(np.isfinite(y)):
@@ -1413,9 +1413,11 @@ class FixedLagSmoother:
             w, dw, f = prev[1], prev[2], prev[3]
         else:
             try:
-                x = np.array(seg.engine.mean(k), dtype=float)  # one copy, its three parts views of it
+                x = seg.engine.mean(k)
             except FilterFailure as err:
                 raise self._failure(t_ns, err, "could not solve the state") from err
+            if x.base is not None:  # a view of the window's arrays: copied once (a mean computed for the call is ours)
+                x = x.copy()
             w, dw, f = x[0:3], x[3:6], x[6:9]
         if not with_sigma:
             return _state(t_ns, w, dw, f)
@@ -1698,10 +1700,12 @@ class FixedLagEstimator(SmootherEstimator):
             for s in states:
                 if cursor >= n or log.timestamps_ns[cursor] != s.timestamp_ns:
                     raise FixedLagSmootherError(f"{log.source}: internal ordering error at sample {cursor}")
-                out[cursor] = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+                row = out[cursor]  # (its three parts written in place: no concatenated copy of them)
+                row[0:3], row[3:6], row[6:9] = s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2
                 if sig is not None and s.sigma_omega_b_radps is not None:
-                    sig[cursor] = np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
-                                                  s.sigma_specific_force_b_mps2])
+                    row = sig[cursor]
+                    row[0:3], row[3:6], row[6:9] = (s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
+                                                    s.sigma_specific_force_b_mps2)
                 cursor += 1
 
         for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):
