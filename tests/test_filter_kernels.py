@@ -305,6 +305,49 @@ def test_the_fused_advance_is_the_numpy_predict_and_measure(monkeypatch, noise, 
         np.testing.assert_allclose(fused.mean(len(log) - 1)[:3], log.truth.omega_b_radps[-1], atol=1e-2)
 
 
+@pytest.mark.parametrize("robust", [0.0, 2.0])
+def test_the_fused_advance_is_the_two_compiled_calls_bit_for_bit(robust):
+    """The fused call (:func:`kernels.advance_update`, its factors T, u, W and the newest covariance P written
+    into the filter's own arrays) gives the very numbers of the two compiled calls it fuses
+    (:func:`kernels.predict_window`, then :func:`kernels.measure_update`), every state of the window, the factors
+    and P equal to the last bit, over a stream long enough to close epochs and compact the window."""
+    array = cube_array(0.05, noise_std_mps2=0.07)
+    log = simulate("random3d", array=array, rate_hz=500.0, duration_s=0.8, seed=5)
+    filters = []
+    for _ in range(2):
+        m = model.ArrayModel(array, ModelOptions(), BatchModelOptions())
+        if robust:
+            m.robust_loss = "cauchy"
+            m.accel_robust_threshold = m.process_robust_threshold = robust
+        filters.append(flf.WindowFilter(m, capacity=64, branches=True))
+    fused, apart = filters
+    h = 1.0 / 500.0
+    in_place = 0
+    for i, y in enumerate(log.accel_mps2):
+        if i == 0:
+            for f in filters:
+                f.start(0)
+                f.measure(y)
+            continue
+        lazy = fused._lazy
+        before = (lazy.T, lazy.u, lazy.W, fused._newest.P)
+        fused.advance(i, fused.model.step(h), 0, y)
+        in_place += all(a is b for a, b in zip(before, (lazy.T, lazy.u, lazy.W, fused._newest.P)))
+        apart.predict(i, apart.model.step(h))
+        apart.measure(y)
+        for f in filters:
+            if len(f) > 40:
+                f.drop_oldest()
+        for a, b in ((fused._store, apart._store), (fused._lazy, apart._lazy), (fused._newest, apart._newest)):
+            for name in a.__slots__:
+                va, vb = getattr(a, name), getattr(b, name)
+                if isinstance(va, np.ndarray) and name != "tmp":
+                    np.testing.assert_array_equal(va, vb, err_msg=f"{name} at sample {i}")
+        assert (fused._store.lo, fused._store.hi, fused._store.split) == (apart._store.lo, apart._store.hi,
+                                                                          apart._store.split)
+    assert fused._base > 0 and in_place > len(log) // 2  # (an epoch's end makes new factors: not in place)
+
+
 @pytest.mark.parametrize("compiled", [True, False])
 def test_a_non_finite_update_is_a_filter_failure_on_both_paths(compiled):
     """A reading that makes the update non-finite: FilterFailure from the fused kernel as from the numpy path,

@@ -243,6 +243,17 @@ class StateEstimate:
     sigma_specific_force_b_mps2: np.ndarray | None = None
 
 
+_STATE_FIELDS = tuple(StateEstimate.__dataclass_fields__)
+
+
+def _state(*values) -> StateEstimate:
+    """``StateEstimate(*values)``, made without the frozen dataclass's ``__init__``: that sets each field through
+    ``object.__setattr__``, a call per field, and a stream makes one state per sample (the same object)."""
+    state = object.__new__(StateEstimate)
+    state.__dict__.update(zip(_STATE_FIELDS, values + (None,) * (len(_STATE_FIELDS) - len(values))))
+    return state
+
+
 class FixedLagUpdate:
     """What one :meth:`FixedLagSmoother.push` gives back.
 
@@ -390,6 +401,11 @@ class StreamConfig:
     def lag_ns(self) -> int:
         """The lag [ns], rounded to the nanosecond."""
         return int(round(self.lag_s * 1e9))
+
+    @functools.cached_property
+    def gap_ns(self) -> float:
+        """A step longer than this [ns] ends the segment (``gap_factor`` nominal steps)."""
+        return self.gap_factor * self.nominal_dt_ns
 
 
 @dataclass
@@ -806,51 +822,57 @@ class FixedLagSmoother:
             raise FixedLagSmootherClosed("fixed-lag smoother: push after close(); create a new smoother to start "
                                          "another stream")
         t_ns = int(timestamp_ns)
-        y = np.asarray(accel_row, dtype=float).reshape(-1)
-        if y.shape != (self.array.n_axes,):
-            raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {self.array.n_axes} axes")
-        if not math.isfinite(y.sum()) and not np.all(np.isfinite(y)):  # (a finite sum: every value finite)
-            bad = [self.array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
+        y = np.asarray(accel_row, dtype=float)
+        if y.ndim != 1:
+            y = y.reshape(-1)
+        array = self.array
+        if y.shape[0] != array.n_axes:
+            raise InputError(f"sample at {t_ns} ns: accel_row has {y.size} values, the array has {array.n_axes} axes")
+        # a finite sum of squares: every value finite (the cheapest of numpy's reductions on a row)
+        if not math.isfinite(y.dot(y)) and not np.all(np.isfinite(y)):
+            bad = [array.accel_columns[i] for i in np.nonzero(~np.isfinite(y))[0]]
             raise DataError(f"sample at {t_ns} ns: non-finite accelerometer reading(s) in {bad}")
         gyro = None
-        if gyro_row is not None and self.array.gyroscope is not None and self.options.model.use_gyro:
+        if gyro_row is not None and array.gyroscope is not None and self.options.model.use_gyro:
             gyro = np.asarray(gyro_row, dtype=float).reshape(-1)
             if gyro.shape != (3,):
                 raise InputError(f"sample at {t_ns} ns: gyro_row must have 3 values, got {gyro.size}")
             if not np.all(np.isfinite(gyro)):
                 gyro = None  # a missing gyro sample: the accelerometers alone carry on
         smoothed: list[StateEstimate] = []
-        if self._clock.last_ns is not None:
-            dt_ns = t_ns - self._clock.last_ns
+        clock = self._clock
+        if clock.last_ns is not None:
+            dt_ns = t_ns - clock.last_ns
             if dt_ns == 0:
-                self._clock.duplicates += 1
+                clock.duplicates += 1
                 return FixedLagUpdate((), None, "duplicate")
-            if 0 > dt_ns >= -self._clock.reset_s * 1e9:
-                self._clock.out_of_order += 1
+            if 0 > dt_ns >= -clock.reset_s * 1e9:
+                clock.out_of_order += 1
                 return FixedLagUpdate((), None, "out-of-order")
             if dt_ns < 0:
-                self._clock.clock_resets += 1
+                clock.clock_resets += 1
                 warnings.warn(f"fixed-lag smoother: the clock went back by {-dt_ns * 1e-9:.6f} s (from "
-                              f"{self._clock.last_ns} to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
+                              f"{clock.last_ns} to {t_ns} ns, more than clock_reset_s = {self.clock_reset_s:g} s); the window was "
                               "flushed and a new segment starts", ClockResetWarning, stacklevel=2)
                 self._settle_choice()
                 smoothed.extend(self._end_segment())
-                self._clock.origin_ns = t_ns
-            elif dt_ns > self.config.gap_factor * self.config.nominal_dt_ns:
+                clock.origin_ns = t_ns
+            elif dt_ns > self.config.gap_ns:
                 self._settle_choice()
                 smoothed.extend(self._end_segment())
         else:
-            self._clock.origin_ns = t_ns
-        self._clock.last_ns = t_ns
-        self._choice.accepted += 1
-        if self._choice.pending is not None:
+            clock.origin_ns = t_ns
+        clock.last_ns = t_ns
+        choice = self._choice
+        choice.accepted += 1
+        if choice.pending is not None:
             self._swap_choice()
         sample = (t_ns, y, gyro)
         if self._sigma is not None:
             self._sigma.readings[t_ns] = y
-        if self._choice.first_pending:
-            self._choice.buffer.append(sample)
-            if len(self._choice.buffer) < self._choice.rules.tune_n:
+        if choice.first_pending:
+            choice.buffer.append(sample)
+            if len(choice.buffer) < choice.rules.tune_n:
                 return FixedLagUpdate(self._scaled(smoothed), None)
             smoothed.extend(self._tune_and_replay())
         else:
@@ -1129,27 +1151,31 @@ class FixedLagSmoother:
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
         choose again when due (every ``retune_every_s``) or when the motion outgrows the model."""
-        if not (self._choice.rules.auto or self._choice.rules.tune) or self.stream_model is None:
+        choice = self._choice
+        chosen = choice.stream_model
+        if not (choice.rules.auto or choice.rules.tune) or chosen is None:
             return
-        self._choice.history.append(sample[0], sample[1], sample[2])
-        chosen = self.stream_model
+        t_ns, y, gyro = sample
+        choice.history.append(t_ns, y, gyro)
         q = chosen.groups.model.omega_dot_random_walk_radps2_per_sqrt_s
-        if chosen.robust:
+        robust = chosen.robust
+        if robust:
             c = chosen.check
-            w2 = 0.0 if self._segment.prev is None else float(self._segment.prev[1] @ self._segment.prev[1])
+            prev = self._segment.prev
+            w2 = 0.0 if prev is None else float(prev[1] @ prev[1])
             var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
         else:
-            var = self.model.noise.mean_accel_var_mps2
-        local = self._choice.local.push(sample[0], sample[1], var)
-        self._choice.jerk_factor = 1.0
-        if local is not None and chosen.robust:  # the batch smoother's local density (robust model)
-            self._choice.jerk_factor = min(1.0, local / q)
-        due = sample[0] - chosen.chosen_at_ns >= self._choice.rules.retune_ns
+            var = choice.model.noise.mean_accel_var_mps2
+        local = choice.local.push(t_ns, y, var)
+        choice.jerk_factor = 1.0
+        if local is not None and robust:  # the batch smoother's local density (robust model)
+            choice.jerk_factor = min(1.0, local / q)
+        due = t_ns - chosen.chosen_at_ns >= choice.rules.retune_ns
         # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
         # again at once (at most once a second), on the history that now holds the motion
-        outgrown = (local is not None and self._choice.local.resolved and local > OUTGROWN_FACTOR * q
-                    and sample[0] - chosen.chosen_at_ns >= 1e9)
-        if (due or outgrown) and len(self._choice.history) >= self._choice.rules.tune_min_n:
+        outgrown = (local is not None and choice.local.resolved and local > OUTGROWN_FACTOR * q
+                    and t_ns - chosen.chosen_at_ns >= 1e9)
+        if (due or outgrown) and len(choice.history) >= choice.rules.tune_min_n:
             self._choose(outgrown=outgrown)
 
     def flush(self) -> tuple[StateEstimate, ...]:
@@ -1315,32 +1341,40 @@ class FixedLagSmoother:
             step = self._step(seg.prev_sample, sample, seg.prev_x, self._choice.jerk_factor)
             seg.engine.advance(k, step, t_ns, y, gyro, extra=self.model.sample_terms(t_ns, y, gyro), prev=seg.prev[1:])
             seg.engine.commit()
-            self._follow_sign(k, t_ns)
+            x = self._follow_sign(k, t_ns)
         except FilterFailure as err:
             seg.k = k_prev
             self._recover(sample, self._failure(t_ns, err))
             return
         seg.window.append((k, t_ns))
         seg.raw.append(sample)
-        self._remember_newest()
+        self._remember_newest(x)
 
     def _step(self, previous, sample, x0: np.ndarray, motion_factor: float):
         """The step from sample ``previous`` to ``sample`` (each (t_ns, accel, gyro)) as the model's step
         groups give it (:meth:`ArrayModel.step`), linearised at the newest state ``x0``; ``motion_factor``:
         the local motion density's factor on the motion model's stds."""
-        return self.model.step((sample[0] - previous[0]) * 1e-9, motion_factor, (previous[0], sample[0]),
-                               ((previous[1], previous[2]), (sample[1], sample[2])), x0)
+        model = self.model
+        h = (sample[0] - previous[0]) * 1e-9
+        if not model.factor_sets.other_steps:  # the built-in groups alone: nothing read of the samples
+            return model.step(h, motion_factor)
+        return model.step(h, motion_factor, (previous[0], sample[0]),
+                          ((previous[1], previous[2]), (sample[1], sample[2])), x0)
 
-    def _follow_sign(self, k: int, t_ns: int) -> None:
-        """The streaming sign chain on the newest filtered state; flip ω where it says so."""
+    def _follow_sign(self, k: int, t_ns: int) -> np.ndarray | None:
+        """The streaming sign chain on the newest filtered state; flip ω where it says so. Returns the newest
+        state's mean as it stands after (None when there is no chain: nothing read)."""
         scale = None if self.stream_model is None else self.stream_model.sign_scale_radps
         if scale is None:
-            return
+            return None
         seg = self._segment
-        x = seg.engine.mean(k)
+        engine = seg.engine
+        x = engine.mean(k)
         moved = self._signs.push(k, t_ns, x[0:3], x[3:6], scale, seg.window[0][0] if seg.window else k)
         if moved is not None:
-            seg.engine.move_branch(*moved)
+            engine.move_branch(*moved)
+            x = engine.mean(k)
+        return x
 
     def _recover(self, sample, err: FixedLagSmootherError) -> None:
         """After a failed update: rebuild the window from its raw samples, once.
@@ -1358,10 +1392,11 @@ class FixedLagSmoother:
         self._segment.warmup = samples
         self._initialise(omega_hint=hint)
 
-    def _remember_newest(self) -> None:
+    def _remember_newest(self, x: np.ndarray | None = None) -> None:
+        """The newest state's values kept (``x``: its mean as read already, else read here), copied once."""
         seg = self._segment
         k, t_ns = seg.window[-1]
-        x = self._values_of(k, t_ns)
+        x = self._values_of(k, t_ns) if x is None else np.array(x, dtype=float)
         seg.prev = (t_ns, x[0:3], x[3:6], x[6:9])
         seg.prev_x = x
         seg.prev_sample = seg.raw[-1]
@@ -1376,43 +1411,47 @@ class FixedLagSmoother:
     def _read(self, entry, with_sigma: bool = False) -> StateEstimate:
         k, t_ns = entry
         seg = self._segment
-        if seg.prev is not None and k == seg.k:
-            w, dw, f = seg.prev[1], seg.prev[2], seg.prev[3]
+        prev = seg.prev
+        if prev is not None and k == seg.k:
+            w, dw, f = prev[1], prev[2], prev[3]
         else:
             try:
-                x = np.array(seg.engine.mean(k), dtype=float)  # one copy, its three parts views of it
+                x = seg.engine.mean(k)
             except FilterFailure as err:
                 raise self._failure(t_ns, err, "could not solve the state") from err
+            if x.base is not None:  # a view of the window's arrays: copied once (a mean computed for the call is ours)
+                x = x.copy()
             w, dw, f = x[0:3], x[3:6], x[6:9]
-        sig = (None, None, None)
-        if with_sigma:
-            try:
-                sd = seg.engine.sigma(k)
-            except FilterFailure as err:
-                raise self._failure(t_ns, err, "could not compute the uncertainty") from err
-            sig = (sd[0:3], sd[3:6], sd[6:9])
-        return StateEstimate(t_ns, w, dw, f, *sig)
+        if not with_sigma:
+            return _state(t_ns, w, dw, f)
+        try:
+            sd = seg.engine.sigma(k)
+        except FilterFailure as err:
+            raise self._failure(t_ns, err, "could not compute the uncertainty") from err
+        return _state(t_ns, w, dw, f, sd[0:3], sd[3:6], sd[6:9])
 
     def _emit_due(self) -> list[StateEstimate]:
         """States at or before newest - lag: final now, marginalised at the next update."""
-        window, raw, engine = self._segment.window, self._segment.raw, self._segment.engine
+        seg, hold = self._segment, self._hold
+        window, raw, engine = seg.window, seg.raw, seg.engine
         newest_ns = window[-1][1]
         cutoff_ns = newest_ns - self.config.lag_ns + 1000  # 1 µs tolerance
         out = []
         if len(window) < 2 or window[0][1] > cutoff_ns:
-            return self._hold_start(newest_ns) if self._hold.deciding else out
+            return self._hold_start(newest_ns) if hold.deciding else out
         readings = lambda i: raw[i][1]  # noqa: E731 (the window's readings, for the branch decision)
+        with_sigma = self.config.compute_sigma
         while len(window) > 1 and window[0][1] <= cutoff_ns:
             engine.settle(readings)
-            if self._hold.deciding:  # held: its filtered value is kept as the start of the re-solve
+            if hold.deciding:  # held: its filtered value is kept as the start of the re-solve
                 k, t_ns = window.popleft()
-                self._hold.held.append((t_ns, raw.popleft(), engine.mean(k).copy()))
+                hold.held.append((t_ns, raw.popleft(), engine.mean(k).copy()))
                 engine.drop_oldest()
                 continue
-            out.append(self._read(window.popleft(), with_sigma=self.config.compute_sigma))
+            out.append(self._read(window.popleft(), with_sigma))
             raw.popleft()
             engine.drop_oldest()
-        if self._hold.deciding:
+        if hold.deciding:
             return self._hold_start(newest_ns)
         return out
 
@@ -1664,10 +1703,12 @@ class FixedLagEstimator(SmootherEstimator):
             for s in states:
                 if cursor >= n or log.timestamps_ns[cursor] != s.timestamp_ns:
                     raise FixedLagSmootherError(f"{log.source}: internal ordering error at sample {cursor}")
-                out[cursor] = np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
+                row = out[cursor]  # (its three parts written in place: no concatenated copy of them)
+                row[0:3], row[3:6], row[6:9] = s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2
                 if sig is not None and s.sigma_omega_b_radps is not None:
-                    sig[cursor] = np.concatenate([s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
-                                                  s.sigma_specific_force_b_mps2])
+                    row = sig[cursor]
+                    row[0:3], row[3:6], row[6:9] = (s.sigma_omega_b_radps, s.sigma_omega_dot_b_radps2,
+                                                    s.sigma_specific_force_b_mps2)
                 cursor += 1
 
         for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):

@@ -726,9 +726,11 @@ def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_st
     ones brought up to date through ``T, u, W``), the new state written into slot ``hi``, :func:`measure_update`
     on it with the robust loss of the step (``c_process`` > 0), its covariance after the update written into
     the window, and the older states brought up to date (:func:`flush_window`) once ``lazy_steps`` recent ones
-    have gathered. Returns ``(T, u, W, P_after, split, ok)``; the window's arrays are updated in place. Where
-    ``ok`` is False (a singular innovation covariance, non-finite values) the prediction is made, the update
-    not (``P_after`` is the covariance it started from)."""
+    have gathered. Returns ``(split, ok)``; the window's arrays are updated in place, and so are ``T``, ``u``,
+    ``W`` (the factors after the update) and ``P`` (the newest state's covariance after it): four arrays
+    written rather than returned, which would make four new Python objects per sample. Where ``ok`` is False
+    (a singular innovation covariance, non-finite values) the prediction is made, the update not (``P`` is the
+    covariance it started from)."""
     newest = hi - 1
     x_newest = mean[newest].copy()
     if newest < split:  # a lazy state: its mean given the updates since the last flush
@@ -737,7 +739,7 @@ def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_st
             for j in range(9):
                 s += cross[newest, i, j] * u[j]
             x_newest[i] += s
-    x, P_new, T = predict_window(F, Q, c, P, x_newest, T, cross[split:hi])
+    x, P_new, T_predicted = predict_window(F, Q, c, P, x_newest, T, cross[split:hi])
     for i in range(9):
         mean[hi, i] = x[i]
         var[hi, i] = P_new[i, i]
@@ -746,10 +748,11 @@ def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_st
     robust_step = c_process > 0.0
     T2, u2, W2, P_after, P_before, ok = measure_update(
         y, x, P_new, x.copy(), R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
-        prior_margin, c_process, process_loss, Q if robust_step else P_new, robust_step, T, u, W,
+        prior_margin, c_process, process_loss, Q if robust_step else P_new, robust_step, T_predicted, u, W,
         mean[split:hi + 1], var[split:hi + 1], cross[split:hi + 1])
     if not ok:
-        return T2, u2, W2, P_after, split, False
+        _written(T, u, W, P, T2, u2, W2, P_after)
+        return split, False
     for i in range(9):  # the newest state's covariance after the update (symmetrised)
         var[hi, i] = P_after[i, i]
         for j in range(9):
@@ -761,7 +764,19 @@ def advance_update(F, Q, c, P, T, u, W, mean, var, cross, lo, split, hi, lazy_st
         u2 = np.zeros(9)
         W2 = np.zeros((9, 9))
         split = hi + 1
-    return T2, u2, W2, P_after, split, True
+    _written(T, u, W, P, T2, u2, W2, P_after)
+    return split, True
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _written(T, u, W, P, T2, u2, W2, P2):
+    """``T2, u2, W2, P2`` copied into ``T, u, W, P`` (:func:`advance_update`'s results, in place)."""
+    for i in range(9):
+        u[i] = u2[i]
+        for j in range(9):
+            T[i, j] = T2[i, j]
+            W[i, j] = W2[i, j]
+            P[i, j] = P2[i, j]
 
 
 @njit(cache=True, nogil=True)

@@ -279,7 +279,7 @@ class StreamSignChain:
         # the best earlier branch per later branch of the newest ``window`` steps, a ring (oldest at
         # ``_head``, ``_count`` of them), with the later state's k
         self._backs = np.zeros((self.window, n), dtype=np.int64)
-        self._ks = np.zeros(self.window, dtype=np.int64)
+        self._ks = [0] * self.window  # (a list: read and written one int at a time, every sample)
         self._head = self._count = 0
 
     def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
@@ -297,21 +297,22 @@ class StreamSignChain:
             self._t_ns = t_ns
             return None
         c2 = scale_radps * scale_radps
-        window = self.window
-        if self._count == window:  # the oldest step beyond the window is dropped
-            self._head = (self._head + 1) % window
-            self._count -= 1
-        slot = (self._head + self._count) % window
-        self._count += 1
-        self._ks[slot] = k
+        window, head, count, ks = self.window, self._head, self._count, self._ks
+        if count == window:  # the oldest step beyond the window is dropped
+            head = (head + 1) % window
+            count -= 1
+        slot = (head + count) % window
+        count += 1
+        ks[slot] = k
         # from branch a (at k-1) to branch b (at k): the Cauchy loss of the trapezoid's misfit, the lowest
         # total kept per b (only the differences matter, and they stay bounded)
         best = _chain_step(self._w, self._dw, omega, omega_dot, self.normal, (t_ns - self._t_ns) * 1e-9, c2,
                            self._cost, self._backs[slot])
         self._t_ns = t_ns
-        while self._count and self._ks[self._head] <= oldest_k:
-            self._head = (self._head + 1) % window
-            self._count -= 1
+        while count and ks[head] <= oldest_k:
+            head = (head + 1) % window
+            count -= 1
+        self._head, self._count = head, count
         cost = self._cost
         if best == 0 or not float(cost[best]) + self.margin * c2 < float(cost[0]):
             return None

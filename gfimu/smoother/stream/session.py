@@ -334,7 +334,7 @@ class StreamSession:
                 states += self._smooth(self._screened(row))
                 self._last_t = t
                 return states
-        states = self._smooth(self._screened(row) if self.screen is not None else [row])
+        states = self._smooth(self._screened(row)) if self.screen is not None else self._smooth_one(row)
         if last is not None and t > last:
             steps = (t - last) * 1e-9 * self.rate_hz
             if steps > 1.5:  # samples that never came (lost datagrams, a sensor pause)
@@ -361,6 +361,14 @@ class StreamSession:
                 kept.append(time.perf_counter() - t0)
             states.extend(update.smoothed)
         return states
+
+    def _smooth_one(self, row) -> list:
+        """:meth:`_smooth` of the one row ``row`` (readings not screened: the row of every sample)."""
+        t0 = time.perf_counter()
+        update = self.smoother.push(*row)
+        if update.dropped is None:
+            self._timings.processing_s.append(time.perf_counter() - t0)
+        return list(update.smoothed)
 
     def _flush(self) -> list:
         """The rows still held by the screening, then the window: every state left."""

@@ -384,7 +384,8 @@ class WindowFilter:
             lazy = self._lazy
             if lazy.epochs.waits(k):
                 self._bring_up(k + 1)
-            return store.mean[s] + store.cross[s] @ lazy.u
+            # (ndarray.dot: the same BLAS product as ``@``, with less of numpy's dispatch around it)
+            return store.mean[s] + store.cross[s].dot(lazy.u)
         raise KeyError(f"state {k} is not in the window")
 
     def sigma(self, k: int) -> np.ndarray:
@@ -408,7 +409,9 @@ class WindowFilter:
             store.lo = lo
             if store.split < lo:
                 store.split = lo
-            self._lazy.epochs.forget_before(store.base + lo)
+            epochs = self._lazy.epochs
+            if epochs.stale:  # (no run waits: nothing to forget)
+                epochs.forget_before(store.base + lo)
 
     # --- the older states: brought up to date when read ----------------------------------
     def _boundary(self) -> None:
@@ -802,13 +805,14 @@ class WindowFilter:
             self._make_room()
             hi = store.hi
         F, Q = step.F, step.Q
-        T, u, W, P_after, split, ok = kernels.advance_update(
+        # (the factors T, u, W and the newest covariance P written in place by the call)
+        split, ok = kernels.advance_update(
             F if F.flags.c_contiguous else np.ascontiguousarray(F, dtype=float),
             Q if Q.flags.c_contiguous else np.ascontiguousarray(Q, dtype=float),
             _ZERO9 if step.c is None else np.asarray(step.c, dtype=float), newest.P, lazy.T, lazy.u, lazy.W,
             store.mean, store.var, store.cross, store.lo, store.split, hi, _NEVER,
             np.ascontiguousarray(y, dtype=float), *ops.kernel_model, *ops.kernel_options)
-        lazy.T, lazy.u, lazy.W, newest.P, newest.Q, newest.F = T, u, W, P_after, Q, F
+        newest.Q, newest.F = Q, F
         hi += 1
         store.hi = hi
         if not ok:
