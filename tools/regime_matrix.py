@@ -493,7 +493,7 @@ def _compile_kernels() -> None:
     from gfimu.smoother.model import kernels
 
     kernels.warm()
-    est = make_estimator("fixed-lag")
+    est = make_estimator("fixed-lag", compute_sigma=True)  # (σ too: its running scale's kernels)
     est.preload()  # (numba loaded, as the command line does: the stream's steps then run compiled)
     preload.wait()
     est.estimate(simulate("random3d", rate_hz=500.0, duration_s=6.0, seed=0))  # (past the first 3 s: the stream)

@@ -4,8 +4,9 @@ The first call of a numba kernel in a process imports numba (about 0.25 s) and l
 numba's on-disk cache; LLVM's start is most of it and runs outside Python's lock). :func:`start` does that
 in a daemon thread, once per process, so the smoother finds its kernels ready:
 
-- ``"stream"``: the fixed-lag smoother's window kernels (:mod:`gfimu.smoother.stream.kernels`), the per-sample
-  ML's (:mod:`gfimu.estimators.ml_kernels`) and the batch solve's (:mod:`gfimu.smoother.model.kernels`: the
+- ``"stream"``: the fixed-lag smoother's window kernels (:mod:`gfimu.smoother.stream.kernels`), its running σ
+  scale's (:mod:`gfimu.smoother.solve.sigma_kernels`), the per-sample ML's (:mod:`gfimu.estimators.ml_kernels`)
+  and the batch solve's (:mod:`gfimu.smoother.model.kernels`: the
   held start and the tuning stretch are solved whole). Only the overloads the cache holds for this source and
   this machine are loaded (their index key is checked first): nothing is compiled that the stream would not
   compile anyway; a kernel called while it is being loaded waits for numba's own lock.
@@ -44,9 +45,10 @@ def _stream() -> None:
     try:
         from ..estimators import ml_kernels
         from .model import kernels as model_kernels
+        from .solve import sigma_kernels
         from .stream import kernels
 
-        for module in (kernels, ml_kernels, model_kernels):
+        for module in (kernels, ml_kernels, model_kernels, sigma_kernels):
             for dispatcher in list(vars(module).values()):
                 _load_cached(dispatcher)
     except Exception:  # noqa: BLE001 - a preload is an optimisation: the kernels then load when first called

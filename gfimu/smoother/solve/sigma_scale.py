@@ -96,7 +96,7 @@ MIN_SAMPLES = 16
 
 def _geometry(array):
     S = array.structure_matrix()
-    return S[:, 0:3], S[:, 3:6], S[:, 6:12]
+    return np.ascontiguousarray(S[:, 0:3]), np.ascontiguousarray(S[:, 3:6]), np.ascontiguousarray(S[:, 6:12])
 
 
 def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np.ndarray, robust=None,
@@ -448,7 +448,7 @@ class RunningTrapezoid:
         if self.jerk_steps is None or self.jerk_steps[0] != key:  # the same step and model: the same rows
             self.jerk_steps = (key, jerk_steps(np.asarray(jerk[0], dtype=float)[None, :], jerk[1], h))
         steps = self.jerk_steps[1]
-        share, a, b = kinematic_shares(single[None, :], steps[0], steps[1], h)
+        share, a, b = self.shares(single, steps[0][0], steps[1][0], float(h[0]))
         r = trapezoid_residuals(np.vstack([previous[1], state[:9]]), steps)
         if not np.all(np.isfinite(r)):
             return None
@@ -459,7 +459,19 @@ class RunningTrapezoid:
         if self.steps < MIN_SAMPLES:
             return None
         r2, a_sum, b_sum = self.ring.sum(axis=0)
-        return share[0], float(trapezoid_level(r2, a_sum, b_sum, variance_factor))
+        return share, float(trapezoid_level(r2, a_sum, b_sum, variance_factor))
+
+    @staticmethod
+    def shares(single: np.ndarray, trapezoid_var: np.ndarray, step_var: np.ndarray, h: float):
+        """(share, a, b) (3,) of :func:`kinematic_shares` for one state, by its compiled row
+        (:func:`gfimu.smoother.solve.sigma_kernels.kinematic_shares_row`: the same numbers to rounding)."""
+        from .sigma_kernels import kinematic_shares_row
+
+        share, a, b = np.empty(3), np.empty(3), np.empty(3)
+        kinematic_shares_row(np.ascontiguousarray(single, dtype=float), np.ascontiguousarray(trapezoid_var, dtype=float),
+                             np.ascontiguousarray(step_var, dtype=float), h, *_quadrature(QUADRATURE_POINTS),
+                             share, a, b)
+        return share, a, b
 
 
 class RunningSigmaScale:
@@ -508,28 +520,18 @@ class RunningSigmaScale:
         return long_run_factors(self._lagged / self._power)
 
     def _parity(self, y: np.ndarray, x: np.ndarray, std: np.ndarray):
-        """:func:`parity` of one sample (the same numbers, without the batch's broadcasting)."""
-        S_f, S_dw, S_q = self._geometry
-        w = x[0:3]
-        inv = 1.0 / std
-        z = (y - S_f @ x[6:9] - S_dw @ x[3:6] - S_q @ quadratic_terms(w)) * inv
-        if self.robust is not None and self.robust[1] > 0:
-            from ..model.problem import robust_weight
+        """:func:`parity` of one sample (the same numbers to rounding, by its compiled row
+        :func:`gfimu.smoother.solve.sigma_kernels.parity_row`)."""
+        from .sigma_kernels import parity_row
 
-            weight = np.sqrt(robust_weight(z, float(self.robust[1]), self.robust[0]))
-            z, inv = z * weight, inv * weight
-        J = np.empty((len(y), 9))
-        J[:, 0:3] = S_q @ quadratic_terms_jacobian(w)
-        J[:, 3:6] = S_dw
-        J[:, 6:9] = S_f
-        J *= inv[:, None]
-        U, sv, Vt = np.linalg.svd(J, full_matrices=False)
-        keep = sv > RANK_TOLERANCE * sv[0]
-        Uk = U[:, keep]
-        p = z - Uk @ (Uk.T @ z)
-        single = (Vt[keep] ** 2).T @ (1.0 / sv[keep] ** 2)
-        single[np.any(Vt[~keep] ** 2 > 1e-12, axis=0)] = np.inf
-        return p, int(np.count_nonzero(keep)), single
+        S_f, S_dw, S_q = self._geometry
+        c, cauchy = 0.0, False
+        if self.robust is not None and self.robust[1] > 0:
+            c, cauchy = float(self.robust[1]), self.robust[0] == "cauchy"
+        p, single = np.empty(len(y)), np.empty(9)
+        rank = parity_row(np.ascontiguousarray(y, dtype=float), np.ascontiguousarray(x, dtype=float),
+                          np.ascontiguousarray(std, dtype=float), S_f, S_dw, S_q, c, cauchy, RANK_TOLERANCE, p, single)
+        return p, int(rank), single
 
     def scaled(self, accel_mps2: np.ndarray, state: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
                jerk=None, t_s: float | None = None) -> np.ndarray:
