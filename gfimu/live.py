@@ -13,7 +13,8 @@ in time or repeating one is dropped and counted by the smoother; time going
 back by more than its ``clock_reset_s`` restarts the window; a broken stream
 (a connection reset) ends the session with what was estimated; SIGINT and
 SIGTERM end it at once (the window flushed, every estimate written), also
-while the source is waiting for data.
+while the source is waiting for data; samples already waiting are estimated
+first, and a second signal drops them (counted as dropped).
 """
 
 from __future__ import annotations
@@ -261,6 +262,8 @@ class _Reader:
     def __init__(self, source: Source, stop: threading.Event, size: int):
         self.source, self.stop = source, stop
         self.size = max(int(size), 1)
+        self.hurry = threading.Event()
+        """Set (a second signal): once stopped, the items still waiting are dropped and counted, not handed out."""
         self.grows = False
         """Whether :meth:`fit` may raise :attr:`size` to :data:`QUEUE_S` of samples at the stream's rate."""
         self.items: deque = deque()
@@ -297,6 +300,10 @@ class _Reader:
         with self.ready:
             if not self.items and not self.stop.is_set():
                 self.ready.wait(timeout=0.2)
+            if self.stop.is_set() and self.hurry.is_set():
+                while self.items and self.items[0] is not None:
+                    self.items.popleft()
+                    self.overrun += 1
             if not self.items:
                 return None if self.stop.is_set() else []
             if self.items[0] is None:
@@ -318,17 +325,21 @@ class _Reader:
 
 class _Signals:
     """SIGINT and SIGTERM set ``stop`` (the first one's name kept in ``caught``) while installed (with
-    ``enabled``, from the main thread); the previous handlers come back on :meth:`restore`."""
+    ``enabled``, from the main thread); a second one sets ``hurry`` too (the samples still waiting are dropped
+    rather than estimated); the previous handlers come back on :meth:`restore`."""
 
     def __init__(self, stop: threading.Event, enabled: bool):
         self.stop = stop
+        self.hurry = threading.Event()
         self.caught: list[str] = []
         self.previous = {}
         if enabled and threading.current_thread() is threading.main_thread():
             self.previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
 
     def _on_signal(self, signum, frame) -> None:  # noqa: ARG002
-        if not self.caught:
+        if self.caught:
+            self.hurry.set()
+        else:
             self.caught.append(signal.Signals(signum).name)
         self.stop.set()
 
@@ -387,6 +398,7 @@ class _Live:
         self.rows_in = self.bad = 0
         self.reasons: list[str] = []
         self.warned_behind = False
+        self.told_stopping = False
 
     def loop(self, reader: _Reader) -> None:
         """Items until the source ends or the run is stopped, then every state left."""
@@ -400,6 +412,7 @@ class _Live:
             self.take_all(items)
             reader.fit(self.session.rate_hz)
             self.behind(reader)
+            self.stopping(reader)
             if self.status_s and time.monotonic() - last_status >= self.status_s:
                 last_status = time.monotonic()
                 self.status(reader)
@@ -466,6 +479,14 @@ class _Live:
         self.say(f"warning: the smoother runs behind the stream: {self._waiting(reader)}; beyond {reader.size} "
                  "(--queue) the oldest are dropped (a faster machine, a lower rate or fewer sensors keep up)")
 
+    def stopping(self, reader: _Reader) -> None:
+        """Said once, when the run is stopped with more samples waiting than one take: they are estimated first,
+        and a second signal drops them."""
+        if self.told_stopping or not reader.stop.is_set() or reader.hurry.is_set() or len(reader.items) <= ITEMS_AT_ONCE:
+            return
+        self.told_stopping = True
+        self.say(f"stopping: {self._waiting(reader)}, estimated first; a second SIGINT or SIGTERM drops them")
+
     def status(self, reader: _Reader) -> None:
         p = _stats(self.session.processing_s.values * 1e3)
         nan = float("nan")
@@ -531,10 +552,11 @@ def run(source: Source, estimator, sink: EstimateSink, *, rate_hz: float | None 
     stop = stop or threading.Event()
     # readings that are not finite or beyond any range: replaced by the screening, or bad rows without it
     source.keep_gross_errors = bool(getattr(estimator, "screen_readings", False))
+    handlers = _Signals(stop, signals)
     reader = _Reader(source, stop, QUEUE_MIN if queue_size is None else queue_size)
+    reader.hurry = handlers.hurry
     reader.grows = queue_size is None
     reader.fit(rate_hz)
-    handlers = _Signals(stop, signals)
     closed, crash = False, []
     live = _Live(source, estimator, sink, rate_hz, say, status_s)
     switch = sys.getswitchinterval()

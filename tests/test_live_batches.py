@@ -226,3 +226,36 @@ def test_an_empty_batch_from_a_source_is_no_item():
     reader.thread.join()
     assert not reader.fatal and reader.overrun == 0
     assert [r.timestamp_ns for r, _ in reader.get()] == [1000] and reader.get() is None
+
+
+def test_a_second_signal_drops_the_samples_still_waiting():
+    """Stopped (a first signal) with samples waiting: they are handed out, to be estimated, and the command says so
+    once when more than one take waits; a second signal (hurry) drops them instead, counted as dropped, and the
+    end comes next."""
+    import io
+    from collections import deque
+
+    from gfimu.live import ITEMS_AT_ONCE, EstimateSink, _Live, _Reader, _Signals
+    from gfimu.methods import make_estimator
+    from gfimu.smoother.stream.session import StreamSession
+
+    array = random_array(3, 0.05, seed=1)
+    stop = threading.Event()
+    signals = _Signals(stop, enabled=False)
+    reader = _Reader(_Burst(array, 1), stop, 10_000)
+    reader.hurry = signals.hurry
+    reading = (Reading(1000, np.zeros(array.n_axes)), 0.0)
+    reader.items = deque([reading] * (ITEMS_AT_ONCE + 10) + [None])
+    signals._on_signal(2, None)  # SIGINT
+    assert stop.is_set() and signals.caught == ["SIGINT"] and not signals.hurry.is_set()
+    said = []
+    live = _Live(_Burst(array, 1), make_estimator("fixed-lag"), EstimateSink(io.StringIO()), 1000.0, said.append, None)
+    live.session = StreamSession(array, live.estimator, 1000.0)
+    live.stopping(reader)
+    live.stopping(reader)
+    assert said == [f"stopping: {ITEMS_AT_ONCE + 10} waiting ({(ITEMS_AT_ONCE + 10) / 1000:.1f} s behind), estimated "
+                    "first; a second SIGINT or SIGTERM drops them"]
+    assert len(reader.get()) == ITEMS_AT_ONCE  # still handed out, to be estimated
+    signals._on_signal(15, None)  # a second signal
+    assert signals.hurry.is_set() and signals.caught == ["SIGINT"]
+    assert reader.get() is None and reader.overrun == 10 and list(reader.items) == [None]
