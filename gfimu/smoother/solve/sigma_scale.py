@@ -60,8 +60,6 @@ emitted so far (:class:`RunningSigmaScale`: causal). The estimates themselves ar
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ...rigid_body import quadratic_terms, quadratic_terms_jacobian
@@ -540,8 +538,8 @@ class RunningSigmaScale:
         the state's time [s]: ω's σ then also follows the path's trapezoid level (:func:`calibrated_sigma`'s
         ``process``), over the newest steps between the states taken."""
         sd = np.asarray(sd, dtype=float)
-        p, rank, single = self._parity(np.asarray(accel_mps2, dtype=float), np.asarray(state, dtype=float)[:9],
-                                       np.asarray(noise_std_mps2, dtype=float))
+        x = np.asarray(state, dtype=float)[:9]
+        p, rank, single = self._parity(np.asarray(accel_mps2, dtype=float), x, np.asarray(noise_std_mps2, dtype=float))
         if np.all(np.isfinite(p)):
             self._power += float(p @ p)
             self._dof += float(len(p) - rank)
@@ -560,12 +558,12 @@ class RunningSigmaScale:
                 self._recent = np.zeros((self.window, 2))
             self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank))
             self.samples += 1
-        kinematic = self.trapezoid.level(np.asarray(state, dtype=float), single, jerk, t_s, self.window or LOCAL_WINDOW,
-                                         self.variance_factor)
-        out = sd * scale_factors(sd, single, self.variance_factor, self.tau(), kinematic)
-        self.gain.take(np.asarray(state, dtype=float)[:9], t_s)
+        variance_factor = self.variance_factor
+        kinematic = self.trapezoid.level(x, single, jerk, t_s, self.window or LOCAL_WINDOW, variance_factor)
+        out = sd * scale_factors(sd, single, variance_factor, self.tau(), kinematic)
+        self.gain.take(x, t_s)
         if self.gain.variance > 0:
-            out = np.sqrt(out ** 2 + common_gain_sd(np.asarray(state, dtype=float)[None, :9], self.gain.variance)[0] ** 2)
+            out = np.sqrt(out ** 2 + common_gain_sd(x[None, :], self.gain.variance)[0] ** 2)
         return out
 
 
