@@ -185,8 +185,8 @@ class RowParser:
 
 
 class Source:
-    """A stream of readings; :meth:`items` yields :class:`Reading`, :class:`BadRow` and :class:`SourceNote`
-    until the stream ends or ``stop`` is set. After it: :attr:`ended` says why, :attr:`failure` is a message when the
+    """A stream of readings; :meth:`batches` yields lists of :class:`Reading`, :class:`BadRow` and
+    :class:`SourceNote` until the stream ends or ``stop`` is set. After it: :attr:`ended` says why, :attr:`failure` is a message when the
     stream broke (a connection reset) and None otherwise."""
 
     name = "source"
@@ -201,18 +201,14 @@ class Source:
         """True: a text row whose readings are not finite or beyond any sensor's range is passed on, for the
         screening downstream to replace (:class:`gfimu.readings.StreamScreen`); False: it is a bad row."""
 
-    def items(self, stop: threading.Event) -> Iterator[Reading | BadRow | SourceNote]:
-        for batch in self.batches(stop):
-            yield from batch
-
     def batches(self, stop: threading.Event) -> Iterator[list[Reading | BadRow | SourceNote]]:
-        """The items of :meth:`items` in lists, each what came in one read (a chunk of text, the datagrams waiting,
-        the packets of a chunk): read and parsed at once, so that a fast stream costs a Python call per read
+        """The stream's items in lists, each what came in one read (a chunk of text, the datagrams waiting, the
+        packets of a chunk), in order: read and parsed at once, so that a fast stream costs a Python call per read
         rather than per sample."""
         raise NotImplementedError
 
     def close(self) -> None:
-        """Release the socket or port (also when :meth:`items` was never run)."""
+        """Release the socket or port (also when :meth:`batches` was never run)."""
 
 
 class _TextRows:
