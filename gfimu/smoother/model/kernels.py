@@ -116,15 +116,24 @@ def _reading(X, k, a, S, P, rows, sr, ww):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _directions_dot_positions(S, P):
+    """``sᵀr`` of each axis (axes,): what :func:`_reading` takes as ``sr``."""
+    axes = S.shape[0]
+    sr = np.empty(axes)
+    for a in range(axes):
+        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
+    return sr
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _axis_constants(S, P, rows, white, per_sample):
     """What :func:`accumulate` reads of each axis and keeps for every sample: ``sᵀr`` (axes,), the
     structure-matrix row over [ω̇, f] ``c`` (axes, 6), ``c cᵀ``'s lower triangle row by row (axes, 21), and
     (one whitening for every sample: not ``per_sample``) ``Σ_a w_a² c_a c_aᵀ``'s lower triangle (6, 6)."""
     axes = S.shape[0]
-    sr = np.empty(axes)
+    sr = _directions_dot_positions(S, P)
     c = np.empty((axes, 6))
     for a in range(axes):
-        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
         for i in range(3):
             c[a, i] = rows[a, 3 + i]
             c[a, 3 + i] = rows[a, i]
@@ -181,9 +190,7 @@ def squared_norm(X, S, P, rows, y, white, sq):
     arguments as :func:`accumulate`'s)."""
     n, axes = y.shape
     per_sample = white.shape[0] != 1 or n == 1
-    sr = np.empty(axes)
-    for a in range(axes):
-        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
+    sr = _directions_dot_positions(S, P)
     for k in range(n):
         w0, w1, w2 = X[k, 0], X[k, 1], X[k, 2]
         ww = w0 * w0 + w1 * w1 + w2 * w2
@@ -202,9 +209,7 @@ def whitened_residual(X, S, P, rows, y, white, out):
     first value; the arguments as :func:`accumulate`'s)."""
     n, axes = y.shape
     per_sample = white.shape[0] != 1 or n == 1
-    sr = np.empty(axes)
-    for a in range(axes):
-        sr[a] = S[a, 0] * P[a, 0] + S[a, 1] * P[a, 1] + S[a, 2] * P[a, 2]
+    sr = _directions_dot_positions(S, P)
     for k in range(n):
         w0, w1, w2 = X[k, 0], X[k, 1], X[k, 2]
         ww = w0 * w0 + w1 * w1 + w2 * w2
