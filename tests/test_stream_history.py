@@ -4,7 +4,7 @@ kept up from what is sent to it equal to the stream's own."""
 
 import numpy as np
 
-from gfimu.smoother.stream.history import History, Stretch
+from gfimu.smoother.stream.history import History, Stretch, same_samples
 
 AXES = 6
 
@@ -84,3 +84,39 @@ def test_a_stretch_of_samples():
     np.testing.assert_array_equal(stretch.times_ns, [0, 1000, 2000])
     assert stretch.gyro.shape == (3, 3) and stretch.rows.shape == (3, 9) and not stretch.has_row.any()
     assert Stretch.of_samples([_sample(0), _sample(1, gyro=False)]).gyro is None
+
+
+def test_samples_told_ahead_match_what_is_sent_once_they_are_appended():
+    """:meth:`History.ahead` numbers the samples to come as :meth:`History.since` sends them once appended (the
+    newest ``capacity`` at most); :func:`same_samples` tells them apart by a single bit, and not by a gyro
+    reading where a sample has none."""
+    for n_ahead in (3, 5, 9):  # within, at and beyond the capacity (5)
+        history = _filled(4, 5)
+        history.since()
+        samples = [_sample(k, gyro=k != 6) for k in range(4, 4 + n_ahead)]
+        told = history.ahead(np.array([s[0] for s in samples]), np.array([s[1] for s in samples]),
+                             np.array([np.zeros(3) if s[2] is None else s[2] for s in samples]),
+                             np.array([s[2] is not None for s in samples]))
+        for s in samples:
+            history.append(*s)
+        sent = history.since()
+        assert told[0] == sent[0] == 4 + n_ahead - min(n_ahead, 5)
+        assert same_samples(told, sent)
+        bumped = (told[0], told[1], told[2].copy(), told[3], told[4])
+        bumped[2][-1, 0] = np.nextafter(bumped[2][-1, 0], np.inf)
+        assert not same_samples(bumped, sent)
+        assert not same_samples((told[0] + 1, *told[1:]), sent)
+    stale = _filled(2, 5)
+    stale.since()
+    told = stale.ahead(np.array([2000]), np.ones((1, AXES)) * 2.0, np.full((1, 3), 9.0), np.array([False]))
+    stale.append(2000, np.ones(AXES) * 2.0, None)  # (its gyro row keeps what the slot held)
+    assert same_samples(told, stale.since())
+
+
+def test_a_copy_of_a_history_is_its_own():
+    history = _filled(3, 4)
+    copy = history.copy()
+    copy.append(*_sample(3))
+    copy.rows[:] = 1.0
+    assert history.total == 3 and copy.total == 4 and not history.rows.any()
+    np.testing.assert_array_equal(history.stretch().times_ns, [0, 1000, 2000])

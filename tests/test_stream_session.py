@@ -107,7 +107,7 @@ def test_choices_made_in_a_process_of_their_own_give_the_rows_of_choices_in_a_th
     assert process is not None and process._process.is_alive()
     in_process += smoother.close()
     assert not process._process.is_alive()  # ended with the smoother
-    monkeypatch.setattr(choice_worker.ChoiceProcess, "start", classmethod(lambda cls, func: None))
+    monkeypatch.setattr(choice_worker.ChoiceProcess, "start", classmethod(lambda cls, func, idle=None: None))
     threaded = est.smoother(log.array, RATE_HZ)
     in_thread = []
     for i in range(len(log)):
@@ -119,6 +119,58 @@ def test_choices_made_in_a_process_of_their_own_give_the_rows_of_choices_in_a_th
     monkeypatch.undo()
     _, session = _stream(est, log)  # a session ends its smoother's process when the stream ends
     assert session.smoother._worker.tried and session.smoother._worker.process is None
+
+
+def test_a_log_s_scheduled_choices_made_ahead_give_the_same_rows(log):
+    """Given the readings to come (a log), the choice's process makes each scheduled choice before it is asked
+    for; the stream uses it only where the samples it took are those it was made on: the same models at the
+    same samples and the same rows to the last bit as without; a reading changed after a choice was made
+    ahead (so that it no longer holds) is made again on the readings the stream took."""
+    from gfimu.parallel import can_fork
+
+    if not can_fork():
+        pytest.skip("no fork on this platform: the choices are made in a thread")
+    est = _estimator()
+    screened, _ = est.screen(log)
+    accel = screened.accel_mps2
+
+    def run(upcoming, readings=accel):
+        session = StreamSession(screened.array, est, RATE_HZ, screen=False, upcoming=upcoming)
+        states = []
+        for i in range(len(screened)):
+            states += session.push(screened.timestamps_ns[i], readings[i])
+        used = session.smoother._worker.ahead.used
+        states += session.finish()
+        return _rows(states), [m.chosen_at_ns for m in session.models], used
+
+    plain, plain_at, none_used = run(None)
+    ahead, ahead_at, used = run((screened.timestamps_ns, accel, None))
+    assert none_used == 0 and used >= 2 and len(ahead_at) >= 4
+    assert ahead_at == plain_at
+    np.testing.assert_array_equal(ahead, plain)
+    changed = accel.copy()
+    changed[len(changed) // 2:, 0] += 1e-9  # what the process was told is to come is not what comes
+    reference, reference_at, _ = run(None, changed)
+    told, told_at, told_used = run((screened.timestamps_ns, accel, None), changed)
+    assert told_used < used and told_at == reference_at
+    np.testing.assert_array_equal(told, reference)
+
+
+def test_the_choice_process_works_ahead_between_requests():
+    """``idle`` runs in the process after each answer: what it did is there for the next request."""
+    from gfimu.parallel import can_fork
+    from gfimu.smoother.stream.choice_worker import ChoiceProcess
+
+    if not can_fork():
+        pytest.skip("no fork on this platform")
+    done = []
+    process = ChoiceProcess.start(lambda x: (x, len(done)), lambda: done.append(1))
+    process.submit("a")
+    assert process.result() == ("a", 0)
+    process.submit("b")
+    assert process.result() == ("b", 1)
+    process.close()
+    assert not process._process.is_alive()
 
 
 def test_the_choice_process_answers_in_order_and_raises_what_a_request_raised():

@@ -22,11 +22,13 @@ import time
 from collections.abc import Callable
 
 
-def _serve(func: Callable, conn, parent: int) -> None:
+def _serve(func: Callable, conn, parent: int, idle: Callable | None = None) -> None:
     """The process's loop: each request ``func(request)``, answered ``(True, result, warnings)`` or ``(False,
     error, warnings)``, until None or the end of the pipe. The warnings it raised go back with the answer
     (each ``(message, category)``), to be raised in the parent where the model is used: the process writes
-    nothing itself (another thread of the parent may have held the output's lock when it was forked)."""
+    nothing itself (another thread of the parent may have held the output's lock when it was forked).
+    ``idle()`` runs after each answer unless the next request is already there (work done ahead of a request
+    it may be asked for: whatever it raises is its own to keep)."""
     import warnings
 
     from ...parallel import die_with_parent, one_blas_thread
@@ -54,22 +56,28 @@ def _serve(func: Callable, conn, parent: int) -> None:
             conn.send((*answer, raised))
         except Exception as exc:  # noqa: BLE001 - an answer that does not pickle
             conn.send((False, RuntimeError(f"the model choice's answer could not be sent: {exc!r}"), raised))
+        if idle is not None and not conn.poll():
+            try:
+                idle()
+            except Exception:  # noqa: BLE001 - work ahead that failed is not used (the request computes it)
+                pass
     conn.close()
     os._exit(0)
 
 
 class ChoiceProcess:
     """One forked process serving ``func(request)`` one request at a time (:meth:`submit`, then
-    :meth:`result`); :meth:`start` returns None where no process may be forked."""
+    :meth:`result`), running ``idle()`` between them (:func:`_serve`); :meth:`start` returns None where no
+    process may be forked."""
 
-    def __init__(self, func: Callable) -> None:
+    def __init__(self, func: Callable, idle: Callable | None = None) -> None:
         import multiprocessing
 
         ctx = multiprocessing.get_context("fork")
         self._conn, child = ctx.Pipe()
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         try:  # (no stop signal between the fork and the child's own handlers)
-            self._process = ctx.Process(target=_serve, args=(func, child, os.getpid()), name="gfimu-model-choice",
+            self._process = ctx.Process(target=_serve, args=(func, child, os.getpid(), idle), name="gfimu-model-choice",
                                         daemon=True)
             self._process.start()
         finally:
@@ -78,8 +86,9 @@ class ChoiceProcess:
         self.busy = False
 
     @classmethod
-    def start(cls, func: Callable) -> ChoiceProcess | None:
-        """A process serving ``func``, or None where none may be forked (or none starts)."""
+    def start(cls, func: Callable, idle: Callable | None = None) -> ChoiceProcess | None:
+        """A process serving ``func`` (``idle`` between requests), or None where none may be forked (or none
+        starts)."""
         from ...parallel import can_fork
         from .. import preload
 
@@ -87,7 +96,7 @@ class ChoiceProcess:
             return None
         preload.wait()
         try:
-            return cls(func)
+            return cls(func, idle)
         except (OSError, ImportError):  # no processes left, no semaphores
             return None
 
@@ -123,12 +132,15 @@ class ChoiceProcess:
         return value
 
     def close(self) -> None:
-        """End the process (its answer, if any, unread)."""
+        """End the process (its answer, if any, unread; work it does ahead of a request cut short)."""
         try:
             self._conn.send(None)
         except (OSError, ValueError):
             pass
         self._conn.close()
+        self._process.join(timeout=0.0 if self.busy else 0.05)
+        if self._process.is_alive():  # (busy with work ahead: nothing of it is wanted now)
+            self._process.terminate()
         self._process.join(timeout=1.0)
         if self._process.is_alive():
             self._process.terminate()

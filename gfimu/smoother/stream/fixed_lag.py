@@ -98,7 +98,7 @@ from ...motion import Motion
 from ...progress import progress as progress_bar
 from . import array_model as model
 from .choice_worker import ChoiceProcess, ForkedChoice
-from .history import History, Stretch
+from .history import History, Stretch, same_samples
 from .window_filter import FilterFailure, WindowFilter
 from .gtsam_window import GtsamWindow
 from ..solve.banded import solve
@@ -449,6 +449,24 @@ def _solved_from(problem, starts: list) -> list:
 
 
 @dataclass
+class AheadOfChoice:
+    """The next scheduled model choice made before it is asked for, where the samples to come are known (a
+    log, :meth:`FixedLagSmoother.look_ahead`). In the stream: the samples to come (``upcoming``: times, readings,
+    gyro readings or None), those sent with the pending request up to the next scheduled choice (``sent``,
+    :meth:`~.history.History.ahead`), once its model is in use that model (``model``), and how many choices
+    made ahead it asked for (``used``). In the choice's
+    process: the request's samples and model to work ahead from (``start``) and what that gave (``guess``:
+    the history with the samples taken in, the stretch read, the answer or the error, the warnings)."""
+
+    upcoming: tuple | None = None
+    sent: tuple | None = None
+    model: object = None
+    used: int = 0
+    start: tuple | None = None
+    guess: tuple | None = None
+
+
+@dataclass
 class WorkerSlot:
     """The process the stream's later model choices are made in (:class:`~.choice_worker.ChoiceProcess`),
     forked when the first is asked for (``tried``); None where none may be forked. ``finalizer`` ends it
@@ -457,6 +475,7 @@ class WorkerSlot:
     tried: bool = False
     process: ChoiceProcess | None = None
     finalizer: object = None
+    ahead: AheadOfChoice = field(default_factory=lambda: AheadOfChoice())
 
     def close(self) -> None:
         """End the process; a later choice is made in a thread."""
@@ -964,7 +983,15 @@ class FixedLagSmoother:
         swap_at = self._choice.accepted + self._choice.rules.delay_n
         process = self._choice_process()
         if process is not None:  # in a process of its own (:mod:`.choice_worker`), which keeps a history of its own
-            request = (history.since(), previous, outgrown)
+            ahead = self._worker.ahead
+            since, sent = history.since(), self._samples_ahead(history)
+            if (not outgrown and ahead.model is not None and previous is ahead.model and ahead.sent is not None
+                    and same_samples(since, ahead.sent)):
+                request = ("ahead", sent)  # the choice the process made ahead, on these very samples
+                ahead.used += 1
+            else:
+                request = ("choose", since, previous, outgrown, sent)
+            ahead.sent, ahead.model = sent, None
             self._choice.pending = ForkedChoice(process, request, lambda answer: _taken_back(answer, previous),
                                                 swap_at, outgrown)
             return None
@@ -983,23 +1010,92 @@ class FixedLagSmoother:
         if self._worker.tried:
             return self._worker.process
         self._worker.tried = True
-        self._worker.process = ChoiceProcess.start(self._chosen_in_process)
+        self._worker.process = ChoiceProcess.start(self._chosen_in_process, self._work_ahead)
         if self._worker.process is not None:
             self._worker.finalizer = weakref.finalize(self, self._worker.process.close)
         return self._worker.process
 
+    def look_ahead(self, timestamps_ns, accel, gyro=None) -> None:
+        """The samples this smoother will be pushed, in order (a log's times (n,), readings (n, axes) and gyro
+        readings (n, 3) or None): the choice's process then makes each scheduled model choice while it waits
+        for the request (:class:`AheadOfChoice`), and the stream waits for none that was made ahead. The
+        rows are the same: a choice made ahead is used only when the samples the stream took are those it
+        was made on, bit for bit, and nothing else asked for a choice meanwhile."""
+        self._worker.ahead.upcoming = (np.asarray(timestamps_ns, dtype=np.int64), np.asarray(accel, dtype=float),
+                                       None if gyro is None else np.asarray(gyro, dtype=float))
+
+    def _samples_ahead(self, history: History) -> tuple | None:
+        """The samples to come up to the next scheduled choice (the first ``retune_every_s`` after the newest
+        one the history holds), as the history will send them (:meth:`~.history.History.ahead`); None where
+        they are not known."""
+        upcoming = self._worker.ahead.upcoming
+        if upcoming is None or not history.total:
+            return None
+        times, accel, gyro = upcoming
+        t_end = int(history.times_ns[(history.total - 1) % history.capacity])
+        p = int(np.searchsorted(times, t_end))
+        q = int(np.searchsorted(times, t_end + self._choice.rules.retune_ns))
+        if p >= len(times) or times[p] != t_end or q >= len(times):
+            return None
+        cut = slice(p + 1, q + 1)
+        g = np.zeros((q - p, 3)) if gyro is None else gyro[cut]
+        has_gyro = np.zeros(q - p, dtype=bool) if gyro is None else np.isfinite(g).all(axis=1)
+        return history.ahead(times[cut], accel[cut], g, has_gyro)
+
     def _chosen_in_process(self, request):
-        """In the choice's process: the samples since the last request (:meth:`~.history.History.since`) taken
-        into the process's own history (its copy of the stream's, as it was forked, kept up since), then
-        :meth:`_chosen_model` on it; the model and whether it kept the previous one's tuning."""
-        since, previous, outgrown = request
-        history = self._choice.history
-        history.extend(*since)
-        stretch = history.stretch()
-        chosen = self._chosen_model(stretch, previous, outgrown=outgrown)[0]
-        history.keep_rows(stretch)
+        """In the choice's process: the model and whether it kept the previous one's tuning. A ``"choose"``
+        request carries the samples since the last (:meth:`~.history.History.since`), taken into the process's
+        own history (its copy of the stream's, as it was forked, kept up since), then :meth:`_chosen_model`
+        runs on it; an ``"ahead"`` one asks for the choice the process made ahead (:meth:`_work_ahead`) on the
+        samples the last request sent, the same numbers (made now where it was not). Either may send the
+        samples up to the next scheduled choice, to work ahead on."""
+        ahead = self._worker.ahead
+        if request[0] == "ahead":
+            sent = request[1]
+            (samples, previous), guess = ahead.start, ahead.guess
+            if guess is None:
+                history = self._choice.history
+                history.extend(*samples)
+                stretch = history.stretch()
+                chosen = self._chosen_model(stretch, previous)[0]
+                history.keep_rows(stretch)
+            else:
+                self._choice.history, chosen, error, raised = guess
+                for message, category in raised:
+                    warnings.warn(message, category, stacklevel=2)
+                if error is not None:
+                    raise error
+        else:
+            _, since, previous, outgrown, sent = request
+            history = self._choice.history
+            history.extend(*since)
+            stretch = history.stretch()
+            chosen = self._chosen_model(stretch, previous, outgrown=outgrown)[0]
+            history.keep_rows(stretch)
         kept = previous is not None and chosen.tuning is not None and chosen.tuning is previous.tuning
+        ahead.start, ahead.guess = (None if sent is None else (sent, chosen)), None
         return chosen, kept
+
+    def _work_ahead(self) -> None:
+        """In the choice's process, between requests: the next scheduled choice made on the samples the last
+        request sent and the model it gave (:class:`AheadOfChoice`), on a copy of the history, kept for an
+        ``"ahead"`` request."""
+        ahead = self._worker.ahead
+        if ahead.start is None or ahead.guess is not None:
+            return
+        samples, previous = ahead.start
+        history = self._choice.history.copy()
+        history.extend(*samples)
+        stretch = history.stretch()
+        chosen = error = None
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                chosen = self._chosen_model(stretch, previous)[0]
+                history.keep_rows(stretch)
+            except Exception as exc:  # noqa: BLE001 - raised when the choice is asked for
+                error = exc
+        ahead.guess = (history, chosen, error, [(str(w.message), w.category) for w in caught])
 
     def _swap_choice(self, final: bool = False) -> None:
         """The pending choice's model put in use when its sample has come (waiting for it when it is not
@@ -1011,6 +1107,8 @@ class FixedLagSmoother:
         self._choice.pending = None
         late = not pending.done
         chosen = pending.result()
+        if isinstance(pending, ForkedChoice):
+            self._worker.ahead.model = chosen  # (the model the process's work ahead starts from)
         if late:
             self._choice.waits.append(pending.waited_s)
         self._use(chosen)
@@ -1692,10 +1790,11 @@ class FixedLagEstimator(SmootherEstimator):
         from .session import StreamSession
 
         # the log's readings are screened already (screen(), the same rule as the stream's): not again here
-        session = StreamSession(log.array, self, log.rate_hz, screen=False, name=str(log.source or "log"))
+        gyro = log.gyro_b_radps if (self.use_gyro and log.array.gyroscope is not None) else None
+        session = StreamSession(log.array, self, log.rate_hz, screen=False, name=str(log.source or "log"),
+                                upcoming=(log.timestamps_ns, log.accel_mps2, gyro))
         out = np.full((n, 9), np.nan)
         sig = np.full((n, 9), np.nan) if self.compute_sigma else None
-        gyro = log.gyro_b_radps if (self.use_gyro and log.array.gyroscope is not None) else None
         cursor = 0  # smoothed states come out in time order, one per sample
 
         def store(states) -> None:

@@ -109,6 +109,22 @@ class History:
         self.sent = self.total
         return first, self.times_ns[slots], self.accel[slots], self.gyro[slots], self.has_gyro[slots]
 
+    def ahead(self, times_ns, accel, gyro, has_gyro) -> tuple:
+        """Samples that will be appended next (``times_ns`` (n,), ``accel`` (n, axes), ``gyro`` (n, 3), ``has_gyro``
+        (n,)) in the form :meth:`since` will give them once they are: the newest ``capacity`` at most, numbered
+        on from the samples appended so far."""
+        n = len(times_ns)
+        keep = min(n, self.capacity)
+        cut = slice(n - keep, n)
+        return (self.total + n - keep, np.array(times_ns[cut], dtype=np.int64), np.array(accel[cut], dtype=float),
+                np.array(gyro[cut], dtype=float), np.array(has_gyro[cut], dtype=bool))
+
+    def copy(self) -> History:
+        """A history of its own with the same samples and rows."""
+        other = History.__new__(History)
+        other.__dict__.update({k: v.copy() if isinstance(v, np.ndarray) else v for k, v in self.__dict__.items()})
+        return other
+
     def extend(self, first: int, times_ns, accel, gyro, has_gyro) -> None:
         """Samples ``first …`` of another history (:meth:`since`) appended, those held already skipped. Samples
         before ``first`` this history has not seen are not held by the other either (it sends the last
@@ -127,3 +143,15 @@ class History:
         self.has_gyro[slots] = has_gyro[skip:]
         self.has_row[slots] = False
         self.total += n
+
+
+def same_samples(a: tuple, b: tuple) -> bool:
+    """Whether two sets of samples in the form of :meth:`History.since` are the same, number for number and
+    bit for bit (a gyro reading compared only where there is one)."""
+    if a[0] != b[0] or len(a[1]) != len(b[1]):
+        return False
+    if not np.array_equal(a[4], b[4]):
+        return False
+    bits = [(np.ascontiguousarray(x).tobytes(), np.ascontiguousarray(y).tobytes())
+            for x, y in ((a[1], b[1]), (a[2], b[2]), (a[3][a[4]], b[3][b[4]]))]
+    return all(x == y for x, y in bits)

@@ -177,7 +177,10 @@ class StreamSession:
     (:class:`gfimu.readings.StreamScreen`; default: the estimator's ``screen_readings``; False for readings
     already screened, as ``gfimu estimate`` screens a log with the same rule). ``follow_rate``: measure the
     rate again when it changes mid-stream (:class:`RateWatch`; a note says so), the window restarting once
-    at the new rate. ``name`` names the stream in errors.
+    at the new rate. ``name`` names the stream in errors. ``upcoming``: the readings the stream will be
+    pushed, where they are known (a log's times, readings and gyro readings or None): the smoother then makes
+    its scheduled model choices ahead (:meth:`FixedLagSmoother.look_ahead
+    <gfimu.smoother.stream.fixed_lag.FixedLagSmoother.look_ahead>`), the same states sooner.
 
     :meth:`push` each reading, :meth:`finish` at the end; both return the states that are final, oldest
     first (:class:`~gfimu.smoother.stream.fixed_lag.StateEstimate`). :meth:`take_notes` gives the messages
@@ -187,7 +190,7 @@ class StreamSession:
     """
 
     def __init__(self, array, estimator, rate_hz: float | None = None, *, screen: bool | None = None,
-                 follow_rate: bool = True, name: str = "source"):
+                 follow_rate: bool = True, name: str = "source", upcoming: tuple | None = None):
         self.array, self.estimator = array, estimator
         self.settings = SessionSettings(
             name, bool(getattr(estimator, "screen_readings", False) if screen is None else screen),
@@ -202,6 +205,7 @@ class StreamSession:
         self._last_t: int | None = None
         self._tally = SessionTally()
         self._timings = SessionTimings()
+        self._upcoming = upcoming
         if rate_hz is not None:
             self._start(float(rate_hz))
 
@@ -288,7 +292,7 @@ class StreamSession:
         """The smoother (and screening) at ``rate_hz``; the readings held meanwhile go in."""
         check_rate(rate_hz, self.name)
         self.rate_hz = float(rate_hz)
-        self.smoother = self.estimator.smoother(self.array, self.rate_hz)
+        self.smoother = self._new_smoother()
         self.screen = self._new_screen()
         self.watch = RateWatch(self.rate_hz) if self.follow_rate else None
         held, self._pending = self._pending, []
@@ -296,6 +300,12 @@ class StreamSession:
         for row in held:
             states += self._push(row)
         return states
+
+    def _new_smoother(self):
+        smoother = self.estimator.smoother(self.array, self.rate_hz)
+        if self._upcoming is not None:
+            smoother.look_ahead(*self._upcoming)
+        return smoother
 
     def _new_screen(self):
         if not self.screening:
@@ -389,6 +399,6 @@ class StreamSession:
         tally.retired_waits += old.choice_waits
         old.end_choice_process()
         self.rate_hz = float(rate_hz)
-        self.smoother = self.estimator.smoother(self.array, self.rate_hz)
+        self.smoother = self._new_smoother()
         self.screen = self._new_screen()
         return states
