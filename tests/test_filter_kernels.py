@@ -82,6 +82,35 @@ def test_the_lu_solve_is_numpys_solve():
         np.testing.assert_allclose(B_work, want, rtol=0, atol=1e-12 * np.abs(want).max() * np.linalg.cond(S))
 
 
+def test_a_factored_matrix_solves_as_the_lu_solve_does_to_the_bit():
+    """:func:`kernels._lu_factor` once, then :func:`kernels._lu_apply` for each right-hand side: the same bits
+    as :func:`kernels._lu_solve` on each, rows swapped (the pivots) or not, zeros below the diagonal or not;
+    the quadratic form of the factored matrix is the unfactored one's, -1 where it is singular."""
+    rng = np.random.default_rng(11)
+    for n, shuffle in ((1, False), (3, True), (9, True), (9, False), (24, True)):
+        S = rng.normal(size=(n, n)) + n * np.eye(n)
+        if shuffle:  # rows reversed: the largest of each column off the diagonal, pivots swap rows
+            S = S[::-1].copy()
+        if n > 2:
+            S[2, 0] = 0.0  # a multiplier of exactly zero: no update of that row
+        LU, piv = S.copy(), np.empty(n, dtype=np.int64)
+        assert kernels._lu_factor(LU, piv)
+        assert shuffle == bool(np.any(piv != np.arange(n))) or n == 1
+        for _ in range(3):
+            B = rng.normal(size=(n, 4))
+            want, S_work = B.copy(), S.copy()
+            assert kernels._lu_solve(S_work, want)
+            got = B.copy()
+            kernels._lu_apply(LU, piv, got)
+            assert got.tobytes() == want.tobytes()
+            d = rng.normal(size=n)
+            factored = kernels._factored(S)
+            assert kernels._factored_form_inverse(*factored, d) == kernels._quadratic_form_inverse(S, d)
+    singular = np.zeros((9, 9))
+    assert kernels._factored_form_inverse(*kernels._factored(singular), np.ones(9)) == -1.0
+    assert kernels._quadratic_form_inverse(singular, np.ones(9)) == -1.0
+
+
 @pytest.mark.parametrize("kind", [0, 1, 2, 3])
 def test_branch_state_is_the_branch_map(kind):
     rng = np.random.default_rng(kind)

@@ -97,6 +97,85 @@ def _lu_solve(S, B):
 
 
 @njit(cache=True, nogil=True)
+def _lu_factor(S, piv):
+    """:func:`_lu_solve`'s elimination of S alone, in place: U above the diagonal and on it, each row's
+    multipliers below it (moved with the row by later swaps), the row each column swapped with in ``piv``;
+    False where a pivot is exactly zero or not finite. :func:`_lu_apply` then solves for any right-hand
+    side with the same numbers as :func:`_lu_solve` gives it (the swaps first, then the eliminations in
+    the same order: each row receives the same updates from the same pivot rows)."""
+    n = S.shape[0]
+    for c in range(n):
+        p, best = c, abs(S[c, c])
+        for r in range(c + 1, n):
+            v = abs(S[r, c])
+            if v > best:
+                p, best = r, v
+        if not best > 0.0 or not np.isfinite(best):
+            return False
+        piv[c] = p
+        if p != c:
+            for j in range(n):
+                S[c, j], S[p, j] = S[p, j], S[c, j]
+        inv = 1.0 / S[c, c]
+        for r in range(c + 1, n):
+            f = S[r, c] * inv
+            S[r, c] = f
+            if f != 0.0:
+                for j in range(c + 1, n):
+                    S[r, j] -= f * S[c, j]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _lu_apply(S, piv, B):
+    """``B ← S⁻¹ B`` from :func:`_lu_factor`'s factors of S."""
+    n = S.shape[0]
+    k_rhs = B.shape[1]
+    for c in range(n):
+        p = piv[c]
+        if p != c:
+            for j in range(k_rhs):
+                B[c, j], B[p, j] = B[p, j], B[c, j]
+    for c in range(n):
+        for r in range(c + 1, n):
+            f = S[r, c]
+            if f != 0.0:
+                for j in range(k_rhs):
+                    B[r, j] -= f * B[c, j]
+    for c in range(n - 1, -1, -1):
+        inv = 1.0 / S[c, c]
+        for j in range(k_rhs):
+            v = B[c, j]
+            for i in range(c + 1, n):
+                v -= S[c, i] * B[i, j]
+            B[c, j] = v * inv
+
+
+@njit(cache=True, nogil=True)
+def _factored(P):
+    """``(LU, piv, ok)``: :func:`_lu_factor` of a copy of P, for :func:`_factored_form_inverse`."""
+    LU = P.copy()
+    piv = np.empty(P.shape[0], dtype=np.int64)
+    return LU, piv, _lu_factor(LU, piv)
+
+
+@njit(cache=True, nogil=True)
+def _factored_form_inverse(LU, piv, ok, d):
+    """:func:`_quadratic_form_inverse` of the matrix :func:`_factored` factored: the same number."""
+    if not ok:
+        return -1.0
+    n = d.shape[0]
+    B = np.empty((n, 1))
+    for i in range(n):
+        B[i, 0] = d[i]
+    _lu_apply(LU, piv, B)
+    v = 0.0
+    for i in range(n):
+        v += d[i] * B[i, 0]
+    return v
+
+
+@njit(cache=True, nogil=True)
 def _quadratic_form_inverse(P, d):
     """``dᵀ P⁻¹ d`` (the prior's cost), or -1 where P is singular."""
     n = d.shape[0]
@@ -156,6 +235,14 @@ def _weighted_products(H, nu, R, AG, inv_r, hw):
 
 @njit(cache=True, nogil=True)
 def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost):
+    """:func:`_solve` with P factored here for the cost's prior term."""
+    LU, piv, lu_ok = _factored(P)
+    return _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost, LU, piv,
+                  lu_ok)
+
+
+@njit(cache=True, nogil=True)
+def _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost, LU, piv, lu_ok):
     """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, AG, J, ok)``, ``AG = Hᵀ S⁻¹ [H, ν]``
     (9 × 10: ``A = Hᵀ S⁻¹ H`` and ``g = Hᵀ S⁻¹ ν``) at the last linearisation, J at x (0 unless
     ``with_cost``), ``ok`` False where the update's system is singular or a reading's variance is not positive
@@ -165,7 +252,7 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
     and ``b = Hᵀ R⁻¹ ν`` (R diagonal), ``Hᵀ S⁻¹ = (I + G P)⁻¹ Hᵀ R⁻¹`` (since ``Hᵀ R⁻¹ S = (G P + I) Hᵀ``
     for ``S = H P Hᵀ + R``), so ``[A, g] = (I + G P)⁻¹ [G, b]``, one 9 × 9 system whatever the number of
     axes, and the new state is ``x̂ + P g``: the numpy expression's ``S⁻¹ [H, ν]`` (an m × m system) to
-    rounding."""
+    rounding. ``(LU, piv, lu_ok)``: P factored (:func:`_factored`), for the prior's cost."""
     m = y.shape[0]
     R = R0.copy()
     H = np.zeros((m, 9))
@@ -187,7 +274,8 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
                 _predict_readings(x, S_q, S_dw, S_f, pred, H)
                 for i in range(m):
                     R[i] = R[i] / _weight((y[i] - pred[i]) / np.sqrt(R[i]), c_robust, loss)
-        _predict_readings(x, S_q, S_dw, S_f, pred, H)
+        if not (adaptive and c_robust > 0.0 and it > 0):  # (else h(x) and H at this x are made just above)
+            _predict_readings(x, S_q, S_dw, S_f, pred, H)
         for i in range(m):
             if not R[i] > 0.0:  # a reading without noise: the information form does not apply
                 return x, H, AG, 0.0, False
@@ -224,7 +312,7 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
     for i in range(m):
         r = y[i] - pred[i]
         cost += r * r / R[i]
-    prior = _quadratic_form_inverse(P, x - xp)
+    prior = _factored_form_inverse(LU, piv, lu_ok, x - xp)
     return x, H_last, AG, cost + max(prior, 0.0), True
 
 
@@ -250,27 +338,29 @@ def branch_state(kind, x, normal):
 
 @njit(cache=True, nogil=True)
 def search(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches, normal,
-           prior_margin):
+           prior_margin, LU, piv, lu_ok):
     """The update's minimum: Gauss-Newton from ``start``, then (``branches``) from the other three branches
     of that minimum, each tried only when the prediction does not rule it out by more than
     ``prior_margin`` (squared, in P) beyond the minimum's cost; two steps tell a branch that loses, one
-    that may win is solved to the end. ``(x, H, AG, J, ok)`` of the lowest J."""
-    x, H, AG, J, ok = solve(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
-                           branches)
+    that may win is solved to the end. ``(x, H, AG, J, ok)`` of the lowest J. ``(LU, piv, lu_ok)``: P factored
+    (:func:`_factored`; read only with ``branches``)."""
+    x, H, AG, J, ok = _solve(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
+                            branches, LU, piv, lu_ok)
     if not ok or not branches:
         return x, H, AG, J, ok
     x_first = x.copy()  # the branches of the first minimum are tried
     for kind in range(1, 4):
         b = branch_state(kind, x_first, normal)
-        distance = _quadratic_form_inverse(P, b - xp)
+        distance = _factored_form_inverse(LU, piv, lu_ok, b - xp)
         if distance > J + prior_margin:  # (P singular: -1, tried)
             continue
-        cx, cH, cAG, cJ, cok = solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, _TWO, tolerance, _TRUE)
+        cx, cH, cAG, cJ, cok = _solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, _TWO, tolerance, _TRUE,
+                                     LU, piv, lu_ok)
         if not cok:
             return cx, cH, cAG, cJ, cok
         if cJ < J:
-            cx, cH, cAG, cJ, cok = solve(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
-                                        tolerance, _TRUE)
+            cx, cH, cAG, cJ, cok = _solve(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
+                                         tolerance, _TRUE, LU, piv, lu_ok)
             if not cok:
                 return cx, cH, cAG, cJ, cok
         if cJ < J:
@@ -638,12 +728,13 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
     solved again from where it is; then :func:`update_window` with the last linearisation (its ``Hᵀ S⁻¹ [H, ν]``). Returns
     ``(T, u, W, P_after, P_before, ok)``: ``P_before`` the newest state's covariance the update started from
     (widened or not), ``ok`` False on a singular innovation covariance or non-finite values (nothing moved)."""
+    LU, piv, lu_ok = _factored(P)  # (P's factors: the branches' distances, the costs' prior terms, the step's residual)
     x, H, AG, J, ok = search(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches,
-                            normal, prior_margin)
+                            normal, prior_margin, LU, piv, lu_ok)
     if not ok:
         return T, u, W, P, P, False
     if robust_step and c_process > 0.0:
-        e2 = _quadratic_form_inverse(P, x - xp)
+        e2 = _factored_form_inverse(LU, piv, lu_ok, x - xp)
         e2 = max(e2, 0.0) / 9.0  # (P singular: 0)
         w = _weight(np.sqrt(e2), c_process, process_loss)
         if w < 1.0:
@@ -654,7 +745,7 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
                 for j in range(9):
                     cross[last, i, j] = P[i, j]
             x, H, AG, J, ok = search(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
-                                    _FALSE, normal, prior_margin)
+                                    _FALSE, normal, prior_margin, LU, piv, _FALSE)
             if not ok:
                 return T, u, W, P, P, False
     T2, u2, W2, P_after, ok = update_window(AG, P, T, u, W, mean, var, cross)
