@@ -411,13 +411,15 @@ class ArrayModel:
         return np.vstack(J0s), np.vstack(J1s), np.concatenate(rs), np.concatenate(motion)
 
     def step(self, h: float, motion_factor: float = 1.0, t_ns: tuple[int, int] | None = None, readings=None,
-             x0: np.ndarray | None = None) -> Step:
+             x0: np.ndarray | None = None, rows: bool = True) -> Step:
         """The process over one step of ``h`` seconds (:class:`Step`) from the step groups' own terms on the
         two samples (:class:`StreamView`): the built-in linear ones (white jerk or driven oscillator,
         specific-force random walk) kept per step length; the others (given in the options) evaluated
         on the samples at ``t_ns`` (their timestamps) with ``readings`` ((accel0, gyro0), (accel1, gyro1)),
         linearised at the newest state ``x0`` and its prediction. ``motion_factor``: the local motion
-        density's factor on the motion model's stds (:func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
+        density's factor on the motion model's stds (:func:`gfimu.smoother.tuning.model_choice.local_density_factors`).
+        ``rows`` False: a step for the numpy engine, which predicts with F, Q and c alone: the rows ``J0, J1,
+        r0`` of a step scaled by ``motion_factor`` are then not made (None)."""
         key = round(h * 1e9)
         cache = self.caches.steps
         fixed = cache.get(key)
@@ -447,14 +449,15 @@ class ArrayModel:
             unit = fixed[1.0]
             if motion_factor == 1.0:
                 return unit
-            J0, J1, r0 = self._scaled(fixed["rows"], motion_factor)
+            J1 = fixed["rows"][1]
             if unit.H0 is None and J1.shape[0] == J1.shape[1]:  # square J1: F stays, Q = J1⁻¹ diag(1/s²) J1⁻ᵀ
                 M = fixed.get("J1_inv")
                 if M is None:
-                    M = fixed["J1_inv"] = np.linalg.inv(fixed["rows"][1])
+                    M = fixed["J1_inv"] = np.linalg.inv(J1)
                 Q = (M * np.where(fixed["rows"][3], motion_factor * motion_factor, 1.0)) @ M.T
+                J0, J1, r0 = self._scaled(fixed["rows"], motion_factor) if rows else (None, None, None)
                 return Step(J0, J1, r0, unit.F, unit.FT, 0.5 * (Q + Q.T), unit.c, None, None)
-            return Step.of(J0, J1, r0)
+            return Step.of(*self._scaled(fixed["rows"], motion_factor))
         J0, J1, r0 = self._scaled(fixed["rows"], motion_factor)
         return Step.of(np.vstack([J0, others[0]]), np.vstack([J1, others[1]]), np.concatenate([r0, others[2]]))
 

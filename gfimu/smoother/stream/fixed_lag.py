@@ -1455,7 +1455,7 @@ class FixedLagSmoother:
         model = self.model
         h = (sample[0] - previous[0]) * 1e-9
         if not model.factor_sets.other_steps:  # the built-in groups alone: nothing read of the samples
-            return model.step(h, motion_factor)
+            return model.step(h, motion_factor, rows=self.config.engine != "numpy")
         return model.step(h, motion_factor, (previous[0], sample[0]),
                           ((previous[1], previous[2]), (sample[1], sample[2])), x0)
 
