@@ -14,6 +14,8 @@ in a daemon thread, once per process, so the smoother finds its kernels ready:
   (:func:`gfimu.smoother.model.kernels.warm`: loaded from the cache, or compiled where it holds none). The
   solve windows' worker processes, forked after :func:`wait`, inherit the machine code.
 
+Either then imports the guard (:mod:`gfimu.smoother.guard`), which runs after the smoother.
+
 Nothing may be forked while the thread runs (a child would inherit the locks it holds, without the thread
 that releases them): :func:`wait` comes first. Any failure leaves the kernels to load where they are first
 called, as without this module.
@@ -51,6 +53,7 @@ def _stream() -> None:
         for module in (kernels, ml_kernels, model_kernels, sigma_kernels):
             for dispatcher in list(vars(module).values()):
                 _load_cached(dispatcher)
+        _guard()
     except Exception:  # noqa: BLE001 - a preload is an optimisation: the kernels then load when first called
         return
 
@@ -60,8 +63,15 @@ def _batch() -> None:
         from .model import kernels
 
         kernels.warm()
+        _guard()
     except Exception:  # noqa: BLE001 - as above
         return
+
+
+def _guard() -> None:
+    """The guard's module imported (with the χ² quantile of :mod:`scipy.special` it reads: about 0.08 s), which
+    both smoothers run once their estimate is made."""
+    from . import guard  # noqa: F401
 
 
 _LOADERS = {"stream": _stream, "batch": _batch}
