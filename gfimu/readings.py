@@ -382,12 +382,14 @@ def _screen(accel_mps2, range_mps2, sensor_of_axis, rate_hz, structure_matrix, e
     long_bad = clipped | stuck
     work = np.where(bad_value | out_range | long_bad, np.nan, y)
     start = 0 if decide_from is None else max(0, decide_from - 2 * SPIKE_REACH)
+    stream = decide_from is not None
     if y.shape[0] < 2 * SCALE_HALF_WIDTH + 1:
         spikes = np.zeros_like(bad_value)
     elif start == 0:
-        spikes = _spikes(work, sensor_of_axis, ends)
+        spikes = _spikes(work, sensor_of_axis, ends, compiled=stream)
     else:  # the rows near the part's cut read from the decisions already taken on them
-        part = _spikes(work[start:], sensor_of_axis, (False, ends[1]), typical=_nanmedian_flat(np.abs(work)))
+        part = _spikes(work[start:], sensor_of_axis, (False, ends[1]), typical=_nanmedian_flat(np.abs(work)),
+                       compiled=True)
         spikes = np.array(known_spikes, dtype=bool)
         spikes[start + SPIKE_REACH:] = part[SPIKE_REACH:]
     spikes &= ~long_bad
@@ -429,11 +431,37 @@ def _long_runs(y: np.ndarray, rate_hz, bad_value: np.ndarray, out_range: np.ndar
     return stuck, runs
 
 
-def _spikes(work: np.ndarray, sensor_of_axis, ends, typical: float | None = None) -> np.ndarray:
+_WHITE_SECOND_DIFFERENCE = float(np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
+"""Mean |y[j+1] - 2 y[j] + y[j-1]| of white noise of unit std: √6 √(2/π)."""
+
+
+def _spikes(work: np.ndarray, sensor_of_axis, ends, typical: float | None = None, compiled: bool = False) -> np.ndarray:
     """(N, n_axes) bool: the isolated spikes of ``work`` (the readings, NaN where already at fault; at least
     2 :data:`SCALE_HALF_WIDTH` + 1 rows), a Hampel identifier with a local scale; a spike seen by two or more
     accelerometers (``sensor_of_axis``) at one sample is an event of the body, not one. ``typical``: the median
-    |reading| the scale's floor is taken from (default: that of ``work``)."""
+    |reading| the scale's floor is taken from (default: that of ``work``). ``compiled``: a buffer's middle (no end
+    of the log in it) through :func:`gfimu.screen_kernels.spike_mask`, the same mask (a stream's decisions)."""
+    typical = _nanmedian_flat(np.abs(work)) if typical is None else typical
+    floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
+    if compiled and not (ends[0] or ends[1]):
+        from .screen_kernels import spike_mask
+
+        spikes = spike_mask(np.ascontiguousarray(work, dtype=float), MEDIAN_HALF_WIDTH, SCALE_HALF_WIDTH, floor,
+                            SPIKE_SCALES, _WHITE_SECOND_DIFFERENCE)
+    else:
+        spikes = _spike_mask(work, ends, floor)
+    if sensor_of_axis is not None and np.any(spikes):
+        sensors = np.asarray(sensor_of_axis)
+        rows = np.nonzero(spikes.any(axis=1))[0]
+        for r in rows:
+            if np.unique(sensors[spikes[r]]).size > 1:
+                spikes[r] = False
+    return spikes
+
+
+def _spike_mask(work: np.ndarray, ends, floor: float) -> np.ndarray:
+    """:func:`_spikes` before its check across sensors, as numpy expressions (the oracle of
+    :func:`gfimu.screen_kernels.spike_mask`)."""
     n = work.shape[0]
     med = _rolling_median(work, MEDIAN_HALF_WIDTH)
     # the first and last rows have a median window cut short, whose median lags a ramp: there, a
@@ -454,18 +482,9 @@ def _spikes(work: np.ndarray, sensor_of_axis, ends, typical: float | None = None
     d2 = np.where(ok, d2, 0.0)
     total = _centred_sum(d2, SCALE_HALF_WIDTH) - _centred_sum(d2, 1)
     number = _centred_sum(ok.astype(float), SCALE_HALF_WIDTH) - _centred_sum(ok.astype(float), 1)
-    local = total / np.maximum(number, 1.0) / (np.sqrt(6.0) * np.sqrt(2.0 / np.pi))
-    # constant (quantised, still) channels have no local scale: a floor at 1e-6 of the typical magnitude
-    typical = _nanmedian_flat(np.abs(work)) if typical is None else typical
-    floor = 1e-6 * max(float(typical) if np.isfinite(typical) else 1.0, 1.0)
-    spikes = np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
-    if sensor_of_axis is not None and np.any(spikes):
-        sensors = np.asarray(sensor_of_axis)
-        rows = np.nonzero(spikes.any(axis=1))[0]
-        for r in rows:
-            if np.unique(sensors[spikes[r]]).size > 1:
-                spikes[r] = False
-    return spikes
+    local = total / np.maximum(number, 1.0) / _WHITE_SECOND_DIFFERENCE
+    # constant (quantised, still) channels have no local scale: the floor, at 1e-6 of the typical magnitude
+    return np.isfinite(dev) & (dev > SPIKE_SCALES * np.maximum(local, floor))
 
 
 def _replaced(y: np.ndarray, short: np.ndarray, long_bad: np.ndarray, structure_matrix) -> np.ndarray:

@@ -5,8 +5,8 @@ numba's on-disk cache; LLVM's start is most of it and runs outside Python's lock
 in a daemon thread, once per process, so the smoother finds its kernels ready:
 
 - ``"stream"``: the fixed-lag smoother's window kernels (:mod:`gfimu.smoother.stream.kernels`), its running σ
-  scale's (:mod:`gfimu.smoother.solve.sigma_kernels`), the per-sample ML's (:mod:`gfimu.estimators.ml_kernels`)
-  and the batch solve's (:mod:`gfimu.smoother.model.kernels`: the
+  scale's (:mod:`gfimu.smoother.solve.sigma_kernels`), the per-sample ML's (:mod:`gfimu.estimators.ml_kernels`),
+  the stream screening's spike rule (:mod:`gfimu.screen_kernels`) and the batch solve's (:mod:`gfimu.smoother.model.kernels`: the
   held start and the tuning stretch are solved whole). Only the overloads the cache holds for this source and
   this machine are loaded (their index key is checked first): nothing is compiled that the stream would not
   compile anyway; a kernel called while it is being loaded waits for numba's own lock.
@@ -45,12 +45,13 @@ def wait() -> None:
 
 def _stream() -> None:
     try:
+        from .. import screen_kernels
         from ..estimators import ml_kernels
         from .model import kernels as model_kernels
         from .solve import sigma_kernels
         from .stream import kernels
 
-        for module in (kernels, ml_kernels, model_kernels, sigma_kernels):
+        for module in (screen_kernels, kernels, ml_kernels, model_kernels, sigma_kernels):  # (in the order used)
             for dispatcher in list(vars(module).values()):
                 _load_cached(dispatcher)
         _guard()
