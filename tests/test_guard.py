@@ -337,3 +337,25 @@ def test_a_long_clean_log_is_fitted_per_sample_once_beside_the_check(monkeypatch
     assert by_guard.report.guard == est.report.guard
     np.testing.assert_array_equal(by_guard.motion.omega_b_radps, est.motion.omega_b_radps)
     np.testing.assert_array_equal(by_guard.motion.specific_force_b_mps2, est.motion.specific_force_b_mps2)
+
+
+def test_the_fixed_lag_guard_s_per_sample_estimate_made_beside_the_stream_is_the_guard_s_own(case, monkeypatch):
+    """The fixed-lag smoother's guard reads a per-sample estimate made in a process of its own while the stream
+    runs: the ML estimate of the whole log to the bit, and the same rows and guard verdict as the guard's own
+    computation of it afterwards."""
+    from gfimu.parallel import can_fork, cpu_count
+    from gfimu.smoother.result import SmootherEstimator
+
+    if not can_fork() or cpu_count() < 2:
+        pytest.skip("the per-sample estimate is made after the stream on this machine")
+    log, ml, _, _ = case
+    est = FixedLagEstimator(**STIFF)
+    beside = est.estimate(log)
+    assert beside.report.per_sample is not None
+    for name in ("omega_b_radps", "omega_dot_b_radps2", "specific_force_b_mps2"):
+        assert getattr(beside.report.per_sample, name).tobytes() == getattr(MLEstimator().estimate_motion(log), name).tobytes()
+    monkeypatch.setattr(FixedLagEstimator, "_per_sample_ahead", SmootherEstimator._per_sample_ahead)
+    after = est.estimate(log)
+    assert after.report.per_sample is None
+    assert beside.motion.omega_b_radps.tobytes() == after.motion.omega_b_radps.tobytes()
+    assert beside.report.guard == after.report.guard and len(beside.report.guard.spans) == 1

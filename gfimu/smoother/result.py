@@ -38,18 +38,46 @@ class SmootherEstimator:
         carries the noise chosen, the model check, the solver's iterations and cost, its notes, and what
         the guard found (:mod:`gfimu.smoother.guard`, unless ``guard='off'``)."""
         t0 = time.perf_counter()
-        run = self.result(log, progress)
+        ahead = self._per_sample_ahead(log) if self.guard != "off" else None
+        try:
+            run = self.result(log, progress)
+        except BaseException:
+            if ahead is not None:
+                ahead.close()
+            raise
         seconds = time.perf_counter() - t0
         report = run.report if run.report.timings else run.report.with_timings(estimate=seconds)
         if self.guard == "off":
             return Estimate(run.motion, report)
         t1 = time.perf_counter()
+        if ahead is not None:
+            per_sample = _taken(ahead)
+            if run.report.per_sample is None and per_sample is not None:
+                run = Estimate(run.motion, dataclasses.replace(run.report, per_sample=per_sample))
+                report = dataclasses.replace(report, per_sample=per_sample)
         # the fixed-lag smoother carries no batch model (no attitude, inclinometer nor calibration)
         motion, outcome = guarded(log, run, GuardOptions(self.guard), self.model, getattr(self, "batch_model", None))
         note = outcome.message()
         report = dataclasses.replace(report.with_timings(guard=time.perf_counter() - t1), guard=outcome,
                                      warnings=report.warnings + ((note,) if note else ()))
         return Estimate(motion, report)
+
+    def _per_sample_ahead(self, log):
+        """The per-sample estimate the guard compares the run with, begun beside the run where the engine makes
+        none of its own (a process of its own, :class:`~gfimu.smoother.stream.choice_worker.ChoiceProcess`,
+        whose answer :func:`_taken` reads), or None: here, none (the batch engine makes it to start from)."""
+        return None
+
+
+def _taken(process):
+    """The answer of a :meth:`SmootherEstimator._per_sample_ahead` process, or None where it failed (the guard
+    then computes it, and raises there what computing it raises); the process ended."""
+    try:
+        return process.result()
+    except Exception:  # noqa: BLE001 - computed again by the guard, where its error belongs
+        return None
+    finally:
+        process.close()
 
 
 def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions,

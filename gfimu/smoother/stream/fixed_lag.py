@@ -1778,6 +1778,20 @@ class FixedLagEstimator(SmootherEstimator):
                             "readings are used as they are (True, the default, replaces such readings)")
         return log, Screening(np.zeros(log.accel_mps2.shape, bool), 0, 0, 0)
 
+    def _per_sample_ahead(self, log: Log):
+        """The guard's per-sample estimate of the whole log (:func:`gfimu.smoother.result.guarded`: ML, as it
+        computes it) begun in a forked process of its own, which makes it on the other core while the stream
+        runs on this one; None where the guard will not judge the run (:func:`~gfimu.smoother.result.unguarded`),
+        the machine has one core or no process may be forked."""
+        from ..result import unguarded
+
+        if cpu_count() < 2 or unguarded(log, self.model) is not None:
+            return None
+        process = ChoiceProcess.start(lambda _: MLEstimator().estimate_motion(log))
+        if process is not None:
+            process.submit(())  # (None would end it)
+        return process
+
     def result(self, log: Log, progress: bool = False) -> Estimate:
         """The fixed-lag smoother over ``log`` sample by sample, before the guard (:meth:`estimate` is the entry)."""
         n = len(log)
