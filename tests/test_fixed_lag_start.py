@@ -124,3 +124,32 @@ def test_a_start_released_from_the_stretchs_batch_solution_weighs_no_evidence():
     assert checks == []
     w = np.array([s.omega_b_radps for s in out])
     assert _rmse(w, log.truth.omega_b_radps) < 0.1
+
+
+def test_the_held_start_s_solves_beside_the_stream_are_the_serial_ones_to_the_bit(monkeypatch):
+    """The starts of a held stretch are solved half in a process of its own, half in the stream's: each solution
+    the one solving them one after the other gives, bit for bit, in the order of the starts."""
+    from gfimu.parallel import can_fork, cpu_count
+    from gfimu.smoother.solve.banded import solve
+    from gfimu.smoother.stream import fixed_lag
+
+    if not can_fork() or cpu_count() < 2:
+        pytest.skip("the starts are solved one after the other on this machine")
+    seen = []
+    solved_from = fixed_lag.FixedLagSmoother._solved_from
+
+    def kept(self, problem, starts):
+        solutions = solved_from(self, problem, starts)
+        seen.append((problem, starts, solutions, self._solver.process))
+        return solutions
+
+    monkeypatch.setattr(fixed_lag.FixedLagSmoother, "_solved_from", kept)
+    log = simulate("slow3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=200.0, duration_s=3.0, seed=1)
+    FixedLagEstimator().estimate(log)
+    assert len(seen) >= 2 and all(p is not None for *_, p in seen)
+    assert not seen[-1][3]._process.is_alive()  # ended with the stream
+    for problem, starts, solutions, _ in seen:
+        assert len(solutions) == len(starts) >= 4
+        for x0, got in zip(starts, solutions):
+            want = solve(problem, x0)
+            assert got.states.tobytes() == want.states.tobytes() and got.cost == want.cost

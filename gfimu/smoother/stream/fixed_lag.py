@@ -435,17 +435,11 @@ def _taken_back(answer, previous):
     return replace(chosen, tuning=previous.tuning) if kept else chosen
 
 
-def _solved_from(problem, starts: list) -> list:
-    """``solve(problem, x0)`` from each start, in threads on the machine's cores (the solves are independent
-    and numpy and LAPACK run without the interpreter's lock on a stretch's arrays): the same solutions as one
-    after the other, in the order of ``starts``."""
-    cores = min(len(starts), cpu_count())
-    if cores < 2:
-        return [solve(problem, x0) for x0 in starts]
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(cores, thread_name_prefix="gfimu-start") as pool:
-        return list(pool.map(lambda x0: solve(problem, x0), starts))
+def _solved_each(request) -> list:
+    """``solve(problem, x0)`` for each start of ``request`` = (problem, starts), in order (a helper process's
+    work: :meth:`FixedLagSmoother._solved_from`)."""
+    problem, starts = request
+    return [solve(problem, x0) for x0 in starts]
 
 
 @dataclass
@@ -733,6 +727,7 @@ class FixedLagSmoother:
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
         self._clock = StreamClock(float(clock_reset_s))
         self._worker = WorkerSlot()
+        self._solver = WorkerSlot()
         self.closed = False
         self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, given.model,
                                                                                              given.batch_model)
@@ -1014,6 +1009,25 @@ class FixedLagSmoother:
         if self._worker.process is not None:
             self._worker.finalizer = weakref.finalize(self, self._worker.process.close)
         return self._worker.process
+
+    def _solved_from(self, problem, starts: list) -> list:
+        """``solve(problem, x0)`` from each start, the later half in a forked process of its own (forked at
+        the first call, kept for the stream's later ones) while this one solves the first half: the same
+        solutions as one after the other, in the order of ``starts``. (Threads would run them one after the
+        other: the banded solver's many small numpy calls hold the interpreter's lock.) One after the other
+        here where no process may be forked or the machine has one core."""
+        slot = self._solver
+        if not slot.tried:
+            slot.tried = True
+            if cpu_count() > 1:
+                slot.process = ChoiceProcess.start(_solved_each)
+                if slot.process is not None:
+                    slot.finalizer = weakref.finalize(self, slot.process.close)
+        if slot.process is None or len(starts) < 2:
+            return _solved_each((problem, starts))
+        k = (len(starts) + 1) // 2
+        slot.process.submit((problem, starts[k:]))
+        return _solved_each((problem, starts[:k])) + slot.process.result()
 
     def look_ahead(self, timestamps_ns, accel, gyro=None) -> None:
         """The samples this smoother will be pushed, in order (a log's times (n,), readings (n, axes) and gyro
@@ -1297,6 +1311,7 @@ class FixedLagSmoother:
         stream: a choice after this is made in a thread."""
         self._settle_choice()
         self._worker.close()
+        self._solver.close()
 
     def close(self) -> tuple[StateEstimate, ...]:
         """:meth:`flush`, then refuse any further push (closing twice returns nothing)."""
@@ -1306,6 +1321,7 @@ class FixedLagSmoother:
         self.closed = True
         self._choice.buffer = []
         self._worker.close()
+        self._solver.close()
         return out
 
     def __enter__(self) -> FixedLagSmoother:
@@ -1316,6 +1332,7 @@ class FixedLagSmoother:
             self.closed = True
             self._choice.pending = None  # a choice still being made is not used
             self._worker.close()
+            self._solver.close()
             self._start_segment()
 
     def _end_segment(self) -> tuple[StateEstimate, ...]:
@@ -1580,7 +1597,7 @@ class FixedLagSmoother:
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)
             starts.append(Xb)
-        solutions = _solved_from(problem, starts)
+        solutions = self._solved_from(problem, starts)
         order = sorted(range(len(solutions)), key=lambda i: solutions[i].cost)
         best = solutions[order[0]]
         w = best.states[:, OMEGA]
