@@ -238,7 +238,7 @@ def test_smoother_bound_uses_the_process_noise_the_smoother_chose():
     est = BatchSmootherEstimator()
     report = est.estimate(log).report
     tuned = smoother_bound(log, est.options(), log.truth,
-                           window_models=[t.apply(est.model, est.batch_model) for t in report.tunings]).sigma["omega_b_radps"]
+                           window_models=[t.apply(est.model_groups) for t in report.tunings]).sigma["omega_b_radps"]
     assert bound["w_rmse_norm"] == pytest.approx(np.sqrt(np.mean(np.sum(tuned**2, axis=1))), rel=1e-9)
     # on the smooth turntable the chosen noise is far below the default, and so is the bound
     default = smoother_bound(log, SmootherOptions(), log.truth).sigma["omega_b_radps"]

@@ -6,7 +6,6 @@ import pytest
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
 from gfimu.simulate.sensor_errors import SensorErrors
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream import kernels
 from gfimu.smoother.stream import window_filter as flf
 from gfimu.smoother.stream import array_model as model
@@ -23,7 +22,7 @@ def _random_spd(rng, n, scale):
 def _filter(slope=0.0, robust=0.0, branches=True):
     array = cube_array(0.05, noise_std_mps2=0.05)
     options = SmootherOptions()
-    m = model.ArrayModel(array, options.model, options.batch_model)
+    m = model.ArrayModel(array, options.model_groups)
     f = flf.WindowFilter(m, branches=branches)
     if slope or robust:
         m.accel_noise_slope_mps2_per_radps = slope
@@ -260,7 +259,7 @@ def test_the_fused_advance_is_the_numpy_predict_and_measure(monkeypatch, noise, 
                    noise=None if noise > 0 else SensorErrors.none())
     filters = []
     for compiled in (True, False):
-        m = model.ArrayModel(array, ModelOptions(), BatchModelOptions())
+        m = model.ArrayModel(array, SmootherOptions().model_groups)
         if robust:
             m.robust_loss = "cauchy"
             m.accel_robust_threshold = m.process_robust_threshold = robust
@@ -315,7 +314,7 @@ def test_the_fused_advance_is_the_two_compiled_calls_bit_for_bit(robust):
     log = simulate("random3d", array=array, rate_hz=500.0, duration_s=0.8, seed=5)
     filters = []
     for _ in range(2):
-        m = model.ArrayModel(array, ModelOptions(), BatchModelOptions())
+        m = model.ArrayModel(array, SmootherOptions().model_groups)
         if robust:
             m.robust_loss = "cauchy"
             m.accel_robust_threshold = m.process_robust_threshold = robust

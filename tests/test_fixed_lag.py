@@ -11,7 +11,6 @@ from gfimu.methods import make_estimator
 from gfimu.factors import accelerometer, kinematics, process
 from gfimu.log import Log
 from gfimu.simulate import SensorErrors, simulate
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream import array_model as model
 from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError, fixed_lag_reason
 from gfimu.smoother.model.problem import SmootherOptions
@@ -43,7 +42,7 @@ def values_of(keys_and_vectors):
 def test_fast_accelerometer_factor_equals_per_sensor_factors_and_numerical_jacobian():
     rng = np.random.default_rng(4)
     arr = cube_array(0.05, 0.07)
-    m = model.ArrayModel(arr, ModelOptions(), BatchModelOptions(), fast_measurement=True)
+    m = model.ArrayModel(arr, SmootherOptions().model_groups, fast_measurement=True)
     w, dw, f = rng.normal(size=(3, 3)) * [[4.0], [30.0], [9.0]]
     y = arr.predict_readings(f, dw, w) + rng.normal(0, 0.3, arr.n_axes)
     kw, kd, kf = model.keys(7)
@@ -83,7 +82,7 @@ def test_step_is_the_white_jerk_of_the_batch_model():
     rng = np.random.default_rng(5)
     opts = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5, process_axis_factors=(0.1, 0.5, 2.0),
                            specific_force_random_walk_mps2_per_sqrt_s=0.4)
-    m = model.ArrayModel(cube_array(), opts.model, opts.batch_model, fast_measurement=True)
+    m = model.ArrayModel(cube_array(), opts.model_groups, fast_measurement=True)
     h = 0.002
     step = m.step(h)
     I3 = np.eye(3)

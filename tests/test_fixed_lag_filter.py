@@ -92,7 +92,7 @@ def test_window_equals_the_dense_least_squares_minimum(frequencies_hz, noise_mps
     log = simulate("random3d", arr, rate_hz=RATE_HZ, duration_s=0.12, seed=21)
     opts = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=40.0, process_axis_frequencies_hz=frequencies_hz,
                            process_axis_factors=(1.0, 0.5, 2.0))
-    m = model.ArrayModel(arr, opts.model, opts.batch_model)
+    m = model.ArrayModel(arr, opts.model_groups)
     times = log.timestamps_ns * 1e-9
     truth = np.hstack([log.truth.omega_b_radps, log.truth.omega_dot_b_radps2, log.truth.specific_force_b_mps2])
     filt = WindowFilter(m, capacity=16)  # grows and compacts on the way

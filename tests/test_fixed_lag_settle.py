@@ -9,7 +9,6 @@ import pytest
 
 from gfimu.array import mimu4444_array
 from gfimu.simulate import simulate
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream.window_filter import (
     OUTLYING_STEP2,
     SETTLE_FALSE_ALARM,
@@ -31,8 +30,7 @@ def _stream(seed: int = 1, gyro: bool = False):
 
 def _window(log, n: int, gyro: bool = False) -> WindowFilter:
     """A window of the first ``n`` samples, solved state by state as the stream solves them."""
-    filt = WindowFilter(ArrayModel(log.array, ModelOptions(omega_dot_random_walk_radps2_per_sqrt_s=200.0),
-                                   BatchModelOptions()),
+    filt = WindowFilter(ArrayModel(log.array, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=200.0).model_groups),
                         capacity=256, branches=True)
     g = log.gyro_b_radps if gyro else None
     start = np.r_[log.truth.omega_b_radps[0], np.zeros(6)]

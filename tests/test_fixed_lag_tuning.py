@@ -99,7 +99,7 @@ def test_the_stream_after_the_stretch_is_the_fixed_lag_smoother_with_those_densi
 def test_per_axis_factors_and_noise_scale_enter_the_factors():
     opt = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5, process_axis_factors=(1e-3, 0.2, 1.0),
                           specific_force_random_walk_mps2_per_sqrt_s=0.4)
-    m = model.ArrayModel(CUBE_5CM, opt.model, opt.batch_model, accel_noise_scale=2.5)
+    m = model.ArrayModel(CUBE_5CM, opt.model_groups, accel_noise_scale=2.5)
     h = 0.002
     Q = m.step(h).Q
     axis = np.array([1e-3, 0.2, 1.0])

@@ -186,13 +186,13 @@ def test_study_start_at_reference_changes_only_the_initial_omega():
     invalid[40:45] = True
     log = log.replace(reference=log.truth, invalid_reference=invalid)
     opt = make_estimator("smoother", preset="hand-held-low-rate").options()
-    own = initial_estimate(log, opt.model, opt.batch_model)
-    x = study.started_at_reference(log, opt.model, opt.batch_model)
+    own = initial_estimate(log, opt.model_groups)
+    x = study.started_at_reference(log, opt.model_groups)
     np.testing.assert_array_equal(x[~invalid, 0:3], log.truth.omega_b_radps[~invalid])
     np.testing.assert_array_equal(np.abs(x[invalid, 0:3]), np.abs(own[invalid, 0:3]))
     assert np.all(np.sum(x[invalid, 0:3] * log.truth.omega_b_radps[invalid], axis=1) >= 0)
     np.testing.assert_array_equal(x[:, 3:], own[:, 3:])
-    np.testing.assert_array_equal(initial_estimate(log, opt.model, opt.batch_model), own)
+    np.testing.assert_array_equal(initial_estimate(log, opt.model_groups), own)
 
 
 def test_preset_sign_chain_is_not_thrown_by_one_glitched_sample():

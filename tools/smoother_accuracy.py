@@ -123,12 +123,12 @@ def main(argv=None) -> int:
         tuning = tunings[0] if tunings else None
         bound_options = smoother.options()
         if tuning:
-            bound_options = with_groups(bound_options, *tuning.apply(smoother.model, smoother.batch_model))
+            bound_options = with_groups(bound_options, *tuning.apply(smoother.model_groups))
         eff = efficiency(m, log.truth, smoother_bound(log, bound_options)).ratio["omega_b_radps"]
         q = (bound_options.omega_dot_random_walk_radps2_per_sqrt_s * np.asarray(bound_options.process_axis_factors)
              if bound_options.motion_model == "jerk" else None)
         gain = ok[best]["rmse_radps"] / err["rmse_radps"]
-        x0 = initial_states(log, smoother.model, smoother.batch_model)
+        x0 = initial_states(log, smoother.model_groups)
         init = omega_errors(type(m)(log.timestamps_ns, omega_b_radps=x0[:, :3]), log.truth)
         rows.append({"case": name, "per_sample": per, "best_per_sample": best, "smoother": err, "gain": gain,
                      "efficiency": eff, "initialisation": init, "time_s": elapsed, "samples": len(log),

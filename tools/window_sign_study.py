@@ -68,7 +68,7 @@ def one_window(log, sl: slice) -> str:
     opt = make_estimator("smoother").options()
     part = log.select(sl)
     truth = log.truth.omega_b_radps[sl]
-    problem, x0 = tuned_problem(part, opt.model, opt.batch_model, opt.tuning, [], None, opt.tune_span_s)
+    problem, x0 = tuned_problem(part, opt.model_groups, [], None, opt.tune_span_s)
     own = batch.solve_window(problem, x0, opt.batch)
     turned = x0.copy()
     sign = np.where(np.sum(turned[:, OMEGA] * truth, axis=1) < 0, -1.0, 1.0)

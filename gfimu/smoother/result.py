@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass, fields
 
 from ..estimate import Estimate
-from .model.option_groups import BatchModelOptions, GuardOptions, ModelOptions, assemble
+from .model.option_groups import AttitudeOptions, GuardOptions, ModelOptions, SelfCalibrationOptions, assemble
 
 
 @dataclass(frozen=True)
@@ -44,19 +44,20 @@ class SmootherEstimator:
         if self.guard == "off":
             return Estimate(run.motion, report)
         t1 = time.perf_counter()
-        # the fixed-lag smoother carries no batch model (no attitude, inclinometer nor calibration)
-        motion, outcome = guarded(log, run, GuardOptions(self.guard), self.model, getattr(self, "batch_model", None))
+        # the fixed-lag smoother carries no attitude, inclinometer nor calibration
+        motion, outcome = guarded(log, run, GuardOptions(self.guard), self.model, getattr(self, "attitude", None),
+                                  getattr(self, "self_calibration", None))
         note = outcome.message()
         report = dataclasses.replace(report.with_timings(guard=time.perf_counter() - t1), guard=outcome,
                                      warnings=report.warnings + ((note,) if note else ()))
         return Estimate(motion, report)
 
 
-def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions,
-            batch_model: BatchModelOptions | None = None):
+def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions, attitude: AttitudeOptions | None = None,
+            self_calibration: SelfCalibrationOptions | None = None):
     """(motion, :class:`gfimu.smoother.guard.GuardResult`) of the smoother's run ``run`` on ``log`` with
-    the guard's options ``guard`` (its mode 'replace' or 'warn'). The smoother's ``model`` and
-    ``batch_model`` (None: a smoother without one, the fixed-lag smoother) say what it used beyond the
+    the guard's options ``guard`` (its mode 'replace' or 'warn'). The smoother's ``model``, ``attitude`` and
+    ``self_calibration`` (None: a smoother without them, the fixed-lag smoother) say what it used beyond the
     accelerometers (:func:`unguarded`): the guard does not judge a smoother that used more than the
     accelerometers the per-sample fit sees (a gyroscope, an inclinometer, self-calibration, factor groups):
     the result says why."""
@@ -66,7 +67,7 @@ def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions,
 
     mode = guard.guard
     report = run.report
-    why = unguarded(log, model, batch_model, report.model_check)
+    why = unguarded(log, model, attitude, self_calibration, report.model_check)
     if why:
         return run.motion, GuardResult(mode, samples=len(log), note=f"not checked: {why}")
     per_sample = report.per_sample if report.per_sample is not None else MLEstimator().estimate_motion(log)
@@ -78,21 +79,20 @@ def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions,
     return replaced(run.motion, per_sample, outcome, model_check, log.array), outcome
 
 
-def unguarded(log, model: ModelOptions, batch_model: BatchModelOptions | None = None,
-              model_check=None) -> str | None:
-    """Why the guard does not judge a smoother of ``model`` and ``batch_model`` (None: the smoother has
-    none, as the fixed-lag smoother) on ``log`` (its model check ``model_check``, when made), or None when it
-    does (and then needs the per-sample estimate of the whole log)."""
+def unguarded(log, model: ModelOptions, attitude: AttitudeOptions | None = None,
+              self_calibration: SelfCalibrationOptions | None = None, model_check=None) -> str | None:
+    """Why the guard does not judge a smoother of ``model``, ``attitude`` and ``self_calibration`` (None: the
+    smoother has none, as the fixed-lag smoother) on ``log`` (its model check ``model_check``, when made), or
+    None when it does (and then needs the per-sample estimate of the whole log)."""
     from ..estimators.ml import MLEstimator
 
     if model.use_gyro and log.array.gyroscope is not None and getattr(log, "gyro_b_radps", None) is not None:
         return "the smoother uses the gyroscope, which the per-sample fit does not"
-    if batch_model is not None:
-        if (batch_model.estimate_attitude and batch_model.use_inclinometer and log.array.inclinometer is not None
-                and getattr(log, "tilt_rad", None) is not None):
-            return "the smoother uses the inclinometer, which the per-sample fit does not"
-        if batch_model.self_calibrate_bias or batch_model.self_calibrate_scale:
-            return "the smoother calibrates the readings, which the per-sample fit does not"
+    if (attitude is not None and attitude.estimate_attitude and attitude.use_inclinometer
+            and log.array.inclinometer is not None and getattr(log, "tilt_rad", None) is not None):
+        return "the smoother uses the inclinometer, which the per-sample fit does not"
+    if self_calibration is not None and self_calibration.calibrates:
+        return "the smoother calibrates the readings, which the per-sample fit does not"
     if model.factor_groups:
         return "the smoother uses factor groups (more than the readings), which the per-sample fit does not"
     if model_check is not None and getattr(model_check, "constant", False):

@@ -23,7 +23,7 @@ from ...motion import Motion
 from ...rotations import matrix_from_quaternion
 from ..solve.banded import factorise, marginal_covariances, normal_equations
 from .engine import window_slices
-from ..model.option_groups import BatchModelOptions, ModelOptions
+from ..model.option_groups import ModelGroups
 from ..model.problem import SmootherOptions, SmootherProblem
 from ..model.layout import OMEGA_DOT, QUANTITIES
 
@@ -40,11 +40,11 @@ def truth_states(truth: Motion) -> np.ndarray:
 
 def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Motion | None = None,
                    true_params: np.ndarray | None = None,
-                   window_models: list[tuple[ModelOptions, BatchModelOptions]] | None = None) -> Motion:
+                   window_models: list[ModelGroups] | None = None) -> Motion:
     """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state.
 
-    ``window_models``: the (model, batch model) of each solve window, e.g. with the process noise that the
-    batch smoother chose from the data (``[t.apply(options.model, options.batch_model) for t in
+    ``window_models``: the option groups of the model of each solve window, e.g. with the process noise that
+    the batch smoother chose from the data (``[t.apply(options.model_groups) for t in
     estimate.report.tunings]``).
     """
     opt = options or SmootherOptions()
@@ -65,8 +65,8 @@ def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Moti
         raise InputError(f"window_models has {len(window_models)} entries for {len(windows)} solve windows")
     for i, (solve_sl, keep_log, keep_win) in enumerate(windows):
         part = log.select(solve_sl)
-        problem = SmootherProblem.of(part, opt) if window_models is None else SmootherProblem(part, *window_models[i])
-        if problem.attitude:
+        problem = SmootherProblem.of(part, opt) if window_models is None else SmootherProblem(part, window_models[i])
+        if problem.layout.attitude:
             problem = problem.with_noise(attitude=problem.noise.attitude.with_prior(_so3.exp(states[solve_sl.start, -3:])))
         params = np.zeros(problem.n_global) if true_params is None else true_params
         ne = normal_equations(problem, states[solve_sl], params)

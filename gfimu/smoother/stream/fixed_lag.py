@@ -345,7 +345,7 @@ def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None
     if array.n_axes < 6 and not has_gyro:
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without a gyroscope ω cannot be "
                 "observed (free flight needs method 'smoother' with free_flight=True)")
-    return options_reason(array, options.model, options.batch_model)
+    return options_reason(array, ModelGroups.of(options))
 
 
 @dataclass(frozen=True)
@@ -594,7 +594,7 @@ class ChoiceState:
         self.models.append(chosen)
         self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
         self.groups = chosen.groups
-        self.model = model.ArrayModel(array, chosen.groups.model, chosen.groups.batch_model, fast_measurement,
+        self.model = model.ArrayModel(array, chosen.groups, fast_measurement,
                                       chosen.accel_noise_scale)
 
 
@@ -698,7 +698,7 @@ class FixedLagSmoother:
                                                          max(float(marginalise_every_s), 2.0 / rate_hz)),
                                    bool(branches), bool(fast_measurement), bool(options.compute_sigma))
         given = ModelGroups.of(options)  # (the options' batch group is checked above: at its defaults)
-        array_model = model.ArrayModel(array, given.model, given.batch_model, fast_measurement)
+        array_model = model.ArrayModel(array, given, fast_measurement)
         tune = tunes_process_noise(given.model, given.tuning)
         auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, given.batch_model) is None
         tune_n = stretch_samples(tune_window_s, rate_hz)  # (cut above STRETCH_RATE_HZ)
@@ -715,8 +715,8 @@ class FixedLagSmoother:
         self._clock = StreamClock(float(clock_reset_s))
         self._worker = WorkerSlot()
         self.closed = False
-        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, given.model,
-                                                                                             given.batch_model)
+        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array,
+                                                                                             given)
                        else None)
         # the held start's longest span [s] (cut above STRETCH_RATE_HZ; the numpy engine only)
         self._hold = StartHold(float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / rate_hz) if engine == "numpy" else 0.0,
@@ -1127,7 +1127,7 @@ class FixedLagSmoother:
         smoother's): (Tuning, problem, initial states)."""
         tunings: list = []
         given = given or self._choice.rules.given
-        problem, x0 = tuned_problem(part, given.model, given.batch_model, replace(given.tuning, tune_process_noise=True),
+        problem, x0 = tuned_problem(part, given._replace(tuning=replace(given.tuning, tune_process_noise=True)),
                                     tunings)
         return tunings[-1], problem, x0
 
@@ -1145,8 +1145,8 @@ class FixedLagSmoother:
         (:class:`gfimu.smoother.tuning.evidence.Tuning`, the model groups carrying it)."""
         tuning, problem, _ = self._tuned(self._stretch_log(Stretch.of_samples(samples)))
         given = self._choice.rules.given
-        return tuning, ModelGroups(tuning.for_stream(problem.model), problem.batch_model,
-                                   replace(given.tuning, tune_process_noise=False))
+        return tuning, problem.options._replace(model=tuning.for_stream(problem.model),
+                                                tuning=replace(given.tuning, tune_process_noise=False))
 
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
@@ -1274,7 +1274,7 @@ class FixedLagSmoother:
         part = self._stretch_log(Stretch.of_samples(seg.warmup), "fixed-lag warm-up")
         times_ns, accel, gyro = part.timestamps_ns, part.accel_mps2, part.gyro_b_radps
         if len(times_ns) >= 2:
-            x0 = initial_estimate(part, self.options.model, self.options.batch_model)  # 'sign-resolving' or 'ml'
+            x0 = initial_estimate(part, self.options)  # 'sign-resolving' or 'ml'
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
@@ -1476,8 +1476,8 @@ class FixedLagSmoother:
         X = np.vstack([h[2] for h in self._hold.held] + [self._segment.engine.mean(k) for k, _ in self._segment.window])
         part = self._stretch_log(Stretch.of_samples(samples))
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
-        problem = make_problem(part, self.options.model, self.options.batch_model, scale, X[:, OMEGA])
-        starts = [X, initial_estimate(part, self.options.model, self.options.batch_model)]
+        problem = make_problem(part, self.options, scale, X[:, OMEGA])
+        starts = [X, initial_estimate(part, self.options)]
         for kind in (1, 2, 3):
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)
@@ -1594,11 +1594,11 @@ class FixedLagSmoother:
 
 
 @dataclass(frozen=True)
-@assemble("model", "stream", "tuning", tune_process_noise=True)
+@assemble("model", "solve", "stream", "tuning", tune_process_noise=True)
 class FixedLagEstimator(SmootherEstimator):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
-    Options: the groups model, stream, tuning and guard of :mod:`gfimu.smoother.model.option_groups`
+    Options: the groups model, solve, stream, tuning and guard of :mod:`gfimu.smoother.model.option_groups`
     (``gfimu estimate --method fixed-lag --list-options``); the batch smoother's group (``window_s``,
     ``overlap_s``, ``reweight_iterations``, ...) is not among them, so such an option is refused where the
     options are read. Each sample's estimate is its
