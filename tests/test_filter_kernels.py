@@ -211,7 +211,7 @@ def test_a_robust_stream_through_the_kernels_is_the_numpy_stream(monkeypatch):
     y[::97, 2] += 4.0  # outliers for the robust losses
 
     def run():
-        sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.1, rate_hz=400.0)
+        sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.1, rate_hz=400.0)
         # the values the stream's robust model sets (smoother/stream/model_choice.py), set here on its model directly
         sm.model.robust_loss = "cauchy"
         sm.model.accel_robust_threshold = sm.model.process_robust_threshold = 2.0

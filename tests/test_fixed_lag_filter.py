@@ -142,7 +142,7 @@ def test_numpy_engine_gives_the_gtsam_engines_answers(scenario, array, rate_hz, 
 
 def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatch):
     log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.0, seed=8)
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
     out = []
     for i in range(300):
         out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
@@ -168,7 +168,7 @@ def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatc
     def always_fail(self, *a, **k):
         raise FilterFailure("singular innovation covariance")
 
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
     for i in range(50):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
     monkeypatch.setattr(WindowFilter, "measure", always_fail)
@@ -180,4 +180,4 @@ def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatc
 
 def test_unknown_engine_is_refused():
     with pytest.raises(ValueError, match="^fixed-lag smoother option engine must be 'numpy' or 'gtsam', got 'cuda'$"):
-        FixedLagSmoother(cube_array(), SmootherOptions(), engine="cuda")
+        FixedLagSmoother(cube_array(), SmootherOptions().model_groups, engine="cuda")

@@ -124,7 +124,7 @@ def test_a_window_filtered_with_an_outgrown_model_is_solved_again_with_the_new_o
 
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=200, duration_s=3.0, seed=5, omega_rms_radps=4.0)
     slow = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=0.5)  # far below the motion's
-    sm = FixedLagSmoother(log.array, slow, lag_s=1.0, rate_hz=200, hold_max_s=0.0)  # rows come out at the lag
+    sm = FixedLagSmoother(log.array, slow.model_groups, lag_s=1.0, rate_hz=200, hold_max_s=0.0)  # rows come out at the lag
     for k in range(400):
         sm.push(log.timestamps_ns[k], log.accel_mps2[k])
     ks = [k for k, _ in sm._segment.window]

@@ -37,11 +37,11 @@ def log():
 def _options(method: str):
     chosen = method_options(method, [f"default_accel_noise_std_mps2={SIGMA}"])
     assert chosen.options == {"default_accel_noise_std_mps2": SIGMA}
-    return chosen.estimator().options()
+    return chosen.estimator().model_groups
 
 
 def test_the_accel_noise_option_reaches_every_group_that_whitens_with_it(log):
-    problem = SmootherProblem.of(log, _options("smoother"))
+    problem = SmootherProblem(log, _options("smoother"))
     np.testing.assert_array_equal(problem.noise.accel.sigma, np.full(log.array.n_axes, SIGMA))
     # the measurement's whitening: the rows on [ω̇, f] are the structure matrix's over σ
     t = log.truth
@@ -69,25 +69,25 @@ def test_the_accel_noise_option_reaches_every_group_that_whitens_with_it(log):
 
 def test_the_fixed_lag_smoother_takes_the_same_value(log):
     options = _options("fixed-lag")
-    model = ArrayModel(log.array, options.model_groups)
+    model = ArrayModel(log.array, options)
     np.testing.assert_array_equal(model.accel_sigma_mps2, np.full(log.array.n_axes, SIGMA))
-    np.testing.assert_allclose(ArrayModel(log.array, options.model_groups, accel_noise_scale=2.0).accel_sigma_mps2, 2 * SIGMA,
+    np.testing.assert_allclose(ArrayModel(log.array, options, accel_noise_scale=2.0).accel_sigma_mps2, 2 * SIGMA,
                                rtol=1e-15)
     # an array stating some axes' noise: the stream's value is the batch problem's, to the bit
     accs = list(log.array.accelerometers)
     accs[0] = dataclasses.replace(accs[0], noise_std_mps2=0.05)
     accs[3] = dataclasses.replace(accs[3], noise_std_mps2=0.11)
     mixed = log.replace(array=dataclasses.replace(log.array, accelerometers=tuple(accs)))
-    batch = SmootherProblem.of(mixed, options).noise.accel.sigma
+    batch = SmootherProblem(mixed, options).noise.accel.sigma
     assert len(set(batch.tolist())) == 3
-    np.testing.assert_array_equal(ArrayModel(mixed.array, options.model_groups).accel_sigma_mps2, batch)
-    np.testing.assert_array_equal(ArrayModel(mixed.array, options.model_groups).first_sigma,
-                                  SmootherProblem.of(mixed, options).noise.first_state.sigma)
+    np.testing.assert_array_equal(ArrayModel(mixed.array, options).accel_sigma_mps2, batch)
+    np.testing.assert_array_equal(ArrayModel(mixed.array, options).first_sigma,
+                                  SmootherProblem(mixed, options).noise.first_state.sigma)
     # the gyroscope's noise too, from the same group
     gyro = simulate("reversal", array=dataclasses.replace(log.array, gyroscope=Gyroscope(noise_std_radps=0.004)),
                     rate_hz=200.0, duration_s=0.2, seed=3)
-    assert ArrayModel(gyro.array, options.model_groups).gyro_sigma_radps == SmootherProblem.of(gyro, options).noise.gyro.sigma == 0.004
-    assert ArrayModel(log.array, options.model_groups).gyro_sigma_radps == DEFAULT_GYRO_NOISE_STD_RADPS  # none stated
+    assert ArrayModel(gyro.array, options).gyro_sigma_radps == SmootherProblem(gyro, options).noise.gyro.sigma == 0.004
+    assert ArrayModel(log.array, options).gyro_sigma_radps == DEFAULT_GYRO_NOISE_STD_RADPS  # none stated
 
 
 def test_the_batch_problem_and_the_stream_view_are_both_what_a_group_reads(log):

@@ -85,13 +85,15 @@ def test_the_estimators_give_their_groups_back():
     assert est.stream.lag_s == 0.1 and est.stream.engine == "gtsam" and est.solve.initialisation == "ml"
     assert not hasattr(est, "batch") and not hasattr(est, "attitude")
     assert FixedLagEstimator.from_groups(est.model, est.solve, est.stream, est.tuning, guard="warn") == est
-    # the model given to the stream: the estimator's model and tuning, the batch group at its defaults
-    inner = est.options()
+    # the model given to the stream: the estimator's model, solve and tuning, the batch model's groups at their
+    # defaults
+    inner = est.model_groups
     assert inner.model == est.model and inner.solve == est.solve and inner.tuning == est.tuning
-    assert inner.batch == BatchOptions()
+    assert inner.batch_model == SmootherOptions().batch_model and inner.attitude == SmootherOptions().attitude
     batch = make_estimator("smoother", window_s=12.0, solver="gtsam", tune_span_s=None)
     assert batch.batch.window_s == 12.0 and batch.batch.solver == "gtsam" and batch.batch.tune_span_s is None
-    assert not hasattr(batch, "stream") and batch.options().batch == batch.batch
+    assert not hasattr(batch, "stream") and batch.model_groups == (batch.model, batch.solve, batch.batch_model,
+                                                                    batch.attitude, batch.self_calibration, batch.tuning)
 
 
 def test_the_fixed_lag_estimator_checks_its_model_options_when_made():
@@ -136,11 +138,11 @@ def test_the_fixed_lag_smoother_takes_the_stream_group_as_it_is_given():
 
     array = cube_array(0.05)
     stream = StreamOptions(lag_s=0.5, gap_factor=2.5, warmup_s=0.1, hold_max_s=1.0, tune_window_s=2.0)
-    sm = FixedLagSmoother.of_groups(array, SmootherOptions(), stream, 500.0)
+    sm = FixedLagSmoother.of_groups(array, SmootherOptions().model_groups, stream, 500.0)
     assert (sm.lag_s, sm.gap_factor, sm.rate_hz) == (0.5, 2.5, 500.0)
     assert sm.config.warmup_n == 50  # 0.1 s at 500 Hz
     assert sm.engine == "numpy"
-    assert FixedLagSmoother.of_groups(array, SmootherOptions(), stream, 500.0, lag_s=0.3).lag_s == 0.3
+    assert FixedLagSmoother.of_groups(array, SmootherOptions().model_groups, stream, 500.0, lag_s=0.3).lag_s == 0.3
     est = FixedLagEstimator(lag_s=0.4)
     made = est.smoother(array, 500.0)
     assert made.lag_s == pytest.approx(est.window_lag_s(500.0), abs=0.0)

@@ -177,7 +177,7 @@ def test_snap_model_sharpens_omega_dot():
     assert omega_rmse(snap, log.truth) < 0.02
     dw = lambda m: float(np.sqrt(np.mean(np.sum((m.omega_dot_b_radps2 - log.truth.omega_dot_b_radps2) ** 2, axis=1))))
     assert dw(snap) < 0.4 * dw(jerk), (dw(snap), dw(jerk))
-    eff = efficiency(snap, log.truth, smoother_bound(log, snap_est.options()))
+    eff = efficiency(snap, log.truth, smoother_bound(log, snap_est.model_groups, snap_est.batch))
     assert 0.8 < eff.ratio["omega_b_radps"] < 1.2, eff.to_markdown()
 
 
@@ -215,7 +215,7 @@ def test_efficiency_and_sigma_consistency():
     log = simulate("random3d", CUBE, rate_hz=500.0, duration_s=5.0, seed=6)
     est = BatchSmootherEstimator(compute_sigma=True)
     m = est.estimate(log).motion
-    bound = smoother_bound(log, est.options())
+    bound = smoother_bound(log, est.model_groups, est.batch)
     eff = efficiency(m, log.truth, bound)
     assert 0.7 < eff.ratio["omega_b_radps"] < 1.1, eff.to_markdown()
     assert 0.8 < eff.ratio["specific_force_b_mps2"] < 1.2, eff.to_markdown()

@@ -201,7 +201,7 @@ def segment_restarts(model: FrozenModel, X: np.ndarray, normal: np.ndarray, widt
 def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: bool,
           reference_shift_ms: float = 0.0, restarts: str | None = None) -> dict:
     est = BatchSmootherEstimator()
-    given = est.options()
+    given = est
     chosen, auto = chosen_model(log, ModelGroups.of(given), False)
     opt = with_groups(given, *chosen)
     if auto is None or auto[0].consistent:

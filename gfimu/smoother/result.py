@@ -12,14 +12,15 @@ import time
 from dataclasses import dataclass, fields
 
 from ..estimate import Estimate
-from .model.option_groups import AttitudeOptions, GuardOptions, ModelOptions, SelfCalibrationOptions, assemble
+from .model.option_groups import (GROUP_CLASSES, AttitudeOptions, GuardOptions, ModelGroups, ModelOptions,
+                            SelfCalibrationOptions, assemble, groups_of)
 
 
 @dataclass(frozen=True)
 @assemble("guard")
 class SmootherEstimator:
-    """What the batch and fixed-lag estimators share: their options as plain
-    :class:`gfimu.smoother.model.problem.SmootherOptions` (:meth:`options`), the ``guard`` option, and :meth:`estimate`
+    """What the batch and fixed-lag estimators share: the option groups of their model together
+    (:attr:`model_groups`), the ``guard`` option, and :meth:`estimate`
     returning the motion with the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing
     of it). A subclass is a dataclass of option groups (:mod:`gfimu.smoother.model.option_groups`) that defines
     ``method`` (its name in :data:`gfimu.methods.METHODS`) and ``result(log, progress)``: the engine's run,
@@ -27,11 +28,13 @@ class SmootherEstimator:
 
     method = ""
 
-    def options(self):
-        from .model.problem import SmootherOptions
-
-        own = {f.name for f in fields(self)}
-        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions) if f.name in own})
+    @property
+    def model_groups(self) -> ModelGroups:
+        """The option groups of the estimator's model (:class:`~gfimu.smoother.model.option_groups.ModelGroups`), what
+        its smoother is made of; a group it does not carry at its defaults (the fixed-lag estimator: the batch
+        model, attitude and self-calibration)."""
+        own = groups_of(self)
+        return ModelGroups(*(getattr(self, name) if name in own else GROUP_CLASSES[name]() for name in ModelGroups._fields))
 
     def estimate(self, log, progress: bool = False) -> Estimate:
         """The smoother on ``log``: :class:`~gfimu.estimate.Estimate` ``(motion, report)``; the report
