@@ -14,8 +14,8 @@ from gfimu.option import Check
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
 from gfimu.smoother.stream.fixed_lag import FixedLagEstimator
 from gfimu.smoother.model.problem import SmootherOptions
-from gfimu.smoother.model.option_groups import (GROUP_CLASSES, GROUPS, BatchOptions, ModelOptions, StreamOptions,
-                                          TuningOptions, assemble, groups_of)
+from gfimu.smoother.model.option_groups import (GROUP_CLASSES, GROUPS, BatchOptions, ModelGroups, ModelOptions,
+                                                StreamOptions, TuningOptions, assemble, groups_of)
 
 
 def _names(*groups):
@@ -38,6 +38,18 @@ def test_every_declaration_carries_a_one_line_help_a_unit_and_its_check():
     assert (f.default, f.metadata["unit"]) == (30.0, "s")
     f = {f.name: f for f in fields(StreamOptions)}["relinearize_threshold"]
     assert (f.default, f.metadata["unit"]) == (0.1, "rad/s")
+
+
+def test_each_group_is_small_and_the_model_s_groups_travel_together():
+    # a group a reader holds in mind: the model, how a solve runs, the batch model, attitude, self-calibration...
+    assert max(len(names) for names in GROUPS.values()) < 15, {g: len(n) for g, n in GROUPS.items()}
+    opt = SmootherOptions(estimate_attitude=True, self_calibrate_bias=True, max_iterations=7, measurement="quadratic")
+    groups = opt.model_groups
+    assert groups._fields == ("model", "solve", "batch_model", "attitude", "self_calibration", "tuning")
+    assert groups == ModelGroups.of(opt) and groups.solve.max_iterations == 7
+    assert groups.attitude.estimate_attitude and groups.self_calibration.calibrates
+    assert groups.batch_model.measurement == "quadratic"
+    assert SmootherOptions.from_groups(*groups, opt.batch) == opt
 
 
 def test_each_flat_class_has_exactly_its_groups_with_the_declared_metadata():
