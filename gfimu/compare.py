@@ -186,8 +186,8 @@ def _bound_variances(name: str, log: Log, truth: Motion, gyro_noise_std_radps: f
     if reason:
         return f"the smoother cannot run on this array: {reason}"
     opt = SmootherOptions(**dict(smoother_options or {}))
-    window_models = [t.apply(opt.model, opt.batch_model) for t in smoother_tunings] or None
-    sigma = smoother_bound(log, options=opt, truth=truth, window_models=window_models).sigma
+    window_models = [t.apply(opt.model_groups) for t in smoother_tunings] or None
+    sigma = smoother_bound(log, opt.model_groups, opt.batch, truth=truth, window_models=window_models).sigma
     variances = {k: v**2 for k, v in sigma.items()}
     if "specific_force_b_mps2" in variances:
         variances["accel_b_mps2"] = variances["specific_force_b_mps2"]

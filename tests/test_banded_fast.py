@@ -41,8 +41,8 @@ def log():
 def system(log, name, damping=0.0):
     opt = OPTIONS[name]
     problem = SmootherProblem.of(log, opt)
-    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model, opt.batch_model))
-    if problem.attitude:
+    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model_groups))
+    if problem.layout.attitude:
         x[:, problem.AT] = 0.01 * np.random.default_rng(1).normal(size=(problem.n, 3))
     p = 0.01 * np.random.default_rng(2).normal(size=problem.n_global)
     return problem, normal_equations(problem, x, p)
@@ -132,9 +132,9 @@ from gfimu.smoother.tuning.evidence import ProcessBasis, linearised_log_evidence
 @pytest.mark.parametrize("name", ["jerk"])
 def test_process_basis_gives_the_evidence_of_the_factors_evaluated_per_setting(log, name):
     opt = OPTIONS[name]
-    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model, opt.batch_model))
+    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model_groups))
     field = "omega_ddot_random_walk_radps3_per_sqrt_s" if name == "snap" else "omega_dot_random_walk_radps2_per_sqrt_s"
-    basis = ProcessBasis.of(log, opt.model, opt.batch_model, field, x, np.zeros(0))
+    basis = ProcessBasis.of(log, opt.model_groups, field, x, np.zeros(0))
     assert basis is not None
     rng = np.random.default_rng(7)
     for _ in range(3):
@@ -142,7 +142,7 @@ def test_process_basis_gives_the_evidence_of_the_factors_evaluated_per_setting(l
         factors = tuple(np.exp(rng.uniform(-3, 1, size=3)))
         settings = SmootherOptions(**{**opt.__dict__, field: q, "process_axis_factors": factors,
                                       "specific_force_random_walk_mps2_per_sqrt_s": force})
-        problem = make_problem(log, settings.model, settings.batch_model)
+        problem = make_problem(log, settings.model_groups)
         meas = measurement_normal_equations(problem, x)
         direct = linearised_log_evidence(problem, x, None, meas)
         summed = basis.banded(meas)
@@ -162,11 +162,11 @@ def test_process_basis_at_new_states_keeps_the_split_and_products_and_equals_one
     basis made afresh there, bit for bit (the same products in the same order)."""
     opt = OPTIONS["jerk"]
     field = "omega_dot_random_walk_radps2_per_sqrt_s"
-    x = initial_states(log, opt.model, opt.batch_model)
+    x = initial_states(log, opt.model_groups)
     y = x + np.random.default_rng(3).normal(scale=0.05, size=x.shape)  # another point, e.g. a solver's
-    first = ProcessBasis.of(log, opt.model, opt.batch_model, field, x, np.zeros(0))
-    kept = ProcessBasis.of(log, opt.model, opt.batch_model, field, y, np.zeros(0), previous=first)
-    fresh = ProcessBasis.of(log, opt.model, opt.batch_model, field, y, np.zeros(0))
+    first = ProcessBasis.of(log, opt.model_groups, field, x, np.zeros(0))
+    kept = ProcessBasis.of(log, opt.model_groups, field, y, np.zeros(0), previous=first)
+    fresh = ProcessBasis.of(log, opt.model_groups, field, y, np.zeros(0))
     assert kept.parts.keys() == fresh.parts.keys() == first.parts.keys()
     for key, part in kept.parts.items():
         assert part.diag is first.parts[key].diag and part.lower is first.parts[key].lower
@@ -175,7 +175,7 @@ def test_process_basis_at_new_states_keeps_the_split_and_products_and_equals_one
                 np.testing.assert_array_equal(got, want)
         assert part.cost == fresh.parts[key].cost
     assert not np.array_equal(kept.parts["force"].grad[1], first.parts["force"].grad[1])  # the residuals moved
-    problem = make_problem(log, opt.model, opt.batch_model)
+    problem = make_problem(log, opt.model_groups)
     meas = measurement_normal_equations(problem, y)
     summed_first = first.banded(measurement_normal_equations(problem, x))
     summed_kept, summed_fresh = kept.banded(meas, previous=summed_first), fresh.banded(meas)
@@ -198,18 +198,18 @@ def test_process_basis_at_new_states_keeps_the_split_and_products_and_equals_one
 
 def test_process_basis_is_not_used_for_the_oscillator_or_white_snap(log):
     opt = OPTIONS["oscillator"]
-    assert ProcessBasis.of(log, opt.model, opt.batch_model, "omega_dot_random_walk_radps2_per_sqrt_s", initial_states(log, opt.model, opt.batch_model), np.zeros(0)) is None
+    assert ProcessBasis.of(log, opt.model_groups, "omega_dot_random_walk_radps2_per_sqrt_s", initial_states(log, opt.model_groups), np.zeros(0)) is None
     opt = OPTIONS["snap"]
-    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model, opt.batch_model))
-    assert ProcessBasis.of(log, opt.model, opt.batch_model, "omega_ddot_random_walk_radps3_per_sqrt_s", x, np.zeros(0)) is None
+    x = StateLayout.from_options(opt).resize(initial_states(log, opt.model_groups))
+    assert ProcessBasis.of(log, opt.model_groups, "omega_ddot_random_walk_radps3_per_sqrt_s", x, np.zeros(0)) is None
 
 
 def test_tuner_with_the_process_basis_chooses_what_it_chose_without():
     log = simulate("random3d", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=3.0, seed=2)
     opt = SmootherOptions()
-    x = initial_states(log, opt.model, opt.batch_model)
-    fast, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x)
-    plain, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x, basis=False)
+    x = initial_states(log, opt.model_groups)
+    fast, *_ = tune(log, opt.model_groups, x)
+    plain, *_ = tune(log, opt.model_groups, x, basis=False)
     assert fast.evaluations == plain.evaluations
     assert fast.density == pytest.approx(plain.density, rel=1e-9)
     np.testing.assert_allclose(fast.axis_factors, plain.axis_factors, rtol=1e-9)
@@ -224,9 +224,9 @@ def test_tuner_with_the_process_basis_on_a_turntable_reaches_the_same_evidence()
     ten thousand); the density and the oscillator are the same."""
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=3.0, seed=2)
     opt = SmootherOptions()
-    x = initial_states(log, opt.model, opt.batch_model)
-    fast, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x)
-    plain, *_ = tune(log, opt.model, opt.batch_model, opt.tuning, x, basis=False)
+    x = initial_states(log, opt.model_groups)
+    fast, *_ = tune(log, opt.model_groups, x)
+    plain, *_ = tune(log, opt.model_groups, x, basis=False)
     assert fast.log_evidence == pytest.approx(plain.log_evidence, abs=2.0)
     assert fast.density == pytest.approx(plain.density, rel=1e-3)
     np.testing.assert_allclose(fast.axis_frequencies_hz, plain.axis_frequencies_hz, rtol=1e-4)

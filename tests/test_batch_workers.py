@@ -56,15 +56,15 @@ def test_workers_on_a_robust_log(log):
 def test_an_error_in_a_worker_reaches_the_caller(log):
     calls = []
 
-    def failing(part, model, batch_model):
+    def failing(part, groups):
         calls.append(1)
         if part.timestamps_ns[0] > log.timestamps_ns[0]:
             raise ValueError("initial states refused for a later window")
-        return initial_estimate(part, model, batch_model)
+        return initial_estimate(part, groups)
 
     estimator = BatchSmootherEstimator(workers=2, window_s=2.0, overlap_s=0.5)
     with pytest.raises(ValueError, match="refused for a later window"):  # the engine's hook for initial states
-        smooth(log, estimator.model, estimator.batch_model, estimator.batch, estimator.tuning, initial=failing)
+        smooth(log, estimator.model_groups, estimator.batch, initial=failing)
 
 
 def test_worker_count():

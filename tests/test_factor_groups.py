@@ -82,8 +82,8 @@ def test_tuner_and_bound_use_the_group(spinning):
     assert diff == pytest.approx(3 * 50 * np.log(1e-4))
     tuned = make_estimator("smoother", factor_groups=(group,), auto_model=False).estimate(log)  # the likelihood tuner
     assert len(tuned.report.tunings) == 1 and np.isfinite(tuned.report.tunings[0].log_evidence)
-    sd = smoother_bound(log, with_group).sigma["omega_b_radps"]
-    sd0 = smoother_bound(log, opt).sigma["omega_b_radps"]
+    sd = smoother_bound(log, with_group.model_groups, with_group.batch).sigma["omega_b_radps"]
+    sd0 = smoother_bound(log, opt.model_groups, opt.batch).sigma["omega_b_radps"]
     assert np.max(sd[125]) < 1.1e-4 < np.min(sd0[125])
 
 
@@ -253,6 +253,6 @@ def test_a_group_that_ties_two_samples_reaches_every_consumer(delta_angles):
     with_group = replace(opt, factor_groups=(group,))
     diff = log_normaliser(SmootherProblem.of(log, with_group)) - log_normaliser(SmootherProblem.of(log, opt))
     assert diff == pytest.approx(3 * (len(log) - 1) * np.log(1e-5))
-    sd = smoother_bound(log, with_group).sigma["omega_b_radps"]
-    sd0 = smoother_bound(log, opt).sigma["omega_b_radps"]
+    sd = smoother_bound(log, with_group.model_groups, with_group.batch).sigma["omega_b_radps"]
+    sd0 = smoother_bound(log, opt.model_groups, opt.batch).sigma["omega_b_radps"]
     assert np.max(sd[100]) < 0.05 * np.min(sd0[100])

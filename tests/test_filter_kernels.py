@@ -6,7 +6,6 @@ import pytest
 from gfimu.array import cube_array
 from gfimu.simulate import simulate
 from gfimu.simulate.sensor_errors import SensorErrors
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream import kernels
 from gfimu.smoother.stream import window_filter as flf
 from gfimu.smoother.stream import array_model as model
@@ -23,7 +22,7 @@ def _random_spd(rng, n, scale):
 def _filter(slope=0.0, robust=0.0, branches=True):
     array = cube_array(0.05, noise_std_mps2=0.05)
     options = SmootherOptions()
-    m = model.ArrayModel(array, options.model, options.batch_model)
+    m = model.ArrayModel(array, options.model_groups)
     f = flf.WindowFilter(m, branches=branches)
     if slope or robust:
         m.accel_noise_slope_mps2_per_radps = slope
@@ -241,7 +240,7 @@ def test_a_robust_stream_through_the_kernels_is_the_numpy_stream(monkeypatch):
     y[::97, 2] += 4.0  # outliers for the robust losses
 
     def run():
-        sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.1, rate_hz=400.0)
+        sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.1, rate_hz=400.0)
         # the values the stream's robust model sets (smoother/stream/model_choice.py), set here on its model directly
         sm.model.robust_loss = "cauchy"
         sm.model.accel_robust_threshold = sm.model.process_robust_threshold = 2.0
@@ -289,7 +288,7 @@ def test_the_fused_advance_is_the_numpy_predict_and_measure(monkeypatch, noise, 
                    noise=None if noise > 0 else SensorErrors.none())
     filters = []
     for compiled in (True, False):
-        m = model.ArrayModel(array, ModelOptions(), BatchModelOptions())
+        m = model.ArrayModel(array, SmootherOptions().model_groups)
         if robust:
             m.robust_loss = "cauchy"
             m.accel_robust_threshold = m.process_robust_threshold = robust
@@ -344,7 +343,7 @@ def test_the_fused_advance_is_the_two_compiled_calls_bit_for_bit(robust):
     log = simulate("random3d", array=array, rate_hz=500.0, duration_s=0.8, seed=5)
     filters = []
     for _ in range(2):
-        m = model.ArrayModel(array, ModelOptions(), BatchModelOptions())
+        m = model.ArrayModel(array, SmootherOptions().model_groups)
         if robust:
             m.robust_loss = "cauchy"
             m.accel_robust_threshold = m.process_robust_threshold = robust

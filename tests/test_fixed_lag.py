@@ -11,7 +11,6 @@ from gfimu.methods import make_estimator
 from gfimu.factors import accelerometer, kinematics, process
 from gfimu.log import Log
 from gfimu.simulate import SensorErrors, simulate
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream import array_model as model
 from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, FixedLagSmootherError, fixed_lag_reason
 from gfimu.smoother.model.problem import SmootherOptions
@@ -43,7 +42,7 @@ def values_of(keys_and_vectors):
 def test_fast_accelerometer_factor_equals_per_sensor_factors_and_numerical_jacobian():
     rng = np.random.default_rng(4)
     arr = cube_array(0.05, 0.07)
-    m = model.ArrayModel(arr, ModelOptions(), BatchModelOptions(), fast_measurement=True)
+    m = model.ArrayModel(arr, SmootherOptions().model_groups, fast_measurement=True)
     w, dw, f = rng.normal(size=(3, 3)) * [[4.0], [30.0], [9.0]]
     y = arr.predict_readings(f, dw, w) + rng.normal(0, 0.3, arr.n_axes)
     kw, kd, kf = model.keys(7)
@@ -83,7 +82,7 @@ def test_step_is_the_white_jerk_of_the_batch_model():
     rng = np.random.default_rng(5)
     opts = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5, process_axis_factors=(0.1, 0.5, 2.0),
                            specific_force_random_walk_mps2_per_sqrt_s=0.4)
-    m = model.ArrayModel(cube_array(), opts.model, opts.batch_model, fast_measurement=True)
+    m = model.ArrayModel(cube_array(), opts.model_groups, fast_measurement=True)
     h = 0.002
     step = m.step(h)
     I3 = np.eye(3)
@@ -164,7 +163,7 @@ def test_push_returns_lagged_smoothed_states_and_newest_filtered():
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.2, seed=4)
     lag_s = 0.1
     # no hold of the start (hold_max_s=0): every row comes out lag_s after its sample once the warm-up is done
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=lag_s, rate_hz=RATE_HZ, warmup_s=0.05, hold_max_s=0.0)
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=lag_s, rate_hz=RATE_HZ, warmup_s=0.05, hold_max_s=0.0)
     lag_ns = round(lag_s * 1e9)
     emitted = []
     warmup_n = int(round(0.05 * RATE_HZ))
@@ -192,7 +191,7 @@ def test_memory_stays_bounded_over_a_long_stream():
     """60 s at 100 Hz (6000 samples): gtsam's keys and factors and the Python window stay bounded."""
     rate_hz, lag_s, block_s = 100.0, 0.2, 0.3
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=rate_hz, duration_s=60.0, seed=5)
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=lag_s, rate_hz=rate_hz, marginalise_every_s=block_s)
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=lag_s, rate_hz=rate_hz, marginalise_every_s=block_s)
     max_states = int(np.ceil((lag_s + 2 * block_s) * rate_hz)) + 3
     keys, factors, window = [], [], []
     smoothed = 0
@@ -221,7 +220,7 @@ def test_gap_restarts_without_integrating_across():
     assert np.all(np.isfinite(est.omega_b_radps))
     assert omega_rmse(est, log.truth) < 0.05
     assert wrong_sign_share(est, log.truth) == 0.0
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ)
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ)
     out = []
     for i in range(600):
         out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
@@ -266,7 +265,7 @@ def test_sigma_matches_the_actual_error():
 
 def test_bad_input_is_refused_with_the_cause():
     arr = cube_array()
-    sm = FixedLagSmoother(arr, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ)
+    sm = FixedLagSmoother(arr, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ)
     with pytest.raises(ValueError, match="12 axes"):
         sm.push(0, np.zeros(5))
     bad = np.zeros(12)
@@ -276,10 +275,10 @@ def test_bad_input_is_refused_with_the_cause():
     sm.push(1000, np.zeros(12))
     assert sm.push(1000, np.zeros(12)).dropped == "duplicate" and sm.n_duplicates == 1
     with pytest.raises(ValueError, match="lag_s"):
-        FixedLagSmoother(arr, SmootherOptions(), lag_s=0.0)
+        FixedLagSmoother(arr, SmootherOptions().model_groups, lag_s=0.0)
     assert "gyroscope" in FixedLagEstimator().applicable(single_triad())
     assert FixedLagEstimator().applicable(replace(single_triad(), gyroscope=Gyroscope(0.01))) is None
-    assert "self_calibrate_bias" in fixed_lag_reason(arr, SmootherOptions(self_calibrate_bias=True))
+    assert "self_calibrate_bias" in fixed_lag_reason(arr, SmootherOptions(self_calibrate_bias=True).model_groups)
     assert "motion_model" in FixedLagEstimator(motion_model="snap").applicable(arr)
     with pytest.raises(ValueError, match="no option"):
         make_estimator("fixed-lag", lag=0.2)
@@ -292,7 +291,7 @@ class _FailingSmoother:
 
 def test_gtsam_solver_failure_rebuilds_the_window_once_then_reports_the_time(monkeypatch):
     log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.0, seed=8)
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02, engine="gtsam")
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02, engine="gtsam")
     out = []
     for i in range(300):
         out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
@@ -312,7 +311,7 @@ def test_gtsam_solver_failure_rebuilds_the_window_once_then_reports_the_time(mon
     assert wrong_sign_share(est, log.truth) == 0.0
     assert omega_rmse(est, log.truth) < 0.05
     # a failure that persists: a clear error naming the time
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02, engine="gtsam")
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02, engine="gtsam")
     for i in range(50):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
     monkeypatch.setattr(sm._segment.engine, "_smoother", _FailingSmoother())

@@ -92,7 +92,7 @@ def test_window_equals_the_dense_least_squares_minimum(frequencies_hz, noise_mps
     log = simulate("random3d", arr, rate_hz=RATE_HZ, duration_s=0.12, seed=21)
     opts = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=40.0, process_axis_frequencies_hz=frequencies_hz,
                            process_axis_factors=(1.0, 0.5, 2.0))
-    m = model.ArrayModel(arr, opts.model, opts.batch_model)
+    m = model.ArrayModel(arr, opts.model_groups)
     times = log.timestamps_ns * 1e-9
     truth = np.hstack([log.truth.omega_b_radps, log.truth.omega_dot_b_radps2, log.truth.specific_force_b_mps2])
     filt = WindowFilter(m, capacity=16)  # grows and compacts on the way
@@ -142,7 +142,7 @@ def test_numpy_engine_gives_the_gtsam_engines_answers(scenario, array, rate_hz, 
 
 def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatch):
     log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=RATE_HZ, duration_s=1.0, seed=8)
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
     out = []
     for i in range(300):
         out.extend(sm.push(log.timestamps_ns[i], log.accel_mps2[i]).smoothed)
@@ -168,7 +168,7 @@ def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatc
     def always_fail(self, *a, **k):
         raise FilterFailure("singular innovation covariance")
 
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=RATE_HZ, warmup_s=0.02)
     for i in range(50):
         sm.push(log.timestamps_ns[i], log.accel_mps2[i])
     monkeypatch.setattr(WindowFilter, "measure", always_fail)
@@ -180,4 +180,4 @@ def test_a_failed_update_rebuilds_the_window_once_then_names_the_time(monkeypatc
 
 def test_unknown_engine_is_refused():
     with pytest.raises(ValueError, match="^fixed-lag smoother option engine must be 'numpy' or 'gtsam', got 'cuda'$"):
-        FixedLagSmoother(cube_array(), SmootherOptions(), engine="cuda")
+        FixedLagSmoother(cube_array(), SmootherOptions().model_groups, engine="cuda")

@@ -9,7 +9,6 @@ import pytest
 
 from gfimu.array import mimu4444_array
 from gfimu.simulate import simulate
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream.window_filter import (
     OUTLYING_STEP2,
     SETTLE_FALSE_ALARM,
@@ -31,8 +30,7 @@ def _stream(seed: int = 1, gyro: bool = False):
 
 def _window(log, n: int, gyro: bool = False) -> WindowFilter:
     """A window of the first ``n`` samples, solved state by state as the stream solves them."""
-    filt = WindowFilter(ArrayModel(log.array, ModelOptions(omega_dot_random_walk_radps2_per_sqrt_s=200.0),
-                                   BatchModelOptions()),
+    filt = WindowFilter(ArrayModel(log.array, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=200.0).model_groups),
                         capacity=256, branches=True)
     g = log.gyro_b_radps if gyro else None
     start = np.r_[log.truth.omega_b_radps[0], np.zeros(6)]
@@ -126,7 +124,7 @@ def test_a_window_filtered_with_an_outgrown_model_is_solved_again_with_the_new_o
 
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=200, duration_s=3.0, seed=5, omega_rms_radps=4.0)
     slow = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=0.5)  # far below the motion's
-    sm = FixedLagSmoother(log.array, slow, lag_s=1.0, rate_hz=200, hold_max_s=0.0)  # rows come out at the lag
+    sm = FixedLagSmoother(log.array, slow.model_groups, lag_s=1.0, rate_hz=200, hold_max_s=0.0)  # rows come out at the lag
     for k in range(400):
         sm.push(log.timestamps_ns[k], log.accel_mps2[k])
     ks = [k for k, _ in sm._segment.window]

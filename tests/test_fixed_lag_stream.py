@@ -30,7 +30,7 @@ def stream(sm, times, rows):
 
 
 def test_duplicates_and_out_of_order_samples_are_dropped_counted_and_change_nothing(log):
-    clean = FixedLagSmoother(log.array, OPTS, lag_s=0.1, rate_hz=RATE_HZ)
+    clean = FixedLagSmoother(log.array, OPTS.model_groups, lag_s=0.1, rate_hz=RATE_HZ)
     ref, _ = stream(clean, log.timestamps_ns, log.accel_mps2)
     ref += list(clean.flush())
     # every 50th sample sent twice, every 70th followed by a late copy of an older sample
@@ -41,7 +41,7 @@ def test_duplicates_and_out_of_order_samples_are_dropped_counted_and_change_noth
             times.append(t), rows.append(y + 5.0), expect.append("duplicate")
         if i % 70 == 20 and i > 5:
             times.append(log.timestamps_ns[i - 3]), rows.append(log.accel_mps2[i - 3]), expect.append("out-of-order")
-    sm = FixedLagSmoother(log.array, OPTS, lag_s=0.1, rate_hz=RATE_HZ)
+    sm = FixedLagSmoother(log.array, OPTS.model_groups, lag_s=0.1, rate_hz=RATE_HZ)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # neither is a warning, let alone an error
         out, drops = stream(sm, times, rows)
@@ -57,7 +57,7 @@ def test_clock_reset_restarts_the_window_with_a_warning_and_goes_on(log):
     n = len(log) // 2
     back_ns = log.timestamps_ns[n] - log.timestamps_ns[0] + 5_000_000_000  # the clock restarts 5 s earlier
     times = np.r_[log.timestamps_ns[:n], log.timestamps_ns[n:] - back_ns]
-    sm = FixedLagSmoother(log.array, OPTS, lag_s=0.1, rate_hz=RATE_HZ, clock_reset_s=0.5)
+    sm = FixedLagSmoother(log.array, OPTS.model_groups, lag_s=0.1, rate_hz=RATE_HZ, clock_reset_s=0.5)
     out = []
     for i in range(len(log)):
         if i == n:
@@ -78,7 +78,7 @@ def test_clock_reset_restarts_the_window_with_a_warning_and_goes_on(log):
 
 
 def test_flush_lets_a_new_stream_start_at_any_time(log):
-    sm = FixedLagSmoother(log.array, OPTS, lag_s=0.1, rate_hz=RATE_HZ)
+    sm = FixedLagSmoother(log.array, OPTS.model_groups, lag_s=0.1, rate_hz=RATE_HZ)
     stream(sm, log.timestamps_ns[:300], log.accel_mps2[:300])
     sm.flush()
     with warnings.catch_warnings():
@@ -89,7 +89,7 @@ def test_flush_lets_a_new_stream_start_at_any_time(log):
 
 
 def test_push_and_flush_after_close_are_clear_errors(log):
-    sm = FixedLagSmoother(log.array, OPTS, lag_s=0.1, rate_hz=RATE_HZ)
+    sm = FixedLagSmoother(log.array, OPTS.model_groups, lag_s=0.1, rate_hz=RATE_HZ)
     out, _ = stream(sm, log.timestamps_ns[:100], log.accel_mps2[:100])
     rest = sm.close()
     assert len(out) + len(rest) == 100 and len(rest) >= int(0.1 * RATE_HZ) and sm.closed
@@ -98,7 +98,7 @@ def test_push_and_flush_after_close_are_clear_errors(log):
         sm.push(log.timestamps_ns[100], log.accel_mps2[100])
     with pytest.raises(FixedLagSmootherClosed, match="flush after close"):
         sm.flush()
-    with FixedLagSmoother(log.array, OPTS, lag_s=0.1, rate_hz=RATE_HZ) as sm2:
+    with FixedLagSmoother(log.array, OPTS.model_groups, lag_s=0.1, rate_hz=RATE_HZ) as sm2:
         sm2.push(log.timestamps_ns[0], log.accel_mps2[0])
     with pytest.raises(FixedLagSmootherClosed):
         sm2.push(log.timestamps_ns[1], log.accel_mps2[1])
@@ -108,7 +108,7 @@ def test_internal_containers_stay_bounded_through_drops_resets_and_gaps(log):
     """A 40 s stream at 200 Hz replayed ten times over the same 4 s of motion, with a clock reset, a gap,
     duplicates and late samples every few steps: every container the smoother keeps stays within its
     window's size from the first repetition to the last."""
-    sm = FixedLagSmoother(log.array, SmootherOptions(), lag_s=0.1, rate_hz=RATE_HZ, tune_window_s=1.0,
+    sm = FixedLagSmoother(log.array, SmootherOptions().model_groups, lag_s=0.1, rate_hz=RATE_HZ, tune_window_s=1.0,
                           clock_reset_s=0.5)
     sizes = []
     n_out = n_in = 0

@@ -9,7 +9,7 @@ from gfimu.simulate import simulate
 from gfimu.smoother.stream import array_model as model
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
 from gfimu.smoother.stream.fixed_lag import FixedLagEstimator, FixedLagSmoother, explicit_process_noise, tunes_process_noise
-from gfimu.smoother.model.option_groups import ModelGroups, ModelOptions, TuningOptions
+from gfimu.smoother.model.option_groups import ModelOptions, TuningOptions
 from gfimu.smoother.model.problem import SmootherOptions
 
 RATE_HZ = 500.0
@@ -99,7 +99,7 @@ def test_the_stream_after_the_stretch_is_the_fixed_lag_smoother_with_those_densi
 def test_per_axis_factors_and_noise_scale_enter_the_factors():
     opt = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5, process_axis_factors=(1e-3, 0.2, 1.0),
                           specific_force_random_walk_mps2_per_sqrt_s=0.4)
-    m = model.ArrayModel(CUBE_5CM, opt.model, opt.batch_model, accel_noise_scale=2.5)
+    m = model.ArrayModel(CUBE_5CM, opt.model_groups, accel_noise_scale=2.5)
     h = 0.002
     Q = m.step(h).Q
     axis = np.array([1e-3, 0.2, 1.0])
@@ -123,14 +123,14 @@ def test_explicit_densities_disable_the_tuning(turntable_log):
         log = turntable_log
         outs = [sm.push(log.timestamps_ns[i], log.accel_mps2[i]) for i in range(150)]
         assert outs[-1].filtered is not None and sm.tuning is None  # streaming from the start, as given
-        assert sm.options == ModelGroups.of(est.options())
+        assert sm.options == est.model_groups
         # with the model check (the default) the given densities are kept once the readings are checked
         sm = FixedLagEstimator(tune_window_s=1.0, **changes).smoother(CUBE_5CM, RATE_HZ)
         for i in range(int(1.5 * RATE_HZ)):
             sm.push(log.timestamps_ns[i], log.accel_mps2[i])
         assert sm.tuning is None and sm.stream_model is not None and sm.stream_model.check.consistent
         for name in explicit_process_noise(est.model):
-            assert getattr(sm.options.model, name) == getattr(est.options(), name)
+            assert getattr(sm.options.model, name) == getattr(est.model, name)
 
 
 def test_stream_waits_for_the_stretch_then_catches_up(turntable_log):
@@ -184,10 +184,7 @@ def test_batch_only_options_are_refused_with_the_reason():
     for name, value in (("window_s", 10.0), ("overlap_s", 1.0), ("reweight_iterations", 2)):
         with pytest.raises(TypeError, match=name):
             FixedLagEstimator(**{name: value})
-        # ...and the streaming smoother given plain SmootherOptions refuses them by name
-        with pytest.raises(ValueError, match=f"^{name}: option\\(s\\) of the batch smoother"):
-            FixedLagSmoother(arr, SmootherOptions(**{name: value}), rate_hz=RATE_HZ)
-    # ...nor the parts of the model only the batch smoother has; given in plain SmootherOptions, the streaming
+    # ...nor the parts of the model only the batch smoother has; given in the groups of a model, the streaming
     # smoother says why it cannot take them
     for name, value, word in (("accel_noise_slope_mps2_per_radps", 0.05, "accel_noise_slope"),
                               ("accel_robust_threshold", 2.0, "accel_robust_threshold"),
@@ -196,7 +193,7 @@ def test_batch_only_options_are_refused_with_the_reason():
         with pytest.raises(TypeError, match=name):
             FixedLagEstimator(**{name: value})
         with pytest.raises(ValueError, match=word):
-            FixedLagSmoother(arr, SmootherOptions(**{name: value}), rate_hz=RATE_HZ)
+            FixedLagSmoother(arr, SmootherOptions(**{name: value}).model_groups, rate_hz=RATE_HZ)
     assert FixedLagEstimator(tune_accel_noise=True, initialisation="ml").applicable(arr) is None
     with pytest.raises(ValueError, match="tune_window_s"):
         FixedLagEstimator(tune_window_s=0.0).smoother(arr, RATE_HZ)

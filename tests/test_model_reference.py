@@ -51,7 +51,7 @@ def test_states(log, problem):
     """The truth in the problem's layout, perturbed."""
     t = log.truth
     x = problem.layout.resize(np.hstack([t.omega_b_radps, t.omega_dot_b_radps2, t.specific_force_b_mps2]))
-    if problem.attitude:
+    if problem.layout.attitude:
         x[:, problem.layout.rotation] = _so3.log(matrix_from_quaternion(t.quaternion_wb))
     return x + 0.05 * np.random.default_rng(1).normal(size=x.shape)
 
@@ -131,7 +131,7 @@ def test_the_fixed_lag_stream_is_the_batch_model(options, fast):
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.1, seed=3).select(slice(10, 13))
     problem = SmootherProblem.of(log, options)
     x = test_states(log, problem)
-    am = model.ArrayModel(log.array, options.model, options.batch_model, fast_measurement=fast)
+    am = model.ArrayModel(log.array, options.model_groups, fast_measurement=fast)
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     am.add_priors(graph, 0)
     for k in range(3):

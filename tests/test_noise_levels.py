@@ -18,7 +18,6 @@ from gfimu.simulate import simulate
 from gfimu.smoother.model.groups import AccelerometerGroup, FactorGroup, MotionModelGroup
 from gfimu.smoother.model.layout import OMEGA_DOT, SPECIFIC_FORCE
 from gfimu.smoother.model.noise_levels import AccelNoise, ModelView, MotionNoise, NoiseLevels
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 from gfimu.smoother.solve.banded import robust_reweighted
 from gfimu.smoother.solve.restarts import FrozenObjective
@@ -38,11 +37,11 @@ def log():
 def _options(method: str):
     chosen = method_options(method, [f"default_accel_noise_std_mps2={SIGMA}"])
     assert chosen.options == {"default_accel_noise_std_mps2": SIGMA}
-    return chosen.estimator().options()
+    return chosen.estimator().model_groups
 
 
 def test_the_accel_noise_option_reaches_every_group_that_whitens_with_it(log):
-    problem = SmootherProblem.of(log, _options("smoother"))
+    problem = SmootherProblem(log, _options("smoother"))
     np.testing.assert_array_equal(problem.noise.accel.sigma, np.full(log.array.n_axes, SIGMA))
     # the measurement's whitening: the rows on [ω̇, f] are the structure matrix's over σ
     t = log.truth
@@ -60,40 +59,40 @@ def test_the_accel_noise_option_reaches_every_group_that_whitens_with_it(log):
     moving = problem.with_noise(accel=problem.noise.accel.motion_dependent(t.omega_b_radps, slope))
     wn = np.linalg.norm(t.omega_b_radps, axis=1)
     np.testing.assert_allclose(moving.noise.accel.per_sample[:, 0], np.sqrt(SIGMA**2 + (slope * wn) ** 2), rtol=1e-15)
-    np.testing.assert_allclose(make_problem(log, problem.model, problem.batch_model, 2.0).noise.accel.sigma, 2 * SIGMA, rtol=1e-15)
+    np.testing.assert_allclose(make_problem(log, problem.options, 2.0).noise.accel.sigma, 2 * SIGMA, rtol=1e-15)
     np.testing.assert_array_equal(FrozenObjective(problem).accel_sigma, SIGMA)
     # re-weighted: the robust weights divide the same σ
-    robust = robust_reweighted(SmootherProblem(log, problem.model, dataclasses.replace(problem.batch_model,
-                                                                                      accel_robust_threshold=2.0)), states)
+    robust = robust_reweighted(SmootherProblem(log, problem.options._replace(batch_model=dataclasses.replace(
+        problem.batch_model, accel_robust_threshold=2.0))), states)
     assert np.all(robust.noise.accel.per_sample >= SIGMA) and robust.noise.accel.base is None
 
 
 def test_the_fixed_lag_smoother_takes_the_same_value(log):
     options = _options("fixed-lag")
-    model = ArrayModel(log.array, options.model, options.batch_model)
+    model = ArrayModel(log.array, options)
     np.testing.assert_array_equal(model.accel_sigma_mps2, np.full(log.array.n_axes, SIGMA))
-    np.testing.assert_allclose(ArrayModel(log.array, options.model, options.batch_model, accel_noise_scale=2.0).accel_sigma_mps2, 2 * SIGMA,
+    np.testing.assert_allclose(ArrayModel(log.array, options, accel_noise_scale=2.0).accel_sigma_mps2, 2 * SIGMA,
                                rtol=1e-15)
     # an array stating some axes' noise: the stream's value is the batch problem's, to the bit
     accs = list(log.array.accelerometers)
     accs[0] = dataclasses.replace(accs[0], noise_std_mps2=0.05)
     accs[3] = dataclasses.replace(accs[3], noise_std_mps2=0.11)
     mixed = log.replace(array=dataclasses.replace(log.array, accelerometers=tuple(accs)))
-    batch = SmootherProblem.of(mixed, options).noise.accel.sigma
+    batch = SmootherProblem(mixed, options).noise.accel.sigma
     assert len(set(batch.tolist())) == 3
-    np.testing.assert_array_equal(ArrayModel(mixed.array, options.model, options.batch_model).accel_sigma_mps2, batch)
-    np.testing.assert_array_equal(ArrayModel(mixed.array, options.model, options.batch_model).first_sigma,
-                                  SmootherProblem.of(mixed, options).noise.first_state.sigma)
+    np.testing.assert_array_equal(ArrayModel(mixed.array, options).accel_sigma_mps2, batch)
+    np.testing.assert_array_equal(ArrayModel(mixed.array, options).first_sigma,
+                                  SmootherProblem(mixed, options).noise.first_state.sigma)
     # the gyroscope's noise too, from the same group
     gyro = simulate("reversal", array=dataclasses.replace(log.array, gyroscope=Gyroscope(noise_std_radps=0.004)),
                     rate_hz=200.0, duration_s=0.2, seed=3)
-    assert ArrayModel(gyro.array, options.model, options.batch_model).gyro_sigma_radps == SmootherProblem.of(gyro, options).noise.gyro.sigma == 0.004
-    assert ArrayModel(log.array, options.model, options.batch_model).gyro_sigma_radps == DEFAULT_GYRO_NOISE_STD_RADPS  # none stated
+    assert ArrayModel(gyro.array, options).gyro_sigma_radps == SmootherProblem(gyro, options).noise.gyro.sigma == 0.004
+    assert ArrayModel(log.array, options).gyro_sigma_radps == DEFAULT_GYRO_NOISE_STD_RADPS  # none stated
 
 
 def test_the_batch_problem_and_the_stream_view_are_both_what_a_group_reads(log):
     problem = SmootherProblem.of(log, SmootherOptions())
-    view = StreamView.of(log.array, ModelOptions(), BatchModelOptions(), log.timestamps_ns[:2]).with_levels((MotionModelGroup(),))
+    view = StreamView.of(log.array, SmootherOptions().model_groups, log.timestamps_ns[:2]).with_levels((MotionModelGroup(),))
     assert isinstance(problem, ModelView) and isinstance(view, ModelView)
     assert isinstance(problem.noise.motion, MotionNoise) and isinstance(view.noise.motion, MotionNoise)
     np.testing.assert_array_equal(view.noise.motion.trapezoid_sigma, problem.noise.motion.trapezoid_sigma[:1])

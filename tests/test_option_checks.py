@@ -107,7 +107,7 @@ def _fixed_lag_smoother(**kwargs):
     from gfimu.array import cube_array
     from gfimu.smoother.stream.fixed_lag import FixedLagSmoother
 
-    return FixedLagSmoother(cube_array(), SmootherOptions(), **kwargs)
+    return FixedLagSmoother(cube_array(), SmootherOptions().model_groups, **kwargs)
 
 
 @pytest.fixture(scope="module")

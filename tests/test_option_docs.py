@@ -1,4 +1,4 @@
-"""The smoothers' options listed in their groups (model, batch, stream, tuning, guard), every one documented;
+"""The smoothers' options listed in their groups (model, solve, batch, stream, tuning, guard, ...), every one documented;
 the flat ``-O name=value`` keeps working, and an option of the other smoother's own group is refused where the
 options are read (exit 2, one line naming it)."""
 
@@ -16,8 +16,9 @@ from gfimu.simulate import simulate
 from gfimu.smoother.model.option_groups import GROUPS
 
 
-@pytest.mark.parametrize("method, groups", [("smoother", ("model", "batch_model", "batch", "tuning", "guard")),
-                                            ("fixed-lag", ("model", "stream", "tuning", "guard"))])
+@pytest.mark.parametrize("method, groups", [("smoother", ("model", "solve", "batch_model", "attitude", "self_calibration",
+                                                          "batch", "tuning", "guard")),
+                                            ("fixed-lag", ("model", "solve", "stream", "tuning", "guard"))])
 def test_every_smoother_option_is_listed_under_its_group(method, groups):
     names = [f.name for f in dataclasses.fields(estimator_class(method)) if f.init]
     assert sorted(names) == sorted(n for g in groups for n in GROUPS[g])

@@ -14,7 +14,6 @@ from gfimu.simulate import simulate
 from gfimu.smoother.batch import engine as batch
 from gfimu.smoother.stream.array_model import ArrayModel
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 from gfimu.smoother.solve.initialise import initial_states
 from gfimu.smoother.tuning.evidence import Tuning, dominant_frequency_hz, linearised_log_evidence
@@ -95,7 +94,7 @@ def test_graph_path_equals_fast_path_with_the_oscillator(turntable_log):
     opt = SmootherOptions(process_axis_frequencies_hz=(0.0, 0.8, 1.0), process_axis_factors=(1.0, 0.1, 0.01),
                           relative_tolerance=1e-16, max_iterations=50)
     problem = SmootherProblem.of(log, opt)
-    x0 = initial_states(log, opt.model, opt.batch_model)
+    x0 = initial_states(log, opt.model_groups)
     fast = batch.solve(problem, x0, method="gn")
     states, _ = batch.solve_with_gtsam(problem, x0, iterations=30, tolerance=0.0)
     np.testing.assert_allclose(states, fast.states, atol=5e-8)
@@ -107,7 +106,7 @@ def test_evidence_with_the_oscillator_equals_the_dense_gaussian_integral():
     log = simulate("reversal", CUBE_5CM, rate_hz=500.0, duration_s=0.06, seed=3)
     problem = SmootherProblem.of(log, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=12.0, process_axis_factors=(0.5, 1.0, 2.0),
                                                    process_axis_frequencies_hz=(0.55, 0.0, 3.0)))
-    x = initial_states(log, problem.model, problem.batch_model) + 0.01
+    x = initial_states(log, problem.options) + 0.01
     dense = dense_log_evidence(problem, x)
     assert linearised_log_evidence(problem, x) == pytest.approx(dense, abs=1e-6 * abs(dense))
 
@@ -162,7 +161,7 @@ def test_random_motion_keeps_the_white_jerk():
 def test_stream_density_floor():
     """``for_stream`` raises an oscillator axis's density to √(2τ) A Ω δΩ, leaves the others."""
     t = Tuning("jerk", 2.0, 1.0, 0.0, 1, (1e-4, 0.5, 1e-5), 0.3, (0.0, 0.0, 1.0), (0.0, 0.0, 1e-3), (0.0, 0.0, 2.5))
-    model, _ = t.apply(ModelOptions(), BatchModelOptions())
+    model = t.apply(SmootherOptions().model_groups).model
     out = t.for_stream(model)
     floor = np.sqrt(2.0) * 2.5 * (2 * np.pi) * (2 * np.pi * 1e-3)
     assert out.process_axis_factors[:2] == (1e-4, 0.5)
@@ -173,7 +172,7 @@ def test_stream_density_floor():
 @pytest.mark.parametrize("fast", [True, False])
 def test_fixed_lag_model_adds_the_oscillator_step(fast):
     opt = SmootherOptions(process_axis_frequencies_hz=(0.0, 2.0, 0.5), process_axis_factors=(1.0, 0.1, 0.01))
-    model = ArrayModel(CUBE_5CM, opt.model, opt.batch_model, fast_measurement=fast)
+    model = ArrayModel(CUBE_5CM, opt.model_groups, fast_measurement=fast)
     graph = gtsam.NonlinearFactorGraph()
     model.add_process(graph, 0, 1, 0.002)
     assert graph.size() == 1  # oscillator step and specific-force random walk, one factor of the step's rows

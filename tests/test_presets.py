@@ -169,7 +169,8 @@ def test_study_bound_at_the_reference_is_the_smoother_bound_plus_the_noise_slope
     flat = {**HAND_HELD, "accel_noise_slope_mps2_per_radps": 0.0}
     got = study.reference_bound(log, flat, mask)
     keys = {f.name for f in dataclasses.fields(SmootherOptions)}
-    sd = smoother_bound(log, SmootherOptions(**{k: v for k, v in flat.items() if k in keys})).sigma["omega_b_radps"]
+    bound_options = SmootherOptions(**{k: v for k, v in flat.items() if k in keys})
+    sd = smoother_bound(log, bound_options.model_groups, bound_options.batch).sigma["omega_b_radps"]
     assert got["rms_bound_norm"] == pytest.approx(float(np.sqrt(np.mean(np.sum(sd**2, axis=1)))), rel=1e-9)
     sloped = study.reference_bound(log, HAND_HELD, mask)
     assert sloped["rms_bound_norm"] > 1.05 * got["rms_bound_norm"]
@@ -185,14 +186,14 @@ def test_study_start_at_reference_changes_only_the_initial_omega():
     invalid = np.zeros(len(log), bool)
     invalid[40:45] = True
     log = log.replace(reference=log.truth, invalid_reference=invalid)
-    opt = make_estimator("smoother", preset="hand-held-low-rate").options()
-    own = initial_estimate(log, opt.model, opt.batch_model)
-    x = study.started_at_reference(log, opt.model, opt.batch_model)
+    opt = make_estimator("smoother", preset="hand-held-low-rate")
+    own = initial_estimate(log, opt.model_groups)
+    x = study.started_at_reference(log, opt.model_groups)
     np.testing.assert_array_equal(x[~invalid, 0:3], log.truth.omega_b_radps[~invalid])
     np.testing.assert_array_equal(np.abs(x[invalid, 0:3]), np.abs(own[invalid, 0:3]))
     assert np.all(np.sum(x[invalid, 0:3] * log.truth.omega_b_radps[invalid], axis=1) >= 0)
     np.testing.assert_array_equal(x[:, 3:], own[:, 3:])
-    np.testing.assert_array_equal(initial_estimate(log, opt.model, opt.batch_model), own)
+    np.testing.assert_array_equal(initial_estimate(log, opt.model_groups), own)
 
 
 def test_preset_sign_chain_is_not_thrown_by_one_glitched_sample():

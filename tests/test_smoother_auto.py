@@ -70,11 +70,11 @@ def test_motion_densities_of_a_random_walk_that_rests_half_the_time():
 
 def test_misfit_options_and_describe():
     check = auto.ModelCheck(False, 100, 5.0, 0.1, 0.2, 0.03, 20.0, 0.05, ("x",))
-    from gfimu.smoother.model.option_groups import BatchModelOptions, ModelGroups, ModelOptions, TuningOptions
+    from gfimu.smoother.model.problem import SmootherOptions
 
-    model, batch_model, tuning = auto.misfit_options(ModelGroups(ModelOptions(), BatchModelOptions(), TuningOptions()),
-                                                     check)
-    assert model.initialisation == "ml" and model.ml_sign_chain and batch_model.robust and not tuning.tune_process_noise
+    chosen = auto.misfit_options(SmootherOptions().model_groups, check)
+    model, solve, batch_model, tuning = chosen.model, chosen.solve, chosen.batch_model, chosen.tuning
+    assert solve.initialisation == "ml" and solve.ml_sign_chain and batch_model.robust and not tuning.tune_process_noise
     assert batch_model.accel_noise_slope_mps2_per_radps == 0.03 and model.default_accel_noise_std_mps2 == 0.2
     assert "disagree" in check.describe() and "0.03" in check.describe()
 

@@ -9,7 +9,6 @@ from gfimu.simulate import simulate
 from gfimu.smoother.batch import engine as batch
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
 from gfimu.smoother.batch.bound import efficiency, smoother_bound
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 from gfimu.smoother.solve.initialise import initial_states, window_initial_omega, trapezoid_integral
 from gfimu import rigid_body
@@ -52,7 +51,7 @@ def small_log():
 def test_marginal_covariances_equal_dense_inverse(small_log):
     log = small_log.select(slice(0, 40))
     problem = SmootherProblem.of(log, SmootherOptions(self_calibrate_bias=True, self_calibrate_scale=True))
-    x = initial_states(log, problem.model, problem.batch_model)
+    x = initial_states(log, problem.options)
     p = np.random.default_rng(0).normal(size=problem.n_global) * 0.01
     ne = batch.normal_equations(problem, x, p)
     n, G = problem.n, problem.n_global
@@ -86,7 +85,7 @@ def test_graph_path_equals_fast_path(small_log, options):
     """GTSAM graph of CustomFactors (linearize/optimize/retract) = banded vectorised engine."""
     log = small_log.select(slice(0, 60))
     problem = SmootherProblem.of(log, options)
-    x0 = initial_states(log, options.model, options.batch_model)
+    x0 = initial_states(log, options.model_groups)
     fast = batch.solve(problem, x0, method="gn")
     states, params = batch.solve_with_gtsam(problem, x0, iterations=30, tolerance=0.0)
     assert fast.converged
@@ -104,7 +103,7 @@ def test_graph_path_equals_fast_path_with_attitude_and_inclinometer():
     log = simulate("turntable", paper001_array(), rate_hz=500.0, duration_s=0.2, seed=3)
     options = SmootherOptions(use_inclinometer=True, relative_tolerance=1e-16, max_iterations=50)
     problem = SmootherProblem.of(log, options)
-    base = initial_states(log, ModelOptions(), BatchModelOptions())
+    base = initial_states(log, SmootherOptions().model_groups)
     R = initial_attitude(log, base[:, 0:3], base[:, 6:9], None, True)
     problem = problem.with_noise(attitude=problem.noise.attitude.with_prior(R[0]))
     x0 = np.hstack([base, _so3.log(R)])
@@ -178,7 +177,7 @@ def test_snap_model_sharpens_omega_dot():
     assert omega_rmse(snap, log.truth) < 0.02
     dw = lambda m: float(np.sqrt(np.mean(np.sum((m.omega_dot_b_radps2 - log.truth.omega_dot_b_radps2) ** 2, axis=1))))
     assert dw(snap) < 0.4 * dw(jerk), (dw(snap), dw(jerk))
-    eff = efficiency(snap, log.truth, smoother_bound(log, snap_est.options()))
+    eff = efficiency(snap, log.truth, smoother_bound(log, snap_est.model_groups, snap_est.batch))
     assert 0.8 < eff.ratio["omega_b_radps"] < 1.2, eff.to_markdown()
 
 
@@ -216,7 +215,7 @@ def test_efficiency_and_sigma_consistency():
     log = simulate("random3d", CUBE, rate_hz=500.0, duration_s=5.0, seed=6)
     est = BatchSmootherEstimator(compute_sigma=True)
     m = est.estimate(log).motion
-    bound = smoother_bound(log, est.options())
+    bound = smoother_bound(log, est.model_groups, est.batch)
     eff = efficiency(m, log.truth, bound)
     assert 0.7 < eff.ratio["omega_b_radps"] < 1.1, eff.to_markdown()
     assert 0.8 < eff.ratio["specific_force_b_mps2"] < 1.2, eff.to_markdown()

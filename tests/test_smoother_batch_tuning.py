@@ -10,7 +10,6 @@ from gfimu.motion import Motion
 from gfimu.simulate import simulate
 from gfimu.smoother.batch import engine as batch
 from gfimu.smoother.batch.engine import BatchSmootherEstimator
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.model.problem import SmootherOptions, SmootherProblem
 from gfimu.smoother.solve.initialise import initial_states
 from gfimu.smoother.tuning.evidence import linearised_log_evidence, make_problem, tune
@@ -47,7 +46,7 @@ def test_evidence_equals_dense_gaussian_integral():
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=0.08, seed=3)
     problem = SmootherProblem.of(log, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=12.0,
                                                    process_axis_factors=(0.5, 1.0, 2.0)))
-    x = initial_states(log, problem.model, problem.batch_model) + 0.01
+    x = initial_states(log, problem.options) + 0.01
     dense = dense_log_evidence(problem, x)
     assert linearised_log_evidence(problem, x) == pytest.approx(dense, abs=1e-6 * abs(dense))
     # the row normaliser: the whitening weights of the process rows are 1/σ
@@ -64,11 +63,11 @@ def test_tuner_recovers_the_density_of_the_process_model():
     q_true = np.array([8.0, 8.0, 2.0])
     log = process_model_log(q_true, 3.0, seed=5)
     opt = SmootherOptions(window_s=None)
-    tuning, model, batch_model = tune(log, opt.model, opt.batch_model, opt.tuning, initial_states(log, opt.model, opt.batch_model))
+    tuning, tuned = tune(log, opt.model_groups, initial_states(log, opt.model_groups))
     q_axes = tuning.density * np.asarray(tuning.axis_factors)
     assert np.all(q_axes / q_true < 1.5) and np.all(q_true / q_axes < 1.5), (q_axes, tuning)
     assert 1 / 1.5 < tuning.specific_force_density / 3.0 < 1.5, tuning
-    assert model.process_axis_factors == tuning.axis_factors and batch_model == opt.batch_model
+    assert tuned.model.process_axis_factors == tuning.axis_factors and tuned.batch_model == opt.batch_model
     # and the tuned smoother is at least as accurate as the default densities on its own model
     tuned_rmse = omega_rmse(BatchSmootherEstimator(window_s=None).estimate(log).motion, log.truth)
     fixed_rmse = omega_rmse(BatchSmootherEstimator(window_s=None, tune_process_noise=False).estimate(log).motion, log.truth)
@@ -97,7 +96,7 @@ def test_accel_noise_scale_is_recovered():
     run = BatchSmootherEstimator(tune_accel_noise=True, tune_axis_frequencies=False).estimate(noisy)
     m = run.motion
     assert run.report.tunings[0].accel_noise_scale == pytest.approx(3.0, rel=0.1)
-    problem = make_problem(noisy, ModelOptions(), BatchModelOptions(), 3.0)
+    problem = make_problem(noisy, SmootherOptions().model_groups, 3.0)
     np.testing.assert_allclose(problem.noise.accel.sigma, 0.21)
     assert omega_rmse(m, noisy.truth) < omega_rmse(BatchSmootherEstimator(tune_process_noise=False).estimate(noisy).motion, noisy.truth)
 
@@ -105,7 +104,7 @@ def test_accel_noise_scale_is_recovered():
 def test_normal_equations_of_a_subset_of_terms_add_up():
     log = simulate("reversal", CUBE, rate_hz=500.0, duration_s=0.1, seed=3)
     problem = SmootherProblem.of(log, SmootherOptions())
-    x = initial_states(log, problem.model, problem.batch_model)
+    x = initial_states(log, problem.options)
     terms = problem.terms(x, np.zeros(0))
     whole = batch.normal_equations(problem, x, np.zeros(0))
     parts = batch.add_normal_equations(batch.normal_equations(problem, x, np.zeros(0), terms[:1]),
@@ -129,7 +128,7 @@ def test_motion_dependent_noise_and_ml_initialisation():
     est = BatchSmootherEstimator(accel_noise_slope_mps2_per_radps=0.2, auto_model=False)
     weighted = est.estimate(noisy).motion
     assert omega_rmse(weighted, noisy.truth) < 0.9 * constant, (omega_rmse(weighted, noisy.truth), constant)
-    problem = make_problem(noisy, ModelOptions(), BatchModelOptions(accel_noise_slope_mps2_per_radps=0.2), 1.0,
+    problem = make_problem(noisy, SmootherOptions(accel_noise_slope_mps2_per_radps=0.2).model_groups, 1.0,
                            noisy.truth.omega_b_radps)
     np.testing.assert_allclose(problem.noise.accel.per_sample[:, 0], np.sqrt(0.07**2 + (0.2 * wn) ** 2))
     from_ml = BatchSmootherEstimator(accel_noise_slope_mps2_per_radps=0.2, initialisation="ml",
@@ -229,9 +228,9 @@ def test_minimum_of_a_stiff_setting_keeps_its_precision():
 
     log = simulate("turntable", cube_array(0.025, noise_std_mps2=0.07), rate_hz=250.0, duration_s=0.6, seed=2)
     plain = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5)
-    x = solve(make_problem(log, plain.model, plain.batch_model), initial_states(log, plain.model, plain.batch_model)).states
+    x = solve(make_problem(log, plain.model_groups), initial_states(log, plain.model_groups)).states
     stiff = _replace(plain, process_axis_factors=(0.01, 1e-5, 0.3), process_axis_frequencies_hz=(0.0, 0.865, 0.0))
-    problem = make_problem(log, stiff.model, stiff.batch_model)
+    problem = make_problem(log, stiff.model_groups)
     ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))
     dx, dp = solve_step(ne, factorise(ne, 0.0))
     truth = dense_minimum(problem, x)
@@ -243,7 +242,7 @@ def test_minimum_of_a_stiff_setting_keeps_its_precision():
     subtracted = ne.cost + 0.5 * float(ne.grad.reshape(-1) @ dx.reshape(-1))
     assert abs(subtracted - truth) > 2.0
     # a factor of 10⁻⁴ (a still stiffer axis than the evidence can tell apart) is exact to 10⁻⁶
-    problem = make_problem(log, _replace(stiff.model, process_axis_factors=(0.01, 1e-4, 0.3)), stiff.batch_model)
+    problem = make_problem(log, stiff.model_groups._replace(model=_replace(stiff.model, process_axis_factors=(0.01, 1e-4, 0.3))))
     ne = normal_equations(problem, x, np.zeros(0), problem.terms(x, np.zeros(0)))
     dx, dp = solve_step(ne, factorise(ne, 0.0))
     assert linearised_half_cost(ne.terms, dx, dp) == pytest.approx(dense_minimum(problem, x), rel=1e-6)

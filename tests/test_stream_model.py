@@ -10,7 +10,6 @@ import pytest
 from gfimu.array import cube_array
 from gfimu.estimators.ml import MLEstimator
 from gfimu.simulate import simulate
-from gfimu.smoother.model.option_groups import BatchModelOptions, ModelOptions
 from gfimu.smoother.stream.window_filter import WindowFilter
 from gfimu.smoother.stream.array_model import ArrayModel
 from gfimu.smoother.tuning.model_choice import check_model
@@ -68,7 +67,7 @@ def test_the_chain_keeps_a_consistent_stream():
 
 def test_moving_a_window_onto_a_branch_twice_gives_it_back():
     log = simulate("random3d", cube_array(0.05, 0.07), rate_hz=200, duration_s=0.5, seed=1)
-    filt = WindowFilter(ArrayModel(log.array, ModelOptions(), BatchModelOptions()), capacity=64)
+    filt = WindowFilter(ArrayModel(log.array, SmootherOptions().model_groups), capacity=64)
     filt._normal = NORMAL
     filt.start(0)
     filt.measure(log.accel_mps2[0])
@@ -131,7 +130,7 @@ def test_older_states_brought_up_only_when_read_give_the_flushed_numbers(compile
     log = simulate("reversal", cube_array(0.05, 0.07), rate_hz=500, duration_s=2.0, seed=5)
     runs = {}
     for deferred in (True, False):
-        filt = WindowFilter(ArrayModel(log.array, ModelOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0), BatchModelOptions()),
+        filt = WindowFilter(ArrayModel(log.array, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0).model_groups),
                             capacity=4096)
         filt.compiled, filt.deferred = compiled, deferred
         filt.start(0)
@@ -168,7 +167,7 @@ def test_the_lazy_window_gives_the_eager_numbers(monkeypatch):
     out = {}
     for steps in (1, 32):
         monkeypatch.setattr(flt, "LAZY_STEPS", steps)
-        filt = WindowFilter(ArrayModel(log.array, ModelOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0), BatchModelOptions()),
+        filt = WindowFilter(ArrayModel(log.array, SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=20.0).model_groups),
                             capacity=512)
         filt.start(0)
         filt.measure(log.accel_mps2[0], start=np.r_[log.truth.omega_b_radps[0], np.zeros(6)])
@@ -199,7 +198,7 @@ def test_the_compiled_settle_path_is_the_numpy_viterbi(robust, planar):
         options = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=30.0, robust_loss="cauchy",
                                   accel_robust_threshold=2.0, process_robust_threshold=3.0)
     log = simulate("random3d", array, rate_hz=200, duration_s=1.0, seed=9)
-    filt = WindowFilter(ArrayModel(log.array, options.model, options.batch_model), capacity=64)
+    filt = WindowFilter(ArrayModel(log.array, options.model_groups), capacity=64)
     step = filt.model.step(0.005)
     rng = np.random.default_rng(3)
     moved = 0

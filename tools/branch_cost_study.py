@@ -201,7 +201,7 @@ def segment_restarts(model: FrozenModel, X: np.ndarray, normal: np.ndarray, widt
 def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: bool,
           reference_shift_ms: float = 0.0, restarts: str | None = None) -> dict:
     est = BatchSmootherEstimator()
-    given = est.options()
+    given = est
     chosen, auto = chosen_model(log, ModelGroups.of(given), False)
     opt = with_groups(given, *chosen)
     if auto is None or auto[0].consistent:
@@ -226,11 +226,11 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
     for solve_sl, keep_log, keep_win in windows:
         part, part_ref = log.select(solve_sl), aligned.select(solve_sl)
         sols = {}
-        problem, x0 = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
+        problem, x0 = moment_problem(part, opt.model_groups, auto, solve_sl, [])
         t0 = time.perf_counter()
         sols["default"] = solve_reweighted(problem, x0, opt.batch, compute_sigma=False)
         seconds["default"] += time.perf_counter() - t0
-        problem_r, _ = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
+        problem_r, _ = moment_problem(part, opt.model_groups, auto, solve_sl, [])
         t0 = time.perf_counter()
         sols["reference"] = solve_reweighted(problem_r, reference_start(x0, part_ref), opt.batch,
                                              compute_sigma=False, warm=True)
@@ -238,12 +238,12 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
         frozen_at = sols["default" if sigma_from == "default" else "reference"].states[:, OMEGA]
         for k in names:
             if k == "pinned":  # ω held at the reference, ω̇ and f the model's best under the frozen noise
-                fresh, _ = moment_problem(part_ref, pinned_opt.model, pinned_opt.batch_model, auto, solve_sl, [])
+                fresh, _ = moment_problem(part_ref, pinned_opt.model_groups, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 res = model.resolve(reference_start(x0, part_ref))
                 X = res.states
             elif k == "restarted":  # the default's frozen solution with local restarts on the other branches
-                fresh, _ = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
+                fresh, _ = moment_problem(part, opt.model_groups, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 if restarts == "runs":  # the library's restarts (what the default smoother now does)
                     model.resolve(default_states)  # the frozen noise and base weights on the problem
@@ -254,7 +254,7 @@ def study(log, sigma_from: str, segment_s: float, segment_gain: float, resolve: 
                 restart_counts[1] += kept
             else:
                 production[k] += float(sols[k].cost)
-                fresh, _ = moment_problem(part, opt.model, opt.batch_model, auto, solve_sl, [])
+                fresh, _ = moment_problem(part, opt.model_groups, auto, solve_sl, [])
                 model = FrozenModel(fresh, frozen_at)
                 X = model.resolve(sols[k].states).states if resolve else sols[k].states
             if k == "default":

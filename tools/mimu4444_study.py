@@ -110,12 +110,12 @@ def run_method(name: str, log, options: dict, progress: bool, start_at_reference
     return motion, None, time.perf_counter() - t0
 
 
-def started_at_reference(part, model, batch_model):
+def started_at_reference(part, groups):
     """Initial states of a batch-smoother window from ω of the log's reference (where the reference
     is valid; at saturated-gyro samples from the own initialisation's ω, turned to the reference's
     side), its other states from its own initialisation: how far the accelerometer-only solution
     stands from the gyro's when started on the right sign branch."""
-    x = initial_estimate(part, model, batch_model)
+    x = initial_estimate(part, groups)
     ref = part.reference.omega_b_radps
     ok = ~part.invalid_reference if part.invalid_reference is not None else np.ones(len(part), bool)
     w = x[:, 0:3].copy()
@@ -154,7 +154,7 @@ def reference_bound(log, options: dict, mask) -> dict:
     sd = np.zeros((len(log), 3))
     for solve_sl, keep_log, keep_win in window_slices(len(log), log.rate_hz, opt.window_s, opt.overlap_s):
         part = log.select(solve_sl)
-        problem = make_problem(part, opt.model, opt.batch_model, 1.0, omega[solve_sl])
+        problem = make_problem(part, opt.model_groups, 1.0, omega[solve_sl])
         ne = normal_equations(problem, states[solve_sl], np.zeros(problem.n_global))
         cov, _ = marginal_covariances(ne, factorise(ne, 0.0))
         sd[keep_log] = np.sqrt(np.einsum("nii->ni", cov[:, 0:3, 0:3]))[keep_win]

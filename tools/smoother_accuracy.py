@@ -31,7 +31,6 @@ from gfimu.methods import make_estimator  # noqa: E402
 from gfimu.simulate import simulate  # noqa: E402
 from gfimu.smoother.batch.engine import BatchSmootherEstimator  # noqa: E402
 from gfimu.smoother.batch.bound import efficiency, smoother_bound  # noqa: E402
-from gfimu.smoother.model.option_groups import with_groups  # noqa: E402
 from gfimu.smoother.solve.initialise import initial_states  # noqa: E402
 
 PER_SAMPLE = ("inversion", "integration", "imm", "ml", "free-flight")
@@ -121,14 +120,13 @@ def main(argv=None) -> int:
         m, tunings = run.motion, run.report.tunings
         err = omega_errors(m, log.truth)
         tuning = tunings[0] if tunings else None
-        bound_options = smoother.options()
-        if tuning:
-            bound_options = with_groups(bound_options, *tuning.apply(smoother.model, smoother.batch_model))
-        eff = efficiency(m, log.truth, smoother_bound(log, bound_options)).ratio["omega_b_radps"]
-        q = (bound_options.omega_dot_random_walk_radps2_per_sqrt_s * np.asarray(bound_options.process_axis_factors)
-             if bound_options.motion_model == "jerk" else None)
+        bound_groups = tuning.apply(smoother.model_groups) if tuning else smoother.model_groups
+        eff = efficiency(m, log.truth, smoother_bound(log, bound_groups, smoother.batch)).ratio["omega_b_radps"]
+        bound_model = bound_groups.model
+        q = (bound_model.omega_dot_random_walk_radps2_per_sqrt_s * np.asarray(bound_model.process_axis_factors)
+             if bound_model.motion_model == "jerk" else None)
         gain = ok[best]["rmse_radps"] / err["rmse_radps"]
-        x0 = initial_states(log, smoother.model, smoother.batch_model)
+        x0 = initial_states(log, smoother.model_groups)
         init = omega_errors(type(m)(log.timestamps_ns, omega_b_radps=x0[:, :3]), log.truth)
         rows.append({"case": name, "per_sample": per, "best_per_sample": best, "smoother": err, "gain": gain,
                      "efficiency": eff, "initialisation": init, "time_s": elapsed, "samples": len(log),
@@ -137,7 +135,7 @@ def main(argv=None) -> int:
               f"{err['sign_errors']:.2%} (best per-sample {ok[best]['sign_errors']:.1%}) | "
               f"{ok[best]['relative_rms']:.2e} → {err['relative_rms']:.2e} | {eff:.2f} | {init['rmse_radps']:.3g}, {init['sign_errors']:.2%} | "
               f"{'-' if q is None else ', '.join(f'{v:.3g}' for v in q)} | "
-              f"{', '.join(f'{v:.4g}' if v else '-' for v in bound_options.process_axis_frequencies_hz)} | {elapsed:.1f} |", flush=True)
+              f"{', '.join(f'{v:.4g}' if v else '-' for v in bound_model.process_axis_frequencies_hz)} | {elapsed:.1f} |", flush=True)
     cube = cube_array(args.half_edge_m, 0.07)
     log = simulate("random3d", cube, rate_hz=500.0, duration_s=args.duration_s, seed=1)
     per_axis, norm = band_limited_wiener_bound(cube, log.truth.omega_b_radps, 500.0)

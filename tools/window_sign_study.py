@@ -65,10 +65,10 @@ def whole_log(log, align: bool) -> tuple[np.ndarray, list[int], float]:
 
 def one_window(log, sl: slice) -> str:
     """The window's cost and wrong samples from its own initial states and from them turned to the truth's sign."""
-    opt = make_estimator("smoother").options()
+    opt = make_estimator("smoother")
     part = log.select(sl)
     truth = log.truth.omega_b_radps[sl]
-    problem, x0 = tuned_problem(part, opt.model, opt.batch_model, opt.tuning, [], None, opt.tune_span_s)
+    problem, x0 = tuned_problem(part, opt.model_groups, [], None, opt.tune_span_s)
     own = batch.solve_window(problem, x0, opt.batch)
     turned = x0.copy()
     sign = np.where(np.sum(turned[:, OMEGA] * truth, axis=1) < 0, -1.0, 1.0)
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
         share = 100.0 * wrong(omega, truth)[moving].mean()
         print(f"  sign across windows {'on ' if align else 'off'}: ω RMSE {rmse:.4f} rad/s, wrong sign {share:.2f} %, "
               f"windows solved again {[w + 1 for w in aligned]}, CPU {cpu:.1f} s")
-    opt = make_estimator("smoother").options()
+    opt = make_estimator("smoother")
     windows = batch.window_slices(len(log), log.rate_hz, opt.window_s, opt.overlap_s)
     bad = wrong(omega, truth)
     studied = set()

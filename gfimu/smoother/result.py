@@ -12,14 +12,15 @@ import time
 from dataclasses import dataclass, fields
 
 from ..estimate import Estimate
-from .model.option_groups import BatchModelOptions, GuardOptions, ModelOptions, assemble
+from .model.option_groups import (GROUP_CLASSES, AttitudeOptions, GuardOptions, ModelGroups, ModelOptions,
+                            SelfCalibrationOptions, assemble, groups_of)
 
 
 @dataclass(frozen=True)
 @assemble("guard")
 class SmootherEstimator:
-    """What the batch and fixed-lag estimators share: their options as plain
-    :class:`gfimu.smoother.model.problem.SmootherOptions` (:meth:`options`), the ``guard`` option, and :meth:`estimate`
+    """What the batch and fixed-lag estimators share: the option groups of their model together
+    (:attr:`model_groups`), the ``guard`` option, and :meth:`estimate`
     returning the motion with the :class:`~gfimu.estimate.Report` of the run (the estimator itself keeps nothing
     of it). A subclass is a dataclass of option groups (:mod:`gfimu.smoother.model.option_groups`) that defines
     ``method`` (its name in :data:`gfimu.methods.METHODS`) and ``result(log, progress)``: the engine's run,
@@ -27,11 +28,13 @@ class SmootherEstimator:
 
     method = ""
 
-    def options(self):
-        from .model.problem import SmootherOptions
-
-        own = {f.name for f in fields(self)}
-        return SmootherOptions(**{f.name: getattr(self, f.name) for f in fields(SmootherOptions) if f.name in own})
+    @property
+    def model_groups(self) -> ModelGroups:
+        """The option groups of the estimator's model (:class:`~gfimu.smoother.model.option_groups.ModelGroups`), what
+        its smoother is made of; a group it does not carry at its defaults (the fixed-lag estimator: the batch
+        model, attitude and self-calibration)."""
+        own = groups_of(self)
+        return ModelGroups(*(getattr(self, name) if name in own else GROUP_CLASSES[name]() for name in ModelGroups._fields))
 
     def estimate(self, log, progress: bool = False) -> Estimate:
         """The smoother on ``log``: :class:`~gfimu.estimate.Estimate` ``(motion, report)``; the report
@@ -55,8 +58,9 @@ class SmootherEstimator:
             if run.report.per_sample is None and per_sample is not None:
                 run = Estimate(run.motion, dataclasses.replace(run.report, per_sample=per_sample))
                 report = dataclasses.replace(report, per_sample=per_sample)
-        # the fixed-lag smoother carries no batch model (no attitude, inclinometer nor calibration)
-        motion, outcome = guarded(log, run, GuardOptions(self.guard), self.model, getattr(self, "batch_model", None))
+        # the fixed-lag smoother carries no attitude, inclinometer nor calibration
+        motion, outcome = guarded(log, run, GuardOptions(self.guard), self.model, getattr(self, "attitude", None),
+                                  getattr(self, "self_calibration", None))
         note = outcome.message()
         report = dataclasses.replace(report.with_timings(guard=time.perf_counter() - t1), guard=outcome,
                                      warnings=report.warnings + ((note,) if note else ()))
@@ -80,11 +84,11 @@ def _taken(process):
         process.close()
 
 
-def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions,
-            batch_model: BatchModelOptions | None = None):
+def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions, attitude: AttitudeOptions | None = None,
+            self_calibration: SelfCalibrationOptions | None = None):
     """(motion, :class:`gfimu.smoother.guard.GuardResult`) of the smoother's run ``run`` on ``log`` with
-    the guard's options ``guard`` (its mode 'replace' or 'warn'). The smoother's ``model`` and
-    ``batch_model`` (None: a smoother without one, the fixed-lag smoother) say what it used beyond the
+    the guard's options ``guard`` (its mode 'replace' or 'warn'). The smoother's ``model``, ``attitude`` and
+    ``self_calibration`` (None: a smoother without them, the fixed-lag smoother) say what it used beyond the
     accelerometers (:func:`unguarded`): the guard does not judge a smoother that used more than the
     accelerometers the per-sample fit sees (a gyroscope, an inclinometer, self-calibration, factor groups):
     the result says why."""
@@ -94,7 +98,7 @@ def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions,
 
     mode = guard.guard
     report = run.report
-    why = unguarded(log, model, batch_model, report.model_check)
+    why = unguarded(log, model, attitude, self_calibration, report.model_check)
     if why:
         return run.motion, GuardResult(mode, samples=len(log), note=f"not checked: {why}")
     per_sample = report.per_sample if report.per_sample is not None else MLEstimator().estimate_motion(log)
@@ -106,21 +110,20 @@ def guarded(log, run: Estimate, guard: GuardOptions, model: ModelOptions,
     return replaced(run.motion, per_sample, outcome, model_check, log.array), outcome
 
 
-def unguarded(log, model: ModelOptions, batch_model: BatchModelOptions | None = None,
-              model_check=None) -> str | None:
-    """Why the guard does not judge a smoother of ``model`` and ``batch_model`` (None: the smoother has
-    none, as the fixed-lag smoother) on ``log`` (its model check ``model_check``, when made), or None when it
-    does (and then needs the per-sample estimate of the whole log)."""
+def unguarded(log, model: ModelOptions, attitude: AttitudeOptions | None = None,
+              self_calibration: SelfCalibrationOptions | None = None, model_check=None) -> str | None:
+    """Why the guard does not judge a smoother of ``model``, ``attitude`` and ``self_calibration`` (None: the
+    smoother has none, as the fixed-lag smoother) on ``log`` (its model check ``model_check``, when made), or
+    None when it does (and then needs the per-sample estimate of the whole log)."""
     from ..estimators.ml import MLEstimator
 
     if model.use_gyro and log.array.gyroscope is not None and getattr(log, "gyro_b_radps", None) is not None:
         return "the smoother uses the gyroscope, which the per-sample fit does not"
-    if batch_model is not None:
-        if (batch_model.estimate_attitude and batch_model.use_inclinometer and log.array.inclinometer is not None
-                and getattr(log, "tilt_rad", None) is not None):
-            return "the smoother uses the inclinometer, which the per-sample fit does not"
-        if batch_model.self_calibrate_bias or batch_model.self_calibrate_scale:
-            return "the smoother calibrates the readings, which the per-sample fit does not"
+    if (attitude is not None and attitude.estimate_attitude and attitude.use_inclinometer
+            and log.array.inclinometer is not None and getattr(log, "tilt_rad", None) is not None):
+        return "the smoother uses the inclinometer, which the per-sample fit does not"
+    if self_calibration is not None and self_calibration.calibrates:
+        return "the smoother calibrates the readings, which the per-sample fit does not"
     if model.factor_groups:
         return "the smoother uses factor groups (more than the readings), which the per-sample fit does not"
     if model_check is not None and getattr(model_check, "constant", False):

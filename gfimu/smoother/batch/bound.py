@@ -23,7 +23,7 @@ from ...motion import Motion
 from ...rotations import matrix_from_quaternion
 from ..solve.banded import factorise, marginal_covariances, normal_equations
 from .engine import window_slices
-from ..model.option_groups import BatchModelOptions, ModelOptions
+from ..model.option_groups import BatchOptions, ModelGroups
 from ..model.problem import SmootherOptions, SmootherProblem
 from ..model.layout import OMEGA_DOT, QUANTITIES
 
@@ -38,35 +38,38 @@ def truth_states(truth: Motion) -> np.ndarray:
     return np.hstack([getattr(truth, q) for q in QUANTITY_SLICES])
 
 
-def smoother_bound(log: Log, options: SmootherOptions | None = None, truth: Motion | None = None,
-                   true_params: np.ndarray | None = None,
-                   window_models: list[tuple[ModelOptions, BatchModelOptions]] | None = None) -> Motion:
-    """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state.
+def smoother_bound(log: Log, groups: ModelGroups | None = None, batch: BatchOptions | None = None,
+                   truth: Motion | None = None, true_params: np.ndarray | None = None,
+                   window_models: list[ModelGroups] | None = None) -> Motion:
+    """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state of the
+    batch smoother of the option groups of the model ``groups`` in the solve windows of ``batch`` (defaults:
+    :class:`SmootherOptions`), at the truth.
 
-    ``window_models``: the (model, batch model) of each solve window, e.g. with the process noise that the
-    batch smoother chose from the data (``[t.apply(options.model, options.batch_model) for t in
-    estimate.report.tunings]``).
+    ``window_models``: the option groups of the model of each solve window, e.g. with the process noise that
+    the batch smoother chose from the data (``[t.apply(groups) for t in estimate.report.tunings]``).
     """
-    opt = options or SmootherOptions()
+    defaults = SmootherOptions()
+    groups = groups or defaults.model_groups
+    batch = batch or defaults.batch
     truth = truth or log.truth
     if truth is None:
         raise InputError(f"{log.source}: the bound needs the truth (log.truth or truth=)")
     states = truth_states(truth)
-    if opt.motion_model == "snap":  # ω̈ of the truth by central differences
+    if groups.model.motion_model == "snap":  # ω̈ of the truth by central differences
         states = np.hstack([states, np.gradient(states[:, OMEGA_DOT], log.times_s, axis=0)])
-    if opt.estimate_attitude or opt.use_inclinometer:
+    if groups.attitude.estimate_attitude or groups.attitude.use_inclinometer:
         if truth.quaternion_wb is None:
             raise InputError("the bound with attitude needs the true quaternion_wb")
         states = np.hstack([states, _so3.log(matrix_from_quaternion(truth.quaternion_wb))])
     n = len(log)
     sd = np.zeros((n, states.shape[1]))
-    windows = window_slices(n, log.rate_hz, opt.window_s, opt.overlap_s)
+    windows = window_slices(n, log.rate_hz, batch.window_s, batch.overlap_s)
     if window_models is not None and len(window_models) != len(windows):
         raise InputError(f"window_models has {len(window_models)} entries for {len(windows)} solve windows")
     for i, (solve_sl, keep_log, keep_win) in enumerate(windows):
         part = log.select(solve_sl)
-        problem = SmootherProblem.of(part, opt) if window_models is None else SmootherProblem(part, *window_models[i])
-        if problem.attitude:
+        problem = SmootherProblem(part, groups if window_models is None else window_models[i])
+        if problem.layout.attitude:
             problem = problem.with_noise(attitude=problem.noise.attitude.with_prior(_so3.exp(states[solve_sl.start, -3:])))
         params = np.zeros(problem.n_global) if true_params is None else true_params
         ne = normal_equations(problem, states[solve_sl], params)

@@ -52,7 +52,7 @@ from ..solve.banded import (  # noqa: F401  (the banded core, also importable fr
     to_lower_banded,
 )
 from ..model.problem import SmootherOptions, SmootherProblem, options_reason
-from ..model.option_groups import BatchModelOptions, BatchOptions, ModelGroups, ModelOptions, TuningOptions, assemble
+from ..model.option_groups import BatchOptions, ModelGroups, assemble
 from ..solve.initialise import initial_attitude, initial_states, sign_chain
 from ..model.layout import OMEGA, SPECIFIC_FORCE, StateLayout
 from ..solve.restarts import branch_restarts
@@ -120,9 +120,9 @@ def solve_problem(problem: SmootherProblem, states: np.ndarray, params: np.ndarr
         return solve(problem, states, params, compute_sigma=compute_sigma, reweight=reweight, max_iterations=max_iterations)
     if solver != "gtsam":
         raise InputError(f"unknown solver {solver!r}; choose one of: {', '.join(SOLVERS)}")
-    limit = int(problem.model.max_iterations if max_iterations is None else max_iterations)
+    limit = int(problem.solve.max_iterations if max_iterations is None else max_iterations)
     X, P, iterations, converged, problem = gtsam_levenberg_marquardt(problem, states, params, limit,
-                                                                     problem.model.relative_tolerance, reweight)
+                                                                     problem.solve.relative_tolerance, reweight)
     ne = normal_equations(problem, X, P)
     result = SolveResult(X, P, ne.cost, iterations, converged, problem=problem)
     if compute_sigma:
@@ -136,7 +136,7 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, batch: BatchOptio
     problem's batch model, ``batch.reweight_iterations``) with either solver."""
     if solver == "numpy":
         return solve_reweighted(problem, states, batch, params, compute_sigma)
-    sigma = problem.model.compute_sigma if compute_sigma is None else compute_sigma
+    sigma = problem.solve.compute_sigma if compute_sigma is None else compute_sigma
     reweight = reweighting(problem.batch_model)
     if reweight is None:
         return solve_problem(problem, states, params, sigma, solver)
@@ -144,30 +144,30 @@ def solve_window(problem: SmootherProblem, states: np.ndarray, batch: BatchOptio
     return solve_problem(problem, first.states, first.params if first.params.size else None, sigma, solver, reweight)
 
 
-def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch: BatchOptions, tuning: TuningOptions,
-           progress: bool = False, initial: InitialStates | None = None, per_sample: bool = False) -> Estimate:
-    """The batch smoother on a whole log: the smoother's ``model`` and ``batch_model`` solved in the overlapping
+def smooth(log: Log, groups: ModelGroups, batch: BatchOptions, progress: bool = False,
+           initial: InitialStates | None = None, per_sample: bool = False) -> Estimate:
+    """The batch smoother on a whole log: the model of the option ``groups`` solved in the overlapping
     solve windows of ``batch`` (their length and overlap, the solver, the restarts, the re-weighting, the
     tuning span and the worker processes), the model chosen from the log and the process noise from each
-    window's data as ``tuning`` asks.
+    window's data as ``groups.tuning`` asks.
 
     ``initial``: how each window's initial states are made (default
     :func:`gfimu.smoother.solve.initialise.initial_estimate`). The report (method "smoother", the options of
-    the four groups) carries the noise tuned and the calibration per window, the solver's iterations and cost,
+    all its groups) carries the noise tuned and the calibration per window, the solver's iterations and cost,
     the model check and, when the check made it, the per-sample estimate; no guard. ``per_sample``: the
     per-sample estimate of the whole log is wanted after the run (the guard's), so the model check makes it
     whether it needs it or not, started beside its own estimate of a subsample (:func:`chosen_model`)."""
     # the options whole, as the report gives them
-    options = SmootherOptions.from_groups(model, batch_model, batch, tuning)
-    _check_smoothable(log, model, batch_model, batch.solver)
+    options = SmootherOptions.from_groups(*groups, batch)
+    _check_smoothable(log, groups, batch.solver)
     preload.wait()  # (the kernels' loading begun while the log was read is over before anything is forked)
-    layout = StateLayout.of(model, batch_model)
+    layout = StateLayout.of(groups.model, groups.attitude)
     attitude = layout.attitude
     windows = window_slices(len(log), log.rate_hz, batch.window_s, batch.overlap_s)
     timings = {}
     t0 = time.perf_counter()
-    chosen, auto = ModelGroups(model, batch_model, tuning), None
-    if tuning.auto_model:
+    chosen, auto = groups, None
+    if groups.tuning.auto_model:
         chosen, auto = chosen_model(log, chosen, attitude, per_sample)
         timings["model check"] = time.perf_counter() - t0
     if auto is not None and auto[0].constant:  # nothing to smooth: the per-sample answer, said so
@@ -177,24 +177,23 @@ def smooth(log: Log, model: ModelOptions, batch_model: BatchModelOptions, batch:
                                           iterations=0, cost=0.0, windows=0, per_sample=motion))
     t0 = time.perf_counter()
     if attitude:  # each window starts from the attitude of the one before: in turn
-        outcomes = _attitude_windows(log, chosen.model, chosen.batch_model, chosen.tuning, windows, initial, batch.solver,
-                                     progress)
+        outcomes = _attitude_windows(log, chosen, windows, initial, batch.solver, progress)
     else:
-        context = _WindowContext(log, chosen.model, chosen.batch_model, batch, chosen.tuning, auto, initial, windows)
+        context = _WindowContext(log, chosen, batch, auto, initial, windows)
         outcomes = _run_windows(context, window_workers(batch.workers, len(windows), batch.solver), progress)
         _align_signs(context, outcomes)
     timings["solve windows"] = time.perf_counter() - t0
-    joined = _Joined.of(log, layout, chosen.model, chosen.batch_model, windows, outcomes)
+    joined = _Joined.of(log, layout, chosen, windows, outcomes)
     return Estimate(joined.motion(log, layout), Report.of(
         "smoother", options, timings=timings, warnings=joined.notes, model_check=auto[0] if auto else None,
         tunings=joined.tunings, calibration=joined.calibration, iterations=joined.iterations, cost=joined.cost,
         windows=len(windows), per_sample=auto[1] if auto else None))
 
 
-def _check_smoothable(log: Log, model: ModelOptions, batch_model: BatchModelOptions, solver: str) -> None:
-    """An :class:`InputError` when the model and batch model do not fit the log's array or ``solver`` is
-    unknown, a :class:`DataError` when the log has fewer than 2 samples."""
-    reason = options_reason(log.array, model, batch_model, attitude_supported=True)
+def _check_smoothable(log: Log, groups: ModelGroups, solver: str) -> None:
+    """An :class:`InputError` when the model of the option ``groups`` does not fit the log's array or ``solver``
+    is unknown, a :class:`DataError` when the log has fewer than 2 samples."""
+    reason = options_reason(log.array, groups, attitude_supported=True)
     if reason:
         raise InputError(f"{log.source}: {reason}")
     if solver not in SOLVERS:
@@ -218,12 +217,12 @@ class _Joined:
     cost: float
 
     @classmethod
-    def of(cls, log: Log, layout: StateLayout, model: ModelOptions, batch_model: BatchModelOptions, windows: list,
+    def of(cls, log: Log, layout: StateLayout, groups: ModelGroups, windows: list,
            outcomes: list[_WindowOutcome]) -> _Joined:
         """Each window's kept rows in place, in window order; σ scaled by the readings' misfit where
         :func:`_calibrates_sigma`."""
         n, M = len(log), layout.size
-        out = cls(np.zeros((n, M)), np.zeros((n, M)) if model.compute_sigma else None, [], [], [], 0, 0.0)
+        out = cls(np.zeros((n, M)), np.zeros((n, M)) if groups.solve.compute_sigma else None, [], [], [], 0, 0.0)
         for w, ((solve_sl, keep_log, keep_win), res) in enumerate(zip(windows, outcomes)):
             out.tunings.extend(res.tunings)
             out.iterations += res.iterations
@@ -237,12 +236,13 @@ class _Joined:
                 out.sd[keep_log, :m] = res.sd[:, :m]
             out.calibration.append(res.calibration)
         if (out.sd is not None and outcomes and all(res.noise is not None for res in outcomes)
-                and _calibrates_sigma(log, model, batch_model)):
+                and _calibrates_sigma(log, groups)):
             noise_std = np.vstack([res.noise for res in outcomes])
             process = None
             if (len(log) > 2 and all(res.process is not None for res in outcomes)
                     and all(np.array_equal(res.process[1], outcomes[0].process[1]) for res in outcomes)):
                 process = (np.vstack([res.process[0] for res in outcomes])[:-1], outcomes[0].process[1], log.dt_s)
+            batch_model = groups.batch_model
             out.sd = calibrated_sigma(log.array, log.accel_mps2, out.states, out.sd, noise_std,
                                       (batch_model.robust_loss, batch_model.accel_robust_threshold)
                                       if batch_model.accel_robust_threshold > 0 else None, process=process,
@@ -315,10 +315,8 @@ class _WindowContext:
     processes, which inherit it when they start)."""
 
     log: Log
-    model: ModelOptions
-    batch_model: BatchModelOptions
+    groups: ModelGroups
     batch: BatchOptions
-    tuning: TuningOptions
     auto: tuple | None
     initial: InitialStates | None
     windows: list
@@ -328,7 +326,7 @@ class _WindowContext:
         part = self.log.select(solve_sl)
         batch, tunings = self.batch, []
         if self.auto is not None and not self.auto[0].consistent:
-            problem, x0 = moment_problem(part, self.model, self.batch_model, self.auto, solve_sl, tunings)
+            problem, x0 = moment_problem(part, self.groups, self.auto, solve_sl, tunings)
             res = solve_window(problem, x0, batch, solver=batch.solver)
             if batch.branch_restarts:
                 res = _restarted(problem, res)
@@ -339,7 +337,7 @@ class _WindowContext:
 
     def _tuned(self, part: Log, tunings: list):
         """:func:`gfimu.smoother.tuning.evidence.tuned_problem` of a window ``part``."""
-        return tuned_problem(part, self.model, self.batch_model, self.tuning, tunings, self.initial, self.batch.tune_span_s)
+        return tuned_problem(part, self.groups, tunings, self.initial, self.batch.tune_span_s)
 
     def aligned(self, w: int, outcome: _WindowOutcome, earlier_omega_b_radps: np.ndarray) -> _WindowOutcome | None:
         """Window ``w`` solved again with the sign of ω the window before found over their overlap
@@ -427,31 +425,30 @@ def _align_signs(context: _WindowContext, outcomes: list[_WindowOutcome]) -> lis
     return aligned
 
 
-def _attitude_windows(log: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions, windows: list,
-                      initial: InitialStates | None, solver: str, progress: bool) -> list[_WindowOutcome]:
+def _attitude_windows(log: Log, groups: ModelGroups, windows: list, initial: InitialStates | None, solver: str,
+                      progress: bool) -> list[_WindowOutcome]:
     out = []
     previous = None  # (solve slice, attitudes) of the window before
     for solve_sl, _, keep_win in progress_bar(windows, total=len(windows), desc="smoother",
                                               enable=progress and len(windows) > 1):
         tunings: list = []
-        res, problem = _solve_with_attitude(log.select(solve_sl), model, batch_model, tuning, previous, solve_sl, tunings,
-                                            initial, solver)
+        res, problem = _solve_with_attitude(log.select(solve_sl), groups, previous, solve_sl, tunings, initial, solver)
         previous = (solve_sl, problem.rotations(res.states))
         out.append(_WindowOutcome.of(res, problem, keep_win, tunings))
     return out
 
 
-def _calibrates_sigma(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> bool:
+def _calibrates_sigma(log: Log, groups: ModelGroups) -> bool:
     """Whether σ is scaled by the readings' misfit (:mod:`gfimu.smoother.solve.sigma_scale`): the accelerometers
     alone, as they are (no gyroscope, inclinometer or calibration variables the residual would leave out)."""
-    opt = batch_model
-    return (opt.measurement == "accelerometer" and not (opt.self_calibrate_bias or opt.self_calibrate_scale)
-            and not (model.use_gyro and log.array.gyroscope is not None and log.gyro_b_radps is not None)
-            and not (opt.estimate_attitude and opt.use_inclinometer and log.array.inclinometer is not None))
+    attitude = groups.attitude
+    return (groups.batch_model.measurement == "accelerometer" and not groups.self_calibration.calibrates
+            and not (groups.model.use_gyro and log.array.gyroscope is not None and log.gyro_b_radps is not None)
+            and not (attitude.estimate_attitude and attitude.use_inclinometer and log.array.inclinometer is not None))
 
 
 def chosen_model(log: Log, given: ModelGroups, attitude: bool, per_sample: bool = False):
-    """(the model, batch model and tuning chosen from those ``given``, (ModelCheck, ML motion or None) or None) of
+    """(the option groups of the model chosen from those ``given``, (ModelCheck, ML motion or None) or None) of
     :mod:`gfimu.smoother.tuning.model_choice`; the ML motion is the whole log's (:class:`MLEstimator` with its
     defaults) where the check computed it, else None.
 
@@ -460,7 +457,7 @@ def chosen_model(log: Log, given: ModelGroups, attitude: bool, per_sample: bool 
     the check reads (the same numbers as one after the other)."""
     batch_model = given.batch_model
     if (attitude or batch_model.free_flight or batch_model.measurement != "accelerometer"
-            or batch_model.self_calibrate_bias or batch_model.self_calibrate_scale):
+            or given.self_calibration.calibrates):
         return given, None
     ml = MLEstimator()
     if ml.applicable(log.array) is not None or not np.all(np.isfinite(log.accel_mps2)):
@@ -499,14 +496,15 @@ def _restarted(problem: SmootherProblem, res: SolveResult) -> SolveResult:
     return out
 
 
-def moment_problem(part: Log, model: ModelOptions, batch_model: BatchModelOptions, auto, solve_sl: slice, tunings: list):
+def moment_problem(part: Log, groups: ModelGroups, auto, solve_sl: slice, tunings: list):
     """Problem and initial states of one window of an inconsistent log: ML initialisation with its
     sign chain, the measured noise floor and slope, the process densities chosen for the log, and
     the jerk density lowered where the body rests (:func:`gfimu.smoother.tuning.model_choice.local_density_factors`)."""
     check, motion = auto
+    model = groups.model
     omega = motion.omega_b_radps[solve_sl]
     omega_dot = motion.omega_dot_b_radps2[solve_sl]
-    if model.ml_sign_chain:
+    if groups.solve.ml_sign_chain:
         omega = omega * sign_chain(omega, omega_dot, part.dt_s)[:, None]
     x0 = np.hstack([omega, omega_dot, motion.specific_force_b_mps2[solve_sl]])
     scale = 1.0
@@ -514,42 +512,42 @@ def moment_problem(part: Log, model: ModelOptions, batch_model: BatchModelOption
         scale = check.noise_floor_mps2 / check.stated_noise_mps2
     tunings.append(Tuning("jerk", model.omega_dot_random_walk_radps2_per_sqrt_s, scale, float("nan"), 0,
                           tuple(model.process_axis_factors), model.specific_force_random_walk_mps2_per_sqrt_s))
-    problem = make_problem(part, model, batch_model, scale, x0[:, OMEGA])
+    problem = make_problem(part, groups, scale, x0[:, OMEGA])
     factors = local_density_factors(x0, part.dt_s, estimate_noise_variances(part.array, check, omega)[0],
                                     model.omega_dot_random_walk_radps2_per_sqrt_s)
     return problem.with_noise(motion=problem.noise.motion.scaled_steps(factors)), x0
 
 
-def _solve_with_attitude(part: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions,
-                         previous, solve_sl: slice, tunings: list, initial: InitialStates | None, solver: str):
+def _solve_with_attitude(part: Log, groups: ModelGroups, previous, solve_sl: slice, tunings: list,
+                         initial: InitialStates | None, solver: str):
     """Two stages: the smoother without attitude, then the attitude propagated from its ω
     (starting from the previous window's attitude, which also anchors the yaw) and the full solve."""
-    base_model = replace(model, compute_sigma=False)
-    base_batch_model = replace(batch_model, estimate_attitude=False, use_inclinometer=False)
+    base = groups._replace(solve=replace(groups.solve, compute_sigma=False),
+                           attitude=replace(groups.attitude, estimate_attitude=False, use_inclinometer=False))
     t = None
-    if tuning.tune_process_noise:  # the process noise of ω, ω̇ chosen without the attitude, kept with it
+    if groups.tuning.tune_process_noise:  # the process noise of ω, ω̇ chosen without the attitude, kept with it
         before = len(tunings)
-        problem0, x0 = tuned_problem(part, base_model, base_batch_model, replace(tuning, tune_motion_model=False), tunings,
+        problem0, x0 = tuned_problem(part, base._replace(tuning=replace(groups.tuning, tune_motion_model=False)), tunings,
                                      initial)
         first = solve_problem(problem0, x0, None, False, solver)
         t = tunings[-1] if len(tunings) > before else None
-        model = replace(model, omega_dot_random_walk_radps2_per_sqrt_s=problem0.model.omega_dot_random_walk_radps2_per_sqrt_s,
-                        process_axis_factors=problem0.model.process_axis_factors,
-                        process_axis_frequencies_hz=problem0.model.process_axis_frequencies_hz)
+        groups = groups._replace(model=replace(
+            groups.model, omega_dot_random_walk_radps2_per_sqrt_s=problem0.model.omega_dot_random_walk_radps2_per_sqrt_s,
+            process_axis_factors=problem0.model.process_axis_factors,
+            process_axis_frequencies_hz=problem0.model.process_axis_frequencies_hz))
     else:
-        first = solve_problem(SmootherProblem(part, base_model, base_batch_model),
-                              (initial or initial_states)(part, base_model, base_batch_model),
-                              None, False, solver)
+        first = solve_problem(SmootherProblem(part, base), (initial or initial_states)(part, base), None, False, solver)
     start = None
     if previous is not None:
         prev_sl, prev_R = previous
         start = prev_R[solve_sl.start - prev_sl.start]
-    R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start, batch_model.use_inclinometer)
-    problem = (make_problem(part, model, batch_model, t.accel_noise_scale) if t is not None
-               else SmootherProblem(part, model, batch_model))
+    R = initial_attitude(part, first.states[:, OMEGA], first.states[:, SPECIFIC_FORCE], start,
+                         groups.attitude.use_inclinometer)
+    problem = (make_problem(part, groups, t.accel_noise_scale) if t is not None else SmootherProblem(part, groups))
     problem = problem.with_noise(attitude=problem.noise.attitude.with_prior(R[0]))
     x0 = np.hstack([first.states, _so3.log(R)])
-    return solve_problem(problem, x0, first.params if first.params.size else None, model.compute_sigma, solver), problem
+    return solve_problem(problem, x0, first.params if first.params.size else None, groups.solve.compute_sigma,
+                         solver), problem
 
 
 PRELOAD_MIN_BYTES = 8_000_000
@@ -563,7 +561,7 @@ bytes (about 400,000 readings, 18 bytes each in imu.csv): there they save more t
 class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     """Factor-graph smoother over the whole log (method "smoother").
 
-    Options: those of :class:`gfimu.smoother.model.problem.SmootherOptions` (groups model, batch, tuning) and
+    Options: those of :class:`gfimu.smoother.model.problem.SmootherOptions` (its groups) and
     ``guard`` (:mod:`gfimu.smoother.model.option_groups`; no fixed-lag option). Returns ω, ω̇
     and the specific force at the body origin for every sample, with
     one-sigma marginal uncertainties when ``compute_sigma``; the report of :meth:`estimate`
@@ -578,7 +576,7 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     method = "smoother"
 
     def applicable(self, array: SensorArray) -> str | None:
-        return options_reason(array, self.model, self.batch_model, attitude_supported=True)
+        return options_reason(array, self.model_groups, attitude_supported=True)
 
     def preload(self, size_bytes: int | None = None) -> None:
         """Begin loading the compiled kernels of the solve in the background (:mod:`gfimu.smoother.preload`),
@@ -594,8 +592,10 @@ class BatchSmootherEstimator(SmootherEstimator, SmootherOptions):
     def result(self, log: Log, progress: bool = False, initial: InitialStates | None = None) -> Estimate:
         """The smoother on ``log`` (:func:`smooth`) before the guard, its report with this estimator's
         options (:meth:`estimate` is the entry: the run, then the guard)."""
-        run = smooth(log, self.model, self.batch_model, self.batch, self.tuning, progress=progress, initial=initial,
-                     per_sample=self.guard != "off" and unguarded(log, self.model, self.batch_model) is None)
+        groups = self.model_groups
+        run = smooth(log, groups, self.batch, progress=progress, initial=initial,
+                     per_sample=self.guard != "off" and unguarded(log, groups.model, groups.attitude,
+                                                                  groups.self_calibration) is None)
         return Estimate(run.motion, replace(run.report, options=options_of(self)))
 
 

@@ -450,7 +450,7 @@ class AttitudeGroup(FactorGroup):
         return bool(problem.layout.attitude)
 
     def noise(self, problem: ModelView) -> AttitudeNoise:
-        opt = problem.batch_model
+        opt = problem.attitude
         return AttitudeNoise(prior_wb=np.eye(3), prior_sigma=np.array([10.0, 10.0, opt.initial_yaw_std_rad]),
                              step_sigma=process.random_walk_sigma(opt.attitude_random_walk_rad_per_sqrt_s, problem.dt_s),
                              accel_step_sigma=process.random_walk_sigma(opt.accel_random_walk_mps2_per_sqrt_s, problem.dt_s))
@@ -812,9 +812,9 @@ class CalibrationPriorGroup(FactorGroup):
         return problem.n_global > 0
 
     def noise(self, problem: ModelView) -> CalibrationNoise:
-        """Each block's prior std from the batch model: ``bias_prior_std_mps2`` (``bias*``), ``scale_prior_std``
+        """Each block's prior std from the self-calibration: ``bias_prior_std_mps2`` (``bias*``), ``scale_prior_std``
         (``scale*``), ``gyro_bias_prior_std_radps`` (the gyroscope bias)."""
-        opt = problem.batch_model
+        opt = problem.self_calibration
         s = np.zeros(problem.n_global)
         for name, (sl, _) in problem.global_blocks.items():
             if name.startswith("bias"):

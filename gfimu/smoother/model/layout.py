@@ -36,15 +36,15 @@ class StateLayout:
     attitude: bool = False
 
     @classmethod
-    def of(cls, model, batch_model) -> StateLayout:
-        """The layout of the model options ``model`` (the motion model) and the batch model ``batch_model``
-        (the attitude) (:mod:`gfimu.smoother.model.option_groups`)."""
-        return cls(model.motion_model == "snap", bool(batch_model.estimate_attitude or batch_model.use_inclinometer))
+    def of(cls, model, attitude) -> StateLayout:
+        """The layout of the model options ``model`` (the motion model) and the attitude options ``attitude``
+        (:mod:`gfimu.smoother.model.option_groups`)."""
+        return cls(model.motion_model == "snap", bool(attitude.estimate_attitude or attitude.use_inclinometer))
 
     @classmethod
     def from_options(cls, options) -> StateLayout:
         """The layout of flat options (:class:`gfimu.smoother.model.problem.SmootherOptions`) ``options``."""
-        return cls.of(options, options)
+        return cls.of(options.model, options.attitude)
 
     omega = OMEGA
     omega_dot = OMEGA_DOT

@@ -22,8 +22,9 @@ the local motion density, the tuner's accelerometer scale) make new values (:met
 :class:`ModelView` is what a factor group may read of the problem it is given: the batch smoother's
 :class:`gfimu.smoother.model.problem.SmootherProblem` and the fixed-lag smoother's view of one or two
 samples of a stream (:class:`gfimu.smoother.stream.array_model.StreamView`) both are one. The options it reads
-are two typed groups, ``model`` (:class:`gfimu.smoother.model.option_groups.ModelOptions`) and ``batch_model``
-(:class:`gfimu.smoother.model.option_groups.BatchModelOptions`), each option under its own name: ``-O
+are typed groups, ``model`` (:class:`gfimu.smoother.model.option_groups.ModelOptions`), ``batch_model``
+(:class:`gfimu.smoother.model.option_groups.BatchModelOptions`), ``attitude`` and ``self_calibration``, each option
+under its own name: ``-O
 default_accel_noise_std_mps2=…`` is ``ModelOptions.default_accel_noise_std_mps2``, read by the accelerometer
 groups' ``noise`` as ``problem.model.default_accel_noise_std_mps2`` into :attr:`AccelNoise.sigma`, which every
 later use reads as ``problem.noise.accel``.
@@ -41,7 +42,7 @@ if TYPE_CHECKING:
     from ...array import SensorArray
     from ...log import Log
     from .layout import StateLayout
-    from .option_groups import BatchModelOptions, ModelOptions
+    from .option_groups import AttitudeOptions, BatchModelOptions, ModelOptions, SelfCalibrationOptions
 
 
 def _frozen(value):
@@ -333,8 +334,8 @@ class NoiseLevels:
 class ModelView(Protocol):
     """What a factor group reads of the problem it is given (:class:`gfimu.smoother.model.problem.SmootherProblem`,
     :class:`gfimu.smoother.stream.array_model.StreamView`): the array and the samples, the model's option groups
-    (``model``, ``batch_model``), the state layout and the noise levels; the calibration variables (none in a
-    stream).
+    (``model``, ``batch_model``, ``attitude``, ``self_calibration``), the state layout and the noise levels; the
+    calibration variables (none in a stream).
 
     The state's columns are read in one place, :attr:`layout` (a :class:`gfimu.smoother.model.layout.StateLayout`):
     its ``size``, whether it carries the snap (``snap``) and the attitude (``attitude``, its ``rotation``
@@ -344,6 +345,8 @@ class ModelView(Protocol):
     log: Log
     model: ModelOptions
     batch_model: BatchModelOptions
+    attitude: AttitudeOptions
+    self_calibration: SelfCalibrationOptions
     n: int
     dt_s: np.ndarray
     layout: StateLayout

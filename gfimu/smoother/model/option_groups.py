@@ -1,8 +1,12 @@
-"""The smoothers' options, each declared once with its unit, default and help, in six groups.
+"""The smoothers' options, each declared once with its unit, default and help, in nine groups.
 
-- :class:`ModelOptions` (``model``): the model both smoothers solve and how they start and stop its solves;
-- :class:`BatchModelOptions` (``batch_model``): the parts of the model only the batch smoother has (attitude,
-  inclinometer, self-calibration, free flight, white snap, the per-sample inversion, robust losses);
+- :class:`ModelOptions` (``model``): the model both smoothers solve (motion model, noise, gyroscope, priors);
+- :class:`SolveOptions` (``solve``): how both smoothers start and stop a solve and what it gives out (initial
+  states, iteration limits, σ);
+- :class:`BatchModelOptions` (``batch_model``): the parts of the model only the batch smoother has beside the
+  two below (white snap, the per-sample inversion, free flight, motion-dependent noise, robust losses);
+- :class:`AttitudeOptions` (``attitude``): the batch smoother's attitude and inclinometer;
+- :class:`SelfCalibrationOptions` (``self_calibration``): the batch smoother's self-calibration;
 - :class:`BatchOptions` (``batch``): the batch smoother's solve windows, re-weighting, restarts and workers;
 - :class:`StreamOptions` (``stream``): the fixed-lag smoother's lag, window engine and model updates;
 - :class:`TuningOptions` (``tuning``): the model and noise chosen from the data;
@@ -10,8 +14,9 @@
 
 Each field is made by :func:`gfimu.option.option`, whose metadata (``unit``, ``help``) ``gfimu estimate --list-options``
 prints. The flat option classes are assembled from the groups by :func:`assemble`:
-:class:`gfimu.smoother.model.problem.SmootherOptions` (model, batch_model, batch, tuning) and the estimators of
-the methods 'smoother' (those and guard) and 'fixed-lag' (model, stream, tuning, guard). They keep every
+:class:`gfimu.smoother.model.problem.SmootherOptions` (model, solve, batch_model, attitude, self_calibration,
+batch, tuning) and the estimators of the methods 'smoother' (those and guard) and 'fixed-lag' (model, solve,
+stream, tuning, guard). They keep every
 option under its flat name (``-O name=value``, the presets, ``SmootherOptions(window_s=10)``), add the
 group's name to each field's metadata, and give each group's values back as a frozen group dataclass
 (``options.model.motion_model``, ``options.batch.window_s``); ``cls.from_groups(model, batch, ...)``
@@ -101,8 +106,9 @@ def _factor_groups(value) -> bool:
 
 @dataclass(frozen=True)
 class ModelOptions:
-    """The model both smoothers solve (factors, noise, priors) and how they start and stop its solves.
-    Noise densities are continuous-time: a random walk of density q has step std ``q sqrt(h)``."""
+    """The model both smoothers solve: the motion model, its noise densities, the accelerometer noise, the
+    gyroscope, the first state's priors and further factor groups. Noise densities are continuous-time: a
+    random walk of density q has step std ``q sqrt(h)``."""
 
     motion_model: str = option("jerk", help=(
         "'jerk': ω̇ is a random walk (white angular jerk, state [ω, ω̇, f]); 'snap': ω̈ is a random walk (white "
@@ -136,6 +142,13 @@ class ModelOptions:
         "solve; the fixed-lag smoother takes those whose rows each tie one sample (per_sample) or two "
         "consecutive samples (steps)"),
         check=Satisfies(_factor_groups, "a tuple of FactorGroup objects (gfimu.smoother.model.groups)"))
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """How both smoothers start and stop a solve of their model and what it gives out: the initial states, the
+    Levenberg-Marquardt limits, the one-sigma uncertainties."""
+
     compute_sigma: bool = option(False, help=(
         "also output one-sigma marginal uncertainties of the estimates (sigma_ columns)"))
     max_iterations: int = option(30, help=(
@@ -156,10 +169,11 @@ class ModelOptions:
 
 @dataclass(frozen=True)
 class BatchModelOptions:
-    """The parts of the model only the batch smoother (method 'smoother') has: the white-snap density, the
-    per-sample inversion as measurement, the attitude and the inclinometer, self-calibration, free flight,
-    and the motion-dependent noise and robust losses it re-weights over whole solutions (the fixed-lag
-    smoother chooses its own from the stream, :mod:`gfimu.smoother.stream.model_choice`)."""
+    """The parts of the model only the batch smoother (method 'smoother') has beside the attitude
+    (:class:`AttitudeOptions`) and self-calibration (:class:`SelfCalibrationOptions`): the white-snap density,
+    the per-sample inversion as measurement, free flight, and the motion-dependent noise and robust losses it
+    re-weights over whole solutions (the fixed-lag smoother chooses its own from the stream,
+    :mod:`gfimu.smoother.stream.model_choice`)."""
 
     omega_ddot_random_walk_radps3_per_sqrt_s: float = option(300.0, "rad/s³/√s", (
         "white angular snap density ('snap' model): how fast ω̈ may change"), check=DENSITY)
@@ -167,30 +181,6 @@ class BatchModelOptions:
         "'accelerometer': one factor per sensor on its raw readings (any array, self-calibration possible); "
         "'quadratic': the per-sample inversion [f, ω̇, q(ω)] with its covariance (an invertible array, no "
         "self-calibration; batch smoother only)"), check=Choice(Measurement))
-    use_inclinometer: bool = option(False, help=(
-        "use the inclinometer's tilt angles (Lu, Tsai & Lin 2010); implies estimate_attitude (batch smoother only)"))
-    estimate_attitude: bool = option(False, help=(
-        "carry the attitude R_k (W←B) in the state and output orientation and gravity-free acceleration; tilt "
-        "is observed through the inclinometer or the random walk of the gravity-free acceleration, yaw only "
-        "through a weak prior (initial_yaw_std_rad; batch smoother only)"))
-    accel_random_walk_mps2_per_sqrt_s: float = option(30.0, "m/s²/√s", (
-        "with the attitude: random walk density of the gravity-free acceleration (replaces the specific-force "
-        "one)"), check=DENSITY)
-    attitude_random_walk_rad_per_sqrt_s: float = option(1e-3, "rad/√s", (
-        "with the attitude: process noise of R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)"), check=DENSITY)
-    initial_yaw_std_rad: float = option(1.0, "rad", (
-        "with the attitude: prior std of the first sample's yaw (the tilt prior, 10 rad, leaves it free)"),
-        check=POSITIVE)
-    self_calibrate_bias: bool = option(False, help=(
-        "estimate a constant bias per accelerometer axis and the gyro bias (batch smoother only)"))
-    bias_prior_std_mps2: float = option(0.1, "m/s²", "prior std of each accelerometer bias (around 0)", check=POSITIVE)
-    gyro_bias_prior_std_radps: float = option(0.05, "rad/s", (
-        "prior std of the gyro bias (around 0) with self_calibrate_bias"), check=POSITIVE)
-    self_calibrate_scale: bool = option(False, help=(
-        "estimate a constant scale-factor error per accelerometer axis (batch smoother only)"))
-    scale_prior_std: float = option(0.01, help=(
-        "prior std of each accelerometer scale-factor error (a fraction, around 0) with self_calibrate_scale"),
-        check=POSITIVE)
     free_flight: bool = option(False, help=(
         "treat the whole log as torque-free free flight (McGinnis, Perkins & King 2012): needs [body] in array.toml (batch "
         "smoother only)"))
@@ -217,6 +207,49 @@ class BatchModelOptions:
     def robust(self) -> bool:
         """Whether any robust re-weighting is on."""
         return self.accel_robust_threshold > 0 or self.process_robust_threshold > 0
+
+
+@dataclass(frozen=True)
+class AttitudeOptions:
+    """The attitude in the batch smoother's state (method 'smoother'): whether it is carried, the inclinometer
+    that observes its tilt, and its process noise and yaw prior."""
+
+    use_inclinometer: bool = option(False, help=(
+        "use the inclinometer's tilt angles (Lu, Tsai & Lin 2010); implies estimate_attitude (batch smoother only)"))
+    estimate_attitude: bool = option(False, help=(
+        "carry the attitude R_k (W←B) in the state and output orientation and gravity-free acceleration; tilt "
+        "is observed through the inclinometer or the random walk of the gravity-free acceleration, yaw only "
+        "through a weak prior (initial_yaw_std_rad; batch smoother only)"))
+    accel_random_walk_mps2_per_sqrt_s: float = option(30.0, "m/s²/√s", (
+        "with the attitude: random walk density of the gravity-free acceleration (replaces the specific-force "
+        "one)"), check=DENSITY)
+    attitude_random_walk_rad_per_sqrt_s: float = option(1e-3, "rad/√s", (
+        "with the attitude: process noise of R_{k+1} = R_k Exp(h (ω_k + ω_{k+1}) / 2)"), check=DENSITY)
+    initial_yaw_std_rad: float = option(1.0, "rad", (
+        "with the attitude: prior std of the first sample's yaw (the tilt prior, 10 rad, leaves it free)"),
+        check=POSITIVE)
+
+
+@dataclass(frozen=True)
+class SelfCalibrationOptions:
+    """The batch smoother's (method 'smoother') self-calibration: constant accelerometer biases and
+    scale-factor errors and the gyroscope bias estimated with the motion, and their priors."""
+
+    self_calibrate_bias: bool = option(False, help=(
+        "estimate a constant bias per accelerometer axis and the gyro bias (batch smoother only)"))
+    bias_prior_std_mps2: float = option(0.1, "m/s²", "prior std of each accelerometer bias (around 0)", check=POSITIVE)
+    gyro_bias_prior_std_radps: float = option(0.05, "rad/s", (
+        "prior std of the gyro bias (around 0) with self_calibrate_bias"), check=POSITIVE)
+    self_calibrate_scale: bool = option(False, help=(
+        "estimate a constant scale-factor error per accelerometer axis (batch smoother only)"))
+    scale_prior_std: float = option(0.01, help=(
+        "prior std of each accelerometer scale-factor error (a fraction, around 0) with self_calibrate_scale"),
+        check=POSITIVE)
+
+    @property
+    def calibrates(self) -> bool:
+        """Whether any calibration variable is estimated."""
+        return self.self_calibrate_bias or self.self_calibrate_scale
 
 
 @dataclass(frozen=True)
@@ -332,26 +365,38 @@ class GuardOptions:
 
 
 class ModelGroups(NamedTuple):
-    """The three groups a choice of the model reads and gives: the model, the batch model and the tuning
+    """The groups of a smoother's model as they travel together from the options to the problem: the model,
+    how its solves start and stop, the batch smoother's batch model, attitude and self-calibration, and the
+    tuning that chooses the model's noise from the data. A problem (:class:`gfimu.smoother.model.problem.SmootherProblem`,
+    the stream's :class:`gfimu.smoother.stream.array_model.ArrayModel`) is built of the first five; a choice of
+    the model reads and gives the model, solve, batch model and tuning
     (:func:`gfimu.smoother.tuning.model_choice.misfit_options`, the batch smoother's
     :func:`gfimu.smoother.batch.engine.chosen_model`, the fixed-lag smoother's
-    :mod:`gfimu.smoother.stream.model_choice`)."""
+    :mod:`gfimu.smoother.stream.model_choice`), the noise tuner the model and batch model
+    (:meth:`gfimu.smoother.tuning.evidence.Tuning.apply`)."""
 
     model: ModelOptions
+    solve: SolveOptions
     batch_model: BatchModelOptions
+    attitude: AttitudeOptions
+    self_calibration: SelfCalibrationOptions
     tuning: TuningOptions
 
     @classmethod
     def of(cls, options) -> ModelGroups:
-        """The three groups of flat ``options`` (an assembled class carrying them)."""
-        return cls(options.model, options.batch_model, options.tuning)
+        """The groups of flat ``options`` (an assembled class carrying them all, as
+        :class:`gfimu.smoother.model.problem.SmootherOptions`)."""
+        return cls(*(getattr(options, name) for name in cls._fields))
 
 
-GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "batch_model": BatchModelOptions, "batch": BatchOptions,
-                                  "stream": StreamOptions, "tuning": TuningOptions, "guard": GuardOptions}
+GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "solve": SolveOptions, "batch_model": BatchModelOptions,
+                                  "attitude": AttitudeOptions, "self_calibration": SelfCalibrationOptions,
+                                  "batch": BatchOptions, "stream": StreamOptions, "tuning": TuningOptions,
+                                  "guard": GuardOptions}
 """Group name -> its dataclass, in the order ``--list-options`` lists them."""
 
-GROUP_METHODS = {"batch_model": ("batch-smoother", "smoother"), "batch": ("batch-smoother", "smoother"),
+GROUP_METHODS = {"batch_model": ("batch-smoother", "smoother"), "attitude": ("batch-smoother", "smoother"),
+                 "self_calibration": ("batch-smoother", "smoother"), "batch": ("batch-smoother", "smoother"),
                  "stream": ("fixed-lag-smoother", "fixed-lag")}
 """The groups only one smoother carries -> (what its options are called, the smoother's method)."""
 

@@ -46,7 +46,7 @@ from ...log import Log
 from .parts import delegated
 from .groups import BUILT_IN, FactorGroup, Term  # noqa: F401  (Term: also importable from here)
 from .noise_levels import NoiseLevels
-from .option_groups import BatchModelOptions, ModelOptions, MotionModel, assemble
+from .option_groups import ModelGroups, ModelOptions, MotionModel, SelfCalibrationOptions, assemble
 from .layout import KINEMATIC_SIZE, OMEGA, OMEGA_DDOT, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 STATE_SIZE = KINEMATIC_SIZE
@@ -55,11 +55,12 @@ W, D, F, A = OMEGA, OMEGA_DOT, SPECIFIC_FORCE, OMEGA_DDOT
 
 
 @dataclass(frozen=True)
-@assemble("model", "batch_model", "batch", "tuning")
+@assemble("model", "solve", "batch_model", "attitude", "self_calibration", "batch", "tuning")
 class SmootherOptions:
-    """Options of the batch smoother's problem and solves: the groups ``model``, ``batch`` and ``tuning`` of
-    :mod:`gfimu.smoother.model.option_groups`, where each option is declared with its unit, default and help
-    (``options.model``, ``options.batch``, ``options.tuning``: the groups' values). Defaults suit
+    """Options of the batch smoother's problem and solves: the groups ``model``, ``solve``, ``batch_model``,
+    ``attitude``, ``self_calibration``, ``batch`` and ``tuning`` of :mod:`gfimu.smoother.model.option_groups`,
+    where each option is declared with its unit, default and help (``options.model``, ``options.batch``, ...:
+    the groups' values; :meth:`model_groups`: those of the model together). Defaults suit
     100 Hz-1 kHz logs. The fixed-lag smoother is given these options with the batch group at its defaults
     (:meth:`gfimu.smoother.stream.fixed_lag.FixedLagEstimator.options`)."""
 
@@ -73,7 +74,12 @@ class SmootherOptions:
     @property
     def robust(self) -> bool:
         """Whether any robust re-weighting is on."""
-        return self.accel_robust_threshold > 0 or self.process_robust_threshold > 0
+        return self.batch_model.robust
+
+    @property
+    def model_groups(self) -> ModelGroups:
+        """The groups of the model together (:class:`~gfimu.smoother.model.option_groups.ModelGroups`)."""
+        return ModelGroups.of(self)
 
 
 def check_oscillators(model: ModelOptions) -> None:
@@ -84,22 +90,23 @@ def check_oscillators(model: ModelOptions) -> None:
         raise InputError("smoother option process_axis_frequencies_hz needs motion_model='jerk'")
 
 
-def options_reason(array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions,
-                   attitude_supported: bool = False) -> str | None:
-    """Why the smoother cannot solve its ``model`` and ``batch_model`` on ``array`` (None if it can).
+def options_reason(array: SensorArray, groups: ModelGroups, attitude_supported: bool = False) -> str | None:
+    """Why the smoother cannot solve the model of ``groups`` (its model, batch model, attitude and
+    self-calibration) on ``array`` (None if it can).
 
     ``attitude_supported``: the caller carries the attitude state (the batch
     smoother does); otherwise ``use_inclinometer`` and ``estimate_attitude``
     are refused.
     """
-    if (batch_model.use_inclinometer or batch_model.estimate_attitude) and not attitude_supported:
+    model, batch_model, attitude = groups.model, groups.batch_model, groups.attitude
+    if (attitude.use_inclinometer or attitude.estimate_attitude) and not attitude_supported:
         return "use_inclinometer / estimate_attitude need the attitude state, which this smoother does not carry"
-    if batch_model.use_inclinometer and array.inclinometer is None:
+    if attitude.use_inclinometer and array.inclinometer is None:
         return f"use_inclinometer: array {array.name!r} has no inclinometer"
-    if (batch_model.use_inclinometer or batch_model.estimate_attitude) and batch_model.free_flight:
+    if (attitude.use_inclinometer or attitude.estimate_attitude) and batch_model.free_flight:
         return "estimate_attitude is not available in free flight (the specific force carries no gravity)"
     if batch_model.measurement == "quadratic":
-        if batch_model.self_calibrate_bias or batch_model.self_calibrate_scale or batch_model.free_flight:
+        if groups.self_calibration.calibrates or batch_model.free_flight:
             return "measurement='quadratic' works on the per-sample inversion: no self-calibration or free flight"
         try:
             array.check_invertible()
@@ -174,21 +181,22 @@ class CalibrationBlocks:
     size: int
 
     @classmethod
-    def of(cls, sensors: list, batch_model: BatchModelOptions, use_gyro: bool) -> CalibrationBlocks:
-        """Per-axis accelerometer biases, then scale-factor errors, then the gyroscope bias, as the batch model asks."""
+    def of(cls, sensors: list, calibration: SelfCalibrationOptions, use_gyro: bool) -> CalibrationBlocks:
+        """Per-axis accelerometer biases, then scale-factor errors, then the gyroscope bias, as the
+        self-calibration ``calibration`` asks."""
         blocks = {}
         g = 0
-        if batch_model.self_calibrate_bias:
+        if calibration.self_calibrate_bias:
             for i, (_, _, cols) in enumerate(sensors):
                 size = cols.stop - cols.start
                 blocks[f"bias{i}"] = (slice(g, g + size), bias_key(i))
                 g += size
-        if batch_model.self_calibrate_scale:
+        if calibration.self_calibrate_scale:
             for i, (_, _, cols) in enumerate(sensors):
                 size = cols.stop - cols.start
                 blocks[f"scale{i}"] = (slice(g, g + size), scale_key(i))
                 g += size
-        if use_gyro and batch_model.self_calibrate_bias:
+        if use_gyro and calibration.self_calibrate_bias:
             blocks["gyro_bias"] = (slice(g, g + 3), gyro_bias_key())
             g += 3
         return cls(blocks, g)
@@ -197,8 +205,9 @@ class CalibrationBlocks:
 @dataclass(eq=False)
 class SmootherProblem:
     """The smoothing problem of one contiguous log (fast path and graph path): the log, the option groups it is
-    built from (:attr:`model`, a :class:`~gfimu.smoother.model.option_groups.ModelOptions`, and :attr:`batch_model`,
-    a :class:`~gfimu.smoother.model.option_groups.BatchModelOptions`; :meth:`of` takes them from flat options),
+    built from (:attr:`options`, a :class:`~gfimu.smoother.model.option_groups.ModelGroups`, read by their names:
+    :attr:`model`, :attr:`solve`, :attr:`batch_model`, :attr:`attitude`, :attr:`self_calibration`; :meth:`of`
+    takes them from flat options),
     the model's groups and their noise levels (:attr:`noise`, a frozen
     :class:`~gfimu.smoother.model.noise_levels.NoiseLevels`: ``problem.noise.accel.sigma``, ...). What its
     groups read of it is :class:`~gfimu.smoother.model.noise_levels.ModelView`.
@@ -206,7 +215,7 @@ class SmootherProblem:
     Besides them it holds the samples (``n``, ``dt_s``), the axes' :attr:`geometry` (:class:`AxisGeometry`;
     ``sensors``, ``all_directions_b``, ``all_positions_m``, ``all_rows`` read it), the calibration variables
     (:attr:`calibration`, :class:`CalibrationBlocks`; ``global_blocks``, ``n_global``), the state
-    :attr:`layout` (the solvers' ``state_size``, ``snap``, ``attitude``, ``AT`` read it; a group reads the
+    :attr:`layout` (the solvers' ``state_size``, ``snap``, ``AT`` read it; a group reads the
     layout itself) and which of the gyroscope and the inclinometer the model uses.
 
     Frozen once built: nothing sets an attribute on it afterwards. A re-weighting returns a new problem
@@ -216,18 +225,17 @@ class SmootherProblem:
     no group's noise levels: the groups and the re-weightings do."""
 
     log: Log
-    model: ModelOptions = field(default_factory=ModelOptions)
-    batch_model: BatchModelOptions = field(default_factory=BatchModelOptions)
+    options: ModelGroups = field(default_factory=lambda: SmootherOptions().model_groups)
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.model, ModelOptions) and isinstance(self.batch_model, BatchModelOptions)):
-            raise TypeError("SmootherProblem(log, model, batch_model) takes the option groups ModelOptions and "
-                            "BatchModelOptions; SmootherProblem.of(log, options) takes flat options")
-        reason = options_reason(self.log.array, self.model, self.batch_model, attitude_supported=True)
+        if not isinstance(self.options, ModelGroups):
+            raise TypeError("SmootherProblem(log, groups) takes the option groups of the model (ModelGroups); "
+                            "SmootherProblem.of(log, options) takes flat options")
+        reason = options_reason(self.log.array, self.options, attitude_supported=True)
         if reason:
             raise InputError(reason)
         arr = self.log.array
-        model, batch_model = self.model, self.batch_model
+        model = self.model
         self.n = len(self.log)
         if self.n < 2:
             raise DataError(f"{self.log.source}: the smoother needs at least 2 samples, got {self.n}")
@@ -239,10 +247,10 @@ class SmootherProblem:
                             f"({int(bad.sum())} such values); the smoother needs finite readings")
         self.geometry = AxisGeometry.of(arr)
         self.use_gyro = arr.gyroscope is not None and model.use_gyro and self.log.gyro_b_radps is not None
-        self.calibration = CalibrationBlocks.of(self.geometry.sensors, batch_model, self.use_gyro)
-        self.layout = StateLayout.of(model, batch_model)
-        self.use_inclinometer = bool(batch_model.use_inclinometer and self.log.tilt_rad is not None)
-        if batch_model.use_inclinometer and self.log.tilt_rad is None:
+        self.calibration = CalibrationBlocks.of(self.geometry.sensors, self.self_calibration, self.use_gyro)
+        self.layout = StateLayout.of(model, self.attitude)
+        self.use_inclinometer = bool(self.attitude.use_inclinometer and self.log.tilt_rad is not None)
+        if self.attitude.use_inclinometer and self.log.tilt_rad is None:
             raise InputError(f"{self.log.source}: use_inclinometer but the log has no tilt_x, tilt_y columns")
         # the model: every group that applies, the measurement first, then those placed first
         # (the first-state prior), then the rest in order; each gives its own noise levels
@@ -253,9 +261,18 @@ class SmootherProblem:
 
     @classmethod
     def of(cls, log: Log, options) -> SmootherProblem:
-        """The problem of ``log`` under the model and batch model of the flat ``options`` (a
-        :class:`SmootherOptions`, or any options carrying those two groups)."""
-        return cls(log, options.model, options.batch_model)
+        """The problem of ``log`` under the model's groups of the flat ``options`` (a :class:`SmootherOptions`,
+        or any options carrying those groups)."""
+        return cls(log, ModelGroups.of(options))
+
+    # --- the option groups, by their names -----------------------------------
+    model = delegated("options", "model", "The model (:class:`~gfimu.smoother.model.option_groups.ModelOptions`).")
+    solve = delegated("options", "solve", "How its solves start and stop (:class:`~gfimu.smoother.model.option_groups.SolveOptions`).")
+    batch_model = delegated("options", "batch_model",
+                            "The batch model (:class:`~gfimu.smoother.model.option_groups.BatchModelOptions`).")
+    attitude = delegated("options", "attitude", "The attitude (:class:`~gfimu.smoother.model.option_groups.AttitudeOptions`).")
+    self_calibration = delegated("options", "self_calibration", (
+        "The self-calibration (:class:`~gfimu.smoother.model.option_groups.SelfCalibrationOptions`)."))
 
     # --- the parts' values, by the names the groups read -------------------
     sensors = delegated("geometry", "sensors", "(directions, positions, column slice) of each accelerometer.")
@@ -267,7 +284,6 @@ class SmootherProblem:
     # the layout's values by the solvers' short names (a factor group reads them as ``problem.layout``, :class:`ModelView`)
     snap = delegated("layout", "snap", "Whether the state carries the snap (white snap motion model).")
     state_size = delegated("layout", "size", "Values per sample's state.")
-    attitude = delegated("layout", "attitude", "Whether the state carries the attitude.")
 
     @property
     def AT(self) -> slice:
@@ -322,7 +338,7 @@ class SmootherProblem:
     def retract(self, states: np.ndarray, delta: np.ndarray) -> np.ndarray:
         """``x ⊕ δ``: vector parts added, attitude ``R ← R Exp(δ)`` (right perturbation)."""
         out = states + delta
-        if self.attitude:
+        if self.layout.attitude:
             out[:, self.AT] = _so3.log(self.rotations(states) @ _so3.exp(delta[:, self.AT]))
         return out
 
@@ -365,7 +381,7 @@ class SmootherProblem:
             values.insert(specific_force_key(k), np.array(states[k, F]))
             if self.snap:
                 values.insert(omega_ddot_key(k), np.array(states[k, A]))
-            if self.attitude:
+            if self.layout.attitude:
                 values.insert(attitude_key(k), gtsam.Rot3(_so3.exp(states[k, self.AT])))
         for name, (sl, key) in self.global_blocks.items():
             values.insert(key, np.array(params[sl]))
@@ -382,7 +398,7 @@ class SmootherProblem:
                 ordering.push_back(key)
             if self.snap:
                 ordering.push_back(omega_ddot_key(k))
-            if self.attitude:
+            if self.layout.attitude:
                 ordering.push_back(attitude_key(k))
         for name, (sl, key) in self.global_blocks.items():
             ordering.push_back(key)
@@ -396,7 +412,7 @@ class SmootherProblem:
                 dims[key] = 3
             if self.snap:
                 dims[omega_ddot_key(k)] = 3
-            if self.attitude:
+            if self.layout.attitude:
                 dims[attitude_key(k)] = 3
         for name, (sl, key) in self.global_blocks.items():
             dims[key] = sl.stop - sl.start
@@ -410,7 +426,7 @@ class SmootherProblem:
             states[k, F] = values.atVector(specific_force_key(k))
             if self.snap:
                 states[k, A] = values.atVector(omega_ddot_key(k))
-            if self.attitude:
+            if self.layout.attitude:
                 states[k, self.AT] = _so3.log(values.atRot3(attitude_key(k)).matrix())
         params = np.zeros(self.n_global)
         for name, (sl, key) in self.global_blocks.items():

@@ -409,9 +409,9 @@ def solve(problem: SmootherProblem, states: np.ndarray, params: np.ndarray | Non
     cost under the weights it was computed with. It stops when an iteration lowers that cost by
     less than ``relative_tolerance`` of it, or, re-weighting, by less than
     :data:`REWEIGHTED_TOLERANCE` of its statistical spread (or after ``max_iterations``, default
-    the options').
+    the problem's solve options').
     """
-    opt = problem.model
+    opt = problem.solve
     X = np.array(states, dtype=float)
     P = np.zeros(problem.n_global) if params is None else np.array(params, dtype=float)
     if reweight is not None:
@@ -512,9 +512,9 @@ def solve_reweighted(problem: SmootherProblem, states: np.ndarray, batch: BatchO
                      warm: bool = False) -> SolveResult:
     """Solve with the motion-dependent noise and robust losses of the problem's batch model: first
     ``batch.reweight_iterations - 1`` iterations under the plain noise (a start for the weights), then
-    iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`); σ as the problem's model asks
-    (``compute_sigma``) unless ``compute_sigma`` is given."""
-    sigma = problem.model.compute_sigma if compute_sigma is None else compute_sigma
+    iteratively re-weighted Levenberg-Marquardt to convergence (:func:`solve`); σ as the problem's solve options
+    ask (``compute_sigma``) unless ``compute_sigma`` is given."""
+    sigma = problem.solve.compute_sigma if compute_sigma is None else compute_sigma
     reweight = reweighting(problem.batch_model)
     if reweight is None:
         return solve(problem, states, params, compute_sigma=sigma)

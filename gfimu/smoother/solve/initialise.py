@@ -32,7 +32,7 @@ from ...log import Log
 from ...rigid_body import quadratic_terms
 from ...rotations import skew
 from .banded import band_structure_of
-from ..model.option_groups import BatchModelOptions, ModelOptions
+from ..model.option_groups import ModelGroups, ModelOptions
 from ..model.problem import STATE_SIZE
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from .gravity_sign import gravity_sign_score, steady_rotation
@@ -366,37 +366,38 @@ def free_flight_omega(log: Log) -> np.ndarray:
     return out if np.sum(dw * integ) >= 0 else -out
 
 
-def initial_states(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> np.ndarray:
-    """Initial states for :class:`gfimu.smoother.model.problem.SmootherProblem` of ``model`` and ``batch_model``:
-    ``[ω, ω̇, f]`` (N, 9), with ω̈ = 0 appended (N, 12) for the 'snap' motion model."""
-    x0 = _initial_states(log, model, batch_model)
-    if model.motion_model == "snap":
+def initial_states(log: Log, groups: ModelGroups) -> np.ndarray:
+    """Initial states for :class:`gfimu.smoother.model.problem.SmootherProblem` of the option ``groups`` (its model,
+    solve and batch model): ``[ω, ω̇, f]`` (N, 9), with ω̈ = 0 appended (N, 12) for the 'snap' motion model."""
+    x0 = _initial_states(log, groups)
+    if groups.model.motion_model == "snap":
         x0 = np.hstack([x0, np.zeros((len(log), 3))])
     return x0
 
 
-def initial_estimate(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> np.ndarray:
-    """Initial states of one solve window as ``model.initialisation`` asks: the sign-resolving
+def initial_estimate(log: Log, groups: ModelGroups) -> np.ndarray:
+    """Initial states of one solve window as ``groups.solve.initialisation`` asks: the sign-resolving
     initialisation (:func:`initial_states`) or the per-sample ML estimate (``'ml'``, its ω signs
     chained over time when ``ml_sign_chain``); free flight (``batch_model.free_flight``) always uses its own
     initialisation."""
-    if model.initialisation != "ml" or batch_model.free_flight:
-        return initial_states(log, model, batch_model)
+    if groups.solve.initialisation != "ml" or groups.batch_model.free_flight:
+        return initial_states(log, groups)
     m = MLEstimator().estimate_motion(log)
     omega = m.omega_b_radps
-    if model.ml_sign_chain:
+    if groups.solve.ml_sign_chain:
         omega = omega * sign_chain(omega, m.omega_dot_b_radps2, log.dt_s)[:, None]
     x = np.hstack([omega, m.omega_dot_b_radps2, m.specific_force_b_mps2])
-    if model.motion_model == "snap":
+    if groups.model.motion_model == "snap":
         x = np.hstack([x, np.gradient(m.omega_dot_b_radps2, log.times_s, axis=0)])
     return x
 
 
-def _initial_states(log: Log, model: ModelOptions, batch_model: BatchModelOptions) -> np.ndarray:
+def _initial_states(log: Log, groups: ModelGroups) -> np.ndarray:
     n = len(log)
     x0 = np.zeros((n, STATE_SIZE))
     arr = log.array
-    if batch_model.free_flight:
+    model = groups.model
+    if groups.batch_model.free_flight:
         w = free_flight_omega(log)
         inertia = np.asarray(arr.body.principal_inertia_kgm2)
         x0[:, OMEGA] = w
@@ -418,7 +419,7 @@ def _initial_states(log: Log, model: ModelOptions, batch_model: BatchModelOption
     if gyro:
         x0[:, OMEGA] = log.gyro_b_radps
         return x0
-    window = max(int(round(model.init_window_s * log.rate_hz)), 8)
+    window = max(int(round(groups.solve.init_window_s * log.rate_hz)), 8)
     for seg in log.segments():
         idx = np.arange(seg.start, seg.stop)
         if idx.size < 2:

@@ -48,7 +48,7 @@ def applies(problem: SmootherProblem) -> bool:
     motion model's steps, no attitude, no calibration variables."""
     opt = problem.batch_model
     return (opt.measurement == "accelerometer" and opt.process_robust_threshold > 0 and not problem.snap
-            and not problem.attitude and not problem.noise.motion.oscillator and problem.n_global == 0
+            and not problem.layout.attitude and not problem.noise.motion.oscillator and problem.n_global == 0
             and problem.n > 2 * MARGIN_SAMPLES + RUN_SAMPLES)
 
 
@@ -173,7 +173,7 @@ def local_resolve(objective: FrozenObjective, X: np.ndarray, a: int, b: int, mar
     lo, hi = max(a - margin, 0), min(b + margin, p.n)
     held = [i for i in (lo, lo + 1) if lo > 0] + [i for i in (hi - 2, hi - 1) if hi < p.n]
     model = replace(p.model, factor_groups=tuple(p.model.factor_groups) + (_HeldStates([i - lo for i in held], X[held]),))
-    sub = SmootherProblem(p.log.select(slice(lo, hi)), model, p.batch_model)
+    sub = SmootherProblem(p.log.select(slice(lo, hi)), p.options._replace(model=model))
     sub = sub.with_noise(accel=sub.noise.accel.with_base(objective.accel_sigma[lo:hi]),
                          motion=sub.noise.motion.with_steps(objective.trapezoid_sigma[lo:hi - 1],
                                                             objective.omega_dot_step_sigma[lo:hi - 1]))

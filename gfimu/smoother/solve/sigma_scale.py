@@ -623,12 +623,12 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     return out
 
 
-def calibrates_stream(array, model, batch_model) -> bool:
-    """Whether the fixed-lag smoother scales σ under its ``model`` and ``batch_model`` (option groups): the
-    accelerometers alone as they are, no gyroscope or calibration variables the residual would leave out."""
-    return (batch_model.measurement == "accelerometer"
-            and not (batch_model.self_calibrate_bias or batch_model.self_calibrate_scale)
-            and not (model.use_gyro and array.gyroscope is not None))
+def calibrates_stream(array, groups) -> bool:
+    """Whether the fixed-lag smoother scales σ under the option ``groups`` of its model (its model, batch model
+    and self-calibration): the accelerometers alone as they are, no gyroscope or calibration variables the
+    residual would leave out."""
+    return (groups.batch_model.measurement == "accelerometer" and not groups.self_calibration.calibrates
+            and not (groups.model.use_gyro and array.gyroscope is not None))
 
 
 def jerk_density(model):

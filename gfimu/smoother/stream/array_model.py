@@ -37,7 +37,7 @@ from ...log import Log
 from ..model.parts import delegated
 from ..model.groups import BUILT_IN, AccelerometerGroup, FirstStatePriorGroup, GyroscopeGroup
 from ..model.noise_levels import NoiseLevels
-from ..model.option_groups import BatchModelOptions, ModelOptions
+from ..model.option_groups import ModelGroups
 from ..model.layout import KINEMATIC_SIZE, OMEGA, OMEGA_DOT, SPECIFIC_FORCE, StateLayout
 
 
@@ -92,8 +92,8 @@ class StreamView:
     ``[ω, ω̇, f]``, no attitude, no calibration variables; the gyroscope is the window engines' own)."""
 
     array: SensorArray
-    model: ModelOptions
-    batch_model: BatchModelOptions
+    options: ModelGroups
+    """The option groups of the model (:class:`~gfimu.smoother.model.option_groups.ModelGroups`), read by their names."""
     dt_s: np.ndarray
     """(n - 1,) step lengths [s]: none for a view of one sample, one for a step."""
     samples: tuple
@@ -106,14 +106,20 @@ class StreamView:
     n_global: ClassVar[int] = 0
     global_blocks: ClassVar[Mapping] = MappingProxyType({})
 
+    model = delegated("options", "model", "The model (:class:`~gfimu.smoother.model.option_groups.ModelOptions`).")
+    batch_model = delegated("options", "batch_model", "The batch model (:class:`BatchModelOptions`).")
+    attitude = delegated("options", "attitude", "The attitude (:class:`AttitudeOptions`; never on in a stream).")
+    self_calibration = delegated("options", "self_calibration", (
+        "The self-calibration (:class:`SelfCalibrationOptions`; never on in a stream)."))
+
     @classmethod
-    def of(cls, array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions, timestamps_ns, accel=None,
+    def of(cls, array: SensorArray, options: ModelGroups, timestamps_ns, accel=None,
            gyro=None, dt_s: np.ndarray | None = None) -> StreamView:
         """The view of the samples at ``timestamps_ns`` (one or two) with these readings (None: zeros, no
         gyroscope); ``dt_s``: their step length (default: from the timestamps)."""
         timestamps_ns = np.asarray(timestamps_ns, dtype=np.int64)
         dt_s = np.diff(timestamps_ns) * 1e-9 if dt_s is None else np.asarray(dt_s, dtype=float)
-        return cls(array, model, batch_model, dt_s, (timestamps_ns, accel, gyro))
+        return cls(array, options, dt_s, (timestamps_ns, accel, gyro))
 
     @property
     def n(self) -> int:
@@ -261,12 +267,12 @@ class Caches:
 
 
 class ArrayModel:
-    """Precomputed geometry and noise models of one array under the option groups ``model``
-    (:class:`~gfimu.smoother.model.option_groups.ModelOptions`) and ``batch_model``
-    (:class:`~gfimu.smoother.model.option_groups.BatchModelOptions`: the robust model's noise slope, thresholds
-    and loss, and the measurement).
+    """Precomputed geometry and noise models of one array under the option groups of the model ``options``
+    (:class:`~gfimu.smoother.model.option_groups.ModelGroups`: its ``model``, and its ``batch_model``, the robust
+    model's noise slope, thresholds and loss, and the measurement).
 
-    Besides ``array``, ``model``, ``batch_model``, ``fast_measurement`` and ``accel_noise_scale``, what it holds is in
+    Besides ``array``, ``options`` (and its ``model`` and ``batch_model``), ``fast_measurement`` and
+    ``accel_noise_scale``, what it holds is in
     four parts (their fields also readable as attributes of the model, e.g. ``model.S_q``):
 
     - :attr:`structure` (:class:`Structure`): the structure matrix's blocks ``S_lin``, ``S_q``, ``S_f``,
@@ -280,24 +286,24 @@ class ArrayModel:
 
     and :attr:`caches` (:class:`Caches`): the gtsam noise models and the step rows per step length."""
 
-    def __init__(self, array: SensorArray, model: ModelOptions, batch_model: BatchModelOptions,
-                 fast_measurement: bool = True, accel_noise_scale: float = 1.0) -> None:
-        if not (isinstance(model, ModelOptions) and isinstance(batch_model, BatchModelOptions)):
-            raise TypeError("ArrayModel(array, model, batch_model, ...) takes the option groups ModelOptions and "
-                            "BatchModelOptions")
+    def __init__(self, array: SensorArray, options: ModelGroups, fast_measurement: bool = True,
+                 accel_noise_scale: float = 1.0) -> None:
+        if not isinstance(options, ModelGroups):
+            raise TypeError("ArrayModel(array, options, ...) takes the option groups of the model (ModelGroups)")
         if not (np.isfinite(accel_noise_scale) and accel_noise_scale > 0):
             raise InputError(f"accel_noise_scale must be a positive number, got {accel_noise_scale!r}")
         self.array = array
+        self.options = options
+        """The option groups of the model, what the factor groups read (:class:`StreamView`)."""
+        model, batch_model = options.model, options.batch_model
         self.model = model
         self.batch_model = batch_model
-        self.option_groups = (model, batch_model)
-        """The model and batch model, what the factor groups read (:class:`StreamView`)."""
         self.fast_measurement = bool(fast_measurement)
         self.accel_noise_scale = float(accel_noise_scale)
         S = array.structure_matrix()
         S_lin = np.ascontiguousarray(S[:, :6])
         # the accelerometer, gyroscope and first-state noise of the batch smoother's groups, on a view of the array
-        levels = StreamView.of(array, *self.option_groups, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
+        levels = StreamView.of(array, self.options, [0]).with_levels((AccelerometerGroup(), FirstStatePriorGroup(),
                                                               GyroscopeGroup())).noise
         sigma = levels.accel.scaled(self.accel_noise_scale).sigma
         wL = S_lin / sigma[:, None]
@@ -356,7 +362,7 @@ class ArrayModel:
         per_sample = self.factor_sets.per_sample
         if not per_sample:
             return None
-        view = StreamView.of(self.array, *self.option_groups, [t_ns], y, gyro)
+        view = StreamView.of(self.array, self.options, [t_ns], y, gyro)
         groups = [g for g in per_sample if g.applies(view)]
         if not groups:
             return None
@@ -425,7 +431,7 @@ class ArrayModel:
         fixed = cache.get(key)
         sets = self.factor_sets
         if fixed is None:
-            view = StreamView.of(self.array, *self.option_groups, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
+            view = StreamView.of(self.array, self.options, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
             zero = np.zeros(KINEMATIC_SIZE)
             fixed = self._step_rows(sets.fixed_steps, view, zero, zero)
             fixed = {"rows": fixed, 1.0: Step.of(*fixed[:3])}
@@ -435,7 +441,7 @@ class ArrayModel:
         others = None
         if sets.other_steps and t_ns is not None:
             (a0, g0), (a1, g1) = readings if readings is not None else ((None, None), (None, None))
-            view = StreamView.of(self.array, *self.option_groups, list(t_ns),
+            view = StreamView.of(self.array, self.options, list(t_ns),
                               None if a0 is None else np.vstack([a0, a1]),
                               None if g0 is None or g1 is None else np.vstack([g0, g1]), dt_s=np.array([h]))
             groups = [g for g in sets.other_steps if g.applies(view)]

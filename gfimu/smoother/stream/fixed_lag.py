@@ -103,7 +103,7 @@ from .window_filter import FilterFailure, WindowFilter
 from .gtsam_window import GtsamWindow
 from ..solve.banded import solve
 from ..model.parts import delegated
-from ..model.problem import SmootherOptions, options_reason
+from ..model.problem import SmootherOptions, check_oscillators, options_reason
 from ...option import check_declared
 from ..model.option_groups import (GROUPS, BatchModelOptions, Engine, ModelGroups, ModelOptions, StreamOptions,
                                    TuningOptions, assemble)
@@ -308,44 +308,43 @@ def tunes_process_noise(model: ModelOptions, tuning: TuningOptions) -> bool:
     return bool(tuning.tune_process_noise) and not explicit_process_noise(model)
 
 
-def fixed_lag_reason(array: SensorArray, options: SmootherOptions) -> str | None:
-    """Why the fixed-lag smoother cannot run on ``array`` with ``options`` (None if it can).
+def fixed_lag_reason(array: SensorArray, options: ModelGroups) -> str | None:
+    """Why the fixed-lag smoother cannot run on ``array`` with the option groups of the model ``options``
+    (None if it can).
 
     Model options the stream cannot honour, set away from their defaults, are refused with the reason,
-    never silently ignored. :class:`FixedLagEstimator` has no batch option; a :class:`SmootherOptions`
-    given to :class:`FixedLagSmoother` with one away from its default is refused too."""
-    batch = [name for name in GROUPS["batch"] if getattr(options, name) != getattr(_DEFAULTS, name)]
-    if batch:
-        return (f"{', '.join(batch)}: option(s) of the batch smoother (method 'smoother'), which the fixed-lag "
-                "smoother does not use (its window is lag_s)")
-    unsupported = [name for name in ("self_calibrate_bias", "self_calibrate_scale", "free_flight", "use_inclinometer",
-                                     "estimate_attitude") if getattr(options, name, False)]
+    never silently ignored (:class:`FixedLagEstimator` has no batch option, and gives the batch model's
+    groups at their defaults)."""
+    unsupported = [name for part, name in ((options.self_calibration, "self_calibrate_bias"),
+                                           (options.self_calibration, "self_calibrate_scale"),
+                                           (options.batch_model, "free_flight"), (options.attitude, "use_inclinometer"),
+                                           (options.attitude, "estimate_attitude")) if getattr(part, name)]
     if unsupported:
         return f"the fixed-lag smoother does not support {', '.join(unsupported)} (use method 'smoother')"
-    whole = [getattr(g, "name", repr(g)) for g in getattr(options, "factor_groups", ())
+    whole = [getattr(g, "name", repr(g)) for g in options.model.factor_groups
              if not (getattr(g, "per_sample", False) or getattr(g, "steps", False))]
     if whole:
         return (f"factor_groups {', '.join(whole)}: the fixed-lag smoother streams only groups whose rows each depend on "
                 "one sample's state (FactorGroup.per_sample) or on two consecutive samples' (FactorGroup.steps; "
                 "use method 'smoother')")
-    if getattr(options, "motion_model", "jerk") != "jerk":
-        return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.motion_model!r} (use method 'smoother')"
-    if options.measurement != "accelerometer":
+    if options.model.motion_model != "jerk":
+        return f"the fixed-lag smoother uses motion_model='jerk' only, got {options.model.motion_model!r} (use method 'smoother')"
+    if options.batch_model.measurement != "accelerometer":
         return "the fixed-lag smoother uses measurement='accelerometer' only"
-    if options.tune_motion_model:
+    if options.tuning.tune_motion_model:
         return "tune_motion_model: the fixed-lag smoother has the 'jerk' motion model only (use method 'smoother')"
-    if options.accel_noise_slope_mps2_per_radps > 0:
+    if options.batch_model.accel_noise_slope_mps2_per_radps > 0:
         return ("accel_noise_slope_mps2_per_radps: the motion-dependent accelerometer noise is re-weighted from a whole "
                 "solution, which a stream does not have (use method 'smoother')")
     for name in ("accel_robust_threshold", "process_robust_threshold", "robust_loss"):
-        if hasattr(_DEFAULTS, name) and getattr(options, name) != getattr(_DEFAULTS, name):
+        if getattr(options.batch_model, name) != getattr(_DEFAULTS, name):
             return (f"{name}: the robust re-weighting is iterated over whole solutions, which a stream does not "
                     "have (use method 'smoother')")
-    has_gyro = array.gyroscope is not None and options.use_gyro
+    has_gyro = array.gyroscope is not None and options.model.use_gyro
     if array.n_axes < 6 and not has_gyro:
         return (f"array {array.name!r} has {array.n_axes} accelerometer axes; without a gyroscope ω cannot be "
                 "observed (free flight needs method 'smoother' with free_flight=True)")
-    return options_reason(array, options.model, options.batch_model)
+    return options_reason(array, options)
 
 
 @dataclass(frozen=True)
@@ -607,7 +606,7 @@ class ChoiceState:
         self.models.append(chosen)
         self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
         self.groups = chosen.groups
-        self.model = model.ArrayModel(array, chosen.groups.model, chosen.groups.batch_model, fast_measurement,
+        self.model = model.ArrayModel(array, chosen.groups, fast_measurement,
                                       chosen.accel_noise_scale)
 
 
@@ -647,7 +646,7 @@ class FixedLagSmoother:
     nominal sample rate, used to detect gaps. Tilt rows are accepted for
     interface symmetry but not used (the state has no orientation). Usage::
 
-        smoother = FixedLagSmoother(array, SmootherOptions(), lag_s=0.2, rate_hz=500.0)
+        smoother = FixedLagSmoother(array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=500.0)
         for timestamp_ns, accel_row in stream:
             update = smoother.push(timestamp_ns, accel_row)
             for state in update.smoothed:      # final, lag_s behind
@@ -660,7 +659,7 @@ class FixedLagSmoother:
     ``warmup_s`` (data gathered to initialise a segment), ``gap_factor``,
     ``fast_measurement``, ``tune_window_s`` (see :class:`FixedLagEstimator`).
 
-    With ``options.tune_process_noise`` and no explicit density (module
+    With ``options.tuning.tune_process_noise`` and no explicit density (module
     docstring) the first ``tune_window_s`` of data are buffered (``push``
     returns nothing meanwhile), the process noise is chosen on them by the
     batch smoother's tuner, and the push that fills the buffer returns all
@@ -678,14 +677,14 @@ class FixedLagSmoother:
     read-only views of these parts.
     """
 
-    def __init__(self, array: SensorArray, options: SmootherOptions | None = None, lag_s: float = 0.2,
+    def __init__(self, array: SensorArray, options: ModelGroups | None = None, lag_s: float = 0.2,
                  rate_hz: float = 500.0, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10,
                  marginalise_every_s: float | None = None, warmup_s: float = 0.2, gap_factor: float = 1.5,
                  fast_measurement: bool = True, tune_window_s: float = 3.0, engine: str = "numpy",
                  clock_reset_s: float = 1.0, auto_model: bool = False, retune_every_s: float = 10.0,
                  model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0,
                  choice_delay_s: float = CHOICE_DELAY_S) -> None:
-        options = options or SmootherOptions()
+        options = options or SmootherOptions().model_groups
         if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
             raise InputError(f"fixed-lag smoother: rate_hz must be a positive number, got {rate_hz!r}")
         if marginalise_every_s is None:  # about 125 updates per block, at most 0.25 s
@@ -709,9 +708,9 @@ class FixedLagSmoother:
         self.config = StreamConfig(float(lag_s), rate_hz, float(gap_factor), max(2, int(round(warmup_s * rate_hz))),
                                    engine, GtsamSettings(float(relinearize_threshold), int(relinearize_skip),
                                                          max(float(marginalise_every_s), 2.0 / rate_hz)),
-                                   bool(branches), bool(fast_measurement), bool(options.compute_sigma))
-        given = ModelGroups.of(options)  # (the options' batch group is checked above: at its defaults)
-        array_model = model.ArrayModel(array, given.model, given.batch_model, fast_measurement)
+                                   bool(branches), bool(fast_measurement), bool(options.solve.compute_sigma))
+        given = options
+        array_model = model.ArrayModel(array, given, fast_measurement)
         tune = tunes_process_noise(given.model, given.tuning)
         auto = bool(auto_model) and engine == "numpy" and auto_model_reason(array, given.batch_model) is None
         tune_n = stretch_samples(tune_window_s, rate_hz)  # (cut above STRETCH_RATE_HZ)
@@ -729,8 +728,8 @@ class FixedLagSmoother:
         self._worker = WorkerSlot()
         self._solver = WorkerSlot()
         self.closed = False
-        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array, given.model,
-                                                                                             given.batch_model)
+        self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array,
+                                                                                             given)
                        else None)
         # the held start's longest span [s] (cut above STRETCH_RATE_HZ; the numpy engine only)
         self._hold = StartHold(float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / rate_hz) if engine == "numpy" else 0.0,
@@ -738,9 +737,9 @@ class FixedLagSmoother:
         self._start_segment()
 
     @classmethod
-    def of_groups(cls, array: SensorArray, options: SmootherOptions | None, stream: StreamOptions, rate_hz: float,
+    def of_groups(cls, array: SensorArray, options: ModelGroups | None, stream: StreamOptions, rate_hz: float,
                   **settings) -> FixedLagSmoother:
-        """A smoother of the model ``options`` and the stream group ``stream`` (:class:`StreamOptions`: its
+        """A smoother of the model's option groups ``options`` and the stream group ``stream`` (:class:`StreamOptions`: its
         lag, window engine, warm-up, hold, gaps and model updates; ``screen_readings`` is the session's, not the
         smoother's); ``settings`` ( ``lag_s``, ``auto_model``, ``clock_reset_s``, ...) override or add to them."""
         taken = {name: getattr(stream, name) for name in GROUPS["stream"] if name != "screen_readings"}
@@ -1239,7 +1238,7 @@ class FixedLagSmoother:
         smoother's): (Tuning, problem, initial states)."""
         tunings: list = []
         given = given or self._choice.rules.given
-        problem, x0 = tuned_problem(part, given.model, given.batch_model, replace(given.tuning, tune_process_noise=True),
+        problem, x0 = tuned_problem(part, given._replace(tuning=replace(given.tuning, tune_process_noise=True)),
                                     tunings)
         return tunings[-1], problem, x0
 
@@ -1257,8 +1256,8 @@ class FixedLagSmoother:
         (:class:`gfimu.smoother.tuning.evidence.Tuning`, the model groups carrying it)."""
         tuning, problem, _ = self._tuned(self._stretch_log(Stretch.of_samples(samples)))
         given = self._choice.rules.given
-        return tuning, ModelGroups(tuning.for_stream(problem.model), problem.batch_model,
-                                   replace(given.tuning, tune_process_noise=False))
+        return tuning, problem.options._replace(model=tuning.for_stream(problem.model),
+                                                tuning=replace(given.tuning, tune_process_noise=False))
 
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
@@ -1389,7 +1388,7 @@ class FixedLagSmoother:
         part = self._stretch_log(Stretch.of_samples(seg.warmup), "fixed-lag warm-up")
         times_ns, accel, gyro = part.timestamps_ns, part.accel_mps2, part.gyro_b_radps
         if len(times_ns) >= 2:
-            x0 = initial_estimate(part, self.options.model, self.options.batch_model)  # 'sign-resolving' or 'ml'
+            x0 = initial_estimate(part, self.options)  # 'sign-resolving' or 'ml'
         else:  # a lone sample before a gap or the end: ω from the gyro or 0, [f, ω̇] from the readings
             w = gyro[0] if gyro is not None else np.zeros(3)
             x0 = np.concatenate(self.model.predict(w, np.zeros(3), np.zeros(3), 0.0, accel[0]))[None]
@@ -1591,8 +1590,8 @@ class FixedLagSmoother:
         X = np.vstack([h[2] for h in self._hold.held] + [self._segment.engine.mean(k) for k, _ in self._segment.window])
         part = self._stretch_log(Stretch.of_samples(samples))
         scale = 1.0 if self.stream_model is None else float(self.stream_model.accel_noise_scale)
-        problem = make_problem(part, self.options.model, self.options.batch_model, scale, X[:, OMEGA])
-        starts = [X, initial_estimate(part, self.options.model, self.options.batch_model)]
+        problem = make_problem(part, self.options, scale, X[:, OMEGA])
+        starts = [X, initial_estimate(part, self.options)]
         for kind in (1, 2, 3):
             Xb = X.copy()
             Xb[:, OMEGA], Xb[:, OMEGA_DOT] = branch(kind, X[:, OMEGA], X[:, OMEGA_DOT], self._signs.normal)
@@ -1709,11 +1708,11 @@ class FixedLagSmoother:
 
 
 @dataclass(frozen=True)
-@assemble("model", "stream", "tuning", tune_process_noise=True)
+@assemble("model", "solve", "stream", "tuning", tune_process_noise=True)
 class FixedLagEstimator(SmootherEstimator):
     """Fixed-lag smoother over a log (method ``"fixed-lag"``).
 
-    Options: the groups model, stream, tuning and guard of :mod:`gfimu.smoother.model.option_groups`
+    Options: the groups model, solve, stream, tuning and guard of :mod:`gfimu.smoother.model.option_groups`
     (``gfimu estimate --method fixed-lag --list-options``); the batch smoother's group (``window_s``,
     ``overlap_s``, ``reweight_iterations``, ...) is not among them, so such an option is refused where the
     options are read. Each sample's estimate is its
@@ -1746,7 +1745,7 @@ class FixedLagEstimator(SmootherEstimator):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self.options()  # the model and tuning options checked as the batch smoother checks them
+        check_oscillators(self.model)  # (each option is checked by its declaration)
 
     def window_lag_s(self, rate_hz: float) -> float:
         """The smoother's own lag [s] at ``rate_hz``: ``lag_s`` less the stream screening's wait
@@ -1763,11 +1762,11 @@ class FixedLagEstimator(SmootherEstimator):
 
     def smoother(self, array: SensorArray, rate_hz: float) -> FixedLagSmoother:
         """A streaming smoother with these options (its lag :meth:`window_lag_s`)."""
-        return FixedLagSmoother.of_groups(array, self.options(), self.stream, rate_hz, lag_s=self.window_lag_s(rate_hz),
+        return FixedLagSmoother.of_groups(array, self.model_groups, self.stream, rate_hz, lag_s=self.window_lag_s(rate_hz),
                                           auto_model=self.auto_model)
 
     def applicable(self, array: SensorArray) -> str | None:
-        return fixed_lag_reason(array, self.options())
+        return fixed_lag_reason(array, self.model_groups)
 
     def preload(self, size_bytes: int | None = None) -> None:
         """Begin loading the compiled kernels in the background (:mod:`gfimu.smoother.preload`), while

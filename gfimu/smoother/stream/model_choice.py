@@ -43,7 +43,7 @@ class StreamModel:
     """One choice of the fixed-lag smoother's model (frozen; a new choice is a new value)."""
 
     groups: ModelGroups
-    """The smoother's model, batch model and tuning with the chosen noise levels and model."""
+    """The option groups of the smoother's model with the chosen noise levels and model."""
     accel_noise_scale: float
     """Factor on the accelerometer noise std of every axis."""
     check: ModelCheck | None
@@ -80,8 +80,7 @@ def check_of(part: Log, ml_motion) -> ModelCheck | None:
 def gaussian(part: Log, given: ModelGroups, check: ModelCheck | None) -> StreamModel:
     """The Gaussian model of a consistent stretch: the process noise by marginal likelihood."""
     tunings: list = []
-    problem, _ = tuned_problem(part, given.model, given.batch_model, replace(given.tuning, tune_process_noise=True),
-                               tunings)
+    problem, _ = tuned_problem(part, given._replace(tuning=replace(given.tuning, tune_process_noise=True)), tunings)
     return from_tuning(tunings[-1], given._replace(model=problem.model, batch_model=problem.batch_model), check, part)
 
 

@@ -37,13 +37,13 @@ from ...log import Log
 from ..solve.banded import (Factorisation, NormalEquations, add_normal_equations, band_structure_of, factorise, factorise_blocks,
                      normal_equations, solve, solve_step)
 from ..model.problem import SmootherProblem, check_oscillators
-from ..model.option_groups import BatchModelOptions, ModelOptions, TuningOptions
+from ..model.option_groups import ModelGroups, ModelOptions
 from ..model.groups import Term
 from ..solve.initialise import initial_estimate
 from ..model.layout import OMEGA, OMEGA_DOT, StateLayout
 
-InitialStates = Callable[[Log, ModelOptions, BatchModelOptions], np.ndarray]
-"""``(window log, model, batch model) -> initial states (N, state size)``, e.g.
+InitialStates = Callable[[Log, ModelGroups], np.ndarray]
+"""``(window log, option groups of the model) -> initial states (N, state size)``, e.g.
 :func:`gfimu.smoother.solve.initialise.initial_estimate`."""
 
 DENSITY_FIELD = {"jerk": "omega_dot_random_walk_radps2_per_sqrt_s", "snap": "omega_ddot_random_walk_radps3_per_sqrt_s"}
@@ -90,9 +90,11 @@ class Tuning:
                 factors[a] = max(factors[a], floor / q)
         return replace(model, process_axis_factors=tuple(float(v) for v in factors))
 
-    def apply(self, model: ModelOptions, batch_model: BatchModelOptions) -> tuple[ModelOptions, BatchModelOptions]:
-        """The ``model`` and ``batch_model`` with this selection (the jerk density is the model's, the snap density
-        the batch model's; the accelerometer noise scale is not an option, see :func:`make_problem`)."""
+    def apply(self, groups: ModelGroups) -> ModelGroups:
+        """The option ``groups`` with this selection in their model and batch model (the jerk density is the
+        model's, the snap density the batch model's; the accelerometer noise scale is not an option, see
+        :func:`make_problem`)."""
+        model, batch_model = groups.model, groups.batch_model
         changes = {"process_axis_factors": tuple(self.axis_factors), "motion_model": self.motion_model}
         if self.motion_model == "jerk":
             changes[DENSITY_FIELD["jerk"]] = self.density
@@ -101,7 +103,7 @@ class Tuning:
             batch_model = replace(batch_model, **{DENSITY_FIELD["snap"]: self.density})
         if np.isfinite(self.specific_force_density):
             changes["specific_force_random_walk_mps2_per_sqrt_s"] = self.specific_force_density
-        return replace(model, **changes), batch_model
+        return groups._replace(model=replace(model, **changes), batch_model=batch_model)
 
     def as_dict(self) -> dict:
         return {"motion_model": self.motion_model, "density": self.density, "axis_factors": list(self.axis_factors),
@@ -111,12 +113,13 @@ class Tuning:
                 "evaluations": self.evaluations}
 
 
-def make_problem(log: Log, model: ModelOptions, batch_model: BatchModelOptions, accel_noise_scale: float = 1.0,
+def make_problem(log: Log, groups: ModelGroups, accel_noise_scale: float = 1.0,
                  omega_b_radps: np.ndarray | None = None) -> SmootherProblem:
-    """:class:`SmootherProblem` of ``model`` and ``batch_model`` with every accelerometer noise std multiplied by
-    ``accel_noise_scale`` and, when ``batch_model.accel_noise_slope_mps2_per_radps`` is set, growing with |ω| of
-    ``omega_b_radps``."""
-    problem = SmootherProblem(log, model, batch_model)
+    """:class:`SmootherProblem` of the option ``groups`` with every accelerometer noise std multiplied by
+    ``accel_noise_scale`` and, when ``groups.batch_model.accel_noise_slope_mps2_per_radps`` is set, growing with
+    |ω| of ``omega_b_radps``."""
+    problem = SmootherProblem(log, groups)
+    batch_model = groups.batch_model
     if accel_noise_scale != 1.0:
         problem = problem.with_noise(accel=problem.noise.accel.scaled(accel_noise_scale))  # the inversion's too ('quadratic')
     slope = batch_model.accel_noise_slope_mps2_per_radps
@@ -281,7 +284,7 @@ class ProcessBasis:
     """The process terms at unit settings at the states this basis was made at."""
 
     @classmethod
-    def of(cls, log: Log, model: ModelOptions, batch_model: BatchModelOptions, field: str, states: np.ndarray,
+    def of(cls, log: Log, groups: ModelGroups, field: str, states: np.ndarray,
            params: np.ndarray, omega_b_radps: np.ndarray | None = None,
            previous: ProcessBasis | None = None) -> ProcessBasis | None:
         """The basis at ``states`` (None where it does not apply, see the class). ``previous``: the basis
@@ -289,17 +292,18 @@ class ProcessBasis:
         numbers as here (factors linear in the states: the white jerk, the random walks, the priors), its
         split of the rows and its products ``JᵀJ`` are kept and only the gradients and costs are made
         here (:meth:`at`): the same numbers as made afresh."""
+        model = groups.model
         if model.motion_model != "jerk" or any(f > 0 for f in model.process_axis_frequencies_hz):
             return None  # (the white-snap system is too stiff for sums that agree to many digits)
         unit = replace(model, **{field: 1.0}, process_axis_factors=(1.0, 1.0, 1.0),
                        specific_force_random_walk_mps2_per_sqrt_s=1.0)
-        problem = make_problem(log, unit, batch_model, 1.0, omega_b_radps)
+        problem = make_problem(log, groups._replace(model=unit), 1.0, omega_b_radps)
         terms = problem.process_terms(states, params)
         if previous is not None and previous.same_jacobians(terms):
             return previous.at(terms, problem.n, problem.state_size)
         fx, fy, fz, ff = PROBE_FACTORS
         probe = replace(unit, process_axis_factors=(fx, fy, fz), specific_force_random_walk_mps2_per_sqrt_s=ff)
-        probed = make_problem(log, probe, batch_model, 1.0, omega_b_radps).process_terms(states, params)
+        probed = make_problem(log, groups._replace(model=probe), 1.0, omega_b_radps).process_terms(states, params)
         if len(terms) != len(probed):
             return None
         factors = {1.0: "const", fx: 0, fy: 1, fz: 2, ff: "force"}
@@ -565,12 +569,11 @@ def dominant_frequency_hz(signal: np.ndarray, rate_hz: float, min_hz: float, max
     return float(f[i] + shift * (f[1] - f[0]))
 
 
-def tune(log: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions, states: np.ndarray,
-         params: np.ndarray | None = None, states_out: list | None = None,
-         basis: bool = True) -> tuple[Tuning, ModelOptions, BatchModelOptions]:
-    """Select the process noise of the smoother's ``model`` and ``batch_model`` maximising
+def tune(log: Log, groups: ModelGroups, states: np.ndarray, params: np.ndarray | None = None,
+         states_out: list | None = None, basis: bool = True) -> tuple[Tuning, ModelGroups]:
+    """Select the process noise of the smoother's model and batch model (of the option ``groups``) maximising
     :func:`linearised_log_evidence` from a starting estimate ``states`` (e.g. the initialisation), as
-    ``tuning`` asks; returns the selection and the model and batch model carrying it.
+    ``tuning = groups.tuning`` asks; returns the selection and the groups carrying it.
 
     Per motion model (both 'jerk' and 'snap' with ``tuning.tune_motion_model``, else the model's own):
     (1) the common jerk/snap density on a grid of factor 4, linearised at ``states``; the smoother is
@@ -584,15 +587,15 @@ def tune(log: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: 
     ``basis``: evaluate the process factors once per linearisation point and weight them per
     setting (:class:`ProcessBasis`; False: evaluate them for every setting, the same numbers slower)."""
     best = None
-    for motion_model in ("jerk", "snap") if tuning.tune_motion_model else (model.motion_model,):
-        search = _NoiseSearch(log, model, batch_model, tuning.tune_axis_frequencies, motion_model, states, params,
-                              basis)
+    tuning = groups.tuning
+    for motion_model in ("jerk", "snap") if tuning.tune_motion_model else (groups.model.motion_model,):
+        search = _NoiseSearch(log, groups, motion_model, states, params, basis)
         found = search.run(tuning.tune_accel_noise)
         if best is None or found.log_evidence > best[0].log_evidence:
-            best = (found, *search.settings(search.current), search.X)
+            best = (found, search.settings(search.current), search.X)
     if states_out is not None:
-        states_out.append(best[3])
-    return best[:3]
+        states_out.append(best[2])
+    return best[:2]
 
 
 def _copy_settings(c: dict) -> dict:
@@ -606,11 +609,12 @@ class _NoiseSearch:
     0: the starting estimate, 1: the smoother's solution with the density found), and the evidence of
     each setting tried there (``known``), with the normal equations and process bases it reuses."""
 
-    def __init__(self, log: Log, model: ModelOptions, batch_model: BatchModelOptions, frequencies: bool,
-                 motion_model: str, states: np.ndarray, params: np.ndarray | None, basis: bool):
-        self.log, self.model, self.batch_model, self.motion_model = log, model, batch_model, motion_model
+    def __init__(self, log: Log, groups: ModelGroups, motion_model: str, states: np.ndarray,
+                 params: np.ndarray | None, basis: bool):
+        self.log, self.groups, self.motion_model = log, groups, motion_model
+        model, batch_model = groups.model, groups.batch_model
         self.basis = basis
-        self.frequencies = frequencies
+        self.frequencies = groups.tuning.tune_axis_frequencies
         """Whether the oscillators are tried (``tune_axis_frequencies``)."""
         self.field = DENSITY_FIELD[motion_model]
         self.p0 = params
@@ -624,22 +628,24 @@ class _NoiseSearch:
         # the state layout of this motion model with the model given (the oscillators need 'jerk')
         given = replace(model, motion_model=motion_model)
         check_oscillators(given)
-        self.X = StateLayout.of(given, batch_model).resize(states)
+        self.X = StateLayout.of(given, groups.attitude).resize(states)
         self.cache: dict = {}
         self.bases: dict = {}
         self.summed: dict = {}
         self.known: dict = {}  # evidence per setting at this linearisation: a search starts where the last one ended
         self.version = 0
 
-    def settings(self, c: dict) -> tuple[ModelOptions, BatchModelOptions]:
-        """The model and batch model of setting ``c`` (the jerk density is the model's, the snap density the
-        batch model's)."""
+    def settings(self, c: dict) -> ModelGroups:
+        """The option groups with the model and batch model of setting ``c`` (the jerk density is the model's,
+        the snap density the batch model's)."""
         density = {self.field: float(np.exp(c["density"]))}
-        model = replace(self.model, motion_model=self.motion_model, **(density if self.motion_model == "jerk" else {}),
+        model = replace(self.groups.model, motion_model=self.motion_model, **(density if self.motion_model == "jerk" else {}),
                         process_axis_factors=tuple(float(v) for v in np.exp(c["axis"])),
                         process_axis_frequencies_hz=tuple(float(v) for v in c["freq"]),
                         specific_force_random_walk_mps2_per_sqrt_s=float(np.exp(c["force"])))
-        return model, (self.batch_model if self.motion_model == "jerk" else replace(self.batch_model, **density))
+        batch_model = self.groups.batch_model
+        return self.groups._replace(model=model, batch_model=(batch_model if self.motion_model == "jerk"
+                                                              else replace(batch_model, **density)))
 
     def run(self, accel_noise: bool) -> Tuning:
         """(1) the density linearised at the start, the smoother solved with it; (2) linearised at that
@@ -649,7 +655,7 @@ class _NoiseSearch:
         if accel_noise:
             self.search("scale", 1e-2, 1e3)
         value = self.search("density", *DENSITY_LIMITS, step=np.log(4.0))
-        problem = make_problem(log, *self.settings(current), float(np.exp(current["scale"])), self.X[:, OMEGA])
+        problem = make_problem(log, self.settings(current), float(np.exp(current["scale"])), self.X[:, OMEGA])
         self.X, self.version = solve(problem, self.X, self.p0).states, 1
         if accel_noise:
             self.search("scale", 1e-2, 1e3, step=np.log(2.0))
@@ -677,7 +683,7 @@ class _NoiseSearch:
         log, X, p0, version = self.log, self.X, self.p0, self.version
         cache, bases, summed = self.cache, self.bases, self.summed
         try:
-            problem = make_problem(log, *self.settings(c), float(np.exp(c["scale"])), X[:, OMEGA])
+            problem = make_problem(log, self.settings(c), float(np.exp(c["scale"])), X[:, OMEGA])
             key = (version, float(c["scale"]))
             if key not in cache:
                 cache.clear()
@@ -686,7 +692,7 @@ class _NoiseSearch:
                 if version not in bases:  # at a new linearisation point: the last one's split and JᵀJ where they hold
                     before = next(iter(bases.values()), None)
                     bases.clear()
-                    bases[version] = ProcessBasis.of(log, *self.settings(c), self.field, X,
+                    bases[version] = ProcessBasis.of(log, self.settings(c), self.field, X,
                                                      np.zeros(problem.n_global) if p0 is None else p0, X[:, OMEGA],
                                                      previous=before)
                 if bases[version] is not None:
@@ -783,35 +789,34 @@ def most_moving_span(omega_dot: np.ndarray, width: int) -> tuple[int, int]:
     return start, start + width
 
 
-def tuned_problem(part: Log, model: ModelOptions, batch_model: BatchModelOptions, tuning: TuningOptions,
-                  tunings: list | None = None, initial: InitialStates | None = None,
+def tuned_problem(part: Log, groups: ModelGroups, tunings: list | None = None, initial: InitialStates | None = None,
                   span_s: float | None = None) -> tuple[SmootherProblem, np.ndarray]:
-    """Problem and initial states of one solve window of ``model`` and ``batch_model``, with the process noise
-    chosen from the data (:func:`tune`) when ``tuning.tune_process_noise``; the choice is appended to ``tunings``
-    and the problem carries the tuned model and batch model (``problem.model``, ``problem.batch_model``).
+    """Problem and initial states of one solve window of the option ``groups``, with the process noise
+    chosen from the data (:func:`tune`) when ``groups.tuning.tune_process_noise``; the choice is appended to
+    ``tunings`` and the problem carries the tuned model and batch model (``problem.model``, ``problem.batch_model``).
 
     ``initial``: how the initial states are made (default :func:`gfimu.smoother.solve.initialise.initial_estimate`);
     ``span_s``: choose on at most this much of the window [s] (None: the whole window): the stretch
     where the initial estimate's ω̇ moves most (the middle one among equals), so that a window that
     rests in its middle is not tuned on its rest alone."""
     initial = initial or initial_estimate
-    x0 = initial(part, model, batch_model)
-    if not tuning.tune_process_noise:
-        return make_problem(part, model, batch_model, 1.0, x0[:, OMEGA]), x0
+    x0 = initial(part, groups)
+    if not groups.tuning.tune_process_noise:
+        return make_problem(part, groups, 1.0, x0[:, OMEGA]), x0
     solved: list = []
     span = slice(0, len(part))
     if span_s is not None and part.times_s[-1] - part.times_s[0] > span_s:
         width = max(int(round(span_s * part.rate_hz)), 4)
         span = slice(*most_moving_span(x0[:, OMEGA_DOT], width))
-    chosen, tuned, tuned_batch = tune(part.select(span), model, batch_model, tuning, x0[span], states_out=solved)
+    chosen, tuned = tune(part.select(span), groups, x0[span], states_out=solved)
     if tunings is not None:
         tunings.append(chosen)
-    if tuned.motion_model != model.motion_model:
-        x0 = initial(part, tuned, tuned_batch)
+    if tuned.model.motion_model != groups.model.motion_model:
+        x0 = initial(part, tuned)
     elif any(f > 0 for f in chosen.axis_frequencies_hz):
         if span == slice(0, len(part)):
             x0 = solved[0]  # the stiff oscillator model starts from the tuner's solution
         else:  # ... or from the white-jerk solution of the whole window with the chosen densities
-            plain = replace(tuned, process_axis_frequencies_hz=(0.0, 0.0, 0.0))
-            x0 = solve(make_problem(part, plain, tuned_batch, chosen.accel_noise_scale, x0[:, OMEGA]), x0).states
-    return make_problem(part, tuned, tuned_batch, chosen.accel_noise_scale, x0[:, OMEGA]), x0
+            plain = tuned._replace(model=replace(tuned.model, process_axis_frequencies_hz=(0.0, 0.0, 0.0)))
+            x0 = solve(make_problem(part, plain, chosen.accel_noise_scale, x0[:, OMEGA]), x0).states
+    return make_problem(part, tuned, chosen.accel_noise_scale, x0[:, OMEGA]), x0

@@ -254,19 +254,20 @@ def measured_noise_options(model: ModelOptions, check: ModelCheck) -> ModelOptio
 
 
 def misfit_options(given: ModelGroups, check: ModelCheck) -> ModelGroups:
-    """The smoother's model, batch model and tuning for a log that disagrees with the rigid-body model (see
-    module docstring), from those ``given``."""
-    model, batch_model, tuning = given
+    """The option groups of the smoother's model for a log that disagrees with the rigid-body model (see
+    module docstring), from those ``given``: its model, solve, batch model and tuning changed."""
+    model = given.model
     floor = check.noise_floor_mps2 if check.noise_floor_mps2 > 0 else model.default_accel_noise_std_mps2
-    return ModelGroups(
-        replace(model, initialisation="ml", ml_sign_chain=True, motion_model="jerk",
-                default_accel_noise_std_mps2=floor),
-        replace(batch_model, accel_noise_slope_mps2_per_radps=check.noise_slope_mps2_per_radps, robust_loss="cauchy",
-                accel_robust_threshold=ROBUST_THRESHOLD, process_robust_threshold=ROBUST_THRESHOLD),
-        replace(tuning, tune_process_noise=False, tune_motion_model=False))
+    return given._replace(
+        model=replace(model, motion_model="jerk", default_accel_noise_std_mps2=floor),
+        solve=replace(given.solve, initialisation="ml", ml_sign_chain=True),
+        batch_model=replace(given.batch_model, accel_noise_slope_mps2_per_radps=check.noise_slope_mps2_per_radps,
+                            robust_loss="cauchy", accel_robust_threshold=ROBUST_THRESHOLD,
+                            process_robust_threshold=ROBUST_THRESHOLD),
+        tuning=replace(given.tuning, tune_process_noise=False, tune_motion_model=False))
 
 
-def user_set(given: ModelGroups, chosen: ModelGroups) -> tuple[dict, dict, dict]:
+def user_set(given: ModelGroups, chosen: ModelGroups) -> tuple[dict, ...]:
     """Per group of ``given``, the options set away from their defaults (``tune_process_noise`` aside) that
     ``chosen`` changes: name -> the value given. A choice of the model keeps them (:func:`with_user_set`)."""
     return tuple({f.name: getattr(mine, f.name) for f in fields(mine)
@@ -275,13 +276,13 @@ def user_set(given: ModelGroups, chosen: ModelGroups) -> tuple[dict, dict, dict]
                  for mine, theirs in zip(given, chosen))
 
 
-def with_user_set(chosen: ModelGroups, kept: tuple[dict, dict, dict]) -> ModelGroups:
+def with_user_set(chosen: ModelGroups, kept: tuple[dict, ...]) -> ModelGroups:
     """``chosen`` with the options ``kept`` (:func:`user_set`) back at the values given."""
     return ModelGroups(*(replace(part, **changes) if changes else part for part, changes in zip(chosen, kept)))
 
 
 def chosen_options(given: ModelGroups, check: ModelCheck, log: Log, ml_motion) -> ModelGroups:
-    """The model, batch model and tuning for ``log`` after its :func:`check_model`, from those ``given``: a
+    """The option groups of the model for ``log`` after its :func:`check_model`, from those ``given``: a
     consistent log keeps them (with the measured noise floor where none is stated, :func:`measured_noise_options`);
     an inconsistent one gets the robust model (:func:`misfit_options`) with, when ``given.tuning`` tunes the
     process noise, the densities of the motion of its per-sample ML estimate ``ml_motion``
