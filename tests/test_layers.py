@@ -29,7 +29,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / "gfimu"
 
 LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
     ("core", 0, ("gfimu.errors", "gfimu.estimate", "gfimu.rigid_body", "gfimu.rotations", "gfimu.motion", "gfimu.array", "gfimu.log",
-                 "gfimu.noise", "gfimu.option", "gfimu.progress", "gfimu.parallel", "gfimu.readings", "gfimu.datasets*")),
+                 "gfimu.noise", "gfimu.option", "gfimu.progress", "gfimu.parallel", "gfimu.readings", "gfimu.screen_kernels",
+                 "gfimu.datasets*")),
     ("io", 1, ("gfimu.io*",)),
     ("simulate", 1, ("gfimu.simulate*",)),
     ("estimators", 2, ("gfimu.estimators*", "gfimu.crb", "gfimu.calibration")),

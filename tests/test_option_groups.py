@@ -184,6 +184,7 @@ def test_the_guard_is_given_the_guard_group_and_the_groups_of_the_model_its_smoo
     monkeypatch.setattr(result, "guarded", guarded)
     for cls in (BatchSmootherEstimator, FixedLagEstimator):
         monkeypatch.setattr(cls, "result", lambda self, log, progress=False: Estimate(still, Report(self.method)))
+    monkeypatch.setattr(FixedLagEstimator, "_per_sample_ahead", lambda self, log: None)  # (no log to estimate)
     batch = BatchSmootherEstimator(guard="warn", use_gyro=False, self_calibrate_bias=True)
     assert batch.estimate(None).report.guard.mode == "warn"
     assert seen[-1] == (GuardOptions("warn"), batch.model, batch.attitude, batch.self_calibration)

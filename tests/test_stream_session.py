@@ -167,6 +167,7 @@ def test_the_choice_process_works_ahead_between_requests():
     process = ChoiceProcess.start(lambda x: (x, len(done)), lambda: done.append(1))
     process.submit("a")
     assert process.result() == ("a", 0)
+    time.sleep(0.5)  # (a request already waiting would skip the work ahead)
     process.submit("b")
     assert process.result() == ("b", 1)
     process.close()
