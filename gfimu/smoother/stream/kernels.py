@@ -728,7 +728,10 @@ def measure_update(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iter
     solved again from where it is; then :func:`update_window` with the last linearisation (its ``Hᵀ S⁻¹ [H, ν]``). Returns
     ``(T, u, W, P_after, P_before, ok)``: ``P_before`` the newest state's covariance the update started from
     (widened or not), ``ok`` False on a singular innovation covariance or non-finite values (nothing moved)."""
-    LU, piv, lu_ok = _factored(P)  # (P's factors: the branches' distances, the costs' prior terms, the step's residual)
+    if branches or (robust_step and c_process > 0.0):  # P's factors: the branches' distances and costs, the step's residual
+        LU, piv, lu_ok = _factored(P)
+    else:  # (nothing reads them)
+        LU, piv, lu_ok = P, np.zeros(P.shape[0], dtype=np.int64), False
     x, H, AG, J, ok = search(y, xp, P, x0, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, branches,
                             normal, prior_margin, LU, piv, lu_ok)
     if not ok:
