@@ -81,10 +81,37 @@ def test_the_lu_solve_is_numpys_solve():
         np.testing.assert_allclose(B_work, want, rtol=0, atol=1e-12 * np.abs(want).max() * np.linalg.cond(S))
 
 
-def test_a_factored_matrix_solves_as_the_lu_solve_does_to_the_bit():
-    """:func:`kernels._lu_factor` once, then :func:`kernels._lu_apply` for each right-hand side: the same bits
-    as :func:`kernels._lu_solve` on each, rows swapped (the pivots) or not, zeros below the diagonal or not;
-    the quadratic form of the factored matrix is the unfactored one's, -1 where it is singular."""
+def _eliminated(S, B):
+    """Gaussian elimination with partial pivoting of S with B along (each right-hand side eliminated as S is),
+    in plain Python floats: the textbook order of operations, the oracle of the factored kernels' bits."""
+    S, B = [list(map(float, r)) for r in S], [list(map(float, r)) for r in B]
+    n = len(S)
+    for c in range(n):
+        p = max(range(c, n), key=lambda r: (abs(S[r][c]), -r))
+        S[c], S[p], B[c], B[p] = S[p], S[c], B[p], B[c]
+        inv = 1.0 / S[c][c]
+        for r in range(c + 1, n):
+            f = S[r][c] * inv
+            if f != 0.0:
+                for j in range(c + 1, n):
+                    S[r][j] -= f * S[c][j]
+                for j in range(len(B[0])):
+                    B[r][j] -= f * B[c][j]
+    for c in range(n - 1, -1, -1):
+        inv = 1.0 / S[c][c]
+        for j in range(len(B[0])):
+            v = B[c][j]
+            for i in range(c + 1, n):
+                v -= S[c][i] * B[i][j]
+            B[c][j] = v * inv
+    return np.array(B)
+
+
+def test_a_factored_matrix_solves_as_elimination_with_the_right_hand_side_to_the_bit():
+    """:func:`kernels._lu_factor` once, then :func:`kernels._lu_apply` for each right-hand side (the swaps first,
+    then the eliminations): the same bits as eliminating each right-hand side along with the matrix, rows swapped
+    (the pivots) or not, zeros below the diagonal or not; :func:`kernels._lu_solve` is the two in one call; the
+    quadratic form of the factored matrix is the unfactored one's, -1 where it is singular."""
     rng = np.random.default_rng(11)
     for n, shuffle in ((1, False), (3, True), (9, True), (9, False), (24, True)):
         S = rng.normal(size=(n, n)) + n * np.eye(n)
@@ -97,11 +124,13 @@ def test_a_factored_matrix_solves_as_the_lu_solve_does_to_the_bit():
         assert shuffle == bool(np.any(piv != np.arange(n))) or n == 1
         for _ in range(3):
             B = rng.normal(size=(n, 4))
-            want, S_work = B.copy(), S.copy()
-            assert kernels._lu_solve(S_work, want)
+            want = _eliminated(S, B)
             got = B.copy()
             kernels._lu_apply(LU, piv, got)
             assert got.tobytes() == want.tobytes()
+            in_one, S_work = B.copy(), S.copy()
+            assert kernels._lu_solve(S_work, in_one)
+            assert in_one.tobytes() == want.tobytes()
             d = rng.normal(size=n)
             factored = kernels._factored(S)
             assert kernels._factored_form_inverse(*factored, d) == kernels._quadratic_form_inverse(S, d)

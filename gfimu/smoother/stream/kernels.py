@@ -59,50 +59,12 @@ def _weight(e: float, c: float, loss: int) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _lu_solve(S, B):
-    """``S⁻¹ B`` by Gaussian elimination with partial pivoting (LAPACK's getrf/getrs, unblocked), in place:
-    S is overwritten, B becomes the solution; False where a pivot is exactly zero or not finite."""
-    n = S.shape[0]
-    k_rhs = B.shape[1]
-    for c in range(n):
-        p, best = c, abs(S[c, c])
-        for r in range(c + 1, n):
-            v = abs(S[r, c])
-            if v > best:
-                p, best = r, v
-        if not best > 0.0 or not np.isfinite(best):
-            return False
-        if p != c:
-            for j in range(n):
-                S[c, j], S[p, j] = S[p, j], S[c, j]
-            for j in range(k_rhs):
-                B[c, j], B[p, j] = B[p, j], B[c, j]
-        inv = 1.0 / S[c, c]
-        for r in range(c + 1, n):
-            f = S[r, c] * inv
-            if f != 0.0:
-                S[r, c] = f
-                for j in range(c + 1, n):
-                    S[r, j] -= f * S[c, j]
-                for j in range(k_rhs):
-                    B[r, j] -= f * B[c, j]
-    for c in range(n - 1, -1, -1):
-        inv = 1.0 / S[c, c]
-        for j in range(k_rhs):
-            v = B[c, j]
-            for i in range(c + 1, n):
-                v -= S[c, i] * B[i, j]
-            B[c, j] = v * inv
-    return True
-
-
-@njit(cache=True, nogil=True)
 def _lu_factor(S, piv):
-    """:func:`_lu_solve`'s elimination of S alone, in place: U above the diagonal and on it, each row's
+    """The elimination of S with partial pivoting, in place: U above the diagonal and on it, each row's
     multipliers below it (moved with the row by later swaps), the row each column swapped with in ``piv``;
     False where a pivot is exactly zero or not finite. :func:`_lu_apply` then solves for any right-hand
-    side with the same numbers as :func:`_lu_solve` gives it (the swaps first, then the eliminations in
-    the same order: each row receives the same updates from the same pivot rows)."""
+    side: the swaps first, then the eliminations (the same numbers as eliminating the right-hand side along
+    with S: each row receives the same updates from the same pivot rows, in the same order)."""
     n = S.shape[0]
     for c in range(n):
         p, best = c, abs(S[c, c])
@@ -149,6 +111,18 @@ def _lu_apply(S, piv, B):
             for i in range(c + 1, n):
                 v -= S[c, i] * B[i, j]
             B[c, j] = v * inv
+
+
+@njit(cache=True, nogil=True)
+def _lu_solve(S, B):
+    """``S⁻¹ B`` by Gaussian elimination with partial pivoting (LAPACK's getrf/getrs, unblocked), in place:
+    S is overwritten (:func:`_lu_factor`), B becomes the solution (:func:`_lu_apply`); False where a pivot is
+    exactly zero or not finite (B then as it was)."""
+    piv = np.empty(S.shape[0], dtype=np.int64)
+    if not _lu_factor(S, piv):
+        return False
+    _lu_apply(S, piv, B)
+    return True
 
 
 @njit(cache=True, nogil=True)
