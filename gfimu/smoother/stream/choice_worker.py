@@ -12,6 +12,12 @@ array and options), and what changes (the model in use, the history) is sent wit
 with the smoother (:meth:`ChoiceProcess.close`), and with its parent however the parent ends
 (:func:`gfimu.parallel.die_with_parent`). Where no process may be forked (:func:`gfimu.parallel.can_fork`)
 there is none and the choices run in a thread, with the same numbers.
+
+:class:`ChoiceProcess` serves any function one request at a time, and two other pieces of work use one of
+their own the same way: the held start's re-solves (half of each check's starts,
+:meth:`FixedLagSmoother._solved_from <gfimu.smoother.stream.fixed_lag.FixedLagSmoother._solved_from>`) and,
+for a log, the guard's per-sample estimate made while the stream runs
+(:meth:`FixedLagEstimator._per_sample_ahead <gfimu.smoother.stream.fixed_lag.FixedLagEstimator._per_sample_ahead>`).
 """
 
 from __future__ import annotations
