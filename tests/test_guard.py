@@ -359,3 +359,19 @@ def test_the_fixed_lag_guard_s_per_sample_estimate_made_beside_the_stream_is_the
     assert after.report.per_sample is None
     assert beside.motion.omega_b_radps.tobytes() == after.motion.omega_b_radps.tobytes()
     assert beside.report.guard == after.report.guard and len(beside.report.guard.spans) == 1
+
+
+def test_a_log_too_long_for_its_estimate_to_be_sent_back_has_it_made_after_the_stream(case, monkeypatch):
+    """Above PER_SAMPLE_AHEAD_MAX samples no process is forked for the guard's per-sample estimate: the guard
+    makes it, with the same rows and verdict."""
+    from gfimu.smoother.stream import fixed_lag
+
+    log, _, _, _ = case
+    est = FixedLagEstimator(**STIFF)
+    beside = est.estimate(log)
+    monkeypatch.setattr(fixed_lag, "PER_SAMPLE_AHEAD_MAX", len(log) - 1)
+    assert est._per_sample_ahead(log) is None
+    after = est.estimate(log)
+    assert after.report.per_sample is None
+    assert beside.motion.omega_b_radps.tobytes() == after.motion.omega_b_radps.tobytes()
+    assert beside.report.guard == after.report.guard

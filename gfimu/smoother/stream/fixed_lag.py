@@ -163,6 +163,13 @@ samples); the span of motion they see is shorter, and a motion that outgrows the
 choice at once (:data:`OUTGROWN_FACTOR`)."""
 
 
+PER_SAMPLE_AHEAD_MAX = 2_000_000
+"""Longest log [samples] whose per-sample estimate for the guard is made beside the stream
+(:meth:`FixedLagEstimator._per_sample_ahead`): its rows (ω, ω̇, f and their σ, about 150 bytes a sample) come
+back through a pipe, a second copy of them for a moment; longer logs (100 s at 20 kHz) have it made after the
+stream, as the guard makes it."""
+
+
 def stretch_samples(seconds: float, rate_hz: float) -> int:
     """The samples of a stretch of ``seconds`` at ``rate_hz``, at most those it holds at
     :data:`STRETCH_RATE_HZ` (at least 2)."""
@@ -1798,10 +1805,11 @@ class FixedLagEstimator(SmootherEstimator):
         """The guard's per-sample estimate of the whole log (:func:`gfimu.smoother.result.guarded`: ML, as it
         computes it) begun in a forked process of its own, which makes it on the other core while the stream
         runs on this one; None where the guard will not judge the run (:func:`~gfimu.smoother.result.unguarded`),
-        the machine has one core or no process may be forked."""
+        the machine has one core, no process may be forked, or the log is longer than
+        :data:`PER_SAMPLE_AHEAD_MAX` (the estimate comes back pickled: a copy of it on the way)."""
         from ..result import unguarded
 
-        if cpu_count() < 2 or unguarded(log, self.model) is not None:
+        if cpu_count() < 2 or len(log) > PER_SAMPLE_AHEAD_MAX or unguarded(log, self.model) is not None:
             return None
         process = ChoiceProcess.start(lambda _: MLEstimator().estimate_motion(log))
         if process is not None:
