@@ -59,13 +59,13 @@ def _weight(e: float, c: float, loss: int) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _lu_factor(S, piv):
-    """The elimination of S with partial pivoting, in place: U above the diagonal and on it, each row's
-    multipliers below it (moved with the row by later swaps), the row each column swapped with in ``piv``;
-    False where a pivot is exactly zero or not finite. :func:`_lu_apply` then solves for any right-hand
-    side: the swaps first, then the eliminations (the same numbers as eliminating the right-hand side along
-    with S: each row receives the same updates from the same pivot rows, in the same order)."""
+def _eliminate(S, piv, B):
+    """Gaussian elimination with partial pivoting of S, in place, with the columns of B (none: an (n, 0) array)
+    eliminated along: U above the diagonal and on it, each row's multipliers below it (moved with the row by
+    later swaps), the row each column swapped with in ``piv``; False where a pivot is exactly zero or not
+    finite."""
     n = S.shape[0]
+    k_rhs = B.shape[1]
     for c in range(n):
         p, best = c, abs(S[c, c])
         for r in range(c + 1, n):
@@ -78,6 +78,8 @@ def _lu_factor(S, piv):
         if p != c:
             for j in range(n):
                 S[c, j], S[p, j] = S[p, j], S[c, j]
+            for j in range(k_rhs):
+                B[c, j], B[p, j] = B[p, j], B[c, j]
         inv = 1.0 / S[c, c]
         for r in range(c + 1, n):
             f = S[r, c] * inv
@@ -85,7 +87,41 @@ def _lu_factor(S, piv):
             if f != 0.0:
                 for j in range(c + 1, n):
                     S[r, j] -= f * S[c, j]
+                for j in range(k_rhs):
+                    B[r, j] -= f * B[c, j]
     return True
+
+
+@njit(cache=True, nogil=True)
+def _back_substitute(S, B):
+    """``B ← U⁻¹ B`` with U the upper triangle of an eliminated S (:func:`_eliminate`)."""
+    n = S.shape[0]
+    for c in range(n - 1, -1, -1):
+        inv = 1.0 / S[c, c]
+        for j in range(B.shape[1]):
+            v = B[c, j]
+            for i in range(c + 1, n):
+                v -= S[c, i] * B[i, j]
+            B[c, j] = v * inv
+
+
+@njit(cache=True, nogil=True)
+def _lu_solve(S, B):
+    """``S⁻¹ B`` by Gaussian elimination with partial pivoting (LAPACK's getrf/getrs, unblocked), in place:
+    S is overwritten, B becomes the solution; False where a pivot is exactly zero or not finite."""
+    piv = np.empty(S.shape[0], dtype=np.int64)
+    if not _eliminate(S, piv, B):
+        return False
+    _back_substitute(S, B)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _lu_factor(S, piv):
+    """:func:`_eliminate` of S alone: its factors for :func:`_lu_apply`, which then solves for any right-hand
+    side with the numbers :func:`_lu_solve` gives (the swaps first, then the eliminations: each row receives the
+    same updates from the same pivot rows, in the same order)."""
+    return _eliminate(S, piv, np.empty((S.shape[0], 0)))
 
 
 @njit(cache=True, nogil=True)
@@ -104,25 +140,7 @@ def _lu_apply(S, piv, B):
             if f != 0.0:
                 for j in range(k_rhs):
                     B[r, j] -= f * B[c, j]
-    for c in range(n - 1, -1, -1):
-        inv = 1.0 / S[c, c]
-        for j in range(k_rhs):
-            v = B[c, j]
-            for i in range(c + 1, n):
-                v -= S[c, i] * B[i, j]
-            B[c, j] = v * inv
-
-
-@njit(cache=True, nogil=True)
-def _lu_solve(S, B):
-    """``S⁻¹ B`` by Gaussian elimination with partial pivoting (LAPACK's getrf/getrs, unblocked), in place:
-    S is overwritten (:func:`_lu_factor`), B becomes the solution (:func:`_lu_apply`); False where a pivot is
-    exactly zero or not finite (B then as it was)."""
-    piv = np.empty(S.shape[0], dtype=np.int64)
-    if not _lu_factor(S, piv):
-        return False
-    _lu_apply(S, piv, B)
-    return True
+    _back_substitute(S, B)
 
 
 @njit(cache=True, nogil=True)
