@@ -139,7 +139,7 @@ def test_a_log_s_scheduled_choices_made_ahead_give_the_same_rows(log):
         states = []
         for i in range(len(screened)):
             states += session.push(screened.timestamps_ns[i], readings[i])
-        used = session.smoother._worker.ahead.used
+        used = session.smoother._ahead.used
         states += session.finish()
         return _rows(states), [m.chosen_at_ns for m in session.models], used
 

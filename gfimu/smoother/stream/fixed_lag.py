@@ -475,7 +475,6 @@ class WorkerSlot:
     tried: bool = False
     process: ChoiceProcess | None = None
     finalizer: object = None
-    ahead: AheadOfChoice = field(default_factory=lambda: AheadOfChoice())
 
     def close(self) -> None:
         """End the process; a later choice is made in a thread."""
@@ -733,6 +732,7 @@ class FixedLagSmoother:
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
         self._clock = StreamClock(float(clock_reset_s))
         self._worker = WorkerSlot()
+        self._ahead = AheadOfChoice()
         self._solver = WorkerSlot()
         self.closed = False
         self._sigma = (SigmaRescale(array) if self.config.compute_sigma and calibrates_stream(array,
@@ -984,7 +984,7 @@ class FixedLagSmoother:
         swap_at = self._choice.accepted + self._choice.rules.delay_n
         process = self._choice_process()
         if process is not None:  # in a process of its own (:mod:`.choice_worker`), which keeps a history of its own
-            ahead = self._worker.ahead
+            ahead = self._ahead
             since, sent = history.since(), self._samples_ahead(history)
             if (not outgrown and ahead.model is not None and previous is ahead.model and ahead.sent is not None
                     and same_samples(since, ahead.sent)):
@@ -1041,14 +1041,14 @@ class FixedLagSmoother:
         for the request (:class:`AheadOfChoice`), and the stream waits for none that was made ahead. The
         rows are the same: a choice made ahead is used only when the samples the stream took are those it
         was made on, bit for bit, and nothing else asked for a choice meanwhile."""
-        self._worker.ahead.upcoming = (np.asarray(timestamps_ns, dtype=np.int64), np.asarray(accel, dtype=float),
+        self._ahead.upcoming = (np.asarray(timestamps_ns, dtype=np.int64), np.asarray(accel, dtype=float),
                                        None if gyro is None else np.asarray(gyro, dtype=float))
 
     def _samples_ahead(self, history: History) -> tuple | None:
         """The samples to come up to the next scheduled choice (the first ``retune_every_s`` after the newest
         one the history holds), as the history will send them (:meth:`~.history.History.ahead`); None where
         they are not known."""
-        upcoming = self._worker.ahead.upcoming
+        upcoming = self._ahead.upcoming
         if upcoming is None or not history.total:
             return None
         times, accel, gyro = upcoming
@@ -1069,16 +1069,12 @@ class FixedLagSmoother:
         runs on it; an ``"ahead"`` one asks for the choice the process made ahead (:meth:`_work_ahead`) on the
         samples the last request sent, the same numbers (made now where it was not). Either may send the
         samples up to the next scheduled choice, to work ahead on."""
-        ahead = self._worker.ahead
+        ahead = self._ahead
         if request[0] == "ahead":
             sent = request[1]
             (samples, previous), guess = ahead.start, ahead.guess
             if guess is None:
-                history = self._choice.history
-                history.extend(*samples)
-                stretch = history.stretch()
-                chosen = self._chosen_model(stretch, previous)[0]
-                history.keep_rows(stretch)
+                chosen = self._chosen_after(self._choice.history, samples, previous)
             else:
                 self._choice.history, chosen, error, raised = guess
                 for message, category in raised:
@@ -1087,11 +1083,7 @@ class FixedLagSmoother:
                     raise error
         else:
             _, since, previous, outgrown, sent = request
-            history = self._choice.history
-            history.extend(*since)
-            stretch = history.stretch()
-            chosen = self._chosen_model(stretch, previous, outgrown=outgrown)[0]
-            history.keep_rows(stretch)
+            chosen = self._chosen_after(self._choice.history, since, previous, outgrown)
         kept = previous is not None and chosen.tuning is not None and chosen.tuning is previous.tuning
         ahead.start, ahead.guess = (None if sent is None else (sent, chosen)), None
         return chosen, kept
@@ -1100,22 +1092,28 @@ class FixedLagSmoother:
         """In the choice's process, between requests: the next scheduled choice made on the samples the last
         request sent and the model it gave (:class:`AheadOfChoice`), on a copy of the history, kept for an
         ``"ahead"`` request."""
-        ahead = self._worker.ahead
+        ahead = self._ahead
         if ahead.start is None or ahead.guess is not None:
             return
         samples, previous = ahead.start
         history = self._choice.history.copy()
-        history.extend(*samples)
-        stretch = history.stretch()
         chosen = error = None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                chosen = self._chosen_model(stretch, previous)[0]
-                history.keep_rows(stretch)
+                chosen = self._chosen_after(history, samples, previous)
             except Exception as exc:  # noqa: BLE001 - raised when the choice is asked for
                 error = exc
         ahead.guess = (history, chosen, error, [(str(w.message), w.category) for w in caught])
+
+    def _chosen_after(self, history: History, samples: tuple, previous, outgrown: bool = False):
+        """``samples`` (:meth:`~.history.History.since`'s form) taken into ``history``, then :meth:`_chosen_model`
+        on it, the ML rows it computed kept there: the model chosen."""
+        history.extend(*samples)
+        stretch = history.stretch()
+        chosen = self._chosen_model(stretch, previous, outgrown=outgrown)[0]
+        history.keep_rows(stretch)
+        return chosen
 
     def _swap_choice(self, final: bool = False) -> None:
         """The pending choice's model put in use when its sample has come (waiting for it when it is not
@@ -1128,7 +1126,7 @@ class FixedLagSmoother:
         late = not pending.done
         chosen = pending.result()
         if isinstance(pending, ForkedChoice):
-            self._worker.ahead.model = chosen  # (the model the process's work ahead starts from)
+            self._ahead.model = chosen  # (the model the process's work ahead starts from)
         if late:
             self._choice.waits.append(pending.waited_s)
         self._use(chosen)
@@ -1316,6 +1314,11 @@ class FixedLagSmoother:
         """End the process the later model choices are made in (:mod:`.choice_worker`), at the end of a
         stream: a choice after this is made in a thread."""
         self._settle_choice()
+        self._end_processes()
+
+    def _end_processes(self) -> None:
+        """End the processes of the later model choices and of the held start's re-solves (a later one made in
+        this process)."""
         self._worker.close()
         self._solver.close()
 
@@ -1326,8 +1329,7 @@ class FixedLagSmoother:
         out = self.flush()
         self.closed = True
         self._choice.buffer = []
-        self._worker.close()
-        self._solver.close()
+        self._end_processes()
         return out
 
     def __enter__(self) -> FixedLagSmoother:
@@ -1337,8 +1339,7 @@ class FixedLagSmoother:
         if not self.closed:
             self.closed = True
             self._choice.pending = None  # a choice still being made is not used
-            self._worker.close()
-            self._solver.close()
+            self._end_processes()
             self._start_segment()
 
     def _end_segment(self) -> tuple[StateEstimate, ...]:
