@@ -65,13 +65,15 @@ def test_the_compiled_parity_is_the_numpy_expression(robust, array_kind):
     X[:5, :3] = 0.0  # at rest one sample does not see ω (q(ω)'s Jacobian vanishes): its variance unknown
     y = rng.normal(0, 10, (n, m))
     std = 10.0 ** rng.uniform(-2, 0, (n, m))
-    p0, r0, s0 = ss.parity(array, y, X, std, robust)
+    p0, r0, s0, d0 = ss.parity(array, y, X, std, robust, slopes=True)
     scale = ss.RunningSigmaScale(array)
     scale.robust = robust
     for k in range(n):
-        p1, r1, s1 = scale._parity(y[k], X[k], std[k])
+        p1, r1, s1, d1 = scale._parity(y[k], X[k], std[k])
         assert r1 == r0[k]
         z = np.abs(y[k] / std[k]) + 1.0  # the whitened readings' size
+        # sums of m terms: weights and leverages within 0 … 1, slopes within -1 … 1, p² at most z²
+        np.testing.assert_allclose(d1, d0[k], rtol=0, atol=1e-9 * m * np.max(z) ** 2)
         assert np.all(np.abs(p1 - p0[k]) <= 1e-9 * np.max(z))
         finite = np.isfinite(s0[k])
         assert np.array_equal(np.isfinite(s1), finite)

@@ -57,12 +57,15 @@ def kinematic_shares_row(single, trapezoid_var, step_var, h, weight, cm, cp, sn,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def parity_row(y, x, std, S_f, S_dw, S_q, c_robust, cauchy, rank_tolerance, p, single):
-    """:func:`gfimu.smoother.solve.sigma_scale.parity` of one sample: the parity residual into ``p`` (m,) and each
-    state's single-sample variance into ``single`` (9,); returns the rank of the whitened Jacobian. ``y`` (m,)
+def parity_row(y, x, std, S_f, S_dw, S_q, c_robust, cauchy, rank_tolerance, p, single, slope):
+    """:func:`gfimu.smoother.solve.sigma_scale.parity` of one sample: the parity residual into ``p`` (m,), each
+    state's single-sample variance into ``single`` (9,) and the robust sandwich's sums into ``slope`` (3,) (its
+    ``slopes``); returns the rank of the whitened Jacobian. ``y`` (m,)
     the readings, ``x`` (≥ 9,) the state, ``std`` (m,) the noise; ``S_f``, ``S_dw``, ``S_q`` the structure
     matrix's parts; ``c_robust`` > 0 the robust threshold (``cauchy`` True for Cauchy, else Huber), 0 none."""
     m = y.shape[0]
+    d = np.ones(m)
+    wa = np.ones(m)
     w0, w1, w2 = x[0], x[1], x[2]
     q0, q1, q2 = w0 * w0 + w1 * w1, w0 * w0 + w2 * w2, w1 * w1 + w2 * w2
     q3, q4, q5 = w0 * w1, w0 * w2, w1 * w2
@@ -78,9 +81,15 @@ def parity_row(y, x, std, S_f, S_dw, S_q, c_robust, cauchy, rank_tolerance, p, s
         if c_robust > 0.0:
             e = abs(zi)
             if cauchy:
-                weight = np.sqrt(1.0 / (1.0 + (e / c_robust) ** 2))
+                irls = 1.0 / (1.0 + (e / c_robust) ** 2)
+                weight = np.sqrt(irls)
+                d[i] = 2.0 * irls - 1.0
+                wa[i] = irls
             else:
-                weight = 1.0 if e <= c_robust else np.sqrt(c_robust / max(e, 1e-300))
+                irls = 1.0 if e <= c_robust else c_robust / max(e, 1e-300)
+                weight = np.sqrt(irls)
+                d[i] = 1.0 if e <= c_robust else 0.0
+                wa[i] = irls
             zi *= weight
             inv *= weight
         z[i] = zi
@@ -115,4 +124,13 @@ def parity_row(y, x, std, S_f, S_dw, S_q, c_robust, cauchy, rank_tolerance, p, s
             elif v2 > 1e-12:
                 unseen = True
         single[j] = np.inf if unseen else v
+    s0 = s1 = s2 = 0.0
+    for i in range(m):
+        h = 0.0
+        for k in range(rank):
+            h += U[i, k] * U[i, k]
+        s0 += wa[i] * p[i] * p[i]
+        s1 += wa[i] * (1.0 - h)
+        s2 += h * d[i]
+    slope[0], slope[1], slope[2] = s0, s1, s2
     return rank

@@ -98,23 +98,29 @@ def _geometry(array):
 
 
 def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np.ndarray, robust=None,
-           geometry=None):
+           geometry=None, slopes: bool = False):
     """(p (N, m), rank (N,), single-sample variances (N, 9)) of the readings ``accel_mps2`` (N, m) at the
     estimates ``states`` (N, ≥9: ω, ω̇, f) with the noise std ``noise_std_mps2`` (N, m) or (m,): the parity
     residual, the rank of the whitened Jacobian and the variance of each state from that sample alone
     (module docstring). ``robust``: (loss, threshold) of the smoother's robust re-weighting of the
     accelerometer axes, or None: each axis' std is then the one the re-weighting gives at the estimate,
-    ``std / √w(r/std)`` (:func:`gfimu.smoother.model.problem.robust_weight`), the noise the smoother's σ assumed."""
+    ``std / √w(r/std)`` (:func:`gfimu.smoother.model.problem.robust_weight`), the noise the smoother's σ assumed.
+    ``slopes``: a fourth array (N, 3), the sums over the sample's axes a of the sandwich's parts under the robust
+    loss (:func:`robust_slope`): Σ w_a p_a², Σ w_a (1 − h_a) and Σ h_a ψ'(z_a)/w(z_a) (w_a the IRLS weight,
+    h_a the axis' leverage on the states, which sum to the rank); without ``robust``: |p|², m − rank, rank."""
     S_f, S_dw, S_q = _geometry(array) if geometry is None else geometry
     X = np.asarray(states, dtype=float)
     w, dw, f = X[:, 0:3], X[:, 3:6], X[:, 6:9]
     y = np.asarray(accel_mps2, dtype=float)
     inv = 1.0 / np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), y.shape)
     z = (y - f @ S_f.T - dw @ S_dw.T - quadratic_terms(w) @ S_q.T) * inv
+    slope = None
     if robust is not None and robust[1] > 0:
         from ..model.problem import robust_weight
 
-        weight = np.sqrt(robust_weight(z, float(robust[1]), robust[0]))
+        weight = robust_weight(z, float(robust[1]), robust[0])
+        slope = robust_slope(z, weight, float(robust[1]), robust[0])
+        weight = np.sqrt(weight)
         z, inv = z * weight, inv * weight
     J = np.concatenate([np.einsum("mk,nkj->nmj", S_q, quadratic_terms_jacobian(w)),
                         np.broadcast_to(S_dw, (len(X),) + S_dw.shape), np.broadcast_to(S_f, (len(X),) + S_f.shape)],
@@ -128,7 +134,48 @@ def parity(array, accel_mps2: np.ndarray, states: np.ndarray, noise_std_mps2: np
     single = np.einsum("nrj,nr->nj", Vt2, inv_s2)
     unseen = np.any((Vt2 > 1e-12) & ~keep[:, :, None], axis=1)
     single[unseen] = np.inf
-    return p, keep.sum(axis=1), single
+    rank = keep.sum(axis=1)
+    if not slopes:
+        return p, rank, single
+    if slope is None:
+        return p, rank, single, np.column_stack([np.sum(p * p, axis=1), p.shape[1] - rank, rank])
+    leverage = np.einsum("nmr,nmr->nm", Uk, Uk)
+    w = weight * weight
+    return p, rank, single, np.column_stack([np.sum(w * p * p, axis=1), np.sum(w * (1.0 - leverage), axis=1),
+                                             np.sum(leverage * slope, axis=1)])
+
+
+def robust_slope(z: np.ndarray, weight: np.ndarray, threshold: float, loss: str) -> np.ndarray:
+    """ψ'(z) / w(z) of whitened residuals ``z`` with their IRLS weights ``weight`` = ψ(z)/z under the robust
+    ``loss`` of ``threshold`` c: Cauchy 2w − 1 (ψ = z/(1 + z²/c²)), Huber 1 within c and 0 beyond.
+
+    The robust smoother's P is the inverse of the information JᵀWJ its re-weighting states; the estimate's
+    spread under the readings' errors is the M-estimator's sandwich (Huber 1981, *Robust Statistics*,
+    §6.2 and §7.6): (Jᵀ Ψ' J)⁻¹ (Jᵀ diag(ψ²) J) (Jᵀ Ψ' J)⁻¹, Ψ' = diag(ψ'). In the weighted frame
+    (J̃ = √W J, z̃ = √w z) the middle is J̃ᵀ diag(w z̃²) J̃ and the outer factors J̃ᵀ diag(ψ'/w) J̃: against
+    P = (J̃ᵀ J̃)⁻¹, the variance factor s² = Σ w p² / Σ w (1 − h) (the parity residual's level, each
+    axis counted by its weight, as it counts in the states) over β² = (Σ h ψ'/w / Σ h)²: the
+    information the re-weighting states, less what the residuals beyond the loss' bend lend the estimate's
+    stability (:func:`calibrated_sigma`, :class:`RunningSigmaScale`; tests/test_sigma_scale.py checks the
+    factor against the spread of a robust regression's estimates over many draws)."""
+    if loss == "cauchy":
+        return 2.0 * weight - 1.0
+    return (np.abs(z) <= threshold).astype(float)
+
+
+SLOPE_FLOOR = 0.25
+"""Least local robust slope β (:func:`robust_slope`, averaged by leverage over the window of s²): below it
+most of the readings' leverage lies beyond the loss' bend, where the sandwich is no first-order
+description; σ's variance is then widened 1/β² = 16 times, not more."""
+
+
+def sandwich_factor(weighted, weighted_dof, slope, rank):
+    """The variance factor s² / β² of a robust solution (:func:`robust_slope`) from sums over its readings
+    (parity's ``slopes``): ``weighted`` Σ w p², ``weighted_dof`` Σ w (1 − h), ``slope`` Σ h ψ'/w and ``rank`` Σ h,
+    numbers or arrays alike."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        beta = np.clip(np.asarray(slope, dtype=float) / np.asarray(rank, dtype=float), SLOPE_FLOOR, 1.0)
+        return np.asarray(weighted, dtype=float) / np.asarray(weighted_dof, dtype=float) / beta ** 2
 
 
 def long_run_factors(rho: np.ndarray) -> np.ndarray:
@@ -491,7 +538,7 @@ class RunningSigmaScale:
         self.samples = 0
         self.window = None if window is None else int(window)
         """Samples of s²'s window (:func:`local_window` of the first sample's degrees of freedom when None)."""
-        self._recent: np.ndarray | None = None  # |p|², m − rank of the newest samples, row i % window of sample i
+        self._recent: np.ndarray | None = None  # |p|², m − rank, the robust sandwich's sums (parity's ``slopes``), rank of the newest samples, row i % window of sample i
         self.trapezoid = RunningTrapezoid()
         """The path's trapezoid level over the newest steps (the same window as s²)."""
         self.gain = RunningGain(array)
@@ -506,11 +553,16 @@ class RunningSigmaScale:
 
     @property
     def variance_factor(self) -> float:
-        """s² over the newest :attr:`window` samples (1 before :data:`MIN_SAMPLES`)."""
+        """s² over the newest :attr:`window` samples (1 before :data:`MIN_SAMPLES`), over the square of their
+        robust slope under a robust loss (:func:`robust_slope`; :func:`calibrated_sigma`)."""
         if self._recent is None:
             return 1.0
-        power, dof = self._recent.sum(axis=0)
-        return power / dof if dof > 0 and self.samples >= MIN_SAMPLES else 1.0
+        power, dof, weighted, weighted_dof, slope, rank = self._recent.sum(axis=0)
+        if not (dof > 0 and self.samples >= MIN_SAMPLES):
+            return 1.0
+        if self.robust is None or not self.robust[1] > 0 or not (weighted_dof > 0 and rank > 0):
+            return power / dof
+        return float(sandwich_factor(weighted, weighted_dof, slope, rank))
 
     def tau(self) -> np.ndarray:
         if self.samples < MIN_SAMPLES or self._power <= 0:
@@ -526,10 +578,11 @@ class RunningSigmaScale:
         c, cauchy = 0.0, False
         if self.robust is not None and self.robust[1] > 0:
             c, cauchy = float(self.robust[1]), self.robust[0] == "cauchy"
-        p, single = np.empty(len(y)), np.empty(9)
+        p, single, sandwich = np.empty(len(y)), np.empty(9), np.empty(3)
         rank = parity_row(np.ascontiguousarray(y, dtype=float), np.ascontiguousarray(x, dtype=float),
-                          np.ascontiguousarray(std, dtype=float), S_f, S_dw, S_q, c, cauchy, RANK_TOLERANCE, p, single)
-        return p, int(rank), single
+                          np.ascontiguousarray(std, dtype=float), S_f, S_dw, S_q, c, cauchy, RANK_TOLERANCE, p, single,
+                          sandwich)
+        return p, int(rank), single, sandwich
 
     def scaled(self, accel_mps2: np.ndarray, state: np.ndarray, sd: np.ndarray, noise_std_mps2: np.ndarray,
                jerk=None, t_s: float | None = None) -> np.ndarray:
@@ -539,7 +592,8 @@ class RunningSigmaScale:
         ``process``), over the newest steps between the states taken."""
         sd = np.asarray(sd, dtype=float)
         x = np.asarray(state, dtype=float)[:9]
-        p, rank, single = self._parity(np.asarray(accel_mps2, dtype=float), x, np.asarray(noise_std_mps2, dtype=float))
+        p, rank, single, sandwich = self._parity(np.asarray(accel_mps2, dtype=float), x,
+                                              np.asarray(noise_std_mps2, dtype=float))
         if np.all(np.isfinite(p)):
             self._power += float(p @ p)
             self._dof += float(len(p) - rank)
@@ -555,8 +609,8 @@ class RunningSigmaScale:
             if self._recent is None:
                 if self.window is None:
                     self.window = local_window(len(p) - rank)
-                self._recent = np.zeros((self.window, 2))
-            self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank))
+                self._recent = np.zeros((self.window, 6))
+            self._recent[self.samples % self.window] = (float(p @ p), float(len(p) - rank), *sandwich, float(rank))
             self.samples += 1
         variance_factor = self.variance_factor
         kinematic = self.trapezoid.level(x, single, jerk, t_s, self.window or LOCAL_WINDOW, variance_factor)
@@ -582,9 +636,9 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     n = len(states)
     noise = np.broadcast_to(np.asarray(noise_std_mps2, dtype=float), np.shape(accel_mps2))
     geometry = _geometry(array)
-    parts = [parity(array, accel_mps2[i:i + CHUNK], states[i:i + CHUNK, :9], noise[i:i + CHUNK], robust, geometry)
-             for i in range(0, n, CHUNK)]  # in blocks: the Jacobians of a long log at once would not fit
-    p, rank, single = (np.concatenate([part[j] for part in parts]) for j in range(3))
+    parts = [parity(array, accel_mps2[i:i + CHUNK], states[i:i + CHUNK, :9], noise[i:i + CHUNK], robust, geometry,
+                    slopes=True) for i in range(0, n, CHUNK)]  # in blocks: the Jacobians of a long log at once would not fit
+    p, rank, single, sandwich = (np.concatenate([part[j] for part in parts]) for j in range(4))
     ok = np.all(np.isfinite(p), axis=1)
     out = np.array(sd, dtype=float)
     if np.count_nonzero(ok) < MIN_SAMPLES:
@@ -602,6 +656,10 @@ def calibrated_sigma(array, accel_mps2: np.ndarray, states: np.ndarray, sd: np.n
     local_dof = local_sums(np.where(ok, p.shape[1] - rank, 0), window)
     with np.errstate(divide="ignore", invalid="ignore"):
         s2 = np.where(local_dof > 0, local_sums(np.sum(q * q, axis=1), window) / local_dof, power / dof)
+    if robust is not None and robust[1] > 0:  # the M-estimator's sandwich (robust_slope)
+        part = [local_sums(np.where(ok, sandwich[:, j], 0.0), window) for j in range(3)]
+        leverage = local_sums(np.where(ok, rank, 0), window)
+        s2 = np.where((part[1] > 0) & (leverage > 0), sandwich_factor(*part, leverage), s2)
     kinematic = None
     if process is not None and n > 2:
         density, natural, dt = process
