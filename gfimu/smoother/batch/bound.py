@@ -24,7 +24,7 @@ from ...rotations import matrix_from_quaternion
 from ..solve.banded import factorise, marginal_covariances, normal_equations
 from .engine import window_slices
 from ..model.option_groups import BatchOptions, ModelGroups
-from ..model.problem import SmootherOptions, SmootherProblem
+from ..model.problem import SmootherProblem
 from ..model.layout import OMEGA_DOT, QUANTITIES
 
 QUANTITY_SLICES = QUANTITIES
@@ -43,14 +43,13 @@ def smoother_bound(log: Log, groups: ModelGroups | None = None, batch: BatchOpti
                    window_models: list[ModelGroups] | None = None) -> Motion:
     """One-sigma bound (as ``Motion`` with the bound in place of values and in ``sigma``) of every state of the
     batch smoother of the option groups of the model ``groups`` in the solve windows of ``batch`` (defaults:
-    :class:`SmootherOptions`), at the truth.
+    the groups' declared ones), at the truth.
 
     ``window_models``: the option groups of the model of each solve window, e.g. with the process noise that
     the batch smoother chose from the data (``[t.apply(groups) for t in estimate.report.tunings]``).
     """
-    defaults = SmootherOptions()
-    groups = groups or defaults.model_groups
-    batch = batch or defaults.batch
+    groups = groups or ModelGroups.defaults()
+    batch = batch or BatchOptions()
     truth = truth or log.truth
     if truth is None:
         raise InputError(f"{log.source}: the bound needs the truth (log.truth or truth=)")

@@ -388,6 +388,11 @@ class ModelGroups(NamedTuple):
         :class:`gfimu.smoother.model.problem.SmootherOptions`)."""
         return cls(*(getattr(options, name) for name in cls._fields))
 
+    @classmethod
+    def defaults(cls) -> ModelGroups:
+        """Every group of the model at its declared defaults."""
+        return cls(*(GROUP_CLASSES[name]() for name in cls._fields))
+
 
 GROUP_CLASSES: dict[str, type] = {"model": ModelOptions, "solve": SolveOptions, "batch_model": BatchModelOptions,
                                   "attitude": AttitudeOptions, "self_calibration": SelfCalibrationOptions,

@@ -103,7 +103,7 @@ from .window_filter import FilterFailure, WindowFilter
 from .gtsam_window import GtsamWindow
 from ..solve.banded import solve
 from ..model.parts import delegated
-from ..model.problem import SmootherOptions, check_oscillators, options_reason
+from ..model.problem import check_oscillators, options_reason
 from ...option import check_declared
 from ..model.option_groups import (GROUPS, BatchModelOptions, Engine, ModelGroups, ModelOptions, StreamOptions,
                                    TuningOptions, assemble)
@@ -301,13 +301,13 @@ ENGINES = tuple(engine.value for engine in Engine)
 PROCESS_NOISE_OPTIONS = ("omega_dot_random_walk_radps2_per_sqrt_s", "specific_force_random_walk_mps2_per_sqrt_s",
                          "process_axis_factors", "process_axis_frequencies_hz")
 """Options that, set away from their defaults, give the process noise explicitly (no tuning)."""
-_DEFAULTS = SmootherOptions()
+_MODEL_DEFAULTS, _BATCH_MODEL_DEFAULTS = ModelOptions(), BatchModelOptions()
 
 
 def explicit_process_noise(model: ModelOptions) -> list[str]:
     """Names of the process-noise options of the ``model`` that differ from their defaults."""
     return [name for name in PROCESS_NOISE_OPTIONS
-            if tuple(np.atleast_1d(getattr(model, name))) != tuple(np.atleast_1d(getattr(_DEFAULTS, name)))]
+            if tuple(np.atleast_1d(getattr(model, name))) != tuple(np.atleast_1d(getattr(_MODEL_DEFAULTS, name)))]
 
 
 def tunes_process_noise(model: ModelOptions, tuning: TuningOptions) -> bool:
@@ -344,7 +344,7 @@ def fixed_lag_reason(array: SensorArray, options: ModelGroups) -> str | None:
         return ("accel_noise_slope_mps2_per_radps: the motion-dependent accelerometer noise is re-weighted from a whole "
                 "solution, which a stream does not have (use method 'smoother')")
     for name in ("accel_robust_threshold", "process_robust_threshold", "robust_loss"):
-        if getattr(options.batch_model, name) != getattr(_DEFAULTS, name):
+        if getattr(options.batch_model, name) != getattr(_BATCH_MODEL_DEFAULTS, name):
             return (f"{name}: the robust re-weighting is iterated over whole solutions, which a stream does not "
                     "have (use method 'smoother')")
     has_gyro = array.gyroscope is not None and options.model.use_gyro
@@ -652,7 +652,7 @@ class FixedLagSmoother:
     nominal sample rate, used to detect gaps. Tilt rows are accepted for
     interface symmetry but not used (the state has no orientation). Usage::
 
-        smoother = FixedLagSmoother(array, SmootherOptions().model_groups, lag_s=0.2, rate_hz=500.0)
+        smoother = FixedLagSmoother(array, ModelGroups.defaults(), lag_s=0.2, rate_hz=500.0)
         for timestamp_ns, accel_row in stream:
             update = smoother.push(timestamp_ns, accel_row)
             for state in update.smoothed:      # final, lag_s behind
@@ -690,7 +690,7 @@ class FixedLagSmoother:
                  clock_reset_s: float = 1.0, auto_model: bool = False, retune_every_s: float = 10.0,
                  model_window_s: float = 30.0, branches: bool = True, hold_max_s: float = 4.0,
                  choice_delay_s: float = CHOICE_DELAY_S) -> None:
-        options = options or SmootherOptions().model_groups
+        options = options or ModelGroups.defaults()
         if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
             raise InputError(f"fixed-lag smoother: rate_hz must be a positive number, got {rate_hz!r}")
         if marginalise_every_s is None:  # about 125 updates per block, at most 0.25 s
