@@ -54,21 +54,31 @@ def test_a_failing_script_leaves_its_section_saying_so():
 
 
 def test_only_replaces_its_section_and_keeps_the_others(tmp_path):
-    """--only real-flow without recordings: that section says it was skipped and when it was run, the
-    header and the other sections stay byte for byte."""
+    """--only startup: that section is run again and says when, the header and the other sections stay byte
+    for byte; --only real-flow without recordings keeps that section's figures as they were (said on standard
+    error), and on a page without them says it was skipped."""
     sections = [bench.MARK.format("header") + "\n# Benchmarks\nMade on an earlier day.\n" + bench.END.format("header"),
                 bench.MARK.format("smoother-accuracy") + "\n| old table |\n" + bench.END.format("smoother-accuracy"),
                 bench.MARK.format("real-flow") + "\nold figures\n" + bench.END.format("real-flow"),
                 bench.MARK.format("startup") + "\n| startup |\n" + bench.END.format("startup")]
     page = tmp_path / "benchmarks.md"
     page.write_text("\n\n".join(sections) + "\n", encoding="utf-8")
+    done = run("--out", str(page), "--only", "startup", "--quick")
+    assert done.returncode == 0, done.stderr
+    text = page.read_text(encoding="utf-8")
+    assert text.startswith("\n\n".join(sections[:3]) + "\n\n" + bench.MARK.format("startup"))
+    assert "| startup |" not in text and "This section alone was run again on" in text
+    before = text
+    done = run("--out", str(page), "--only", "real-flow", "--recordings", str(tmp_path / "none"))
+    assert done.returncode == 0, done.stderr
+    assert page.read_text(encoding="utf-8") == before and "real-flow: its data are not here" in done.stderr
+    page.write_text("\n\n".join(sections[:2] + sections[3:]) + "\n", encoding="utf-8")
     done = run("--out", str(page), "--only", "real-flow", "--recordings", str(tmp_path / "none"))
     assert done.returncode == 0, done.stderr
     text = page.read_text(encoding="utf-8")
     assert text.startswith(sections[0] + "\n\n" + sections[1] + "\n\n" + bench.MARK.format("real-flow"))
     assert text.endswith(bench.END.format("real-flow") + "\n\n" + sections[3] + "\n")
-    assert "old figures" not in text and f"was found at `{tmp_path / 'none'}`" in text
-    assert "This section alone was run again on" in text
+    assert f"was found at `{tmp_path / 'none'}`" in text
     assert sorted(p.name for p in tmp_path.iterdir()) == ["benchmarks.md"]  # no temporary file left
 
 

@@ -15,8 +15,9 @@ existing page, each stating when and how it was run, the others kept as they wer
 A script that fails leaves its section saying so (the command, its exit status and the end of its
 standard error), the other sections are still run and written, and the exit status is 1. The
 recordings of the ``real-flow`` and ``fixed-lag-real`` sections are read from ``--recordings`` (default
-``$GFIMU_MIMU4444_DIR`` or ``../shared/data/mimu4444`` beside the repository, as the tests do);
-without them that section says it was skipped.
+``$GFIMU_MIMU4444_DIR`` or ``../shared/data/mimu4444`` beside the repository, as the tests do), the phone
+exports from ``$GFIMU_PHONE_EXPORTS_DIR``; without its data a section that the page already holds with
+figures is kept as it was (said on standard error), else it says it was skipped.
 """
 
 from __future__ import annotations
@@ -57,6 +58,11 @@ class Section:
     json: bool = True  # the script takes --json (sent to a temporary folder)
     recordings: bool = False  # the MIMU4444 recordings are appended as arguments
     drop: tuple[str, ...] = DROP  # lines of its output left out (regular expressions)
+    data_env: str | None = None  # the environment variable naming the folder of its data (None: none needed)
+
+    def lacks_data(self) -> bool:
+        """Whether the folder of data this section reads is not there."""
+        return self.data_env is not None and not Path(os.environ.get(self.data_env, "")).is_dir()
 
 
 SECTIONS = (
@@ -204,7 +210,7 @@ SECTIONS = (
         "array.toml recorded `readings`) and now (the export's own Gravity.csv added back, or attitude refused "
         "and ω and a estimated without it). The first attitude is compared with the phone's own gravity vector "
         "(the first row of its Gravity.csv).",
-        json=False),
+        json=False, data_env="GFIMU_PHONE_EXPORTS_DIR"),
     Section(
         "startup", "Start-up of the command", "bench_startup.py",
         "Wall time of a few command lines that do no work, each in a fresh process, and which heavy "
@@ -414,12 +420,15 @@ def main(argv=None) -> int:
     when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     parts: dict[str, str] = {}
     note = None
-    if only and args.out.exists():
+    old: dict[str, str] = {}
+    if args.out.exists():
         try:
-            parts = read_page(args.out)
+            old = read_page(args.out)
         except PageError as exc:
             print(f"benchmarks: error: {exc}", file=sys.stderr)
             return 2
+    if only and args.out.exists():
+        parts = dict(old)
         note = (f"*This section alone was run again on {when}, {commit()}, on {machine()}, load average "
                 f"{os.getloadavg()[0]:.1f}, {'a quick run (`--quick`)' if args.quick else 'a full run'}; the "
                 "header's date and run are the other sections'.*")
@@ -428,6 +437,11 @@ def main(argv=None) -> int:
     ok = True
     for s in SECTIONS:
         if only and s.name not in only:
+            continue
+        if (s.lacks_data() or (s.recordings and not recordings(args.recordings, args.quick))) and s.name in old \
+                and "\nSkipped: " not in old[s.name]:
+            print(f"benchmarks: {s.name}: its data are not here; the page's section kept as it was", file=sys.stderr)
+            parts[s.name] = old[s.name]
             continue
         parts[s.name], good = run_section(s, args.quick, args.recordings, note)
         ok &= good
