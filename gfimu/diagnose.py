@@ -15,6 +15,9 @@
   the sizes (an accelerometer more than 1 m from the origin: mm; all within 1 mm: divided once
   too often) and, with a gyroscope, in ``c = (|ω_gyro| / |ω_accelerometers|)²``;
 - **time skew** of one sensor against the others (:func:`sensor_skews`);
+- **calibration errors**: constant errors of each sensor's position and each axis' gain that the residual
+  shows (:func:`calibration_errors`): a misfit that is mostly theirs biases every estimate along the states,
+  which no smoother's σ covers (docs/uncertainty.md);
 - **stuck and clipped channels** (:func:`channel_faults`);
 - **expected accuracy**: the per-sample Cramér-Rao bound (:mod:`gfimu.crb`) at the fitted ω, with
   the stated and the measured noise;
@@ -60,6 +63,14 @@ SKEW_FRACTION_OF_NOISE = 0.5
 readings, RMS) exceeds half the stated noise std (it then adds a quarter of the noise variance)."""
 SKEW_MIN_Z = 5.0
 """... and when the skew is 5 standard errors from zero."""
+CALIBRATION_SHARE = 0.5
+"""Constant position and gain errors are reported when they explain at least half of the residual's power
+beyond the noise the fit itself absorbs: the misfit is then mostly a calibration error, not noise, vibration
+or an error that changes with time."""
+CALIBRATION_MIN_Z = 5.0
+"""... and a sensor's position (or an axis' gain) when its error is 5 standard errors from zero."""
+CALIBRATION_CHUNK = 4096
+"""Samples whose regressors :func:`calibration_errors` holds at once."""
 SIGN_WINDOW_S = 1.0
 """Length [s] of the windows over which the sign of ω is judged."""
 SIGN_SNR = 6.0
@@ -100,6 +111,13 @@ class SensorReport:
     skew_s: float
     """Time skew against the others [s]: the sensor reads at t + skew (NaN when not estimated)."""
     skew_std_s: float
+    position_offset_mm: tuple = (float("nan"),) * 3
+    """The constant error of the sensor's position the residual shows [mm, body frame]: the true position less
+    array.toml's, the part the readings can tell (:func:`calibration_errors`; NaN when not estimated)."""
+    position_offset_std_mm: tuple = (float("nan"),) * 3
+    gain_error: tuple = ()
+    """The constant gain error of each of its axes (the reading over the true value, less 1)."""
+    gain_error_std: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -134,6 +152,8 @@ class Consistency:
     stated_noise_mps2: float
     per_sensor: tuple[SensorReport, ...]
     bands: tuple[BandReport, ...]
+    calibration_share: float = float("nan")
+    """The share of the residual's power that constant position and gain errors explain (:func:`calibration_errors`)."""
 
 
 @dataclass(frozen=True)
@@ -232,6 +252,7 @@ class Diagnosis:
     stated_noise_mps2 = _Part("consistency")
     per_sensor = _Part("consistency")
     bands = _Part("consistency")
+    calibration_share = _Part("consistency")
     still_specific_force_mps2 = _Part("units")
     median_specific_force_mps2 = _Part("units")
     accel_unit_suspect = _Part("units")
@@ -287,10 +308,16 @@ class Diagnosis:
                   + ("consistent with a rigid body" if m["consistent"] else "inconsistent: " + "; ".join(m["reasons"])),
                   f"  noise floor {self.noise_floor_mps2:.3g} m/s^2 ({stated}{floored})"
                   f" + {m['noise_slope_mps2_per_radps']:.3g} m/s^2 per rad/s",
-                  "  sensor      residual [m/s^2]  x others  skew [ms]"]
+                  "  sensor      residual [m/s^2]  x others  skew [ms]          position error [mm]"]
         for s in self.per_sensor:
             skew = "" if not np.isfinite(s.skew_s) else f"{s.skew_s * 1e3:+.3g} ± {s.skew_std_s * 1e3:.2g}"
-            lines.append(f"  {s.name:<10}  {s.residual_mps2:>16.3g}  {s.ratio_to_others:>8.2f}  {skew}")
+            offset = ("" if not np.all(np.isfinite(s.position_offset_mm))
+                      else ", ".join(f"{v:+.2f}" for v in s.position_offset_mm)
+                      + f" ± {max(s.position_offset_std_mm):.2g}")
+            lines.append(f"  {s.name:<10}  {s.residual_mps2:>16.3g}  {s.ratio_to_others:>8.2f}  {skew:<17}  {offset}")
+        if np.isfinite(self.calibration_share):
+            lines.append(f"  constant position and gain errors explain {100 * self.calibration_share:.1f} % of the "
+                         "residual's power (a misfit mostly theirs is a calibration error)")
         lines.append("  |omega| band [rad/s]  samples  residual [m/s^2]  bound on |omega| error [rad/s]")
         for b in self.bands:
             high = "inf" if not np.isfinite(b.high_radps) else f"{b.high_radps:g}"
@@ -471,6 +498,100 @@ def sensor_skews(log: Log, motion, sigma_axes: np.ndarray, residual: np.ndarray,
     return skew, err, size
 
 
+@dataclass(frozen=True)
+class CalibrationFit:
+    """Constant calibration errors fitted to the rigid-body residual (:func:`calibration_errors`): per sensor its
+    position error [m] (S, 3) and standard errors, per axis its gain error (m,) and standard errors, the share
+    of the residual's power they explain and the rank of the fit (of 3 S + m unknowns)."""
+
+    position_m: np.ndarray
+    position_std_m: np.ndarray
+    gain: np.ndarray
+    gain_std: np.ndarray
+    share: float
+    rank: int
+
+
+def calibration_errors(log: Log, motion, sigma_axes: np.ndarray, residual: np.ndarray,
+                       use: np.ndarray | None = None) -> CalibrationFit:
+    """Constant errors of the array's calibration fitted to the per-sample fit's ``residual`` (N, m) [m/s²]
+    (``motion`` its ω, ω̇; ``sigma_axes`` (m,) the noise that whitens it; ``use`` (N,) the samples, default
+    all finite ones), by least squares over the whole log.
+
+    A sensor whose true position is its stated one plus δr reads, on axis a of direction d_a,
+    ``d_aᵀ ([ω̇]× + [ω]×²) δr`` more than the rigid body of the stated positions predicts; an axis whose gain
+    is 1 + δg reads δg times its value more. The per-sample fit absorbs what of that lies in the tangent space
+    of the model (the columns of ``D = [S_f, S_ω̇, S_q ∂q/∂ω]``, as :func:`sensor_skews`), so its whitened
+    residual is the regressors projected off D times (δr, δg), plus noise. Some errors are changes of the
+    states and never show: a common shift of every position (f absorbs it), a common scale of the positions
+    (ω̇ / c, ω / √c) and a common gain (f, ω̇, ω² scaled alike): the fit gives the least-squares errors of
+    least size, the part the readings tell (its ``rank``; 3 S + m − 5 for an array that sees ω in full).
+    Standard errors from the residual left after the fit. (Pure: no I/O.)"""
+    array = log.array
+    S = array.structure_matrix()
+    m = array.n_axes
+    owner = np.asarray(array.axis_owner)
+    sensors = len(array.accelerometers)
+    n_par = 3 * sensors + m
+    w = 1.0 / np.asarray(sigma_axes, dtype=float)
+    omega, omega_dot = np.asarray(motion.omega_b_radps), np.asarray(motion.omega_dot_b_radps2)
+    ok = np.all(np.isfinite(residual), axis=1) & np.all(np.isfinite(omega), axis=1) & np.all(np.isfinite(omega_dot), axis=1)
+    if use is not None:
+        ok &= use
+    rows = np.nonzero(ok)[0]
+    directions = np.asarray(array.axis_directions_b, dtype=float)
+    A = np.zeros((n_par, n_par))
+    b = np.zeros(n_par)
+    power = 0.0
+    for start in range(0, rows.size, CALIBRATION_CHUNK):
+        idx = rows[start:start + CALIBRATION_CHUNK]
+        n = idx.size
+        wv, dw = omega[idx], omega_dot[idx]
+        D = np.concatenate([np.broadcast_to(S[:, :6], (n,) + S[:, :6].shape),
+                            np.einsum("aj,njk->nak", S[:, 6:], quadratic_terms_jacobian(wv))], axis=2) * w[None, :, None]
+        q, _ = np.linalg.qr(D)
+        lever = _cross_matrices(dw) + _cross_matrices(wv) @ _cross_matrices(wv)  # (n, 3, 3): δf = lever δr
+        G = np.zeros((n, m, n_par))
+        per_axis = np.einsum("aj,njk->nak", directions, lever)  # (n, m, 3)
+        for a in range(m):
+            G[:, a, 3 * owner[a]:3 * owner[a] + 3] = per_axis[:, a]
+        G[:, np.arange(m), 3 * sensors + np.arange(m)] = log.accel_mps2[idx] - residual[idx]  # the fitted readings
+        G *= w[None, :, None]
+        # projected off q's columns: Gᵀ (I − q qᵀ) G = GᵀG − (qᵀG)ᵀ(qᵀG), and the same for r
+        qt = q.transpose(0, 2, 1)
+        r = (residual[idx] * w[None, :])[:, :, None]
+        H, h = (qt @ G).reshape(n * 9, n_par), (qt @ r).reshape(n * 9)
+        G, r = G.reshape(n * m, n_par), r.reshape(n * m)
+        A += G.T @ G - H.T @ H
+        b += G.T @ r - H.T @ h
+        power += float(r @ r - h @ h)
+    nan = np.full(n_par, np.nan)
+    theta, std, share, rank = nan, nan, float("nan"), 0
+    scale = np.sqrt(np.diag(A))
+    if rows.size and power > 0 and np.all(scale > 0):
+        As = A / np.outer(scale, scale)  # (the unknowns made alike: metres and gains)
+        lam, V = np.linalg.eigh(0.5 * (As + As.T))
+        keep = lam > 1e-9 * lam[-1]
+        rank = int(np.count_nonzero(keep))
+        pinv = (V[:, keep] / lam[keep]) @ V[:, keep].T
+        theta = pinv @ (b / scale) / scale
+        fitted = float(theta @ b)
+        dof = max(rows.size * (m - 9) - rank, 1)
+        s2 = max(power - fitted, 0.0) / dof
+        std = np.sqrt(np.clip(np.diag(pinv), 0.0, None) * s2) / scale
+        share = fitted / power
+    return CalibrationFit(theta[:3 * sensors].reshape(sensors, 3), std[:3 * sensors].reshape(sensors, 3),
+                          theta[3 * sensors:], std[3 * sensors:], share, rank)
+
+
+def _cross_matrices(v: np.ndarray) -> np.ndarray:
+    """[v]× of each row of ``v`` (n, 3): (n, 3, 3)."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
 # --- sign --------------------------------------------------------------------
 
 def sign_resolution(omega_b_radps: np.ndarray, sigma_omega: np.ndarray, sigma_omega_dot: np.ndarray,
@@ -534,12 +655,13 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
     clean, screening = screen_log(log)
     sigma_axes = noise_policy.accel_noise_std(array)
     fit = _Fit.of(log, clean, progress)
-    sensors, skew_size = _sensor_reports(clean, fit, sigma_axes, ~fault_mask.any(axis=1))
+    sensors, skew_size, calibration = _sensor_reports(clean, fit, sigma_axes, ~fault_mask.any(axis=1))
     bound = _Bound.of(clean, fit, sigma_axes)
     units = _units_and_sizes(log, fit, bound)
     dead = dead_channels(log.accel_mps2, array.accel_columns)
     fix = _fix_first(units, dead, len(array.accel_columns), timing)
     warn = _warnings(fit, faults, sensors, skew_size, sigma_axes, timing, screening)
+    warn += _calibration_warning(clean, calibration)
     faults += [ChannelFault(d.column, d.kind, d.samples, d.first_row, len(log) - 1, d.value_mps2) for d in dead]
     guard = smoother_guard(clean, smoother_options)
     if guard.get("spans"):
@@ -549,7 +671,7 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
               "residual_norm_mps2": np.sqrt(np.mean(fit.residual**2, axis=1)), "dt_s": np.diff(log.timestamps_ns) * 1e-9,
               "sign_snr": bound.sign_snr}
     consistency = Consistency(fit.check.as_dict(), float(fit.check.noise_floor_mps2), float(fit.check.stated_noise_mps2),
-                              tuple(sensors), tuple(_band_reports(fit, bound)))
+                              tuple(sensors), tuple(_band_reports(fit, bound)), float(calibration.share))
     return Diagnosis(log.source, array.name, len(array.accelerometers), array.n_axes, timing, consistency, units,
                      Channels(tuple(faults), int(screening.count)), bound.accuracy(), all_warnings, tuple(fix),
                      _verdict(fix, warn, all_warnings, bound), guard=_json_clean(guard), figure_data=figure)
@@ -586,25 +708,62 @@ class _Fit:
         return cls(motion, residual, check, ok, dof, _robust_scale(residual[ok], axis=0) * dof)
 
 
-def _sensor_reports(clean: Log, fit: _Fit, sigma_axes: np.ndarray, use: np.ndarray) -> tuple[list, np.ndarray]:
-    """(a :class:`SensorReport` per accelerometer: residual, stated noise, ratio to the others, time skew; the
-    size of each sensor's projected rate of change, which a skew multiplies) from the samples ``use``."""
+def _sensor_reports(clean: Log, fit: _Fit, sigma_axes: np.ndarray, use: np.ndarray) -> tuple[list, np.ndarray,
+                                                                                           CalibrationFit]:
+    """(a :class:`SensorReport` per accelerometer: residual, stated noise, ratio to the others, time skew,
+    position and gain errors; the size of each sensor's projected rate of change, which a skew multiplies; the
+    calibration fit) from the samples ``use``."""
     array = clean.array
     owner = array.axis_owner
     stated = array.noise_std_per_axis_mps2
     per_sensor_scale = np.array([np.sqrt(np.mean(fit.scale_axis[owner == i] ** 2))
                                  for i in range(len(array.accelerometers))])
     skew, skew_err, skew_size = sensor_skews(clean, fit.motion, sigma_axes, fit.residual, use=use)
+    calibration = calibration_errors(clean, fit.motion, sigma_axes, fit.residual, use=use)
     sensors = []
     for i, acc in enumerate(array.accelerometers):
         others = np.delete(per_sensor_scale, i)
         ref = float(np.median(others)) if others.size else float("nan")
         st = stated[owner == i]
+        mine = owner == i
         sensors.append(SensorReport(acc.name, float(per_sensor_scale[i]),
                                     float(np.nanmean(st)) if np.any(np.isfinite(st)) else float("nan"),
                                     float(per_sensor_scale[i] / ref) if ref > 0 else float("nan"),
-                                    float(skew[i]), float(skew_err[i])))
-    return sensors, skew_size
+                                    float(skew[i]), float(skew_err[i]),
+                                    tuple(float(v) for v in calibration.position_m[i] * 1e3),
+                                    tuple(float(v) for v in calibration.position_std_m[i] * 1e3),
+                                    tuple(float(v) for v in calibration.gain[mine]),
+                                    tuple(float(v) for v in calibration.gain_std[mine])))
+    return sensors, skew_size, calibration
+
+
+def _calibration_warning(clean: Log, fit: CalibrationFit) -> list[str]:
+    """The warning that the readings' misfit is mostly a calibration error (:data:`CALIBRATION_SHARE`), naming
+    the sensors whose position error is significant (:data:`CALIBRATION_MIN_Z`, the largest three) and the
+    largest significant gain error; none otherwise."""
+    if not fit.share >= CALIBRATION_SHARE:
+        return []
+    array = clean.array
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_pos = np.max(np.abs(fit.position_m / fit.position_std_m), axis=1)
+        z_gain = np.abs(fit.gain / fit.gain_std)
+    size = np.linalg.norm(fit.position_m, axis=1)
+    named = [i for i in np.argsort(-size) if z_pos[i] >= CALIBRATION_MIN_Z][:3]
+    parts = []
+    if named:
+        listed = "; ".join(f"{array.accelerometers[i].name} " + ", ".join(f"{v * 1e3:+.2f}" for v in fit.position_m[i])
+                           + " mm" for i in named)
+        parts.append(f"sensor positions off array.toml's by up to {size[named[0]] * 1e3:.2g} mm ({listed}; a shift "
+                     "common to every sensor does not show)")
+    significant = np.nonzero(z_gain >= CALIBRATION_MIN_Z)[0]
+    if significant.size:
+        a = int(significant[np.argmax(np.abs(fit.gain[significant]))])
+        parts.append(f"axis gains off by up to {100 * fit.gain[a]:+.2g} % ({array.accel_columns[a]})")
+    if not parts:
+        return []
+    return [f"the readings' misfit is {100 * fit.share:.0f} % that of constant calibration errors: "
+            + "; ".join(parts) + ". Re-measure the positions, calibrate the gains (gfimu calibrate); the smoothers' "
+            "sigma does not cover such an error (docs/uncertainty.md)"]
 
 
 @dataclass(frozen=True)
