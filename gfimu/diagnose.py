@@ -16,7 +16,7 @@
   too often) and, with a gyroscope, in ``c = (|ω_gyro| / |ω_accelerometers|)²``;
 - **time skew** of one sensor against the others (:func:`sensor_skews`);
 - **calibration errors**: constant errors of each sensor's position and each axis' gain that the residual
-  shows (:func:`calibration_errors`): a misfit that is mostly theirs biases every estimate along the states,
+  shows (:func:`gfimu.array_misfit.calibration_errors`): a misfit that is mostly theirs biases every estimate along the states,
   which no smoother's σ covers (docs/uncertainty.md);
 - **stuck and clipped channels** (:func:`channel_faults`);
 - **expected accuracy**: the per-sample Cramér-Rao bound (:mod:`gfimu.crb`) at the fitted ω, with
@@ -36,6 +36,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .array_misfit import CALIBRATION_MIN_Z, CALIBRATION_SHARE, CalibrationFit, calibration_errors
 from .crb import crb_per_sample
 from .errors import InputError
 from .estimators.ml import MLEstimator
@@ -63,14 +64,6 @@ SKEW_FRACTION_OF_NOISE = 0.5
 readings, RMS) exceeds half the stated noise std (it then adds a quarter of the noise variance)."""
 SKEW_MIN_Z = 5.0
 """... and when the skew is 5 standard errors from zero."""
-CALIBRATION_SHARE = 0.5
-"""Constant position and gain errors are reported when they explain at least half of the residual's power
-beyond the noise the fit itself absorbs: the misfit is then mostly a calibration error, not noise, vibration
-or an error that changes with time."""
-CALIBRATION_MIN_Z = 5.0
-"""... and a sensor's position (or an axis' gain) when its error is 5 standard errors from zero."""
-CALIBRATION_CHUNK = 4096
-"""Samples whose regressors :func:`calibration_errors` holds at once."""
 SIGN_WINDOW_S = 1.0
 """Length [s] of the windows over which the sign of ω is judged."""
 SIGN_SNR = 6.0
@@ -498,100 +491,6 @@ def sensor_skews(log: Log, motion, sigma_axes: np.ndarray, residual: np.ndarray,
     return skew, err, size
 
 
-@dataclass(frozen=True)
-class CalibrationFit:
-    """Constant calibration errors fitted to the rigid-body residual (:func:`calibration_errors`): per sensor its
-    position error [m] (S, 3) and standard errors, per axis its gain error (m,) and standard errors, the share
-    of the residual's power they explain and the rank of the fit (of 3 S + m unknowns)."""
-
-    position_m: np.ndarray
-    position_std_m: np.ndarray
-    gain: np.ndarray
-    gain_std: np.ndarray
-    share: float
-    rank: int
-
-
-def calibration_errors(log: Log, motion, sigma_axes: np.ndarray, residual: np.ndarray,
-                       use: np.ndarray | None = None) -> CalibrationFit:
-    """Constant errors of the array's calibration fitted to the per-sample fit's ``residual`` (N, m) [m/s²]
-    (``motion`` its ω, ω̇; ``sigma_axes`` (m,) the noise that whitens it; ``use`` (N,) the samples, default
-    all finite ones), by least squares over the whole log.
-
-    A sensor whose true position is its stated one plus δr reads, on axis a of direction d_a,
-    ``d_aᵀ ([ω̇]× + [ω]×²) δr`` more than the rigid body of the stated positions predicts; an axis whose gain
-    is 1 + δg reads δg times its value more. The per-sample fit absorbs what of that lies in the tangent space
-    of the model (the columns of ``D = [S_f, S_ω̇, S_q ∂q/∂ω]``, as :func:`sensor_skews`), so its whitened
-    residual is the regressors projected off D times (δr, δg), plus noise. Some errors are changes of the
-    states and never show: a common shift of every position (f absorbs it), a common scale of the positions
-    (ω̇ / c, ω / √c) and a common gain (f, ω̇, ω² scaled alike): the fit gives the least-squares errors of
-    least size, the part the readings tell (its ``rank``; 3 S + m − 5 for an array that sees ω in full).
-    Standard errors from the residual left after the fit. (Pure: no I/O.)"""
-    array = log.array
-    S = array.structure_matrix()
-    m = array.n_axes
-    owner = np.asarray(array.axis_owner)
-    sensors = len(array.accelerometers)
-    n_par = 3 * sensors + m
-    w = 1.0 / np.asarray(sigma_axes, dtype=float)
-    omega, omega_dot = np.asarray(motion.omega_b_radps), np.asarray(motion.omega_dot_b_radps2)
-    ok = np.all(np.isfinite(residual), axis=1) & np.all(np.isfinite(omega), axis=1) & np.all(np.isfinite(omega_dot), axis=1)
-    if use is not None:
-        ok &= use
-    rows = np.nonzero(ok)[0]
-    directions = np.asarray(array.axis_directions_b, dtype=float)
-    A = np.zeros((n_par, n_par))
-    b = np.zeros(n_par)
-    power = 0.0
-    for start in range(0, rows.size, CALIBRATION_CHUNK):
-        idx = rows[start:start + CALIBRATION_CHUNK]
-        n = idx.size
-        wv, dw = omega[idx], omega_dot[idx]
-        D = np.concatenate([np.broadcast_to(S[:, :6], (n,) + S[:, :6].shape),
-                            np.einsum("aj,njk->nak", S[:, 6:], quadratic_terms_jacobian(wv))], axis=2) * w[None, :, None]
-        q, _ = np.linalg.qr(D)
-        lever = _cross_matrices(dw) + _cross_matrices(wv) @ _cross_matrices(wv)  # (n, 3, 3): δf = lever δr
-        G = np.zeros((n, m, n_par))
-        per_axis = np.einsum("aj,njk->nak", directions, lever)  # (n, m, 3)
-        for a in range(m):
-            G[:, a, 3 * owner[a]:3 * owner[a] + 3] = per_axis[:, a]
-        G[:, np.arange(m), 3 * sensors + np.arange(m)] = log.accel_mps2[idx] - residual[idx]  # the fitted readings
-        G *= w[None, :, None]
-        # projected off q's columns: Gᵀ (I − q qᵀ) G = GᵀG − (qᵀG)ᵀ(qᵀG), and the same for r
-        qt = q.transpose(0, 2, 1)
-        r = (residual[idx] * w[None, :])[:, :, None]
-        H, h = (qt @ G).reshape(n * 9, n_par), (qt @ r).reshape(n * 9)
-        G, r = G.reshape(n * m, n_par), r.reshape(n * m)
-        A += G.T @ G - H.T @ H
-        b += G.T @ r - H.T @ h
-        power += float(r @ r - h @ h)
-    nan = np.full(n_par, np.nan)
-    theta, std, share, rank = nan, nan, float("nan"), 0
-    scale = np.sqrt(np.diag(A))
-    if rows.size and power > 0 and np.all(scale > 0):
-        As = A / np.outer(scale, scale)  # (the unknowns made alike: metres and gains)
-        lam, V = np.linalg.eigh(0.5 * (As + As.T))
-        keep = lam > 1e-9 * lam[-1]
-        rank = int(np.count_nonzero(keep))
-        pinv = (V[:, keep] / lam[keep]) @ V[:, keep].T
-        theta = pinv @ (b / scale) / scale
-        fitted = float(theta @ b)
-        dof = max(rows.size * (m - 9) - rank, 1)
-        s2 = max(power - fitted, 0.0) / dof
-        std = np.sqrt(np.clip(np.diag(pinv), 0.0, None) * s2) / scale
-        share = fitted / power
-    return CalibrationFit(theta[:3 * sensors].reshape(sensors, 3), std[:3 * sensors].reshape(sensors, 3),
-                          theta[3 * sensors:], std[3 * sensors:], share, rank)
-
-
-def _cross_matrices(v: np.ndarray) -> np.ndarray:
-    """[v]× of each row of ``v`` (n, 3): (n, 3, 3)."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
-
-
 # --- sign --------------------------------------------------------------------
 
 def sign_resolution(omega_b_radps: np.ndarray, sigma_omega: np.ndarray, sigma_omega_dot: np.ndarray,
@@ -661,7 +560,8 @@ def diagnose(log: Log, progress: bool = False, calibration=None, smoother_option
     dead = dead_channels(log.accel_mps2, array.accel_columns)
     fix = _fix_first(units, dead, len(array.accel_columns), timing)
     warn = _warnings(fit, faults, sensors, skew_size, sigma_axes, timing, screening)
-    warn += _calibration_warning(clean, calibration)
+    if not fit.check.consistent:  # (a misfit within the noise is nobody's calibration error)
+        warn += _calibration_warning(clean, calibration)
     faults += [ChannelFault(d.column, d.kind, d.samples, d.first_row, len(log) - 1, d.value_mps2) for d in dead]
     guard = smoother_guard(clean, smoother_options)
     if guard.get("spans"):

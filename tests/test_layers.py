@@ -4,7 +4,7 @@ Layers, lowest first (a module may import its own layer and the layers below):
 
 core (error kinds, estimate and report, rigid body, array, log, motion, rotations, noise policy, option declarations, progress, forked workers, bundled data)
 ← io (formats, readers, outputs) and simulate (synthetic logs), side by side
-← estimators (the papers' per-sample methods, the per-sample bound, calibration)
+← estimators (the papers' per-sample methods, the per-sample bound, calibration and its errors read off a fit)
 ← smoother (factors, model, solvers, tuning, fixed lag)
 ← methods (the registry of every method by name)
 ← evaluation (metrics, comparison study, plots)
@@ -33,7 +33,7 @@ LAYERS: list[tuple[str, int, tuple[str, ...]]] = [
                  "gfimu.datasets*")),
     ("io", 1, ("gfimu.io*",)),
     ("simulate", 1, ("gfimu.simulate*",)),
-    ("estimators", 2, ("gfimu.estimators*", "gfimu.crb", "gfimu.calibration")),
+    ("estimators", 2, ("gfimu.estimators*", "gfimu.crb", "gfimu.calibration", "gfimu.array_misfit")),
     ("smoother", 3, ("gfimu.factors*", "gfimu.smoother*")),
     ("methods", 4, ("gfimu.methods",)),
     ("evaluation", 5, ("gfimu.evaluation", "gfimu.compare", "gfimu.plots", "gfimu.diagnose")),

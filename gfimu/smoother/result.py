@@ -62,9 +62,25 @@ class SmootherEstimator:
         motion, outcome = guarded(log, run, GuardOptions(self.guard), self.model, getattr(self, "attitude", None),
                                   getattr(self, "self_calibration", None))
         note = outcome.message()
+        notes = (note,) if note else ()
+        if self.model_groups.solve.compute_sigma:
+            notes += self._calibration_note(log, report)
         report = dataclasses.replace(report.with_timings(guard=time.perf_counter() - t1), guard=outcome,
-                                     warnings=report.warnings + ((note,) if note else ()))
+                                     warnings=report.warnings + notes)
         return Estimate(motion, report)
+
+    @staticmethod
+    def _calibration_note(log, report) -> tuple[str, ...]:
+        """σ's warning where the readings' misfit is mostly a calibration error, a bias σ does not include
+        (:func:`gfimu.array_misfit.misfit_warning`, on the per-sample estimate the run or the guard made; only
+        where the model check found the readings beyond white noise)."""
+        check = report.model_check
+        if report.per_sample is None or check is None or getattr(check, "consistent", True):
+            return ()
+        from ..array_misfit import misfit_warning
+
+        note = misfit_warning(log, report.per_sample)
+        return (note,) if note else ()
 
     def _per_sample_ahead(self, log):
         """The per-sample estimate the guard compares the run with, begun beside the run where the engine makes
