@@ -56,9 +56,10 @@ def calibration_errors(log, motion, sigma_axes: np.ndarray, residual: np.ndarray
 
     A sensor whose true position is its stated one plus δr reads, on axis a of direction d_a,
     ``d_aᵀ ([ω̇]× + [ω]×²) δr`` more than the rigid body of the stated positions predicts; an axis whose gain
-    is 1 + δg reads δg times its value more. The per-sample fit absorbs what of that lies in the tangent space
-    of the model (the columns of ``D = [S_f, S_ω̇, S_q ∂q/∂ω]``, as :func:`gfimu.diagnose.sensor_skews`), so its whitened
-    residual is the regressors projected off D times (δr, δg), plus noise. Some errors are changes of the
+    is 1 + δg reads δg times its value more. The per-sample fit absorbs what of that lies in the tangent
+    space of the model (the columns of ``D = [S_f, S_ω̇, S_q ∂q/∂ω]``, as
+    :func:`gfimu.diagnose.sensor_skews`), so its whitened residual is the regressors projected off D times
+    (δr, δg), plus noise. Some errors are changes of the
     states and never show: a common shift of every position (f absorbs it), a common scale of the positions
     (ω̇ / c, ω / √c) and a common gain (f, ω̇, ω² scaled alike): the fit gives the least-squares errors of
     least size, the part the readings tell (its ``rank``; 3 S + m − 5 for an array that sees ω in full).
@@ -71,7 +72,8 @@ def calibration_errors(log, motion, sigma_axes: np.ndarray, residual: np.ndarray
     n_par = 3 * sensors + m
     w = 1.0 / np.asarray(sigma_axes, dtype=float)
     omega, omega_dot = np.asarray(motion.omega_b_radps), np.asarray(motion.omega_dot_b_radps2)
-    ok = np.all(np.isfinite(residual), axis=1) & np.all(np.isfinite(omega), axis=1) & np.all(np.isfinite(omega_dot), axis=1)
+    ok = (np.all(np.isfinite(residual), axis=1) & np.all(np.isfinite(omega), axis=1)
+          & np.all(np.isfinite(omega_dot), axis=1))
     if use is not None:
         ok &= use
     rows = np.nonzero(ok)[0]
@@ -84,7 +86,8 @@ def calibration_errors(log, motion, sigma_axes: np.ndarray, residual: np.ndarray
         n = idx.size
         wv, dw = omega[idx], omega_dot[idx]
         D = np.concatenate([np.broadcast_to(S[:, :6], (n,) + S[:, :6].shape),
-                            np.einsum("aj,njk->nak", S[:, 6:], quadratic_terms_jacobian(wv))], axis=2) * w[None, :, None]
+                            np.einsum("aj,njk->nak", S[:, 6:], quadratic_terms_jacobian(wv))], axis=2)
+        D *= w[None, :, None]
         q, _ = np.linalg.qr(D)
         lever = _cross_matrices(dw) + _cross_matrices(wv) @ _cross_matrices(wv)  # (n, 3, 3): δf = lever δr
         G = np.zeros((n, m, n_par))
@@ -149,8 +152,8 @@ def misfit_warning(log, motion) -> str | None:
                              rigid_body_residual(log.array, part.accel_mps2, picked))
     if not fit.share >= CALIBRATION_SHARE:
         return None
-    return (f"sigma does not cover an error of the array's calibration: the readings' misfit is {100 * fit.share:.0f} % "
-            "that of constant sensor position and gain errors, which bias the estimate alike at every sample "
+    return ("sigma does not cover an error of the array's calibration: the readings' misfit is "
+            f"{100 * fit.share:.0f} % that of constant sensor position and gain errors, which bias the estimate alike at every sample "
             f"(`gfimu diagnose {log.source}` names the sensors and their offsets)")
 
 

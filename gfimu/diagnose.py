@@ -16,8 +16,8 @@
   too often) and, with a gyroscope, in ``c = (|ω_gyro| / |ω_accelerometers|)²``;
 - **time skew** of one sensor against the others (:func:`sensor_skews`);
 - **calibration errors**: constant errors of each sensor's position and each axis' gain that the residual
-  shows (:func:`gfimu.array_misfit.calibration_errors`): a misfit that is mostly theirs biases every estimate along the states,
-  which no smoother's σ covers (docs/uncertainty.md);
+  shows (:func:`gfimu.array_misfit.calibration_errors`): a misfit that is mostly theirs biases every
+  estimate along the states, which no smoother's σ covers (docs/uncertainty.md);
 - **stuck and clipped channels** (:func:`channel_faults`);
 - **expected accuracy**: the per-sample Cramér-Rao bound (:mod:`gfimu.crb`) at the fitted ω, with
   the stated and the measured noise;

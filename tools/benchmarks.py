@@ -125,8 +125,9 @@ SECTIONS = (
         "gyros, as `gfimu evaluate log est.csv --moving-threshold-radps 2` scores them; a third row against "
         "the reference lined up in time, as with `--estimate-time-offset`), the share of samples within 1σ "
         "and 2σ per axis, the spread of a share from the count of independent samples and the mean NEES, "
-        "for the white-noise σ and for the σ the smoothers report (scaled by the readings' own misfit and "
-        "following the path's own trapezoid level: [uncertainty.md](uncertainty.md)).",
+        "for the white-noise σ and for the σ the smoothers report (scaled by the readings' own misfit, under a "
+        "robust model as the M-estimator's sandwich, and following the path's own trapezoid level: "
+        "[uncertainty.md](uncertainty.md)).",
         full=(), quick=("--cells", "misfit"), json=False, recordings=True),
     Section(
         "fixed-lag-latency", "Fixed-lag smoother: latency, end to end, memory", "bench_fixed_lag.py",

@@ -358,7 +358,8 @@ def main(argv=None) -> int:
           "mean NEES Σ_j (e_j/σ_j)² (3 when σ is right); in target: every axis within 60-76 % and 90-98 % (yes), or "
           "within those bounds widened by twice ± (within ±), or not (no). "
           "white: the σ of the white-noise model alone; scaled: the σ the smoothers report, scaled by the "
-          "readings' own misfit, following the path's own trapezoid level and widened by the common gain gravity shows. "
+          "readings' own misfit (under a robust model, the M-estimator's sandwich), following the path's own "
+          "trapezoid level and widened by the common gain gravity shows. "
           f"Recordings: moving samples (|ω_ref| > {MOVING_RADPS:g} rad/s, reference valid) "
           "against the mean of the board's gyros.")
     return 0

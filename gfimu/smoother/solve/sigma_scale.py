@@ -20,6 +20,10 @@ them:
   the log: a real array's misfit grows and shrinks with the motion (lever-arm, scale and alignment errors
   scale with ω̇, ω² and f; vibration comes and goes), and a factor of the whole log would give the fast
   stretches σ too small (the short tails of the error) and the quiet ones σ too large.
+- **Robust sandwich.** Under the robust loss a misfitting log gets, the smoother's P is the inverse of the
+  information its re-weighting states; the spread of an M-estimate is the sandwich (Huber 1981): s² is then
+  the parity level counted by each axis' weight, over β², β the leverage-weighted ψ'/w (:func:`robust_slope`,
+  :func:`sandwich_factor`).
 - **Correlation in time.** ρ_k = Σ_i p_i · p_{i−k} / Σ_i |p_i|², k = 1 … :data:`MAX_LAG` (whole log, or the
   samples emitted so far). A state the smoother estimates from L samples' worth of readings has, under an
   error of this correlation, the variance of white noise times τ(L) = 1 + 2 Σ_{k<L} (1 − k/L) ρ_k (the
@@ -538,7 +542,9 @@ class RunningSigmaScale:
         self.samples = 0
         self.window = None if window is None else int(window)
         """Samples of s²'s window (:func:`local_window` of the first sample's degrees of freedom when None)."""
-        self._recent: np.ndarray | None = None  # |p|², m − rank, the robust sandwich's sums (parity's ``slopes``), rank of the newest samples, row i % window of sample i
+        # |p|², m − rank, the robust sandwich's three sums (parity's ``slopes``) and the rank of the newest samples,
+        # row i % window of sample i
+        self._recent: np.ndarray | None = None
         self.trapezoid = RunningTrapezoid()
         """The path's trapezoid level over the newest steps (the same window as s²)."""
         self.gain = RunningGain(array)
