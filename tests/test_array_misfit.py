@@ -50,7 +50,7 @@ def test_the_warnings_subsample_gives_the_share_of_the_whole_log(logs):
     np.testing.assert_allclose(residual[7], moved.accel_mps2[7] - S @ x, atol=1e-12 * np.max(np.abs(moved.accel_mps2)))
 
 
-@pytest.mark.parametrize("method", ["smoother", "fixed-lag"])
+@pytest.mark.parametrize("method", ["smoother", pytest.param("fixed-lag", marks=pytest.mark.slow)])
 def test_sigma_says_when_the_misfit_is_a_calibration_error(logs, method):
     """Both smoothers, with σ: the moved log's report warns that σ does not cover the calibration error and
     names gfimu diagnose; the log as recorded gets no such warning, nor the moved one without σ (nothing
