@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .rigid_body import quadratic_terms, quadratic_terms_jacobian
+from .rotations import skew
 
 CALIBRATION_SHARE = 0.5
 """Constant position and gain errors are reported when they explain at least half of the residual's power,
@@ -89,7 +90,7 @@ def calibration_errors(log, motion, sigma_axes: np.ndarray, residual: np.ndarray
                             np.einsum("aj,njk->nak", S[:, 6:], quadratic_terms_jacobian(wv))], axis=2)
         D *= w[None, :, None]
         q, _ = np.linalg.qr(D)
-        lever = _cross_matrices(dw) + _cross_matrices(wv) @ _cross_matrices(wv)  # (n, 3, 3): δf = lever δr
+        lever = skew(dw) + skew(wv) @ skew(wv)  # (n, 3, 3): δf = lever δr
         G = np.zeros((n, m, n_par))
         per_axis = np.einsum("aj,njk->nak", directions, lever)  # (n, m, 3)
         for a in range(m):
@@ -123,14 +124,6 @@ def calibration_errors(log, motion, sigma_axes: np.ndarray, residual: np.ndarray
                           theta[3 * sensors:], std[3 * sensors:], share, rank)
 
 
-def _cross_matrices(v: np.ndarray) -> np.ndarray:
-    """[v]× of each row of ``v`` (n, 3): (n, 3, 3)."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
-
-
 def rigid_body_residual(array, accel_mps2: np.ndarray, motion) -> np.ndarray:
     """(N, m) readings ``accel_mps2`` less the rigid-body prediction ``S [f, ω̇, q(ω)]`` of ``motion``
     (Ho & Lin 2009, eq. 6) [m/s²]."""
@@ -147,20 +140,12 @@ def misfit_warning(log, motion) -> str | None:
 
     stride = max(1, -(-len(log) // MISFIT_SAMPLES))
     part = log.select(slice(0, len(log), stride)) if stride > 1 else log
-    picked = motion if stride == 1 else _every(motion, stride)
+    picked = motion if stride == 1 else motion.select(slice(0, len(log), stride))
     fit = calibration_errors(part, picked, accel_noise_std(log.array),
                              rigid_body_residual(log.array, part.accel_mps2, picked))
     if not fit.share >= CALIBRATION_SHARE:
         return None
     return ("sigma does not cover an error of the array's calibration: the readings' misfit is "
-            f"{100 * fit.share:.0f} % that of constant sensor position and gain errors, which bias the estimate alike at every sample "
+            f"{100 * fit.share:.0f} % that of constant sensor position and gain errors, which bias the estimate "
+            "alike at every sample "
             f"(`gfimu diagnose {log.source}` names the sensors and their offsets)")
-
-
-def _every(motion, stride: int):
-    """ω, ω̇ and f of every ``stride``-th sample of ``motion`` (what :func:`calibration_errors` reads)."""
-    from types import SimpleNamespace
-
-    return SimpleNamespace(omega_b_radps=motion.omega_b_radps[::stride],
-                           omega_dot_b_radps2=motion.omega_dot_b_radps2[::stride],
-                           specific_force_b_mps2=motion.specific_force_b_mps2[::stride])

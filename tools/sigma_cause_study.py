@@ -67,13 +67,6 @@ def _captured(log):
     return seen
 
 
-def _cross(v: np.ndarray) -> np.ndarray:
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
-
-
 def _shares(e: np.ndarray, sd: np.ndarray) -> str:
     z = e / sd
     return (f"1σ {'/'.join(f'{100 * v:.0f}' for v in (np.abs(z) < 1).mean(axis=0))} %, "
@@ -88,6 +81,7 @@ def calibration_fit(array, accel: np.ndarray, states: np.ndarray, noise: np.ndar
     ``level`` and ``cleaned`` (the parity power over its degrees of freedom, before and after), ``rank`` (of the
     fit), ``J`` (N, m, 9) and ``G`` (N, m, 3 triads + m) (the whitened Jacobians of the states and of the errors)."""
     from gfimu.rigid_body import quadratic_terms, quadratic_terms_jacobian
+    from gfimu.rotations import skew
     from gfimu.smoother.model.problem import robust_weight
 
     y, X = np.asarray(accel, dtype=float), np.asarray(states, dtype=float)
@@ -111,7 +105,7 @@ def calibration_fit(array, accel: np.ndarray, states: np.ndarray, noise: np.ndar
     dof = float(m * n - np.count_nonzero(keep))
     owner = np.asarray(array.axis_owner)
     triads = int(owner.max()) + 1
-    rows = np.einsum("ak,nkj->naj", array.axis_directions_b, _cross(dw) + _cross(w) @ _cross(w))
+    rows = np.einsum("ak,nkj->naj", array.axis_directions_b, skew(dw) + skew(w) @ skew(w))
     G = np.zeros((n, m, 3 * triads + m))
     for k in range(m):
         G[:, k, 3 * owner[k]:3 * owner[k] + 3] = rows[:, k]

@@ -72,8 +72,8 @@ class SmootherEstimator:
     @staticmethod
     def _calibration_note(log, report) -> tuple[str, ...]:
         """σ's warning where the readings' misfit is mostly a calibration error, a bias σ does not include
-        (:func:`gfimu.array_misfit.misfit_warning`, on the per-sample estimate the run or the guard made; only
-        where the model check found the readings beyond white noise)."""
+        (:func:`gfimu.array_misfit.misfit_warning`, on the per-sample estimate the report carries: the run's, or
+        the one made beside it for the guard; only where the model check found the readings beyond white noise)."""
         check = report.model_check
         if report.per_sample is None or check is None or getattr(check, "consistent", True):
             return ()

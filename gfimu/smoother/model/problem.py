@@ -61,8 +61,8 @@ class SmootherOptions:
     ``attitude``, ``self_calibration``, ``batch`` and ``tuning`` of :mod:`gfimu.smoother.model.option_groups`,
     where each option is declared with its unit, default and help (``options.model``, ``options.batch``, ...:
     the groups' values; :meth:`model_groups`: those of the model together). Defaults suit
-    100 Hz-1 kHz logs. The fixed-lag smoother is given these options with the batch group at its defaults
-    (:meth:`gfimu.smoother.stream.fixed_lag.FixedLagEstimator.options`)."""
+    100 Hz-1 kHz logs. The fixed-lag smoother takes the groups of its model (its estimator's
+    :attr:`~gfimu.smoother.result.SmootherEstimator.model_groups`: those it does not carry at their defaults)."""
 
     def __post_init__(self) -> None:
         """The rules that tie two options (each option's own range is checked by its declaration,
@@ -225,7 +225,7 @@ class SmootherProblem:
     no group's noise levels: the groups and the re-weightings do."""
 
     log: Log
-    options: ModelGroups = field(default_factory=lambda: SmootherOptions().model_groups)
+    options: ModelGroups = field(default_factory=ModelGroups.defaults)
 
     def __post_init__(self) -> None:
         if not isinstance(self.options, ModelGroups):
