@@ -58,10 +58,10 @@ def test_the_hold_is_bounded_and_every_row_comes_out_once_in_order():
 
 
 def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
-    """StartHold's bookkeeping (the held start's part of FixedLagSmoother): the first check ``check_every_ns``
-    after the first row held, the next once the stretch from that row to the newest sample has doubled since
-    the last check, and at once when the rows span ``max_s``; the change of the re-solve between checks in its
-    covariance; release ends the hold."""
+    """StartHold's bookkeeping (the held start's part of FixedLagSmoother): checks at spans of the stretch from
+    the first row held to the newest sample that double up to the last one, made when the rows span ``max_s``
+    (the first at least ``check_every_ns``), and at once when the rows span ``max_s``; the change of the
+    re-solve between checks in its covariance; release ends the hold."""
     from gfimu.smoother.stream.fixed_lag import StartHold
 
     ms = 1_000_000
@@ -69,13 +69,27 @@ def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
     assert hold.deciding and hold.held == [] and hold.held_s == 0.0
     hold.held = [(t * ms, ("raw", t), None) for t in (100, 110, 120)]
     assert hold.held_s == pytest.approx(0.02, abs=1e-15)
-    assert not hold.due(599 * ms) and hold.next_check_ns == 600 * ms  # 100 ms + 500 ms
-    assert hold.due(600 * ms) and hold.next_check_ns == 1100 * ms
-    # the stretch from the first row spans 1 s at the second check: the third when it spans 2 s
-    assert not hold.due(1099 * ms) and hold.due(1100 * ms) and hold.next_check_ns == 2100 * ms
-    assert not hold.due(2099 * ms) and hold.next_check_ns == 2100 * ms
-    hold.held.append((2100 * ms, ("raw", 2100), None))  # the rows span 2.0 s = max_s: due before the next check
-    assert hold.due(1200 * ms) and hold.next_check_ns == 2300 * ms
+
+    def due(newest_ms: int) -> bool:  # the rows held up to 280 ms before the newest sample (the lag), then due()
+        while hold.held[-1][0] + 10 * ms <= (newest_ms - 280) * ms:
+            t = hold.held[-1][0] // ms + 10
+            hold.held.append((t * ms, ("raw", t), None))
+        return hold.due(newest_ms * ms)
+
+    # the newest sample 280 ms ahead of the last row held: the last check at a span of 2.0 s + 280 ms (the rows
+    # then span max_s); before it, 1140 ms and 570 ms (the shortest of the halvings at least 500 ms)
+    assert not due(400) and hold.next_check_ns == 670 * ms  # 100 ms + 570 ms
+    assert not due(669) and due(670) and hold.next_check_ns == 1240 * ms
+    assert not due(1239) and due(1240) and hold.next_check_ns == 2380 * ms
+    assert not due(2379) and hold.held_s == pytest.approx(1.99) and due(2380)  # the rows span 2.0 s = max_s
+    n = len(hold.held)
+    hold.held.append((2200 * ms, ("raw", 2200), None))  # the rows span 2.1 s > max_s: due before the next check
+    assert hold.due(2381 * ms)
+    hold.held = hold.held[:n]
+    # a hold whose longest span is less than twice the first check's: one check, the last
+    short = StartHold(max_s=0.4, check_every_ns=500 * ms)
+    short.held = [(0, ("raw", 0), None), (20 * ms, ("raw", 20), None)]
+    assert not short.due(200 * ms) and short.next_check_ns == 580 * ms  # 0.4 s + the 180 ms ahead
 
     times = np.array([100, 110, 120]) * ms
     omega = np.zeros((3, 3))
@@ -86,7 +100,7 @@ def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
     assert hold.moved(times[:2], shifted[:2], cov[:2]) == np.inf  # fewer rows than the last check's
 
     hold.record(hold.held_s, 7.5, 0.4, 0.2, False)
-    assert hold.release() == [("raw", 100), ("raw", 110), ("raw", 120), ("raw", 2100)]
+    assert hold.release() == [("raw", t) for t in range(100, 2101, 10)]
     assert not hold.deciding and hold.held == []
     assert hold.starts == [{"held_s": pytest.approx(2.0), "evidence_nats": 7.5, "agreement_chi2": 0.4,
                             "moved_chi2": 0.2, "open": False}]

@@ -487,8 +487,8 @@ class StartHold:
     """The first rows of each segment held back past the lag until the data decide the branch of ω (numpy
     engine; :meth:`FixedLagSmoother._release_start`).
 
-    Settings: ``max_s`` (the longest hold [s]; 0: rows are never held) and ``check_every_ns`` (when the
-    evidence is first weighed; then at doubling spans, :meth:`due`). Of the current segment: ``deciding``
+    Settings: ``max_s`` (the longest hold [s]; 0: rows are never held) and ``check_every_ns`` (the shortest
+    span at which the evidence is first weighed; then at doubling spans, :meth:`due`). Of the current segment: ``deciding``
     (its first rows are being held), ``held`` ((timestamp_ns, raw sample, filtered state) of the rows held
     so far), ``next_check_ns`` (when the evidence is weighed next), ``last_resolve`` ((timestamps, ω) of the
     previous check's re-solve) and ``waiting_for_batch`` (the rows held are to be released from a batch
@@ -508,6 +508,7 @@ class StartHold:
         self.deciding = self.max_s > 0
         self.held: list = []
         self.next_check_ns: int | None = None
+        self.level = 0  # the next check's j: at the span top / 2^j (:meth:`due`)
         self.last_resolve: tuple | None = None
 
     @property
@@ -516,17 +517,23 @@ class StartHold:
         return (self.held[-1][0] - self.held[0][0]) * 1e-9 if self.held else 0.0
 
     def due(self, newest_ns: int) -> bool:
-        """Whether the evidence is to be weighed now, the newest sample at ``newest_ns``: ``check_every_ns``
-        after the first row held, then each time the stretch from that row to the newest sample has doubled
-        since the last check, and once the rows span ``max_s``. Each check solves the whole stretch again,
-        so checks at doubling spans cost at most twice the last one together (at even spacing the cost
-        grows with the square of the hold)."""
+        """Whether the evidence is to be weighed now, the newest sample at ``newest_ns``: at the spans ``top / 2^j``
+        of the stretch from the first row held to the newest sample, j = J, J - 1, … 0, ``top`` the span once the
+        rows span ``max_s`` (the newest sample runs ahead of the last row held by the lag) and ``top / 2^J`` the
+        shortest at least ``check_every_ns``; and at once when the rows span ``max_s``. Each check solves the
+        whole stretch again, so checks at doubling spans cost at most twice the last one together (at even
+        spacing the cost grows with the square of the hold); counted back from the last check, which the
+        longest hold makes anyway, none falls just before it (a check nearly as long would cost as much and
+        decide no sooner)."""
         first = self.held[0][0]
+        top = self.max_s * 1e9 + (newest_ns - self.held[-1][0])
         if self.next_check_ns is None:
-            self.next_check_ns = first + self.check_every_ns
+            self.level = math.floor(math.log2(top / self.check_every_ns)) if top > self.check_every_ns else 0
+            self.next_check_ns = first + int(math.ceil(top / 2.0 ** self.level))
         if newest_ns < self.next_check_ns and self.held_s < self.max_s:
             return False
-        self.next_check_ns = first + max(2 * (newest_ns - first), self.check_every_ns)
+        self.level = max(self.level - 1, 0)
+        self.next_check_ns = first + int(math.ceil(top / 2.0 ** self.level))
         return True
 
     def record(self, held_s: float, evidence_nats: float, agreement_chi2: float, moved_chi2: float,
