@@ -74,6 +74,27 @@ def test_fast_accelerometer_factor_equals_per_sensor_factors_and_numerical_jacob
     np.testing.assert_allclose(A_ordered, num, rtol=1e-6, atol=1e-5)
 
 
+@pytest.mark.parametrize("frequencies_hz", [(0.0, 0.0, 0.0), (1.5, 0.0, 3.0)])
+def test_steps_prepared_at_once_are_the_steps_made_one_at_a_time(frequencies_hz):
+    """ArrayModel.prepare_steps (the step lengths another model met, made in one view) gives each step
+    length the very numbers step() makes for it alone: rows, transition and noise, bit for bit."""
+    opts = SmootherOptions(omega_dot_random_walk_radps2_per_sqrt_s=7.5, process_axis_factors=(0.1, 0.5, 2.0),
+                           specific_force_random_walk_mps2_per_sqrt_s=0.4, process_axis_frequencies_hz=frequencies_hz)
+    keys = [16_000_123, 15_999_877, 16_000_000, 2_000_000, 50_000]
+    alone, at_once = (model.ArrayModel(cube_array(), opts.model_groups, fast_measurement=True) for _ in range(2))
+    at_once.prepare_steps(keys + [16_000_000, 0])
+    assert sorted(at_once._step_cache) == sorted(keys)
+    for key in keys:
+        a, b = alone.step(key * 1e-9), at_once._step_cache[key][1.0]
+        assert at_once.step(key * 1e-9) is b  # (taken from the cache)
+        for name in ("J0", "J1", "r0", "F", "FT", "Q"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        assert a.c is None and b.c is None and a.H0 is None and b.H0 is None
+        for x, y in zip(alone._step_cache[key]["rows"], at_once._step_cache[key]["rows"]):
+            assert np.array_equal(x, y)
+        assert np.array_equal(alone.step(key * 1e-9, 0.3).Q, at_once.step(key * 1e-9, 0.3).Q)
+
+
 def test_step_is_the_white_jerk_of_the_batch_model():
     """The stream's step comes from the batch model's groups: for the white jerk its transition is
     x1 = [[I, h I], [0, I]] x0 on (ω, ω̇) and f1 = f0, its noise the closed form of the trapezoid and the

@@ -204,6 +204,10 @@ class Step:
 
 _ZERO3 = np.zeros(3)
 
+STEP_CACHE_SIZE = 64
+"""Step lengths whose built-in steps a model keeps (:meth:`ArrayModel.step`): a recording's clock jitters
+over a score of them; beyond this many (irregular timestamps) the cache starts again."""
+
 
 @dataclass(frozen=True, eq=False, slots=True)
 class Structure:
@@ -385,6 +389,48 @@ class ArrayModel:
 
         return terms
 
+    def _fixed_step(self, h: float) -> dict:
+        """The built-in step groups' rows over one step of ``h`` seconds and the :class:`Step` they make
+        (:meth:`step`'s cache entry)."""
+        groups = self.factor_sets.fixed_steps
+        view = StreamView.of(self.array, self.options, [0, round(h * 1e9)], dt_s=np.array([h])).with_levels(groups)
+        zero = np.zeros(KINEMATIC_SIZE)
+        rows = self._step_rows(groups, view, zero, zero)
+        return {"rows": rows, 1.0: Step.of(*rows[:3])}
+
+    def prepare_steps(self, keys_ns) -> None:
+        """The built-in steps of the step lengths ``keys_ns`` [ns] (those another model of the stream met:
+        :meth:`step`'s cache keys) made at once, in one view of as many steps: each step's rows are the
+        groups' elementwise terms of its own length, the numbers :meth:`step` makes for it alone (a model is
+        chosen again every few seconds, and a recording's jittered clock gives a score of step lengths,
+        each of which cost the groups' whole machinery, about 0.4 ms, when first met)."""
+        cache = self.caches.steps
+        keys = [int(k) for k in keys_ns if int(k) > 0 and int(k) not in cache][:STEP_CACHE_SIZE - len(cache)]
+        if len(keys) < 2:
+            return
+        groups = self.factor_sets.fixed_steps
+        dt_s = np.array(keys, dtype=np.int64) * 1e-9  # (each h as step() gets it: (t1 - t0) * 1e-9)
+        view = StreamView.of(self.array, self.options, np.concatenate([[0], np.cumsum(keys)]),
+                             dt_s=dt_s).with_levels(groups)
+        X = np.zeros((len(keys) + 1, KINEMATIC_SIZE))
+        per_group = []
+        for group in groups:
+            terms = list(group.terms(view, X, np.zeros(0)))
+            if any(t.kind != "binary" or t.jac_global is not None or t.residual.shape[0] != len(keys) for t in terms):
+                return  # (rows not one set per step: each step made when first met, by step())
+            per_group.append((group, terms))
+        for i, key in enumerate(keys):
+            J0s, J1s, rs, motion = [], [], [], []
+            for group, terms in per_group:
+                for t in terms:
+                    r, J0, J1 = t.residual[i], t.jac["x0"][i], t.jac["x1"][i]
+                    J0s.append(J0)
+                    J1s.append(J1)
+                    rs.append(r - J0 @ X[0] - J1 @ X[1])
+                    motion.append(np.full(len(r), group.motion))
+            rows = (np.vstack(J0s), np.vstack(J1s), np.concatenate(rs), np.concatenate(motion))
+            cache[key] = {"rows": rows, 1.0: Step.of(*rows[:3])}
+
     @staticmethod
     def _step_rows(groups, view: StreamView, x0: np.ndarray, x1: np.ndarray, motion_factor: float = 1.0):
         """(J0, J1, r0, motion) of ``groups``' terms on the two-sample ``view`` linearised at (x0, x1): rows
@@ -431,11 +477,8 @@ class ArrayModel:
         fixed = cache.get(key)
         sets = self.factor_sets
         if fixed is None:
-            view = StreamView.of(self.array, self.options, [0, key], dt_s=np.array([h])).with_levels(sets.fixed_steps)
-            zero = np.zeros(KINEMATIC_SIZE)
-            fixed = self._step_rows(sets.fixed_steps, view, zero, zero)
-            fixed = {"rows": fixed, 1.0: Step.of(*fixed[:3])}
-            if len(cache) > 64:  # irregular timestamps: keep the cache bounded
+            fixed = self._fixed_step(h)
+            if len(cache) > STEP_CACHE_SIZE:  # irregular timestamps: keep the cache bounded
                 cache.clear()
             cache[key] = fixed
         others = None

@@ -619,8 +619,11 @@ class ChoiceState:
         self.models.append(chosen)
         self.tuning = chosen.tuning if chosen.tuning is not None else self.tuning
         self.groups = chosen.groups
+        previous = self.model
         self.model = model.ArrayModel(array, chosen.groups, fast_measurement,
                                       chosen.accel_noise_scale)
+        if previous is not None:  # the step lengths the stream has met, made at once for the new model
+            self.model.prepare_steps(previous.caches.steps.keys())
 
 
 class SigmaRescale:
