@@ -36,11 +36,13 @@ CONTAINMENT = (
     "batch-scheduler-ssh", "live-g-header", "live-guard-replace", "live-udp-no-port", "live-serial-baud-negative",
     "live-1ns-steps", "live-rate-1e9", "array-400-digit-position", "array-range-tiny", "array-noise-1e300",
     "imu-underscore-number", "imu-cr-line-ends", "imu-1ns-steps-fixed-lag", "opt-axis-frequency-1e308",
-    "map-column-twice", "map-mg-over-mps2", "mimu-one-packet", "kalibr-large-no-alias", "zip-member-twice",
+    "map-column-twice", "map-mg-over-mps2", "mimu-one-packet",
+    pytest.param("kalibr-large-no-alias", marks=pytest.mark.slow), "zip-member-twice",
     "simulate-full-disk", "mimu-random-counters", "live-tcp-garbage",
 )
 """The cases of live and batch containment, units by any factor, bounded resources and the message cases, each
-with the words its standard error must hold (zip-bomb, the slowest to build, runs with the slow tests)."""
+with the words its standard error must hold (zip-bomb and the large Kalibr file, the slowest to build, run with
+the slow tests)."""
 
 campaign = _campaign()
 CASES = {c.name: c for c in campaign.cases()}

@@ -262,6 +262,7 @@ def test_the_rate_watch_shortcut_says_what_the_full_rule_says():
     assert said >= 3  # the watch did see the jumps
 
 
+@pytest.mark.slow
 def test_what_a_long_stream_keeps_does_not_grow_with_its_length():
     """The memory a session holds at the end of a stream does not grow with the stream's length: between
     its 2,000th and its 6,000th sample (past the first choice of the model, the history it is chosen on
