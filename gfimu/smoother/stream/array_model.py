@@ -420,31 +420,28 @@ class ArrayModel:
                 return  # (rows not one set per step: each step made when first met, by step())
             per_group.append((group, terms))
         for i, key in enumerate(keys):
-            J0s, J1s, rs, motion = [], [], [], []
-            for group, terms in per_group:
-                for t in terms:
-                    r, J0, J1 = t.residual[i], t.jac["x0"][i], t.jac["x1"][i]
-                    J0s.append(J0)
-                    J1s.append(J1)
-                    rs.append(r - J0 @ X[0] - J1 @ X[1])
-                    motion.append(np.full(len(r), group.motion))
-            rows = (np.vstack(J0s), np.vstack(J1s), np.concatenate(rs), np.concatenate(motion))
+            rows = self._step_rows(groups, view, X[0], X[1], terms=per_group, step=i)
             cache[key] = {"rows": rows, 1.0: Step.of(*rows[:3])}
 
     @staticmethod
-    def _step_rows(groups, view: StreamView, x0: np.ndarray, x1: np.ndarray, motion_factor: float = 1.0):
+    def _step_rows(groups, view: StreamView, x0: np.ndarray, x1: np.ndarray, motion_factor: float = 1.0,
+                   terms=None, step: int = 0):
         """(J0, J1, r0, motion) of ``groups``' terms on the two-sample ``view`` linearised at (x0, x1): rows
         ``r0 + J0 x0 + J1 x1``, the motion model's rows (``motion``, a mask) divided by ``motion_factor``
-        (its stds times it, as :meth:`gfimu.smoother.model.noise_levels.MotionNoise.scaled_steps` in the batch smoother)."""
+        (its stds times it, as :meth:`gfimu.smoother.model.noise_levels.MotionNoise.scaled_steps` in the batch smoother).
+        ``terms``: each group's terms on ``view`` made already ((group, terms) pairs; the view then may hold
+        several steps, each term binary), of which the rows of step ``step``."""
         X = np.vstack([x0, x1])
         J0s, J1s, rs, motion = [], [], [], []
-        for group in groups:
+        if terms is None:
+            terms = [(group, group.terms(view, X, np.zeros(0))) for group in groups]
+        for group, group_terms in terms:
             scale = 1.0 / motion_factor if group.motion else 1.0
-            for t in group.terms(view, X, np.zeros(0)):
+            for t in group_terms:
                 if t.jac_global is not None:
                     raise InputError(f"factor group {group.name!r}: the fixed-lag smoother streams no calibration variables")
                 if t.kind == "binary":
-                    r, J0, J1 = t.residual[0], t.jac["x0"][0], t.jac["x1"][0]
+                    r, J0, J1 = t.residual[step], t.jac["x0"][step], t.jac["x1"][step]
                 elif t.kind == "unary":  # rows on one of the two states
                     r, J = t.residual.reshape(-1), t.jac["x"].reshape(-1, KINEMATIC_SIZE)
                     if t.residual.shape[0] == 0:
