@@ -169,6 +169,13 @@ SECTIONS = (
         full=("--cell", "impacts-20kHz", "--duration-s", "6"), quick=("--cell", "impacts-20kHz", "--duration-s", "0.5"),
         json=False),
     Section(
+        "screen-cost", "Screening a log with spikes: the whole-log rule and the stream's", "screen_cost.py",
+        "The readings' screening of a simulated 10-minute, 62.5 Hz log of a cube of four triads with a 60 m/s² "
+        "spike on one channel every 150 samples (2.4 s), by the whole-log rule the batch smoother uses and by the "
+        "stream's rule applied row by row, as `gfimu estimate --method fixed-lag` and `gfimu live` screen (each "
+        "block it cannot pass as it is decided on its own buffer). One process, medians of three runs.",
+        full=("--runs", "3"), quick=("--duration-s", "60", "--runs", "1"), json=False),
+    Section(
         "batch-throughput", "Batch smoother: throughput and memory", "bench_smoother.py",
         "The whole command `gfimu estimate LOG --method smoother` (start-up, reading and writing included) "
         "on simulated random motion, 10 cm cube of four triads, 500 Hz, for several log lengths: median wall "
