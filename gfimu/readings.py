@@ -632,6 +632,12 @@ class StreamScreen:
     ``gfimu estimate --method fixed-lag`` (:func:`screen_stream`) screen a recording alike.
     """
 
+    compiled = True
+    """A decision on a buffer whose only faults can be spikes made in one compiled call
+    (:func:`gfimu.screen_kernels.spike_decision`: the same readings and spikes to the bit); False: the numpy
+    expressions of :func:`_screen` for every decision (the tests' oracle). Around a spike every block is decided
+    on its buffer: at 62.5 Hz, a sample at a time."""
+
     def __init__(self, array, rate_hz: float | None, clean=None):
         self.clean = clean
         """None, or ``clean(first, stop)``: True where the rows ``[first, stop)`` (counted from the first pushed)
@@ -639,6 +645,14 @@ class StreamScreen:
         without running the rule (:func:`screen_stream`: from the whole-log screening)."""
         self.rule = ScreenRule.of(array, rate_hz)
         rule = self.rule
+        limit = (np.full(len(rule.columns), np.nan) if rule.range_mps2 is None
+                 else np.broadcast_to(np.asarray(rule.range_mps2, dtype=float), (len(rule.columns),)))
+        stated = np.isfinite(limit) & (limit > 0)
+        # the value checks of _value_faults, for the compiled decision (a reading beyond ``_high`` is out of
+        # range, one at or beyond ``_low`` clipped; none where no range is stated)
+        self._low = np.ascontiguousarray((1 - CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
+        self._high = np.ascontiguousarray((1 + CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
+        self._sensors = np.ascontiguousarray(np.asarray(rule.sensor_of_axis, dtype=np.int64))
         self._times: list[int] = []
         # the buffer's readings, rows [0, len(self._times)) of an array that grows as needed (one copy of the
         # rows kept per block, not a stack of rows per decision)
@@ -816,21 +830,37 @@ class StreamScreen:
             return out
         if clean:
             y = self._accel[:n].copy()
-            kinds = {kind: np.zeros(y.shape, bool) for kind in KINDS}
+            kinds = {}  # (a kind not there: none of its faults)
         else:
             rule = self.rule
             known = np.zeros((n, len(rule.columns)), bool)
             for row, mask in self._spike_rows.items():
                 if row >= self._first:
                     known[row - self._first] = mask
-            y, kinds, _ = _screen(self._accel[:n], rule.range_mps2, rule.sensor_of_axis, rule.rate_hz,
-                                  rule.structure_matrix, ends=(self._first == 0, end), decide_from=a, known_spikes=known)
+            fast = False
+            if self.compiled and not end:
+                from .screen_kernels import spike_decision
+
+                fast, y, spikes = spike_decision(
+                    self._accel[:n], self._low, self._high, stuck_min_samples(rule.rate_hz) - 1,
+                    max(0, a - 2 * SPIKE_REACH), SPIKE_REACH, known, self._sensors, MEDIAN_HALF_WIDTH,
+                    SCALE_HALF_WIDTH, SPIKE_SCALES, _WHITE_SECOND_DIFFERENCE, OUT_OF_ANY_RANGE_MPS2, self._first == 0, a, b)
+                if fast:
+                    kinds = {"spikes": spikes}
+            if not fast:
+                y, kinds, _ = _screen(self._accel[:n], rule.range_mps2, rule.sensor_of_axis, rule.rate_hz,
+                                      rule.structure_matrix, ends=(self._first == 0, end), decide_from=a,
+                                      known_spikes=known)
             for k in np.nonzero(kinds["spikes"][a:b].any(axis=1))[0]:
                 self._spike_rows[self._next + int(k)] = kinds["spikes"][a + k]
         # each reading handed out an array of its own: one kept downstream holds its row, not the buffer
         out = [(self._times[k], y[k].copy(), self._gyro[k]) for k in range(a, b)]
         replaced = np.zeros((b - a, y.shape[1]), bool)
         for kind in KINDS:
+            if kind not in kinds:
+                if kind in ("clipped", "stuck") and any(k == kind for k, _ in self._open):  # its open runs end
+                    self._track_runs(kind, np.zeros((b - a, y.shape[1]), bool))
+                continue
             mask = kinds[kind][a:b]
             self._counts[kind] += int(mask.sum())
             replaced |= mask

@@ -2,7 +2,10 @@
 
 A stream decides its readings a block at a time (one sample at 62.5 Hz, ten at 500 Hz), each decision on a
 buffer of a few dozen rows: there the numpy expressions of :func:`gfimu.readings._spikes` cost their calls
-(about forty, 0.2-0.3 ms a decision) far more than their arithmetic. :func:`spike_mask` is that rule for a
+(about forty, 0.2-0.3 ms a decision) far more than their arithmetic. Around a spike every block is decided so
+(a spike every 2.4 s at 62.5 Hz: nine decisions in ten), and a buffer whose only faults can be spikes is decided
+whole by :func:`spike_decision`: the value checks, the spikes and their replacements in one call, the numpy
+expressions of :func:`gfimu.readings._screen` its oracle (``StreamScreen.compiled = False``). :func:`spike_mask` is that rule for a
 buffer's middle (no end of the log in it), term for term and in the same order of operations, so it gives the
 same mask to the bit: the rolling median is a selection (the middle value, or the mean of the two middle finite
 ones where a window holds a missing reading), the centred sums are differences of running sums taken in row
@@ -65,6 +68,13 @@ def spike_mask(work, median_half, scale_half, floor, spike_scales, white_factor)
     local scales from the rolling median of ±``median_half`` rows (:func:`gfimu.readings._spikes` without its
     ends and before its check across sensors). The local scale is the mean |second difference| over ±``scale_half``
     rows, the three a spike touches left out, over ``white_factor`` (√6 √(2/π)), at least ``floor``."""
+    return spike_mask_rows(work, median_half, scale_half, floor, spike_scales, white_factor, 0, work.shape[0])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def spike_mask_rows(work, median_half, scale_half, floor, spike_scales, white_factor, r0, r1):
+    """:func:`spike_mask` of the rows ``[r0, r1)`` alone (the others False): the same numbers there, the local
+    scales' running sums still taken from the first row."""
     n, m = work.shape
     vals = np.empty(2 * median_half + 1)
     d2 = np.zeros((n, m))
@@ -88,7 +98,7 @@ def spike_mask(work, median_half, scale_half, floor, spike_scales, white_factor)
     _centred_sums(ok, scale_half, wide_n)
     _centred_sums(ok, 1, near_n)
     out = np.zeros((n, m), dtype=np.bool_)
-    for i in range(n):
+    for i in range(max(r0, 0), min(r1, n)):
         for j in range(m):
             w = work[i, j]
             if np.isnan(w):
@@ -101,3 +111,121 @@ def spike_mask(work, median_half, scale_half, floor, spike_scales, white_factor)
                 continue
             out[i, j] = dev > spike_scales * (local if local > floor else floor)
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def spike_decision(buf, low_limit, high_limit, min_repeats, start, reach, known, sensor_of_axis, median_half, scale_half,
+                   spike_scales, white_factor, out_of_any, log_start, first, stop):
+    """A stream's decision (:meth:`gfimu.readings.StreamScreen._decide`) on a buffer ``buf`` (N, n_axes) that
+    holds only finite readings within range and no run of repeats long enough to be stuck, in one call:
+    ``(ok, y, spikes)``, ``ok`` False (nothing computed) where the buffer holds any other fault, or the
+    spike rule would read from the log's first rows (``start`` 0 and ``log_start``, the buffer's first row the
+    log's): the numpy expressions then decide.
+
+    The checks are :func:`gfimu.readings._value_faults`' (not finite, beyond ``out_of_any``, beyond
+    ``high_limit`` = (1 + tolerance) × the stated range, at or beyond ``low_limit`` = (1 - tolerance) × it: a
+    clip; infinite where no range is stated) and a column repeating one value over ``min_repeats`` + 1
+    readings in a row (as long as :func:`gfimu.readings.stuck_runs`' shortest run). Then, as :func:`gfimu.readings._screen`
+    decides: the spikes of the rows from ``start`` (0: every row's) (:func:`spike_mask`, the floor from the
+    whole buffer's median |reading|, :func:`gfimu.readings._nanmedian_flat`), a row whose spikes two sensors
+    (``sensor_of_axis``) share cleared, those of the rows before ``start + reach`` as ``known``; each spike
+    replaced by the median of its good neighbours within ``median_half`` rows, else by the next good reading
+    of its column (the last where none follows; :func:`gfimu.readings._replaced`). Only the rows decided,
+    ``[first, stop)``, are given out: their readings (``y``, the other rows as they came) and their spikes are
+    those of the numpy expressions."""
+    n, m = buf.shape
+    y = buf.copy()
+    spikes = known.copy()
+    if (start == 0 and log_start) or n < 2 * scale_half + 1:
+        return False, y, spikes
+    for i in range(n):
+        for j in range(m):
+            v = buf[i, j]
+            if not np.isfinite(v):
+                return False, y, spikes
+            a = abs(v)
+            if a > out_of_any or a > high_limit[j] or a >= low_limit[j]:
+                return False, y, spikes
+    for j in range(m):  # a run of one value over min_repeats + 1 readings may be stuck: the numpy rule judges it
+        run = 0
+        for i in range(1, n):
+            run = run + 1 if buf[i, j] == buf[i - 1, j] else 0
+            if run >= min_repeats:
+                return False, y, spikes
+    flat = np.abs(buf).reshape(-1)
+    k = flat.shape[0]
+    hi = k // 2  # the two middle values (one where k is odd), as numpy's partition finds them
+    part_hi = np.partition(flat, hi)
+    lo_value = part_hi[hi]
+    if (k - 1) // 2 < hi:
+        lo_value = part_hi[0]
+        for i in range(1, hi):
+            if part_hi[i] > lo_value:
+                lo_value = part_hi[i]
+    typical = (lo_value + part_hi[hi]) / 2
+    floor = 1e-6 * max(typical if np.isfinite(typical) else 1.0, 1.0)
+    # the rows decided (``[first, stop)``) and the median windows around them: their spikes alone tell the
+    # readings given out, unless a window holds no good reading (then every row's, below)
+    work = np.ascontiguousarray(buf[start:])
+    ok, y, spikes = _spikes_replaced(buf, work, start, reach, known, sensor_of_axis, median_half, scale_half, floor,
+                                     spike_scales, white_factor, first - median_half, stop + median_half, first, stop)
+    if ok:
+        return True, y, spikes
+    return _spikes_replaced(buf, work, start, reach, known, sensor_of_axis, median_half, scale_half, floor,
+                            spike_scales, white_factor, 0, n, 0, n)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _spikes_replaced(buf, work, start, reach, known, sensor_of_axis, median_half, scale_half, floor, spike_scales,
+                     white_factor, lo, hi, first, stop):
+    """:func:`spike_decision`'s spikes of the buffer's rows ``[lo, hi)`` and the readings of rows ``[first, stop)``
+    with theirs replaced: ``(ok, y, spikes)``, ``ok`` False where a replaced reading's window holds no good
+    reading and the rows outside ``[lo, hi)`` were not looked at (its replacement is then the next good
+    reading of its column, anywhere in the buffer)."""
+    n, m = buf.shape
+    y = buf.copy()
+    spikes = known.copy()
+    part = spike_mask_rows(work, median_half, scale_half, floor, spike_scales, white_factor, max(lo, 0) - start,
+                           min(hi, n) - start)
+    for i in range(part.shape[0]):  # a spike seen by two sensors at one sample is an event of the body
+        first_sensor = -1
+        shared = False
+        for j in range(m):
+            if part[i, j]:
+                if first_sensor < 0:
+                    first_sensor = sensor_of_axis[j]
+                elif sensor_of_axis[j] != first_sensor:
+                    shared = True
+        if shared:
+            for j in range(m):
+                part[i, j] = False
+    for i in range(start + reach if start > 0 else 0, n):  # (from start 0: every row's, as the whole buffer's rule)
+        for j in range(m):
+            spikes[i, j] = part[i - start, j]
+    vals = np.empty(2 * median_half + 1)
+    x = buf.copy()
+    for i in range(n):
+        for j in range(m):
+            if spikes[i, j]:
+                x[i, j] = np.nan
+    whole = lo <= 0 and hi >= n
+    for i in range(max(first, 0), min(stop, n)):
+        for j in range(m):
+            if not spikes[i, j]:
+                continue
+            fill = _window_median(x, i, j, median_half, vals)
+            if np.isnan(fill):  # no good reading within the window: the next good one of the column (else the last)
+                if not whole:
+                    return False, y, spikes
+                nxt, last = -1, -1
+                for r in range(n):
+                    if not spikes[r, j]:
+                        last = r
+                        if r >= i and nxt < 0:
+                            nxt = r
+                if nxt >= 0:
+                    fill = buf[nxt, j]
+                elif last >= 0:
+                    fill = buf[last, j]
+            y[i, j] = fill
+    return True, y, spikes

@@ -57,8 +57,68 @@ def test_a_stream_screened_through_the_compiled_rule_decides_as_the_numpy_one(mo
     compiled_rows, compiled = screened()
     numpy_spikes = readings._spikes
     monkeypatch.setattr(readings, "_spikes", lambda *a, **k: numpy_spikes(*a, **{**k, "compiled": False}))
+    monkeypatch.setattr(readings.StreamScreen, "compiled", False)
     numpy_rows, reference = screened()
     assert compiled_rows.tobytes() == numpy_rows.tobytes()
     assert (compiled.spikes, compiled.stuck, compiled.non_finite) == (reference.spikes, reference.stuck,
                                                                       reference.non_finite)
     assert compiled.spikes >= 1 and compiled.stuck >= 1
+
+
+def _dirty_log(rate_hz: float, seed: int):
+    """A simulated log with what a stream decides block by block: isolated spikes on every channel, runs of
+    adjacent spikes (windows with no good reading), a stuck run, readings clipped at the stated range and a
+    lost reading."""
+    from dataclasses import replace
+
+    from gfimu.simulate import simulate
+
+    log = simulate("random3d", rate_hz=rate_hz, duration_s=40.0, seed=seed)
+    array = log.array.with_accelerometers(replace(a, range_mps2=120.0) for a in log.array.accelerometers)
+    rng = np.random.default_rng(seed)
+    accel = log.accel_mps2.copy()
+    n, m = accel.shape
+    rows = rng.choice(np.arange(5, n - 5), n // 40, replace=False)
+    accel[rows, rng.integers(0, m, rows.size)] += rng.choice([-1.0, 1.0], rows.size) * rng.uniform(15.0, 80.0, rows.size)
+    for r in range(300, n - 300, 700):
+        accel[r:r + 4, (r // 700) % m] += 60.0  # four adjacent spikes: a window with no good reading
+    accel[900:900 + int(0.5 * rate_hz), 3] = accel[900, 3]  # a stuck run of 0.5 s
+    accel[1500:1503, 5] = 120.0  # clipped at the range
+    accel[1800, 2] = np.nan
+    return log.replace(array=array, accel_mps2=accel)
+
+
+@pytest.mark.parametrize("rate_hz", [62.5, 500.0])
+def test_a_decision_on_a_buffer_with_spikes_alone_is_the_numpy_one(monkeypatch, rate_hz):
+    """StreamScreen's decisions made in one compiled call where a buffer's only faults can be spikes
+    (gfimu.screen_kernels.spike_decision; the numpy expressions elsewhere) give every row, count and run the
+    numpy expressions give, pushed one by one (a live stream) and through screen_stream (a log); at 62.5 Hz a
+    decision per sample, most of them compiled."""
+    import gfimu.screen_kernels as kernels
+
+    log = _dirty_log(rate_hz, seed=int(rate_hz))
+
+    def pushed():
+        screen = readings.StreamScreen(log.array, rate_hz)
+        rows = []
+        for i in range(len(log)):
+            rows += screen.push(log.timestamps_ns[i], log.accel_mps2[i])
+        rows += screen.flush()
+        return np.vstack([r[1] for r in rows]), screen.screening()
+
+    calls = []
+    decision = kernels.spike_decision
+    monkeypatch.setattr(kernels, "spike_decision", lambda *a: calls.append(decision(*a)[0]) or decision(*a))
+    rows, screening = pushed()
+    whole, whole_screening = readings.screen_stream(log)
+    assert sum(calls) >= 0.5 * len(calls) > 0  # (the compiled decision made most of them)
+    monkeypatch.setattr(readings.StreamScreen, "compiled", False)
+    want_rows, want = pushed()
+    want_whole, want_whole_screening = readings.screen_stream(log)
+    assert rows.tobytes() == want_rows.tobytes()
+    assert whole.accel_mps2.tobytes() == want_whole.accel_mps2.tobytes()
+    for got, ref in ((screening, want), (whole_screening, want_whole_screening)):
+        np.testing.assert_array_equal(got.replaced, ref.replaced)
+        assert (got.non_finite, got.out_of_range, got.spikes, got.clipped, got.stuck, got.runs) == (
+            ref.non_finite, ref.out_of_range, ref.spikes, ref.clipped, ref.stuck, ref.runs)
+    assert want.spikes > 50 and want.stuck >= 1 and want.clipped >= 1 and want.non_finite == 1
