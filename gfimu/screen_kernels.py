@@ -114,6 +114,32 @@ def spike_mask_rows(work, median_half, scale_half, floor, spike_scales, white_fa
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _select(a, k):
+    """The ``k``-th smallest value of ``a`` (no NaN), ``a`` reordered in place so that the values before
+    position ``k`` are at most it (Hoare's selection)."""
+    lo, hi = 0, a.shape[0] - 1
+    while lo < hi:
+        pivot = a[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return a[k]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def spike_decision(buf, low_limit, high_limit, min_repeats, start, reach, known, sensor_of_axis, median_half, scale_half,
                    spike_scales, white_factor, out_of_any, log_start, first, stop):
     """A stream's decision (:meth:`gfimu.readings.StreamScreen._decide`) on a buffer ``buf`` (N, n_axes) that
@@ -154,15 +180,15 @@ def spike_decision(buf, low_limit, high_limit, min_repeats, start, reach, known,
                 return False, y, spikes
     flat = np.abs(buf).reshape(-1)
     k = flat.shape[0]
-    hi = k // 2  # the two middle values (one where k is odd), as numpy's partition finds them
-    part_hi = np.partition(flat, hi)
-    lo_value = part_hi[hi]
+    hi = k // 2  # the two middle values (one where k is odd): the order statistics numpy's partition finds
+    hi_value = _select(flat, hi)  # (flat now holds the values below it before it)
+    lo_value = hi_value
     if (k - 1) // 2 < hi:
-        lo_value = part_hi[0]
+        lo_value = flat[0]
         for i in range(1, hi):
-            if part_hi[i] > lo_value:
-                lo_value = part_hi[i]
-    typical = (lo_value + part_hi[hi]) / 2
+            if flat[i] > lo_value:
+                lo_value = flat[i]
+    typical = (lo_value + hi_value) / 2
     floor = 1e-6 * max(typical if np.isfinite(typical) else 1.0, 1.0)
     # the rows decided (``[first, stop)``) and the median windows around them: their spikes alone tell the
     # readings given out, unless a window holds no good reading (then every row's, below)

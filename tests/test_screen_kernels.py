@@ -122,3 +122,20 @@ def test_a_decision_on_a_buffer_with_spikes_alone_is_the_numpy_one(monkeypatch, 
         assert (got.non_finite, got.out_of_range, got.spikes, got.clipped, got.stuck, got.runs) == (
             ref.non_finite, ref.out_of_range, ref.spikes, ref.clipped, ref.stuck, ref.runs)
     assert want.spikes > 50 and want.stuck >= 1 and want.clipped >= 1 and want.non_finite == 1
+
+
+def test_the_selection_finds_numpys_order_statistic():
+    """gfimu.screen_kernels._select (the median |reading| of a decision's buffer) gives the k-th smallest value
+    numpy's sort gives, ties and all, the smaller values before it."""
+    from gfimu.screen_kernels import _select
+
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        a = rng.normal(size=int(rng.integers(1, 200)))
+        if trial % 3 == 0:
+            a = np.round(a, 1)  # ties
+        k = int(rng.integers(0, a.size))
+        b = a.copy()
+        value = _select(b, k)
+        assert value == np.sort(a)[k]
+        assert np.all(b[:k] <= value) and np.all(b[k + 1:] >= value) and np.array_equal(np.sort(b), np.sort(a))
