@@ -653,6 +653,8 @@ class StreamScreen:
         self._low = np.ascontiguousarray((1 - CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
         self._high = np.ascontiguousarray((1 + CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
         self._sensors = np.ascontiguousarray(np.asarray(rule.sensor_of_axis, dtype=np.int64))
+        self._min_repeats = stuck_min_samples(rule.rate_hz) - 1  # (a run of one value this long may be stuck)
+        self._decision = None  # the compiled decision, imported at its first use
         self._times: list[int] = []
         # the buffer's readings, rows [0, len(self._times)) of an array that grows as needed (one copy of the
         # rows kept per block, not a stack of rows per decision)
@@ -839,10 +841,12 @@ class StreamScreen:
                     known[row - self._first] = mask
             fast = False
             if self.compiled and not end:
-                from .screen_kernels import spike_decision
+                if self._decision is None:
+                    from .screen_kernels import spike_decision
 
-                fast, y, spikes = spike_decision(
-                    self._accel[:n], self._low, self._high, stuck_min_samples(rule.rate_hz) - 1,
+                    self._decision = spike_decision
+                fast, y, spikes = self._decision(
+                    self._accel[:n], self._low, self._high, self._min_repeats,
                     max(0, a - 2 * SPIKE_REACH), SPIKE_REACH, known, self._sensors, MEDIAN_HALF_WIDTH,
                     SCALE_HALF_WIDTH, SPIKE_SCALES, _WHITE_SECOND_DIFFERENCE, OUT_OF_ANY_RANGE_MPS2, self._first == 0, a, b)
                 if fast:
