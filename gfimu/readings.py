@@ -207,13 +207,21 @@ def runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist()))
 
 
+def range_limits(range_mps2, n_axes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(clip, over) (n_axes,): a reading of at least ``clip`` in magnitude is clipped, one beyond ``over`` out of
+    range: the stated range (NaN or None: none stated, both infinite) less and more :data:`CLIP_TOLERANCE`."""
+    limit = np.broadcast_to(np.asarray(np.nan if range_mps2 is None else range_mps2, dtype=float), (n_axes,))
+    stated = np.isfinite(limit) & (limit > 0)
+    limit = np.where(stated, limit, np.inf)
+    return (1 - CLIP_TOLERANCE) * limit, (1 + CLIP_TOLERANCE) * limit
+
+
 def clipped_readings(accel_mps2: np.ndarray, range_mps2) -> np.ndarray:
     """(N, n_axes) readings within :data:`CLIP_TOLERANCE` of the stated range (NaN: none stated) or beyond it."""
     y = np.asarray(accel_mps2, dtype=float)
-    limit = np.broadcast_to(np.asarray(range_mps2, dtype=float), (y.shape[1],))
-    stated = np.isfinite(limit) & (limit > 0)
+    clip, _ = range_limits(range_mps2, y.shape[1])
     with np.errstate(invalid="ignore"):
-        return np.isfinite(y) & stated[None, :] & (np.abs(y) >= (1 - CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
+        return np.isfinite(y) & (np.abs(y) >= clip[None, :])
 
 
 def stuck_min_samples(rate_hz: float | None) -> int:
@@ -407,12 +415,10 @@ def _value_faults(y: np.ndarray, range_mps2) -> tuple[np.ndarray, np.ndarray, np
         out_range = ~bad_value & (np.abs(y) > OUT_OF_ANY_RANGE_MPS2)
     clipped = np.zeros_like(bad_value)
     if range_mps2 is not None:
-        limit = np.asarray(range_mps2, dtype=float)
-        stated = np.isfinite(limit) & (limit > 0)
+        _, over = range_limits(range_mps2, y.shape[1])
         with np.errstate(invalid="ignore"):
-            out_range |= ~bad_value & stated[None, :] & (
-                np.abs(y) > (1 + CLIP_TOLERANCE) * np.where(stated, limit, np.inf)[None, :])
-        clipped = clipped_readings(y, limit) & ~out_range
+            out_range |= ~bad_value & (np.abs(y) > over[None, :])
+        clipped = clipped_readings(y, range_mps2) & ~out_range
     return bad_value, out_range, clipped
 
 
@@ -645,13 +651,9 @@ class StreamScreen:
         without running the rule (:func:`screen_stream`: from the whole-log screening)."""
         self.rule = ScreenRule.of(array, rate_hz)
         rule = self.rule
-        limit = (np.full(len(rule.columns), np.nan) if rule.range_mps2 is None
-                 else np.broadcast_to(np.asarray(rule.range_mps2, dtype=float), (len(rule.columns),)))
-        stated = np.isfinite(limit) & (limit > 0)
-        # the value checks of _value_faults, for the compiled decision (a reading beyond ``_high`` is out of
-        # range, one at or beyond ``_low`` clipped; none where no range is stated)
-        self._low = np.ascontiguousarray((1 - CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
-        self._high = np.ascontiguousarray((1 + CLIP_TOLERANCE) * np.where(stated, limit, np.inf))
+        # the value checks of _value_faults, for the compiled decision (a reading at or beyond ``_low`` is
+        # clipped, one beyond ``_high`` out of range; none where no range is stated)
+        self._low, self._high = (np.ascontiguousarray(v) for v in range_limits(rule.range_mps2, len(rule.columns)))
         self._sensors = np.ascontiguousarray(np.asarray(rule.sensor_of_axis, dtype=np.int64))
         self._min_repeats = stuck_min_samples(rule.rate_hz) - 1  # (a run of one value this long may be stuck)
         self._decision = None  # the compiled decision, imported at its first use
@@ -848,7 +850,8 @@ class StreamScreen:
                 fast, y, spikes = self._decision(
                     self._accel[:n], self._low, self._high, self._min_repeats,
                     max(0, a - 2 * SPIKE_REACH), SPIKE_REACH, known, self._sensors, MEDIAN_HALF_WIDTH,
-                    SCALE_HALF_WIDTH, SPIKE_SCALES, _WHITE_SECOND_DIFFERENCE, OUT_OF_ANY_RANGE_MPS2, self._first == 0, a, b)
+                    SCALE_HALF_WIDTH, SPIKE_SCALES, _WHITE_SECOND_DIFFERENCE, OUT_OF_ANY_RANGE_MPS2, self._first == 0,
+                    a, b)
                 if fast:
                     kinds = {"spikes": spikes}
             if not fast:

@@ -2,13 +2,13 @@
 
 A stream decides its readings a block at a time (one sample at 62.5 Hz, ten at 500 Hz), each decision on a
 buffer of a few dozen rows: there the numpy expressions of :func:`gfimu.readings._spikes` cost their calls
-(about forty, 0.2-0.3 ms a decision) far more than their arithmetic. Around a spike every block is decided so
-(a spike every 2.4 s at 62.5 Hz: nine decisions in ten), and a buffer whose only faults can be spikes is decided
-whole by :func:`spike_decision`: the value checks, the spikes and their replacements in one call, the numpy
-expressions of :func:`gfimu.readings._screen` its oracle (``StreamScreen.compiled = False``). :func:`spike_mask` is that rule for a
-buffer's middle (no end of the log in it), term for term and in the same order of operations, so it gives the
-same mask to the bit: the rolling median is a selection (the middle value, or the mean of the two middle finite
-ones where a window holds a missing reading), the centred sums are differences of running sums taken in row
+(about forty, 0.2-0.3 ms a decision) far more than their arithmetic. Around a spike every block is decided so (a spike
+every 2.4 s at 62.5 Hz: nine decisions in ten), and a buffer whose only faults can be spikes is decided whole by
+:func:`spike_decision`: the value checks, the spikes and their replacements in one call, the numpy expressions of
+:func:`gfimu.readings._screen` its oracle (``StreamScreen.compiled = False``). :func:`spike_mask` is that rule for a
+buffer's middle (no end of the log in it), term for term and in the same order of operations, so it gives the same
+mask to the bit: the rolling median is a selection (the middle value, or the mean of the two middle finite ones where
+a window holds a missing reading), the centred sums are differences of running sums taken in row
 order, as ``numpy.cumsum`` takes them. The numpy expression stays the oracle ``tests/test_screen_kernels.py``
 compares it with; a whole log (:func:`gfimu.readings.screen_log`) is screened by the numpy expressions, on
 arrays long enough for them.
@@ -140,44 +140,42 @@ def _select(a, k):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def spike_decision(buf, low_limit, high_limit, min_repeats, start, reach, known, sensor_of_axis, median_half, scale_half,
-                   spike_scales, white_factor, out_of_any, log_start, first, stop):
+def spike_decision(buf, low_limit, high_limit, min_repeats, start, reach, known, sensor_of_axis, median_half,
+                   scale_half, spike_scales, white_factor, out_of_any, log_start, first, stop):
     """A stream's decision (:meth:`gfimu.readings.StreamScreen._decide`) on a buffer ``buf`` (N, n_axes) that
     holds only finite readings within range and no run of repeats long enough to be stuck, in one call:
-    ``(ok, y, spikes)``, ``ok`` False (nothing computed) where the buffer holds any other fault, or the
-    spike rule would read from the log's first rows (``start`` 0 and ``log_start``, the buffer's first row the
-    log's): the numpy expressions then decide.
+    ``(ok, y, spikes)``, ``ok`` False (nothing computed, ``buf`` and ``known`` returned) where the buffer
+    holds any other fault, or the spike rule would read from the log's first rows (``start`` 0 and
+    ``log_start``, the buffer's first row the log's): the numpy expressions then decide.
 
     The checks are :func:`gfimu.readings._value_faults`' (not finite, beyond ``out_of_any``, beyond
     ``high_limit`` = (1 + tolerance) × the stated range, at or beyond ``low_limit`` = (1 - tolerance) × it: a
-    clip; infinite where no range is stated) and a column repeating one value over ``min_repeats`` + 1
-    readings in a row (as long as :func:`gfimu.readings.stuck_runs`' shortest run). Then, as :func:`gfimu.readings._screen`
-    decides: the spikes of the rows from ``start`` (0: every row's) (:func:`spike_mask`, the floor from the
-    whole buffer's median |reading|, :func:`gfimu.readings._nanmedian_flat`), a row whose spikes two sensors
-    (``sensor_of_axis``) share cleared, those of the rows before ``start + reach`` as ``known``; each spike
-    replaced by the median of its good neighbours within ``median_half`` rows, else by the next good reading
-    of its column (the last where none follows; :func:`gfimu.readings._replaced`). Only the rows decided,
-    ``[first, stop)``, are given out: their readings (``y``, the other rows as they came) and their spikes are
-    those of the numpy expressions."""
+    clip; infinite where no range is stated, :func:`gfimu.readings.range_limits`) and a column repeating one
+    value over ``min_repeats`` + 1 readings in a row (as long as :func:`gfimu.readings.stuck_runs`' shortest
+    run). Then, as :func:`gfimu.readings._screen` decides: the spikes of the rows from ``start`` (0: every
+    row's; :func:`spike_mask`, the floor from the whole buffer's median |reading|,
+    :func:`gfimu.readings._nanmedian_flat`), a row whose spikes two sensors (``sensor_of_axis``) share
+    cleared, those of the rows before ``start + reach`` as ``known``; each spike replaced by the median of its
+    good neighbours within ``median_half`` rows, else by the next good reading of its column (the last where
+    none follows; :func:`gfimu.readings._replaced`). Only the rows decided, ``[first, stop)``, are given out:
+    their readings (``y``, the other rows as they came) and their spikes are those of the numpy expressions."""
     n, m = buf.shape
-    y = buf.copy()
-    spikes = known.copy()
     if (start == 0 and log_start) or n < 2 * scale_half + 1:
-        return False, y, spikes
+        return False, buf, known  # (not ok: nothing made, the arrays given returned)
     for i in range(n):
         for j in range(m):
             v = buf[i, j]
             if not np.isfinite(v):
-                return False, y, spikes
+                return False, buf, known
             a = abs(v)
             if a > out_of_any or a > high_limit[j] or a >= low_limit[j]:
-                return False, y, spikes
+                return False, buf, known
     for j in range(m):  # a run of one value over min_repeats + 1 readings may be stuck: the numpy rule judges it
         run = 0
         for i in range(1, n):
             run = run + 1 if buf[i, j] == buf[i - 1, j] else 0
             if run >= min_repeats:
-                return False, y, spikes
+                return False, buf, known
     flat = np.abs(buf).reshape(-1)
     k = flat.shape[0]
     hi = k // 2  # the two middle values (one where k is odd): the order statistics numpy's partition finds

@@ -40,7 +40,8 @@ def main(argv=None) -> int:
     ap.add_argument("log", nargs="?", help="log folder (default: a simulated random3d log, --rate-hz, --duration-s)")
     ap.add_argument("--rate-hz", type=float, default=62.5, help="simulated log's rate [Hz] (default 62.5)")
     ap.add_argument("--duration-s", type=float, default=600.0, help="simulated log's length [s] (default 600)")
-    ap.add_argument("--spike-every", type=int, default=150, help="a spike every this many samples (0: none; default 150)")
+    ap.add_argument("--spike-every", type=int, default=150,
+                    help="a spike every this many samples (0: none; default 150)")
     ap.add_argument("--spike-mps2", type=float, default=60.0, help="the spikes' size [m/s^2] (default 60)")
     ap.add_argument("--runs", type=int, default=3, help="rounds; medians are shown (default 3)")
     args = ap.parse_args(argv)

@@ -488,8 +488,8 @@ class StartHold:
     engine; :meth:`FixedLagSmoother._release_start`).
 
     Settings: ``max_s`` (the longest hold [s]; 0: rows are never held) and ``check_every_ns`` (the shortest
-    span at which the evidence is first weighed; then at doubling spans, :meth:`due`). Of the current segment: ``deciding``
-    (its first rows are being held), ``held`` ((timestamp_ns, raw sample, filtered state) of the rows held
+    span at which the evidence is first weighed; then at doubling spans, :meth:`due`). Of the current segment:
+    ``deciding`` (its first rows are being held), ``held`` ((timestamp_ns, raw sample, filtered state) of the rows held
     so far), ``next_check_ns`` (when the evidence is weighed next), ``last_resolve`` ((timestamps, ω) of the
     previous check's re-solve) and ``waiting_for_batch`` (the rows held are to be released from a batch
     solution of the stretch: no check meanwhile). Of every segment so far: ``starts`` (how its start was decided) and
