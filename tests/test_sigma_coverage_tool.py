@@ -87,3 +87,36 @@ def test_scaled_sigma_covers_a_physical_misfit_within_the_binomial_spread(tmp_pa
     assert 0.0 < sp < 0.15
     assert sc.in_target(m, 3 * sp), (m, sp)
     assert 1.5 < m.mean_nees < 6.0
+
+
+@pytest.mark.parametrize("constant, drawn", [(False, 1), (True, sc.MAX_DRAWS)])
+def test_auto_draws_stop_once_the_scaled_sigma_holds_enough_independent_samples(monkeypatch, tmp_path, capsys,
+                                                                                constant, drawn):
+    # a draw of 2000 independent errors holds 2000 independent samples per axis: one draw is enough; an error
+    # constant over each draw holds one per draw, so the drawing goes on to MAX_DRAWS
+    from gfimu.motion import Motion
+
+    n = 2000
+    seen = []
+
+    def read_cell(cell, folder):
+        seen.append(cell.cell.seed)
+        return cell.cell.seed, np.zeros((n, 3))
+
+    def run_both(seed, method):
+        rng = np.random.default_rng(seed)
+        err = np.full((n, 3), rng.standard_normal()) if constant else rng.standard_normal((n, 3))
+        sigma = np.ones((n, 3))
+        return Motion(np.arange(n, dtype=np.int64), err, sigma={"omega_b_radps": sigma}), sigma
+
+    monkeypatch.setattr(sc, "read_cell", read_cell)
+    monkeypatch.setattr(sc, "run_both", run_both)
+    mc = _cell("turntable-0.3m-unstated")
+    sc.pooled_rows_for(mc, None, ["smoother"], tmp_path)
+    assert len(seen) == drawn and seen[0] == mc.cell.seed
+    out = capsys.readouterr().out
+    assert (f"({drawn} draws)" in out) == (drawn > 1) and out.count("| smoother |") == 2
+    # a number of draws given: exactly that many
+    seen.clear()
+    sc.pooled_rows_for(mc, 2, ["smoother"], tmp_path)
+    assert len(seen) == 2

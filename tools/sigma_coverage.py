@@ -16,7 +16,7 @@ MIMU4444 recordings given as arguments (``data.bin``) are converted with ``gfimu
 scored as ``gfimu evaluate LOG EST --moving-threshold-radps 2`` scores them: against the mean of the
 board's gyros, on the rows whose reference is valid and turns faster than 2 rad/s.
 
-    python3 tools/sigma_coverage.py [--cells PATTERN] [--methods smoother,fixed-lag] [--no-cells] [--all] [--draws N] [data.bin ...]
+    python3 tools/sigma_coverage.py [--cells PATTERN] [--methods smoother,fixed-lag] [--no-cells] [--all] [--draws N|auto] [data.bin ...]
 
 Noise-free cells are left out (the errors there are rounding, σ ~ 0), and cells over 10,000 samples
 unless ``--all`` (time). Each row's ± is the spread of its 1σ share from the count of independent
@@ -25,10 +25,12 @@ positive), a binomial std √(c (1 − c) / N_eff) of share c, the largest over 
 third row: the scaled σ against the reference lined up in time (the offset that best lines |ω| up, as
 ``gfimu evaluate --estimate-time-offset``: the board's gyros lag its accelerometers by about 1.3 ms, an
 error of the reference, not of the estimate).
-``--draws N`` pools N independent draws of each simulated cell (seeds 1 … N of its motion, noise and
-misfit): a short cell's error is correlated over most of its length (20kHz-0.5s: a few independent
-samples per axis, ± 26 %), so one draw cannot tell a σ that is right from one that is not; N draws hold
-the sum of their independent samples, and ± shrinks as 1/√N. The foreign cells' draws vary the triads'
+Each simulated cell is drawn again (seeds 1, 2, … of its motion, noise and misfit), its draws pooled, until
+every method's scaled σ has :data:`MIN_INDEPENDENT` independent samples on every axis, or
+:data:`MAX_DRAWS` draws: a short cell's error is correlated over most of its length (20kHz-0.5s: a few
+independent samples per axis, ± 26 %), and a cell with sensor positions or gains off makes one fixed
+calibration error per draw, so one draw cannot tell a σ that is right from one that is not; the pooled draws
+hold the sum of their independent samples, and ± shrinks as 1/√N. ``--draws N`` pools exactly N draws. The foreign cells' draws vary the triads'
 layout and the noise only: the motion, and with it the bias of their unstated gain, is the same in every
 draw, which ± does not count. A run that fails prints its error in the table.
 """
@@ -87,6 +89,11 @@ def ar1(rng, shape, std: float, corr: float) -> np.ndarray:
 
 LONG_SAMPLES = 10000
 """Cells of more samples run with ``--all`` only (time)."""
+MIN_INDEPENDENT = 100
+"""Independent samples per axis a simulated cell's pooled draws reach before the drawing stops (``--draws auto``):
+the 1σ share of a right σ then scatters by at most √(0.68 · 0.32 / 100) ≈ 5 %."""
+MAX_DRAWS = 5
+"""... or this many draws (time)."""
 
 MATRIX = tuple(MisfitCell(c) for c in rm.CELLS if c.noise_mps2 > 0)
 CELLS = MATRIX + (
@@ -292,11 +299,20 @@ def read_cell(mc: MisfitCell, folder: Path):
     return log, omega
 
 
-def pooled_rows_for(mc: MisfitCell, n: int, methods, folder: Path) -> None:
-    """Rows of ``n`` independent draws of ``mc`` pooled (:func:`draws`, :func:`spread`), for each method."""
+def independent_samples(err: np.ndarray, sigma: np.ndarray) -> float:
+    """The fewest independent samples over the axes of one draw's 1σ indicator (:func:`independent_counts`)."""
+    counts = independent_counts(err, sigma)
+    return float(np.min(counts[:, 1])) if np.all(np.isfinite(counts)) else 0.0
+
+
+def pooled_rows_for(mc: MisfitCell, n: int | None, methods, folder: Path) -> None:
+    """Rows of independent draws of ``mc`` pooled (:func:`draws`, :func:`spread`), for each method: ``n``
+    draws, or (None) draws until every method's scaled σ holds :data:`MIN_INDEPENDENT` independent samples
+    on every axis, at most :data:`MAX_DRAWS`."""
     runs = {m: [] for m in methods}  # (err, white, scaled) per draw
+    held = {m: 0.0 for m in methods}  # independent samples of the scaled σ's indicator, summed over the draws
     failed = {}
-    for k, cell in enumerate(draws(mc, n)):
+    for k, cell in enumerate(draws(mc, n or MAX_DRAWS)):
         sub = folder / f"{mc.name}-draw{k}"
         sub.mkdir(parents=True, exist_ok=True)
         log, omega = read_cell(cell, sub)
@@ -305,15 +321,20 @@ def pooled_rows_for(mc: MisfitCell, n: int, methods, folder: Path) -> None:
                 continue
             try:
                 motion, white = run_both(log, method)
-                runs[method].append((motion.omega_b_radps - omega, white, motion.sigma["omega_b_radps"]))
+                err = motion.omega_b_radps - omega
+                runs[method].append((err, white, motion.sigma["omega_b_radps"]))
+                held[method] += independent_samples(err, motion.sigma["omega_b_radps"])
             except Exception as exc:  # reported, not fatal to the table
                 failed[method] = f"seed {cell.cell.seed}: {type(exc).__name__}: {exc}"
         del log
-    name = f"{mc.name} ({n} draws)"
+        if n is None and all(held[m] >= MIN_INDEPENDENT for m in methods if m not in failed):
+            break
     for method in methods:
         if method in failed:
-            print(f"| {name} | {method} | | error: {failed[method]} ||||||||", flush=True)
+            print(f"| {mc.name} | {method} | | error: {failed[method]} ||||||||", flush=True)
             continue
+        drawn = len(runs[method])
+        name = mc.name if drawn == 1 else f"{mc.name} ({drawn} draws)"
         (e0, w0, s0), rest = runs[method][0], runs[method][1:]
         print(row(name, method, "white", e0, w0, [(e, w) for e, w, _ in rest]), flush=True)
         print(row(name, method, "scaled", e0, s0, [(e, s) for e, _, s in rest]), flush=True)
@@ -326,9 +347,18 @@ def main(argv=None) -> int:
     ap.add_argument("--no-cells", action="store_true", help="the recordings only")
     ap.add_argument("--all", action="store_true", help=f"cells over {LONG_SAMPLES} samples too")
     ap.add_argument("--methods", default="smoother,fixed-lag")
-    ap.add_argument("--draws", type=int, default=1, help="independent draws of each simulated cell, pooled")
+    ap.add_argument("--draws", default="auto",
+                    help="independent draws of each simulated cell, pooled: a number, or auto (until every method's "
+                         f"scaled σ holds {MIN_INDEPENDENT} independent samples per axis, at most {MAX_DRAWS}; "
+                         "default: auto)")
     args = ap.parse_args(argv)
     methods = args.methods.split(",")
+    if args.draws == "auto":
+        n_draws = None
+    elif args.draws.isdigit() and int(args.draws) >= 1:
+        n_draws = int(args.draws)
+    else:
+        ap.error(f"--draws: a number of draws (1 or more) or auto, not {args.draws!r}")
     cells = [] if args.no_cells else [c for c in CELLS if args.all or c.cell.duration_s * c.cell.rate_hz <= LONG_SAMPLES]
     if args.cells:
         import fnmatch
@@ -340,11 +370,7 @@ def main(argv=None) -> int:
     print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for mc in cells:
-            if args.draws > 1:
-                pooled_rows_for(mc, args.draws, methods, Path(tmp))
-                continue
-            log, omega = read_cell(mc, Path(tmp))
-            rows_for(mc.name, log, omega, methods)
+            pooled_rows_for(mc, n_draws, methods, Path(tmp))
         for rec in args.recordings:
             name = f"{rec.parent.name} (MIMU4444)"
             got = moving_recording(rec, Path(tmp))
