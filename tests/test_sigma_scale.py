@@ -326,3 +326,18 @@ def test_parity_sandwich_sums_by_hand(loss):
         np.testing.assert_allclose(sums[i], expected, rtol=1e-9, atol=1e-9 * ARRAY.n_axes)
     p0, rank0, _, plain = ss.parity(ARRAY, y, X, std, None, slopes=True)
     np.testing.assert_array_equal(plain, np.column_stack([np.sum(p0 * p0, axis=1), ARRAY.n_axes - rank0, rank0]))
+
+
+@pytest.mark.parametrize("n", [3, 10, 101, 1000])
+def test_local_sums_are_numpys_same_convolution_with_ones(n):
+    # the window the guard's sums and s_i² take: exactly the convolution's for integer values (counts), to
+    # rounding for real ones (cumulative sums of values of size v over n samples: n · v · eps at most)
+    rng = np.random.default_rng(n)
+    for width in sorted({1, 2, 3, 4, 5, 8, 9, n}):
+        if width > n:
+            continue
+        k = rng.integers(0, 5, n)
+        np.testing.assert_array_equal(ss.local_sums(k, width), np.convolve(k.astype(float), np.ones(width), "same"))
+        v = 10.0 * rng.standard_normal(n)
+        np.testing.assert_allclose(ss.local_sums(v, width), np.convolve(v, np.ones(width), "same"), rtol=0,
+                                   atol=n * 10.0 * 8 * np.finfo(float).eps)

@@ -197,7 +197,10 @@ def long_run_factors(rho: np.ndarray) -> np.ndarray:
 
 
 def local_sums(values: np.ndarray, window: int) -> np.ndarray:
-    """Sums of ``values`` (N,) over the ``window`` samples centred on each (fewer at the ends)."""
+    """Sums of ``values`` (N,) over the ``window`` samples centred on each (fewer at the ends): samples
+    ``i - window // 2`` to ``i + (window - 1) // 2``, the window of ``numpy.convolve(values, numpy.ones(window),
+    "same")`` (``window`` ≤ N), by cumulative sums: O(N) rather than O(N · window), the same sums to rounding
+    (exactly for integer values)."""
     c = np.concatenate([[0.0], np.cumsum(np.asarray(values, dtype=float))])
     i = np.arange(len(values))
     half = int(window) // 2
