@@ -56,3 +56,13 @@ def test_a_baseline_checkout_runs_the_gfimu_commands_in_the_same_loop(tmp_path):
     assert sorted(entry) == ["floor", "import", "import@baseline", "samples"]
     done = run("--log", str(log), "--baseline", str(tmp_path), cwd=tmp_path)
     assert done.returncode == 2 and f"--baseline {tmp_path}: not a gfimu checkout" in done.stderr
+
+
+def test_a_cell_of_the_regime_matrix_is_built_and_measured(tmp_path):
+    # --cell builds the cell's log (here 0.05 s of the 20 kHz impact cell: 1,000 samples) and measures on it
+    done = run("--cell", "impacts-20kHz", "--duration-s", "0.05", "--runs", "1", "--only", "floor,pass", "--json",
+               str(tmp_path / "b.json"), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "regime-matrix cell impacts-20kHz (20000 Hz, 0.05 s): 1000 samples" in done.stdout
+    done = run("--cell", "no-such-cell", cwd=tmp_path)
+    assert done.returncode == 2 and "no cell 'no-such-cell'" in done.stderr

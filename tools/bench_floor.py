@@ -24,13 +24,15 @@ of the floor's. The processes run with Python's bytecode cache on and one BLAS t
 (``tools/bench_env.py``).
 
 The log is a simulated cube of four triads (``gfimu simulate random3d``, 5 cm half edge, 500 Hz,
-``--duration-s`` long, default noise), or ``--log DIR`` (a log folder), or each MIMU4444 ``data.bin``
-given as an argument (converted with ``gfimu convert mimu4444`` first; one table each).
+``--duration-s`` long, default noise), or ``--log DIR`` (a log folder), or ``--cell NAME`` (a cell of
+tools/regime_matrix.py, ``--duration-s`` long where given: the 20 kHz impact cell, at the rates impact sensors
+record), or each MIMU4444 ``data.bin`` given as an argument (converted with ``gfimu convert mimu4444`` first;
+one table each).
 
 With ``--baseline DIR`` (another checkout of gfimu) each gfimu command selected also runs with that
 checkout's package, in the same loop, as ``NAME@baseline``: a before/after comparison under the same load.
 
-    python3 tools/bench_floor.py [--runs 5] [--duration-s 60] [--log DIR] [--only batch,fixed-lag] [--baseline DIR] [data.bin ...]
+    python3 tools/bench_floor.py [--runs 5] [--duration-s 60] [--log DIR | --cell NAME] [--only batch,fixed-lag] [--baseline DIR] [data.bin ...]
 """
 
 from __future__ import annotations
@@ -172,8 +174,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("recordings", nargs="*", type=Path, help="MIMU4444 data.bin files, each converted and measured")
     ap.add_argument("--runs", type=int, default=5, help="rounds of the loop; medians are shown (default 5)")
-    ap.add_argument("--duration-s", type=float, default=60.0, help="length of the simulated cube log [s] (default 60)")
+    ap.add_argument("--duration-s", type=float, default=None,
+                    help="length of the simulated cube log [s] (default 60), or with --cell of the cell's log (default: "
+                         "the cell's own)")
     ap.add_argument("--log", type=Path, help="measure on this log folder instead of a simulated one")
+    ap.add_argument("--cell", help="measure on the log of this cell of tools/regime_matrix.py (e.g. impacts-20kHz)")
     ap.add_argument("--only", default=",".join(NAMES),
                     help=f"comma-separated commands to run, of {', '.join(NAMES)} (default all)")
     ap.add_argument("--baseline", type=Path, metavar="DIR",
@@ -188,6 +193,18 @@ def main(argv=None) -> int:
         ap.error("--runs: at least 1")
     if args.log is not None and not (args.log / "imu.csv").is_file():
         ap.error(f"--log {args.log}: no imu.csv in that folder")
+    cell = None
+    if args.cell is not None:
+        import regime_matrix
+
+        cell = next((c for c in regime_matrix.CELLS if c.name == args.cell), None)
+        if cell is None:
+            ap.error(f"--cell: no cell {args.cell!r}; tools/regime_matrix.py --list names them")
+        if args.duration_s is not None:
+            from dataclasses import replace
+
+            cell = replace(cell, duration_s=args.duration_s)
+    duration_s = 60.0 if args.duration_s is None else args.duration_s
     for rec in args.recordings:
         if not rec.is_file():
             ap.error(f"{rec}: no such file")
@@ -201,6 +218,11 @@ def main(argv=None) -> int:
         logs: list[tuple[str, Path]] = []
         if args.log is not None:
             logs.append((f"log {args.log}", args.log))
+        if cell is not None:
+            folder, _ = regime_matrix.build_log(cell, Path(tmp) / "cell")
+            for extra in ("truth.csv", "reference.csv"):  # the command would not read them; the floor does not either
+                (folder / extra).unlink(missing_ok=True)
+            logs.append((f"regime-matrix cell {cell.name} ({cell.rate_hz:g} Hz, {cell.duration_s:g} s)", folder))
         for rec in args.recordings:
             folder = Path(tmp) / f"{rec.parent.name}-{len(logs)}"
             subprocess.run([sys.executable, "-m", "gfimu", "convert", "mimu4444", str(rec), "--out", str(folder),
@@ -209,10 +231,10 @@ def main(argv=None) -> int:
         if not logs:
             folder = Path(tmp) / "cube"
             subprocess.run([sys.executable, "-m", "gfimu", "simulate", "random3d", "--out", str(folder),
-                            "--duration-s", f"{args.duration_s:g}", "--rate-hz", "500", "--seed", "0", "--quiet"],
+                            "--duration-s", f"{duration_s:g}", "--rate-hz", "500", "--seed", "0", "--quiet"],
                            env=env, check=True)
             (folder / "truth.csv").unlink()  # the command would not read it; the floor does not either
-            logs.append((f"simulated cube of four triads (random3d, 500 Hz, {args.duration_s:g} s)", folder))
+            logs.append((f"simulated cube of four triads (random3d, 500 Hz, {duration_s:g} s)", folder))
         print(f"{os.cpu_count()} CPUs, 1-minute load average {load:.1f} at the start; "
               f"medians of {args.runs} rounds, each command once per round in a turning order")
         print()

@@ -204,6 +204,14 @@ SECTIONS = (
         full=("--runs", "3", "--only", "floor,batch,fixed-lag"),
         quick=("--runs", "1", "--only", "floor,batch,fixed-lag"), recordings=True),
     Section(
+        "floor-20khz", "Batch and fixed-lag whole commands at 20 kHz", "bench_floor.py",
+        "The same loop on 6 s of the regime matrix's 20 kHz impact cell (four triads, 2.5 cm, impacts of "
+        "20-100 g; tools/regime_matrix.py): the floor, `gfimu estimate LOG` and `gfimu estimate LOG --method "
+        "fixed-lag`, medians of the rounds. At this rate the batch smoother's process-noise tuning (its marginal "
+        "likelihood over every sample of the window: `tune_span_s` is 10 s whatever the rate) is most of its time.",
+        full=("--runs", "3", "--only", "floor,batch,fixed-lag", "--cell", "impacts-20kHz", "--duration-s", "6"),
+        quick=("--runs", "1", "--only", "floor,batch,fixed-lag", "--cell", "impacts-20kHz", "--duration-s", "1")),
+    Section(
         "reader-memory", "Reading a log: memory and time", "bench_reader_memory.py",
         "A 500 Hz log of eight triads written with the library's writer, then read in a fresh process: "
         "peak resident memory above the process's memory before reading, as MB and as a multiple of the "
