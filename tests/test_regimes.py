@@ -282,3 +282,25 @@ def test_regime_matrix_cli_rejects_unknown_cell():
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert "no cell matches 'no-such-cell'" in proc.stderr
+
+
+def test_another_draw_of_the_cells_is_their_seed_plus_n(capsys, monkeypatch):
+    # --draw N runs each cell with its seed plus N (the failing draws of a cell can be run by name); a negative
+    # draw is refused
+    seen = []
+
+    def run_cell(cell, folder, *args, **kwargs):
+        seen.append((cell.name, cell.seed))
+        return {"cell": cell.name, "description": cell.describe(), "samples": 0, "results": {},
+                "verdict": {"cell": "PASS", "reasons": []}}
+
+    monkeypatch.setattr(rm, "run_cell", run_cell)
+    monkeypatch.setattr(rm, "compile_kernels", lambda: 0.0)
+    monkeypatch.setattr(rm, "table_row", lambda row: row["cell"])
+    cell = next(c for c in rm.CELLS if c.name == "vehicle-50Hz-60s")
+    rm.main(["--cells", "vehicle-50Hz-60s", "--draw", "4"])
+    assert seen == [("vehicle-50Hz-60s", cell.seed + 4)]
+    assert "draw 4: each cell's seed plus 4" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        rm.main(["--draw", "-1"])
+    assert exc.value.code == 2

@@ -32,7 +32,7 @@ CSV layout by ``gfimu convert csv --map``), hand-held (random 3-D), turntable (c
 one axis, after a spin-up from rest), vehicle (slow yaw, long accelerations), impacts of 20-100 g lasting 1-5 ms, a long
 still stretch then motion, and a body at rest in free fall (all readings zero).
 
-    python3 tools/regime_matrix.py [--quick] [--cells PATTERN] [--json OUT] [--keep DIR]
+    python3 tools/regime_matrix.py [--quick] [--cells PATTERN] [--draw N] [--json OUT] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -713,14 +713,21 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout-per-sample", type=float, default=3e-3, help="... plus this [s] per sample")
     ap.add_argument("-O", dest="options", action="append", default=[], metavar="METHOD.NAME=VALUE",
                     help="an option of one method (a Python literal: 1e-3, None, 'ml'), e.g. -O smoother.tune_span_s=None")
+    ap.add_argument("--draw", type=int, default=0, metavar="N",
+                    help="another draw of each cell: its seed plus N (its motion, noise and misfit drawn again; "
+                         "default 0, the cell as listed)")
     ap.add_argument("--list", action="store_true", help="list the cells and exit")
     args = ap.parse_args(argv)
+    if args.draw < 0:
+        ap.error("--draw: 0 or more")
     try:
         options = parse_options(args.options)
     except ValueError as exc:
         print(f"-O: {exc}", file=sys.stderr)
         return 2
-    cells = cells_selected(args.quick, args.cells)
+    cells = [replace(c, seed=c.seed + args.draw) for c in cells_selected(args.quick, args.cells)]
+    if args.draw:
+        print(f"draw {args.draw}: each cell's seed plus {args.draw}")
     if args.list:
         for c in cells:
             print(f"{c.name:34s} {'quick' if c.quick else 'full '}  {c.describe()}")
