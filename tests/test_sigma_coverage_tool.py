@@ -120,3 +120,22 @@ def test_auto_draws_stop_once_the_scaled_sigma_holds_enough_independent_samples(
     seen.clear()
     sc.pooled_rows_for(mc, 2, ["smoother"], tmp_path)
     assert len(seen) == 2
+
+
+def test_a_cell_with_a_calibration_error_is_drawn_the_most_times(monkeypatch, tmp_path, capsys):
+    # positions or gains off: one error per draw, so the draws go on to MAX_DRAWS however many independent
+    # samples the first holds
+    from gfimu.motion import Motion
+
+    n = 2000
+    seen = []
+    monkeypatch.setattr(sc, "read_cell", lambda cell, folder: (seen.append(cell.cell.seed), cell.cell.seed)[1:] +
+                        (np.zeros((n, 3)),))
+
+    def run_both(seed, method):
+        err = np.random.default_rng(seed).standard_normal((n, 3))
+        return Motion(np.arange(n, dtype=np.int64), err, sigma={"omega_b_radps": np.ones((n, 3))}), np.ones((n, 3))
+
+    monkeypatch.setattr(sc, "run_both", run_both)
+    sc.pooled_rows_for(_cell("mimu-like-62Hz"), None, ["smoother"], tmp_path)
+    assert len(seen) == sc.MAX_DRAWS and f"({sc.MAX_DRAWS} draws)" in capsys.readouterr().out

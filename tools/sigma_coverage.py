@@ -28,9 +28,10 @@ error of the reference, not of the estimate).
 Each simulated cell is drawn again (seeds 1, 2, … of its motion, noise and misfit), its draws pooled, until
 every method's scaled σ has :data:`MIN_INDEPENDENT` independent samples on every axis, or
 :data:`MAX_DRAWS` draws: a short cell's error is correlated over most of its length (20kHz-0.5s: a few
-independent samples per axis, ± 26 %), and a cell with sensor positions or gains off makes one fixed
-calibration error per draw, so one draw cannot tell a σ that is right from one that is not; the pooled draws
-hold the sum of their independent samples, and ± shrinks as 1/√N. ``--draws N`` pools exactly N draws. The foreign cells' draws vary the triads'
+independent samples per axis, ± 26 %), so one draw cannot tell a σ that is right from one that is not; the
+pooled draws hold the sum of their independent samples, and ± shrinks as 1/√N. A cell with sensor positions or
+gains off makes one fixed calibration error per draw, which the count of a draw's samples does not see: it is
+drawn :data:`MAX_DRAWS` times. ``--draws N`` pools exactly N draws. The foreign cells' draws vary the triads'
 layout and the noise only: the motion, and with it the bias of their unstated gain, is the same in every
 draw, which ± does not count. A run that fails prints its error in the table.
 """
@@ -308,10 +309,13 @@ def independent_samples(err: np.ndarray, sigma: np.ndarray) -> float:
 def pooled_rows_for(mc: MisfitCell, n: int | None, methods, folder: Path) -> None:
     """Rows of independent draws of ``mc`` pooled (:func:`draws`, :func:`spread`), for each method: ``n``
     draws, or (None) draws until every method's scaled σ holds :data:`MIN_INDEPENDENT` independent samples
-    on every axis, at most :data:`MAX_DRAWS`."""
+    on every axis, at most :data:`MAX_DRAWS` (and :data:`MAX_DRAWS` of a cell whose sensor positions or gains are
+    off: one such error per draw, which makes each draw's errors one sample however many it holds)."""
     runs = {m: [] for m in methods}  # (err, white, scaled) per draw
     held = {m: 0.0 for m in methods}  # independent samples of the scaled σ's indicator, summed over the draws
     failed = {}
+    if n is None and (mc.position_error_m > 0 or mc.scale_error > 0):
+        n = MAX_DRAWS  # one calibration error per draw, which its samples' count does not see: every draw
     for k, cell in enumerate(draws(mc, n or MAX_DRAWS)):
         sub = folder / f"{mc.name}-draw{k}"
         sub.mkdir(parents=True, exist_ok=True)
