@@ -107,7 +107,6 @@ from ..model.problem import check_oscillators, options_reason
 from ...option import check_declared
 from ..model.option_groups import (GROUPS, BatchModelOptions, Engine, ModelGroups, ModelOptions, StreamOptions,
                                    TuningOptions, assemble)
-from ..solve.gravity_sign import gravity_sign_score
 from ..solve.initialise import initial_estimate, still_start
 from ..model.layout import OMEGA, OMEGA_DOT, SPECIFIC_FORCE
 from ..result import SmootherEstimator
@@ -131,13 +130,6 @@ branch is ``1 / (1 + e^Λ)`` for a log-likelihood ratio Λ, so the sign is decid
 SIGN_DECISION_NATS = math.log((1.0 - SIGN_ERROR_PROBABILITY) / SIGN_ERROR_PROBABILITY)
 """ln(999) = 6.9 nats."""
 
-
-GRAVITY_SIGN_SAMPLES, GRAVITY_SIGN_SCORE = 50, 0.5
-"""A tuning stretch's batch solution decides the sign of its held start by gravity when at least this many of its
-samples turn faster than 0.5 rad/s with gravity dominating f and ḟ follows -ω × f with a coefficient below minus
-this (:func:`gfimu.smoother.solve.gravity_sign.gravity_sign_score`; the batch initialiser's test of a steady
-rotation, :func:`gfimu.smoother.solve.initialise.steady_rotation_sign`): a rotation at constant rate, whose
-sign neither the readings nor ω̇ tell, and whose held re-solves weigh no such evidence."""
 
 AGREEMENT_CHI2 = 3.0
 """The filter's ω at the lag (the next row it would give) agrees with the re-solve of the held stretch
@@ -1707,14 +1699,9 @@ class FixedLagSmoother:
         return out
 
     def _start_from_batch(self, batch: list) -> int:
-        """The held rows of a tuning stretch whose batch solution ``batch`` comes out (:meth:`_tune_and_replay`),
-        released from it where the data decide the branch of ω: gravity turns in the body against the solution's
-        ω (:data:`GRAVITY_SIGN_SCORE`), or the held stretch solved again from the starts of :meth:`_start_evidence`
-        puts its best minimum on the solution's branch, ahead of the next by :data:`SIGN_DECISION_NATS`. The window
-        then goes on from the solution's states. Otherwise (a short stretch of slow rotation, whose sign its batch
-        solution cannot know either: a vehicle's yaw at 0.1 rad/s) the rows stay held, that check counted as the
-        hold's first (:meth:`StartHold.checked`). Returns the number of held rows so released (0 when nothing is
-        held or the rows are not the stretch's)."""
+        """The held rows of a tuning stretch whose batch solution ``batch`` comes out (:meth:`_tune_and_replay`):
+        the batch smoother has decided them on the whole stretch; the window goes on from its states. Returns
+        the number of held rows so released (0 when nothing is held or the rows are not the stretch's)."""
         hold = self._hold
         n = len(hold.held)
         rows = [h[0] for h in hold.held] + [t for _, t in self._segment.window]
@@ -1723,12 +1710,6 @@ class FixedLagSmoother:
             return 0
         X = np.array([np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
                       for s in batch[:len(rows)]])
-        if len(rows) > 2:  # gravity, turning in the body against ω, tells the sign (the batch initialiser's test)
-            score, used = gravity_sign_score(X[:, OMEGA], X[:, SPECIFIC_FORCE], np.diff(np.asarray(rows)) * 1e-9)
-            if used >= GRAVITY_SIGN_SAMPLES and score < -GRAVITY_SIGN_SCORE:
-                hold.record(hold.held_s, math.nan, math.nan, math.nan, False)
-                self._restart_window(X, hold.release())
-                return n
         try:
             _, best, _, evidence = self._start_evidence()
         except (np.linalg.LinAlgError, FloatingPointError, ValueError):  # not solvable: held, as any start
