@@ -39,9 +39,8 @@ def test_slow_motion_start_is_held_and_the_log_stays_within_twice_the_batch_smoo
 
 def test_the_hold_is_bounded_and_every_row_comes_out_once_in_order():
     """hold_max_s bounds the hold: at 200 Hz with hold_max_s = 1 s and lag 0.2 s, the first rows come out
-    at the latest when the held rows span 1 s after the 3 s tuning stretch (the sample 1.2 s past it, plus one
-    check), all at once, then one per push; every timestamp once, in order; the decision is recorded in
-    ``starts`` (the rows held span at most the hold, or the tuning stretch where its end decides them)."""
+    at the latest when the held rows span 1 s (the sample 1.2 s in, plus one check), all at once, then
+    one per push; every timestamp once, in order; the decision is recorded in ``starts``."""
     log = simulate("slow3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=200.0, duration_s=4.0, seed=1)
     sm = FixedLagEstimator(hold_max_s=1.0).smoother(log.array, 200.0)
     first_out, out = None, []
@@ -54,7 +53,7 @@ def test_the_hold_is_bounded_and_every_row_comes_out_once_in_order():
     out.extend(sm.flush())
     np.testing.assert_array_equal([s.timestamp_ns for s in out], log.timestamps_ns)
     assert first_out is not None and first_out <= int(round((3.0 + 1.0 + 0.2 + 0.5) * 200.0))
-    assert len(sm.starts) >= 1 and sm.starts[0]["held_s"] <= 3.0
+    assert len(sm.starts) >= 1 and sm.starts[0]["held_s"] <= 1.0 + 1e-9
     assert set(sm.starts[0]) == {"held_s", "evidence_nats", "agreement_chi2", "moved_chi2", "open"}
 
 
@@ -110,11 +109,11 @@ def test_start_hold_weighs_the_evidence_every_check_and_at_its_longest_span():
     assert not StartHold(max_s=0.0, check_every_ns=500 * ms).deciding  # no hold (the gtsam engine)
 
 
-def test_a_start_released_from_the_stretchs_batch_solution_weighs_the_evidence_once():
+def test_a_start_released_from_the_stretchs_batch_solution_weighs_no_evidence():
     """A consistent first stretch whose process noise is tuned comes out as its batch solution, which also
-    releases the rows held while the stretch is streamed where the data decide their branch: one check at the
-    stretch's end (none while it is streamed: each would solve the held stretch five times for rows the batch
-    solution replaces), its evidence recorded, and the rows are the batch solution's."""
+    releases the rows held while the stretch is streamed: no evidence is weighed meanwhile (each check would
+    solve the held stretch five times for rows the batch solution replaces). The start is recorded as decided
+    from the batch solution (no evidence figure), and the rows are the batch solution's."""
     from gfimu.smoother.stream import fixed_lag
 
     log = simulate("random3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=500.0, duration_s=5.0, seed=3)
@@ -135,55 +134,10 @@ def test_a_start_released_from_the_stretchs_batch_solution_weighs_the_evidence_o
     finally:
         fixed_lag.FixedLagSmoother._start_evidence = original
     np.testing.assert_array_equal([s.timestamp_ns for s in out], log.timestamps_ns)
-    assert len(checks) == 1 and checks[0] > 0
-    assert sm.starts and sm.starts[0]["evidence_nats"] >= fixed_lag.SIGN_DECISION_NATS and not sm.starts[0]["open"]
+    assert sm.starts and np.isnan(sm.starts[0]["evidence_nats"]) and not sm.starts[0]["open"]
+    assert checks == []
     w = np.array([s.omega_b_radps for s in out])
     assert _rmse(w, log.truth.omega_b_radps) < 0.1
-
-
-def test_start_hold_checked_off_its_schedule_moves_the_next_check_past_the_spans_passed():
-    """A check made off the schedule (a tuning stretch's, at its end) counts for the spans already passed: the
-    next falls at the first span of the schedule beyond the newest sample."""
-    from gfimu.smoother.stream.fixed_lag import StartHold
-
-    ms = 1_000_000
-    hold = StartHold(max_s=2.0, check_every_ns=500 * ms)
-    hold.held = [(t * ms, ("raw", t), None) for t in range(0, 1201, 10)]  # 1.2 s held, the newest 1.4 s in
-    hold.checked(1400 * ms)
-    # top = 2 s + 0.2 s: the schedule's spans 0.55, 1.1, 2.2 s; 1.4 s in, the next is at 2.2 s
-    assert hold.next_check_ns == 2200 * ms and not hold.due(2100 * ms) and hold.due(2200 * ms)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("draw", [4, 6, 7, 9])
-def test_a_vehicle_turning_slowly_keeps_the_sign_of_its_yaw(tmp_path, draw):
-    """A vehicle's yaw at 0.03-0.45 rad/s (the regime matrix's vehicle-50Hz-60s: a 0.3 m cube, 0.01 m/s², 50 Hz;
-    its draws 4, 6, 7 and 9 after the first): |ω| too small for the readings to tell from noise, while ω̇
-    (0.05-0.2 rad/s², which the readings fix linearly) stands 15 times above its own noise. Judged still, the
-    first stretch gave the stream the default densities, 100 times too loose, and three of these draws came
-    out with 20-28 % of the samples' ω the wrong way (0.19-0.33 rad/s RMSE, against 0.11-0.13 for the
-    per-sample ML estimate); tuned on that stretch, the fourth (draw 7) had its start released on the wrong
-    branch by the stretch's batch solution. Each keeps the sign, within twice the batch smoother (both about
-    0.004 rad/s)."""
-    import sys
-    from dataclasses import replace
-    from pathlib import Path
-
-    from gfimu.io import read_log
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-    import regime_matrix as rm
-
-    cell = next(c for c in rm.CELLS if c.name == "vehicle-50Hz-60s")
-    path, _ = rm.build_log(replace(cell, seed=cell.seed + draw), tmp_path)
-    log = read_log(path)
-    truth = log.truth.omega_b_radps
-    est = FixedLagEstimator()
-    fl = est.estimate(est.screen(log)[0]).motion.omega_b_radps
-    batch = BatchSmootherEstimator().estimate(log).motion.omega_b_radps
-    moving = np.linalg.norm(truth, axis=1) > 0.1
-    assert np.mean((np.sum(fl * truth, axis=1) < 0) & moving) < 0.005
-    assert _rmse(fl, truth) <= 2.0 * _rmse(batch, truth)
 
 
 def test_the_held_start_s_solves_beside_the_stream_are_the_serial_ones_to_the_bit(monkeypatch):
@@ -206,7 +160,7 @@ def test_the_held_start_s_solves_beside_the_stream_are_the_serial_ones_to_the_bi
     monkeypatch.setattr(fixed_lag.FixedLagSmoother, "_solved_from", kept)
     log = simulate("slow3d", array=cube_array(0.05, noise_std_mps2=0.07), rate_hz=200.0, duration_s=3.0, seed=1)
     FixedLagEstimator().estimate(log)
-    assert len(seen) >= 1 and all(p is not None for *_, p in seen)
+    assert len(seen) >= 2 and all(p is not None for *_, p in seen)
     assert not seen[-1][3]._process.is_alive()  # ended with the stream
     for problem, starts, solutions, _ in seen:
         assert len(solutions) == len(starts) >= 4

@@ -375,30 +375,3 @@ def test_a_log_too_long_for_its_estimate_to_be_sent_back_has_it_made_after_the_s
     assert after.report.per_sample is None
     assert beside.motion.omega_b_radps.tobytes() == after.motion.omega_b_radps.tobytes()
     assert beside.report.guard == after.report.guard
-
-
-@pytest.mark.slow
-def test_a_right_smoother_is_kept_where_the_per_sample_fit_only_looks_determined(tmp_path):
-    """Where |ω| is a few times the std the readings give it, the per-sample |ω| is biased up by its own noise
-    (|ω̂|² ≈ |ω|² + tr Σ) and the bound at it looks surer than it is. On the first 2 s of the regime matrix's
-    20 kHz impact cell (a 2.5 cm cube, 0.1 m/s², |ω| of 1-2.5 rad/s) the fixed-lag smoother tuned on its first
-    0.3 s is right to 0.008-0.044 rad/s where the per-sample answer is 1.4-2.7 rad/s off, yet the bound at the
-    per-sample |ω| counted those samples and the guard put that answer in five spans (1.48 rad/s over the 2 s).
-    A sample counts only where it is well determined at the smoother's |ω| as well: the smoother's answer stays
-    (0.020 rad/s over the 2 s)."""
-    import sys
-    from dataclasses import replace
-    from pathlib import Path
-
-    from gfimu.io import read_log
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-    import regime_matrix as rm
-
-    cell = next(c for c in rm.CELLS if c.name == "impacts-20kHz")
-    path, _ = rm.build_log(replace(cell, duration_s=6.0), tmp_path)  # its impacts from 2.2 s on
-    log = read_log(path).select(slice(0, 40000))
-    est = FixedLagEstimator()
-    run = est.estimate(est.screen(log)[0])
-    err = run.motion.omega_b_radps - log.truth.omega_b_radps
-    assert float(np.sqrt(np.mean(np.sum(err ** 2, axis=1)))) < 0.05

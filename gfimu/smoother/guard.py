@@ -24,10 +24,7 @@ than :data:`MERGE_GAP_S` are bridged and spans shorter than :data:`MIN_SAMPLES` 
 Only samples where the per-sample fit is well determined count: its |ω| at least
 :data:`DETERMINED_FACTOR` times the std of its ω (the Cramér-Rao bound at that ω with the noise σ_k,
 :func:`gfimu.crb.crb_per_sample`; it falls as 1/|ω|, so this asks |ω|² above a multiple of σ_k over
-the lever arms, the |ω| the noise alone gives), and so is the smoother's |ω| (the per-sample |ω| is biased up
-by its own noise, |ω̂|² ≈ |ω|² + tr Σ, where it is poorly determined, and the bound at it looks surer than it
-is: on the 20 kHz impact cell of the regime matrix, a 2.5 cm cube at 0.1 m/s², the per-sample answer was
-1.4-2.7 rad/s off where the bound at it counted it determined), and its own whitened residual within the χ²_ν
+the lever arms, the |ω| the noise alone gives), and its own whitened residual within the χ²_ν
 quantile at :data:`OUTLIER_FALSE_ALARM` (ν = axes - 9): where the readings themselves disagree with a rigid body, neither fit says which
 answer is right.
 
@@ -239,9 +236,6 @@ def check(log: Log, smoothed: Motion, per_sample: Motion, model_check: ModelChec
         z_s = np.sum(rigid_body_residual(log, smoothed.omega_b_radps, smoothed.omega_dot_b_radps2,
                                          smoothed.specific_force_b_mps2) ** 2, axis=1) / var
     ok = usable_samples(log, per_sample, model_check, z_m, var) & np.isfinite(z_s)
-    if ok.any():  # ... and well determined at the smoother's |ω| too (module docstring)
-        ws = np.linalg.norm(smoothed.omega_b_radps, axis=1)
-        ok[ok] = ws[ok] >= DETERMINED_FACTOR * omega_noise(log.array, smoothed.omega_b_radps[ok], var[ok])
     delta = np.where(ok, z_s - z_m, 0.0)
     if n < MIN_SAMPLES or not ok.any():
         return GuardResult(mode, (), int(ok.sum()), n)

@@ -525,29 +525,16 @@ class StartHold:
         spacing the cost grows with the square of the hold); counted back from the last check, which the
         longest hold makes anyway, none falls just before it (a check nearly as long would cost as much and
         decide no sooner)."""
-        first, top = self._schedule(newest_ns)
-        if newest_ns < self.next_check_ns and self.held_s < self.max_s:
-            return False
-        self.level = max(self.level - 1, 0)
-        self.next_check_ns = first + int(math.ceil(top / 2.0 ** self.level))
-        return True
-
-    def checked(self, newest_ns: int) -> None:
-        """A check was made, the newest sample at ``newest_ns``, off :meth:`due`'s schedule (a tuning stretch's,
-        streamed all at once): the next falls at the first of the schedule's spans beyond it."""
-        first, top = self._schedule(newest_ns)
-        while self.level > 0 and newest_ns >= self.next_check_ns:
-            self.level -= 1
-            self.next_check_ns = first + int(math.ceil(top / 2.0 ** self.level))
-
-    def _schedule(self, newest_ns: int) -> tuple[int, float]:
-        """(the first row held's timestamp, ``top``) of :meth:`due`, the schedule set at its first call."""
         first = self.held[0][0]
         top = self.max_s * 1e9 + (newest_ns - self.held[-1][0])
         if self.next_check_ns is None:
             self.level = math.floor(math.log2(top / self.check_every_ns)) if top > self.check_every_ns else 0
             self.next_check_ns = first + int(math.ceil(top / 2.0 ** self.level))
-        return first, top
+        if newest_ns < self.next_check_ns and self.held_s < self.max_s:
+            return False
+        self.level = max(self.level - 1, 0)
+        self.next_check_ns = first + int(math.ceil(top / 2.0 ** self.level))
+        return True
 
     def record(self, held_s: float, evidence_nats: float, agreement_chi2: float, moved_chi2: float,
                open_: bool) -> None:
@@ -1710,20 +1697,7 @@ class FixedLagSmoother:
             return 0
         X = np.array([np.concatenate([s.omega_b_radps, s.omega_dot_b_radps2, s.specific_force_b_mps2])
                       for s in batch[:len(rows)]])
-        try:
-            _, best, _, evidence = self._start_evidence()
-        except (np.linalg.LinAlgError, FloatingPointError, ValueError):  # not solvable: held, as any start
-            hold.checked(rows[-1])
-            return 0
-        w = best.states[:, OMEGA]
-        d = X[:, OMEGA] - w
-        same = math.sqrt(float(np.mean(np.sum(d * d, axis=1)))) <= SAME_BRANCH * math.sqrt(
-            float(np.mean(np.sum(w * w, axis=1))))
-        if not (evidence >= SIGN_DECISION_NATS and same):
-            hold.moved(np.asarray(rows, dtype=np.int64), w, None)  # kept for the next check
-            hold.checked(rows[-1])
-            return 0
-        hold.record(hold.held_s, evidence, math.nan, math.nan, False)
+        hold.record(hold.held_s, math.nan, math.nan, math.nan, False)
         self._restart_window(X, hold.release())
         return n
 

@@ -133,34 +133,22 @@ def has_motion(part: Log, ml_motion, check: ModelCheck | None) -> bool:
 
 STILL_OMEGA_NOISE = 2.0
 """A stretch is still when the 90th percentile of its per-sample |ω| is below this many times the
-|ω| that the readings' noise alone gives, and so is that of its per-sample |ω̇| against the RMS of ω̇'s own
-noise (and its ω̇ shows no motion above the noise). At rest the 90th percentile of |ω| is about 1.2 times it
-(a 5 cm cube of four triads with white noise: 1.02 against 0.83 rad/s), a slow turntable's (±23.5° at 1 Hz)
-3.1 times; that of |ω̇| 1.2-1.44 times (1.44: a three-axis Gaussian's norm, 2.50 σ at its 90th percentile, over
-√3 σ), a vehicle's yaw at 0.03-0.45 rad/s (ω̇ of 0.05-0.2 rad/s², a 0.3 m cube at 0.01 m/s²) 14-16 times."""
+|ω| that the readings' noise alone gives (and its ω̇ shows no motion above the noise). At rest the
+90th percentile is about 1.2 times it (a 5 cm cube of four triads with white noise: 1.02 against
+0.83 rad/s), a slow turntable's (±23.5° at 1 Hz) 3.1 times."""
 
 
 def is_still(part: Log, ml_motion, check: ModelCheck) -> bool:
     """Whether ``part`` shows the body at rest (or turning too slowly for its readings to tell): no
-    motion of ω̇ above the noise (:func:`has_motion`), |ω| within :data:`STILL_OMEGA_NOISE` times
+    motion of ω̇ above the noise (:func:`has_motion`) and |ω| within :data:`STILL_OMEGA_NOISE` times
     the |ω| of noise alone, ``√σ_q`` with ``σ_q`` the std the floor puts on the quadratic terms
-    (Ho & Lin 2009, eq. 6), and |ω̇| within :data:`STILL_OMEGA_NOISE` times the RMS of the per-sample ω̇'s
-    own noise (:func:`gfimu.smoother.tuning.model_choice.estimate_noise_variances`). The readings fix ω̇
-    linearly: a rotation too slow for them to tell |ω| from noise (a vehicle's yaw) still shows its angular
-    acceleration, and is motion, whose densities are tuned, not rest, which keeps the densities as given
-    (the defaults, 100 times too loose for such a yaw: its ω wandered through zero onto the wrong branch)."""
+    (Ho & Lin 2009, eq. 6)."""
     if has_motion(part, ml_motion, check):
         return False
     S = part.array.structure_matrix()
     c_q = float(np.mean(np.diag(np.linalg.pinv(S.T @ S))[6:9]))
     omega_noise = math.sqrt(check.noise_floor_mps2 * math.sqrt(max(c_q, 0.0)))
-    if not check.omega_p90_radps < STILL_OMEGA_NOISE * omega_noise:
-        return False
-    var_dw, _ = estimate_noise_variances(part.array, check, ml_motion.omega_b_radps)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.linalg.norm(ml_motion.omega_dot_b_radps2, axis=1) / np.sqrt(np.sum(var_dw, axis=1))
-    z = z[np.isfinite(z)]
-    return z.size == 0 or float(np.percentile(z, 90)) < STILL_OMEGA_NOISE
+    return check.omega_p90_radps < STILL_OMEGA_NOISE * omega_noise
 
 
 def sign_scale(part: Log, ml_motion) -> float | None:
