@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "tools" / "bench_floor.py"
@@ -58,6 +59,7 @@ def test_a_baseline_checkout_runs_the_gfimu_commands_in_the_same_loop(tmp_path):
     assert done.returncode == 2 and f"--baseline {tmp_path}: not a gfimu checkout" in done.stderr
 
 
+@pytest.mark.slow
 def test_a_cell_of_the_regime_matrix_is_built_and_measured(tmp_path):
     # --cell builds the cell's log (here 0.05 s of the 20 kHz impact cell: 1,000 samples) and measures on it
     done = run("--cell", "impacts-20kHz", "--duration-s", "0.05", "--runs", "1", "--only", "floor,pass", "--json",

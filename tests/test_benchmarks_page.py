@@ -7,6 +7,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "tools" / "benchmarks.py"
 _spec = importlib.util.spec_from_file_location("tools_benchmarks", SCRIPT)
@@ -53,6 +55,7 @@ def test_a_failing_script_leaves_its_section_saying_so():
     assert text.startswith(bench.MARK.format("x")) and text.endswith(bench.END.format("x"))
 
 
+@pytest.mark.slow
 def test_only_replaces_its_section_and_keeps_the_others(tmp_path):
     """--only startup: that section is run again and says when, the header and the other sections stay byte
     for byte; --only real-flow without recordings keeps that section's figures as they were (said on standard

@@ -96,7 +96,7 @@ def test_a_zip_holding_one_member_twice_is_refused(tmp_path):
     assert src.read_bytes() == before and not (tmp_path / "log").exists()
 
 
-@pytest.mark.parametrize("end", [b"\r", b"\r\n"])
+@pytest.mark.parametrize("end", [pytest.param(b"\r", marks=pytest.mark.slow), b"\r\n"])
 def test_cr_and_crlf_line_ends_read_as_line_ends(tmp_path, end):
     """imu.csv of 5 MB (several read blocks, a CR then its LF may fall on either side of a block's end) with
     lone CR or CRLF line ends: the same log as with LF."""
