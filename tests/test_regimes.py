@@ -14,6 +14,7 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -304,3 +305,10 @@ def test_another_draw_of_the_cells_is_their_seed_plus_n(capsys, monkeypatch):
     with pytest.raises(SystemExit) as exc:
         rm.main(["--draw", "-1"])
     assert exc.value.code == 2
+
+
+def test_a_cell_is_found_by_name_with_its_length_or_not_at_all():
+    cell = rm.named_cell("impacts-20kHz")
+    assert cell is next(c for c in rm.CELLS if c.name == "impacts-20kHz")
+    assert rm.named_cell("impacts-20kHz", 6.0) == replace(cell, duration_s=6.0)
+    assert rm.named_cell("no-such-cell") is None and rm.named_cell("no-such-cell", 1.0) is None

@@ -197,13 +197,9 @@ def main(argv=None) -> int:
     if args.cell is not None:
         import regime_matrix
 
-        cell = next((c for c in regime_matrix.CELLS if c.name == args.cell), None)
+        cell = regime_matrix.named_cell(args.cell, args.duration_s)
         if cell is None:
             ap.error(f"--cell: no cell {args.cell!r}; tools/regime_matrix.py --list names them")
-        if args.duration_s is not None:
-            from dataclasses import replace
-
-            cell = replace(cell, duration_s=args.duration_s)
     duration_s = 60.0 if args.duration_s is None else args.duration_s
     for rec in args.recordings:
         if not rec.is_file():

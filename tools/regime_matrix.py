@@ -328,6 +328,13 @@ CELLS: tuple[Cell, ...] = (
 )
 
 
+def named_cell(name: str, duration_s: float | None = None) -> Cell | None:
+    """The cell called ``name`` (None: there is none), ``duration_s`` long where given (the tools that measure
+    one cell's log: bench_floor.py, replay_udp.py, stream_cost.py)."""
+    cell = next((c for c in CELLS if c.name == name), None)
+    return cell if cell is None or duration_s is None else replace(cell, duration_s=duration_s)
+
+
 def cells_selected(quick: bool, pattern: str | None) -> list[Cell]:
     """The cells of the run: the quick subset or all, filtered by ``pattern`` (comma-separated names or
     glob patterns; a plain word matches every cell whose name contains it)."""

@@ -160,15 +160,11 @@ def _replay(args, ap, launcher: Launcher) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if args.cell:
-            from dataclasses import replace
-
             import regime_matrix
 
-            cell = next((c for c in regime_matrix.CELLS if c.name == args.cell), None)
+            cell = regime_matrix.named_cell(args.cell, args.duration_s)
             if cell is None:
                 ap.error(f"no cell {args.cell!r}; tools/regime_matrix.py --help lists them")
-            if args.duration_s is not None:
-                cell = replace(cell, duration_s=args.duration_s)
             log_dir, _ = regime_matrix.build_log(cell, tmp)
         elif args.log:
             log_dir = Path(args.log).resolve()

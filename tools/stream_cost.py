@@ -101,14 +101,12 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         log_dir = args.log
         if log_dir is None and args.cell:
-            import dataclasses
-
             sys.path.insert(0, str(HERE))
             import regime_matrix as rm
 
-            cell = next(c for c in rm.CELLS if c.name == args.cell)
-            if args.duration_s:
-                cell = dataclasses.replace(cell, duration_s=args.duration_s)
+            cell = rm.named_cell(args.cell, args.duration_s or None)
+            if cell is None:
+                ap.error(f"--cell: no cell {args.cell!r}; tools/regime_matrix.py --list names them")
             log_dir = str(rm.build_log(cell, Path(tmp))[0])
         elif log_dir is None:
             log_dir = str(Path(tmp) / "cube")
