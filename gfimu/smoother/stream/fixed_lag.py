@@ -1171,11 +1171,13 @@ class FixedLagSmoother:
             chosen = replace(previous, check=check, chosen_at_ns=t_end, samples=len(part))
         elif ml is not None and stream_model.is_still(*self._newest(part, ml), check):
             # a still stretch tells nothing of how the body will move: the motion seen before, else the
-            # densities as given, and the next motion asks for a choice at once
+            # level of a turn too slow for each sample (:meth:`_slow_motion`), else the densities as given;
+            # the next motion asks for a choice at once
             if previous is not None and not previous.robust and previous.moving:
                 chosen = replace(previous, check=check, chosen_at_ns=t_end, samples=len(part))
             else:
-                chosen = stream_model.StreamModel(base, 1.0, check, None, t_end, len(part), moving=False)
+                chosen = (self._slow_motion(part, base, check, t_end)
+                          or stream_model.StreamModel(base, 1.0, check, None, t_end, len(part), moving=False))
         else:
             n = rules.tune_n
             span = part if len(part) <= n else part.select(slice(len(part) - n, None))
@@ -1188,6 +1190,25 @@ class FixedLagSmoother:
         if chosen.sign_scale_radps is None and ml is not None:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
         return chosen, batch
+
+    def _slow_motion(self, part: Log, base: ModelGroups, check, t_end: int):
+        """The model of a stretch that looks still sample by sample but whose mean |ω|² tells a turn from rest
+        (:func:`~.model_choice.slow_turn`: a turn too slow for each sample to show, as a car's yaw): the common
+        jerk density and the specific-force density tuned on its newest ``tune_window_s``, on every axis alike
+        and without oscillators (3 s of slow motion fix a level, not a shape per axis: on a slow random
+        rotation, the per-axis factors and the 0.7-0.8 Hz oscillators tuned on its first 3 s doubled the
+        stream's error); None for a body at rest. It counts as a still choice (``moving`` False): the next
+        choice is made afresh. Without it the stream keeps the densities as given, 100 times looser than a
+        car's yaw, and its ω wanders through zero onto the other branch."""
+        n = self._choice.rules.tune_n
+        span = part if len(part) <= n else part.select(slice(len(part) - n, None))
+        if not stream_model.slow_turn(span):
+            return None
+        tuning, _, _ = self._tuned(span, base)
+        level = replace(tuning, axis_factors=(1.0, 1.0, 1.0), axis_frequencies_hz=(0.0, 0.0, 0.0),
+                        axis_frequency_std_hz=(0.0, 0.0, 0.0), axis_amplitude_radps=(0.0, 0.0, 0.0))
+        chosen = stream_model.from_tuning(level, level.apply(base), check, span)
+        return replace(chosen, chosen_at_ns=t_end, moving=False)
 
     def _replay_window(self) -> None:
         """The window solved again from its raw samples with the model just chosen because the motion
