@@ -612,6 +612,10 @@ class ChoiceState:
     pending: PendingChoice | None = None
     accepted: int = 0
     waits: list = field(default_factory=list)
+    turn_checked_ns: int = -(2**62)
+    """When :meth:`FixedLagSmoother._turn_began` last looked [ns]."""
+    squares_row: np.ndarray | None = None
+    """:func:`~.model_choice.squares_row` of the array, made at the first look."""
 
     def use(self, chosen: StreamModel, array: SensorArray, fast_measurement: bool) -> None:
         """``chosen`` becomes the model in use."""
@@ -1322,8 +1326,28 @@ class FixedLagSmoother:
         # again at once (at most once a second), on the history that now holds the motion
         outgrown = (local is not None and choice.local.resolved and local > OUTGROWN_FACTOR * q
                     and t_ns - chosen.chosen_at_ns >= 1e9)
-        if (due or outgrown) and len(choice.history) >= choice.rules.tune_min_n:
+        # a turn too slow for each sample, begun under the densities as given: choose again at once (the
+        # window goes on as it is: solved again from its newest states, a slow 3-D motion came out worse)
+        turn = (not (due or outgrown) and not chosen.moving and chosen.tuning is None and not robust
+                and self._turn_began(t_ns))
+        if (due or outgrown or turn) and len(choice.history) >= choice.rules.tune_min_n:
             self._choose(outgrown=outgrown)
+
+    def _turn_began(self, t_ns: int) -> bool:
+        """Whether a turn too slow for each sample has begun under a model chosen on a still stretch with the
+        densities as given: once a second, :func:`~.model_choice.slow_turn`'s test on the newest
+        ``tune_window_s`` of the history. A turn that grows between two scheduled choices (10 s apart) is
+        otherwise carried on the loose densities until the next one, on whichever branch of ω they wandered
+        onto while the body crept."""
+        choice = self._choice
+        if t_ns - choice.turn_checked_ns < 1_000_000_000 or len(choice.history) < choice.rules.tune_min_n:
+            return False
+        choice.turn_checked_ns = t_ns
+        if choice.squares_row is None:
+            choice.squares_row = stream_model.squares_row(self.array)
+        history = choice.history
+        slots = history._order(history.total - choice.rules.tune_n)
+        return stream_model.turning(history.accel[slots], choice.squares_row)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.

@@ -168,11 +168,21 @@ def slow_turn(part: Log) -> bool:
     against its standard error from :data:`SLOW_TURN_BLOCKS` block means (t test, :data:`SLOW_TURN_T`).
     A body turning at 0.1 rad/s on a 0.3 m array at 50 Hz and 0.01 m/s² is at the per-sample noise's |ω|
     and :func:`is_still`, but its mean |ω|² over 3 s stands eight standard errors above zero."""
-    n = len(part)
+    return turning(part.accel_mps2, squares_row(part.array))
+
+
+def squares_row(array) -> np.ndarray:
+    """The row of the least-squares inverse of ``array``'s structure matrix that gives 2|ω|² (the sum of q's
+    three square terms) from one sample's readings (:func:`turning`)."""
+    return np.linalg.pinv(array.structure_matrix())[6:9].sum(axis=0)
+
+
+def turning(accel_mps2: np.ndarray, row: np.ndarray) -> bool:
+    """:func:`slow_turn`'s test on the readings ``accel_mps2`` (N, axes) with ``row`` (:func:`squares_row`)."""
+    n = len(accel_mps2)
     if n < 2 * SLOW_TURN_BLOCKS:
         return False
-    fit = np.asarray(part.accel_mps2, dtype=float) @ np.linalg.pinv(part.array.structure_matrix()).T
-    two_w2 = fit[:, 6] + fit[:, 7] + fit[:, 8]
+    two_w2 = np.asarray(accel_mps2, dtype=float) @ row
     means = np.array([b.mean() for b in np.array_split(two_w2, SLOW_TURN_BLOCKS)])
     se = float(np.std(means, ddof=1)) / math.sqrt(SLOW_TURN_BLOCKS)
     return bool(se > 0 and float(np.mean(two_w2)) > SLOW_TURN_T * se)
