@@ -32,6 +32,13 @@ def test_the_newest_samples_in_order_as_the_ring_wraps():
     assert len(_filled(3, 4).stretch()) == 3
 
 
+def test_the_newest_readings_are_the_last_n_held_in_order():
+    history = _filled(11, 4)
+    np.testing.assert_array_equal(history.newest_accel(2)[:, 0], [9.0, 10.0])
+    np.testing.assert_array_equal(history.newest_accel(9)[:, 0], [7.0, 8.0, 9.0, 10.0])  # no more than it holds
+    assert history.newest_accel(2).shape == (2, AXES)
+
+
 def test_a_stretch_has_gyro_readings_only_where_every_sample_has_one():
     assert _filled(6, 4, no_gyro={1}).stretch().gyro is not None  # (sample 1 no longer held)
     assert _filled(6, 4, no_gyro={3}).stretch().gyro is None

@@ -1345,9 +1345,7 @@ class FixedLagSmoother:
         choice.turn_checked_ns = t_ns
         if choice.squares_row is None:
             choice.squares_row = stream_model.squares_row(self.array)
-        history = choice.history
-        slots = history._order(history.total - choice.rules.tune_n)
-        return stream_model.turning(history.accel[slots], choice.squares_row)
+        return stream_model.turning(choice.history.newest_accel(choice.rules.tune_n), choice.squares_row)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.

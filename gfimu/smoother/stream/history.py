@@ -86,6 +86,10 @@ class History:
         first = max(first, self.total - self.capacity)
         return np.arange(first, self.total) % self.capacity
 
+    def newest_accel(self, n: int) -> np.ndarray:
+        """The readings of the newest ``n`` samples held (fewer when it holds fewer), oldest first (a copy)."""
+        return self.accel[self._order(self.total - int(n))]
+
     def stretch(self) -> Stretch:
         """Every sample held, oldest first, copied."""
         slots = self._order(0)

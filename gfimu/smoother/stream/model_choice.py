@@ -166,8 +166,8 @@ def slow_turn(part: Log) -> bool:
     fit of the rigid-body model, linear in [f, ω̇, q(ω)] (Ho & Lin 2009, eq. 2), gives an unbiased sum of
     its three square terms, 2|ω|², which is zero at rest whatever the noise; its mean over the stretch
     against its standard error from :data:`SLOW_TURN_BLOCKS` block means (t test, :data:`SLOW_TURN_T`).
-    A body turning at 0.1 rad/s on a 0.3 m array at 50 Hz and 0.01 m/s² is at the per-sample noise's |ω|
-    and :func:`is_still`, but its mean |ω|² over 3 s stands eight standard errors above zero."""
+    A car turning at 0.11-0.15 rad/s on a 0.3 m array at 50 Hz and 0.01 m/s² is at the per-sample noise's
+    |ω| and :func:`is_still`, but its mean |ω|² over 3 s stands 9-10 standard errors above zero."""
     return turning(part.accel_mps2, squares_row(part.array))
 
 
