@@ -67,7 +67,7 @@ def _rmse(log: Log, omega_true: np.ndarray, method: str) -> float:
     return float(np.sqrt(np.mean(np.sum((w - omega_true) ** 2, axis=1))))
 
 
-@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow), pytest.param(3, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("seed", [2, pytest.param(1, marks=pytest.mark.slow), pytest.param(3, marks=pytest.mark.slow)])
 def test_a_slow_yaw_is_followed_on_its_branch_from_the_start(seed):
     """Per sample the yaw is at the noise's |ω| (the per-sample ML estimate's error is about 0.1 rad/s);
     smoothed over seconds it is known to about 0.005 rad/s. The fixed-lag smoother stays within a tenth
