@@ -11,7 +11,9 @@ every ``retune_every_s``, and at once when the motion outgrows the model in use
    model check (:func:`gfimu.smoother.tuning.model_choice.check_model`): do the readings follow the rigid-body
    model up to white noise, and with which noise floor and growth with |ω|;
 2. a consistent stretch: the process noise by marginal likelihood
-   (:func:`gfimu.smoother.tuning.evidence.tuned_problem`);
+   (:func:`gfimu.smoother.tuning.evidence.tuned_problem`); a still one (:func:`is_still`) keeps the densities
+   of the motion seen before, else those tuned on it where its mean |ω|² tells a turn from rest
+   (:func:`slow_turn`), else the densities as given;
 3. an inconsistent stretch: the robust model (:func:`gfimu.smoother.tuning.model_choice.misfit_options`: the
    measured noise floor and slope, Cauchy weights on the accelerometer axes, per-sample ML
    initialisation with its sign chain) and the process densities of the motion seen so far
