@@ -614,8 +614,6 @@ class ChoiceState:
     waits: list = field(default_factory=list)
     turn_checked_ns: int = -(2**62)
     """When :meth:`FixedLagSmoother._turn_began` last looked [ns]."""
-    squares_row: np.ndarray | None = None
-    """:func:`~.model_choice.squares_row` of the array, made at the first look."""
 
     def use(self, chosen: StreamModel, array: SensorArray, fast_measurement: bool) -> None:
         """``chosen`` becomes the model in use."""
@@ -744,6 +742,7 @@ class FixedLagSmoother:
                                    LocalDensity(array), given, array_model)
         self._signs = StreamSignChain(int(math.ceil(self.config.lag_s * rate_hz)) + 2, plane_normal(np.concatenate(
             [np.atleast_2d(acc.position_m) for acc in array.accelerometers])))
+        self._squares_row = stream_model.squares_row(array)  # 2|ω|² of a sample's readings (slow_turn's test)
         self._clock = StreamClock(float(clock_reset_s))
         self._worker = WorkerSlot()
         self._ahead = AheadOfChoice()
@@ -1173,14 +1172,14 @@ class FixedLagSmoother:
         elif (not first and not outgrown and previous is not None and not previous.robust and previous.moving
               and previous.tuning is not None):
             chosen = replace(previous, check=check, chosen_at_ns=t_end, samples=len(part))
-        elif ml is not None and stream_model.is_still(*self._newest(part, ml), check):
+        elif ml is not None and stream_model.is_still(*(newest := self._newest(part, ml)), check):
             # a still stretch tells nothing of how the body will move: the motion seen before, else the
             # level of a turn too slow for each sample (:meth:`_slow_motion`), else the densities as given;
             # the next motion asks for a choice at once
             if previous is not None and not previous.robust and previous.moving:
                 chosen = replace(previous, check=check, chosen_at_ns=t_end, samples=len(part))
             else:
-                chosen = (self._slow_motion(part, base, check, t_end)
+                chosen = (self._slow_motion(newest[0], base, check, t_end)
                           or stream_model.StreamModel(base, 1.0, check, None, t_end, len(part), moving=False))
         else:
             n = rules.tune_n
@@ -1195,18 +1194,16 @@ class FixedLagSmoother:
             chosen = replace(chosen, sign_scale_radps=stream_model.sign_scale(part, ml))
         return chosen, batch
 
-    def _slow_motion(self, part: Log, base: ModelGroups, check, t_end: int):
+    def _slow_motion(self, span: Log, base: ModelGroups, check, t_end: int):
         """The model of a stretch that looks still sample by sample but whose mean |ω|² tells a turn from rest
         (:func:`~.model_choice.slow_turn`: a turn too slow for each sample to show, as a car's yaw): the common
-        jerk density and the specific-force density tuned on its newest ``tune_window_s``, on every axis alike
-        and without oscillators (3 s of slow motion fix a level, not a shape per axis: on a slow random
+        jerk density and the specific-force density tuned on ``span`` (its newest ``tune_window_s``), on every
+        axis alike and without oscillators (3 s of slow motion fix a level, not a shape per axis: on a slow random
         rotation, the per-axis factors and the 0.7-0.8 Hz oscillators tuned on its first 3 s doubled the
         stream's error); None for a body at rest. It counts as a still choice (``moving`` False): the next
         choice is made afresh. Without it the stream keeps the densities as given, 100 times looser than a
         car's yaw, and its ω wanders through zero onto the other branch."""
-        n = self._choice.rules.tune_n
-        span = part if len(part) <= n else part.select(slice(len(part) - n, None))
-        if not stream_model.slow_turn(span):
+        if not stream_model.turning(span.accel_mps2, self._squares_row):
             return None
         tuning, _, _ = self._tuned(span, base)
         level = replace(tuning, axis_factors=(1.0, 1.0, 1.0), axis_frequencies_hz=(0.0, 0.0, 0.0),
@@ -1343,9 +1340,7 @@ class FixedLagSmoother:
         if t_ns - choice.turn_checked_ns < 1_000_000_000 or len(choice.history) < choice.rules.tune_min_n:
             return False
         choice.turn_checked_ns = t_ns
-        if choice.squares_row is None:
-            choice.squares_row = stream_model.squares_row(self.array)
-        return stream_model.turning(choice.history.newest_accel(choice.rules.tune_n), choice.squares_row)
+        return stream_model.turning(choice.history.newest_accel(choice.rules.tune_n), self._squares_row)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
