@@ -235,16 +235,32 @@ def solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, to
 
 @njit(cache=True, nogil=True)
 def _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost, LU, piv, lu_ok):
-    """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, AG, J, ok)``, ``AG = Hᵀ S⁻¹ [H, ν]``
-    (9 × 10: ``A = Hᵀ S⁻¹ H`` and ``g = Hᵀ S⁻¹ ν``) at the last linearisation, J at x (0 unless
-    ``with_cost``), ``ok`` False where the update's system is singular or a reading's variance is not positive
-(the filter's ``FilterFailure``).
+    """:func:`_gauss_newton` with its ``AG`` solved: ``(x, H, AG, J, ok)``."""
+    x, H, AG, M, piv_m, J, ok = _gauss_newton(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
+                                              tolerance, with_cost, LU, piv, lu_ok)
+    if ok:
+        _lu_apply(M, piv_m, AG)
+    return x, H, AG, J, ok
+
+
+@njit(cache=True, nogil=True)
+def _gauss_newton(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance, with_cost, LU, piv,
+                  lu_ok):
+    """Gauss-Newton on J from ``x``, at most ``iterations`` steps: ``(x, H, GB, M, piv_m, J, ok)``, with
+    ``GB = Hᵀ R⁻¹ [H, ν]`` (9 × 10: ``[G, b]``) at the last linearisation and ``M = I + G P`` factored there
+    (``(M, piv_m)``, :func:`_lu_factor`): ``_lu_apply(M, piv_m, GB)`` makes it ``Hᵀ S⁻¹ [H, ν]``, ``A = Hᵀ
+    S⁻¹ H`` and ``g = Hᵀ S⁻¹ ν``, the update's information (:func:`_solve`; :func:`search` does it for the
+    minimum it keeps alone); J at x (0 unless ``with_cost``); ``ok`` False where the update's system is
+    singular or a reading's variance is not positive (the filter's ``FilterFailure``).
 
     The update is solved in the state's nine dimensions rather than the m readings': with ``G = Hᵀ R⁻¹ H``
     and ``b = Hᵀ R⁻¹ ν`` (R diagonal), ``Hᵀ S⁻¹ = (I + G P)⁻¹ Hᵀ R⁻¹`` (since ``Hᵀ R⁻¹ S = (G P + I) Hᵀ``
     for ``S = H P Hᵀ + R``), so ``[A, g] = (I + G P)⁻¹ [G, b]``, one 9 × 9 system whatever the number of
     axes, and the new state is ``x̂ + P g``: the numpy expression's ``S⁻¹ [H, ν]`` (an m × m system) to
-    rounding. ``(LU, piv, lu_ok)``: P factored (:func:`_factored`), for the prior's cost."""
+    rounding. Each step solves for g alone; A, which only the last linearisation needs, is solved from
+    the same factors by whoever keeps the result (the same numbers as solving both at every step: each
+    column of a right-hand side is eliminated on its own). ``(LU, piv, lu_ok)``: P factored
+    (:func:`_factored`), for the prior's cost."""
     m = y.shape[0]
     R = R0.copy()
     H = np.zeros((m, 9))
@@ -252,6 +268,8 @@ def _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, t
     nu = np.empty(m)
     AG = np.zeros((9, 10))
     M = np.empty((9, 9))
+    piv_m = np.zeros(9, dtype=np.int64)
+    g = np.empty((9, 1))
     x = x.copy()
     x_new = np.empty(9)
     inv_r = np.empty(m)
@@ -270,7 +288,7 @@ def _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, t
             _predict_readings(x, S_q, S_dw, S_f, pred, H)
         for i in range(m):
             if not R[i] > 0.0:  # a reading without noise: the information form does not apply
-                return x, H, AG, 0.0, False
+                return x, H, AG, M, piv_m, 0.0, False
         for i in range(m):  # ν, the innovation of the linearisation at x
             s = 0.0
             for j in range(9):
@@ -284,12 +302,14 @@ def _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, t
                     s += AG[a, k] * P[k, b]
                 M[a, b] = s
             M[a, a] += 1.0
-        if not _lu_solve(M, AG):  # AG ← (I + G P)⁻¹ [G, b] = Hᵀ S⁻¹ [H, ν]
-            return x, H, AG, 0.0, False
+            g[a, 0] = AG[a, 9]
+        if not _lu_factor(M, piv_m):
+            return x, H, AG, M, piv_m, 0.0, False
+        _lu_apply(M, piv_m, g)  # g ← (I + G P)⁻¹ b = Hᵀ S⁻¹ ν
         for a in range(9):
             s = xp[a]
             for b in range(9):
-                s += P[a, b] * AG[b, 9]
+                s += P[a, b] * g[b, 0]
             x_new[a] = s
         step = abs(x_new[0] - x[0]) + abs(x_new[1] - x[1]) + abs(x_new[2] - x[2])
         for a in range(9):
@@ -297,7 +317,7 @@ def _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, t
         if step < tolerance and (c_robust <= 0.0 or it > 0):
             break
     if not with_cost:
-        return x, H, AG, 0.0, True
+        return x, H, AG, M, piv_m, 0.0, True
     H_last = H.copy()
     _predict_readings(x, S_q, S_dw, S_f, pred, H)
     cost = 0.0
@@ -305,7 +325,7 @@ def _solve(y, xp, P, x, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, t
         r = y[i] - pred[i]
         cost += r * r / R[i]
     prior = _factored_form_inverse(LU, piv, lu_ok, x - xp)
-    return x, H_last, AG, cost + max(prior, 0.0), True
+    return x, H_last, AG, M, piv_m, cost + max(prior, 0.0), True
 
 
 @njit(cache=True, nogil=True)
@@ -334,29 +354,32 @@ def search(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iteration
     """The update's minimum: Gauss-Newton from ``start``, then (``branches``) from the other three branches
     of that minimum, each tried only when the prediction does not rule it out by more than
     ``prior_margin`` (squared, in P) beyond the minimum's cost; two steps tell a branch that loses, one
-    that may win is solved to the end. ``(x, H, AG, J, ok)`` of the lowest J. ``(LU, piv, lu_ok)``: P factored
-    (:func:`_factored`; read only with ``branches``)."""
-    x, H, AG, J, ok = _solve(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations, tolerance,
-                            branches, LU, piv, lu_ok)
-    if not ok or not branches:
+    that may win is solved to the end. ``(x, H, AG, J, ok)`` of the lowest J (its ``AG`` solved, as
+    :func:`_solve` gives it). ``(LU, piv, lu_ok)``: P factored (:func:`_factored`; read only with
+    ``branches``)."""
+    x, H, AG, M, pm, J, ok = _gauss_newton(y, xp, P, start, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
+                                           tolerance, branches, LU, piv, lu_ok)
+    if not ok:
         return x, H, AG, J, ok
-    x_first = x.copy()  # the branches of the first minimum are tried
-    for kind in range(1, 4):
-        b = branch_state(kind, x_first, normal)
-        distance = _factored_form_inverse(LU, piv, lu_ok, b - xp)
-        if distance > J + prior_margin:  # (P singular: -1, tried)
-            continue
-        cx, cH, cAG, cJ, cok = _solve(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, _TWO, tolerance, _TRUE,
-                                     LU, piv, lu_ok)
-        if not cok:
-            return cx, cH, cAG, cJ, cok
-        if cJ < J:
-            cx, cH, cAG, cJ, cok = _solve(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss, iterations,
-                                         tolerance, _TRUE, LU, piv, lu_ok)
+    if branches:
+        x_first = x.copy()  # the branches of the first minimum are tried
+        for kind in range(1, 4):
+            b = branch_state(kind, x_first, normal)
+            distance = _factored_form_inverse(LU, piv, lu_ok, b - xp)
+            if distance > J + prior_margin:  # (P singular: -1, tried)
+                continue
+            cx, cH, cAG, cM, cpm, cJ, cok = _gauss_newton(y, xp, P, b, R0, S_q, S_dw, S_f, slope, c_robust, loss, _TWO,
+                                                          tolerance, _TRUE, LU, piv, lu_ok)
             if not cok:
                 return cx, cH, cAG, cJ, cok
-        if cJ < J:
-            x, H, AG, J = cx, cH, cAG, cJ
+            if cJ < J:
+                cx, cH, cAG, cM, cpm, cJ, cok = _gauss_newton(y, xp, P, cx, R0, S_q, S_dw, S_f, slope, c_robust, loss,
+                                                              iterations, tolerance, _TRUE, LU, piv, lu_ok)
+                if not cok:
+                    return cx, cH, cAG, cJ, cok
+            if cJ < J:
+                x, H, AG, M, pm, J = cx, cH, cAG, cM, cpm, cJ
+    _lu_apply(M, pm, AG)
     return x, H, AG, J, True
 
 
