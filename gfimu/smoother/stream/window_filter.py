@@ -42,11 +42,24 @@ from collections import deque
 import numpy as np
 
 from ...rigid_body import quadratic_terms, quadratic_terms_jacobian
-from . import kernels
 from .array_model import ArrayModel, Step
 from ..model.parts import delegated
 from ..model.problem import robust_loss, robust_weight
 from ..solve.restarts import branch, plane_normal
+
+
+class _Kernels:
+    """:mod:`gfimu.smoother.stream.kernels`, imported when a filter first needs it: importing this module
+    does not import numba (the command's start; :mod:`gfimu.smoother.preload` loads it meanwhile)."""
+
+    def __getattr__(self, name: str):
+        from . import kernels as module
+
+        globals()["kernels"] = module  # (later calls find the module itself)
+        return getattr(module, name)
+
+
+kernels = _Kernels()
 
 
 LAZY_STEPS = None
