@@ -398,7 +398,8 @@ def test_the_fused_advance_is_the_two_compiled_calls_bit_for_bit(robust):
         for a, b in ((fused._store, apart._store), (fused._lazy, apart._lazy), (fused._newest, apart._newest)):
             for name in a.__slots__:
                 va, vb = getattr(a, name), getattr(b, name)
-                if isinstance(va, np.ndarray) and name != "tmp":
+                # (tmp: scratch; the steps: kept by advance(), which the two calls apart do not use)
+                if isinstance(va, np.ndarray) and name not in ("tmp", "F", "Q", "has_step"):
                     np.testing.assert_array_equal(va, vb, err_msg=f"{name} at sample {i}")
         assert (fused._store.lo, fused._store.hi, fused._store.split) == (apart._store.lo, apart._store.hi,
                                                                           apart._store.split)

@@ -904,3 +904,104 @@ def window_step_residual2(F, Q, mean, cross, u, split, s0):
                 v += t
             x[a, i] = v
     return step_residual2(F, Q, x[0], x[1])
+
+
+# --- the epochs of the window's older states (gfimu.smoother.stream.window_filter.Epochs) ------------------------
+# ``ep`` (4,) int64: the epochs kept, the number of the epoch in row 0, the first run's slot in ``stale`` and the
+# runs' count; ``stale`` (R, 3) int64: a ring of the runs of waiting states [k_first, k_stop, epoch]
+
+EP_N, EP_FIRST, EP_HEAD, EP_COUNT = 0, 1, 2, 3
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _run_pop(stale, ep):
+    """The first run, taken off the ring."""
+    h = ep[EP_HEAD]
+    a, b, e = stale[h, 0], stale[h, 1], stale[h, 2]
+    ep[EP_HEAD] = (h + 1) % stale.shape[0]
+    ep[EP_COUNT] -= 1
+    return a, b, e
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _run_push(stale, ep, front, a, b, e):
+    """A run put first (``front``) or last on the ring (the caller has made room)."""
+    R = stale.shape[0]
+    if front:
+        h = (ep[EP_HEAD] + R - 1) % R
+        ep[EP_HEAD] = h
+    else:
+        h = (ep[EP_HEAD] + ep[EP_COUNT]) % R
+    stale[h, 0], stale[h, 1], stale[h, 2] = a, b, e
+    ep[EP_COUNT] += 1
+
+
+@njit(cache=True, nogil=True)
+def epochs_close(Ts, us, Ws, ep, stale, T, u, W, k_lo, k_split):
+    """:meth:`Epochs.close <gfimu.smoother.stream.window_filter.Epochs.close>`: an epoch ends with factors ``(T, u, W)``,
+    kept in row ``ep[EP_N]`` of ``(Ts, us, Ws)`` (the rows no waiting run needs dropped first when they are all
+    taken), and the older states ``[k_lo, k_split)`` not waiting yet wait for it. Returns 0 when done, 1 when
+    the rows are full (the caller grows them and calls again), 2 when the ring of runs is (nothing done)."""
+    R = stale.shape[0]
+    count = ep[EP_COUNT]
+    if count + 2 > R:
+        return 2
+    n, first = ep[EP_N], ep[EP_FIRST]
+    if n == Ts.shape[0]:
+        need = first + n
+        for j in range(count):
+            e = stale[(ep[EP_HEAD] + j) % R, 2]
+            if e < need:
+                need = e
+        need -= first
+        if need > 0:
+            for i in range(n - need):
+                for a in range(9):
+                    us[i, a] = us[i + need, a]
+                    for b in range(9):
+                        Ts[i, a, b] = Ts[i + need, a, b]
+                        Ws[i, a, b] = Ws[i + need, a, b]
+            first += need
+            n -= need
+            ep[EP_FIRST], ep[EP_N] = first, n
+        if n == Ts.shape[0]:
+            return 1
+    epoch = first + n
+    for a in range(9):
+        us[n, a] = u[a]
+        for b in range(9):
+            Ts[n, a, b] = T[a, b]
+            Ws[n, a, b] = W[a, b]
+    ep[EP_N] = n + 1
+    if count == 0:
+        _run_push(stale, ep, False, k_lo, k_split, epoch)
+        return 0
+    head_first = stale[ep[EP_HEAD], 0]
+    tail_stop = stale[(ep[EP_HEAD] + count - 1) % R, 1]
+    if k_lo < head_first:
+        _run_push(stale, ep, True, k_lo, head_first, epoch)
+    if tail_stop < k_split:
+        _run_push(stale, ep, False, tail_stop, k_split, epoch)
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def epochs_bring_up(Ts, us, Ws, ep, stale, k_stop, k_lo, least, base, mean, var, cross):
+    """:meth:`WindowFilter._bring_up <gfimu.smoother.stream.window_filter.WindowFilter._bring_up>`: the runs of
+    waiting states before ``k_stop`` (at least ``least`` states of a run; the rest of it goes on waiting, and
+    states before ``k_lo`` have left), each brought up to date through its epochs since, composed
+    (:func:`compose_epochs`) and applied (:func:`flush_window`) to the window's arrays (slot = k - ``base``)."""
+    n, first = ep[EP_N], ep[EP_FIRST]
+    while ep[EP_COUNT] > 0 and stale[ep[EP_HEAD], 0] < k_stop:
+        k0, k1, epoch = _run_pop(stale, ep)
+        if k0 < k_lo:
+            k0 = k_lo
+        if k1 <= k0:
+            continue
+        cut = max(k_stop, k0 + least)
+        if cut < k1:
+            _run_push(stale, ep, True, cut, k1, epoch)
+            k1 = cut
+        T, u, W = compose_epochs(Ts[:n], us[:n], Ws[:n], epoch - first)
+        a, b = k0 - base, k1 - base
+        flush_window(T, u, W, mean[a:b], var[a:b], cross[a:b])

@@ -120,76 +120,103 @@ class Epochs:
     ``(T, u, W)`` (its :attr:`WindowFilter.lazy_steps` updates' share of the older states, ``C ← C T``, ``m += C u``,
     ``v -= diag(C W Cᵀ)``), kept while a state still waits for them, and the runs of states that wait:
     ``[k_first, k_stop, epoch]``, states ``k_first … k_stop - 1`` up to date as of the start of ``epoch``
-    (their runs contiguous, oldest first)."""
+    (their runs contiguous, oldest first), in a ring (``stale``). Arrays throughout, which the compiled kernels
+    read and write (:func:`kernels.epochs_close <gfimu.smoother.stream.kernels.epochs_close>`,
+    :func:`kernels.epochs_bring_up <gfimu.smoother.stream.kernels.epochs_bring_up>`): ``ep`` holds the
+    epochs kept, the number of the epoch in row 0, the first run's slot and the runs' count."""
 
-    def __init__(self) -> None:
-        self.T = np.empty((16, 9, 9))  # each epoch's factors, the oldest kept first
-        self.u = np.empty((16, 9))
-        self.W = np.empty((16, 9, 9))
-        self.n = 0  # epochs kept
-        self.first = 0  # the number of the epoch in row 0
-        self.stale: deque = deque()
+    def __init__(self, capacity: int = 16) -> None:
+        self.T = np.empty((capacity, 9, 9))  # each epoch's factors, the oldest kept first
+        self.u = np.empty((capacity, 9))
+        self.W = np.empty((capacity, 9, 9))
+        self.stale = np.zeros((capacity + 4, 3), dtype=np.int64)
+        self.ep = np.zeros(4, dtype=np.int64)
+
+    @property
+    def n(self) -> int:
+        """Epochs kept."""
+        return int(self.ep[0])
+
+    @property
+    def first(self) -> int:
+        """The number of the epoch in row 0."""
+        return int(self.ep[1])
+
+    @property
+    def runs(self) -> int:
+        """Runs of states waiting."""
+        return int(self.ep[3])
+
+    def run(self, j: int) -> tuple[int, int, int]:
+        """The ``j``-th run (0: the oldest; -1: the newest): (k_first, k_stop, epoch)."""
+        ep = self.ep
+        if j < 0:
+            j += int(ep[3])
+        row = self.stale[(int(ep[2]) + j) % len(self.stale)]
+        return int(row[0]), int(row[1]), int(row[2])
 
     def waits(self, k: int) -> bool:
         """Whether state ``k`` waits for epochs (is not up to date as of the current epoch's start)."""
-        stale = self.stale
-        return bool(stale) and stale[0][0] <= k < stale[-1][1]
+        ep = self.ep
+        count = ep[3]
+        if not count:
+            return False
+        stale, head = self.stale, ep[2]
+        return bool(stale[head, 0] <= k < stale[(head + count - 1) % len(stale), 1])
 
     def close(self, T: np.ndarray, u: np.ndarray, W: np.ndarray, k_lo: int, k_split: int) -> None:
         """An epoch ends with factors ``(T, u, W)``: the older states ``[k_lo, k_split)`` that were up to date
-        as of its start (the others wait already) now wait for it."""
-        epoch = self.first + self.n
-        self._keep(T, u, W)
-        stale = self.stale
-        if not stale:
-            stale.append([k_lo, k_split, epoch])
-            return
-        if k_lo < stale[0][0]:
-            stale.appendleft([k_lo, stale[0][0], epoch])
-        if stale[-1][1] < k_split:
-            stale.append([stale[-1][1], k_split, epoch])
-
-    def _keep(self, T: np.ndarray, u: np.ndarray, W: np.ndarray) -> None:
-        """Store an epoch's factors, dropping those no waiting state needs any more."""
-        n = self.n
-        if n == len(self.T):
-            need = min((c[2] for c in self.stale), default=self.first + n) - self.first
-            if need > 0:
-                for arr in (self.T, self.u, self.W):
-                    arr[:n - need] = arr[need:n]
-                self.first += need
-                n -= need
-            if n == len(self.T):
+        as of its start (the others wait already) now wait for it (the rows no waiting state needs dropped
+        when all are taken; the arrays grown when that is not enough)."""
+        while True:
+            status = kernels.epochs_close(self.T, self.u, self.W, self.ep, self.stale, T, u, W, int(k_lo),
+                                          int(k_split))
+            if status == 0:
+                return
+            if status == 1:
                 self.T, self.u, self.W = (np.concatenate([a, np.empty_like(a)]) for a in (self.T, self.u, self.W))
-        self.T[n], self.u[n], self.W[n] = T, u, W
-        self.n = n + 1
+            else:
+                self.grow_runs()
+
+    def grow_runs(self) -> None:
+        """A ring of runs twice as long, the runs kept in order from its first slot."""
+        count, head, R = int(self.ep[3]), int(self.ep[2]), len(self.stale)
+        runs = self.stale[(head + np.arange(count)) % R]
+        self.stale = np.zeros((2 * R, 3), dtype=np.int64)
+        self.stale[:count] = runs
+        self.ep[2] = 0
 
     def take(self, k_stop: float, k_lo: int, least: int):
         """The runs of waiting states before ``k_stop`` (at least ``least`` states of a run; the rest of it goes
-        on waiting), no longer waiting: ``(k_first, k_stop, row)`` each, ``row`` the first of its epochs."""
-        stale = self.stale
-        while stale and stale[0][0] < k_stop:
-            k0, k1, epoch = stale.popleft()
+        on waiting), no longer waiting: ``(k_first, k_stop, row)`` each, ``row`` the first of its epochs (the
+        numpy path's; :func:`kernels.epochs_bring_up <gfimu.smoother.stream.kernels.epochs_bring_up>` is the
+        compiled one)."""
+        ep, stale, R = self.ep, self.stale, len(self.stale)
+        while ep[3] and stale[ep[2], 0] < k_stop:
+            k0, k1, epoch = (int(v) for v in stale[ep[2]])
+            ep[2], ep[3] = (ep[2] + 1) % R, ep[3] - 1
             k0 = max(k0, k_lo)
             if k1 <= k0:
                 continue
             cut = max(k_stop, k0 + least)
             if cut < k1:
-                stale.appendleft([int(cut), k1, epoch])
+                ep[2], ep[3] = (ep[2] + R - 1) % R, ep[3] + 1
+                stale[ep[2]] = (int(cut), k1, epoch)
                 k1 = int(cut)
-            yield k0, k1, epoch - self.first
+            yield k0, k1, epoch - int(ep[1])
 
     def forget_before(self, k_lo: int) -> None:
         """States before ``k_lo`` left the window."""
-        stale = self.stale
-        while stale and stale[0][1] <= k_lo:
-            stale.popleft()
+        ep, stale, R = self.ep, self.stale, len(self.stale)
+        while ep[3] and stale[ep[2], 1] <= k_lo:
+            ep[2], ep[3] = (ep[2] + 1) % R, ep[3] - 1
 
     def clear(self) -> None:
         """No state waits (all brought up to date): no epoch kept."""
-        self.stale.clear()
-        self.first += self.n
-        self.n = 0
+        ep = self.ep
+        ep[3] = 0
+        ep[1] += ep[0]
+        ep[0] = 0
 
 
 class FilterFailure(RuntimeError):
@@ -199,10 +226,13 @@ class FilterFailure(RuntimeError):
 class WindowStore:
     """The window's storage: each slot's mean, marginal variances and cross-covariance with the newest
     state (``mean`` (cap, 9), ``var`` (cap, 9), ``cross`` (cap, 9, 9); ``tmp`` scratch of the shape of
-    ``cross``), ``cap`` slots; the states in slots ``[lo, hi)``, those in ``[lo, split)`` updated lazily
-    (:meth:`WindowFilter._flush`), ``[split, hi)`` at once; ``base`` the index k of slot 0."""
+    ``cross``), the step into its state (``F``, ``Q`` (cap, 9, 9), where ``has_step``: the branch decision's
+    (:meth:`WindowFilter.settle`)), ``cap`` slots; the states in slots ``[lo, hi)``, those in ``[lo, split)``
+    updated lazily (:meth:`WindowFilter._flush`), ``[split, hi)`` at once; ``base`` the index k of slot 0."""
 
-    __slots__ = ("mean", "var", "cross", "tmp", "cap", "lo", "hi", "split", "base")
+    __slots__ = ("mean", "var", "cross", "tmp", "F", "Q", "has_step", "cap", "lo", "hi", "split", "base")
+    ARRAYS = ("mean", "var", "cross", "F", "Q", "has_step")
+    """The arrays of one value per slot (moved and grown together, :meth:`WindowFilter._make_room`)."""
 
     def __init__(self, capacity: int) -> None:
         self.cap = capacity
@@ -210,7 +240,22 @@ class WindowStore:
         self.var = np.zeros((capacity, 9))
         self.cross = np.zeros((capacity, 9, 9))
         self.tmp = np.empty((capacity, 9, 9))
+        self.F = np.zeros((capacity, 9, 9))
+        self.Q = np.zeros((capacity, 9, 9))
+        self.has_step = np.zeros(capacity, dtype=bool)
         self.lo = self.hi = self.split = self.base = 0
+
+    def keep_step(self, k: int, F: np.ndarray, Q: np.ndarray) -> None:
+        """The step into state ``k`` (in the window)."""
+        s = k - self.base
+        self.F[s] = F
+        self.Q[s] = Q
+        self.has_step[s] = True
+
+    def step(self, k: int):
+        """(F, Q) of the step into state ``k`` (views of the store's arrays), or None where it has none."""
+        s = k - self.base
+        return (self.F[s], self.Q[s]) if self.has_step[s] else None
 
 
 class LazyFactors:
@@ -239,14 +284,13 @@ class NewestStep:
 
 
 class StepRecord:
-    """What the branch decision (:meth:`WindowFilter.settle`) reads of the segment's steps: ``steps``,
-    k -> (F, Q) of the step into each state of the window, and ``unsettled``, whether an update used rows
-    it cannot evaluate (gyroscope, factor groups, given step groups)."""
+    """Whether an update of the segment used rows the branch decision (:meth:`WindowFilter.settle`) cannot
+    evaluate (``unsettled``: gyroscope, factor groups, given step groups); the steps themselves are the
+    store's (:class:`WindowStore`)."""
 
-    __slots__ = ("steps", "unsettled")
+    __slots__ = ("unsettled",)
 
     def __init__(self) -> None:
-        self.steps: dict = {}
         self.unsettled = False
 
 
@@ -417,13 +461,12 @@ class WindowFilter:
         store = self._store
         lo = store.lo
         if store.hi > lo:
-            self._record.steps.pop(store.base + lo, None)
             lo += 1
             store.lo = lo
             if store.split < lo:
                 store.split = lo
             epochs = self._lazy.epochs
-            if epochs.stale:  # (no run waits: nothing to forget)
+            if epochs.ep[3]:  # (no run waits: nothing to forget)
                 epochs.forget_before(store.base + lo)
 
     # --- the older states: brought up to date when read ----------------------------------
@@ -453,18 +496,20 @@ class WindowFilter:
         """The waiting states before ``k_stop`` (and at least :attr:`lazy_steps` of a run) brought up to date
         as of the current epoch's start: each run's epochs since composed into one ``(T, u, W)`` and applied."""
         ep, base = self._lazy.epochs, self._store.base
-        if not ep.stale or ep.stale[0][0] >= k_stop:  # no state before k_stop waits
+        if not ep.ep[3] or ep.stale[ep.ep[2], 0] >= k_stop:  # no state before k_stop waits
+            return
+        if self.compiled:
+            store = self._store
+            kernels.epochs_bring_up(ep.T, ep.u, ep.W, ep.ep, ep.stale, _NEVER if k_stop == math.inf else int(k_stop),
+                                    base + store.lo, self.lazy_steps, base, store.mean, store.var, store.cross)
             return
         Ts, us, Ws = ep.T[:ep.n], ep.u[:ep.n], ep.W[:ep.n]
         for k0, k1, first in ep.take(k_stop, base + self._store.lo, self.lazy_steps):
-            if self.compiled:
-                T, u, W = kernels.compose_epochs(Ts, us, Ws, first)
-            else:
-                T, u, W = Ts[first].copy(), us[first].copy(), Ws[first].copy()
-                for e in range(first + 1, len(Ts)):
-                    u = u + T @ us[e]
-                    W = W + T @ Ws[e] @ T.T
-                    T = T @ Ts[e]
+            T, u, W = Ts[first].copy(), us[first].copy(), Ws[first].copy()
+            for e in range(first + 1, len(Ts)):
+                u = u + T @ us[e]
+                W = W + T @ Ws[e] @ T.T
+                T = T @ Ts[e]
             self._apply(T, u, W, k0 - base, k1 - base)
 
     def _apply(self, T: np.ndarray, u: np.ndarray, W: np.ndarray, a: int, b: int) -> None:
@@ -505,15 +550,16 @@ class WindowFilter:
         n = store.hi - store.lo
         if n >= store.cap // 2:  # a window longer than expected (irregular steps): grow
             cap = 2 * store.cap
-            for name in ("mean", "var", "cross"):
+            for name in store.ARRAYS:
                 old = getattr(store, name)
-                new = np.zeros((cap,) + old.shape[1:])
+                new = np.zeros((cap,) + old.shape[1:], dtype=old.dtype)
                 new[:n] = old[store.lo:store.hi]
                 setattr(store, name, new)
             store.tmp = np.empty((cap, 9, 9))
             store.cap = cap
         else:
-            for arr in (store.mean, store.var, store.cross):
+            for name in store.ARRAYS:
+                arr = getattr(store, name)
                 arr[:n] = arr[store.lo:store.hi]
         store.base += store.lo
         store.lo, store.hi = 0, n
@@ -681,7 +727,7 @@ class WindowFilter:
         if not self._branches or record.unsettled or hi - lo < 3:
             return 0
         k0 = store.base + lo
-        step = record.steps.get(k0 + 1)
+        step = store.step(k0 + 1)
         if step is None:
             return 0
         F, Q = step
@@ -699,7 +745,7 @@ class WindowFilter:
         if not e2 > OUTLYING_STEP2:
             return 0
         X = self._means(lo, hi)  # the oldest (held), then the states decided
-        steps = [record.steps.get(store.base + i) for i in range(lo + 1, hi)]
+        steps = [store.step(store.base + i) for i in range(lo + 1, hi)]
         if any(s is None for s in steps):
             return 0
         Y = np.vstack([np.asarray(readings(i), dtype=float) for i in range(1, hi - lo)])
@@ -800,10 +846,10 @@ class WindowFilter:
             record.unsettled = True  # rows of given step groups, which the branch decision does not evaluate
         if self.compiled and gyro is None and extra is None and start is None and step.H0 is None:
             self._advance_compiled(k, step, y)  # the prediction and the update in one compiled call
-            record.steps[k] = (step.F, step.Q)  # (the newest step's F and Q, as the call stored them)
+            self._store.keep_step(k, step.F, step.Q)
             return
         self.predict(k, step)
-        record.steps[k] = (step.F, step.Q)
+        self._store.keep_step(k, step.F, step.Q)
         self.measure(y, gyro, start=start, extra=extra, once=once)
 
     def _advance_compiled(self, k: int, step: Step, y) -> None:
@@ -863,7 +909,7 @@ class WindowFilter:
         newest.P = np.diag(self._ops.prior_var)
         newest.Q = None
         newest.F = None
-        self._record.steps = {}
+        store.has_step[0] = False
         self._record.unsettled = False
         store.cross[0] = newest.P
         store.hi = 1
