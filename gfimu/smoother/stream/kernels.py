@@ -1005,3 +1005,61 @@ def epochs_bring_up(Ts, us, Ws, ep, stale, k_stop, k_lo, least, base, mean, var,
         T, u, W = compose_epochs(Ts[:n], us[:n], Ws[:n], epoch - first)
         a, b = k0 - base, k1 - base
         flush_window(T, u, W, mean[a:b], var[a:b], cross[a:b])
+
+
+# --- the streaming sign chain (gfimu.smoother.stream.model_choice.StreamSignChain) --------------------------------
+# ``st`` (5,) int64: the ring's first slot and count, the newest state's time [ns], whether there is one, the moves
+
+CH_HEAD, CH_COUNT, CH_T, CH_HAS, CH_FLIPS = 0, 1, 2, 3, 4
+
+
+@njit(cache=True, nogil=True)
+def chain_push(k, t_ns, w, dw, c2, oldest_k, margin, normal, prev_w, prev_dw, cost, backs, ks, st, out):
+    """:meth:`StreamSignChain.push <gfimu.smoother.stream.model_choice.StreamSignChain.push>` of state ``k`` at
+    ``t_ns`` with (ω, ω̇) = (``w``, ``dw``), Cauchy scale² ``c2``, the window's oldest state ``oldest_k``, on the
+    chain's arrays (``prev_w``, ``prev_dw`` (4, 3), ``cost`` (4,), ``backs`` (window, 4), ``ks`` (window,),
+    ``st``), in place. Returns True when the states from ``out[0]`` are to move onto branch ``out[1]`` (the
+    chain then starts again from them), False otherwise; the chain's first state (none before it) is taken
+    in by the caller."""
+    window = ks.shape[0]
+    head, count = st[CH_HEAD], st[CH_COUNT]
+    if count == window:  # the oldest step beyond the window is dropped
+        head = (head + 1) % window
+        count -= 1
+    slot = (head + count) % window
+    count += 1
+    ks[slot] = k
+    best = chain_step(prev_w, prev_dw, w, dw, normal, (t_ns - st[CH_T]) * 1e-9, c2, cost, backs[slot])
+    st[CH_T] = t_ns
+    while count > 0 and ks[head] <= oldest_k:
+        head = (head + 1) % window
+        count -= 1
+    st[CH_HEAD], st[CH_COUNT] = head, count
+    if best == 0 or not cost[best] + margin * c2 < cost[0]:
+        return False
+    # the best path's last run on branch `best` (within the window) moves onto it
+    first = k
+    state = best
+    for j in range(count - 1, -1, -1):
+        slot = (head + j) % window
+        state = backs[slot, state]
+        if state != best:
+            break
+        first = ks[slot] - 1
+    if first < oldest_k:
+        first = oldest_k
+    nb = cost.shape[0]
+    c = cost.copy()
+    pw = prev_w.copy()
+    pdw = prev_dw.copy()
+    for b in range(nb):
+        a = b ^ best
+        cost[b] = c[a]
+        for j in range(3):
+            prev_w[b, j] = pw[a, j]
+            prev_dw[b, j] = pdw[a, j]
+    st[CH_HEAD] = 0
+    st[CH_COUNT] = 0
+    st[CH_FLIPS] += 1
+    out[0], out[1] = first, best
+    return True

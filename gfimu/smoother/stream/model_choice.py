@@ -272,8 +272,8 @@ _density_push = None
 """:func:`gfimu.smoother.stream.kernels.local_density_push`, once imported."""
 
 
-_chain_step = None
-""":func:`gfimu.smoother.stream.kernels.chain_step`, once imported."""
+_chain_push = None
+""":func:`gfimu.smoother.stream.kernels.chain_push`, once imported."""
 
 _FLOAT = np.dtype(np.float64)
 
@@ -305,68 +305,43 @@ class StreamSignChain:
         self.normal = np.asarray(normal, dtype=float)
         self.margin = float(margin)
         self.branches = int(branches)
-        self.flips = 0
-        """Moves so far (every segment)."""
+        self._st = np.zeros(5, dtype=np.int64)  # ring head and count, newest time, whether there is one, moves
+        self._out = np.zeros(2, dtype=np.int64)
         self.reset()
+
+    @property
+    def flips(self) -> int:
+        """Moves so far (every segment)."""
+        return int(self._st[4])
 
     def reset(self) -> None:
         n = self.branches
         self._cost = np.zeros(n)
         self._w, self._dw = np.zeros((n, 3)), np.zeros((n, 3))  # the newest state's (ω, ω̇) per branch
-        self._t_ns: int | None = None  # its time (None: no state yet)
-        # the best earlier branch per later branch of the newest ``window`` steps, a ring (oldest at
-        # ``_head``, ``_count`` of them), with the later state's k
+        # the best earlier branch per later branch of the newest ``window`` steps, a ring (oldest at its head),
+        # with the later state's k
         self._backs = np.zeros((self.window, n), dtype=np.int64)
-        self._ks = [0] * self.window  # (a list: read and written one int at a time, every sample)
-        self._head = self._count = 0
+        self._ks = np.zeros(self.window, dtype=np.int64)
+        self._st[:4] = 0  # (no state yet: its time unset)
 
     def push(self, k: int, t_ns: int, omega: np.ndarray, omega_dot: np.ndarray, scale_radps: float,
              oldest_k: int) -> tuple[int, int] | None:
-        global _chain_step
-        if _chain_step is None:  # the compiled step, imported on first use
-            from .kernels import chain_step as _chain_step
+        global _chain_push
+        if _chain_push is None:  # the compiled step, imported on first use
+            from .kernels import chain_push as _chain_push
 
         if not (type(omega) is np.ndarray and omega.dtype is _FLOAT and type(omega_dot) is np.ndarray
                 and omega_dot.dtype is _FLOAT):
             omega, omega_dot = np.array(omega, dtype=float), np.array(omega_dot, dtype=float)
-        if self._t_ns is None:
+        st = self._st
+        if not st[3]:
             for b in range(self.branches):
                 self._w[b], self._dw[b] = branch(b, omega, omega_dot, self.normal)
-            self._t_ns = t_ns
+            st[2], st[3] = t_ns, 1
             return None
-        c2 = scale_radps * scale_radps
-        window, head, count, ks = self.window, self._head, self._count, self._ks
-        if count == window:  # the oldest step beyond the window is dropped
-            head = (head + 1) % window
-            count -= 1
-        slot = (head + count) % window
-        count += 1
-        ks[slot] = k
         # from branch a (at k-1) to branch b (at k): the Cauchy loss of the trapezoid's misfit, the lowest
-        # total kept per b (only the differences matter, and they stay bounded)
-        best = _chain_step(self._w, self._dw, omega, omega_dot, self.normal, (t_ns - self._t_ns) * 1e-9, c2,
-                           self._cost, self._backs[slot])
-        self._t_ns = t_ns
-        while count and ks[head] <= oldest_k:
-            head = (head + 1) % window
-            count -= 1
-        self._head, self._count = head, count
-        cost = self._cost
-        if best == 0 or not float(cost[best]) + self.margin * c2 < float(cost[0]):
+        # total kept per b (only the differences matter, and they stay bounded); the moves: kernels.chain_push
+        if not _chain_push(k, t_ns, omega, omega_dot, scale_radps * scale_radps, oldest_k, self.margin, self.normal,
+                           self._w, self._dw, self._cost, self._backs, self._ks, st, self._out):
             return None
-        # the best path's last run on branch `best` (within the window) moves onto it
-        first = k
-        state = best
-        for j in range(self._count - 1, -1, -1):
-            slot = (self._head + j) % window
-            state = int(self._backs[slot, state])
-            if state != best:
-                break
-            first = int(self._ks[slot]) - 1
-        first = max(first, oldest_k)
-        relabel = np.arange(self.branches) ^ best
-        self._cost[:] = cost[relabel]
-        self._w[:], self._dw[:] = self._w[relabel], self._dw[relabel]
-        self._head = self._count = 0
-        self.flips += 1
-        return first, best
+        return int(self._out[0]), int(self._out[1])
