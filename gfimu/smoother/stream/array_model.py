@@ -500,9 +500,11 @@ class ArrayModel:
                 M = fixed.get("J1_inv")
                 if M is None:
                     M = fixed["J1_inv"] = np.linalg.inv(J1)
-                Q = (M * np.where(fixed["rows"][3], motion_factor * motion_factor, 1.0)) @ M.T
+                from .kernels import scaled_process_noise
+
+                Q = scaled_process_noise(M, np.where(fixed["rows"][3], motion_factor * motion_factor, 1.0))
                 J0, J1, r0 = self._scaled(fixed["rows"], motion_factor) if rows else (None, None, None)
-                return Step(J0, J1, r0, unit.F, unit.FT, 0.5 * (Q + Q.T), unit.c, None, None)
+                return Step(J0, J1, r0, unit.F, unit.FT, Q, unit.c, None, None)
             return Step.of(*self._scaled(fixed["rows"], motion_factor))
         J0, J1, r0 = self._scaled(fixed["rows"], motion_factor)
         return Step.of(np.vstack([J0, others[0]]), np.vstack([J1, others[1]]), np.concatenate([r0, others[2]]))

@@ -1310,7 +1310,8 @@ class FixedLagSmoother:
         if robust:
             c = chosen.check
             prev = self._segment.prev
-            w2 = 0.0 if prev is None else float(prev[1] @ prev[1])
+            w = None if prev is None else prev[1]  # (|ω|² summed in order: the block's kernel takes it so)
+            w2 = 0.0 if w is None else float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
             var = c.noise_floor_mps2 ** 2 + c.noise_slope_mps2_per_radps ** 2 * w2
         else:
             var = choice.model.noise.mean_accel_var_mps2

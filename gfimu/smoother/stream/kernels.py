@@ -1063,3 +1063,37 @@ def chain_push(k, t_ns, w, dw, c2, oldest_k, margin, normal, prev_w, prev_dw, co
     st[CH_FLIPS] += 1
     out[0], out[1] = first, best
     return True
+
+
+@njit(cache=True, nogil=True)
+def lazy_mean(mean_s, cross_s, u):
+    """A lazy state's mean given the updates since the last flush, ``m + C u`` (:meth:`WindowFilter.mean
+    <gfimu.smoother.stream.window_filter.WindowFilter.mean>`; each sum in the order :func:`window_step_residual2` and
+    the block's reads take it)."""
+    out = np.empty(9)
+    for i in range(9):
+        s = 0.0
+        for j in range(9):
+            s += cross_s[i, j] * u[j]
+        out[i] = mean_s[i] + s
+    return out
+
+
+@njit(cache=True, nogil=True)
+def scaled_process_noise(M, scale):
+    """``Q = M diag(scale) Mᵀ``, symmetrised ``(Q + Qᵀ) / 2``: a step's process noise with the rows of ``M``'s
+    columns ``k`` scaled by ``scale[k]`` (:meth:`ArrayModel.step <gfimu.smoother.stream.array_model.ArrayModel.step>`:
+    the motion model's rows by the local motion factor squared)."""
+    n = M.shape[0]
+    Q = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            for k in range(n):
+                s += M[i, k] * scale[k] * M[j, k]
+            Q[i, j] = s
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = 0.5 * (Q[i, j] + Q[j, i])
+    return out

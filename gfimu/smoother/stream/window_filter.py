@@ -441,8 +441,7 @@ class WindowFilter:
             lazy = self._lazy
             if lazy.epochs.waits(k):
                 self._bring_up(k + 1)
-            # (ndarray.dot: the same BLAS product as ``@``, with less of numpy's dispatch around it)
-            return store.mean[s] + store.cross[s].dot(lazy.u)
+            return kernels.lazy_mean(store.mean[s], store.cross[s], lazy.u)
         raise KeyError(f"state {k} is not in the window")
 
     def sigma(self, k: int) -> np.ndarray:
