@@ -4,7 +4,8 @@ The first call of a numba kernel in a process imports numba (about 0.25 s) and l
 numba's on-disk cache; LLVM's start is most of it and runs outside Python's lock). :func:`start` does that
 in a daemon thread, once per process, so the smoother finds its kernels ready:
 
-- ``"stream"``: the fixed-lag smoother's window kernels (:mod:`gfimu.smoother.stream.kernels`), its running σ
+- ``"stream"``: the fixed-lag smoother's window kernels (:mod:`gfimu.smoother.stream.kernels`, and its block of
+  samples, :mod:`gfimu.smoother.stream.block`), its running σ
   scale's (:mod:`gfimu.smoother.solve.sigma_kernels`), the per-sample ML's (:mod:`gfimu.estimators.ml_kernels`),
   the stream screening's spike rule (:mod:`gfimu.screen_kernels`) and the batch solve's (:mod:`gfimu.smoother.model.kernels`: the
   held start and the tuning stretch are solved whole). Only the overloads the cache holds for this source and
@@ -49,9 +50,9 @@ def _stream() -> None:
         from ..estimators import ml_kernels
         from .model import kernels as model_kernels
         from .solve import sigma_kernels
-        from .stream import kernels
+        from .stream import block, kernels
 
-        for module in (screen_kernels, kernels, ml_kernels, model_kernels, sigma_kernels):  # (in the order used)
+        for module in (screen_kernels, kernels, ml_kernels, model_kernels, sigma_kernels, block):  # (in the order used)
             for dispatcher in list(vars(module).values()):
                 _load_cached(dispatcher)
         _guard()

@@ -509,6 +509,24 @@ class ArrayModel:
         J0, J1, r0 = self._scaled(fixed["rows"], motion_factor)
         return Step.of(np.vstack([J0, others[0]]), np.vstack([J1, others[1]]), np.concatenate([r0, others[2]]))
 
+    def step_parts(self, h: float):
+        """``(F, Q, M, motion)`` of the built-in step over ``h`` seconds as :meth:`step` scales it: the transition,
+        the process noise at a motion factor of 1, ``M = J1⁻¹`` and the rows of the motion model (``Q`` at factor
+        s is ``M diag(s² on those rows, 1 elsewhere) Mᵀ``); None where a step is not made so (other step groups, rows
+        on the newest state alone, an offset, a J1 that is not square). :mod:`gfimu.smoother.stream.block` takes its
+        steps from here."""
+        if self.factor_sets.other_steps:
+            return None
+        unit = self.step(h, rows=False)
+        fixed = self.caches.steps.get(round(h * 1e9))
+        J1 = fixed["rows"][1]
+        if unit.H0 is not None or unit.c is not None or J1.shape[0] != J1.shape[1]:
+            return None
+        M = fixed.get("J1_inv")
+        if M is None:
+            M = fixed["J1_inv"] = np.linalg.inv(J1)
+        return unit.F, unit.Q, M, np.asarray(fixed["rows"][3], dtype=bool)
+
     @staticmethod
     def _scaled(rows, motion_factor: float):
         """(J0, J1, r0) of the built-in step rows, the motion model's divided by ``motion_factor``."""

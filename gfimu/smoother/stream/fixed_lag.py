@@ -113,14 +113,15 @@ from ..result import SmootherEstimator
 from . import model_choice as stream_model
 from ..tuning.model_choice import measured_noise_options
 from ..solve.restarts import branch, plane_normal
-from .model_choice import LocalDensity, StreamModel, StreamSignChain
+from .model_choice import OUTGROWN_FACTOR, LocalDensity, StreamModel, StreamSignChain
+from .states import StateEstimate, StateRows, _state
 from ..solve.sigma_scale import RunningSigmaScale, calibrates_stream, jerk_density
 from ..tuning.evidence import make_problem, tuned_problem
 from ...estimators.ml import MLEstimator
 
-OUTGROWN_FACTOR = 2.0
-"""The model is chosen again at once (at most once a second) when the local motion density exceeds
-its jerk density this many times (a factor four in power: the body moves faster than the model allows)."""
+BLOCK_SAMPLES = 2048
+"""Samples a log's stream hands the smoother at most at once (:meth:`FixedLagSmoother.push_block`; the progress
+bar moves by as many)."""
 
 SIGN_ERROR_PROBABILITY = 1e-3
 """The start of a segment is held until the branch of ω it is on is this unlikely to be the wrong one
@@ -235,30 +236,6 @@ class FixedLagSmootherClosed(InputError, RuntimeError):
 
 class ClockResetWarning(RuntimeWarning):
     """The stream's time went back by more than ``clock_reset_s``: the window was restarted."""
-
-
-@dataclass(frozen=True)
-class StateEstimate:
-    """ω, ω̇ and f of one sample (body frame), with optional one-sigma values."""
-
-    timestamp_ns: int
-    omega_b_radps: np.ndarray
-    omega_dot_b_radps2: np.ndarray
-    specific_force_b_mps2: np.ndarray
-    sigma_omega_b_radps: np.ndarray | None = None
-    sigma_omega_dot_b_radps2: np.ndarray | None = None
-    sigma_specific_force_b_mps2: np.ndarray | None = None
-
-
-_STATE_FIELDS = tuple(StateEstimate.__dataclass_fields__)
-
-
-def _state(*values) -> StateEstimate:
-    """``StateEstimate(*values)``, made without the frozen dataclass's ``__init__``: that sets each field through
-    ``object.__setattr__``, a call per field, and a stream makes one state per sample (the same object)."""
-    state = object.__new__(StateEstimate)
-    state.__dict__.update(zip(_STATE_FIELDS, values + (None,) * (len(_STATE_FIELDS) - len(values))))
-    return state
 
 
 class FixedLagUpdate:
@@ -1299,13 +1276,20 @@ class FixedLagSmoother:
     def _observe(self, sample) -> None:
         """Keep ``sample`` in the history the model is chosen on; the local motion density it shows;
         choose again when due (every ``retune_every_s``) or when the motion outgrows the model."""
+        taken, local = self._observe_data(sample)
+        if taken:
+            self._observe_decide(sample[0], local)
+
+    def _observe_data(self, sample) -> tuple[bool, float | None]:
+        """:meth:`_observe`'s data: ``sample`` into the history, the local motion density and the jerk factor it
+        gives (robust model). Returns (whether the stream observes: it does once a model is chosen, when it
+        tunes or checks the model; the local density or None)."""
         choice = self._choice
         chosen = choice.stream_model
         if not (choice.rules.auto or choice.rules.tune) or chosen is None:
-            return
+            return False, None
         t_ns, y, gyro = sample
         choice.history.append(t_ns, y, gyro)
-        q = chosen.groups.model.omega_dot_random_walk_radps2_per_sqrt_s
         robust = chosen.robust
         if robust:
             c = chosen.check
@@ -1318,7 +1302,15 @@ class FixedLagSmoother:
         local = choice.local.push(t_ns, y, var)
         choice.jerk_factor = 1.0
         if local is not None and robust:  # the batch smoother's local density (robust model)
-            choice.jerk_factor = min(1.0, local / q)
+            choice.jerk_factor = min(1.0, local / chosen.groups.model.omega_dot_random_walk_radps2_per_sqrt_s)
+        return True, local
+
+    def _observe_decide(self, t_ns: int, local: float | None) -> None:
+        """:meth:`_observe`'s decision at the sample at ``t_ns`` whose local density is ``local``: a model choice
+        when due, when the motion outgrew the model, or when a slow turn began."""
+        choice = self._choice
+        chosen = choice.stream_model
+        q = chosen.groups.model.omega_dot_random_walk_radps2_per_sqrt_s
         due = t_ns - chosen.chosen_at_ns >= choice.rules.retune_ns
         # a model the body now outmoves (chosen on a still stretch, or on the first slow motion): choose
         # again at once (at most once a second), on the history that now holds the motion
@@ -1326,7 +1318,7 @@ class FixedLagSmoother:
                     and t_ns - chosen.chosen_at_ns >= 1e9)
         # a turn too slow for each sample, begun under the densities as given: choose again at once (the
         # window goes on as it is: solved again from its newest states, a slow 3-D motion came out worse)
-        turn = (not (due or outgrown) and not chosen.moving and chosen.tuning is None and not robust
+        turn = (not (due or outgrown) and not chosen.moving and chosen.tuning is None and not chosen.robust
                 and self._turn_began(t_ns))
         if (due or outgrown or turn) and len(choice.history) >= choice.rules.tune_min_n:
             self._choose(outgrown=outgrown)
@@ -1342,6 +1334,25 @@ class FixedLagSmoother:
             return False
         choice.turn_checked_ns = t_ns
         return stream_model.turning(choice.history.newest_accel(choice.rules.tune_n), self._squares_row)
+
+    def push_block(self, timestamps_ns: np.ndarray, accel: np.ndarray, start: int = 0, stop: int | None = None):
+        """Samples ``start …`` (before ``stop``) of ``timestamps_ns`` (n,) and ``accel`` (n, axes) pushed as
+        :meth:`push` takes them one by one (no gyroscope readings), as many as go on in one compiled call
+        (:mod:`gfimu.smoother.stream.block`: the steady state of a segment) and at least one: returns (the next
+        sample's index, the states that reached the lag, oldest first: :class:`~.block.StateRows` of a block and
+        :class:`StateEstimate` of samples pushed one by one). The same states, to the last bit, as pushing each
+        sample (``tests/test_stream_block.py``)."""
+        from . import block
+
+        times = np.ascontiguousarray(timestamps_ns, dtype=np.int64)
+        rows = np.ascontiguousarray(accel, dtype=float)
+        stop = len(times) if stop is None else int(stop)
+        if not 0 <= start < stop <= len(times) or rows.shape != (len(times), self.array.n_axes):
+            raise InputError(f"fixed-lag smoother: push_block needs 0 <= start < stop <= {len(times)} and readings of "
+                             f"shape ({len(times)}, {self.array.n_axes}), got start {start}, stop {stop}, {rows.shape}")
+        if not block.ready(self):
+            return start + 1, list(self.push(int(times[start]), rows[start]).smoothed)
+        return block.run(self, times, rows, int(start), stop)
 
     def flush(self) -> tuple[StateEstimate, ...]:
         """Emit every state still in the window (smoothed with the data so far) and reset.
@@ -1888,6 +1899,13 @@ class FixedLagEstimator(SmootherEstimator):
         def store(states) -> None:
             nonlocal cursor
             for s in states:
+                if isinstance(s, StateRows):  # a block's states (gfimu.smoother.stream.block)
+                    m = len(s)
+                    if cursor + m > n or not np.array_equal(log.timestamps_ns[cursor:cursor + m], s.timestamp_ns):
+                        raise FixedLagSmootherError(f"{log.source}: internal ordering error at sample {cursor}")
+                    out[cursor:cursor + m] = s.values
+                    cursor += m
+                    continue
                 if cursor >= n or log.timestamps_ns[cursor] != s.timestamp_ns:
                     raise FixedLagSmootherError(f"{log.source}: internal ordering error at sample {cursor}")
                 row = out[cursor]  # (its three parts written in place: no concatenated copy of them)
@@ -1898,8 +1916,18 @@ class FixedLagEstimator(SmootherEstimator):
                                                     s.sigma_specific_force_b_mps2)
                 cursor += 1
 
-        for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):
-            store(session.push(log.timestamps_ns[i], log.accel_mps2[i], None if gyro is None else gyro[i]))
+        times, accel = np.ascontiguousarray(log.timestamps_ns, dtype=np.int64), np.ascontiguousarray(log.accel_mps2,
+                                                                                                    dtype=float)
+        if gyro is None:  # runs of samples at once where the stream is steady (the same states as one by one)
+            for c0 in progress_bar(range(0, n, BLOCK_SAMPLES), total=-(-n // BLOCK_SAMPLES), desc="fixed-lag",
+                                   enable=progress):
+                i, c1 = c0, min(n, c0 + BLOCK_SAMPLES)
+                while i < c1:
+                    i, states = session.push_block(times, accel, i, c1)
+                    store(states)
+        else:
+            for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):
+                store(session.push(times[i], accel[i], gyro[i]))
         store(session.finish())
         for note in session.take_notes():
             if note.startswith("warning: "):

@@ -197,6 +197,10 @@ def sign_scale(part: Log, ml_motion) -> float | None:
     return sign_chain_scale(ml_motion.omega_b_radps, ml_motion.omega_dot_b_radps2, part.dt_s)
 
 
+OUTGROWN_FACTOR = 2.0
+"""The model is chosen again at once (at most once a second) when the local motion density exceeds
+its jerk density this many times (a factor four in power: the body moves faster than the model allows)."""
+
 RESOLVED_FACTOR = 4.0
 """The local motion is resolved when its step power exceeds this many times the noise's (a motion
 density above the noise's by √3 in std): below, the local density is the noise's, which says

@@ -19,10 +19,14 @@ import numpy as np
 
 from ...errors import DataError
 from ..model.parts import delegated
+from .states import as_states
 
 RATE_ROWS = 64
 """Samples from whose timestamps the rate is taken when neither array.toml nor the caller gives it
 (the median period, as :attr:`gfimu.log.Log.rate_hz` takes it over a whole log)."""
+
+BLOCK_ROWS = 4
+"""Rows the screening decides at once (or a log hands over) from which they go to the smoother as a block."""
 
 RATE_WATCH_STEPS = 32
 """Consecutive steps forward at one steady period, away from the nominal one, after which the rate is
@@ -108,6 +112,19 @@ class Kept:
             drop = TIMES_KEPT // 2
             self._rows[:self._n - drop] = self._rows[drop:self._n]
             self._n -= drop
+
+    def extend(self, value, count: int) -> None:
+        """``value`` appended ``count`` times (as many :meth:`append` calls would keep)."""
+        count = int(count)
+        while count > 0:
+            take = min(count, TIMES_KEPT + 1 - self._n)
+            self._rows[self._n:self._n + take] = value
+            self._n += take
+            count -= take
+            if self._n > TIMES_KEPT:
+                drop = TIMES_KEPT // 2
+                self._rows[:self._n - drop] = self._rows[drop:self._n]
+                self._n -= drop
 
     def __len__(self) -> int:
         return self._n
@@ -232,6 +249,43 @@ class StreamSession:
                                "samples (array.toml states no rate_hz; --rate-hz sets it)")
             return self._start(rate)
         return self._push(row)
+
+    def push_block(self, timestamps_ns: np.ndarray, accel: np.ndarray, start: int, stop: int) -> tuple[int, list]:
+        """Readings ``start …`` (before ``stop``) of ``timestamps_ns`` (n,) int64 and ``accel`` (n, axes), without
+        gyroscope readings, as :meth:`push` takes them one by one: a run of them at once where the smoother
+        can take a block (:meth:`FixedLagSmoother.push_block
+        <gfimu.smoother.stream.fixed_lag.FixedLagSmoother.push_block>`: readings not screened here, a steady
+        rate), at least one. Returns (the next reading's index, the states made final: :class:`StateEstimate
+        <gfimu.smoother.stream.fixed_lag.StateEstimate>` objects and :class:`~.block.StateRows`). The time a
+        block took is counted in :attr:`processing_s` as its mean per sample."""
+        if self.smoother is None or self.screen is not None or self.settings.use_gyro or self._last_t is None:
+            return start + 1, self.push(int(timestamps_ns[start]), accel[start])
+        # the readings the rate watch and the time-order check take without a word (RateWatch.step's steady
+        # case: a step within [1.1/1.5, 0.9 × 1.5] nominal steps; a longer or a backward one goes one by one)
+        times = timestamps_ns[start:stop]
+        steps = np.diff(times, prepend=np.int64(self._last_t))
+        if self.watch is not None:
+            nominal = steps * (1e-9 * self.watch.rate_hz)
+            quiet = (nominal >= 1.1 / 1.5) & (nominal <= 0.9 * 1.5)
+        else:
+            quiet = steps > 0
+        run = int(np.argmin(quiet)) if not quiet.all() else len(times)
+        if run == 0:
+            return start + 1, self.push(int(timestamps_ns[start]), accel[start])
+        t0 = time.perf_counter()
+        end, states = self.smoother.push_block(timestamps_ns, accel, start, start + run)
+        self._timings.processing_s.extend((time.perf_counter() - t0) / (end - start), end - start)
+        if self.watch is not None:
+            watch = self.watch
+            if watch.last is None:
+                taken = steps[1:end - start]
+            else:
+                taken = steps[:end - start]
+            watch.steps.extend(int(v) for v in taken[-RATE_WATCH_STEPS:])
+            del watch.steps[:-RATE_WATCH_STEPS]
+            watch.last = int(timestamps_ns[end - 1])
+        self._last_t = int(timestamps_ns[end - 1])
+        return end, states
 
     def finish(self) -> list:
         """Every state still held (the readings waiting for the rate, the screening's, the window's)."""
@@ -361,7 +415,10 @@ class StreamSession:
         return rows
 
     def _smooth(self, rows) -> list:
-        """The smoother's update on each row, its time kept per row (not for a row it drops)."""
+        """The smoother's update on each row, its time kept per row (not for a row it drops); several rows
+        without gyroscope readings at once where the smoother takes them so (:meth:`_smooth_block`)."""
+        if len(rows) >= BLOCK_ROWS and all(row[2] is None for row in rows):
+            return self._smooth_block(rows)
         states = []
         kept, push = self._timings.processing_s, self.smoother.push
         for row in rows:
@@ -370,6 +427,22 @@ class StreamSession:
             if update.dropped is None:
                 kept.append(time.perf_counter() - t0)
             states.extend(update.smoothed)
+        return states
+
+    def _smooth_block(self, rows) -> list:
+        """:meth:`_smooth` of ``rows`` through :meth:`FixedLagSmoother.push_block
+        <gfimu.smoother.stream.fixed_lag.FixedLagSmoother.push_block>` (the same states), as
+        :class:`~gfimu.smoother.stream.fixed_lag.StateEstimate` objects; each row's time the mean of its run."""
+        times = np.fromiter((row[0] for row in rows), dtype=np.int64, count=len(rows))
+        accel = np.vstack([row[1] for row in rows])
+        states: list = []
+        kept, i = self._timings.processing_s, 0
+        while i < len(rows):
+            t0 = time.perf_counter()
+            j, out = self.smoother.push_block(times, accel, i, len(rows))
+            kept.extend((time.perf_counter() - t0) / (j - i), j - i)
+            states.extend(as_states(out))
+            i = j
         return states
 
     def _smooth_one(self, row) -> list:
@@ -402,3 +475,4 @@ class StreamSession:
         self.smoother = self._new_smoother()
         self.screen = self._new_screen()
         return states
+

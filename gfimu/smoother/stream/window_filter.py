@@ -227,11 +227,11 @@ class WindowStore:
     """The window's storage: each slot's mean, marginal variances and cross-covariance with the newest
     state (``mean`` (cap, 9), ``var`` (cap, 9), ``cross`` (cap, 9, 9); ``tmp`` scratch of the shape of
     ``cross``), the step into its state (``F``, ``Q`` (cap, 9, 9), where ``has_step``: the branch decision's
-    (:meth:`WindowFilter.settle`)), ``cap`` slots; the states in slots ``[lo, hi)``, those in ``[lo, split)``
+    (:meth:`WindowFilter.settle`)) and its sample's time (``t_ns``), ``cap`` slots; the states in slots ``[lo, hi)``, those in ``[lo, split)``
     updated lazily (:meth:`WindowFilter._flush`), ``[split, hi)`` at once; ``base`` the index k of slot 0."""
 
-    __slots__ = ("mean", "var", "cross", "tmp", "F", "Q", "has_step", "cap", "lo", "hi", "split", "base")
-    ARRAYS = ("mean", "var", "cross", "F", "Q", "has_step")
+    __slots__ = ("mean", "var", "cross", "tmp", "F", "Q", "has_step", "t_ns", "cap", "lo", "hi", "split", "base")
+    ARRAYS = ("mean", "var", "cross", "F", "Q", "has_step", "t_ns")
     """The arrays of one value per slot (moved and grown together, :meth:`WindowFilter._make_room`)."""
 
     def __init__(self, capacity: int) -> None:
@@ -243,14 +243,16 @@ class WindowStore:
         self.F = np.zeros((capacity, 9, 9))
         self.Q = np.zeros((capacity, 9, 9))
         self.has_step = np.zeros(capacity, dtype=bool)
+        self.t_ns = np.zeros(capacity, dtype=np.int64)
         self.lo = self.hi = self.split = self.base = 0
 
-    def keep_step(self, k: int, F: np.ndarray, Q: np.ndarray) -> None:
-        """The step into state ``k`` (in the window)."""
+    def keep_step(self, k: int, F: np.ndarray, Q: np.ndarray, t_ns: int) -> None:
+        """The step into state ``k`` (in the window), its sample at ``t_ns``."""
         s = k - self.base
         self.F[s] = F
         self.Q[s] = Q
         self.has_step[s] = True
+        self.t_ns[s] = t_ns
 
     def step(self, k: int):
         """(F, Q) of the step into state ``k`` (views of the store's arrays), or None where it has none."""
@@ -831,6 +833,7 @@ class WindowFilter:
         """The first state of a segment, index ``k``: the weak priors, then its readings (linearised
         from ``start``; ``once``: at ``start`` alone, :meth:`measure`)."""
         self.start(k)
+        self._store.t_ns[0] = t_ns
         self.measure(y, gyro, start=start, extra=extra, once=once)
 
     def advance(self, k: int, step: Step, t_ns: int, y, gyro=None, extra=None, start=None, prev=None,
@@ -845,10 +848,10 @@ class WindowFilter:
             record.unsettled = True  # rows of given step groups, which the branch decision does not evaluate
         if self.compiled and gyro is None and extra is None and start is None and step.H0 is None:
             self._advance_compiled(k, step, y)  # the prediction and the update in one compiled call
-            self._store.keep_step(k, step.F, step.Q)
+            self._store.keep_step(k, step.F, step.Q, t_ns)
             return
         self.predict(k, step)
-        self._store.keep_step(k, step.F, step.Q)
+        self._store.keep_step(k, step.F, step.Q, t_ns)
         self.measure(y, gyro, start=start, extra=extra, once=once)
 
     def _advance_compiled(self, k: int, step: Step, y) -> None:
