@@ -1918,16 +1918,16 @@ class FixedLagEstimator(SmootherEstimator):
 
         times, accel = np.ascontiguousarray(log.timestamps_ns, dtype=np.int64), np.ascontiguousarray(log.accel_mps2,
                                                                                                     dtype=float)
-        if gyro is None:  # runs of samples at once where the stream is steady (the same states as one by one)
+        if gyro is None and sig is None:  # runs of samples at once where the stream is steady (the same states)
             for c0 in progress_bar(range(0, n, BLOCK_SAMPLES), total=-(-n // BLOCK_SAMPLES), desc="fixed-lag",
                                    enable=progress):
                 i, c1 = c0, min(n, c0 + BLOCK_SAMPLES)
                 while i < c1:
                     i, states = session.push_block(times, accel, i, c1)
                     store(states)
-        else:
+        else:  # (σ of each state, or gyroscope rows: sample by sample)
             for i in progress_bar(range(n), total=n, desc="fixed-lag", enable=progress):
-                store(session.push(times[i], accel[i], gyro[i]))
+                store(session.push(times[i], accel[i], None if gyro is None else gyro[i]))
         store(session.finish())
         for note in session.take_notes():
             if note.startswith("warning: "):
