@@ -149,23 +149,25 @@ SECTIONS = (
         full=("--simulate", "40"), quick=("--simulate", "12"), json=False),
     Section(
         "live-20khz", "gfimu live at 20 kHz: the impact cell in real time", "replay_udp.py",
-        "The regime matrix's 20 kHz cell (four triads, impacts; tools/regime_matrix.py) sent at its own rate, one "
-        "row per UDP datagram on localhost, into `gfimu live --out -` with the defaults: how many rows came out, "
-        "how long after the last datagram the last row came (how far from real time the stream runs), the "
-        "latencies, and `gfimu live`'s own summary (rows dropped when the input outran the smoother; the default "
-        "queue holds 10 s of samples, 200,000 at 20 kHz).",
-        full=("--cell", "impacts-20kHz", "--duration-s", "10"),
+        "The regime matrix's 20 kHz cell (four triads, impacts; tools/regime_matrix.py), 30 s of it, sent at its "
+        "own rate, one row per UDP datagram on localhost, into `gfimu live --out -` with the defaults: how many "
+        "rows came out, how long after the last datagram the last row came (how far from real time the stream "
+        "runs), the latencies over the whole replay and past its first 10 s (the first rows wait for the first "
+        "model's stretch and the held start), and `gfimu live`'s own summary (rows dropped when the input outran "
+        "the smoother; the default queue holds 10 s of samples, 200,000 at 20 kHz).",
+        full=("--cell", "impacts-20kHz", "--duration-s", "30"),
         quick=("--cell", "impacts-20kHz", "--duration-s", "0.2"), json=False),
     Section(
-        "stream-cost", "Fixed-lag smoother: CPU push by push", "stream_cost.py",
+        "stream-cost", "Fixed-lag smoother: CPU sample by sample", "stream_cost.py",
         "The fixed-lag method as `gfimu estimate --method fixed-lag` runs it (its screening, then the stream "
-        "session fed row by row), on a simulated 60 s, 500 Hz cube of four triads: the CPU of the whole run (the "
+        "session fed the log in blocks of samples, each run the smoother can take at once in one compiled call, "
+        "the others one by one), on a simulated 60 s, 500 Hz cube of four triads: the CPU of the whole run (the "
         "model choices made in their own process included), of the stream's own thread (`time.thread_time`: a busy "
-        "machine stretches wall time, not this), of the push that made the first choice of the model, and per "
-        "push in steady state (the log's second half); and the rate the stream's thread keeps up with.",
+        "machine stretches wall time, not this), of the call that made the first choice of the model, the calls, "
+        "and per sample in steady state (the log's second half); and the rate the stream's thread keeps up with.",
         full=(), quick=("--simulate-s", "10"), json=False),
     Section(
-        "stream-cost-20khz", "Fixed-lag smoother at 20 kHz: CPU push by push", "stream_cost.py",
+        "stream-cost-20khz", "Fixed-lag smoother at 20 kHz: CPU sample by sample", "stream_cost.py",
         "The same on 6 s of the regime matrix's 20 kHz impact cell (four triads, impacts of 20-100 g; "
         "tools/regime_matrix.py).",
         full=("--cell", "impacts-20kHz", "--duration-s", "6"), quick=("--cell", "impacts-20kHz", "--duration-s", "0.5"),

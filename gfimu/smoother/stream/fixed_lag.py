@@ -1339,7 +1339,7 @@ class FixedLagSmoother:
         """Samples ``start …`` (before ``stop``) of ``timestamps_ns`` (n,) and ``accel`` (n, axes) pushed as
         :meth:`push` takes them one by one (no gyroscope readings), as many as go on in one compiled call
         (:mod:`gfimu.smoother.stream.block`: the steady state of a segment) and at least one: returns (the next
-        sample's index, the states that reached the lag, oldest first: :class:`~.block.StateRows` of a block and
+        sample's index, the states that reached the lag, oldest first: :class:`~.states.StateRows` of a block and
         :class:`StateEstimate` of samples pushed one by one). The same states, to the last bit, as pushing each
         sample (``tests/test_stream_block.py``)."""
         from . import block

@@ -256,7 +256,7 @@ class StreamSession:
         can take a block (:meth:`FixedLagSmoother.push_block
         <gfimu.smoother.stream.fixed_lag.FixedLagSmoother.push_block>`: readings not screened here, a steady
         rate), at least one. Returns (the next reading's index, the states made final: :class:`StateEstimate
-        <gfimu.smoother.stream.fixed_lag.StateEstimate>` objects and :class:`~.block.StateRows`). The time a
+        <gfimu.smoother.stream.states.StateEstimate>` objects and :class:`~.states.StateRows`). The time a
         block took is counted in :attr:`processing_s` as its mean per sample."""
         if self.smoother is None or self.screen is not None or self.settings.use_gyro or self._last_t is None:
             return start + 1, self.push(int(timestamps_ns[start]), accel[start])
@@ -432,7 +432,7 @@ class StreamSession:
     def _smooth_block(self, rows) -> list:
         """:meth:`_smooth` of ``rows`` through :meth:`FixedLagSmoother.push_block
         <gfimu.smoother.stream.fixed_lag.FixedLagSmoother.push_block>` (the same states), as
-        :class:`~gfimu.smoother.stream.fixed_lag.StateEstimate` objects; each row's time the mean of its run."""
+        :class:`~gfimu.smoother.stream.states.StateEstimate` objects; each row's time the mean of its run."""
         times = np.fromiter((row[0] for row in rows), dtype=np.int64, count=len(rows))
         accel = np.vstack([row[1] for row in rows])
         states: list = []
