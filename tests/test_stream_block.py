@@ -81,7 +81,8 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c == "epochs-4kHz" else c
+                                  for c in sorted(CASES)])
 def test_a_block_gives_the_states_of_one_sample_at_a_time(case):
     calls, n, sm = _same_both_ways(simulate(**CASES[case]))
     # the block took the steady stream: a call per hundred samples or fewer, once the start is decided
