@@ -163,3 +163,20 @@ def test_a_stop_names_why_the_block_left_a_sample_to_the_per_sample_code():
         while i < len(accel):
             i, _ = sm.push_block(log.timestamps_ns, accel, i, len(accel))
     assert sm._clock.last_ns == log.timestamps_ns[1999]  # every sample before it taken, none after
+
+
+def test_the_smoother_takes_the_compiled_batch_solves_whatever_was_imported_before():
+    """The batch solves of the stream (its first model's stretch, the held start) take the compiled kernels
+    wherever numba is loaded: a smoother loads it when it is made, so that its rows do not depend on whether
+    anything imported numba before it (the block imports it; importing the smoother's module does not)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from gfimu.array import cube_array\n"
+            "from gfimu.smoother.stream.fixed_lag import FixedLagSmoother\n"
+            "assert 'numba' not in sys.modules, 'imported with the module'\n"
+            "FixedLagSmoother(cube_array(0.05, noise_std_mps2=0.05), lag_s=0.2, rate_hz=500.0)\n"
+            "assert 'numba' in sys.modules, 'not loaded with the smoother'\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr

@@ -40,8 +40,8 @@ DONE, BEFORE, OBSERVED, MOVE, FAIL, SETTLE = 0, 1, 2, 3, 4, 5
 """How a block ended (module docstring)."""
 
 # the block's own state, in and out (``iv``: int64, ``fv``: float64)
-IV_CLOCK, IV_K, IV_ACCEPTED, IV_TOTAL, IV_LO, IV_HI, IV_SPLIT, IV_BASE, IV_UPDATES, IV_PREV_T, IV_OUT, IV_STOP, \
-    IV_CODE, IV_STEP, IV_SCALED, IV_ADDED, IV_WHY = range(17)
+IV_CLOCK, IV_K, IV_ACCEPTED, IV_TOTAL, IV_LO, IV_HI, IV_SPLIT, IV_BASE, IV_UPDATES, IV_OUT, IV_STOP, IV_CODE, \
+    IV_STEP, IV_ADDED, IV_WHY = range(15)
 WHY_TIME, WHY_READING, WHY_CHOICE_IN_USE, WHY_ROOM, WHY_CHAIN, WHY_EPOCHS, WHY_LOCAL = range(1, 8)
 """Why a block stopped before a sample (``iv[IV_WHY]``): time not going forward or a gap, a reading not finite, a
 model choice to put in use, the window outgrowing its arrays, the sign chain not started, the epochs' arrays
@@ -241,12 +241,10 @@ def advance_block(times, accel, i0, i1, iv, fv, xn, q_last,
         jerk = fv[FV_JERK]
         if jerk == 1.0:
             Q = Q_tab[row]
-            iv[IV_SCALED] = 0
         else:
             for a in range(9):
                 scale[a] = jerk * jerk if motion_tab[row, a] else 1.0
             Q = scaled_process_noise(M_tab[row], scale)
-            iv[IV_SCALED] = 1
         for a in range(9):
             for b in range(9):
                 q_last[a, b] = Q[a, b]
@@ -289,7 +287,6 @@ def advance_block(times, accel, i0, i1, iv, fv, xn, q_last,
                           ch_dw, ch_cost, ch_backs, ch_ks, ch_st, ch_out):
                 iv[IV_CODE] = MOVE
                 return
-        iv[IV_PREV_T] = t
         iv[IV_ADDED] += 1
         # --- the states due (_emit_due): the branch decision's test of the oldest step, the oldest read, dropped
         cutoff = t - ci[CI_LAG_NS] + 1000
@@ -321,9 +318,7 @@ def advance_block(times, accel, i0, i1, iv, fv, xn, q_last,
 
 # --- the Python side ------------------------------------------------------------------------------------------
 
-_EMPTY9 = np.zeros((1, 9))
-_EMPTY_I = np.zeros(1, dtype=np.int64)
-_EMPTY_F = np.zeros(1)
+_EMPTY9 = np.zeros((1, 9))  # (the local density's inversion rows where it has none)
 
 
 def ready(sm) -> bool:
@@ -391,7 +386,7 @@ def run(sm, times_ns: np.ndarray, accel: np.ndarray, i0: int, i1: int) -> tuple[
                    OUTGROWN_FACTOR, RESOLVED_FACTOR, local._c_dw if local.available else 0.0, OUTLYING_STEP2,
                    scale * scale, sm._signs.margin])
     iv = np.array([clock.last_ns, seg.k, choice.accepted, choice.history.total, store.lo, store.hi, store.split,
-                   store.base, engine._counts.updates, seg.prev_sample[0], 0, i0, 0, -1, 0, 0, 0], dtype=np.int64)
+                   store.base, engine._counts.updates, 0, i0, 0, -1, 0, 0], dtype=np.int64)
     fv = np.array([choice.jerk_factor, 1.0 if local.resolved else 0.0, -1.0])
     xn = np.array(seg.prev_x, dtype=float)
     q_last = np.zeros((9, 9))

@@ -731,6 +731,12 @@ class FixedLagSmoother:
         # the held start's longest span [s] (cut above STRETCH_RATE_HZ; the numpy engine only)
         self._hold = StartHold(float(hold_max_s) * min(1.0, STRETCH_RATE_HZ / rate_hz) if engine == "numpy" else 0.0,
                                int(round(max(self.config.lag_s, 0.5) * 1e9)))
+        # numba loaded with the smoother (in the background while a command reads its log,
+        # gfimu.smoother.preload): the batch solves of the stream (its first model's stretch, the held start)
+        # take the compiled kernels wherever numba is loaded (gfimu.smoother.model.groups), and so take them
+        # from the first one on, whatever was imported before: the same rows pushed one by one or in blocks
+        import numba  # noqa: F401
+
         self._start_segment()
 
     @classmethod
