@@ -180,3 +180,22 @@ def test_the_smoother_takes_the_compiled_batch_solves_whatever_was_imported_befo
             "assert 'numba' in sys.modules, 'not loaded with the smoother'\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
+
+
+@pytest.mark.slow
+def test_a_real_recording_in_blocks_is_its_rows_one_by_one(mimu4444_dir, tmp_path):
+    """The MIMU4444 recording exp_1 (37,439 samples at 62.5 Hz, eight triads, the robust model): every row the
+    same to the last bit whether the stream takes it in blocks or one sample at a time, and the blocks take it
+    in a call per few dozen samples."""
+    import subprocess
+    import sys
+
+    from gfimu.io import read_log
+
+    out = tmp_path / "log"
+    proc = subprocess.run([sys.executable, "-m", "gfimu", "convert", "mimu4444", str(mimu4444_dir / "exp_1" / "data.bin"),
+                           "--out", str(out), "--quiet", "--no-progress"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    calls, n, sm = _same_both_ways(read_log(out))
+    assert sm.models[-1].robust
+    assert calls < n / 10
