@@ -33,8 +33,8 @@ from numba import njit
 from .model_choice import OUTGROWN_FACTOR, RESOLVED_FACTOR
 from .states import StateRows
 from .kernels import (EP_COUNT, EP_FIRST, EP_HEAD, EP_N, CH_HAS, advance_update, chain_push, epochs_bring_up,
-                      epochs_close, flush_window, lazy_mean, local_density_push, scaled_process_noise,
-                      window_step_residual2)
+                      epochs_close, flush_lazy, lazy_mean, local_density_push, move_to_start, reset_factors,
+                      scaled_process_noise, window_step_residual2)
 
 DONE, BEFORE, OBSERVED, MOVE, FAIL, SETTLE = 0, 1, 2, 3, 4, 5
 """How a block ended (module docstring)."""
@@ -98,37 +98,6 @@ def _epoch_room(Ts, ep, stale):
 
 
 @njit(cache=True, nogil=True)
-def _make_room(lo, split, hi, base, lazy_steps, mean, var, cross, Fs, Qs, has_step, t_slot, T, u, W, Ts, us, Ws, ep,
-               stale):
-    """:meth:`WindowFilter._make_room <gfimu.smoother.stream.window_filter.WindowFilter._make_room>` where the
-    window's states fit in half its arrays: every state brought up to date (:meth:`~WindowFilter._flush`), then
-    moved to the arrays' start. Returns the new (split, base)."""
-    epochs_bring_up(Ts, us, Ws, ep, stale, _NEVER, base + lo, lazy_steps, base, mean, var, cross)
-    ep[EP_COUNT] = 0  # (Epochs.clear)
-    ep[EP_FIRST] += ep[EP_N]
-    ep[EP_N] = 0
-    if split > lo:
-        flush_window(T, u, W, mean[lo:split], var[lo:split], cross[lo:split])
-    for a in range(9):
-        u[a] = 0.0
-        for b in range(9):
-            T[a, b] = 1.0 if a == b else 0.0
-            W[a, b] = 0.0
-    n = hi - lo
-    for s in range(n):
-        for a in range(9):
-            mean[s, a] = mean[lo + s, a]
-            var[s, a] = var[lo + s, a]
-            for b in range(9):
-                cross[s, a, b] = cross[lo + s, a, b]
-                Fs[s, a, b] = Fs[lo + s, a, b]
-                Qs[s, a, b] = Qs[lo + s, a, b]
-        has_step[s] = has_step[lo + s]
-        t_slot[s] = t_slot[lo + s]
-    return n, base + lo
-
-
-@njit(cache=True, nogil=True)
 def advance_block(times, accel, i0, i1, iv, fv, xn, q_last,
                   step_of, F_tab, Q_tab, M_tab, motion_tab,
                   mean, var, cross, Fs, Qs, has_step, t_slot, P, T, u, W, Ts, us, Ws, ep, stale,
@@ -179,10 +148,12 @@ def advance_block(times, accel, i0, i1, iv, fv, xn, q_last,
             if hi - lo >= cap // 2:  # (grown, by the per-sample code)
                 iv[IV_CODE], iv[IV_WHY] = BEFORE, WHY_ROOM
                 return
-            split, base = _make_room(lo, split, hi, base, lazy_steps, mean, var, cross, Fs, Qs, has_step, t_slot, T, u,
-                                     W, Ts, us, Ws, ep, stale)
+            flush_lazy(lo, split, base, lazy_steps, mean, var, cross, T, u, W, Ts, us, Ws, ep, stale)
+            move_to_start(lo, hi, mean, var, cross, Fs, Qs, has_step, t_slot)
+            base += lo
             hi -= lo
             lo = 0
+            split = hi
             iv[IV_LO], iv[IV_HI], iv[IV_SPLIT], iv[IV_BASE] = lo, hi, split, base
         if ci[CI_CHAIN] and not ch_st[CH_HAS]:
             iv[IV_CODE], iv[IV_WHY] = BEFORE, WHY_CHAIN
@@ -262,11 +233,7 @@ def advance_block(times, accel, i0, i1, iv, fv, xn, q_last,
         if hi - split >= lazy_steps:  # the end of an epoch (WindowFilter._boundary)
             if split > lo:
                 epochs_close(Ts, us, Ws, ep, stale, T, u, W, base + lo, base + split)
-            for a in range(9):
-                u[a] = 0.0
-                for b in range(9):
-                    T[a, b] = 1.0 if a == b else 0.0
-                    W[a, b] = 0.0
+            reset_factors(T, u, W)
             split = hi
         iv[IV_SPLIT] = split
         s = k - base

@@ -1097,3 +1097,45 @@ def scaled_process_noise(M, scale):
         for j in range(n):
             out[i, j] = 0.5 * (Q[i, j] + Q[j, i])
     return out
+
+
+@njit(cache=True, nogil=True)
+def reset_factors(T, u, W):
+    """The open epoch's factors ``(T, u, W)`` back to no update (``I``, 0, 0), in place."""
+    for a in range(9):
+        u[a] = 0.0
+        for b in range(9):
+            T[a, b] = 1.0 if a == b else 0.0
+            W[a, b] = 0.0
+
+
+@njit(cache=True, nogil=True)
+def flush_lazy(lo, split, base, lazy_steps, mean, var, cross, T, u, W, Ts, us, Ws, ep, stale):
+    """:meth:`WindowFilter._flush <gfimu.smoother.stream.window_filter.WindowFilter._flush>` on the window's arrays
+    (slots ``[lo, …)``, slot = k - ``base``): every state waiting for epochs brought up to date
+    (:func:`epochs_bring_up`), no epoch kept, the lazy states ``[lo, split)`` given the open epoch's factors
+    (:func:`flush_window`) and those reset (:func:`reset_factors`)."""
+    epochs_bring_up(Ts, us, Ws, ep, stale, 1 << 62, base + lo, lazy_steps, base, mean, var, cross)
+    ep[EP_COUNT] = 0  # (Epochs.clear)
+    ep[EP_FIRST] += ep[EP_N]
+    ep[EP_N] = 0
+    if split > lo:
+        flush_window(T, u, W, mean[lo:split], var[lo:split], cross[lo:split])
+    reset_factors(T, u, W)
+
+
+@njit(cache=True, nogil=True)
+def move_to_start(lo, hi, mean, var, cross, F, Q, has_step, t_ns):
+    """The window's slots ``[lo, hi)`` moved to the start of its arrays (:meth:`WindowFilter._make_room
+    <gfimu.smoother.stream.window_filter.WindowFilter._make_room>`: one value per slot in each,
+    :attr:`WindowStore.ARRAYS <gfimu.smoother.stream.window_filter.WindowStore.ARRAYS>`)."""
+    for s in range(hi - lo):
+        for a in range(9):
+            mean[s, a] = mean[lo + s, a]
+            var[s, a] = var[lo + s, a]
+            for b in range(9):
+                cross[s, a, b] = cross[lo + s, a, b]
+                F[s, a, b] = F[lo + s, a, b]
+                Q[s, a, b] = Q[lo + s, a, b]
+        has_step[s] = has_step[lo + s]
+        t_ns[s] = t_ns[lo + s]

@@ -37,7 +37,6 @@ arrays are compacted when the new end reaches their capacity.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
@@ -141,19 +140,6 @@ class Epochs:
     def first(self) -> int:
         """The number of the epoch in row 0."""
         return int(self.ep[1])
-
-    @property
-    def runs(self) -> int:
-        """Runs of states waiting."""
-        return int(self.ep[3])
-
-    def run(self, j: int) -> tuple[int, int, int]:
-        """The ``j``-th run (0: the oldest; -1: the newest): (k_first, k_stop, epoch)."""
-        ep = self.ep
-        if j < 0:
-            j += int(ep[3])
-        row = self.stale[(int(ep[2]) + j) % len(self.stale)]
-        return int(row[0]), int(row[1]), int(row[2])
 
     def waits(self, k: int) -> bool:
         """Whether state ``k`` waits for epochs (is not up to date as of the current epoch's start)."""
@@ -534,13 +520,18 @@ class WindowFilter:
         applied to them at once: O(window / lazy_steps + lazy_steps) per update instead of O(window),
         the same numbers to rounding. The stale states are brought up to date first (:meth:`_bring_up`)."""
         store, lazy = self._store, self._lazy
-        self._bring_up(math.inf)
-        lazy.epochs.clear()
-        if store.split > store.lo:
-            self._apply(lazy.T, lazy.u, lazy.W, store.lo, store.split)
-        lazy.T = np.eye(9)
-        lazy.u = np.zeros(9)
-        lazy.W = np.zeros((9, 9))
+        if self.compiled:  # (the block of samples flushes so too: gfimu.smoother.stream.block)
+            ep = lazy.epochs
+            kernels.flush_lazy(store.lo, store.split, store.base, self.lazy_steps, store.mean, store.var, store.cross,
+                               lazy.T, lazy.u, lazy.W, ep.T, ep.u, ep.W, ep.ep, ep.stale)
+        else:
+            self._bring_up(math.inf)
+            lazy.epochs.clear()
+            if store.split > store.lo:
+                self._apply(lazy.T, lazy.u, lazy.W, store.lo, store.split)
+            lazy.T = np.eye(9)
+            lazy.u = np.zeros(9)
+            lazy.W = np.zeros((9, 9))
         store.split = store.hi
 
     def _make_room(self) -> None:
@@ -559,9 +550,7 @@ class WindowFilter:
             store.tmp = np.empty((cap, 9, 9))
             store.cap = cap
         else:
-            for name in store.ARRAYS:
-                arr = getattr(store, name)
-                arr[:n] = arr[store.lo:store.hi]
+            kernels.move_to_start(store.lo, store.hi, *(getattr(store, name) for name in store.ARRAYS))
         store.base += store.lo
         store.lo, store.hi = 0, n
         store.split = n
